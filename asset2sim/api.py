@@ -161,9 +161,14 @@ def refine(asset: str | Path, prompt: str = "", out_dir: str | Path = "out", *,
         RefineError: the input, the request, an override (codes
             ``OVERRIDE_*``: unknown joint or part, wrong kind, beyond the
             joint's range, unknown material) or the output folder was refused,
-            or the estimator failed (``failure_mode`` and ``codes`` say which).
+            or the estimator failed (``failure_mode`` and ``codes`` say which);
+            ``failure_mode`` ``timeout`` with code ``SIM_STEPS_EXCEEDED`` when its
+            simulations passed the cap of one refine
+            (:data:`asset2sim.schemas.config.MAX_REFINE_STEPS` steps, every phase
+            and engine together).
         ValueError: ``config`` or ``overrides`` is invalid (a unit missing or
-            unknown, a negative value, an unknown field).
+            unknown, a negative value, an unknown field, a time step below
+            :data:`asset2sim.schemas.config.MIN_TIMESTEP`).
     """
     cfg = load_config(config)
     if overrides:

@@ -317,12 +317,14 @@ def sha256_file(path: Path | str) -> str:
     return h.hexdigest()
 
 
-def sha256_files(paths: Iterable[Path | str]) -> str:
-    """Hex sha256 over several files' names and contents, in sorted order."""
+def sha256_files(paths: Iterable[Path | str], known: dict[str, str] | None = None) -> str:
+    """Hex sha256 over several files' names and contents, in sorted order; ``known``: path (as ``str``) -> the hex
+    sha256 of its bytes as already read (those files are not read again)."""
     h = hashlib.sha256()
+    known = known or {}
     for name, p in sorted({(str(p), p) for p in map(Path, paths)}):
         h.update(name.encode())
         h.update(b"\0")
-        h.update(sha256_file(p).encode())
+        h.update((known.get(name) or sha256_file(p)).encode())
         h.update(b"\0")
     return h.hexdigest()

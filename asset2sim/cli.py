@@ -31,8 +31,9 @@ for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import asset2sim.commands as commands  # noqa: E402
-from asset2sim import __version__, allocator  # noqa: E402
+from asset2sim import __version__, allocator, library_dirs  # noqa: E402
 from asset2sim.commands import _status  # noqa: E402
+from asset2sim.commands._output import inert_streams  # noqa: E402
 from asset2sim.commands._status import INTERNAL_ERROR, INTERRUPTED, INVALID_REQUEST, CommandError  # noqa: E402
 from asset2sim.engines.quiet import STARTUP_MESSAGES  # noqa: E402
 from asset2sim.extras import EXTRA_OF_MODULE, install_hint, missing_module  # noqa: E402
@@ -180,8 +181,15 @@ def write_error_log(command: str | None, exc: BaseException) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the console script; returns the exit code."""
+    """Entry point of the console script; returns the exit code. Everything the command prints passes through
+    :mod:`asset2sim.commands._output` (no control character of a name or a request reaches the terminal)."""
+    with inert_streams():
+        return _main(argv)
+
+
+def _main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    library_dirs.configure()  # matplotlib's and MLflow's folders: never created in the home folder by a command
     allocator.keep_freed_memory()  # freed arrays reused, not faulted in again (asset2sim.allocator)
     # never renders with MuJoCo: no OpenGL back-end spares its import GLFW and a GL context (a user's value is kept)
     os.environ.setdefault("MUJOCO_GL", "disable")

@@ -13,18 +13,22 @@ deterministic: the same bytes on every run.
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import json
+import os
 import shutil
+import stat
 import tempfile
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from asset2sim import atomic
+from asset2sim import atomic, file_names, output_paths
 from asset2sim.demo_geometry import DemoArticulation, fmt_number, mtl_text, obj_text
 from asset2sim.demo_objects import DEMO_OBJECTS, LAPTOP_MODEL_OPENING, DemoObject
 from asset2sim.frames import pose_matrix, translation_matrix
+from asset2sim.output_paths import OutputError
 from asset2sim.urdf import PARTNET_STYLE, UrdfGeometry, UrdfJoint, UrdfLimit, UrdfLink, UrdfModel, write_urdf
 
 __all__ = [
@@ -94,35 +98,142 @@ def _serialise(obj: DemoArticulation) -> dict[str, bytes]:
     return files
 
 
-def _is_generated(folder: Path) -> bool:
-    meta = folder / "meta.json"
-    if not meta.is_file():
-        return False
+#: The generator's record in a folder it wrote: every file it wrote there with its SHA-256 (``files``), and while a
+#: rebuild writes, the files it is writing (``pending``). A rebuild removes or replaces only files this record lists
+#: with their bytes unchanged, or files already holding the bytes it writes.
+RECORD_NAME = ".asset2sim-demo.json"
+_RECORD_VERSION = 1
+#: Largest record read, bytes (a record lists a few dozen files).
+_MAX_RECORD_BYTES = 1 << 20
+_MAX_LISTED = 5
+
+
+def _sha(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _recorded(folder: Path) -> dict[str, set[str]]:
+    """Relative path -> the SHA-256 values the record of ``folder`` lists for it (``files`` and ``pending``); empty
+    when there is no record or it is not a regular file of JSON. Unsafe paths (absolute, ``..``) are ignored."""
     try:
-        data = json.loads(meta.read_text())
+        data = json.loads(atomic.read_regular(folder / RECORD_NAME, _MAX_RECORD_BYTES).decode("utf-8"))
     except (OSError, ValueError):
-        return False
-    return isinstance(data, dict) and str(data.get("source", "")).startswith("asset2sim demo generator")
+        return {}
+    out: dict[str, set[str]] = {}
+    if not isinstance(data, dict):
+        return out
+    for part in ("files", "pending"):
+        entries = data.get(part)
+        for rel, digest in (entries.items() if isinstance(entries, dict) else ()):
+            safe = output_paths._safe_rel(rel)
+            if safe is not None and isinstance(digest, str):
+                out.setdefault(safe, set()).add(digest)
+    return out
+
+
+def _write_record(folder: Path, files: dict[str, str], pending: dict[str, str] | None = None) -> None:
+    record = {"version": _RECORD_VERSION, "generator_version": GENERATOR_VERSION, "files": dict(sorted(files.items()))}
+    if pending:
+        record["pending"] = dict(sorted(pending.items()))
+    atomic.write_json(folder / RECORD_NAME, record)
+
+
+def _entry_digest(folder: Path, rel: str) -> str | None:
+    """SHA-256 of ``folder/rel`` when it is a regular file reached without a symlink (itself or a folder on the
+    way), else None."""
+    path = folder / rel
+    try:
+        if path.is_symlink() or Path(os.path.realpath(path.parent)) != Path(os.path.realpath(folder)) / PurePosixPath(rel).parent:
+            return None
+        if not stat.S_ISREG(os.lstat(path).st_mode):
+            return None
+        return atomic.sha256_file(path)
+    except OSError:
+        return None
+
+
+def _claim(folder: Path, files: dict[str, bytes], *, exclusive: bool) -> dict[str, set[str]]:
+    """The record of ``folder`` after checking that a rebuild may write ``files`` there: with ``exclusive`` every
+    entry of the folder (else only the paths of ``files`` and of the record) must be the record itself, a file the
+    record lists with the bytes it recorded, or a file already holding the bytes ``files`` gives it.
+
+    Raises:
+        OutputError: ``OUTPUT_NOT_GENERATED`` naming the first entries the generator did not write (or a user
+            changed), with the way out; nothing is removed or written.
+    """
+    recorded = _recorded(folder)
+    wanted = {rel: _sha(data) for rel, data in files.items()}
+    names = output_paths._entries(folder) if exclusive else sorted(set(files) | set(recorded))
+    foreign = []
+    for rel in names:
+        if rel == RECORD_NAME and _entry_digest(folder, rel) is not None:
+            continue
+        if not os.path.lexists(folder / rel):
+            continue
+        digest = _entry_digest(folder, rel)
+        if digest is None or not (digest in recorded.get(rel, ()) or digest == wanted.get(rel)):
+            foreign.append(rel)
+    if foreign:
+        listed = ", ".join(foreign[:_MAX_LISTED]) + (", ..." if len(foreign) > _MAX_LISTED else "")
+        raise OutputError(f"{folder} holds {len(foreign)} file(s) the demo generator did not write or that changed since "
+                          f"({listed}); it replaces only its own files: move them away, or choose a new or empty folder",
+                          "OUTPUT_NOT_GENERATED", folder / foreign[0])
+    return recorded
+
+
+def _target(out_dir: Path) -> Path:
+    """The folder to write for ``out_dir``: itself, or the folder a symlink ``out_dir`` names (followed, never
+    replaced). Raises OutputError ``OUTPUT_NOT_A_FOLDER`` for a file or a symlink to anything but a folder."""
+    if out_dir.is_symlink():
+        target = Path(os.path.realpath(out_dir))
+        if not target.is_dir():
+            raise OutputError(f"{out_dir} is a symlink to {target}, which is not a folder; give a folder", "OUTPUT_NOT_A_FOLDER", out_dir)
+        return target
+    if os.path.lexists(out_dir) and not out_dir.is_dir():
+        raise OutputError(f"{out_dir} exists and is not a folder", "OUTPUT_NOT_A_FOLDER", out_dir)
+    return out_dir
+
+
+def _write_owned(folder: Path, files: dict[str, bytes], *, exclusive: bool) -> None:
+    """Write ``files`` (relative path -> bytes) into the existing ``folder`` after :func:`_claim`: the record first
+    (so a killed rebuild leaves every file it may have written listed), then the files that differ, then the
+    files the record listed and ``files`` no longer holds are removed, then the final record."""
+    recorded = _claim(folder, files, exclusive=exclusive)
+    wanted = {rel: _sha(data) for rel, data in files.items()}
+    present = {rel: d for rel in sorted(set(recorded) | set(files)) if (d := _entry_digest(folder, rel)) is not None}
+    _write_record(folder, present, pending=wanted)  # every state until the end: each file as it was or as it will be
+    for rel in sorted(files):
+        if present.get(rel) != wanted[rel]:
+            atomic.write_bytes(file_names.join_inside(folder, rel), files[rel])
+    stale = [rel for rel in sorted(recorded) if rel not in files and rel in present]
+    for rel in stale:
+        output_paths._unlink_inside(folder, rel)
+    output_paths._prune_empty(folder, stale)
+    _write_record(folder, wanted)
 
 
 def _write_folder(out_dir: Path, files: dict[str, bytes]) -> Path:
-    """Write ``files`` as a fresh folder ``out_dir``, assembled beside it and renamed into place; FileExistsError
-    when ``out_dir`` is not empty and not a folder this generator wrote."""
+    """Write ``files`` as the folder ``out_dir`` (a symlink to a folder: that folder): a new one is assembled beside
+    it and renamed into place; an existing one is rebuilt in place, only when it holds nothing but what this
+    generator recorded there (:data:`RECORD_NAME`) or the very bytes it writes. Returns ``out_dir``.
+
+    Raises:
+        OutputError: ``OUTPUT_NOT_GENERATED`` (a file the generator did not write, or changed since; nothing is
+            touched), ``OUTPUT_NOT_A_FOLDER``.
+        OSError: the folder cannot be written.
+    """
     out_dir = Path(out_dir)
-    if out_dir.exists() and (not out_dir.is_dir() or (any(out_dir.iterdir()) and not _is_generated(out_dir))):
-        raise FileExistsError(f"{out_dir} exists and is not a generated demo asset; not overwriting it")
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=str(out_dir.parent)))
+    folder = _target(out_dir)
+    if folder.is_dir():
+        _write_owned(folder, files, exclusive=True)
+        return out_dir
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".tmp", dir=str(folder.parent)))
     try:
         for rel in sorted(files):
             atomic.write_bytes(tmp / rel, files[rel])
-        if out_dir.exists():
-            old = out_dir.with_name(f".{out_dir.name}.old.{tmp.name}")
-            out_dir.rename(old)
-            tmp.rename(out_dir)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            tmp.rename(out_dir)
+        _write_record(tmp, {rel: _sha(data) for rel, data in files.items()})
+        os.rename(tmp, folder)  # fails (nothing replaced) when a folder appeared there meanwhile
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -147,7 +258,8 @@ def build_object(asset_id: str, out_dir: Path) -> Path:
 
     Raises:
         KeyError: unknown id.
-        FileExistsError: ``out_dir`` holds something this generator did not write.
+        OutputError: ``out_dir`` holds a file this generator did not write or that changed since
+            (``OUTPUT_NOT_GENERATED``; nothing is touched), or is not a folder (``OUTPUT_NOT_A_FOLDER``).
         OSError: the folder cannot be written.
     """
     return _write_folder(Path(out_dir), demo_files(asset_id))
@@ -161,7 +273,7 @@ def build_box_with_lid(out_dir: Path) -> Path:
     rad) to ``out_dir``; returns ``out_dir``.
 
     Raises:
-        FileExistsError: ``out_dir`` holds something this generator did not write.
+        OutputError: as :func:`build_object`.
         OSError: the folder cannot be written.
     """
     return _build("box_lid", out_dir)
@@ -202,18 +314,29 @@ def manifest_text() -> str:
 
 
 def build_demo_dataset(root: Path) -> Path:
-    """Write every demo object under ``root/<id>/`` and ``root/manifest.csv``
-    (earlier builds replaced, other files left alone); returns ``root``.
+    """Write every demo object under ``root/<id>/`` and ``root/manifest.csv`` (earlier builds replaced, other files
+    of ``root`` left alone; a symlink ``root`` followed); returns ``root``. Every folder is checked before anything is
+    written, so a refusal leaves the dataset as it was.
 
     Raises:
-        FileExistsError: ``root/<id>`` holds something this generator did not write.
+        OutputError: ``root/<id>`` holds a file the generator did not write or that changed since, or
+            ``root/manifest.csv`` is not the generator's (``OUTPUT_NOT_GENERATED``); a path is not a folder
+            (``OUTPUT_NOT_A_FOLDER``).
         OSError: ``root`` cannot be written.
     """
     root = Path(root)
-    root.mkdir(parents=True, exist_ok=True)
-    for entry in DEMO_OBJECTS:
-        _build(entry.asset_id, root / entry.asset_id)
-    atomic.write_text(root / "manifest.csv", manifest_text())
+    folder = _target(root)
+    folder.mkdir(parents=True, exist_ok=True)
+    objects = {entry.asset_id: demo_files(entry.asset_id) for entry in DEMO_OBJECTS}
+    manifest = {"manifest.csv": manifest_text().encode()}
+    for asset_id, files in objects.items():
+        sub = _target(folder / asset_id)
+        if sub.is_dir():
+            _claim(sub, files, exclusive=True)
+    _claim(folder, manifest, exclusive=False)
+    for asset_id, files in objects.items():
+        _write_folder(folder / asset_id, files)
+    _write_owned(folder, manifest, exclusive=False)
     return root
 
 

@@ -14,6 +14,8 @@ import re
 from pathlib import Path, PurePosixPath
 from typing import Iterable
 
+from asset2sim.output_paths import OutputError
+
 __all__ = ["MAX_CLEAN", "UnsafePath", "clashes", "file_stem", "is_clean", "join_inside"]
 
 #: Longest name used as a stem unchanged (characters; far below the 255-byte file-name limit with suffixes).
@@ -23,11 +25,14 @@ _UNSAFE_CHARS = re.compile(r"[^A-Za-z0-9_\-]+")
 _PREFIX = 32
 
 
-class UnsafePath(ValueError):
-    """A path built for the output would lie outside its folder; ``path`` is it."""
+class UnsafePath(OutputError):
+    """A path built for the output would lie outside its folder; ``path`` is it (as given, relative). An
+    :class:`~asset2sim.output_paths.OutputError` with code ``OUTPUT_PATH_ESCAPES`` (absolute, ``..``, NUL) or
+    ``OUTPUT_SYMLINK_ESCAPES`` (a symlink on the way leads out), so every writer reports it as the output guard's
+    refusal."""
 
-    def __init__(self, message: str, path: str):
-        super().__init__(message)
+    def __init__(self, message: str, path: str, code: str = "OUTPUT_PATH_ESCAPES"):
+        super().__init__(message, code, path)
         self.path = path
 
 
@@ -73,5 +78,5 @@ def join_inside(folder: Path | str, rel: str) -> Path:
     real_root = Path(os.path.realpath(root))
     real = Path(os.path.realpath(target))
     if real != real_root and real_root not in real.parents:
-        raise UnsafePath(f"{target} resolves to {real}, outside {real_root}", rel)
+        raise UnsafePath(f"{target} resolves to {real}, outside {real_root}", rel, "OUTPUT_SYMLINK_ESCAPES")
     return target

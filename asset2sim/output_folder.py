@@ -26,7 +26,7 @@ from typing import Any, Iterable, Iterator
 
 from asset2sim import atomic
 from asset2sim.output_paths import (MARKER_NAME, RECORD_NAME, OutputError, _entries, _prune_empty, _remove_with_temps, _safe_rel,
-                                    _within, check_location)
+                                    _within, check_location, write_inside)
 
 #: The files and folders of an output folder (the SPEC's contract and the extras).
 URDF_NAME = "mobility.urdf"
@@ -110,12 +110,67 @@ _ACTIVE: dict[Path, "OwnedFolder"] = {}
 _ACTIVE_LOCK = threading.Lock()
 
 
+_GUARDS: list["_Guard"] = []
+
+
 def _dispatch(paths: list[Path]) -> None:
-    """The atomic writer's observer: hands each destination to the owned folders."""
+    """The atomic writer's observer: hands each destination to the guarded and the owned folders (either may
+    refuse it)."""
     with _ACTIVE_LOCK:
-        owners = list(_ACTIVE.values())
+        guards, owners = list(_GUARDS), list(_ACTIVE.values())
+    for guard in guards:
+        for path in paths:
+            write_inside(path, guard.given, guard.root)
     for owner in owners:
         owner._observe(paths)
+
+
+@dataclass(frozen=True)
+class _Guard:
+    given: Path
+    root: Path
+
+
+@contextlib.contextmanager
+def guarding(folder: Path | str) -> Iterator[Path]:
+    """While the block runs, refuse every atomic write (:mod:`asset2sim.atomic`, any thread of this process) that
+    lies in ``folder`` by name (as given or resolved) but leaves it through a symlink (``folder/views`` a symlink
+    elsewhere) or ``..``: the one output guard (:func:`~asset2sim.output_paths.write_inside`) for writers that keep
+    no ownership record (``audit``, ``judge``, ``rate``, ``pairs``, the host write-backs, a flow's run folder).
+    ``folder`` itself may be a symlink (followed: its real folder is the output). Yields the real folder.
+
+    Raises (from the write, which is then not made):
+        OutputError: ``OUTPUT_SYMLINK_ESCAPES`` or ``OUTPUT_PATH_ESCAPES``.
+    """
+    guard = _Guard(given=Path(os.path.abspath(folder)), root=Path(os.path.realpath(folder)))
+    with _ACTIVE_LOCK:
+        _GUARDS.append(guard)
+        atomic.add_observer(_dispatch)
+    try:
+        yield guard.root
+    finally:
+        with _ACTIVE_LOCK:
+            _GUARDS.remove(guard)
+            if not _ACTIVE and not _GUARDS:
+                atomic.remove_observer(_dispatch)
+
+
+def check_destination(path: Path | str, folder: Path | str) -> Path:
+    """``path`` (a file a writer opens itself, not through :mod:`asset2sim.atomic`: a database) checked by the one
+    output guard against ``folder`` (:func:`guarding`), and refused when it is a symlink (itself, or a file a
+    library creates beside it, such as SQLite's ``-wal``); returns ``path``.
+
+    Raises:
+        OutputError: ``OUTPUT_SYMLINK_ESCAPES``.
+    """
+    path = Path(path)
+    if write_inside(path, folder, Path(os.path.realpath(folder))) is None:
+        raise OutputError(f"{path} lies outside the folder {folder}", "OUTPUT_SYMLINK_ESCAPES", path)
+    for p in (path, *(path.with_name(path.name + suffix) for suffix in ("-wal", "-shm", "-journal"))):
+        if p.is_symlink():
+            raise OutputError(f"{p} is a symlink (to {os.path.realpath(p)}); asset2sim writes its own file there: remove it",
+                              "OUTPUT_SYMLINK_ESCAPES", p)
+    return path
 
 
 @dataclass
@@ -141,30 +196,14 @@ class OwnedFolder:
             self._held = None
 
     def _rel(self, path: Path) -> str | None:
-        """Relative path of a destination inside this folder, or None when it lies elsewhere. Raises
-        OutputError when it lies here by name but a symlink leads it out."""
-        ap = Path(os.path.abspath(path))
-        parent = ap.parent.resolve()
-        self._refuse_dotdot_escape(Path(path), parent)
-        if _within(parent, self.root):
-            if self.source is not None and _within(parent, self.source):
-                raise OutputError(f"{ap} would be written into the input folder {self.source}", "OUTPUT_SYMLINK_ESCAPES", ap)
-            return (parent / ap.name).relative_to(self.root).as_posix()
-        if _within(ap, self.given) or _within(ap, self.root):
-            raise OutputError(f"{ap} would be written through a symlink to {parent}, outside the output folder {self.given}",
-                              "OUTPUT_SYMLINK_ESCAPES", ap)
-        return None
-
-    def _refuse_dotdot_escape(self, path: Path, parent: Path) -> None:
-        """Refuse a path that starts in this folder and leaves it through ``..`` (``out/collision/../../x.obj``)."""
-        parts = path.parts
-        if ".." not in parts:
-            return
-        head = Path(os.path.abspath(Path(*parts[: parts.index("..")]) if parts.index("..") else Path(".")))
-        starts_here = any(_within(head, base) for base in (self.given, self.root) + ((self.final,) if self.final else ()))
-        if starts_here and not _within(parent, self.root):
-            raise OutputError(f"{path} would be written outside the output folder {self.given} (through '..')",
-                              "OUTPUT_PATH_ESCAPES", path)
+        """Relative path of a destination inside this folder, or None when it lies elsewhere
+        (:func:`~asset2sim.output_paths.write_inside`, the one output guard). Raises OutputError when it lies here by
+        name but a symlink or ``..`` leads it out, or into the input folder."""
+        rel = write_inside(path, self.given, self.root, *((self.final,) if self.final else ()))
+        if rel is not None and self.source is not None and _within(self.root / rel, self.source):
+            ap = Path(os.path.abspath(path))
+            raise OutputError(f"{ap} would be written into the input folder {self.source}", "OUTPUT_SYMLINK_ESCAPES", ap)
+        return rel
 
     def _observe(self, paths: list[Path]) -> None:
         new = []
@@ -251,7 +290,7 @@ class OwnedFolder:
         with _ACTIVE_LOCK:
             if _ACTIVE.get(self.root) is self:
                 del _ACTIVE[self.root]
-            if not _ACTIVE:
+            if not _ACTIVE and not _GUARDS:
                 atomic.remove_observer(_dispatch)
 
 
@@ -395,6 +434,31 @@ def remove_stale_staging(out_dir: Path | str) -> bool:
     return os.path.lexists(staging) and _ours(staging) and _remove_stale(staging)
 
 
+def remove_owned(out_dir: Path | str) -> list[str]:
+    """Remove what asset2sim wrote in the output folder ``out_dir``: the files its completion marker and ownership
+    record list (with their temporary files), then those two, then the folders left empty and ``out_dir`` itself
+    when nothing else is in it. A file the product did not write stays (with the folders holding it); nothing is
+    followed through a symlink. Returns the relative paths of what stays (sorted)."""
+    root = Path(out_dir)
+    if not root.is_dir() or root.is_symlink():
+        return []
+    owned = recorded_files(root)
+    for rel in sorted(owned):
+        _remove_with_temps(root, rel)
+    for name in sorted(_BOOKKEEPING):
+        _remove_with_temps(root, name)
+    _prune_empty(root, owned)
+    left = _entries(root)
+    if not left:
+        with contextlib.suppress(OSError):
+            for folder, dirs, _files in sorted(os.walk(root), key=lambda t: -len(t[0])):
+                with contextlib.suppress(OSError):
+                    if folder != str(root):
+                        os.rmdir(folder)
+            root.rmdir()
+    return left
+
+
 def _write_failed(given: Path, exc: OSError) -> OutputError:
     """``OUTPUT_WRITE_FAILED`` for an OSError."""
     where = exc.filename or given
@@ -403,35 +467,44 @@ def _write_failed(given: Path, exc: OSError) -> OutputError:
 
 def product_folder(path: Path | str) -> Path | None:
     """The nearest folder, ``path`` included, holding a completion marker or an ownership record; None when
-    there is none."""
+    there is none. Resolved; :func:`product_folder_as_named` gives it as named."""
+    found = product_folder_as_named(path)
+    return None if found is None else found.resolve()
+
+
+def product_folder_as_named(path: Path | str) -> Path | None:
+    """:func:`product_folder` as ``path`` names it (absolute, symlinks kept), or None."""
     p = Path(os.path.abspath(path))
     for folder in (p, *p.parents):
         if (folder / MARKER_NAME).is_file() or (folder / RECORD_NAME).is_file():
-            return folder.resolve()
+            return folder
     return None
 
 
 @contextlib.contextmanager
 def adopting(path: Path | str) -> Iterator[OwnedFolder | None]:
-    """While the block runs, record every atomic write into the output folder around ``path``
-    (:func:`product_folder`) in its ownership record. Yields the :class:`OwnedFolder`, or None when ``path``
-    is in no such folder."""
-    root = product_folder(path)
-    if root is None:
-        yield None
-        return
-    owner = OwnedFolder(root=root, given=root, source=None, files=_listed(root / RECORD_NAME))
-    with _ACTIVE_LOCK:
-        previous = _ACTIVE.get(root)
-        _ACTIVE[root] = owner
-        atomic.add_observer(_dispatch)
-    try:
-        yield owner
-    finally:
+    """While the block runs, refuse every write that lies in the folder ``path`` by name but leaves it
+    (:func:`guarding`) and record every atomic write into the output folder around ``path``
+    (:func:`product_folder`) in its ownership record, the folder compared as named and as resolved. Yields the
+    :class:`OwnedFolder`, or None when ``path`` is in no such folder (the writes are still guarded)."""
+    named = product_folder_as_named(path)
+    with guarding(path):
+        if named is None:
+            yield None
+            return
+        root = named.resolve()
+        owner = OwnedFolder(root=root, given=named, source=None, files=_listed(root / RECORD_NAME))
         with _ACTIVE_LOCK:
-            if previous is not None:
-                _ACTIVE[root] = previous
-            elif _ACTIVE.get(root) is owner:
-                del _ACTIVE[root]
-            if not _ACTIVE:
-                atomic.remove_observer(_dispatch)
+            previous = _ACTIVE.get(root)
+            _ACTIVE[root] = owner
+            atomic.add_observer(_dispatch)
+        try:
+            yield owner
+        finally:
+            with _ACTIVE_LOCK:
+                if previous is not None:
+                    _ACTIVE[root] = previous
+                elif _ACTIVE.get(root) is owner:
+                    del _ACTIVE[root]
+                if not _ACTIVE and not _GUARDS:
+                    atomic.remove_observer(_dispatch)

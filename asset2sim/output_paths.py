@@ -24,6 +24,7 @@ CODES = {
     "OUTPUT_CONTAINS_INPUT": "the output folder contains the input folder",
     "OUTPUT_NOT_A_FOLDER": "the output path exists and is not a folder",
     "OUTPUT_NOT_EMPTY": "the output folder holds files asset2sim did not write (use --overwrite)",
+    "OUTPUT_NOT_GENERATED": "a folder the demo generator rebuilds (--asset-out, --dataset) holds files it did not write or that changed since",
     "OUTPUT_RECORD_NOT_A_FILE": "a bookkeeping file (.asset2sim-complete.json, .asset2sim-owned.json) is not a regular file (FIFO, folder, symlink ...)",
     "OUTPUT_WRITE_FAILED": "the output folder cannot be created or written (permissions, read-only, full disk)",
     "OUTPUT_SYMLINK_ESCAPES": "a file would be written through a symlink leading out of the output folder",
@@ -57,6 +58,54 @@ def _within(path: Path, root: Path) -> bool:
     if isinstance(path, PurePosixPath) and isinstance(root, PurePosixPath) and path.is_absolute() == root.is_absolute():
         return path.parts[:len(root.parts)] == root.parts  # as below on POSIX (case-sensitive), without building parents
     return path == root or root in path.parents
+
+
+def write_inside(path: Path | str, given: Path | str, root: Path | str, *aliases: Path | str) -> str | None:
+    """The one output guard: where a destination ``path`` lies relative to an output folder the user named
+    ``given`` (absolute, as given) whose real path is ``root`` (resolved); ``aliases``: other names of the folder
+    (a staged run's final folder). The path is compared as given and as resolved: it belongs to the folder when it
+    lies there by name (under ``given``, ``root`` or an alias) or when its folder resolves inside ``root``.
+
+    Returns:
+        Its relative path (POSIX) inside ``root`` (the folder holding it resolved), or None when it lies elsewhere
+        both by name and resolved.
+
+    Raises:
+        OutputError: ``OUTPUT_SYMLINK_ESCAPES`` when it lies in the folder by name but a symlink on the way (the
+            folder given, a subfolder such as ``views/``) leads it out of ``root``; ``OUTPUT_PATH_ESCAPES`` when it
+            starts in the folder and leaves it through ``..``.
+    """
+    given, root = Path(os.path.abspath(given)), Path(root)
+    bases = (given, root, *(Path(os.path.abspath(a)) for a in aliases))
+    ap = Path(os.path.abspath(path))
+    parent = ap.parent.resolve()
+    parts = Path(path).parts
+    if ".." in parts:
+        head = Path(os.path.abspath(Path(*parts[: parts.index("..")]) if parts.index("..") else Path(".")))
+        if any(_within(head, base) for base in bases) and not _within(parent, root):
+            raise OutputError(f"{path} would be written outside the output folder {given} (through '..')", "OUTPUT_PATH_ESCAPES", path)
+    if _within(parent, root):
+        return (parent / ap.name).relative_to(root).as_posix()
+    if any(_within(ap, base) for base in bases):
+        raise OutputError(f"{ap} would be written through a symlink to {parent}, outside the output folder {given}",
+                          "OUTPUT_SYMLINK_ESCAPES", ap)
+    return None
+
+
+#: The codes of the output guard's refusals: never turned into a note by a writer that carries on.
+ESCAPE_CODES = frozenset({"OUTPUT_SYMLINK_ESCAPES", "OUTPUT_PATH_ESCAPES"})
+
+
+def raise_refusal(exc: BaseException) -> None:
+    """Raise the output guard's refusal (an :class:`OutputError` with a code of :data:`ESCAPE_CODES`) when ``exc`` is
+    one or holds one in its chain; return otherwise. A writer that turns its failures into notes calls this first."""
+    seen: set[int] = set()
+    cur: BaseException | None = exc
+    while cur is not None and id(cur) not in seen:
+        seen.add(id(cur))
+        if isinstance(cur, OutputError) and cur.code in ESCAPE_CODES:
+            raise cur
+        cur = cur.__cause__ or cur.__context__
 
 
 def check_location(source_dir: Path | str, out_dir: Path | str) -> Path:

@@ -54,6 +54,12 @@ _MOVING_TYPES = frozenset({"revolute", "continuous", "prismatic", "floating", "p
 Mode = Literal["strict", "lenient", "collect"]
 
 
+#: Longest robot, link or joint name the reader hands on (characters): PyBullet's URDF importer ends the process (exit
+#: 1, or a segmentation fault) on a joint name of about 2,000 characters. The validator reports longer names as
+#: ``NAME_TOO_LONG`` (``asset2sim.tasks.ingest.findings.MAX_NAME_CHARS``, the same number).
+MAX_NAME_CHARS = 256
+
+
 class UrdfError(ValueError):
     """A URDF cannot be read. The message names the file, the line (when
     known) and the link or joint; ``code`` is stable (``XML_*``, ``NUMBER_*``,
@@ -704,6 +710,8 @@ class _Reader:
                     self.problem("LINK_NAME_DUPLICATE", f"link {ln.name!r} is defined again", line=ln.line, link=ln.name)
                 continue
             model.links[ln.name] = ln
+        if self.mode != "collect":  # (the validator reports it as a finding: NAME_TOO_LONG)
+            self._check_name_lengths(model)
         if self.mode == "strict":
             self._check_tree(model)
         else:
@@ -711,6 +719,17 @@ class _Reader:
             roots = [n for n in model.links if n not in children]
             model.root = roots[0] if len(roots) == 1 else None
         return model
+
+    def _check_name_lengths(self, model: UrdfModel) -> None:
+        """Modes strict and lenient: no robot, link or joint name longer than :data:`MAX_NAME_CHARS` (UrdfError
+        ``NAME_TOO_LONG``), so no engine or renderer is handed one (PyBullet ends the process on them)."""
+        for kind, items in (("robot", [(model.name, None)]), ("link", [(ln.name, ln.line) for ln in model.link_elements]),
+                            ("joint", [(j.name, j.line) for j in model.joints])):
+            for name, line in items:
+                if name and len(name) > MAX_NAME_CHARS:
+                    shown = f"{name[:28]}...{name[-28:]}"
+                    raise UrdfError(f"{kind} name of {len(name)} characters > cap {MAX_NAME_CHARS} ({shown!r})", code="NAME_TOO_LONG",
+                                    source=self.source, line=line)
 
     def _check_tree(self, model: UrdfModel) -> None:
         """Mode strict: parent and child name links, no link has two parents,

@@ -23,6 +23,8 @@ from pydantic import BaseModel, Field
 from asset2sim import atomic
 from asset2sim.flows.catalog import RegressionSettings, ResultCatalog
 from asset2sim.tasks.check.verdict import MISSING_FAILURE_MODE
+from asset2sim.inert import plot_text
+from asset2sim import library_dirs
 
 #: Metric columns compared between runs: column -> (unit, True when higher is better).
 COMPARED_METRICS: dict[str, tuple[str, bool]] = {
@@ -265,6 +267,7 @@ def pass_rate_figure(history, current_run: str | None = None, title: str = ""):
     """A matplotlib Figure: the pass rates per run (all checks, rest
     stability, oscillation; fractions) in run order, ``current_run`` marked.
     ``history``: :func:`asset2sim.flows.queries.pass_rates_over_time`."""
+    library_dirs.configure()  # before matplotlib's first import
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -283,10 +286,10 @@ def pass_rate_figure(history, current_run: str | None = None, title: str = ""):
             ax.axvline(i, color="#999999", linestyle="--", linewidth=0.8)
     step = max(1, len(history) // 12)
     ax.set_xticks(x[::step])
-    ax.set_xticklabels([str(r)[:15] for r in list(history["run"])[::step]], rotation=30, ha="right", fontsize=7)
+    ax.set_xticklabels([plot_text(str(r)[:15]) for r in list(history["run"])[::step]], rotation=30, ha="right", fontsize=7)
     ax.set_ylim(-2, 102)
     ax.set_ylabel("pass rate (%)")
-    ax.set_title(title or "pass rate over runs")
+    ax.set_title(plot_text(title) if title else "pass rate over runs")  # a dataset's name: never mathtext
     ax.legend(fontsize=7, loc="lower left")
     fig.tight_layout()
     return fig

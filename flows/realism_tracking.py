@@ -12,6 +12,7 @@ from urllib.parse import unquote, urlparse
 from asset2sim.flows.tracking import client_run
 from asset2sim.schemas.realism import MethodScore
 from asset2sim.apps.realism.bradley_terry import PRIOR_GAMES
+from asset2sim import library_dirs
 
 #: The default experiment of realism runs.
 REALISM_EXPERIMENT = "asset2sim-realism"
@@ -54,6 +55,7 @@ def log_realism_scores(scores: list[MethodScore], *, tracking_uri: str, experime
         ValueError: no scores, or ``ratings_parquet`` missing.
         mlflow.exceptions.MlflowException: the store refuses the run.
     """
+    library_dirs.configure()  # before MLflow's first import: no telemetry file or report
     from mlflow.tracking import MlflowClient
 
     if not scores:

@@ -16,7 +16,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from asset2sim import __version__, array_cache, atomic
+from asset2sim import __version__, array_cache, atomic, output_folder
 from asset2sim.flows.catalog import (
     Catalog,
     CatalogError,
@@ -290,7 +290,8 @@ def publish_stage(job: AssetJob, refined: StageRecord, measured: StageRecord | N
         return StageRecord(status="error", error=f"upload of {local} to {job.out_uri} failed: {type(exc).__name__}: {exc}",
                            error_type=type(exc).__name__, failure_mode="crash", seconds=time.perf_counter() - t0,
                            worker=_worker_name())
-    for folder in (local, job.metrics_dir, job.work_dir):
+    output_folder.remove_owned(local)  # the refine's own files; anything else in the folder stays
+    for folder in (job.metrics_dir, job.work_dir):  # the flow's bookkeeping folders (under the run's .work and metrics)
         shutil.rmtree(folder, ignore_errors=True)
     return StageRecord(status="ok", value={"out_uri": job.out_uri, "files": up["files"], "bytes": up["bytes"]},
                        seconds=time.perf_counter() - t0, worker=_worker_name())
@@ -413,7 +414,8 @@ def stage_refine(
         )
     if reference_dir is not None and "reference" in params:
         kwargs["reference"] = Path(reference_dir)
-    result = fn(Path(asset_dir), prompt, Path(out_dir), RefineConfig(**config), **kwargs)
+    with output_folder.guarding(Path(out_dir).parent):  # the run's folder: no asset's output through a symlink out of it
+        result = fn(Path(asset_dir), prompt, Path(out_dir), RefineConfig(**config), **kwargs)
     report = RefineReport.model_validate(result.report.model_dump(mode="json"))
     out = RefineOutput(
         report=report,
@@ -608,6 +610,7 @@ def prepare_prefect_environment(project_root: Path | str) -> dict[str, str]:
         "PREFECT_HOME": str(Path(project_root) / ".prefect"),
         "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
         "DO_NOT_TRACK": "1",
+        "MLFLOW_DISABLE_TELEMETRY": "true",  # no ~/.config/mlflow/telemetry.json, no usage sent
         # a first start migrates a fresh SQLite database: slower than Prefect's 20 s on a busy machine
         "PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS": "180",
     }

@@ -17,6 +17,8 @@ from asset2sim import atomic
 from asset2sim.flows.catalog import TrackingSettings
 from asset2sim.flows.queries import failure_modes, run_summary
 from asset2sim.schemas.report import FAILURE_MODES
+from asset2sim.inert import plot_text, shorten
+from asset2sim import library_dirs
 
 #: Columns of the run's summary table, in order.
 SUMMARY_COLUMNS = (
@@ -39,6 +41,7 @@ def summary_table(df):
 
 def failure_mode_figure(df, title: str = ""):
     """A matplotlib Figure: stacked bars of failure modes per category (assets; ``none`` green)."""
+    library_dirs.configure()  # before matplotlib's first import
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -62,10 +65,10 @@ def failure_mode_figure(df, title: str = ""):
         ax.bar(x, vals, bottom=bottom, label=m, color=colors.get(m))
         bottom = [b + v for b, v in zip(bottom, vals)]
     ax.set_xticks(x)
-    ax.set_xticklabels([str(i) for i in table.index], rotation=30, ha="right", fontsize=8)
+    ax.set_xticklabels([plot_text(shorten(i, 40)) for i in table.index], rotation=30, ha="right", fontsize=8)  # names: never mathtext
     ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel("assets")
-    ax.set_title(title or "failure modes by category")
+    ax.set_title(plot_text(title) if title else "failure modes by category")
     if modes:
         ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
@@ -156,6 +159,7 @@ def log_flow_run(
         ImportError: MLflow is not installed (``pip install asset2sim[pipeline]``).
         mlflow.exceptions.MlflowException: the store refused a write.
     """
+    library_dirs.configure()  # before MLflow's first import: no telemetry file or report
     from mlflow.entities import Metric, Param, RunTag
     from mlflow.tracking import MlflowClient
 

@@ -24,6 +24,21 @@ MAX_PHASE_TIME = 60.0
 #: Most simulator steps one settle + test measurement may take ((settle_time + test_time) / timestep): a time step
 #: and times that ask for more would run for hours, not give a better verdict.
 MAX_MEASUREMENT_STEPS = 200_000
+#: Smallest time step, s: 42 times finer than the SPEC's 1/240 s and 20 times finer than MuJoCo's default 2 ms. Every
+#: check derives its steps from simulated seconds over the time step (the sweep, robust rest's trials, operability's
+#: strokes, the gripper, the escalation's rounds), so a finer step multiplies them all without a better verdict;
+#: ``1e-7`` ran a refine past 360 s and ``1e-300`` for ever.
+MIN_TIMESTEP = 1e-4
+#: Most simulated steps of one refine, every phase, round and engine together (``asset2sim.engines.step_budget``; past
+#: it the refine ends with ``SIM_STEPS_EXCEEDED``): 53 times the most a refine of the 21 dev objects took with the
+#: SPEC's time step and its manifest task (56,190 steps, the suitcase 103755 over 3 rounds; the median 8,400), so
+#: only a finer step or longer times reach it; about 3.5 minutes of PyBullet on such an object
+#: (``docs/design/trust.md``).
+MAX_REFINE_STEPS = 3_000_000
+#: Simulated seconds every refine spends besides its rest tests, at least (robust rest's trials and the sweep of its
+#: one joint): the smallest refine of the dev objects simulated 11.8 s (the door 8877). A configuration whose time step
+#: makes even these exceed :data:`MAX_REFINE_STEPS` is refused before any work.
+MIN_REFINE_SECONDS = 10.0
 
 
 #: Smallest band a joint must come to rest in around its initial state after the object is put down (SPEC, robust
@@ -35,12 +50,12 @@ REST_BAND_RANGE_SHARE = 0.05
 
 class SimConventions(BaseModel):
     """SPEC conventions for every simulator measurement. Every field is finite and bounded (pydantic refuses
-    the rest, naming the field): a time step in (0, 0.05] s, settle and test times up to :data:`MAX_PHASE_TIME`,
-    at most :data:`MAX_MEASUREMENT_STEPS` steps per measurement."""
+    the rest, naming the field): a time step in [:data:`MIN_TIMESTEP`, 0.05] s, settle and test times up to
+    :data:`MAX_PHASE_TIME`, at most :data:`MAX_MEASUREMENT_STEPS` steps per measurement."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
-    timestep: float = Field(1.0 / 240.0, gt=0.0, le=0.05)
-    """s"""
+    timestep: float = Field(1.0 / 240.0, ge=MIN_TIMESTEP, le=0.05)
+    """s, at least :data:`MIN_TIMESTEP`"""
     gravity: float = Field(-9.81, ge=-100.0, le=100.0)
     """m/s^2 along z"""
     settle_time: float = Field(1.0, ge=0.0, le=MAX_PHASE_TIME)
@@ -156,6 +171,15 @@ class RefineConfig(BaseModel):
             raise ValueError(f"engines: {bad[:3]} are not engine names (lower-case letters, digits and '_')")
         return v
 
+    @model_validator(mode="after")
+    def _refine_fits_its_step_cap(self) -> "RefineConfig":
+        need = minimum_refine_steps(self)
+        if need > MAX_REFINE_STEPS:
+            raise ValueError(f"sim.timestep {self.sim.timestep:g} s: even the smallest refine would simulate {need:.0f} steps "
+                             f"(at least {MIN_REFINE_SECONDS:g} s of checks plus settle + test in each of {len(self.engines)} "
+                             f"engine(s)), above the cap of {MAX_REFINE_STEPS} steps per refine: use a larger timestep")
+        return self
+
     def config_hash(self) -> str:
         """sha256 (hex, 16 chars) of the canonical JSON of this configuration."""
         data = self.model_dump(mode="json")
@@ -173,3 +197,11 @@ class RefineConfig(BaseModel):
             data.pop("mjcf", None)
         blob = json.dumps(data, sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def minimum_refine_steps(config: RefineConfig) -> float:
+    """The fewest simulated steps any refine with ``config`` takes: :data:`MIN_REFINE_SECONDS` of checks plus one
+    settle + test rest measurement in each engine, over ``config.sim.timestep``. A configuration above
+    :data:`MAX_REFINE_STEPS` is refused when it is made (:class:`RefineConfig`)."""
+    sim = config.sim
+    return (MIN_REFINE_SECONDS + len(config.engines) * (sim.settle_time + sim.test_time)) / sim.timestep

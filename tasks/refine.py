@@ -13,7 +13,7 @@ from pathlib import Path
 
 from asset2sim import array_cache, atomic, output_folder
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
-from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.config import MAX_REFINE_STEPS, RefineConfig
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import RefineReport
 from asset2sim.schemas.request import RequestSpec
@@ -40,6 +40,8 @@ from asset2sim.tasks.publish.contract import (MARKER_NAME, REPORT_NAME, is_compl
 from asset2sim.tasks.state import balance, ground_clearance, pose, stability
 from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
+from asset2sim.inert import one_line
+from asset2sim.engines.step_budget import StepBudgetExceeded, step_budget
 
 __all__ = ["MARKER_NAME", "REPORT_NAME", "Progress", "RefineError", "RefineResult", "is_complete", "refine_asset", "request_notes", "run_hash"]
 
@@ -124,7 +126,8 @@ def refine_asset(
     owner = _start_output(asset, out_dir, overwrite)
     work = owner.write_path(out_dir)  # out_dir, or the staging folder that replaces a complete earlier output
     staged_input = asset.staged_from.parent if asset.staged_from is not None else None  # an MJCF / USD file's own folder
-    with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference):  # no cache entry in the input or output
+    # no cache entry in the input or output; every simulated step of every phase counted against one cap
+    with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference), step_budget(MAX_REFINE_STEPS):
         try:
             _announce_extract(asset, findings, log)
             cache = analyze.MeshCache()
@@ -145,6 +148,9 @@ def refine_asset(
             extra_paths = extra_outputs.write_extras(work, report, att, log, reference, shown=out_dir, clips=config.clips, media=media) if extras else {}
             extra_paths.update(host)
             write_completion_marker(owner.root, asset.input_hash, chash, owner=owner)  # last, once every file exists
+        except StepBudgetExceeded as exc:
+            owner.abandon()
+            raise RefineError(f"{asset.asset_id}: {exc}", "timeout", [exc.code]) from None
         except BaseException:
             owner.abandon()
             raise
@@ -301,7 +307,7 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Works
     try:
         fractions, before, after = balance.steadiest_fractions(ws.source(att.candidate), att.overlay, att.state, att.closed_out, intervals)
     except Exception as exc:  # a measurement that fails leaves the attempt as it was
-        log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {exc})")
+        log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {one_line(exc)})")
         return None
     why = "unstable" if not att.check.stable else "toppled by a robust-rest disturbance"
     if fractions and after.stable:
@@ -391,7 +397,9 @@ def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: StageLog
     try:
         result = est.estimate(ctx)
     except Exception as exc:
-        raise RefineError(f"{asset.asset_id}: estimator {config.estimator!r} failed: {exc}", "estimator_failure", ["ESTIMATOR_FAILED"]) from exc
+        code = getattr(exc, "code", None)  # a model call's fault by what happened (MODEL_REPLY_INVALID ...)
+        raise RefineError(f"{asset.asset_id}: estimator {config.estimator!r} failed: {one_line(exc, 600)}", "estimator_failure",
+                          ["ESTIMATOR_FAILED", *([code] if isinstance(code, str) and code.startswith("MODEL_") else [])]) from exc
     bands = dict(result.bands)
     log.lap("synthesize")
     try:

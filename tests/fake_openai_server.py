@@ -12,7 +12,8 @@ finish reason, refusal), :func:`status` (an HTTP error with headers),
 :func:`sleep_then` (answer late: a timeout), :func:`drop` (close the
 connection without answering), :func:`raw` (arbitrary bytes, e.g. a 10 MB body),
 :func:`trickle` (a valid reply sent a byte at a time, slowly) and :func:`flood`
-(a body of any size, generated while it is sent, never held whole).
+(a body of any size, generated while it is sent, never held whole), :func:`encoded` (a body under any
+``Content-Encoding``, e.g. :func:`gzip_bomb`).
 
 Bounded by construction: at most ``max_requests`` requests are served (later
 ones get 503), the server shuts itself down after ``lifetime_s`` seconds, and
@@ -22,6 +23,7 @@ leaving the ``with`` block stops it. Every request is recorded in
 
 from __future__ import annotations
 
+import functools
 import json
 import re
 import socket
@@ -335,6 +337,33 @@ def flood(total_bytes: int, chunk_bytes: int = 1 << 20) -> Behaviour:
             pass
 
     return b
+
+
+def encoded(payload: bytes, encoding: str, code: int = 200) -> Behaviour:
+    """Answer ``code`` with ``payload`` sent as it is under ``Content-Encoding: encoding`` (already compressed by the
+    caller: a gzip bomb, gzip inside gzip), whatever the request's ``Accept-Encoding`` asked."""
+
+    def b(server: FakeOpenAIServer, req: Request) -> None:
+        _send(req, code, payload, {"Content-Encoding": encoding})
+
+    return b
+
+
+@functools.lru_cache(maxsize=4)
+def gzip_bomb(decoded_bytes: int, layers: int = 1) -> bytes:
+    """A gzip body of ``decoded_bytes`` zero bytes (about 1 MB per GiB), compressed ``layers`` times; made in 1 MiB
+    steps, never held decoded (kept for the process: 1 GiB takes about 2 s to compress)."""
+    import zlib
+
+    comp = zlib.compressobj(9, zlib.DEFLATED, 16 + zlib.MAX_WBITS)
+    block, out, left = b"\0" * (1 << 20), [], decoded_bytes
+    while left > 0:
+        out.append(comp.compress(block[:min(left, len(block))]))
+        left -= len(block)
+    data = b"".join(out) + comp.flush()
+    for _ in range(layers - 1):
+        data = zlib.compress(data, 9, wbits=16 + zlib.MAX_WBITS)
+    return data
 
 
 # ------------------------------------------------------------- a valid answer

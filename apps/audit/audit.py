@@ -221,9 +221,10 @@ def _rest_state(ctx, overlay: Overlay, closed: dict[str, float]) -> dict[str, fl
 def _write(report: AuditReport, asset: AssetDescription, dp: declared_mod.DeclaredPhysics, judged: Judgement, out_dir: Path) -> AuditReport:
     """``audit.json``, ``audit.md`` and the patch (when a value changes) into ``out_dir`` (atomic writes)."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    if any(v.patched is not None for v in report.values):
-        written = patch.write_patch(asset, dp, report.values, judged.patched, out_dir / patch.PATCH_DIR)
-        report = report.model_copy(update={"patch": written.relative_to(out_dir).as_posix()})
-    atomic.write_json(out_dir / AUDIT_JSON, report.model_dump(mode="json"))
-    atomic.write_text(out_dir / AUDIT_MD, report_md.render(report))
+    with output_folder.guarding(out_dir):  # nothing through a symlinked patch/ (or out_dir/..)
+        if any(v.patched is not None for v in report.values):
+            written = patch.write_patch(asset, dp, report.values, judged.patched, out_dir / patch.PATCH_DIR)
+            report = report.model_copy(update={"patch": written.relative_to(out_dir).as_posix()})
+        atomic.write_json(out_dir / AUDIT_JSON, report.model_dump(mode="json"))
+        atomic.write_text(out_dir / AUDIT_MD, report_md.render(report))
     return report

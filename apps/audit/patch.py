@@ -20,6 +20,7 @@ from asset2sim.tasks.assemble import copied_meshes
 from asset2sim.apps.audit import patch_usd
 from asset2sim.engines.mjcf.base import load_mujoco, mujoco_messages
 from asset2sim.tasks.ingest.declared import DeclaredPhysics
+from asset2sim.tasks.ingest import mjcf_files
 from asset2sim.tasks.ingest.mjcf_files import compile_mjcf, gather_mjcf
 from asset2sim.tasks.ingest.staged import StagingError
 from asset2sim.frames import translation_matrix
@@ -49,7 +50,7 @@ def write_patch(asset: AssetDescription, dp: DeclaredPhysics, values: list[Value
     folder.mkdir(parents=True, exist_ok=True)
     links, joints = changed(values, patched)
     if dp.format == "mjcf":
-        return _write_mjcf(dp, links, joints, folder)
+        return _write_mjcf(dp, links, joints, folder, mjcf_files.staged_sources(asset.urdf_path))
     if dp.format == "usd":
         return patch_usd.write_usd(dp, links, joints, folder)
     return _write_urdf(asset, dp.source, links, joints, folder)
@@ -83,25 +84,32 @@ def _write_urdf(asset: AssetDescription, source: Path, links: dict[str, LinkPhys
     return out
 
 
-def _copy_named(src: Path, base: Path, folder: Path) -> str:
+def _copy_named(src: Path, base: Path, folder: Path, data: bytes | None = None) -> str:
     """Copy an asset file the MJCF or URDF names into ``folder``: at its path relative to ``base`` (the file's folder)
-    when inside it, else under ``assets/`` by a safe name; returns the relative POSIX path written."""
-    real = Path(os.path.realpath(src))
+    when inside it, else under ``assets/`` by a safe name; ``data``: its bytes as already read (then ``src`` only names
+    it); returns the relative POSIX path written."""
+    real = Path(os.path.realpath(src)) if data is None else Path(src)
     try:
         rel = real.relative_to(Path(os.path.realpath(base))).as_posix()
     except ValueError:
         digest = hashlib.sha256(str(real).encode()).hexdigest()[:8]
         rel = f"assets/{file_names.file_stem(real.stem)}-{digest}{real.suffix.lower()}"
     target = file_names.join_inside(folder, rel)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    atomic.copy_file(real, target)
+    if data is not None:
+        atomic.write_bytes(target, data)  # the bytes the reader policy read: the input is not opened again
+    else:
+        atomic.copy_file(real, target)  # its folders made by the atomic writer, after the output's guard
     return rel
 
 
-def _write_mjcf(dp: DeclaredPhysics, links: dict[str, LinkPhysics], joints: dict[str, JointDynamics], folder: Path) -> Path:
+def _write_mjcf(dp: DeclaredPhysics, links: dict[str, LinkPhysics], joints: dict[str, JointDynamics], folder: Path,
+                read: tuple | None = None) -> Path:
+    """The patched MJCF in ``folder``, compiled from ``read`` (the sources staged when the audit read the input,
+    :func:`~asset2sim.tasks.ingest.mjcf_files.staged_sources`; None: gathered once here under the reader policy),
+    its meshes and textures written from those bytes; the input's paths are not opened again."""
     mujoco = load_mujoco()
     source = dp.source
-    sources = gather_mjcf(source)  # the reader policy: only checked files inside the input's tree are read and copied
+    sources = read[0] if read is not None else gather_mjcf(source)  # only checked files inside the input's tree
     spec, model, _ = compile_mjcf(sources)
     base = source.parent
     meshdir, texdir = Path(spec.meshdir or ""), Path(spec.texturedir or "")
@@ -112,7 +120,7 @@ def _write_mjcf(dp: DeclaredPhysics, links: dict[str, LinkPhysics], joints: dict
                 real = sources.real.get(named)
                 if real is None:  # gather_mjcf checked every file attribute; nothing else is copied
                     raise StagingError(f"{source}: {item.file!r} was not checked by the reader policy; not copied")
-                item.file = _copy_named(real, base, folder)
+                item.file = _copy_named(real, base, folder, data=sources.files[named])
     spec.meshdir = spec.texturedir = ""
     spec.modelfiledir = str(folder)  # MuJoCo resolves the copies' relative paths from the patch's folder
     if spec.compiler.inertiafromgeom == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE:  # else explicit inertials would be ignored

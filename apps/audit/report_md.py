@@ -3,6 +3,7 @@ and patched physics, and the changes the patch makes: the diff a reviewer reads)
 
 from __future__ import annotations
 
+from asset2sim.inert import markdown_text as md
 from asset2sim.schemas.audit import AuditReport, ValueVerdict
 
 
@@ -13,8 +14,8 @@ def _num(v: float | None) -> str:
 def _row(v: ValueVerdict) -> str:
     verdict = v.verdict.replace("_", " ") + (f" (x{v.factor:.3g})" if v.verdict == "implausible" and v.factor not in (None, 0) else "")
     band = "-" if v.low is None and v.high is None else f"{_num(v.low) if v.low is not None else '0'} - {_num(v.high) if v.high is not None else 'inf'}"
-    return (f"| {v.where} | {v.quantity} | {_num(v.declared)} | {_num(v.estimate)} | {band} | {v.unit} | **{verdict}** | "
-            f"{v.reason.replace('|', '/')} |")
+    return (f"| {md(v.where)} | {md(v.quantity)} | {_num(v.declared)} | {_num(v.estimate)} | {band} | {md(v.unit)} | **{md(verdict)}** | "
+            f"{md(v.reason)} |")
 
 
 def changes(report: AuditReport) -> list[ValueVerdict]:
@@ -25,14 +26,14 @@ def changes(report: AuditReport) -> list[ValueVerdict]:
 def render(report: AuditReport) -> str:
     """The report as Markdown text."""
     bad = report.implausible
-    lines = [f"# Audit of {report.asset_id}", "",
-             f"- input: `{report.source}` ({report.format.upper()})",
-             f"- category: {report.category} ({report.category_reason or 'given'})",
-             f"- root: {'fixed (mounted)' if report.root_fixed else 'free (on the ground)'}; {report.root_source}",
+    lines = [f"# Audit of {md(report.asset_id)}", "",
+             f"- input: {md(report.source)} ({report.format.upper()})",
+             f"- category: {md(report.category)} ({md(report.category_reason or 'given')})",
+             f"- root: {'fixed (mounted)' if report.root_fixed else 'free (on the ground)'}; {md(report.root_source)}",
              f"- verdict: **{report.failure_mode}**: {len(bad)} implausible of {len(report.values)} values judged",
              ""]
     if report.labels:
-        lines += ["Part labels used: " + ", ".join(f"{k} = {v}" for k, v in report.labels.items()), ""]
+        lines += ["Part labels used: " + ", ".join(f"{md(k)} = {md(v)}" for k, v in report.labels.items()), ""]
     lines += ["## Values", "", "| where | quantity | declared | estimate | plausible | unit | verdict | why |",
               "|---|---|---|---|---|---|---|---|", *(_row(v) for v in report.values), ""]
     lines += ["## Simulation checks", ""]
@@ -40,20 +41,21 @@ def render(report: AuditReport) -> str:
         lines += ["Not run.", ""]
     for c in report.checks:
         state = "passed" if c.passed else ("could not run: " + c.error if c.error else "failed: " + ", ".join(c.failures))
-        lines.append(f"- {c.physics} physics: {state}")
+        lines.append(f"- {md(c.physics)} physics: {md(state)}")
         for m in c.metrics:
-            lines.append(f"  - {m.name}: {_num(m.value)} {m.unit} ({'pass' if m.passed else 'fail' if m.passed is False else 'info'}; {m.threshold})")
+            lines.append(f"  - {md(m.name)}: {_num(m.value)} {md(m.unit)} ({'pass' if m.passed else 'fail' if m.passed is False else 'info'}; "
+                         f"{md(m.threshold)})")
     lines.append("")
     lines += ["## Changes in the patch", ""]
     diff = changes(report)
     if not diff:
         lines += ["None: every judged value is kept.", ""]
     else:
-        lines += [f"Patched file: `{report.patch}`" if report.patch else "No patch written (no output folder).", "",
+        lines += [f"Patched file: {md(report.patch)}" if report.patch else "No patch written (no output folder).", "",
                   "| where | quantity | declared | patched | unit | why |", "|---|---|---|---|---|---|"]
-        lines += [f"| {v.where} | {v.quantity} | {_num(v.declared)} | {_num(v.patched)} | {v.unit} | {v.verdict.replace('_', ' ')}: "
-                  f"{v.reason.replace('|', '/')} |" for v in diff]
+        lines += [f"| {md(v.where)} | {md(v.quantity)} | {_num(v.declared)} | {_num(v.patched)} | {md(v.unit)} | "
+                  f"{md(v.verdict.replace('_', ' '))}: {md(v.reason)} |" for v in diff]
         lines += ["", "Inertia rows give the tensor's trace; center-of-mass rows the distance from the geometric center of mass.", ""]
     if report.notes:
-        lines += ["## Notes", "", *(f"- {n}" for n in report.notes), ""]
+        lines += ["## Notes", "", *(f"- {md(n)}" for n in report.notes), ""]
     return "\n".join(lines)

@@ -24,7 +24,7 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any, Sequence
 
-from asset2sim import atomic
+from asset2sim import atomic, output_folder
 from asset2sim.file_names import UnsafePath, join_inside
 from asset2sim.schemas.realism import ClipPair, JudgeVerdict, PairSet, PairSide
 from asset2sim.apps.realism import pair_set
@@ -34,6 +34,7 @@ from asset2sim.tasks.synthesize.llm_client import LLMClient
 from asset2sim.tasks.synthesize.llm_config import ClientConfig
 from asset2sim.tasks.synthesize.llm_errors import ModelCallError
 from asset2sim.tasks.synthesize.llm_usage import Usage
+from asset2sim.inert import one_line
 
 #: Version of :data:`RUBRIC` and of the message layout (a new version is a new cache key anyway).
 RUBRIC_VERSION = "1"
@@ -155,7 +156,7 @@ def ask_once(client: LLMClient, messages: list[dict[str, Any]]) -> tuple[Reading
     try:
         comp = client.complete(messages, schema=REPLY_SCHEMA, schema_name="realism_verdict")
     except ModelCallError as exc:
-        return Reading(None, f"call failed: {exc}"), Usage(attempts=exc.attempts)
+        return Reading(None, f"call failed: {one_line(exc)}"), Usage(attempts=exc.attempts)
     reading = read_reply(comp.content, finish_reason=comp.finish_reason, refusal=comp.refusal)
     if reading.choice is not None and not comp.cached:
         client.cache_put(comp.key, comp)
@@ -299,7 +300,8 @@ def write_judgements(folder: Path | str, verdicts: Sequence[JudgeVerdict]) -> Pa
     table = pa.Table.from_pylist(rows, schema=schema)
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink)
-    return atomic.write_bytes(Path(folder) / JUDGEMENTS_FILE, sink.getvalue().to_pybytes())
+    with output_folder.guarding(folder):
+        return atomic.write_bytes(Path(folder) / JUDGEMENTS_FILE, sink.getvalue().to_pybytes())
 
 
 def read_judgements(folder: Path | str) -> list[JudgeVerdict]:

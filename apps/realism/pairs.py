@@ -19,7 +19,9 @@ from typing import Sequence
 
 import numpy as np
 
-from asset2sim import atomic
+from asset2sim import atomic, output_folder
+from asset2sim.inert import one_line
+from asset2sim.output_paths import OutputError
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.realism import Clip, ClipPair, PairSet, PairSide
 from asset2sim.tasks.evaluation.clips import (CLIP_FPS, CLIP_SIZE, CLIP_VIEWS, draw_frames, fit_cameras, fit_poses, pose_points,
@@ -142,8 +144,10 @@ def calibration_specs(subject: Subject, *, work: Path | str, defects: Sequence[s
     for k, name in enumerate(defects or list(DEFECTS)):
         try:
             b = plant_defect(subject.side, name, subject.joint, subject.closed, subject.force_limit, Path(work) / f"{k:02d}")
+        except OutputError:  # the output guard refused a write: not a defect that cannot be planted
+            raise
         except (KeyError, ValueError) as exc:
-            skipped[f"{subject.object_id} {name}"] = str(exc)
+            skipped[f"{subject.object_id} {name}"] = one_line(exc)
             continue
         specs.append(_spec(subject, b, name))
     return specs, skipped
@@ -172,17 +176,20 @@ def build_pair_set(specs: Sequence[tuple[PairSpec, ClosedEnd]], pair_set: Path |
     """Make every pair of ``specs`` (:func:`make_pair`, clip folders numbered in order) and write ``pairs.json``; a pair
     that fails is listed in ``skipped`` with its error and the others go on. ``progress``: callback(text) per pair."""
     pairs, skipped = [], dict(skipped or {})
-    for index, (spec, closed) in enumerate(specs):
-        key = f"{spec.object_id} {spec.b.method}"
-        try:
-            pairs.append(make_pair(spec, closed, pair_set, index, config=config, conventions=conventions))
-            if progress:
-                progress(f"{key}: pair {pairs[-1].pair_id}")
-        except Exception as exc:  # one pair never stops the set
-            skipped[key] = f"{type(exc).__name__}: {exc}"
-            if progress:
-                progress(f"{key}: skipped ({skipped[key]})")
-    return write_pair_set(pair_set, pairs, skipped)
+    with output_folder.guarding(pair_set):  # no clip or frame through a symlinked subfolder
+        for index, (spec, closed) in enumerate(specs):
+            key = f"{spec.object_id} {spec.b.method}"
+            try:
+                pairs.append(make_pair(spec, closed, pair_set, index, config=config, conventions=conventions))
+                if progress:
+                    progress(f"{key}: pair {pairs[-1].pair_id}")
+            except OutputError:  # a write the guard refused: the whole set, not one pair
+                raise
+            except Exception as exc:  # one pair never stops the set
+                skipped[key] = f"{type(exc).__name__}: {one_line(str(exc))}"
+                if progress:
+                    progress(f"{key}: skipped ({skipped[key]})")
+        return write_pair_set(pair_set, pairs, skipped)
 
 
 #: The methods a benchmark's asset2sim output is paired with by default (``asset2sim benchmark``'s baselines).
@@ -226,9 +233,12 @@ def specs_from_folders(paths: Sequence[Path | str], pair_set: Path | str, *, aga
             specs += got
             skipped.update(why)
             if defects is None or len(defects):
-                got, why = calibration_specs(subject, work=Path(pair_set) / DEFECTS_DIR / f"{n:04d}", defects=defects)
+                with output_folder.guarding(pair_set):  # the broken copies: never through a symlinked defects/
+                    got, why = calibration_specs(subject, work=Path(pair_set) / DEFECTS_DIR / f"{n:04d}", defects=defects)
                 specs += got
                 skipped.update(why)
+        except OutputError:  # a write the guard refused: the whole set
+            raise
         except Exception as exc:  # one object's unreadable output never stops the set
-            skipped[object_id] = f"{type(exc).__name__}: {exc}"
+            skipped[object_id] = f"{type(exc).__name__}: {one_line(exc)}"
     return specs, skipped

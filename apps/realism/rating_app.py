@@ -34,7 +34,6 @@ Protections, as a web app on a shared machine needs them (``docs/guide/realism.m
 # no `from __future__ import annotations`: FastAPI reads the endpoints' annotations (Request) in create_app's scope
 import hashlib
 import hmac
-import html
 import sqlite3
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -42,6 +41,7 @@ from typing import TYPE_CHECKING, Sequence
 from urllib.parse import parse_qs, quote
 
 from asset2sim.apps.realism.ratings import RatingError, RatingStore, Showing, check_rater, media_path, side
+from asset2sim.inert import html_text
 
 if TYPE_CHECKING:
     from fastapi import FastAPI, Request
@@ -79,14 +79,14 @@ textarea { width: 100%; }
 def _page(title: str, body: str, status: int = 200) -> "HTMLResponse":
     from fastapi.responses import HTMLResponse
 
-    doc = (f"<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
+    doc = (f"<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{html_text(title)}</title>"
            f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><style>{_STYLE}</style></head>"
            f"<body>{body}</body></html>\n")
     return HTMLResponse(doc, status_code=status, headers=_HEADERS)
 
 
 def _start_page(error: str = "", status: int = 200) -> "HTMLResponse":
-    message = f"<p class=\"error\" id=\"error\">{html.escape(error)}</p>" if error else ""
+    message = f"<p class=\"error\" id=\"error\">{html_text(error)}</p>" if error else ""
     return _page("Realism rating", f"""
 <h1>Realism rating</h1>
 <p>You will see short clips of objects being moved, two versions side by side. They differ only in how the
@@ -123,18 +123,18 @@ def _rating_page(rater: str, index: int, shown: Showing, done: int, total: int, 
             base = f"/media/{r}/{index}/{position}/{v}"
             videos.append(f"<video id=\"{position}-{v}\" autoplay loop muted playsinline controls preload=\"auto\" "
                           f"poster=\"{base}/poster\" width=\"{clip.width}\" height=\"{clip.height}\" "
-                          f"title=\"{html.escape(clip.view)} view\"><source src=\"{base}/video\" type=\"video/webm\">"
+                          f"title=\"{html_text(clip.view)} view\"><source src=\"{base}/video\" type=\"video/webm\">"
                           "</video>")
         columns.append(f"<div class=\"side\" id=\"side-{position}\"><h2>{position.capitalize()}</h2>{''.join(videos)}</div>")
     scores = "".join(f"<label><input type=\"radio\" name=\"score\" value=\"{s}\" id=\"score-{s}\"> {s}</label> "
                      for s in range(1, 6))
     return _page(f"Realism rating: pair {done + 1} of {total}", f"""
-<p class="muted">Rater <b id="rater-id">{html.escape(rater)}</b> &middot; pair <span id="progress">{done + 1}</span>
-of {total} &middot; object: {html.escape(shown.pair.category)}</p>
+<p class="muted">Rater <b id="rater-id">{html_text(rater)}</b> &middot; pair <span id="progress">{done + 1}</span>
+of {total} &middot; object: {html_text(shown.pair.category)}</p>
 <div class="sides">{''.join(columns)}</div>
 <form method="post" action="/rate/{r}/answer" id="answer">
   <input type="hidden" name="pair" value="{index}">
-  <input type="hidden" name="token" value="{html.escape(token)}">
+  <input type="hidden" name="token" value="{html_text(token)}">
   <p class="question">Which behaves more like the real object?</p>
   <fieldset><legend>How realistic is the side you choose? (optional: 1 not at all, 5 like the real object)</legend>
     <label><input type="radio" name="score" value="" id="score-none" checked> no score</label> {scores}</fieldset>
@@ -150,14 +150,14 @@ of {total} &middot; object: {html.escape(shown.pair.category)}</p>
 def _done_page(rater: str, total: int) -> "HTMLResponse":
     return _page("Realism rating: done", f"""
 <h1 id="done">Thank you</h1>
-<p>Rater <b>{html.escape(rater)}</b>: you have rated all {total} pairs. You can close this page.</p>""")
+<p>Rater <b>{html_text(rater)}</b>: you have rated all {total} pairs. You can close this page.</p>""")
 
 
 def _error_page(code: str, message: str, rater: str | None = None) -> "HTMLResponse":
     link = f"/rate/{quote(rater, safe='')}" if rater else "/"
     back = f"<p><a href=\"{link}\">{'Continue rating' if rater else 'Start'}</a></p>"
     return _page("Realism rating: error",
-                 f"<h1>Not recorded</h1><p class=\"error\" id=\"error\">{html.escape(message)}</p>{back}",
+                 f"<h1>Not recorded</h1><p class=\"error\" id=\"error\">{html_text(message)}</p>{back}",
                  _STATUS.get(code, 400))
 
 

@@ -33,7 +33,7 @@ import time
 from pathlib import Path
 from typing import Literal, NamedTuple
 
-from asset2sim import atomic
+from asset2sim import atomic, output_folder
 from asset2sim.schemas.realism import ClipPair, PairSide, Rating
 from asset2sim.apps.realism.pair_set import PAIRS_JSON as PAIRS_FILE, PairSetError, read_pair_set
 from asset2sim.apps.realism.pair_set import media_path  # noqa: F401  (the rating app's media check)
@@ -133,7 +133,7 @@ class RatingStore:
         self.pair_set = read_pair_set(self.folder)
         self.pairs = list(self.pair_set.pairs)
         self.index = {p.pair_id: i for i, p in enumerate(self.pairs)}
-        self.database = self.folder / DATABASE_FILE
+        self.database = output_folder.check_destination(self.folder / DATABASE_FILE, self.folder)  # SQLite follows symlinks
         self.parquet = self.folder / RATINGS_FILE
         self._local = threading.local()
         self._connections: list[sqlite3.Connection] = []

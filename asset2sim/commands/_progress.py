@@ -10,7 +10,9 @@ import sys
 import time
 from typing import Any
 
+from asset2sim.commands._output import raw
 from asset2sim.flow_progress import ProgressEvent
+from asset2sim.inert import markup
 
 
 def eta_seconds(elapsed: float, finished: int, total: int, worked: int | None = None) -> float | None:
@@ -33,7 +35,7 @@ class FlowProgress:
 
     def __init__(self, live: bool | None = None, stream: Any = None):
         self.stream = stream or sys.stdout
-        self.live = self.stream.isatty() if live is None else live
+        self.live = raw(self.stream).isatty() if live is None else live  # the terminal beneath the commands' inert stream
         self.counts = {"done": 0, "skipped": 0, "failed": 0}
         self.total = 0
         self.started = time.perf_counter()
@@ -52,7 +54,7 @@ class FlowProgress:
         elif ev.kind == "asset_finished":
             self.counts[ev.status if ev.status in self.counts else "failed"] += 1
             if self._progress is not None:
-                self._progress.update(self._task, advance=1, description=ev.dataset, **self.counts)
+                self._progress.update(self._task, advance=1, description=markup(ev.dataset), **self.counts)
             elif not self.live:
                 print(self._line(ev), file=self.stream, flush=True)
         elif ev.kind == "run_finished":
@@ -76,10 +78,10 @@ class FlowProgress:
         counts = TextColumn("[green]done {task.fields[done]}[/] [cyan]skipped {task.fields[skipped]}[/] "
                             "[red]failed {task.fields[failed]}[/]")
         self._progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), counts, TimeElapsedColumn(),
-                                  TextColumn("ETA"), TimeRemainingColumn(), console=Console(file=self.stream), transient=False)
+                                  TextColumn("ETA"), TimeRemainingColumn(), console=Console(file=raw(self.stream)), transient=False)
         self._quiet_console_logs()
         self._progress.start()
-        self._task = self._progress.add_task(f"{ev.dataset}: {STARTING}", total=max(1, ev.total), **self.counts)
+        self._task = self._progress.add_task(f"{markup(ev.dataset)}: {STARTING}", total=max(1, ev.total), **self.counts)
 
     def _quiet_console_logs(self) -> None:
         """Raise every terminal log handler to WARNING (remembering its level)."""

@@ -21,6 +21,8 @@ from asset2sim.output_paths import OutputError, check_location
 from asset2sim.flows import audit_catalog
 from asset2sim.apps.audit.batch import AuditTarget, audit_one, find_assets
 from asset2sim.schemas.config import RefineConfig
+from asset2sim.commands import _output
+from asset2sim.inert import markup, terminal
 
 NAME = "audit"
 HELP = ("Audit assets that already carry physics (URDF, MJCF, USD): each mass, density, inertia, center of mass, damping, "
@@ -69,8 +71,6 @@ def _out_outside_inputs(out: Path, inputs: list[Path]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
-    from rich.markup import escape
     from rich.table import Table
 
     if args.jobs < 1:
@@ -105,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
             rows = _run_all(targets, args.out, args.category, not args.no_sim, args.jobs, config)
         if args.out is not None:
             audit_catalog.write_audit_catalog(args.out, rows)
-    console = Console() if sys.stdout.isatty() else Console(width=200, soft_wrap=True)
+    console = _output.console()
     if args.json:
         for r in rows:
             print(r.model_dump_json())
@@ -115,16 +115,16 @@ def run(args: argparse.Namespace) -> int:
             table.add_column(col)
         for r in rows:
             checks = "-" if r.declared_passed is None else ("passes" if r.declared_passed else "fails " + ", ".join(r.declared_failures))
-            table.add_row(*map(escape, (r.asset_id, r.format, r.category, r.failure_mode,  # "[mujoco]" is text, not markup
+            table.add_row(*map(markup, (r.asset_id, r.format, r.category, r.failure_mode,  # "[mujoco]" is text, not markup
                                         "; ".join(r.implausible) or r.error[:160] or "-", checks)))
         console.print(table)
         import pandas as pd
 
         by_cat = audit_catalog.failure_modes_by_category(pd.DataFrame.from_records([r.model_dump() for r in rows]))
-        console.print(by_cat.to_string())
+        console.print(terminal(by_cat.to_string()), markup=False)  # categories are the inputs' words
         if args.out is not None:
-            console.print(f"written: {args.out}/<asset>/audit.md, {args.out}/{audit_catalog.ASSETS_PARQUET}, "
-                          f"{args.out}/{audit_catalog.VALUES_PARQUET}")
+            console.print(terminal(f"written: {args.out}/<asset>/audit.md, {args.out}/{audit_catalog.ASSETS_PARQUET}, "
+                                   f"{args.out}/{audit_catalog.VALUES_PARQUET}"), markup=False)
     failed = [r for r in rows if r.failure_mode == "audit_failed"]
     for r in failed:  # the whole reason, one line each (the table cuts it; a missing extra's hint ends it)
         print(CommandError(INVALID_INPUT, "AUDIT_FAILED", r.source, r.error).line(NAME), file=sys.stderr)

@@ -13,6 +13,8 @@ from pathlib import Path
 
 from asset2sim.commands._status import INVALID_REQUEST, CommandError, parse_engines
 from asset2sim.apps.benchmark.benchmark import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
+from asset2sim.commands import _output
+from asset2sim.inert import markup
 
 NAME = "benchmark"
 HELP = "Run methods (defaults, human, direct, asset2sim) on a manifest, evaluate each, write the thesis table and an index page."
@@ -79,7 +81,7 @@ def _print_table(console, title: str, summary: dict) -> None:
         return "-" if x is None else f"{100 * x:.1f}%"
 
     for method, r in summary.items():
-        t.add_row(method, pm(r["pen_ts_mean"], r["pen_ts_sd"]), pm(r["pen_mean"], r["pen_sd"]),
+        t.add_row(markup(method), pm(r["pen_ts_mean"], r["pen_ts_sd"]), pm(r["pen_mean"], r["pen_sd"]),
                   f"{pct(r['rest_stability_pass'])} ({r['rest_n']})", f"{pct(r['oscillation_pass'])} ({r['osc_n']})",
                   f"{pct(r['probes_pass'])} ({r['probes_n']})",
                   f"{pct(r.get('sweep_pass'))} ({r.get('sweep_n', 0)})", f"{pct(r.get('robust_rest_pass'))} ({r.get('robust_n', 0)})",
@@ -87,7 +89,7 @@ def _print_table(console, title: str, summary: dict) -> None:
                   f"{pct(r.get('ready'))} ({r.get('ready_n', 0)})",
                   pm(r["scale_mean"], r["scale_sd"]), pm(r["init_mean"], r["init_sd"]),
                   pct(r["prompt_mean"]), pct(r["all_pass"]), "-" if r["median_seconds"] is None else f"{r['median_seconds']:.2f}",
-                  r.get("realism", "not rated"), str(r["errors"]))
+                  markup(r.get("realism", "not rated")), str(r["errors"]))
     console.print(t)
 
 
@@ -104,17 +106,16 @@ def _realism(out: Path, methods: list[str]) -> dict[str, str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console(width=max(Console().width, 180))
+    console = _output.console(width=180)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     ids = [i.strip() for i in args.ids.split(",")] if args.ids else None
     engines = tuple(parse_engines(args.engines))
     out = args.out
 
     def progress(method: str, rid: str, msg: str) -> None:
-        console.print(f"[bold]{method}[/bold] {rid}: {msg}")
+        console.print(f"[bold]{markup(method)}[/bold] {markup(rid)}: {markup(msg)}")
 
     try:
         records = run_benchmark(args.manifest, methods, out, rows=ids, seed=args.seed, engines=engines,
@@ -132,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
             "engines": list(engines)}
     write_benchmark_outputs(records, methods, out, meta)
     if meta.get("parquet_error"):
-        console.print(f"[yellow]results.parquet not written: {meta['parquet_error']}[/yellow]")
+        console.print(f"[yellow]results.parquet not written: {markup(meta['parquet_error'])}[/yellow]")
     for title, summary in tables.items():
         _print_table(console, title, summary)
     rt = Table(title="research numbers (SPEC, thesis 9-object set, Isaac Sim)")
@@ -146,14 +147,14 @@ def run(args: argparse.Namespace) -> int:
         med = secs[len(secs) // 2] if len(secs) % 2 else 0.5 * (secs[len(secs) // 2 - 1] + secs[len(secs) // 2])
         console.print(f"median evaluation time per asset: {med:.2f} s over {len(secs)} evaluations (goal <= 1.5 s; "
                       f"method runs, report writing and start-up excluded)")
-    console.print(f"wrote {out / 'summary.html'}, {out / 'index.html'}, results.csv/json/parquet, summary.csv/json")
+    console.print(f"wrote {out / 'summary.html'}, {out / 'index.html'}, results.csv/json/parquet, summary.csv/json", markup=False)
     if args.compare is not None:
         prev = json.loads(Path(args.compare).read_text())["records"]
         diffs = compare_records(prev, records)
         if diffs:
-            console.print(f"[red]{len(diffs)} differences from {args.compare}:[/red]")
+            console.print(f"[red]{len(diffs)} differences from {markup(args.compare)}:[/red]")
             for d in diffs[:50]:
-                console.print(f"  {d}")
+                console.print(f"  {markup(d)}")
             return 1
-        console.print(f"[green]same results as {args.compare} (timings excluded)[/green]")
+        console.print(f"[green]same results as {markup(args.compare)} (timings excluded)[/green]")
     return 0

@@ -18,8 +18,9 @@ from pathlib import Path
 
 from asset2sim import demo_assets
 from asset2sim.commands import refine as refine_cmd
-from asset2sim.commands._status import INVALID_REQUEST, OUTPUT_LOCATION, CommandError
+from asset2sim.commands._status import INVALID_REQUEST, OUTPUT_LOCATION, CommandError, output_failure
 from asset2sim.demo_objects import DEMO_OBJECTS
+from asset2sim.output_paths import OutputError
 
 NAME = "demo"
 HELP = "Build a built-in articulated object (a box with a hinged lid, a two-drawer cabinet, a laptop ...) and refine it."
@@ -54,7 +55,9 @@ def _entry(asset_id: str):
 def _write(what: str, fn, folder: Path) -> Path:
     try:
         return fn(folder)
-    except (FileExistsError, OSError) as exc:
+    except OutputError as exc:  # a folder holding files the generator did not write: refused, nothing touched
+        raise output_failure(exc, folder) from exc
+    except OSError as exc:
         raise CommandError(OUTPUT_LOCATION, "OUTPUT_WRITE_FAILED", folder, f"{what} not written: {exc}") from exc
 
 

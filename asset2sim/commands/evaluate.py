@@ -8,13 +8,14 @@ cannot be evaluated, 4 the output cannot be written.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from asset2sim.commands._status import INVALID_REQUEST, CommandError, os_failure, output_failure, output_folder_failure, parse_engines
 from asset2sim.tasks.evaluation.evaluate import EvaluationError, evaluate_asset
 from asset2sim.tasks.check.verdict import why_it_failed
 from asset2sim import output_folder
+from asset2sim.commands import _output
+from asset2sim.inert import markup, terminal
 
 NAME = "evaluate"
 HELP = "Evaluate an asset (any URDF): physical robustness, semantic accuracy, probes; writes evaluation.json and report.html."
@@ -48,11 +49,10 @@ def default_out(asset: Path) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
     from rich.table import Table
 
     # a terminal: its width (the threshold column wraps); a pipe or file: lines kept whole for grep
-    console = Console() if sys.stdout.isatty() else Console(width=200, soft_wrap=True)
+    console = _output.console()
     out = args.out or default_out(args.asset)
     engines = tuple(parse_engines(args.engines))
     bad_out = output_folder_failure(out)
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     except (EvaluationError, ValueError) as exc:
         raise CommandError(INVALID_REQUEST, getattr(exc, "code", None) or "EVALUATION_INPUT_INVALID", args.asset,
                            str(exc)) from exc
-    table = Table(title=f"{ev.asset_id} ({ev.category or 'no category'}): {'READY' if ev.passed else 'NOT READY'}")
+    table = Table(title=f"{markup(ev.asset_id)} ({markup(ev.category or 'no category')}): {'READY' if ev.passed else 'NOT READY'}")
     wide = console.width >= WIDE_TABLE  # a narrow terminal gets the table without the thresholds' column
     for col in ("metric", "engine", "value", "unit", "verdict"):
         table.add_column(col, no_wrap=True)
@@ -79,17 +79,17 @@ def run(args: argparse.Namespace) -> int:
     for m in ev.metrics:
         verdict = "-" if m.passed is None else ("[green]pass[/green]" if m.passed else "[red]FAIL[/red]")
         value = "-" if m.value is None else f"{m.value:.4g}"
-        table.add_row(m.name, m.engine, value, m.unit, verdict, *([m.threshold] if wide else []))
+        table.add_row(markup(m.name), markup(m.engine), value, markup(m.unit), verdict, *([markup(m.threshold)] if wide else []))
     console.print(table)
     if not wide:
         console.print(f"[dim]thresholds: report.html, or a terminal of {WIDE_TABLE} columns or more[/dim]")
     for why in why_it_failed(ev.metrics):  # the sentences of report.html's "Why it failed"
-        console.print(f"why it failed {why}", markup=False, soft_wrap=True)
+        console.print(f"why it failed {terminal(why)}", markup=False, soft_wrap=True)
     asked = ev.metric("request_met")  # as asked: each unmet phrase with its gap
     for u in (asked.details.get("unmet") or []) if asked is not None and asked.passed is False else []:
-        console.print(f"NOT AS ASKED {u.get('text') or u.get('phrase')}", markup=False, soft_wrap=True)
+        console.print(f"NOT AS ASKED {terminal(u.get('text') or u.get('phrase'))}", markup=False, soft_wrap=True)
     for n in ev.notes:
-        console.print(f"[dim]note: {n}[/dim]")
+        console.print(f"[dim]note: {markup(n)}[/dim]")
     console.print(f"evaluated in {ev.seconds:.2f} s; wrote {out / 'evaluation.json'}" + ("" if args.no_report else f" and {out / 'report.html'}"),
-                  soft_wrap=True)
+                  markup=False, soft_wrap=True)
     return 0 if ev.passed else 1

@@ -17,6 +17,7 @@ from asset2sim.commands._progress import FlowProgress
 from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, OUTPUT_LOCATION, REGRESSION, CommandError, catalog_failure,
                                         errno_name)
 from asset2sim.flow_progress import listening
+from asset2sim.commands import _output
 
 NAME = "flow"
 HELP = (
@@ -85,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     prepare_prefect_environment(cat.project_root)  # before Prefect is imported
     if args.serve:
         return _serve(args, cat)
-    live = not getattr(args, "no_progress", False) and sys.stdout.isatty()
+    live = not getattr(args, "no_progress", False) and _output.raw(sys.stdout).isatty()
     if live:  # the bar replaces Prefect's INFO lines in the terminal (here and in the workers)
         os.environ.setdefault("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", "WARNING")
     from asset2sim.flows.refine_flow import run_refine_flow  # imports Prefect: after its environment is set

@@ -13,6 +13,8 @@ import argparse
 from pathlib import Path
 
 from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError, output_folder_failure
+from asset2sim.commands import _output
+from asset2sim.inert import markup
 
 NAME = "pairs"
 HELP = ("Make realism pairs: the same scripted push-and-release of one joint simulated with asset2sim's physics and with "
@@ -32,13 +34,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
-    from rich.markup import escape
-
     from asset2sim.apps.realism.defects import DEFECTS
     from asset2sim.apps.realism.pairs import build_pair_set, specs_from_folders
 
-    console = Console()
+    console = _output.console()
     out = args.out
     if out is None:
         if len(args.folders) == 1 and (args.folders[0] / "asset2sim").is_dir():
@@ -62,11 +61,11 @@ def run(args: argparse.Namespace) -> int:
         specs, skipped = specs_from_folders(args.folders, out, against=against, defects=defects)
     except FileNotFoundError as exc:
         raise CommandError(INVALID_INPUT, "PAIRS_INPUT_INVALID", None, str(exc)) from exc
-    pair_set = build_pair_set(specs, out, skipped=skipped, progress=lambda text: console.print(escape(text)))
+    pair_set = build_pair_set(specs, out, skipped=skipped, progress=lambda text: console.print(markup(text)))
     for key, why in pair_set.skipped.items():
-        console.print(f"[yellow]skipped {escape(key)}: {escape(why)}[/yellow]")
+        console.print(f"[yellow]skipped {markup(key)}: {markup(why)}[/yellow]")
     n_defect = sum(1 for p in pair_set.pairs if p.defect)
-    console.print(f"wrote {escape(str(out / 'pairs.json'))}: {len(pair_set.pairs)} pairs ({n_defect} calibration pairs with planted defects)")
+    console.print(f"wrote {markup(str(out / 'pairs.json'))}: {len(pair_set.pairs)} pairs ({n_defect} calibration pairs with planted defects)")
     if not pair_set.pairs:
         raise CommandError(INVALID_INPUT, "NO_PAIRS", out, "no pair could be made (see the skipped lines above)")
     return 0

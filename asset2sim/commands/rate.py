@@ -12,7 +12,6 @@ the folder cannot be used.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, NOT_READY, OUTPUT_LOCATION, CommandError
@@ -20,6 +19,8 @@ from asset2sim.apps.realism.rating_app import serve
 from asset2sim.apps.realism.pair_set import PairSetError, find_pair_set
 from asset2sim.apps.realism.ratings import RATINGS_FILE, RatingsDatabaseError
 from asset2sim.apps.realism.scores import SCORES_FILE, NotRated, realism_scores
+from asset2sim.commands import _output
+from asset2sim.inert import markup
 
 NAME = "rate"
 HELP = ("Serve the realism rating app for people over a pair set (FOLDER/pairs.json or FOLDER/realism/pairs.json) "
@@ -51,17 +52,15 @@ def pair_set_folder(folder: Path) -> Path:
 
 
 def _print_scores(scores, folder: Path) -> None:
-    from rich.console import Console
-    from rich.markup import escape
     from rich.table import Table
 
-    console = Console() if sys.stdout.isatty() else Console(width=200, soft_wrap=True)
-    table = Table(title=f"realism (Bradley-Terry, people) of {escape(str(folder))}")
+    console = _output.console()
+    table = Table(title=f"realism (Bradley-Terry, people) of {markup(folder)}")
     for column, justify in (("method", "left"), ("strength", "right"), ("95 % interval", "right"), ("Elo", "right"),
                             ("wins", "right"), ("comparisons", "right")):
         table.add_column(column, justify=justify)
     for s in scores:
-        table.add_row(escape(s.method), f"{s.strength:+.2f}", f"[{s.ci_low:+.2f}, {s.ci_high:+.2f}]", f"{s.elo:.0f}",
+        table.add_row(markup(s.method), f"{s.strength:+.2f}", f"[{s.ci_low:+.2f}, {s.ci_high:+.2f}]", f"{s.elo:.0f}",
                       str(s.wins), str(s.comparisons))
     console.print(table)
 

@@ -15,6 +15,7 @@ from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, H
 from asset2sim.engines.loading import BOX_CORNERS, joint_tables, read_urdf
 from asset2sim.engines.mjcf import GROUND, KEYFRAME, MjcfError, lowest_point, mujoco_messages, urdf_to_mjcf
 from asset2sim.engines.mjcf.base import load_mujoco as _mujoco, mesh_vertices, safe_name
+from asset2sim.engines.step_budget import spend
 
 
 def _compile(load, path) -> object:
@@ -252,6 +253,7 @@ class MuJoCoSession(SessionDefaults):
 
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:
+        spend(n)  # the refine's one budget of steps (asset2sim.engines.step_budget)
         mj = self._mj
         for _ in range(int(n)):
             if self._drive:

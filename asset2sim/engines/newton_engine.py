@@ -19,6 +19,7 @@ from asset2sim.engines.loading import (BOX_CORNERS, BULLET_DEFAULT_FRICTION, BUL
                                        BULLET_PLANE_FRICTION, CollisionPiece, collision_pieces, joint_tables, read_urdf)
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
 from asset2sim.mesh_io import convex_hull_mesh
+from asset2sim.engines.step_budget import spend
 
 #: Contact friction on every shape and the ground (PyBullet's 0.5 x 0.5).
 CONTACT_FRICTION = BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION
@@ -295,6 +296,7 @@ class NewtonSession(SessionDefaults):
 
     # ----------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:
+        spend(n)  # the refine's one budget of steps (asset2sim.engines.step_budget)
         for _ in range(int(n)):
             self.state0.clear_forces()
             self._pipeline.collide(self.state0, self.contacts)

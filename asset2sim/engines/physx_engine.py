@@ -23,6 +23,7 @@ from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, H
 from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
                                        collision_pieces, joint_tables, link_friction, principal_axes, read_urdf)
 from asset2sim.frames import matrix_quat_wxyz
+from asset2sim.engines.step_budget import spend
 
 #: Damping (N*m*s/rad or N*s/m) of the zero-velocity drive carrying the passive
 #: joint forces: a velocity constraint clamped at friction + damping * |qdot|.
@@ -500,6 +501,7 @@ class PhysXSession(SessionDefaults):
 
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:
+        spend(n)  # the refine's one budget of steps (asset2sim.engines.step_budget)
         springs = self._passive.sprung
         for _ in range(int(n)):
             self.apply_passive_forces()

@@ -13,6 +13,7 @@ from asset2sim.engines.base import (ContactPair, EngineTraits, EngineUnsupported
                                     penetration_sum, register_engine, register_shape_world, register_viewer)
 from asset2sim.engines import pybullet_clients
 from asset2sim.engines.quiet import quiet_fds, quiet_stdout, startup_quiet
+from asset2sim.engines.step_budget import spend
 
 _TYPES = {0: "revolute", 1: "prismatic", 2: "spherical", 3: "planar", 4: "fixed"}
 
@@ -263,6 +264,7 @@ class PyBulletSession(SessionDefaults):
 
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:
+        spend(n)  # the refine's one budget of steps (asset2sim.engines.step_budget)
         for _ in range(n):
             self.apply_passive_forces()
             self._p.stepSimulation(physicsClientId=self.cid)

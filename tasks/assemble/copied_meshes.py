@@ -11,7 +11,7 @@ import threading
 import cachetools
 from pathlib import Path, PurePosixPath
 
-from asset2sim import atomic, mesh_io
+from asset2sim import atomic, file_names, mesh_io
 from asset2sim.output_folder import (EVALUATION_NAME, MARKER_NAME, OVERLAY_NAME, RECORD_NAME, REPORT_HTML_NAME, REPORT_NAME,
                                      STATE_NAME, TIMINGS_NAME, URDF_NAME, OutputError)
 from asset2sim.schemas.asset import AssetDescription
@@ -283,7 +283,10 @@ def copy_meshes(asset: AssetDescription, out_dir: Path) -> list[Path]:
     for dst, data in edited:
         mesh_io.write_file(dst, data)
     for d in _walked_dirs(asset):
-        (out_dir / d).mkdir(parents=True, exist_ok=True)
+        try:  # the one output guard's rule: a folder reached through a symlink out of out_dir is not made
+            file_names.join_inside(out_dir, d).mkdir(parents=True, exist_ok=True)
+        except file_names.UnsafePath as exc:
+            raise OutputError(str(exc), "OUTPUT_SYMLINK_ESCAPES", out_dir / d) from exc
     return out
 
 

@@ -65,12 +65,16 @@ def parse_urdf(source: SimSource) -> tuple[dict[str, LinkInfo], dict[str, JointI
 
     Raises:
         EvaluationError: unreadable XML or a malformed number (names the file,
-            line and link or joint).
+            line and link or joint), or a name longer than
+            :data:`asset2sim.urdf.MAX_NAME_CHARS` (``code`` ``NAME_TOO_LONG``).
     """
     try:
         model = source.model(mode="lenient")
     except UrdfError as exc:
-        raise EvaluationError(f"unreadable URDF: {exc}") from exc
+        err = EvaluationError(f"unreadable URDF: {exc}")
+        if exc.code == "NAME_TOO_LONG":  # refused before any engine loads it: PyBullet ends the process on such names
+            err.code = exc.code
+        raise err from exc
     links = {name: LinkInfo(name, None if ln.inertial is None else ln.inertial.mass, bool(ln.collisions), bool(ln.visuals))
              for name, ln in model.links.items()}
     joints = {}

@@ -33,6 +33,8 @@ from asset2sim.tasks.check.task_spec import parse_task, with_work_to_do
 from asset2sim.tasks.evaluation.report_html import write_report
 from asset2sim import output_folder
 from asset2sim.output_folder import EVALUATION_NAME, REPORT_HTML_NAME, URDF_NAME
+from asset2sim.inert import one_line
+from asset2sim.output_paths import raise_refusal
 
 __all__ = ["METRICS", "Evaluation", "EvaluationError", "JointInfo", "divergence_check", "evaluate_asset", "evaluate_refined",
            "metric_names", "requested_joints", "write_evaluation"]
@@ -128,7 +130,8 @@ def _write_clips(ev: Evaluation, runs: dict[str, EngineRun], engine: str, out_di
     except ImportError as exc:
         ev.notes.append(f"clips skipped: {exc} (pip install av)")
     except Exception as exc:  # a clip must not cost the evaluation (a full disk shows again writing evaluation.json)
-        ev.notes.append(f"clips failed: {exc}")
+        raise_refusal(exc)  # a write the output guard refused is the output's problem, not the clip's
+        ev.notes.append(f"clips failed: {one_line(exc)}")
     return None
 
 

@@ -18,6 +18,7 @@ from asset2sim.tasks.check.robust_rest import RobustRestConfig, RobustRestRun, T
 from asset2sim.tasks.check.sweep import JointSweep, SweepConfig, SweepRun
 from asset2sim.tasks.evaluation.plots import legend, new_figure, styled, svg_bytes
 from asset2sim.tasks.geometry.render import SceneRenderer
+from asset2sim.inert import html_text, one_line
 
 #: The frames drawn of a failing trial: (caption, where in the trace).
 FRAMES = ("as disturbed", "after settling", "end of the test")
@@ -143,12 +144,18 @@ def draw_poses(renderer: SceneRenderer, poses: list[Pose]) -> dict[str, np.ndarr
     return out
 
 
+def _h3(text: str) -> str:
+    """A heading of the evidence: ``text`` (names and failure text from the run) escaped."""
+    return f"<h3>{html_text(text)}</h3>"
+
+
 def _task_table(attempt: dict) -> str:
     cells = [("reached the target", attempt.get("reached")), ("held after release", attempt.get("held")),
              ("peak gripper force (N)", attempt.get("peak_force_n")), ("object slid (mm)", 1000 * (attempt.get("root_slide_m") or 0.0)),
              ("object tilted (rad)", attempt.get("root_tilt_rad")), ("gripper at its force limit", attempt.get("force_limited"))]
-    return ("<table><tr>" + "".join(f"<th>{k}</th>" for k, _ in cells) + "</tr><tr>"
-            + "".join(f"<td>{('yes' if v else 'no') if isinstance(v, bool) else f'{v:.3g}' if isinstance(v, float) else v}</td>" for _, v in cells)
+    return ("<table><tr>" + "".join(f"<th>{html_text(k)}</th>" for k, _ in cells) + "</tr><tr>"
+            + "".join(f"<td>{html_text(('yes' if v else 'no') if isinstance(v, bool) else f'{v:.3g}' if isinstance(v, float) else v)}</td>"
+                      for _, v in cells)
             + "</tr></table>")
 
 
@@ -163,14 +170,14 @@ def evidence_section(runs: dict, urdf: Path | str, dt: float, svg: Callable[[byt
     others = dict(initial_state or {})
     items: list[tuple[str, Callable[[], list[Pose]]]] = []  # (the HTML before the frames, the poses)
     for attempt in [a for a in (task or {}).get("attempts", []) if not a.get("success")]:
-        items.append((f"<h3>task: {attempt['action']} {attempt['joint']}: {attempt.get('failure', '')}</h3>" + _task_table(attempt),
+        items.append((_h3(f"task: {attempt['action']} {attempt['joint']}: {attempt.get('failure', '')}") + _task_table(attempt),
                       lambda a=attempt: task_poses(a, dict(closed or {}), others)))
     sweeps, trials = failing(runs)
     for engine, js in sweeps:
-        items.append((f"<h3>joint sweep of {js.joint} ({engine}): {js.failure}</h3>" + svg(sweep_plot(js), f"sweep {js.joint}"),
+        items.append((_h3(f"joint sweep of {js.joint} ({engine}): {js.failure}") + svg(sweep_plot(js), f"sweep {js.joint}"),
                       lambda js=js: sweep_poses(js, others)))
     for engine, trial in trials:
-        items.append((f"<h3>robust rest, trial {trial.name} ({engine}): {trial.failure}</h3>" + svg(trial_plot(trial, dt), f"trial {trial.name}"),
+        items.append((_h3(f"robust rest, trial {trial.name} ({engine}): {trial.failure}") + svg(trial_plot(trial, dt), f"trial {trial.name}"),
                       lambda trial=trial: trial_poses(trial)))
     if not items:
         return ""
@@ -187,5 +194,5 @@ def evidence_section(runs: dict, urdf: Path | str, dt: float, svg: Callable[[byt
                     raise error
                 parts.append("<div class='views'>" + "".join(figure(img, cap) for cap, img in draw_poses(renderer, poses()).items()) + "</div>")
             except Exception as exc:
-                parts.append(f"<p class='small'>frames not drawn ({type(exc).__name__}: {exc})</p>")
+                parts.append(f"<p class='small'>frames not drawn ({type(exc).__name__}: {html_text(one_line(exc))})</p>")
     return "".join(parts)

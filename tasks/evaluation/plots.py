@@ -15,16 +15,18 @@ import numpy as np
 
 from asset2sim.frames import quat_angle
 from asset2sim.tasks.check.probes import reached_fraction
+from asset2sim import library_dirs
 
 SVG_MIME = "image/svg+xml"  # the media type of every figure here (``data:`` URIs)
 #: Pixels per inch of the figures (their sizes are given in px).
 DPI = 100.0
 #: Most points drawn per scatter series (:func:`thinned`); the points are drawn as an image inside the SVG.
 MAX_SCATTER = 1500
-#: matplotlib settings while drawing and saving: compact fonts, text kept as text, and ids salted with a fixed
-#: string so the same figure gives the same bytes (``svg.hashsalt``; matplotlib's default is random per run).
+#: matplotlib settings while drawing and saving: compact fonts, text kept as text, ids salted with a fixed string so
+#: the same figure gives the same bytes (``svg.hashsalt``; matplotlib's default is random per run), and mathtext off:
+#: labels carry names from the input (a joint named ``a$b$`` is text, never a formula that fails to parse).
 STYLE = {"font.size": 8.0, "axes.titlesize": 9.0, "legend.fontsize": 7.0, "svg.fonttype": "none", "svg.hashsalt": "asset2sim",
-         "axes.grid": True, "grid.alpha": 0.3}
+         "axes.grid": True, "grid.alpha": 0.3, "text.parse_math": False}
 
 
 #: One figure drawn at a time in a process: matplotlib's settings (``rc_context``) are global, so two threads drawing
@@ -38,6 +40,7 @@ def styled(draw):
 
     @functools.wraps(draw)
     def run(*args, **kwargs):
+        library_dirs.configure()  # before matplotlib's first import: its folders in asset2sim's cache, not ~/.config
         import matplotlib
 
         with _DRAWING, matplotlib.rc_context(STYLE):

@@ -7,7 +7,6 @@ joint's own coordinate (radians with degrees, or millimetres).
 
 from __future__ import annotations
 
-import html
 import math
 from pathlib import Path
 from typing import Any, Callable
@@ -18,14 +17,16 @@ from asset2sim.tasks.check.as_asked import quantity_text
 from asset2sim.tasks.check.asset_files import find_urdf, parse_urdf
 from asset2sim.tasks.geometry.render import render_views
 from asset2sim.engines.source import UrdfFile
+from asset2sim.inert import html_text
 
 #: Views shown for the input and the output, side by side.
 COMPARED_VIEWS = ("perspective", "front")
 
 
 def esc(x: Any) -> str:
-    """HTML-escaped text of ``x`` (empty for None)."""
-    return html.escape("" if x is None else str(x))
+    """HTML-escaped text of ``x`` (empty for None): :func:`asset2sim.inert.html_text`, the one escaping of user-derived
+    text in HTML (quotes and control characters included)."""
+    return "" if x is None else html_text(x)
 
 
 def position_text(q: float | None, jtype: str) -> str:

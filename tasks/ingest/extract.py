@@ -9,6 +9,7 @@ Given inertials that validation marks ``replace_with_estimate`` are left out
 
 from __future__ import annotations
 
+import hashlib
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -126,12 +127,21 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
     desc = AssetDescription(
         asset_id=asset_id or default_id, source_dir=folder, urdf_path=urdf,
         robot_name=robot.name or urdf.stem, links=links, joints=joints, root_link=roots[0],
-        category=category or result.category, input_hash=sha256_files(files),
+        category=category or result.category, input_hash=sha256_files(files, known=_digests_read(staged_asset)),
         staged_from=None if staged_asset is None else Path(os.path.realpath(staged_asset.read.source)),
         staging_notes=[] if staged_asset is None else list(staged_asset.read.notes))
     if key is not None:
         _EXTRACT_MEMO.put(key, read, (desc, list(result.findings)))
     return desc, list(result.findings)
+
+
+def _digests_read(staged_asset: "staged.StagedAsset | None") -> dict[str, str]:
+    """path -> sha256 of the input's files whose bytes the reader kept (an MJCF input's sources): hashed from those
+    bytes, never read a second time."""
+    src = None if staged_asset is None else staged_asset.read.sources
+    if src is None or not hasattr(src, "real"):
+        return {}
+    return {str(src.real[k]): hashlib.sha256(data).hexdigest() for k, data in src.files.items()}
 
 
 def _stage_other_format(asset: Path | str, reading: ReadOptions | None = None) -> "staged.StagedAsset | None":

@@ -13,6 +13,7 @@ from typing import Any, Iterable, Literal, Mapping
 from pydantic import BaseModel, ConfigDict, Field
 
 from asset2sim import safexml
+from asset2sim.urdf import MAX_NAME_CHARS
 from asset2sim.schemas.overlay import SCALE_RANGE, ValidationIssue
 from asset2sim.prior_tables import MAX_PRIOR_DIM_M, load_priors
 from asset2sim.tasks.ingest.finding_codes import CODES, MESH_USE_DEPENDENT, Severity
@@ -22,7 +23,7 @@ MeshUse = Literal["collision", "mass", "visual"]
 
 __all__ = [
     "Action", "CODES", "DEFAULT_POLICY", "Finding", "IMAGE_EXTENSIONS", "MAX_COORDINATE", "MAX_LINKS",
-    "MAX_MOVABLE_JOINTS", "MAX_REVOLUTE_LIMIT", "MAX_TEXTURE_BYTES", "MAX_TEXTURE_PIXELS", "MAX_TOTAL_TEXTURE_BYTES",
+    "MAX_MOVABLE_JOINTS", "MAX_NAME_CHARS", "MAX_BUILT_FACES", "MAX_REVOLUTE_LIMIT", "MAX_TEXTURE_BYTES", "MAX_TEXTURE_PIXELS", "MAX_TOTAL_TEXTURE_BYTES",
     "MAX_TOTAL_TEXTURE_PIXELS", "MAX_TOTAL_FACES", "MESH_EXTENSIONS", "MESH_USE_DEPENDENT", "MOVABLE_TYPES", "MeshUse",
     "Recorder", "SEMANTIC_KINDS", "SIMULATOR_MESH_EXTENSIONS", "Severity", "ValidationPolicy", "ValidationResult",
     "asset_size_range", "errors", "has_errors",
@@ -36,10 +37,18 @@ SIMULATOR_MESH_EXTENSIONS = frozenset({".obj", ".stl", ".dae"})
 MAX_LINKS = 128
 #: Movable joints per asset (refine's time grows about as N^2; docs/design/validation.md "Joint cap").
 MAX_MOVABLE_JOINTS = 32
+#: Longest link, joint or robot name (characters; ``asset2sim.urdf.MAX_NAME_CHARS``, re-exported): PyBullet's URDF
+#: importer ends the process (exit 1, nothing said; a segmentation fault in ``evaluate``) on a joint name of about
+#: 2,000 characters and cannot load a 10,000-character link name; real assets' names are far shorter.
 #: |revolute limit| above this (rad, two turns) cannot be meant as a stop.
 MAX_REVOLUTE_LIMIT = 4.0 * math.pi
 #: Total triangles per asset (refine's time and memory grow linearly; docs/design/validation.md "Face cap").
 MAX_TOTAL_FACES = 1_000_000
+#: Triangles of a URDF as the simulators build them: every ``<visual>`` and ``<collision>`` mesh reference counts
+#: (PyBullet builds each), so one file named many times counts as often; twice :data:`MAX_TOTAL_FACES`, so an
+#: asset whose every mesh is both its link's visual and collision (PartNet-Mobility's layout) within the face cap
+#: stays within this one (the dev set's largest: 482,452, the laptop 9912).
+MAX_BUILT_FACES = 2 * MAX_TOTAL_FACES
 #: |vertex coordinate| (file units) beyond which a vertex lies more than MAX_PRIOR_DIM_M (20 m) from its
 #: link even at the smallest overlay scale (SCALE_RANGE[0]): 2e5.
 MAX_COORDINATE = MAX_PRIOR_DIM_M / SCALE_RANGE[0]
@@ -121,6 +130,7 @@ class ValidationPolicy:
         xml: caps of the XML parser.
         max_mesh_bytes, max_mesh_faces: per mesh file, bytes and triangles.
         max_total_faces: triangles over all distinct mesh files of the asset.
+        max_built_faces: triangles over every mesh reference (a file named twice counts twice).
         mesh_extensions: mesh suffixes recognised (lower case, with the dot).
         simulator_mesh_extensions: the formats refine can load.
         max_links, max_movable_joints: per URDF.
@@ -141,6 +151,7 @@ class ValidationPolicy:
     max_mesh_bytes: int = 64 * 1024 * 1024
     max_mesh_faces: int = MAX_TOTAL_FACES
     max_total_faces: int = MAX_TOTAL_FACES
+    max_built_faces: int = MAX_BUILT_FACES
     mesh_extensions: frozenset[str] = MESH_EXTENSIONS
     simulator_mesh_extensions: frozenset[str] = SIMULATOR_MESH_EXTENSIONS
     max_links: int = MAX_LINKS

@@ -42,6 +42,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Mapping
 from typing import Literal
 
 from asset2sim import safexml
@@ -154,10 +155,21 @@ def host_layout(path: Path | str) -> HostLayout | None:
     return None
 
 
-def _element_compiler_angle(root, base: Path, top: Path, seen: set[str]) -> tuple[str | None, str | None]:
+def _parsed(path: Path, files: Mapping[str, bytes] | None):
+    """The XML root of ``path``: from ``files`` (absolute normalized path -> bytes already read under the reader
+    policy) when given (None when it is not among them), else read from disk (regular files only)."""
+    if files is None:
+        return safexml.parse_xml_file(path)
+    data = files.get(os.path.normpath(os.path.abspath(path)))
+    return None if data is None else safexml.parse_xml_bytes(data, source=str(path))
+
+
+def _element_compiler_angle(root, base: Path, top: Path, seen: set[str],
+                            files: Mapping[str, bytes] | None = None) -> tuple[str | None, str | None]:
     """(last ``<compiler angle>`` value, the file stating it) in ``root`` and the files it includes, in document
     order; ``base`` the including file's folder, ``top`` the model file's folder (MuJoCo resolves includes against
-    it; the including file's folder is tried first)."""
+    it; the including file's folder is tried first); ``files``: the checked files to read includes from (else the
+    disk)."""
     found: tuple[str | None, str | None] = (None, None)
     for el in root.iter():
         tag = el.tag if isinstance(el.tag, str) else ""
@@ -167,7 +179,7 @@ def _element_compiler_angle(root, base: Path, top: Path, seen: set[str]) -> tupl
             name = el.get("file", "")
             for folder in (base, top):
                 inc = Path(os.path.abspath(folder / name)) if not os.path.isabs(name) else Path(name)
-                if inc.is_file():
+                if (os.path.normpath(inc) in files) if files is not None else inc.is_file():
                     break
             else:
                 continue
@@ -176,25 +188,31 @@ def _element_compiler_angle(root, base: Path, top: Path, seen: set[str]) -> tupl
                 continue
             seen.add(key)
             try:
-                sub = safexml.parse_xml_file(inc)
+                sub = _parsed(inc, files)
             except (safexml.SafeXMLError, OSError):  # an unreadable include: MuJoCo's compile reports it
                 continue
-            angle, where = _element_compiler_angle(sub, inc.parent, top, seen)
+            if sub is None:
+                continue
+            angle, where = _element_compiler_angle(sub, inc.parent, top, seen, files)
             if angle is not None:
                 found = (angle, where or str(inc))
     return found
 
 
-def file_compiler_angle(path: Path | str) -> tuple[AngleUnit | None, str | None]:
+def file_compiler_angle(path: Path | str, files: Mapping[str, bytes] | None = None) -> tuple[AngleUnit | None, str | None]:
     """(the unit the file's own ``<compiler angle>`` states, the file stating it: ``path`` or an include), or
     (None, None) when neither the file nor its includes state one (or the value is not ``radian`` / ``degree``,
-    which MuJoCo refuses when compiling)."""
+    which MuJoCo refuses when compiling). ``files``: the file and its includes as the reader policy read them
+    (absolute normalized path -> bytes, :class:`~asset2sim.tasks.ingest.mjcf_files.MjcfSources`), so nothing is read
+    from disk again; None reads them from disk."""
     path = Path(path)
     try:
-        root = safexml.parse_xml_file(path)
+        root = _parsed(path, files)
     except (safexml.SafeXMLError, OSError):  # MuJoCo's compile reports an unreadable file with its own message
         return None, None
-    angle, where = _element_compiler_angle(root, path.parent, path.parent, {os.path.realpath(path)})
+    if root is None:
+        return None, None
+    angle, where = _element_compiler_angle(root, path.parent, path.parent, {os.path.realpath(path)}, files)
     if angle not in ANGLE_UNITS:
         return None, None
     return angle, where or str(path)  # type: ignore[return-value]
@@ -214,8 +232,9 @@ def _world_file_angle(path: Path) -> tuple[AngleUnit | None, Path | None]:
     return None, None
 
 
-def mjcf_angle(path: Path | str, override: AngleUnit | None = None) -> AngleConvention:
-    """The angle unit the MJCF file at ``path`` is read in, and why (the order in the module's docstring).
+def mjcf_angle(path: Path | str, override: AngleUnit | None = None, files: Mapping[str, bytes] | None = None) -> AngleConvention:
+    """The angle unit the MJCF file at ``path`` is read in, and why (the order in the module's docstring); ``files``:
+    the file and its includes as already read (:func:`file_compiler_angle`).
 
     Raises:
         ValueError: ``override`` is neither ``radian`` nor ``degree``.
@@ -225,7 +244,7 @@ def mjcf_angle(path: Path | str, override: AngleUnit | None = None) -> AngleConv
         if override not in ANGLE_UNITS:
             raise ValueError(f"mjcf angle {override!r}: expected one of {list(ANGLE_UNITS)}")
         return AngleConvention(override, "override", None, f"asked (--mjcf-angle {override}, config mjcf.angle)")
-    own, where = file_compiler_angle(path)
+    own, where = file_compiler_angle(path, files)
     if own is not None:
         shown = Path(where).name if where else path.name
         return AngleConvention(own, "file", None, f'the file states <compiler angle="{own}"> ({shown})')

@@ -168,7 +168,7 @@ class MeshChecks(Recorder):
         assert self.folder is not None
         pol = self.policy
         scans: dict[Path, MeshScan | str] = {}
-        total_faces = 0
+        total_faces = built_faces = references = 0
         for ln in links:
             lname = ln.name or None
             geoms = [("visual", g) for g in ln.visuals] + [("collision", g) for g in ln.collisions]
@@ -216,6 +216,8 @@ class MeshChecks(Recorder):
                 if isinstance(scan, str):
                     self.add("MESH_UNREADABLE", f"{scan} (referenced at {at})", file=frel, link=lname, role=role, urdf_line=g.line)
                     continue
+                built_faces += scan.n_faces  # every reference: the simulators build each
+                references += 1
                 if scan.bounds is not None:
                     self.mesh_bounds[id(g)] = scan.bounds
                 for code, msg in scan.defects.items():
@@ -238,6 +240,10 @@ class MeshChecks(Recorder):
             self.add("MESH_TOO_MANY_FACES", f"{total_faces} triangles over all meshes > cap {pol.max_total_faces} "
                      "(the bound that keeps one asset's refine within the flow's time and memory limits; docs/design/validation.md)",
                      file=self.urdf_rel, total_faces=total_faces, cap=pol.max_total_faces)
+        elif built_faces > pol.max_built_faces:
+            self.add("MESH_TOO_MANY_FACES", f"{built_faces} triangles as the simulators build them ({references} <mesh> references, "
+                     f"a file named twice counted twice) > cap {pol.max_built_faces} (docs/design/validation.md)",
+                     file=self.urdf_rel, built_faces=built_faces, references=references, cap=pol.max_built_faces)
 
     def _format_problem(self, fname: str, real: Path) -> str | None:
         """Why refine cannot load this mesh file (None: it can): the suffix as written (PyBullet's choice)

@@ -12,7 +12,9 @@ cap; it is then read without blocking (:mod:`asset2sim.input_files`). A refusal 
 
 - ``MJCF_PATH_ESCAPES``: an absolute path, a URI, ``../`` leaving the tree or a symlink out of it (in a file
   attribute, an include or ``meshdir`` / ``texturedir`` / ``assetdir``);
-- ``INPUT_NOT_FOUND``, ``INPUT_NOT_REGULAR_FILE`` (a FIFO, device, socket or folder), ``INPUT_TOO_LARGE``,
+- ``INPUT_NOT_FOUND``, ``INPUT_NOT_REGULAR_FILE`` (a FIFO, device, socket or folder), ``INPUT_TOO_LARGE`` (a file
+  above its cap, or what MuJoCo would build above :data:`MAX_TOTAL_BYTES` or :data:`MAX_BUILT_FACES`, counting every
+  element that names a file: one mesh named 60 times is built 60 times),
   ``INPUT_OUTSIDE_TREE`` (the model file itself a symlink out of its folder), ``INPUT_UNREADABLE``;
 - ``MJCF_INCLUDE_INVALID``: an include of itself (a loop), without a file, more than :data:`MAX_INCLUDES`
   includes or a chain deeper than :data:`MAX_INCLUDE_DEPTH`;
@@ -25,20 +27,23 @@ checked; its warnings are collected, never written to ``MUJOCO_LOG.TXT``.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 from asset2sim import atomic, safexml
 from asset2sim.engines.mjcf.base import load_mujoco, mujoco_messages
 from asset2sim.extras import import_extra
 from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, allowed_outside, inside, read_file
 from asset2sim.tasks.ingest import host_conventions
-from asset2sim.tasks.ingest.staged import StagingError, input_tree
+from asset2sim.tasks.ingest.staged import SOURCE_DIR, StagingError, input_tree, read_of, read_snapshot, write_snapshot
 
-__all__ = ["MAX_INCLUDES", "MAX_INCLUDE_DEPTH", "MAX_TOTAL_BYTES", "MjcfSources", "compile_mjcf", "gather_mjcf"]
+__all__ = ["MAX_INCLUDES", "MAX_INCLUDE_DEPTH", "MAX_TOTAL_BYTES", "MjcfSources", "OpenedMjcf", "compile_mjcf", "gather_mjcf",
+           "opened_mjcf", "staged_sources"]
 
 #: Includes per model (MuJoCo refuses a repeated include; a chain deeper than this is refused too).
 MAX_INCLUDES = 256
@@ -46,6 +51,10 @@ MAX_INCLUDES = 256
 MAX_INCLUDE_DEPTH = 16
 #: Bytes of every file a model names together (each file: :data:`asset2sim.input_files.DEFAULT_MAX_BYTES`).
 MAX_TOTAL_BYTES = 1024 * 1024 * 1024
+#: Triangles MuJoCo builds for one model, every ``<mesh>`` element counted (one file named by 60 elements is built 60
+#: times): MuJoCo's compiler took 1.6 GB for 2,000,000 (10 references of a 200,000-face STL, about 800 bytes a face)
+#: and 4.5 GB for 6,000,000; this keeps a refine of an MJCF input under 2 GB.
+MAX_BUILT_FACES = 1_000_000
 #: Elements whose file attribute MuJoCo resolves through ``meshdir`` / ``texturedir``.
 _MESHDIR_TAGS = frozenset({"mesh", "skin", "hfield"})
 _TEXDIR_TAGS = frozenset({"texture"})
@@ -65,6 +74,28 @@ class MjcfSources:
     main: str
     files: dict[str, bytes]
     real: dict[str, Path]
+
+    def snapshot(self, folder: Path | str, **extra: str | None) -> Path:
+        """Write these sources into ``folder`` (a staged asset's own ``source/``: :func:`asset2sim.tasks.ingest.staged.stage`
+        calls this; :func:`~asset2sim.tasks.ingest.staged.write_snapshot`), with the paths, each key's real path and
+        ``extra`` (the angle unit it was read with). Returns ``folder``. Raises OSError."""
+        return write_snapshot(folder, self.files, kind="mjcf", path=str(self.path), tree=str(self.tree), main=self.main,
+                              real={k: str(v) for k, v in self.real.items()}, **extra)
+
+    @classmethod
+    def from_snapshot(cls, folder: Path | str) -> tuple["MjcfSources", dict]:
+        """(the sources, the snapshot's other fields) written by :meth:`snapshot`, each file checked against its SHA-256.
+
+        Raises:
+            OSError: no snapshot there, or a file missing or not a regular file.
+            ValueError: not an MJCF snapshot, or a file changed since.
+        """
+        files, meta = read_snapshot(folder, DEFAULT_MAX_BYTES)
+        if meta.get("kind") != "mjcf":
+            raise ValueError(f"{folder}: not a snapshot of MJCF sources")
+        real = {k: Path(meta["real"][k]) for k in files}
+        extra = {k: v for k, v in meta.items() if k not in ("kind", "path", "tree", "main", "real")}
+        return cls(path=Path(meta["path"]), tree=Path(meta["tree"]), main=meta["main"], files=files, real=real), extra
 
 
 def _refuse(code: str, message: str) -> StagingError:
@@ -170,11 +201,44 @@ class _Gather:
                 dirs[attr] = _resolve(value, self.main_dir, self.tree, self.path, f"<compiler {attr}>") if value else self.main_dir
         meshdir = dirs.get("meshdir", dirs.get("assetdir", self.main_dir))
         texdir = dirs.get("texturedir", dirs.get("assetdir", self.main_dir))
+        built_bytes = built_faces = 0
+        faces_of: dict[str, int] = {}
         for tag, attr, value, where in self.refs:
             base = meshdir if tag in _MESHDIR_TAGS else texdir if tag in _TEXDIR_TAGS else self.main_dir
             key = _resolve(value, base, self.tree, self.path, f"<{tag} {attr}> in {where}")
-            self.read(key, f"<{tag} {attr}={value!r}>")
+            data = self.read(key, f"<{tag} {attr}={value!r}>")
+            built_bytes += len(data)  # every element that names the file: MuJoCo builds each
+            if tag == "mesh":
+                if key not in faces_of:
+                    faces_of[key] = mesh_faces(data, key)
+                built_faces += faces_of[key]
+            if built_bytes > self.max_total:
+                raise _refuse("INPUT_TOO_LARGE", f"{self.path}: the files its elements name come to more than {self.max_total} "
+                              "bytes as MuJoCo builds them (every element naming a file counts, a file named twice twice); not read")
+            if built_faces > MAX_BUILT_FACES:
+                raise _refuse("INPUT_TOO_LARGE", f"{self.path}: its <mesh> elements come to {built_faces} triangles or more as "
+                              f"MuJoCo builds them (a file named twice counts twice) > cap {MAX_BUILT_FACES}; not compiled")
         return MjcfSources(path=self.path, tree=Path(self.tree), main=self.main, files=self.files, real=self.real)
+
+
+def mesh_faces(data: bytes, name: str) -> int:
+    """Triangles MuJoCo builds from the mesh file ``data`` (named ``name``, its suffix telling the format): a binary
+    STL's count, an ASCII STL's facets, an OBJ's faces fanned (a face of k corners: k - 2), MuJoCo's ``.msh`` header;
+    any other file its bytes over 50 (a binary STL's bytes per face). Reads nothing."""
+    suffix = os.path.splitext(name)[1].lower()
+    if suffix == ".stl":
+        if len(data) >= 84 and 84 + 50 * int.from_bytes(data[80:84], "little") == len(data):
+            return int.from_bytes(data[80:84], "little")
+        return data.count(b"facet")
+    if suffix == ".obj":
+        total = 0
+        for line in data.splitlines():
+            if line.startswith((b"f ", b"f\t")):
+                total += max(0, len(line.split()) - 3)
+        return total
+    if suffix == ".msh" and len(data) >= 16:
+        return int.from_bytes(data[12:16], "little", signed=True)
+    return len(data) // 50
 
 
 def gather_mjcf(path: Path | str, tree: Path | str | None = None, *, max_file_bytes: int = DEFAULT_MAX_BYTES,
@@ -205,27 +269,26 @@ def _mirrored(tmp: str, path: str) -> str:
     return os.path.join(tmp, os.path.splitdrive(path)[1].lstrip("/\\"))
 
 
-def compile_mjcf(sources: MjcfSources, degree: bool | None = None):
-    """(spec, compiled ``MjModel``, MuJoCo's warnings) of checked ``sources``, its angles read in degrees (``degree``
-    True) or radians (False) whatever its ``<compiler angle>`` says (None: as it says): MuJoCo reads a private temporary
-    copy holding only those files, each at its absolute path mirrored under the copy's folder (a file attribute or
-    folder written absolute, in a folder the user allowed, is pointed at its copy while compiling, then given back
-    as written); the folder is removed before returning (the model holds what it needs).
+class OpenedMjcf:
+    """An MJCF model MuJoCo read from the private copy of its checked sources (:func:`opened_mjcf`): ``spec`` (the
+    ``MjSpec``), ``model`` (compiled when opened), ``warnings`` (MuJoCo's, as notes); :meth:`compile` compiles the
+    spec again (after edits) from the same copy, while the block that opened it runs."""
 
-    Raises:
-        MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
-        StagingError: MuJoCo cannot read or compile the model (its message, naming the file).
-    """
-    import_extra("mujoco", "reading MJCF")  # MissingExtra naming the extra when MuJoCo is not installed
-    mujoco = load_mujoco()
-    with tempfile.TemporaryDirectory(prefix="asset2sim-mjcf-") as tmp:
-        for key, data in sources.files.items():
-            atomic.write_bytes(_mirrored(tmp, key), data, durable=False)
+    def __init__(self, spec, folder: str, sources: MjcfSources, warnings: list[str]):
+        self.spec, self.folder, self.sources, self.warnings = spec, folder, sources, warnings
+        self.model = None
+
+    def compile(self):
+        """The spec compiled from the private copy (a file attribute or folder written absolute, in a folder the user
+        allowed, pointed at its copy while compiling, then given back as written); returns the ``MjModel``.
+
+        Raises:
+            StagingError: MuJoCo cannot compile it (its message, naming the file).
+        """
+        mujoco = load_mujoco()
+        spec, tmp = self.spec, self.folder
         try:
             with mujoco_messages() as caught:
-                spec = mujoco.MjSpec.from_file(_mirrored(tmp, sources.main))
-                if degree is not None:  # MuJoCo converts angles when compiling (range, euler, axisangle, ref, springref)
-                    spec.compiler.degree = degree
                 written = []  # (object, attribute, value as written) pointed at the copy while compiling
                 for obj, attr in ((spec, "meshdir"), (spec, "texturedir"),
                                   *((item, "file") for items in (spec.meshes, spec.textures, spec.hfields, spec.skins)
@@ -239,7 +302,67 @@ def compile_mjcf(sources: MjcfSources, degree: bool | None = None):
                 finally:
                     for obj, attr, value in written:
                         setattr(obj, attr, value)
-        except Exception as exc:  # mujoco raises ValueError with the parser's or compiler's message
-            msg = str(exc).replace(tmp + os.sep, "/").replace(tmp, ".")
-            raise StagingError(f"{sources.path}: MuJoCo cannot read this MJCF: {msg}") from exc
-    return spec, model, [f"MuJoCo: {w}" for w in caught]
+        except Exception as exc:  # mujoco raises ValueError with the compiler's message
+            raise StagingError(f"{self.sources.path}: MuJoCo cannot read this MJCF: {_shown(exc, tmp)}") from exc
+        self.warnings.extend(f"MuJoCo: {w}" for w in caught)
+        return model
+
+
+def _shown(exc: BaseException, tmp: str) -> str:
+    return str(exc).replace(tmp + os.sep, "/").replace(tmp, ".")
+
+
+@contextlib.contextmanager
+def opened_mjcf(sources: MjcfSources, degree: bool | None = None) -> Iterator[OpenedMjcf]:
+    """The model of checked ``sources`` read by MuJoCo from a private temporary copy holding only those files (each at
+    its absolute path mirrored under the copy's folder), its angles read in degrees (``degree`` True) or radians
+    (False) whatever its ``<compiler angle>`` says (None: as it says), compiled once; the copy lives while the block
+    runs (edits to the spec compile again from it, :meth:`OpenedMjcf.compile`) and is removed after. Nothing is read
+    from the input's own paths.
+
+    Raises:
+        MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
+        StagingError: MuJoCo cannot read or compile the model (its message, naming the file).
+    """
+    import_extra("mujoco", "reading MJCF")  # MissingExtra naming the extra when MuJoCo is not installed
+    mujoco = load_mujoco()
+    with tempfile.TemporaryDirectory(prefix="asset2sim-mjcf-") as tmp:
+        for key, data in sources.files.items():
+            atomic.write_bytes(_mirrored(tmp, key), data, durable=False)
+        try:
+            with mujoco_messages() as caught:
+                spec = mujoco.MjSpec.from_file(_mirrored(tmp, sources.main))
+        except Exception as exc:  # mujoco raises ValueError with the parser's message
+            raise StagingError(f"{sources.path}: MuJoCo cannot read this MJCF: {_shown(exc, tmp)}") from exc
+        if degree is not None:  # MuJoCo converts angles when compiling (range, euler, axisangle, ref, springref)
+            spec.compiler.degree = degree
+        opened = OpenedMjcf(spec, tmp, sources, [f"MuJoCo: {w}" for w in caught])
+        opened.model = opened.compile()
+        yield opened
+
+
+def compile_mjcf(sources: MjcfSources, degree: bool | None = None):
+    """(spec, compiled ``MjModel``, MuJoCo's warnings) of checked ``sources`` (:func:`opened_mjcf`); the private copy
+    is removed before returning (the model holds what it needs; compile the spec again inside :func:`opened_mjcf`).
+
+    Raises:
+        MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
+        StagingError: MuJoCo cannot read or compile the model (its message, naming the file).
+    """
+    with opened_mjcf(sources, degree) as opened:
+        return opened.spec, opened.model, list(opened.warnings)
+
+
+def staged_sources(urdf_path: Path | str) -> tuple[MjcfSources, dict] | None:
+    """The checked sources an MJCF input was staged from (the staged URDF ``urdf_path``: this process's read when it
+    is still held, :func:`asset2sim.tasks.ingest.staged.read_of`, else the snapshot in the staged folder), and what
+    was recorded with them (``angle``: the unit its angles were read in); None when neither is at hand (not an
+    MJCF input, or its staged folder is gone). Every later stage (the host write-back, the audit's patch) compiles
+    from these, never from the input's paths."""
+    read = read_of(urdf_path)
+    if read is not None and isinstance(read.sources, MjcfSources):
+        return read.sources, {"angle": read.angle_unit}
+    try:
+        return MjcfSources.from_snapshot(Path(urdf_path).parent / SOURCE_DIR)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None

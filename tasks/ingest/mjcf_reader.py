@@ -36,6 +36,7 @@ Conventions (MJCF -> URDF):
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -87,7 +88,7 @@ def read_mjcf_asset(path: Path | str, options: ReadOptions | None = None) -> Rea
     options = options or ReadOptions()
     sources = gather_mjcf(path)  # first: every file it names checked before anything reads it
     tree = host_conventions.package_tree(path)
-    convention = host_conventions.mjcf_angle(path, options.mjcf_angle)
+    convention = host_conventions.mjcf_angle(path, options.mjcf_angle, files=sources.files)  # the bytes read, not the disk
     spec, m, warned = compile_mjcf(sources, degree=convention.unit == "degree")
     mujoco = load_mujoco()
     scene = mjcf_scene.pick_object(m, path, options.body)
@@ -97,7 +98,7 @@ def read_mjcf_asset(path: Path | str, options: ReadOptions | None = None) -> Rea
         reader.notes.append(f"files it names read within its package's asset folder {tree}")
     reader.notes.extend(scene.notes)
     reader.notes.extend(warned)
-    return reader.read(scene.root, scene.bodies)
+    return replace(reader.read(scene.root, scene.bodies), sources=sources, angle_unit=convention.unit)  # the bytes, for later stages
 
 
 class _Reader:

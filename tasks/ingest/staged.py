@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import atexit
 import hashlib
+import json
 import os
 import re
 import threading
@@ -22,6 +23,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -33,6 +35,9 @@ from asset2sim.urdf import UrdfInertial, UrdfLink, UrdfMaterial, UrdfModel, writ
 STAGED_URDF = "model.urdf"
 #: Folder (inside the staged folder) of the meshes written for the model.
 MESH_DIR = "meshes"
+#: Folder (inside the staged folder) of the input's own files as the reader policy read them (an MJCF input's
+#: snapshot: :meth:`asset2sim.tasks.ingest.mjcf_files.MjcfSources.snapshot`), for the stages after extraction.
+SOURCE_DIR = "source"
 #: File suffixes read as MJCF and as OpenUSD.
 MJCF_SUFFIXES = (".xml", ".mjcf")
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
@@ -91,6 +96,11 @@ class ReadAsset:
     prims: dict[str, str] = field(default_factory=dict)
     frames: dict[str, np.ndarray] = field(default_factory=dict)
     initial_state: dict[str, float] = field(default_factory=dict)
+    #: the input's files as the reader policy read them (MJCF: ``MjcfSources``, the bytes), kept so that no later
+    #: stage reads the input's paths again; None for other formats
+    sources: Any = None
+    #: the angle unit the file was read in (MJCF: ``radian`` or ``degree``), None for other formats
+    angle_unit: str | None = None
 
 
 @dataclass(frozen=True)
@@ -219,6 +229,45 @@ def obj_bytes(vertices: np.ndarray, triangles: np.ndarray) -> bytes:
                        digits=17).encode("utf-8")
 
 
+#: The manifest of a snapshot of an input's files (:func:`write_snapshot`).
+SNAPSHOT_NAME = "sources.json"
+
+
+def write_snapshot(folder: Path | str, files: dict[str, bytes], **meta: Any) -> Path:
+    """Write ``files`` (the input's files as the reader policy read them: absolute path -> bytes) into ``folder`` (a
+    staged asset's ``source/``) as ``files/<n>`` with :data:`SNAPSHOT_NAME` (each path's file and SHA-256, and
+    ``meta``), so a later stage, in this process or another, uses the bytes read and never the input's paths.
+    Returns ``folder``. Raises OSError."""
+    folder = Path(folder)
+    entries = {}
+    for n, (key, data) in enumerate(sorted(files.items())):
+        atomic.write_bytes(folder / "files" / str(n), data, durable=False)
+        entries[key] = {"file": str(n), "sha256": hashlib.sha256(data).hexdigest()}
+    atomic.write_json(folder / SNAPSHOT_NAME, {"format": 1, "files": entries, **meta}, durable=False)
+    return folder
+
+
+def read_snapshot(folder: Path | str, max_file_bytes: int) -> tuple[dict[str, bytes], dict[str, Any]]:
+    """(path -> bytes, the other fields) of a snapshot :func:`write_snapshot` wrote, each file checked against its
+    SHA-256 and read as a regular file of at most ``max_file_bytes``.
+
+    Raises:
+        OSError: no snapshot, or a file missing or not a regular file.
+        ValueError: not a snapshot, or a file changed since.
+    """
+    folder = Path(folder)
+    doc = json.loads(atomic.read_regular(folder / SNAPSHOT_NAME, 1 << 24).decode("utf-8"))
+    if not isinstance(doc, dict) or doc.get("format") != 1 or not isinstance(doc.get("files"), dict):
+        raise ValueError(f"{folder / SNAPSHOT_NAME}: not a snapshot of an input's files")
+    files = {}
+    for key, entry in doc["files"].items():
+        data = atomic.read_regular(folder / "files" / str(int(entry["file"])), max_file_bytes)
+        if hashlib.sha256(data).hexdigest() != entry["sha256"]:
+            raise ValueError(f"{folder}: the copy of {key} changed since it was read")
+        files[key] = data
+    return files, {k: v for k, v in doc.items() if k not in ("format", "files")}
+
+
 def stage(read: ReadAsset, folder: Path | str) -> StagedAsset:
     """Write ``read`` into ``folder``: ``model.urdf`` and ``meshes/*.obj`` (atomically, inside ``folder``).
 
@@ -233,6 +282,8 @@ def stage(read: ReadAsset, folder: Path | str) -> StagedAsset:
         except StagingError as exc:
             raise StagingError(f"{read.source}: {rel}: {exc}") from exc
         atomic.write_bytes(file_names.join_inside(folder, rel), data)
+    if read.sources is not None and hasattr(read.sources, "snapshot"):  # the bytes read, for the stages after extraction
+        read.sources.snapshot(folder / SOURCE_DIR, angle=read.angle_unit)
     urdf_path = folder / STAGED_URDF
     comment = f" staged by asset2sim from {read.format.upper()} {read.source.name} "
     atomic.write_bytes(urdf_path, write_urdf(read.model, comment=comment))

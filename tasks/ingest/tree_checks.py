@@ -10,10 +10,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from asset2sim import file_names
-from asset2sim.tasks.ingest.findings import MOVABLE_TYPES, Recorder
+from asset2sim.tasks.ingest.findings import MAX_NAME_CHARS, MOVABLE_TYPES, Recorder
 from asset2sim.tasks.ingest.mesh_checks import zero_pose_bounds
 from asset2sim.tasks.ingest.urdf_checks import joint_name, link_name
 from asset2sim.urdf import UrdfJoint, UrdfLink, UrdfModel
+from asset2sim.inert import shorten
 
 #: A revolute range spanning less than this (rad, one degree) only makes sense in the other unit.
 MIN_REVOLUTE_SPAN = float(np.radians(1.0))
@@ -90,6 +91,9 @@ class TreeChecks(Recorder):
             self.add("URDF_NO_LINKS", "the robot has no <link>")
             return set(), None
         self._caps(model)
+        if model.name and len(model.name) > MAX_NAME_CHARS:
+            self.add("NAME_TOO_LONG", f"robot name of {len(model.name)} characters > cap {MAX_NAME_CHARS} "
+                     f"({shorten(model.name, 60)!r})", length=len(model.name), cap=MAX_NAME_CHARS)
         seen = self._first_by_name(links, "link")
         jseen = self._first_by_name(joints, "joint")
         self._file_names(seen)
@@ -118,11 +122,16 @@ class TreeChecks(Recorder):
                      f"per-asset time limit, which then ends it", joints=len(movable), cap=self.policy.max_movable_joints)
 
     def _first_by_name(self, items: list, kind: str) -> dict:
-        """``kind`` ("link" or "joint") elements by name, the first of each; the others are duplicates."""
+        """``kind`` ("link" or "joint") elements by name, the first of each; the others are duplicates. A name longer
+        than :data:`MAX_NAME_CHARS` is refused (``NAME_TOO_LONG``), shown shortened."""
         seen: dict = {}
         for it in items:
             if not it.name:
                 continue
+            if len(it.name) > MAX_NAME_CHARS:
+                self.add("NAME_TOO_LONG", f"{kind} name of {len(it.name)} characters > cap {MAX_NAME_CHARS} "
+                         f"({shorten(it.name, 60)!r}): PyBullet cannot load it", line=it.line,
+                         **{kind: shorten(it.name, 60)}, length=len(it.name), cap=MAX_NAME_CHARS)
             if it.name in seen:
                 self.add(f"{kind.upper()}_NAME_DUPLICATE", f"{kind} {it.name!r} is defined again (first at line "
                          f"{seen[it.name].line})", line=it.line, **{kind: it.name})

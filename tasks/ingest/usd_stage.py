@@ -43,6 +43,8 @@ class StageReading:
     notes: list[str] = field(default_factory=list)
     meshes: dict = field(default_factory=dict)
     used: set = field(default_factory=set)
+    #: triangles built so far, every Gprim counted (a mesh referenced or instanced many times is built as often)
+    faces: int = 0
 
     def error(self, what: str, message: str) -> StagingError:
         return StagingError(f"{self.path}: {what}: {message}")
@@ -58,6 +60,9 @@ class StageReading:
 
 #: Layers per stage (sublayers, references and payloads, each counted once).
 MAX_LAYERS = 1024
+#: Triangles the reader builds from one stage, every mesh prim counted (the limit MuJoCo's compiler sets for MJCF:
+#: :data:`asset2sim.tasks.ingest.mjcf_files.MAX_BUILT_FACES`; the staged URDF then meets the validator's face caps).
+MAX_BUILT_FACES = 1_000_000
 
 
 def _layer_file(identifier: str) -> tuple[str, bool]:
@@ -268,6 +273,12 @@ def _mesh(ctx: StageReading, prim, link: str, to_link: np.ndarray) -> UrdfGeomet
     mesh = UsdGeom.Mesh(prim)
     attrs = (mesh.GetPointsAttr(), mesh.GetFaceVertexCountsAttr(), mesh.GetFaceVertexIndicesAttr())
     points, counts, idx = (a.Get() for a in attrs)
+    if counts is not None and idx is not None:  # counted before any array is built from them
+        ctx.faces += max(0, len(idx) - 2 * len(counts))  # a fan of c - 2 triangles per polygon of c corners
+        if ctx.faces > MAX_BUILT_FACES:
+            raise StagingError(f"{ctx.path}: the stage's meshes come to more than {MAX_BUILT_FACES} triangles as they are built "
+                               f"(every mesh prim counted, a referenced or instanced mesh as often as it appears; at "
+                               f"{prim.GetPath()}); not read", code="INPUT_TOO_LARGE")
     pts = np.array(points if points is not None else [], float).reshape(-1, 3)
     counts = np.array(counts if counts is not None else [], np.int64)
     idx = np.array(idx if idx is not None else [], np.int64)

@@ -9,8 +9,11 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import math
+import os
+import stat
 import subprocess
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Any
 
 
@@ -18,8 +21,10 @@ import asset2sim
 from asset2sim import __version__, atomic, output_folder
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.report import RefineReport
+from asset2sim.input_files import file_kind
 from asset2sim.output_folder import (MARKER_NAME, REPORT_NAME, TIMINGS_NAME, VOLATILE, OwnedFolder,
                                     read_record)
+from asset2sim.output_paths import OutputError, _safe_rel
 
 #: Sub-packages of ``asset2sim`` whose sources make up the code (``package-dir`` in pyproject.toml).
 CODE_PACKAGES = ("asset2sim", "asset2sim.tasks", "asset2sim.schemas", "asset2sim.apps", "asset2sim.flows")
@@ -109,25 +114,77 @@ def flow_config_hash(refine_hash: str, *, refine_function: str, evaluate: bool, 
                     "extras": extras, "reference": reference, "reference_scale": reference_scale})
 
 
+def _incomplete(out_dir: Path, why: str, where: Path | None = None) -> OutputError:
+    return OutputError(f"{out_dir} is not a complete output as its completion marker records it: {why}; refine it "
+                       "again (--force)", "OUTPUT_INCOMPLETE", where or out_dir)
+
+
+def _regular_inside(out_dir: Path, rel: object, what: str) -> Path:
+    """``out_dir/rel`` when ``rel`` is a relative path (no ``..``, not absolute) whose every folder and itself lie
+    inside ``out_dir`` without a symlink on the way and it is a regular file (``lstat``: nothing opened); else
+    ``OUTPUT_INCOMPLETE``."""
+    safe = _safe_rel(rel)
+    if safe is None or safe != rel:
+        raise _incomplete(out_dir, f"{what} {rel!r} is not a relative path inside the folder")
+    path = out_dir / safe
+    if Path(os.path.realpath(path.parent)) != Path(os.path.realpath(out_dir)) / PurePosixPath(safe).parent:
+        raise _incomplete(out_dir, f"{what} {safe}: a symlink on the way leads out of the folder", path)
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        raise _incomplete(out_dir, f"{what} {safe} is missing", path) from None
+    except OSError as exc:
+        raise _incomplete(out_dir, f"{what} {safe} cannot be inspected ({exc.strerror})", path) from None
+    if not stat.S_ISREG(mode):
+        raise _incomplete(out_dir, f"{what} {safe} is a {file_kind(mode)}, not the regular file asset2sim wrote", path)
+    return path
+
+
+def verify_output(out_dir: Path | str) -> dict[str, Any]:
+    """The completion marker of ``out_dir``, after checking the output against it before anything opens a file of it
+    (an engine, a renderer): every entry it lists is a relative path inside the folder (no ``..``, no absolute path,
+    no symlink on the way), a regular file (``lstat``; a FIFO, a device or a symlink is refused without being
+    opened) holding the SHA-256 recorded; the ``unhashed`` files (wall times) present are regular files too.
+    Hashing reads each file once (``O_NONBLOCK``, regular files only).
+
+    Returns:
+        The marker (``input_hash``, ``config_hash``, ``version``, ``files`` relative path -> sha256 ...).
+
+    Raises:
+        OutputError: ``OUTPUT_INCOMPLETE`` naming the file and what is wrong (no marker, not asset2sim's, an entry
+            outside, missing, not a regular file, changed since).
+    """
+    out_dir = Path(out_dir)
+    try:
+        marker = read_record(out_dir / MARKER_NAME)
+    except (OSError, ValueError) as exc:
+        raise _incomplete(out_dir, f"no readable completion marker ({exc})") from exc
+    if not isinstance(marker, dict) or not isinstance(marker.get("files"), dict) or not isinstance(marker.get("unhashed", []), list):
+        raise _incomplete(out_dir, f"{MARKER_NAME} is not a completion marker asset2sim wrote", out_dir / MARKER_NAME)
+    for rel, digest in marker["files"].items():
+        path = _regular_inside(out_dir, rel, "the file")
+        try:
+            actual = atomic.sha256_file(path)
+        except OSError as exc:  # replaced meanwhile
+            raise _incomplete(out_dir, f"the file {rel} cannot be read ({exc.strerror or exc})", path) from None
+        if actual != digest:
+            raise _incomplete(out_dir, f"the file {rel} changed since the run wrote it (SHA-256 {actual[:12]}..., "
+                              f"recorded {str(digest)[:12]}...)", path)
+    for rel in marker.get("unhashed", []):
+        if isinstance(rel, str) and _safe_rel(rel) == rel and not os.path.lexists(out_dir / rel):
+            continue
+        _regular_inside(out_dir, rel, "the file")
+    return marker
+
+
 def is_complete(out_dir: Path | str, input_hash: str, config_hash: str) -> bool:
     """True when ``out_dir`` holds a completion marker for exactly this input, configuration and version,
-    and every file it lists has its recorded SHA-256."""
+    and the output verifies against it (:func:`verify_output`)."""
     try:
-        data = read_record(Path(out_dir) / MARKER_NAME)
-    except (OSError, ValueError):
+        data = verify_output(out_dir)
+    except OutputError:
         return False
-    if not isinstance(data, dict) or not isinstance(data.get("files", {}), dict):
-        return False
-    if data.get("input_hash") != input_hash or data.get("config_hash") != config_hash or data.get("version") != __version__:
-        return False
-    for rel, digest in data.get("files", {}).items():
-        p = Path(out_dir) / rel
-        try:
-            if not p.is_file() or atomic.sha256_file(p) != digest:
-                return False
-        except OSError:  # replaced by a FIFO or removed meanwhile
-            return False
-    return True
+    return data.get("input_hash") == input_hash and data.get("config_hash") == config_hash and data.get("version") == __version__
 
 
 def output_files(out_dir: Path | str) -> list[str]:
@@ -165,13 +222,32 @@ def write_report_json(out_dir: Path | str, report: RefineReport) -> Path:
     return atomic.write_json(out_dir / REPORT_NAME, data)
 
 
+def non_finite(obj: Any, where: str = "$") -> str | None:
+    """The JSON path (``$.metrics[3].value``) of the first NaN or infinity in ``obj`` (parsed JSON), or None."""
+    stack = [(obj, where)]
+    while stack:
+        value, at = stack.pop()
+        if isinstance(value, float) and not math.isfinite(value):
+            return at
+        if isinstance(value, dict):
+            stack.extend((v, f"{at}.{k}") for k, v in reversed(list(value.items())))
+        elif isinstance(value, list):
+            stack.extend((v, f"{at}[{i}]") for i, v in reversed(list(enumerate(value))))
+    return None
+
+
 def read_report_json(out_dir: Path | str) -> RefineReport:
     """``out_dir/report.json`` as a :class:`RefineReport`, with the wall times of ``timings.json`` when it is readable
-    (:func:`write_report_json`). Raises OSError (missing, not a regular file, too large) or ValueError (invalid)."""
+    (:func:`write_report_json`). Raises OSError (missing, not a regular file, too large) or ValueError (invalid; a
+    NaN or infinity named by its JSON path, :func:`non_finite`)."""
     out_dir = Path(out_dir)
     data = read_record(out_dir / REPORT_NAME)
     if not isinstance(data, dict):
         raise ValueError(f"{out_dir / REPORT_NAME}: not a JSON object")
+    where = non_finite(data)
+    if where is not None:
+        raise ValueError(f"{out_dir / REPORT_NAME}: {where} is not a finite number (NaN or infinity), which asset2sim "
+                         "never writes")
     try:
         timings = read_record(out_dir / TIMINGS_NAME)
     except (OSError, ValueError):

@@ -212,6 +212,7 @@ def _write_joints(stage, root_path, model: UrdfModel, link_paths: dict[str, str]
 def _save(stage, target: Path) -> Path:
     """Write the stage as one binary layer to ``target`` atomically (exported
     to a temporary file beside it first); returns ``target``."""
+    atomic.announce([target])  # the output's guard first: nothing is made through a symlinked usd/ folder
     target.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(suffix=".usd", dir=target.parent)
     os.close(fd)

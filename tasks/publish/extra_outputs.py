@@ -5,13 +5,14 @@ the loss of the refined asset, except an output folder that cannot be written (`
 from __future__ import annotations
 
 import errno
-import traceback
 from dataclasses import replace
 from pathlib import Path
 
 from asset2sim import atomic, output_folder
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.extras import install_hint
+from asset2sim.inert import one_line
+from asset2sim.output_paths import raise_refusal
 from asset2sim.output_folder import CLIPS_DIR, URDF_NAME, VIEWS_DIR
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.config import RefineConfig
@@ -23,7 +24,7 @@ from asset2sim.tasks.check.attempt import Attempt
 from asset2sim.tasks.check.verdict import combine_verdict
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON
-from asset2sim.tasks.ingest import staged
+from asset2sim.tasks.ingest import mjcf_files, staged
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.publish import export_usd, host_mjcf, host_usd
 from asset2sim.tasks.publish import media as media_phase
@@ -37,11 +38,13 @@ UNWRITABLE = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None),
 
 def raise_if_unwritable(exc: BaseException, out_dir: Path) -> None:
     """Raise ``OUTPUT_WRITE_FAILED`` (an :class:`~asset2sim.output_folder.OutputError`) when ``exc`` or an
-    exception in its chain is an OSError whose errno is in :data:`UNWRITABLE`; return otherwise."""
+    exception in its chain is an OSError whose errno is in :data:`UNWRITABLE`, and the output guard's own
+    refusal (``OUTPUT_SYMLINK_ESCAPES``, ``OUTPUT_PATH_ESCAPES``) as it is; return otherwise."""
     seen: set[int] = set()
     cur: BaseException | None = exc
     while cur is not None and id(cur) not in seen:
         seen.add(id(cur))
+        raise_refusal(cur)
         if isinstance(cur, OSError) and cur.errno in UNWRITABLE:
             where = cur.filename or out_dir
             raise output_folder.OutputError(f"output folder {out_dir} cannot be written: {where}: {cur.strerror or cur}",
@@ -58,19 +61,25 @@ def host_files(out_dir: Path, asset: AssetDescription, config: RefineConfig, rep
     source = asset.staged_from
     fmt = staged.input_format(source) if source is not None else None
     if fmt == "mjcf":
-        return _host_mjcf(out_dir, source, config, report)
+        return _host_mjcf(out_dir, source, asset.urdf_path, config, report)
     if fmt == "usd":
         return _host_usd(out_dir, source, report)
     return {}
 
 
-def _host_mjcf(out_dir: Path, source: Path, config: RefineConfig, report: RefineReport) -> dict[str, str]:
+def _host_mjcf(out_dir: Path, source: Path, staged_urdf: Path, config: RefineConfig, report: RefineReport) -> dict[str, str]:
+    read = mjcf_files.staged_sources(staged_urdf)  # the bytes the reader policy read when the refine began
+    if read is None:
+        report.notes.append(f"host MJCF not written: the files of {source.name} as read when the refine began are no "
+                            "longer at hand (its staged folder is gone); the input is not read a second time")
+        return {}
     try:
         with quiet_stdout():
-            done = host_mjcf.write_host_mjcf(out_dir, source, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle))
+            done = host_mjcf.write_host_mjcf(out_dir, source, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle),
+                                             sources=read[0], angle=read[1].get("angle"))
     except Exception as exc:  # the host file must not lose the refined asset
         raise_if_unwritable(exc, out_dir)
-        report.notes.append(f"host MJCF not written: {exc}")
+        report.notes.append(f"host MJCF not written: {one_line(exc)}")
         return {}
     rel = done.path.relative_to(out_dir).as_posix()
     report.notes.append(f"host MJCF: {rel} is {source.name} with the refined physics (bodies {list(done.bodies)}, joints "
@@ -86,7 +95,7 @@ def _host_usd(out_dir: Path, source: Path, report: RefineReport) -> dict[str, st
         done = host_usd.write_host_usd(out_dir, source)
     except Exception as exc:  # the host stage must not lose the refined asset
         raise_if_unwritable(exc, out_dir)
-        report.notes.append(f"host USD not written: {exc}")
+        report.notes.append(f"host USD not written: {one_line(exc)}")
         return {}
 
     def rel(p: Path) -> str:
@@ -120,7 +129,7 @@ def write_extras(out_dir: Path, report: RefineReport, att: Attempt, log: StageLo
                 report.notes.append(f"{what} skipped: {install_hint(exc)}")
             except Exception as exc:  # export must not lose the refined asset
                 raise_if_unwritable(exc, out_dir)
-                report.notes.append(f"{what} failed: {exc}")
+                report.notes.append(f"{what} failed: {one_line(exc)}")
             log.lap(f"extras_{key}")
         views = None
         if media:
@@ -129,7 +138,7 @@ def write_extras(out_dir: Path, report: RefineReport, att: Attempt, log: StageLo
                 out["views"] = str(out_dir / VIEWS_DIR)
             except Exception as exc:
                 raise_if_unwritable(exc, out_dir)
-                report.notes.append(f"renders failed: {exc}")
+                report.notes.append(f"renders failed: {one_line(exc)}")
             log.lap("extras_render")
         try:
             paths = evaluate.evaluate_refined(out_dir, report, recording=recording, reference=reference, recorded=att.check.recorded,
@@ -146,7 +155,7 @@ def write_extras(out_dir: Path, report: RefineReport, att: Attempt, log: StageLo
             report.metrics = [m for m in report.metrics if m.name != "request_met" or not asked] + asked
         except Exception as exc:
             raise_if_unwritable(exc, out_dir)
-            report.notes.append(f"HTML report failed: {exc}\n{traceback.format_exc(limit=3)}")
+            report.notes.append(f"HTML report failed: {type(exc).__name__}: {one_line(exc)}")
         log.lap("extras_report" if media else "extras_evaluation")
     report.media = "done" if media else "deferred"
     if not media:

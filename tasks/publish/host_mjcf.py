@@ -41,13 +41,13 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim import atomic, file_names, safexml
+from asset2sim import atomic, file_names, output_folder, safexml
 from asset2sim.engines.loading import read_initial_state
 from asset2sim.output_folder import MJCF_DIR, OVERLAY_NAME, URDF_NAME
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.ingest import host_conventions, mjcf_scene
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
-from asset2sim.tasks.ingest.mjcf_files import gather_mjcf
+from asset2sim.tasks.ingest.mjcf_files import MjcfSources, OpenedMjcf, gather_mjcf, opened_mjcf
 from asset2sim.tasks.ingest.staged import MJCF_SUFFIXES
 from asset2sim.urdf import read_urdf
 
@@ -90,13 +90,20 @@ def _names(m, mujoco) -> dict[str, list[str]]:
     return out
 
 
-def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOptions | None = None) -> HostExport:
+def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOptions | None = None, *,
+                    sources: MjcfSources | None = None, angle: str | None = None) -> HostExport:
     """Write the refined output in ``out_dir`` back into the MJCF file ``source`` it was refined from.
 
     Args:
         out_dir: a refined output folder (``mobility.urdf``, ``overlay.json``, ``initial_state.json``).
-        source: the MJCF file the refine read (only read).
+        source: the MJCF file the refine read (its name; nothing is read from it when ``sources`` is given).
         reading: the options it was read with (the object's body, the angle unit).
+        sources: the file and every file it names as the reader policy read them when the refine staged it
+            (:func:`~asset2sim.tasks.ingest.mjcf_files.staged_sources`): MuJoCo compiles from a private copy of these
+            bytes, so the write-back never opens the input's paths again; None gathers them once here under the
+            reader policy (:func:`~asset2sim.tasks.ingest.mjcf_files.gather_mjcf`).
+        angle: the angle unit the refine read the file in (``radian`` / ``degree``); None works it out from the
+            file and its host package as the reader does.
 
     Returns:
         :class:`HostExport`: ``mjcf/host/<source name>`` and its diff, inside ``out_dir``.
@@ -106,22 +113,28 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
         HostExportError: the output was rescaled; a refined link or joint has no counterpart in the file; the
             written model does not compile or loses a name or a mass.
     """
+    source = Path(source)
+    reading = reading or ReadOptions()
+    if sources is None:
+        sources = gather_mjcf(source)  # once, under the reader policy
+    unit = angle or host_conventions.mjcf_angle(source, reading.mjcf_angle, files=sources.files).unit
+    with output_folder.guarding(out_dir), opened_mjcf(sources, degree=unit == "degree") as opened:
+        # nothing through a symlinked mjcf/ or mjcf/host/; MuJoCo reads the bytes read before, never the input
+        return _write_host_mjcf(Path(out_dir), source, reading, opened, unit)
+
+
+def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: OpenedMjcf, unit: str) -> HostExport:
     import mujoco
 
-    out_dir, source = Path(out_dir), Path(source)
-    reading = reading or ReadOptions()
     overlay = Overlay.model_validate(json.loads((out_dir / OVERLAY_NAME).read_text()))
     if not math.isclose(overlay.scale, 1.0, rel_tol=0.0, abs_tol=1e-12):
         raise HostExportError(f"{source}: the object was rescaled (x{overlay.scale:.4g}); its host file keeps the host's sizes, "
                               "so none is written (refine without --size / --scale / size words to keep the size)")
     model = read_urdf(out_dir / URDF_NAME)
     state = read_initial_state(out_dir)
-    convention = host_conventions.mjcf_angle(source, reading.mjcf_angle)
-    spec = mujoco.MjSpec.from_file(str(source))
-    spec.compiler.degree = convention.unit == "degree"
-    original = spec.compile()
+    spec, original = opened.spec, opened.model
     pick = mjcf_scene.pick_object(original, source, reading.body)
-    per_rad = 180.0 / math.pi if convention.unit == "degree" else 1.0
+    per_rad = 180.0 / math.pi if unit == "degree" else 1.0
     explicit = {b.name: bool(b.explicitinertial) for b in spec.bodies if b.name}
     bodies, joints = [], []
     for b in pick.bodies:
@@ -145,15 +158,15 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
             joints.append((jname, j))
     _set_keyframe(spec, original, state, joints)
     try:
-        written = spec.compile()
-    except Exception as exc:  # mujoco raises ValueError with the compiler's message
+        written = opened.compile()  # from the private copy of the bytes read
+    except Exception as exc:  # StagingError with the compiler's message
         raise HostExportError(f"{source}: the refined host file does not compile: {exc}") from exc
     _check(source, original, written, mujoco, model, bodies)
     xml = spec.to_xml()
     folder = out_dir / MJCF_DIR / HOST_DIR
     path = file_names.join_inside(folder, file_names.file_stem(source.stem) + ".xml")
     atomic.write_bytes(path, xml.encode("utf-8"))
-    before = source.read_text(errors="replace").splitlines(keepends=True)
+    before = opened.sources.files[opened.sources.main].decode("utf-8", "replace").splitlines(keepends=True)
     diff = "".join(difflib.unified_diff(before, xml.splitlines(keepends=True), fromfile=str(source), tofile=path.name))
     diff_path = file_names.join_inside(folder, file_names.file_stem(source.stem) + ".diff")
     atomic.write_bytes(diff_path, diff.encode("utf-8"))
@@ -161,20 +174,22 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
                                               for j in range(int(original.body_jntadr[b]), int(original.body_jntadr[b]) + int(original.body_jntnum[b]))
                                               if int(original.jnt_type[j]) in (mjcf_scene.JNT_HINGE, mjcf_scene.JNT_SLIDE)]
               for b in pick.bodies}
-    files = write_package_files(folder / FILES_DIR, source, xml, set(bodies), {b: v for b, v in moving.items() if v})
+    files = write_package_files(folder / FILES_DIR, source, xml, set(bodies), {b: v for b, v in moving.items() if v},
+                                sources=opened.sources)
     return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(name for name, _ in joints),
                       files=tuple(files))
 
 
 def write_package_files(folder: Path, source: Path, host_xml: str, inertials: set[str],
-                    joints: dict[str, list[dict[str, str]]]) -> list[Path]:
+                    joints: dict[str, list[dict[str, str]]], *, sources: MjcfSources | None = None) -> list[Path]:
     """``source`` and the files it includes that hold a body of ``inertials`` or ``joints`` (names), written again
     under ``folder`` at their path in the input's tree (the host package's asset folder,
     :func:`~asset2sim.tasks.ingest.host_conventions.package_tree`, else the input's folder; a file from a folder
     ``--allow-outside-paths`` allows is left out): the ``<inertial>`` of the bodies of ``inertials`` as ``host_xml``
     (the host file written) has it, and on the hinge and slide ``<joint>`` elements of the bodies of ``joints``
     (body name -> attributes per joint in order, :func:`_joint_physics`) those attributes; their unified diff against
-    the package's files in ``folder``'s parent as :data:`FILES_DIFF`. Returns the files written.
+    the package's files in ``folder``'s parent as :data:`FILES_DIFF`; ``sources``: the files as already read (None:
+    gathered once here under the reader policy). Returns the files written.
 
     Raises:
         StagingError: an included file cannot be read again under the input's trust rules.
@@ -188,7 +203,8 @@ def write_package_files(folder: Path, source: Path, host_xml: str, inertials: se
         keys.setdefault(_body_key(b), []).append(label)
         if label in inertials:
             hosted[label] = b
-    sources = gather_mjcf(source)  # the files the reader read, in the tree it read them in
+    if sources is None:
+        sources = gather_mjcf(source)  # the files the reader read, in the tree it read them in
     out, diffs = [], []
     for name, data in sorted(sources.files.items()):
         if Path(name).suffix.lower() not in MJCF_SUFFIXES:  # meshes and textures

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim import atomic, file_names
+from asset2sim import atomic, file_names, output_folder
 from asset2sim.engines.loading import read_initial_state
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, rigid_inverse
 from asset2sim.openusd import pxr_modules
@@ -239,8 +239,12 @@ def write_host_usd(out_dir: Path | str, source: Path | str) -> HostUsdExport:
         HostUsdError: the output was rescaled; a refined link or joint has no prim in the stage; the written
             stage loses a prim path or does not hold a refined value.
     """
+    with output_folder.guarding(out_dir):  # nothing through a symlinked usd/ or usd/host/
+        return _write_host_usd(Path(out_dir), Path(source))
+
+
+def _write_host_usd(out_dir: Path, source: Path) -> HostUsdExport:
     _, Sdf, _, Usd, _, UsdPhysics = pxr_modules()
-    out_dir, source = Path(out_dir), Path(source)
     overlay = Overlay.model_validate_json((out_dir / OVERLAY_NAME).read_text())
     if not math.isclose(overlay.scale, 1.0, rel_tol=0.0, abs_tol=1e-12):
         raise HostUsdError(f"{source}: the object was rescaled (x{overlay.scale:.4g}); its host stage keeps the host's sizes, "

@@ -12,18 +12,20 @@ completion marker, so the folder stays complete for its input and configuration.
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import numpy as np
 
 from asset2sim import atomic, output_folder
 from asset2sim.engines.quiet import quiet_stdout
-from asset2sim.output_folder import CLIPS_DIR, MARKER_NAME, RECORD_NAME, REPORT_HTML_NAME, URDF_NAME, VIEWS_DIR, VOLATILE
-from asset2sim.output_paths import OutputError
+from asset2sim.inert import one_line
+from asset2sim.output_folder import CLIPS_DIR, MARKER_NAME, RECORD_NAME, REPORT_HTML_NAME, REPORT_NAME, URDF_NAME, VIEWS_DIR, VOLATILE
+from asset2sim.output_paths import OutputError, raise_refusal
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON
 from asset2sim.tasks.geometry import render
-from asset2sim.tasks.publish.contract import read_report_json, write_report_json
+from asset2sim.tasks.publish.contract import read_report_json, verify_output, write_report_json
 
 __all__ = ["DEFERRED_NOTE", "media_pending", "make_media", "output_views"]
 
@@ -61,41 +63,67 @@ def make_media(out_dir: Path | str, *, reference: Path | str | None = None, clip
         clip that cannot be drawn is a note in ``report.json`` (never a lost output).
 
     Raises:
-        OutputError: ``OUTPUT_INCOMPLETE`` when ``out_dir`` holds no complete output (no completion marker or no
-            readable ``report.json``); ``OUTPUT_WRITE_FAILED`` when it cannot be written.
+        OutputError: ``OUTPUT_INCOMPLETE`` before any file is opened when ``out_dir`` does not verify against its
+            completion marker (:func:`~asset2sim.tasks.publish.contract.verify_output`: an entry outside the folder,
+            missing, not a regular file or changed since) or holds no usable ``report.json`` (a NaN named by its
+            field); ``OUTPUT_SYMLINK_ESCAPES`` for a write through a symlink; ``OUTPUT_WRITE_FAILED`` when it cannot
+            be written. A failure part way leaves ``report.json`` as it was and the marker matching the files.
     """
     out_dir = Path(out_dir)
-    marker = out_dir / MARKER_NAME
+    head = verify_output(out_dir)  # before any engine or renderer opens a file of it
     try:
+        report_bytes = atomic.read_regular(out_dir / REPORT_NAME, output_folder.MAX_RECORD_BYTES)
         report = read_report_json(out_dir)
-        head = output_folder.read_record(marker)
     except (OSError, ValueError) as exc:
-        raise OutputError(f"{out_dir} holds no complete refine output ({exc}); refine it first", "OUTPUT_INCOMPLETE",
-                          out_dir) from exc
-    if not isinstance(head, dict) or not isinstance(head.get("files"), dict):
-        raise OutputError(f"{marker}: not a completion marker asset2sim wrote", "OUTPUT_INCOMPLETE", marker)
+        raise OutputError(f"{out_dir} holds no usable report.json ({one_line(exc)}); refine it again (--force)",
+                          "OUTPUT_INCOMPLETE", out_dir / REPORT_NAME) from exc
     if report.media == "done" and (out_dir / REPORT_HTML_NAME).is_file() and not force:
         return {}
     out: dict[str, str] = {}
-    with output_folder.adopting(out_dir) as owner, quiet_stdout():  # renderers print from C; the library must not
-        views = None
-        try:
-            views = output_views(out_dir, dict(report.initial_joint_positions))
-            out["views"] = str(out_dir / VIEWS_DIR)
-        except Exception as exc:  # a renderer unavailable: the report without its renders
-            report.notes.append(f"renders failed: {exc}")
-        paths = evaluate.evaluate_refined(out_dir, report, reference=reference, views=views,
-                                          views_state=dict(report.initial_joint_positions), checks=list(report.metrics),
-                                          shown=out_dir, clips=clips, html=True, evaluation_json=False)
-        out["html"] = str(paths["report"])
-        if clips and (out_dir / CLIPS_DIR / CLIPS_JSON).is_file():
-            out["clips"] = str(out_dir / CLIPS_DIR)
-        report.media = "done"
-        report.notes = [n for n in report.notes if not n.startswith(DEFERRED_NOTE)]
-        write_report_json(out_dir, report)
-        added = set(owner.files) if owner is not None else set()
-    _extend_marker(out_dir, head, added)
+    added: set[str] = set()
+    try:
+        with output_folder.adopting(out_dir) as owner, quiet_stdout():  # renderers print from C; the library must not
+            views = None
+            try:
+                views = output_views(out_dir, dict(report.initial_joint_positions))
+                out["views"] = str(out_dir / VIEWS_DIR)
+            except Exception as exc:  # a renderer unavailable: the report without its renders
+                raise_refusal(exc)  # but never a write the output guard refused
+                report.notes.append(f"renders failed: {one_line(exc)}")
+            paths = evaluate.evaluate_refined(out_dir, report, reference=reference, views=views,
+                                              views_state=dict(report.initial_joint_positions), checks=list(report.metrics),
+                                              shown=out_dir, clips=clips, html=True, evaluation_json=False)
+            out["html"] = str(paths["report"])
+            if clips and (out_dir / CLIPS_DIR / CLIPS_JSON).is_file():
+                out["clips"] = str(out_dir / CLIPS_DIR)
+            report.media = "done"
+            report.notes = [n for n in report.notes if not n.startswith(DEFERRED_NOTE)]
+            added = set(owner.files) if owner is not None else set()
+            write_report_json(out_dir, report)
+        _extend_marker(out_dir, head, added)
+    except BaseException:
+        with contextlib.suppress(OSError, ValueError):  # the failure itself is what the caller hears of
+            _keep_consistent(out_dir, head, report_bytes)
+        raise
     return out
+
+
+def _keep_consistent(out_dir: Path, head: dict, report_bytes: bytes) -> None:
+    """After a media phase that failed part way: ``report.json`` as it was, and the completion marker listing the
+    files it listed with their bytes now (a render it replaced rehashed; one no longer a regular file dropped), so
+    the folder never disagrees with its own marker."""
+    try:
+        if atomic.read_regular(out_dir / REPORT_NAME, output_folder.MAX_RECORD_BYTES) != report_bytes:
+            atomic.write_bytes(out_dir / REPORT_NAME, report_bytes)
+    except OSError:
+        atomic.write_bytes(out_dir / REPORT_NAME, report_bytes)
+    files = {}
+    for rel in head["files"]:
+        try:
+            files[rel] = atomic.sha256_file(out_dir / rel)
+        except OSError:
+            continue
+    atomic.write_json(out_dir / MARKER_NAME, {**{k: v for k, v in head.items() if k != "files"}, "files": files})
 
 
 def _extend_marker(out_dir: Path, head: dict, added: set[str]) -> None:

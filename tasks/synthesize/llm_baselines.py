@@ -15,6 +15,7 @@ from asset2sim.tasks.synthesize.llm_errors import LLMError, ReplyError
 from asset2sim.tasks.synthesize.llm_overlay import check_reply_names, estimator_info
 from asset2sim.tasks.synthesize.llm_prompt import VIEWS, build_messages, describe, render_closed_views
 from asset2sim.tasks.synthesize.llm_usage import Usage
+from asset2sim.inert import one_line
 
 IVW_TEMPERATURE = 1.0
 """Sampling temperature of the IVW baseline's repeated queries (independent samples)."""
@@ -91,7 +92,7 @@ def ivw_overlay(ctx: EstimationContext, client: LLMClient, n_views: int = 5, n_c
             try:
                 ans = client.ask(msgs, ModelReply, schema=schema, schema_name=REPLY_SCHEMA_NAME, max_reasks=0, temperature=IVW_TEMPERATURE)
             except LLMError as exc:
-                failures.append(f"{v} #{k + 1}: {exc}")
+                failures.append(f"{v} #{k + 1}: {one_line(exc)}")
                 last_exc = exc
                 continue
             if check_reply_names(ctx, ans.reply):

@@ -19,8 +19,8 @@ from typing import Any, Callable
 
 from asset2sim import array_cache, atomic
 from asset2sim.tasks.synthesize.llm_config import ClientConfig, with_overrides
-from asset2sim.tasks.synthesize.llm_errors import (DeadlineExceeded, LLMError, LLMUnavailable, MissingCredentials, ModelCallError,
-                                                   ReplyError, ReplyInvalid, ReplyTooLarge)
+from asset2sim.tasks.synthesize.llm_errors import (ConnectionRefused, DeadlineExceeded, LLMError, LLMUnavailable, MissingCredentials,
+                                                   ModelCallError, ReplyError, ReplyInvalid, ReplyTooLarge, ReplyUnreadable)
 from asset2sim.tasks.synthesize.llm_reply import excerpt, parse_json_strict, parse_reply, reask_text
 from asset2sim.tasks.synthesize.llm_transport import NO_KEY, call_bounds, classify, import_litellm, retry_after_s, short_error
 from asset2sim.tasks.synthesize.llm_usage import M, Answer, Completion, T, Usage
@@ -29,6 +29,12 @@ CACHE_FORMAT = 1
 
 #: Slack (bytes) of a reply record beyond its content: key, digest, model, finish reason, punctuation.
 RECORD_OVERHEAD_BYTES = 64 << 10
+
+
+def _code(message: str) -> str | None:
+    """The ``MODEL_*`` code a failure message starts with, or None."""
+    head = message.split(":", 1)[0]
+    return head if head.startswith("MODEL_") and head.replace("_", "").isalpha() else None
 
 
 def record_digest(key: str, model: Any, content: Any, finish_reason: Any) -> str:
@@ -40,7 +46,7 @@ def record_digest(key: str, model: Any, content: Any, finish_reason: Any) -> str
 
 #: The client's own names and the pieces' names callers import from here.
 __all__ = ["make_client", "model_string", "CACHE_FORMAT", "NO_KEY", "ClientConfig", "DeadlineExceeded", "LLMClient", "LLMError", "LLMUnavailable", "MissingCredentials",
-           "ModelCallError", "ReplyError", "ReplyInvalid", "ReplyTooLarge", "import_litellm", "parse_json_strict", "parse_reply", "retry_after_s", "with_overrides"]
+           "ConnectionRefused", "ModelCallError", "ReplyError", "ReplyInvalid", "ReplyTooLarge", "ReplyUnreadable", "import_litellm", "parse_json_strict", "parse_reply", "retry_after_s", "with_overrides"]
 
 
 class LLMClient:
@@ -181,6 +187,7 @@ class LLMClient:
         t0 = time.monotonic()
         u = Usage()
         last: str = ""
+        cls: type[ModelCallError] = ModelCallError
         status: int | None = None
         try:
             for attempt in range(1, cfg.max_attempts + 1):
@@ -188,21 +195,35 @@ class LLMClient:
                 try:
                     with call_bounds(cfg.timeout_s, cfg.max_reply_bytes) as bounds:
                         resp = litellm.completion(**kwargs)
-                except Exception as exc:  # classified below; non-API bugs are not retried
+                except Exception as exc:  # classified below by what happened; non-API bugs are not retried
                     if bounds.tripped == "size":
                         raise ReplyTooLarge(f"model {cfg.model}: MODEL_REPLY_TOO_LARGE: the reply grew past "
-                                            f"{cfg.max_reply_bytes} bytes and was refused while it arrived "
-                                            "(ASSET2SIM_LLM_MAX_REPLY_BYTES raises the cap)", u.attempts, None) from None
+                                            f"{cfg.max_reply_bytes} bytes (decoded) and was refused while it arrived "
+                                            "(ASSET2SIM_LLM_MAX_REPLY_BYTES raises the cap)", u.attempts, bounds.status) from None
                     if bounds.tripped == "deadline" and bounds.received:
                         raise DeadlineExceeded(f"model {cfg.model}: MODEL_DEADLINE_EXCEEDED: the reply was not complete "
                                                f"{cfg.timeout_s:g} s after the attempt began ({bounds.received} bytes "
                                                "arrived); a server this slow is not asked again", u.attempts, None) from None
+                    if bounds.tripped == "invalid" and bounds.failure is not None:
+                        raise ReplyUnreadable(f"model {cfg.model}: MODEL_REPLY_INVALID: {bounds.failure[1]} (not retried)",
+                                              u.attempts, bounds.status) from None
                     retryable, status, kind = classify(exc, litellm)
+                    cls, detail = ModelCallError, short_error(exc, 200)
                     if bounds.tripped == "deadline":
-                        retryable, kind = True, "timeout"
-                    last = f"{kind}: {short_error(exc)}"
+                        retryable, kind = True, "MODEL_DEADLINE_EXCEEDED: timeout, no reply within the deadline"
+                        detail = f"{cfg.timeout_s:g} s"
+                    elif bounds.failure is not None and bounds.failure[0] == "MODEL_CONNECTION_REFUSED":
+                        cls, retryable, kind, detail = ConnectionRefused, True, f"MODEL_CONNECTION_REFUSED: {bounds.failure[1]}", ""
+                    elif bounds.status is not None and 200 <= bounds.status < 300:
+                        cls, retryable, status = ReplyUnreadable, True, bounds.status
+                        kind = f"MODEL_REPLY_INVALID: the server answered HTTP {bounds.status} with a body that is not a chat completion"
+                        detail = "not JSON, or without choices"
+                    elif status is not None and bounds.status is not None:
+                        kind = f"MODEL_HTTP_ERROR: HTTP {bounds.status}"
+                        cls = ModelCallError
+                    last = f"{kind} ({detail})" if detail else kind
                     if not retryable:
-                        raise ModelCallError(f"model {cfg.model}: {last} (not retried)", u.attempts, status) from None
+                        raise cls(f"model {cfg.model}: {last} (not retried)", u.attempts, status, _code(last)) from None
                     if attempt >= cfg.max_attempts:
                         break
                     wait = min(cfg.backoff_s * (2 ** (attempt - 1)), cfg.max_backoff_s)
@@ -215,7 +236,7 @@ class LLMClient:
                     self._sleep(wait)
                     continue
                 return self._completion_from(resp, key, u, litellm)
-            raise ModelCallError(f"model {cfg.model}: {last}; gave up after {u.attempts} attempts", u.attempts, status)
+            raise cls(f"model {cfg.model}: {last}; gave up after {u.attempts} attempts", u.attempts, status, _code(last))
         finally:
             u.seconds = time.monotonic() - t0
             with self._lock:

@@ -16,12 +16,33 @@ class MissingCredentials(LLMError):
 
 
 class ModelCallError(LLMError):
-    """A call failed (not retryable, or retries exhausted) after ``attempts`` tries; ``status``: the last HTTP status."""
+    """A call failed (not retryable, or retries exhausted) after ``attempts`` tries; ``status``: the last HTTP status;
+    ``code``: what happened (``MODEL_HTTP_ERROR`` a status the server sent, ``MODEL_CALL_FAILED`` anything else; the
+    subclasses below name the rest). The message is one sentence: no traceback, no second line."""
 
-    def __init__(self, message: str, attempts: int, status: int | None = None):
+    code = "MODEL_CALL_FAILED"
+
+    def __init__(self, message: str, attempts: int, status: int | None = None, code: str | None = None):
         super().__init__(message)
         self.attempts = attempts
         self.status = status
+        if code is not None:
+            self.code = code
+
+
+class ConnectionRefused(ModelCallError):
+    """No connection could be made to the model's server (nothing listens there, the name does not resolve, the
+    network refuses). Code ``MODEL_CONNECTION_REFUSED``; retried like other network faults."""
+
+    code = "MODEL_CONNECTION_REFUSED"
+
+
+class ReplyUnreadable(ModelCallError):
+    """The server answered, but its reply is not one: a 2xx body that is not a chat completion (not JSON, no
+    choices), or a body in an encoding asset2sim does not inflate (nested, or one it did not ask for). Code
+    ``MODEL_REPLY_INVALID``."""
+
+    code = "MODEL_REPLY_INVALID"
 
 
 class DeadlineExceeded(ModelCallError):

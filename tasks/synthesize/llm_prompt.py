@@ -20,6 +20,7 @@ from asset2sim.tasks.interpret.size_priors import target_size
 from asset2sim.tasks.geometry import render
 from asset2sim.tasks.synthesize import estimate
 from asset2sim.tasks.synthesize.context import EstimationContext
+from asset2sim.inert import one_line
 
 DESCRIPTION_MARK = "ASSET DESCRIPTION (JSON):"
 """Line preceding the structured description in the user message."""
@@ -156,7 +157,7 @@ def render_closed_views(ctx: EstimationContext, views: tuple[str, ...] = VIEWS, 
     try:
         images = render.render_views(ctx.asset.urdf_path, q, views=views, size=size)
     except Exception as exc:  # renders are evidence, not a requirement
-        return {}, [f"renders failed ({type(exc).__name__}: {exc}); the model got the description only"]
+        return {}, [f"renders failed ({type(exc).__name__}: {one_line(exc)}); the model got the description only"]
     return {v: png_data_url(img) for v, img in images.items()}, []
 
 

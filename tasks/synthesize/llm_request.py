@@ -23,6 +23,7 @@ from asset2sim.schemas.request import RequestIntent, RequestSpec
 from asset2sim.tasks.interpret.request import parse_request
 from asset2sim.tasks.synthesize.llm_client import LLMClient, make_client
 from asset2sim.tasks.synthesize.llm_errors import LLMError, ReplyInvalid
+from asset2sim.inert import one_line
 
 INTENT_SCHEMA_NAME = "request_intent"
 
@@ -149,7 +150,7 @@ def parse_request_model(text: str, client: LLMClient, offline: RequestSpec | Non
         answer = client.ask(intent_messages(text, schema), RequestIntent, schema=schema, schema_name=INTENT_SCHEMA_NAME, accept=accept,
                             max_reasks=0)
     except LLMError as exc:  # the call failed, or the reply did not validate (ReplyError lists why)
-        why = str(exc).split("\n", 1)[0][:400]
+        why = one_line(exc, 400)
         return offline.model_copy(update={"parse_note": f"request parse: offline (the model's parse was not used: {why})"})
     states = ", ".join(js.short() for js in answer.value.joint_states) or "no states"  # the same note from the cache: same output
     return with_intent(offline, answer.value, f"request parse: model {model}, validated against the intent schema ({states})")
@@ -176,5 +177,5 @@ def parse_request_for(text: str, config: RefineConfig | None = None, client: LLM
         try:
             client = make_client(config.estimator, config.model, config.base_url)
         except (LLMError, ValueError) as exc:
-            return offline.model_copy(update={"parse_note": f"request parse: offline (no model backend: {str(exc)[:300]})"})
+            return offline.model_copy(update={"parse_note": f"request parse: offline (no model backend: {one_line(exc)})"})
     return parse_request_model(text, client, offline)

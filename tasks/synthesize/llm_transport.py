@@ -15,6 +15,15 @@ past the size cap the socket read raises at once and the attempt is recorded as
 :class:`~asset2sim.tasks.synthesize.llm_errors.DeadlineExceeded` or
 :class:`~asset2sim.tasks.synthesize.llm_errors.ReplyTooLarge`. Memory stays
 bounded by the cap; calls outside :func:`call_bounds` pass through unchanged.
+
+The reply's body is decoded here, not by httpx (:class:`DecodedTransport`): every request asks for
+``Accept-Encoding: identity``; a body the server compresses anyway (one ``gzip`` or ``deflate``) is inflated in
+steps that never hold more than the cap, the *decoded* bytes counted against it (a 1 MB gzip body of 1 GiB is
+refused once 16 MiB are out, ``size``), and a body in any other or in several encodings (gzip inside gzip) is
+refused before it is inflated (``invalid``). What happened is recorded on the attempt's :class:`CallBounds`
+(``failure``: the code and one sentence; ``status``: the HTTP status the server sent), so the client names a
+fault by what it was (an invalid reply, too large, the deadline, a refused connection) whatever exception
+litellm wraps it in.
 """
 
 from __future__ import annotations
@@ -25,9 +34,11 @@ import os
 import threading
 import time
 import urllib.request
+import zlib
 from contextlib import contextmanager
 from typing import Iterator
 
+from asset2sim.inert import one_line
 from asset2sim.tasks.synthesize.llm_errors import LLMUnavailable
 
 #: litellm version that must never be used (reported compromised).
@@ -54,6 +65,10 @@ class CallBounds:
         self.start = time.monotonic()
         self.received = 0
         self.tripped: str | None = None
+        #: the HTTP status of the last response of this attempt (None before one arrives)
+        self.status: int | None = None
+        #: (code, one sentence) of what went wrong at the transport (a refused connection, an undecodable body)
+        self.failure: tuple[str, str] | None = None
 
     def left(self) -> float:
         """Seconds left before the deadline (<= 0: passed)."""
@@ -163,9 +178,118 @@ def _bounder():
     return bound
 
 
+#: Content codings a body may arrive in although the request asked for ``identity`` (inflated with a bounded output).
+INFLATED = {"gzip": 16 + zlib.MAX_WBITS, "x-gzip": 16 + zlib.MAX_WBITS, "deflate": zlib.MAX_WBITS}
+#: Bytes of compressed input handed to the decompressor at a time.
+_INFLATE_STEP = 64 << 10
+
+
+class BodyRefused(Exception):
+    """A reply body the transport would not hand on (its :class:`CallBounds` says why)."""
+
+
+def _codings(headers) -> list[str]:
+    """The content codings of a response, outermost last (``identity`` left out)."""
+    values = headers.get_list("content-encoding", split_commas=True) if hasattr(headers, "get_list") else []
+    return [v.strip().lower() for v in values if v.strip() and v.strip().lower() != "identity"]
+
+
+def decode_body(chunks, codings: list[str], bounds: CallBounds) -> bytes:
+    """The decoded body of a response sent as ``chunks`` (raw bytes, as on the wire) in ``codings``, at most
+    ``bounds.max_bytes`` decoded bytes ever held. Raises :class:`BodyRefused` (``bounds.failure`` and
+    ``bounds.tripped`` set): ``size`` past the cap, ``invalid`` for several codings, one not in :data:`INFLATED` or a
+    body that does not inflate."""
+    if len(codings) > 1:
+        bounds.tripped, bounds.failure = "invalid", ("MODEL_REPLY_INVALID", f"the reply's body is in nested encodings "
+                                                     f"({', '.join(codings)}), which asset2sim does not inflate")
+        raise BodyRefused(bounds.failure[1])
+    if codings and codings[0] not in INFLATED:
+        bounds.tripped, bounds.failure = "invalid", ("MODEL_REPLY_INVALID", f"the reply's body is encoded as {codings[0]!r}, "
+                                                     "which asset2sim did not ask for (it asks for identity)")
+        raise BodyRefused(bounds.failure[1])
+    wbits = INFLATED[codings[0]] if codings else None
+    inflate = zlib.decompressobj(wbits) if wbits is not None else None
+    out, size = [], 0
+
+    def keep(piece: bytes) -> None:
+        nonlocal size
+        size += len(piece)
+        if size > bounds.max_bytes:
+            bounds.tripped = "size"
+            bounds.failure = ("MODEL_REPLY_TOO_LARGE", f"the decoded reply is larger than {bounds.max_bytes} bytes")
+            raise BodyRefused(bounds.failure[1])
+        out.append(piece)
+
+    def feed(data: bytes) -> None:
+        nonlocal inflate
+        while data:
+            keep(inflate.decompress(data, bounds.max_bytes - size + 1))  # never more than the cap out at once
+            if inflate.eof:  # a gzip body may hold several members, one after another
+                data = inflate.unused_data if wbits != zlib.MAX_WBITS else b""
+                if data:
+                    inflate = zlib.decompressobj(wbits)
+            else:
+                data = inflate.unconsumed_tail
+
+    try:
+        for chunk in chunks:
+            if inflate is None:
+                keep(chunk)
+                continue
+            for i in range(0, len(chunk), _INFLATE_STEP):
+                feed(chunk[i:i + _INFLATE_STEP])
+        if inflate is not None and not inflate.eof:
+            keep(inflate.flush())
+    except zlib.error as exc:
+        bounds.tripped, bounds.failure = "invalid", ("MODEL_REPLY_INVALID", f"the reply's {codings[0]} body does not inflate ({exc})")
+        raise BodyRefused(bounds.failure[1]) from None
+    return b"".join(out)
+
+
+def _decoded_transport(inner):
+    """``inner`` (an httpx transport) wrapped so that, within :func:`call_bounds`, requests ask for
+    ``Accept-Encoding: identity`` and responses come back decoded and bounded (:func:`decode_body`), the status and
+    a refused connection recorded on the attempt's :class:`CallBounds` (module docstring)."""
+    import httpx
+
+    class DecodedTransport(httpx.BaseTransport):
+        def __init__(self, wrapped):
+            self.wrapped = wrapped
+
+        def handle_request(self, request):
+            bounds = getattr(_BOUNDS, "current", None)
+            if bounds is None:
+                return self.wrapped.handle_request(request)
+            request.headers["Accept-Encoding"] = "identity"
+            try:
+                response = self.wrapped.handle_request(request)
+            except httpx.ConnectError as exc:
+                if bounds.failure is None:
+                    bounds.failure = ("MODEL_CONNECTION_REFUSED", f"no connection to {request.url.scheme}://{request.url.host}"
+                                      f":{request.url.port or ''} ({first_line(exc) or 'refused'})")
+                raise
+            bounds.status = response.status_code
+            try:
+                body = decode_body(response.stream, _codings(response.headers), bounds)
+            except BodyRefused as exc:
+                response.close()
+                raise httpx.DecodingError(str(exc), request=request) from None
+            finally:
+                response.close()
+            headers = [(k, v) for k, v in response.headers.multi_items() if k.lower() not in ("content-encoding", "content-length",
+                                                                                                 "transfer-encoding")]
+            return httpx.Response(response.status_code, headers=headers, content=body, request=request,
+                                  extensions={k: v for k, v in response.extensions.items() if k != "network_stream"})
+
+        def close(self) -> None:
+            self.wrapped.close()
+
+    return DecodedTransport(inner)
+
+
 def bounded_client():
     """An ``httpx.Client`` (redirects followed, proxies and certificates from the environment as httpx reads
-    them) whose every transport obeys :func:`call_bounds`."""
+    them) whose every transport obeys :func:`call_bounds` and decodes bodies itself (:func:`decode_body`)."""
     import httpx
 
     client = httpx.Client(follow_redirects=True)
@@ -173,16 +297,19 @@ def bounded_client():
     for transport in [client._transport, *client._mounts.values()]:  # the proxies' transports too
         if transport is not None:
             bound(transport)
+    client._transport = _decoded_transport(client._transport)
+    client._mounts = {pattern: None if t is None else _decoded_transport(t) for pattern, t in client._mounts.items()}
     return client
 
 
 def bounded_transport():
-    """An ``httpx.HTTPTransport`` whose connections obey :func:`call_bounds` (module docstring)."""
+    """An httpx transport whose connections obey :func:`call_bounds` and whose bodies are decoded and bounded here
+    (module docstring)."""
     import httpx
 
     transport = httpx.HTTPTransport()
     _bounder()(transport)
-    return transport
+    return _decoded_transport(transport)
 
 
 def _install_bounded_transport(litellm) -> None:
@@ -281,6 +408,11 @@ def classify(exc: BaseException, litellm=None) -> tuple[bool, int | None, str]:
 
 
 def short_error(exc: BaseException, limit: int = 300) -> str:
-    """The message of ``exc`` on one line, cut to ``limit`` characters."""
-    s = str(exc).replace("\n", " ")
-    return s if len(s) <= limit else s[:limit] + "..."
+    """The first line of ``exc``'s message, no traceback (litellm puts one in some messages), control characters
+    escaped, cut to ``limit`` characters (:func:`asset2sim.inert.one_line`)."""
+    return one_line(exc, limit)
+
+
+def first_line(exc: BaseException) -> str:
+    """:func:`short_error` at 160 characters."""
+    return one_line(exc, 160)

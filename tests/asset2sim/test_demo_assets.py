@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
+import os
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
@@ -242,13 +243,23 @@ def test_loads_in_the_project_engine(dataset: Path):
             session.close()
 
 
-def test_output_is_deterministic_and_rebuild_replaces(tmp_path: Path):
+def _generated(folder: Path) -> dict[str, str]:
+    """tree_hashes of a generated folder without the generator's record."""
+    return {k: v for k, v in tree_hashes(folder).items() if Path(k).name != demo_assets.RECORD_NAME}
+
+
+def test_output_is_deterministic_and_rebuild_replaces_only_its_own(tmp_path: Path):
     a = demo_assets.build_demo_dataset(tmp_path / "a")
     b = demo_assets.build_demo_dataset(tmp_path / "b")
     ha, hb = tree_hashes(a), tree_hashes(b)
     assert ha == hb and len(ha) > 5 * 10
-    # a rebuild over an earlier build (with a stray file) gives the same tree
-    (a / "laptop" / "textured_objs" / "stale.obj").write_text("junk")
+    # a rebuild over an earlier build gives the same tree; a file an older generator recorded and no longer
+    # writes is removed
+    laptop = a / "laptop"
+    (laptop / "textured_objs" / "old.obj").write_text("an older generator's mesh")
+    record = json.loads((laptop / demo_assets.RECORD_NAME).read_text())
+    record["files"]["textured_objs/old.obj"] = hashlib.sha256(b"an older generator's mesh").hexdigest()
+    (laptop / demo_assets.RECORD_NAME).write_text(json.dumps(record))
     demo_assets.build_demo_dataset(a)
     assert tree_hashes(a) == hb
     # in-memory files equal the written ones
@@ -262,11 +273,91 @@ def test_never_overwrites_foreign_data(tmp_path: Path):
     foreign = tmp_path / "mine"
     foreign.mkdir()
     (foreign / "notes.txt").write_text("keep me")
-    with pytest.raises(FileExistsError):
+    with pytest.raises(demo_assets.OutputError) as info:
         demo_assets.build_box_with_lid(foreign)
+    assert info.value.code == "OUTPUT_NOT_GENERATED" and "notes.txt" in str(info.value)
     assert (foreign / "notes.txt").read_text() == "keep me"
     with pytest.raises(KeyError):
         demo_assets.demo_files("no_such_object")
+
+
+def _hostile_folders(tmp_path: Path) -> dict[str, tuple[Path, dict[str, str]]]:
+    """Folders a rebuild must not touch: name -> (folder, the user's files relative path -> text)."""
+    forged = tmp_path / "forged"
+    (forged / "experiments").mkdir(parents=True)
+    (forged / "meta.json").write_text(json.dumps({"source": "asset2sim demo generator (built from geometry)"}))
+    (forged / "experiments" / "results.csv").write_text("trial,score\n1,0.9\n")
+    added = demo_assets.build_box_with_lid(tmp_path / "added")
+    (added / "my_notes.txt").write_text("notes")
+    (added / "textured_objs" / "my_better_mesh.obj").write_text("v 0 0 0\n")
+    edited = demo_assets.build_box_with_lid(tmp_path / "edited")
+    (edited / "mobility.urdf").write_text((edited / "mobility.urdf").read_text().replace("box", "my box"))
+    claimed = demo_assets.build_box_with_lid(tmp_path / "claimed")  # a record naming a path outside
+    (tmp_path / "victim.txt").write_text("victim")
+    record = json.loads((claimed / demo_assets.RECORD_NAME).read_text())
+    record["files"]["../victim.txt"] = hashlib.sha256(b"victim").hexdigest()
+    (claimed / demo_assets.RECORD_NAME).write_text(json.dumps(record))
+    (claimed / "link.obj").symlink_to(tmp_path / "victim.txt")
+    return {"forged": (forged, {"meta.json": (forged / "meta.json").read_text(), "experiments/results.csv": "trial,score\n1,0.9\n"}),
+            "added": (added, {"my_notes.txt": "notes", "textured_objs/my_better_mesh.obj": "v 0 0 0\n"}),
+            "edited": (edited, {"mobility.urdf": (edited / "mobility.urdf").read_text()}),
+            "claimed": (claimed, {"../victim.txt": "victim"})}
+
+
+def test_asset_out_refuses_folders_holding_what_the_generator_did_not_write(tmp_path: Path, capsys):
+    """``demo --asset-out DIR`` (the command, in process): a folder with a forged ``meta.json``, files a user added
+    to a generated folder, a generated file the user edited, or a record claiming a path outside are refused
+    with exit 4 naming the file and the way out; every file stays as it was."""
+    from asset2sim import cli
+
+    for name, (folder, kept) in _hostile_folders(tmp_path).items():
+        before = tree_hashes(folder)
+        rc = cli.main(["demo", "--object", "box_lid", "--asset-out", str(folder), "--no-refine"])
+        err = capsys.readouterr().err
+        assert rc == 4, (name, err)
+        assert "OUTPUT_NOT_GENERATED" in err and "move them away" in err, (name, err)
+        assert tree_hashes(folder) == before, name
+        for rel, text in kept.items():
+            assert (folder / rel).read_text() == text, (name, rel)
+        assert not [p for p in folder.parent.iterdir() if p.name.startswith(".")], name
+
+
+def test_asset_out_through_a_symlink_writes_the_folder_it_names(tmp_path: Path, capsys):
+    """A symlink to an empty folder is followed: the files land in that folder, the symlink stays the symlink it
+    was, and nothing hidden is left beside it; a rebuild of the same folder is a no-op; a dangling symlink or one
+    to a file is refused."""
+    from asset2sim import cli
+
+    target = tmp_path / "real"
+    target.mkdir()
+    link = tmp_path / "link"
+    link.symlink_to(target)
+    for _ in range(2):
+        assert cli.main(["demo", "--object", "laptop", "--asset-out", str(link), "--no-refine"]) == 0
+        assert link.is_symlink() and Path(os.readlink(link)) == target
+        assert _generated(target) == {k: hashlib.sha256(v).hexdigest() for k, v in demo_assets.demo_files("laptop").items()}
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "real"]
+    (tmp_path / "file").write_text("x")
+    for bad in ("dangling", "to_file"):
+        (tmp_path / bad).symlink_to(tmp_path / ("nowhere" if bad == "dangling" else "file"))
+        assert cli.main(["demo", "--asset-out", str(tmp_path / bad), "--no-refine"]) == 4
+        assert "OUTPUT_NOT_A_FOLDER" in capsys.readouterr().err
+    assert (tmp_path / "file").read_text() == "x"
+
+
+def test_dataset_rebuild_refuses_a_foreign_manifest_before_writing(tmp_path: Path):
+    root = demo_assets.build_demo_dataset(tmp_path / "ds")
+    (root / "manifest.csv").write_text("id,category,prompt\nmine,Box,my own rows\n")
+    (root / "my_results.parquet").write_text("kept")  # other files of the root are left alone
+    (root / "laptop" / "mobility.urdf").unlink()
+    with pytest.raises(demo_assets.OutputError) as info:
+        demo_assets.build_demo_dataset(root)
+    assert info.value.code == "OUTPUT_NOT_GENERATED" and "manifest.csv" in str(info.value)
+    assert "my own rows" in (root / "manifest.csv").read_text()
+    assert not (root / "laptop" / "mobility.urdf").exists()  # nothing written before the refusal
+    (root / "manifest.csv").unlink()
+    demo_assets.build_demo_dataset(root)
+    assert demo_assets.demo_dataset_is_current(root) and (root / "my_results.parquet").read_text() == "kept"
 
 
 def test_single_builders_and_ensure(tmp_path: Path):
@@ -281,7 +372,7 @@ def test_single_builders_and_ensure(tmp_path: Path):
     assert set(builders) == set(IDS)
     for asset_id, build in builders.items():
         out = build(tmp_path / "single" / asset_id)
-        assert tree_hashes(out) == {
+        assert _generated(out) == {
             k: hashlib.sha256(v).hexdigest() for k, v in demo_assets.demo_files(asset_id).items()
         }
     root = tmp_path / "ensure"

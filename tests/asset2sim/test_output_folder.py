@@ -561,3 +561,21 @@ def test_outputs_are_fsynced_scratch_files_and_the_ownership_record_are_not(tmp_
     assert len(synced) == 4
     refine_asset(box, "", tmp_path / "refined", extras=False)
     assert atomic._SCRATCH == {}
+
+
+def test_remove_owned_removes_only_the_products_files(tmp_path, box):
+    """The flow's clean-up after an upload (``output_folder.remove_owned``) removes what the refine recorded and
+    leaves a user's file (with its folder); a folder holding only the product's files goes whole."""
+    out = tmp_path / "out"
+    refine_asset(box, PROMPT, out, extras=False)
+    (out / "my_notes.txt").write_text("keep me")
+    (out / "collision" / "mine.obj").parent.mkdir(exist_ok=True)
+    (out / "collision" / "mine.obj").write_text("v 0 0 0\n")
+    before = outside_hashes(tmp_path, out)
+    left = of.remove_owned(out)
+    assert left == ["collision/mine.obj", "my_notes.txt"]
+    assert sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()) == left
+    assert outside_hashes(tmp_path, out) == before
+    out2 = tmp_path / "out2"
+    refine_asset(box, PROMPT, out2, extras=False)
+    assert of.remove_owned(out2) == [] and not out2.exists()

@@ -188,3 +188,75 @@ def test_judge_with_a_trickling_server_ends_at_the_deadline(pair_set, tmp_path, 
     assert rc == 2 and "MODEL_CALLS_FAILED" in err and "MODEL_DEADLINE_EXCEEDED" in err
     assert took < 15.0, took  # 8 questions, 4 at a time, about 1 s each; a trickled reply takes 150 s
     assert srv.n_chat == 2 * len(ps.pairs)  # each asked once
+
+
+# ------------------------------------------------------------------ compressed replies and faults named by what they are
+def _one_sentence(message: str) -> None:
+    assert "\n" not in message and "Traceback" not in message and "HTTP 500" not in message, message
+
+
+def test_a_gzip_bomb_is_refused_by_its_decoded_bytes_in_bounded_memory(tmp_path):
+    """A 256 KB gzip body of 256 MiB: the decoded bytes count against the 16 MiB cap, so it ends at the cap, with the
+    client's memory (Python allocations, tracemalloc) far under 1 GB (the issue's 1 GiB body: the same path, 4x
+    the compression time)."""
+    import tracemalloc
+
+    bomb = fake.gzip_bomb(256 << 20)
+    with fake.FakeOpenAIServer(fake.encoded(bomb, "gzip"), lifetime_s=60) as srv:
+        tracemalloc.start()
+        try:
+            with pytest.raises(ReplyTooLarge, match="MODEL_REPLY_TOO_LARGE.*16777216 bytes .decoded.") as err:
+                client(srv, tmp_path, timeout_s=30).complete(MESSAGES)
+            _, peak = tracemalloc.get_traced_memory()
+        finally:
+            tracemalloc.stop()
+        assert srv.requests[0].headers.get("accept-encoding") == "identity"
+    assert peak < 128 << 20, peak
+    assert err.value.attempts == 1 and srv.n_chat == 1
+    _one_sentence(str(err.value))
+
+
+@pytest.mark.parametrize("encoding, body", [("gzip, gzip", lambda: fake.gzip_bomb(64 << 20, layers=2)), ("br", lambda: b"\x8b\x00")],
+                         ids=["gzip-in-gzip", "not-asked-for"])
+def test_nested_or_unasked_encodings_are_refused_before_inflating(tmp_path, encoding, body):
+    with fake.FakeOpenAIServer(fake.encoded(body(), encoding), lifetime_s=60) as srv:
+        with pytest.raises(ModelCallError) as err:
+            client(srv, tmp_path).complete(MESSAGES)
+    assert err.value.code == "MODEL_REPLY_INVALID" and srv.n_chat == 1, str(err.value)
+    _one_sentence(str(err.value))
+
+
+def test_a_gzip_reply_within_the_cap_is_read_in_every_member():
+    import gzip
+
+    body = json.dumps(fake.completion_body("zipped")).encode()
+    half = len(body) // 2
+    for payload in (gzip.compress(body), gzip.compress(body[:half]) + gzip.compress(body[half:])):
+        with fake.FakeOpenAIServer(fake.encoded(payload, "gzip"), lifetime_s=60) as srv:
+            comp = client(srv, None).complete(MESSAGES)
+        assert comp.content == "zipped"
+
+
+@pytest.mark.parametrize("behaviour, code", [
+    (fake.raw(b"{not json"), "MODEL_REPLY_INVALID"),
+    (fake.raw(b"<html>a proxy's page</html>", content_type="text/html"), "MODEL_REPLY_INVALID"),
+    (fake.raw(json.dumps({"choices": "none"}).encode()), "MODEL_REPLY_INVALID"),
+    (fake.status(503), "MODEL_HTTP_ERROR"),
+], ids=["malformed", "html", "no-choices", "503"])
+def test_model_faults_are_named_by_what_happened_in_one_sentence(tmp_path, behaviour, code):
+    with fake.FakeOpenAIServer(behaviour, lifetime_s=60) as srv:
+        with pytest.raises(ModelCallError) as err:
+            client(srv, tmp_path, max_attempts=2).complete(MESSAGES)
+    assert err.value.code == code and code in str(err.value), str(err.value)
+    _one_sentence(str(err.value))
+
+
+def test_a_refused_connection_is_named(tmp_path):
+    from tests.helpers import free_port
+
+    cfg = ClientConfig(model="openai/m", base_url=f"http://127.0.0.1:{free_port()}/v1", timeout_s=5, max_attempts=2,
+                       backoff_s=0.01, cache_dir=None)
+    with pytest.raises(ModelCallError) as err:
+        LLMClient(cfg).complete(MESSAGES)
+    assert err.value.code == "MODEL_CONNECTION_REFUSED" and "gave up after 2 attempts" in str(err.value), str(err.value)
+    _one_sentence(str(err.value))

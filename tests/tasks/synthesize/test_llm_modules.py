@@ -62,7 +62,9 @@ def test_transport_classifies_faults() -> None:
     assert llm_transport.retry_after_s(_Status(429, {"retry-after-ms": "1500"})) == pytest.approx(1.5)
     assert llm_transport.retry_after_s(_Status(429, {"Retry-After": "7"})) == pytest.approx(7.0)
     assert llm_transport.retry_after_s(_Status(429)) is None
-    assert llm_transport.short_error(ValueError("a\nb" + "x" * 400), 10) == "a bxxxxxxx..."
+    assert llm_transport.short_error(ValueError("a\nb" + "x" * 400), 10) == "a"  # the first line only
+    assert llm_transport.short_error(ValueError("x" * 400), 10) == "xxxxxxx..."
+    assert llm_transport.short_error(RuntimeError("HTTP 500: down Traceback (most recent call last):\n  File x")) == "HTTP 500: down"
 
 
 def test_reply_parsing_and_reask() -> None:
