@@ -192,8 +192,11 @@ def _metric_results(ctx: Context, runs: dict[str, EngineRun], *, probes: bool, m
     if checks:
         have = {(m.name, m.engine) for m in results}
         results += [m for m in checks if (m.name, m.engine) not in have]
-    words = motion_joints(ctx.request, ctx.joints, ctx.semantics, ctx.task_joints, ctx.category)
-    return as_asked.word_conflicts(results, words)  # a word about motion the physical verdict contradicts
+    # a word about motion the physical verdict contradicts, on the joints whose overlay says it applied the word
+    sources = {n: str(j.get("source") or "") for n, j in ((ctx.overlay or {}).get("joints") or {}).items()}
+    words = [(w, [n for n in joints if f"request '{w.phrase}'" in sources.get(n, "")])
+             for w, joints in motion_joints(ctx.request, ctx.joints, ctx.semantics, ctx.task_joints, ctx.category)]
+    return as_asked.word_conflicts(results, words)
 
 
 def _apply(spec: MetricSpec, ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:

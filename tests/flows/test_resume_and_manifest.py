@@ -87,7 +87,7 @@ def test_a_complete_folder_without_its_row_is_recorded_not_refined(tmp_path, das
     measured = json.loads((run1 / "_metrics" / "box_lid" / "evaluation.json").read_text())
     assert old["rest_stable"] and old["oscillation_pass"]
     expected = readiness([MetricResult(**m) for m in measured["metrics"]
-                          if m["name"] in ("joint_sweep", "robust_rest", "probes")]).failure_mode
+                          if m["name"] in ("joint_sweep", "robust_rest", "probes", "request_met")]).failure_mode
     assert old["status"] == "done" and old["failure_mode"] == expected and old["source_run"] == s1["run"]
     assert old["out_dir"] == str(run1 / "box_lid")
     report = json.loads((run1 / "box_lid" / "report.json").read_text())
