@@ -227,6 +227,9 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
             ld = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
             if ld[name].gravity_load * cs.direction > 0:
                 hold = max(hold, abs(ld[name].gravity_load))
+        if ch.free_moving and _on_stop(loads[name], cs, state[name], unit,
+                                       set_down.joint_band(cs.lower * unit, cs.upper * unit, name in prismatic)):
+            hold = 0.0  # asked to move freely and resting on the stop its weight presses it onto: nothing to hold
         spring, balanced = None, False
         mechanism = "moves freely (asked)" if ch.free_moving else ("friction slide" if name in prismatic else "friction hinge")
         note = source + "".join(f"; request '{w.phrase}': {w.kind.replace('_', ' ')}" for w in ch.words)
