@@ -87,13 +87,18 @@ def mechanisms(case: dict) -> list[str]:
     return out
 
 
+#: Smallest static load (N m or N) a hold margin is reported over.
+LEAST_LOAD = 1e-3
+
+
 def hold_margins(case: dict) -> list[float]:
     """Each joint's hold margin: its friction over the largest static load it was sized to hold (``holding.static_load``:
-    the gravity load around its state, the set-down's lean), where there is one."""
+    the gravity load around its state, the set-down's lean), where there is one of at least :data:`LEAST_LOAD` (a
+    mounted door on a vertical hinge has none)."""
     out = []
     for d in (case.get("joints") or {}).values():
         load = (d.get("holding") or {}).get("static_load") or 0.0
-        if load > 1e-9:
+        if load >= LEAST_LOAD:
             out.append(float(d["friction"]) / load)
     return out
 
