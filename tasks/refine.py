@@ -175,8 +175,12 @@ def _open_estimator(config: RefineConfig) -> estimator.Estimator:
     """The configured estimator; RefineError("estimator_failure") when it cannot be made."""
     try:
         return backends.get_estimator(config.estimator, **{k: v for k, v in (("model", config.model), ("base_url", config.base_url)) if v})
+    except estimator.EstimatorUnknown as exc:  # a name: the option's error, one sentence
+        raise RefineError(str(exc), "estimator_failure", ["ESTIMATOR_UNAVAILABLE"]) from exc
     except Exception as exc:
-        raise RefineError(f"estimator {config.estimator!r} unavailable: {exc}", "estimator_failure", ["ESTIMATOR_UNAVAILABLE"]) from exc
+        why = one_line(exc)
+        raise RefineError(why if why.startswith("--") else f"--estimator {config.estimator} cannot be used: {why}",
+                          "estimator_failure", ["ESTIMATOR_UNAVAILABLE"]) from exc
 
 
 def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, category: str | None,
@@ -222,7 +226,7 @@ def _check_overrides(asset: AssetDescription, config: RefineConfig) -> None:
     try:
         overrides.apply_overrides(RequestSpec(), config.overrides, asset)
     except overrides.OverrideError as exc:
-        raise RefineError(f"{asset.urdf_path}: {exc}", "invalid_input", [exc.code]) from exc
+        raise RefineError(str(exc), "invalid_input", [exc.code]) from exc
 
 
 def _completed_result(out_dir: Path, log: StageLog) -> RefineResult:

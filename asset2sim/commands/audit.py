@@ -28,6 +28,14 @@ NAME = "audit"
 HELP = ("Audit assets that already carry physics (URDF, MJCF, USD): each mass, density, inertia, center of mass, damping, "
         "friction and limit against the product's estimate, simulation checks, and a patch in the input's format.")
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {
+    0: "every asset plausible, its declared physics passing the checks",
+    1: "an asset could not be audited",
+    3: "an asset has implausible values or fails a check",
+    4: "the output cannot be written",
+}
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("paths", type=Path, nargs="+", metavar="PATH",

@@ -19,6 +19,9 @@ from asset2sim.inert import markup
 NAME = "benchmark"
 HELP = "Run methods (defaults, human, direct, asset2sim) on a manifest, evaluate each, write the thesis table and an index page."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {0: "done", 1: "--compare found a difference from the earlier run"}
+
 #: Record fields excluded from the reproducibility comparison (wall times; the report link, absent with --no-reports).
 TIMING_FIELDS = ("seconds", "method_seconds", "report")
 

@@ -20,6 +20,14 @@ from asset2sim.inert import markup, terminal
 NAME = "evaluate"
 HELP = "Evaluate an asset (any URDF): physical robustness, semantic accuracy, probes; writes evaluation.json and report.html."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {
+    0: "every metric with a verdict passes",
+    1: "a metric fails",
+    2: "the asset cannot be evaluated",
+    4: "the output cannot be written",
+}
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("asset", type=Path, help="asset folder (mobility.urdf, initial_state.json ...) or a URDF file")

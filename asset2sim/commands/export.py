@@ -27,6 +27,14 @@ from asset2sim.output_folder import URDF_NAME
 NAME = "export"
 HELP = "Export an output folder for other simulators (MJCF for MuJoCo, USD for Isaac Sim and Newton), optionally checking parity across engines."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {
+    0: "checked (and parity passes)",
+    1: "a check or parity verdict fails",
+    2: "the folder cannot be exported",
+    4: "the output cannot be written",
+}
+
 FORMATS = ("mjcf", "usd")
 
 

@@ -17,6 +17,9 @@ from asset2sim.flows.catalog import CatalogError, ResultCatalog, load_catalog
 NAME = "failures"
 HELP = "Print the failure-mode breakdown of the latest run (or --run) from the Parquet catalog, and other catalog queries."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {0: "printed", 1: "the catalog has no rows", 2: "the catalog cannot be read, or an option names no run or column"}
+
 #: Columns the breakdown of a run reads besides the --by columns.
 BREAKDOWN_COLUMNS = queries.COUNT_COLUMNS
 #: Columns of the list of assets that did not pass all checks.

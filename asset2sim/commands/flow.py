@@ -25,6 +25,15 @@ HELP = (
     "--serve registers and serves the nightly deployment."
 )
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {
+    0: "done",
+    1: "a dataset or manifest that cannot be read",
+    2: "the catalog cannot be used",
+    4: "the output folders cannot be written",
+    5: "the run regressed against the previous run",
+}
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")

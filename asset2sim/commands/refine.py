@@ -36,6 +36,15 @@ from asset2sim.engines.source import UrdfFile
 NAME = "refine"
 HELP = "Refine one asset for a natural-language request into an interaction-ready asset (an output folder: docs/guide/outputs.md)."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {
+    0: "written and interaction-ready",
+    1: "invalid input",
+    2: "invalid request, estimator failure or invalid overlay",
+    3: "written but not interaction-ready or not as asked",
+    4: "output location problem",
+}
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes), a URDF file, or an MJCF (.xml) or OpenUSD (.usd, .usda, .usdc, .usdz) file")
@@ -263,6 +272,8 @@ def _refine_failure(exc: RefineError, args: argparse.Namespace) -> CommandError:
     code = join_codes(codes) or mode.upper()
     status = INVALID_INPUT if mode == "invalid_input" and not isinstance(cause, (RequestTooLong, OverrideError)) else INVALID_REQUEST
     msg = str(exc).removeprefix(f"{args.asset}: ")
+    if isinstance(cause, OverrideError) or "ESTIMATOR_UNAVAILABLE" in codes:  # an option's error: one sentence naming it
+        return CommandError(status, code, None, msg)
     return CommandError(status, code, args.asset, f"{mode.replace('_', ' ')}: {msg}",
                         problems=finding_problems(cause, args.asset) if isinstance(cause, AssetError) else ())
 

@@ -17,6 +17,9 @@ from asset2sim.tasks.ingest.validate_input import CODES, ValidationPolicy, has_e
 NAME = "validate"
 HELP = "Check an input asset (safe XML, kinematic tree, numbers, inertials, mesh paths and contents); exit 1 on errors."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {0: "no error", 1: "the asset is refused"}
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes), a URDF file, or an MJCF (.xml) or "

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from asset2sim import atomic, demo_assets
-from asset2sim.cli import main
+from asset2sim.cli import command_names, main
 from asset2sim.tasks import refine as refine_mod
 from asset2sim.tasks.assemble import export_mjcf
 from asset2sim.tasks.publish import refine_report
@@ -293,6 +293,22 @@ def test_help_lists_every_exit_status(capsys):
         assert f"{status} {_status.EXIT_STATUSES[status]}" in text, (status, text)
 
 
+@pytest.mark.parametrize("name", command_names())
+def test_each_command_help_lists_its_exit_statuses(name, capsys):
+    """``asset2sim COMMAND --help`` ends with the command's own exit statuses and those every command shares (a
+    usage error, an internal error, 130 interrupted), as ``asset2sim --help`` lists them all."""
+    import importlib
+
+    module = importlib.import_module(f"asset2sim.commands.{name}")
+    assert main([name, "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    text = text.replace("- ", "-")  # argparse wraps after a hyphen
+    assert "exit statuses: " in text and "130 interrupted" in text and "70 internal error" in text, text
+    assert module.EXITS and 0 in module.EXITS
+    for status, meaning in module.EXITS.items():
+        assert f"{status} {' '.join(meaning.split())}" in text, (status, text)
+
+
 def test_failures_outside_the_project_is_one_prefixed_line(tmp_path):
     p = subprocess.run([sys.executable, "-m", "asset2sim", "failures"], capture_output=True, text=True, timeout=120, cwd=tmp_path,
                        env=dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[2])))
@@ -306,6 +322,23 @@ def test_a_size_without_a_unit_suggests_plausible_units(box, tmp_path, capsys):
     line = _one_line(capsys.readouterr().err)
     assert "OVERRIDE_INVALID" in line and "30cm (0.3 m)" in line and "30m " not in line and "30m)" not in line, line
     assert "size: size:" not in line
+
+
+@pytest.mark.parametrize("given, code, says", [
+    (["--estimator", "ofline"], "ESTIMATOR_UNAVAILABLE", "--estimator ofline: no such estimator; did you mean offline? (known: "),
+    (["--material", "unobtainium"], "OVERRIDE_UNKNOWN_MATERIAL", "--material 'unobtainium': not a known material ("),
+    (["--state", "wing=30deg"], "OVERRIDE_UNKNOWN_JOINT", "--state wing=30deg: the asset has no movable joint or part named 'wing'"),
+    (["--mass", "30"], "OVERRIDE_INVALID", "unit missing in '30'"),
+])
+def test_an_option_error_is_one_sentence_naming_the_option(box, tmp_path, capsys, given, code, says):
+    """An option's error is one line and one sentence: the option as given, what is wrong, what would do; no Python
+    list or nested quotes (``"unknown estimator 'ofline'; known: ['llm', ...]"``) and no temporary path."""
+    assert main(["refine", str(box), "--out", str(tmp_path / "o"), *given, "-q", "--no-extras"]) == 2
+    line = _one_line(capsys.readouterr().err)
+    prog, got, rest = _fields(line)
+    assert got == code and says in rest, line
+    assert "['" not in line and '"' not in line and "asset2sim-staged" not in line and str(box) not in line, line
+    assert not (tmp_path / "o").exists()
 
 
 def test_estimator_and_engine_errors_have_codes(box, tmp_path, capsys):

@@ -168,3 +168,23 @@ def test_slowest_of_a_run_that_reused_every_asset_says_so(store, tmp_path, capsy
     assert failures.run(_args(catalog, slowest=3)) == 0
     out = capsys.readouterr().out
     assert out.startswith(f"no asset was refined in run {r3}") and "Empty DataFrame" not in out
+
+
+@pytest.mark.slow  # end to end: the command line in a child process
+def test_failures_into_a_pipe_closed_early_ends_quietly(store, tmp_path):
+    """``asset2sim failures | head -2``: the reader closes the pipe before the breakdown is written; the command
+    ends with status 0 and nothing on stderr (it ended with status 70, INTERNAL_ERROR: BrokenPipeError)."""
+    import subprocess
+    import sys
+
+    catalog = tmp_path / "catalog.yaml"
+    catalog.write_text(f"default_dataset: demo\ncatalog_root: {store.root}\ndatasets: {{demo: {{root: raw}}}}\n")
+    p = subprocess.Popen([sys.executable, "-m", "asset2sim", "failures", "--catalog", str(catalog), "--run", "all", "--by", "run"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path)
+    p.stdout.close()  # before the child has written anything: its first write meets a closed pipe
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 0, err
+    assert err == ""
+    shell = subprocess.run(["bash", "-c", f"{sys.executable} -m asset2sim failures --catalog {catalog} | head -2; "
+                            "echo status ${PIPESTATUS[0]}"], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert shell.stdout.splitlines()[-1] == "status 0" and shell.stderr == ""
