@@ -21,6 +21,7 @@ from asset2sim.output_paths import OutputError, check_location
 from asset2sim.flows import audit_catalog
 from asset2sim.apps.audit.batch import AuditTarget, audit_one, find_assets
 from asset2sim.schemas.config import RefineConfig
+from asset2sim.tasks.check.verdict import verdict_line
 from asset2sim.commands import _output
 from asset2sim.inert import markup, terminal
 
@@ -122,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
         for col in ("asset", "format", "category", "verdict", "implausible", "declared physics"):
             table.add_column(col)
         for r in rows:
-            checks = "-" if r.declared_passed is None else ("passes" if r.declared_passed else "fails " + ", ".join(r.declared_failures))
+            checks = "-" if r.declared_passed is None else verdict_line("none" if r.declared_passed else "declared_physics_fails",
+                                                                        {}, r.declared_failures)
             table.add_row(*map(markup, (r.asset_id, r.format, r.category, r.failure_mode,  # "[mujoco]" is text, not markup
                                         "; ".join(r.implausible) or r.error[:160] or "-", checks)))
         console.print(table)

@@ -139,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
         console.print(f"[yellow]results.parquet not written: {markup(meta['parquet_error'])}[/yellow]")
     for title, summary in tables.items():
         _print_table(console, title, summary)
-    rt = Table(title="research numbers (SPEC, thesis 9-object set, Isaac Sim)")
+    rt = Table(title="research numbers (thesis 9-object set, Isaac Sim)")
     for c in RESEARCH_NUMBERS[0]:
         rt.add_column(c)
     for r in RESEARCH_NUMBERS:

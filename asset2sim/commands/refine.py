@@ -26,7 +26,7 @@ from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import MESSAGE_FINDINGS
 from asset2sim.tasks.check.as_asked import quantity_text
-from asset2sim.tasks.check.verdict import penetration_measures, why_it_failed
+from asset2sim.tasks.check.verdict import penetration_measures, readiness, verdict_line, why_it_failed
 from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_text
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.refine import RefineError
@@ -162,14 +162,29 @@ def summary_lines(result) -> list[str]:
         f"oscillation  {'PASS' if osc and osc.passed else 'FAIL'}",
         _manipulation_line(r),
         _operability_line(r),
-        f"verdict      {'interaction-ready' if r.failure_mode == 'none' else 'FAILED: ' + r.failure_mode}" + _tiers(r),
-    ] + why_lines(r) + as_asked_lines(r) + skipped_lines(r) + [
-        f"engine {row['engine']:<8} {row['status']}: rest {row['rest_stability']}, oscillation {row['oscillation']}, Phi {row['penetration_mm']} mm"
-        + (f" ({row['reason']})" if row['reason'] else "")
-        for row in r.parity
-    ] + request_lines(r.request) + media_lines(r, result.out_dir) + [
+        f"verdict      {verdict_line(r.failure_mode, r.readiness, readiness(r.metrics).failures)}",
+    ] + why_lines(r) + as_asked_lines(r) + skipped_lines(r) + engine_lines(r) + request_lines(r.request) + media_lines(r, result.out_dir) + [
         "wall time    " + ", ".join(f"{k} {v:.2f}s" for k, v in r.stage_seconds.items()),
     ]
+
+
+def engine_lines(report) -> list[str]:
+    """One line per engine the checks ran in (``report.parity``): whether it ran, its rest test and self-contact Phi
+    in the verdict's words, and the checks that fail in it (the verdict's ``metric@engine``), so no engine line reads
+    as a pass beside the verdict's failure."""
+    failing = readiness(report.metrics).failures
+    out = []
+    for row in report.parity:
+        if row["status"] != "ok":
+            out.append(f"engine {row['engine']:<8} not run" + (f": {row['reason']}" if row["reason"] else ""))
+            continue
+        words = {True: "pass", False: "FAIL", None: "n/a"}
+        here = [f.split("@")[0] for f in failing if f.endswith(f"@{row['engine']}")]
+        out.append(f"engine {row['engine']:<8} rest {words.get(row['rest_stability'], row['rest_stability'])}, oscillation "
+                   f"{words.get(row['oscillation'], row['oscillation'])}, self-contact Phi "
+                   f"{'-' if row['penetration_mm'] is None else format(float(row['penetration_mm']), '.3f')} mm"
+                   + (f"; failing here: {', '.join(here)}" if here else "") + (f" ({row['reason']})" if row["reason"] else ""))
+    return out
 
 
 def why_lines(report) -> list[str]:
@@ -218,13 +233,6 @@ def as_asked_lines(report) -> list[str]:
     if m is None or m.passed is not False:
         return []
     return [f"NOT AS ASKED {u.get('text') or u.get('phrase')}" for u in (m.details or {}).get("unmet") or []]
-
-
-def _tiers(report) -> str:
-    """`` (rest pass, sweep pass, robust_rest FAIL, probes n/a)``: the report's readiness tiers."""
-    if not report.readiness:
-        return ""
-    return " (" + ", ".join(f"{t} {'pass' if v else ('FAIL' if v is False else 'n/a')}" for t, v in report.readiness.items()) + ")"
 
 
 def _manipulation_line(report) -> str:

@@ -65,11 +65,34 @@ class Readiness:
         return not any(v is False for v in self.tiers.values())
 
     def line(self) -> str:
-        """One line: ``interaction-ready (...)`` or ``NOT READY: probes@pybullet, ... (...)``."""
-        tiers = ", ".join(f"{t} {'pass' if v else ('FAIL' if v is False else 'n/a')}" for t, v in self.tiers.items())
-        if self.ready:
-            return f"interaction-ready ({tiers})"
-        return f"NOT READY: {', '.join(self.failures)} ({tiers})"
+        """One line, the words every command and report uses (:func:`verdict_line`): ``interaction-ready (rest pass,
+        ...)`` or ``NOT READY: probe_failed (probes@pybullet, ...; rest pass, ..., probes FAIL, ...)``."""
+        return verdict_line(self.failure_mode, self.tiers, self.failures)
+
+    def short(self) -> str:
+        """:meth:`line` without the tiers: ``interaction-ready`` or ``NOT READY: probe_failed (probes@pybullet)``."""
+        return verdict_line(self.failure_mode, {}, self.failures)
+
+
+def tiers_text(tiers: dict[str, bool | None]) -> str:
+    """``rest pass, sweep FAIL, task n/a``: each readiness tier with its verdict, in order."""
+    return ", ".join(f"{t} {'pass' if v else ('FAIL' if v is False else 'n/a')}" for t, v in tiers.items())
+
+
+def verdict_line(failure_mode: str, tiers: dict[str, bool | None], failures: list[str] | tuple[str, ...] = ()) -> str:
+    """The verdict in the one vocabulary of the terminal (``refine``, ``demo``, ``evaluate``, ``audit``),
+    ``report.html`` and ``audit.md``: ``interaction-ready`` when ``failure_mode`` is ``none``, else ``NOT READY:
+    <failure mode>``, then in parentheses the failing checks (``metric@engine``) and the ``tiers``
+    (:func:`tiers_text`) when given."""
+    inside = "; ".join(x for x in (", ".join(failures), tiers_text(tiers)) if x)
+    word = "interaction-ready" if failure_mode == "none" else f"NOT READY: {failure_mode}"
+    return f"{word} ({inside})" if inside else word
+
+
+def metric_verdict(m: Any) -> bool | None:
+    """A metric's pass/fail as the readiness verdict reads it (:data:`PENETRATION_METRICS`: at most
+    :data:`UNRESOLVED_PENETRATION_MM`, a child inside its parent beyond its modelled pose); None: not graded."""
+    return _verdict(m)
 
 
 def _verdict(m: Any) -> bool | None:

@@ -61,7 +61,7 @@ def test_refine_command_prints_summary_and_writes_contract(tmp_path):
         assert (out / name).is_file()
     mode = json.loads((out / "report.json").read_text())["failure_mode"]
     assert (p.returncode == 0) == (mode == "none")
-    assert ("interaction-ready" if mode == "none" else f"FAILED: {mode}") in p.stdout
+    assert ("interaction-ready" if mode == "none" else f"NOT READY: {mode}") in p.stdout
 
 
 @pytest.mark.slow  # end to end: the command line
@@ -73,7 +73,7 @@ def test_a_request_not_met_exits_3_and_prints_the_phrase(tmp_path, capsys):
     assert main(["refine", str(SHARED / "103275"), "--prompt", "A stapler with its drawer open.", "--out", str(out),
                  "--no-extras", "-q"]) == 3
     text = capsys.readouterr().out
-    assert "FAILED: request_not_met" in text and "request FAIL" in text
+    assert "NOT READY: request_not_met" in text and "request FAIL" in text
     assert "NOT AS ASKED 'drawer open': not applied" in text
     assert "from closed" in text and "% open" in text
     report = json.loads((out / "report.json").read_text())
@@ -153,7 +153,7 @@ def test_invalid_input_exits_1_and_long_request_2(box, tmp_path, capsys):
 def test_written_but_not_interaction_ready_exits_3(box, tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(refine_report, "post_check_failure_mode", lambda check: "unstable")
     assert main(["refine", str(box), "--prompt", PROMPT, "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 3
-    assert "FAILED: unstable" in capsys.readouterr().out
+    assert "NOT READY: unstable" in capsys.readouterr().out
     assert (tmp_path / "o" / "mobility.urdf").is_file()
 
 
@@ -509,7 +509,7 @@ def test_body_and_mjcf_angle_are_refine_options_and_config_fields_outside_the_de
 
 def test_a_child_inside_its_parent_is_explained_once_in_the_terminal_and_the_report(tmp_path, capsys):
     """A lid clear of a bar of its body as modelled, asked open 0.5 rad: it lies inside the bar (parent-child
-    penetration, which the SPEC's Phi skips). The terminal's penetration line names both kinds, the verdict is
+    penetration, which the self-contact Phi skips). The terminal's penetration line names both kinds, the verdict is
     unresolved_penetration with one "why it failed" line (the links, the depth against 5 mm, what to do), and
     report.html says the same, with no line saying there is no penetration."""
     import html
@@ -520,10 +520,10 @@ def test_a_child_inside_its_parent_is_explained_once_in_the_terminal_and_the_rep
     slab, bar = _box([0, 0, 0], [0.1, 0.1, 0.01]), _box([0.0, 0.0, 0.07], [0.1, 0.06, 0.09])
     asset = _asset(tmp_path / "barred", [slab, bar], [_box([0.02, 0.02, 0.02], [0.08, 0.08, 0.05])])
     out = tmp_path / "o"
-    assert main(["refine", str(asset), "--state", "hinge=0.5rad", "--out", str(out), "--no-clips", "--engines", "pybullet",
+    assert main(["refine", str(asset), "--state", "hinge=0.5rad", "--out", str(out), "--no-clips", "--engines", "pybullet,physx",
                  "-q"]) == 3
     lines = capsys.readouterr().out.splitlines()
-    assert "verdict      FAILED: unresolved_penetration" in "\n".join(lines)
+    assert "verdict      NOT READY: unresolved_penetration" in "\n".join(lines)
     pen = [ln for ln in lines if ln.startswith("penetration  ")]
     assert len(pen) == 1 and "self-contact Phi 0.000 mm (pybullet) pass" in pen[0], pen
     assert re.search(r"parent-child \d+\.\d+ mm \(pybullet, body/lid; \d+\.\d+ mm beyond its modelled pose\) FAIL", pen[0]), pen
@@ -536,4 +536,11 @@ def test_a_child_inside_its_parent_is_explained_once_in_the_terminal_and_the_rep
     text = html.unescape((out / "report.html").read_text())
     assert "<h2>Why it failed</h2>" in text and f"<li>{why[0]}</li>" in text  # the terminal's sentence, word for word
     assert "no self-penetration at the initial state" not in text
-    assert "A child inside its parent (pybullet)" in text
+    assert "A child inside its parent (pybullet; " in text and "penetration tier: <b>FAIL</b>" in text
+    engine = [ln for ln in lines if ln.startswith("engine pybullet")]
+    assert engine and "failing here: parent_child_penetration" in engine[0] and " ok" not in engine[0], engine
+    # the evidence: the lid and its body drawn in colour at the initial state and as modelled, as robust rest's trials are
+    assert "<h3>penetration (parent-child, pybullet): 'lid' inside its parent 'body'" in text
+    for caption in ("at the initial state, perspective", "at the initial state, front", "as modelled, perspective"):
+        assert f"<figcaption class='small'>{caption}</figcaption>" in text, caption
+    assert "SPEC" not in text
