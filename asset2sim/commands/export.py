@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     if parity:
         rows = parity_table(evaluate_engines(out, parity))
         print()
-        print(f"{'engine':<10} {'Phi mm':>9} {'deepest mm':>10} {'rest':>5} {'D_pos m':>9} {'D_ori rad':>9} {'osc':>5}  notes")
+        print(f"{'engine':<10} {'pen. mm':>9} {'deepest mm':>10} {'rest':>5} {'D_pos m':>9} {'D_ori rad':>9} {'osc':>5}  notes")
         for r in rows:
             if r["status"] != "ok":
                 print(f"{r['engine']:<10} {r['status']}: {r['reason']}")

@@ -72,6 +72,6 @@ def parent_child_penetration(source: SimSource, initial_state: dict[str, float],
     return MetricResult(name="parent_child_penetration", value=worst, unit=unit("parent_child_penetration"),
                         passed=beyond <= tolerance * 1000.0,
                         threshold=f"a child at most {tolerance * 1000:g} mm deeper inside its parent than as modelled "
-                                  "(the pair collided; the self-contact Phi leaves it out)",
+                                  "(the pair collided; the self-contact penetration leaves it out)",
                         details={"pairs": pairs, "beyond_modelled_mm": beyond, "modelled": modelled,
                                  "margin_removed_mm": margin * 1000.0}, engine=engine)

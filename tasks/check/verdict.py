@@ -130,7 +130,7 @@ def penetration_measures(metrics: list[Any]) -> list[str]:
             continue
         verdict = {True: "pass", False: "FAIL", None: "n/a"}[_verdict(m)]
         if m.name == "penetration":
-            out.append(f"self-contact Phi {m.value:.3f} mm ({m.engine}) {verdict}")
+            out.append(f"self-contact {m.value:.3f} mm ({m.engine}) {verdict}")
             continue
         pairs = (m.details or {}).get("pairs") or {}
         worst = max(pairs, key=pairs.get) if pairs else None
@@ -154,7 +154,7 @@ def penetration_why(metrics: list[Any]) -> list[str]:
             pairs = sorted(d.get("pairs") or [], key=lambda p: -float(p.get("max_depth_mm") or 0.0))
             links = f"links '{pairs[0]['link_a']}' and '{pairs[0]['link_b']}' (not parent and child) overlap by up to " \
                     f"{float(pairs[0]['max_depth_mm']):.1f} mm" if pairs else "links that are not parent and child overlap"
-            out.append(f"self-contact penetration Phi {m.value:.1f} mm ({m.engine}) is above {UNRESOLVED_PENETRATION_MM:g} mm: "
+            out.append(f"self-contact penetration {m.value:.1f} mm ({m.engine}) is above {UNRESOLVED_PENETRATION_MM:g} mm: "
                        f"{links} at the initial state. Ask for another state (--state JOINT=closed or a smaller opening) "
                        "or give these links collision meshes that do not overlap.")
             continue

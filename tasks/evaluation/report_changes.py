@@ -8,6 +8,7 @@ joint's own coordinate (radians with degrees, or millimetres).
 from __future__ import annotations
 
 import math
+import re
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -166,6 +167,32 @@ def _output_value(jd: dict[str, Any], quantity: str, jtype: str) -> str:
     return text
 
 
+def state_moves(report: dict[str, Any]) -> dict[str, str]:
+    """joint -> why its initial state is not where its request put it (the band's centre, or the number asked), in one
+    clause: stability by design opened it elsewhere within its band (``design_changes``: the reason and the margin), or
+    the state search moved it to remove self-penetration (``state``: asked vs found). Joints nothing moved are not
+    listed. ``report``: ``report.json`` as a dict."""
+    out: dict[str, str] = {}
+    for note in report.get("design_changes") or []:
+        if not str(note).startswith("stability by design"):
+            continue
+        head, _, rest = str(note).partition("; ")
+        for name in (report.get("initial_joint_positions") or {}):
+            m = re.search(rf"(?<![\w-]){re.escape(name)} opened to (\d+(?:\.\d+)?) of its range(?: \(allowed [^)]*\))?", rest)
+            if m:
+                where = rest.split(", where the object stands steadiest", 1)[1].split(" (asked")[0] if "stands steadiest" in rest else ""
+                out[name] = (f"moved to {100 * float(m.group(1)):.0f} % open, off its band's target: "
+                             f"{head.removeprefix('stability by design: ')}"
+                             + (f"; the object stands steadiest there{where}" if where else "")
+                             + ("; the least opening its band allows" if "the least its band allows" in note else ""))
+    state = report.get("state") or {}
+    for name, q in (report.get("initial_joint_positions") or {}).items():
+        asked = (state.get("requested") or {}).get(name)
+        if name not in out and asked is not None and abs(float(asked) - float(q)) > 1e-9:
+            out[name] = f"moved by the state search to remove self-penetration ({state.get('method', '')})"
+    return out
+
+
 def change_rows(report: dict[str, Any], overlay: dict[str, Any] | None, joint_types: dict[str, str],
                 side: InputSide | None = None) -> list[str]:
     """The table rows (HTML) of every change refine made, each with its reason, the input column as the input's own
@@ -202,14 +229,14 @@ def _change_rows(report: dict[str, Any], ov: dict[str, Any], joint_types: dict[s
     bands = report.get("requested_bands") or {}
     state = report.get("state") or {}
     closed = report.get("closed_positions") or {}
+    moves = state_moves(report)
     for name, q in (report.get("initial_joint_positions") or {}).items():
         jt = joint_types.get(name, "revolute")
-        moved = abs(float((state.get("requested") or {}).get(name, q)) - float(q)) > 1e-9
         asked = next((q for q in ((report.get("request") or {}).get("quantities") or []) if str(q.get("what", "")).startswith(f"{name} ")), None)
         why = (f"the request: '{asked.get('phrase')}'" if asked else
                f"the request: {bands[name].replace('_', ' ')}" if name in bands else "not asked: closed")
-        if moved:
-            why += f"; moved by the state search to remove self-penetration ({state.get('method', '')})"
+        if name in moves:
+            why += f"; {moves[name]}"
         start = (side.physics.initial_state if side.physics is not None else {}).get(name)
         rows.append(_row(f"{name} initial position", "as modelled (0)" if start is None else
                          f"{position_text(start, jt)} (the file's keyframe)",
@@ -292,7 +319,8 @@ def understood(found: dict[str, Any] | None) -> str:
         unit = q.get("unit", "")
         frame = " from the closed end" if q.get("kind") == "state" and unit in ("rad", "m") else ""
         got = "-" if q.get("achieved") is None else quantity_text(q["achieved"], unit) + frame
-        asked = "-" if q.get("asked") is None else quantity_text(q["asked"], unit) + frame
+        asked = "-" if q.get("asked") is None else quantity_text(q["asked"], unit) + (
+            "" if q.get("asked_high") is None else f" to {quantity_text(q['asked_high'], unit)}") + frame
         rows.append(_row(f"{q.get('what')} ('{q.get('phrase', '')}')", asked, got,
                          ("within tolerance" if q.get("within_tolerance") else "MISSED") + (f": {q['why']}" if q.get("why") else "")))
     if found.get("ignored"):

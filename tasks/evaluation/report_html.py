@@ -584,7 +584,7 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
     if chart:
         parts.append("<h2>Pass rates</h2>" + svg_tag(chart, "pass rates"))
     parts.append("<p class='small'>Ours: PyBullet under the conventions of docs/guide/metrics.md; the research measured in "
-                 "Isaac Sim (PhysX). Penetration in mm is Phi summed over contact points; pass rates count assets that were "
+                 "Isaac Sim (PhysX). Penetration in mm is the depth summed over self-contact points; pass rates count assets that were "
                  "produced; (n) is the number of assets with a verdict.</p>")
     return _page("asset2sim benchmark", "\n".join(parts))
 

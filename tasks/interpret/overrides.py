@@ -36,7 +36,7 @@ def apply_overrides(spec: RequestSpec, overrides: RequestOverrides | None, asset
     update: dict = {"overrides": overrides.given()}
     props = list(spec.properties)
     if overrides.mass is not None:
-        props = [p for p in props if p.label is not None or p.mass is None]
+        props = [p for p in props if p.label is not None or (p.mass is None and p.mass_range is None)]
         props.append(PartProperty(label=None, mass=overrides.mass, phrase=f"--mass {overrides.mass:g} kg"))
         update["mass_level"] = None
     if overrides.material is not None:
