@@ -61,6 +61,23 @@ def _latest(store: ResultCatalog, dataset: str | None) -> tuple[str, str] | None
     return max(store.runs(dataset), key=lambda p: (p[1], p[0]), default=None)
 
 
+#: ``_run.json``'s ``outcome`` of a run that refined nothing (``asset2sim.flows.refine_flow.NOTHING_TO_DO``).
+NOTHING_TO_DO = "nothing_to_do"
+
+
+def latest_worked(store: ResultCatalog, dataset: str | None) -> tuple[tuple[str, str] | None, list[str]]:
+    """((dataset, run) of the most recent run that refined anything, the later runs passed over): a rerun with
+    nothing to do (``_run.json`` ``outcome`` ``nothing_to_do``: every asset reused) is passed over; a run without that
+    record counts as one that worked. ((None), []) when the catalog has no run."""
+    passed: list[str] = []
+    for ds, run in sorted(store.runs(dataset), key=lambda p: (p[1], p[0]), reverse=True):
+        if (store.run_info(ds, run) or {}).get("outcome") == NOTHING_TO_DO:
+            passed.append(run)
+            continue
+        return (ds, run), passed
+    return _latest(store, dataset), []
+
+
 def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
@@ -93,9 +110,11 @@ def run(args: argparse.Namespace) -> int:
         return 0
 
     if args.run == "latest":
-        dataset, run_id = latest
+        (dataset, run_id), passed = latest_worked(store, args.dataset)
         runs: str | None = run_id
         scope = f"run {run_id} of dataset {dataset}"
+        if passed:
+            print(f"passed over {len(passed)} later run(s) with nothing to do (every asset reused): {', '.join(passed)}")
     elif args.run == "all":
         dataset, run_id, runs = args.dataset, None, None
         scope = "all runs" + (f" of dataset {args.dataset}" if args.dataset else "")
