@@ -117,11 +117,14 @@ def run(args: argparse.Namespace) -> int:
         console.print(f"other checks failing: {', '.join(other)}", markup=False, soft_wrap=True)
     if asked:
         console.print(terminal(f"request      {asked}"), markup=False, soft_wrap=True)
-    for why in why_it_failed(ev.metrics):  # the sentences of report.html's "Why it failed"
+    whys = why_it_failed(ev.metrics)
+    for why in whys:  # the sentences of report.html's "Why it failed"
         console.print(f"why it failed {terminal(why)}", markup=False, soft_wrap=True)
-    asked = ev.metric("request_met")  # as asked: each unmet phrase with its gap
+    asked = ev.metric("request_met")  # as asked: each unmet phrase with its gap, unless a sentence above says it
     for u in (asked.details.get("unmet") or []) if asked is not None and asked.passed is False else []:
-        console.print(f"NOT AS ASKED {terminal(u.get('text') or u.get('phrase'))}", markup=False, soft_wrap=True)
+        text = str(u.get("text") or u.get("phrase"))
+        if not any(text in w for w in whys):
+            console.print(f"NOT AS ASKED {terminal(text)}", markup=False, soft_wrap=True)
     for n in ev.notes:
         console.print(f"[dim]note: {markup(n)}[/dim]")
     console.print(f"evaluated in {ev.seconds:.2f} s; wrote {out / 'evaluation.json'}" + ("" if args.no_report else f" and {out / 'report.html'}"),

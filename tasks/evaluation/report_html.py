@@ -469,7 +469,9 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         f"<h1>asset2sim {esc(command)}: {esc(ev.asset_id)}</h1>",
         f"<p class='meta'>method <b>{esc(ev.method or '-')}</b> &middot; category {esc(ev.category or '-')} &middot; "
         f"engines {esc(', '.join(measured_engines(ev)))} &middot; scale {fmt(ev.scale)} ({esc(ev.scale_source)})</p>",
-        f"<p class='meta'>URDF <code>{esc(portable_urdf(ev, folder) if folder is not None else ev.urdf)}</code><br/>"
+        f"<p class='meta'>URDF <code>{esc(portable_urdf(ev, folder) if folder is not None else ev.urdf)}</code>"
+        + (f" &middot; input <code>{esc(Path(str(ctx.report['source'])).name)}</code>"
+           if ctx is not None and ctx.report and ctx.report.get("source") else "") + "<br/>"
         f"request: <i>{esc(ev.prompt or '-')}</i><br/>"
         f"reference: <code>{esc(ev.reference or '-')}</code></p>",
         _request_warnings(pa.details) if (pa := ev.metric("prompt_alignment")) is not None else "",

@@ -74,7 +74,7 @@ def test_a_request_not_met_exits_3_and_prints_the_phrase(tmp_path, capsys):
                  "--no-extras", "-q"]) == 3
     text = capsys.readouterr().out
     assert "NOT READY: request_not_met" in text and "request FAIL" in text
-    assert "NOT AS ASKED 'drawer open': not applied" in text
+    assert text.count("'drawer open': not applied") == 1, text  # said once, in "why it failed"
     assert "from closed" in text and "% open" in text
     report = json.loads((out / "report.json").read_text())
     assert report["failure_mode"] == "request_not_met" and report["readiness"]["request"] is False
@@ -322,6 +322,21 @@ def test_a_size_without_a_unit_suggests_plausible_units(box, tmp_path, capsys):
     line = _one_line(capsys.readouterr().err)
     assert "OVERRIDE_INVALID" in line and "30cm (0.3 m)" in line and "30m " not in line and "30m)" not in line, line
     assert "size: size:" not in line
+
+
+def test_a_missing_part_is_said_once_per_summary(tmp_path, capsys):
+    """A laptop asked for its drawer open (it has none): the summary says so once (why it failed), not again as NOT AS
+    ASKED, a request line and a request warning."""
+    laptop = demo_assets.build_object("laptop", tmp_path / "in" / "laptop")
+    out = tmp_path / "o"
+    assert main(["refine", str(laptop), "--prompt", "A laptop with its screen open 100 degrees and its drawer open.",
+                 "--out", str(out), "--no-extras", "--engines", "pybullet", "-q"]) == 3
+    captured = capsys.readouterr()
+    lines = captured.out.splitlines()
+    said = [ln for ln in lines if "the request names a 'drawer'" in ln]
+    assert len(said) == 1 and said[0].startswith("why it failed request_not_met"), lines
+    assert not any(ln.startswith("NOT AS ASKED") for ln in lines)
+    assert lines[-1].startswith("report       ") and "asset2sim report" in lines[-1]  # --no-extras: how to make it
 
 
 @pytest.mark.parametrize("given, code, says", [
