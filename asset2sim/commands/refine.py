@@ -210,8 +210,8 @@ def engine_lines(report) -> list[str]:
     failing = readiness(report.metrics).failures
     out = []
     for row in report.parity:
-        if row["status"] != "ok":
-            out.append(f"engine {row['engine']:<8} not run" + (f": {row['reason']}" if row["reason"] else ""))
+        if row["status"] != "ok":  # skipped (its extra missing) or an error: said with its reason
+            out.append(f"engine {row['engine']:<8} {row['status']}" + (f": {row['reason']}" if row["reason"] else ""))
             continue
         words = {True: "pass", False: "FAIL", None: "n/a"}
         here = [f.split("@")[0] for f in failing if f.endswith(f"@{row['engine']}")]
@@ -333,6 +333,21 @@ def finding_problems(exc: AssetError, asset) -> list[tuple[str, str, str]]:
     return out
 
 
+def option_error(message: str, given: dict, state: dict) -> str:
+    """An override's error as one sentence naming the option as typed: ``overrides: mass: unit missing in '30'; ...``
+    -> ``--mass 30: unit missing in '30'; ...``, ``overrides: state: state lid: ...`` -> ``--state lid=5kg: ...``;
+    a message about a field not given on the command line (``--config``'s) as it is."""
+    text = message.removeprefix("overrides: ")
+    field, _, rest = text.partition(": ")
+    if field in given:
+        return f"--{field} {given[field]}: {rest.removeprefix(f'{field}: ')}"
+    if field == "state":
+        name, _, why = rest.removeprefix("state ").partition(": ")
+        if name in state:
+            return f"--state {name}={state[name]}: {why}"
+    return text
+
+
 def options(args: argparse.Namespace) -> RefineConfig:
     """The run's :class:`RefineConfig`: ``--config``'s file, then the flags
     given (CommandError status 2 ``CONFIG_INVALID`` / ``OVERRIDE_INVALID``, or the code of a file refused unread:
@@ -367,7 +382,7 @@ def options(args: argparse.Namespace) -> RefineConfig:
     try:
         overrides = merge_overrides(base.overrides, {**given, **({"state": state} if state else {})})
     except ValueError as exc:
-        raise CommandError(INVALID_REQUEST, "OVERRIDE_INVALID", None, str(exc)) from exc
+        raise CommandError(INVALID_REQUEST, "OVERRIDE_INVALID", None, option_error(str(exc), given, state)) from exc
     return base.model_copy(update={**fields, "overrides": overrides})
 
 

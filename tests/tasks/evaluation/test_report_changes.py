@@ -125,3 +125,24 @@ def test_a_state_moved_off_its_band_says_why():
                                 "targets; the object stands steadiest there: static margin 12.3 -> 20.1 mm")
     assert moves["joint_1"] == "moved by the state search to remove self-penetration (local search)"
     assert "joint_2" not in moves
+
+
+def test_a_usd_and_a_urdf_input_are_read_as_their_files_declare_them(door):
+    """The input side reads every format alike: the door's own USD export (UsdPhysics masses, joint damping in stage
+    units) and its URDF give the masses and the hinge's damping they declare, each drawable; a missing input is one
+    line naming its file, never a path."""
+    from asset2sim.tasks.evaluation.report_changes import read_input
+
+    pytest.importorskip("pxr")
+    total = door.report.total_mass
+    for path, fmt in ((door.out_dir / "usd" / "mobility.usd", "usd"), (door.out_dir, "urdf")):
+        side = read_input(path)
+        try:
+            assert side.format == fmt and side.error == "" and side.urdf is not None and side.urdf.is_file(), (fmt, side.error)
+            masses = [ln.mass for ln in side.physics.links.values() if ln.mass is not None]
+            assert sum(masses) == pytest.approx(total, rel=1e-3), fmt
+            assert side.physics.joints["door_hinge"].damping == pytest.approx(door.overlay.joints["door_hinge"].damping, rel=1e-3)
+        finally:
+            side.close()
+    gone = read_input(door.out_dir.parent / "moved" / "door.xml")
+    assert gone.physics is None and gone.error == "door.xml is no longer where it was read from"
