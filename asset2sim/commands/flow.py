@@ -125,8 +125,8 @@ def run(args: argparse.Namespace) -> int:
     servers_s, assets_s, tracking_s = (float(summary.get(f"{k}_seconds") or 0.0) for k in ("stage_servers", "assets", "tracking"))
     worked = int(summary.get("done", 0)) + int(summary.get("failed", 0))
     if run_outcome(summary) == NOTHING_TO_DO:
-        print(f"run {summary['run']} of dataset {summary['dataset']}: nothing to do: all {summary['assets']} assets finished "
-              "before and were reused (recorded as skipped; `asset2sim failures` passes over this run, --force redoes them)")
+        print(f"run {summary['run']} of dataset {summary['dataset']}: nothing to do: every asset ({summary['assets']}) finished "
+              "before and was reused (recorded as skipped; `asset2sim failures` passes over this run, --force redoes them)")
     else:
         print(f"run {summary['run']} of dataset {summary['dataset']}: {summary['assets']} assets "
               f"({summary['done']} done, {summary['skipped']} skipped, {summary['failed']} failed)")
