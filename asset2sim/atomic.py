@@ -317,13 +317,16 @@ def sha256_file(path: Path | str) -> str:
     return h.hexdigest()
 
 
-def sha256_files(paths: Iterable[Path | str], known: dict[str, str] | None = None) -> str:
+def sha256_files(paths: Iterable[Path | str], known: dict[str, str] | None = None,
+                 named: Callable[[Path], str] | None = None) -> str:
     """Hex sha256 over several files' names and contents, in sorted order; ``known``: path (as ``str``) -> the hex
-    sha256 of its bytes as already read (those files are not read again)."""
+    sha256 of its bytes as already read (those files are not read again); ``named``: the name a path is hashed
+    under (default the path itself; a file in a temporary folder is named relative to it, so the hash is the
+    same in every run)."""
     h = hashlib.sha256()
     known = known or {}
-    for name, p in sorted({(str(p), p) for p in map(Path, paths)}):
-        h.update(name.encode())
+    for key, name, p in sorted({(named(p) if named else str(p), str(p), p) for p in map(Path, paths)}):
+        h.update(key.encode())
         h.update(b"\0")
         h.update((known.get(name) or sha256_file(p)).encode())
         h.update(b"\0")

@@ -16,6 +16,7 @@ import contextlib
 import ctypes
 import difflib
 import importlib
+import io
 import os
 import pkgutil
 import sys
@@ -32,7 +33,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import asset2sim.commands as commands  # noqa: E402
 from asset2sim import __version__, allocator, library_dirs  # noqa: E402
-from asset2sim.commands import _status  # noqa: E402
+from asset2sim.commands import _output, _status  # noqa: E402
 from asset2sim.commands._output import inert_streams  # noqa: E402
 from asset2sim.commands._status import INTERNAL_ERROR, INTERRUPTED, INVALID_REQUEST, CommandError  # noqa: E402
 from asset2sim.engines.quiet import STARTUP_MESSAGES  # noqa: E402
@@ -61,9 +62,15 @@ TOP_LEVEL_FLAGS = ("--debug", "--verbose", "-v")
 _NEGATIVE_NUMBER = re.compile(r"^-\d+$|^-\d*\.\d+$")
 
 
-def exit_statuses_text() -> str:
-    """Every exit status of :mod:`asset2sim.commands._status` with its meaning, one phrase each (``--help``)."""
-    return ", ".join(f"{code} {meaning}" for code, meaning in _status.EXIT_STATUSES.items())
+def exit_statuses_text(own: dict[int, str] | None = None) -> str:
+    """Exit statuses with their meanings, one phrase each (``--help``): every status of
+    :mod:`asset2sim.commands._status`, or a command's own (its module's ``EXITS``) with those every command shares
+    (2 a usage error, 70 an internal error, 130 interrupted)."""
+    if own is None:
+        return ", ".join(f"{code} {meaning}" for code, meaning in _status.EXIT_STATUSES.items())
+    shared = {INVALID_REQUEST: "usage error", INTERNAL_ERROR: "internal error", INTERRUPTED: "interrupted"}
+    merged = {**shared, **own} if INVALID_REQUEST in own else {**own, **shared}
+    return ", ".join(f"{code} {merged[code]}" for code in sorted(merged))
 
 
 def did_you_mean(word: str, choices) -> str:
@@ -142,7 +149,9 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         if only is not None and name != only:
             continue
         module = importlib.import_module(f"asset2sim.commands.{name}")
-        p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
+        p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP,
+                           epilog=f"exit statuses: {exit_statuses_text(getattr(module, 'EXITS', {}))} "
+                                  "(see docs/guide/outputs.md)")
         p.command = module.NAME
         module.add_arguments(p)
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="print the traceback of an error")
@@ -223,6 +232,9 @@ def _main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"asset2sim {command}: INTERRUPTED", file=sys.stderr, flush=True)
         return INTERRUPTED
+    except BrokenPipeError:  # the reader of a pipe stopped (`| head`): what it wanted was written
+        closed_pipe()
+        return 0
     except ImportError as exc:  # an optional dependency missing: the extra named; any other import error is a bug
         if missing_module(exc) not in EXTRA_OF_MODULE:
             return internal_error(command, exc, debug)
@@ -232,6 +244,16 @@ def _main(argv: list[str] | None = None) -> int:
         return INVALID_REQUEST
     except Exception as exc:  # the one place that turns a bug into a status
         return internal_error(command, exc, debug)
+
+
+def closed_pipe() -> None:
+    """Standard output pointed at the null device once a pipe's reader has closed it, so nothing the process still
+    writes or flushes at exit raises again (Python's "Exception ignored ... BrokenPipeError")."""
+    with contextlib.suppress(OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        fd = _output.raw(sys.stdout).fileno()
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, fd)
+        os.close(devnull)
 
 
 def internal_error(command: str | None, exc: BaseException, debug: bool) -> int:

@@ -27,6 +27,8 @@ class ProgressEvent:
     status: str | None = None
     failure_mode: str | None = None
     seconds: float | None = None
+    pending: int | None = None
+    """``run_started``: how many assets go to the workers (0: every one finished before; nothing starts)."""
 
 
 Listener = Callable[[ProgressEvent], None]

@@ -1156,11 +1156,11 @@ def _scale_translation(m: np.ndarray, s: float) -> np.ndarray:
 LIMITED_TYPES = ("revolute", "prismatic", "continuous")
 
 
-def conform_limits(model: UrdfModel, effort: float, velocity: float) -> list[str]:
-    """Make every ``<limit>`` of ``model`` (in place) one every URDF parser
-    accepts: joints of types without limits lose theirs, revolute and
-    prismatic joints get one, and missing ``effort`` (N*m or N) / ``velocity``
-    (rad/s or m/s) get the values given. Returns a note per dropped limit."""
+def conform_limits(model: UrdfModel, effort: float | None = None, velocity: float | None = None) -> list[str]:
+    """Make every ``<limit>`` of ``model`` (in place) fit its joint: joints of types without limits lose theirs,
+    revolute and prismatic joints get one; a missing ``effort`` (N*m or N) / ``velocity`` (rad/s or m/s) gets
+    the value given, and stays missing with None (the default: a limit keeps what its file declared; URDF
+    readers that need both, such as ROS's urdfdom, then need them added). Returns a note per dropped limit."""
     notes: list[str] = []
     for j in model.joints:
         if j.type not in LIMITED_TYPES:
@@ -1172,9 +1172,9 @@ def conform_limits(model: UrdfModel, effort: float, velocity: float) -> list[str
             if j.type == "continuous":
                 continue
             j.limit = UrdfLimit()
-        if j.limit.effort is None:
+        if j.limit.effort is None and effort is not None:
             j.limit.effort = float(effort)
-        if j.limit.velocity is None:
+        if j.limit.velocity is None and velocity is not None:
             j.limit.velocity = float(velocity)
     return notes
 

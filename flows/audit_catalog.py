@@ -61,14 +61,24 @@ def write_audit_catalog(out_root: Path | str, rows: list[AuditRow]) -> dict[str,
     return paths
 
 
+#: The column of :func:`failure_modes_by_category` counting every asset whose declared physics fails a check in
+#: simulation, whatever its first failure mode (an asset with implausible values may fail one too).
+DECLARED_NOT_READY = "declared_physics_not_ready"
+
+
 def failure_modes_by_category(assets):
-    """Assets per category (rows, plus ``total``) and failure mode (columns :data:`AUDIT_MODES`), from the
-    ``audit_assets`` table."""
+    """Assets per category (rows, plus ``total``) and failure mode (columns :data:`AUDIT_MODES`: each asset once,
+    under its first mode), then :data:`DECLARED_NOT_READY`: the assets whose declared physics fails a check in
+    simulation, whichever mode came first, so a failing check is never counted as 0 beside an asset that has one;
+    from the ``audit_assets`` table."""
     import pandas as pd
 
     if assets.empty:
-        return pd.DataFrame(columns=list(AUDIT_MODES))
-    table = pd.crosstab(assets["category"].replace("", "(unread)"), assets["failure_mode"]).reindex(columns=list(AUDIT_MODES), fill_value=0)
+        return pd.DataFrame(columns=[*AUDIT_MODES, DECLARED_NOT_READY])
+    category = assets["category"].replace("", "(unread)")
+    table = pd.crosstab(category, assets["failure_mode"]).reindex(columns=list(AUDIT_MODES), fill_value=0)
+    failing = assets["declared_passed"].map(lambda v: bool(v == False))  # noqa: E712 (None, NaN: not run)
+    table[DECLARED_NOT_READY] = failing.groupby(category).sum().reindex(table.index, fill_value=0).astype(int)
     table.loc["total"] = table.sum()
     return table
 

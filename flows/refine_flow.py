@@ -232,11 +232,13 @@ def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
 @flow(name=FLOW_NAME, persist_result=False)
 def refine_dataset(catalog: str = "catalog.yaml", dataset: str | None = None, workers: int | None = None,
                    dask_address: str | None = None, ids: list[str] | None = None, limit: int | None = None, force: bool = False,
-                   out: str | None = None, dask_host: str | None = None, dashboard: bool | None = None) -> dict[str, Any]:
+                   out: str | None = None, dask_host: str | None = None, dashboard: bool | None = None,
+                   requested_at: float | None = None) -> dict[str, Any]:
     """Refine every asset of ``dataset`` as declared in ``catalog`` (arguments
-    as :func:`run_refine_flow`); returns the run summary."""
+    as :func:`run_refine_flow`; ``requested_at``: when the run was asked for, epoch s, before any server started);
+    returns the run summary."""
     return run_dataset(get_run_logger(), catalog, dataset, workers, dask_address, ids=ids, limit=limit,
-                       force=force, out=out, dask_host=dask_host, dashboard=dashboard)
+                       force=force, out=out, dask_host=dask_host, dashboard=dashboard, requested_at=requested_at)
 
 
 @dataclasses.dataclass
@@ -271,16 +273,20 @@ def plan_driver(cat, name: str, *, ids=None, limit=None, force: bool = False, ou
 def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, workers: int | None = None,
                 dask_address: str | None = None, *, ids: list[str] | None = None, limit: int | None = None, force: bool = False,
                 out: str | None = None, planned: DriverPlan | None = None, dask_host: str | None = None,
-                dashboard: bool | None = None) -> dict[str, Any]:
+                dashboard: bool | None = None, requested_at: float | None = None) -> dict[str, Any]:
     """The body of :func:`refine_dataset`, also run without a Prefect flow run when nothing is left to dispatch;
-    ``planned``: a plan made already by :func:`plan_driver`. Raises :class:`RegressionFailure` (the report logged)
-    when the run regressed beyond ``catalog.yaml`` ``results.regression`` with ``fail_flow``."""
+    ``planned``: a plan made already by :func:`plan_driver`; ``requested_at``: when the run was asked for (epoch s;
+    ``_run.json``'s ``requested_at``, the start of its MLflow run: Prefect's and Dask's start-up are the run's too).
+    Raises :class:`RegressionFailure` (the report logged) when the run regressed beyond ``catalog.yaml``
+    ``results.regression`` with ``fail_flow``."""
     t0, body_started_epoch = time.perf_counter(), time.time()
     cat = load_catalog(catalog)
     name, _ = cat.dataset(dataset)
     if planned is None:
         planned = plan_driver(cat, name, ids=ids, limit=limit, force=force, out=out)
     run = _start_run(log, cat, name, planned, workers, dask_address, dask_host, dashboard)
+    if requested_at is not None:
+        run.info["requested_at"] = float(requested_at)
     _record_without_workers(log, run, planned)
     timing = _dispatch(log, run, planned)
     if run.cat.config.run.extras == "deferred":
@@ -302,6 +308,7 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
     )
     run.info.update(
         status="finished",
+        outcome=run_outcome(summary),
         finished_at=datetime.now(timezone.utc).isoformat(),
         mlflow_run_id=mlflow_run_id,
         regression={k: summary["regression"][k] for k in ("status", "exceeded", "previous_run", "regressed", "reasons")},
@@ -314,6 +321,17 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
         log.error("%s", report)
         raise RegressionFailure(report, summary)
     return summary
+
+
+#: ``_run.json``'s ``outcome`` of a run that refined nothing: every asset finished before and reused (``skipped``).
+NOTHING_TO_DO = "nothing_to_do"
+
+
+def run_outcome(summary: dict[str, Any]) -> str:
+    """``nothing_to_do`` when the run refined no asset (every row skipped: reused from an earlier run), else
+    ``worked``: what ``_run.json`` and the MLflow run say, so ``asset2sim failures`` passes over such a run."""
+    skipped_only = int(summary.get("skipped") or 0) > 0 and not int(summary.get("done") or 0) and not int(summary.get("failed") or 0)
+    return NOTHING_TO_DO if skipped_only else "worked"
 
 
 @dataclasses.dataclass
@@ -359,7 +377,7 @@ def _start_run(log, cat, name: str, planned: DriverPlan, workers, dask_address, 
     log.info("run %s: %d assets of dataset %s on %s", run_id, len(jobs), name,
              address or f"a local Dask cluster ({n_workers} workers, listening on {host}, "
                         f"dashboard {'on a free port' if dashboard else 'off'})")
-    flow_progress.emit(ProgressEvent("run_started", name, run_id, total=info["assets"]))
+    flow_progress.emit(ProgressEvent("run_started", name, run_id, total=info["assets"], pending=len(planned.pending)))
     return _Run(cat, name, run_id, store, info, address, n_workers, host, dashboard)
 
 
@@ -624,7 +642,7 @@ def _log_to_mlflow(run: _Run, df, summary, artifacts, extra_tags: dict[str, str]
             project_root=cat.project_root,
             settings=cat.config.tracking,
             tags={"prefect.flow_run_id": info["flow_run_id"] or "", "asset2sim.run": run_id, **(extra_tags or {})},
-            started_at=info.get("started_at"), ended_at=time.time(),
+            started_at=info.get("requested_at") or info.get("started_at"), ended_at=time.time(),
         )
     except Exception as exc:  # the catalog is the record; tracking must not lose it
         return None, f"{type(exc).__name__}: {exc}"
@@ -701,6 +719,7 @@ def run_refine_flow(
     program). ``out``: the output store (``s3://bucket/prefix``); ``dask_host`` / ``dashboard``: the local Dask
     cluster's listening host and dashboard (None: ``catalog.yaml`` ``run``). Returns the run summary (also of a
     regressed run). Raises CatalogError: invalid catalog or manifest (before any asset runs)."""
+    requested_at = time.time()  # the run's MLflow record starts here: server and cluster start-up are the run's
     params = flow_parameters(catalog, dataset, workers, dask_address, out)
     params.update({k: v for k, v in (("dask_host", dask_host), ("dashboard", dashboard)) if v is not None})
     cat = load_catalog(params["catalog"])  # fail early, before the flow starts
@@ -712,11 +731,11 @@ def run_refine_flow(
         if not planned.pending:
             try:
                 return run_dataset(logging.getLogger("asset2sim.flow"), **params, ids=ids, limit=limit, force=force,
-                                   planned=planned)
+                                   planned=planned, requested_at=requested_at)
             except RegressionFailure as exc:  # recorded and reported; the caller sets the exit status
                 return exc.summary
     with prefect_api_for_run(cat.project_root):
-        state = refine_dataset(**params, ids=ids, limit=limit, force=force, return_state=True)
+        state = refine_dataset(**params, ids=ids, limit=limit, force=force, requested_at=requested_at, return_state=True)
     if state.is_failed():
         exc = state.result(raise_on_failure=False)
         if isinstance(exc, RegressionFailure):  # recorded and reported; the caller sets the exit status

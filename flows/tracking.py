@@ -194,7 +194,7 @@ def log_flow_run(
             child = client.create_run(
                 exp_id,
                 run_name=str(row["asset_id"]),
-                start_time=_ms(row.get("started_at")) or ts,
+                start_time=_asset_start(row) or ts,
                 tags={
                     "mlflow.parentRunId": rid,
                     "asset2sim.kind": "asset",
@@ -246,6 +246,20 @@ def _artifact_dir(path: Path, out_dir: Any) -> str | None:
     """The artifact folder of ``path`` inside its output folder (None: the run's root)."""
     rel = path.parent.relative_to(Path(str(out_dir)))
     return None if str(rel) == "." else rel.as_posix()
+
+
+def _asset_start(row: dict[str, Any]) -> int | None:
+    """Epoch ms an asset's MLflow run starts at: its end less the wall time of its own stages (``wall_seconds``), so
+    the run spans the asset's work and not the time it waited for a worker; its recorded start when either is
+    unknown."""
+    end, wall = _ms(row.get("finished_at")), row.get("wall_seconds")
+    try:
+        wall = float(wall)
+    except (TypeError, ValueError):
+        wall = math.nan
+    if end is None or not math.isfinite(wall) or wall < 0:
+        return _ms(row.get("started_at"))
+    return max(end - int(round(wall * 1000)), _ms(row.get("started_at")) or 0)
 
 
 def _ms(when: Any) -> int | None:

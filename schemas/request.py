@@ -29,6 +29,30 @@ TargetKind = Literal["fraction", "angle", "distance", "end"]
 EndName = Literal["high", "low", "on", "off"]
 Dimension = Literal["height", "width", "depth", "length", "largest", "volume"]
 OrderAxis = Literal["vertical", "left_right", "right_left", "front_back", "middle", "size"]
+#: The words of the first and the last part along each order, seen facing the object's front.
+ORDER_ENDS: dict[str, tuple[str, str]] = {"vertical": ("highest", "lowest"), "left_right": ("leftmost", "rightmost"),
+                                          "right_left": ("rightmost", "leftmost"), "front_back": ("frontmost", "backmost"),
+                                          "size": ("smallest", "largest")}
+#: How each order counts, for a part named by its number ("the 2nd door from the top").
+ORDER_FROM: dict[str, str] = {"vertical": "from the top", "left_right": "from the left", "right_left": "from the right",
+                              "front_back": "from the front", "size": "by size, smallest first"}
+
+
+def ordinal_words(ordinal: int, order: str, label: str | None) -> str:
+    """A part named by its place among its kind, in words: ``the largest door`` (``ordinal`` -1, ``order`` size),
+    ``the highest drawer`` (0, vertical), ``the middle drawer``, ``the 2nd door from the left`` (1, left_right),
+    ``the 2nd door from the end, from the top`` (-2); ``label`` None: ``part``."""
+    what = label or "part"
+    if order == "middle":
+        return f"the middle {what}"
+    first, last = ORDER_ENDS.get(order, ("first", "last"))
+    if ordinal == 0:
+        return f"the {first} {what}"
+    if ordinal == -1:
+        return f"the {last} {what}"
+    n = abs(ordinal) + (1 if ordinal >= 0 else 0)
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"the {n}{suffix} {what} " + (ORDER_FROM.get(order, "") if ordinal >= 0 else f"from the end, {ORDER_FROM.get(order, '')}")
 """How an ordinal counts, facing the object's front: top to bottom, left to right, right to left, front to back;
 ``middle`` the middle one of an odd count along the direction the parts are spread in (ordinal 0); ``size`` by the
 moving part's box volume, smallest first ("the freezer door" 0, "the main door" -1)."""
@@ -65,6 +89,9 @@ class PartProperty(BaseModel):
     model_config = ConfigDict(extra="forbid")
     label: str | None = None
     mass: float | None = None
+    mass_range: tuple[float, float] | None = None
+    """A range of masses asked (kg, low <= high: "between 20 and 30 kg"): the estimate is kept inside it, brought to
+    its nearer end when outside; ``mass`` is then None."""
     material: str | None = None
     phrase: str = ""
 
@@ -142,12 +169,24 @@ class JointStateRequest(BaseModel):
     """The words of the request this came from."""
 
     def short(self) -> str:
-        """The request in a few words for a progress line: who (label, joint or "all", "#n" an ordinal, "@order"
-        when not top to bottom) and what: a number as asked from the closed end ("lid=30 deg from closed",
-        "drawer=20 mm from closed", "door=40 %"), an end ("lever=up"), else the band ("door=halfway")."""
+        """The request in a few symbols, for tests and logs (:meth:`words` says it for people): who (label, joint or
+        "all", "#n" an ordinal, "@order" when not top to bottom) and what: a number as asked from the closed end
+        ("lid=30 deg from closed", "drawer=20 mm from closed", "door=40 %"), an end ("lever=up"), else the band
+        ("door=halfway")."""
         who = (self.joint if self.selector == "joint" else self.label) or "all"
         if self.ordinal is not None:
             who += f"#{self.ordinal}" + ("" if self.order == "vertical" else f"@{self.order}")
+        return f"{who}={self._what()}"
+
+    def words(self) -> str:
+        """The request for people, as the progress lines say it: ``the largest door halfway``, ``lid 30 deg from
+        closed``, ``every task-relevant part closed`` (a part named by its place in words, :func:`ordinal_words`)."""
+        who = (self.joint if self.selector == "joint" else self.label) or "every task-relevant part"
+        if self.ordinal is not None:
+            who = ordinal_words(self.ordinal, self.order, self.label)
+        return f"{who} {self._what().replace('_', ' ')}"
+
+    def _what(self) -> str:
         t = self.target
         if t is None:
             what = self.band
@@ -159,7 +198,7 @@ class JointStateRequest(BaseModel):
             what = f"{1000.0 * float(t.value or 0.0):.4g} mm from closed"
         else:
             what = f"{100.0 * float(t.value or 0.0):.4g} %"
-        return f"{who}={what}"
+        return what
 
     @property
     def names_part(self) -> bool:
@@ -305,6 +344,8 @@ class QuantityOutcome(BaseModel):
     within_tolerance: bool = True
     why: str = ""
     """How the target was decided; why it was missed (a limit, the geometry)."""
+    asked_high: float | None = None
+    """The upper end when a range was asked (``asked`` its lower end): met anywhere inside it."""
     kind: Literal["state", "size", "mass", "dynamics", ""] = ""
     """What was asked: a joint ``state`` (an angle, a distance or a fraction from the closed end, or an end), a
     ``size``, the total ``mass``, a joint's ``dynamics`` value; "" in reports written before it was recorded."""

@@ -129,7 +129,7 @@ def refine_asset(
     # no cache entry in the input or output; every simulated step of every phase counted against one cap
     with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference), step_budget(MAX_REFINE_STEPS):
         try:
-            _announce_extract(asset, findings, log)
+            _announce_extract(asset_dir, asset, findings, log)
             cache = analyze.MeshCache()
             geometry = _analyze(asset, cache, log)
             with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx, \
@@ -175,8 +175,12 @@ def _open_estimator(config: RefineConfig) -> estimator.Estimator:
     """The configured estimator; RefineError("estimator_failure") when it cannot be made."""
     try:
         return backends.get_estimator(config.estimator, **{k: v for k, v in (("model", config.model), ("base_url", config.base_url)) if v})
+    except estimator.EstimatorUnknown as exc:  # a name: the option's error, one sentence
+        raise RefineError(str(exc), "estimator_failure", ["ESTIMATOR_UNAVAILABLE"]) from exc
     except Exception as exc:
-        raise RefineError(f"estimator {config.estimator!r} unavailable: {exc}", "estimator_failure", ["ESTIMATOR_UNAVAILABLE"]) from exc
+        why = one_line(exc)
+        raise RefineError(why if why.startswith("--") else f"--estimator {config.estimator} cannot be used: {why}",
+                          "estimator_failure", ["ESTIMATOR_UNAVAILABLE"]) from exc
 
 
 def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, category: str | None,
@@ -222,7 +226,7 @@ def _check_overrides(asset: AssetDescription, config: RefineConfig) -> None:
     try:
         overrides.apply_overrides(RequestSpec(), config.overrides, asset)
     except overrides.OverrideError as exc:
-        raise RefineError(f"{asset.urdf_path}: {exc}", "invalid_input", [exc.code]) from exc
+        raise RefineError(str(exc), "invalid_input", [exc.code]) from exc
 
 
 def _completed_result(out_dir: Path, log: StageLog) -> RefineResult:
@@ -233,9 +237,22 @@ def _completed_result(out_dir: Path, log: StageLog) -> RefineResult:
     return RefineResult(out_dir=out_dir, report=report, overlay=overlay, skipped=True)
 
 
-def _announce_extract(asset: AssetDescription, findings: list, log: StageLog) -> None:
-    log.say("extract", f"{asset.urdf_path}: {len(asset.links)} links, {len(asset.movable_joints())} movable joints, category {asset.category}"
-            + (f"; {len(findings)} validation findings (none fatal)" if findings else ""))
+def input_shown(asset_dir: Path | str, asset: AssetDescription) -> str:
+    """The input as the user gave it, for the progress lines: ``asset_dir`` as given, and for an MJCF or USD file
+    read into the asset model (staged as a URDF in a temporary folder) the file and its format, never the staged
+    copy: ``objects/door.xml (MJCF)``; a folder holding one such file: ``cabinet_7/cabinet.xml (MJCF)``."""
+    given = Path(asset_dir)
+    if asset.staged_from is None:
+        return str(given)
+    fmt = "USD" if asset.staged_from.suffix.lower() in (".usd", ".usda", ".usdc", ".usdz") else "MJCF"
+    shown = given / asset.staged_from.name if given.is_dir() else given
+    return f"{shown} ({fmt})"
+
+
+def _announce_extract(asset_dir: Path | str, asset: AssetDescription, findings: list, log: StageLog) -> None:
+    category = asset.category or "not declared (recognised from the request and the parts next)"
+    log.say("extract", f"{input_shown(asset_dir, asset)}: {len(asset.links)} links, {len(asset.movable_joints())} movable joints, "
+            f"category {category}" + (f"; {len(findings)} validation findings (none fatal)" if findings else ""))
     log.lap("extract")
 
 
@@ -265,7 +282,7 @@ def _interpret(ctx: EstimationContext, log: StageLog) -> str:
         log.say("request", f"pose '{spec.pose_hint}': {pose_note}")
     for note in request_notes(spec):
         log.say("request", note)
-    log.say("request", f"category {ctx.category}; size {spec.size_class or 'regular'}; states " + (", ".join(js.short() for js in spec.joint_states) or "none asked"))
+    log.say("request", f"category {ctx.category}; size {spec.size_class or 'regular'}; states " + (", ".join(js.words() for js in spec.joint_states) or "none asked"))
     log.lap("closed_state")
     return pose_note
 

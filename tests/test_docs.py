@@ -59,6 +59,7 @@ EXPECTED_FILES = {
                   "out/from_usd/usd/host/mobility.usd", "out/from_usd/usd/host/mobility.physics.usda"],
     "outputs.md": ["out/demo/mobility.urdf", "out/demo/initial_state.json", "out/demo/overlay.json", "out/demo/report.json"],
     "requests.md": ["refine.yaml"],
+    "pipeline.md": ["project/catalog.yaml"],
     "simulators.md": ["out/box/mjcf/mobility.xml", "out/box/usd/mobility.usd"],
     "validation.md": ["broken/mobility.urdf"],
     "realism.md": ["out/demo/clips/clips.json", "pairs/pairs.json", "pairs/clips/0000/a_front.webm", "pairs/clips/0001/b_perspective.webm"],

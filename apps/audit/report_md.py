@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from asset2sim.inert import markdown_text as md
 from asset2sim.schemas.audit import AuditReport, ValueVerdict
+from asset2sim.tasks.check.verdict import readiness
 
 
 def _num(v: float | None) -> str:
@@ -40,10 +41,10 @@ def render(report: AuditReport) -> str:
     if not report.checks:
         lines += ["Not run.", ""]
     for c in report.checks:
-        state = "passed" if c.passed else ("could not run: " + c.error if c.error else "failed: " + ", ".join(c.failures))
+        state = ("could not run: " + c.error) if c.error else readiness(list(c.metrics)).line()  # refine's words
         lines.append(f"- {md(c.physics)} physics: {md(state)}")
         for m in c.metrics:
-            lines.append(f"  - {md(m.name)}: {_num(m.value)} {md(m.unit)} ({'pass' if m.passed else 'fail' if m.passed is False else 'info'}; "
+            lines.append(f"  - {md(m.name)}: {_num(m.value)} {md(m.unit)} ({'pass' if m.passed else 'FAIL' if m.passed is False else 'n/a'}; "
                          f"{md(m.threshold)})")
     lines.append("")
     lines += ["## Changes in the patch", ""]

@@ -27,6 +27,14 @@ def eta_seconds(elapsed: float, finished: int, total: int, worked: int | None = 
 
 #: Shown until the first asset finishes (a temporary Prefect server, a Dask cluster and the stage servers start first).
 STARTING = "starting Prefect, Dask and the workers (up to a minute) ..."
+#: Shown instead when every asset finished before: nothing is started, each finished result is reused.
+NOTHING_TO_START = "every one finished before: reused, nothing to start"
+
+
+def starting(ev: ProgressEvent) -> str:
+    """What a run is doing before its first asset finishes: :data:`STARTING`, or :data:`NOTHING_TO_START` when no asset
+    goes to the workers (``ev.pending`` 0)."""
+    return NOTHING_TO_START if ev.pending == 0 else STARTING
 
 
 class FlowProgress:
@@ -50,7 +58,7 @@ class FlowProgress:
             if self.live:
                 self._start_bar(ev)
             else:
-                print(f"run {ev.run} of dataset {ev.dataset}: {ev.total} assets; {STARTING}", file=self.stream, flush=True)
+                print(f"run {ev.run} of dataset {ev.dataset}: {ev.total} assets; {starting(ev)}", file=self.stream, flush=True)
         elif ev.kind == "asset_finished":
             self.counts[ev.status if ev.status in self.counts else "failed"] += 1
             if self._progress is not None:
@@ -81,7 +89,7 @@ class FlowProgress:
                                   TextColumn("ETA"), TimeRemainingColumn(), console=Console(file=raw(self.stream)), transient=False)
         self._quiet_console_logs()
         self._progress.start()
-        self._task = self._progress.add_task(f"{markup(ev.dataset)}: {STARTING}", total=max(1, ev.total), **self.counts)
+        self._task = self._progress.add_task(f"{markup(ev.dataset)}: {starting(ev)}", total=max(1, ev.total), **self.counts)
 
     def _quiet_console_logs(self) -> None:
         """Raise every terminal log handler to WARNING (remembering its level)."""

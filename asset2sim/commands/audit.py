@@ -21,12 +21,21 @@ from asset2sim.output_paths import OutputError, check_location
 from asset2sim.flows import audit_catalog
 from asset2sim.apps.audit.batch import AuditTarget, audit_one, find_assets
 from asset2sim.schemas.config import RefineConfig
+from asset2sim.tasks.check.verdict import verdict_line
 from asset2sim.commands import _output
 from asset2sim.inert import markup, terminal
 
 NAME = "audit"
 HELP = ("Audit assets that already carry physics (URDF, MJCF, USD): each mass, density, inertia, center of mass, damping, "
         "friction and limit against the product's estimate, simulation checks, and a patch in the input's format.")
+
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {
+    0: "every asset plausible, its declared physics passing the checks",
+    1: "an asset could not be audited",
+    3: "an asset has implausible values or fails a check",
+    4: "the output cannot be written",
+}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -114,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
         for col in ("asset", "format", "category", "verdict", "implausible", "declared physics"):
             table.add_column(col)
         for r in rows:
-            checks = "-" if r.declared_passed is None else ("passes" if r.declared_passed else "fails " + ", ".join(r.declared_failures))
+            checks = "-" if r.declared_passed is None else verdict_line("none" if r.declared_passed else "declared_physics_fails",
+                                                                        {}, r.declared_failures)
             table.add_row(*map(markup, (r.asset_id, r.format, r.category, r.failure_mode,  # "[mujoco]" is text, not markup
                                         "; ".join(r.implausible) or r.error[:160] or "-", checks)))
         console.print(table)

@@ -19,6 +19,9 @@ from asset2sim.inert import markup
 NAME = "benchmark"
 HELP = "Run methods (defaults, human, direct, asset2sim) on a manifest, evaluate each, write the thesis table and an index page."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {0: "done", 1: "--compare found a difference from the earlier run"}
+
 #: Record fields excluded from the reproducibility comparison (wall times; the report link, absent with --no-reports).
 TIMING_FIELDS = ("seconds", "method_seconds", "report")
 
@@ -136,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
         console.print(f"[yellow]results.parquet not written: {markup(meta['parquet_error'])}[/yellow]")
     for title, summary in tables.items():
         _print_table(console, title, summary)
-    rt = Table(title="research numbers (SPEC, thesis 9-object set, Isaac Sim)")
+    rt = Table(title="research numbers (thesis 9-object set, Isaac Sim)")
     for c in RESEARCH_NUMBERS[0]:
         rt.add_column(c)
     for r in RESEARCH_NUMBERS:

@@ -25,6 +25,9 @@ from asset2sim.output_paths import OutputError
 NAME = "demo"
 HELP = "Build a built-in articulated object (a box with a hinged lid, a two-drawer cabinet, a laptop ...) and refine it."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {0: "written and interaction-ready", 3: "written but not interaction-ready", 4: "a folder that cannot be written"}
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     ids = ", ".join(o.asset_id for o in DEMO_OBJECTS)

@@ -12,7 +12,8 @@ from pathlib import Path
 
 from asset2sim.commands._status import INVALID_REQUEST, CommandError, os_failure, output_failure, output_folder_failure, parse_engines
 from asset2sim.tasks.evaluation.evaluate import EvaluationError, evaluate_asset
-from asset2sim.tasks.check.verdict import why_it_failed
+from asset2sim.tasks.check.verdict import readiness, why_it_failed
+from asset2sim.tasks.publish.contract import read_report_json
 from asset2sim import output_folder
 from asset2sim.commands import _output
 from asset2sim.inert import markup, terminal
@@ -20,11 +21,21 @@ from asset2sim.inert import markup, terminal
 NAME = "evaluate"
 HELP = "Evaluate an asset (any URDF): physical robustness, semantic accuracy, probes; writes evaluation.json and report.html."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {
+    0: "every metric with a verdict passes",
+    1: "a metric fails",
+    2: "the asset cannot be evaluated",
+    4: "the output cannot be written",
+}
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("asset", type=Path, help="asset folder (mobility.urdf, initial_state.json ...) or a URDF file")
     p.add_argument("--reference", type=Path, default=None, help="PartNet-Mobility folder with reference_gensim2.json/.urdf")
-    p.add_argument("--prompt", default=None, help="the request the asset should satisfy")
+    p.add_argument("--prompt", default=None, help=(
+        "the request the asset should satisfy (default for a refined output folder: the request its report.json "
+        "records, so the output is graded as refine graded it)"))
     p.add_argument("--category", default=None, help="object category (default: from the asset's files)")
     p.add_argument("--engines", default="pybullet", help="comma-separated engines (default: pybullet)")
     p.add_argument("--out", type=Path, default=None,
@@ -48,6 +59,21 @@ def default_out(asset: Path) -> Path:
     return folder.parent / f"{folder.resolve().name}-evaluation"
 
 
+def refined_request(asset: Path, prompt: str | None, task: str | None) -> tuple[str | None, str | None, str]:
+    """(prompt, task, what was taken) for evaluating ``asset``: those given, else, for a refined output folder, the
+    request and task its ``report.json`` records (the evaluation then grades what refine graded); the third item
+    says where a request taken from the folder came from ("" when none was taken)."""
+    if prompt is not None:
+        return prompt, task, ""
+    try:
+        report = read_report_json(asset if asset.is_dir() else asset.parent)
+    except (OSError, ValueError):  # not a refined output: evaluated as given
+        return prompt, task, ""
+    if not report.prompt:
+        return prompt, task, ""
+    return report.prompt, task if task is not None else report.task, f"'{report.prompt}' (from report.json; --prompt gives another)"
+
+
 def run(args: argparse.Namespace) -> int:
     from rich.table import Table
 
@@ -58,11 +84,12 @@ def run(args: argparse.Namespace) -> int:
     bad_out = output_folder_failure(out)
     if bad_out is not None:
         raise bad_out
+    prompt, task, asked = refined_request(args.asset, args.prompt, getattr(args, "task", None))
     try:
         with output_folder.adopting(out):  # into a refined folder: its files become the product's
-            ev = evaluate_asset(args.asset, reference=args.reference, prompt=args.prompt, engines=engines, seed=args.seed,
+            ev = evaluate_asset(args.asset, reference=args.reference, prompt=prompt, engines=engines, seed=args.seed,
                                 category=args.category, out_dir=out, write_report=not args.no_report, probes=not args.no_probes,
-                                task=getattr(args, "task", None), clips=not getattr(args, "no_clips", False))
+                                task=task, clips=not getattr(args, "no_clips", False))
     except output_folder.OutputError as exc:
         raise output_failure(exc, out) from exc
     except OSError as exc:
@@ -70,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
     except (EvaluationError, ValueError) as exc:
         raise CommandError(INVALID_REQUEST, getattr(exc, "code", None) or "EVALUATION_INPUT_INVALID", args.asset,
                            str(exc)) from exc
-    table = Table(title=f"{markup(ev.asset_id)} ({markup(ev.category or 'no category')}): {'READY' if ev.passed else 'NOT READY'}")
+    ready = readiness(list(ev.metrics))
+    table = Table(title=f"{markup(ev.asset_id)} ({markup(ev.category or 'no category')}): {markup(ready.short())}")
     wide = console.width >= WIDE_TABLE  # a narrow terminal gets the table without the thresholds' column
     for col in ("metric", "engine", "value", "unit", "verdict"):
         table.add_column(col, no_wrap=True)
@@ -83,11 +111,20 @@ def run(args: argparse.Namespace) -> int:
     console.print(table)
     if not wide:
         console.print(f"[dim]thresholds: report.html, or a terminal of {WIDE_TABLE} columns or more[/dim]")
-    for why in why_it_failed(ev.metrics):  # the sentences of report.html's "Why it failed"
+    console.print(f"verdict      {ready.line()}", markup=False, soft_wrap=True)  # refine's words, report.html's badge
+    other = [f for f in ev.failures if f not in ready.failures]
+    if other:
+        console.print(f"other checks failing: {', '.join(other)}", markup=False, soft_wrap=True)
+    if asked:
+        console.print(terminal(f"request      {asked}"), markup=False, soft_wrap=True)
+    whys = why_it_failed(ev.metrics)
+    for why in whys:  # the sentences of report.html's "Why it failed"
         console.print(f"why it failed {terminal(why)}", markup=False, soft_wrap=True)
-    asked = ev.metric("request_met")  # as asked: each unmet phrase with its gap
+    asked = ev.metric("request_met")  # as asked: each unmet phrase with its gap, unless a sentence above says it
     for u in (asked.details.get("unmet") or []) if asked is not None and asked.passed is False else []:
-        console.print(f"NOT AS ASKED {terminal(u.get('text') or u.get('phrase'))}", markup=False, soft_wrap=True)
+        text = str(u.get("text") or u.get("phrase"))
+        if not any(text in w for w in whys):
+            console.print(f"NOT AS ASKED {terminal(text)}", markup=False, soft_wrap=True)
     for n in ev.notes:
         console.print(f"[dim]note: {markup(n)}[/dim]")
     console.print(f"evaluated in {ev.seconds:.2f} s; wrote {out / 'evaluation.json'}" + ("" if args.no_report else f" and {out / 'report.html'}"),

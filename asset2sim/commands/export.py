@@ -27,6 +27,14 @@ from asset2sim.output_folder import URDF_NAME
 NAME = "export"
 HELP = "Export an output folder for other simulators (MJCF for MuJoCo, USD for Isaac Sim and Newton), optionally checking parity across engines."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {
+    0: "checked (and parity passes)",
+    1: "a check or parity verdict fails",
+    2: "the folder cannot be exported",
+    4: "the output cannot be written",
+}
+
 FORMATS = ("mjcf", "usd")
 
 
@@ -87,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     if parity:
         rows = parity_table(evaluate_engines(out, parity))
         print()
-        print(f"{'engine':<10} {'Phi mm':>9} {'deepest mm':>10} {'rest':>5} {'D_pos m':>9} {'D_ori rad':>9} {'osc':>5}  notes")
+        print(f"{'engine':<10} {'pen. mm':>9} {'deepest mm':>10} {'rest':>5} {'D_pos m':>9} {'D_ori rad':>9} {'osc':>5}  notes")
         for r in rows:
             if r["status"] != "ok":
                 print(f"{r['engine']:<10} {r['status']}: {r['reason']}")

@@ -17,6 +17,9 @@ from asset2sim.flows.catalog import CatalogError, ResultCatalog, load_catalog
 NAME = "failures"
 HELP = "Print the failure-mode breakdown of the latest run (or --run) from the Parquet catalog, and other catalog queries."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {0: "printed", 1: "the catalog has no rows", 2: "the catalog cannot be read, or an option names no run or column"}
+
 #: Columns the breakdown of a run reads besides the --by columns.
 BREAKDOWN_COLUMNS = queries.COUNT_COLUMNS
 #: Columns of the list of assets that did not pass all checks.
@@ -58,6 +61,23 @@ def _latest(store: ResultCatalog, dataset: str | None) -> tuple[str, str] | None
     return max(store.runs(dataset), key=lambda p: (p[1], p[0]), default=None)
 
 
+#: ``_run.json``'s ``outcome`` of a run that refined nothing (``asset2sim.flows.refine_flow.NOTHING_TO_DO``).
+NOTHING_TO_DO = "nothing_to_do"
+
+
+def latest_worked(store: ResultCatalog, dataset: str | None) -> tuple[tuple[str, str] | None, list[str]]:
+    """((dataset, run) of the most recent run that refined anything, the later runs passed over): a rerun with
+    nothing to do (``_run.json`` ``outcome`` ``nothing_to_do``: every asset reused) is passed over; a run without that
+    record counts as one that worked. ((None), []) when the catalog has no run."""
+    passed: list[str] = []
+    for ds, run in sorted(store.runs(dataset), key=lambda p: (p[1], p[0]), reverse=True):
+        if (store.run_info(ds, run) or {}).get("outcome") == NOTHING_TO_DO:
+            passed.append(run)
+            continue
+        return (ds, run), passed
+    return _latest(store, dataset), []
+
+
 def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
@@ -90,9 +110,11 @@ def run(args: argparse.Namespace) -> int:
         return 0
 
     if args.run == "latest":
-        dataset, run_id = latest
+        (dataset, run_id), passed = latest_worked(store, args.dataset)
         runs: str | None = run_id
         scope = f"run {run_id} of dataset {dataset}"
+        if passed:
+            print(f"passed over {len(passed)} later run(s) with nothing to do (every asset reused): {', '.join(passed)}")
     elif args.run == "all":
         dataset, run_id, runs = args.dataset, None, None
         scope = "all runs" + (f" of dataset {args.dataset}" if args.dataset else "")

@@ -25,6 +25,15 @@ HELP = (
     "--serve registers and serves the nightly deployment."
 )
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {
+    0: "done",
+    1: "a dataset or manifest that cannot be read",
+    2: "the catalog cannot be used",
+    4: "the output folders cannot be written",
+    5: "the run regressed against the previous run",
+}
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")
@@ -89,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     live = not getattr(args, "no_progress", False) and _output.raw(sys.stdout).isatty()
     if live:  # the bar replaces Prefect's INFO lines in the terminal (here and in the workers)
         os.environ.setdefault("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", "WARNING")
-    from asset2sim.flows.refine_flow import run_refine_flow  # imports Prefect: after its environment is set
+    from asset2sim.flows.refine_flow import NOTHING_TO_DO, run_outcome, run_refine_flow  # imports Prefect: after its environment is set
 
     ids = [i.strip() for i in args.ids.split(",") if i.strip()] if args.ids else None
     progress = FlowProgress(live=live)
@@ -115,8 +124,12 @@ def run(args: argparse.Namespace) -> int:
     dask_s = float(summary.get("dask_startup_seconds") or 0.0) + float(summary.get("dask_teardown_seconds") or 0.0)
     servers_s, assets_s, tracking_s = (float(summary.get(f"{k}_seconds") or 0.0) for k in ("stage_servers", "assets", "tracking"))
     worked = int(summary.get("done", 0)) + int(summary.get("failed", 0))
-    print(f"run {summary['run']} of dataset {summary['dataset']}: {summary['assets']} assets "
-          f"({summary['done']} done, {summary['skipped']} skipped, {summary['failed']} failed)")
+    if run_outcome(summary) == NOTHING_TO_DO:
+        print(f"run {summary['run']} of dataset {summary['dataset']}: nothing to do: every asset ({summary['assets']}) finished "
+              "before and was reused (recorded as skipped; `asset2sim failures` passes over this run, --force redoes them)")
+    else:
+        print(f"run {summary['run']} of dataset {summary['dataset']}: {summary['assets']} assets "
+              f"({summary['done']} done, {summary['skipped']} skipped, {summary['failed']} failed)")
     print(f"  all checks passed: {_fmt(summary.get('pass_rate_all'), True)}; rest stability "
           f"{_fmt(summary.get('stability_pass_rate'), True)}; oscillation {_fmt(summary.get('oscillation_pass_rate'), True)}; "
           f"penetration {_fmt(summary.get('penetration_mm_mean'))} mm (mean); "

@@ -22,6 +22,9 @@ HELP = ("Ask vision-language models which clip of each pair looks more realistic
         "when they agree), calibrate them on the planted-defect pairs and report the agreement between families; "
         "writes judgements.parquet and judge_calibration.json beside pairs.json (docs/guide/realism.md).")
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {0: "judged", 1: "no pair set or an invalid one", 2: "a model that cannot be used, or every call to a model failed"}
+
 
 class _JudgeOption(argparse.Action):
     """``--model`` starts a judge; ``--base-url`` and ``--family`` set the latest one's."""

@@ -20,6 +20,9 @@ NAME = "pairs"
 HELP = ("Make realism pairs: the same scripted push-and-release of one joint simulated with asset2sim's physics and with "
         "another method's (or a planted defect), drawn as clips from two views, for people (rate) and models (judge).")
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {0: "pairs written", 1: "no input folder could be read or no pair could be made", 4: "the output cannot be written"}
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("folders", type=Path, nargs="+", metavar="FOLDER",

@@ -26,6 +26,14 @@ NAME = "rate"
 HELP = ("Serve the realism rating app for people over a pair set (FOLDER/pairs.json or FOLDER/realism/pairs.json) "
         "on 127.0.0.1, or with --scores print the Bradley-Terry scores per method (docs/guide/realism.md).")
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {
+    0: "done (or stopped with Ctrl-C)",
+    1: "no pair set, an invalid one or a damaged ratings.sqlite",
+    3: "nothing rated yet (--scores)",
+    4: "the port or the folder cannot be used",
+}
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("folder", type=Path, metavar="FOLDER",

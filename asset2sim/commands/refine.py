@@ -26,8 +26,8 @@ from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import MESSAGE_FINDINGS
 from asset2sim.tasks.check.as_asked import quantity_text
-from asset2sim.tasks.check.verdict import penetration_measures, why_it_failed
-from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_text
+from asset2sim.tasks.check.verdict import penetration_measures, readiness, verdict_line, why_it_failed
+from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_text, state_moves
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.refine import RefineError
 from asset2sim.tasks.synthesize.validate_overlay import OverlayInvalid
@@ -35,6 +35,15 @@ from asset2sim.engines.source import UrdfFile
 
 NAME = "refine"
 HELP = "Refine one asset for a natural-language request into an interaction-ready asset (an output folder: docs/guide/outputs.md)."
+
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {
+    0: "written and interaction-ready",
+    1: "invalid input",
+    2: "invalid request, estimator failure or invalid overlay",
+    3: "written but not interaction-ready or not as asked",
+    4: "output location problem",
+}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -114,9 +123,10 @@ def _joint_labels(out_dir) -> dict[str, str]:
         return {}
 
 
-def _state_text(name: str, q: float, report, types: dict[str, str], labels: dict[str, str]) -> str:
+def _state_text(name: str, q: float, report, types: dict[str, str], labels: dict[str, str], moves: dict[str, str] | None = None) -> str:
     """One joint's initial state in the one frame of every amount: "joint_2 (lid) = 30.0 deg from closed (asked 30 deg),
-    25 % open", the number asked (``report.request.quantities``) beside what it has."""
+    25 % open", the number asked (``report.request.quantities``) beside what it has, and why it stands elsewhere than
+    its request put it when something moved it (``moves``: :func:`~asset2sim.tasks.evaluation.report_changes.state_moves`)."""
     asked = next((x for x in (report.request.quantities if report.request else []) if x.kind == "state" and x.asked is not None
                   and x.what.rsplit(" ", 1)[0] == name), None)
     ask = ""
@@ -128,7 +138,8 @@ def _state_text(name: str, q: float, report, types: dict[str, str], labels: dict
                else f" (asked {100.0 * v:.4g} % open)")
     who = f"{name} ({labels[name]})" if labels.get(name) else name
     return (f"{who} = {from_closed_text(q, report.closed_positions.get(name), types.get(name, 'revolute'))}{ask}"
-            + (f", {opening_text(report.opening_fractions[name])}" if name in report.opening_fractions else ""))
+            + (f", {opening_text(report.opening_fractions[name])}" if name in report.opening_fractions else "")
+            + (f" ({moves[name]})" if moves and name in moves else ""))
 
 
 def summary_lines(result) -> list[str]:
@@ -137,12 +148,13 @@ def summary_lines(result) -> list[str]:
     stab, osc = r.metric("rest_stability"), r.metric("oscillation")
     types = _joint_types(result.out_dir)
     labels = _joint_labels(result.out_dir)
-    state = ", ".join(_state_text(k, v, r, types, labels) for k, v in r.initial_joint_positions.items()) or "(no movable joints)"
+    moves = state_moves(r.model_dump(mode="json"))
+    state = ", ".join(_state_text(k, v, r, types, labels, moves) for k, v in r.initial_joint_positions.items()) or "(no movable joints)"
     stability = "stability    n/a" if not stab else (f"stability    {'PASS' if stab.passed else 'FAIL'} (D_pos "
                                                      f"{stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori "
                                                      f"{stab.details.get('D_ori_rad', float('nan')):.2e} rad)")
-    return [
-        f"asset        {r.asset_id} ({r.category})",
+    lines = [
+        f"asset        {r.asset_id} ({r.category or 'no category'})",
         f"output       {result.out_dir}",
         f"scale        {r.scale:.4g}",
         f"total mass   {r.total_mass:.4g} kg",
@@ -153,14 +165,61 @@ def summary_lines(result) -> list[str]:
         f"oscillation  {'PASS' if osc and osc.passed else 'FAIL'}",
         _manipulation_line(r),
         _operability_line(r),
-        f"verdict      {'interaction-ready' if r.failure_mode == 'none' else 'FAILED: ' + r.failure_mode}" + _tiers(r),
-    ] + why_lines(r) + as_asked_lines(r) + skipped_lines(r) + [
-        f"engine {row['engine']:<8} {row['status']}: rest {row['rest_stability']}, oscillation {row['oscillation']}, Phi {row['penetration_mm']} mm"
-        + (f" ({row['reason']})" if row['reason'] else "")
-        for row in r.parity
-    ] + request_lines(r.request) + media_lines(r, result.out_dir) + [
+        f"verdict      {verdict_line(r.failure_mode, r.readiness, readiness(r.metrics).failures)}",
+    ] + why_lines(r) + as_asked_lines(r) + skipped_lines(r) + engine_lines(r) + request_lines(r.request) + [
         "wall time    " + ", ".join(f"{k} {v:.2f}s" for k, v in r.stage_seconds.items()),
     ]
+    return once(lines) + [report_line(r, result.out_dir)]
+
+
+#: Where a summary line's message starts (after its label column, ``"request      "``).
+LABEL_WIDTH = 13
+#: Messages shorter than this are never dropped as repeats (``PASS``, an engine's numbers).
+REPEAT_MIN_CHARS = 30
+
+
+def once(lines: list[str]) -> list[str]:
+    """``lines`` with every ``NOT AS ASKED`` and ``request`` line whose message (after its label; a ``WARNING: ``
+    prefix aside) an earlier line already says dropped: one missing part is said once per summary (in "why it failed"), not again as ``NOT AS
+    ASKED``, a request line and a warning."""
+    kept: list[str] = []
+    for line in lines:
+        message = line[LABEL_WIDTH:].strip().removeprefix("WARNING: ")
+        restating = line.startswith(("NOT AS ASKED ", "request      "))
+        if restating and len(message) >= REPEAT_MIN_CHARS and any(message in k for k in kept):
+            continue
+        kept.append(line)
+    return kept
+
+
+def report_line(report, out_dir) -> str:
+    """The summary's last line: where to read why each check passed or failed (``report.html``, its plots and
+    frames), or how to make it when it was not (``--no-extras``, ``--defer-media``)."""
+    html = Path(out_dir) / "report.html"
+    if report.media == "done" and html.is_file():
+        return f"report       {html} (every check with its evidence; open it in a browser)"
+    if report.media == "deferred":
+        return f"report       deferred: `asset2sim report {out_dir}` makes views/, clips/ and {html}"
+    return f"report       {Path(out_dir) / 'report.json'} (no report.html with --no-extras: `asset2sim report {out_dir}` makes it)"
+
+
+def engine_lines(report) -> list[str]:
+    """One line per engine the checks ran in (``report.parity``): whether it ran, its rest test and self-contact Phi
+    in the verdict's words, and the checks that fail in it (the verdict's ``metric@engine``), so no engine line reads
+    as a pass beside the verdict's failure."""
+    failing = readiness(report.metrics).failures
+    out = []
+    for row in report.parity:
+        if row["status"] != "ok":  # skipped (its extra missing) or an error: said with its reason
+            out.append(f"engine {row['engine']:<8} {row['status']}" + (f": {row['reason']}" if row["reason"] else ""))
+            continue
+        words = {True: "pass", False: "FAIL", None: "n/a"}
+        here = [f.split("@")[0] for f in failing if f.endswith(f"@{row['engine']}")]
+        out.append(f"engine {row['engine']:<8} rest {words.get(row['rest_stability'], row['rest_stability'])}, oscillation "
+                   f"{words.get(row['oscillation'], row['oscillation'])}, self-contact "
+                   f"{'-' if row['penetration_mm'] is None else format(float(row['penetration_mm']), '.3f')} mm"
+                   + (f"; failing here: {', '.join(here)}" if here else "") + (f" ({row['reason']})" if row["reason"] else ""))
+    return out
 
 
 def why_lines(report) -> list[str]:
@@ -169,13 +228,6 @@ def why_lines(report) -> list[str]:
     if report.failure_mode == "none":
         return []
     return [f"why it failed {why}" for why in why_it_failed(report.metrics)]
-
-
-def media_lines(report, out_dir) -> list[str]:
-    """The summary's media line when the media phase was deferred (how to make it), else nothing."""
-    if report.media != "deferred":
-        return []
-    return [f"media        deferred: `asset2sim report {out_dir}` makes views/, clips/ and report.html"]
 
 
 def skipped_lines(report) -> list[str]:
@@ -194,7 +246,8 @@ def request_lines(found) -> list[str]:
         if q.asked is None or q.achieved is None:
             continue
         frame = " from the closed end" if q.kind == "state" and q.unit in ("rad", "m") else ""
-        out.append(f"request      {q.what}: asked {quantity_text(q.asked, q.unit)}, got {quantity_text(q.achieved, q.unit)}{frame}"
+        asked = quantity_text(q.asked, q.unit) + ("" if q.asked_high is None else f" to {quantity_text(q.asked_high, q.unit)}")
+        out.append(f"request      {q.what}: asked {asked}, got {quantity_text(q.achieved, q.unit)}{frame}"
                    + ("" if q.within_tolerance else f"  (MISSED, gap {quantity_text(abs(q.achieved - q.asked), q.unit)}: {q.why})"))
     out += [f"request      {w}" for w in found.warnings]
     if found.ignored:
@@ -209,13 +262,6 @@ def as_asked_lines(report) -> list[str]:
     if m is None or m.passed is not False:
         return []
     return [f"NOT AS ASKED {u.get('text') or u.get('phrase')}" for u in (m.details or {}).get("unmet") or []]
-
-
-def _tiers(report) -> str:
-    """`` (rest pass, sweep pass, robust_rest FAIL, probes n/a)``: the report's readiness tiers."""
-    if not report.readiness:
-        return ""
-    return " (" + ", ".join(f"{t} {'pass' if v else ('FAIL' if v is False else 'n/a')}" for t, v in report.readiness.items()) + ")"
 
 
 def _manipulation_line(report) -> str:
@@ -263,6 +309,8 @@ def _refine_failure(exc: RefineError, args: argparse.Namespace) -> CommandError:
     code = join_codes(codes) or mode.upper()
     status = INVALID_INPUT if mode == "invalid_input" and not isinstance(cause, (RequestTooLong, OverrideError)) else INVALID_REQUEST
     msg = str(exc).removeprefix(f"{args.asset}: ")
+    if isinstance(cause, OverrideError) or "ESTIMATOR_UNAVAILABLE" in codes:  # an option's error: one sentence naming it
+        return CommandError(status, code, None, msg)
     return CommandError(status, code, args.asset, f"{mode.replace('_', ' ')}: {msg}",
                         problems=finding_problems(cause, args.asset) if isinstance(cause, AssetError) else ())
 
@@ -283,6 +331,21 @@ def finding_problems(exc: AssetError, asset) -> list[tuple[str, str, str]]:
         out.append((join_codes(f.code for f in errors[MESSAGE_FINDINGS:]), str(asset),
                     f"invalid input: ... and {len(errors) - MESSAGE_FINDINGS} more (asset2sim validate lists them all)"))
     return out
+
+
+def option_error(message: str, given: dict, state: dict) -> str:
+    """An override's error as one sentence naming the option as typed: ``overrides: mass: unit missing in '30'; ...``
+    -> ``--mass 30: unit missing in '30'; ...``, ``overrides: state: state lid: ...`` -> ``--state lid=5kg: ...``;
+    a message about a field not given on the command line (``--config``'s) as it is."""
+    text = message.removeprefix("overrides: ")
+    field, _, rest = text.partition(": ")
+    if field in given:
+        return f"--{field} {given[field]}: {rest.removeprefix(f'{field}: ')}"
+    if field == "state":
+        name, _, why = rest.removeprefix("state ").partition(": ")
+        if name in state:
+            return f"--state {name}={state[name]}: {why}"
+    return text
 
 
 def options(args: argparse.Namespace) -> RefineConfig:
@@ -319,15 +382,21 @@ def options(args: argparse.Namespace) -> RefineConfig:
     try:
         overrides = merge_overrides(base.overrides, {**given, **({"state": state} if state else {})})
     except ValueError as exc:
-        raise CommandError(INVALID_REQUEST, "OVERRIDE_INVALID", None, str(exc)) from exc
+        raise CommandError(INVALID_REQUEST, "OVERRIDE_INVALID", None, option_error(str(exc), given, state)) from exc
     return base.model_copy(update={**fields, "overrides": overrides})
+
+
+#: The stages as the progress lines name them (``report.json``'s ``stage_seconds`` keeps the stages' own names).
+STAGE_WORDS = {"extract": "read", "analyze": "geometry", "closed_state": "closed ends", "synthesize": "physics",
+               "refine_state": "state", "post_check": "checks", "shut_repair": "repair", "sweep_repair": "repair",
+               "skip": "kept"}
 
 
 def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
 
     def progress(stage: str, message: str) -> None:
-        line = f"[{time.perf_counter() - t0:6.2f}s] {stage:<12} {message}"
+        line = f"[{time.perf_counter() - t0:6.2f}s] {STAGE_WORDS.get(stage, stage.replace('_', ' ')):<12} {message}"
         if message.startswith("WARNING"):  # warnings are printed with --quiet too, on stderr
             print(line, file=sys.stderr, flush=True)
         elif not args.quiet:

@@ -20,6 +20,9 @@ from asset2sim.tasks.geometry.render import (VIEWS, RenderError, SceneRenderer, 
 NAME = "render"
 HELP = "Render textured views (front, back, left, right, perspective; optionally top) of an asset at a joint state to PNGs."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {0: "every view written", 1: "rendering failed", 2: "bad input", 4: "the output folder cannot be used"}
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes) or a URDF file")

@@ -17,6 +17,9 @@ from asset2sim.commands._status import CommandError, OUTPUT_LOCATION, output_fai
 NAME = "report"
 HELP = "Make the renders, clips and report.html of a refined output folder whose refine deferred them (--defer-media)."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {0: "the media are made (or were already)", 4: "no complete refine output, or it cannot be written"}
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("out", type=Path, help="a refined output folder (the --out of refine, or an asset's folder of a flow)")

@@ -9,6 +9,9 @@ from pathlib import Path
 NAME = "serve"
 HELP = "Register the nightly deployment (cron schedule from catalog.yaml) with Prefect and serve it until interrupted."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {0: "stopped", 2: "the catalog cannot be used"}
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")

@@ -1,5 +1,6 @@
-"""``asset2sim validate ASSET``: one line per finding about an input asset,
-then a verdict. Exit status: 0 no error, 1 refused, 2 usage errors.
+"""``asset2sim validate ASSET``: one line per error and warning about an input asset (the infos too with
+``--verbose``), then a verdict whose counts are those of the lines it could print. Exit status: 0 no error, 1
+refused, 2 usage errors.
 """
 
 from __future__ import annotations
@@ -17,6 +18,9 @@ from asset2sim.tasks.ingest.validate_input import CODES, ValidationPolicy, has_e
 NAME = "validate"
 HELP = "Check an input asset (safe XML, kinematic tree, numbers, inertials, mesh paths and contents); exit 1 on errors."
 
+#: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
+EXITS = {0: "no error", 1: "the asset is refused"}
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes), a URDF file, or an MJCF (.xml) or "
@@ -26,7 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention")
     parser.add_argument("--json", action="store_true", help="print the findings as a JSON list instead of text")
     parser.add_argument("--strict", action="store_true", help="treat warnings as errors")
-    parser.add_argument("--quiet", "-q", action="store_true", help="print errors and warnings only (no info)")
+    parser.add_argument("--quiet", "-q", action="store_true", help="print errors and warnings only (the default; --verbose adds the infos)")
     parser.add_argument("--paths-only", action="store_true", help="check mesh paths but do not read mesh contents (faster)")
     parser.add_argument("--error", metavar="CODE", action="append", default=[],
                         help="make this code an error (repeatable), e.g. --error JOINT_LIMIT_EQUAL")
@@ -47,17 +51,28 @@ def run(args: argparse.Namespace) -> int:
             findings, notes = validate_any(args.asset, policy, ReadOptions(body=args.body, mjcf_angle=args.mjcf_angle))
     except AssetError as exc:
         raise CommandError(INVALID_INPUT, "INPUT_UNREADABLE", args.asset, str(exc)) from exc
-    if not args.json and not args.quiet:
+    infos = bool(getattr(args, "verbose", False)) and not args.quiet  # how the input was read: behind --verbose
+    if args.json:
+        shown = [f for f in findings if not (args.quiet and f.severity == "info")]
+        print(json.dumps([f.model_dump(mode="json") for f in shown], indent=2))
+        return 1 if has_errors(findings) else 0
+    if infos:
         for note in notes:
             print(f"{'info':<7} {'INPUT_READ':<32} {args.asset.name}  {note}")
-    shown = [f for f in findings if not (args.quiet and f.severity == "info")]
-    if args.json:
-        print(json.dumps([f.model_dump(mode="json") for f in shown], indent=2))
-    else:
-        for f in shown:
-            loc = f"{f.file}:{f.line}" if f.line else f.file
-            print(f"{f.severity:<7} {f.code:<32} {loc}  {f.where}: {f.message}")
-        n = {s: sum(1 for f in findings if f.severity == s) for s in ("error", "warning", "info")}
-        verdict = "REFUSED" if has_errors(findings) else "OK"
-        print(f"{args.asset}: {verdict} ({n['error']} error(s), {n['warning']} warning(s), {n['info']} info)")
+    for f in findings:
+        if f.severity == "info" and not infos:
+            continue
+        loc = f"{f.file}:{f.line}" if f.line else f.file
+        print(f"{f.severity:<7} {f.code:<32} {loc}  {f.where}: {f.message}")
+    n = {s: sum(1 for f in findings if f.severity == s) for s in ("error", "warning", "info")}
+    n["info"] += len(notes)  # every info line counted, printed or not
+    verdict = "REFUSED" if has_errors(findings) else "OK"
+    hidden = "" if infos or not n["info"] else ", shown with --verbose"
+    print(f"{args.asset}: {verdict} ({_count(n['error'], 'error')}, {_count(n['warning'], 'warning')}, "
+          f"{_count(n['info'], 'info')}{hidden})")
     return 1 if has_errors(findings) else 0
+
+
+def _count(n: int, what: str) -> str:
+    """``1 error``, ``3 errors``, ``2 info`` (info has no plural)."""
+    return f"{n} {what}" + ("" if n == 1 or what == "info" else "s")

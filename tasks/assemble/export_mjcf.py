@@ -1,7 +1,8 @@
 """Export an output folder to MJCF (MuJoCo), derived from ``mobility.urdf`` (the source of truth),
 ``overlay.json`` (springs) and ``initial_state.json`` (the keyframe) by
-:func:`asset2sim.engines.mjcf.urdf_to_mjcf`. Written as ``mjcf/<urdf stem>.xml`` (meshdir "..", the
-original meshes referenced where they are) and ``mjcf/meshes/*.obj`` (convex pieces MuJoCo cannot take
+:func:`asset2sim.engines.mjcf.urdf_to_mjcf`. Written as ``mjcf/<urdf stem>.xml`` (every file it names relative
+to its own folder, ``../collision/...``, no ``meshdir``: hosts that resolve files against the MJCF's folder, as
+robosuite's ``MujocoXML`` does, load it too) and ``mjcf/meshes/*.obj`` (convex pieces MuJoCo cannot take
 from the original files), then checked by loading the written file with MuJoCo (:func:`check_mjcf`).
 A re-export removes the pieces it no longer uses, only those the folder records as the product's.
 """
@@ -203,8 +204,18 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
     _remove_stale_pieces(out_dir, set(build.derived_meshes))
     xml_path = out_dir / MJCF_DIR / f"{urdf.stem}.xml"
     # checked as written, before it replaces the file: a file MuJoCo refuses never lands
-    return atomic.write_text(xml_path, _header(build.notes, fixed) + build.xml + "\n",
+    return atomic.write_text(xml_path, _header(build.notes, fixed) + own_folder_paths(build.xml) + "\n",
                              check=(lambda tmp: check_mjcf(tmp, urdf, initial, fixed_base=fixed, shown=xml_path)) if check else None)
+
+
+_FILE_ATTR = re.compile(r'(<(?:mesh|texture|hfield|skin)\b[^>]*?\bfile=")(?![/\\])')
+
+
+def own_folder_paths(xml: str) -> str:
+    """``xml`` (an MJCF written with ``meshdir=".."``) with every asset file named relative to the MJCF's own
+    folder (``../collision/x.obj``) and no ``meshdir``: the same files for MuJoCo, and for hosts that join file
+    names to the MJCF's folder without reading ``meshdir``."""
+    return _FILE_ATTR.sub(r"\1../", xml.replace(' meshdir=".."', "", 1))
 
 
 def _remove_stale_pieces(out_dir: Path, keep: set[str]) -> None:

@@ -82,7 +82,7 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
         _rotate_root(model, asset.root_link, root_rotation)
     urdf.scale_model(model, s, geometry=False, inertials=False)
     _set_joints(model, overlay)
-    urdf.conform_limits(model, effort=1000.0, velocity=1000.0)  # no <limit> on fixed joints (urdf_parser_py)
+    urdf.conform_limits(model)  # no <limit> on fixed joints; effort and velocity only where the input declared them
     if collision_out is not None:
         free = overlay.mounting is None or not overlay.mounting.fixed  # a mounted root does not stand on its footprint
         densest = {name: max_density(lp) for name, lp in overlay.links.items()}
@@ -145,7 +145,7 @@ def _set_joints(model: urdf.UrdfModel, overlay: Overlay) -> None:
             if dyn is None:
                 raise OutputError(f"overlay has no dynamics for joint {joint.name!r} (validate the overlay first)")
             joint.dynamics = urdf.UrdfDynamics(damping=float(dyn.damping), friction=float(dyn.friction))
-            if joint.limit is None:  # effort and velocity filled by urdf.conform_limits
+            if joint.limit is None:  # no effort or velocity invented (the input declared none)
                 joint.limit = urdf.UrdfLimit()
             if dyn.lower is not None:  # clipped to what the geometry allows (tasks.geometry.limits)
                 joint.limit.lower = float(dyn.lower)

@@ -14,6 +14,7 @@ from asset2sim.frames import quat_angle
 from asset2sim.schemas.config import REST_BAND_FLOORS, REST_BAND_RANGE_SHARE, SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check.verdict import UNRESOLVED_PENETRATION_MM
 from asset2sim.tasks.synthesize.set_down import rest_band
 
 
@@ -44,8 +45,8 @@ def penetration(session: SimSession) -> MetricResult:
     """Phi at the session's current state, mm, with the colliding link pairs (``details.pairs``)."""
     phi, pairs = session.self_penetration()
     return MetricResult(
-        name="penetration", value=phi * 1000.0, unit=unit("penetration"), passed=None,
-        threshold="reported (no pass/fail threshold)",
+        name="penetration", value=phi * 1000.0, unit=unit("penetration"), passed=bool(phi * 1000.0 <= UNRESOLVED_PENETRATION_MM),
+        threshold=f"<= {UNRESOLVED_PENETRATION_MM:g} mm (self-contact: links that are not parent and child)",
         details={"pairs": [{"link_a": c.link_a, "link_b": c.link_b, "depth_mm": c.depth * 1000.0,
                             "max_depth_mm": c.max_depth * 1000.0, "points": c.points} for c in pairs]},
         engine=session.engine)
@@ -145,7 +146,7 @@ def settle_tilt(trace: RestTrace, engine: str = "pybullet") -> MetricResult:
     tilt = quat_angle(trace.initial_root_quat, trace.q0)
     drop = float(np.linalg.norm(trace.p0 - trace.initial_root_pos))
     return MetricResult(name="settle_tilt", value=tilt, unit=unit("settle_tilt"), passed=tilt <= SETTLE_TILT_LIMIT,
-                        threshold=f"root rotation while settling <= {SETTLE_TILT_LIMIT} rad (asset2sim check, not SPEC)",
+                        threshold=f"root rotation while settling <= {SETTLE_TILT_LIMIT} rad (the object does not fall over as it settles)",
                         details={"tilt_rad": tilt, "displacement_m": drop}, engine=engine)
 
 

@@ -65,11 +65,34 @@ class Readiness:
         return not any(v is False for v in self.tiers.values())
 
     def line(self) -> str:
-        """One line: ``interaction-ready (...)`` or ``NOT READY: probes@pybullet, ... (...)``."""
-        tiers = ", ".join(f"{t} {'pass' if v else ('FAIL' if v is False else 'n/a')}" for t, v in self.tiers.items())
-        if self.ready:
-            return f"interaction-ready ({tiers})"
-        return f"NOT READY: {', '.join(self.failures)} ({tiers})"
+        """One line, the words every command and report uses (:func:`verdict_line`): ``interaction-ready (rest pass,
+        ...)`` or ``NOT READY: probe_failed (probes@pybullet, ...; rest pass, ..., probes FAIL, ...)``."""
+        return verdict_line(self.failure_mode, self.tiers, self.failures)
+
+    def short(self) -> str:
+        """:meth:`line` without the tiers: ``interaction-ready`` or ``NOT READY: probe_failed (probes@pybullet)``."""
+        return verdict_line(self.failure_mode, {}, self.failures)
+
+
+def tiers_text(tiers: dict[str, bool | None]) -> str:
+    """``rest pass, sweep FAIL, task n/a``: each readiness tier with its verdict, in order."""
+    return ", ".join(f"{t} {'pass' if v else ('FAIL' if v is False else 'n/a')}" for t, v in tiers.items())
+
+
+def verdict_line(failure_mode: str, tiers: dict[str, bool | None], failures: list[str] | tuple[str, ...] = ()) -> str:
+    """The verdict in the one vocabulary of the terminal (``refine``, ``demo``, ``evaluate``, ``audit``),
+    ``report.html`` and ``audit.md``: ``interaction-ready`` when ``failure_mode`` is ``none``, else ``NOT READY:
+    <failure mode>``, then in parentheses the failing checks (``metric@engine``) and the ``tiers``
+    (:func:`tiers_text`) when given."""
+    inside = "; ".join(x for x in (", ".join(failures), tiers_text(tiers)) if x)
+    word = "interaction-ready" if failure_mode == "none" else f"NOT READY: {failure_mode}"
+    return f"{word} ({inside})" if inside else word
+
+
+def metric_verdict(m: Any) -> bool | None:
+    """A metric's pass/fail as the readiness verdict reads it (:data:`PENETRATION_METRICS`: at most
+    :data:`UNRESOLVED_PENETRATION_MM`, a child inside its parent beyond its modelled pose); None: not graded."""
+    return _verdict(m)
 
 
 def _verdict(m: Any) -> bool | None:
@@ -107,7 +130,7 @@ def penetration_measures(metrics: list[Any]) -> list[str]:
             continue
         verdict = {True: "pass", False: "FAIL", None: "n/a"}[_verdict(m)]
         if m.name == "penetration":
-            out.append(f"self-contact Phi {m.value:.3f} mm ({m.engine}) {verdict}")
+            out.append(f"self-contact {m.value:.3f} mm ({m.engine}) {verdict}")
             continue
         pairs = (m.details or {}).get("pairs") or {}
         worst = max(pairs, key=pairs.get) if pairs else None
@@ -131,7 +154,7 @@ def penetration_why(metrics: list[Any]) -> list[str]:
             pairs = sorted(d.get("pairs") or [], key=lambda p: -float(p.get("max_depth_mm") or 0.0))
             links = f"links '{pairs[0]['link_a']}' and '{pairs[0]['link_b']}' (not parent and child) overlap by up to " \
                     f"{float(pairs[0]['max_depth_mm']):.1f} mm" if pairs else "links that are not parent and child overlap"
-            out.append(f"self-contact penetration Phi {m.value:.1f} mm ({m.engine}) is above {UNRESOLVED_PENETRATION_MM:g} mm: "
+            out.append(f"self-contact penetration {m.value:.1f} mm ({m.engine}) is above {UNRESOLVED_PENETRATION_MM:g} mm: "
                        f"{links} at the initial state. Ask for another state (--state JOINT=closed or a smaller opening) "
                        "or give these links collision meshes that do not overlap.")
             continue

@@ -30,7 +30,7 @@ from asset2sim.tasks.check import as_asked
 from asset2sim.tasks.evaluation.metric_defs import METRICS, MetricSpec, divergence_check, metric_names
 from asset2sim.tasks.check.request_match import labelled_joints, motion_joints, requested_joints
 from asset2sim.tasks.check.task_spec import parse_task, with_work_to_do
-from asset2sim.tasks.evaluation.report_html import write_report
+from asset2sim.tasks.evaluation.report_html import portable_urdf, write_report
 from asset2sim import output_folder
 from asset2sim.output_folder import EVALUATION_NAME, REPORT_HTML_NAME, URDF_NAME
 from asset2sim.inert import one_line
@@ -258,7 +258,9 @@ def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True
     out_dir = Path(out_dir)
     paths = {}
     if evaluation_json:  # its wall time apart (timings.json), so two evaluations of the same files write the same bytes
-        paths["evaluation"] = write_json(out_dir / EVALUATION_NAME, _jsonable(ev.model_dump(mode="json", exclude={"seconds"})))
+        data = ev.model_dump(mode="json", exclude={"seconds"})
+        data["urdf"] = portable_urdf(ev, out_dir)  # no absolute path: the same refine into two folders writes the same bytes
+        paths["evaluation"] = write_json(out_dir / EVALUATION_NAME, _jsonable(data))
         output_folder.merge_timings(out_dir, {"evaluation_seconds": ev.seconds})
     if report:
         paths["report"] = write_report(ev, out_dir / REPORT_HTML_NAME, views=views, clips=clips)

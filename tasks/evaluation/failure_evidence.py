@@ -1,13 +1,16 @@
-"""Evidence of the failing robust-rest trials and joint sweeps for the report: per failing trial, a plot of
-what followed the disturbance (the tilt of the object's up direction and each joint's drift, against their
-tolerances) and frames of the object as disturbed, after settling and at the end of the test, drawn as it
-lay; per failing sweep, the opening over time against the lines that count and frames where it stalled.
+"""Evidence of every failing tier for the report: per failing robust-rest trial, a plot of what followed the
+disturbance (the tilt of the object's up direction and each joint's drift, against their tolerances) and frames of
+the object as disturbed, after settling and at the end of the test, drawn as it lay; per failing sweep, the opening
+over time against the lines that count and frames where it stalled; per failing penetration, the two parts inside
+each other drawn in colour at the initial state (and, for a child inside its parent, at its modelled pose); per
+failing operability stroke, the part where the hand took it, where the hand stopped and where it needed the most.
 """
 
 from __future__ import annotations
 
 import contextlib
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -16,6 +19,7 @@ import numpy as np
 from asset2sim.frames import quat_wxyz_matrix, quat_xyzw_to_wxyz
 from asset2sim.tasks.check.robust_rest import RobustRestConfig, RobustRestRun, Trial, up_change
 from asset2sim.tasks.check.sweep import JointSweep, SweepConfig, SweepRun
+from asset2sim.tasks.check.verdict import PENETRATION_METRICS, metric_verdict
 from asset2sim.tasks.evaluation.plots import legend, new_figure, styled, svg_bytes
 from asset2sim.tasks.geometry.render import SceneRenderer
 from asset2sim.inert import html_text, one_line
@@ -133,14 +137,99 @@ def task_poses(attempt: dict, closed: dict, others: dict[str, float]) -> list[Po
             if attempt.get(key) is not None and math.isfinite(attempt[key])]
 
 
-def draw_poses(renderer: SceneRenderer, poses: list[Pose]) -> dict[str, np.ndarray]:
+#: Colours of the two parts of a failing penetration (the first link, the second), and of every other link.
+PAIR_COLORS = ((0.85, 0.15, 0.1, 1.0), (0.15, 0.35, 0.9, 1.0))
+OTHER_COLOR = (0.86, 0.86, 0.86, 1.0)
+
+
+@dataclass(frozen=True)
+class Highlight:
+    """Frames of a penetration: ``links`` the two links drawn in :data:`PAIR_COLORS` (the others grey), ``views``
+    the views drawn at each pose."""
+
+    links: tuple[str, str]
+    views: tuple[str, ...] = ("perspective", "front")
+
+
+def penetration_failures(metrics: list) -> list[tuple[str, str, str, str, float, bool]]:
+    """(engine, kind, link a, link b, depth mm, parent-child) of every failing penetration measure, its deepest pair:
+    ``self-contact`` (two links that are not parent and child, the self-contact Phi) and ``parent-child`` (a child
+    deeper inside its parent than as modelled), graded by the readiness rule."""
+    out = []
+    for m in metrics:
+        if m.name not in PENETRATION_METRICS or metric_verdict(m) is not False:
+            continue
+        d = m.details or {}
+        if m.name == "penetration":
+            pairs = sorted(d.get("pairs") or [], key=lambda p: -float(p.get("max_depth_mm") or 0.0))
+            if pairs:
+                out.append((m.engine, "self-contact", pairs[0]["link_a"], pairs[0]["link_b"], float(pairs[0]["max_depth_mm"]), False))
+            continue
+        pairs = d.get("pairs") or {}
+        modelled = d.get("modelled") or {}
+        if pairs:
+            worst = max(pairs, key=lambda k: pairs[k] - modelled.get(k, 0.0))
+            parent, _, child = worst.partition("/")
+            out.append((m.engine, "parent-child", parent, child, float(pairs[worst]), True))
+    return out
+
+
+def operability_failures(metrics: list) -> list[tuple[str, dict, dict]]:
+    """(engine, part summary, stroke) of every failing operability stroke (``operability`` details: the part and
+    the stroke as :func:`~asset2sim.tasks.check.operability.operability_metric` records them)."""
+    out = []
+    for m in metrics:
+        if m.name != "operability" or m.passed is not False:
+            continue
+        for part in ((m.details or {}).get("parts") or {}).values():
+            out += [(m.engine, part, s) for s in part.get("strokes") or [] if not s.get("passed", True)]
+    return out
+
+
+def operability_poses(part: dict, stroke: dict, closed: dict, others: dict[str, float]) -> list[Pose]:
+    """The part of a failing stroke where the hand took it (closed for an opening stroke, open for a closing
+    one), where the hand stopped and where the stroke needed the most effort, the other joints at ``others``
+    (rad or m) and the root fixed as the tier holds it; ``closed``: joint -> {q_closed, direction, open_range}."""
+    c = closed.get(part["joint"])
+    if not c or not c.get("open_range"):
+        return []
+    opening = stroke.get("action") == "open"
+    shown = {f"the hand took it ({'closed' if opening else 'open'})": 0.0 if opening else 1.0,
+             f"the hand stopped ({100 * float(stroke.get('reached') or 0.0):.0f} % open)": stroke.get("reached")}
+    if stroke.get("at_fraction") is not None:
+        shown[f"it needed the most here ({100 * float(stroke['at_fraction']):.0f} % open)"] = stroke["at_fraction"]
+    return [(caption, {**others, part["joint"]: c["q_closed"] + c["direction"] * float(f) * c["open_range"]}, np.eye(3))
+            for caption, f in shown.items() if f is not None and math.isfinite(float(f))]
+
+
+def _stroke_table(part: dict, stroke: dict) -> str:
+    top = (part.get("force_range_n") or [None, None])[1]
+    cells = [("stroke", stroke.get("action")), ("asked to", f"{100 * float(stroke.get('target') or 0):.0f} % open"),
+             ("reached", f"{100 * float(stroke.get('reached') or 0):.0f} % open"),
+             ("force it needed (N)", stroke.get("needed_force_n")), ("the hand's range (N)", top),
+             ("torque it needed (N m)", stroke.get("needed_torque_nm")), ("stopped by", stroke.get("stopped_by") or "-")]
+    return ("<table><tr>" + "".join(f"<th>{html_text(k)}</th>" for k, _ in cells) + "</tr><tr>"
+            + "".join(f"<td>{html_text('-' if v is None else f'{v:.3g}' if isinstance(v, float) else v)}</td>" for _, v in cells)
+            + "</tr></table>")
+
+
+def draw_poses(renderer: SceneRenderer, poses: list[Pose], highlight: Highlight | None = None) -> dict[str, np.ndarray]:
     """caption -> (H, W, 3) uint8 perspective render of each pose (every joint a pose names set, the root
-    turned by its rotation)."""
+    turned by its rotation); with ``highlight``, its two links in colour and the others grey, each of its views
+    drawn (``caption, view``), the asset's own colours back afterwards."""
     out = {}
-    for caption, joints, rotation in poses:
-        renderer.set_joint_positions({k: v for k, v in joints.items() if k in renderer.joint_names and math.isfinite(v)})
-        renderer.turn_root(rotation)
-        out[caption] = renderer.render("perspective")
+    views = highlight.views if highlight is not None else ("perspective",)
+    if highlight is not None:
+        renderer.color_links(dict(zip(highlight.links, PAIR_COLORS)), OTHER_COLOR)
+    try:
+        for caption, joints, rotation in poses:
+            renderer.set_joint_positions({k: v for k, v in joints.items() if k in renderer.joint_names and math.isfinite(v)})
+            renderer.turn_root(rotation)
+            for view in views:
+                out[caption if len(views) == 1 else f"{caption}, {view}"] = renderer.render(view)
+    finally:
+        if highlight is not None:
+            renderer.color_links(None)
     return out
 
 
@@ -161,38 +250,55 @@ def _task_table(attempt: dict) -> str:
 
 def evidence_section(runs: dict, urdf: Path | str, dt: float, svg: Callable[[bytes, str], str],
                      figure: Callable[[np.ndarray, str], str], initial_state: dict[str, float] | None = None,
-                     task: dict | None = None, closed: dict | None = None) -> str:
-    """HTML of every failing robust-rest trial's and joint sweep's plot and frames, and of every failed task
-    attempt's numbers and frames (empty when none failed), the frames drawn by one renderer of ``urdf``;
-    ``svg`` and ``figure`` make the HTML of a plot and of a captioned image; ``initial_state``: the other
-    joints' positions (rad or m); ``task``: the ``task_execution`` metric's details; ``closed``: joint ->
-    {q_closed, direction, open_range}."""
+                     task: dict | None = None, closed: dict | None = None, metrics: list | None = None,
+                     modelled_state: dict[str, float] | None = None) -> str:
+    """HTML of the evidence of every failing tier (empty when none failed), the frames drawn by one renderer of
+    ``urdf``: each failing penetration's two parts in colour (at the initial state and, for a child inside its
+    parent, at ``modelled_state``, every joint at 0 clipped to its limits), each failing operability stroke's
+    numbers and frames (where the hand took the part, where it stopped, where it needed the most), each failed task
+    attempt's numbers and frames, each failing joint sweep's and robust-rest trial's plot and frames. ``svg`` and
+    ``figure`` make the HTML of a plot and of a captioned image; ``initial_state``: the joints' positions (rad or
+    m); ``task``: the ``task_execution`` metric's details; ``closed``: joint -> {q_closed, direction, open_range};
+    ``metrics``: the evaluation's metrics (the penetration and operability measures)."""
     others = dict(initial_state or {})
-    items: list[tuple[str, Callable[[], list[Pose]]]] = []  # (the HTML before the frames, the poses)
+    items: list[tuple[str, Callable[[], list[Pose]], Highlight | None]] = []  # (the HTML before the frames, poses, colours)
+    for engine, kind, a, b, depth, nested in penetration_failures(metrics or []):
+        what = (f"'{b}' inside its parent '{a}'" if nested else f"'{a}' and '{b}'")
+        poses: list[Pose] = [("at the initial state", others, np.eye(3))]
+        if nested:
+            poses.append(("as modelled", dict(modelled_state or {}), np.eye(3)))
+        items.append((_h3(f"penetration ({kind}, {engine}): {what}, {depth:.1f} mm deep at the initial state")
+                      + f"<p class='small'>{html_text(a)} in red, {html_text(b)} in blue, every other part grey.</p>",
+                      lambda poses=poses: poses, Highlight((a, b))))
+    for engine, part, stroke in operability_failures(metrics or []):
+        items.append((_h3(f"operability of {part['joint']} ({part.get('label') or 'unlabelled'}, {engine}): "
+                          f"{stroke['action']}: {stroke.get('failure', '')}") + _stroke_table(part, stroke),
+                      lambda p=part, s=stroke: operability_poses(p, s, dict(closed or {}), others), None))
     for attempt in [a for a in (task or {}).get("attempts", []) if not a.get("success")]:
         items.append((_h3(f"task: {attempt['action']} {attempt['joint']}: {attempt.get('failure', '')}") + _task_table(attempt),
-                      lambda a=attempt: task_poses(a, dict(closed or {}), others)))
+                      lambda a=attempt: task_poses(a, dict(closed or {}), others), None))
     sweeps, trials = failing(runs)
     for engine, js in sweeps:
         items.append((_h3(f"joint sweep of {js.joint} ({engine}): {js.failure}") + svg(sweep_plot(js), f"sweep {js.joint}"),
-                      lambda js=js: sweep_poses(js, others)))
+                      lambda js=js: sweep_poses(js, others), None))
     for engine, trial in trials:
         items.append((_h3(f"robust rest, trial {trial.name} ({engine}): {trial.failure}") + svg(trial_plot(trial, dt), f"trial {trial.name}"),
-                      lambda trial=trial: trial_poses(trial)))
+                      lambda trial=trial: trial_poses(trial), None))
     if not items:
         return ""
-    parts = ["<h2>Why it failed: the failing trials</h2>"]
+    parts = ["<h2>Why it failed: the evidence</h2>"]
     with contextlib.ExitStack() as stack:
         try:
             renderer, error = stack.enter_context(SceneRenderer(urdf, size=FRAME_SIZE)), None
         except Exception as exc:  # the plots and numbers stand alone
             renderer, error = None, exc
-        for head, poses in items:
+        for head, poses, highlight in items:
             parts.append(head)
             try:
                 if renderer is None:
                     raise error
-                parts.append("<div class='views'>" + "".join(figure(img, cap) for cap, img in draw_poses(renderer, poses()).items()) + "</div>")
+                drawn = draw_poses(renderer, poses(), highlight)
+                parts.append("<div class='views'>" + "".join(figure(img, cap) for cap, img in drawn.items()) + "</div>")
             except Exception as exc:
                 parts.append(f"<p class='small'>frames not drawn ({type(exc).__name__}: {html_text(one_line(exc))})</p>")
     return "".join(parts)

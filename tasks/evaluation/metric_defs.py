@@ -362,15 +362,17 @@ def _m_request_met(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResul
         if abs(got - sz.value) > tol:
             unmet.append(as_asked.missed(sz.phrase, kind="size", target=sz.value, achieved=got, unit="m", tolerance=tol,
                                          reason=f"{sz.dimension} of the closed object"))
-    total = next((p for p in spec.properties if p.mass is not None and p.label is None), None)
+    total = next((p for p in spec.properties if (p.mass is not None or p.mass_range is not None) and p.label is None), None)
     if total is not None:
         graded += 1
         got = sum(v["mass"] for v in r.masses.values()) if r is not None else sum(
             (li.mass if li.mass is not None else 1.0) for li in ctx.links.values())
-        tol = sem.TARGET_REL_TOL * float(total.mass)
-        if abs(got - float(total.mass)) > tol:
-            unmet.append(as_asked.missed(total.phrase, kind="mass", target=float(total.mass), achieved=float(got), unit="kg", tolerance=tol,
-                                         reason="total mass in the simulator"))
+        lo, hi = (float(total.mass), float(total.mass)) if total.mass is not None else total.mass_range
+        target = min(max(float(got), lo), hi)  # a range is met anywhere in it: its nearer end
+        tol = sem.TARGET_REL_TOL * target
+        if abs(got - target) > tol:
+            unmet.append(as_asked.missed(total.phrase, kind="mass", target=target, achieved=float(got), unit="kg", tolerance=tol,
+                                         reason="total mass in the simulator" + ("" if lo == hi else f" (asked {lo:g}-{hi:g} kg)")))
     m = as_asked.request_met_metric(unmet, request=ctx.prompt, graded=graded, not_graded=not_graded,
                                     source="the evaluation (the output measured, closed ends its own)")
     return [m]

@@ -8,16 +8,20 @@ joint's own coordinate (radians with degrees, or millimetres).
 from __future__ import annotations
 
 import math
+import re
+import tempfile
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
 from asset2sim.tasks.check.as_asked import quantity_text
-from asset2sim.tasks.check.asset_files import find_urdf, parse_urdf
+from asset2sim.tasks.check.asset_files import find_urdf
 from asset2sim.tasks.geometry.render import render_views
-from asset2sim.engines.source import UrdfFile
-from asset2sim.inert import html_text
+from asset2sim.tasks.ingest import declared as declared_mod
+from asset2sim.tasks.ingest import staged
+from asset2sim.inert import html_text, one_line
 
 #: Views shown for the input and the output, side by side.
 COMPARED_VIEWS = ("perspective", "front")
@@ -67,24 +71,149 @@ def _row(what: str, before: str, after: str, why: str) -> str:
             f"<td class='small'>{esc(why)}</td></tr>")
 
 
-def _input_joints(report: dict[str, Any]) -> dict[str, Any]:
-    """The input URDF's joints (``asset_files.JointInfo`` by name); {} when the input cannot be read."""
+#: Units of a joint's damping, friction and stiffness, by joint type (revolute and continuous share theirs).
+DYNAMICS_UNITS = {"rotational": {"damping": "N m s/rad", "friction": "N m", "stiffness": "N m/rad"},
+                  "linear": {"damping": "N s/m", "friction": "N", "stiffness": "N/m"}}
+
+
+def dynamics_unit(quantity: str, jtype: str) -> str:
+    """The unit of a joint's ``quantity`` (``damping``, ``friction``, ``stiffness``) for a joint of type ``jtype``."""
+    return DYNAMICS_UNITS["linear" if jtype == "prismatic" else "rotational"][quantity]
+
+
+@dataclass
+class InputSide:
+    """The input as its own file declares it, for the input column and picture of "What asset2sim changed":
+    ``name`` the file the user gave (its name), ``format`` ``urdf`` / ``mjcf`` / ``usd``; ``physics`` what it
+    declares (:func:`asset2sim.tasks.ingest.declared.read_declared`; None when it cannot be read, ``error`` then says
+    why in one line); ``urdf`` a URDF of it to draw (the input's own, or the MJCF or USD file staged as one in
+    ``_tmp``, removed by :meth:`close`)."""
+
+    name: str
+    format: str = "urdf"
+    physics: declared_mod.DeclaredPhysics | None = None
+    urdf: Path | None = None
+    error: str = ""
+    _tmp: tempfile.TemporaryDirectory | None = field(default=None, repr=False)
+
+    def close(self) -> None:
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+
+
+def read_input(source: Path | str | None) -> InputSide:
+    """The input at ``source`` (``report.json``'s ``source``: a URDF folder or file, an MJCF or USD file) read as its
+    file declares it and made drawable; never raises: what cannot be read is said in ``error``."""
+    if not source:
+        return InputSide(name="the input", error="report.json names no input")
+    path = Path(source)
+    side = InputSide(name=path.name)
+    if not path.exists():
+        side.error = f"{path.name} is no longer where it was read from"
+        return side
     try:
-        return parse_urdf(UrdfFile(find_urdf(Path(report["source"]))))[1]
-    except Exception:
-        return {}
+        other = staged.other_format_file(path)
+        if other is not None:
+            side.format = other[1]
+            side.physics = declared_mod.read_declared(other[0])
+            side._tmp = tempfile.TemporaryDirectory(prefix="asset2sim-input-")
+            side.urdf = staged.stage(side.physics.read, side._tmp.name).urdf_path
+        else:
+            side.urdf = find_urdf(path)
+            side.physics = declared_mod.read_declared(path, side.urdf)
+    except Exception as exc:  # the table says what could not be read; the output side stands alone
+        side.error = f"{path.name} could not be read ({type(exc).__name__}: {one_line(exc).replace(str(path), path.name)})"
+    return side
 
 
-def change_rows(report: dict[str, Any], overlay: dict[str, Any] | None, joint_types: dict[str, str]) -> list[str]:
-    """The table rows (HTML) of every change refine made, each with its reason: scale, total mass, joint
-    limits clipped to the geometry, the joint state, damping and friction raised or lowered by the checks,
-    collision pieces, stability by design and the root's mounting."""
-    ov = overlay or {}
+def _declared_mass(side: InputSide) -> str:
+    """The input's total mass as its file declares it: ``10.39 kg (as declared: frame 7.854, door 2.435, latch 0.1 kg)``,
+    the mass the simulator would infer from geoms, or ``none declared``."""
+    dp = side.physics
+    if dp is None:
+        return side.error or "-"
+    declared = {n: ln.mass for n, ln in dp.links.items() if ln.how == "declared" and ln.mass is not None}
+    inferred = {n: ln.mass for n, ln in dp.links.items() if ln.how == "inferred" and ln.mass is not None}
+    if not declared and not inferred:
+        return "none declared"
+    total = sum(declared.values()) + sum(inferred.values())
+    parts = ", ".join(f"{n} {m:.4g}" for n, m in {**declared, **inferred}.items())
+    how = "as declared" if not inferred else ("as MuJoCo infers it from the geoms" if not declared else
+                                              f"declared for {len(declared)} link(s), inferred from the geoms for {len(inferred)}")
+    return f"{total:.4g} kg ({how}: {parts} kg)"
+
+
+def _declared_value(side: InputSide, joint: str, quantity: str, jtype: str) -> str:
+    """A joint's ``quantity`` as the input declares it, with its unit; ``none declared`` (a simulator's default 0)."""
+    dp = side.physics
+    if dp is None:
+        return "-"
+    dj = dp.joints.get(joint)
+    v = None if dj is None else getattr(dj, quantity)
+    if v is None:
+        return "none declared"
+    text = f"{float(v):.4g} {dynamics_unit(quantity, jtype)}"
+    if quantity == "stiffness" and dj.reference is not None:
+        text += f" about {position_text(dj.reference, jtype)}"
+    return text
+
+
+def _output_value(jd: dict[str, Any], quantity: str, jtype: str) -> str:
+    v = float(jd.get(quantity) or 0.0)
+    text = f"{v:.4g} {dynamics_unit(quantity, jtype)}"
+    if quantity == "stiffness" and v > 0 and jd.get("spring_reference") is not None:
+        text += f" about {position_text(jd['spring_reference'], jtype)}"
+    return text
+
+
+def state_moves(report: dict[str, Any]) -> dict[str, str]:
+    """joint -> why its initial state is not where its request put it (the band's centre, or the number asked), in one
+    clause: stability by design opened it elsewhere within its band (``design_changes``: the reason and the margin), or
+    the state search moved it to remove self-penetration (``state``: asked vs found). Joints nothing moved are not
+    listed. ``report``: ``report.json`` as a dict."""
+    out: dict[str, str] = {}
+    for note in report.get("design_changes") or []:
+        if not str(note).startswith("stability by design"):
+            continue
+        head, _, rest = str(note).partition("; ")
+        for name in (report.get("initial_joint_positions") or {}):
+            m = re.search(rf"(?<![\w-]){re.escape(name)} opened to (\d+(?:\.\d+)?) of its range(?: \(allowed [^)]*\))?", rest)
+            if m:
+                where = rest.split(", where the object stands steadiest", 1)[1].split(" (asked")[0] if "stands steadiest" in rest else ""
+                out[name] = (f"moved to {100 * float(m.group(1)):.0f} % open, off its band's target: "
+                             f"{head.removeprefix('stability by design: ')}"
+                             + (f"; the object stands steadiest there{where}" if where else "")
+                             + ("; the least opening its band allows" if "the least its band allows" in note else ""))
+    state = report.get("state") or {}
+    for name, q in (report.get("initial_joint_positions") or {}).items():
+        asked = (state.get("requested") or {}).get(name)
+        if name not in out and asked is not None and abs(float(asked) - float(q)) > 1e-9:
+            out[name] = f"moved by the state search to remove self-penetration ({state.get('method', '')})"
+    return out
+
+
+def change_rows(report: dict[str, Any], overlay: dict[str, Any] | None, joint_types: dict[str, str],
+                side: InputSide | None = None) -> list[str]:
+    """The table rows (HTML) of every change refine made, each with its reason, the input column as the input's own
+    file declares it (``side``, :func:`read_input`; read here when None): scale, total mass, joint limits clipped to
+    the geometry, the joint state, every movable joint's damping, friction and (when either side has a spring)
+    stiffness with their units, collision pieces, stability by design and the root's mounting."""
+    own = side is None
+    side = read_input(report.get("source")) if side is None else side
+    try:
+        return _change_rows(report, overlay or {}, joint_types, side)
+    finally:
+        if own:
+            side.close()
+
+
+def _change_rows(report: dict[str, Any], ov: dict[str, Any], joint_types: dict[str, str], side: InputSide) -> list[str]:
     notes = ov.get("notes") or {}
     rows = [_row("scale", "1 (the input's units)", f"{float(report.get('scale', 1.0)):.4g}", notes.get("size", ""))]
-    rows.append(_row("total mass", "none given (or not plausible)", f"{float(report.get('total_mass', 0.0)):.4g} kg",
+    rows.append(_row("total mass", _declared_mass(side), f"{float(report.get('total_mass', 0.0)):.4g} kg",
                      "; ".join(x for x in (notes.get("mass_arithmetic"), notes.get("material")) if x)))
-    before = _input_joints(report)
+    before = side.physics.joints if side.physics is not None else {}
     for name, jd in (ov.get("joints") or {}).items():
         src = str(jd.get("limit_source") or "")
         if src.startswith("clipped"):
@@ -100,23 +229,32 @@ def change_rows(report: dict[str, Any], overlay: dict[str, Any] | None, joint_ty
     bands = report.get("requested_bands") or {}
     state = report.get("state") or {}
     closed = report.get("closed_positions") or {}
+    moves = state_moves(report)
     for name, q in (report.get("initial_joint_positions") or {}).items():
         jt = joint_types.get(name, "revolute")
-        moved = abs(float((state.get("requested") or {}).get(name, q)) - float(q)) > 1e-9
         asked = next((q for q in ((report.get("request") or {}).get("quantities") or []) if str(q.get("what", "")).startswith(f"{name} ")), None)
         why = (f"the request: '{asked.get('phrase')}'" if asked else
                f"the request: {bands[name].replace('_', ' ')}" if name in bands else "not asked: closed")
-        if moved:
-            why += f"; moved by the state search to remove self-penetration ({state.get('method', '')})"
-        rows.append(_row(f"{name} initial position", "as modelled (0)",
+        if name in moves:
+            why += f"; {moves[name]}"
+        start = (side.physics.initial_state if side.physics is not None else {}).get(name)
+        rows.append(_row(f"{name} initial position", "as modelled (0)" if start is None else
+                         f"{position_text(start, jt)} (the file's keyframe)",
                          f"{from_closed_text(q, closed.get(name), jt)}, {opening_text(fractions.get(name))}".rstrip(", "), why))
-    changed: dict[tuple[str, str], tuple[float, str]] = {}
+    changed: dict[tuple[str, str], str] = {}
     for rnd in report.get("escalation") or []:
         for joint, ch in (rnd.get("changes") or {}).items():
-            for k, v in ch.items():
-                changed[(joint, k)] = (v, f"after check round {rnd.get('round')}: {rnd.get('reason', '')}")
-    for (joint, k), (v, why) in changed.items():
-        rows.append(_row(f"{joint} {k}", "estimated", f"{float(v):.4g}", why))
+            for k in ch:
+                changed[(joint, k)] = f"after check round {rnd.get('round')}: {rnd.get('reason', '')}"
+    for name, jd in (ov.get("joints") or {}).items():
+        jt = joint_types.get(name, "revolute")
+        dj = before.get(name)
+        spring = float(jd.get("stiffness") or 0.0) > 0 or (dj is not None and (dj.stiffness or 0.0) > 0)
+        for k in ("damping", "friction", "stiffness"):
+            if k == "stiffness" and not spring:
+                continue
+            why = changed.get((name, k)) or _source_of(str(jd.get("source") or ""), k)
+            rows.append(_row(f"{name} {k}", _declared_value(side, name, k, jt), _output_value(jd, k, jt), why))
     for line in (state.get("collision_changes") or []):
         rows.append(_row("collision pieces", "", "", line))
     for line in report.get("design_changes") or []:
@@ -127,29 +265,46 @@ def change_rows(report: dict[str, Any], overlay: dict[str, Any] | None, joint_ty
     return rows
 
 
-def before_after(report: dict[str, Any], after: dict[str, np.ndarray] | None, img: Callable[[np.ndarray, str], str]) -> str:
-    """The input as modelled (every joint at 0, its own scale) beside the output at its initial state,
-    :data:`COMPARED_VIEWS` each; ``after``: the output's renders (view -> (H, W, 3) uint8); ``img``: an
-    (image, caption) -> HTML function. A note when the input cannot be drawn."""
+def before_after(side: InputSide, after: dict[str, np.ndarray] | None, img: Callable[[np.ndarray, str], str]) -> str:
+    """The input as modelled (every joint at 0, its own scale; an MJCF or USD file as it is read into the asset
+    model) beside the output at its initial state, :data:`COMPARED_VIEWS` each; ``side``: :func:`read_input`;
+    ``after``: the output's renders (view -> (H, W, 3) uint8); ``img``: an (image, caption) -> HTML function. A
+    one-line note naming the input's file (never a temporary path) when it cannot be drawn."""
     figs = []
     size = next(((a.shape[1], a.shape[0]) for a in (after or {}).values()), (256, 256))
     try:
-        src = render_views(find_urdf(Path(report["source"])), {}, views=COMPARED_VIEWS, size=size)
-        figs += [img(src[v], f"input, {v}") for v in COMPARED_VIEWS]
+        if side.urdf is None:
+            raise ValueError(side.error or "not read")
+        src = render_views(side.urdf, {}, views=COMPARED_VIEWS, size=size)
+        figs += [img(src[v], f"input ({side.name}), {v}") for v in COMPARED_VIEWS]
     except Exception as exc:
-        figs.append(f"<p class='small'>the input could not be drawn ({esc(type(exc).__name__)}: {esc(exc)})</p>")
+        why = side.error or f"{type(exc).__name__}: {one_line(exc)}".replace(str(side.urdf), side.name)
+        figs.append(f"<p class='small'>the input could not be drawn: {esc(why)}</p>")
     figs += [img(after[v], f"output, {v}") for v in COMPARED_VIEWS if after and v in after]
     return "<div class='views'>" + "".join(figs) + "</div>"
 
 
 def changes_section(report: dict[str, Any] | None, overlay: dict[str, Any] | None, joint_types: dict[str, str],
                     after: dict[str, np.ndarray] | None, img: Callable[[np.ndarray, str], str]) -> str:
-    """The report's "What asset2sim changed" section (HTML); empty without a ``report.json``."""
+    """The report's "What asset2sim changed" section (HTML): the input (as its own file declares it, URDF, MJCF or
+    USD alike) drawn beside the output, the table of changes; empty without a ``report.json``."""
     if not report:
         return ""
-    table = ("<table><tr><th>what</th><th>input</th><th>output</th><th>why</th></tr>"
-             + "".join(change_rows(report, overlay, joint_types)) + "</table>")
-    return "<h2>What asset2sim changed</h2>" + before_after(report, after, img) + table + understood(report.get("request"))
+    side = read_input(report.get("source"))
+    try:
+        table = ("<table><tr><th>what</th><th>input (" + esc(side.name) + ")</th><th>output</th><th>why</th></tr>"
+                 + "".join(change_rows(report, overlay, joint_types, side)) + "</table>")
+        return "<h2>What asset2sim changed</h2>" + before_after(side, after, img) + table + understood(report.get("request"))
+    finally:
+        side.close()
+
+
+def _source_of(source: str, quantity: str) -> str:
+    """The part of a joint's overlay ``source`` text that speaks of ``quantity`` (``"; damping 2 from the request
+    ('...')"``), else the whole text: why the output has its value."""
+    parts = [p.strip() for p in source.split(";") if p.strip()]
+    named = [p for p in parts if quantity in p]
+    return "; ".join(named or parts)
 
 
 def understood(found: dict[str, Any] | None) -> str:
@@ -164,7 +319,8 @@ def understood(found: dict[str, Any] | None) -> str:
         unit = q.get("unit", "")
         frame = " from the closed end" if q.get("kind") == "state" and unit in ("rad", "m") else ""
         got = "-" if q.get("achieved") is None else quantity_text(q["achieved"], unit) + frame
-        asked = "-" if q.get("asked") is None else quantity_text(q["asked"], unit) + frame
+        asked = "-" if q.get("asked") is None else quantity_text(q["asked"], unit) + (
+            "" if q.get("asked_high") is None else f" to {quantity_text(q['asked_high'], unit)}") + frame
         rows.append(_row(f"{q.get('what')} ('{q.get('phrase', '')}')", asked, got,
                          ("within tolerance" if q.get("within_tolerance") else "MISSED") + (f": {q['why']}" if q.get("why") else "")))
     if found.get("ignored"):

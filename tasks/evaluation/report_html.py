@@ -16,7 +16,8 @@ import numpy as np
 
 from asset2sim.atomic import write_text
 from asset2sim.schemas.metrics import METRIC_INFO
-from asset2sim.tasks.check.verdict import readiness, why_it_failed
+from asset2sim.tasks.check.asset_files import clip_to_limits
+from asset2sim.tasks.check.verdict import UNRESOLVED_PENETRATION_MM, penetration_measures, readiness, why_it_failed
 from asset2sim.tasks.evaluation import plots
 from asset2sim.tasks.evaluation.failure_evidence import evidence_section
 from asset2sim.tasks.evaluation.report_changes import changes_section, esc, from_closed_text, opening_text
@@ -133,10 +134,33 @@ def _verdict_table(ev) -> str:
     )
 
 
+def modelled_state(ctx) -> dict[str, float]:
+    """Every movable joint of the evaluated URDF at 0 clipped to its limits (rad or m): the pose the asset was
+    modelled in, which a child inside its parent is graded against; {} without a context."""
+    if ctx is None:
+        return {}
+    return {n: clip_to_limits(0.0, j.lower, j.upper) for n, j in ctx.joints.items() if j.type in ("revolute", "prismatic", "continuous")}
+
+
+def measured_engines(ev) -> list[str]:
+    """The engines the report's verdicts were measured in (those of its metrics, then those the evaluation ran), in
+    order: the header names every engine a row of the verdict table comes from."""
+    return list(dict.fromkeys([m.engine for m in ev.metrics if m.engine and m.engine != "none"] + list(ev.engines)))
+
+
 def _penetration_details(ev) -> str:
-    out = []
+    """The penetration tier at the initial state: one sentence with its verdict (the readiness rule, the words of the
+    terminal's penetration line), then the self-contact pairs and the children inside their parents, each with its
+    verdict; never "no penetration" above a failing pair."""
+    r = readiness(list(ev.metrics))
+    measures = penetration_measures(ev.metrics)
+    verdict = {True: "pass", False: "FAIL", None: "not measured"}[r.tiers.get("penetration")]
+    out = [f"<p>penetration tier: <b>{verdict}</b>" + (f" ({esc('; '.join(measures))})" if measures else "") + "</p>"]
     for m in ev.metrics:
-        if m.name != "penetration" or not m.details.get("pairs"):
+        if m.name != "penetration" or m.value is None:
+            continue
+        if not m.details.get("pairs"):
+            out.append(f"<p class='small'>self-contact ({esc(m.engine)}): no two links that are not parent and child overlap</p>")
             continue
         rows = "".join(
             f"<tr><td>{esc(p['link_a'])}</td><td>{esc(p['link_b'])}</td><td class='num'>{fmt(p['depth_mm'])}</td>"
@@ -144,20 +168,21 @@ def _penetration_details(ev) -> str:
             for p in m.details["pairs"]
         )
         out.append(
-            f"<h3>Penetrating link pairs ({esc(m.engine)})</h3><table><tr><th>link a</th><th>link b</th>"
-            f"<th>sum of depths (mm)</th><th>deepest point (mm)</th><th>points</th></tr>{rows}</table>"
+            f"<h3>Self-contact: penetrating link pairs ({esc(m.engine)}; {'pass' if m.passed else 'FAIL'}: {esc(m.threshold)})</h3>"
+            f"<table><tr><th>link a</th><th>link b</th><th>sum of depths (mm)</th><th>deepest point (mm)</th><th>points</th></tr>"
+            f"{rows}</table>"
         )
-    if not out:
-        out.append("<p class='small'>no self-contact penetration (links that are not parent and child) at the initial state</p>")
-    for m in ev.metrics:  # the pairs the SPEC's Phi skips: a child inside its parent
+    for m in ev.metrics:  # the pairs the self-contact Phi skips: a child inside its parent
         pairs = m.details.get("pairs") if m.name == "parent_child_penetration" else None
         if not pairs:
             continue
         modelled = m.details.get("modelled") or {}
         rows = "".join(f"<tr><td>{esc(k.partition('/')[0])}</td><td>{esc(k.partition('/')[2])}</td><td class='num'>{fmt(v)}</td>"
-                       f"<td class='num'>{fmt(modelled.get(k, 0.0))}</td></tr>" for k, v in pairs.items())
-        out.append(f"<h3>A child inside its parent ({esc(m.engine)})</h3><table><tr><th>parent</th><th>child</th>"
-                   f"<th>depth (mm)</th><th>at its modelled pose (mm)</th></tr>{rows}</table>")
+                       f"<td class='num'>{fmt(modelled.get(k, 0.0))}</td><td class='num'>{fmt(max(v - modelled.get(k, 0.0), 0.0))}</td>"
+                       f"{verdict_cell(max(v - modelled.get(k, 0.0), 0.0) <= UNRESOLVED_PENETRATION_MM)}</tr>" for k, v in pairs.items())
+        out.append(f"<h3>A child inside its parent ({esc(m.engine)}; {esc(m.threshold)})</h3><table><tr><th>parent</th>"
+                   "<th>child</th><th>depth (mm)</th><th>at its modelled pose (mm)</th><th>deeper than modelled (mm)</th>"
+                   f"<th>verdict</th></tr>{rows}</table>")
     return "".join(out)
 
 
@@ -419,11 +444,13 @@ def clips_section(clip_set, folder: str = "clips") -> str:
     return "\n".join(parts)
 
 
-def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str = "evaluate", clips=None) -> str:
+def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str = "evaluate", clips=None,
+                  folder: Path | str | None = None) -> str:
     """The HTML text of one evaluation's report; ``views``: renders at
     ``ev.initial_state`` (view -> (H, W, 3) uint8) already taken, None to render here;
     ``command``: the command that wrote it (``refine`` or ``evaluate``), in the title;
-    ``clips``: the :class:`~asset2sim.schemas.realism.ClipSet` written beside the report (played in it)."""
+    ``clips``: the :class:`~asset2sim.schemas.realism.ClipSet` written beside the report (played in it); ``folder``: where the
+    report is written (the URDF is named relative to it when it lies there, :func:`portable_urdf`)."""
     ctx = ev._context
     dt = ctx.conventions.timestep if ctx is not None else 1.0 / 240.0
     settle_n = int(round(ctx.conventions.settle_time / dt)) if ctx is not None else 240
@@ -441,8 +468,11 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
     sections = [
         f"<h1>asset2sim {esc(command)}: {esc(ev.asset_id)}</h1>",
         f"<p class='meta'>method <b>{esc(ev.method or '-')}</b> &middot; category {esc(ev.category or '-')} &middot; "
-        f"engines {esc(', '.join(ev.engines))} &middot; scale {fmt(ev.scale)} ({esc(ev.scale_source)})</p>",
-        f"<p class='meta'>URDF <code>{esc(ev.urdf)}</code><br/>request: <i>{esc(ev.prompt or '-')}</i><br/>"
+        f"engines {esc(', '.join(measured_engines(ev)))} &middot; scale {fmt(ev.scale)} ({esc(ev.scale_source)})</p>",
+        f"<p class='meta'>URDF <code>{esc(portable_urdf(ev, folder) if folder is not None else ev.urdf)}</code>"
+        + (f" &middot; input <code>{esc(Path(str(ctx.report['source'])).name)}</code>"
+           if ctx is not None and ctx.report and ctx.report.get("source") else "") + "<br/>"
+        f"request: <i>{esc(ev.prompt or '-')}</i><br/>"
         f"reference: <code>{esc(ev.reference or '-')}</code></p>",
         _request_warnings(pa.details) if (pa := ev.metric("prompt_alignment")) is not None else "",
         f"<p>{badge}</p>",
@@ -456,8 +486,9 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         changes_section(ctx.report if ctx is not None else None, ctx.overlay if ctx is not None else None, joint_types, views, _figure),
         "<h2>Verdicts</h2>",
         _verdict_table(ev),
-        evidence_section(ev._runs, ev.urdf, dt, svg_tag, _figure, dict(ev.initial_state),
-                         getattr(ev.metric("task_execution"), "details", None), ev.closed_positions),
+        evidence_section(ev._runs, ctx.urdf if ctx is not None else ev.urdf, dt, svg_tag, _figure, dict(ev.initial_state),
+                         getattr(ev.metric("task_execution"), "details", None), ev.closed_positions, list(ev.metrics),
+                         modelled_state(ctx)),
         "<h2>Operability</h2>",
         operability_section(ev),
         "<h2>Penetration at the initial state</h2>",
@@ -487,12 +518,27 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
     return _page(f"asset2sim {esc(command)} {esc(ev.asset_id)}", "\n".join(sections))
 
 
+def portable_urdf(ev, out_dir: Path | str) -> str:
+    """The evaluated URDF as ``evaluation.json`` and ``report.html`` name it: relative to ``out_dir`` (the folder they
+    are written to) when the URDF lies in it, as a refine's output does (``mobility.urdf``), so a moved or copied
+    output names no place it is not; else the path as given."""
+    ctx = getattr(ev, "_context", None)
+    evaluated = Path(ctx.urdf) if ctx is not None else Path(ev.urdf)
+    folder = Path(out_dir).resolve()
+    for candidate in (evaluated, Path(ev.urdf)):
+        try:
+            return candidate.resolve().relative_to(folder).as_posix()
+        except (ValueError, OSError):
+            continue
+    return str(ev.urdf)
+
+
 def write_report(ev, path: Path | str, views: dict[str, np.ndarray] | None = None, clips=None) -> Path:
     """Write ``report.html`` atomically (``views`` as in :func:`render_report`); returns the path. Its
     title names ``refine`` when it lies beside the refine's ``report.json`` it reports on, else ``evaluate``."""
     ctx = ev._context
     by_refine = ctx is not None and ctx.report is not None and Path(path).resolve().parent == Path(ctx.folder).resolve()
-    return write_text(Path(path), render_report(ev, views, "refine" if by_refine else "evaluate", clips))
+    return write_text(Path(path), render_report(ev, views, "refine" if by_refine else "evaluate", clips, folder=Path(path).parent))
 
 
 # ------------------------------------------------------------------ benchmark pages
@@ -533,14 +579,14 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
             err = f" <span class='small'>({r.get('errors')} failed to produce)</span>" if r.get("errors") else ""
             parts.append(f"<tr><td>{esc(method)}{err}</td>" + "".join(f"<td class='num'>{c}</td>" for c in cells) + "</tr>")
         parts.append("</table>")
-    parts.append("<h2>Research numbers (SPEC, thesis 9-object set, Isaac Sim)</h2><table><tr>"
+    parts.append("<h2>Research numbers (thesis 9-object set, Isaac Sim)</h2><table><tr>"
                  + "".join(f"<th>{esc(k)}</th>" for k in research[0]) + "</tr>"
                  + "".join("<tr>" + "".join(f"<td>{esc(v)}</td>" for v in r.values()) + "</tr>" for r in research)
                  + "</table>")
     if chart:
         parts.append("<h2>Pass rates</h2>" + svg_tag(chart, "pass rates"))
     parts.append("<p class='small'>Ours: PyBullet under the conventions of docs/guide/metrics.md; the research measured in "
-                 "Isaac Sim (PhysX). Penetration in mm is Phi summed over contact points; pass rates count assets that were "
+                 "Isaac Sim (PhysX). Penetration in mm is the depth summed over self-contact points; pass rates count assets that were "
                  "produced; (n) is the number of assets with a verdict.</p>")
     return _page("asset2sim benchmark", "\n".join(parts))
 

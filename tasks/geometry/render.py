@@ -142,6 +142,7 @@ class SceneRenderer:
         self.urdf_path = Path(urdf_path)
         self._viewer = None
         self._root0: tuple[np.ndarray, np.ndarray] | None = None
+        self._own_colors: list | None = None
         self._work = Path(tempfile.mkdtemp(prefix="asset2sim-render-"))
         try:
             t0 = time.perf_counter()
@@ -186,6 +187,26 @@ class SceneRenderer:
             if not math.isfinite(v):
                 raise ValueError(f"joint {name!r}: position {value!r} is not finite")
             self._viewer.set_joint_positions({name: v})
+
+    def color_links(self, colors: Mapping[str, Iterable[float]] | None, others: Iterable[float] | None = None) -> None:
+        """Draw each link of ``colors`` (link name -> RGBA, each in 0..1) in its colour and, with ``others``, every
+        other link in that one (a pale grey makes two parts stand out); ``colors`` None: the asset's own colours
+        again.
+
+        Raises:
+            KeyError: a link name the URDF has no visual of.
+        """
+        if self._own_colors is None:
+            self._own_colors = list(self._viewer.visual_colors())
+        known = {link for link, _, _ in self._own_colors}
+        missing = [n for n in (colors or {}) if n not in known]
+        if missing:
+            raise KeyError(f"{self.urdf_path}: no visual of link(s) {missing}")
+        for link, k, rgba in self._own_colors:
+            c = (colors or {}).get(link) if colors is not None else None
+            if c is None and colors is not None and others is not None:
+                c = others
+            self._viewer.set_visual_color(link, k, rgba if c is None else tuple(float(x) for x in c))
 
     def turn_root(self, rotation: np.ndarray) -> None:
         """Draw the object turned by ``rotation`` (3, 3) about the world origin from its pose as loaded (a

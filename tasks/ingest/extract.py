@@ -127,12 +127,29 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
     desc = AssetDescription(
         asset_id=asset_id or default_id, source_dir=folder, urdf_path=urdf,
         robot_name=robot.name or urdf.stem, links=links, joints=joints, root_link=roots[0],
-        category=category or result.category, input_hash=sha256_files(files, known=_digests_read(staged_asset)),
+        category=category or result.category,
+        input_hash=sha256_files(files, known=_digests_read(staged_asset), named=_staged_names(staged_asset, folder)),
         staged_from=None if staged_asset is None else Path(os.path.realpath(staged_asset.read.source)),
         staging_notes=[] if staged_asset is None else list(staged_asset.read.notes))
     if key is not None:
         _EXTRACT_MEMO.put(key, read, (desc, list(result.findings)))
     return desc, list(result.findings)
+
+
+def _staged_names(staged_asset: "staged.StagedAsset | None", folder: Path):
+    """The name each file is hashed under: a file of the staging ``folder`` (a new temporary folder every run) by
+    its place in it (``<staged>/model.urdf``), every other file by its path; None for an input not staged. The same
+    input then has the same hash in every process (a rerun is skipped, two outputs of it are the same bytes)."""
+    if staged_asset is None:
+        return None
+
+    def named(p: Path) -> str:
+        try:
+            return f"<staged>/{Path(os.path.realpath(p)).relative_to(folder).as_posix()}"
+        except ValueError:
+            return str(p)
+
+    return named
 
 
 def _digests_read(staged_asset: "staged.StagedAsset | None") -> dict[str, str]:

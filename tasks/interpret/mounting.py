@@ -79,7 +79,7 @@ def category_mounting(category: str | None) -> RootMount:
     """The prior of ``category`` (canonical name); without an entry (or None) free-standing."""
     prior = load_mounting_priors().get(category or "")
     if prior is None:
-        return RootMount(kind="free-standing", fixed=False, source=f"category prior: {category or 'unknown category'} is free-standing (SPEC convention)")
+        return RootMount(kind="free-standing", fixed=False, source=f"category prior: {category or 'unknown category'} is free-standing (the measurement convention for objects that stand)")
     return RootMount(kind=prior.kind, fixed=prior.kind != FREE, source=f"category prior ({category}): {prior.kind}; {prior.source.strip()}")
 
 

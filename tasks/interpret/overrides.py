@@ -36,7 +36,7 @@ def apply_overrides(spec: RequestSpec, overrides: RequestOverrides | None, asset
     update: dict = {"overrides": overrides.given()}
     props = list(spec.properties)
     if overrides.mass is not None:
-        props = [p for p in props if p.label is not None or p.mass is None]
+        props = [p for p in props if p.label is not None or (p.mass is None and p.mass_range is None)]
         props.append(PartProperty(label=None, mass=overrides.mass, phrase=f"--mass {overrides.mass:g} kg"))
         update["mass_level"] = None
     if overrides.material is not None:
@@ -68,7 +68,7 @@ def _state_request(asset: AssetDescription, name: str, st) -> JointStateRequest:
         joints = [j for j in movable.values() if asset.link(j.child).semantic_label == name]
         selector = {"selector": "label", "label": name}
     else:
-        raise OverrideError(f"{phrase}: {asset.urdf_path} has no movable joint or part named {name!r} (joints: "
+        raise OverrideError(f"{phrase}: the asset has no movable joint or part named {name!r} (joints: "
                             f"{', '.join(movable) or 'none'}; parts: {', '.join(sorted(labels)) or 'none'})", "OVERRIDE_UNKNOWN_JOINT")
     for j in joints:
         _check_fits(phrase, j, st)

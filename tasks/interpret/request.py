@@ -705,13 +705,21 @@ def _merge_properties(props: list[PartProperty], warnings: list[str]) -> list[Pa
             out[p.label] = p
             continue
         upd = {}
-        for field in ("mass", "material"):
+        for field in ("mass", "mass_range", "material"):
             new, prev = getattr(p, field), getattr(old, field)
             if new is None:
                 continue
+            if field == "mass_range" and old.mass is not None or field == "mass" and old.mass_range is not None:
+                prev = old.mass if field == "mass_range" else old.mass_range
             if prev is not None and prev != new:
-                warnings.append(f"contradiction: '{old.phrase}' and '{p.phrase}' give the {p.label or 'object'} two {field}s; '{p.phrase}' is used")
+                what = "materials" if field == "material" else "masses"
+                warnings.append(f"contradiction: '{old.phrase}' and '{p.phrase}' give the {p.label or 'object'} two {what}; "
+                                f"'{p.phrase}' is used")
             upd[field] = new
+            if field == "mass":
+                upd["mass_range"] = None
+            elif field == "mass_range":
+                upd["mass"] = None
         out[p.label] = old.model_copy(update={**upd, "phrase": f"{old.phrase}; {p.phrase}"})
     return list(out.values())
 

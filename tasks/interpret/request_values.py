@@ -275,10 +275,44 @@ def part_after(low: str, end: int, max_words: int = 2, mention_starts: list[int]
     return None, end
 
 
+_MASS_RANGE_RX = re.compile(
+    _L + r"(?:(?P<lead>between|from)\s+)?(?P<lo>" + NUM + r")\s*(?P<lo_unit>" + _unit_rx(_MASS_UNITS) + r")?\s*"
+    r"(?P<sep>and|to|-|–)\s*" + _QTY.format(units=_unit_rx(_MASS_UNITS)))
+
+
+def mass_ranges(low: str) -> list[re.Match]:
+    """Ranges of masses in numbers: "between 20 and 30 kg", "from 2 kg to 3 kg", "20-30 kg", "20 to 30 kg" (the first
+    number in the second's unit unless it has its own; "and" only after "between")."""
+    out = []
+    for m in _MASS_RANGE_RX.finditer(low):
+        if (m.group("sep") == "and") != (m.group("lead") == "between"):
+            continue
+        out.append(m)
+    return out
+
+
 def masses(low: str, mention_starts: list[int] | None = None) -> list[Found]:
-    """Masses in numbers ("weighs 2 kg", "a 300 g lid": per part), values ``PartProperty``."""
+    """Masses in numbers ("weighs 2 kg", "a 300 g lid": per part; "between 20 and 30 kg": a range), values
+    ``PartProperty``."""
     out: list[Found] = []
+    ranges = mass_ranges(low)
+    for m in ranges:
+        hi = number_value(m.group("num")) * _factor(_MASS_UNITS, m.group("unit"))
+        lo = number_value(m.group("lo")) * _factor(_MASS_UNITS, m.group("lo_unit") or m.group("unit"))
+        if lo <= 0 or hi <= 0:
+            continue
+        label, end = part_after(low, m.end(), mention_starts=mention_starts)
+        start = m.start()
+        w = _WEIGHS_BEFORE.search(low[max(0, m.start() - 40): m.start()])
+        if w:
+            start -= len(w.group(0))
+            if label is None:
+                label = part_before(low, start, mention_starts=mention_starts)
+        text = low[start:max(end, m.end())].strip()
+        out.append(Found(start, max(end, m.end()), text, PartProperty(label=label, mass_range=(min(lo, hi), max(lo, hi)), phrase=text)))
     for m in _MASS_RX.finditer(low):
+        if any(r.start() <= m.start() < r.end() for r in ranges):
+            continue
         v = number_value(m.group("num")) * _factor(_MASS_UNITS, m.group("unit"))
         if v <= 0:
             continue

@@ -167,7 +167,7 @@ def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: 
     path = file_names.join_inside(folder, file_names.file_stem(source.stem) + ".xml")
     atomic.write_bytes(path, xml.encode("utf-8"))
     before = opened.sources.files[opened.sources.main].decode("utf-8", "replace").splitlines(keepends=True)
-    diff = "".join(difflib.unified_diff(before, xml.splitlines(keepends=True), fromfile=str(source), tofile=path.name))
+    diff = "".join(difflib.unified_diff(before, xml.splitlines(keepends=True), fromfile=f"{source.name} (the input)", tofile=path.name))
     diff_path = file_names.join_inside(folder, file_names.file_stem(source.stem) + ".diff")
     atomic.write_bytes(diff_path, diff.encode("utf-8"))
     moving = {mjcf_scene.label(original, b): [_joint_physics(next(x for x in spec.joints if x.id == j), bool(original.jnt_limited[j]))

@@ -84,7 +84,7 @@ def mounting_note(overlay: Overlay) -> str:
     """The report's line on how the root was held in every check."""
     m = overlay.mounting
     if m is None or not m.fixed:
-        return "root: free-standing, free on the ground in every check (SPEC convention)" + (f"; {m.source}" if m else "")
+        return "root: free-standing, free on the ground in every check (the measurement convention for objects that stand)" + (f"; {m.source}" if m else "")
     return f"root: mounted ({m.kind}), fixed in every check (rest, oscillation, probes, evaluation), no ground plane; {m.source}"
 
 

@@ -125,7 +125,7 @@ def shut_repair(ctx: EstimationContext, syn: Synthesis, config: RefineConfig, ws
     shut, kept = state_search.refine_state_with_decomposition(
         replace(syn.candidate(ctx), state=closed), syn.closed_out, {n: "closed" for n in syn.closed_out}, config, ws, log.say)
     overrides = kept.collision_overrides
-    head = (f"closed configuration (the request opens {', '.join(opened)}): Phi {shut.phi_requested * 1000:.3g} -> "
+    head = (f"closed configuration (the request opens {', '.join(opened)}): self-penetration {shut.phi_requested * 1000:.3g} -> "
             f"{shut.phi_result * 1000:.3g} mm" + ("" if overrides else "; collision pieces kept"))
     log.say("shut_repair", head)
     log.lap("shut_repair")
@@ -141,7 +141,7 @@ def search_state(ctx: EstimationContext, est, syn: Synthesis, base: Candidate, c
         base, syn.closed_out, syn.bands, config, ws, log.say, proposer=proposer,
         intervals={n: t.interval for n, t in syn.targets.items() if t.interval is not None},
         addressed=lambda: request_apply.resolve_states(ctx, syn.overlay.scale).addressed)
-    log.say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
+    log.say("refine_state", f"self-penetration {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
     log.lap("refine_state")
     return st, kept
 

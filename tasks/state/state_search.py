@@ -86,7 +86,7 @@ def refine_state_with_decomposition(candidate: Candidate, closed_out, bands, con
         before.evaluations = st.evaluations
         before.model_queries = st.model_queries
         before.collision_changes = [
-            f"collision pieces changed for {', '.join(links)} but Phi went {before.phi_result * 1000:.3g} -> "
+            f"collision pieces changed for {', '.join(links)} but self-penetration went {before.phi_result * 1000:.3g} -> "
             f"{st.phi_result * 1000:.3g} mm; original collision meshes kept"
         ] + dnotes
         return before, candidate

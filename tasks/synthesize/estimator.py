@@ -4,6 +4,7 @@ name on import (:mod:`asset2sim.tasks.synthesize.backends` imports the built-in 
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass, field
 from typing import Callable, Protocol
 
@@ -11,7 +12,7 @@ from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.synthesize import request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
 
-__all__ = ["Estimate", "Estimator", "get_estimator", "register_estimator"]
+__all__ = ["Estimate", "Estimator", "EstimatorUnknown", "get_estimator", "register_estimator"]
 
 
 @dataclass
@@ -38,6 +39,14 @@ class Estimator(Protocol):
 _REGISTRY: dict[str, Callable[..., Estimator]] = {}
 
 
+class EstimatorUnknown(KeyError):
+    """An estimator name no backend is registered under; ``str()`` is the message alone (a ``KeyError`` would quote
+    it)."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+
 def register_estimator(name: str, factory: Callable[..., Estimator]) -> None:
     """Register ``factory(**settings) -> Estimator`` under ``name``."""
     _REGISTRY[name] = factory
@@ -47,8 +56,10 @@ def get_estimator(name: str, **settings) -> Estimator:
     """Instantiate the estimator registered as ``name`` with ``settings`` (e.g. ``model``, ``base_url``).
 
     Raises:
-        KeyError: unknown name (the message lists the known ones).
+        EstimatorUnknown: unknown name (one sentence: the closest known name and every known one).
     """
     if name not in _REGISTRY:
-        raise KeyError(f"unknown estimator {name!r}; known: {sorted(_REGISTRY)}")
+        close = difflib.get_close_matches(name, sorted(_REGISTRY), n=1, cutoff=0.6)
+        raise EstimatorUnknown(f"--estimator {name}: no such estimator" + (f"; did you mean {close[0]}?" if close else "")
+                               + f" (known: {', '.join(sorted(_REGISTRY))})")
     return _REGISTRY[name](**settings)

@@ -152,7 +152,7 @@ def parse_request_model(text: str, client: LLMClient, offline: RequestSpec | Non
     except LLMError as exc:  # the call failed, or the reply did not validate (ReplyError lists why)
         why = one_line(exc, 400)
         return offline.model_copy(update={"parse_note": f"request parse: offline (the model's parse was not used: {why})"})
-    states = ", ".join(js.short() for js in answer.value.joint_states) or "no states"  # the same note from the cache: same output
+    states = ", ".join(js.words() for js in answer.value.joint_states) or "no states"  # the same note from the cache: same output
     return with_intent(offline, answer.value, f"request parse: model {model}, validated against the intent schema ({states})")
 
 

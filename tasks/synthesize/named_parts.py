@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from asset2sim.schemas.request import DynamicsValue, JointStateRequest
+from asset2sim.schemas.request import ORDER_ENDS, DynamicsValue, JointStateRequest, ordinal_words
 from asset2sim.tasks.interpret import priors
 from asset2sim.tasks.interpret.part_labels import BODY_LABELS, canonical_label
 from asset2sim.tasks.interpret.part_priors import named_by_word, stand_in_joints
@@ -67,8 +67,7 @@ def link_named(ctx: "EstimationContext", link: str, label: str | None) -> bool:
 #: Relative difference of box volume below which two parts are the same size ("the smaller door" names neither).
 SAME_SIZE = 0.05
 #: Words for the orders resolved from the geometry, in the report ("the highest of 2 drawers").
-_FIRST_WORDS = {"vertical": ("highest", "lowest"), "left_right": ("leftmost", "rightmost"), "right_left": ("rightmost", "leftmost"),
-                "front_back": ("frontmost", "backmost"), "size": ("smallest", "largest")}
+_FIRST_WORDS = ORDER_ENDS
 
 
 def _order_key(order: str, c: np.ndarray) -> float:
@@ -117,8 +116,8 @@ def _pick(jr: JointStateRequest, targets: list[str], centers: dict[str, np.ndarr
     if jr.ordinal is None:
         return targets
     if not -n <= jr.ordinal < n:
-        warnings.append(f"WARNING: '{jr.phrase}' asks for {jr.label or 'part'} #{jr.ordinal + 1 if jr.ordinal >= 0 else jr.ordinal} "
-                        f"({jr.order}) but only {n} exist; ignored")
+        warnings.append(f"WARNING: '{jr.phrase}' asks for {ordinal_words(jr.ordinal, jr.order, jr.label)} but only {n} exist; "
+                        "ignored")
         return []
     pick = targets[jr.ordinal]
     first, last = _FIRST_WORDS.get(order, ("first", "last"))

@@ -287,6 +287,13 @@ def scaled_link(lp: LinkPhysics, f: float, note: str) -> LinkPhysics:
     })
 
 
+def range_target(mass: float, mass_range: tuple[float, float]) -> float:
+    """The mass (kg) a range asked for gives ``mass`` (kg): itself inside ``mass_range`` (low, high), else the nearer
+    end: a range is met anywhere in it, so the estimate is moved only as far as the range needs."""
+    lo, hi = mass_range
+    return min(max(float(mass), float(lo)), float(hi))
+
+
 def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausible: tuple[float, float]) -> tuple[dict[str, LinkPhysics], list[str], bool]:
     """Masses in numbers and words on the links (inertia scaled alike): per-part masses first, then the total
     (other links scaled), else "heavy" / "light" at 0.9 x the upper / 1.1 x the lower plausible end. Returns
@@ -295,19 +302,30 @@ def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausi
     out = dict(links)
     fixed: set[str] = set()
     for p in ctx.request.properties:
-        if p.mass is None or p.label is None:
+        if (p.mass is None and p.mass_range is None) or p.label is None:
             continue
         names = [n for n in out if link_named(ctx, n, p.label)]
         if not names:
             continue
         m = sum(out[n].mass for n in names)
-        f = p.mass / max(m, 1e-12)
+        want = p.mass if p.mass is not None else range_target(m, p.mass_range)
+        f = want / max(m, 1e-12)
         for n in names:
-            out[n] = scaled_link(out[n], f, f"; x{f:.4g} to the requested {p.mass:g} kg of the {p.label} ('{p.phrase}')")
+            out[n] = scaled_link(out[n], f, f"; x{f:.4g} to the requested {want:g} kg of the {p.label} ('{p.phrase}')")
         fixed.update(names)
-        notes.append(f"'{p.phrase}': {p.label} links {names} {m:.4g} -> {p.mass:.4g} kg")
+        notes.append(f"'{p.phrase}': {p.label} links {names} {m:.4g} -> {want:.4g} kg")
     total_req = next((p.mass for p in ctx.request.properties if p.mass is not None and p.label is None), None)
     why = None
+    rng = next((p for p in ctx.request.properties if p.mass_range is not None and p.label is None), None)
+    if total_req is None and rng is not None:
+        now = sum(lp.mass for lp in out.values())
+        total_req = range_target(now, rng.mass_range)
+        why = (f"'{rng.phrase}': the estimate {now:.4g} kg lies in the {rng.mass_range[0]:g}-{rng.mass_range[1]:g} kg asked"
+               if total_req == now else
+               f"'{rng.phrase}': the estimate {now:.4g} kg brought to the nearer end of the {rng.mass_range[0]:g}-{rng.mass_range[1]:g} kg asked")
+        if total_req == now:
+            notes.append(why + "; kept")
+            return out, notes, True
     lo, hi = plausible
     if total_req is None and ctx.request.mass_level is not None:
         total_req = 0.9 * hi if ctx.request.mass_level == "heavy" else 1.1 * lo
@@ -361,6 +379,9 @@ def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResoluti
     total = overlay.total_mass()
     if total_req is not None and abs(total - total_req) > NUMBER_TOLERANCE * total_req:
         out.append(f"total mass {total:.4g} kg but the request asks {total_req:.4g} kg")
+    rng = next((p.mass_range for p in ctx.request.properties if p.mass_range is not None and p.label is None), None)
+    if rng is not None and not rng[0] * (1 - NUMBER_TOLERANCE) <= total <= rng[1] * (1 + NUMBER_TOLERANCE):
+        out.append(f"total mass {total:.4g} kg but the request asks {rng[0]:g}-{rng[1]:g} kg")
     for sz, (phrase, asked, got) in zip(ctx.request.sizes, size_residuals(ctx, overlay.scale)):
         unit = "m^3" if sz.dimension == "volume" else "m"
         if abs(got - asked) > NUMBER_TOLERANCE * asked:
@@ -397,7 +418,8 @@ def summary(spec: RequestSpec) -> list[str]:
     if spec.sizes:
         out.append("sizes: " + ", ".join(f"{s.dimension} {s.value:g} m" for s in spec.sizes))
     for p in spec.properties:
-        what = ", ".join(x for x in ((f"{p.mass:g} kg" if p.mass is not None else ""), (p.material or "")) if x)
+        mass = f"{p.mass:g} kg" if p.mass is not None else f"{p.mass_range[0]:g}-{p.mass_range[1]:g} kg" if p.mass_range else ""
+        what = ", ".join(x for x in (mass, (p.material or "")) if x)
         out.append(f"{p.label or 'object'}: {what}")
     if spec.mass_level:
         out.append(f"mass: {spec.mass_level}")
@@ -516,6 +538,13 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
         ok = abs(total_mass - total_req.mass) <= NUMBER_TOLERANCE * total_req.mass
         q.append(QuantityOutcome(what="total mass", phrase=total_req.phrase, asked=total_req.mass, achieved=total_mass, unit="kg",
                                  within_tolerance=ok, why="" if ok else "the parts' requested masses exceed it", kind="mass"))
+    rng = next((p for p in ctx.request.properties if p.mass_range is not None and p.label is None), None)
+    if rng is not None:
+        lo, hi = rng.mass_range
+        ok = lo * (1 - NUMBER_TOLERANCE) <= total_mass <= hi * (1 + NUMBER_TOLERANCE)
+        q.append(QuantityOutcome(what="total mass", phrase=rng.phrase, asked=lo, asked_high=hi, achieved=total_mass, unit="kg",
+                                 within_tolerance=ok, why="a range: met anywhere in it" if ok else "the parts' requested masses exceed it",
+                                 kind="mass"))
     q += _dynamics_outcomes(ctx, overlay, escalation or [])
     phrases = phrase_lines(ctx, resolution, closed_out, state) if resolution is not None else []
     phrases += motion_lines(ctx, overlay, motion_words or {}, escalation)

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from asset2sim import atomic, demo_assets
-from asset2sim.cli import main
+from asset2sim.cli import command_names, main
 from asset2sim.tasks import refine as refine_mod
 from asset2sim.tasks.assemble import export_mjcf
 from asset2sim.tasks.publish import refine_report
@@ -34,7 +34,7 @@ def test_demo_runs_without_data(tmp_path):
     p = run("demo", "--out", str(out), "--no-extras")
     assert p.returncode == 0, p.stderr
     assert "interaction-ready" in p.stdout
-    for stage in ("extract", "analyze", "refine_state", "post_check"):
+    for stage in ("read", "geometry", "state", "checks"):
         assert stage in p.stdout
     report = json.loads((out / "report.json").read_text())
     assert report["failure_mode"] == "none"
@@ -61,7 +61,7 @@ def test_refine_command_prints_summary_and_writes_contract(tmp_path):
         assert (out / name).is_file()
     mode = json.loads((out / "report.json").read_text())["failure_mode"]
     assert (p.returncode == 0) == (mode == "none")
-    assert ("interaction-ready" if mode == "none" else f"FAILED: {mode}") in p.stdout
+    assert ("interaction-ready" if mode == "none" else f"NOT READY: {mode}") in p.stdout
 
 
 @pytest.mark.slow  # end to end: the command line
@@ -73,8 +73,8 @@ def test_a_request_not_met_exits_3_and_prints_the_phrase(tmp_path, capsys):
     assert main(["refine", str(SHARED / "103275"), "--prompt", "A stapler with its drawer open.", "--out", str(out),
                  "--no-extras", "-q"]) == 3
     text = capsys.readouterr().out
-    assert "FAILED: request_not_met" in text and "request FAIL" in text
-    assert "NOT AS ASKED 'drawer open': not applied" in text
+    assert "NOT READY: request_not_met" in text and "request FAIL" in text
+    assert text.count("'drawer open': not applied") == 1, text  # said once, in "why it failed"
     assert "from closed" in text and "% open" in text
     report = json.loads((out / "report.json").read_text())
     assert report["failure_mode"] == "request_not_met" and report["readiness"]["request"] is False
@@ -153,7 +153,7 @@ def test_invalid_input_exits_1_and_long_request_2(box, tmp_path, capsys):
 def test_written_but_not_interaction_ready_exits_3(box, tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(refine_report, "post_check_failure_mode", lambda check: "unstable")
     assert main(["refine", str(box), "--prompt", PROMPT, "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 3
-    assert "FAILED: unstable" in capsys.readouterr().out
+    assert "NOT READY: unstable" in capsys.readouterr().out
     assert (tmp_path / "o" / "mobility.urdf").is_file()
 
 
@@ -293,6 +293,22 @@ def test_help_lists_every_exit_status(capsys):
         assert f"{status} {_status.EXIT_STATUSES[status]}" in text, (status, text)
 
 
+@pytest.mark.parametrize("name", command_names())
+def test_each_command_help_lists_its_exit_statuses(name, capsys):
+    """``asset2sim COMMAND --help`` ends with the command's own exit statuses and those every command shares (a
+    usage error, an internal error, 130 interrupted), as ``asset2sim --help`` lists them all."""
+    import importlib
+
+    module = importlib.import_module(f"asset2sim.commands.{name}")
+    assert main([name, "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    text = text.replace("- ", "-")  # argparse wraps after a hyphen
+    assert "exit statuses: " in text and "130 interrupted" in text and "70 internal error" in text, text
+    assert module.EXITS and 0 in module.EXITS
+    for status, meaning in module.EXITS.items():
+        assert f"{status} {' '.join(meaning.split())}" in text, (status, text)
+
+
 def test_failures_outside_the_project_is_one_prefixed_line(tmp_path):
     p = subprocess.run([sys.executable, "-m", "asset2sim", "failures"], capture_output=True, text=True, timeout=120, cwd=tmp_path,
                        env=dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[2])))
@@ -306,6 +322,38 @@ def test_a_size_without_a_unit_suggests_plausible_units(box, tmp_path, capsys):
     line = _one_line(capsys.readouterr().err)
     assert "OVERRIDE_INVALID" in line and "30cm (0.3 m)" in line and "30m " not in line and "30m)" not in line, line
     assert "size: size:" not in line
+
+
+def test_a_missing_part_is_said_once_per_summary(tmp_path, capsys):
+    """A laptop asked for its drawer open (it has none): the summary says so once (why it failed), not again as NOT AS
+    ASKED, a request line and a request warning."""
+    laptop = demo_assets.build_object("laptop", tmp_path / "in" / "laptop")
+    out = tmp_path / "o"
+    assert main(["refine", str(laptop), "--prompt", "A laptop with its screen open 100 degrees and its drawer open.",
+                 "--out", str(out), "--no-extras", "--engines", "pybullet", "-q"]) == 3
+    captured = capsys.readouterr()
+    lines = captured.out.splitlines()
+    said = [ln for ln in lines if "the request names a 'drawer'" in ln]
+    assert len(said) == 1 and said[0].startswith("why it failed request_not_met"), lines
+    assert not any(ln.startswith("NOT AS ASKED") for ln in lines)
+    assert lines[-1].startswith("report       ") and "asset2sim report" in lines[-1]  # --no-extras: how to make it
+
+
+@pytest.mark.parametrize("given, code, says", [
+    (["--estimator", "ofline"], "ESTIMATOR_UNAVAILABLE", "--estimator ofline: no such estimator; did you mean offline? (known: "),
+    (["--material", "unobtainium"], "OVERRIDE_UNKNOWN_MATERIAL", "--material 'unobtainium': not a known material ("),
+    (["--state", "wing=30deg"], "OVERRIDE_UNKNOWN_JOINT", "--state wing=30deg: the asset has no movable joint or part named 'wing'"),
+    (["--mass", "30"], "OVERRIDE_INVALID", "unit missing in '30'"),
+])
+def test_an_option_error_is_one_sentence_naming_the_option(box, tmp_path, capsys, given, code, says):
+    """An option's error is one line and one sentence: the option as given, what is wrong, what would do; no Python
+    list or nested quotes (``"unknown estimator 'ofline'; known: ['llm', ...]"``) and no temporary path."""
+    assert main(["refine", str(box), "--out", str(tmp_path / "o"), *given, "-q", "--no-extras"]) == 2
+    line = _one_line(capsys.readouterr().err)
+    prog, got, rest = _fields(line)
+    assert got == code and says in rest, line
+    assert "['" not in line and '"' not in line and "asset2sim-staged" not in line and str(box) not in line, line
+    assert not (tmp_path / "o").exists()
 
 
 def test_estimator_and_engine_errors_have_codes(box, tmp_path, capsys):
@@ -476,7 +524,7 @@ def test_body_and_mjcf_angle_are_refine_options_and_config_fields_outside_the_de
 
 def test_a_child_inside_its_parent_is_explained_once_in_the_terminal_and_the_report(tmp_path, capsys):
     """A lid clear of a bar of its body as modelled, asked open 0.5 rad: it lies inside the bar (parent-child
-    penetration, which the SPEC's Phi skips). The terminal's penetration line names both kinds, the verdict is
+    penetration, which the self-contact Phi skips). The terminal's penetration line names both kinds, the verdict is
     unresolved_penetration with one "why it failed" line (the links, the depth against 5 mm, what to do), and
     report.html says the same, with no line saying there is no penetration."""
     import html
@@ -487,12 +535,12 @@ def test_a_child_inside_its_parent_is_explained_once_in_the_terminal_and_the_rep
     slab, bar = _box([0, 0, 0], [0.1, 0.1, 0.01]), _box([0.0, 0.0, 0.07], [0.1, 0.06, 0.09])
     asset = _asset(tmp_path / "barred", [slab, bar], [_box([0.02, 0.02, 0.02], [0.08, 0.08, 0.05])])
     out = tmp_path / "o"
-    assert main(["refine", str(asset), "--state", "hinge=0.5rad", "--out", str(out), "--no-clips", "--engines", "pybullet",
+    assert main(["refine", str(asset), "--state", "hinge=0.5rad", "--out", str(out), "--no-clips", "--engines", "pybullet,physx",
                  "-q"]) == 3
     lines = capsys.readouterr().out.splitlines()
-    assert "verdict      FAILED: unresolved_penetration" in "\n".join(lines)
+    assert "verdict      NOT READY: unresolved_penetration" in "\n".join(lines)
     pen = [ln for ln in lines if ln.startswith("penetration  ")]
-    assert len(pen) == 1 and "self-contact Phi 0.000 mm (pybullet) pass" in pen[0], pen
+    assert len(pen) == 1 and "self-contact 0.000 mm (pybullet) pass" in pen[0], pen
     assert re.search(r"parent-child \d+\.\d+ mm \(pybullet, body/lid; \d+\.\d+ mm beyond its modelled pose\) FAIL", pen[0]), pen
     why = [ln.removeprefix("why it failed ") for ln in lines if ln.startswith("why it failed ")]
     assert len(why) == 1, lines
@@ -503,4 +551,42 @@ def test_a_child_inside_its_parent_is_explained_once_in_the_terminal_and_the_rep
     text = html.unescape((out / "report.html").read_text())
     assert "<h2>Why it failed</h2>" in text and f"<li>{why[0]}</li>" in text  # the terminal's sentence, word for word
     assert "no self-penetration at the initial state" not in text
-    assert "A child inside its parent (pybullet)" in text
+    assert "A child inside its parent (pybullet; " in text and "penetration tier: <b>FAIL</b>" in text
+    engine = [ln for ln in lines if ln.startswith("engine pybullet")]
+    assert engine and "failing here: parent_child_penetration" in engine[0] and " ok" not in engine[0], engine
+    # the evidence: the lid and its body drawn in colour at the initial state and as modelled, as robust rest's trials are
+    assert "<h3>penetration (parent-child, pybullet): 'lid' inside its parent 'body'" in text
+    for caption in ("at the initial state, perspective", "at the initial state, front", "as modelled, perspective"):
+        assert f"<figcaption class='small'>{caption}</figcaption>" in text, caption
+    assert "SPEC" not in text
+
+
+@pytest.mark.slow  # end to end: the command line, twice per input
+@pytest.mark.parametrize("kind", ["mjcf", "urdf"])
+def test_two_refines_of_one_input_into_two_folders_are_the_same_bytes(tmp_path, kind):
+    """robosuite's door (MJCF, staged in a new temporary folder per process) and a demo laptop (URDF) refined by two
+    processes into two folders at different depths: every file but timings.json holds the same bytes, and none names
+    its output folder, the other one or a temporary staging folder (a moved output names no place it is not)."""
+    from tests.tasks.ingest.host_layouts import robosuite_door
+
+    if kind == "mjcf":
+        pytest.importorskip("mujoco")
+        src = robosuite_door(tmp_path / "in" / "robosuite" / "robosuite" / "models" / "assets" / "objects" / "door.xml")
+        prompt = "A door, slightly open."
+    else:
+        src = demo_assets.build_object("laptop", tmp_path / "in" / "laptop")
+        prompt = "A laptop with its screen open 100 degrees."
+    outs = [tmp_path / "a", tmp_path / "deeper" / "b"]
+    for out in outs:
+        p = run("refine", str(src), "--prompt", prompt, "--out", str(out), "--engines", "pybullet", "-q")
+        assert p.returncode in (0, 3), p.stderr
+    files = sorted(str(f.relative_to(outs[0])) for f in outs[0].rglob("*") if f.is_file())
+    assert files == sorted(str(f.relative_to(outs[1])) for f in outs[1].rglob("*") if f.is_file())
+    differ = [f for f in files if (outs[0] / f).read_bytes() != (outs[1] / f).read_bytes()]
+    assert differ == ["timings.json"], differ
+    for f in files:
+        data = (outs[1] / f).read_bytes()
+        for place in (str(outs[0]).encode(), str(outs[1]).encode(), b"asset2sim-staged", b"asset2sim-input-"):
+            assert place not in data, (f, place)
+        if f.endswith((".json", ".html", ".txt", ".urdf", ".xml", ".diff")):  # words a user reads: no "SPEC"
+            assert b"SPEC" not in data, f

@@ -374,7 +374,7 @@ def test_staged_rerun_records_the_folder_the_user_named(tmp_path, box):
     refine_asset(box, PROMPT, out, extras=True)
     res = refine_asset(box, PROMPT, out, extras=True, skip_if_complete=False)
     ev = json.loads((out / "evaluation.json").read_text())
-    assert ev["urdf"] == str(out / "mobility.urdf")
+    assert ev["urdf"] == "mobility.urdf"  # relative to the folder it lies in: neither the staging folder nor a place
     assert of.STAGING_SUFFIX not in (out / "report.html").read_text()
     assert all(Path(p).is_relative_to(out) for p in res.extras.values())
 

@@ -123,6 +123,33 @@ def test_run_artifacts_and_tracking_metrics(store, tmp_path):
     assert tracking.resolve_tracking_uri(tmp_path, None).startswith("sqlite:///")
 
 
+def test_an_assets_mlflow_run_spans_its_own_work():
+    """An asset that waited 40 s for a worker and worked 6 s: its MLflow run starts 6 s before it finished (its
+    stages' wall time), not when it was queued; without a wall time, when it was recorded to start."""
+    finished = T0 + timedelta(seconds=46)
+    row = {"started_at": T0, "finished_at": finished, "wall_seconds": 6.0}
+    assert tracking._asset_start(row) == int(finished.timestamp() * 1000) - 6000
+    assert tracking._asset_start({**row, "wall_seconds": None}) == int(T0.timestamp() * 1000)
+    assert tracking._asset_start({**row, "wall_seconds": 99.0}) == int(T0.timestamp() * 1000)  # never before its start
+
+
+def test_failures_passes_over_a_rerun_with_nothing_to_do(store, tmp_path, capsys):
+    """A rerun that reused every asset (``_run.json`` outcome ``nothing_to_do``, as the flow records it) is not "the
+    latest run" of ``failures``: the breakdown is of the latest run that refined, and the passed-over run is named."""
+    from asset2sim.commands import failures
+
+    r3 = "20260303T020000Z-cccccc"
+    for aid in ("box", "box2", "cab", "mic"):
+        store.append_row("demo", r3, _row(aid, "Box", status="skipped", wall=0.01))
+    store.write_run_info("demo", r3, {"status": "finished", "outcome": "nothing_to_do"})
+    catalog = tmp_path / "catalog.yaml"
+    catalog.write_text(f"default_dataset: demo\ncatalog_root: {store.root}\ndatasets: {{demo: {{root: raw}}}}\n")
+    assert failures.run(_args(catalog)) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"passed over 1 later run(s) with nothing to do (every asset reused): {r3}")
+    assert "failure modes of run 20260302T020000Z-bbbbbb of dataset demo: 4 assets, 3 done, 1 skipped" in out
+
+
 def _args(catalog: Path, **kw) -> argparse.Namespace:
     d = dict(catalog=catalog, dataset=None, run="latest", by="category", over_time=False, slowest=0, changes=None)
     d.update(kw)
@@ -168,3 +195,23 @@ def test_slowest_of_a_run_that_reused_every_asset_says_so(store, tmp_path, capsy
     assert failures.run(_args(catalog, slowest=3)) == 0
     out = capsys.readouterr().out
     assert out.startswith(f"no asset was refined in run {r3}") and "Empty DataFrame" not in out
+
+
+@pytest.mark.slow  # end to end: the command line in a child process
+def test_failures_into_a_pipe_closed_early_ends_quietly(store, tmp_path):
+    """``asset2sim failures | head -2``: the reader closes the pipe before the breakdown is written; the command
+    ends with status 0 and nothing on stderr (it ended with status 70, INTERNAL_ERROR: BrokenPipeError)."""
+    import subprocess
+    import sys
+
+    catalog = tmp_path / "catalog.yaml"
+    catalog.write_text(f"default_dataset: demo\ncatalog_root: {store.root}\ndatasets: {{demo: {{root: raw}}}}\n")
+    p = subprocess.Popen([sys.executable, "-m", "asset2sim", "failures", "--catalog", str(catalog), "--run", "all", "--by", "run"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path)
+    p.stdout.close()  # before the child has written anything: its first write meets a closed pipe
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 0, err
+    assert err == ""
+    shell = subprocess.run(["bash", "-c", f"{sys.executable} -m asset2sim failures --catalog {catalog} | head -2; "
+                            "echo status ${PIPESTATUS[0]}"], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert shell.stdout.splitlines()[-1] == "status 0" and shell.stderr == ""

@@ -44,6 +44,14 @@ def test_conform_limits_drops_a_fixed_joints_limit_and_completes_movable_ones(ti
     model.joints.append(urdf.UrdfJoint(name="hinge", type="revolute", parent="body", child="lid",
                                        limit=urdf.UrdfLimit(lower=0.0, upper=1.0)))
     model.links["lid"] = urdf.UrdfLink(name="lid")
+    kept = urdf.read_urdf(tiny)
+    kept.joints.append(urdf.UrdfJoint(name="hinge", type="revolute", parent="body", child="lid",
+                                      limit=urdf.UrdfLimit(lower=0.0, upper=1.0)))
+    kept.links["lid"] = urdf.UrdfLink(name="lid")
+    urdf.conform_limits(kept)  # nothing given: nothing invented
+    lim = kept.joint("hinge").limit
+    assert (lim.lower, lim.upper, lim.effort, lim.velocity) == (0.0, 1.0, None, None)
+    assert "effort" not in urdf.write_urdf(kept).decode()
     notes = urdf.conform_limits(model, effort=7.0, velocity=3.0)
     assert model.joint("fix").limit is None and "fix" in notes[0]
     lim = model.joint("hinge").limit

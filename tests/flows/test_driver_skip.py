@@ -69,12 +69,23 @@ def test_rerun_of_finished_assets_starts_nothing(tmp_path, prefect_server, dask_
     rows1 = _rows(catalog, s1["run"])
     assert {a: e.input_hash for a, e in index.items()} == {a: rows1[a]["input_hash"] for a in ASSETS}
 
-    # no Prefect server configured: nothing left to do, so no server, no flow run, no Dask
+    # no Prefect server configured: nothing left to do, so no server, no flow run, no Dask; the progress says nothing
+    # starts, the run is recorded as one with nothing to do, and `failures` passes over it to the run that refined
+    from asset2sim.commands import _progress, failures
+    from asset2sim.flow_progress import listening
+
     CALLS_PATH.write_text("")
-    with temporary_settings(restore_defaults={PREFECT_API_URL}):
+    said = []
+    with temporary_settings(restore_defaults={PREFECT_API_URL}), listening(said.append):
         assert not PREFECT_API_URL.value()
         s2 = run_refine_flow(catalog, workers=1)
     assert s2["skipped"] == 3 and s2["driver_skipped"] == 3 and s2["done"] == 0
+    started = next(e for e in said if e.kind == "run_started")
+    assert started.pending == 0 and _progress.starting(started) == _progress.NOTHING_TO_START
+    store = ResultCatalog(cat.catalog_root)
+    assert store.run_info("gen", s2["run"])["outcome"] == "nothing_to_do"
+    assert store.run_info("gen", s1["run"])["outcome"] == "worked"
+    assert failures.latest_worked(store, "gen") == (("gen", s1["run"]), [s2["run"]])
     assert s2["dask_startup_seconds"] == 0.0 and s2["assets_seconds"] == 0.0
     assert flowfakes.calls(CALLS_PATH) == []
     rows2 = _rows(catalog, s2["run"])

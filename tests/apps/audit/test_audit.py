@@ -137,7 +137,8 @@ def test_the_catalog_holds_one_row_per_asset_and_per_value(planted):
     assert len(assets) == len(expected) + 3
     assert set(assets["failure_mode"]) <= set(audit_catalog.AUDIT_MODES)
     by_cat = audit_catalog.failure_modes_by_category(assets)
-    assert by_cat.loc["total"].sum() == len(assets)
+    assert by_cat.loc["total", list(audit_catalog.AUDIT_MODES)].sum() == len(assets)
+    assert by_cat.loc["total", audit_catalog.DECLARED_NOT_READY] == (assets["declared_passed"] == False).sum()  # noqa: E712
     assert by_cat.loc["StorageFurniture", "implausible_values"] == 2
     bad = audit_catalog.implausible_by_category(values)
     assert bad.loc["TrashCan", "density"] == 1 and bad.loc["Box", "inertia"] == 1

@@ -78,7 +78,27 @@ def test_export_compiles_with_the_urdf_masses_and_keyframe(tmp_path):
     assert m.jnt_range[hinge] == pytest.approx([0.0, 2.0])
     # meshes are referenced relatively: the folder can move
     text = path.read_text()
-    assert str(tmp_path) not in text and 'meshdir=".."' in text
+    assert str(tmp_path) not in text and "meshdir" not in text
+
+
+def test_every_file_the_export_names_lies_where_its_own_folder_says(tmp_path):
+    """The MJCF export names each file relative to its own folder (no meshdir to read): a host that joins file names
+    to the MJCF's folder, as robosuite's MujocoXML does, finds every mesh; MuJoCo loads it from another working
+    folder."""
+    import os
+    import re
+
+    a = write_contract_asset(tmp_path / "asset", lid_angle=0.6)
+    path = export_mjcf(a.root)
+    files = re.findall(r'<(?:mesh|texture|hfield|skin)\b[^>]*?\bfile="([^"]+)"', path.read_text())
+    assert files and all((path.parent / f).is_file() for f in files), files
+    assert all(f.startswith("../") or f.startswith("meshes/") for f in files), files
+    here = os.getcwd()
+    try:
+        os.chdir(tmp_path)
+        assert mujoco.MjModel.from_xml_path(str(path.relative_to(tmp_path))).nmesh == len(files)
+    finally:
+        os.chdir(here)
 
 
 def test_export_is_portable_and_the_keyframe_rests(tmp_path):

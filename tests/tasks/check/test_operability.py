@@ -77,6 +77,28 @@ def test_a_drawer_jammed_at_80_n_is_not_operable_and_the_products_drawer_is(desk
     assert readiness([m]).failure_mode == "not_operable"
 
 
+def test_a_jammed_drawer_shows_where_the_hand_stopped(desk, tmp_path):
+    """The report's evidence of a failing operability stroke, as robust rest's trials have theirs: the stroke's numbers
+    (asked, reached, the force it needed against the hand's range) and frames of the drawer where the hand took it,
+    where the hand stopped and where it needed the most."""
+    from asset2sim.tasks.evaluation.failure_evidence import evidence_section
+
+    out = _with_friction(desk.out_dir, tmp_path / "jammed", next(iter(desk.report.initial_joint_positions)), 80.0)
+    m = operability.operability_metric(_operate(out))
+    assert m.passed is False
+    closed = {n: {"q_closed": c.q_closed, "direction": c.direction, "open_range": c.open_range}
+              for n, c in measure_closed(UrdfFile(out / "mobility.urdf")).items()}
+    seen = []
+    html = evidence_section({}, out / "mobility.urdf", 1 / 240, lambda svg, alt: "",
+                            lambda img, cap: seen.append((img.shape, cap)) or cap, desk.report.initial_joint_positions,
+                            None, closed, [m])
+    (joint,) = m.details["failing"]
+    assert f"<h3>operability of {joint} (drawer, pybullet): open: " in html and "force it needed (N)" in html
+    captions = [cap for _, cap in seen]
+    assert captions[0] == "the hand took it (closed)" and any(c.startswith("the hand stopped (") for c in captions), captions
+    assert all(shape == (200, 200, 3) for shape, _ in seen)
+
+
 def test_a_door_jammed_at_40_n_m_is_not_operable(tmp_path):
     """A double-door cabinet's door with 40 N m of hinge friction (a hand at its far edge gives well under
     10 N m inside 22.2 N) is not operable; with the product's friction both doors are."""

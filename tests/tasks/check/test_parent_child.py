@@ -1,5 +1,7 @@
 """Refine's post-check measures parent-child penetration with the pair
-collided (the pairs the SPEC's Phi skips), in the engine's own query."""
+collided (the pairs the self-contact Phi skips), in the engine's own query,
+and grades it by its depth beyond the modelled pose, as the readiness verdict
+does: refine, evaluate and audit tell one story about one penetration."""
 
 from __future__ import annotations
 
@@ -9,6 +11,7 @@ from asset2sim.engines.source import UrdfFile
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.check.parent_child import parent_child_penetration
+from asset2sim.tasks.check.verdict import readiness
 from asset2sim.schemas.overlay import EstimatorInfo, JointDynamics, Overlay
 from asset2sim.tasks.geometry.analyze import analyze_asset
 from asset2sim.tasks.ingest.extract import extract_asset
@@ -29,9 +32,10 @@ def test_input_nested_in_its_parent_reads_its_depth(tmp_path, engine):
         pytest.importorskip("mujoco")
     m = parent_child_penetration(UrdfFile(_nested(tmp_path) / "mobility.urdf"), {"hinge": 0.0}, engine)
     assert m.value == pytest.approx(20.0, abs=0.05)  # the post's top 20 mm into the lid's hull, margins removed
-    assert m.passed is False and m.details["pairs"] == {"body/lid": m.value}
+    assert m.details["pairs"] == {"body/lid": m.value}
     assert m.engine == engine
     assert m.details["modelled"] == m.details["pairs"] and m.details["beyond_modelled_mm"] == 0.0  # at 0, as modelled
+    assert m.passed is True  # drawn inside its parent, as robosuite draws a latch inside its door: as the asset says
 
 
 def test_a_lid_swung_into_a_bar_of_its_body_reads_its_depth_beyond_the_modelled_pose(tmp_path):
@@ -42,6 +46,7 @@ def test_a_lid_swung_into_a_bar_of_its_body_reads_its_depth_beyond_the_modelled_
     barred = _asset(tmp_path / "barred", [slab, bar], [_box([0.02, 0.02, 0.02], [0.08, 0.08, 0.05])])
     m = parent_child_penetration(UrdfFile(barred / "mobility.urdf"), {"hinge": 0.5})
     assert m.value > 10.0 and m.details["modelled"] == {} and m.details["beyond_modelled_mm"] == m.value
+    assert m.passed is False and readiness([m]).tiers["penetration"] is False  # the metric and the verdict agree
     m = parent_child_penetration(UrdfFile(_nested(tmp_path / "nested") / "mobility.urdf"), {"hinge": 0.3})
     assert 0.0 < m.value < 20.0 and m.details["beyond_modelled_mm"] == 0.0
 

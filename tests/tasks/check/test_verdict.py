@@ -85,7 +85,8 @@ def test_readiness_names_every_failing_tier_and_the_first_mode():
     assert r.tiers["request"] is None  # no request_met: not measured
     assert r.failures == ["robust_rest@physx", "probes@pybullet"]  # semantic metrics do not decide readiness
     assert r.failure_mode == "not_robust_at_rest"
-    assert r.line().startswith("NOT READY: robust_rest@physx, probes@pybullet")
+    assert r.line().startswith("NOT READY: not_robust_at_rest (robust_rest@physx, probes@pybullet; rest pass")
+    assert r.short() == "NOT READY: not_robust_at_rest (robust_rest@physx, probes@pybullet)"
     ok = readiness([_m("rest_stability", True), _m("probes", None), _m("joint_sweep", True)])
     assert ok.ready and ok.failure_mode == "none" and ok.tiers["probes"] is None
     assert ok.line().startswith("interaction-ready")

@@ -121,7 +121,7 @@ def test_the_report_shows_the_terminals_sentences_at_the_top(tmp_path, capsys):
                     r"\d+\.\d mm; largest excursion \d+\.\d mm\) when the object landed after the 5 deg tilt .*What remains: a "
                     r"lighter drawer .*a stiffer slide than a hand may operate", lines[0]), lines
     assert _report_why(tmp_path / "out" / "report.html") == lines
-    assert "Why it failed: the failing trials" in (tmp_path / "out" / "report.html").read_text()
+    assert "Why it failed: the evidence" in (tmp_path / "out" / "report.html").read_text()
 
 
 def _evaluate(asset: Path, out: Path, capsys) -> tuple[list[str], dict]:

@@ -382,11 +382,13 @@ def test_evaluate_command_writes_files_and_sets_the_exit_code(tmp_path, capsys):
     assert main(["evaluate", str(good), "--out", str(tmp_path / "o1"), "--no-probes"]) == 0
     assert (tmp_path / "o1" / "evaluation.json").is_file() and (tmp_path / "o1" / "report.html").is_file()
     out = capsys.readouterr().out
-    assert "READY" in out and "rest_stability" in out
+    assert "good (no category): interaction-ready" in out and "rest_stability" in out
+    assert "verdict      interaction-ready (rest pass" in out  # refine's words
     bad = _slab(tmp_path / "bad", True)
     assert main(["evaluate", str(bad), "--out", str(tmp_path / "o2"), "--no-probes", "--no-report"]) == 1
     assert not (tmp_path / "o2" / "report.html").exists()
-    assert "ground_penetration" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "ground_penetration" in out and "NOT READY: unstable (ground_penetration@pybullet" in out
     assert main(["evaluate", str(tmp_path / "missing")]) == 2
 
 

@@ -73,7 +73,7 @@ def test_an_asset_written_but_not_ready_exits_3_and_every_output_agrees(tmp_path
     ev = json.loads((out / "evaluation.json").read_text())
     assert report["failure_mode"] == "blocked_joint"
     assert report["readiness"]["sweep"] is False
-    assert f"FAILED: {report['failure_mode']}" in verdict and "sweep FAIL" in verdict
+    assert f"NOT READY: {report['failure_mode']}" in verdict and "sweep FAIL" in verdict
     badge = _badge(out / "report.html")
     assert badge.startswith("NOT READY") and "joint_sweep@pybullet" in badge
     assert "joint_sweep@pybullet" in ev["failures"]

@@ -158,7 +158,7 @@ def test_a_failing_asset_shows_the_failing_trials_plot_and_frames(tmp_path):
     rr = ev.metric("robust_rest")
     assert rr.passed is False
     html = (tmp_path / "ev" / "report.html").read_text()
-    assert "<h1>asset2sim evaluate: 102181</h1>" in html and "Why it failed: the failing trials" in html
+    assert "<h1>asset2sim evaluate: 102181</h1>" in html and "Why it failed: the evidence" in html
     failing = [name for name, t in rr.details["trials"].items() if t["passed"] is False]
     for name in failing:
         assert f"robust rest, trial {name} (pybullet)" in html and f"alt=\"trial {name}\"" in html

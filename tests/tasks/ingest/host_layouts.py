@@ -8,6 +8,8 @@
 - :func:`metaworld_window`: Meta-World's vertical window (``objects/window.xml``) in the same layout: a frame and
   a sash on a vertical slide ``window_slide`` ranged 0 to 0.2 m, both bodies unnamed, as Meta-World writes them.
 - :func:`degree_door`: a door whose range is written in degrees (``0 90``) with no ``<compiler>``.
+- :func:`hand_written_cabinet`: a small free-standing cabinet written by hand (degrees, primitive boxes, masses left to
+  MuJoCo), a door on a hinge ranged 0 to 120 degrees.
 """
 
 from __future__ import annotations
@@ -199,3 +201,29 @@ def degree_door(path: Path, ref: float = 0.0) -> Path:
             </body>
           </worldbody>
         </mujoco>""".replace("REF", f"{ref:g}"))
+
+
+def hand_written_cabinet(path: Path, door: str = 'damping="0.3" frictionloss="0.05"') -> Path:
+    """A small cabinet as someone writes one by hand in MJCF (``<compiler angle="degree">``, primitive boxes, no
+    ``<inertial>``: MuJoCo infers the masses from the geoms): a free-standing 0.4 x 0.4 x 0.6 m carcass and a door
+    on a hinge ``door_hinge`` ranged 0 to 120 degrees at its left edge, with a knob; ``door``: the hinge's dynamics
+    attributes as written."""
+    return _write(path, f"""
+        <mujoco model="cabinet">
+          <compiler angle="degree"/>
+          <worldbody>
+            <body name="carcass" pos="0 0 0.35">
+              <freejoint name="free"/>
+              <geom type="box" name="back" pos="-0.2 0 0" size="0.01 0.2 0.3"/>
+              <geom type="box" name="left" pos="0 -0.2 0" size="0.2 0.01 0.3"/>
+              <geom type="box" name="right" pos="0 0.2 0" size="0.2 0.01 0.3"/>
+              <geom type="box" name="top" pos="0 0 0.3" size="0.2 0.2 0.01"/>
+              <geom type="box" name="bottom" pos="0 0 -0.3" size="0.2 0.2 0.01"/>
+              <body name="door" pos="0.22 0 0">
+                <joint name="door_hinge" type="hinge" pos="0 -0.2 0" axis="0 0 -1" range="0 120" {door}/>
+                <geom type="box" name="panel" size="0.01 0.2 0.3"/>
+                <geom type="box" name="knob" pos="0.03 0.15 0" size="0.02 0.01 0.02"/>
+              </body>
+            </body>
+          </worldbody>
+        </mujoco>""")

@@ -238,7 +238,7 @@ def test_asset_without_any_geometry_is_refused_naming_the_urdf(tmp_path):
 def test_cli_validate_exit_codes_and_output(tmp_path, capsys):
     ok = cb.build_valid(tmp_path / "ok")
     assert cli.main(["validate", str(ok)]) == 0
-    assert "OK (0 error(s)" in capsys.readouterr().out
+    assert "OK (0 errors" in capsys.readouterr().out
     bad = cb.CASES_BY_NAME["numbers_limit_reversed"].build(tmp_path / "bad")
     assert cli.main(["validate", str(bad)]) == 1
     out = capsys.readouterr().out
@@ -254,6 +254,23 @@ def test_cli_validate_exit_codes_and_output(tmp_path, capsys):
     assert cli.main(["validate", "--json", str(bad)]) == 1
     rows = json.loads(capsys.readouterr().out)
     assert any(r["code"] == "JOINT_LIMIT_REVERSED" and r["joint"] == "lid_hinge" for r in rows)
+
+
+def test_validate_counts_what_it_prints_and_shows_infos_with_verbose(tmp_path, capsys):
+    """robosuite's door (three notes on how it was read): by default no info line and the verdict says 3 info, shown
+    with --verbose; with --verbose every counted line is printed; the counts always agree with the lines."""
+    from tests.tasks.ingest.host_layouts import robosuite_door
+
+    pytest.importorskip("mujoco")
+    xml = robosuite_door(tmp_path / "robosuite" / "robosuite" / "models" / "assets" / "objects" / "door.xml")
+    for verbose in (False, True):
+        assert cli.main(["validate", *(["--verbose"] if verbose else []), str(xml)]) == 0
+        lines = capsys.readouterr().out.splitlines()
+        verdict = lines[-1]
+        infos = [ln for ln in lines[:-1] if ln.startswith("info ")]
+        m = re.search(r"OK \((\d+) errors, (\d+) warnings, (\d+) info(, shown with --verbose)?\)$", verdict)
+        assert m and m.group(1) == m.group(2) == "0" and int(m.group(3)) >= 3, verdict
+        assert len(infos) == (int(m.group(3)) if verbose else 0) and bool(m.group(4)) is not verbose, lines
 
 
 # ----------------------------------------------------------------------------- docs in sync

@@ -135,3 +135,27 @@ def test_a_toggle_switch_turned_on_stays_on_without_a_return_spring(tmp_path):
     ev = json.loads((res.out_dir / "evaluation.json").read_text())
     probes = next(m for m in ev["metrics"] if m["name"] == "probes")
     assert probes["passed"], probes["details"]
+
+
+def test_a_range_of_masses_is_read_as_a_range(demo_root, tmp_path):
+    """"between 20 and 30 kg" is one range, every word understood: an estimate inside it is kept, one outside is
+    brought to the nearer end (not to the upper number alone, nor with 'between' left not understood); the summary and
+    the as-asked tier grade it met anywhere in the range."""
+    from asset2sim.tasks.interpret.request import parse_request
+
+    for text, lo, hi in (("A microwave between 20 and 30 kg.", 20.0, 30.0), ("a microwave weighing 2-3 kg", 2.0, 3.0),
+                         ("a microwave from 500 g to 2 kg", 0.5, 2.0), ("a microwave of 40 to 50 kg", 40.0, 50.0)):
+        spec = parse_request(text)
+        (p,) = spec.properties
+        assert p.label is None and p.mass is None and p.mass_range == (lo, hi), (text, p)
+        assert spec.ignored == [], (text, spec.ignored)
+    estimate_only = refine_asset(demo_root / "microwave", "A microwave.", tmp_path / "plain", extras=False).report.total_mass
+    lo, hi = 0.8 * estimate_only, 1.5 * estimate_only  # the estimate lies inside: kept
+    inside = refine_asset(demo_root / "microwave", f"A microwave between {lo:.3f} and {hi:.3f} kg.", tmp_path / "in", extras=False)
+    assert inside.report.total_mass == pytest.approx(estimate_only, rel=1e-6)
+    above = refine_asset(demo_root / "microwave", f"A microwave between {2 * hi:.3f} and {3 * hi:.3f} kg.", tmp_path / "above",
+                         extras=False)
+    assert above.report.total_mass == pytest.approx(round(2 * hi, 3), rel=0.01)  # the nearer end
+    assert above.report.failure_mode == "none" and above.report.metric("request_met").passed
+    lines = "\n".join(summary_lines(above))
+    assert f"total mass: asked {2 * hi:.4g} kg to {3 * hi:.4g} kg" in lines and "not understood" not in lines, lines

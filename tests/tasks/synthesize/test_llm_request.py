@@ -195,7 +195,7 @@ def test_refine_applies_the_models_parse_and_says_so(server, tmp_path, monkeypat
     cfg = RefineConfig(estimator="openai", model="m", base_url=server.url, request_parser="model")
     res = refine_asset(plate, "A small box with its lid slightly open.", tmp_path / "out", cfg, extras=False)
     assert server.n_chat == 2 and sum(r.request_text() is not None for r in server.requests) == 1
-    assert any(n.startswith("request parse: model openai/m, validated against the intent schema (all=30 deg from closed)")
+    assert any(n.startswith("request parse: model openai/m, validated against the intent schema (every task-relevant part 30 deg from closed)")
                for n in res.report.notes), res.report.notes
     asked = [q for q in res.report.request.quantities if q.kind == "state"]
     assert len(asked) == 1 and asked[0].asked == pytest.approx(math.pi / 6) and asked[0].within_tolerance, asked
