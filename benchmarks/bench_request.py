@@ -127,7 +127,8 @@ def model_path(target: str, model_name: str) -> None:
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from asset2sim.schemas.request import RequestIntent
-    from asset2sim.tasks.synthesize.llm_client import ClientConfig, LLMClient
+    from asset2sim.models.client import LLMClient
+    from asset2sim.models.config import ClientConfig
     from asset2sim.tasks.synthesize.llm_request import parse_request_model
     from tests import fake_openai_server as fake
     from tests.tasks.interpret.request_corpus import load_corpus, parse_rates

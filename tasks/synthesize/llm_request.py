@@ -21,8 +21,8 @@ from asset2sim.prior_tables import load_priors
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.request import RequestIntent, RequestSpec
 from asset2sim.tasks.interpret.request import parse_request
-from asset2sim.tasks.synthesize.llm_client import LLMClient, make_client
-from asset2sim.tasks.synthesize.llm_errors import LLMError, ReplyInvalid
+from asset2sim.models.client import LLMClient, make_client
+from asset2sim.models.errors import LLMError, ReplyInvalid
 from asset2sim.inert import one_line
 
 INTENT_SCHEMA_NAME = "request_intent"
@@ -159,7 +159,7 @@ def parse_request_model(text: str, client: LLMClient, offline: RequestSpec | Non
 def parse_request_for(text: str, config: RefineConfig | None = None, client: LLMClient | None = None) -> RequestSpec:
     """The request's parse as ``config.request_parser`` asks: the offline parse (the default), or the model's
     (:func:`parse_request_model`) with ``client``, else a client for ``config``'s estimator, model and base URL
-    (knobs and reply cache from the environment, :meth:`ClientConfig.from_env`). Without a model backend
+    (knobs and reply cache from the environment, :meth:`~asset2sim.models.config.ClientConfig.from_env`). Without a model backend
     (another estimator, no model, litellm or the provider's key missing) the offline parse is kept with a note.
 
     Raises:

@@ -21,7 +21,8 @@ from asset2sim.schemas.request import INTENT_FIELDS, RequestIntent, RequestSpec 
 from asset2sim.tasks.ingest.extract import extract_asset  # noqa: E402
 from asset2sim.tasks.interpret.request import parse_request  # noqa: E402
 from asset2sim.tasks.refine import request_notes  # noqa: E402
-from asset2sim.tasks.synthesize import llm_client as lc  # noqa: E402
+from asset2sim.models import client as lc  # noqa: E402
+from asset2sim.models.config import ClientConfig  # noqa: E402
 from asset2sim.tasks.synthesize import llm_request as lr  # noqa: E402
 from asset2sim.tasks.synthesize.context import interpret  # noqa: E402
 from tests import fake_openai_server as fake  # noqa: E402
@@ -34,7 +35,7 @@ FRIDGE = "a fridge with the freezer door open 90 degrees and the main door close
 def client(server, tmp_path, **kw) -> lc.LLMClient:
     cfg = dict(model="openai/m", base_url=server.url, timeout_s=5.0, max_attempts=1, cache_dir=tmp_path / "cache")
     cfg.update(kw)
-    return lc.LLMClient(lc.ClientConfig(**cfg), sleep=lambda s: None)
+    return lc.LLMClient(ClientConfig(**cfg), sleep=lambda s: None)
 
 
 def fridge_intent(text: str) -> dict:
@@ -133,7 +134,7 @@ def test_interpret_on_a_dev_refrigerator(server, tmp_path, monkeypatch):
 def test_every_corpus_parse_is_a_valid_model_reply():
     """The offline parse of every corpus request, sent as a model would (JSON of the intent), validates strictly,
     passes the checks and gives the same parse back: the schema and the checks refuse no intent the parser makes."""
-    from asset2sim.tasks.synthesize.llm_reply import parse_reply
+    from asset2sim.models.replies import parse_reply
     from tests.tasks.interpret.request_corpus import load_corpus
 
     entries = load_corpus()
