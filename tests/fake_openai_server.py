@@ -49,7 +49,7 @@ DESCRIPTION_MARK = "ASSET DESCRIPTION (JSON):"
 
 INTENT_MARK = "REQUEST TO PARSE:"
 """Line that precedes the request text of a request-parse call
-(``asset2sim.tasks.synthesize.llm_request.INTENT_MARK``)."""
+(``asset2sim.tasks.interpret.reading.INTENT_MARK``)."""
 
 
 @dataclass
