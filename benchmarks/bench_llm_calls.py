@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     from asset2sim.tasks.synthesize import backends
     from asset2sim.tasks.synthesize import llm_estimator as le
     from asset2sim.tasks.synthesize.context import build_context
-    from asset2sim.tasks.synthesize.llm_client import LLMError
+    from asset2sim.models.errors import LLMError
     from asset2sim.tasks.refine import RefineError, refine_asset
 
     rows = list(csv.DictReader(args.manifest.open()))

@@ -23,7 +23,7 @@ included, minutes) and prints how many land (numbers within 5 %, bands in
 their interval, sizes, masses, materials, damping levels, warnings).
 
 ``--model URL`` also parses the corpus and the generated requests with the model path
-(``--request-parser model``: ``tasks/synthesize/llm_request.py``) against the OpenAI-compatible server at URL
+(``--request-parser model``: ``tasks/interpret/reading.py``) against the OpenAI-compatible server at URL
 (``--model-name``, default ``m``; 127.0.0.1 for a local server) and prints the parse rate per phenomenon of
 both paths side by side, with the calls made and the replies the offline parse replaced; ``--model fake``
 starts a local fake server (``tests/fake_openai_server.py``) that answers each request with the offline
@@ -127,8 +127,9 @@ def model_path(target: str, model_name: str) -> None:
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from asset2sim.schemas.request import RequestIntent
-    from asset2sim.tasks.synthesize.llm_client import ClientConfig, LLMClient
-    from asset2sim.tasks.synthesize.llm_request import parse_request_model
+    from asset2sim.models.client import LLMClient
+    from asset2sim.models.config import ClientConfig
+    from asset2sim.tasks.interpret.reading import parse_request_model
     from tests import fake_openai_server as fake
     from tests.tasks.interpret.request_corpus import load_corpus, parse_rates
     from tests.tasks.interpret.request_generated import generate, mismatch

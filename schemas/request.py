@@ -286,6 +286,9 @@ INTENT_FIELDS = ("category_hint", "size_class", "joint_states", "sizes", "pose_h
                  "damping", "holds_position", "spring", "stiff", "free_moving", "motions", "part_counts", "mount")
 
 
+# The docstring below is this schema's description, sent to models verbatim with every request parse: it
+# stays word for word (the module it names is now tasks/interpret/reading.py), or every request changes and
+# every cached parse is asked again.
 class RequestIntent(BaseModel):
     """The typed intent of a request: per part the reference (label, ordinal and order), the state (band), the
     amount and its unit (``target``: a fraction, an angle in rad, a distance in m or an end) and the source words

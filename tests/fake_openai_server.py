@@ -34,6 +34,8 @@ from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Callable
 
+import pytest
+
 Behaviour = Callable[["FakeOpenAIServer", "Request"], None]
 
 PROPOSAL_MARK = "STALLED STATE SEARCH (JSON):"
@@ -47,7 +49,7 @@ DESCRIPTION_MARK = "ASSET DESCRIPTION (JSON):"
 
 INTENT_MARK = "REQUEST TO PARSE:"
 """Line that precedes the request text of a request-parse call
-(``asset2sim.tasks.synthesize.llm_request.INTENT_MARK``)."""
+(``asset2sim.tasks.interpret.reading.INTENT_MARK``)."""
 
 
 @dataclass
@@ -471,3 +473,22 @@ def intent_reply(make: Callable[[str], Any]) -> Behaviour:
         reply(json.dumps(make(text)))(server, req)
 
     return b
+
+
+#: The environment variables litellm reads a provider's key from.
+MODEL_KEYS = ("OPENAI_API_KEY", "GEMINI_API_KEY", "GOOGLE_API_KEY", "ANTHROPIC_API_KEY")
+
+
+@pytest.fixture(autouse=True)
+def no_keys(monkeypatch):
+    """No provider key in the environment (no test reaches a real model); a conftest that imports it
+    makes it autouse for its folder."""
+    for k in MODEL_KEYS:
+        monkeypatch.delenv(k, raising=False)
+
+
+@pytest.fixture
+def server():
+    """A fake OpenAI-compatible server for the test (its ``url``, the requests it saw)."""
+    with FakeOpenAIServer(lifetime_s=300) as srv:
+        yield srv

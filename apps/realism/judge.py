@@ -26,14 +26,14 @@ from typing import Any, Sequence
 
 from asset2sim import atomic, output_folder
 from asset2sim.file_names import UnsafePath, join_inside
+from asset2sim.models.client import LLMClient
+from asset2sim.models.config import ClientConfig
+from asset2sim.models.errors import ModelCallError
+from asset2sim.models.usage import Usage
 from asset2sim.schemas.realism import ClipPair, JudgeVerdict, PairSet, PairSide
 from asset2sim.apps.realism import pair_set
 from asset2sim.apps.realism.judge_reply import Reading, read_reply
 from asset2sim.apps.realism.pair_set import PairSetError, find_pair_set  # noqa: F401  (the judge command's)
-from asset2sim.tasks.synthesize.llm_client import LLMClient
-from asset2sim.tasks.synthesize.llm_config import ClientConfig
-from asset2sim.tasks.synthesize.llm_errors import ModelCallError
-from asset2sim.tasks.synthesize.llm_usage import Usage
 from asset2sim.inert import one_line
 
 #: Version of :data:`RUBRIC` and of the message layout (a new version is a new cache key anyway).

@@ -17,8 +17,8 @@ import re
 from dataclasses import dataclass
 from typing import Literal
 
-from asset2sim.tasks.synthesize.llm_errors import ReplyInvalid
-from asset2sim.tasks.synthesize.llm_reply import parse_json_strict
+from asset2sim.models.errors import ReplyInvalid
+from asset2sim.models.replies import parse_json_strict
 
 Letter = Literal["A", "B"]
 

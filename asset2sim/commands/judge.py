@@ -14,8 +14,8 @@ from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandEr
 from asset2sim.apps.realism.calibration import CALIBRATION_FILE, judge_calibration, write_calibration
 from asset2sim.apps.realism.judge import JUDGEMENTS_FILE, JudgeInputError, find_pair_set, judge_pairs
 from asset2sim.apps.realism.scores import SCORES_FILE, judge_scores
-from asset2sim.tasks.synthesize.llm_config import ClientConfig
-from asset2sim.tasks.synthesize.llm_errors import LLMUnavailable, MissingCredentials
+from asset2sim.models.config import ClientConfig
+from asset2sim.models.errors import LLMUnavailable, MissingCredentials
 
 NAME = "judge"
 HELP = ("Ask vision-language models which clip of each pair looks more realistic (both orders; a verdict kept only "

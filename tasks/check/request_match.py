@@ -9,9 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.schemas.request import MotionPhrase, RequestSpec, StateTarget
+from asset2sim.schemas.request import JointStateRequest, MotionPhrase, RequestSpec, StateTarget
 from asset2sim.tasks.check.asset_files import MOVABLE, JointInfo
 from asset2sim.tasks.interpret import categories, part_priors, size_priors
+from asset2sim.tasks.interpret.named_parts import named_joints, pick
 from asset2sim.tasks.interpret.request import parse_request
 
 
@@ -81,65 +82,23 @@ def recognize_category(prompt: str | None, model_cat: str | None = None, labels:
     return getattr(m, "name", None) or model_cat
 
 
-def match_label(label: str | None, wanted: str | None, category: str | None = None) -> bool:
-    """Whether the request's part word ``wanted`` names a link labelled ``label``
-    (:func:`~asset2sim.tasks.interpret.part_priors.request_label_matches`; when
-    that fails, equal labels or ``wanted`` as a ``_``-separated word of ``label``)."""
-    if not label or not wanted:
-        return False
-    try:
-        return bool(part_priors.request_label_matches(category or "Generic", wanted, label))
-    except Exception:
-        pass
-    label, wanted = label.lower(), wanted.lower()
-    return wanted == label or wanted in label.split("_")
-
-
-#: How an ordinal counts (``JointStateRequest.order``, seen facing the object's front): (world axis, sign) of the sort
-#: key, first = smallest (refine's ``named_parts._order_key``).
-_ORDER_AXES = {"vertical": (2, -1.0), "left_right": (1, -1.0), "right_left": (1, 1.0), "front_back": (0, 1.0)}
-
-
-def _words_named(category: str | None, word: str | None, names: list[str], joints: dict[str, JointInfo],
-                 semantics: dict[str, tuple[str, str]]) -> list[str]:
-    """Of ``names``, the joints whose child's label the request's part ``word`` names
-    (``part_priors.named_by_word``: its own label or a category synonym, else the synonym table)."""
+def _named(category: str | None, word: str | None, names: list[str], joints: dict[str, JointInfo],
+           semantics: dict[str, tuple[str, str]]) -> list[str]:
+    """Of ``names``, the joints whose child's label (``semantics``: link -> (kind, label)) the
+    request's part ``word`` names, as refine matches them
+    (:func:`~asset2sim.tasks.interpret.named_parts.named_joints`)."""
     labels = [semantics.get(joints[n].child, (None, None))[1] for n in names]
-    try:
-        hit, _ = part_priors.named_by_word(category or "Generic", word, labels)
-    except Exception:  # a prior that cannot be read must not stop the evaluation
-        hit = [i for i, lab in enumerate(labels) if match_label(lab, word, category)]
-    return [names[i] for i in hit]
+    return named_joints(category or "Generic", word, names, labels)
 
 
-def _ordered_pick(js, names: list[str], joints: dict[str, JointInfo], centres: dict[str, np.ndarray],
-                  volumes: dict[str, float]) -> list[str]:
-    """``names`` sorted as ``js.order`` counts and narrowed to ``js.ordinal`` (refine's ``named_parts._pick``):
-    ``middle`` the middle one of an odd count (>= 3) along the direction the parts spread most, ``size`` by the
-    child link's box volume (smallest first; the smaller of one part, or the smaller / larger of parts within 5 % of one
-    size, is none)."""
-    zero = np.zeros(3)
-    order = js.order
-    if order == "middle":
-        c = np.array([centres.get(joints[n].child, zero) for n in names]) if names else np.zeros((0, 3))
-        order = "vertical" if not len(c) or np.ptp(c[:, 2]) >= np.ptp(c[:, 1]) else "left_right"
-    if order == "size":
-        names.sort(key=lambda n: volumes.get(joints[n].child, 0.0))
-    else:
-        axis, sign = _ORDER_AXES.get(order, (2, -1.0))
-        names.sort(key=lambda n: (sign * float(centres.get(joints[n].child, zero)[axis]), float(centres.get(joints[n].child, zero)[0])))
-    if js.ordinal is None:
-        return names
-    if js.order == "middle":
-        return [names[len(names) // 2]] if len(names) >= 3 and len(names) % 2 else []
-    if order == "size" and js.ordinal in (0, -1) and len(names) >= 2:
-        v = [volumes.get(joints[n].child, 0.0) for n in names]
-        pick, nxt = (v[0], v[1]) if js.ordinal == 0 else (v[-1], v[-2])
-        if min(pick, nxt) >= 0.95 * max(pick, nxt):  # parts of one size: none is smaller (larger)
-            return []
-    if order == "size" and js.ordinal == 0 and len(names) < 2:
-        return []
-    return [names[js.ordinal]] if -len(names) <= js.ordinal < len(names) else []  # negative: from the end ("the bottom drawer")
+def _picked(js: JointStateRequest, names: list[str], joints: dict[str, JointInfo],
+            centres: dict[str, np.ndarray], volumes: dict[str, float]) -> list[str]:
+    """``names`` counted and narrowed as refine's ordinals count
+    (:func:`~asset2sim.tasks.interpret.named_parts.pick`), by each child link's ``centres`` and
+    ``volumes``."""
+    children = {n: joints[n].child for n in names}
+    return pick(js, names, {n: centres[c] for n, c in children.items() if c in centres},
+                {n: volumes.get(c, 0.0) for n, c in children.items()})
 
 
 def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
@@ -153,7 +112,7 @@ def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sem
     task-relevant ones standing in for the category's main part the word names,
     ``part_priors.stand_in_joints``; else none: the phrase goes to the second list),
     top to bottom (or as the request's ``order`` counts) by ``centres`` (link -> (3,) m) or ``volumes`` (link ->
-    box volume, m^3, order ``size``), ``ordinal`` picking one (negative: from the end; :func:`_ordered_pick`); a
+    box volume, m^3, order ``size``), ``ordinal`` picking one (negative: from the end; :func:`_picked`); a
     phrase naming a part or joint overrides one naming none, else a later
     phrase overrides an earlier one."""
     out, unmatched = [], []
@@ -164,14 +123,14 @@ def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sem
         if js.selector == "all":  # a continuous joint (a knob, a wheel) has no open or closed: not "it" (as refine applies it)
             names = [n for n in task_joints if n in movable and joints[n].type != "continuous"]
             if js.ordinal is not None:  # "the second slightly open", "the freezer open": one of them
-                names = _ordered_pick(js, names, joints, centres, volumes or {})
+                names = _picked(js, names, joints, centres, volumes or {})
         elif js.selector == "joint":  # an override names the joint itself
             names = [js.joint] if js.joint in movable else []
         else:
             tm = [(n, semantics.get(joints[n].child, (None, None))[1]) for n in task_joints if n in movable and joints[n].type != "continuous"]
-            names = _words_named(category, js.label, movable, joints, semantics) \
+            names = _named(category, js.label, movable, joints, semantics) \
                 or part_priors.stand_in_joints(category or "", js.label, tm)[0]
-            names = _ordered_pick(js, list(names), joints, centres, volumes or {})
+            names = _picked(js, list(names), joints, centres, volumes or {})
         if not names and not (js.selector == "all" and js.band == "closed" and js.target is None):  # nothing opens: closed as it is
             unmatched.append(js.phrase or f"{js.label or 'all'} {js.band}")
         for n in names:
@@ -185,11 +144,11 @@ def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sem
 def motion_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
                   task_joints: list[str], category: str | None = None) -> list[tuple[MotionPhrase, list[str]]]:
     """Each word of ``spec`` about a part's motion with the movable joints it applies to, as refine applies it: a word
-    naming a part the joints whose child's label names it (:func:`_words_named`), one naming none ``task_joints``."""
+    naming a part the joints whose child's label names it (:func:`_named`), one naming none ``task_joints``."""
     if spec is None:
         return []
     movable = [n for n, j in joints.items() if j.type in MOVABLE]
-    return [(w, [n for n in task_joints if n in movable] if w.label is None else _words_named(category, w.label, movable, joints, semantics))
+    return [(w, [n for n in task_joints if n in movable] if w.label is None else _named(category, w.label, movable, joints, semantics))
             for w in spec.motions]
 
 
@@ -202,7 +161,7 @@ def labelled_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sema
     movable = [n for n, j in joints.items() if j.type in MOVABLE]
     for js in spec.joint_states:
         if js.selector == "label":
-            out += _words_named(category, js.label, movable, joints, semantics)
+            out += _named(category, js.label, movable, joints, semantics)
     return out
 
 
@@ -221,7 +180,7 @@ def unmatched_properties(spec: RequestSpec | None, joints: dict[str, JointInfo],
             out.append((p.phrase, f"names a '{p.label}' but this {what} has no such part"))
     movable = [n for n, j in joints.items() if j.type in MOVABLE]
     for d in spec.dynamics_values:
-        if d.label is None or _words_named(category, d.label, movable, joints, semantics):
+        if d.label is None or _named(category, d.label, movable, joints, semantics):
             continue
         tm = [(n, semantics.get(joints[n].child, (None, None))[1]) for n in task_joints if n in movable and joints[n].type != "continuous"]
         try:

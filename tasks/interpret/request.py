@@ -193,7 +193,7 @@ _ORDINALS = _compile(
         (r"right(?:most|[- ]hand)?", 0, "right_left"),
         (r"front(?:most)?", 0, "front_back"),
         (r"back(?:most)?|rear(?:most)?", -1, "front_back"),
-        # resolved from the geometry (tasks/synthesize/named_parts.py): the middle one of an odd count, along the
+        # resolved from the geometry (tasks/interpret/named_parts.py): the middle one of an odd count, along the
         # direction the parts are spread in; by the size of the moving part's box, smallest first ("the freezer
         # door": a refrigerator's smaller door; "the main door": its largest)
         (r"middle(?:most)?|cent(?:er|re)|central", 0, "middle"),

@@ -14,17 +14,14 @@ import numpy as np
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import RootMount
-from asset2sim.schemas.request import RequestOverrides, RequestSpec
+from asset2sim.schemas.request import RequestSpec
 from asset2sim.tasks.geometry import analyze
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_positions, link_hull_points, links_aabb, object_extents, object_hull_volume, subtree_links
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
-from asset2sim.tasks.interpret.categories import recognize_category
 from asset2sim.tasks.interpret.mounting import root_mounting
-from asset2sim.tasks.interpret.overrides import apply_overrides
 from asset2sim.tasks.interpret.part_labels import labels_from_names
-from asset2sim.tasks.interpret.request import parse_request
-from asset2sim.tasks.synthesize.llm_request import parse_request_for
+from asset2sim.tasks.interpret.reading import interpret
 
 from asset2sim.engines.base import SessionOptions, SimSession
 from asset2sim.engines.registry import open_session
@@ -65,32 +62,6 @@ class EstimationContext:
     def closed_state(self) -> dict[str, float]:
         """joint -> closed position (rad, or input units for prismatic joints)."""
         return {n: c.q_closed for n, c in self.closed.items()}
-
-
-@dataclass(frozen=True)
-class Interpretation:
-    """The request and the category of one asset (stage 3)."""
-
-    request: RequestSpec
-    category: str
-    category_reason: str
-
-
-def interpret(asset: AssetDescription, prompt: str, category: str | None = None,
-              overrides: RequestOverrides | None = None, config: RefineConfig | None = None) -> Interpretation:
-    """Parse ``prompt`` (``overrides`` win over its words) and recognise the category of ``asset``
-    (``category`` wins over the asset's own; else labels and words decide). ``config.request_parser`` "model":
-    the model of ``config.estimator`` parses the request, the offline parse kept when its parse is not valid
-    (:func:`asset2sim.tasks.synthesize.llm_request.parse_request_for`).
-
-    Raises:
-        OverrideError: an override does not fit the asset.
-    """
-    parsed = parse_request(prompt) if config is None or config.request_parser == "offline" else parse_request_for(prompt, config)
-    spec = apply_overrides(parsed, overrides, asset)
-    labels = [ln.semantic_label for ln in asset.links if ln.semantic_label]
-    match = recognize_category(category or asset.category, labels, prompt)
-    return Interpretation(spec, getattr(match, "name", None) or str(match), getattr(match, "reason", ""))
 
 
 def subtree_height(session: SimSession, links: list[str], hull_points: dict[str, np.ndarray]) -> float:

@@ -17,7 +17,7 @@ from asset2sim.tasks.interpret import priors
 from asset2sim.tasks.interpret.operating_forces import operating_range
 from asset2sim.tasks.synthesize import physics, request_apply, set_down
 from asset2sim.tasks.synthesize.context import EstimationContext
-from asset2sim.tasks.synthesize.named_parts import joints_of, moving_parts
+from asset2sim.tasks.interpret.named_parts import joints_of, moving_parts
 
 
 def task_relevant_joints(ctx: EstimationContext) -> list[str]:
@@ -154,7 +154,7 @@ WORD_DAMPING = {"free": "low", "low_damping": "low", "high_damping": "high", "so
 def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tuple[dict[str, JointChoice], list[tuple[str, str]]]:
     """(joint -> :class:`JointChoice`, (phrase, why) of each word naming a part the object lacks) from the request's
     words about motion (``ctx.request.motions``): a word naming a part applies to that part's joints
-    (:func:`~asset2sim.tasks.synthesize.named_parts.joints_of`), one naming none to the ``relevant`` joints (the
+    (:func:`~asset2sim.tasks.interpret.named_parts.joints_of`), one naming none to the ``relevant`` joints (the
     task's parts). A relevant joint's category may expect a return spring (a stapler's arm; ``categories.yaml``
     ``spring_labels``); a self-closing part gets high damping unless a word says otherwise (a door closer is a spring
     and a hydraulic damper)."""

@@ -6,15 +6,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from asset2sim.models.client import LLMClient
+from asset2sim.models.errors import LLMError, ReplyError
+from asset2sim.models.usage import Usage
 from asset2sim.schemas.model_reply import REPLY_SCHEMA_NAME, ModelReply, reply_json_schema
 from asset2sim.schemas.overlay import ContactMaterial, Inertia, JointDynamics, LinkPhysics, Overlay, ValidationNotes
 from asset2sim.tasks.synthesize import ivw, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext
-from asset2sim.tasks.synthesize.llm_client import LLMClient
-from asset2sim.tasks.synthesize.llm_errors import LLMError, ReplyError
 from asset2sim.tasks.synthesize.llm_overlay import check_reply_names, estimator_info
 from asset2sim.tasks.synthesize.llm_prompt import VIEWS, build_messages, describe, render_closed_views
-from asset2sim.tasks.synthesize.llm_usage import Usage
 from asset2sim.inert import one_line
 
 IVW_TEMPERATURE = 1.0

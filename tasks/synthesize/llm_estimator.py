@@ -8,16 +8,17 @@ and the direct / IVW baselines: ``docs/design/model_backends.md``.
 
 from __future__ import annotations
 
+from asset2sim.models.client import LLMClient, make_client, model_string
+from asset2sim.models.config import ClientConfig
+from asset2sim.models.errors import ModelCallError, ReplyError, ReplyInvalid
+from asset2sim.models.usage import Usage
 from asset2sim.schemas.model_reply import PROPOSAL_SCHEMA_NAME, REPLY_SCHEMA_NAME, JointProposalReply, ModelReply, reply_json_schema
 from asset2sim.tasks.synthesize import estimator
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.llm_baselines import IVW_TEMPERATURE, direct_overlay, ivw_overlay
-from asset2sim.tasks.synthesize.llm_client import ClientConfig, LLMClient, make_client, model_string
-from asset2sim.tasks.synthesize.llm_errors import ModelCallError, ReplyError, ReplyInvalid
 from asset2sim.tasks.synthesize.llm_overlay import MASS_AGREEMENT, estimator_info, overlay_from_reply
 from asset2sim.tasks.synthesize.llm_prompt import (DESCRIPTION_MARK, PROPOSAL_MARK, VIEWS, build_messages, describe, proposal_messages,
                                                    render_closed_views)
-from asset2sim.tasks.synthesize.llm_usage import Usage
 
 #: The estimators' own names and the pieces' names callers import from here.
 __all__ = ["DESCRIPTION_MARK", "IVW_TEMPERATURE", "MASS_AGREEMENT", "PROPOSAL_MARK", "VIEWS", "LLMEstimator", "OpenAICompatibleEstimator",

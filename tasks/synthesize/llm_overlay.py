@@ -6,13 +6,13 @@ same physics and validator as the offline estimator
 from __future__ import annotations
 
 from asset2sim import __version__
+from asset2sim.models.errors import ReplyInvalid
+from asset2sim.models.usage import Usage
 from asset2sim.schemas.model_reply import ModelReply
 from asset2sim.schemas.overlay import ContactMaterial, EstimatorInfo, LinkPhysics, Overlay, ValidationNotes
 from asset2sim.tasks.interpret.part_priors import material_for
 from asset2sim.tasks.synthesize import estimate, physics, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext
-from asset2sim.tasks.synthesize.llm_errors import ReplyInvalid
-from asset2sim.tasks.synthesize.llm_usage import Usage
 from asset2sim.tasks.synthesize.request_apply import scaled_link
 
 MASS_AGREEMENT = 3.0

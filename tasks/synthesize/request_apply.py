@@ -1,5 +1,5 @@
 """Apply a parsed request to one object: the joints a phrase names
-(:mod:`.named_parts`), the opening fractions numbers and ends ask
+(:mod:`asset2sim.tasks.interpret.named_parts`), the opening fractions numbers and ends ask
 (:mod:`.opening_fractions`; beyond the limit: the limit, warned), the scale of
 sizes in numbers, masses, materials and explicit joint parameters, and the
 checks of an overlay against the request (``docs/guide/requests.md``).
@@ -16,7 +16,7 @@ from asset2sim.schemas.overlay import JointDynamics, LinkPhysics, Overlay
 from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, JointStateRequest, QuantityOutcome, RequestFindings, RequestSpec
 from asset2sim.tasks.interpret import priors
 from asset2sim.prior_tables import MaterialPrior, load_priors
-from asset2sim.tasks.synthesize.named_parts import count_warnings, joints_named, joints_of, link_named, moving_parts, stand_ins, state_targets, unit_fits
+from asset2sim.tasks.interpret.named_parts import count_warnings, joints_named, joints_of, link_named, moving_parts, stand_ins, state_targets, unit_fits
 from asset2sim.tasks.geometry.closed_state import links_aabb
 from asset2sim.tasks.synthesize.opening_fractions import box_center, fraction_for
 

@@ -170,13 +170,14 @@ def test_a_cached_reply_record_with_nan_is_asked_again(tmp_path):
     the model asked again, instead of being replayed."""
     from asset2sim import array_cache
     from asset2sim.schemas.model_reply import ModelReply, reply_json_schema
-    from asset2sim.tasks.synthesize import llm_client as lc
+    from asset2sim.models import client as lc
+    from asset2sim.models.config import ClientConfig
 
     def ask(client):
         return client.ask(messages, ModelReply, schema=reply_json_schema(), schema_name="asset2sim_overlay_reply")
 
     with fake.FakeOpenAIServer(lifetime_s=120) as server:
-        client = lc.LLMClient(lc.ClientConfig(model="openai/m", base_url=server.url, timeout_s=5.0, max_attempts=1,
+        client = lc.LLMClient(ClientConfig(model="openai/m", base_url=server.url, timeout_s=5.0, max_attempts=1,
                                               cache_dir=tmp_path / "cache"))
         desc = {"category": "Box", "closed_extents_m": [0.2, 0.2, 0.2], "typical_dims_m": [0.3, 0.2, 0.1],
                 "links": [{"name": "body", "volume_m3": 0.008, "area_m2": 0.24}],

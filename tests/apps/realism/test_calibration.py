@@ -12,7 +12,7 @@ import pytest
 from asset2sim.schemas.realism import JudgeVerdict
 from asset2sim.apps.realism import calibration as C
 from asset2sim.apps.realism.judge import judge_pairs
-from asset2sim.tasks.synthesize.llm_config import ClientConfig
+from asset2sim.models.config import ClientConfig
 from tests import fake_openai_server as fake
 from tests import realism_judge_fixtures as fx
 

@@ -20,8 +20,8 @@ if importlib.util.find_spec("litellm") is None:  # the client imports it on firs
 from asset2sim.cli import main  # noqa: E402
 from asset2sim.apps.realism import judge as J  # noqa: E402
 from asset2sim.apps.realism.judge_reply import read_reply  # noqa: E402
-from asset2sim.tasks.synthesize.llm_client import LLMClient  # noqa: E402
-from asset2sim.tasks.synthesize.llm_config import ClientConfig  # noqa: E402
+from asset2sim.models.client import LLMClient  # noqa: E402
+from asset2sim.models.config import ClientConfig  # noqa: E402
 from tests import fake_openai_server as fake  # noqa: E402
 from tests import realism_judge_fixtures as fx  # noqa: E402
 

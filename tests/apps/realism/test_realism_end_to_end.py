@@ -20,7 +20,7 @@ from asset2sim.apps.realism.pair_set import read_pair_set  # noqa: E402
 from asset2sim.apps.realism.ratings import RatingStore  # noqa: E402
 from asset2sim.apps.realism.scores import realism_scores  # noqa: E402
 from asset2sim.tasks.refine import refine_asset  # noqa: E402
-from asset2sim.tasks.synthesize.llm_config import ClientConfig  # noqa: E402
+from asset2sim.models.config import ClientConfig  # noqa: E402
 from tests import fake_openai_server as fake  # noqa: E402
 from tests import realism_judge_fixtures as fx  # noqa: E402
 from tests.helpers import assert_ready_or_honestly_not_robust  # noqa: E402

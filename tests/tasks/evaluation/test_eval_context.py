@@ -19,10 +19,10 @@ from asset2sim.tasks.evaluation.eval_context import build_context, task_joints
 from asset2sim.tasks.check.request_match import (
     category_prior,
     labelled_joints,
-    match_label,
     parse_prompt,
     scaled_mass_range,
 )
+from asset2sim.tasks.interpret.part_priors import request_label_matches
 from asset2sim.urdf import read_urdf
 from tests.conftest import SHARED, needs_shared
 
@@ -84,12 +84,12 @@ def test_initial_state_defaults_to_zero_clipped_and_task_joints_to_every_movable
 
 
 def test_request_words_name_links_through_the_category_synonyms(demo_root):
-    assert match_label("screen", "lid", "Laptop")  # a laptop's lid is its screen
-    assert not match_label("screen", "lid", None)
-    assert not match_label(None, "lid") and not match_label("lid", None)
+    assert request_label_matches("Laptop", "lid", "screen")  # a laptop's lid is its screen
+    assert not request_label_matches("Generic", "lid", "screen")
+    assert not request_label_matches("Generic", "lid", None) and not request_label_matches("Generic", None, "lid")
     ctx = build_context(demo_root / "box_lid", prompt="A box with its lid slightly open.")
     named = labelled_joints(ctx.request, ctx.joints, ctx.semantics, ctx.category)
-    assert named and all(match_label(ctx.semantics[ctx.joints[n].child][1], "lid", ctx.category) for n in named)
+    assert named and all(request_label_matches(ctx.category, "lid", ctx.semantics[ctx.joints[n].child][1]) for n in named)
     assert {ctx.semantics[ctx.joints[n].child][1] for n in named} == {"rotation_lid"}
     assert labelled_joints(None, ctx.joints, ctx.semantics) == []
 

@@ -12,7 +12,8 @@ from asset2sim import demo_assets
 from asset2sim.tasks.geometry import analyze
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.synthesize import backends, estimate, estimator
-from asset2sim.tasks.synthesize.context import EstimationContext, build_context, interpret
+from asset2sim.tasks.interpret.reading import interpret
+from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 from asset2sim.tasks.synthesize.validate_overlay import validate_overlay
 from tests.conftest import SHARED, needs_shared
 

@@ -30,7 +30,7 @@ from asset2sim.tasks.synthesize import ivw
 from asset2sim.tasks.synthesize import physics  # noqa: E402
 from asset2sim.tasks.synthesize import llm_estimator as le  # noqa: E402
 from asset2sim.tasks.synthesize.context import build_context  # noqa: E402
-from asset2sim.tasks.synthesize.llm_client import ReplyError  # noqa: E402
+from asset2sim.models.errors import ReplyError  # noqa: E402
 from asset2sim.tasks.refine import MARKER_NAME, RefineError, refine_asset  # noqa: E402
 from asset2sim.tasks.synthesize.validate_overlay import inertia_problems  # noqa: E402
 from tests import fake_openai_server as fake  # noqa: E402

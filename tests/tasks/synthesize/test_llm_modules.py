@@ -1,43 +1,28 @@
-"""The model-backend modules split by concern (settings, errors, transport,
-reply parsing, accounting; prompts, reply -> overlay, baselines): the public
-names stay importable from ``llm_client`` / ``llm_estimator``, and the pieces
-work on their own (no litellm needed here)."""
+"""The model backends split by concern: the client's pieces in the wing ``asset2sim/models/``
+(settings, errors, transport, reply parsing, accounting) and the estimator's in this stage (prompts,
+reply -> overlay, baselines); the estimator's public names stay importable from ``llm_estimator``,
+and the pieces work on their own (no litellm needed here)."""
 
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import pytest
 
+from asset2sim.inert import one_line
+from asset2sim.models import client, config, errors, replies, transport, usage
 from asset2sim.schemas.model_reply import JointProposalReply, reply_json_schema
-from asset2sim.tasks.synthesize import (
-    llm_baselines,
-    llm_client,
-    llm_config,
-    llm_errors,
-    llm_estimator,
-    llm_overlay,
-    llm_prompt,
-    llm_reply,
-    llm_transport,
-    llm_usage,
-)
+from asset2sim.tasks.synthesize import llm_baselines, llm_estimator, llm_overlay, llm_prompt
 from asset2sim.tasks.synthesize.context import build_context
 from tests.helpers import write_hinged_plate
 
 
-@pytest.mark.parametrize(
-    ("facade", "homes", "own"),
-    [
-        (llm_client, (llm_config, llm_errors, llm_transport, llm_reply, llm_usage), {"LLMClient", "CACHE_FORMAT", "make_client",
-                                                                                  "model_string"}),
-        (llm_estimator, (llm_prompt, llm_overlay, llm_baselines, llm_client), {"LLMEstimator", "OpenAICompatibleEstimator"}),
-    ],
-)
-def test_public_names_are_the_homes_objects(facade, homes, own) -> None:
-    for name in facade.__all__:
-        obj = getattr(facade, name)
-        if name in own:
+def test_public_names_are_the_homes_objects() -> None:
+    homes = (llm_prompt, llm_overlay, llm_baselines, client)
+    for name in llm_estimator.__all__:
+        obj = getattr(llm_estimator, name)
+        if name in {"LLMEstimator", "OpenAICompatibleEstimator"}:
             assert all(not hasattr(h, name) for h in homes), name
         else:
             assert any(vars(h).get(name) is obj and getattr(obj, "__module__", h.__name__) == h.__name__ for h in homes), name
@@ -54,41 +39,41 @@ class _Status(Exception):
 
 
 def test_transport_classifies_faults() -> None:
-    assert llm_transport.classify(TimeoutError("slow")) == (True, None, "connection error")
-    assert llm_transport.classify(_Status(429)) == (True, 429, "HTTP 429")
-    assert llm_transport.classify(_Status(503, on_response=True)) == (True, 503, "HTTP 503")
-    assert llm_transport.classify(_Status(400)) == (False, 400, "HTTP 400")
-    assert llm_transport.classify(KeyError("bug")) == (False, None, "KeyError")
-    assert llm_transport.retry_after_s(_Status(429, {"retry-after-ms": "1500"})) == pytest.approx(1.5)
-    assert llm_transport.retry_after_s(_Status(429, {"Retry-After": "7"})) == pytest.approx(7.0)
-    assert llm_transport.retry_after_s(_Status(429)) is None
-    assert llm_transport.short_error(ValueError("a\nb" + "x" * 400), 10) == "a"  # the first line only
-    assert llm_transport.short_error(ValueError("x" * 400), 10) == "xxxxxxx..."
-    assert llm_transport.short_error(RuntimeError("HTTP 500: down Traceback (most recent call last):\n  File x")) == "HTTP 500: down"
+    assert transport.classify(TimeoutError("slow")) == (True, None, "connection error")
+    assert transport.classify(_Status(429)) == (True, 429, "HTTP 429")
+    assert transport.classify(_Status(503, on_response=True)) == (True, 503, "HTTP 503")
+    assert transport.classify(_Status(400)) == (False, 400, "HTTP 400")
+    assert transport.classify(KeyError("bug")) == (False, None, "KeyError")
+    assert transport.retry_after_s(_Status(429, {"retry-after-ms": "1500"})) == pytest.approx(1.5)
+    assert transport.retry_after_s(_Status(429, {"Retry-After": "7"})) == pytest.approx(7.0)
+    assert transport.retry_after_s(_Status(429)) is None
+    assert one_line(ValueError("a\nb" + "x" * 400), 10) == "a"  # a model error: the first line only
+    assert one_line(ValueError("x" * 400), 10) == "xxxxxxx..."
+    assert one_line(RuntimeError("HTTP 500: down Traceback (most recent call last):\n  File x")) == "HTTP 500: down"
 
 
 def test_reply_parsing_and_reask() -> None:
-    assert llm_reply.parse_json_strict('```json\n{"a": 1}\n```') == {"a": 1}
+    assert replies.parse_json_strict('```json\n{"a": 1}\n```') == {"a": 1}
     for bad in ('{"a": 1, "a": 2}', '{"a": NaN}', '{"a": 1e999}', "[1]", '{"a": 1} tail', "prose"):
-        with pytest.raises(llm_errors.ReplyInvalid):
-            llm_reply.parse_json_strict(bad)
-    text = llm_reply.reask_text(["x: missing", "y: too large"])
+        with pytest.raises(errors.ReplyInvalid):
+            replies.parse_json_strict(bad)
+    text = replies.reask_text(["x: missing", "y: too large"])
     assert "- x: missing\n- y: too large" in text
-    assert llm_reply.excerpt("abcdef", 3) == "abc... [3 more characters omitted]"
+    assert replies.excerpt("abcdef", 3) == "abc... [3 more characters omitted]"
 
 
 def test_usage_since_a_snapshot() -> None:
-    u = llm_usage.Usage(calls=1, attempts=2, total_tokens=10, cost_usd=0.5, seconds=1.0)
+    u = usage.Usage(calls=1, attempts=2, total_tokens=10, cost_usd=0.5, seconds=1.0)
     before = u.snapshot()
-    u.add(llm_usage.Usage(calls=2, attempts=3, cached=1, total_tokens=5, cost_usd=0.25, seconds=0.5))
+    u.add(usage.Usage(calls=2, attempts=3, cached=1, total_tokens=5, cost_usd=0.25, seconds=0.5))
     d = u.since(before)
     assert (d.calls, d.attempts, d.cached, d.total_tokens) == (2, 3, 1, 5)
     assert d.cost_usd == pytest.approx(0.25) and d.seconds == pytest.approx(0.5)
 
 
 def test_config_overrides_keep_the_rest() -> None:
-    cfg = llm_config.ClientConfig(model="openai/m", timeout_s=5.0)
-    new = llm_config.with_overrides(cfg, max_attempts=2)
+    cfg = config.ClientConfig(model="openai/m", timeout_s=5.0)
+    new = replace(cfg, max_attempts=2)
     assert (new.model, new.timeout_s, new.max_attempts) == ("openai/m", 5.0, 2)
 
 

@@ -11,7 +11,8 @@ import pytest
 
 from asset2sim.schemas.metrics import column_values
 from asset2sim.tasks.refine import refine_asset
-from asset2sim.tasks.synthesize import named_parts, request_apply
+from asset2sim.tasks.interpret import named_parts
+from asset2sim.tasks.synthesize import request_apply
 from asset2sim.tasks.synthesize.context import build_context
 from tests.conftest import SHARED, needs_shared
 

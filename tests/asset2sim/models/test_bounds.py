@@ -22,10 +22,10 @@ if importlib.util.find_spec("litellm") is None:  # the client imports it on firs
 
 from asset2sim.cli import main  # noqa: E402
 from asset2sim.apps.realism import judge as J  # noqa: E402
-from asset2sim.tasks.synthesize.llm_client import LLMClient  # noqa: E402
-from asset2sim.tasks.synthesize.llm_config import ClientConfig  # noqa: E402
-from asset2sim.tasks.synthesize.llm_errors import DeadlineExceeded, ModelCallError, ReplyInvalid, ReplyTooLarge  # noqa: E402
-from asset2sim.tasks.synthesize.llm_reply import parse_json_strict  # noqa: E402
+from asset2sim.models.client import LLMClient  # noqa: E402
+from asset2sim.models.config import ClientConfig  # noqa: E402
+from asset2sim.models.errors import DeadlineExceeded, ModelCallError, ReplyInvalid, ReplyTooLarge  # noqa: E402
+from asset2sim.models.replies import parse_json_strict  # noqa: E402
 from tests import fake_openai_server as fake  # noqa: E402
 from tests import realism_judge_fixtures as fx  # noqa: E402
 

@@ -1,10 +1,11 @@
-"""Settings of a model client (:class:`ClientConfig`), from code or ``ASSET2SIM_LLM_*`` variables."""
+"""Settings of a model client (:class:`ClientConfig`), from code or ``ASSET2SIM_LLM_*``
+variables."""
 
 from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +24,8 @@ def _env_float(name: str, default: float) -> float:
 
 
 def default_cache_dir() -> Path:
-    """``$ASSET2SIM_LLM_CACHE_DIR``, else ``$XDG_CACHE_HOME/asset2sim/llm``, else ``~/.cache/asset2sim/llm``."""
+    """``$ASSET2SIM_LLM_CACHE_DIR``, else ``$XDG_CACHE_HOME/asset2sim/llm``, else
+    ``~/.cache/asset2sim/llm``."""
     env = os.environ.get("ASSET2SIM_LLM_CACHE_DIR")
     if env:
         return Path(env).expanduser()
@@ -33,12 +35,14 @@ def default_cache_dir() -> Path:
 
 @dataclass(frozen=True)
 class ClientConfig:
-    """Settings of one ``LLMClient``: ``model`` (litellm ``provider/name``), ``base_url`` (a local server),
-    ``api_key`` (else the provider's variable; never hashed), ``timeout_s`` the deadline of one HTTP attempt
-    (connecting, sending and every read of the whole reply), ``max_attempts`` HTTP tries per call, ``backoff_s`` doubling up to ``max_backoff_s``, the longest ``Retry-After`` honoured
-    (``max_retry_after_s``), ``max_reply_chars`` (the message), ``max_reply_bytes`` (the whole HTTP reply, refused
-    while it arrives), ``max_tokens``, ``temperature`` (None: the provider's),
-    ``cache_dir`` (None: no cache) and the ``render_size`` of the views (pixels). Times in s.
+    """Settings of one ``LLMClient``: ``model`` (litellm ``provider/name``), ``base_url`` (a local
+    server), ``api_key`` (else the provider's variable; never hashed), ``timeout_s`` the deadline of
+    one HTTP attempt (connecting, sending and every read of the whole reply), ``max_attempts`` HTTP
+    tries per call, ``backoff_s`` doubling up to ``max_backoff_s``, the longest ``Retry-After``
+    honoured (``max_retry_after_s``), ``max_reply_chars`` (the message), ``max_reply_bytes`` (the
+    whole HTTP reply, refused while it arrives), ``max_tokens``, ``temperature`` (None: the
+    provider's), ``cache_dir`` (None: no cache) and the ``render_size`` of the views (pixels).
+    Times in s. A copy with fields replaced: ``dataclasses.replace``.
     """
 
     model: str
@@ -68,14 +72,14 @@ class ClientConfig:
 
     @classmethod
     def from_env(cls, model: str, base_url: str | None = None, **overrides) -> "ClientConfig":
-        """Config for ``model`` with knobs from ``ASSET2SIM_LLM_*`` variables (names and defaults below;
-        ``ASSET2SIM_LLM_CACHE_DIR=off`` disables the cache); keyword ``overrides`` win.
+        """Config for ``model`` with knobs from ``ASSET2SIM_LLM_*`` variables (names and defaults
+        below; ``ASSET2SIM_LLM_CACHE_DIR=off`` disables the cache); keyword ``overrides`` win.
 
         Raises:
             ValueError: a malformed environment value.
         """
         cache_env = os.environ.get("ASSET2SIM_LLM_CACHE_DIR", "")
-        size = int(_env_float("ASSET2SIM_LLM_RENDER_SIZE", 384))
+        size = max(int(_env_float("ASSET2SIM_LLM_RENDER_SIZE", 384)), 16)
         kw: dict[str, Any] = dict(
             model=model,
             base_url=base_url,
@@ -88,12 +92,7 @@ class ClientConfig:
             max_reply_bytes=int(_env_float("ASSET2SIM_LLM_MAX_REPLY_BYTES", 16 << 20)),
             max_tokens=int(_env_float("ASSET2SIM_LLM_MAX_TOKENS", 16384)),
             cache_dir=None if cache_env.lower() in ("off", "none", "0") else default_cache_dir(),
-            render_size=(max(size, 16), max(size, 16)),
+            render_size=(size, size),
         )
         kw.update(overrides)
         return cls(**kw)
-
-
-def with_overrides(config: ClientConfig, **kw) -> ClientConfig:
-    """A copy of ``config`` with fields replaced."""
-    return replace(config, **kw)

@@ -1,4 +1,4 @@
-"""The model-reply cache proves its records (asset2sim.tasks.synthesize.llm_client):
+"""The model-reply cache proves its records (asset2sim.models.client):
 each holds its key and the digest of its reply; a tampered, moved or
 oversized record is rejected with a CacheWarning, deleted, and the reply is
 asked again and stored anew."""
@@ -12,12 +12,13 @@ import warnings
 import pytest
 
 from asset2sim.array_cache import CacheWarning
-from asset2sim.tasks.synthesize import llm_client as lc
-from asset2sim.tasks.synthesize.llm_usage import Completion, Usage
+from asset2sim.models import client as lc
+from asset2sim.models.config import ClientConfig
+from asset2sim.models.usage import Completion, Usage
 
 
 def make(tmp_path, **kw) -> lc.LLMClient:
-    return lc.LLMClient(lc.ClientConfig(model="openai/m", cache_dir=tmp_path / "cache", **kw))
+    return lc.LLMClient(ClientConfig(model="openai/m", cache_dir=tmp_path / "cache", **kw))
 
 
 def key_of(c: lc.LLMClient, text: str) -> str:
@@ -94,7 +95,7 @@ def test_tampered_record_is_asked_again_and_stored_anew(tmp_path, monkeypatch):
     msgs = [{"role": "system", "content": "answer JSON"},
             {"role": "user", "content": [{"type": "text", "text": f"{fake.DESCRIPTION_MARK}\n{json.dumps(desc)}"}]}]
     with fake.FakeOpenAIServer(lifetime_s=120) as server:
-        c = lc.LLMClient(lc.ClientConfig(model="openai/m", base_url=server.url, timeout_s=5.0, max_attempts=2, backoff_s=0.05,
+        c = lc.LLMClient(ClientConfig(model="openai/m", base_url=server.url, timeout_s=5.0, max_attempts=2, backoff_s=0.05,
                                          max_backoff_s=0.2, cache_dir=tmp_path / "cache"))
 
         def ask():

@@ -1,4 +1,4 @@
-"""The request parsed by a model into the typed intent (asset2sim.tasks.synthesize.llm_request) against a local fake
+"""The request parsed by a model into the typed intent (asset2sim.tasks.interpret.reading) against a local fake
 OpenAI-compatible server (127.0.0.1, no network): a valid reply is used and said in the report's notes; a schema
 violation, garbage, an out-of-range amount, HTTP 500 or a missing backend keep the offline parse with a note; the
 reply cache gives the same parse again without a call; the offline path is unchanged."""
@@ -21,9 +21,9 @@ from asset2sim.schemas.request import INTENT_FIELDS, RequestIntent, RequestSpec 
 from asset2sim.tasks.ingest.extract import extract_asset  # noqa: E402
 from asset2sim.tasks.interpret.request import parse_request  # noqa: E402
 from asset2sim.tasks.refine import request_notes  # noqa: E402
-from asset2sim.tasks.synthesize import llm_client as lc  # noqa: E402
-from asset2sim.tasks.synthesize import llm_request as lr  # noqa: E402
-from asset2sim.tasks.synthesize.context import interpret  # noqa: E402
+from asset2sim.models import client as lc  # noqa: E402
+from asset2sim.models.config import ClientConfig  # noqa: E402
+from asset2sim.tasks.interpret import reading as lr  # noqa: E402
 from tests import fake_openai_server as fake  # noqa: E402
 from tests.conftest import needs_shared  # noqa: E402
 
@@ -34,7 +34,7 @@ FRIDGE = "a fridge with the freezer door open 90 degrees and the main door close
 def client(server, tmp_path, **kw) -> lc.LLMClient:
     cfg = dict(model="openai/m", base_url=server.url, timeout_s=5.0, max_attempts=1, cache_dir=tmp_path / "cache")
     cfg.update(kw)
-    return lc.LLMClient(lc.ClientConfig(**cfg), sleep=lambda s: None)
+    return lc.LLMClient(ClientConfig(**cfg), sleep=lambda s: None)
 
 
 def fridge_intent(text: str) -> dict:
@@ -123,17 +123,17 @@ def test_interpret_on_a_dev_refrigerator(server, tmp_path, monkeypatch):
                   and json.loads((p / "meta.json").read_text()).get("model_cat") == "Refrigerator")
     asset = extract_asset(folder, asset_id=folder.name)
     cfg = RefineConfig(estimator="openai", model="m", base_url=server.url, request_parser="model")
-    meaning = interpret(asset, FRIDGE, None, None, cfg)
+    meaning = lr.interpret(asset, FRIDGE, None, None, cfg)
     assert meaning.request.parser == "model" and meaning.category == "Refrigerator"
     assert [js.short() for js in meaning.request.joint_states] == ["door#0@size=90 deg from closed", "door#-1@size=closed"]
     assert server.n_chat == 1
-    assert interpret(asset, FRIDGE, None, None, RefineConfig()).request == parse_request(FRIDGE)
+    assert lr.interpret(asset, FRIDGE, None, None, RefineConfig()).request == parse_request(FRIDGE)
 
 
 def test_every_corpus_parse_is_a_valid_model_reply():
     """The offline parse of every corpus request, sent as a model would (JSON of the intent), validates strictly,
     passes the checks and gives the same parse back: the schema and the checks refuse no intent the parser makes."""
-    from asset2sim.tasks.synthesize.llm_reply import parse_reply
+    from asset2sim.models.replies import parse_reply
     from tests.tasks.interpret.request_corpus import load_corpus
 
     entries = load_corpus()

@@ -1,4 +1,5 @@
-"""Strict parsing of model replies (:class:`ReplyInvalid`, one line per problem), and the message that asks again."""
+"""Strict parsing of model replies (:class:`ReplyInvalid`, one line per problem), and the message
+that asks again."""
 
 from __future__ import annotations
 
@@ -9,7 +10,14 @@ from typing import Any, TypeVar
 
 from pydantic import BaseModel, ValidationError
 
-from asset2sim.tasks.synthesize.llm_errors import ReplyInvalid
+from asset2sim.models.errors import ReplyInvalid
+
+M = TypeVar("M", bound=BaseModel)
+
+#: Deepest nesting of arrays and objects a reply may have (the reply schemas need fewer than 10).
+MAX_JSON_DEPTH = 64
+
+_NESTING = re.compile(r'[\[\]{}"\\]')
 
 
 class _Reject(ValueError):
@@ -46,15 +54,10 @@ def _strip_fence(text: str) -> str:
     return t
 
 
-#: Deepest nesting of arrays and objects a reply may have (the reply schemas need fewer than 10 levels).
-MAX_JSON_DEPTH = 64
-
-_NESTING = re.compile(r'[\[\]{}"\\]')
-
-
 def json_depth_exceeds(text: str, limit: int = MAX_JSON_DEPTH) -> bool:
-    """Whether ``text`` opens more than ``limit`` arrays / objects inside each other (outside strings): one
-    linear pass, no recursion, so a reply nested 100,000 deep is refused before a decoder recurses into it."""
+    """Whether ``text`` opens more than ``limit`` arrays / objects inside each other (outside
+    strings): one linear pass, no recursion, so a reply nested 100,000 deep is refused before a
+    decoder recurses into it."""
     depth = 0
     in_string = False
     skip = -1  # the position of a character a backslash escapes
@@ -83,22 +86,25 @@ def parse_json_strict(text: str) -> dict[str, Any]:
     """Parse exactly one JSON object (one Markdown fence around it tolerated).
 
     Raises:
-        ReplyInvalid: prose, several values, truncation, duplicate keys, NaN / Infinity / overflowing numbers,
-            nesting deeper than :data:`MAX_JSON_DEPTH`.
+        ReplyInvalid: prose, several values, truncation, duplicate keys, NaN / Infinity /
+            overflowing numbers, nesting deeper than :data:`MAX_JSON_DEPTH`.
     """
     t = _strip_fence(text)
+    too_deep = f"invalid JSON: nested deeper than {MAX_JSON_DEPTH} arrays or objects"
     if json_depth_exceeds(t):
-        raise ReplyInvalid([f"invalid JSON: nested deeper than {MAX_JSON_DEPTH} arrays or objects"])
-    dec = json.JSONDecoder(object_pairs_hook=_no_duplicates, parse_constant=_no_constant, parse_float=_finite_float)
+        raise ReplyInvalid([too_deep])
+    dec = json.JSONDecoder(object_pairs_hook=_no_duplicates, parse_constant=_no_constant,
+                           parse_float=_finite_float)
     try:
         obj, end = dec.raw_decode(t)
     except RecursionError:
-        raise ReplyInvalid([f"invalid JSON: nested deeper than {MAX_JSON_DEPTH} arrays or objects"]) from None
+        raise ReplyInvalid([too_deep]) from None
     except _Reject as exc:
         raise ReplyInvalid([f"invalid JSON: {exc}"]) from None
     except json.JSONDecodeError as exc:
         what = "the reply is not JSON" if exc.pos == 0 else "invalid or truncated JSON"
-        raise ReplyInvalid([f"{what}: {exc.msg} at line {exc.lineno} column {exc.colno} (character {exc.pos} of {len(t)})"]) from None
+        raise ReplyInvalid([f"{what}: {exc.msg} at line {exc.lineno} column {exc.colno} "
+                            f"(character {exc.pos} of {len(t)})"]) from None
     except ValueError as exc:  # e.g. an integer with too many digits
         raise ReplyInvalid([f"invalid JSON: {exc}"]) from None
     if t[end:].strip():
@@ -108,7 +114,12 @@ def parse_json_strict(text: str) -> dict[str, Any]:
     return obj
 
 
-M = TypeVar("M", bound=BaseModel)
+def _shown(got: Any) -> str:
+    """A rejected scalar value as the error line shows it (JSON where it is JSON), 60 characters."""
+    try:
+        return json.dumps(got)[:60]
+    except (TypeError, ValueError):
+        return repr(got)[:60]
 
 
 def pydantic_errors(exc: ValidationError, limit: int = 30) -> list[str]:
@@ -117,19 +128,11 @@ def pydantic_errors(exc: ValidationError, limit: int = 30) -> list[str]:
     for e in exc.errors()[:limit]:
         loc = ".".join(str(p) for p in e.get("loc", ())) or "(top level)"
         got = e.get("input")
-        got_s = "" if isinstance(got, (dict, list)) else f" (got {json.dumps(got)[:60] if _jsonable(got) else repr(got)[:60]})"
+        got_s = "" if isinstance(got, (dict, list)) else f" (got {_shown(got)})"
         out.append(f"{loc}: {e.get('msg', 'invalid')}{got_s}")
     if len(exc.errors()) > limit:
         out.append(f"... and {len(exc.errors()) - limit} more errors")
     return out
-
-
-def _jsonable(x: Any) -> bool:
-    try:
-        json.dumps(x)
-        return True
-    except (TypeError, ValueError):
-        return False
 
 
 def parse_reply(text: str, model_cls: type[M]) -> M:
@@ -148,8 +151,8 @@ def reask_text(errors: list[str]) -> str:
         "Your previous reply could not be used:\n"
         f"{lines}\n"
         "Answer again with exactly one JSON object that follows the schema: every field present, "
-        "no other fields, finite numbers within the stated ranges, names exactly as in the description. "
-        "No prose, no Markdown."
+        "no other fields, finite numbers within the stated ranges, names exactly as in the "
+        "description. No prose, no Markdown."
     )
 
 

@@ -1,4 +1,4 @@
-"""The model client (asset2sim.tasks.synthesize.llm_client) against a local fake
+"""The model client (asset2sim.models.client) against a local fake
 OpenAI-compatible server: retries and Retry-After, timeouts, dropped
 connections, strict parsing, re-asks, the reply cache, accounting, credentials."""
 
@@ -9,6 +9,7 @@ import json
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -17,7 +18,9 @@ if importlib.util.find_spec("litellm") is None:  # not imported here: the client
     pytest.skip("model backends need litellm (pip install 'asset2sim[llm]')", allow_module_level=True)
 
 from asset2sim.schemas.model_reply import ModelReply, reply_json_schema  # noqa: E402
-from asset2sim.tasks.synthesize import llm_client as lc  # noqa: E402
+from asset2sim.models import client as lc  # noqa: E402
+from asset2sim.models import errors, replies, transport  # noqa: E402
+from asset2sim.models.config import ClientConfig  # noqa: E402
 from tests import fake_openai_server as fake  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -49,7 +52,7 @@ class Sleeps(list):
 def client(server, tmp_path, sleeps=None, **kw) -> lc.LLMClient:
     cfg = dict(model="openai/m", base_url=server.url, timeout_s=20.0, max_attempts=3, backoff_s=0.05, max_backoff_s=0.2, cache_dir=tmp_path / "cache")
     cfg.update(kw)
-    return lc.LLMClient(lc.ClientConfig(**cfg), sleep=sleeps if sleeps is not None else Sleeps())
+    return lc.LLMClient(ClientConfig(**cfg), sleep=sleeps if sleeps is not None else Sleeps())
 
 
 def ask(c: lc.LLMClient, tag: str = "", **kw):
@@ -71,12 +74,12 @@ def ask(c: lc.LLMClient, tag: str = "", **kw):
     ],
 )
 def test_strict_json_rejects(text, match):
-    with pytest.raises(lc.ReplyInvalid, match=match):
-        lc.parse_json_strict(text)
+    with pytest.raises(errors.ReplyInvalid, match=match):
+        replies.parse_json_strict(text)
 
 
 def test_strict_json_accepts_one_fenced_object():
-    assert lc.parse_json_strict('```json\n{"a": 1.5}\n```') == {"a": 1.5}
+    assert replies.parse_json_strict('```json\n{"a": 1.5}\n```') == {"a": 1.5}
 
 
 def _valid() -> dict:
@@ -101,8 +104,8 @@ def _valid() -> dict:
 def test_reply_schema_rejects_extra_missing_and_out_of_range(mutate, match):
     d = _valid()
     mutate(d)
-    with pytest.raises(lc.ReplyInvalid) as ei:
-        lc.parse_reply(json.dumps(d), ModelReply)
+    with pytest.raises(errors.ReplyInvalid) as ei:
+        replies.parse_reply(json.dumps(d), ModelReply)
     assert any(match in e for e in ei.value.errors), ei.value.errors
 
 
@@ -135,7 +138,7 @@ def test_sent_schema_is_closed_and_uses_supported_keywords_only():
     walk(schema)
     assert n_objects == 5  # the reply, Estimate, LinkReply, JointReply, ReplyNotes
     # what a model sees must parse back: the fake's valid reply follows it
-    lc.parse_reply(json.dumps(_valid()), ModelReply)
+    replies.parse_reply(json.dumps(_valid()), ModelReply)
 
 
 # ---------------------------------------------------------------- the network
@@ -149,7 +152,7 @@ def test_valid_reply_one_call_tokens_and_request_shape(server, tmp_path):
     req = server.requests[0]
     rf = req.body["response_format"]
     assert rf["type"] == "json_schema" and rf["json_schema"]["schema"] == reply_json_schema()
-    assert req.headers["authorization"] == f"Bearer {lc.NO_KEY}"  # local server: no key needed
+    assert req.headers["authorization"] == f"Bearer {transport.NO_KEY}"  # local server: no key needed
     assert req.body["temperature"] == 0.0 and req.body["max_tokens"] == c.config.max_tokens
 
 
@@ -171,7 +174,7 @@ def test_retry_after_ms_and_http_date(server, tmp_path):
     class E(Exception):
         litellm_response_headers = {"retry-after": time.strftime("%a, %d %b %Y %H:%M:%S GMT", time.gmtime(time.time() + 30))}
 
-    assert 25 <= lc.retry_after_s(E()) <= 31
+    assert 25 <= transport.retry_after_s(E()) <= 31
 
 
 def test_429_without_retry_after_uses_exponential_backoff(server, tmp_path):
@@ -184,7 +187,7 @@ def test_429_without_retry_after_uses_exponential_backoff(server, tmp_path):
 
 def test_retry_after_beyond_the_limit_fails_at_once(server, tmp_path):
     server.push(fake.status(429, headers={"Retry-After": "3600"}))
-    with pytest.raises(lc.ModelCallError, match="retry after 3600 s") as ei:
+    with pytest.raises(errors.ModelCallError, match="retry after 3600 s") as ei:
         ask(client(server, tmp_path))
     assert server.n_chat == 1 and ei.value.status == 429
 
@@ -198,7 +201,7 @@ def test_server_errors_are_retried(server, tmp_path, code):
 
 def test_persistent_503_gives_up_after_max_attempts(server, tmp_path):
     server.push(*[fake.status(503)] * 10)
-    with pytest.raises(lc.ModelCallError, match="gave up after 3 attempts"):
+    with pytest.raises(errors.ModelCallError, match="gave up after 3 attempts"):
         ask(client(server, tmp_path, max_attempts=3))
     assert server.n_chat == 3
 
@@ -206,7 +209,7 @@ def test_persistent_503_gives_up_after_max_attempts(server, tmp_path):
 @pytest.mark.parametrize("code", [400, 401, 404])
 def test_client_errors_are_not_retried(server, tmp_path, code):
     server.push(fake.status(code))
-    with pytest.raises(lc.ModelCallError, match="not retried"):
+    with pytest.raises(errors.ModelCallError, match="not retried"):
         ask(client(server, tmp_path))
     assert server.n_chat == 1
 
@@ -221,7 +224,7 @@ def test_timeout_is_retried(server, tmp_path):
 
 def test_only_timeouts_end_in_a_clear_error(server, tmp_path):
     server.push(*[fake.sleep_then(5.0)] * 3)
-    with pytest.raises(lc.ModelCallError, match="timeout.*gave up after 2 attempts"):
+    with pytest.raises(errors.ModelCallError, match="timeout.*gave up after 2 attempts"):
         ask(client(server, tmp_path, timeout_s=0.5, max_attempts=2))
 
 
@@ -234,7 +237,7 @@ def test_dropped_connection_is_retried(server, tmp_path):
 def test_ten_megabyte_junk_body_is_retried_then_fails_clearly(server, tmp_path):
     junk = fake.raw(b"x" * (10 * 1024 * 1024))
     server.push(junk, junk, junk)
-    with pytest.raises(lc.ModelCallError, match="gave up after 3 attempts"):
+    with pytest.raises(errors.ModelCallError, match="gave up after 3 attempts"):
         ask(client(server, tmp_path))
     assert server.n_chat == 3
 
@@ -267,7 +270,7 @@ def test_unusable_reply_is_reasked_with_the_problem(server, tmp_path, bad, expec
 
 def test_three_unusable_replies_end_in_a_reply_error(server, tmp_path):
     server.push(*[fake.text_reply("no JSON today")] * 5)
-    with pytest.raises(lc.ReplyError, match="no usable reply after 3 replies") as ei:
+    with pytest.raises(errors.ReplyError, match="no usable reply after 3 replies") as ei:
         ask(client(server, tmp_path))
     assert server.n_chat == 3 and len(ei.value.history) == 3
 
@@ -278,7 +281,7 @@ def test_accept_rejection_is_reasked_and_replayed_from_cache(server, tmp_path):
     def accept(r):
         seen.append(r)
         if len(seen) == 1:
-            raise lc.ReplyInvalid(["links.0.link: 'body' is not a link of the asset"])
+            raise errors.ReplyInvalid(["links.0.link: 'body' is not a link of the asset"])
         return "ok"
 
     a = ask(client(server, tmp_path), accept=accept)
@@ -303,14 +306,14 @@ def test_cache_makes_reruns_free_and_keys_on_prompt_images_and_schema(server, tm
     m2[1]["content"].append({"type": "image_url", "image_url": {"url": "data:image/png;base64,AAAA"}})
     assert c.cache_key(m1, {"a": 1}, 0.0) != c.cache_key(m2, {"a": 1}, 0.0)
     assert c.cache_key(m1, {"a": 1}, 0.0) != c.cache_key(m1, {"a": 2}, 0.0)
-    other_model = lc.LLMClient(lc.with_overrides(c.config, model="openai/other"))
+    other_model = lc.LLMClient(replace(c.config, model="openai/other"))
     assert other_model.cache_key(m1, {"a": 1}, 0.0) != c.cache_key(m1, {"a": 1}, 0.0)
 
 
 def test_invalid_replies_are_not_cached_and_corrupt_cache_is_ignored(server, tmp_path):
     c = client(server, tmp_path)
     server.push(*[fake.text_reply("prose")] * 3)
-    with pytest.raises(lc.ReplyError):
+    with pytest.raises(errors.ReplyError):
         ask(c)
     assert not list((tmp_path / "cache").rglob("*.json"))
     ask(c)  # the server answers validly now
@@ -331,40 +334,40 @@ def test_cache_disabled(server, tmp_path):
 
 # ---------------------------------------------------------------- credentials
 def test_missing_key_is_a_clear_error(monkeypatch, tmp_path):
-    c = lc.LLMClient(lc.ClientConfig(model="gemini/gemini-2.5-flash", cache_dir=None))
-    with pytest.raises(lc.MissingCredentials, match="GEMINI_API_KEY"):
+    c = lc.LLMClient(ClientConfig(model="gemini/gemini-2.5-flash", cache_dir=None))
+    with pytest.raises(errors.MissingCredentials, match="GEMINI_API_KEY"):
         c.check_credentials()
     monkeypatch.setenv("GEMINI_API_KEY", "test-key")
     c.check_credentials()
-    with pytest.raises(lc.MissingCredentials, match="OPENAI_API_KEY"):
-        lc.LLMClient(lc.ClientConfig(model="openai/gpt-4o-mini")).check_credentials()
+    with pytest.raises(errors.MissingCredentials, match="OPENAI_API_KEY"):
+        lc.LLMClient(ClientConfig(model="openai/gpt-4o-mini")).check_credentials()
 
 
 def test_local_server_needs_no_key_but_a_provider(tmp_path):
-    lc.LLMClient(lc.ClientConfig(model="openai/m", base_url="http://127.0.0.1:9/v1")).check_credentials()
-    with pytest.raises(lc.MissingCredentials, match="provider/model"):
-        lc.LLMClient(lc.ClientConfig(model="no-such-provider-model")).check_credentials()
+    lc.LLMClient(ClientConfig(model="openai/m", base_url="http://127.0.0.1:9/v1")).check_credentials()
+    with pytest.raises(errors.MissingCredentials, match="provider/model"):
+        lc.LLMClient(ClientConfig(model="no-such-provider-model")).check_credentials()
 
 
 def test_config_from_env(monkeypatch, tmp_path):
     monkeypatch.setenv("ASSET2SIM_LLM_TIMEOUT_S", "7.5")
     monkeypatch.setenv("ASSET2SIM_LLM_MAX_ATTEMPTS", "2")
     monkeypatch.setenv("ASSET2SIM_LLM_CACHE_DIR", str(tmp_path / "c"))
-    cfg = lc.ClientConfig.from_env("openai/m", "http://x/v1", backoff_s=0.0)
+    cfg = ClientConfig.from_env("openai/m", "http://x/v1", backoff_s=0.0)
     assert (cfg.timeout_s, cfg.max_attempts, cfg.cache_dir, cfg.backoff_s) == (7.5, 2, tmp_path / "c", 0.0)
     monkeypatch.setenv("ASSET2SIM_LLM_CACHE_DIR", "off")
-    assert lc.ClientConfig.from_env("openai/m").cache_dir is None
+    assert ClientConfig.from_env("openai/m").cache_dir is None
     monkeypatch.setenv("ASSET2SIM_LLM_TIMEOUT_S", "soon")
     with pytest.raises(ValueError, match="ASSET2SIM_LLM_TIMEOUT_S"):
-        lc.ClientConfig.from_env("openai/m")
+        ClientConfig.from_env("openai/m")
     with pytest.raises(ValueError, match="max_attempts"):
-        lc.ClientConfig(model="openai/m", max_attempts=0)
+        ClientConfig(model="openai/m", max_attempts=0)
 
 
 def test_package_imports_without_litellm():
     code = (
         "import sys\n"
-        "import asset2sim.tasks.synthesize.llm_client, asset2sim.tasks.synthesize.llm_estimator, asset2sim.schemas.model_reply, asset2sim.tasks.synthesize.ivw\n"
+        "import asset2sim.models.client, asset2sim.tasks.synthesize.llm_estimator, asset2sim.schemas.model_reply, asset2sim.tasks.synthesize.ivw\n"
         "import asset2sim.tasks.synthesize.estimate, asset2sim.tasks.refine\n"
         "assert 'litellm' not in sys.modules, 'litellm imported at package import'\n"
     )
@@ -376,5 +379,5 @@ def test_forbidden_litellm_version_is_refused(monkeypatch):
 
     real = importlib.metadata.version
     monkeypatch.setattr(importlib.metadata, "version", lambda name: "1.107.0" if name == "litellm" else real(name))
-    with pytest.raises(lc.LLMUnavailable, match="1.107.0"):
-        lc.import_litellm()
+    with pytest.raises(errors.LLMUnavailable, match="1.107.0"):
+        transport.import_litellm()

@@ -8,16 +8,17 @@ from typing import Generic, TypeVar
 from pydantic import BaseModel
 
 M = TypeVar("M", bound=BaseModel)
-
+T = TypeVar("T")
 
 _COUNTS = ("calls", "attempts", "cached", "prompt_tokens", "completion_tokens", "total_tokens")
 
 
 @dataclass
 class Usage:
-    """What calls cost: ``calls`` replies received over the network (re-asks included, cache hits not),
-    ``attempts`` HTTP tries, ``cached`` cache hits, tokens as the API reports them, ``cost_usd`` as far as
-    litellm knows (None: unknown), ``seconds`` of wall time, retries included."""
+    """What calls cost: ``calls`` replies received over the network (re-asks included, cache hits
+    not), ``attempts`` HTTP tries, ``cached`` cache hits, tokens as the API reports them,
+    ``cost_usd`` as far as litellm's cost table knows (None: unknown), ``seconds`` of wall time,
+    retries included."""
 
     calls: int = 0
     attempts: int = 0
@@ -43,15 +44,16 @@ class Usage:
     def since(self, before: "Usage") -> "Usage":
         """What was added after the snapshot ``before`` (cost None when none known)."""
         cost = None if self.cost_usd is None else self.cost_usd - (before.cost_usd or 0.0)
-        return Usage(**{k: getattr(self, k) - getattr(before, k) for k in _COUNTS}, cost_usd=cost, seconds=self.seconds - before.seconds)
+        counts = {k: getattr(self, k) - getattr(before, k) for k in _COUNTS}
+        return Usage(**counts, cost_usd=cost, seconds=self.seconds - before.seconds)
 
     def summary(self) -> str:
         """One line: calls, attempts, cache hits, tokens, cost, seconds."""
         cost = "unknown" if self.cost_usd is None else f"${self.cost_usd:.4f}"
         return (
-            f"{self.calls} model calls ({self.attempts} HTTP attempts, {self.cached} cached replies), "
-            f"{self.total_tokens} tokens ({self.prompt_tokens} prompt + {self.completion_tokens} completion), "
-            f"cost {cost}, {self.seconds:.2f} s"
+            f"{self.calls} model calls ({self.attempts} HTTP attempts, {self.cached} cached "
+            f"replies), {self.total_tokens} tokens ({self.prompt_tokens} prompt + "
+            f"{self.completion_tokens} completion), cost {cost}, {self.seconds:.2f} s"
         )
 
 
@@ -67,12 +69,10 @@ class Completion:
     usage: Usage
 
 
-T = TypeVar("T")
-
-
 @dataclass
 class Answer(Generic[M, T]):
-    """Result of ``LLMClient.ask``: the ``reply``, ``accept``'s ``value``, the rejected attempts' problems, usage."""
+    """Result of ``LLMClient.ask``: the ``reply``, ``accept``'s ``value``, the rejected attempts'
+    problems, usage."""
 
     reply: M
     value: T

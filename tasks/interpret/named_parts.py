@@ -1,0 +1,217 @@
+"""The parts a request's words name on one object, matched here for refine (``tasks/synthesize``)
+and the evaluation (``tasks/check/request_match.py``) alike: a part word names the movable joints
+whose moving link carries its label (:func:`named_joints`, ``part_priors.named_by_word``: its own
+label or a category synonym, else the synonym table), "all" or a missing label the task-relevant
+ones (warned); an ordinal picks one of them (:func:`pick`), counted top to bottom by the moving
+part's box center, or left / right / front / back facing the front, or by size
+(``docs/design/requests.md``).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, Sequence
+
+import numpy as np
+
+from asset2sim.schemas.asset import AssetDescription
+from asset2sim.schemas.request import ORDER_ENDS, DynamicsValue, JointStateRequest, RequestSpec, ordinal_words
+from asset2sim.tasks.interpret.part_labels import BODY_LABELS, canonical_label
+from asset2sim.tasks.interpret.part_priors import named_by_word, stand_in_joints
+from asset2sim.tasks.interpret.request_values import PART_RX
+
+#: Relative difference of box volume below which two parts are the same size ("the smaller door"
+#: names neither).
+SAME_SIZE = 0.05
+#: Words for the orders resolved from the geometry, in the report ("the highest of 2 drawers").
+_FIRST_WORDS = ORDER_ENDS
+
+
+class PartsContext(Protocol):
+    """What refine matches part words on (its ``EstimationContext`` is one): the asset (labels,
+    joints), its category, each movable joint's moving links (``subtrees``) and the request."""
+
+    asset: AssetDescription
+    category: str
+    subtrees: dict[str, list[str]]
+    request: RequestSpec
+
+
+def named_joints(category: str, word: str | None, joints: Sequence[str],
+                 labels: Sequence[str | None], notes: list[str] | None = None) -> list[str]:
+    """Of ``joints``, those whose moving link's label (``labels``, one per joint) the part ``word``
+    names (``part_priors.named_by_word``); a label the synonym table gives for it said in
+    ``notes``."""
+    hit, how = named_by_word(category, word, labels)
+    if how and notes is not None:
+        notes.append(f"{how}: {', '.join(joints[i] for i in hit)}")
+    return [joints[i] for i in hit]
+
+
+def _order_key(order: str, c: np.ndarray) -> float:
+    """Sort key of a joint for an ordinal's order (ascending = first); ``c`` the (3,) box center,
+    m."""
+    return float({"left_right": -c[1], "right_left": c[1], "front_back": c[0]}.get(order, -c[2]))
+
+
+def _spread_order(targets: list[str], centers: dict[str, np.ndarray]) -> str:
+    """The order along which ``targets``' box centers spread most: ``vertical`` (world z, also
+    without targets) or ``left_right`` (y)."""
+    if not targets:
+        return "vertical"
+    c = np.array([centers.get(n, np.zeros(3)) for n in targets])
+    return "vertical" if np.ptp(c[:, 2]) >= np.ptp(c[:, 1]) else "left_right"
+
+
+def pick(jr: JointStateRequest, targets: list[str], centers: dict[str, np.ndarray],
+         sizes: dict[str, float], warnings: list[str] | None = None,
+         notes: list[str] | None = None) -> list[str]:
+    """``targets`` (joints) sorted as ``jr.order`` counts, by ``centers`` (joint -> (3,) box center,
+    m; ``middle``: along the direction the parts spread most) or ``sizes`` (joint -> box volume,
+    m^3, smallest first: order ``size``), then narrowed to the one ``jr.ordinal`` names (negative:
+    from the end, "the bottom drawer"); all of them sorted without an ordinal. [] with a warning
+    when none is: beyond the count, no middle one of an even count, no smaller one of one part or
+    of parts of one size (within :data:`SAME_SIZE`). How it was picked goes to ``notes`` ("top
+    drawer = joint_1, the highest of 2 drawers"). ``targets`` is sorted in place."""
+    warnings = warnings if warnings is not None else []
+    notes = notes if notes is not None else []
+    part = jr.label or "part"
+    what = f"{jr.label}s" if jr.label else "parts"
+    n = len(targets)
+    order = _spread_order(targets, centers) if jr.order == "middle" else jr.order
+    if order == "size":
+        targets.sort(key=lambda t: sizes.get(t, 0.0))
+    else:
+        targets.sort(key=lambda t: _order_key(order, centers.get(t, np.zeros(3))))
+    if jr.ordinal is None:
+        return targets
+    if jr.order == "middle":
+        if n < 3 or n % 2 == 0:
+            warnings.append(f"WARNING: '{jr.phrase}' asks for the middle {part} but this object "
+                            f"has {n} {what}{'' if n < 3 else ' (an even count)'}: none is the middle "
+                            "one; not applied")
+            return []
+        chosen = targets[n // 2]
+        notes.append(f"'{jr.phrase}': middle {part} = {chosen}, the middle one of {n} {what} "
+                     f"({'top to bottom' if order == 'vertical' else 'left to right'})")
+        return [chosen]
+    if order == "size" and jr.ordinal in (0, -1) and n >= 2:
+        v = [sizes.get(t, 0.0) for t in targets]
+        first, second = (v[0], v[1]) if jr.ordinal == 0 else (v[-1], v[-2])
+        if min(first, second) >= (1.0 - SAME_SIZE) * max(first, second):
+            word = "smaller" if jr.ordinal == 0 else "larger"
+            volumes = ", ".join(f"{x:.3g}" for x in v)
+            warnings.append(f"WARNING: '{jr.phrase}' asks for the {word} {part} but the {what} are "
+                            f"of one size (box volumes {volumes} m^3): none is {word}; not applied")
+            return []
+    if order == "size" and jr.ordinal == 0 and n < 2:
+        warnings.append(f"WARNING: '{jr.phrase}' asks for the smaller of several {what} but this "
+                        f"object has {n}: not applied")
+        return []
+    if not -n <= jr.ordinal < n:
+        warnings.append(f"WARNING: '{jr.phrase}' asks for "
+                        f"{ordinal_words(jr.ordinal, jr.order, jr.label)} but only {n} exist; ignored")
+        return []
+    chosen = targets[jr.ordinal]
+    first_word, last_word = _FIRST_WORDS.get(order, ("first", "last"))
+    rank = (f"the {first_word}" if jr.ordinal == 0
+            else f"the {last_word}" if jr.ordinal == -1 or jr.ordinal == n - 1
+            else f"number {jr.ordinal + 1} ({first_word} first)")
+    notes.append(f"'{jr.phrase}': {part} = {chosen}, {rank} of {n} {what}")
+    return [chosen]
+
+
+def moving_parts(ctx: PartsContext) -> str:
+    """The moving parts' labels (else link names), each once, comma-separated; "none" without
+    any."""
+    parts = (ctx.asset.link(j.child).semantic_label or j.child for j in ctx.asset.movable_joints())
+    return ", ".join(dict.fromkeys(parts)) or "none"
+
+
+def joints_named(ctx: PartsContext, label: str, notes: list[str] | None = None) -> list[str]:
+    """Movable joints whose moving link carries ``label`` (``priors.request_label_matches``), else a
+    label the synonym table gives for it (:func:`named_joints`, said in ``notes``)."""
+    joints = ctx.asset.movable_joints()
+    labels = [ctx.asset.link(j.child).semantic_label for j in joints]
+    return named_joints(ctx.category, label, [j.name for j in joints], labels, notes)
+
+
+def joints_of(ctx: PartsContext, d: DynamicsValue, relevant: list[str]) -> list[str]:
+    """The joints an explicit joint parameter names: its label's (else :func:`stand_ins`; none when
+    no part stands in), or without a label ``relevant``."""
+    if d.label is None:
+        return relevant
+    return joints_named(ctx, d.label) or stand_ins(ctx, d.label, relevant)[0]
+
+
+def stand_ins(ctx: PartsContext, label: str, relevant: list[str]) -> tuple[list[str], str]:
+    """The non-continuous ``relevant`` joints a part word the object has no part of still names, and
+    how (:func:`~asset2sim.tasks.interpret.part_priors.stand_in_joints`)."""
+    asset = ctx.asset
+    labelled = [(n, asset.link(asset.joint(n).child).semantic_label) for n in relevant
+                if asset.joint(n).type != "continuous"]
+    return stand_in_joints(ctx.category, label, labelled)
+
+
+def unit_fits(d: DynamicsValue, linear: bool) -> bool:
+    """Whether a joint parameter's unit fits a prismatic (``linear``) or revolute joint (a value
+    without unit fits both)."""
+    return not ((d.motion == "rotational" and linear) or (d.motion == "linear" and not linear))
+
+
+def link_named(ctx: PartsContext, link: str, label: str | None) -> bool:
+    """Whether a property's label names ``link``: None everything, "body" an unmoved or
+    body-labelled link."""
+    if label is None:
+        return True
+    if label == "body":
+        moving = {ln for links in ctx.subtrees.values() for ln in links}
+        return link not in moving or canonical_label(ctx.asset.link(link).semantic_label) \
+            in BODY_LABELS
+    labels = [ln.semantic_label for ln in ctx.asset.links]
+    hit, _ = named_by_word(ctx.category, label, labels)
+    return ctx.asset.link(link).semantic_label in {labels[i] for i in hit}
+
+
+def state_targets(ctx: PartsContext, jr: JointStateRequest, relevant: list[str],
+                  centers: dict[str, np.ndarray], warnings: list[str],
+                  sizes: dict[str, float] | None = None,
+                  notes: list[str] | None = None) -> list[str]:
+    """The joints a state request names: the joint of an override, the movable joints whose part
+    carries the label, or for a request that names no part the non-continuous ``relevant`` ones;
+    an ordinal picks among them (:func:`pick`) by ``centers`` (joint -> (3,) box center, m) or
+    ``sizes`` (joint -> box volume, m^3: order ``size``), how it picked in ``notes``. A label no
+    part of the object carries moves nothing (warned: [] returned) unless some ``relevant`` joints
+    stand in for it (:func:`stand_ins`, warned). Warnings appended to ``warnings``."""
+    if jr.selector == "joint":  # an override names the joint itself
+        movable = any(j.name == jr.joint for j in ctx.asset.movable_joints())
+        return [jr.joint] if jr.joint in relevant or movable else []
+    named = jr.names_part
+    targets = joints_named(ctx, str(jr.label), notes) if named else []
+    if named and not targets:
+        targets, how = stand_ins(ctx, str(jr.label), relevant)
+        applied = f"applied to {how} {targets}" if targets else "not applied"
+        warnings.append(f"WARNING: the request names a '{jr.label}' ('{jr.phrase}') but no part of "
+                        f"this {ctx.category} carries that label; its moving parts: "
+                        f"{moving_parts(ctx)}; '{jr.phrase}' {applied}")
+        if not targets:
+            return []
+    if not named:
+        targets = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
+    if jr.ordinal is not None:
+        targets = pick(jr, list(targets), centers, sizes or {}, warnings, notes)
+    return targets
+
+
+def count_warnings(ctx: PartsContext) -> list[str]:
+    """Warnings for part counts ("two-drawer") that differ from the movable parts with that
+    label."""
+    out = []
+    for label, n in ctx.request.part_counts.items():
+        if not PART_RX.fullmatch(label):
+            continue
+        have = joints_named(ctx, label)
+        if len(have) != n:
+            which = f" ({', '.join(have)})" if have else f"; its moving parts: {moving_parts(ctx)}"
+            out.append(f"WARNING: the request names {n} {label}(s) but this {ctx.category} has "
+                       f"{len(have)} movable {label}(s){which}")
+    return out
