@@ -24,6 +24,7 @@ from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import SimConventions
+from asset2sim.tasks.check.stroke import run_stroke
 from asset2sim.tasks.check.sweep import SweepConfig, effort_limit, joint_subtrees
 from asset2sim.tasks.evaluation.clips import Trajectory
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd
@@ -149,17 +150,16 @@ def push_release(side: PhysicsSide, joint: str, closed: ClosedEnd, force_limit: 
 
         n_push = int(round(cfg.push_time / dt))
         n_free = int(round(cfg.release_time / dt))
-        ok = record(0)
-        for k in range(1, n_push + n_free + 1):
-            if not ok:
-                break
-            if k <= n_push and drive > 0:
+
+        def law(k, q, qd):
+            if k < n_push and drive > 0:
                 session.drive_joint(joint, closed.direction * speed, drive)
-            elif k == n_push + 1 or (k <= n_push and drive <= 0):  # let go (friction beyond the limit: never pushed)
-                session.release_joint(joint)
-            session.step(1)
-            if k % cfg.record_every == 0:
-                ok = record(k)
+            elif k == n_push or (k < n_push and drive <= 0):
+                session.release_joint(joint)  # let go (friction beyond the limit: never pushed)
+
+        if record(0):  # a diverged run ends at its last finite sample
+            run_stroke(session, joint, n_push + n_free, law=law,
+                       record=lambda k, q, qd: k % cfg.record_every == 0 and not record(k))
     finally:
         session.close()
     return Trajectory(t=np.asarray(t), joints={n: np.asarray(v) for n, v in qs.items()}, root_pos=np.asarray(pos),

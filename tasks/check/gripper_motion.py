@@ -15,6 +15,7 @@ import numpy as np
 from asset2sim.frames import axis_angle_matrix
 from asset2sim.tasks.check.contact_points import joint_frame_axis
 from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits
+from asset2sim.tasks.check.stroke import run_stroke
 from asset2sim.tasks.check.support import SupportWatch
 
 _UP = np.array([0.0, 0.0, 1.0])
@@ -137,14 +138,14 @@ class GripperMove:
         m.f_rel = frac(q_rel)
         if not done and reached(m.f_rel):
             notes.append("target reached but the joint was still moving at the time limit")
-        for _ in range(int(round(cfg.hold_time / dt))):
-            session.step(1)
+
+        def wait(k, q, qd):
             m.steps += 1
             watch.update()
             if m.steps % RECORD_EVERY == 0:
                 record_sample(session, m, None)
-        q_end, _ = session.joint_state(joint)
-        m.f_end = frac(q_end)
+
+        m.f_end = frac(run_stroke(session, joint, int(round(cfg.hold_time / dt)), record=wait).q)
         m.held_ok = reached(m.f_end) if np.isfinite(m.f_end) else False
         return m
 
@@ -161,14 +162,16 @@ class GripperMove:
         decel = qdot_max / cfg.accel_time
         q_des = q0
         pushed_steps = 0
-        for k in range(n_move):
+        done = False
+
+        def law(k, q, qd):
+            nonlocal q_des, pushed_steps
             # trapezoidal speed profile: ramped up over accel_time, and down at the same rate before the target
             speed = qdot_max * min(1.0, (k + 1) * dt / cfg.accel_time)
             speed = min(speed, max(float(np.sqrt(2.0 * decel * abs(q_target - q_des))), decel * dt))
             q_des = q_des + sgn * speed * dt
             if sgn * (q_des - q_target) > 0:
                 q_des = q_target
-            q, _ = session.joint_state(joint)
             o, a = joint_frame_axis(session, joint, grasp.link)
             p = grasp.grasp_point_world()
             target, push = _gripper_target(o, a, p, self.side_sign * (q_des - q), prismatic, cfg.vertical_share)
@@ -177,19 +180,20 @@ class GripperMove:
             _record_peaks(m, F, o, a, p, prismatic)
             if float(np.linalg.norm(F)) >= cfg.limits.max_force_n * (1 - 1e-9):
                 m.force_limited = True
-            session.step(1)
+
+        def record(k, q, qd):
+            nonlocal done
             m.steps += 1
             if m.steps % RECORD_EVERY == 0:
                 record_sample(session, m, grasp.grasp_point_world())
-            q, qd = session.joint_state(joint)
             slide, tilt = watch.update()
-            if not np.isfinite(q):
-                break
-            if slide > cfg.slide_tol or tilt > cfg.tip_tol:
-                break  # the object moves instead of the joint: the gripper stops
-            if q_des == q_target and reached(frac(q)) and abs(qd) < stopped:
-                return True, pushed_steps
-        return False, pushed_steps
+            if not np.isfinite(q) or slide > cfg.slide_tol or tilt > cfg.tip_tol:
+                return True  # the object moves instead of the joint: the gripper stops
+            done = q_des == q_target and reached(frac(q)) and abs(qd) < stopped
+            return done
+
+        run_stroke(session, joint, n_move, law=law, record=record)
+        return done, pushed_steps
 
 
 def _gripper_target(o: np.ndarray, a: np.ndarray, p: np.ndarray, dq: float, prismatic: bool,

@@ -45,6 +45,7 @@ from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever
 from asset2sim.tasks.interpret.operating_forces import ForceRange, load_operating_forces, operating_range
 from asset2sim.tasks.check.gripper import GripperLimits
 from asset2sim.tasks.check.operating import gravity_force, range_force
+from asset2sim.tasks.check.stroke import Reach, reach_stroke
 from asset2sim.tasks.check.sweep import HOLD_FORCE, REACH_FRACTION
 from asset2sim.tasks.interpret.part_priors import handled
 from asset2sim.urdf import UrdfModel
@@ -204,43 +205,20 @@ def _needed(session: SimSession, model: UrdfModel, joint: str, links: list[str],
 
 
 def _push(session: SimSession, joint: str, closed: tuple[float, float, float], sign: float, target: float,
-          hand: _Hand, held: list[str], cfg: OperabilityConfig) -> tuple[float, float | None, bool]:
-    """Push ``joint`` in direction ``sign`` (+1 opening) until the opening fraction passes ``target`` with
-    ``hand``, the ``held`` joints driven still. Returns (farthest fraction reached, time s or None, diverged)."""
-    qc, d, rng = closed
-    effort, speed, time_limit = hand.effort, hand.speed, hand.time_limit
+          hand: _Hand, held: list[str], cfg: OperabilityConfig) -> Reach:
+    """Push ``joint`` in direction ``sign`` (+1 opening) until the opening fraction passes
+    ``target`` with ``hand`` (its force rising over ``ramp_time``, easing off near its speed), the
+    ``held`` joints driven still."""
     dt = session.options.conventions.timestep
-    s = sign * d
-    n = int(round(time_limit / dt))
-    far = -np.inf if sign > 0 else np.inf
+    s = sign * closed[1]
 
-    def frac(q: float) -> float:
-        return float(d * (q - qc) / rng)
-
-    def done(f: float) -> bool:
-        return f >= target if sign > 0 else f <= target
-
-    for k in range(n):
-        q, qd = session.joint_state(joint)
-        if not (np.isfinite(q) and np.isfinite(qd)):
-            return (far if np.isfinite(far) else float("nan")), None, True
-        f = frac(q)
-        far = max(far, f) if sign > 0 else min(far, f)
-        if done(f):
-            return float(far), k * dt, False
-        ease = float(np.clip((speed - s * qd) / (0.5 * speed), 0.0, 1.0))
+    def law(k, q, qd):
+        ease = float(np.clip((hand.speed - s * qd) / (0.5 * hand.speed), 0.0, 1.0))
         ramp = min(1.0, (k + 1) * dt / cfg.ramp_time)
-        session.apply_joint_effort(joint, s * effort * ramp * ease)
-        for o in held:
-            session.drive_joint(o, 0.0, cfg.hold_force)
-        session.step(1)
-    q, _ = session.joint_state(joint)
-    if np.isfinite(q):
-        f = frac(q)
-        far = max(far, f) if sign > 0 else min(far, f)
-        if done(f):
-            return float(far), time_limit, False
-    return float(far), None, False
+        session.apply_joint_effort(joint, s * hand.effort * ramp * ease)
+
+    return reach_stroke(session, joint, closed, target, sign, hand.time_limit, law, held=held,
+                        hold_force=cfg.hold_force)
 
 
 def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tuple[float, float, float],
@@ -288,7 +266,11 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
                 session.set_joint_positions({**state, joint: qc})
             else:
                 session.set_joint_positions({**state, joint: qc + d * reached_open * rng})
-            reached, t, diverged = _push(session, joint, closed, sign, target, hand, held, cfg)
+            push = _push(session, joint, closed, sign, target, hand, held, cfg)
+            reached, diverged, dt = push.far, push.diverged, session.options.conventions.timestep
+            t = None if push.steps is None else push.steps * dt
+            if push.steps == push.limit:  # reached at the last reading: the time limit itself
+                t = time_limit
             stop = None
             if t is None and not diverged and need <= effort:  # as far as geometry lets it: a link in the way?
                 stop = blocker(session.joint_positions(), links, own)

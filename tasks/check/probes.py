@@ -13,6 +13,7 @@ import numpy as np
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, blocking_link, joints_between
 from asset2sim.tasks.check.pusher import ProbeConfig, Pusher, push_budget, push_geometry, pusher_for, root_held
+from asset2sim.tasks.check.stroke import run_stroke
 from asset2sim.tasks.check.support import SupportWatch
 from asset2sim.tasks.geometry.limits import rigid_group, subtrees
 from asset2sim.urdf import UrdfModel
@@ -206,36 +207,42 @@ def _push(session, stroke: _Stroke, hand: Pusher, cfg: ProbeConfig, watch: Suppo
           react: bool) -> None:
     """Push the ``stroke``'s part towards its target with ``hand``, until reached, the steps run out or the object
     slid or tipped; ``react``: the push's reaction acts on the root, equal and opposite at the push point."""
-    joint, sign, n_push, reached_if, frac = stroke.joint, stroke.sign, stroke.n_push, stroke.reached_if, stroke.frac
+    joint, sign = stroke.joint, stroke.sign
     link, root = session.joint_child[joint], session.link_names[0]
     dt = session.options.conventions.timestep
-    lead = 0.0  # how far the hand runs ahead of the push point, m
-    while not run.reached and run.steps < n_push:
+    lead = force = 0.0  # how far the hand runs ahead of the push point, m; its force, N
+    lever: float | None = None
+
+    def law(k, q, qd):
+        nonlocal lead, force, lever
         c, t_dir, lever = push_geometry(session, joint)
         d = sign * t_dir
-        q, qd = session.joint_state(joint)
         v = sign * qd * (lever if lever is not None else 1.0)  # speed of the push point along d
         lead, force = hand.step(lead, v, dt)
         session.apply_link_force(link, force * d, c)
         if react and link != root:
             session.apply_link_force(root, -force * d, c)  # the steadying hand's reaction
-        session.step(1)
+
+    def record(k, q, qd):
         run.steps += 1
         run.peak_force = max(run.peak_force, force)
         eff = force * (lever if lever is not None else 1.0)
         if eff >= run.peak_effort:
             run.peak_effort, run.lever = eff, lever
-        q, qd = session.joint_state(joint)
         xy, rot = watch.current()
         disp = float(np.linalg.norm(xy))
         run.max_disp, run.max_rot = max(run.max_disp, disp), max(run.max_rot, rot)
         run.record(run.steps * dt, q, force, disp, 0.0)
         if not np.isfinite(q):
-            break
-        if reached_if(frac(q)):
+            return True
+        if stroke.reached_if(stroke.frac(q)):
             run.reached, run.t_reach = True, run.steps * dt
-        elif run.max_disp > cfg.slide_tol or run.max_rot > cfg.tip_tol:
-            break  # the object moves instead of the joint: the pusher stops
+            return True
+        # the object moves instead of the joint: the pusher stops
+        return run.max_disp > cfg.slide_tol or run.max_rot > cfg.tip_tol
+
+    if not run.reached:
+        run_stroke(session, joint, stroke.n_push, law=law, record=record)
 
 
 def _release(session, joint: str, n_rel: int, frac: Callable[[float], float], watch: SupportWatch, run: _Run) -> None:
@@ -243,12 +250,13 @@ def _release(session, joint: str, n_rel: int, frac: Callable[[float], float], wa
     dt = session.options.conventions.timestep
     q_rel, _ = session.joint_state(joint)
     run.f_rel = run.f_low = run.f_high = frac(q_rel)
-    for i in range(n_rel):
-        session.step(1)
-        q, qd = session.joint_state(joint)
+
+    def record(k, q, qd):
         f = frac(q)
         run.f_low, run.f_high = min(run.f_low, f), max(run.f_high, f)
-        run.record((run.steps + i + 1) * dt, q, 0.0, float(np.linalg.norm(watch.current()[0])), 1.0)
+        run.record((run.steps + k) * dt, q, 0.0, float(np.linalg.norm(watch.current()[0])), 1.0)
+
+    run_stroke(session, joint, n_rel, record=record)
 
 
 def _judge(prismatic: bool, action: str, open_range: float, cfg: ProbeConfig, run: _Run, holds_position: bool,

@@ -16,6 +16,7 @@ from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root_options, joints_between
 from asset2sim.tasks.check.contact_points import joint_frame_axis
+from asset2sim.tasks.check.stroke import Reach, reach_stroke
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.synthesize.physics import G
 from asset2sim.urdf import UrdfModel
@@ -176,70 +177,59 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     cfg = config or SweepConfig()
     dt = session.options.conventions.timestep
     jtype = session.joint_types[joint]
-    prismatic = jtype == "prismatic"
     q_far = closed + direction * open_range
     v_max = open_range / cfg.traverse_time
     limit = effort_limit(session, joint, links, open_range, cfg)
     session.set_joint_positions({**initial_state, joint: closed})
-    vdiv = DIVERGED_SPEED_PRISMATIC if prismatic else DIVERGED_SPEED_REVOLUTE
+    vdiv = DIVERGED_SPEED_PRISMATIC if jtype == "prismatic" else DIVERGED_SPEED_REVOLUTE
     max_pen, worst = _deepest(session)
-    diverged = False
     trace: dict[str, list[float]] = {"t": [], "fraction": [], "phase": []}
 
-    def frac(q: float) -> float:
-        return float(direction * (q - closed) / open_range)
+    def penetration(k, q, qd):
+        nonlocal max_pen, worst
+        d, pair = _deepest(session)
+        if d > max_pen:
+            max_pen, worst = d, pair
 
-    def drive(goal: float, done) -> tuple[float, float | None]:
-        nonlocal max_pen, worst, diverged
-        best = None
-        n = int(round(cfg.time_limit / dt))
-        phase, t0 = float(goal != q_far), (trace["t"][-1] + dt if trace["t"] else 0.0)
-        for k in range(n):
-            q, qd = session.joint_state(joint)
-            trace["t"].append(t0 + k * dt)
-            trace["fraction"].append(frac(q))
-            trace["phase"].append(phase)
-            if not (np.isfinite(q) and np.isfinite(qd)) or abs(qd) > vdiv:
-                diverged = True
-                return (best if best is not None else float("nan")), None
-            f = frac(q)
-            best = f if best is None else (max(best, f) if goal == q_far else min(best, f))
-            if done(f):
-                return best, k * dt
+    def drive(goal: float) -> Reach:
+        def law(k, q, qd):
             v = float(np.clip(cfg.position_gain * (goal - q), -v_max, v_max))
             session.drive_joint(joint, v, limit)
-            for o in held:
-                session.drive_joint(o, 0.0, cfg.hold_force)
-            session.step(1)
-            d, pair = _deepest(session)
-            if d > max_pen:
-                max_pen, worst = d, pair
-        q, _ = session.joint_state(joint)
-        f = frac(q)
-        if np.isfinite(f):
-            best = max(best, f) if goal == q_far else min(best, f)
-        return best, (n * dt if done(f) else None)
+
+        sign = 1.0 if goal == q_far else -1.0
+        target = cfg.reach_fraction if sign > 0 else 1.0 - cfg.reach_fraction
+        r = reach_stroke(session, joint, (closed, direction, open_range), target, sign,
+                         cfg.time_limit, law, held=held, hold_force=cfg.hold_force, max_speed=vdiv,
+                         record=penetration)
+        t0 = trace["t"][-1] + dt if trace["t"] else 0.0
+        trace["t"] += [t0 + k * dt for k in range(len(r.fractions))]
+        trace["fraction"] += r.fractions
+        trace["phase"] += [float(sign < 0)] * len(r.fractions)
+        return r
 
     # PyBullet applies springs by torque control, which makes the holds drift: the others stay passive
     hold = cfg.hold_others and not (any(sp.stiffness > 0 for sp in session.options.springs.values())
                                      and session.traits.springs_by_torque)
     held = [o for o in session.joint_types if o != joint] if hold else []
     try:
-        out, t_out = drive(q_far, lambda f: f >= cfg.reach_fraction)
-        back, t_back = (float("nan"), None) if diverged else drive(closed, lambda f: f <= 1.0 - cfg.reach_fraction)
+        out = drive(q_far)
+        back = Reach(0) if out.diverged else drive(closed)
     finally:
         for o in [joint, *held]:
             session.release_joint(o)
+    diverged = out.diverged or back.diverged
+    t_out, t_back = (None if r.steps is None else r.steps * dt for r in (out, back))
     failure = ["diverged"] if diverged else []
     if t_out is None and not diverged:
-        failure.append(f"reached only {out:.0%} of the range opening")
+        failure.append(f"reached only {out.far:.0%} of the range opening")
     if t_back is None and not diverged:
-        failure.append(f"closed back only to {back:.0%} open")
+        failure.append(f"closed back only to {back.far:.0%} open")
     if max_pen >= cfg.max_penetration:
         failure.append(f"self-penetration {max_pen * 1000:.1f} mm" + (f" ({worst[0]} / {worst[1]})" if worst else ""))
     return JointSweep(
         joint=joint, joint_type=jtype, q_closed=float(closed), q_far=float(q_far), open_range=float(open_range),
-        effort_limit=limit, reached_open=float(out), reached_closed=float(back), time_open=t_out, time_close=t_back,
+        effort_limit=limit, reached_open=float(out.far), reached_closed=float(back.far),
+        time_open=t_out, time_close=t_back,
         max_penetration=max_pen, worst_pair=worst, diverged=diverged, passed=not failure, failure="; ".join(failure),
         trace=trace)
 
