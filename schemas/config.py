@@ -124,7 +124,7 @@ class RefineConfig(BaseModel):
     """Budget of contact queries during state refinement (count)."""
     max_escalation_rounds: int = Field(5, ge=0, le=50)
     """Post-check rounds changing damping/friction in one attempt, its collision repairs included (count;
-    :mod:`asset2sim.tasks.check.dynamics_search`)."""
+    :mod:`asset2sim.tasks.tune.dynamics_search`)."""
     escalation_factor: float = Field(3.0, gt=1.0, le=100.0)
     """Multiplier on damping/friction per escalation round (dimensionless)."""
     sag_tolerance_revolute: float = Field(0.02, gt=0.0, le=math.pi)

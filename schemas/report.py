@@ -46,7 +46,7 @@ class EscalationRound(BaseModel):
     reason: str = ""
     words_kept: list[str] = Field(default_factory=list)
     """Changes this round's step asked and a word of the request about the part's motion kept from it
-    (``tasks/check/word_guard.py``), one line each."""
+    (``tasks/tune/word_guard.py``), one line each."""
 
 
 class StateRefinement(BaseModel):

@@ -113,7 +113,7 @@ MotionKind = Literal["free", "stiff", "hold", "spring", "self_closing", "soft_cl
                      "moderate_damping", "slides"]
 
 #: What each word about a part's motion asks of its joint (``tasks/synthesize/estimate.py`` applies it, with its
-#: source; ``tasks/check/word_guard.py`` keeps every later step from moving the joint against it): the parameters it
+#: source; ``tasks/tune/word_guard.py`` keeps every later step from moving the joint against it): the parameters it
 #: sets and whether no later step may raise (``"max"``) or lower (``"min"``) each.
 MOTION_GUARDS: dict[str, dict[str, str]] = {
     "free": {"friction": "max", "damping": "max"},

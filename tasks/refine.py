@@ -17,7 +17,6 @@ from asset2sim.schemas.config import MAX_REFINE_STEPS, RefineConfig
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import RefineReport
 from asset2sim.schemas.request import RequestSpec
-from asset2sim.tasks.check import keep_declared as keep
 from asset2sim.tasks.ingest.declared import read_declared
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.geometry import analyze, limits
@@ -29,8 +28,6 @@ from asset2sim.tasks.assemble import (write)
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.publish import extra_outputs, output, refine_report
 from asset2sim.tasks.publish import media as media_phase
-from asset2sim.tasks.check import escalation
-from asset2sim.tasks.check.attempt import Attempt, least_openings
 from asset2sim.tasks.state import placement
 from asset2sim.tasks.geometry.closed_state import closed_tuples
 from asset2sim.tasks.interpret.request import request_notes
@@ -40,6 +37,9 @@ from asset2sim.tasks.publish.contract import (MARKER_NAME, REPORT_NAME, is_compl
 from asset2sim.tasks.state import balance, ground_clearance, pose, stability
 from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
+from asset2sim.tasks.tune import escalation
+from asset2sim.tasks.tune import keep_declared as keep
+from asset2sim.tasks.tune.attempt import Attempt, least_openings
 from asset2sim.inert import one_line
 from asset2sim.engines.step_budget import StepBudgetExceeded, step_budget
 
@@ -212,7 +212,7 @@ def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, categor
 
 
 def _keep_declared(est: estimator.Estimator, asset_dir: Path | str, asset: AssetDescription) -> estimator.Estimator:
-    """``est`` keeping the asset's plausible declared physics (:class:`asset2sim.tasks.check.keep_declared.KeepDeclared`);
+    """``est`` keeping the asset's plausible declared physics (:class:`asset2sim.tasks.tune.keep_declared.KeepDeclared`);
     RefineError("invalid_input") when the declared physics cannot be read."""
     try:
         declared = read_declared(asset_dir, asset.urdf_path)

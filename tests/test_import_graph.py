@@ -12,7 +12,8 @@ optional heavy third-party packages only.
 
 The layers (:data:`LAYERS`), each importing only its own and earlier ones:
 the core (``asset2sim/`` and ``schemas/``), then the stages of ``tasks/`` in
-data-flow order, ``tasks/refine.py`` that chains them, the applications
+data-flow order (the measuring tiers of ``check/`` below the tuning loop of ``tune/``),
+``tasks/refine.py`` that chains them, the applications
 (``apps/``: the audit, the realism tools, the benchmark) above it, ``flows/``, the public API (``asset2sim.api``, whose names the
 package ``asset2sim`` lends on first use) and the command line.
 """
@@ -116,8 +117,8 @@ def _named_modules(text: str, modules: dict[str, Path]) -> list[str]:
 
 #: The layers in data-flow order (index = rank); a module may import only
 #: modules of its own or an earlier layer (:func:`_layer`).
-LAYERS = ["core", "ingest", "geometry", "interpret", "synthesize", "assemble", "state", "check", "evaluation",
-          "publish", "refine", "apps", "flows", "api", "cli"]
+LAYERS = ["core", "ingest", "geometry", "interpret", "synthesize", "assemble", "state", "check", "tune",
+          "evaluation", "publish", "refine", "apps", "flows", "api", "cli"]
 
 
 def _layer(module: str) -> str:
@@ -216,6 +217,10 @@ def test_import_by_name_is_an_edge(tmp_path):
 def test_a_stage_importing_a_later_one_is_reported():
     assert _layer("asset2sim.tasks.state.clearance") == "state" and _layer("asset2sim.tasks.refine") == "refine"
     assert LAYERS.index(_layer("asset2sim.tasks.assemble.write")) > LAYERS.index(_layer("asset2sim.tasks.synthesize.estimate"))
+    # the tuning loop (escalation, the dynamics search, repairs) sits above the measuring tiers:
+    # check/ never imports tune/
+    assert _layer("asset2sim.tasks.tune.escalation") == "tune"
+    assert LAYERS.index("check") < LAYERS.index("tune") < LAYERS.index("evaluation")
     assert _layer("asset2sim.output_folder") == "core" and _layer("asset2sim.flows.catalog") == "flows"
     # the applications sit above every stage and below the flows and commands
     assert _layer("asset2sim.apps.audit.audit") == "apps" and _layer("asset2sim.apps.realism.judge") == "apps"

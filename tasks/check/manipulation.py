@@ -1,6 +1,5 @@
-"""The post-check's manipulation tiers (refine stage 7): the joint sweep and
-robust rest of the written asset, the joints robust rest found leaving their
-state and the friction factor escalation gives them (``docs/design/metrics.md``).
+"""The post-check's manipulation tiers (refine stage 7): the joint sweep, operability and
+robust rest of the written asset (``docs/design/metrics.md``).
 """
 
 from __future__ import annotations
@@ -49,55 +48,6 @@ def measure_manipulation(engine: str, obj: SimObject, closed: dict[str, tuple[fl
     sw.details["root"] = "fixed (mounted)" if fixed_base else "fixed (by definition of the sweep)"
     op.details["root"] = "fixed (mounted)" if fixed_base else "fixed (held by the other hand)"
     return [sw, op, rr]
-
-
-def joints_not_held(metrics: list[MetricResult]) -> list[str]:
-    """Joints that left their state in any robust-rest trial of ``metrics`` and,
-    when one did, those whose drift exceeded :data:`HOLD_TARGET_SHARE` of their
-    tolerance in some trial (coupled parts' drift varies between rounds), first-seen order."""
-    failing_: list[str] = []
-    near: list[str] = []
-    for m in metrics:
-        if m.name != "robust_rest":
-            continue
-        for trial in (m.details.get("trials") or {}).values():
-            failing_.extend(trial.get("failing_joints") or [])
-            for j, d in (trial.get("joint_drift") or {}).items():
-                tol = (trial.get("joint_tolerance") or {}).get(j)
-                if d is not None and tol and float(d) > HOLD_TARGET_SHARE * float(tol):
-                    near.append(j)
-    if not failing_:
-        return []
-    return list(dict.fromkeys(failing_ + near))
-
-
-#: Share of a joint's tolerance that escalation aims its drift at (:func:`hold_factor`).
-HOLD_TARGET_SHARE = 0.5
-#: Exponents of :func:`hold_factor`: an impact's travel (drop, nudge) falls about
-#: as 1 / friction^2, a slope load (tilt) needs friction about proportional to it.
-HOLD_EXPONENT_IMPACT = 0.5
-HOLD_EXPONENT_SLOPE = 1.0
-#: Smallest friction step of :func:`hold_factor`.
-HOLD_MIN_STEP = 1.2
-
-
-def hold_factor(metrics: list[MetricResult], joint: str, largest: float) -> float:
-    """Factor on the friction (and damping) of ``joint`` that should make it hold
-    through robust rest: the largest over the trials of (drift /
-    (HOLD_TARGET_SHARE tolerance)) ** e (e HOLD_EXPONENT_IMPACT for the drop
-    and the nudge, HOLD_EXPONENT_SLOPE for the tilts), between HOLD_MIN_STEP and ``largest``."""
-    best = HOLD_MIN_STEP
-    for m in metrics:
-        if m.name != "robust_rest":
-            continue
-        for name, trial in (m.details.get("trials") or {}).items():
-            d = (trial.get("joint_drift") or {}).get(joint)
-            tol = (trial.get("joint_tolerance") or {}).get(joint)
-            if d is None or not tol or d <= HOLD_TARGET_SHARE * tol:
-                continue
-            e = HOLD_EXPONENT_SLOPE if name.startswith("tilt") else HOLD_EXPONENT_IMPACT
-            best = max(best, (float(d) / (HOLD_TARGET_SHARE * float(tol))) ** e)
-    return float(min(largest, best))
 
 
 def failing(metrics: list[MetricResult]) -> list[str]:

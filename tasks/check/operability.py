@@ -41,13 +41,14 @@ from asset2sim.engines.source import SimObject
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import Blocker
-from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, rigid_group, subtree
+from asset2sim.tasks.check.contact_points import (contact_point_rule, grasp_lever, joint_frame_axis,
+                                                  rigid_group, subtree)
 from asset2sim.tasks.interpret.operating_forces import ForceRange, load_operating_forces, operating_range
 from asset2sim.tasks.check.gripper import GripperLimits
-from asset2sim.tasks.check.operating import gravity_force, range_force
 from asset2sim.tasks.check.stroke import Reach, reach_stroke
 from asset2sim.tasks.check.sweep import HOLD_FORCE, REACH_FRACTION
 from asset2sim.tasks.interpret.part_priors import handled
+from asset2sim.tasks.synthesize.physics import G as GRAVITY
 from asset2sim.urdf import UrdfModel
 
 #: Joint types a hand moves along a range.
@@ -147,9 +148,36 @@ class OperabilityRun:
     skipped: dict[str, str] = field(default_factory=dict)
 
 
+def range_force(rng_: ForceRange, where: str, lever: float | None) -> tuple[float, str]:
+    """(upper end of the force range, or of the torque range / ``lever`` where smaller, N; what set it)."""
+    force, bound = float("inf"), ""
+    if rng_.force_n is not None:
+        force, bound = rng_.force_n[1], f"force range of {where}"
+    if rng_.torque_nm is not None and lever is not None and rng_.torque_nm[1] / lever < force:
+        force, bound = rng_.torque_nm[1] / lever, f"torque range of {where}"
+    return force, bound
+
+
+def gravity_force(session: SimSession, model: UrdfModel, joint: str, links: list[str]) -> float:
+    """Generalised gravity force Q (N m or N; > 0 pushes q up) of ``links`` on ``joint``:
+    a . sum((c_i - o) x m_i g), prismatic a . sum(m_i g)."""
+    o, a = joint_frame_axis(session, joint, session.joint_child[joint])
+    g = np.array([0.0, 0.0, -GRAVITY])
+    q = 0.0
+    for ln in links:
+        lk = model.links.get(ln)
+        if lk is None or lk.inertial is None or not lk.inertial.mass:
+            continue
+        p, Rl = session.link_frame(ln)
+        c = np.asarray(p, float) + np.asarray(Rl, float) @ lk.inertial.com()
+        f = lk.inertial.mass * g
+        q += float(a @ f) if session.joint_types[joint] == "prismatic" else float(a @ np.cross(c - o, f))
+    return q
+
+
 def hand_limits(rng: ForceRange, lever: float | None) -> tuple[float, float]:
     """(force limit at the grasp point N, effort limit N m or N) of a hand inside ``rng`` at ``lever`` m
-    (None: prismatic): :func:`~asset2sim.tasks.check.operating.range_force`, the force range's top lowered
+    (None: prismatic): :func:`range_force`, the force range's top lowered
     where the torque range's top bounds F r.
 
     Raises:
@@ -164,7 +192,7 @@ def hand_limits(rng: ForceRange, lever: float | None) -> tuple[float, float]:
 def generalized_load(session: SimSession, model: UrdfModel, joint: str, links: list[str],
                      springs: dict[str, Spring]) -> float:
     """Generalised force Q (N m or N; > 0 pushes q up) on ``joint`` at the session's state: gravity on ``links``
-    (:func:`~asset2sim.tasks.check.operating.gravity_force`) plus the joint's spring
+    (:func:`gravity_force`) plus the joint's spring
     (:meth:`~asset2sim.engines.base.Spring.force`)."""
     q = gravity_force(session, model, joint, links)
     s = springs.get(joint)

@@ -1,7 +1,7 @@
-"""Post-check and escalation (refine stage 7): the SPEC metrics of the written
-asset plus each joint's sag (largest departure from its initial position,
-against ``RefineConfig.sag_tolerance_*``); a joint that oscillates or sags
-gets its damping and friction multiplied by ``escalation_factor``.
+"""Post-check (refine stage 7): the SPEC metrics of the written asset plus each
+joint's sag (largest departure from its initial position, against
+``RefineConfig.sag_tolerance_*``); the escalation of a check that fails is the
+tuning's (:mod:`asset2sim.tasks.tune.escalation`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,6 @@ from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import manipulation, metrics, parent_child, parity, robust_rest
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
-from asset2sim.tasks.synthesize.physics import max_stable_damping
 from asset2sim.tasks.assemble.export_mjcf import overlay_springs
 
 
@@ -238,62 +237,3 @@ def sweep_not_run(metrics: list[MetricResult]) -> bool:
 def root_label(fixed: bool) -> str:
     """How a check held the root: "fixed (mounted)" or "free (on the ground)"."""
     return "fixed (mounted)" if fixed else "free (on the ground)"
-
-
-def escalate(overlay: Overlay, check: PostCheck, factor: float,
-             friction_caps: dict[str, float] | None = None,
-             tilt_floors: dict[str, float] | None = None,
-             damping_caps: dict[str, float] | None = None) -> tuple[Overlay, dict[str, dict[str, float]], str]:
-    """Raise damping and friction of the joints that oscillate, sag or are not
-    held by robust rest (all joints when the root is unstable and no joint is
-    singled out). ``friction_caps`` (joint -> N*m or N) bound the friction,
-    ``tilt_floors`` (N*m or N) raise that of a joint robust rest does not hold,
-    ``damping_caps`` (N m s/rad or N s/m) bound the damping (never below the values before).
-
-    Returns (new overlay, changes joint -> {parameter: new value}, reason).
-    """
-    other_unstable, other_osc = check.engine_failures()
-    osc = list(dict.fromkeys(list(check.metric("oscillation").details.get("failing", [])) + other_osc))
-    not_held = manipulation.joints_not_held(check.metrics)
-    targets = list(dict.fromkeys(list(osc) + list(check.sagging) + not_held))
-    reason = []
-    if osc:
-        reason.append(f"oscillating: {', '.join(osc)}")
-    if check.sagging:
-        reason.append(f"sagging: {', '.join(check.sagging)}")
-    if not_held:
-        reason.append(f"not held under robust rest: {', '.join(not_held)}")
-    if not targets and not check.stable:
-        targets = list(overlay.joints)
-        reason.append("root unstable: damping all joints")
-    ov = overlay.model_copy(deep=True)
-    changes: dict[str, dict[str, float]] = {}
-    for name in targets:
-        d = ov.joints.get(name)
-        if d is None:
-            continue
-        f = factor
-        if name in not_held and name not in osc and name not in check.sagging:  # only robust rest: as far as needed
-            f = manipulation.hold_factor(check.metrics, name, factor * factor)
-        damping = max(d.damping * f, 1e-4)
-        friction = max(d.friction * f, 1e-3)
-        note = f"; escalated x{f:.3g}"
-        floor = (tilt_floors or {}).get(name) if name in not_held else None
-        if floor is not None and floor > friction:
-            friction = floor
-            note += f" (friction raised to {floor:.3g} for robust rest's tilts)"
-        cap = (friction_caps or {}).get(name)
-        if cap is not None and friction > cap:
-            friction = max(cap, d.friction)
-            note += f" (friction capped at {friction:.3g}: what a real operating force moves and its mechanism allows)"
-        if d.inertia_axis:
-            damping = min(damping, max(max_stable_damping(d.inertia_axis), d.damping))
-        dcap = (damping_caps or {}).get(name)
-        if dcap is not None and damping > dcap:
-            damping = max(dcap, d.damping)
-        if friction == d.friction and damping == d.damping:
-            continue
-        new = d.model_copy(update={"damping": damping, "friction": friction, "source": d.source + note})
-        ov.joints[name] = new
-        changes[name] = {"damping": new.damping, "friction": new.friction}
-    return ov, changes, "; ".join(reason)

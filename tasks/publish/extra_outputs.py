@@ -20,7 +20,7 @@ from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.report import RefineReport
 from asset2sim.stage_log import StageLog
 from asset2sim.tasks.assemble import export_mjcf
-from asset2sim.tasks.check.attempt import Attempt
+from asset2sim.tasks.tune.attempt import Attempt
 from asset2sim.tasks.check.verdict import combine_verdict
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON

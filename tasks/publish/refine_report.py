@@ -6,7 +6,7 @@ from __future__ import annotations
 from asset2sim import __version__
 from asset2sim.schemas.report import RefineReport
 from asset2sim.tasks.check import as_asked, parity
-from asset2sim.tasks.check.attempt import Attempt
+from asset2sim.tasks.tune.attempt import Attempt
 from asset2sim.tasks.check.verdict import penetration_measures, post_check_failure_mode, readiness
 from asset2sim.tasks.interpret.request import request_notes
 from asset2sim.tasks.synthesize import estimate, request_apply

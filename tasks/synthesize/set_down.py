@@ -33,7 +33,7 @@ SET_DOWN_DROP = 0.02
 #: ... and leaned this far about each horizontal axis, both ways, and let go, rad (5 deg).
 SET_DOWN_LEAN = float(np.radians(5.0))
 #: Safety factor on the lean's load (dimensionless): the object is let go leaned and rocks back, so the lean is held
-#: with the escalation's tilt-floor margin (``check.operating.TILT_MARGIN``), not the static ``physics.HOLD_SAFETY``.
+#: with the escalation's tilt-floor margin (``tune.operating.TILT_MARGIN``), not the static ``physics.HOLD_SAFETY``.
 LEAN_SAFETY = 2.0
 #: The SPEC's set-down trials whose landings :func:`landings` models.
 LANDING_TRIALS = ("drop", "tilt+x", "tilt-x", "tilt+y", "tilt-y")

@@ -16,7 +16,8 @@ from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.engines.base import Spring
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
-from asset2sim.tasks.check import operability, operating, robust_rest
+from asset2sim.tasks.check import operability, robust_rest
+from asset2sim.tasks.tune import operating
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.geometry.urdf_closed import measure_closed
 from asset2sim.tasks.interpret.part_priors import handled

@@ -17,6 +17,7 @@ from asset2sim.tasks.check.robust_rest import robust_rest_metric, run_robust_res
 from asset2sim.tasks.check.sweep import run_sweep, sweep_metric
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.refine import refine_asset
+from asset2sim.tasks.tune.escalation import escalate
 from asset2sim.urdf import read_urdf
 from tests.tasks.check.failure_assets import build_tall_faucet
 
@@ -110,7 +111,7 @@ def test_sweep_is_skipped_only_on_a_round_that_is_escalated_whatever_it_says(fau
     cfg = RefineConfig()
     rec = RecordedRuns()
     def escalated(chk):  # as refine's loop: another round whenever escalation changes something
-        return bool(postcheck.escalate(ov, chk, cfg.escalation_factor)[1])
+        return bool(escalate(ov, chk, cfg.escalation_factor)[1])
 
     early = postcheck.run_post_check(UrdfFile(out / "mobility.urdf"), state, ov, cfg, closed=closed, escalated=escalated, recorded=rec)
     last = postcheck.run_post_check(UrdfFile(out / "mobility.urdf"), state, ov, cfg, closed=closed, escalated=lambda chk: False, recorded=rec)
@@ -123,7 +124,7 @@ def test_sweep_is_skipped_only_on_a_round_that_is_escalated_whatever_it_says(fau
     assert postcheck.sweep_not_run(early.metrics) and not postcheck.sweep_not_run(last.metrics)
     others = [e for e in cfg.engines if e != "pybullet"]
     assert early.engine_results == {} and sorted(last.engine_results) == sorted(others)
-    assert postcheck.escalate(ov, early, cfg.escalation_factor) == postcheck.escalate(ov, last, cfg.escalation_factor)
+    assert escalate(ov, early, cfg.escalation_factor) == escalate(ov, last, cfg.escalation_factor)
     assert rec.hits == 1  # robust rest of the same files taken from the first check
 
 

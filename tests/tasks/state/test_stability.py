@@ -183,7 +183,7 @@ def test_a_fully_open_stapler_stands_in_its_band(tmp_path):
     it stands at the target and is interaction-ready. Before, its arm and
     magazine weighed twice as much; the 2 cm drop and the 5 deg tilts
     toppled it at the target, though it was statically steady, and the arm
-    went to the least opening the band allows (0.85, :func:`asset2sim.tasks.check.attempt.least_openings`).
+    went to the least opening the band allows (0.85, :func:`asset2sim.tasks.tune.attempt.least_openings`).
     Either way the arm stays in its band, and a lower opening is explained."""
     res = refine_asset(SHARED / "102990", "A stapler, fully open.", tmp_path / "out", extras=False)
     r = res.report
@@ -200,7 +200,7 @@ def test_the_least_openings_are_the_lower_ends_of_the_bands_of_joints_opened_pas
     already there and a joint without a closed end are left."""
     from types import SimpleNamespace
 
-    from asset2sim.tasks.check.attempt import least_openings
+    from asset2sim.tasks.tune.attempt import least_openings
 
     closed = {n: SimpleNamespace(fraction=lambda q: q) for n in ("lid", "door", "at_end")}
     att = SimpleNamespace(closed_out=closed, state={"lid": 1.0, "door": 0.0, "at_end": 0.355, "knob": 0.9})

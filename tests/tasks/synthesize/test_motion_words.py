@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from asset2sim.demo_assets import build_object
-from asset2sim.tasks.check import word_guard
+from asset2sim.tasks.tune import word_guard
 from asset2sim.tasks.interpret.request import parse_request
 from asset2sim.tasks.refine import refine_asset
 from asset2sim.tasks.synthesize.context import build_context

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check.manipulation import HOLD_MIN_STEP, HOLD_TARGET_SHARE, hold_factor, joints_not_held
+from asset2sim.tasks.tune.escalation import HOLD_MIN_STEP, HOLD_TARGET_SHARE, hold_factor, joints_not_held
 
 
 def _rr(drifts: dict[str, dict[str, float]], tol: float = 0.002) -> MetricResult:

@@ -1,5 +1,5 @@
 """The bracketed friction / damping search between robust rest and the task
-(refine stage 7, ``asset2sim.tasks.check.dynamics_search``): on rounds built
+(refine stage 7, ``asset2sim.tasks.tune.dynamics_search``): on rounds built
 like the post-check's and on a real laptop whose screen the caps alone left
 1 % short of holding."""
 
@@ -9,8 +9,8 @@ import pytest
 
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import dynamics_search, operating
-from asset2sim.tasks.check.dynamics_search import DynamicsSearch, Setting
+from asset2sim.tasks.tune import dynamics_search, operating
+from asset2sim.tasks.tune.dynamics_search import DynamicsSearch, Setting
 from tests.conftest import SHARED, needs_shared
 
 

@@ -1,13 +1,15 @@
 """How hard a joint may be to operate: the bounds escalation
-(:func:`asset2sim.tasks.check.postcheck.escalate`) keeps friction and damping to: the probe's cap, the
-operating budget with a task (``docs/design/metrics.md``, "Operable friction") and the tilt floor, the
-friction before escalation plus ``TILT_MARGIN`` m_s g r sin(theta) (prismatic: without r).
+(:func:`asset2sim.tasks.tune.escalation.escalate`) keeps friction and damping to: the probe's
+cap, the operating budget with a task (``docs/design/metrics.md``, "Operable friction") and the
+tilt floor, the friction before escalation plus ``TILT_MARGIN`` m_s g r sin(theta) (prismatic:
+without r); every joint's caps in one value (:func:`operating_limits`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -18,13 +20,18 @@ from asset2sim.engines.source import SimObject
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.overlay import JointDynamics, Overlay
 from asset2sim.schemas.request import BAND_INTERVAL
+from asset2sim.tasks.check import sweep
 from asset2sim.tasks.check.blockers import fixed_root_options
 from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, grasp_side, joint_frame_axis, subtree
 from asset2sim.tasks.interpret.operating_forces import ForceRange, operating_range
+from asset2sim.tasks.interpret.part_priors import handled
 from asset2sim.tasks.check.gripper import GripperLimits
 from asset2sim.tasks.check.gripper_motion import TaskConfig
+from asset2sim.tasks.check.operability import gravity_force, range_force
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.check.pusher import ProbeConfig
+from asset2sim.tasks.check.task_spec import task_actions
+from asset2sim.tasks.check.task_tier import link_labels
 from asset2sim.tasks.geometry.closed_state import subtree_links
 from asset2sim.tasks.synthesize.physics import G as GRAVITY, max_stable_friction
 from asset2sim.urdf import UrdfModel
@@ -174,23 +181,6 @@ class OperatingBudget:
     """non-empty where the budget cannot hold the requested state (the friction cap is then the hold floor)"""
     hold_floor: float = 0.0
     """friction (N m or N) below which the requested state does not hold (0 for parts moving freely)"""
-
-
-def gravity_force(session: SimSession, model: UrdfModel, joint: str, links: list[str]) -> float:
-    """Generalised gravity force Q (N m or N; > 0 pushes q up) of ``links`` on ``joint``:
-    a . sum((c_i - o) x m_i g), prismatic a . sum(m_i g)."""
-    o, a = joint_frame_axis(session, joint, session.joint_child[joint])
-    g = np.array([0.0, 0.0, -GRAVITY])
-    q = 0.0
-    for ln in links:
-        lk = model.links.get(ln)
-        if lk is None or lk.inertial is None or not lk.inertial.mass:
-            continue
-        p, Rl = session.link_frame(ln)
-        c = np.asarray(p, float) + np.asarray(Rl, float) @ lk.inertial.com()
-        f = lk.inertial.mass * g
-        q += float(a @ f) if session.joint_types[joint] == "prismatic" else float(a @ np.cross(c - o, f))
-    return q
 
 
 def ground_friction(model: UrdfModel) -> float:
@@ -349,16 +339,6 @@ def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: boo
     return t, max(float(np.linalg.norm(t)), 1e-12), grasp_lever(session, joint, grasp.link, grasp.point, model)
 
 
-def range_force(rng_: ForceRange, where: str, lever: float | None) -> tuple[float, str]:
-    """(upper end of the force range, or of the torque range / ``lever`` where smaller, N; what set it)."""
-    force, bound = float("inf"), ""
-    if rng_.force_n is not None:
-        force, bound = rng_.force_n[1], f"force range of {where}"
-    if rng_.torque_nm is not None and lever is not None and rng_.torque_nm[1] / lever < force:
-        force, bound = rng_.torque_nm[1] / lever, f"torque range of {where}"
-    return force, bound
-
-
 def _ground_force(t: np.ndarray, nt: float, s_motion: float, mu: float, total: float) -> float | None:
     """mu M g / (h - mu v), N: the push along ``s_motion`` ``t`` (|t| = ``nt``) the
     ground friction still resists; None where the gripper presses or lifts (a vertical share of the push of
@@ -413,3 +393,53 @@ def bound_overlay(overlay: Overlay, budgets: dict[str, OperatingBudget]) -> tupl
         ov.joints[name] = d.model_copy(update={"friction": fr, "damping": dm, "source": d.source + note})
         notes.append(f"{name}{note[1:]}")
     return ov, notes
+
+
+@dataclass
+class OperatingLimits:
+    """What escalation keeps to: joint -> friction cap and damping cap (N m
+    or N; N m s/rad or N s/m), the budgets they come from, and notes."""
+
+    friction_caps: dict[str, float]
+    damping_caps: dict[str, float]
+    budgets: dict[str, OperatingBudget] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    hand_caps: dict[str, float] = field(default_factory=dict)
+    """joint -> the friction (N m or N) a hand inside the part's range still moves both ways over the whole range
+    (the operability tier's): no step of the dynamics search goes above it"""
+
+
+def operating_limits(obj: SimObject, overlay: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry],
+                     closed: dict[str, tuple[float, float, float]] | None, *, category: str | None, task: str | None,
+                     free_moving: bool, joints: list[str] | None = None) -> OperatingLimits:
+    """Friction and damping caps of every movable joint of the written asset ``obj`` (its root as mounted): the
+    operating budget (:func:`operating_budgets`) of a hand inside the part's real
+    range, both ways with the root fixed, for every handled part
+    (:func:`~asset2sim.tasks.interpret.part_priors.handled`) where the closed ends are known, the tighter of it and
+    the task gripper's for the task's ``joints``; else the probe's cap
+    (:func:`friction_caps`); damping at most what the joint sweep's drive still
+    moves (:func:`~asset2sim.tasks.check.sweep.damping_caps`).
+
+    Raises:
+        EngineUnavailable; whatever loading ``obj.source`` raises.
+    """
+    labels = link_labels(asset)
+    hand = {n: c for n, c in (closed or {}).items() if handled(labels.get(asset.joint(n).child))}
+    # every handled part, both ways, root fixed (the operability tier's hand); a task's joints also as its gripper meets them
+    budgets = operating_budgets(dataclasses.replace(obj, fixed_base=True), overlay, hand, category=category,
+                                labels=labels, free_moving=free_moving, whole=True) if hand else {}
+    hand_caps = {n: b.friction_cap for n, b in budgets.items()}
+    sel = {n: c for n, c in (closed or {}).items() if joints is None or n in joints}
+    if sel and task:
+        for n, b in operating_budgets(obj, overlay, sel, category=category, labels=labels,
+                                      actions=task_actions(task), free_moving=free_moving).items():
+            if n not in budgets or b.budget < budgets[n].budget:
+                budgets[n] = b
+    caps = friction_caps(overlay, overlay, asset, geometry)
+    caps.update({n: b.friction_cap for n, b in budgets.items()})
+    dcaps = {n: b.damping_cap for n, b in budgets.items()}
+    if closed:  # what the joint sweep's drive still moves through the range in time
+        for name, c in sweep.damping_caps(obj, closed).items():
+            dcaps[name] = min(c, dcaps.get(name, c))
+    return OperatingLimits(friction_caps=caps, damping_caps=dcaps, budgets=budgets,
+                           notes=[b.conflict for b in budgets.values() if b.conflict], hand_caps=hand_caps)

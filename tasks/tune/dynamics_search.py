@@ -1,7 +1,7 @@
 """The friction and damping of a joint bracketed between robust rest (wants them high) and the task
 (wants them low): :class:`DynamicsSearch` turns the proposals of relief
-(:func:`asset2sim.tasks.check.task_tier.relieve`) and escalation
-(:func:`asset2sim.tasks.check.postcheck.escalate`) into a bracketed search over the post-check rounds
+(:func:`relieve`) and escalation
+(:func:`asset2sim.tasks.tune.escalation.escalate`) into a bracketed search over the post-check rounds
 (``docs/design/metrics.md``, "Interaction under manipulation"; the rules of :meth:`DynamicsSearch.settle`:
 ``docs/design/core.md``). Settings are ordered by the operating cost f + c w (w the gripper's top speed
 at the grasp point; 1 without a budget).
@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import operating, task_tier
+from asset2sim.tasks.tune import operating
 
 #: Settings whose operating costs differ by less than this share are the same
 #: setting (dimensionless): a bracket this narrow is not split again.
@@ -30,6 +30,8 @@ UNANSWERED_RATIO = 2.0
 #: the same drift at any friction until it holds: no stop there.
 UNANSWERED_SHARE = 0.1
 
+#: Smallest share of its friction a joint keeps in one relief round (:func:`relieve`).
+RELIEF_MIN_SHARE = 0.5
 
 @dataclass(frozen=True)
 class Setting:
@@ -80,7 +82,7 @@ class RoundOutcome:
 
 def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.OperatingBudget] | None = None) -> RoundOutcome:
     """The per-joint outcome of a post-check round's ``metrics``; a task counts
-    against a joint as relief counts it (:func:`~asset2sim.tasks.check.task_tier.force_excess`)."""
+    against a joint as relief counts it (:func:`force_excess`)."""
     out = RoundOutcome()
     seen: set[str] = set()
     for m in metrics:
@@ -102,7 +104,7 @@ def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.Oper
                 j = a["joint"]
                 tried[j] = tried.get(j, True) and bool(a.get("success"))
                 out.peak_force[j] = max(out.peak_force.get(j, 0.0), float(a.get("peak_operating_force_n") or 0.0))
-    out.task_bad = set(task_tier.force_excess(metrics, budgets or {})[0])
+    out.task_bad = set(force_excess(metrics, budgets or {})[0])
     out.task_ok = {j for j, ok in tried.items() if ok and j not in out.task_bad}
     return out
 
@@ -119,7 +121,7 @@ class DynamicsSearch:
         self.budgets = dict(budgets or {})
         self.floors = dict(floors or {})
         """joint -> friction (N m or N) that holds its part's weight at robust rest's tilt
-        (:func:`~asset2sim.tasks.check.operating.tilt_floors`); a drift that does not answer raises from at least it
+        (:func:`~asset2sim.tasks.tune.operating.tilt_floors`); a drift that does not answer raises from at least it
         is not its weight's (:meth:`_unanswered`)"""
         self.hand_caps = dict(hand_caps or {})
         """joint -> friction (N m or N) no headroom step goes above (a hand still moves the part both ways)"""
@@ -264,3 +266,73 @@ def failing_tiers(metrics: list[MetricResult]) -> int:
 def fewest_failures(rounds: list[list[MetricResult]]) -> int:
     """Index of the round (its metrics) with the fewest failing metrics, the latest of equals."""
     return min(range(len(rounds)), key=lambda i: (failing_tiers(rounds[i]), -i))
+
+
+def force_excess(metrics: list[MetricResult], budgets: dict[str, operating.OperatingBudget]) -> tuple[dict[str, float], dict[str, str]]:
+    """Joints whose task needed more than a real operating force -> the measured excess (N m or N), and why:
+    an ``operating_force`` attempt outside its range, or a moved part under which the free object slid or
+    tipped at a peak operating force above the budget's allowed force."""
+    excess: dict[str, float] = {}
+    why: dict[str, str] = {}
+    for m in metrics:
+        if m.name == "operating_force" and m.passed is False:
+            for row in m.details.get("attempts") or []:
+                if row.get("passed") is not False:
+                    continue
+                b = budgets.get(row["joint"])
+                e = 0.0
+                if row.get("force_range_n"):
+                    e = max(e, float(row["peak_operating_force_n"]) - float(row["force_range_n"][1]))
+                    if b is not None and b.lever:
+                        e *= b.lever
+                if row.get("torque_range_nm") and row.get("peak_torque_nm") is not None:
+                    e = max(e, float(row["peak_torque_nm"]) - float(row["torque_range_nm"][1]))
+                if e > 0:
+                    excess[row["joint"]] = max(excess.get(row["joint"], 0.0), e)
+                    why[row["joint"]] = "operating force above the real range"
+        if m.name == "task_execution" and m.passed is False:
+            for a in m.details.get("attempts") or []:
+                b = budgets.get(a["joint"])
+                if not (a.get("slid") or a.get("tipped")) or b is None or not a.get("moved"):
+                    continue
+                e = float(a["peak_operating_force_n"]) - b.force_n
+                e = e * b.lever if b.lever else e
+                if e > 0:
+                    excess[a["joint"]] = max(excess.get(a["joint"], 0.0), e)
+                    why.setdefault(a["joint"], "the free object slid under the gripper's push")
+    return excess, why
+
+
+def relieve(overlay: Overlay, metrics: list[MetricResult], limits: operating.OperatingLimits) -> tuple[Overlay, dict[str, dict[str, float]], str]:
+    """Lower the friction (then the damping at top speed) of joints whose task
+    needed more than a real operating force by the excess (:func:`force_excess`)
+    / ``BUDGET_SHARE``, at most down to :data:`RELIEF_MIN_SHARE` of the friction
+    per round and never below the hold floor; ``limits``' caps are lowered with them.
+
+    Returns:
+        (new overlay, joint -> {"friction", "damping"} changed, reason); no
+        changes when nothing failed on force.
+    """
+    excess, why = force_excess(metrics, limits.budgets)
+    ov = overlay.model_copy(deep=True)
+    changes: dict[str, dict[str, float]] = {}
+    for name, e in excess.items():
+        d = ov.joints.get(name)
+        b = limits.budgets.get(name)
+        if d is None or b is None:
+            continue
+        need = e / operating.BUDGET_SHARE
+        fr = max(d.friction - need, RELIEF_MIN_SHARE * d.friction, min(b.hold_floor, d.friction))
+        left = need - (d.friction - fr)
+        dm = max(d.damping - left / b.speed, 0.0) if left > 0 else d.damping
+        if fr == d.friction and dm == d.damping:
+            continue
+        unit = "N" if b.joint_type == "prismatic" else "N m"
+        ov.joints[name] = d.model_copy(update={"friction": fr, "damping": dm, "source": d.source + (
+            f"; task needed {e:.3g} {unit} more than a real operating force: friction {d.friction:.3g} -> {fr:.3g}, "
+            f"damping {d.damping:.3g} -> {dm:.3g}")})
+        limits.friction_caps[name] = fr
+        limits.damping_caps[name] = dm
+        changes[name] = {"damping": dm, "friction": fr}
+    reason = "; ".join(f"{j}: {w}" for j, w in why.items() if j in changes)
+    return ov, changes, reason

@@ -3,7 +3,7 @@ keeps one only when the check improves). Two triggers:
 
 - **sweep blocked** (:func:`sweep_repairs`): limits clipped against the
   carrying chain, then running clearance (:mod:`asset2sim.tasks.state.clearance`),
-  then convex decomposition (:mod:`asset2sim.tasks.check.stop_repair`);
+  then convex decomposition (:mod:`asset2sim.tasks.tune.stop_repair`);
 - **parts held together** (:func:`held_together_pairs`, :func:`clearance_repair`):
   a tier of :data:`HELD_TOGETHER_TIERS` fails while link pairs are in contact at the state.
 """
@@ -21,7 +21,7 @@ from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.geometry.decomposition import DecompositionUnavailable
 from asset2sim.tasks.state import clearance
-from asset2sim.tasks.check import stop_repair
+from asset2sim.tasks.tune import stop_repair
 from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel
 
@@ -75,7 +75,7 @@ def sweep_repairs(obj: SimObject, asset: AssetDescription, sweep_metric: MetricR
     computed only when the one before was not kept). ``blocked``: joint -> where the
     sweep stopped (rad or m); ``overrides``: the collision overrides so far;
     the rest as :func:`clearance_repair` and
-    :func:`~asset2sim.tasks.check.stop_repair.decompose_for_blocked`.
+    :func:`~asset2sim.tasks.tune.stop_repair.decompose_for_blocked`.
 
     Raises:
         OSError: a collision file cannot be read or written.

@@ -1,4 +1,4 @@
-"""Stage 7b's candidate repairs (asset2sim.tasks.check.repair) on a generated
+"""Stage 7b's candidate repairs (asset2sim.tasks.tune.repair) on a generated
 two-drawer asset: the parts-held-together trigger and the running-clearance
 candidate."""
 
@@ -6,9 +6,9 @@ from __future__ import annotations
 
 from asset2sim.schemas.overlay import EstimatorInfo, Inertia, JointDynamics, LinkPhysics, Overlay
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check.escalation import kept_dynamics
+from asset2sim.tasks.tune.escalation import kept_dynamics
 from asset2sim.tasks.state import clearance
-from asset2sim.tasks.check import repair
+from asset2sim.tasks.tune import repair
 from asset2sim.urdf import read_urdf
 from tests.tasks.state.test_clearance import write_stacked_drawers
 

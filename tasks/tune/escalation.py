@@ -1,6 +1,7 @@
-"""Stage 7 of the refine: the post-check and its escalation of damping and friction within the hand's range
-(:func:`post_check`), the joint limits clipped to the geometry (:func:`clip_limits`) and the collision repairs
-the post-check calls for (:func:`repair_sweep`)."""
+"""Stage 7 of the refine, the tuning loop over the post-check: the post-check and its escalation
+of damping and friction within the hand's range (:func:`post_check`; the step itself,
+:func:`escalate`, and the friction factor robust rest asks, :func:`hold_factor`) and the
+collision repairs the post-check calls for (:func:`repair_sweep`)."""
 
 from __future__ import annotations
 
@@ -8,16 +9,18 @@ from dataclasses import replace
 
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay
-from asset2sim.schemas.report import EscalationRound, StateRefinement
+from asset2sim.schemas.report import EscalationRound, MetricResult, StateRefinement
 from asset2sim.stage_log import StageLog
 from asset2sim.tasks.assemble import write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
-from asset2sim.tasks.check import dynamics_search, operating, postcheck, repair, robust_rest, sweep, task_tier, word_guard
+from asset2sim.tasks.check import postcheck, robust_rest, sweep, task_tier
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_tuples
 from asset2sim.tasks.state import clearance, placement
 from asset2sim.tasks.synthesize import estimate
 from asset2sim.tasks.synthesize.context import EstimationContext
+from asset2sim.tasks.synthesize.physics import max_stable_damping
+from asset2sim.tasks.tune import dynamics_search, operating, repair, word_guard
 
 
 def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfig, ws: Workspace, log: StageLog,
@@ -35,8 +38,8 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     n = 0
     spec = task_tier.task_spec_for(ctx.task, ws.model(cand), asset, ctx.category, estimate.task_relevant_joints(ctx), state, closed) \
         if ctx.task and closed else None
-    # what the task's gripper can still operate on the task's joints (task_tier.operating_limits); estimates above it are lowered
-    lim = task_tier.operating_limits(postcheck.overlay_object(ws.source(cand), state, overlay, config.sim), overlay, asset,
+    # what the task's gripper can still operate on the task's joints (operating.operating_limits); estimates above it are lowered
+    lim = operating.operating_limits(postcheck.overlay_object(ws.source(cand), state, overlay, config.sim), overlay, asset,
                                      ctx.geometry, closed, category=ctx.category, task=ctx.task,
                                      free_moving=ctx.request.free_moving, joints=spec.joints if spec is not None else None)
     bounded, notes = operating.bound_overlay(overlay, lim.budgets)
@@ -54,7 +57,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     floors = operating.tilt_floors(overlay, overlay, asset, robust_rest.RobustRestConfig().tilt)
 
     def escalated(chk: postcheck.PostCheck) -> bool:  # this loop escalates ``chk`` (the post-check then skips the sweep)
-        return n < config.max_escalation_rounds and bool(postcheck.escalate(overlay, chk, config.escalation_factor, caps, floors, dcaps)[1])
+        return n < config.max_escalation_rounds and bool(escalate(overlay, chk, config.escalation_factor, caps, floors, dcaps)[1])
 
     def with_task(chk: postcheck.PostCheck) -> postcheck.PostCheck:  # the task tier appended when refine was given a task
         if spec is not None:
@@ -73,9 +76,9 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         n += 1
         before = overlay
         # a task that needed more than a real operating force first: lower friction / damping (and their caps)
-        overlay, changes, reason = task_tier.relieve(overlay, check.metrics, lim)
+        overlay, changes, reason = dynamics_search.relieve(overlay, check.metrics, lim)
         if not changes:
-            overlay, changes, reason = postcheck.escalate(overlay, check, config.escalation_factor, caps, floors, dcaps)
+            overlay, changes, reason = escalate(overlay, check, config.escalation_factor, caps, floors, dcaps)
         overlay, changes, notes = search.settle(before, overlay, changes, caps)
         reason = "; ".join([reason, *notes]) if reason and notes else reason or "; ".join(notes)
         overlay, held = word_guard.keep(before, overlay, kept_words)
@@ -123,7 +126,7 @@ def _changed(before: Overlay, after: Overlay) -> dict[str, dict[str, float]]:
 def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[str, ClosedState], result: tuple, st: StateRefinement,
                   state: dict[str, float], config: RefineConfig, ws: Workspace, log: StageLog):
     """Stage 7b: collision repairs where the post-check shows a part held by its neighbours' pieces: a
-    blocked joint sweep (:func:`asset2sim.tasks.check.repair.sweep_repairs`, better = a better sweep score)
+    blocked joint sweep (:func:`asset2sim.tasks.tune.repair.sweep_repairs`, better = a better sweep score)
     or parts held together (running clearance, better = fewer failing tiers). Each repair is loaded, the
     limits clipped again from ``unclipped`` and ``closed_raw``, and post-checked; the first that is better
     while no passed metric fails is kept. ``result``: (overlay, check, rounds, collision overrides, closed
@@ -182,3 +185,111 @@ def kept_dynamics(clipped: Overlay, kept: Overlay) -> Overlay:
     joints = {name: dyn.model_copy(update={k: getattr(kept.joints[name], k) for k in ("damping", "friction", "source")})
               if name in kept.joints else dyn for name, dyn in clipped.joints.items()}
     return clipped.model_copy(update={"joints": joints})
+
+
+def escalate(overlay: Overlay, check: postcheck.PostCheck, factor: float,
+             friction_caps: dict[str, float] | None = None,
+             tilt_floors: dict[str, float] | None = None,
+             damping_caps: dict[str, float] | None = None) -> tuple[Overlay, dict[str, dict[str, float]], str]:
+    """Raise damping and friction of the joints that oscillate, sag or are not
+    held by robust rest (all joints when the root is unstable and no joint is
+    singled out). ``friction_caps`` (joint -> N*m or N) bound the friction,
+    ``tilt_floors`` (N*m or N) raise that of a joint robust rest does not hold,
+    ``damping_caps`` (N m s/rad or N s/m) bound the damping (never below the values before).
+
+    Returns (new overlay, changes joint -> {parameter: new value}, reason).
+    """
+    other_unstable, other_osc = check.engine_failures()
+    osc = list(dict.fromkeys(list(check.metric("oscillation").details.get("failing", [])) + other_osc))
+    not_held = joints_not_held(check.metrics)
+    targets = list(dict.fromkeys(list(osc) + list(check.sagging) + not_held))
+    reason = []
+    if osc:
+        reason.append(f"oscillating: {', '.join(osc)}")
+    if check.sagging:
+        reason.append(f"sagging: {', '.join(check.sagging)}")
+    if not_held:
+        reason.append(f"not held under robust rest: {', '.join(not_held)}")
+    if not targets and not check.stable:
+        targets = list(overlay.joints)
+        reason.append("root unstable: damping all joints")
+    ov = overlay.model_copy(deep=True)
+    changes: dict[str, dict[str, float]] = {}
+    for name in targets:
+        d = ov.joints.get(name)
+        if d is None:
+            continue
+        f = factor
+        if name in not_held and name not in osc and name not in check.sagging:  # only robust rest: as far as needed
+            f = hold_factor(check.metrics, name, factor * factor)
+        damping = max(d.damping * f, 1e-4)
+        friction = max(d.friction * f, 1e-3)
+        note = f"; escalated x{f:.3g}"
+        floor = (tilt_floors or {}).get(name) if name in not_held else None
+        if floor is not None and floor > friction:
+            friction = floor
+            note += f" (friction raised to {floor:.3g} for robust rest's tilts)"
+        cap = (friction_caps or {}).get(name)
+        if cap is not None and friction > cap:
+            friction = max(cap, d.friction)
+            note += f" (friction capped at {friction:.3g}: what a real operating force moves and its mechanism allows)"
+        if d.inertia_axis:
+            damping = min(damping, max(max_stable_damping(d.inertia_axis), d.damping))
+        dcap = (damping_caps or {}).get(name)
+        if dcap is not None and damping > dcap:
+            damping = max(dcap, d.damping)
+        if friction == d.friction and damping == d.damping:
+            continue
+        new = d.model_copy(update={"damping": damping, "friction": friction, "source": d.source + note})
+        ov.joints[name] = new
+        changes[name] = {"damping": new.damping, "friction": new.friction}
+    return ov, changes, "; ".join(reason)
+
+
+def joints_not_held(metrics: list[MetricResult]) -> list[str]:
+    """Joints that left their state in any robust-rest trial of ``metrics`` and,
+    when one did, those whose drift exceeded :data:`HOLD_TARGET_SHARE` of their
+    tolerance in some trial (coupled parts' drift varies between rounds), first-seen order."""
+    failing_: list[str] = []
+    near: list[str] = []
+    for m in metrics:
+        if m.name != "robust_rest":
+            continue
+        for trial in (m.details.get("trials") or {}).values():
+            failing_.extend(trial.get("failing_joints") or [])
+            for j, d in (trial.get("joint_drift") or {}).items():
+                tol = (trial.get("joint_tolerance") or {}).get(j)
+                if d is not None and tol and float(d) > HOLD_TARGET_SHARE * float(tol):
+                    near.append(j)
+    if not failing_:
+        return []
+    return list(dict.fromkeys(failing_ + near))
+
+
+#: Share of a joint's tolerance that escalation aims its drift at (:func:`hold_factor`).
+HOLD_TARGET_SHARE = 0.5
+#: Exponents of :func:`hold_factor`: an impact's travel (drop, nudge) falls about
+#: as 1 / friction^2, a slope load (tilt) needs friction about proportional to it.
+HOLD_EXPONENT_IMPACT = 0.5
+HOLD_EXPONENT_SLOPE = 1.0
+#: Smallest friction step of :func:`hold_factor`.
+HOLD_MIN_STEP = 1.2
+
+
+def hold_factor(metrics: list[MetricResult], joint: str, largest: float) -> float:
+    """Factor on the friction (and damping) of ``joint`` that should make it hold
+    through robust rest: the largest over the trials of (drift /
+    (HOLD_TARGET_SHARE tolerance)) ** e (e HOLD_EXPONENT_IMPACT for the drop
+    and the nudge, HOLD_EXPONENT_SLOPE for the tilts), between HOLD_MIN_STEP and ``largest``."""
+    best = HOLD_MIN_STEP
+    for m in metrics:
+        if m.name != "robust_rest":
+            continue
+        for name, trial in (m.details.get("trials") or {}).items():
+            d = (trial.get("joint_drift") or {}).get(joint)
+            tol = (trial.get("joint_tolerance") or {}).get(joint)
+            if d is None or not tol or d <= HOLD_TARGET_SHARE * tol:
+                continue
+            e = HOLD_EXPONENT_SLOPE if name.startswith("tilt") else HOLD_EXPONENT_IMPACT
+            best = max(best, (float(d) / (HOLD_TARGET_SHARE * float(tol))) ** e)
+    return float(min(largest, best))

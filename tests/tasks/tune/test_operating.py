@@ -1,6 +1,6 @@
 """Operable friction: escalation holds a state through robust rest only with
-friction a real operating force still overcomes (tasks/check/operating.py,
-tasks/check/task_tier.py): the probe's cap, the task gripper's operating
+friction a real operating force still overcomes (tasks/tune/operating.py,
+tasks/tune/dynamics_search.py): the probe's cap, the task gripper's operating
 budget (category/part ranges, ground friction of a free object, gravity along
 the task's path), the estimate lowered to it, and the relief of a task that
 needed more than the range; on generated demo objects."""
@@ -16,7 +16,7 @@ from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim import demo_assets
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import operating, task_tier
+from asset2sim.tasks.tune import dynamics_search, operating
 from asset2sim.tasks.interpret.operating_forces import operating_range
 from asset2sim.tasks.check.gripper import GripperLimits
 from asset2sim.tasks.check.task_spec import task_actions
@@ -136,11 +136,11 @@ def test_relieve_lowers_friction_by_the_measured_excess():
     b = operating.OperatingBudget(joint="j", joint_type="revolute", link="lid", rule="far edge", lever=0.25, force_n=6.0,
                                   bound="torque range of Laptop.default", budget=1.6, speed=1.0, gravity_state=0.3,
                                   friction_cap=2.0, damping_cap=0.5, hold_floor=operating.HOLD_MARGIN * 0.3)
-    lim = task_tier.OperatingLimits(friction_caps={"j": 2.0}, damping_caps={"j": 0.5}, budgets={"j": b})
+    lim = operating.OperatingLimits(friction_caps={"j": 2.0}, damping_caps={"j": 0.5}, budgets={"j": b})
     force = MetricResult(name="operating_force", value=8.0, unit="N", passed=False, details={"attempts": [
         {"joint": "j", "passed": False, "peak_operating_force_n": 8.0, "force_range_n": [0.0, 22.2],
          "peak_torque_nm": 2.0, "torque_range_nm": [0.0, 1.5]}]})
-    new, changes, reason = task_tier.relieve(ov, [force], lim)
+    new, changes, reason = dynamics_search.relieve(ov, [force], lim)
     want = 2.0 - 0.5 / operating.BUDGET_SHARE
     assert new.joints["j"].friction == pytest.approx(want) and changes["j"]["friction"] == pytest.approx(want)
     assert lim.friction_caps["j"] == pytest.approx(want), "escalation may not raise it again"
@@ -148,17 +148,17 @@ def test_relieve_lowers_friction_by_the_measured_excess():
     # at most half the friction in one round (part of an excess may be inertia); the rest comes off the damping
     big = force.model_copy(deep=True)
     big.details["attempts"][0]["peak_torque_nm"] = 4.0
-    new, _, _ = task_tier.relieve(ov, [big], lim)
-    assert new.joints["j"].friction == pytest.approx(task_tier.RELIEF_MIN_SHARE * 2.0)
+    new, _, _ = dynamics_search.relieve(ov, [big], lim)
+    assert new.joints["j"].friction == pytest.approx(dynamics_search.RELIEF_MIN_SHARE * 2.0)
     assert new.joints["j"].damping < 0.5
     # never below the hold floor
     heavy = b.__class__(**{**b.__dict__, "gravity_state": 1.5, "hold_floor": operating.HOLD_MARGIN * 1.5})
     lim.budgets["j"] = heavy
-    new, _, _ = task_tier.relieve(ov, [big], lim)
+    new, _, _ = dynamics_search.relieve(ov, [big], lim)
     assert new.joints["j"].friction == pytest.approx(operating.HOLD_MARGIN * 1.5)
     # a task inside its range changes nothing
     ok = force.model_copy(update={"passed": True})
-    assert task_tier.relieve(ov, [ok], lim)[1] == {}
+    assert dynamics_search.relieve(ov, [ok], lim)[1] == {}
 
 
 def _overlay_json(friction: float, damping: float) -> dict:

@@ -1,5 +1,5 @@
 """Collision repair where the joint sweep stops inside the range against a
-hull that bulges (tasks.check.stop_repair), on a generated asset."""
+hull that bulges (tasks.tune.stop_repair), on a generated asset."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.tasks.check.sweep import blocked_positions, blocked_stops, run_sweep, sweep_metric
 from asset2sim.tasks.ingest.extract import extract_asset
-from asset2sim.tasks.check import stop_repair
+from asset2sim.tasks.tune import stop_repair
 
 pytest.importorskip("coacd")
 

@@ -1,0 +1,1 @@
+"""Stage package ``tune`` of the refine data flow (see DEVELOPERS.md)."""
