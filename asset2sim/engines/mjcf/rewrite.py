@@ -12,8 +12,8 @@ from lxml import etree
 from asset2sim.engines.base import Spring
 from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
                                        CollisionPiece, link_friction)
-from asset2sim.engines.mjcf.base import (FREE_JOINT, GROUND, IMPRATIO, NOSLIP_ITERATIONS, MjcfError, close, num_text, quat_text, safe_name,
-                                         vec_text)
+from asset2sim.engines.mjcf.base import (ARMATURE, CONE, FREE_JOINT, FRICTION_SOLIMP, GROUND, MjcfError, close, friction_solref, num_text,
+                                         quat_text, safe_name, vec_text)
 from asset2sim.schemas.config import SimConventions
 from asset2sim.urdf import UrdfModel
 
@@ -96,8 +96,7 @@ def set_options(root, conv: SimConventions, gravity: bool, meshdir: str) -> None
     root.insert(0, comp)
     opt = etree.Element("option")
     for k, v in (("timestep", num_text(conv.timestep)), ("gravity", f"0 0 {num_text(conv.gravity if gravity else 0.0)}"),
-                 ("integrator", "implicitfast"), ("noslip_iterations", str(NOSLIP_ITERATIONS)), ("cone", "elliptic"),
-                 ("impratio", num_text(IMPRATIO))):
+                 ("integrator", "implicitfast"), ("cone", CONE)):
         opt.set(k, v)
     for old in root.findall("option"):
         root.remove(old)
@@ -173,9 +172,12 @@ def set_inertial(b, link, missing_inertial: str, notes: list[str]) -> None:
         b.insert(0, el)
 
 
-def set_joints(b, link, model: UrdfModel, spec, springs: dict[str, Spring], urdf_path: Path) -> list[str]:
-    """Rewrite the body's joint at full precision; returns the joint names
-    written (MjcfError: an unexpected joint, or another axis / damping / friction)."""
+def set_joints(b, link, model: UrdfModel, spec, springs: dict[str, Spring], urdf_path: Path, timestep: float) -> list[str]:
+    """Rewrite the body's joint at full precision, with its dry friction's solver parameters for a model stepped at
+    ``timestep`` s (``solreffriction`` :func:`~asset2sim.engines.mjcf.base.friction_solref`, ``solimpfriction``
+    :data:`~asset2sim.engines.mjcf.base.FRICTION_SOLIMP`) and ``armature`` :data:`~asset2sim.engines.mjcf.base.ARMATURE`
+    on the joint itself; returns the joint names written (MjcfError: an unexpected joint, or another axis / damping /
+    friction)."""
     pj = model.parent_joint(link.name)
     names = []
     for je in b.findall("joint"):
@@ -199,6 +201,9 @@ def set_joints(b, link, model: UrdfModel, spec, springs: dict[str, Spring], urdf
             je.set("limited", "false")
         je.set("damping", num_text(pj.damping))
         je.set("frictionloss", num_text(pj.friction))
+        je.set("solreffriction", vec_text(friction_solref(timestep)))
+        je.set("solimpfriction", vec_text(FRICTION_SOLIMP))
+        je.set("armature", num_text(ARMATURE))
         sp = springs.get(pj.name)
         if sp is not None and sp.stiffness > 0:
             je.set("stiffness", num_text(sp.stiffness))
