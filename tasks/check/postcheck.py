@@ -196,6 +196,8 @@ def run_post_check(source: SimSource, initial_state: dict[str, float], overlay: 
         if not parity_done:
             options = obj.options(springs=overlay_springs(overlay, initial_state))
             engine_results = {e: parity.session_metrics(source, e, options) for e in others}
+            stab.details["joints_held"] = {n: s.held for n, s in settling.items()}  # the reference engine's parity row
+            stab.details["breakaway"] = parity.engine_breakaway(source, engine, options)
             parity_done = True
 
     nested = parent_child.parent_child_penetration(source, initial_state, engine, conv)  # the pairs the SPEC's Phi skips
