@@ -25,6 +25,8 @@ EXTRA_OF_MODULE: dict[str, tuple[str, str]] = {
     "fastapi": ("FastAPI", "realism"),
     "uvicorn": ("uvicorn", "realism"),
     "newton": ("Newton", "newton"),
+    "ovphysx": ("ovphysx (PhysX on OpenUSD)", "ovphysx"),
+    "ovstage": ("ovstage", "ovphysx"),
     "warp": ("NVIDIA Warp", "newton"),
     "gymnasium": ("Gymnasium", "gym"),
     "stable_baselines3": ("Stable-Baselines3", "learn"),

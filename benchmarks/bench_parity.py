@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-ENGINES = ("pybullet", "physx", "mujoco", "newton")
+ENGINES = ("pybullet", "physx", "mujoco", "newton")  # also: mjx (MJX on JAX), ovphysx (the USD export in PhysX)
 #: The files a parity result depends on.
 INPUTS = ("mobility.urdf", "initial_state.json", "overlay.json")
 #: A disagreement in the deepest point (mm) worth explaining: PyBullet's
@@ -119,7 +119,7 @@ def disagreements(rows: list[dict]) -> list[str]:
                 for r in ok
             )
             out.append(f"{key}: {detail}")
-    depths = [(r["engine"], r["max_depth_mm"] or 0.0) for r in ok]
+    depths = [(r["engine"], r["max_depth_mm"]) for r in ok if r["max_depth_mm"] is not None]
     if depths and max(d for _, d in depths) - min(d for _, d in depths) > DEPTH_GAP_MM:
         out.append("deepest point mm: " + ", ".join(f"{e} {d:.2f}" for e, d in depths))
     return out
@@ -170,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
                 c["max_pen"] = max(c["max_pen"], r["penetration_mm"] or 0.0)
                 c["max_depth"] = max(c["max_depth"], r["max_depth_mm"] or 0.0)
                 line.append(f"{r['engine']}: {'S' if r['rest_stability'] else 's'}{'O' if r['oscillation'] else 'o'} "
-                            f"depth {r['max_depth_mm']:.2f}")
+                            + ("depth -" if r["max_depth_mm"] is None else f"depth {r['max_depth_mm']:.2f}"))
                 h, brk = holding[r["engine"]], r.get("breakaway") or {}
                 h["objects"] += 1
                 h["held"] += all((r.get("joints_held") or {}).values())

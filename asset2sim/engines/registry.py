@@ -24,6 +24,7 @@ _LAZY: dict[str, tuple[str, tuple[str, ...]]] = {
     "mujoco": ("asset2sim.engines.mujoco_engine", ("mujoco",)),
     "mjx": ("asset2sim.engines.mjx_engine", ("mujoco", "jax", "mujoco.mjx")),
     "newton": ("asset2sim.engines.newton_engine", ("newton", "warp", "scipy")),
+    "ovphysx": ("asset2sim.engines.ovphysx_engine", ("ovphysx", "ovstage", "pxr")),
 }
 
 

@@ -68,9 +68,13 @@ def _session_metrics(source: SimSource, engine: str, options: SessionOptions) ->
     except Exception as exc:  # the asset does not load in this engine: a failure
         return _not_run(engine, "error", f"could not load: {type(exc).__name__}: {exc}", False)
     try:
-        pen = metrics.penetration(session)
+        try:
+            pen = metrics.penetration(session)
+            pen.details["ground_penetration_mm"] = float(session.ground_penetration()) * 1000.0
+        except EngineUnsupported as exc:  # an engine that reads no contacts (ovphysx): not measured, not failed
+            pen = MetricResult(name="penetration", value=None, unit=unit("penetration"), passed=None,
+                               details={"unsupported": str(exc)}, engine=engine)
         pen.details["engine_notes"] = list(session.notes)
-        pen.details["ground_penetration_mm"] = float(session.ground_penetration()) * 1000.0
         trace = metrics.run_rest_test(session, conv)
         rest = metrics.rest_stability(trace, conv, engine=engine)
         osc = metrics.oscillation(trace, conv, engine=engine)
@@ -121,8 +125,8 @@ def parity_table(results: dict[str, list[MetricResult]]) -> list[dict[str, Any]]
         rows.append({
             "engine": engine, "status": status, "reason": reason,
             "penetration_mm": pen.value if pen is not None else None,
-            "max_depth_mm": max((p["max_depth_mm"] for p in pairs), default=0.0) if status == "ok" else None,
-            "penetration_points": sum(p["points"] for p in pairs) if status == "ok" else None,
+            "max_depth_mm": max((p["max_depth_mm"] for p in pairs), default=0.0) if status == "ok" and pen.value is not None else None,
+            "penetration_points": sum(p["points"] for p in pairs) if status == "ok" and pen.value is not None else None,
             "rest_stability": rest.passed if rest is not None else None,
             "D_pos_m": rest.details.get("D_pos_m") if rest is not None else None,
             "D_ori_rad": rest.details.get("D_ori_rad") if rest is not None else None,
