@@ -198,6 +198,7 @@ def _write_joints(stage, root_path, model: UrdfModel, link_paths: dict[str, str]
         jp = joints_scope.AppendChild(joint_names[j.name])
         joint_paths[j.name] = str(jp)
         _write_joint(stage, jp, j, link_paths, initial, springs.get(j.name))
+    _filter_parent_child(stage, model, link_paths)
     if fixed:
         jp = joints_scope.AppendChild("root_joint" if "root_joint" not in joint_names.values() else "asset2sim_root_joint")
         fj = UsdPhysics.FixedJoint.Define(stage, jp)
@@ -207,6 +208,17 @@ def _write_joints(stage, root_path, model: UrdfModel, link_paths: dict[str, str]
         fj.CreateLocalPos1Attr(Gf.Vec3f(0, 0, 0))
         fj.CreateLocalRot1Attr(Gf.Quatf(1, 0, 0, 0))
     return joint_paths
+
+
+def _filter_parent_child(stage, model: UrdfModel, link_paths: dict[str, str]) -> None:
+    """``UsdPhysics.FilteredPairsAPI`` on every joint's child body naming its parent: the SPEC's exclusion of a link and
+    its parent, explicit for a runtime or importer that collides jointed bodies (UsdPhysics joints disable their two
+    bodies' collision only through ``physics:collisionEnabled``, which a fixed joint merged by an importer loses)."""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    for j in model.joints:
+        child = stage.GetPrimAtPath(link_paths[j.child])
+        api = UsdPhysics.FilteredPairsAPI.Apply(child)
+        api.CreateFilteredPairsRel().AddTarget(Sdf.Path(link_paths[j.parent]))
 
 
 def _save(stage, target: Path) -> Path:

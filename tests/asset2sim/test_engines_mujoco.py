@@ -207,3 +207,34 @@ def test_keyframe_places_the_object_on_the_ground(tmp_path):
     mujoco.mj_forward(m, d)
     assert all(d.contact[i].dist > -1e-9 for i in range(d.ncon))
     assert np.isfinite(d.qacc).all()
+
+
+def _body_contacts(xml: str, build, lid: float, filterparent: bool) -> int:
+    """Contacts between the body and the lid with the lid turned ``lid`` rad (into the body below 0)."""
+    import re
+
+    if not filterparent:
+        xml = re.sub(r"<option([^>]*)/>", r'<option\1><flag filterparent="disable"/></option>', xml, count=1)
+    m = mujoco.MjModel.from_xml_string(xml, assets=build.assets())
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "lid_hinge")
+    d.qpos[m.jnt_qposadr[jid]] = lid
+    mujoco.mj_forward(m, d)
+    names = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in ("body", "lid")}
+    return sum({int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2])} == names for c in d.contact[:d.ncon])
+
+
+def test_parent_child_exclusion_travels_with_the_file(tmp_path):
+    """The lid turned 0.2 rad into its parent's walls: MuJoCo's parent filter drops the pair; a host scene that turns
+    it off (``filterparent="disable"``) still collides nothing there, because the MJCF names the pair in an
+    ``<exclude>``; without those, the same scene collides the lid with its parent."""
+    import re
+
+    a = write_contract_asset(tmp_path)
+    b = urdf_to_mjcf(a.urdf, SessionOptions(initial_state=a.initial_state))
+    assert '<exclude body1="body" body2="lid"/>' in b.xml and '<exclude body1="body" body2="post"/>' in b.xml
+    assert _body_contacts(b.xml, b, -0.2, filterparent=True) == 0
+    assert _body_contacts(b.xml, b, -0.2, filterparent=False) == 0
+    bare = re.sub(r"<exclude [^>]*/>", "", b.xml)
+    assert _body_contacts(bare, b, -0.2, filterparent=False) > 0

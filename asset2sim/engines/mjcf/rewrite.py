@@ -60,9 +60,18 @@ def contact_policy(model: UrdfModel, pieces: dict[str, list[CollisionPiece]], fr
 
 
 def set_contacts(root, model: UrdfModel, pieces: dict[str, list[CollisionPiece]], fixed_base: bool, notes: list[str]) -> None:
-    """Replace ``<contact>`` by the ``<pair>``s and ``<exclude>``s of :func:`contact_policy`."""
+    """Replace ``<contact>`` by the ``<pair>``s and ``<exclude>``s of :func:`contact_policy`, and an ``<exclude>`` for
+    every other joint's parent and child that both have shapes (pairs MuJoCo's ``filterparent`` already drops, written
+    so that a host scene with ``<flag filterparent="disable"/>`` keeps the SPEC's exclusion)."""
     contact = etree.Element("contact")
     pairs, excludes = contact_policy(model, pieces, free=not fixed_base)
+    needed = set(excludes)
+    # every parent-child pair with shapes on both sides excluded by name, not only those MuJoCo's parent filter would
+    # collide: the filter then travels with the file into a host scene that turns filterparent off, and into MJX
+    shaped = [n for n in model.tree_order() if pieces.get(n)]
+    for j in model.joints:
+        if j.parent in shaped and j.child in shaped and (j.parent, j.child) not in needed and (j.child, j.parent) not in needed:
+            excludes.append((j.parent, j.child))
     for a, b in pairs:
         f = num_text(max(link_friction(model, a), link_friction(model, b)))
         for pa in pieces[a]:
@@ -74,8 +83,8 @@ def set_contacts(root, model: UrdfModel, pieces: dict[str, list[CollisionPiece]]
     if pairs:
         notes.append("MuJoCo filters contacts between bodies welded by fixed joints and their parents; "
                      f"explicit <pair>s restore PyBullet's pairs {[f'{a}/{b}' for a, b in pairs]}")
-    if excludes:
-        notes.append(f"<exclude>s remove parent/child pairs MuJoCo would collide: {[f'{a}/{b}' for a, b in excludes]}")
+    if needed:
+        notes.append(f"<exclude>s remove parent/child pairs MuJoCo would collide: {[f'{a}/{b}' for a, b in sorted(needed)]}")
     for old in root.findall("contact"):
         root.remove(old)
     if len(contact):
