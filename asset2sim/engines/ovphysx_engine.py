@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import EngineUnsupported, SessionDefaults, SessionOptions, register_engine
+from asset2sim.engines.base import EngineUnavailable, EngineUnsupported, SessionDefaults, SessionOptions, register_engine
 from asset2sim.engines.loading import collision_pieces, joint_tables, read_urdf
 from asset2sim.engines.step_budget import spend
 from asset2sim.openusd import pxr_modules
@@ -110,7 +110,7 @@ class OvPhysxSession(SessionDefaults):
     """A :class:`~asset2sim.engines.base.SimSession` of the USD export in ovphysx (module docstring).
 
     Raises:
-        FileNotFoundError: no USD export beside the URDF.
+        EngineUnavailable: no USD export beside the URDF (parity reports the engine skipped with the reason).
         RuntimeError: ovphysx cannot load the stage, or it holds no articulation of the file's joints.
     """
 
@@ -122,8 +122,8 @@ class OvPhysxSession(SessionDefaults):
         self.options = options
         urdf_path = Path(urdf_path)
         self.usd = urdf_path.parent / "usd" / f"{urdf_path.stem}.usd"
-        if not self.usd.is_file():
-            raise FileNotFoundError(f"{self.usd} does not exist: the ovphysx engine runs the USD export "
+        if not self.usd.is_file():  # a refine's candidate, or an output not exported: this engine has nothing to run
+            raise EngineUnavailable(f"engine 'ovphysx' runs the USD export, and {self.usd} does not exist "
                                     "(asset2sim export OUT --format usd)")
         self.urdf = read_urdf(urdf_path)
         self.joint_names, self.joint_types, self.joint_limits, self.joint_child = joint_tables(self.urdf)

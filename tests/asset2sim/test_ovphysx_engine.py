@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.base import EngineUnavailable, SessionOptions
 from asset2sim.engines.registry import available_engines, known_engines, open_session
 from asset2sim.engines.source import UrdfFile
 from asset2sim.extras import install_hint
@@ -77,8 +77,12 @@ def test_physx_reads_the_friction_the_export_authors_for_it(tmp_path, removed, h
     assert (lid == pytest.approx(0.6, abs=2e-3)) if held else lid < 0.05
 
 
-def test_a_folder_without_the_usd_export_is_refused(tmp_path):
+def test_a_folder_without_the_usd_export_is_skipped_with_the_reason(tmp_path):
+    """A refine's candidate or an output not exported has no USD to run: parity names the engine skipped, why, and
+    how to export it."""
     _need_ovphysx()
     a = write_contract_asset(tmp_path)
-    with pytest.raises(FileNotFoundError, match="export OUT --format usd"):
+    with pytest.raises(EngineUnavailable, match="export OUT --format usd"):
         open_session("ovphysx", a.urdf, SessionOptions(initial_state=dict(a.initial_state)))
+    row = parity_table(evaluate_engines(tmp_path, ["ovphysx"]))[0]
+    assert row["status"] == "skipped" and "--format usd" in row["reason"]
