@@ -181,12 +181,9 @@ def set_inertial(b, link, missing_inertial: str, notes: list[str]) -> None:
         b.insert(0, el)
 
 
-def set_joints(b, link, model: UrdfModel, spec, springs: dict[str, Spring], urdf_path: Path, timestep: float) -> list[str]:
-    """Rewrite the body's joint at full precision, with its dry friction's solver parameters for a model stepped at
-    ``timestep`` s (``solreffriction`` :func:`~asset2sim.engines.mjcf.base.friction_solref`, ``solimpfriction``
-    :data:`~asset2sim.engines.mjcf.base.FRICTION_SOLIMP`) and ``armature`` :data:`~asset2sim.engines.mjcf.base.ARMATURE`
-    on the joint itself; returns the joint names written (MjcfError: an unexpected joint, or another axis / damping /
-    friction)."""
+def set_joints(b, link, model: UrdfModel, spec, springs: dict[str, Spring], urdf_path: Path) -> list[str]:
+    """Rewrite the body's joint at full precision; returns the joint names
+    written (MjcfError: an unexpected joint, or another axis / damping / friction)."""
     pj = model.parent_joint(link.name)
     names = []
     for je in b.findall("joint"):
@@ -210,15 +207,24 @@ def set_joints(b, link, model: UrdfModel, spec, springs: dict[str, Spring], urdf
             je.set("limited", "false")
         je.set("damping", num_text(pj.damping))
         je.set("frictionloss", num_text(pj.friction))
-        je.set("solreffriction", vec_text(friction_solref(timestep)))
-        je.set("solimpfriction", vec_text(FRICTION_SOLIMP))
-        je.set("armature", num_text(ARMATURE))
         sp = springs.get(pj.name)
         if sp is not None and sp.stiffness > 0:
             je.set("stiffness", num_text(sp.stiffness))
             je.set("springref", num_text(sp.reference))
         names.append(pj.name)
     return names
+
+
+def set_friction_solver(worldbody, timestep: float) -> None:
+    """On every hinge and slide joint under ``worldbody``, its dry friction's solver parameters for a model stepped at
+    ``timestep`` s (``solreffriction`` :func:`~asset2sim.engines.mjcf.base.friction_solref`, ``solimpfriction``
+    :data:`~asset2sim.engines.mjcf.base.FRICTION_SOLIMP`) and ``armature``
+    :data:`~asset2sim.engines.mjcf.base.ARMATURE`, on the joint itself so that they travel with the body into MJX and
+    host scenes whatever their ``<default>``."""
+    for je in worldbody.iter("joint"):
+        je.set("solreffriction", vec_text(friction_solref(timestep)))
+        je.set("solimpfriction", vec_text(FRICTION_SOLIMP))
+        je.set("armature", num_text(ARMATURE))
 
 
 def set_geoms(b, link, model: UrdfModel, plist: list[CollisionPiece], geom_mesh: dict[tuple, str], visuals: bool, urdf_path: Path) -> None:
