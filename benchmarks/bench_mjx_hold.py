@@ -1,6 +1,6 @@
 """Does the MJCF export hold its initial state as MJX and host scenes run it (no no-slip pass)?
 
-    python benchmarks/bench_mjx_hold.py [--root out/bench_refine] [--ids 100221,148] [--no-mjx]
+    python benchmarks/bench_mjx_hold.py [--root out/bench_refine] [--ids 100221,148] [--no-mjx] [--x64]
 
 For every output folder under ROOT (as written by ``benchmarks/bench_refine.py``) the MJCF is exported
 (``export_mjcf``) and the written file is loaded with ``mujoco.MjModel.from_xml_path``, reset to its keyframe
@@ -10,12 +10,13 @@ no other change, in three ways:
 - ``defaults``: host MuJoCo, every joint's friction solver parameters set back to MuJoCo's defaults
   (``solreffriction`` 0.02 1, ``solimpfriction`` 0.9 0.95 0.001 0.5 2: the export before it wrote its own), no no-slip;
 - ``mujoco``: host MuJoCo, the file as written;
-- ``mjx``: ``mujoco.mjx.step`` (JAX, on this machine's CPU) in one compiled loop, the file as written.
+- ``mjx``: ``mujoco.mjx.step`` (JAX, on this machine's CPU) in one compiled loop, the file as written; JAX's
+  default float32, or float64 with ``--x64``.
 
 A run holds when every joint with limits comes to rest inside its robust-rest band around the keyframe (max(0.02 rad
 or 2 mm, 5 % of its range), not moving over the last 0.5 s: ``metrics.joint_settling``) and a free root is at rest
 over the 2 s test (D_pos <= 1 mm, D_ori <= 0.01 rad: ``metrics.rest_stability``). Prints one row per object (the
-worst joint's settled/band) and the counts; writes ROOT/mjx_hold.json.
+worst joint's settled/band) and the counts; writes ROOT/mjx_hold.json (``--x64``: ROOT/mjx_hold_x64.json).
 """
 
 from __future__ import annotations
@@ -73,18 +74,22 @@ def step_host(m, d, n: int) -> np.ndarray:
 
 
 def step_mjx(m, d, n: int) -> np.ndarray:
-    """Positions (n, nq) of ``n`` ``mjx.step``s in one ``jax.lax.scan``."""
+    """Positions (n, nq) of ``n`` ``mjx.step``s: the first alone (under ``jax_enable_x64`` the data MJX puts holds
+    int32 contact indices its step returns as int64, which a scan's carry refuses), the rest in one ``jax.lax.scan``."""
     import jax
+    import jax.numpy as jnp
     from mujoco import mjx
 
     mx, dx = mjx.put_model(m), mjx.put_data(m, d)
+    dx = jax.jit(mjx.step)(mx, dx)
+    first = dx.qpos
 
     def body(dx, _):
         dx = mjx.step(mx, dx)
         return dx, dx.qpos
 
-    _, traj = jax.jit(lambda dx: jax.lax.scan(body, dx, None, length=n))(dx)
-    return np.asarray(traj, float)
+    _, traj = jax.jit(lambda dx: jax.lax.scan(body, dx, None, length=n - 1))(dx)
+    return np.asarray(jnp.concatenate([first[None], traj]), float)
 
 
 def hold(xml: Path, how: str) -> dict:
@@ -127,7 +132,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--root", type=Path, default=ROOT / "out" / "bench_refine")
     ap.add_argument("--ids", default="")
     ap.add_argument("--no-mjx", action="store_true", help="host MuJoCo only")
+    ap.add_argument("--x64", action="store_true", help="MJX in float64 (jax_enable_x64; JAX's default is float32)")
     args = ap.parse_args(argv)
+    if args.x64:
+        import jax
+
+        jax.config.update("jax_enable_x64", True)
     from asset2sim.tasks.assemble.export_mjcf import export_mjcf
 
     folders = sorted(p for p in args.root.iterdir() if (p / "mobility.urdf").is_file())
@@ -149,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
               flush=True)
     counts = {h: sum(r[h]["holds"] for r in rows.values()) for h in hows}
     print("holding: " + ", ".join(f"{h} {c}/{len(rows)}" for h, c in counts.items()))
-    (args.root / "mjx_hold.json").write_text(json.dumps({"rows": rows, "counts": counts}, indent=1, default=float))
+    (args.root / ("mjx_hold_x64.json" if args.x64 else "mjx_hold.json")).write_text(json.dumps({"rows": rows, "counts": counts}, indent=1, default=float))
     return 0
 
 
