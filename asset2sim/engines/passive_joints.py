@@ -31,7 +31,7 @@ class PassiveJoints:
     reference: np.ndarray
 
     @classmethod
-    def from_urdf(cls, urdf, springs: dict[str, Spring], names: list[str]) -> "PassiveJoints":
+    def from_urdf(cls, urdf, springs: dict[str, Spring], names: list[str]) -> PassiveJoints:
         """From the ``<dynamics>`` of ``urdf``'s movable joints and ``springs`` (joint -> :class:`Spring`, the
         output's ``overlay.json``), for the joints ``names`` in the articulation's order (a name the URDF does
         not have as a movable joint keeps zeros)."""

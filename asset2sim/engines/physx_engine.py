@@ -7,7 +7,6 @@ different: ``docs/design/simulators.md``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +18,7 @@ with startup_quiet():
     from sapien import physx
 
 from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
-                                    SessionOptions, Spring, penetration_sum, register_engine)
+                                    SessionOptions, penetration_sum, register_engine)
 from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
                                        collision_pieces, joint_tables, link_friction, principal_axes, read_urdf)
 from asset2sim.frames import matrix_quat_wxyz

@@ -214,7 +214,7 @@ def _filter_parent_child(stage, model: UrdfModel, link_paths: dict[str, str]) ->
     """``UsdPhysics.FilteredPairsAPI`` on every joint's child body naming its parent: the SPEC's exclusion of a link and
     its parent, explicit for a runtime or importer that collides jointed bodies (UsdPhysics joints disable their two
     bodies' collision only through ``physics:collisionEnabled``, which a fixed joint merged by an importer loses)."""
-    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    _, Sdf, _, _, _, UsdPhysics = _pxr()
     for j in model.joints:
         child = stage.GetPrimAtPath(link_paths[j.child])
         api = UsdPhysics.FilteredPairsAPI.Apply(child)
