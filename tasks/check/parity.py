@@ -93,13 +93,15 @@ def engine_breakaway(source: SimSource, engine: str, options: SessionOptions) ->
     """Every joint with friction pushed in ``engine`` (:mod:`asset2sim.tasks.check.breakaway`: root fixed, gravity off,
     the options' springs and state): :func:`~asset2sim.tasks.check.breakaway.breakaway_summary`, ``measured`` False
     with the reason where the engine cannot push a joint or save its state (Newton) or does not load the asset."""
-    frictions = {j.name: float(j.friction) for j in source.model().movable_joints}
+    joints = source.model().movable_joints
+    frictions = {j.name: float(j.friction) for j in joints}
+    dampings = {j.name: float(j.damping) for j in joints}
     try:
         session = source.open(engine, dataclasses.replace(options, fixed_base=True, gravity=False, ground=False))
     except EngineUnavailable as exc:
         return breakaway.breakaway_summary(None, str(exc))
     try:
-        return breakaway.breakaway_summary(breakaway.measure_breakaway(session, frictions))
+        return breakaway.breakaway_summary(breakaway.measure_breakaway(session, frictions, dampings))
     except EngineUnsupported as exc:
         return breakaway.breakaway_summary(None, f"{engine} cannot push a joint: {exc}")
     finally:

@@ -118,3 +118,12 @@ def test_refine_reports_per_engine_what_holds(refine_once):
     for row in rows.values():
         for joint, r in row["breakaway"]["joints"].items():
             assert f"{joint} {r['ratio']:.2g} f" in html
+
+
+def test_a_free_part_breaks_away_within_a_sensors_resolution():
+    """A bag's free handle declares 3.3e-5 N*m: a breakaway 8.5e-6 N*m above it is below what a fingertip sensor
+    resolves and passes; the same 26 % over a friction a hand feels fails."""
+    res = breakaway.RESOLUTION["revolute"]
+    assert breakaway.JointBreakaway("handle", 3.3e-5, 4.15e-5, 1, res).passed
+    assert not breakaway.JointBreakaway("lid", 0.5, 0.63, 1, res).passed
+    assert not breakaway.JointBreakaway("lid", 3.3e-5, None, 1, res).passed
