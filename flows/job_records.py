@@ -102,12 +102,14 @@ def report_tokens(report: RefineReport, out_dir: Path | str) -> int | None:
 class Prepared(BaseModel):
     """What the flow's input stage found for one asset: ``skip`` the earlier catalog row to reuse, ``resume``
     an earlier run's :class:`JobRecord` whose complete folder to record, ``asset`` and ``findings`` handed to
-    the refine stage (:meth:`extracted`); ``seconds`` wall time."""
+    the refine stage (:meth:`extracted`); ``seconds`` wall time, ``cpu_seconds`` the CPU time (user + system) of the
+    thread that read the asset."""
 
     model_config = ConfigDict(extra="forbid")
     ok: bool = False
     worker: str | None = None
     seconds: float | None = None
+    cpu_seconds: float | None = None
     input_hash: str | None = None
     config_hash: str | None = None
     refine_config_hash: str | None = None
@@ -199,6 +201,8 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
     stages: dict[str, float] = {}
     if prepared.seconds is not None:
         stages["prepare"] = round(float(prepared.seconds), 4)
+    if prepared.cpu_seconds is not None:
+        stages["cpu.prepare"] = round(float(prepared.cpu_seconds), 4)
     if prepared.skip is not None:  # reuse an earlier finished result
         return _reused_row(row, prepared.skip, stages)
     errors: list[str] = []
@@ -257,7 +261,7 @@ def _reused_row(row: CatalogRow, prev: dict[str, Any], stages: dict[str, float])
     row.model_queries = 0
     row.tokens = 0
     row.stage_seconds = json.dumps(stages)
-    row.wall_seconds = sum(stages.values())
+    row.wall_seconds = sum(v for k, v in stages.items() if "." not in k)
     return row
 
 

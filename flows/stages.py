@@ -350,7 +350,7 @@ def prepare_asset(job: AssetJob) -> Prepared:
     """Input stage: read and hash the asset and decide whether an earlier result (``skip``) or a killed run's
     folder (``resume``) can be reused; else write the job record into ``job.work_dir``. Returns the Prepared
     record (``ok`` False, ``invalid_input``, for an unreadable asset). Raises OSError: record not written."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.thread_time()
     rec = Prepared(worker=_worker_name())
     try:
         config = RefineConfig(**job.config)
@@ -358,6 +358,7 @@ def prepare_asset(job: AssetJob) -> Prepared:
         asset, findings = extract_asset_checked(Path(job.asset_dir), asset_id=job.asset_id, category=job.category, reading=reading)
     except Exception as exc:  # any reading problem is the input's
         rec.failure_mode, rec.error, rec.seconds = "invalid_input", f"{type(exc).__name__}: {exc}", time.perf_counter() - t0
+        rec.cpu_seconds = time.thread_time() - c0
         return rec
     rhash = run_hash(asset.input_hash, RefineConfig(**job.config), job.prompt, job.category)
     chash = job_config_hash(job, rhash)
@@ -374,7 +375,7 @@ def prepare_asset(job: AssetJob) -> Prepared:
         job_fields = {k: v for k, v in asdict(job).items() if k not in ("finished", "resumable")}
         write_job_record(job.work_dir, JobRecord(job=job_fields, input_hash=asset.input_hash, config_hash=chash,
                                                  refine_config_hash=rhash))
-    rec.seconds = time.perf_counter() - t0
+    rec.seconds, rec.cpu_seconds = time.perf_counter() - t0, time.thread_time() - c0
     return rec
 
 
