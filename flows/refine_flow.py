@@ -41,8 +41,37 @@ from asset2sim.flows.job_records import Prepared, build_manifest_row, build_row
 __all__ = ["FLOW_NAME", "SUBFLOW_NAME", "AssetJob", "flow_parameters", "refine_assets", "refine_dataset", "run_refine_flow"]
 
 
-prepare_many = task(stages.prepare_batch, name="prepare", cache_policy=NO_CACHE, persist_result=False)
-chain = task(stages.refine_chain, name="refine-metrics", cache_policy=NO_CACHE, persist_result=False)
+class Sealed:
+    """A task argument Prefect hands to the task whole, without looking inside: Prefect walks every argument for
+    futures and states to link (``visit_collection``), rebuilding each pydantic model and dataclass it holds, twice
+    in the driver and twice in the worker, which costs 2-12 ms per pass for one asset's description. An asset's
+    arguments hold no future (the flow passes each prepared record itself), so nothing is lost. (Prefect's own
+    ``quote`` and ``opaque`` wrappers are tuples, which Dask's task spec unpacks on the way.)"""
+
+    __slots__ = ("value",)
+
+    def __init__(self, value: Any):
+        self.value = value
+
+    def __getstate__(self) -> tuple:
+        return (self.value,)  # never false: pickle calls __setstate__ for an empty value too
+
+    def __setstate__(self, state: tuple) -> None:
+        self.value = state[0]
+
+
+def prepare_sealed(batch: Sealed) -> list:
+    """:func:`asset2sim.flows.stages.prepare_batch` of a sealed batch of jobs."""
+    return stages.prepare_batch(batch.value)
+
+
+def chain_sealed(job: Sealed, prepared: Sealed) -> stages.ChainResult:
+    """:func:`asset2sim.flows.stages.refine_chain` of a sealed job and its prepared record."""
+    return stages.refine_chain(job.value, prepared.value)
+
+
+prepare_many = task(prepare_sealed, name="prepare", cache_policy=NO_CACHE, persist_result=False)
+chain = task(chain_sealed, name="refine-metrics", cache_policy=NO_CACHE, persist_result=False)
 
 #: Largest batch of assets one prepare task reads.
 PREPARE_BATCH_MAX = 25
@@ -170,7 +199,7 @@ def _submit_prepares(jobs: list[AssetJob], batch_size: int, starts: dict[str, fl
         batch = jobs[i:i + size]
         for job in batch:
             starts[job.asset_id] = time.time()
-        prep_futures[prepare_many.submit(batch)] = batch
+        prep_futures[prepare_many.submit(Sealed(batch))] = batch
     return prep_futures
 
 
@@ -196,7 +225,7 @@ def _submit_chains(prep_futures: dict, chain_task, rec: _AssetRecorder, fingerpr
                 continue
             # a killed run's complete folder (prepared.resume): refine reads its report, metrics its evaluation
             limit = {} if job.isolation in ("process", "spawn") else {"timeout_seconds": job.time_limit_seconds}
-            chains[chain_task.with_options(**limit).submit(job, prepared)] = (job, prepared)
+            chains[chain_task.with_options(**limit).submit(Sealed(job), Sealed(prepared))] = (job, prepared)
     return chains
 
 
@@ -674,15 +703,38 @@ def _dask_task_runner(workers: int | None, address: str | None, *, host: str = "
     )
 
 
+#: Dask's own bookkeeping kept light on the flow's cluster: no profiler sampling every worker's stacks 100 times a
+#: second, the event-loop tick, the system monitor and the nanny's memory monitor at 1-2 s instead of 20-500 ms (CPU a
+#: refine needs; ``docs/design/pipeline.md``, "What the orchestration costs"). A cluster the flow is given gets them
+#: from its machines' environment (:func:`dask_settings_env`, the guide's recipe for N machines).
+DASK_SETTINGS: dict[str, Any] = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "2s",
+    "distributed.worker.memory.monitor-interval": "1s",
+}
+
+
+def dask_settings_env() -> dict[str, str]:
+    """:data:`DASK_SETTINGS` as the environment variables Dask reads (``DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED``
+    ...)."""
+    return {"DASK_" + key.replace(".", "__").replace("-", "_").upper(): str(value).lower() if isinstance(value, bool) else str(value)
+            for key, value in DASK_SETTINGS.items()}
+
+
 @contextlib.contextmanager
 def _local_cluster_config(address: str | None, dashboard: bool):
-    """Dask configuration for a local cluster: without ``dashboard``, no HTTP routes on scheduler and workers."""
-    if address or dashboard:
+    """Dask configuration for a local cluster: :data:`DASK_SETTINGS`; without ``dashboard``, no HTTP routes on
+    scheduler and workers."""
+    if address:
         yield
         return
     import dask
 
-    with dask.config.set({"distributed.scheduler.http.routes": [], "distributed.worker.http.routes": []}):
+    settings = dict(DASK_SETTINGS)
+    if not dashboard:
+        settings.update({"distributed.scheduler.http.routes": [], "distributed.worker.http.routes": []})
+    with dask.config.set(settings):
         yield
 
 
