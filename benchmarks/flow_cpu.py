@@ -20,6 +20,7 @@ server has reaped them (``wait4``) and carries their time. The sampler's own thr
 from __future__ import annotations
 
 import os
+import re
 import threading
 import time
 from dataclasses import dataclass, field
@@ -34,7 +35,7 @@ WORK_ROLE = "refine children"
 
 def role_of(cmdline: str, is_root: bool, parent_cmdline: str) -> str:
     """The role of a process from its command line (``parent_cmdline``: its parent's)."""
-    if is_root:
+    if is_root or re.search(r"asset2sim\S*\s+flow\b", cmdline):  # this process, or an ``asset2sim flow`` it ran
         return "driver"
     if "asset2sim.flows.forkserver" in cmdline:
         return "refine children" if "asset2sim.flows.forkserver" in parent_cmdline else "stage servers"
@@ -164,7 +165,7 @@ class FlowCpu:
         roles = dict.fromkeys(ROLES, 0.0)
         outside = dict.fromkeys(OUTSIDE, 0.0)
         ended_children_of_driver = 0.0
-        root_key = next((k for k, v in b.procs.items() if v.role == "driver"), None)
+        root_key = next((k for k in b.procs if k[0] == os.getpid()), None)  # this process (the sampler's)
         for key, p in b.procs.items():
             before = a.procs.get(key)
             own = p.own - (before.own if before else 0.0)
