@@ -5,10 +5,10 @@ server as the store, over the dev rows.
     .venv/bin/python benchmarks/bench_cluster.py [--requests 1] [--machines 2] [--work DIR]
 
 1. Builds the dev rows' dataset as ``bench_flow.py`` does (``--requests`` requests per object; 21 assets by default).
-2. Starts an S3-compatible server (``moto_server``) and the recipe: a Prefect server and a Dask scheduler as
+2. Starts an S3-compatible server (``moto_server``) and, after the local run, the recipe: a Prefect server and a Dask scheduler as
    processes of their own, ``--machines`` ``dask worker`` processes of one single-threaded worker each.
-3. Runs ``asset2sim flow`` on this machine alone (its own Dask cluster, catalog and outputs in local folders, the
-   recipe's Prefect server), then the recipe's driver line (``--scheduler``, catalog and outputs in the store), each
+3. Runs ``asset2sim flow`` on this machine alone (its own temporary Prefect server and Dask cluster, catalog and
+   outputs in local folders) before the recipe starts, then the recipe's driver line (``--scheduler``, catalog and outputs in the store), each
    from an empty on-disk cache of its own, and prints each run's first phase (assets an hour, per-asset median) and
    the CPU of every process by role (``flow_cpu.FlowCpu``: the driver, the Prefect server, the scheduler, the
    nannies, the workers, the stage servers, the refine children; the S3 server apart, as the store's stand-in).
@@ -84,14 +84,15 @@ def main(argv: list[str] | None = None) -> int:
                                                      "extras": False})
         print(f"dataset: {len(rows)} assets; the recipe on 127.0.0.1 with {args.machines} worker machines of one core")
         with cluster_run.S3Server(work / "s3", BUCKET) as s3:
+            os.environ.update(s3.environ())  # this process reads the cluster run's catalog and files from the store
+            local_env = {k: v for k, v in os.environ.items() if k != "PREFECT_API_URL"}
+            _, a = _timed("local flow (its own Prefect server and Dask cluster, local folders)",
+                          lambda: cluster_run.local_flow(local, args.machines, local_env), local, work)
             t0 = time.perf_counter()
             with cluster_run.RecipeCluster(work / "cluster-logs", s3.store, machines=args.machines) as rc:
                 print(f"recipe up in {time.perf_counter() - t0:.1f} s (scheduler {rc.scheduler}, logs in {work / 'cluster-logs'})")
-                _, a = _timed("local flow (its own Dask cluster, local folders)",
-                              lambda: rc.local_flow(local, workers=args.machines), local, work)
-                _, b = _timed("the recipe's flow (scheduler, workers and store of the recipe)",
+                _, b = _timed("the recipe's flow (its Prefect server, scheduler, workers and store)",
                               lambda: rc.flow(cluster), cluster, work)
-                os.environ.update(s3.environ())
                 problems = cluster_run.compare_runs(a, b)
         print(f"asset for asset ({len(a)} local, {len(b)} on the cluster): "
               + ("the same catalog columns and output bytes, timings aside" if not problems else f"{len(problems)} differences"))

@@ -1,7 +1,7 @@
 """The guide's recipe for N machines run on 127.0.0.1, and a flow run on it compared with the local flow's.
 
-``docs/guide/pipeline.md`` ("On N machines") holds the recipe as one fenced block after the line
-:data:`RECIPE_MARK`: a Prefect server and a Dask scheduler on one machine, the environment every machine exports
+``docs/guide/pipeline.md`` ("On N machines") holds the recipe as one fenced block after the line that starts with
+:data:`RECIPE_MARK` (the documents' own test does not run it): a Prefect server and a Dask scheduler on one machine, the environment every machine exports
 (the Prefect API, the object store's endpoint and credentials), one ``dask worker`` line run on each worker machine
 and the driver's ``asset2sim flow --scheduler ...``. :func:`recipe` reads those commands; :class:`RecipeCluster` runs
 them here, each as a process of its own, after substituting what the recipe writes in capitals (``HOST`` ->
@@ -31,7 +31,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 GUIDE = ROOT / "docs" / "guide" / "pipeline.md"
 #: The line before the recipe's fenced block in the guide.
-RECIPE_MARK = "<!-- the recipe for N machines: tests/flows/test_cluster_store.py and benchmarks/bench_cluster.py run it -->"
+RECIPE_MARK = "<!-- not run in tests: the recipe for N machines"
 BIN = Path(sys.executable).parent
 
 #: Catalog columns that differ between two runs of the same work: times, the run's names, where the output lies.
@@ -188,10 +188,8 @@ class RecipeCluster:
                               timeout=timeout)
 
     def local_flow(self, catalog: Path, workers: int = 2, timeout: float = 1800.0) -> subprocess.CompletedProcess:
-        """``asset2sim flow --catalog catalog --workers N`` on this machine alone (the flow's own Dask cluster), with
-        the recipe's environment (its Prefect server), run to its end."""
-        argv = self._argv(["asset2sim", "flow", "--catalog", str(catalog), "--workers", str(workers), "--no-progress"])
-        return subprocess.run(argv, env=self.env, cwd=catalog.parent, capture_output=True, text=True, timeout=timeout)
+        """:func:`local_flow` with the recipe's environment (its Prefect server)."""
+        return local_flow(catalog, workers, self.env, timeout)
 
     def close(self) -> None:
         for p in reversed(self.procs):
@@ -212,6 +210,15 @@ class RecipeCluster:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def local_flow(catalog: Path, workers: int = 2, env: dict[str, str] | None = None,
+               timeout: float = 1800.0) -> subprocess.CompletedProcess:
+    """``asset2sim flow --catalog catalog --workers N`` on this machine alone (the flow's own Dask cluster; without
+    ``PREFECT_API_URL`` in ``env``, its own temporary Prefect server), run to its end."""
+    argv = [str(BIN / "asset2sim"), "flow", "--catalog", str(catalog), "--workers", str(workers), "--no-progress"]
+    return subprocess.run(argv, env=env if env is not None else dict(os.environ), cwd=catalog.parent,
+                          capture_output=True, text=True, timeout=timeout)
 
 
 def run_rows(catalog: Path, run: str | None = None):
