@@ -45,9 +45,8 @@ BUCKET = "a2s-bench"
 
 
 def _timed(label: str, run, catalog: Path, work: Path) -> tuple[float, object]:
-    """Run ``run()`` (a flow run to its end) from an empty on-disk cache, sampling the CPU of every process; print
-    its first phase and CPU by role; returns (wall s, its catalog rows)."""
-    os.environ["ASSET2SIM_CACHE"] = str(work / f"cache-{label}")  # inherited by the processes started from now on
+    """Run ``run()`` (a flow run to its end), sampling the CPU of every process; print its throughput and CPU by
+    role; returns (wall s, its catalog rows)."""
     print(f"{label}: load before {_load()}", flush=True)
     t0 = time.perf_counter()
     with FlowCpu() as cpu:
@@ -85,9 +84,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"dataset: {len(rows)} assets; the recipe on 127.0.0.1 with {args.machines} worker machines of one core")
         with cluster_run.S3Server(work / "s3", BUCKET) as s3:
             os.environ.update(s3.environ())  # this process reads the cluster run's catalog and files from the store
-            local_env = {k: v for k, v in os.environ.items() if k != "PREFECT_API_URL"}
+            os.environ["ASSET2SIM_CACHE"] = str(work / "cache-local")  # each run from an empty on-disk cache
             _, a = _timed("local flow (its own Prefect server and Dask cluster, local folders)",
-                          lambda: cluster_run.local_flow(local, args.machines, local_env), local, work)
+                          lambda: cluster_run.local_flow(local, args.machines, {k: v for k, v in os.environ.items()
+                                                                                if k != "PREFECT_API_URL"}), local, work)
+            os.environ["ASSET2SIM_CACHE"] = str(work / "cache-cluster")  # the recipe's workers start cold too
             t0 = time.perf_counter()
             with cluster_run.RecipeCluster(work / "cluster-logs", s3.store, machines=args.machines) as rc:
                 print(f"recipe up in {time.perf_counter() - t0:.1f} s (scheduler {rc.scheduler}, logs in {work / 'cluster-logs'})")

@@ -177,9 +177,9 @@ class FlowCpu:
             bucket[p.role] += own
             if p.role == "stage servers":
                 roles[WORK_ROLE] += p.reaped - (before.reaped if before else 0.0)
-            if not p.alive and root_key is not None and p.parent == root_key[0]:
-                ended_children_of_driver += own
-        if root_key is not None:  # processes the driver ran and reaped between two samples (git, ...)
+            if not p.alive and root_key is not None and p.parent == root_key[0]:  # reaped by this process: its own
+                ended_children_of_driver += own + p.reaped - (before.reaped if before else 0.0)  # and what it reaped
+        if root_key is not None:  # processes this process ran and reaped unseen between two samples (git, ...)
             d_b, d_a = b.procs[root_key], a.procs.get(root_key)
             reaped = d_b.reaped - (d_a.reaped if d_a else 0.0)
             roles["other"] += max(0.0, reaped - ended_children_of_driver)
