@@ -34,9 +34,11 @@ GUIDE = ROOT / "docs" / "guide" / "pipeline.md"
 RECIPE_MARK = "<!-- not run in tests: the recipe for N machines"
 BIN = Path(sys.executable).parent
 
-#: Catalog columns that differ between two runs of the same work: times, the run's names, where the output lies.
+#: Catalog columns that differ between two runs of the same work: times, the run's names, where the output lies, and
+#: the checkout's label (``code_version``: the commit when each run started, a commit of documents in between changes
+#: it; ``code_hash``, the source, is compared).
 RUN_COLUMNS = ("run", "wall_seconds", "stage_seconds", "started_at", "finished_at", "flow_run_id", "worker", "out_dir",
-               "source_run", "dataset")
+               "source_run", "dataset", "code_version")
 
 
 @dataclass

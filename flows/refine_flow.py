@@ -185,6 +185,8 @@ class _AssetRecorder:
             flow_run_id=self.flow_run_id, started_at=self.starts[job.asset_id], finished_at=time.time(),
         )  # fmt: skip
         _add_isolation_times(row, refined, measured)
+        if published is not None and published.status == "ok" and isinstance(published.value.get("clips"), list):
+            row.clips = json.dumps(published.value["clips"])  # read in the worker: the row's out_dir is the store's
         self.store.append_row(job.dataset, job.run_id, row)
         self.rows.append(row)
         _emit_finished(job.dataset, job.run_id, row)

@@ -39,7 +39,7 @@ def test_the_recipe_is_what_the_flow_sets_for_its_own_cluster():
 @pytest.mark.slow  # end to end: the guide's cluster recipe, a moto server and two flow runs (about 2 minutes)
 def test_the_guides_recipe_for_n_machines_gives_the_local_flows_catalog_and_files(tmp_path):
     raw = make_project(tmp_path / "proj", {"box_lid": "box_lid", "laptop": "laptop"}).parent / "raw"
-    # the verdict's files (no media: a store's row lists no clips, its folder's media stay with the upload)
+    # the verdict's files, no media (a shorter run; a deferred media phase would leave the store's outputs deferred)
     run = {"workers": 2, "evaluate": True, "extras": False, "time_limit_seconds": 300}
     local, cluster = cluster_run.write_catalogs(tmp_path, raw, raw / "manifest.csv", BUCKET, run)
     with cluster_run.S3Server(tmp_path / "s3", BUCKET) as s3, \

@@ -60,3 +60,24 @@ def test_a_skipped_row_keeps_the_rounds_of_the_result_it_reuses():
     prev = {**done.model_dump(mode="json"), "run": "earlier"}
     row = build_row(_job(), Prepared(ok=True, seconds=0.1, skip=prev), None, None)
     assert row.status == "skipped" and row.postcheck_rounds == 2 and row.extra_rounds == done.extra_rounds
+
+
+def test_a_published_rows_clips_are_read_before_the_local_copy_goes(tmp_path):
+    """With an output store the row's ``out_dir`` is the store's URI; the clips column comes from the worker's folder,
+    read by the publish stage before it removes the local copy."""
+    from asset2sim import atomic
+    from asset2sim.flows.stages import publish_stage
+    from asset2sim.schemas.realism import Clip, ClipSet
+
+    out = tmp_path / "work" / "a"
+    (out / "clips").mkdir(parents=True)
+    (out / "clips" / "sweep_00_front.webm").write_bytes(b"webm")
+    clip = Clip(joint="j", motion="sweep", view="front", video="sweep_00_front.webm", poster="p.png", fps=30.0,
+                n_frames=2, duration_s=0.1, width=8, height=8)
+    atomic.write_json(out / "clips" / "clips.json", ClipSet(clips=[clip]).model_dump(mode="json"))
+    job = AssetJob(dataset="d", run_id="r", asset_id="a", prompt="A box.", asset_dir="/in/a", out_dir=str(out),
+                   work_dir=str(tmp_path / "w"), metrics_dir=str(tmp_path / "m"), out_uri=str(tmp_path / "store" / "a"))
+    refined = StageRecord(status="ok", value=RefineOutput(report=_report([]), out_dir=str(out)))
+    published = publish_stage(job, refined)
+    assert published.status == "ok" and published.value["clips"] == ["clips/sweep_00_front.webm"]
+    assert (tmp_path / "store" / "a" / "clips" / "sweep_00_front.webm").is_file()
