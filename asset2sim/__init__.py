@@ -13,7 +13,8 @@ __version__ = "0.2.0"
 #: The public names, all defined in :mod:`asset2sim.api`.
 __all__ = [
     "AuditError", "AuditResult", "Evaluation", "Finding", "RefineConfig", "RefineError", "RefineResult", "RequestOverrides",
-    "SimConventions", "audit", "evaluate", "export", "load_config", "load_mujoco", "load_pybullet", "load_sapien", "make_media", "refine",
+    "SimConventions", "audit", "declare_physics", "evaluate", "export", "load_config", "load_mujoco", "load_pybullet", "load_sapien",
+    "make_media", "refine",
     "validate",
 ]
 

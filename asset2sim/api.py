@@ -24,6 +24,8 @@ from typing import Any
 from pydantic import ValidationError
 
 from asset2sim.engines.base import SessionOptions, SimSession
+from asset2sim.engines.loading import read_urdf
+from asset2sim.engines.passive_joints import DeclaredPhysics
 from asset2sim.engines.registry import known_engines, open_session
 from asset2sim.input_files import load_yaml
 from asset2sim.output_folder import URDF_NAME
@@ -39,7 +41,7 @@ from asset2sim.tasks.refine import RefineError, RefineResult, refine_asset
 
 __all__ = [
     "AuditError", "AuditResult", "Evaluation", "Finding", "RefineConfig", "RefineError", "RefineResult", "RequestOverrides",
-    "SimConventions", "audit", "evaluate", "export", "load_config", "load_mujoco", "load_pybullet", "load_sapien", "make_media", "refine",
+    "SimConventions", "audit", "declare_physics", "evaluate", "export", "load_config", "load_mujoco", "load_pybullet", "load_sapien", "make_media", "refine",
     "validate",
 ]
 
@@ -355,7 +357,7 @@ def load_pybullet(out_dir: str | Path, client: int | None = None, *, ground: boo
 
 def load_sapien(out_dir: str | Path, scene: Any = None, *, ground: bool = True) -> SimSession:
     """Load a refine output into SAPIEN 3 (PhysX) as asset2sim verified it.
-    Friction, damping, springs and catches act through ``session.step()``; when
+    Friction, damping and springs act through ``session.step()``; when
     stepping yourself, call ``session.apply_passive_forces()`` before each
     ``scene.step()``.
 
@@ -377,6 +379,30 @@ def load_sapien(out_dir: str | Path, scene: Any = None, *, ground: bool = True) 
         EngineUnavailable: SAPIEN is not installed (``pip install 'asset2sim[physx]'``).
     """
     return _load("physx", out_dir, **({} if scene is None else {"scene": scene, "ground": ground}))
+
+
+def declare_physics(articulation: Any, out_dir: str | Path) -> DeclaredPhysics:
+    """Give a SAPIEN articulation you built yourself (SAPIEN's ``URDFLoader``, ManiSkill's loader, your own builder) from
+    a refine output's ``mobility.urdf`` the physics the output declares, as asset2sim verified it: each movable joint's
+    Coulomb friction (N*m or N) and damping through a zero-velocity drive whose force limit is friction + damping *
+    |qdot|, springs from ``overlay.json`` as joint forces, PhysX's own joint friction coefficient set to 0. SAPIEN's
+    loader reads ``<dynamics friction>`` as that unitless coefficient (a part then moves at about 5 % of its
+    friction) and damping as a drive; after this call it breaks away at its friction.
+
+    Call ``declared.before_step()`` before every ``scene.step()``.
+
+    Args:
+        articulation: a ``sapien.physx.PhysxArticulation`` whose active joints are the output's movable joints.
+        out_dir: a folder written by :func:`refine`.
+
+    Returns:
+        The :class:`~asset2sim.engines.passive_joints.DeclaredPhysics` (``before_step()``, ``passive`` the values).
+
+    Raises:
+        ValueError: not an output folder, or the articulation's joints are not the file's.
+    """
+    out = _output_folder(out_dir)
+    return DeclaredPhysics(articulation, read_urdf(out / URDF_NAME), verified_options(out).springs)
 
 
 def load_mujoco(out_dir: str | Path) -> SimSession:

@@ -11,6 +11,8 @@ from types import ModuleType
 #: Top-level module -> (what it is, the extra of ``pyproject.toml`` that installs it).
 EXTRA_OF_MODULE: dict[str, tuple[str, str]] = {
     "mujoco": ("MuJoCo", "mujoco"),
+    "mujoco.mjx": ("MJX (mujoco-mjx)", "mjx"),
+    "jax": ("JAX", "mjx"),
     "pxr": ("OpenUSD (usd-core)", "usd"),
     "sapien": ("SAPIEN", "physx"),
     "coacd": ("CoACD", "coacd"),
@@ -23,6 +25,8 @@ EXTRA_OF_MODULE: dict[str, tuple[str, str]] = {
     "fastapi": ("FastAPI", "realism"),
     "uvicorn": ("uvicorn", "realism"),
     "newton": ("Newton", "newton"),
+    "ovphysx": ("ovphysx (PhysX on OpenUSD)", "ovphysx"),
+    "ovstage": ("ovstage", "ovphysx"),
     "warp": ("NVIDIA Warp", "newton"),
     "gymnasium": ("Gymnasium", "gym"),
     "stable_baselines3": ("Stable-Baselines3", "learn"),
@@ -38,9 +42,12 @@ def install_command(extra: str) -> str:
 
 
 def missing_module(exc: BaseException) -> str | None:
-    """The top-level name of the module an ImportError could not import (``exc.name``), or None."""
+    """The name of the module an ImportError could not import (``exc.name``) as :data:`EXTRA_OF_MODULE` knows it: the
+    dotted name where it is listed (``mujoco.mjx``, a package of its own), else its top-level name; or None."""
     name = getattr(exc, "name", None)
-    return name.split(".")[0] if isinstance(name, str) and name else None
+    if not (isinstance(name, str) and name):
+        return None
+    return name if name in EXTRA_OF_MODULE else name.split(".")[0]
 
 
 def install_hint(exc: BaseException) -> str:

@@ -38,7 +38,7 @@ the root welded to the world when ``initial_state.json`` declares it fixed (a
 mounted door) and free on the ground otherwise, and each movable joint's
 friction, damping and spring (``mobility.urdf`` ``<dynamics>``, ``overlay.json``)
 applied every simulation step by
-:class:`~asset2sim.engines.physx_engine.PassiveJoints`. The scene keeps
+:class:`~asset2sim.engines.passive_joints.PassiveJoints`. The scene keeps
 ManiSkill's solver settings (TGS, 15 position iterations; asset2sim's checks
 use PGS) and steps at 240 Hz, 12 steps per control step. SAPIEN's own URDF loader,
 which ManiSkill uses, drops the friction: a lid that holds open falls shut.
@@ -95,7 +95,8 @@ except ImportError as exc:  # ManiSkill, torch or SAPIEN not installed: one line
 
 from asset2sim.engines.base import Spring
 from asset2sim.engines.loading import CollisionPiece, collision_pieces, read_urdf
-from asset2sim.engines.physx_engine import (FRICTION_DRIVE_DAMPING, PassiveJoints, attach_collision_shapes, configure_articulation,
+from asset2sim.engines.passive_joints import FRICTION_DRIVE_DAMPING, PassiveJoints
+from asset2sim.engines.physx_engine import (attach_collision_shapes, configure_articulation,
                                             fill_articulation_builder)
 from asset2sim.output_folder import REPORT_NAME, URDF_NAME
 from asset2sim.tasks.check.contact_points import contact_point_rule

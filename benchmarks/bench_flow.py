@@ -19,10 +19,15 @@
    :data:`TAIL_FACTOR` times the median (wall or CPU) with the stage that took most of its time (the output's
    ``timings.json``) and the CoACD decompositions its report names, and how the start order fitted the run
    (:func:`order_check`: geometry bytes against cold wall time, the workers' busy share, when the first refine began);
-   writes ``DIR/summary.json``.
+   the post-check rounds per asset (median, p90, max, how many the first post-check decided) and what started each
+   extra round (the catalog's ``postcheck_rounds`` and ``extra_rounds``: :func:`rounds`); and the CPU of every process
+   of the flow by role (driver, Prefect server, Dask workers, stage servers ...: ``flow_cpu.FlowCpu``) beside the
+   refine children's, over the first phase from the flow's start to its last row and from its first row to its last,
+   with the share of the machine that refines nothing; writes ``DIR/summary.json``.
 
-Goal: >= 2,000 assets an hour for the first phase on 2 cores, p99 <= 5x the median. Numbers from
-a loaded machine (see the load average printed) are upper bounds of the cost.
+Goals: >= 2,000 assets an hour for the first phase on 2 cores, post-check rounds median 1, p99 <= 6x and max <= 10x
+the median, less than 8 % of the machine on processes that refine nothing. Numbers from a loaded machine (see the
+load average printed) are upper bounds of the cost.
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ DEV = ROOT.parent / "shared" / "datasets" / "partnet_mobility"
 
 from bench_flow_synthetic import _load, flow_times  # noqa: E402
 from bench_generalization import _noun  # noqa: E402
+from flow_cpu import FlowCpu, print_report  # noqa: E402
 
 #: An asset above this many times the median first-phase time (wall or CPU) is listed in the tail.
 TAIL_FACTOR = 3.0
@@ -177,6 +183,58 @@ def print_tail(t: dict, factor: float = TAIL_FACTOR) -> None:
               + (f", CoACD pieces kept {e['coacd_pieces']}" if e["coacd_pieces"] else ""))
 
 
+def rounds(df) -> dict:
+    """Post-check rounds per asset of a run's catalog rows ``df`` (``postcheck_rounds``; for rows written before the
+    column, ``report.json`` in ``out_dir``): median, p90, max, the histogram, how many assets their first post-check
+    decided, and what started the extra rounds (``extra_rounds``: each check that failed the round before, robust
+    rest's trials apart; a round started with nothing failed, by the first words of its reason)."""
+    import collections
+
+    from asset2sim.flows.job_records import extra_rounds
+    from asset2sim.tasks.publish.contract import read_report_json
+
+    per_asset: dict[str, int] = {}
+    causes: collections.Counter = collections.Counter()
+    trials: collections.Counter = collections.Counter()
+    for rec in df.to_dict("records"):
+        n, extra = rec.get("postcheck_rounds"), rec.get("extra_rounds")
+        if (n is None or n != n) and rec.get("status") == "done" and rec.get("out_dir"):
+            try:
+                report = read_report_json(Path(str(rec["out_dir"])))
+                n, extra = len(report.escalation), json.dumps(extra_rounds(report))
+            except (OSError, ValueError):
+                continue
+        if n is None or n != n:
+            continue
+        per_asset[rec["asset_id"]] = int(n)
+        for r in json.loads(extra or "[]"):
+            for check in r["after"] or [f"nothing failed: {' '.join(r['reason'].split()[:6])}"]:
+                name, _, failing = check.partition(": ")
+                causes[name] += 1
+                for t in filter(None, failing.split(", ")) if name.startswith("robust_rest") else ():
+                    trials[t] += 1
+    vals = list(per_asset.values())
+    med, p90, _ = quantiles([float(v) for v in vals])
+    hist = collections.Counter(vals)
+    return {"assets": len(vals), "median": med, "p90": p90, "max": max(vals, default=0),
+            "histogram": dict(sorted(hist.items())), "first_decided": hist.get(1, 0),
+            "first_decided_share": hist.get(1, 0) / len(vals) if vals else None,
+            "extra_rounds": sum(v - 1 for v in vals), "started_by": dict(causes.most_common()),
+            "robust_rest_trials": dict(trials.most_common())}
+
+
+def print_rounds(r: dict) -> None:
+    """Print :func:`rounds`'s figures."""
+    print(f"  post-check rounds per asset: median {r['median']:g}, p90 {r['p90']:g}, max {r['max']} over {r['assets']} "
+          f"assets {r['histogram']}; the first post-check decided {r['first_decided']} "
+          f"({100 * (r['first_decided_share'] or 0):.0f} %)")
+    if r["extra_rounds"]:
+        print(f"  what started the {r['extra_rounds']} extra rounds (failed the round before): "
+              + ", ".join(f"{k} {v}" for k, v in r["started_by"].items())
+              + (f"; robust-rest trials failed: " + ", ".join(f"{k} {v}" for k, v in r["robust_rest_trials"].items())
+                 if r["robust_rest_trials"] else ""))
+
+
 def report_only(work: Path) -> int:
     """``--report-only``: :func:`print_tail` of the latest run recorded under ``work`` (a kept ``--work``), and
     :func:`print_order` where its ``summary.json`` is kept too."""
@@ -191,6 +249,7 @@ def report_only(work: Path) -> int:
     print(f"run {runs[-1]}: {len(df)} assets")
     t = tail(df)
     print_tail(t)
+    print_rounds(rounds(df))
     (work / "tail.json").write_text(json.dumps(t, indent=1))
     summary = work / "summary.json"
     if summary.is_file():  # the run's first phase and workers, for the start order's fit
@@ -198,6 +257,24 @@ def report_only(work: Path) -> int:
         o = order_check(df, work / "raw", int(s.get("workers") or 2), float(s["assets_phase_s"]))
         print_order(o)
     return 0
+
+
+def _phase_marks(cpu: FlowCpu):
+    """A progress listener that takes ``cpu``'s snapshots "first row" and "last row" (every asset of the run
+    recorded: the end of the first phase, before the media phase)."""
+    seen = {"total": 0, "rows": 0}
+
+    def on(event) -> None:
+        if event.kind == "run_started":
+            seen["total"] = event.total
+        elif event.kind == "asset_finished":
+            seen["rows"] += 1
+            if seen["rows"] == 1:
+                cpu.snapshot("first row")
+            if seen["rows"] == seen["total"]:
+                cpu.snapshot("last row")
+
+    return on
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -219,13 +296,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         rows = build_dataset(args.manifest, work / "raw", max(1, min(len(VARIANTS) + 1, args.requests)))
         catalog = write_catalog(work, args.workers, args.media)
+        from asset2sim import flow_progress
         from asset2sim.flows.catalog import ResultCatalog, load_catalog
         from asset2sim.flows.refine_flow import run_refine_flow
 
         print(f"dataset: {len(rows)} assets ({args.requests} requests x {len(rows) // max(1, args.requests)} objects); "
               f"load before: {_load()}", flush=True)
         t0 = time.perf_counter()
-        summary = run_refine_flow(catalog, workers=args.workers)
+        with FlowCpu() as cpu, flow_progress.listening(_phase_marks(cpu)):
+            summary = run_refine_flow(catalog, workers=args.workers)
         wall = time.perf_counter() - t0
         df = ResultCatalog(load_catalog(catalog).catalog_root).read("dev", summary["run"])
         worked = int(summary["done"]) + int(summary["failed"])
@@ -246,7 +325,9 @@ def main(argv: list[str] | None = None) -> int:
                "stages_s": {k: dict(zip(("median", "p90", "p99"), quantiles(v))) for k, v in sorted(stages.items())},
                "failure_modes": df["failure_mode"].fillna("none").value_counts().to_dict(), "tail": tail(df),
                "workers": args.workers, "media": args.media, "load_after": _load(),
-               "order": order_check(df, work / "raw", args.workers, assets_s)}
+               "order": order_check(df, work / "raw", args.workers, assets_s), "rounds": rounds(df),
+               "cpu": {k: cpu.report(a, "last row") for k, a in (("first_phase", "start"), ("assets", "first row"))
+                       if a in cpu.snapshots and "last row" in cpu.snapshots}}
         print(f"flow: {worked} assets refined in {wall:.1f} s wall (assets phase {assets_s:.1f} s); load after: {_load()}")
         print(f"  first phase (verdict, evaluation, exports): {out['first_phase_assets_per_hour'] or 0:.0f} assets/hour "
               f"(goal >= 2000)")
@@ -254,7 +335,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  media phase (renders, clips, report.html): {made} outputs in {media_s:.1f} s = "
                   f"{out['media_assets_per_hour'] or 0:.0f} assets/hour")
         print(f"  per asset: median {med:.2f} s, p90 {p90:.2f} s, p99 {p99:.2f} s = {p99 / med if med else 0:.2f}x the "
-              "median (goal <= 5x)")
+              "median (goal <= 6x)")
+        print_rounds(out["rounds"])
+        prepare_s = sum(json.loads(st or "{}").get("cpu.prepare", 0.0) for st in df["stage_seconds"])
+        for key, title in (("first_phase", "the first phase from the flow's start to its last row"),
+                           ("assets", "from its first row to its last")):
+            if key in out["cpu"]:
+                print_report(out["cpu"][key], title, prepare_s if key == "first_phase" else None)
         print_tail(out["tail"])
         print_order(out["order"])
         print("  stage seconds per asset (median / p90 / p99):")

@@ -2,7 +2,11 @@
 MuJoCo and Newton for every refined output folder under a root (default:
 out/bench_refine, as written by benchmarks/bench_refine.py); print the parity
 table (loaded, rest stable, oscillation, Phi and deepest point per engine),
-the objects where the engines disagree, and the authored-equals-simulated
+the objects where the engines disagree, the holding table (per engine: the
+objects whose every joint comes to rest in its band over the rest test, and
+every joint with friction pushed alone, root fixed, gravity off, springs
+accounted: does it start to move within 20 % of its declared friction,
+``asset2sim.tasks.check.breakaway``), and the authored-equals-simulated
 table (what each engine holds after loading, against the files).
 
     python benchmarks/bench_parity.py [--root out/bench_refine] [--ids 103275,7236]
@@ -27,7 +31,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-ENGINES = ("pybullet", "physx", "mujoco", "newton")
+ENGINES = ("pybullet", "physx", "mujoco", "newton")  # also: mjx (MJX on JAX), ovphysx (the USD export in PhysX)
 #: The files a parity result depends on.
 INPUTS = ("mobility.urdf", "initial_state.json", "overlay.json")
 #: A disagreement in the deepest point (mm) worth explaining: PyBullet's
@@ -115,7 +119,7 @@ def disagreements(rows: list[dict]) -> list[str]:
                 for r in ok
             )
             out.append(f"{key}: {detail}")
-    depths = [(r["engine"], r["max_depth_mm"] or 0.0) for r in ok]
+    depths = [(r["engine"], r["max_depth_mm"]) for r in ok if r["max_depth_mm"] is not None]
     if depths and max(d for _, d in depths) - min(d for _, d in depths) > DEPTH_GAP_MM:
         out.append("deepest point mm: " + ", ".join(f"{e} {d:.2f}" for e, d in depths))
     return out
@@ -140,6 +144,7 @@ def main(argv: list[str] | None = None) -> int:
         keep = set(args.ids.split(","))
         folders = [f for f in folders if f.name in keep]
     counts = {e: {"stable": 0, "osc": 0, "ran": 0, "max_pen": 0.0, "max_depth": 0.0} for e in engines}
+    holding = {e: {"objects": 0, "held": 0, "pushed": 0, "breakaway_ok": 0, "ratios": [], "not_measured": set()} for e in engines}
     rows_out = []
     authored_rows = []
     for f in folders:
@@ -165,7 +170,17 @@ def main(argv: list[str] | None = None) -> int:
                 c["max_pen"] = max(c["max_pen"], r["penetration_mm"] or 0.0)
                 c["max_depth"] = max(c["max_depth"], r["max_depth_mm"] or 0.0)
                 line.append(f"{r['engine']}: {'S' if r['rest_stability'] else 's'}{'O' if r['oscillation'] else 'o'} "
-                            f"depth {r['max_depth_mm']:.2f}")
+                            + ("depth -" if r["max_depth_mm"] is None else f"depth {r['max_depth_mm']:.2f}"))
+                h, brk = holding[r["engine"]], r.get("breakaway") or {}
+                h["objects"] += 1
+                h["held"] += all((r.get("joints_held") or {}).values())
+                if brk.get("measured"):
+                    for j in brk["joints"].values():
+                        h["pushed"] += 1
+                        h["breakaway_ok"] += bool(j["passed"])
+                        h["ratios"].append(j["ratio"] if j["ratio"] is not None else float("inf"))
+                elif brk:
+                    h["not_measured"].add(brk.get("reason", "")[:100])
             else:
                 line.append(f"{r['engine']}: {r['status']}")
         dis = disagreements(rows)
@@ -190,6 +205,13 @@ def main(argv: list[str] | None = None) -> int:
     print("engine    loaded  rest-stability  oscillation  max Phi (mm)  max deepest point (mm)")
     for e, c in counts.items():
         print(f"{e:<9} {c['ran']:>3}/{len(folders):<3} {c['stable']:>8} {c['osc']:>13} {c['max_pen']:>14.2f} {c['max_depth']:>14.2f}")
+    print()
+    print("holding: every joint at rest in its band over the rest test; breakaway of every joint with friction within 20 %")
+    print("engine    objects  all joints held  joints pushed  breakaway within 20 %  breakaway / friction (min, max)")
+    for e, h in holding.items():
+        rng = f"{min(h['ratios']):.3f}, {max(h['ratios']):.3f}" if h["ratios"] else "-"
+        why = f"  not measured: {'; '.join(sorted(h['not_measured']))}" if h["not_measured"] else ""
+        print(f"{e:<9} {h['objects']:>7} {h['held']:>16} {h['pushed']:>14} {h['breakaway_ok']:>21}  {rng}{why}")
     if authored_rows:
         print()
         print("authored equals simulated (per engine and loaded file; error in units of the tolerance, <= 1 passes)")

@@ -19,7 +19,7 @@ from asset2sim.output_folder import OVERLAY_NAME, read_record
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.catalog import CatalogRow
 from asset2sim.schemas.metrics import column_values
-from asset2sim.schemas.report import RefineReport
+from asset2sim.schemas.report import MetricResult, RefineReport
 from asset2sim.tasks.check.verdict import FAILED_STATUSES, asset_failure_mode
 from asset2sim.tasks.evaluation.clips import clip_videos
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError, is_valid_id
@@ -102,12 +102,14 @@ def report_tokens(report: RefineReport, out_dir: Path | str) -> int | None:
 class Prepared(BaseModel):
     """What the flow's input stage found for one asset: ``skip`` the earlier catalog row to reuse, ``resume``
     an earlier run's :class:`JobRecord` whose complete folder to record, ``asset`` and ``findings`` handed to
-    the refine stage (:meth:`extracted`); ``seconds`` wall time."""
+    the refine stage (:meth:`extracted`); ``seconds`` wall time, ``cpu_seconds`` the CPU time (user + system) of the
+    thread that read the asset."""
 
     model_config = ConfigDict(extra="forbid")
     ok: bool = False
     worker: str | None = None
     seconds: float | None = None
+    cpu_seconds: float | None = None
     input_hash: str | None = None
     config_hash: str | None = None
     refine_config_hash: str | None = None
@@ -174,7 +176,7 @@ REUSED_COLUMNS = (
     "category", "estimator", "model", "scale", "scale_deviation_pct", "total_mass_kg", "initial_state",
     "penetration_mm", "rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "prompt_alignment",
     "failure_mode", "model_queries", "tokens", "out_dir", "error", "code_hash", "clips", "request_met", "request_unmet",
-    "media",
+    "media", "postcheck_rounds", "extra_rounds",
 )  # fmt: skip
 
 
@@ -199,6 +201,8 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
     stages: dict[str, float] = {}
     if prepared.seconds is not None:
         stages["prepare"] = round(float(prepared.seconds), 4)
+    if prepared.cpu_seconds is not None:
+        stages["cpu.prepare"] = round(float(prepared.cpu_seconds), 4)
     if prepared.skip is not None:  # reuse an earlier finished result
         return _reused_row(row, prepared.skip, stages)
     errors: list[str] = []
@@ -257,7 +261,7 @@ def _reused_row(row: CatalogRow, prev: dict[str, Any], stages: dict[str, float])
     row.model_queries = 0
     row.tokens = 0
     row.stage_seconds = json.dumps(stages)
-    row.wall_seconds = sum(stages.values())
+    row.wall_seconds = sum(v for k, v in stages.items() if "." not in k)
     return row
 
 
@@ -276,6 +280,8 @@ def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages:
         row.total_mass_kg = report.total_mass
         row.initial_state = json.dumps(report.initial_joint_positions or {}, sort_keys=True)
         row.model_queries = int(report.model_queries or 0)
+        row.postcheck_rounds = len(report.escalation) or None
+        row.extra_rounds = json.dumps(extra_rounds(report)) if report.escalation else None
         row.refine_config_hash = report.config_hash or row.refine_config_hash
         row.tokens = value.tokens
         row.estimator = report.estimator or row.estimator
@@ -294,6 +300,29 @@ def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages:
             errors.append(refined.log_tail[-600:])
         return refined.failure_mode
     return None
+
+
+def failed_checks(metrics: list[MetricResult]) -> list[str]:
+    """The checks of one post-check round that failed, ``name(engine)``; a robust-rest check with its failing
+    trials after a colon (``robust_rest(pybullet): tilt+y, drop``)."""
+    out = []
+    for m in metrics:
+        if m.passed is not False:
+            continue
+        trials = (m.details or {}).get("trials") if m.name == "robust_rest" else None
+        failing = [str(k) for k, t in trials.items() if isinstance(t, dict) and t.get("passed") is False] if isinstance(trials, dict) else []
+        out.append(f"{m.name}({m.engine})" + (f": {', '.join(failing)}" if failing else ""))
+    return out
+
+
+def extra_rounds(report: RefineReport) -> list[dict[str, Any]]:
+    """What started each post-check round of ``report`` after its first: ``{"round": n, "after": [...], "reason":
+    text}``, ``after`` the checks that failed the round before (:func:`failed_checks`; empty when that round passed,
+    as before the final setting is checked again with the joint sweep), ``reason`` the round's own account (its
+    ``reason``). Empty when the first post-check decided."""
+    rounds = report.escalation
+    return [{"round": cur.round, "after": failed_checks(prev.metrics), "reason": cur.reason}
+            for prev, cur in zip(rounds, rounds[1:])]
 
 
 def _add_measured(row: CatalogRow, measured: StageRecord | None, stages: dict[str, float]) -> tuple[dict[str, Any], list[str] | None]:

@@ -14,6 +14,7 @@ import json
 import logging
 import os
 import time
+import uuid
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict
 from datetime import datetime, timezone
@@ -41,8 +42,43 @@ from asset2sim.flows.job_records import Prepared, build_manifest_row, build_row
 __all__ = ["FLOW_NAME", "SUBFLOW_NAME", "AssetJob", "flow_parameters", "refine_assets", "refine_dataset", "run_refine_flow"]
 
 
-prepare_many = task(stages.prepare_batch, name="prepare", cache_policy=NO_CACHE, persist_result=False)
-chain = task(stages.refine_chain, name="refine-metrics", cache_policy=NO_CACHE, persist_result=False)
+class Sealed:
+    """A task argument Prefect hands to the task whole, without looking inside: Prefect walks every argument for
+    futures and states to link (``visit_collection``), rebuilding each pydantic model and dataclass it holds, twice
+    in the driver and twice in the worker, which costs 2-12 ms per pass for one asset's description. An asset's
+    arguments hold no future (the flow passes each prepared record itself), so nothing is lost. (Prefect's own
+    ``quote`` and ``opaque`` wrappers are tuples, which Dask's task spec unpacks on the way.) Dask names each
+    submission by a token of its arguments, pickling what it does not know (about 10 ms for one asset's record):
+    a sealed value's token is drawn once instead (``__dask_tokenize__``), as for ``pure=False`` submissions."""
+
+    __slots__ = ("value", "_token")
+
+    def __init__(self, value: Any):
+        self.value = value
+        self._token = uuid.uuid4().hex
+
+    def __dask_tokenize__(self) -> str:
+        return self._token
+
+    def __getstate__(self) -> tuple:
+        return (self.value,)  # never false: pickle calls __setstate__ for an empty value too
+
+    def __setstate__(self, state: tuple) -> None:
+        self.value, self._token = state[0], uuid.uuid4().hex
+
+
+def prepare_sealed(batch: Sealed) -> list:
+    """:func:`asset2sim.flows.stages.prepare_batch` of a sealed batch of jobs."""
+    return stages.prepare_batch(batch.value)
+
+
+def chain_sealed(job: Sealed, prepared: Sealed) -> stages.ChainResult:
+    """:func:`asset2sim.flows.stages.refine_chain` of a sealed job and its prepared record."""
+    return stages.refine_chain(job.value, prepared.value)
+
+
+prepare_many = task(prepare_sealed, name="prepare", cache_policy=NO_CACHE, persist_result=False)
+chain = task(chain_sealed, name="refine-metrics", cache_policy=NO_CACHE, persist_result=False)
 
 #: Largest batch of assets one prepare task reads.
 PREPARE_BATCH_MAX = 25
@@ -149,6 +185,8 @@ class _AssetRecorder:
             flow_run_id=self.flow_run_id, started_at=self.starts[job.asset_id], finished_at=time.time(),
         )  # fmt: skip
         _add_isolation_times(row, refined, measured)
+        if published is not None and published.status == "ok" and isinstance(published.value.get("clips"), list):
+            row.clips = json.dumps(published.value["clips"])  # read in the worker: the row's out_dir is the store's
         self.store.append_row(job.dataset, job.run_id, row)
         self.rows.append(row)
         _emit_finished(job.dataset, job.run_id, row)
@@ -170,7 +208,7 @@ def _submit_prepares(jobs: list[AssetJob], batch_size: int, starts: dict[str, fl
         batch = jobs[i:i + size]
         for job in batch:
             starts[job.asset_id] = time.time()
-        prep_futures[prepare_many.submit(batch)] = batch
+        prep_futures[prepare_many.submit(Sealed(batch))] = batch
     return prep_futures
 
 
@@ -196,7 +234,7 @@ def _submit_chains(prep_futures: dict, chain_task, rec: _AssetRecorder, fingerpr
                 continue
             # a killed run's complete folder (prepared.resume): refine reads its report, metrics its evaluation
             limit = {} if job.isolation in ("process", "spawn") else {"timeout_seconds": job.time_limit_seconds}
-            chains[chain_task.with_options(**limit).submit(job, prepared)] = (job, prepared)
+            chains[chain_task.with_options(**limit).submit(Sealed(job), Sealed(prepared))] = (job, prepared)
     return chains
 
 
@@ -674,15 +712,38 @@ def _dask_task_runner(workers: int | None, address: str | None, *, host: str = "
     )
 
 
+#: Dask's own bookkeeping kept light on the flow's cluster: no profiler sampling every worker's stacks 100 times a
+#: second, the event-loop tick, the system monitor and the nanny's memory monitor at 1-2 s instead of 20-500 ms (CPU a
+#: refine needs; ``docs/design/pipeline.md``, "What the orchestration costs"). A cluster the flow is given gets them
+#: from its machines' environment (:func:`dask_settings_env`, the guide's recipe for N machines).
+DASK_SETTINGS: dict[str, Any] = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "2s",
+    "distributed.worker.memory.monitor-interval": "1s",
+}
+
+
+def dask_settings_env() -> dict[str, str]:
+    """:data:`DASK_SETTINGS` as the environment variables Dask reads (``DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED``
+    ...)."""
+    return {"DASK_" + key.replace(".", "__").replace("-", "_").upper(): str(value).lower() if isinstance(value, bool) else str(value)
+            for key, value in DASK_SETTINGS.items()}
+
+
 @contextlib.contextmanager
 def _local_cluster_config(address: str | None, dashboard: bool):
-    """Dask configuration for a local cluster: without ``dashboard``, no HTTP routes on scheduler and workers."""
-    if address or dashboard:
+    """Dask configuration for a local cluster: :data:`DASK_SETTINGS`; without ``dashboard``, no HTTP routes on
+    scheduler and workers."""
+    if address:
         yield
         return
     import dask
 
-    with dask.config.set({"distributed.scheduler.http.routes": [], "distributed.worker.http.routes": []}):
+    settings = dict(DASK_SETTINGS)
+    if not dashboard:
+        settings.update({"distributed.scheduler.http.routes": [], "distributed.worker.http.routes": []})
+    with dask.config.set(settings):
         yield
 
 

@@ -33,6 +33,7 @@ from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.metrics import REST_TEST_METRICS, column_values
 from asset2sim.schemas.report import MetricResult, RefineReport
+from asset2sim.tasks.evaluation.clips import clip_videos
 from asset2sim.tasks.evaluation.evaluate import Evaluation, evaluate_asset
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.extract import extract_asset_checked
@@ -276,12 +277,15 @@ def finished_in_store(row: dict[str, Any] | None, input_hash: str) -> dict[str, 
 
 def publish_stage(job: AssetJob, refined: StageRecord, measured: StageRecord | None = None) -> StageRecord:
     """Publish stage: upload the refined and metrics folders to ``job.out_uri`` / ``job.metrics_uri`` and delete
-    the local copies; ``value``: ``{"out_uri", "files", "bytes"}``; a refused upload is status ``error``."""
+    the local copies; ``value``: ``{"out_uri", "files", "bytes", "clips"}`` (``clips``: the folder's clip videos,
+    :func:`asset2sim.tasks.evaluation.clips.clip_videos`, read before the local copy goes); a refused upload is status
+    ``error``."""
     if job.out_uri is None or refined is None or refined.status != "ok":
         return StageRecord(status="skipped", seconds=0.0)
     t0 = time.perf_counter()
     value: RefineOutput = refined.value
     local = value.out_dir or job.out_dir
+    clips = clip_videos(local)
     try:
         up = store_mod.upload_folder(local, job.out_uri)
         if job.metrics_uri and Path(job.metrics_dir).is_dir():
@@ -293,7 +297,7 @@ def publish_stage(job: AssetJob, refined: StageRecord, measured: StageRecord | N
     output_folder.remove_owned(local)  # the refine's own files; anything else in the folder stays
     for folder in (job.metrics_dir, job.work_dir):  # the flow's bookkeeping folders (under the run's .work and metrics)
         shutil.rmtree(folder, ignore_errors=True)
-    return StageRecord(status="ok", value={"out_uri": job.out_uri, "files": up["files"], "bytes": up["bytes"]},
+    return StageRecord(status="ok", value={"out_uri": job.out_uri, "files": up["files"], "bytes": up["bytes"], "clips": clips},
                        seconds=time.perf_counter() - t0, worker=_worker_name())
 
 
@@ -350,7 +354,7 @@ def prepare_asset(job: AssetJob) -> Prepared:
     """Input stage: read and hash the asset and decide whether an earlier result (``skip``) or a killed run's
     folder (``resume``) can be reused; else write the job record into ``job.work_dir``. Returns the Prepared
     record (``ok`` False, ``invalid_input``, for an unreadable asset). Raises OSError: record not written."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.thread_time()
     rec = Prepared(worker=_worker_name())
     try:
         config = RefineConfig(**job.config)
@@ -358,6 +362,7 @@ def prepare_asset(job: AssetJob) -> Prepared:
         asset, findings = extract_asset_checked(Path(job.asset_dir), asset_id=job.asset_id, category=job.category, reading=reading)
     except Exception as exc:  # any reading problem is the input's
         rec.failure_mode, rec.error, rec.seconds = "invalid_input", f"{type(exc).__name__}: {exc}", time.perf_counter() - t0
+        rec.cpu_seconds = time.thread_time() - c0
         return rec
     rhash = run_hash(asset.input_hash, RefineConfig(**job.config), job.prompt, job.category)
     chash = job_config_hash(job, rhash)
@@ -374,7 +379,7 @@ def prepare_asset(job: AssetJob) -> Prepared:
         job_fields = {k: v for k, v in asdict(job).items() if k not in ("finished", "resumable")}
         write_job_record(job.work_dir, JobRecord(job=job_fields, input_hash=asset.input_hash, config_hash=chash,
                                                  refine_config_hash=rhash))
-    rec.seconds = time.perf_counter() - t0
+    rec.seconds, rec.cpu_seconds = time.perf_counter() - t0, time.thread_time() - c0
     return rec
 
 

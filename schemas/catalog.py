@@ -18,8 +18,8 @@ from pydantic import BaseModel, ConfigDict, field_validator
 #: ever added (nullable), so a reader of version N reads every older file
 #: (version 2 added ``code_hash``, version 3 ``request_warnings``, version 4 ``clips``, version 5 ``operable`` and
 #: ``operating_efforts``, version 6 ``request_met`` and ``request_unmet``, version 7 ``media``, version 8 ``learnable`` and
-#: ``learnability``).
-SCHEMA_VERSION = 8
+#: ``learnability``, version 9 ``postcheck_rounds`` and ``extra_rounds``).
+SCHEMA_VERSION = 9
 SCHEMA_VERSION_KEY = b"asset2sim.catalog_schema_version"
 
 RowStatus = Literal["done", "skipped", "failed"]
@@ -39,7 +39,10 @@ class CatalogRow(BaseModel):
     ``done``, ``deferred`` (``asset2sim report OUT`` makes it) or ``off``; ``learnable``: a trained policy learned the
     asset's task (false: on no seed while it learned it on other assets; null: not measured or undecided),
     ``learnability`` JSON {verdict, seeds, success, passive, learned_on, action, framework, budget}, written by the
-    learnability benchmark (:mod:`asset2sim.flows.learnability`); ``code_hash`` what the skip rule compares.
+    learnability benchmark (:mod:`asset2sim.flows.learnability`); ``postcheck_rounds``: the post-check rounds the refine
+    ran (1: its first post-check decided), ``extra_rounds`` JSON [{round, after, reason}]: what started each round after
+    the first (``after``: the checks that failed the round before, a robust-rest check with its failing trials;
+    ``reason``: the round's own account); ``code_hash`` what the skip rule compares.
     Non-finite floats are null."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
@@ -72,6 +75,8 @@ class CatalogRow(BaseModel):
     media: Optional[str] = None
     learnable: Optional[bool] = None
     learnability: Optional[str] = None
+    postcheck_rounds: Optional[int] = None
+    extra_rounds: Optional[str] = None
     model_queries: Optional[int] = None
     tokens: Optional[int] = None
     wall_seconds: Optional[float] = None

@@ -195,3 +195,61 @@ def test_load_sapien_into_a_users_scene_gives_the_same_robust_rest_as_its_own(st
     assert _trials(session) == expected
     session.close()
     assert scene.get_entities() == []  # the articulation and the plane removed, the scene kept
+
+
+def _sapien_own_articulation(scene, urdf: Path):
+    """``urdf`` built by SAPIEN's own URDF loader into ``scene``, root fixed, visuals left out (no render device)."""
+    loader = scene.create_urdf_loader()
+    loader.fixed_root_link = True
+    builder = loader.load_file_as_articulation_builder(str(urdf))
+    for link in builder.link_builders:
+        link.visual_records = []
+    return builder.build(fix_root_link=True)
+
+
+def _sapien_own_lid(folder: Path, declared: bool, steps: int = 720) -> float:
+    """The contract asset's lid (rad) after ``steps`` in a scene of the checks' settings, the articulation built by
+    SAPIEN's own URDF loader (root fixed), given the declared physics or not."""
+    from asset2sim.engines import physx_engine
+
+    scene = physx_engine.new_scene()
+    art = _sapien_own_articulation(scene, folder / URDF_NAME)
+    names = [j.get_name() for j in art.get_active_joints()]
+    qpos = art.get_qpos()
+    qpos[names.index("lid_hinge")] = 0.6
+    art.set_qpos(qpos)
+    physics = asset2sim.declare_physics(art, folder) if declared else None
+    for _ in range(steps):
+        if physics is not None:
+            physics.before_step()
+        scene.step()
+    return float(art.get_qpos()[names.index("lid_hinge")])
+
+
+def test_declare_physics_gives_a_users_own_sapien_articulation_the_declared_friction(tmp_path):
+    """SAPIEN's own URDF loader takes the lid's 0.5 N*m as PhysX's unitless coefficient and the lid, loaded by
+    0.16 N*m of gravity, falls shut; one call gives the same articulation the declared friction and it stays open;
+    declared 0.1 N*m, it falls as the files say."""
+    pytest.importorskip("sapien")
+    from tests.contract_asset import write_contract_asset
+
+    held = write_contract_asset(tmp_path / "held", lid_angle=0.6, lid_friction=0.5, lid_damping=0.02)
+    assert _sapien_own_lid(held.urdf.parent, declared=False) < 0.1
+    assert _sapien_own_lid(held.urdf.parent, declared=True) == pytest.approx(0.6, abs=5e-3)
+    weak = write_contract_asset(tmp_path / "weak", lid_angle=0.6, lid_friction=0.1, lid_damping=0.02)
+    assert _sapien_own_lid(weak.urdf.parent, declared=True) < 0.1
+
+
+def test_declare_physics_refuses_another_files_articulation(tmp_path):
+    pytest.importorskip("sapien")
+    from asset2sim.engines import physx_engine
+    from tests.contract_asset import write_contract_asset
+
+    a = write_contract_asset(tmp_path / "a")
+    other = tmp_path / "b"
+    shutil.copytree(a.urdf.parent, other)
+    (other / URDF_NAME).write_text((other / URDF_NAME).read_text().replace("lid_hinge", "door_hinge"))
+    scene = physx_engine.new_scene()  # kept alive while its articulation is
+    art = _sapien_own_articulation(scene, other / URDF_NAME)
+    with pytest.raises(ValueError, match="not the file's movable joints"):
+        asset2sim.declare_physics(art, a.urdf.parent)

@@ -303,3 +303,32 @@ def test_gensim2_references_build_and_step_in_the_same_environment(shared_datase
     finally:
         env.close()
     assert not written.exists()
+
+
+def _dev_rows():
+    import csv
+
+    from tests.conftest import SHARED
+
+    path = SHARED / "manifest.csv"
+    return (SHARED, list(csv.DictReader(path.open()))) if path.is_file() else (SHARED, [])
+
+
+@pytest.mark.slow  # end to end: every dev row refined, then built and stepped in ManiSkill
+@pytest.mark.parametrize("row", _dev_rows()[1], ids=[r["id"] for r in _dev_rows()[1]])
+def test_every_dev_output_is_a_maniskill_task_or_a_named_skip(refine_once, row):
+    """Each environment takes the output as a task object, or names why not with an MS_* code; the object's own task
+    builds on the CPU backend and steps (``benchmarks/bench_maniskill_tasks.py`` prints the table)."""
+    shared, _ = _dev_rows()
+    res = refine_once(shared / row["id"], row["prompt"], extras=False)
+    for action in ("open", "close", "task"):
+        objects, skipped = ams.load_task_objects([res.out], action, manifest=shared / "manifest.csv" if action == "task" else None)
+        assert len(objects) + len(skipped) == 1
+        assert all(error.startswith("MS_") for _, error in skipped), skipped
+    env = _make(ams.ENV_IDS["task"], [res.out], manifest=shared / "manifest.csv")
+    try:
+        env.reset(seed=0)
+        for _ in range(3):
+            env.step(env.action_space.sample())
+    finally:
+        env.close()

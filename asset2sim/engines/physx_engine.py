@@ -7,7 +7,6 @@ different: ``docs/design/simulators.md``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -19,15 +18,13 @@ with startup_quiet():
     from sapien import physx
 
 from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
-                                    SessionOptions, Spring, penetration_sum, register_engine)
+                                    SessionOptions, penetration_sum, register_engine)
 from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
                                        collision_pieces, joint_tables, link_friction, principal_axes, read_urdf)
 from asset2sim.frames import matrix_quat_wxyz
+from asset2sim.engines.passive_joints import FRICTION_DRIVE_DAMPING, PassiveJoints
 from asset2sim.engines.step_budget import spend
 
-#: Damping (N*m*s/rad or N*s/m) of the zero-velocity drive carrying the passive
-#: joint forces: a velocity constraint clamped at friction + damping * |qdot|.
-FRICTION_DRIVE_DAMPING = 1.0e6
 #: Bullet's default linear and angular velocity damping of multibody links (1/s).
 BULLET_LINK_DAMPING = 0.04
 #: PGS, not SAPIEN's default TGS (``docs/design/simulators.md``).
@@ -156,67 +153,6 @@ def configure_articulation(art) -> None:
     art.set_sleep_threshold(0.0)
     art.set_solver_position_iterations(SOLVER_ITERATIONS[0])
     art.set_solver_velocity_iterations(SOLVER_ITERATIONS[1])
-
-
-@dataclass
-class PassiveJoints:
-    """The passive forces of an articulation's movable joints, in the order of its ``active_joints``: Coulomb
-    ``friction`` (N*m or N) and viscous ``damping`` (N*m*s/rad or N*s/m) act through a zero-velocity drive whose
-    force limit is ``friction + damping * |qdot|`` (:meth:`force_limits`, set each step); springs
-    (``stiffness`` N*m/rad or N/m about ``reference``) as joint forces (:meth:`joint_forces`).
-    The one implementation of SAPIEN's passive joints: :class:`PhysXSession` and :mod:`asset2sim.maniskill` use it."""
-
-    names: list[str]
-    friction: np.ndarray
-    damping: np.ndarray
-    stiffness: np.ndarray
-    reference: np.ndarray
-
-    @classmethod
-    def from_urdf(cls, urdf, springs: dict[str, Spring], names: list[str]) -> "PassiveJoints":
-        """From the ``<dynamics>`` of ``urdf``'s movable joints and ``springs`` (joint -> :class:`Spring`, the
-        output's ``overlay.json``), for the joints ``names`` in the articulation's order (a name the URDF does
-        not have as a movable joint keeps zeros)."""
-        index = {n: i for i, n in enumerate(names)}
-        out = cls(list(names), *(np.zeros(len(names)) for _ in range(4)))
-        for pj in urdf.movable_joints:
-            i = index.get(pj.name)
-            if i is None:
-                continue
-            out.damping[i] = pj.damping
-            out.friction[i] = pj.friction
-            sp = springs.get(pj.name)
-            if sp is not None:
-                out.stiffness[i] = sp.stiffness
-                out.reference[i] = sp.reference
-        return out
-
-    @property
-    def sprung(self) -> bool:
-        """Whether any joint has a spring (joint forces to apply each step)."""
-        return bool(np.any(self.stiffness))
-
-    @property
-    def damped(self) -> bool:
-        """Whether any joint has damping (force limits to update each step)."""
-        return bool(np.any(self.damping))
-
-    def configure(self, joints) -> None:
-        """Give each of ``joints`` (``PhysxArticulationJoint``, this order) its passive drive: no PhysX joint
-        friction, zero target velocity, damping :data:`FRICTION_DRIVE_DAMPING`, force limit the friction."""
-        for i, joint in enumerate(joints):
-            joint.set_friction(0.0)
-            joint.set_drive_properties(0.0, FRICTION_DRIVE_DAMPING, float(self.friction[i]), "force")
-            joint.set_drive_target(0.0)
-            joint.set_drive_velocity_target(0.0)
-
-    def force_limits(self, qvel: np.ndarray) -> np.ndarray:
-        """The drives' force limits (n,) N*m or N at joint velocities ``qvel`` (n,) or (b, n): friction + damping * |qdot|."""
-        return self.friction + self.damping * np.abs(np.asarray(qvel, float))
-
-    def joint_forces(self, qpos: np.ndarray) -> np.ndarray:
-        """The springs' joint forces (n,) or (b, n) N*m or N at joint positions ``qpos``: -k (q - q_ref)."""
-        return -self.stiffness * (np.asarray(qpos, float) - self.reference)
 
 
 class PhysXSession(SessionDefaults):

@@ -22,7 +22,9 @@ _LAZY: dict[str, tuple[str, tuple[str, ...]]] = {
     "pybullet": ("asset2sim.engines.pybullet_engine", ("pybullet",)),
     "physx": ("asset2sim.engines.physx_engine", ("sapien",)),
     "mujoco": ("asset2sim.engines.mujoco_engine", ("mujoco",)),
+    "mjx": ("asset2sim.engines.mjx_engine", ("mujoco", "jax", "mujoco.mjx")),
     "newton": ("asset2sim.engines.newton_engine", ("newton", "warp", "scipy")),
+    "ovphysx": ("asset2sim.engines.ovphysx_engine", ("ovphysx", "ovstage", "pxr")),
 }
 
 

@@ -7,16 +7,17 @@ that fails, ``PostCheck.passed``).
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import SPEC_METRICS, unit
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import metrics
+from asset2sim.tasks.check import breakaway, metrics
 from asset2sim.tasks.assemble.export_mjcf import output_session_options
 
-from asset2sim.engines.base import EngineUnavailable, SessionOptions
+from asset2sim.engines.base import EngineUnavailable, EngineUnsupported, SessionOptions
 from asset2sim.engines.source import SimSource, UrdfFile
 from asset2sim.output_folder import URDF_NAME
 
@@ -67,16 +68,42 @@ def _session_metrics(source: SimSource, engine: str, options: SessionOptions) ->
     except Exception as exc:  # the asset does not load in this engine: a failure
         return _not_run(engine, "error", f"could not load: {type(exc).__name__}: {exc}", False)
     try:
-        pen = metrics.penetration(session)
+        try:
+            pen = metrics.penetration(session)
+            pen.details["ground_penetration_mm"] = float(session.ground_penetration()) * 1000.0
+        except EngineUnsupported as exc:  # an engine that reads no contacts (ovphysx): not measured, not failed
+            pen = MetricResult(name="penetration", value=None, unit=unit("penetration"), passed=None,
+                               details={"unsupported": str(exc)}, engine=engine)
         pen.details["engine_notes"] = list(session.notes)
-        pen.details["ground_penetration_mm"] = float(session.ground_penetration()) * 1000.0
         trace = metrics.run_rest_test(session, conv)
         rest = metrics.rest_stability(trace, conv, engine=engine)
         osc = metrics.oscillation(trace, conv, engine=engine)
-        rest.details["joint_drift"] = {n: j.settled for n, j in metrics.joint_settling(trace, timestep=conv.timestep).items()}
+        settling = metrics.joint_settling(trace, timestep=conv.timestep)
+        rest.details["joint_drift"] = {n: j.settled for n, j in settling.items()}
+        rest.details["joints_held"] = {n: j.held for n, j in settling.items()}
+        rest.details["breakaway"] = engine_breakaway(source, engine, options)
         return [pen, rest, osc]
     except Exception as exc:  # an engine error mid-run fails the asset in that engine
         return _not_run(engine, "error", f"{type(exc).__name__}: {exc}", False)
+    finally:
+        session.close()
+
+
+def engine_breakaway(source: SimSource, engine: str, options: SessionOptions) -> dict:
+    """Every joint with friction pushed in ``engine`` (:mod:`asset2sim.tasks.check.breakaway`: root fixed, gravity off,
+    the options' springs and state): :func:`~asset2sim.tasks.check.breakaway.breakaway_summary`, ``measured`` False
+    with the reason where the engine cannot push a joint or save its state (Newton) or does not load the asset."""
+    joints = source.model().movable_joints
+    frictions = {j.name: float(j.friction) for j in joints}
+    dampings = {j.name: float(j.damping) for j in joints}
+    try:
+        session = source.open(engine, dataclasses.replace(options, fixed_base=True, gravity=False, ground=False))
+    except EngineUnavailable as exc:
+        return breakaway.breakaway_summary(None, str(exc))
+    try:
+        return breakaway.breakaway_summary(breakaway.measure_breakaway(session, frictions, dampings))
+    except EngineUnsupported as exc:
+        return breakaway.breakaway_summary(None, f"{engine} cannot push a joint: {exc}")
     finally:
         session.close()
 
@@ -100,13 +127,15 @@ def parity_table(results: dict[str, list[MetricResult]]) -> list[dict[str, Any]]
         rows.append({
             "engine": engine, "status": status, "reason": reason,
             "penetration_mm": pen.value if pen is not None else None,
-            "max_depth_mm": max((p["max_depth_mm"] for p in pairs), default=0.0) if status == "ok" else None,
-            "penetration_points": sum(p["points"] for p in pairs) if status == "ok" else None,
+            "max_depth_mm": max((p["max_depth_mm"] for p in pairs), default=0.0) if status == "ok" and pen.value is not None else None,
+            "penetration_points": sum(p["points"] for p in pairs) if status == "ok" and pen.value is not None else None,
             "rest_stability": rest.passed if rest is not None else None,
             "D_pos_m": rest.details.get("D_pos_m") if rest is not None else None,
             "D_ori_rad": rest.details.get("D_ori_rad") if rest is not None else None,
             "oscillation": osc.passed if osc is not None else None,
             "failing_joints": list(osc.details.get("failing", [])) if osc is not None else [],
+            "joints_held": dict(rest.details.get("joints_held", {})) if rest is not None else {},
+            "breakaway": rest.details.get("breakaway") if rest is not None else None,
             "engine_notes": list(pen.details.get("engine_notes", [])) if pen is not None else [],
         })
     return rows

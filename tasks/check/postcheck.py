@@ -110,6 +110,9 @@ class PostCheck:
     recording: RestRecording | None = None
     recorded: RecordedRuns = field(default_factory=RecordedRuns)
     """The manipulation tiers' runs, reused by the evaluation of the same files."""
+    reference_holding: dict = field(default_factory=dict)
+    """With other engines (``--engines``), the reference engine's side of their parity rows: ``joints_held`` (joint
+    -> came to rest in its band) and ``breakaway`` (:func:`~asset2sim.tasks.check.parity.engine_breakaway`)."""
 
     def engine_failures(self) -> tuple[bool, list[str]]:
         """(any other engine unstable, joints oscillating in another engine)."""
@@ -188,6 +191,7 @@ def run_post_check(source: SimSource, initial_state: dict[str, float], overlay: 
     tilt = metrics.settle_tilt(trace, engine=engine)
     others = [e for e in dict.fromkeys(config.engines) if e != engine]
     engine_results: dict[str, list[MetricResult]] = {}
+    holding: dict = {}
     parity_done = not others
 
     def run_parity() -> None:
@@ -195,6 +199,8 @@ def run_post_check(source: SimSource, initial_state: dict[str, float], overlay: 
         if not parity_done:
             options = obj.options(springs=overlay_springs(overlay, initial_state))
             engine_results = {e: parity.session_metrics(source, e, options) for e in others}
+            holding.update(joints_held={n: s.held for n, s in settling.items()},  # the reference engine's parity row
+                           breakaway=parity.engine_breakaway(source, engine, options))
             parity_done = True
 
     nested = parent_child.parent_child_penetration(source, initial_state, engine, conv)  # the pairs the SPEC's Phi skips
@@ -221,7 +227,7 @@ def run_post_check(source: SimSource, initial_state: dict[str, float], overlay: 
     if not sweep_not_run(extra):
         run_parity()
     return PostCheck(metrics=[*base, *extra], trace=trace, sag=drift, sagging=sagging,
-                     engine_results=engine_results, recording=recording, recorded=recorded)
+                     engine_results=engine_results, recording=recording, recorded=recorded, reference_holding=holding)
 
 
 #: Why an escalation round records the sweep as not run (:func:`run_post_check`).

@@ -419,6 +419,37 @@ def as_asked_block(ev) -> str:
             "<code>request_not_met</code>; states measured from the closed end)<ul>" + items + "</ul></div>")
 
 
+def engines_section(report) -> str:
+    """"What holds in each engine": one row per engine of ``report.parity`` (``refine --engines``): rest stability,
+    the joints held at rest over the rest test, each joint's breakaway push over its declared friction (within 20 %
+    passes; the SPEC: "each value means the same in every engine"); empty without parity rows."""
+    rows = list(getattr(report, "parity", None) or [])
+    if not rows:
+        return ""
+
+    def breakaway_cell(b: dict | None) -> str:
+        if not b:
+            return "-"
+        if not b.get("measured"):
+            return f"<span class='small'>not measured: {esc(b.get('reason') or '-')}</span>"
+        parts = [f"{esc(j)} {fmt(r.get('ratio'), 2)} f" for j, r in b.get("joints", {}).items()]
+        return f"{verdict_cell(b.get('passed'))} <span class='small'>{', '.join(parts) or 'no joint with friction'}</span>"
+
+    intro = ("<p class='small'>Each engine of <code>--engines</code> on the same files: rest stability, the joints that come "
+             "to rest in their band, and the push at which each joint with friction starts to move (root fixed, gravity off, "
+             "springs accounted), as a multiple of its declared friction f; within 0.8-1.2 f passes.</p>")
+    out = ["<h2>What holds in each engine</h2>", intro,
+           "<table><tr><th>engine</th><th>status</th><th>rest stability</th><th>joints held</th><th>breakaway</th></tr>"]
+    for r in rows:
+        held = r.get("joints_held") or {}
+        held_text = ", ".join(f"{esc(j)}{'' if ok else ' (moves)'}" for j, ok in held.items()) or "-"
+        out.append(f"<tr><td>{esc(r.get('engine'))}</td><td>{esc(r.get('status'))} <span class='small'>{esc(r.get('reason') or '')}</span>"
+                   f"</td><td>{verdict_cell(r.get('rest_stability'))}</td><td class='small'>{held_text}</td>"
+                   f"<td>{breakaway_cell(r.get('breakaway'))}</td></tr>")
+    out.append("</table>")
+    return "\n".join(out)
+
+
 def clips_section(clip_set, folder: str = "clips") -> str:
     """HTML playing every clip of ``clip_set`` (a :class:`~asset2sim.schemas.realism.ClipSet`; None or empty:
     nothing), one row per joint and motion, the videos looping muted with their poster frames; ``folder``: the
@@ -486,6 +517,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         changes_section(ctx.report if ctx is not None else None, ctx.overlay if ctx is not None else None, joint_types, views, _figure),
         "<h2>Verdicts</h2>",
         _verdict_table(ev),
+        engines_section(ctx.report if ctx is not None else None),
         evidence_section(ev._runs, ctx.urdf if ctx is not None else ev.urdf, dt, svg_tag, _figure, dict(ev.initial_state),
                          getattr(ev.metric("task_execution"), "details", None), ev.closed_positions, list(ev.metrics),
                          modelled_state(ctx)),

@@ -129,6 +129,44 @@ class ReadOptions:
             raise ValueError(f"mjcf angle {self.mjcf_angle!r}: expected one of {list(ANGLE_UNITS)}")
 
 
+@dataclass(frozen=True)
+class PhysicsOverride:
+    """A host package whose code sets an object's joint physics when it builds a task, over what its file says:
+    ``layout`` the :class:`HostLayout` name, ``files`` the object's file names, ``joints`` the joint names it sets,
+    ``values`` attribute -> the value it sets (the file's units), ``how`` the call that sets them and ``keep`` how a
+    user keeps the refined values."""
+
+    layout: str
+    files: tuple[str, ...]
+    joints: tuple[str, ...]
+    values: dict[str, float]
+    how: str
+    keep: str
+
+
+#: Host code that overrides an object's joint physics at run time. robosuite's Door environment
+#: (``robosuite/environments/manipulation/door.py``) builds ``DoorObject(name="Door", friction=0.0, damping=0.1,
+#: lock=self.use_latch)``; ``DoorObject`` (``robosuite/models/objects/xml_objects.py``) then sets the hinge's
+#: ``frictionloss`` and ``damping`` in the XML from those arguments (``_set_door_friction``, ``_set_door_damping``).
+PHYSICS_OVERRIDES: tuple[PhysicsOverride, ...] = (
+    PhysicsOverride("robosuite", ("door.xml", "door_lock.xml", "door_small.xml"), ("hinge", "door_hinge"),
+                    {"frictionloss": 0.0, "damping": 0.1},
+                    'robosuite\'s Door environment builds DoorObject(name="Door", friction=0.0, damping=0.1, '
+                    "lock=...), which sets the hinge's frictionloss and damping when the task is built",
+                    "DoorObject(name=\"Door\", friction={frictionloss}, damping={damping}, lock=...)"),
+)
+
+
+def physics_overrides(path: Path | str, joints: list[str]) -> list[tuple[PhysicsOverride, str]]:
+    """The :data:`PHYSICS_OVERRIDES` that apply to the MJCF file at ``path`` (its host layout and file name), with
+    the joint of ``joints`` (names as the file has them) each sets."""
+    layout = host_layout(path)
+    if layout is None:
+        return []
+    name = Path(path).name.lower()
+    return [(o, j) for o in PHYSICS_OVERRIDES if o.layout == layout.name and name in o.files for j in joints if j in o.joints]
+
+
 def package_tree(path: Path | str) -> Path | None:
     """The asset folder of the known host package (:data:`HOST_LAYOUTS`) the MJCF at ``path`` lies in (the folder
     its layout's last folder name marks: ``.../metaworld/assets``, ``.../robosuite/models/assets``), the tree the

@@ -198,6 +198,7 @@ def _write_joints(stage, root_path, model: UrdfModel, link_paths: dict[str, str]
         jp = joints_scope.AppendChild(joint_names[j.name])
         joint_paths[j.name] = str(jp)
         _write_joint(stage, jp, j, link_paths, initial, springs.get(j.name))
+    _filter_parent_child(stage, model, link_paths)
     if fixed:
         jp = joints_scope.AppendChild("root_joint" if "root_joint" not in joint_names.values() else "asset2sim_root_joint")
         fj = UsdPhysics.FixedJoint.Define(stage, jp)
@@ -207,6 +208,17 @@ def _write_joints(stage, root_path, model: UrdfModel, link_paths: dict[str, str]
         fj.CreateLocalPos1Attr(Gf.Vec3f(0, 0, 0))
         fj.CreateLocalRot1Attr(Gf.Quatf(1, 0, 0, 0))
     return joint_paths
+
+
+def _filter_parent_child(stage, model: UrdfModel, link_paths: dict[str, str]) -> None:
+    """``UsdPhysics.FilteredPairsAPI`` on every joint's child body naming its parent: the SPEC's exclusion of a link and
+    its parent, explicit for a runtime or importer that collides jointed bodies (UsdPhysics joints disable their two
+    bodies' collision only through ``physics:collisionEnabled``, which a fixed joint merged by an importer loses)."""
+    _, Sdf, _, _, _, UsdPhysics = _pxr()
+    for j in model.joints:
+        child = stage.GetPrimAtPath(link_paths[j.child])
+        api = UsdPhysics.FilteredPairsAPI.Apply(child)
+        api.CreateFilteredPairsRel().AddTarget(Sdf.Path(link_paths[j.parent]))
 
 
 def _save(stage, target: Path) -> Path:
@@ -351,6 +363,12 @@ def _write_joint(stage, path, j: UrdfJoint, link_paths: dict[str, str], initial:
     prim.CreateAttribute(f"newton:{dof}:position", Sdf.ValueTypeNames.Float).Set(float(initial.get(j.name, 0.0) * unit))
     prim.AddAppliedSchema("NewtonJointAPI")
     prim.CreateAttribute("newton:friction", Sdf.ValueTypeNames.Float).Set(float(j.friction))
+    # PhysX (Isaac Sim 5, ovphysx) reads Coulomb joint friction as an effort (N*m or N) from PhysxJointAxisAPI:<dof>
+    # (ovphysx also takes newton:friction); physxJoint:jointFriction, PhysX's unitless coefficient on the constraint
+    # force, is left at its default 0
+    prim.AddAppliedSchema(f"PhysxJointAxisAPI:{dof}")
+    for effort in ("staticFrictionEffort", "dynamicFrictionEffort"):
+        prim.CreateAttribute(f"physxJointAxis:{dof}:{effort}", Sdf.ValueTypeNames.Float).Set(float(j.friction))
     for attr, value in (("damping", j.damping), ("friction", j.friction), ("stiffness", k), ("springReference", ref)):
         prim.CreateAttribute(f"asset2sim:{attr}", Sdf.ValueTypeNames.Double, custom=True).Set(float(value))
 

@@ -87,6 +87,7 @@ def _host_mjcf(out_dir: Path, source: Path, staged_urdf: Path, config: RefineCon
                         f"{done.diff.relative_to(out_dir).as_posix()}"
                         + "".join(f"; {f.relative_to(out_dir).as_posix()}, the package's file with the same physics"
                                   for f in done.files))
+    report.notes.extend(f"host MJCF: {note}" for note in done.overrides)
     return {"host_mjcf": str(done.path)}
 
 

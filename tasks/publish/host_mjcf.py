@@ -24,8 +24,9 @@ around the object's included file (Meta-World's environments include ``objects/a
 ``objects/drawer.xml`` scene). So each of the input's own files holding bodies of the object (the file given, and
 the files it includes) is also written again as ``mjcf/host/files/<its path in the input's tree>``, the package's
 XML as it was (XML comments dropped) with only the bodies' ``<inertial>`` those of the host file and their hinge
-and slide joints' ``damping``, ``frictionloss``, ``stiffness``, ``springref`` and ``range`` the refined ones in the
-unit the file is compiled in (bodies matched by name, their joints in order), to copy over the package's file;
+and slide joints' ``damping``, ``frictionloss`` (with its ``solreffriction`` and ``solimpfriction``, as the MJCF
+export holds friction without the no-slip pass, at the host's time step), ``stiffness``, ``springref`` and ``range``
+the refined ones in the unit the file is compiled in (bodies matched by name, their joints in order), to copy over the package's file;
 ``mjcf/host/files.diff`` is their diff against the package's. These files carry no keyframe: the host sets its
 state.
 """
@@ -43,6 +44,7 @@ import numpy as np
 
 from asset2sim import atomic, file_names, output_folder, safexml
 from asset2sim.engines.loading import read_initial_state
+from asset2sim.engines.mjcf.base import FRICTION_SOLIMP, friction_solref
 from asset2sim.output_folder import MJCF_DIR, OVERLAY_NAME, URDF_NAME
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.ingest import host_conventions, mjcf_scene
@@ -58,7 +60,7 @@ FILES_DIR = "files"
 #: Their unified diff against the package's files (inside ``mjcf/host/``).
 FILES_DIFF = "files.diff"
 #: Joint attributes a package file takes from the refined joint (in the file's units).
-JOINT_PHYSICS = ("damping", "frictionloss", "stiffness", "springref", "range")
+JOINT_PHYSICS = ("damping", "frictionloss", "solreffriction", "solimpfriction", "stiffness", "springref", "range")
 #: The keyframe holding the refined initial state.
 KEYFRAME = "initial"
 #: Relative tolerance of the check that the written file carries the refined masses.
@@ -79,6 +81,8 @@ class HostExport:
     bodies: tuple[str, ...]
     joints: tuple[str, ...]
     files: tuple[Path, ...] = ()
+    overrides: tuple[str, ...] = ()
+    """What the host package's code sets over the written values at run time, with how to keep the refined ones."""
 
 
 def _names(m, mujoco) -> dict[str, list[str]]:
@@ -177,7 +181,23 @@ def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: 
     files = write_package_files(folder / FILES_DIR, source, xml, set(bodies), {b: v for b, v in moving.items() if v},
                                 sources=opened.sources)
     return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(name for name, _ in joints),
-                      files=tuple(files))
+                      files=tuple(files), overrides=tuple(override_notes(source, spec, [name for name, _ in joints])))
+
+
+def override_notes(source: Path, spec, joints: list[str]) -> list[str]:
+    """One sentence per joint of ``joints`` whose physics the host package's code sets at run time
+    (:data:`~asset2sim.tasks.ingest.host_conventions.PHYSICS_OVERRIDES`): what it sets, over which refined values
+    (``spec``'s joints, the file's units), and the call that keeps them."""
+    out = []
+    for override, joint in host_conventions.physics_overrides(source, joints):
+        target = next((x for x in spec.joints if x.name == joint), None)
+        if target is None:
+            continue
+        refined = {"frictionloss": float(target.frictionloss), "damping": float(np.atleast_1d(target.damping)[0])}
+        replaced = ", ".join(f"{k} {refined[k]:.6g} with {v:.6g}" for k, v in override.values.items() if k in refined)
+        keep = override.keep.format(**{k: f"{v:.6g}" for k, v in refined.items()})
+        out.append(f"{override.how}: it replaces the refined {joint!r} {replaced}; build {keep} to keep the refined values")
+    return out
 
 
 def write_package_files(folder: Path, source: Path, host_xml: str, inertials: set[str],
@@ -253,6 +273,7 @@ def _joint_physics(joint, limited: bool) -> dict[str, str]:
     def text(values) -> str:
         return " ".join(f"{float(v):.12g}" for v in values)
     out = {"damping": text(joint.damping[:1]), "frictionloss": text([joint.frictionloss]),
+           "solreffriction": text(joint.solref_friction), "solimpfriction": text(joint.solimp_friction),
            "stiffness": text(joint.stiffness[:1]), "springref": text([joint.springref])}
     if limited:
         out["range"] = text(joint.range)
@@ -306,6 +327,9 @@ def _set_joint(joint, m, j: int, name: str, model, overlay: Overlay, per_rad: fl
         damping[0] = float(urdf.dynamics.damping or 0.0)
         joint.damping = damping
         joint.frictionloss = float(urdf.dynamics.friction or 0.0)
+        # the friction held without the no-slip pass, as the MJCF export holds it, at the host's time step
+        joint.solref_friction = list(friction_solref(float(m.opt.timestep)))
+        joint.solimp_friction = list(FRICTION_SOLIMP)
     dyn = overlay.joints.get(name)
     if dyn is not None:
         stiffness = np.array(joint.stiffness, float)

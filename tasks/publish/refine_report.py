@@ -93,4 +93,6 @@ def parity_rows(check) -> list[dict]:
     if not check.engine_results:
         return []
     base = [m for m in check.metrics if m.name in parity.METRICS]
-    return parity.parity_table({"pybullet": base, **check.engine_results})
+    rows = parity.parity_table({"pybullet": base, **check.engine_results})
+    rows[0].update(check.reference_holding)  # PyBullet's joints held and breakaway
+    return rows

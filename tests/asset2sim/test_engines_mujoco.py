@@ -136,16 +136,58 @@ def test_session_masses_and_no_mujoco_log_file(tmp_path, monkeypatch):
     assert os.listdir(work) == []
 
 
-def test_frictionloss_holds_without_creep(tmp_path):
-    """MuJoCo's soft friction would let a held lid creep (0.2 rad in 3 s);
-    the no-slip pass keeps it where Coulomb friction holds it."""
+def _lid_after(build, seconds: float, solref=None, solimp=None, options: str = "") -> float:
+    """The lid's angle (rad) after ``seconds`` of the build's model, its friction solver parameters optionally set
+    back (``solref`` / ``solimp``) or its ``<option>`` replaced by ``options`` (a host scene's)."""
+    xml = build.xml
+    if options:
+        import re
+
+        xml = re.sub(r"<option[^>]*/>", options, xml, count=1)
+    m = mujoco.MjModel.from_xml_string(xml, assets=build.assets())
+    if solref is not None:
+        m.dof_solref[:] = solref
+        m.dof_solimp[:] = solimp
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    for _ in range(round(seconds / m.opt.timestep)):
+        mujoco.mj_step(m, d)
+    jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "lid_hinge")
+    return float(d.qpos[m.jnt_qposadr[jid]])
+
+
+def test_frictionloss_holds_without_the_noslip_pass(tmp_path):
+    """MuJoCo's soft friction lets a held lid creep; the MJCF holds it with no no-slip pass (MJX has none) through each
+    joint's own friction solver parameters, and with MuJoCo's defaults for them the same lid creeps past its rest band
+    (0.1 rad: 5 % of its 2 rad range), so the parameters are what holds it."""
+    from asset2sim.engines.mjcf import ARMATURE, FRICTION_SOLIMP, friction_solref
+
     a = write_contract_asset(tmp_path, lid_angle=0.6, lid_friction=0.5, lid_damping=0.0)
+    b = urdf_to_mjcf(a.urdf, SessionOptions(initial_state=a.initial_state))
+    m = _compile(b)
+    assert m.opt.noslip_iterations == 0 and m.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
+    assert np.allclose(m.dof_solref[6:], friction_solref(1 / 240)) and np.allclose(m.dof_solimp[6:], FRICTION_SOLIMP)
+    assert np.all(m.dof_armature == ARMATURE)
+    assert _lid_after(b, 3.0) == pytest.approx(0.6, abs=1e-3)
+    assert abs(_lid_after(b, 3.0, (0.02, 1.0), (0.9, 0.95, 0.001, 0.5, 2.0)) - 0.6) > 0.1
     s = open_session("mujoco", a.urdf, SessionOptions(initial_state=a.initial_state))
     try:
+        assert s.m.opt.noslip_iterations == 0  # the checks run MuJoCo as the file does
         s.step(720)
-        assert s.joint_positions()["lid_hinge"] == pytest.approx(0.6, abs=1e-4)
+        assert s.joint_positions()["lid_hinge"] == pytest.approx(0.6, abs=1e-3)
     finally:
         s.close()
+
+
+def test_the_joints_hold_in_a_host_scene_with_its_own_options_and_defaults(tmp_path):
+    """A host scene that includes the object brings its own ``<option>`` (elliptic cones, a 2 ms step) and
+    ``<default>`` joint (MuJoCo's own friction solver parameters, under which this lid creeps 0.2 rad in 3 s): the
+    parameters written on each joint win, and the lid stays where its friction holds it."""
+    a = write_contract_asset(tmp_path, lid_angle=0.6, lid_friction=0.5, lid_damping=0.0)
+    b = urdf_to_mjcf(a.urdf, SessionOptions(initial_state=a.initial_state))
+    b.xml = b.xml.replace('<joint armature="0"/>', '<joint solreffriction="0.02 1" solimpfriction="0.9 0.95 0.001 0.5 2"/>')
+    host = '<option timestep="0.002" gravity="0 0 -9.81" cone="elliptic" impratio="10"/>'
+    assert _lid_after(b, 3.0, options=host) == pytest.approx(0.6, abs=1e-3)
 
 
 def test_keyframe_places_the_object_on_the_ground(tmp_path):
@@ -165,3 +207,34 @@ def test_keyframe_places_the_object_on_the_ground(tmp_path):
     mujoco.mj_forward(m, d)
     assert all(d.contact[i].dist > -1e-9 for i in range(d.ncon))
     assert np.isfinite(d.qacc).all()
+
+
+def _body_contacts(xml: str, build, lid: float, filterparent: bool) -> int:
+    """Contacts between the body and the lid with the lid turned ``lid`` rad (into the body below 0)."""
+    import re
+
+    if not filterparent:
+        xml = re.sub(r"<option([^>]*)/>", r'<option\1><flag filterparent="disable"/></option>', xml, count=1)
+    m = mujoco.MjModel.from_xml_string(xml, assets=build.assets())
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "lid_hinge")
+    d.qpos[m.jnt_qposadr[jid]] = lid
+    mujoco.mj_forward(m, d)
+    names = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in ("body", "lid")}
+    return sum({int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2])} == names for c in d.contact[:d.ncon])
+
+
+def test_parent_child_exclusion_travels_with_the_file(tmp_path):
+    """The lid turned 0.2 rad into its parent's walls: MuJoCo's parent filter drops the pair; a host scene that turns
+    it off (``filterparent="disable"``) still collides nothing there, because the MJCF names the pair in an
+    ``<exclude>``; without those, the same scene collides the lid with its parent."""
+    import re
+
+    a = write_contract_asset(tmp_path)
+    b = urdf_to_mjcf(a.urdf, SessionOptions(initial_state=a.initial_state))
+    assert '<exclude body1="body" body2="lid"/>' in b.xml and '<exclude body1="body" body2="post"/>' in b.xml
+    assert _body_contacts(b.xml, b, -0.2, filterparent=True) == 0
+    assert _body_contacts(b.xml, b, -0.2, filterparent=False) == 0
+    bare = re.sub(r"<exclude [^>]*/>", "", b.xml)
+    assert _body_contacts(bare, b, -0.2, filterparent=False) > 0

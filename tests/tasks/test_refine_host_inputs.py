@@ -90,6 +90,16 @@ def test_a_robosuite_door_is_refined_at_its_size_with_its_range_in_radians(tmp_p
     _check_swapped(res, before_model, after_model, "door_hinge")
     assert after_model.jnt_range[0][1] == pytest.approx(0.4)  # radians, as robosuite compiles it
     assert any(n.startswith("host MJCF: mjcf/host/door.xml") for n in res.report.notes)
+    # robosuite's Door environment sets the hinge's friction and damping when it builds the task: the notes say so,
+    # with the refined values and the DoorObject call that keeps them
+    friction, damping = hinge.dynamics.friction, hinge.dynamics.damping
+    (override,) = [n for n in res.report.notes if "DoorObject" in n]
+    assert "friction=0.0, damping=0.1" in override and f"frictionloss {friction:.6g} with 0" in override
+    assert f'DoorObject(name="Door", friction={friction:.6g}, damping={damping:.6g}, lock=...)' in override
+    # the package's file holds the refined friction without the no-slip pass, at robosuite's 2 ms step
+    j = after_model.joint("door_hinge").id
+    assert after_model.dof_solref[after_model.jnt_dofadr[j]] == pytest.approx((2 * after_model.opt.timestep, 1.0))
+    assert after_model.dof_solimp[after_model.jnt_dofadr[j]][:2] == pytest.approx((0.9999, 0.9999))
     audit = audit_asset(xml, simulate=False).report
     scale = audit.values[0]
     assert scale.quantity == "scale" and scale.verdict == "plausible" and scale.declared == pytest.approx(0.6, rel=0.05)

@@ -14,8 +14,8 @@ from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, CollisionPiece, collision_pieces, read_urdf
 from asset2sim.engines.mjcf.base import (DERIVED_MESH_DIR, KEYFRAME, MjcfError, compile_xml, load_mujoco, mujoco_messages, mujoco_warnings,
                                          num_text, place_on_ground, relative_to, safe_name, vec_text)
-from asset2sim.engines.mjcf.rewrite import (add_root_and_ground, place_bodies, rename_meshes, set_contacts, set_geoms, set_inertial,
-                                            set_joints, set_options)
+from asset2sim.engines.mjcf.rewrite import (add_root_and_ground, place_bodies, rename_meshes, set_contacts, set_friction_solver, set_geoms,
+                                            set_inertial, set_joints, set_options)
 from asset2sim.engines.mjcf.visuals import add_visuals
 from asset2sim.file_names import file_stem
 from asset2sim.frames import translation_matrix
@@ -198,6 +198,7 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     worldbody = root.find("worldbody")
     geom_mesh = {key: file_to_mesh[v] for key, v in meshes.names.items()}
     bodies = _rewrite_bodies(worldbody, model, spec, pieces, geom_mesh, springs, missing_inertial, visuals, notes)
+    set_friction_solver(worldbody, conv.timestep)
     set_contacts(root, model, pieces, fixed_base, notes)
     root_body = bodies[model.root]
     add_root_and_ground(root_body, worldbody, fixed_base, ground)
@@ -221,8 +222,8 @@ def _rewrite_bodies(worldbody, model: UrdfModel, spec, pieces: dict[str, list[Co
                     springs: dict[str, Spring], missing_inertial: str, visuals: bool, notes: list[str]) -> dict:
     """Rewrite every body of the import (pose, inertial, joint, collision
     geoms) from the URDF ``model`` (read from its file); ``geom_mesh``: (link, ...) key of a collision mesh -> the
-    MJCF mesh name. Returns body name -> element (MjcfError: the import's bodies or joints are not the URDF's, or
-    a per-body check fails).
+    MJCF mesh name. Returns body name -> element (MjcfError: the import's bodies or joints are not the URDF's, or a
+    per-body check fails).
     """
     urdf_path = model.path
     movable = [j.name for j in model.movable_joints]

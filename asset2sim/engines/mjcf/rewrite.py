@@ -12,8 +12,8 @@ from lxml import etree
 from asset2sim.engines.base import Spring
 from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
                                        CollisionPiece, link_friction)
-from asset2sim.engines.mjcf.base import (FREE_JOINT, GROUND, IMPRATIO, NOSLIP_ITERATIONS, MjcfError, close, num_text, quat_text, safe_name,
-                                         vec_text)
+from asset2sim.engines.mjcf.base import (ARMATURE, CONE, FREE_JOINT, FRICTION_SOLIMP, GROUND, MjcfError, close, friction_solref, num_text,
+                                         quat_text, safe_name, vec_text)
 from asset2sim.schemas.config import SimConventions
 from asset2sim.urdf import UrdfModel
 
@@ -60,9 +60,18 @@ def contact_policy(model: UrdfModel, pieces: dict[str, list[CollisionPiece]], fr
 
 
 def set_contacts(root, model: UrdfModel, pieces: dict[str, list[CollisionPiece]], fixed_base: bool, notes: list[str]) -> None:
-    """Replace ``<contact>`` by the ``<pair>``s and ``<exclude>``s of :func:`contact_policy`."""
+    """Replace ``<contact>`` by the ``<pair>``s and ``<exclude>``s of :func:`contact_policy`, and an ``<exclude>`` for
+    every other joint's parent and child that both have shapes (pairs MuJoCo's ``filterparent`` already drops, written
+    so that a host scene with ``<flag filterparent="disable"/>`` keeps the SPEC's exclusion)."""
     contact = etree.Element("contact")
     pairs, excludes = contact_policy(model, pieces, free=not fixed_base)
+    needed = set(excludes)
+    # every parent-child pair with shapes on both sides excluded by name, not only those MuJoCo's parent filter would
+    # collide: the filter then travels with the file into a host scene that turns filterparent off, and into MJX
+    shaped = [n for n in model.tree_order() if pieces.get(n)]
+    for j in model.joints:
+        if j.parent in shaped and j.child in shaped and (j.parent, j.child) not in needed and (j.child, j.parent) not in needed:
+            excludes.append((j.parent, j.child))
     for a, b in pairs:
         f = num_text(max(link_friction(model, a), link_friction(model, b)))
         for pa in pieces[a]:
@@ -74,8 +83,8 @@ def set_contacts(root, model: UrdfModel, pieces: dict[str, list[CollisionPiece]]
     if pairs:
         notes.append("MuJoCo filters contacts between bodies welded by fixed joints and their parents; "
                      f"explicit <pair>s restore PyBullet's pairs {[f'{a}/{b}' for a, b in pairs]}")
-    if excludes:
-        notes.append(f"<exclude>s remove parent/child pairs MuJoCo would collide: {[f'{a}/{b}' for a, b in excludes]}")
+    if needed:
+        notes.append(f"<exclude>s remove parent/child pairs MuJoCo would collide: {[f'{a}/{b}' for a, b in sorted(needed)]}")
     for old in root.findall("contact"):
         root.remove(old)
     if len(contact):
@@ -96,8 +105,7 @@ def set_options(root, conv: SimConventions, gravity: bool, meshdir: str) -> None
     root.insert(0, comp)
     opt = etree.Element("option")
     for k, v in (("timestep", num_text(conv.timestep)), ("gravity", f"0 0 {num_text(conv.gravity if gravity else 0.0)}"),
-                 ("integrator", "implicitfast"), ("noslip_iterations", str(NOSLIP_ITERATIONS)), ("cone", "elliptic"),
-                 ("impratio", num_text(IMPRATIO))):
+                 ("integrator", "implicitfast"), ("cone", CONE)):
         opt.set(k, v)
     for old in root.findall("option"):
         root.remove(old)
@@ -205,6 +213,18 @@ def set_joints(b, link, model: UrdfModel, spec, springs: dict[str, Spring], urdf
             je.set("springref", num_text(sp.reference))
         names.append(pj.name)
     return names
+
+
+def set_friction_solver(worldbody, timestep: float) -> None:
+    """On every hinge and slide joint under ``worldbody``, its dry friction's solver parameters for a model stepped at
+    ``timestep`` s (``solreffriction`` :func:`~asset2sim.engines.mjcf.base.friction_solref`, ``solimpfriction``
+    :data:`~asset2sim.engines.mjcf.base.FRICTION_SOLIMP`) and ``armature``
+    :data:`~asset2sim.engines.mjcf.base.ARMATURE`, on the joint itself so that they travel with the body into MJX and
+    host scenes whatever their ``<default>``."""
+    for je in worldbody.iter("joint"):
+        je.set("solreffriction", vec_text(friction_solref(timestep)))
+        je.set("solimpfriction", vec_text(FRICTION_SOLIMP))
+        je.set("armature", num_text(ARMATURE))
 
 
 def set_geoms(b, link, model: UrdfModel, plist: list[CollisionPiece], geom_mesh: dict[tuple, str], visuals: bool, urdf_path: Path) -> None:

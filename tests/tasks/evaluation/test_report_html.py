@@ -177,7 +177,7 @@ def test_a_refine_report_says_what_asset2sim_changed_and_why(tmp_path):
     section = html.split("<h2>What asset2sim changed</h2>")[1].split("<h2>")[0]
     for what in ("scale", "total mass", "joint_1 limits", "joint_1 initial position", "collision pieces", "root"):
         assert f"<td>{what}</td>" in section, what
-    assert "input, perspective" in section and "output, perspective" in section
+    assert "input (103275), perspective" in section and "output, perspective" in section  # the input named by its file
     assert "it runs into link_2" in section  # the clipped limit's reason
     assert "the request: slightly open" in section
     assert "deg from closed, " in section and "% open" in section  # the joint state from its closed end

@@ -276,3 +276,22 @@ def test_docs_snippets_load_an_output(contract):
         exec(compile(code, f"{DOC}:{module}", "exec"), {"OUT": str(contract)})
         ran += 1
     assert ran >= 2  # pxr and pybullet at least
+
+
+def test_parent_child_pairs_filtered_and_friction_as_physx_reads_it(tmp_path):
+    """Every joint's child body names its parent in FilteredPairsAPI (the SPEC's exclusion, explicit), and every movable
+    joint carries its friction as PhysX's static and dynamic friction effort (N*m or N), the file's value."""
+    a = write_contract_asset(tmp_path, lid_friction=0.5, post_friction=2.0)
+    build = export_usd(tmp_path)
+    stage = Usd.Stage.Open(str(build.path))
+    model = read_urdf(a.urdf)
+    for j in model.joints:
+        child = stage.GetPrimAtPath(build.links[j.child])
+        assert child.HasAPI(UsdPhysics.FilteredPairsAPI), j.child
+        assert [str(t) for t in UsdPhysics.FilteredPairsAPI(child).GetFilteredPairsRel().GetTargets()] == [build.links[j.parent]]
+    for j in model.movable_joints:
+        prim = stage.GetPrimAtPath(build.joints[j.name])
+        dof = "linear" if j.type == "prismatic" else "angular"
+        assert f"PhysxJointAxisAPI:{dof}" in prim.GetMetadata("apiSchemas").GetAddedOrExplicitItems()
+        for effort in ("staticFrictionEffort", "dynamicFrictionEffort"):
+            assert prim.GetAttribute(f"physxJointAxis:{dof}:{effort}").Get() == pytest.approx(j.friction, rel=1e-7)

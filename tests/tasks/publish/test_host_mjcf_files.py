@@ -18,6 +18,7 @@ from tests.tasks.ingest import host_layouts as hl
 mujoco = pytest.importorskip("mujoco")
 
 from asset2sim.schemas.config import RefineConfig
+from asset2sim.tasks.publish.host_mjcf import JOINT_PHYSICS
 from asset2sim.tasks.refine import refine_asset
 from asset2sim.urdf import read_urdf
 
@@ -36,7 +37,7 @@ ENVIRONMENT = textwrap.dedent("""
 def _without_physics(path, keep: bool = False):
     """The file's element tree as nested tuples, without ``<inertial>`` elements and the joints' physics
     attributes (``keep``: with them)."""
-    physics = {"damping", "frictionloss", "stiffness", "springref", "range"}
+    physics = set(JOINT_PHYSICS)  # damping, friction loss and its solver parameters, spring, range
 
     def walk(e):
         attrib = {k: v for k, v in e.attrib.items() if keep or e.tag != "joint" or k not in physics}

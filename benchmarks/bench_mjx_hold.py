@@ -1,0 +1,167 @@
+"""Does the MJCF export hold its initial state as MJX and host scenes run it (no no-slip pass)?
+
+    python benchmarks/bench_mjx_hold.py [--root out/bench_refine] [--ids 100221,148] [--no-mjx] [--x64]
+
+For every output folder under ROOT (as written by ``benchmarks/bench_refine.py``) the MJCF is exported
+(``export_mjcf``) and the written file is loaded with ``mujoco.MjModel.from_xml_path``, reset to its keyframe
+``initial`` and stepped for the robust-rest window (the SPEC's settle 1 s + test 2 s at 1/240 s, 720 steps) with
+no other change, in three ways:
+
+- ``defaults``: host MuJoCo, every joint's friction solver parameters set back to MuJoCo's defaults
+  (``solreffriction`` 0.02 1, ``solimpfriction`` 0.9 0.95 0.001 0.5 2: the export before it wrote its own), no no-slip;
+- ``mujoco``: host MuJoCo, the file as written;
+- ``mjx``: ``mujoco.mjx.step`` (JAX, on this machine's CPU) in one compiled loop, the file as written; JAX's
+  default float32, or float64 with ``--x64``.
+
+A run holds when every joint with limits comes to rest inside its robust-rest band around the keyframe (max(0.02 rad
+or 2 mm, 5 % of its range), not moving over the last 0.5 s: ``metrics.joint_settling``) and a free root is at rest
+over the 2 s test (D_pos <= 1 mm, D_ori <= 0.01 rad: ``metrics.rest_stability``). Prints one row per object (the
+worst joint's settled/band) and the counts; writes ROOT/mjx_hold.json (``--x64``: ROOT/mjx_hold_x64.json).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+MUJOCO_DEFAULT_SOLREF = (0.02, 1.0)
+MUJOCO_DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
+
+
+def trace_of(m, qpos: np.ndarray, q0: np.ndarray):
+    """A :class:`~asset2sim.tasks.check.metrics.RestTrace` of positions ``qpos`` (N, nq) stepped from keyframe ``q0``."""
+    import mujoco
+
+    from asset2sim.schemas.config import SimConventions
+    from asset2sim.tasks.check.metrics import RestTrace
+
+    conv = SimConventions()
+    n_set = round(conv.settle_time / conv.timestep)
+    free = m.njnt and int(m.jnt_type[0]) == int(mujoco.mjtJoint.mjJNT_FREE)
+    joints, types, limits, settle, initial = {}, {}, {}, {}, {}
+    for j in range(m.njnt):
+        kind = int(m.jnt_type[j])
+        if kind not in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)):
+            continue
+        name, a = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j), int(m.jnt_qposadr[j])
+        settle[name], joints[name] = qpos[:n_set, a], qpos[n_set - 1:, a]
+        types[name] = "prismatic" if kind == int(mujoco.mjtJoint.mjJNT_SLIDE) else "revolute"
+        limits[name] = tuple(float(x) for x in m.jnt_range[j]) if m.jnt_limited[j] else (-np.inf, np.inf)
+        initial[name] = float(q0[a])
+    test = qpos[n_set - 1:]
+    pos = test[:, 0:3] if free else np.zeros((len(test), 3))
+    quat = test[:, [4, 5, 6, 3]] if free else np.tile([0.0, 0.0, 0.0, 1.0], (len(test), 1))
+    return RestTrace(t=np.arange(len(test)) * conv.timestep, root_pos=pos, root_quat=quat, joints=joints, joint_types=types,
+                     p0=pos[0], q0=quat[0], settle_joints=settle, initial_joints=initial, joint_limits=limits,
+                     diverged=not bool(np.all(np.isfinite(qpos))))
+
+
+def step_host(m, d, n: int) -> np.ndarray:
+    """Positions (n, nq) of ``n`` ``mj_step``s."""
+    import mujoco
+
+    out = np.empty((n, m.nq))
+    for i in range(n):
+        mujoco.mj_step(m, d)
+        out[i] = d.qpos
+    return out
+
+
+def step_mjx(m, d, n: int) -> np.ndarray:
+    """Positions (n, nq) of ``n`` ``mjx.step``s: the first alone (under ``jax_enable_x64`` the data MJX puts holds
+    int32 contact indices its step returns as int64, which a scan's carry refuses), the rest in one ``jax.lax.scan``."""
+    import jax
+    import jax.numpy as jnp
+    from mujoco import mjx
+
+    mx, dx = mjx.put_model(m), mjx.put_data(m, d)
+    dx = jax.jit(mjx.step)(mx, dx)
+    first = dx.qpos
+
+    def body(dx, _):
+        dx = mjx.step(mx, dx)
+        return dx, dx.qpos
+
+    _, traj = jax.jit(lambda dx: jax.lax.scan(body, dx, None, length=n - 1))(dx)
+    return np.asarray(jnp.concatenate([first[None], traj]), float)
+
+
+def hold(xml: Path, how: str) -> dict:
+    """One run of the file ``xml`` (``how``: defaults, mujoco, mjx) -> {"holds", "worst", "d_pos", "d_ori", "wall_s"}."""
+    import mujoco
+
+    from asset2sim.engines.mjcf.base import mujoco_messages
+    from asset2sim.schemas.config import SimConventions
+    from asset2sim.tasks.check import metrics
+
+    with mujoco_messages():
+        m = mujoco.MjModel.from_xml_path(str(xml))
+    if how == "defaults":
+        m.dof_solref[:] = MUJOCO_DEFAULT_SOLREF
+        m.dof_solimp[:] = MUJOCO_DEFAULT_SOLIMP
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "initial"))
+    mujoco.mj_forward(m, d)
+    q0 = d.qpos.copy()
+    conv = SimConventions()
+    n = round((conv.settle_time + conv.test_time) / conv.timestep)
+    t0 = time.perf_counter()
+    qpos = step_mjx(m, d, n) if how == "mjx" else step_host(m, d, n)
+    wall = time.perf_counter() - t0
+    trace = trace_of(m, qpos, q0)
+    settling = metrics.joint_settling(trace)
+    joints_held = all(s.held for s in settling.values())
+    free = bool(m.njnt) and int(m.jnt_type[0]) == int(mujoco.mjtJoint.mjJNT_FREE)
+    rest = metrics.rest_stability(trace, conv) if free else None
+    worst = max(settling.items(), key=lambda kv: kv[1].settled / kv[1].band, default=None)
+    return {"holds": bool(joints_held and (rest is None or rest.passed)),
+            "worst": None if worst is None else {"joint": worst[0], "settled": worst[1].settled, "band": worst[1].band,
+                                                 "held": worst[1].held},
+            "d_pos": None if rest is None else rest.details.get("D_pos_m"), "d_ori": None if rest is None else rest.details.get("D_ori_rad"),
+            "options": {"noslip_iterations": int(m.opt.noslip_iterations), "cone": int(m.opt.cone)}, "wall_s": wall}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--root", type=Path, default=ROOT / "out" / "bench_refine")
+    ap.add_argument("--ids", default="")
+    ap.add_argument("--no-mjx", action="store_true", help="host MuJoCo only")
+    ap.add_argument("--x64", action="store_true", help="MJX in float64 (jax_enable_x64; JAX's default is float32)")
+    args = ap.parse_args(argv)
+    if args.x64:
+        import jax
+
+        jax.config.update("jax_enable_x64", True)
+    from asset2sim.tasks.assemble.export_mjcf import export_mjcf
+
+    folders = sorted(p for p in args.root.iterdir() if (p / "mobility.urdf").is_file())
+    if args.ids:
+        wanted = set(args.ids.split(","))
+        folders = [p for p in folders if p.name in wanted]
+    hows = ["defaults", "mujoco"] + ([] if args.no_mjx else ["mjx"])
+    rows = {}
+    print("object | " + " | ".join(hows) + " | worst joint settled/band (mjx or mujoco) | mjx wall s")
+    for folder in folders:
+        xml = export_mjcf(folder)
+        row = {how: hold(xml, how) for how in hows}
+        rows[folder.name] = row
+        last = row[hows[-1]]
+        w = last["worst"]
+        worst = "-" if w is None else f"{w['joint']} {w['settled']:.4f}/{w['band']:.3f}"
+        wall = f"{row['mjx']['wall_s']:.1f}" if "mjx" in row else "-"
+        print(f"{folder.name} | " + " | ".join("holds" if row[h]["holds"] else "MOVES" for h in hows) + f" | {worst} | {wall}",
+              flush=True)
+    counts = {h: sum(r[h]["holds"] for r in rows.values()) for h in hows}
+    print("holding: " + ", ".join(f"{h} {c}/{len(rows)}" for h, c in counts.items()))
+    (args.root / ("mjx_hold_x64.json" if args.x64 else "mjx_hold.json")).write_text(json.dumps({"rows": rows, "counts": counts}, indent=1, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,146 @@
+"""Breakaway: does each joint start to move under a push of its declared friction, in this engine?
+
+The SPEC: "a joint declared with friction f starts to move under a push of f (within 20 %) in each of [the engines the
+outputs are made for]". Each movable joint with friction is pushed alone, root fixed, gravity off (so that friction,
+and a spring, are all that resist), by an effort along its axis that ramps from :data:`RAMP_FROM` f to
+:data:`RAMP_TO` f over :data:`RAMP_TIME` s, the spring's force k (q - q_s) added each step so the push meets friction
+alone. The breakaway is the push (N*m or N, the spring's share and the damping's share c v at that step left out) at
+the first step the joint moves along the push faster than :data:`START_SPEED` (rad/s or m/s) for :data:`START_STEPS`
+steps in a row; it passes within
+:data:`TOLERANCE` of f. The push goes toward the farther limit. A joint without friction is not pushed (nothing to
+break away from).
+
+Why a ramp and a speed: a part held by viscous damping c as well moves at (push - f) / c once the push passes f, so a
+displacement threshold would read c as friction (a damped lid needing 1.3 f to travel 1 mm in time); at
+:data:`START_SPEED` the damping's share is c times that speed, which the breakaway leaves out (a bag's free handle,
+f = 3.3e-5 N*m and c = 6.2e-4 N*m*s/rad, has c v near 10 % of f). A ramp of 1 s
+adds at most f / 240 per step, and the inertia's lag is a few steps (a 5 kg drawer held by 5 N reaches 1e-4 m/s within
+0.014 s of the push passing f).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from asset2sim.engines.base import SimSession
+
+#: The push ramps from this share of the declared friction ...
+RAMP_FROM = 0.5
+#: ... to this share ...
+RAMP_TO = 1.5
+#: ... over this time (s).
+RAMP_TIME = 1.0
+#: Speed along the push (rad/s revolute, m/s prismatic) at which a joint has started to move: above MuJoCo's creep
+#: under a load below its friction (a stapler lid's, I ~ 1e-5 kg*m^2, passed 1e-3 rad/s at 0.62 f with the MJCF's
+#: friction solver parameters), far below a part let go; the damping's share of the push at that speed is c * speed,
+#: at most 2.5 % of f on the dev rows (revolute c / f <= 5 s, prismatic <= 85 s).
+START_SPEED = {"revolute": 5e-3, "continuous": 5e-3, "prismatic": 1e-4}
+#: Steps in a row at that speed.
+START_STEPS = 3
+#: The SPEC's tolerance on the breakaway push (relative to the declared friction).
+TOLERANCE = 0.2
+#: Below this difference (N*m revolute, N prismatic) a breakaway is the declared friction whatever the ratio: the
+#: resolution of a fingertip force/torque sensor (ATI Nano17, SI-12-0.12 calibration: 1/64 N*mm, 1/320 N), the least
+#: push a gripper could tell apart. A part asked to move freely declares a friction near it (a bag's free handle:
+#: 3.3e-5 N*m), where an engine's contact solver reaches the push within a few 1e-6 N*m but not within 20 %.
+RESOLUTION = {"revolute": 1.0 / 64000.0, "continuous": 1.0 / 64000.0, "prismatic": 1.0 / 320.0}
+
+
+@dataclass(frozen=True)
+class JointBreakaway:
+    """One joint pushed: ``declared`` friction (N*m or N), the ``breakaway`` push (same unit; None: it did not move up
+    to :data:`RAMP_TO` f), ``ratio`` breakaway / declared (None when it did not move; 0 for a joint that moved under
+    the first step's push is reported as :data:`RAMP_FROM`), ``direction`` +1 or -1 along the axis."""
+
+    joint: str
+    declared: float
+    breakaway: float | None
+    direction: int
+    resolution: float = 0.0
+    """N*m or N: :data:`RESOLUTION` of the joint's type"""
+
+    @property
+    def ratio(self) -> float | None:
+        return None if self.breakaway is None or self.declared <= 0 else self.breakaway / self.declared
+
+    @property
+    def passed(self) -> bool:
+        """Started to move within :data:`TOLERANCE` of the declared friction, or within :data:`RESOLUTION` of it."""
+        r = self.ratio
+        if r is None:
+            return False
+        return abs(r - 1.0) <= TOLERANCE + 1e-9 or abs(self.breakaway - self.declared) <= self.resolution
+
+    def as_dict(self) -> dict:
+        return {"declared": self.declared, "breakaway": self.breakaway, "ratio": self.ratio, "direction": self.direction,
+                "passed": self.passed}
+
+
+def push_direction(q0: float, lower: float, upper: float) -> int:
+    """+1 or -1: toward the farther limit from ``q0`` (+1 without finite limits)."""
+    if not (np.isfinite(lower) and np.isfinite(upper)):
+        return 1
+    return 1 if upper - q0 >= q0 - lower else -1
+
+
+def joint_breakaway(session: SimSession, joint: str, friction: float, damping: float = 0.0) -> JointBreakaway:
+    """Push ``joint`` of an open session (root fixed and gravity off, as :func:`measure_breakaway` opens it) along the
+    ramp from its current state, springs from ``session.options.springs``; ``damping`` (N*m*s/rad or N*s/m, the
+    file's) gives the share c v of the push the joint's speed v takes, left out of the breakaway; the state is
+    restored afterwards.
+
+    Raises:
+        EngineUnsupported: the engine cannot apply a joint effort or save its state.
+    """
+    q0 = session.joint_positions()[joint]
+    lower, upper = session.joint_limits.get(joint, (-np.inf, np.inf))
+    direction = push_direction(q0, lower, upper)
+    spring = session.options.springs.get(joint)
+    dt = session.options.conventions.timestep
+    n = max(2, round(RAMP_TIME / dt))
+    jtype = session.joint_types.get(joint, "revolute")
+    speed = START_SPEED.get(jtype, 1e-3)
+    resolution = RESOLUTION.get(jtype, 0.0)
+    saved = session.save_state()
+    try:
+        run = 0
+        for i in range(n + 1):
+            push = friction * (RAMP_FROM + (RAMP_TO - RAMP_FROM) * i / n)
+            q, _ = session.joint_state(joint)
+            hold = spring.stiffness * (q - spring.reference) if spring is not None and spring.stiffness > 0 else 0.0
+            session.apply_joint_effort(joint, direction * push + hold)
+            session.step(1)
+            _, v = session.joint_state(joint)
+            run = run + 1 if direction * v > speed else 0
+            if run >= START_STEPS:
+                return JointBreakaway(joint, friction, max(push - damping * direction * v, 0.0), direction, resolution)
+        return JointBreakaway(joint, friction, None, direction, resolution)
+    finally:
+        session.restore_state(saved)
+        session.discard_state(saved)
+
+
+def measure_breakaway(session: SimSession, frictions: dict[str, float],
+                      dampings: dict[str, float] | None = None) -> dict[str, JointBreakaway]:
+    """:func:`joint_breakaway` of every movable joint of ``session`` with friction > 0 in ``frictions`` (joint ->
+    N*m or N, the files' ``<dynamics friction>``; ``dampings`` their ``<dynamics damping>``), one after the other
+    from the session's state.
+
+    Raises:
+        EngineUnsupported: as :func:`joint_breakaway`.
+    """
+    dampings = dampings or {}
+    return {j: joint_breakaway(session, j, float(frictions[j]), float(dampings.get(j, 0.0)))
+            for j in session.joint_names if float(frictions.get(j, 0.0)) > 0.0}
+
+
+def breakaway_summary(results: dict[str, JointBreakaway] | None, reason: str = "") -> dict:
+    """JSON of one engine's breakaway: {"measured": bool, "reason", "passed": bool | None, "joints": {joint: ...}}."""
+    if results is None:
+        return {"measured": False, "reason": reason, "passed": None, "joints": {}}
+    return {"measured": True, "reason": "", "passed": all(r.passed for r in results.values()),
+            "joints": {j: r.as_dict() for j, r in results.items()}}
+
+
