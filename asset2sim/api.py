@@ -32,11 +32,11 @@ from asset2sim.output_folder import URDF_NAME
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.request import RequestOverrides
-from asset2sim.tasks.assemble.export_mjcf import export_mjcf, output_session_options
+from asset2sim.formats import FORMATS
+from asset2sim.engines.loading import output_session_options
 from asset2sim.apps.audit.audit import AuditError, AuditResult, audit_asset
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.ingest.validate_input import Finding, ValidationPolicy, validate_asset
-from asset2sim.tasks.publish.export_usd import export_usd
 from asset2sim.tasks.refine import RefineError, RefineResult, refine_asset
 
 __all__ = [
@@ -277,11 +277,9 @@ def export(out_dir: str | Path, format: str = "mjcf", *, visuals: bool = True) -
         ExportError / UsdExportError: the export did not read back the same.
     """
     out = _output_folder(out_dir)
-    if format == "mjcf":
-        return export_mjcf(out, visuals=visuals)
-    if format == "usd":
-        return export_usd(out, visuals=visuals).path
-    raise ValueError(f"unknown export format {format!r} (mjcf or usd)")
+    if format not in FORMATS:
+        raise ValueError(f"unknown export format {format!r} (mjcf or usd)")
+    return FORMATS[format].export(out, visuals=visuals)
 
 
 def make_media(out_dir: str | Path, *, reference: str | Path | None = None, clips: bool = True,
@@ -317,7 +315,7 @@ def _output_folder(out_dir: str | Path) -> Path:
 
 def verified_options(out_dir: str | Path, conventions: SimConventions | None = None) -> SessionOptions:
     """The :class:`~asset2sim.engines.base.SessionOptions` asset2sim's checks open an output folder with
-    (:func:`asset2sim.tasks.assemble.export_mjcf.output_session_options`). Raises ValueError when it is not
+    (:func:`asset2sim.formats.mjcf.export.output_session_options`). Raises ValueError when it is not
     an output folder or its ``overlay.json`` is invalid."""
     return output_session_options(_output_folder(out_dir), conventions=conventions)
 

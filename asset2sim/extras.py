@@ -76,3 +76,12 @@ def import_extra(module: str, needed_for: str) -> ModuleType:
         return importlib.import_module(module)
     except ImportError as exc:
         raise MissingExtra(f"{needed_for}: {install_hint(exc)}", name=missing_module(exc) or module.split(".")[0]) from exc
+
+
+def pxr_modules():
+    """``(Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics)`` from ``pxr`` (OpenUSD, the ``usd`` extra).
+
+    Raises:
+        MissingExtra (an ImportError): ``usd-core`` is not installed (the message names the extra, ``[usd]``).
+    """
+    return tuple(import_extra(f"pxr.{m}", "OpenUSD") for m in ("Gf", "Sdf", "Tf", "Usd", "UsdGeom", "UsdPhysics"))

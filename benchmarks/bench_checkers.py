@@ -29,7 +29,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from asset2sim.engines.quiet import quiet_stdout
     from asset2sim.tasks.check.third_party import CHECKERS, MJCF_PATH, OPT_IN, run_checkers
-    from asset2sim.tasks.assemble.export_mjcf import export_mjcf
+    from asset2sim.formats.mjcf.export import export_mjcf
 
     names = args.checkers.split(",") if args.checkers else [n for n in CHECKERS if n not in OPT_IN]
     folders = sorted(p.parent for p in args.root.glob("*/mobility.urdf"))

@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
         import jax
 
         jax.config.update("jax_enable_x64", True)
-    from asset2sim.tasks.assemble.export_mjcf import export_mjcf
+    from asset2sim.formats.mjcf.export import export_mjcf
 
     folders = sorted(p for p in args.root.iterdir() if (p / "mobility.urdf").is_file())
     if args.ids:

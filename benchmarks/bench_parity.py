@@ -136,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     from asset2sim.engines.quiet import quiet_stdout
-    from asset2sim.tasks.assemble.export_mjcf import export_mjcf
+    from asset2sim.formats.mjcf.export import export_mjcf
 
     engines = args.engines.split(",")
     folders = sorted(p.parent for p in args.root.glob("*/mobility.urdf"))
@@ -230,7 +230,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _export_usd(folder: Path):
-    from asset2sim.tasks.publish.export_usd import export_usd
+    from asset2sim.formats.usd.export import export_usd
 
     return export_usd(folder)
 

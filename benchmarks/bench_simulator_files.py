@@ -182,8 +182,8 @@ def _mjcf_checks(f: Path, state: dict, row: dict, convert: bool) -> bool:
     with ``convert`` or without one). False when the conversion failed (``row["mjcf"]`` says why)."""
     from asset2sim.engines.base import SessionOptions
     from asset2sim.engines.mjcf import urdf_to_mjcf
-    from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
-    from asset2sim.tasks.assemble.write import read_root
+    from asset2sim.engines.loading import springs_from_overlay
+    from asset2sim.engines.loading import read_root
 
     urdf_path = f / "mobility.urdf"
     xml = f / "mjcf" / "mobility.xml"

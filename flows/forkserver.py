@@ -60,7 +60,7 @@ PROJECT_MODULES = (
     "asset2sim.engines.pybullet_engine",
     "asset2sim.engines.physx_engine",
     "asset2sim.priors",
-    "asset2sim.tasks.publish.export_usd",
+    "asset2sim.formats.usd.export",
 )
 
 

@@ -37,7 +37,7 @@ from asset2sim.tasks.evaluation.clips import clip_videos
 from asset2sim.tasks.evaluation.evaluate import Evaluation, evaluate_asset
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.extract import extract_asset_checked
-from asset2sim.tasks.ingest.host_conventions import ReadOptions
+from asset2sim.formats import ReadOptions
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.publish.contract import code_version, flow_config_hash, run_hash, skip_code_hash

@@ -119,7 +119,7 @@ class AssetDescription(BaseModel):
     """sha256 over the URDF and every file it references (hex)."""
     staged_from: Path | None = None
     """The MJCF or USD file this asset was read from (then ``urdf_path`` is the URDF staged from it,
-    :mod:`asset2sim.tasks.ingest.staged`); None for a URDF input."""
+    :mod:`asset2sim.formats.staging`); None for a URDF input."""
     staging_notes: list[str] = []
     """What staging converted or left out, one line each (empty for a URDF input)."""
 

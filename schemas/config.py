@@ -98,7 +98,7 @@ class MjcfConfig(BaseModel):
     angle: Literal["radian", "degree"] | None = None
     """The unit of the file's angles (joint ranges, ``euler``, ``ref``), winning over its ``<compiler angle>``
     and its host package's convention; None: as the package that compiles it reads it
-    (:mod:`asset2sim.tasks.ingest.host_conventions`, ``docs/guide/inputs.md``)."""
+    (:mod:`asset2sim.formats.mjcf.conventions`, ``docs/guide/inputs.md``)."""
 
 
 class RefineConfig(BaseModel):

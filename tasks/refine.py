@@ -18,7 +18,7 @@ from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import RefineReport
 from asset2sim.schemas.request import RequestSpec
 from asset2sim.tasks.ingest.declared import read_declared
-from asset2sim.tasks.ingest.host_conventions import ReadOptions
+from asset2sim.formats import ReadOptions
 from asset2sim.tasks.geometry import analyze, limits
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding

@@ -19,14 +19,14 @@ from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay, RootMount
 from asset2sim.engines.loading import read_initial_state
 from asset2sim.tasks.assemble import write
-from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
+from asset2sim.engines.loading import springs_from_overlay
 from asset2sim.apps.audit import patch, report_md
 from asset2sim.tasks.check.plausibility import Judgement, judge
 from asset2sim.tasks.geometry.closed_state import closed_tuples
 from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.ingest import declared as declared_mod
 from asset2sim.tasks.ingest import extract
-from asset2sim.tasks.ingest.host_conventions import ReadOptions
+from asset2sim.formats import ReadOptions
 from asset2sim.tasks.interpret import mounting
 from asset2sim.tasks.interpret.categories import recognize_category
 from asset2sim.tasks.interpret.part_labels import labels_from_names
@@ -95,8 +95,10 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
         except output_folder.OutputError as exc:
             raise AuditError(str(exc)) from exc
     try:
-        initial, declared_root = _state_file(asset) if dp.format == "urdf" else (dict(dp.initial_state), None)
-        dp = _overlay_springs(asset, dp) if dp.format == "urdf" else dp
+        if dp.format == "urdf":  # a URDF input's state and springs lie in the files beside it
+            (initial, declared_root), dp = _state_file(asset), _overlay_springs(asset, dp)
+        else:
+            initial, declared_root = dict(dp.initial_state), None
         with build_context(asset, "", config, category=match.name) as ctx:
             mount = declared_root or _mounting(dp, ctx.category)
             judged = judge(ctx, dp, mount)

@@ -12,7 +12,7 @@ from asset2sim import file_names
 from asset2sim.schemas.audit import AuditRow
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.apps.audit.audit import AuditError, audit_asset
-from asset2sim.tasks.ingest import staged
+from asset2sim.formats import FORMATS, staging
 
 __all__ = ["AuditTarget", "audit_one", "find_assets"]
 
@@ -27,7 +27,7 @@ class AuditTarget:
 
 def _is_asset(path: Path) -> bool:
     """A path that is one asset by itself: a file, a folder with a URDF, or a folder holding one MJCF or USD file."""
-    return path.is_file() or any(path.glob("*.urdf")) or staged.other_format_file(path) is not None
+    return path.is_file() or any(path.glob("*.urdf")) or staging.other_format_file(path) is not None
 
 
 def _model_files(folder: Path) -> list[Path]:
@@ -35,10 +35,10 @@ def _model_files(folder: Path) -> list[Path]:
     fragments such as ``<mujocoinclude>``) are parts of other files, not assets."""
     out = []
     for f in sorted(folder.iterdir()):
-        if not f.is_file() or f.suffix.lower() not in (*staged.MJCF_SUFFIXES, *staged.USD_SUFFIXES):
+        if not f.is_file() or f.suffix.lower() not in (*staging.MJCF_SUFFIXES, *staging.USD_SUFFIXES):
             continue
-        fmt = staged.input_format(f)
-        if fmt == "usd" or (fmt == "mjcf" and staged.root_element(f) == "mujoco"):
+        fmt = FORMATS.get(staging.input_format(f))
+        if fmt is not None and fmt.is_model(f):
             out.append(f)
     return out
 

@@ -18,9 +18,9 @@ from asset2sim.engines.loading import read_initial_state
 from asset2sim.engines.mjcf import MjcfError
 from asset2sim.tasks.check.parity import evaluate_engines, parity_table
 from asset2sim import output_folder
-from asset2sim.tasks.assemble.export_mjcf import ExportError, check_mjcf, export_mjcf
-from asset2sim.tasks.publish.export_usd import UsdExportError, check_usd, export_usd
-from asset2sim.tasks.assemble.write import read_root
+from asset2sim.formats.mjcf.export import ExportError, check_mjcf, export_mjcf
+from asset2sim.formats.usd.export import UsdExportError, check_usd, export_usd
+from asset2sim.engines.loading import read_root
 from asset2sim.urdf import UrdfError
 from asset2sim.output_folder import URDF_NAME
 

@@ -12,7 +12,7 @@ from pathlib import Path
 from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError, add_allow_outside, outside_paths
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import validate_any
-from asset2sim.tasks.ingest.host_conventions import ReadOptions
+from asset2sim.formats import ReadOptions
 from asset2sim.tasks.ingest.validate_input import CODES, ValidationPolicy, has_errors
 
 NAME = "validate"

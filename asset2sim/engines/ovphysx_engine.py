@@ -28,7 +28,7 @@ import numpy as np
 from asset2sim.engines.base import EngineUnavailable, EngineUnsupported, SessionDefaults, SessionOptions, register_engine
 from asset2sim.engines.loading import collision_pieces, joint_tables, read_urdf
 from asset2sim.engines.step_budget import spend
-from asset2sim.openusd import pxr_modules
+from asset2sim.extras import pxr_modules
 
 #: Object prim of the session's scene layer.
 OBJECT = "/World/object"

@@ -23,6 +23,7 @@ from asset2sim.tasks.assemble import collision_geometry
 from asset2sim.tasks.assemble.copied_meshes import copy_meshes, taken_paths
 from asset2sim.tasks.synthesize.validate_overlay import max_density
 from asset2sim.output_folder import OVERLAY_NAME, STATE_NAME, URDF_NAME, OutputError, check_location
+from asset2sim.engines.loading import ROOT_KEY, read_root  # noqa: F401  read_root: the measuring stages read it from here
 
 
 @dataclass
@@ -210,10 +211,6 @@ def part_labels(asset: AssetDescription) -> dict[str, partnet_mobility.Semantics
     return out
 
 
-#: Key of the root declaration in ``initial_state.json``.
-ROOT_KEY = "root"
-
-
 def root_record(mount: RootMount | None) -> dict:
     """The ``"root"`` entry of ``initial_state.json`` for a mounting (None: free-standing):
     ``{"fixed": bool, "mounting": kind, "pose": ..., "source": ...}``. A fixed root's ``pose`` is the root
@@ -231,31 +228,3 @@ def root_sentence(mount: RootMount | None) -> str:
         return (f"Mounted ({mount.kind}): load with a FIXED root link at the file's origin "
                 f"(PyBullet useFixedBase, SAPIEN fix_root_link, MJCF without a free joint); see {STATE_NAME} \"{ROOT_KEY}\". ")
     return f"Free-standing: root free, resting on the ground; see {STATE_NAME} \"{ROOT_KEY}\". "
-
-
-def read_root(folder: Path | str) -> RootMount:
-    """The root declaration of an output folder's ``initial_state.json`` (:func:`root_record`);
-    free-standing when the file or its ``"root"`` entry is absent.
-
-    Raises:
-        OutputError: ``"root"`` is present but not the shape
-            :func:`root_record` writes (names the file).
-    """
-    p = Path(folder) / STATE_NAME
-    if not p.is_file():
-        return RootMount()
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise OutputError(f"{p}: not readable JSON: {exc}") from exc
-    rec = data.get(ROOT_KEY) if isinstance(data, dict) else None
-    if rec is None:
-        return RootMount()
-    if not isinstance(rec, dict) or not isinstance(rec.get("fixed"), bool):
-        raise OutputError(f"{p}: \"{ROOT_KEY}\" must be an object with a boolean \"fixed\"")
-    fixed = rec["fixed"]
-    kind = rec.get("mounting") or ("wall-mounted" if fixed else "free-standing")
-    try:
-        return RootMount(kind=kind, fixed=fixed, source=str(rec.get("source") or f"declared in {STATE_NAME}"))
-    except ValueError as exc:
-        raise OutputError(f"{p}: \"{ROOT_KEY}\": {exc}") from exc

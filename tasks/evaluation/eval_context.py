@@ -13,7 +13,7 @@ import numpy as np
 
 from asset2sim.engines.base import Spring
 from asset2sim.engines.source import SimObject, UrdfFile
-from asset2sim.tasks.assemble.export_mjcf import joint_spring
+from asset2sim.engines.loading import joint_spring
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.request import RequestSpec
 from asset2sim.tasks.check.asset_files import (
@@ -34,7 +34,7 @@ from asset2sim.tasks.check.task_spec import TaskSpec
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.interpret.part_priors import task_relevant_joints
 from asset2sim.output_folder import OVERLAY_NAME, REPORT_NAME, STATE_NAME, OutputError
-from asset2sim.tasks.assemble.write import read_root
+from asset2sim.engines.loading import read_root
 
 
 @dataclass
@@ -208,7 +208,7 @@ def _root_fixed(folder: Path, notes: list[str]) -> bool:
 
 def _springs(overlay: dict[str, Any] | None, joints: dict[str, JointInfo], initial: dict[str, float]) -> dict[str, Spring]:
     """joint -> the overlay's spring (stiffness > 0; reference rad/m, else the initial position;
-    :func:`~asset2sim.tasks.assemble.export_mjcf.joint_spring`)."""
+    :func:`~asset2sim.formats.mjcf.export.joint_spring`)."""
     springs: dict[str, Spring] = {}
     for jn, jd in ((overlay or {}).get("joints") or {}).items():
         if jn in joints and float(jd.get("stiffness") or 0.0) > 0:

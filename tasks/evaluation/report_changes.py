@@ -20,7 +20,7 @@ from asset2sim.tasks.check.as_asked import quantity_text
 from asset2sim.tasks.check.asset_files import find_urdf
 from asset2sim.tasks.geometry.render import render_views
 from asset2sim.tasks.ingest import declared as declared_mod
-from asset2sim.tasks.ingest import staged
+from asset2sim.formats import staging
 from asset2sim.inert import html_text, one_line
 
 #: Views shown for the input and the output, side by side.
@@ -113,12 +113,12 @@ def read_input(source: Path | str | None) -> InputSide:
         side.error = f"{path.name} is no longer where it was read from"
         return side
     try:
-        other = staged.other_format_file(path)
+        other = staging.other_format_file(path)
         if other is not None:
             side.format = other[1]
             side.physics = declared_mod.read_declared(other[0])
             side._tmp = tempfile.TemporaryDirectory(prefix="asset2sim-input-")
-            side.urdf = staged.stage(side.physics.read, side._tmp.name).urdf_path
+            side.urdf = staging.stage(side.physics.read, side._tmp.name).urdf_path
         else:
             side.urdf = find_urdf(path)
             side.physics = declared_mod.read_declared(path, side.urdf)

@@ -1,7 +1,7 @@
 """The physics an input declares, as a simulator loading it would use it: per link mass, center of mass,
 inertia tensor (or that the simulator infers them from the geometry, and from which density), per joint
 limits, damping, friction and spring. Read from a URDF (:mod:`asset2sim.urdf`), an MJCF file
-(:mod:`.mjcf_reader`, MuJoCo's compiled values) or an OpenUSD stage (:mod:`.usd_reader`), in the frames of
+(:mod:`asset2sim.formats.mjcf.reader`, MuJoCo's compiled values) or an OpenUSD stage (:mod:`asset2sim.formats.usd.reader`), in the frames of
 the asset model those readers make (the staged URDF's), SI units and radians. The audit
 (:mod:`asset2sim.apps.audit`) judges these values."""
 
@@ -14,10 +14,11 @@ from typing import Literal
 import numpy as np
 
 from asset2sim.urdf import UrdfInertial, UrdfModel, read_urdf
-from asset2sim.tasks.ingest import readers, staged, urdf_meshes
-from asset2sim.tasks.ingest.host_conventions import ReadOptions
+from asset2sim.schemas.asset import AssetDescription
+from asset2sim.tasks.ingest import partnet_mobility, urdf_meshes
+from asset2sim.formats import FORMATS, ReadOptions, read_asset_file, staging
 
-__all__ = ["DeclaredJoint", "DeclaredLink", "DeclaredPhysics", "read_declared"]
+__all__ = ["DeclaredJoint", "DeclaredLink", "DeclaredPhysics", "read_declared", "real_units"]
 
 How = Literal["declared", "inferred", "absent"]
 
@@ -69,7 +70,7 @@ class DeclaredPhysics:
     links: dict[str, DeclaredLink] = field(default_factory=dict)
     joints: dict[str, DeclaredJoint] = field(default_factory=dict)
     root_fixed: bool | None = None
-    read: staged.ReadAsset | None = None
+    read: staging.ReadAsset | None = None
     initial_state: dict[str, float] = field(default_factory=dict)
 
 
@@ -84,7 +85,7 @@ def _link(name: str, inertial: UrdfInertial | None, how: How, density: float | N
                         density=density, written_moments=None if written is None else np.asarray(written, float))
 
 
-def declared_from_model(source: Path, fmt: str, model: UrdfModel, read: staged.ReadAsset | None = None) -> DeclaredPhysics:
+def declared_from_model(source: Path, fmt: str, model: UrdfModel, read: staging.ReadAsset | None = None) -> DeclaredPhysics:
     """The declared physics of an asset model (a URDF's, or a reader's ``read.model`` with its springs,
     inferred inertials and densities)."""
     links = {}
@@ -113,27 +114,44 @@ def read_declared(path: Path | str, urdf_path: Path | str | None = None, reading
     """The physics the input at ``path`` declares.
 
     Args:
-        path: an MJCF or USD file (or a folder holding one, :func:`staged.other_format_file`), or a URDF asset.
+        path: an MJCF or USD file (or a folder holding one, :func:`staging.other_format_file`), or a URDF asset.
         urdf_path: the URDF file extraction found or staged; needed when ``path`` is a URDF folder. A URDF this
-            process staged (:func:`staged.read_of`) gives what its reader read, without reading the file again.
+            process staged (:func:`staging.read_of`) gives what its reader read, without reading the file again.
         reading: how an MJCF file is read (the object's body in a scene, the angle unit;
-            :class:`~asset2sim.tasks.ingest.host_conventions.ReadOptions`).
+            :class:`~asset2sim.formats.mjcf.conventions.ReadOptions`).
 
     Raises:
         StagingError: the MJCF or USD file cannot be read into the asset model.
         UrdfError: the URDF cannot be read (lenient mode).
         ValueError: a URDF asset given as a folder without ``urdf_path``.
     """
-    read = staged.read_of(urdf_path) if urdf_path is not None else None
+    read = staging.read_of(urdf_path) if urdf_path is not None else None
     if read is not None:  # staged by extraction in this process: the file is not read again
         return declared_from_model(read.source, read.format, read.model, read)
-    other = staged.other_format_file(path)
+    other = staging.other_format_file(path)
     if other is not None:
         source, fmt = other
-        read = readers.read_asset_file(source, fmt, reading)
+        read = read_asset_file(source, fmt, reading)
         return declared_from_model(Path(source), fmt, read.model, read)
     original = urdf_meshes.urdf_needing_conversion(path)  # its meshes converted for the simulators: its own values
     urdf = original or (Path(urdf_path) if urdf_path is not None else Path(path))
     if urdf.is_dir():
         raise ValueError(f"{path}: a URDF asset folder needs its URDF file")
     return declared_from_model(urdf, "urdf", read_urdf(urdf, mode="lenient"))
+
+
+def real_units(asset: AssetDescription) -> str | None:
+    """Why ``asset``'s lengths are real sizes in metres, or None when they say nothing about its size: an MJCF file
+    or a USD stage (:attr:`asset2sim.formats.Format.real_units`: MuJoCo's lengths are metres, a stage is read through its
+    ``metersPerUnit``), a URDF declaring inertials (SI units, mass and lengths together); never PartNet-Mobility's
+    ``mobility.urdf``, normalized to about unit size (:func:`asset2sim.tasks.ingest.partnet_mobility.size_normalized`)."""
+    source = asset.staged_from or asset.urdf_path
+    if partnet_mobility.size_normalized(source):
+        return None
+    suffix = Path(source).suffix.lower()
+    for fmt in FORMATS.values() if asset.staged_from is not None else ():
+        if suffix in fmt.suffixes:
+            return fmt.real_units.format(name=Path(source).name)
+    if any(ln.given_inertial is not None for ln in asset.links):
+        return f"a URDF declaring inertials ({Path(source).name}: SI units, masses and lengths together)"
+    return None

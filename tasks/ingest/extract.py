@@ -20,9 +20,11 @@ from asset2sim import atomic, file_memo, input_files
 from asset2sim.atomic import sha256_files
 from asset2sim.frames import matrix_rpy
 from asset2sim.schemas.asset import AssetDescription, GeometryRef, GivenInertial, JointDesc, LinkDesc, Origin
-from asset2sim.tasks.ingest import readers, staged, urdf_meshes, validate_input
+from asset2sim.tasks.ingest import urdf_meshes, validate_input
+from asset2sim.formats import read_asset_file
+from asset2sim.formats import staging
 from asset2sim.tasks.ingest.errors import AssetError
-from asset2sim.tasks.ingest.host_conventions import ReadOptions
+from asset2sim.formats import ReadOptions
 from asset2sim.tasks.ingest.partnet_mobility import URDF_NAMES
 from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfJoint, UrdfLink, UrdfModel, parse_urdf_bytes
 
@@ -76,7 +78,7 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
         category: overrides ``meta.json``'s ``model_cat`` when given.
         policy: validation policy; default ``validate_input.DEFAULT_POLICY`` (then the result is
             memoized while the files are unchanged, :data:`_EXTRACT_MEMO`).
-        reading: how an MJCF file is read (:class:`~asset2sim.tasks.ingest.host_conventions.ReadOptions`: the
+        reading: how an MJCF file is read (:class:`~asset2sim.formats.mjcf.conventions.ReadOptions`: the
             object's body in a scene, the angle unit); default: as its package compiles it.
 
     Returns:
@@ -136,7 +138,7 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
     return desc, list(result.findings)
 
 
-def _staged_names(staged_asset: "staged.StagedAsset | None", folder: Path):
+def _staged_names(staged_asset: "staging.StagedAsset | None", folder: Path):
     """The name each file is hashed under: a file of the staging ``folder`` (a new temporary folder every run) by
     its place in it (``<staged>/model.urdf``), every other file by its path; None for an input not staged. The same
     input then has the same hash in every process (a rerun is skipped, two outputs of it are the same bytes)."""
@@ -152,7 +154,7 @@ def _staged_names(staged_asset: "staged.StagedAsset | None", folder: Path):
     return named
 
 
-def _digests_read(staged_asset: "staged.StagedAsset | None") -> dict[str, str]:
+def _digests_read(staged_asset: "staging.StagedAsset | None") -> dict[str, str]:
     """path -> sha256 of the input's files whose bytes the reader kept (an MJCF input's sources): hashed from those
     bytes, never read a second time."""
     src = None if staged_asset is None else staged_asset.read.sources
@@ -161,9 +163,9 @@ def _digests_read(staged_asset: "staged.StagedAsset | None") -> dict[str, str]:
     return {str(src.real[k]): hashlib.sha256(data).hexdigest() for k, data in src.files.items()}
 
 
-def _stage_other_format(asset: Path | str, reading: ReadOptions | None = None) -> "staged.StagedAsset | None":
-    """An MJCF or USD file (:func:`~asset2sim.tasks.ingest.staged.other_format_file` of ``asset``) read (:mod:`~asset2sim.tasks.ingest.mjcf_reader`, :mod:`~asset2sim.tasks.ingest.usd_reader`)
-    and staged as a URDF folder (:func:`~asset2sim.tasks.ingest.staged.stage`), or a URDF naming GLB / glTF / PLY
+def _stage_other_format(asset: Path | str, reading: ReadOptions | None = None) -> "staging.StagedAsset | None":
+    """An MJCF or USD file (:func:`~asset2sim.formats.staging.other_format_file` of ``asset``) read (:mod:`~asset2sim.formats.mjcf.reader`, :mod:`~asset2sim.formats.usd.reader`)
+    and staged as a URDF folder (:func:`~asset2sim.formats.staging.stage`), or a URDF naming GLB / glTF / PLY
     meshes staged with OBJ copies (:mod:`~asset2sim.tasks.ingest.urdf_meshes`, its ``semantics.txt`` and
     ``meta.json`` beside it); None for any other URDF input.
 
@@ -171,14 +173,14 @@ def _stage_other_format(asset: Path | str, reading: ReadOptions | None = None) -
         AssetError: the file cannot be read into the asset model (the reader's message, naming the body, prim
             or joint), or its reader is not installed.
     """
-    found = staged.other_format_file(asset)
+    found = staging.other_format_file(asset)
     if found is None:
         urdf = urdf_meshes.urdf_needing_conversion(asset)
         if urdf is None:
             return None
         try:
-            out = staged.stage(urdf_meshes.read_urdf_converting(urdf), staged.staging_folder(urdf))
-        except (staged.StagingError, OSError) as exc:
+            out = staging.stage(urdf_meshes.read_urdf_converting(urdf), staging.staging_folder(urdf))
+        except (staging.StagingError, OSError) as exc:
             raise AssetError(f"{urdf}: cannot convert its meshes: {exc}") from exc
         for side in ("semantics.txt", "meta.json"):  # the dataset's side files go with the URDF
             if (urdf.parent / side).is_file():
@@ -186,9 +188,9 @@ def _stage_other_format(asset: Path | str, reading: ReadOptions | None = None) -
         return out
     source, fmt = found
     try:
-        read = readers.read_asset_file(source, fmt, reading)
-        return staged.stage(read, staged.staging_folder(source))
-    except staged.StagingError as exc:
+        read = read_asset_file(source, fmt, reading)
+        return staging.stage(read, staging.staging_folder(source))
+    except staging.StagingError as exc:
         if exc.code is None:
             raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc}") from exc
         finding = validate_input.Finding(code=exc.code, severity="error", message=str(exc), file=str(source), action="refuse")

@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from asset2sim import mesh_io
-from asset2sim.tasks.ingest.staged import ReadAsset, StagingError, mesh_name
+from asset2sim.formats.staging import ReadAsset, StagingError, mesh_name
 from asset2sim.urdf import UrdfError, read_urdf
 
 __all__ = ["CONVERTED_SUFFIXES", "read_urdf_converting", "urdf_needing_conversion"]

@@ -17,7 +17,11 @@ import os
 import stat
 from pathlib import Path
 
-from asset2sim.tasks.ingest import partnet_mobility, readers, staged
+from asset2sim.tasks.ingest import partnet_mobility
+
+from asset2sim.formats import read_asset_file
+
+from asset2sim.formats import staging
 from asset2sim.tasks.ingest.findings import (CODES, DEFAULT_POLICY, MAX_LINKS, MAX_TOTAL_FACES, SEMANTIC_KINDS, Finding,
                                              ValidationPolicy, ValidationResult, has_errors)
 from asset2sim.tasks.ingest.mesh_checks import MeshChecks
@@ -179,7 +183,7 @@ def run_validation(asset: Path | str, policy: ValidationPolicy | None = None) ->
     """
     v = _Validator(Path(asset), policy or DEFAULT_POLICY)
     try:
-        found = staged.other_format_file(asset)
+        found = staging.other_format_file(asset)
         if found is not None:
             return _other_format(v, *found)
         return v.run()
@@ -190,12 +194,12 @@ def run_validation(asset: Path | str, policy: ValidationPolicy | None = None) ->
 
 def _other_format(v: _Validator, source: Path, fmt: str) -> ValidationResult:
     """An MJCF or USD file validated: the files it names under the reader policy (``MJCF_PATH_ESCAPES``,
-    ``USD_LAYER_OUTSIDE_ASSET``, ``INPUT_*``: :mod:`~asset2sim.tasks.ingest.mjcf_files`,
-    :func:`~asset2sim.tasks.ingest.usd_stage.open_layers`), then the file read and staged as a URDF folder,
+    ``USD_LAYER_OUTSIDE_ASSET``, ``INPUT_*``: :mod:`~asset2sim.formats.mjcf.files`,
+    :func:`~asset2sim.formats.usd.stage.open_layers`), then the file read and staged as a URDF folder,
     whose validation gives the rest of the findings (``FORMAT_UNREADABLE`` when the reader refuses it)."""
     try:
-        staged_asset = staged.stage(readers.read_asset_file(source, fmt), staged.staging_folder(source))
-    except staged.StagingError as exc:
+        staged_asset = staging.stage(read_asset_file(source, fmt), staging.staging_folder(source))
+    except staging.StagingError as exc:
         v.add(exc.code or "FORMAT_UNREADABLE", str(exc), file=str(source))
         return v.result
     except ImportError as exc:

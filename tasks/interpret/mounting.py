@@ -17,9 +17,8 @@ from asset2sim.engines.base import session_root_options
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import MountingKind, RootMount
 from asset2sim.schemas.request import RequestSpec
-from asset2sim.tasks.ingest import staged
+from asset2sim.formats import FORMATS, ReadOptions, staging
 from asset2sim.tasks.ingest.declared import read_declared
-from asset2sim.tasks.ingest.host_conventions import ReadOptions
 
 __all__ = [
     "FREE",
@@ -164,7 +163,7 @@ def root_mounting(asset: AssetDescription, request: RequestSpec, category: str, 
     ``reading``), else the category prior."""
     source = asset.staged_from
     if (request.mount is None and request_mounting(request.text, category) is None
-            and source is not None and staged.input_format(source) == "mjcf"):
+            and source is not None and getattr(FORMATS.get(staging.input_format(source)), "declares_root", False)):
         declared = declared_mounting(category, read_declared(source, asset.urdf_path, reading).root_fixed, "the MJCF file")
         if declared is not None:
             return declared

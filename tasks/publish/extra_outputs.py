@@ -19,14 +19,14 @@ from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.report import RefineReport
 from asset2sim.stage_log import StageLog
-from asset2sim.tasks.assemble import export_mjcf
 from asset2sim.tasks.tune.attempt import Attempt
 from asset2sim.tasks.check.verdict import combine_verdict
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON
-from asset2sim.tasks.ingest import mjcf_files, staged
-from asset2sim.tasks.ingest.host_conventions import ReadOptions
-from asset2sim.tasks.publish import export_usd, host_mjcf, host_usd
+from asset2sim.formats import FORMATS, ReadOptions, staging
+from asset2sim.formats.mjcf.files import staged_sources
+from asset2sim.formats.mjcf.physics import write_host_mjcf
+from asset2sim.formats.usd.physics import write_host_usd
 from asset2sim.tasks.publish import media as media_phase
 from asset2sim.tasks.publish.contract import write_report_json
 
@@ -54,29 +54,25 @@ def raise_if_unwritable(exc: BaseException, out_dir: Path) -> None:
 
 def host_files(out_dir: Path, asset: AssetDescription, config: RefineConfig, report: RefineReport) -> dict[str, str]:
     """An MJCF or USD input's refined object written back into its own files (``mjcf/host/``,
-    :func:`asset2sim.tasks.publish.host_mjcf.write_host_mjcf`; ``usd/host/``,
-    :func:`asset2sim.tasks.publish.host_usd.write_host_usd`), noted in the report; {} for other inputs. A file
+    :func:`asset2sim.formats.mjcf.physics.write_host_mjcf`; ``usd/host/``,
+    :func:`asset2sim.formats.usd.physics.write_host_usd`), noted in the report; {} for other inputs. A file
     that cannot be written (a rescaled object, MuJoCo or usd-core missing) is a note, never the loss of the refined
     asset."""
     source = asset.staged_from
-    fmt = staged.input_format(source) if source is not None else None
-    if fmt == "mjcf":
-        return _host_mjcf(out_dir, source, asset.urdf_path, config, report)
-    if fmt == "usd":
-        return _host_usd(out_dir, source, report)
-    return {}
+    write = _HOST_FILES.get(staging.input_format(source)) if source is not None else None
+    return write(out_dir, source, asset.urdf_path, config, report) if write is not None else {}
 
 
 def _host_mjcf(out_dir: Path, source: Path, staged_urdf: Path, config: RefineConfig, report: RefineReport) -> dict[str, str]:
-    read = mjcf_files.staged_sources(staged_urdf)  # the bytes the reader policy read when the refine began
+    read = staged_sources(staged_urdf)  # the bytes the reader policy read when the refine began
     if read is None:
         report.notes.append(f"host MJCF not written: the files of {source.name} as read when the refine began are no "
                             "longer at hand (its staged folder is gone); the input is not read a second time")
         return {}
     try:
         with quiet_stdout():
-            done = host_mjcf.write_host_mjcf(out_dir, source, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle),
-                                             sources=read[0], angle=read[1].get("angle"))
+            done = write_host_mjcf(out_dir, source, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle),
+                                        sources=read[0], angle=read[1].get("angle"))
     except Exception as exc:  # the host file must not lose the refined asset
         raise_if_unwritable(exc, out_dir)
         report.notes.append(f"host MJCF not written: {one_line(exc)}")
@@ -91,9 +87,9 @@ def _host_mjcf(out_dir: Path, source: Path, staged_urdf: Path, config: RefineCon
     return {"host_mjcf": str(done.path)}
 
 
-def _host_usd(out_dir: Path, source: Path, report: RefineReport) -> dict[str, str]:
+def _host_usd(out_dir: Path, source: Path, staged_urdf: Path, config: RefineConfig, report: RefineReport) -> dict[str, str]:
     try:
-        done = host_usd.write_host_usd(out_dir, source)
+        done = write_host_usd(out_dir, source)
     except Exception as exc:  # the host stage must not lose the refined asset
         raise_if_unwritable(exc, out_dir)
         report.notes.append(f"host USD not written: {one_line(exc)}")
@@ -106,6 +102,10 @@ def _host_usd(out_dir: Path, source: Path, report: RefineReport) -> dict[str, st
                         f"({done.changes} attributes on {list(done.prims)}), prim paths as they were; the changes alone as a "
                         f"layer: {rel(done.layer)}; prim path -> attribute old -> new: {rel(done.diff)}")
     return {"host_usd": str(done.path), "host_usd_layer": str(done.layer)}
+
+
+#: Input format -> the writer of its input's own files with the refined physics, noted in the report.
+_HOST_FILES = {"mjcf": _host_mjcf, "usd": _host_usd}
 
 
 def write_extras(out_dir: Path, report: RefineReport, att: Attempt, log: StageLog, reference: Path | str | None,
@@ -122,10 +122,10 @@ def write_extras(out_dir: Path, report: RefineReport, att: Attempt, log: StageLo
         recording = replace(recording, urdf=(out_dir / URDF_NAME).resolve())
     out: dict[str, str] = {}
     with quiet_stdout():  # engines and renderers print from C; the library must not
-        for key, make, what in (("mjcf", lambda: export_mjcf.export_mjcf(out_dir), "MJCF export"),
-                                ("usd", lambda: export_usd.export_usd(out_dir).path, "USD export")):
+        for key, fmt in FORMATS.items():
+            what = f"{fmt.label} export"
             try:
-                out[key] = str(make())
+                out[key] = str(fmt.export(out_dir))
             except ImportError as exc:  # MuJoCo / usd-core (pxr) not installed: the extra that would do it named
                 report.notes.append(f"{what} skipped: {install_hint(exc)}")
             except Exception as exc:  # export must not lose the refined asset

@@ -18,7 +18,7 @@ from asset2sim.schemas.request import RequestSpec
 from asset2sim.tasks.geometry import analyze
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_positions, link_hull_points, links_aabb, object_extents, object_hull_volume, subtree_links
 from asset2sim.tasks.ingest import extract
-from asset2sim.tasks.ingest.host_conventions import ReadOptions
+from asset2sim.formats import ReadOptions
 from asset2sim.tasks.interpret.mounting import root_mounting
 from asset2sim.tasks.interpret.part_labels import labels_from_names
 from asset2sim.tasks.interpret.reading import interpret

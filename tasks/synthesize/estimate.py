@@ -12,7 +12,8 @@ import numpy as np
 from asset2sim.schemas.overlay import Holding, JointDynamics, LinkPhysics
 from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, MotionPhrase
 from asset2sim.tasks.geometry.closed_state import ClosedState
-from asset2sim.tasks.ingest import host_conventions, partnet_mobility
+from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest.declared import real_units
 from asset2sim.tasks.interpret import priors
 from asset2sim.tasks.interpret.operating_forces import operating_range
 from asset2sim.tasks.synthesize import physics, request_apply, set_down
@@ -47,7 +48,7 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
     sized = request_apply.scale_from_sizes(ctx)
     if sized is not None:
         return sized
-    real = host_conventions.real_units(ctx.asset)
+    real = real_units(ctx.asset)
     kept, why_not = _real_size(ctx, real)
     if kept is not None:
         return 1.0, kept
@@ -70,7 +71,7 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
 
 
 def _real_size(ctx: EstimationContext, real: str | None) -> tuple[str | None, str | None]:
-    """(note, None) when an input in real units (``real``: why, :func:`~asset2sim.tasks.ingest.host_conventions.real_units`)
+    """(note, None) when an input in real units (``real``: why, :func:`~asset2sim.tasks.ingest.declared.real_units`)
     keeps its size: no size asked (no size words, numbers, ``--size`` or ``--scale``) and its largest closed dimension
     plausible for its category by the audit's rule (:func:`~asset2sim.tasks.interpret.size_priors.plausible_largest_dimension`);
     else (None, why it is rescaled, for the size note; None for a normalized input)."""

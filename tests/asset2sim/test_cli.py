@@ -16,7 +16,7 @@ import pytest
 from asset2sim import atomic, demo_assets
 from asset2sim.cli import command_names, main
 from asset2sim.tasks import refine as refine_mod
-from asset2sim.tasks.assemble import export_mjcf
+from asset2sim.formats.mjcf import export as export_mjcf
 from asset2sim.tasks.publish import refine_report
 from asset2sim.tasks.interpret.request import MAX_REQUEST_CHARS
 from tests.conftest import SHARED, needs_shared

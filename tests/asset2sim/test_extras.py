@@ -46,7 +46,7 @@ def test_a_missing_module_is_one_line_naming_its_extra(monkeypatch):
 
 
 def test_auditing_an_mjcf_without_mujoco_names_the_extra(tmp_path, monkeypatch, capsys):
-    from tests.tasks.ingest.test_mjcf_reader import _cabinet_xml
+    from tests.formats.test_mjcf_reader import _cabinet_xml
 
     _cabinet_xml(tmp_path / "in")
     monkeypatch.chdir(tmp_path)  # a short path: the table's cell holds the whole reason

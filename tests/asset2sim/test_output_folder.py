@@ -25,7 +25,8 @@ from asset2sim.engines.registry import open_session
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.ingest.validate_input import validate_asset
 from asset2sim import output_folder as of
-from asset2sim.tasks.assemble import copied_meshes, export_mjcf, write
+from asset2sim.tasks.assemble import copied_meshes, write
+from asset2sim.formats.mjcf import export as export_mjcf
 from asset2sim.tasks.publish import refine_report
 from asset2sim.tasks.refine import MARKER_NAME, RefineError, is_complete, refine_asset
 from tests import corpus_builder as cb

@@ -11,7 +11,7 @@ from asset2sim.engines.registry import available_engines, known_engines, open_se
 from asset2sim.engines.source import UrdfFile
 from asset2sim.extras import install_hint
 from asset2sim.tasks.check.parity import engine_breakaway, evaluate_engines, parity_table
-from asset2sim.tasks.publish.export_usd import export_usd
+from asset2sim.formats.usd.export import export_usd
 from tests.contract_asset import write_contract_asset
 
 

@@ -57,7 +57,7 @@ def test_a_refine_prints_only_its_own_lines(tmp_path):
     whose mesh data was asked) refined from the command line: stdout holds progress and summary lines only, stderr
     nothing (no build line, no libvulkan warning, no library log)."""
     pytest.importorskip("mujoco")
-    from tests.tasks.ingest.test_mjcf_reader import _cabinet_xml
+    from tests.formats.test_mjcf_reader import _cabinet_xml
 
     xml = _cabinet_xml(tmp_path / "in")
     env = _env()

@@ -158,8 +158,8 @@ def test_flow_refine_stage_never_writes_through_a_symlinked_asset_folder(area):
 def test_host_write_backs_never_write_through_a_symlinked_folder(area):
     pytest.importorskip("mujoco")
     pytest.importorskip("pxr")
-    from asset2sim.tasks.publish.host_mjcf import write_host_mjcf
-    from asset2sim.tasks.publish.host_usd import write_host_usd
+    from asset2sim.formats.mjcf.physics import write_host_mjcf
+    from asset2sim.formats.usd.physics import write_host_usd
 
     box, real, link, outside = area
     exported = refine_asset(box, PROMPT, real.parent / "exported", extras=True, media=False)

@@ -153,8 +153,8 @@ def test_a_degree_range_door_keeps_its_size_and_its_quarter_turn(tmp_path):
 
 
 def test_a_urdf_with_inertials_keeps_its_size_and_a_partnet_mobility_model_is_sized(tmp_path):
-    from asset2sim.tasks.ingest.mjcf_reader import read_mjcf_asset
-    from asset2sim.tasks.ingest.staged import stage
+    from asset2sim.formats.mjcf.reader import read_mjcf_asset
+    from asset2sim.formats.staging import stage
 
     xml = hl.robosuite_door(tmp_path / "robosuite" / "models" / "assets" / "objects" / "door.xml")
     urdf = stage(read_mjcf_asset(xml), tmp_path / "door_urdf").urdf_path  # model.urdf with the door's inertials

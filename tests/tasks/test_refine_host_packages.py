@@ -15,7 +15,7 @@ import pytest
 mujoco = pytest.importorskip("mujoco")
 
 from asset2sim.schemas.config import RefineConfig  # noqa: E402
-from asset2sim.tasks.ingest.host_conventions import package_tree  # noqa: E402
+from asset2sim.formats.mjcf.conventions import package_tree  # noqa: E402
 from asset2sim.tasks.refine import refine_asset  # noqa: E402
 from asset2sim.urdf import read_urdf  # noqa: E402
 

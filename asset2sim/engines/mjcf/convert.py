@@ -161,7 +161,7 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
         visuals: also write the visual meshes as non-colliding geoms (group 2;
             collision geoms go to group 3).
         compile_visuals: with ``visuals``, compile the text with them (False: the caller loads the file it
-            writes, as :func:`asset2sim.tasks.assemble.export_mjcf.export_mjcf` does).
+            writes, as :func:`asset2sim.formats.mjcf.export.export_mjcf` does).
 
     Raises:
         UrdfError: the URDF cannot be read.

@@ -19,8 +19,8 @@ from asset2sim.schemas.audit import AuditReport
 from asset2sim.schemas.config import SimConventions
 from asset2sim.apps.audit.audit import AUDIT_JSON, AUDIT_MD, AuditError, audit_asset
 from asset2sim.apps.audit.batch import find_assets
-from asset2sim.tasks.ingest import staged
-from asset2sim.tasks.ingest.mjcf_reader import read_mjcf_asset
+from asset2sim.formats import staging
+from asset2sim.formats.mjcf.reader import read_mjcf_asset
 from asset2sim.urdf import read_urdf, write_urdf
 from tests.tasks.ingest import host_layouts as hl
 from tests.planted_assets import cabinet, storage_box, trash_can, write_mjcf, write_planted_folder
@@ -148,16 +148,16 @@ def test_the_catalog_holds_one_row_per_asset_and_per_value(planted):
 def _urdf_asset(folder: Path, part, name: str) -> Path:
     """A URDF asset (model.urdf + meshes) staged from the MJCF object ``part`` builds."""
     src = write_mjcf(folder.parent / f"{name}-mjcf", name, part)
-    staged.stage(read_mjcf_asset(src), folder)
+    staging.stage(read_mjcf_asset(src), folder)
     return folder
 
 
 def test_a_urdf_with_a_wrong_mass_gets_a_urdf_patch(tmp_path):
     asset = _urdf_asset(tmp_path / "cab", cabinet(), "cabinet")
-    model = read_urdf(asset / staged.STAGED_URDF)
+    model = read_urdf(asset / staging.STAGED_URDF)
     model.links["door"].inertial.mass *= 100.0
     model.links["door"].inertial.inertia = model.links["door"].inertial.inertia * 100.0
-    (asset / staged.STAGED_URDF).write_bytes(write_urdf(model))
+    (asset / staging.STAGED_URDF).write_bytes(write_urdf(model))
     res = audit_asset(asset, tmp_path / "out")
     flagged = {(v.where, v.quantity) for v in res.report.implausible}
     assert ("link door", "mass") in flagged and all(w in ("link door", "object") for w, _ in flagged)
@@ -180,13 +180,13 @@ def test_a_dataset_urdf_without_physics_is_reported_missing_and_patched(shared_d
 
 def test_a_usd_with_a_planted_mass_is_flagged_and_patched_in_usd(tmp_path):
     pytest.importorskip("pxr")
-    from asset2sim.tasks.publish.export_usd import export_usd
+    from asset2sim.formats.usd.export import export_usd
 
     asset = _urdf_asset(tmp_path / "box", storage_box(), "storage_box")
-    model = read_urdf(asset / staged.STAGED_URDF)
+    model = read_urdf(asset / staging.STAGED_URDF)
     model.links["lid"].inertial.mass *= 0.01  # the mass edited, the inertia tensor left as it was
     (asset / "mobility.urdf").write_bytes(write_urdf(model))
-    (asset / staged.STAGED_URDF).unlink()
+    (asset / staging.STAGED_URDF).unlink()
     usd = export_usd(asset, check=False).path
     res = audit_asset(usd, tmp_path / "out")
     flagged = {(v.where, v.quantity) for v in res.report.implausible}

@@ -61,7 +61,7 @@ def test_every_engine_holds_what_the_files_say(tmp_path):
 
 @pytest.mark.skipif("mujoco" not in available_engines(), reason="mujoco not installed")
 def test_the_exported_mjcf_holds_what_the_files_say(tmp_path):
-    from asset2sim.tasks.assemble.export_mjcf import export_mjcf
+    from asset2sim.formats.mjcf.export import export_mjcf
 
     write_contract_asset(tmp_path, lid_angle=0.4, lid_stiffness=0.3, lid_spring_reference=0.2)
     export_mjcf(tmp_path)
@@ -123,7 +123,7 @@ def test_newton_holds_what_the_files_say(tmp_path):
     minute on the CPU)."""
     pytest.importorskip("newton")
     pytest.importorskip("pxr")
-    from asset2sim.tasks.publish.export_usd import export_usd
+    from asset2sim.formats.usd.export import export_usd
 
     write_contract_asset(tmp_path, lid_angle=0.4, post_height=0.02, lid_stiffness=0.3, lid_spring_reference=0.2)
     export_usd(tmp_path)

@@ -86,7 +86,7 @@ def test_post_check_follows_the_overlay_root(mounted):
 
 def test_mjcf_check_refuses_a_free_joint_on_a_mounted_asset(free_standing, tmp_path):
     pytest.importorskip("mujoco")
-    from asset2sim.tasks.assemble.export_mjcf import ExportError, check_mjcf, export_mjcf
+    from asset2sim.formats.mjcf.export import ExportError, check_mjcf, export_mjcf
 
     out = free_standing.copy_to(tmp_path / "free")  # the export writes into the folder
     xml = export_mjcf(out)

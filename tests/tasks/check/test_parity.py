@@ -141,7 +141,7 @@ rows = {{r['engine']: r for r in parity_table(evaluate_engines(Path({str(tmp_pat
 assert rows['pybullet']['status'] == 'ok' and rows['pybullet']['rest_stability'] is True, rows['pybullet']
 for e, module in (('physx', 'sapien'), ('mujoco', 'mujoco')):
     assert rows[e]['status'] == 'skipped' and module in rows[e]['reason'].lower() and "pip install 'asset2sim[" in rows[e]['reason'], rows[e]
-from asset2sim.tasks.assemble.export_mjcf import export_mjcf
+from asset2sim.formats.mjcf.export import export_mjcf
 try:
     export_mjcf(Path({str(tmp_path)!r}))
 except ImportError:

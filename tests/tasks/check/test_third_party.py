@@ -90,7 +90,7 @@ def test_urdf_validator_passes_the_contract(contract):
 @needs_doctor
 def test_mjcf_doctor_finds_no_error_in_the_exported_mjcf(contract):
     pytest.importorskip("mujoco")
-    from asset2sim.tasks.assemble.export_mjcf import export_mjcf
+    from asset2sim.formats.mjcf.export import export_mjcf
 
     export_mjcf(contract)
     r = check_mjcf_doctor(contract / "mjcf" / "mobility.xml")

@@ -97,8 +97,8 @@ def test_a_usd_stage_instancing_one_mesh_sixty_times_is_refused(tmp_path):
     pytest.importorskip("pxr")
     from pxr import Sdf, Usd, UsdGeom, UsdPhysics, Vt
 
-    from asset2sim.tasks.ingest.staged import StagingError
-    from asset2sim.tasks.ingest.usd_reader import read_usd_asset
+    from asset2sim.formats.staging import StagingError
+    from asset2sim.formats.usd.reader import read_usd_asset
 
     path = tmp_path / "many.usda"
     stage = Usd.Stage.CreateNew(str(path))

@@ -17,7 +17,7 @@ import pytest
 
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import extract_asset_checked
-from asset2sim.tasks.ingest.mjcf_reader import read_mjcf_asset
+from asset2sim.formats.mjcf.reader import read_mjcf_asset
 from asset2sim.tasks.ingest.validate_input import CODES, validate_asset
 from tests.helpers import tree_hashes, no_hang
 

@@ -17,7 +17,7 @@ from tests.helpers import no_hang
 
 mujoco = pytest.importorskip("mujoco")
 
-from asset2sim.tasks.ingest.mjcf_files import MjcfSources, gather_mjcf, staged_sources  # noqa: E402
+from asset2sim.formats.mjcf.files import MjcfSources, gather_mjcf, staged_sources  # noqa: E402
 from asset2sim.tasks.refine import refine_asset  # noqa: E402
 
 MAIN = textwrap.dedent("""\
@@ -91,10 +91,11 @@ def test_the_host_write_back_compiles_from_the_bytes_read_before(chest, tmp_path
 def test_staged_sources_come_back_from_the_snapshot_alone(chest):
     """A stage in another process (the flow's refine after its prepare) finds the bytes in the staged folder's
     snapshot, each checked against its SHA-256; a changed copy is not used."""
-    from asset2sim.tasks.ingest import extract, staged
+    from asset2sim.tasks.ingest import extract
+    from asset2sim.formats import staging
 
     asset, _ = extract.extract_asset_checked(chest)
-    snap = asset.urdf_path.parent / staged.SOURCE_DIR
+    snap = asset.urdf_path.parent / staging.SOURCE_DIR
     sources, extra = MjcfSources.from_snapshot(snap)
     assert sources.files == gather_mjcf(chest).files and extra["angle"] == "radian"
     assert staged_sources(asset.urdf_path)[0].files == sources.files
@@ -118,8 +119,8 @@ def test_the_input_hash_comes_from_the_bytes_read_and_equals_a_fresh_hash(chest)
 
 def staged_read_files(asset) -> list[Path]:
     """The files the refine hashed: the input's (as read) and the staged URDF and meshes made of them."""
-    from asset2sim.tasks.ingest import staged
+    from asset2sim.formats import staging
 
-    read = staged.read_of(asset.urdf_path)
-    staged_files = [asset.urdf_path, *sorted((asset.urdf_path.parent / staged.MESH_DIR).glob("*.obj"))]
+    read = staging.read_of(asset.urdf_path)
+    staged_files = [asset.urdf_path, *sorted((asset.urdf_path.parent / staging.MESH_DIR).glob("*.obj"))]
     return [*read.files, *staged_files]

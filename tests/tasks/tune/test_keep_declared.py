@@ -7,7 +7,7 @@ import pytest
 
 from asset2sim import cli
 from asset2sim.schemas.config import RefineConfig
-from asset2sim.tasks.ingest.mjcf_reader import read_mjcf_asset
+from asset2sim.formats.mjcf.reader import read_mjcf_asset
 from asset2sim.tasks.refine import refine_asset
 from tests.planted_assets import cabinet, write_generated_urdf, write_mjcf
 

@@ -1,7 +1,9 @@
-"""The refined object written back into its own OpenUSD stage, to drop into its host in place of the original.
+"""The one OpenUSD physics writer: the refined object written back into its own stage, to drop into its host in
+place of the original (:func:`write_host_usd`), and the audit's patch of a USD input (:func:`write_patched_usd`),
+both through :class:`UsdEdit`, :func:`set_body_mass` and :func:`set_joint_dynamics`.
 
-A USD input is opened again (:func:`asset2sim.tasks.ingest.usd_stage.open_stage`, the trust rules of the reader)
-and read again (:func:`asset2sim.tasks.ingest.usd_reader.read_usd_asset`: each link's rigid-body prim and frame,
+A USD input is opened again (:func:`asset2sim.formats.usd.stage.open_stage`, the trust rules of the reader)
+and read again (:func:`asset2sim.formats.usd.reader.read_usd_asset`: each link's rigid-body prim and frame,
 each joint's prim). The refined physics of ``mobility.urdf``, ``overlay.json`` and ``initial_state.json`` is
 authored on the stage's session layer, in the stage's own units (``metersPerUnit``, ``kilogramsPerUnit``, degrees
 for angles and angular gains, as UsdPhysics writes them; the inverse of the reader's conversions):
@@ -42,12 +44,13 @@ import numpy as np
 from asset2sim import atomic, file_names, output_folder
 from asset2sim.engines.loading import read_initial_state
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, rigid_inverse
-from asset2sim.openusd import pxr_modules
+from asset2sim.extras import pxr_modules
 from asset2sim.output_folder import OVERLAY_NAME, URDF_NAME, USD_DIR
-from asset2sim.schemas.overlay import Overlay
-from asset2sim.tasks.ingest import usd_reader
-from asset2sim.tasks.ingest.usd_reader import DEG, FRICTION_ATTRS
-from asset2sim.tasks.ingest.usd_stage import StageReading, open_stage
+from asset2sim.schemas.overlay import JointDynamics, LinkPhysics, Overlay
+from asset2sim.formats.staging import ReadAsset
+from asset2sim.formats.usd import reader
+from asset2sim.formats.usd.reader import DEG, FRICTION_ATTRS
+from asset2sim.formats.usd.stage import StageReading, open_stage
 from asset2sim.urdf import read_urdf
 
 __all__ = ["HOST_DIR", "HostUsdError", "HostUsdExport", "UsdEdit", "applied_schemas", "set_body_mass", "set_joint_dynamics", "write_host_usd"]
@@ -197,7 +200,7 @@ def set_body_mass(edit: UsdEdit, ctx: StageReading, body, link_frame: np.ndarray
 def set_joint_dynamics(edit: UsdEdit, ctx: StageReading, prim, damping: float, friction: float,
                        stiffness: float | None = None, reference: float | None = None) -> None:
     """Author a revolute or prismatic joint's ``damping`` (N*m*s/rad or N*s/m) on its drive and its Coulomb
-    ``friction`` (N*m or N) in :data:`~asset2sim.tasks.ingest.usd_reader.FRICTION_ATTRS` (the first always, the
+    ``friction`` (N*m or N) in :data:`~asset2sim.formats.usd.reader.FRICTION_ATTRS` (the first always, the
     others where authored), in stage units (angular gains per degree); with ``stiffness`` (N*m/rad or N/m) the
     drive's stiffness and its ``targetPosition`` ``reference`` (rad or m). A drive of stiffness 0 is added where
     the joint had none."""
@@ -251,7 +254,7 @@ def _write_host_usd(out_dir: Path, source: Path) -> HostUsdExport:
                            "so none is written (refine without --size / --scale / size words to keep the size)")
     model = read_urdf(out_dir / URDF_NAME)
     state = read_initial_state(out_dir)
-    read = usd_reader.read_usd_asset(source)
+    read = reader.read_usd_asset(source)
     ctx = open_stage(source)
     stage = ctx.stage
     before = _prim_paths(stage, Usd)
@@ -330,3 +333,34 @@ def _check(source: Path, path: Path, before: list[str], edit: UsdEdit, Usd) -> N
         got = written.GetPrimAtPath(prim_path).GetAttribute(name).Get()
         if got is None or not np.allclose(_numbers(got), _numbers(new), rtol=VALUE_RTOL, atol=0.0):
             raise HostUsdError(f"{path}: {prim_path}.{name} reads {got}, not the refined {new}")
+
+
+def write_patched_usd(source: Path, read: ReadAsset | None, children: dict[str, str], links: dict[str, LinkPhysics],
+                      joints: dict[str, JointDynamics], folder: Path, staged_urdf: Path | None = None) -> Path:
+    """The audit's patch of the USD stage ``source``: ``folder/<stem>.usda``, the stage flattened into one layer
+    (references and sublayers resolved; the input's layers are only read) with ``links``' mass, center of mass and
+    inertia tensor and ``joints``' damping and friction (SI, the asset model's link frames) in stage units
+    (:func:`set_body_mass`, :func:`set_joint_dynamics`) on the prims ``read`` (what the reader read) recorded for
+    them. ``children`` and ``staged_urdf`` are not used (the table's writers share one signature).
+
+    Raises:
+        ImportError: usd-core is not installed.
+        StagingError: the stage cannot be opened.
+        KeyError: a link or joint the reader did not record a prim for.
+    """
+    _, _, _, Usd, UsdGeom, _ = pxr_modules()
+    assert read is not None
+    ctx = open_stage(Path(source))
+    layer = ctx.stage.Flatten()
+    stage = Usd.Stage.Open(layer)
+    cache = UsdGeom.XformCache(Usd.TimeCode.Default())
+    edit = UsdEdit()
+    for name, lp in links.items():
+        body = stage.GetPrimAtPath(read.prims[name])
+        world = ctx.L @ np.array(cache.GetLocalToWorldTransform(body), float).T
+        set_body_mass(edit, ctx, body, read.frames[name], world, lp.mass, np.asarray(lp.com, float), lp.inertia.matrix())
+    for name, jd in joints.items():
+        set_joint_dynamics(edit, ctx, stage.GetPrimAtPath(read.prims[name]), jd.damping, jd.friction)
+    out = folder / f"{file_names.file_stem(Path(source).stem)}.usda"
+    atomic.write_text(out, layer.ExportToString())
+    return out

@@ -15,13 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim import atomic
-from asset2sim.openusd import authored, pxr_modules as _pxr
-from asset2sim.engines.loading import CollisionPiece, collision_pieces, principal_axes, read_initial_state, read_urdf
+from asset2sim.extras import pxr_modules as _pxr
+from asset2sim.engines.loading import (CollisionPiece, collision_pieces, principal_axes, read_initial_state, read_root, read_urdf,
+                                       springs_from_overlay)
+from asset2sim.formats.usd.stage import authored
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
 from asset2sim.mesh_io import MeshReadError, convex_hull_mesh, read_mesh
 from asset2sim.schemas.overlay import Overlay
-from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
-from asset2sim.tasks.assemble.write import read_root
 from asset2sim.urdf import UrdfJoint, UrdfModel
 from asset2sim.output_folder import OVERLAY_NAME, URDF_NAME, USD_DIR
 

@@ -20,11 +20,11 @@ from tests.conftest import SHARED
 
 mujoco = pytest.importorskip("mujoco")
 
-from asset2sim.tasks.assemble.export_mjcf import export_mjcf  # noqa: E402
+from asset2sim.formats.mjcf.export import export_mjcf  # noqa: E402
 from asset2sim.tasks.ingest.errors import AssetError  # noqa: E402
 from asset2sim.tasks.ingest.extract import extract_asset_checked  # noqa: E402
-from asset2sim.tasks.ingest.mjcf_reader import read_mjcf_asset  # noqa: E402
-from asset2sim.tasks.ingest.staged import StagingError, input_format, stage  # noqa: E402
+from asset2sim.formats.mjcf.reader import read_mjcf_asset  # noqa: E402
+from asset2sim.formats.staging import StagingError, input_format, stage  # noqa: E402
 from asset2sim.tasks.refine import refine_asset  # noqa: E402
 from asset2sim.urdf import UrdfModel, read_urdf  # noqa: E402
 
@@ -101,8 +101,8 @@ def _round_trip(row: dict, out: Path, usd: bool = False) -> None:
     for name, q in read.initial_state.items():
         assert abs(q - state.get(name, 0.0)) <= 1e-9, (row["id"], name, q, state.get(name))
     if usd:  # URDF -> USD -> asset model, within the same tolerances (USD stores float32)
-        from asset2sim.tasks.ingest.usd_reader import read_usd_asset
-        from asset2sim.tasks.publish.export_usd import export_usd
+        from asset2sim.formats.usd.reader import read_usd_asset
+        from asset2sim.formats.usd.export import export_usd
 
         assert_same_model(read_usd_asset(export_usd(out, check=False).path).model, urdf, f"{row['id']} (USD)")
 

@@ -18,7 +18,7 @@ from tests.tasks.ingest import host_layouts as hl
 mujoco = pytest.importorskip("mujoco")
 
 from asset2sim.schemas.config import RefineConfig
-from asset2sim.tasks.publish.host_mjcf import JOINT_PHYSICS
+from asset2sim.formats.mjcf.physics import JOINT_PHYSICS
 from asset2sim.tasks.refine import refine_asset
 from asset2sim.urdf import read_urdf
 

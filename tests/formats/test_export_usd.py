@@ -14,14 +14,14 @@ from tests.contract_asset import write_contract_asset
 from asset2sim.engines.loading import read_initial_state, read_urdf
 from asset2sim.frames import quat_wxyz_matrix
 from asset2sim.schemas.overlay import Inertia
-from asset2sim.tasks.assemble.export_mjcf import export_mjcf
+from asset2sim.formats.mjcf.export import export_mjcf
 from tests.conftest import SHARED
 
 pxr = pytest.importorskip("pxr")
 
 from pxr import Usd, UsdGeom, UsdPhysics  # noqa: E402
 
-from asset2sim.tasks.publish.export_usd import (  # noqa: E402
+from asset2sim.formats.usd.export import (  # noqa: E402
     DEG,
     UsdExportError,
     check_usd,
@@ -250,7 +250,7 @@ def test_refined_dev_objects_export(asset_id, prompt, tmp_path, refine_once):
 
 
 # ------------------------------------------------------------ docs snippets
-DOC = Path(__file__).resolve().parents[3] / "docs" / "guide" / "simulators.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "guide" / "simulators.md"
 
 
 def _doc_snippets() -> list[str]:

@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from asset2sim.tasks.ingest.staged import StagingError
+from asset2sim.formats.staging import StagingError
 
 #: MuJoCo's joint types (``mjtJoint``): free, ball, slide, hinge.
 JNT_FREE, JNT_BALL, JNT_SLIDE, JNT_HINGE = 0, 1, 2, 3

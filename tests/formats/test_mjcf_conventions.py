@@ -13,10 +13,10 @@ from tests.tasks.ingest import host_layouts as hl
 
 pytest.importorskip("mujoco")
 
-from asset2sim.tasks.ingest import host_conventions  # noqa: E402
+from asset2sim.formats.mjcf import conventions as host_conventions  # noqa: E402
 from asset2sim.tasks.ingest.extract import validate_any  # noqa: E402
-from asset2sim.tasks.ingest.host_conventions import HOST_LAYOUTS, ReadOptions, mjcf_angle  # noqa: E402
-from asset2sim.tasks.ingest.mjcf_reader import read_mjcf_asset  # noqa: E402
+from asset2sim.formats.mjcf.conventions import HOST_LAYOUTS, ReadOptions, mjcf_angle  # noqa: E402
+from asset2sim.formats.mjcf.reader import read_mjcf_asset  # noqa: E402
 
 
 def _range(read, joint: str) -> tuple[float, float]:

@@ -1,7 +1,7 @@
 """MJCF (MuJoCo) articulated objects read into the project's one asset model.
 
 The file and every file it names are checked and read first
-(:mod:`asset2sim.tasks.ingest.mjcf_files`); the checked copy is parsed and compiled by
+(:mod:`asset2sim.formats.mjcf.files`); the checked copy is parsed and compiled by
 MuJoCo itself (``mujoco.MjSpec.from_file``, then ``spec.compile()``): default classes, ``<compiler angle>`` (degrees are
 MJCF's default), ``meshdir``, mesh scale and recentring, ``fromto`` and
 alternative orientations all come resolved from the compiled ``MjModel``; the
@@ -10,10 +10,10 @@ spec says which bodies declare an ``<inertial>``. Nothing here walks XML.
 Conventions (MJCF -> URDF):
 
 - The object is the world body's child whose subtree carries the joints
-  (:mod:`asset2sim.tasks.ingest.mjcf_scene`: the static bodies around it, a
+  (:mod:`asset2sim.formats.mjcf.scene`: the static bodies around it, a
   table or a wall, are noted and left out); its body is the root link. Angles
   are read in the unit the file's host package compiles it with
-  (:mod:`asset2sim.tasks.ingest.host_conventions`). A ``<freejoint>`` on it
+  (:mod:`asset2sim.formats.mjcf.conventions`). A ``<freejoint>`` on it
   means a free-standing object; none means the root is welded to the world
   (a mounted object). Geoms on the world body (a ground plane) are scenery
   and are left out, with a note.
@@ -43,10 +43,11 @@ import numpy as np
 
 from asset2sim.engines.mjcf.base import load_mujoco
 from asset2sim.frames import axis_angle_matrix, quat_wxyz_matrix, rigid_inverse, rigid_matrix, translation_matrix
-from asset2sim.tasks.ingest import host_conventions, mjcf_scene
-from asset2sim.tasks.ingest.host_conventions import ReadOptions
-from asset2sim.tasks.ingest.mjcf_files import MjcfSources, compile_mjcf, gather_mjcf
-from asset2sim.tasks.ingest.staged import DeclaredSpring, ReadAsset, StagingError, collisions_as_visuals, mesh_name, rgba_material
+from asset2sim.formats.mjcf import conventions
+from asset2sim.formats.mjcf import scene
+from asset2sim.formats.mjcf.conventions import ReadOptions
+from asset2sim.formats.mjcf.files import MjcfSources, compile_mjcf, gather_mjcf
+from asset2sim.formats.staging import DeclaredSpring, ReadAsset, StagingError, collisions_as_visuals, mesh_name, rgba_material
 from asset2sim.urdf import UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfModel
 
 #: Primitive geoms written as a mesh of their surface: triangles per full turn of the tessellation.
@@ -63,17 +64,17 @@ def read_mjcf_asset(path: Path | str, options: ReadOptions | None = None) -> Rea
 
     Args:
         path: the ``<mujoco>`` XML file (its meshes resolved as MuJoCo resolves them). The file and every file it
-            names are checked and read first (:func:`~asset2sim.tasks.ingest.mjcf_files.gather_mjcf`: regular
+            names are checked and read first (:func:`~asset2sim.formats.mjcf.files.gather_mjcf`: regular
             files inside the file's folder, or inside its package's asset folder for a file of a known package
-            (:func:`~asset2sim.tasks.ingest.host_conventions.package_tree`), under the size cap); MuJoCo reads
+            (:func:`~asset2sim.formats.mjcf.conventions.package_tree`), under the size cap); MuJoCo reads
             only a private copy of those.
         options: ``body`` picks the object in a scene with several jointed subtrees
-            (:func:`~asset2sim.tasks.ingest.mjcf_scene.pick_object`); ``mjcf_angle`` overrides the angle unit
-            the file's place implies (:func:`~asset2sim.tasks.ingest.host_conventions.mjcf_angle`). The notes
+            (:func:`~asset2sim.formats.mjcf.scene.pick_object`); ``mjcf_angle`` overrides the angle unit
+            the file's place implies (:func:`~asset2sim.formats.mjcf.conventions.mjcf_angle`). The notes
             say which convention was used and why, and which bodies around the object were left out.
 
     Returns:
-        A :class:`~asset2sim.tasks.ingest.staged.ReadAsset` (format ``"mjcf"``): lengths in m, angles in
+        A :class:`~asset2sim.formats.staging.ReadAsset` (format ``"mjcf"``): lengths in m, angles in
         rad, masses in kg, inertia tensors (3, 3) in kg*m^2 about the center of mass in the link axes.
 
     Raises:
@@ -87,18 +88,18 @@ def read_mjcf_asset(path: Path | str, options: ReadOptions | None = None) -> Rea
     path = Path(path)
     options = options or ReadOptions()
     sources = gather_mjcf(path)  # first: every file it names checked before anything reads it
-    tree = host_conventions.package_tree(path)
-    convention = host_conventions.mjcf_angle(path, options.mjcf_angle, files=sources.files)  # the bytes read, not the disk
+    tree = conventions.package_tree(path)
+    convention = conventions.mjcf_angle(path, options.mjcf_angle, files=sources.files)  # the bytes read, not the disk
     spec, m, warned = compile_mjcf(sources, degree=convention.unit == "degree")
     mujoco = load_mujoco()
-    scene = mjcf_scene.pick_object(m, path, options.body)
+    pick = scene.pick_object(m, path, options.body)
     reader = _Reader(path, spec, m, mujoco, sources)
     reader.notes.append(convention.note)
     if tree is not None:
         reader.notes.append(f"files it names read within its package's asset folder {tree}")
-    reader.notes.extend(scene.notes)
+    reader.notes.extend(pick.notes)
     reader.notes.extend(warned)
-    return replace(reader.read(scene.root, scene.bodies), sources=sources, angle_unit=convention.unit)  # the bytes, for later stages
+    return replace(reader.read(pick.root, pick.bodies), sources=sources, angle_unit=convention.unit)  # the bytes, for later stages
 
 
 class _Reader:

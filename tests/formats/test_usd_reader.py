@@ -16,9 +16,9 @@ pxr = pytest.importorskip("pxr")
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, Vt  # noqa: E402
 
 from asset2sim.mesh_io import read_mesh  # noqa: E402
-from asset2sim.tasks.ingest import staged  # noqa: E402
-from asset2sim.tasks.ingest.staged import StagingError  # noqa: E402
-from asset2sim.tasks.ingest.usd_reader import read_usd_asset  # noqa: E402
+from asset2sim.formats import staging  # noqa: E402
+from asset2sim.formats.staging import StagingError  # noqa: E402
+from asset2sim.formats.usd.reader import read_usd_asset  # noqa: E402
 from asset2sim.urdf import read_urdf  # noqa: E402
 
 DEG = 180.0 / math.pi
@@ -44,9 +44,9 @@ def test_refined_output_round_trip(asset_id, shared_dataset, tmp_path, refine_on
     """Links, joints (type, parent, child, origin, axis, limits, damping, friction), springs, masses, COM and
     inertia tensors of the USD export equal mobility.urdf's to 1e-6 relative; geometry sits where the URDF's does."""
     from asset2sim.engines.loading import read_initial_state
-    from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
-    from asset2sim.tasks.assemble.write import read_root
-    from asset2sim.tasks.publish.export_usd import export_usd
+    from asset2sim.engines.loading import springs_from_overlay
+    from asset2sim.engines.loading import read_root
+    from asset2sim.formats.usd.export import export_usd
 
     if not (shared_dataset / asset_id / "mobility.urdf").is_file():
         pytest.skip(f"dev object {asset_id} not present")
@@ -208,7 +208,7 @@ def test_staged_door_reads_back(tmp_path):
     """stage() writes model.urdf and meshes/*.obj; the URDF reads back with the same joints and meshes."""
     _door(tmp_path / "door.usda")
     read = read_usd_asset(tmp_path / "door.usda")
-    out = staged.stage(read, tmp_path / "st")
+    out = staging.stage(read, tmp_path / "st")
     back = read_urdf(out.urdf_path)
     assert out.urdf_path == tmp_path / "st" / "model.urdf" and sorted(back.links) == sorted(read.model.links)
     for j in read.model.joints:

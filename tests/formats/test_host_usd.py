@@ -18,11 +18,11 @@ from pxr import Sdf, Usd
 
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.request import RequestOverrides
-from asset2sim.tasks.ingest.usd_reader import read_usd_asset
-from asset2sim.tasks.publish.host_usd import applied_schemas
+from asset2sim.formats.usd.reader import read_usd_asset
+from asset2sim.formats.usd.physics import applied_schemas
 from asset2sim.tasks.refine import refine_asset
 from asset2sim.urdf import read_urdf
-from tests.tasks.publish.usd_cabinet import CARCASS, DOOR, HINGE, cabinet_usd
+from tests.formats.usd_cabinet import CARCASS, DOOR, HINGE, cabinet_usd
 
 CONFIG = RefineConfig(engines=["pybullet"])
 PHYSICS = ("physics:mass", "physics:centerOfMass", "physics:diagonalInertia", "physics:principalAxes",
@@ -116,7 +116,7 @@ def test_a_partnet_mobility_object_as_a_usd_stage_goes_back_with_its_meshes(shar
     masses."""
     import csv
 
-    from asset2sim.tasks.publish.export_usd import export_usd
+    from asset2sim.formats.usd.export import export_usd
 
     if not (shared_dataset / "148" / "mobility.urdf").is_file():
         pytest.skip("dev object 148 not present")

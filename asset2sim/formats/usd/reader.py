@@ -1,11 +1,11 @@
 """OpenUSD (UsdPhysics) articulated objects read into the project's asset model.
 
 :func:`read_usd_asset` opens a stage with pxr (``usd-core``; the file is never parsed here) and gives a
-:class:`~asset2sim.tasks.ingest.staged.ReadAsset` (``format="usd"``) whose :class:`~asset2sim.urdf.UrdfModel`
+:class:`~asset2sim.formats.staging.ReadAsset` (``format="usd"``) whose :class:`~asset2sim.urdf.UrdfModel`
 is in SI units (m, kg, rad) and Z up. Rigid bodies are the links, revolute / prismatic / fixed joints the joints
 (``body0`` the parent, ``body1`` the child). The stage is re-expressed in metres, Z up: every transform ``X``
-becomes ``L X L^-1`` (:mod:`asset2sim.tasks.ingest.usd_stage`, which also reads the geometry). A child's link frame has its body's axes and its origin at the joint (``localPos1``), so a
-USD written by :mod:`asset2sim.tasks.publish.export_usd` reads back in the source URDF's link frames. The root
+becomes ``L X L^-1`` (:mod:`asset2sim.formats.usd.stage`, which also reads the geometry). A child's link frame has its body's axes and its origin at the joint (``localPos1``), so a
+USD written by :mod:`asset2sim.formats.usd.export` reads back in the source URDF's link frames. The root
 link keeps the world's axes: the object stands as it stands on the stage.
 """
 
@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.frames import quat_wxyz_matrix, rigid_inverse, rigid_matrix
-from asset2sim.openusd import authored, pxr_modules, value_or
-from asset2sim.tasks.ingest.staged import DeclaredSpring, ReadAsset, collisions_as_visuals, numbered
-from asset2sim.tasks.ingest.usd_stage import StageReading, link_geometry, open_stage, used_files
+from asset2sim.extras import pxr_modules
+from asset2sim.formats.staging import DeclaredSpring, ReadAsset, collisions_as_visuals, numbered
+from asset2sim.formats.usd.stage import StageReading, authored, link_geometry, open_stage, used_files, value_or
 from asset2sim.urdf import UrdfDynamics, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfModel
 
 #: Degrees per radian (UsdPhysics angles, angular limits and angular gains are per degree).

@@ -13,9 +13,9 @@ pytest.importorskip("mujoco")
 
 from asset2sim.tasks.ingest.errors import AssetError  # noqa: E402
 from asset2sim.tasks.ingest.extract import extract_asset_checked  # noqa: E402
-from asset2sim.tasks.ingest.host_conventions import ReadOptions  # noqa: E402
-from asset2sim.tasks.ingest.mjcf_reader import read_mjcf_asset  # noqa: E402
-from asset2sim.tasks.ingest.staged import StagingError  # noqa: E402
+from asset2sim.formats.mjcf.conventions import ReadOptions  # noqa: E402
+from asset2sim.formats.mjcf.reader import read_mjcf_asset  # noqa: E402
+from asset2sim.formats.staging import StagingError  # noqa: E402
 
 
 def test_a_meta_world_scene_reads_the_drawer_and_leaves_the_table_and_wall(tmp_path):

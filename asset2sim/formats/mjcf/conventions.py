@@ -46,9 +46,6 @@ from typing import Mapping
 from typing import Literal
 
 from asset2sim import safexml
-from asset2sim.schemas.asset import AssetDescription
-from asset2sim.tasks.ingest import partnet_mobility
-from asset2sim.tasks.ingest.staged import MJCF_SUFFIXES, USD_SUFFIXES
 
 AngleUnit = Literal["radian", "degree"]
 #: The angle units MJCF's ``<compiler angle>`` takes.
@@ -241,7 +238,7 @@ def file_compiler_angle(path: Path | str, files: Mapping[str, bytes] | None = No
     """(the unit the file's own ``<compiler angle>`` states, the file stating it: ``path`` or an include), or
     (None, None) when neither the file nor its includes state one (or the value is not ``radian`` / ``degree``,
     which MuJoCo refuses when compiling). ``files``: the file and its includes as the reader policy read them
-    (absolute normalized path -> bytes, :class:`~asset2sim.tasks.ingest.mjcf_files.MjcfSources`), so nothing is read
+    (absolute normalized path -> bytes, :class:`~asset2sim.formats.mjcf.files.MjcfSources`), so nothing is read
     from disk again; None reads them from disk."""
     path = Path(path)
     try:
@@ -300,21 +297,3 @@ def mjcf_angle(path: Path | str, override: AngleUnit | None = None, files: Mappi
                                f"{layout.why}, and this file states no <compiler angle>: MuJoCo's default, degrees")
     return AngleConvention(MUJOCO_DEFAULT_ANGLE, "default", None,
                            "the file states no <compiler angle> and lies in no known host package: MuJoCo's default, degrees")
-
-
-def real_units(asset: AssetDescription) -> str | None:
-    """Why ``asset``'s lengths are real sizes in metres, or None when they say nothing about its size: an MJCF file
-    (MuJoCo's lengths are metres), a USD stage (read through its ``metersPerUnit``), a URDF declaring inertials (SI
-    units, mass and lengths together); never PartNet-Mobility's ``mobility.urdf``, normalized to about unit size
-    (:func:`asset2sim.tasks.ingest.partnet_mobility.size_normalized`)."""
-    source = asset.staged_from or asset.urdf_path
-    if partnet_mobility.size_normalized(source):
-        return None
-    suffix = Path(source).suffix.lower()
-    if asset.staged_from is not None and suffix in MJCF_SUFFIXES:
-        return f"an MJCF file ({Path(source).name}: MuJoCo's lengths are metres)"
-    if asset.staged_from is not None and suffix in USD_SUFFIXES:
-        return f"a USD stage ({Path(source).name}, read in metres through its metersPerUnit)"
-    if any(ln.given_inertial is not None for ln in asset.links):
-        return f"a URDF declaring inertials ({Path(source).name}: SI units, masses and lengths together)"
-    return None

@@ -1,4 +1,4 @@
-"""One OpenUSD stage being read (:mod:`asset2sim.tasks.ingest.usd_reader`): its basis change to metres and
+"""One OpenUSD stage being read (:mod:`asset2sim.formats.usd.reader`): its basis change to metres and
 Z up, the files it uses, and the geometry of a rigid body's Gprims in its link frame.
 
 A stage's lengths are ``metersPerUnit`` m and its up axis Y or Z: every transform ``X`` becomes ``L X L^-1``,
@@ -17,9 +17,22 @@ import numpy as np
 
 from asset2sim.frames import rigid_matrix, rigid_part
 from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, check_file
-from asset2sim.openusd import authored, pxr_modules, value_or
-from asset2sim.tasks.ingest.staged import StagingError, input_tree, mesh_name, rgba_material
+from asset2sim.extras import pxr_modules
+from asset2sim.formats.staging import StagingError, input_tree, mesh_name, rgba_material
 from asset2sim.urdf import UrdfGeometry, UrdfLink, UrdfMaterial
+
+
+def authored(prim, name: str):
+    """The authored value of attribute ``name`` of ``prim``; None when the attribute is absent or not authored."""
+    a = prim.GetAttribute(name)
+    return a.Get() if a and a.HasAuthoredValue() else None
+
+
+def value_or(prim, name: str, default):
+    """Attribute ``name``'s value (its schema fallback included); ``default`` when it has none."""
+    a = prim.GetAttribute(name)
+    value = a.Get() if a else None
+    return default if value is None else value
 
 #: Rotation (3, 3) taking +z to the axis of a Cylinder / Capsule / Cone.
 _AXIS_TURN = {"X": np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]), "Y": np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]]),
@@ -61,7 +74,7 @@ class StageReading:
 #: Layers per stage (sublayers, references and payloads, each counted once).
 MAX_LAYERS = 1024
 #: Triangles the reader builds from one stage, every mesh prim counted (the limit MuJoCo's compiler sets for MJCF:
-#: :data:`asset2sim.tasks.ingest.mjcf_files.MAX_BUILT_FACES`; the staged URDF then meets the validator's face caps).
+#: :data:`asset2sim.formats.mjcf.files.MAX_BUILT_FACES`; the staged URDF then meets the validator's face caps).
 MAX_BUILT_FACES = 1_000_000
 
 
@@ -75,7 +88,7 @@ def _layer_file(identifier: str) -> tuple[str, bool]:
 def open_layers(path: Path | str, tree: Path | str | None = None, *, max_bytes: int = DEFAULT_MAX_BYTES) -> list:
     """Open the root layer at ``path`` and every layer it composes (sublayers, references, payloads, in variants
     too: ``Sdf.Layer.GetCompositionAssetDependencies``), each checked before pxr opens it: a regular file inside
-    ``tree`` (default :func:`~asset2sim.tasks.ingest.staged.input_tree`, the file's folder; symlinks resolved)
+    ``tree`` (default :func:`~asset2sim.formats.staging.input_tree`, the file's folder; symlinks resolved)
     under ``max_bytes``. A stage opened on the first layer returned finds the others open and opens no other file.
 
     Returns:

@@ -8,7 +8,7 @@ fields and ``texturedir`` for textures). Each must be a relative path that stays
 model file's folder), with every symlink resolved, or lie in a folder the user allowed
 (:func:`asset2sim.input_files.allow_outside`, ``--allow-outside-paths``), and name a regular file under the size
 cap; it is then read without blocking (:mod:`asset2sim.input_files`). A refusal is a
-:class:`~asset2sim.tasks.ingest.staged.StagingError` with a code:
+:class:`~asset2sim.formats.staging.StagingError` with a code:
 
 - ``MJCF_PATH_ESCAPES``: an absolute path, a URI, ``../`` leaving the tree or a symlink out of it (in a file
   attribute, an include or ``meshdir`` / ``texturedir`` / ``assetdir``);
@@ -39,8 +39,8 @@ from asset2sim import atomic, safexml
 from asset2sim.engines.mjcf.base import load_mujoco, mujoco_messages
 from asset2sim.extras import import_extra
 from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, allowed_outside, inside, read_file
-from asset2sim.tasks.ingest import host_conventions
-from asset2sim.tasks.ingest.staged import SOURCE_DIR, StagingError, input_tree, read_of, read_snapshot, write_snapshot
+from asset2sim.formats.mjcf import conventions
+from asset2sim.formats.staging import SOURCE_DIR, StagingError, input_tree, read_of, read_snapshot, write_snapshot
 
 __all__ = ["MAX_INCLUDES", "MAX_INCLUDE_DEPTH", "MAX_TOTAL_BYTES", "MjcfSources", "OpenedMjcf", "compile_mjcf", "gather_mjcf",
            "opened_mjcf", "staged_sources"]
@@ -76,8 +76,8 @@ class MjcfSources:
     real: dict[str, Path]
 
     def snapshot(self, folder: Path | str, **extra: str | None) -> Path:
-        """Write these sources into ``folder`` (a staged asset's own ``source/``: :func:`asset2sim.tasks.ingest.staged.stage`
-        calls this; :func:`~asset2sim.tasks.ingest.staged.write_snapshot`), with the paths, each key's real path and
+        """Write these sources into ``folder`` (a staged asset's own ``source/``: :func:`asset2sim.formats.staging.stage`
+        calls this; :func:`~asset2sim.formats.staging.write_snapshot`), with the paths, each key's real path and
         ``extra`` (the angle unit it was read with). Returns ``folder``. Raises OSError."""
         return write_snapshot(folder, self.files, kind="mjcf", path=str(self.path), tree=str(self.tree), main=self.main,
                               real={k: str(v) for k, v in self.real.items()}, **extra)
@@ -247,8 +247,8 @@ def gather_mjcf(path: Path | str, tree: Path | str | None = None, *, max_file_by
 
     Args:
         path: the ``<mujoco>`` file. tree: the folder its references must stay in (default: its package's asset
-            folder for a file of a known package, :func:`~asset2sim.tasks.ingest.host_conventions.package_tree`, so
-            Meta-World's ``../scene`` includes read; else :func:`~asset2sim.tasks.ingest.staged.input_tree`, the
+            folder for a file of a known package, :func:`~asset2sim.formats.mjcf.conventions.package_tree`, so
+            Meta-World's ``../scene`` includes read; else :func:`~asset2sim.formats.staging.input_tree`, the
             file's folder). Every reader of the file (extraction, the audit's patch, the host write-back) so reads
             the same files.
         max_file_bytes: cap per file, bytes. max_total_bytes: cap over all files, bytes.
@@ -259,7 +259,7 @@ def gather_mjcf(path: Path | str, tree: Path | str | None = None, *, max_file_by
     """
     path = Path(os.path.abspath(str(path)))
     if tree is None:
-        tree = host_conventions.package_tree(path)
+        tree = conventions.package_tree(path)
     root = Path(os.path.abspath(str(tree))) if tree is not None else input_tree(path)
     return _Gather(path, root, max_file_bytes, max_total_bytes, limits).run()
 
@@ -355,7 +355,7 @@ def compile_mjcf(sources: MjcfSources, degree: bool | None = None):
 
 def staged_sources(urdf_path: Path | str) -> tuple[MjcfSources, dict] | None:
     """The checked sources an MJCF input was staged from (the staged URDF ``urdf_path``: this process's read when it
-    is still held, :func:`asset2sim.tasks.ingest.staged.read_of`, else the snapshot in the staged folder), and what
+    is still held, :func:`asset2sim.formats.staging.read_of`, else the snapshot in the staged folder), and what
     was recorded with them (``angle``: the unit its angles were read in); None when neither is at hand (not an
     MJCF input, or its staged folder is gone). Every later stage (the host write-back, the audit's patch) compiles
     from these, never from the input's paths."""

@@ -1,7 +1,7 @@
 """Assets in other formats (MJCF, OpenUSD) staged as a URDF folder.
 
-A reader of another format (:mod:`asset2sim.tasks.ingest.mjcf_reader`,
-:mod:`asset2sim.tasks.ingest.usd_reader`) turns the file into the project's one
+A reader of another format (:mod:`asset2sim.formats.mjcf.reader`,
+:mod:`asset2sim.formats.usd.reader`) turns the file into the project's one
 asset model (:class:`asset2sim.urdf.UrdfModel`, SI units, radians) and the
 values URDF has no element for (joint springs). :func:`stage` writes that
 model as ``<folder>/model.urdf`` with its meshes as ``<folder>/meshes/*.obj``.
@@ -36,7 +36,7 @@ STAGED_URDF = "model.urdf"
 #: Folder (inside the staged folder) of the meshes written for the model.
 MESH_DIR = "meshes"
 #: Folder (inside the staged folder) of the input's own files as the reader policy read them (an MJCF input's
-#: snapshot: :meth:`asset2sim.tasks.ingest.mjcf_files.MjcfSources.snapshot`), for the stages after extraction.
+#: snapshot: :meth:`asset2sim.formats.mjcf.files.MjcfSources.snapshot`), for the stages after extraction.
 SOURCE_DIR = "source"
 #: File suffixes read as MJCF and as OpenUSD.
 MJCF_SUFFIXES = (".xml", ".mjcf")
@@ -339,3 +339,21 @@ def staging_folder(source: Path | str) -> Path:
     digest = hashlib.sha256(src.encode("utf-8", "surrogatepass")).hexdigest()[:12]
     folder = Path(tempfile.mkdtemp(prefix=f"{file_names.file_stem(Path(src).stem)[:40]}-{digest}-", dir=_STAGING_ROOT[0]))
     return folder
+
+
+def copy_named(src: Path, base: Path, folder: Path, data: bytes | None = None) -> str:
+    """Copy an asset file the MJCF or URDF names into ``folder``: at its path relative to ``base`` (the file's folder)
+    when inside it, else under ``assets/`` by a safe name; ``data``: its bytes as already read (then ``src`` only names
+    it); returns the relative POSIX path written."""
+    real = Path(os.path.realpath(src)) if data is None else Path(src)
+    try:
+        rel = real.relative_to(Path(os.path.realpath(base))).as_posix()
+    except ValueError:
+        digest = hashlib.sha256(str(real).encode()).hexdigest()[:8]
+        rel = f"assets/{file_names.file_stem(real.stem)}-{digest}{real.suffix.lower()}"
+    target = file_names.join_inside(folder, rel)
+    if data is not None:
+        atomic.write_bytes(target, data)  # the bytes the reader policy read: the input is not opened again
+    else:
+        atomic.copy_file(real, target)  # its folders made by the atomic writer, after the output's guard
+    return rel

@@ -1,8 +1,10 @@
-"""The refined object written back into its own MJCF file, to drop into its host in place of the original.
+"""The one MJCF physics writer: the refined object written back into its own MJCF file, to drop into its host in
+place of the original (:func:`write_host_mjcf`), and the audit's patch of an MJCF input (:func:`write_patched_mjcf`),
+both through :func:`set_body_inertial` and :func:`set_joint_friction` on MuJoCo's ``MjSpec``.
 
 An MJCF input (a robosuite fragment, a Meta-World scene) is read again with the conventions it was read with
-(:func:`asset2sim.tasks.ingest.host_conventions.mjcf_angle`, the object of
-:func:`asset2sim.tasks.ingest.mjcf_scene.pick_object`), and only its physics is changed to the refined output's:
+(:func:`asset2sim.formats.mjcf.conventions.mjcf_angle`, the object of
+:func:`asset2sim.formats.mjcf.scene.pick_object`), and only its physics is changed to the refined output's:
 
 - each body of the object that carries geometry or declares an ``<inertial>`` gets the refined link's mass, center
   of mass and full inertia tensor (an explicit ``<inertial>``; bodies without either, wrappers, are left as they are);
@@ -36,6 +38,7 @@ from __future__ import annotations
 import difflib
 import json
 import math
+import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,13 +47,13 @@ import numpy as np
 
 from asset2sim import atomic, file_names, output_folder, safexml
 from asset2sim.engines.loading import read_initial_state
-from asset2sim.engines.mjcf.base import FRICTION_SOLIMP, friction_solref
+from asset2sim.engines.mjcf.base import FRICTION_SOLIMP, friction_solref, load_mujoco, mujoco_messages
 from asset2sim.output_folder import MJCF_DIR, OVERLAY_NAME, URDF_NAME
-from asset2sim.schemas.overlay import Overlay
-from asset2sim.tasks.ingest import host_conventions, mjcf_scene
-from asset2sim.tasks.ingest.host_conventions import ReadOptions
-from asset2sim.tasks.ingest.mjcf_files import MjcfSources, OpenedMjcf, gather_mjcf, opened_mjcf
-from asset2sim.tasks.ingest.staged import MJCF_SUFFIXES
+from asset2sim.schemas.overlay import JointDynamics, LinkPhysics, Overlay
+from asset2sim.formats.mjcf import conventions, scene
+from asset2sim.formats.mjcf.conventions import ReadOptions
+from asset2sim.formats.mjcf.files import MjcfSources, OpenedMjcf, compile_mjcf, gather_mjcf, opened_mjcf, staged_sources
+from asset2sim.formats.staging import MJCF_SUFFIXES, ReadAsset, StagingError, copy_named
 from asset2sim.urdf import read_urdf
 
 #: Folder (inside the output's ``mjcf/``) of the file written for the host.
@@ -103,9 +106,9 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
         source: the MJCF file the refine read (its name; nothing is read from it when ``sources`` is given).
         reading: the options it was read with (the object's body, the angle unit).
         sources: the file and every file it names as the reader policy read them when the refine staged it
-            (:func:`~asset2sim.tasks.ingest.mjcf_files.staged_sources`): MuJoCo compiles from a private copy of these
+            (:func:`~asset2sim.formats.mjcf.files.staged_sources`): MuJoCo compiles from a private copy of these
             bytes, so the write-back never opens the input's paths again; None gathers them once here under the
-            reader policy (:func:`~asset2sim.tasks.ingest.mjcf_files.gather_mjcf`).
+            reader policy (:func:`~asset2sim.formats.mjcf.files.gather_mjcf`).
         angle: the angle unit the refine read the file in (``radian`` / ``degree``); None works it out from the
             file and its host package as the reader does.
 
@@ -121,7 +124,7 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
     reading = reading or ReadOptions()
     if sources is None:
         sources = gather_mjcf(source)  # once, under the reader policy
-    unit = angle or host_conventions.mjcf_angle(source, reading.mjcf_angle, files=sources.files).unit
+    unit = angle or conventions.mjcf_angle(source, reading.mjcf_angle, files=sources.files).unit
     with output_folder.guarding(out_dir), opened_mjcf(sources, degree=unit == "degree") as opened:
         # nothing through a symlinked mjcf/ or mjcf/host/; MuJoCo reads the bytes read before, never the input
         return _write_host_mjcf(Path(out_dir), source, reading, opened, unit)
@@ -137,18 +140,18 @@ def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: 
     model = read_urdf(out_dir / URDF_NAME)
     state = read_initial_state(out_dir)
     spec, original = opened.spec, opened.model
-    pick = mjcf_scene.pick_object(original, source, reading.body)
+    pick = scene.pick_object(original, source, reading.body)
     per_rad = 180.0 / math.pi if unit == "degree" else 1.0
     explicit = {b.name: bool(b.explicitinertial) for b in spec.bodies if b.name}
     bodies, joints = [], []
     for b in pick.bodies:
-        name = mjcf_scene.label(original, b)
+        name = scene.label(original, b)
         link = model.links.get(name)
         if link is None:
             raise HostExportError(f"{source}: body {name!r} has no link in the refined {URDF_NAME}")
         offset = np.zeros(3)
         jids = [j for j in range(int(original.body_jntadr[b]), int(original.body_jntadr[b]) + int(original.body_jntnum[b]))
-                if int(original.jnt_type[j]) in (mjcf_scene.JNT_HINGE, mjcf_scene.JNT_SLIDE)]
+                if int(original.jnt_type[j]) in (scene.JNT_HINGE, scene.JNT_SLIDE)]
         if jids:
             offset = np.asarray(original.jnt_pos[jids[0]], float)  # the link frame sits on the joint
         carries = int(original.body_geomnum[b]) > 0 or explicit.get(original.body(b).name, False)
@@ -174,9 +177,9 @@ def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: 
     diff = "".join(difflib.unified_diff(before, xml.splitlines(keepends=True), fromfile=f"{source.name} (the input)", tofile=path.name))
     diff_path = file_names.join_inside(folder, file_names.file_stem(source.stem) + ".diff")
     atomic.write_bytes(diff_path, diff.encode("utf-8"))
-    moving = {mjcf_scene.label(original, b): [_joint_physics(next(x for x in spec.joints if x.id == j), bool(original.jnt_limited[j]))
+    moving = {scene.label(original, b): [_joint_physics(next(x for x in spec.joints if x.id == j), bool(original.jnt_limited[j]))
                                               for j in range(int(original.body_jntadr[b]), int(original.body_jntadr[b]) + int(original.body_jntnum[b]))
-                                              if int(original.jnt_type[j]) in (mjcf_scene.JNT_HINGE, mjcf_scene.JNT_SLIDE)]
+                                              if int(original.jnt_type[j]) in (scene.JNT_HINGE, scene.JNT_SLIDE)]
               for b in pick.bodies}
     files = write_package_files(folder / FILES_DIR, source, xml, set(bodies), {b: v for b, v in moving.items() if v},
                                 sources=opened.sources)
@@ -186,10 +189,10 @@ def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: 
 
 def override_notes(source: Path, spec, joints: list[str]) -> list[str]:
     """One sentence per joint of ``joints`` whose physics the host package's code sets at run time
-    (:data:`~asset2sim.tasks.ingest.host_conventions.PHYSICS_OVERRIDES`): what it sets, over which refined values
+    (:data:`~asset2sim.formats.mjcf.conventions.PHYSICS_OVERRIDES`): what it sets, over which refined values
     (``spec``'s joints, the file's units), and the call that keeps them."""
     out = []
-    for override, joint in host_conventions.physics_overrides(source, joints):
+    for override, joint in conventions.physics_overrides(source, joints):
         target = next((x for x in spec.joints if x.name == joint), None)
         if target is None:
             continue
@@ -204,7 +207,7 @@ def write_package_files(folder: Path, source: Path, host_xml: str, inertials: se
                     joints: dict[str, list[dict[str, str]]], *, sources: MjcfSources | None = None) -> list[Path]:
     """``source`` and the files it includes that hold a body of ``inertials`` or ``joints`` (names), written again
     under ``folder`` at their path in the input's tree (the host package's asset folder,
-    :func:`~asset2sim.tasks.ingest.host_conventions.package_tree`, else the input's folder; a file from a folder
+    :func:`~asset2sim.formats.mjcf.conventions.package_tree`, else the input's folder; a file from a folder
     ``--allow-outside-paths`` allows is left out): the ``<inertial>`` of the bodies of ``inertials`` as ``host_xml``
     (the host file written) has it, and on the hinge and slide ``<joint>`` elements of the bodies of ``joints``
     (body name -> attributes per joint in order, :func:`_joint_physics`) those attributes; their unified diff against
@@ -216,7 +219,7 @@ def write_package_files(folder: Path, source: Path, host_xml: str, inertials: se
         UnsafePath: an included file's path would leave ``folder``.
     """
     host = safexml.parse_xml_bytes(host_xml.encode("utf-8"), source="host file")
-    keys: dict[tuple, list[str]] = {}  # body key -> labels (mjcf_scene.label: body ids count from 1 in document order)
+    keys: dict[tuple, list[str]] = {}  # body key -> labels (scene.label: body ids count from 1 in document order)
     hosted = {}
     for i, b in enumerate(host.iter("body"), start=1):
         label = b.get("name") or f"body_{i}"
@@ -299,17 +302,31 @@ def _copy_physics(host, body, joints: list[dict[str, str]]) -> None:
 
 
 def _set_inertial(body, inertial, offset: np.ndarray) -> None:
-    """An explicit ``<inertial>`` on ``body`` (an ``mjsBody``) of the refined link's ``inertial``: its center of
-    mass moved by ``offset`` (3,) m from the link frame to the body frame, the tensor (3, 3) kg*m^2 as written."""
+    """:func:`set_body_inertial` of the refined link's ``inertial`` (a ``UrdfInertial``) on ``body``."""
     origin = np.asarray(inertial.origin if inertial.origin is not None else np.eye(4), float)
     rot = origin[:3, :3]
     tensor = rot @ np.asarray(inertial.inertia if inertial.inertia is not None else np.zeros((3, 3)), float) @ rot.T
+    set_body_inertial(body, float(inertial.mass), origin[:3, 3], tensor, offset)
+
+
+def set_body_inertial(body, mass: float, com, tensor: np.ndarray, offset: np.ndarray) -> None:
+    """An explicit ``<inertial>`` on ``body`` (an ``mjsBody``): ``mass`` kg, the center of mass ``com`` (3,) m in the
+    link frame moved by ``offset`` (3,) m to the body frame (the link frame sits on the body's joint), the tensor
+    ``tensor`` (3, 3) kg*m^2 about it in the link axes, written as MuJoCo's full inertia."""
     body.explicitinertial = True
-    body.mass = float(inertial.mass)
-    body.ipos = origin[:3, 3] + offset
+    body.mass = mass
+    body.ipos = np.asarray(com, float) + offset
     body.iquat = [1.0, 0.0, 0.0, 0.0]
     body.inertia = [0.0, 0.0, 0.0]  # MuJoCo takes either the diagonal or the full tensor
     body.fullinertia = [tensor[0, 0], tensor[1, 1], tensor[2, 2], tensor[0, 1], tensor[0, 2], tensor[1, 2]]
+
+
+def set_joint_friction(joint, damping: float, friction: float) -> None:
+    """``joint``'s (an ``mjsJoint``) damping (its first value; N*m*s/rad or N*s/m) and friction loss (N*m or N)."""
+    values = np.array(joint.damping, float)
+    values[0] = damping
+    joint.damping = values
+    joint.frictionloss = friction
 
 
 def _set_joint(joint, m, j: int, name: str, model, overlay: Overlay, per_rad: float) -> None:
@@ -320,13 +337,10 @@ def _set_joint(joint, m, j: int, name: str, model, overlay: Overlay, per_rad: fl
     urdf = next((x for x in model.joints if x.name == name), None)
     if urdf is None:
         return
-    hinge = int(m.jnt_type[j]) == mjcf_scene.JNT_HINGE
+    hinge = int(m.jnt_type[j]) == scene.JNT_HINGE
     unit = per_rad if hinge else 1.0
     if urdf.dynamics is not None:
-        damping = np.array(joint.damping, float)
-        damping[0] = float(urdf.dynamics.damping or 0.0)
-        joint.damping = damping
-        joint.frictionloss = float(urdf.dynamics.friction or 0.0)
+        set_joint_friction(joint, float(urdf.dynamics.damping or 0.0), float(urdf.dynamics.friction or 0.0))
         # the friction held without the no-slip pass, as the MJCF export holds it, at the host's time step
         joint.solref_friction = list(friction_solref(float(m.opt.timestep)))
         joint.solimp_friction = list(FRICTION_SOLIMP)
@@ -370,3 +384,57 @@ def _check(source: Path, original, written, mujoco, model, bodies: list[str]) ->
         if not math.isclose(float(written.body_mass[b]), want, rel_tol=MASS_RTOL):
             raise HostExportError(f"{source}: body {name!r} weighs {float(written.body_mass[b]):.6g} kg in the host file, "
                                   f"not the refined {want:.6g} kg")
+
+
+def write_patched_mjcf(source: Path, read: ReadAsset | None, children: dict[str, str], links: dict[str, LinkPhysics],
+                       joints: dict[str, JointDynamics], folder: Path, staged_urdf: Path | None = None) -> Path:
+    """The audit's patch of the MJCF file ``source``: MuJoCo's own writer (``MjSpec.to_xml``) in ``folder`` with the
+    mass, center of mass and inertia tensor of ``links`` and the damping and friction of ``joints`` (SI, the asset
+    model's link frames; ``children``: joint -> its child body), compiled from the sources staged when the input
+    was read (:func:`~asset2sim.formats.mjcf.files.staged_sources` of ``staged_urdf``; else gathered once here under
+    the reader policy), its meshes and textures written from those bytes; the input's paths are not opened again.
+    ``read`` is not used (the table's writers share one signature). Returns the patched file.
+
+    Raises:
+        ImportError: MuJoCo is not installed.
+        StagingError: a file the model names was not checked by the reader policy, or the model does not compile.
+    """
+    mujoco = load_mujoco()
+    staged = staged_sources(staged_urdf) if staged_urdf is not None else None
+    sources = staged[0] if staged is not None else gather_mjcf(source)  # only checked files inside the input's tree
+    spec, model, _ = compile_mjcf(sources)
+    base = source.parent
+    meshdir, texdir = Path(spec.meshdir or ""), Path(spec.texturedir or "")
+    for items, sub in ((spec.meshes, meshdir), (spec.hfields, meshdir), (spec.skins, meshdir), (spec.textures, texdir)):
+        for item in items:
+            if getattr(item, "file", ""):
+                named = os.path.normpath(os.path.join(os.path.abspath(base), sub, item.file))
+                real = sources.real.get(named)
+                if real is None:  # gather_mjcf checked every file attribute; nothing else is copied
+                    raise StagingError(f"{source}: {item.file!r} was not checked by the reader policy; not copied")
+                item.file = copy_named(real, base, folder, data=sources.files[named])
+    spec.meshdir = spec.texturedir = ""
+    spec.modelfiledir = str(folder)  # MuJoCo resolves the copies' relative paths from the patch's folder
+    if spec.compiler.inertiafromgeom == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE:  # else explicit inertials would be ignored
+        spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_AUTO
+    bodies = {(model.body(b).name or f"body_{b}"): b for b in range(1, model.nbody)}
+    for name, lp in links.items():
+        b = bodies[name]
+        body = spec.bodies[b]
+        offset = _joint_offset(model, b)  # the link frame is the body frame moved to its joint's pos
+        set_body_inertial(body, lp.mass, lp.com, lp.inertia.matrix(), offset)
+    for name, jd in joints.items():
+        joint = next(j for j in spec.bodies[bodies[children[name]]].joints if j.type != mujoco.mjtJoint.mjJNT_FREE)
+        set_joint_friction(joint, jd.damping, jd.friction)
+    with mujoco_messages():
+        spec.compile()
+        xml = spec.to_xml()
+    out = folder / file_names.file_stem(source.name)
+    atomic.write_text(out, xml)
+    return out
+
+
+def _joint_offset(model, b: int) -> np.ndarray:
+    """(3,) m: the position of body ``b``'s hinge or slide joint in the body frame (0 without one)."""
+    n, adr = int(model.body_jntnum[b]), int(model.body_jntadr[b])
+    return np.asarray(model.jnt_pos[adr], float) if n == 1 and model.jnt_type[adr] in (2, 3) else np.zeros(3)

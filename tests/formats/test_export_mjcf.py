@@ -16,9 +16,11 @@ from tests.contract_asset import write_contract_asset
 pytestmark = pytest.mark.mujoco
 mujoco = pytest.importorskip("mujoco")
 
-from asset2sim.tasks.assemble.export_mjcf import ExportError, check_mjcf, export_mjcf, springs_from_overlay
+from asset2sim.formats.mjcf.export import ExportError, check_mjcf, export_mjcf
 
-ROOT = Path(__file__).resolve().parents[3]
+from asset2sim.engines.loading import springs_from_overlay
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _real_outputs() -> list[Path]:
@@ -195,7 +197,7 @@ def test_check_catches_a_wrong_export(tmp_path):
 def test_a_file_that_fails_its_check_never_replaces_the_export(tmp_path, monkeypatch):
     """The file is checked as written, before it lands: a conversion MuJoCo reads with another mass fails
     naming ``mjcf/mobility.xml``, the earlier export stays byte for byte, and no temporary file is left."""
-    from asset2sim.tasks.assemble import export_mjcf as module
+    from asset2sim.formats.mjcf import export as module
 
     write_contract_asset(tmp_path, lid_angle=0.3)
     path = export_mjcf(tmp_path)
