@@ -11,7 +11,7 @@ to every project module a string of it names (``"asset2sim.engines.mujoco_engine
 optional heavy third-party packages only.
 
 The layers (:data:`LAYERS`), each importing only its own and earlier ones:
-the core (``asset2sim/`` and ``schemas/``), then the stages of ``tasks/`` in
+the core (``asset2sim/`` with its format wing ``asset2sim/formats/``, and ``schemas/``), then the stages of ``tasks/`` in
 data-flow order (the measuring tiers of ``check/`` below the tuning loop of ``tune/``),
 ``tasks/refine.py`` that chains them, the applications
 (``apps/``: the audit, the realism tools, the benchmark) above it, ``flows/``, the public API (``asset2sim.api``, whose names the
@@ -222,6 +222,8 @@ def test_a_stage_importing_a_later_one_is_reported():
     assert _layer("asset2sim.tasks.tune.escalation") == "tune"
     assert LAYERS.index("check") < LAYERS.index("tune") < LAYERS.index("evaluation")
     assert _layer("asset2sim.output_folder") == "core" and _layer("asset2sim.flows.catalog") == "flows"
+    # the format wing (readers, exports, physics writers) is core: every stage may use it, it imports no stage
+    assert _layer("asset2sim.formats.mjcf.physics") == "core" and _layer("asset2sim.formats") == "core"
     # the applications sit above every stage and below the flows and commands
     assert _layer("asset2sim.apps.audit.audit") == "apps" and _layer("asset2sim.apps.realism.judge") == "apps"
     assert LAYERS.index("refine") < LAYERS.index("apps") < LAYERS.index("flows") < LAYERS.index("cli")
