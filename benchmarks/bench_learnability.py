@@ -8,7 +8,7 @@
     python benchmarks/bench_learnability.py --framework maniskill --ids 100221,9912 --held-out 47645 \
         --methods raw,asset2sim --steps 20000 --seeds 0,1,2 [--sim-backend gpu --n-envs 1024 --device cuda]
 
-``--framework maniskill`` runs the comparison in ManiSkill 3 (:mod:`asset2sim.maniskill`, the ``maniskill``
+``--framework maniskill`` runs the comparison in ManiSkill 3 (:mod:`asset2sim.apps.learn.maniskill`, the ``maniskill``
 extra): PPO per method and seed on the training objects, evaluated on them and on the held-out ones
 (``benchmarks/learnability_maniskill.py``). What follows is the PyBullet benchmark (the default).
 
@@ -25,13 +25,13 @@ experiment at the budget a CPU allows, and scales with ``--steps``,
    = :func:`asset2sim.tasks.refine.refine_asset`) under ``DIR/<method>/<id>/asset``
    (``--reuse`` keeps an asset already there).
 2. The row's ``task`` becomes a gymnasium environment
-   (:mod:`asset2sim.tasks.evaluation.learn_env`: a force- and speed-limited
+   (:mod:`asset2sim.apps.learn.gym_env`: a force- and speed-limited
    gripper attached at the task link's contact point, PyBullet through the
    engine protocol, staged reward, success = target reached and held 1 s after
    release without the object sliding > 5 mm or tipping > 0.05 rad).
 3. Feasibility reference: a scripted policy (along the joint's direction of
    motion at 0.25, 0.5 and 1 times the speed limit,
-   :meth:`~asset2sim.tasks.evaluation.learn_env.TaskEnv.scripted_action`)
+   :meth:`~asset2sim.apps.learn.gym_env.TaskEnv.scripted_action`)
    runs ``--eval-episodes`` episodes at each speed; its success rate is the
    best speed's: can the task be done at all on this asset with this gripper?
 4. PPO (stable-baselines3, ``MlpPolicy``, CPU, ``DummyVecEnv`` of
@@ -181,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     import torch
     from stable_baselines3 import PPO
 
-    from asset2sim.tasks.evaluation.learn_env import LearnConfig
+    from asset2sim.apps.learn.gym_env import LearnConfig
 
     torch.set_num_threads(1)
     rows = _manifest_rows(args)
@@ -224,7 +224,7 @@ def _arguments() -> argparse.ArgumentParser:
     ap.add_argument("--n-envs", type=int, default=2)
     ap.add_argument("--n-steps", type=int, default=256, help="PPO rollout length per environment")
     ap.add_argument("--max-run-seconds", type=float, default=0.0, help="wall-time cap per PPO run (0: none)")
-    ap.add_argument("--start", choices=("task", "asset"), default="task", help="task joint start (learn_env.prepare_task)")
+    ap.add_argument("--start", choices=("task", "asset"), default="task", help="task joint start (learn.task.prepare_task)")
     ap.add_argument("--out", type=Path, default=ROOT / "out" / "bench_learnability")
     ap.add_argument("--reuse", action="store_true", help="keep assets already made under --out")
     ap.add_argument("--no-ppo", action="store_true", help="only the scripted and passive references")
@@ -309,7 +309,7 @@ def _make_assets(rows: list, methods: list[str], args) -> dict[tuple[str, str], 
 def _learn_task(row, m: str, a: Path | str, args, cfg, seeds: list[int], emit, ppo) -> None:
     """The row's task on method ``m``'s asset ``a`` (its folder, or why it is n/a): the scripted and passive
     references, then ``ppo`` (stable-baselines3's ``PPO``) per seed; each record handed to ``emit``."""
-    from asset2sim.tasks.evaluation.learn_task import prepare_task
+    from asset2sim.apps.learn.task import prepare_task
 
     base = {"id": row.id, "category": row.category, "task": row.task, "method": m}
     if isinstance(a, str):
@@ -338,7 +338,7 @@ def _references(task, cfg, args, base: dict, emit) -> None:
     holding still), ``--eval-episodes`` episodes each (reset seeds 10000 + i)."""
     import numpy as np
 
-    from asset2sim.tasks.evaluation.learn_env import TaskEnv, run_episode
+    from asset2sim.apps.learn.gym_env import TaskEnv, run_episode
 
     m, rid = base["method"], base["id"]
     t0 = time.perf_counter()
@@ -391,7 +391,7 @@ def _train_ppo(ppo, task, cfg, args, seed: int, base: dict, emit) -> None:
     deterministic policy run ``--eval-episodes`` episodes (reset seeds 10000 + i)."""
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from asset2sim.tasks.evaluation.learn_env import TaskEnv, run_episode
+    from asset2sim.apps.learn.gym_env import TaskEnv, run_episode
 
     m, rid = base["method"], base["id"]
     t0 = time.perf_counter()

@@ -2,7 +2,7 @@
 
     python benchmarks/bench_maniskill_tasks.py [--root out/bench_refine] [--manifest PATH] [--steps 10]
 
-For every output folder under ROOT and each environment of ``asset2sim.maniskill`` (open, close, the object's own
+For every output folder under ROOT and each environment of ``asset2sim.apps.learn.maniskill`` (open, close, the object's own
 task with the manifest's task where the output records none): the folder becomes a task object or is skipped with
 the code ``load_task_objects`` names. Then each folder alone is built in ``Asset2Sim-ManifestTask-v1`` on ManiSkill's
 CPU backend (Panda, state observations, no renderer), reset and stepped ``--steps`` control steps of random
@@ -34,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     import gymnasium as gym
 
-    from asset2sim import maniskill as ams
+    from asset2sim.apps.learn import maniskill as ams
 
     folders = sorted(p for p in args.root.iterdir() if (p / "mobility.urdf").is_file())
     manifest = args.manifest if args.manifest.is_file() else None

@@ -42,7 +42,7 @@ def count_lookups(packages) -> dict[str, list[int]]:
                 continue
             try:
                 importlib.import_module(m.name)
-            except ImportError:  # an optional extra not installed (e.g. asset2sim.maniskill without torch)
+            except ImportError:  # an optional extra not installed (e.g. asset2sim.apps.learn.maniskill without torch)
                 continue
     stats: dict[str, list[int]] = collections.defaultdict(lambda: [0, 0])
 

@@ -5,7 +5,7 @@ Per method (``raw``: the unrefined input; ``defaults``, ``human``, ``direct``,
 seed, one PPO policy (CleanRL's PPO as ManiSkill's ``examples/baselines/ppo``
 has it: state observations, ``normalized_dense`` reward, gamma 0.8, GAE 0.9,
 4 epochs, clip 0.2, target KL 0.1) trains on the training objects of the
-``asset2sim.maniskill`` environment (``Asset2Sim-CloseArticulation-v1`` or
+``asset2sim.apps.learn.maniskill`` environment (``Asset2Sim-CloseArticulation-v1`` or
 ``-OpenArticulation-v1``, one object per sub-scene), then its deterministic
 policy runs ``--eval-episodes`` episodes on every object, the held-out ones
 (``--held-out``) included. A passive reference (the robot holding still) shows
@@ -301,7 +301,7 @@ def run(args, rows: list, held_out: list, make_assets, record_flags=None) -> int
     import sapien
     import torch
 
-    import asset2sim.maniskill as ams
+    import asset2sim.apps.learn.maniskill as ams
 
     torch.set_num_threads(1)
     env_id = ams.ENV_IDS[args.action]

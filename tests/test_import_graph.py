@@ -14,8 +14,9 @@ The layers (:data:`LAYERS`), each importing only its own and earlier ones:
 the core (``asset2sim/`` with its format wing ``asset2sim/formats/``, and ``schemas/``), then the stages of ``tasks/`` in
 data-flow order (the measuring tiers of ``check/`` below the tuning loop of ``tune/``),
 ``tasks/refine.py`` that chains them, the applications
-(``apps/``: the audit, the realism tools, the benchmark) above it, ``flows/``, the public API (``asset2sim.api``, whose names the
-package ``asset2sim`` lends on first use) and the command line.
+(``apps/``: the audit, the realism tools, the benchmark, the learning environments) above it, ``flows/``, the public API
+(``asset2sim.api``, whose names the package ``asset2sim`` lends on first use) and the command line. The applications
+stand side by side: none imports another (what two of them share lives in a stage or the core).
 """
 
 from __future__ import annotations
@@ -126,12 +127,12 @@ def _layer(module: str) -> str:
     parts = module.split(".")
     if module in ("asset2sim.cli", "asset2sim.__main__") or parts[:2] == ["asset2sim", "commands"]:
         return "cli"
-    # the public API: the package's names are asset2sim.api's; asset2sim.maniskill (an extra) builds tasks on it
-    if module in ("asset2sim", "asset2sim.api", "asset2sim.maniskill"):
+    # the public API: the package's names are asset2sim.api's
+    if module in ("asset2sim", "asset2sim.api"):
         return "api"
     if parts[:2] == ["asset2sim", "flows"]:
         return "flows"
-    if parts[:2] == ["asset2sim", "apps"]:  # the applications (audit, realism, benchmark): above the stages
+    if parts[:2] == ["asset2sim", "apps"]:  # the applications (audit, realism, benchmark, learn): above the stages
         return "apps"
     if parts[:2] == ["asset2sim", "tasks"] and len(parts) >= 3:
         return parts[2] if parts[2] in LAYERS else "refine" if parts[2] == "refine" else parts[2]
@@ -227,6 +228,49 @@ def test_a_stage_importing_a_later_one_is_reported():
     # the applications sit above every stage and below the flows and commands
     assert _layer("asset2sim.apps.audit.audit") == "apps" and _layer("asset2sim.apps.realism.judge") == "apps"
     assert LAYERS.index("refine") < LAYERS.index("apps") < LAYERS.index("flows") < LAYERS.index("cli")
+
+
+def _app(module: str) -> str | None:
+    """The application a module belongs to (``asset2sim.apps.<app>...``), else None."""
+    parts = module.split(".")
+    return parts[2] if parts[:2] == ["asset2sim", "apps"] and len(parts) > 2 else None
+
+
+def _app_to_app_imports(modules: dict[str, Path]) -> list[str]:
+    """Every import (top level or inside a function) by a module of ``apps/<a>/`` of a module of
+    ``apps/<b>/``, b != a, as "path:line imports name"."""
+    out = []
+    for name, path in modules.items():
+        a = _app(name)
+        if a is None:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if isinstance(node, ast.Import):
+                targets = [al.name for al in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                targets = [node.module] + [f"{node.module}.{al.name}" for al in node.names]
+            else:
+                continue
+            for t in targets:
+                b = _app(t)
+                if b is not None and b != a:
+                    out.append(f"{path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}:{node.lineno} imports {t}")
+                    break
+    return out
+
+
+def test_no_application_imports_another():
+    """apps/<a>/ never imports apps/<b>/ (b != a), not even inside a function: what two applications share (the
+    GenSim2 reference the benchmark's ``human`` method and the ManiSkill environments build) lives below them."""
+    found = _app_to_app_imports({n: p for n, p in _modules().items() if _app(n)})
+    assert not found, "applications importing another application:\n" + "\n".join(found)
+
+
+def test_an_application_importing_another_inside_a_function_is_reported(tmp_path):
+    (tmp_path / "env.py").write_text("def f():\n    from asset2sim.apps.benchmark.baselines import make_human\n")
+    (tmp_path / "own.py").write_text("from asset2sim.apps.learn import task\nimport asset2sim.tasks.refine\n")
+    found = _app_to_app_imports({"asset2sim.apps.learn.env": tmp_path / "env.py", "asset2sim.apps.learn.own": tmp_path / "own.py"})
+    assert len(found) == 1 and found[0].endswith("env.py:2 imports asset2sim.apps.benchmark.baselines")
 
 
 def test_no_guarded_imports_of_own_modules(package_graph):

@@ -1,6 +1,6 @@
 """The passive joint forces of a SAPIEN (PhysX) articulation as asset2sim verifies them, without importing SAPIEN:
 :class:`PassiveJoints` (friction, damping and springs of the movable joints) and :class:`DeclaredPhysics` (a user's
-own articulation given them). Used by :mod:`asset2sim.engines.physx_engine`, :mod:`asset2sim.maniskill` and
+own articulation given them). Used by :mod:`asset2sim.engines.physx_engine`, :mod:`asset2sim.apps.learn.maniskill` and
 :func:`asset2sim.api.declare_physics`."""
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ class PassiveJoints:
     ``friction`` (N*m or N) and viscous ``damping`` (N*m*s/rad or N*s/m) act through a zero-velocity drive whose
     force limit is ``friction + damping * |qdot|`` (:meth:`force_limits`, set each step); springs
     (``stiffness`` N*m/rad or N/m about ``reference``) as joint forces (:meth:`joint_forces`).
-    The one implementation of SAPIEN's passive joints: :class:`PhysXSession` and :mod:`asset2sim.maniskill` use it."""
+    The one implementation of SAPIEN's passive joints: :class:`PhysXSession` and :mod:`asset2sim.apps.learn.maniskill` use it."""
 
     names: list[str]
     friction: np.ndarray

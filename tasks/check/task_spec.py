@@ -10,7 +10,8 @@ from dataclasses import dataclass, field, replace
 
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.check.asset_files import JointInfo
-from asset2sim.tasks.check.request_match import labelled_joints, parse_prompt
+from asset2sim.tasks.interpret.named_parts import labelled_joints
+from asset2sim.tasks.interpret.request import parse_prompt
 
 #: Leading verbs -> action ("close" / "open"); any other verb: both directions.
 VERBS: dict[str, str] = {

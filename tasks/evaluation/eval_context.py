@@ -29,7 +29,9 @@ from asset2sim.tasks.check.asset_files import (
     read_semantics,
 )
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, infer_scale_from_geometry
-from asset2sim.tasks.check.request_match import category_prior, parse_prompt, recognize_category
+from asset2sim.tasks.interpret.categories import category_name
+from asset2sim.tasks.interpret.request import parse_prompt
+from asset2sim.tasks.interpret.size_priors import size_mass_prior
 from asset2sim.tasks.check.task_spec import TaskSpec
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.interpret.part_priors import task_relevant_joints
@@ -164,7 +166,7 @@ def build_context(asset: Path | str, *, reference: Path | str | None = None, pro
         raise EvaluationError(f"reference {ref_dir}: no such folder")
     semantics = read_semantics(folder) or (read_semantics(ref_dir) if ref_dir else {})
     cat = (category or (overlay or {}).get("category") or (report or {}).get("category") or (baseline or {}).get("category")
-           or recognize_category(prompt, read_category(folder) or (read_category(ref_dir) if ref_dir else None),
+           or category_name(prompt, read_category(folder) or (read_category(ref_dir) if ref_dir else None),
                                  [lab for _, lab in semantics.values()]))
     spec, req_err = parse_prompt(prompt)
     if req_err:
@@ -179,7 +181,7 @@ def build_context(asset: Path | str, *, reference: Path | str | None = None, pro
         baseline=baseline, semantics=semantics, category=cat, prompt=prompt, request=spec, request_error=req_err,
         reference_dir=ref_dir, reference_scale=ref_info.scale if ref_info is not None else None, reference_state=ref_state,
         reference_rule=rule, scale=scale, scale_source=scale_src, task_joints=[], closed={},
-        springs=springs, prior=category_prior(cat, spec), conventions=conventions or SimConventions(),
+        springs=springs, prior=size_mass_prior(cat, spec), conventions=conventions or SimConventions(),
         sag_tol_revolute=RefineConfig().sag_tolerance_revolute, sag_tol_prismatic=RefineConfig().sag_tolerance_prismatic,
         notes=notes, root_fixed=root_fixed,
     )

@@ -28,7 +28,7 @@ from asset2sim.tasks.evaluation.engine_run import EngineRun, run_engine, set_clo
 from asset2sim.tasks.evaluation.eval_context import Context, build_context, task_joints
 from asset2sim.tasks.check import as_asked
 from asset2sim.tasks.evaluation.metric_defs import METRICS, MetricSpec, divergence_check, metric_names
-from asset2sim.tasks.check.request_match import labelled_joints, motion_joints, requested_joints
+from asset2sim.tasks.interpret.named_parts import labelled_joints, motion_joints, requested_joints
 from asset2sim.tasks.check.task_spec import parse_task, with_work_to_do
 from asset2sim.tasks.evaluation.report_html import portable_urdf, write_report
 from asset2sim import output_folder

@@ -22,7 +22,9 @@ from asset2sim.tasks.check.probes import probes_metric
 from asset2sim.tasks.evaluation import semantic_metrics as sem
 from asset2sim.tasks.evaluation.engine_run import EngineRun
 from asset2sim.tasks.evaluation.eval_context import Context, hold_required
-from asset2sim.tasks.check.request_match import request_warnings, requested_joints, scaled_mass_range, unmatched_properties
+from asset2sim.tasks.interpret.named_parts import requested_joints, unmatched_properties
+from asset2sim.tasks.interpret.request import request_warnings
+from asset2sim.tasks.interpret.size_priors import scaled_mass_range
 from asset2sim.tasks.check import as_asked
 
 #: Largest ground penetration during the rest test that passes, m.

@@ -4,14 +4,15 @@ in one adapter; the rest of the pipeline never opens a dataset side file itself.
 An object folder holds ``mobility.urdf`` (:func:`find_urdf`), ``semantics.txt`` (one
 ``link_name joint_kind semantic_label`` line per link, :func:`read_semantics`), ``meta.json``
 (``model_cat``: the category, :func:`read_category`) and possibly GenSim2's reference (Hua et al.,
-"GenSim2", CoRL 2024: ``reference_gensim2.json`` / ``.urdf``, :func:`read_reference`). A dataset root
-holds one folder per object id and ``manifest.csv`` (:mod:`asset2sim.tasks.ingest.manifest`,
-re-exported here).
+"GenSim2", CoRL 2024: ``reference_gensim2.json`` / ``.urdf``, :func:`read_reference`, written as an asset
+folder at its scale by :func:`write_reference`). A dataset root holds one folder per object id and
+``manifest.csv`` (:mod:`asset2sim.tasks.ingest.manifest`, re-exported here).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import stat
 from dataclasses import dataclass, field
@@ -21,13 +22,17 @@ from typing import Any, Iterator, NamedTuple
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.manifest import (  # manifest.csv, re-exported: this module is the dataset's one adapter
     ROW_ERROR_CODES, ManifestError, ManifestRow, ManifestRowError, is_valid_id, read_manifest, read_manifest_rows)
-from asset2sim.urdf import MOVABLE, read_urdf
+from asset2sim import mesh_io
+from asset2sim.atomic import copy_file, sha256_file, write_bytes, write_json
+from asset2sim.output_folder import STATE_NAME, URDF_NAME
+from asset2sim.urdf import MOVABLE, UrdfLimit, read_urdf, scale_model, write_urdf
 
 __all__ = [
     "META_NAME", "MANIFEST_NAME", "REFERENCE_JSON", "REFERENCE_URDF", "ROW_ERROR_CODES", "SEMANTICS_NAME", "URDF_NAMES",
-    "GenSim2Reference", "ManifestError", "ManifestRow", "ManifestRowError", "Semantics", "SemanticsLine", "find_urdf",
-    "format_semantics", "has_reference", "iter_semantics", "meta_category", "read_category", "is_valid_id", "read_manifest",
-    "read_manifest_rows", "read_reference", "read_semantics", "urdf_candidates",
+    "GenSim2Reference", "ManifestError", "ManifestRow", "ManifestRowError", "Semantics", "SemanticsLine", "WrittenReference",
+    "find_urdf", "format_semantics", "has_reference", "iter_semantics", "meta_category", "read_category", "is_valid_id",
+    "read_manifest", "read_manifest_rows", "read_reference", "read_semantics", "reference_initial_state", "scale_urdf",
+    "urdf_candidates", "urdf_joints", "write_reference",
 ]
 
 #: URDF names looked up first in an object folder, in order.
@@ -225,3 +230,134 @@ def read_reference(folder: Path | str) -> GenSim2Reference:
         types[j.name] = j.type  # a name written twice keeps its first place and last type
     task = [n for n, t in types.items() if t in MOVABLE]
     return GenSim2Reference(scale=scale, joint_position_range=rng, urdf=ru, task_joints=task)
+
+
+def scale_urdf(src: Path | str, dst: Path | str, scale: float, *, joint_limits: dict[str, tuple[float, float]] | None = None,
+               header: str = "", copy_meshes: bool = True) -> Path:
+    """Write a copy of URDF ``src`` with the uniform scale ``scale`` (> 0) baked in
+    (:func:`asset2sim.urdf.scale_model`: mesh scales, primitive sizes, origins,
+    prismatic limits, inertia x s^2, masses kept) to ``dst``; returns ``dst``.
+
+    ``joint_limits``: joint -> (lower, upper), input units, replacing the file's;
+    ``header``: a comment atop ``<robot>``; ``copy_meshes``: copy the meshes inside
+    ``src``'s folder beside ``dst`` (relative paths, with the MTL libraries and textures an OBJ names
+    inside that folder), else absolute paths.
+    Raises ValueError: bad scale, ``package://`` mesh paths, an unknown joint; UrdfError: ``src`` unreadable."""
+    if not (math.isfinite(scale) and scale > 0):
+        raise ValueError(f"scale must be a finite number > 0, got {scale}")
+    src = Path(src).resolve()
+    model = read_urdf(src, mode="lenient")
+    to_copy: set[Path] = set()
+    for link in model.links.values():
+        for g in link.visuals + link.collisions:
+            if g.kind != "mesh":
+                continue
+            fname = g.filename or ""
+            if fname.startswith("package://"):
+                raise ValueError(f"{src}: link {link.name!r}: package:// mesh paths are not supported")
+            mesh_src = (src.parent / fname.removeprefix("file://")).resolve()
+            if copy_meshes and mesh_src.is_relative_to(src.parent):
+                to_copy.add(mesh_src)
+                g.filename = mesh_src.relative_to(src.parent).as_posix()
+            else:
+                g.filename = str(mesh_src)
+    dst_dir = Path(dst).parent
+    for mesh_src in sorted(to_copy):
+        deps = mesh_io.obj_material_files(mesh_src, keep=lambda p: p.resolve().is_relative_to(src.parent))
+        for f in [mesh_src] + deps:
+            out = dst_dir / f.relative_to(src.parent)
+            if not (out.is_file() and sha256_file(out) == sha256_file(f)):
+                copy_file(f, out)
+    names = {j.name: j for j in model.joints}
+    missing = set(joint_limits or {}) - set(names)
+    if missing:
+        raise ValueError(f"{src}: joints {sorted(missing)} not found")
+    for name, (lo, hi) in (joint_limits or {}).items():
+        joint = names[name]
+        if joint.limit is None:
+            joint.limit = UrdfLimit()
+        joint.limit.lower, joint.limit.upper = float(lo), float(hi)
+    scale_model(model, float(scale))
+    write_bytes(Path(dst), write_urdf(model, comment=f" {header} " if header else None))
+    return Path(dst)
+
+
+def urdf_joints(urdf: Path | str) -> dict[str, dict[str, Any]]:
+    """Joint name -> {type, lower, upper} (rad or m; None when absent) of a URDF (lenient reading).
+    Raises UrdfError: unreadable XML or a malformed number."""
+    return {j.name: {"type": j.type, "lower": None if j.limit is None else j.limit.lower,
+                     "upper": None if j.limit is None else j.limit.upper} for j in read_urdf(urdf, mode="lenient").joints}
+
+
+def reference_initial_state(joints: dict[str, dict[str, Any]], task_joints: list[str],
+                            rng: tuple[float, float] | None, scale: float) -> dict[str, float]:
+    """The reference's initial state (joint -> rad or m, output units) over ``joints``
+    (:func:`urdf_joints`): the ``task_joints`` at the lower end of ``rng`` (prismatic times ``scale``),
+    the other movable joints at 0, each clipped to its limits."""
+    out = {}
+    for name, j in joints.items():
+        if j["type"] in MOVABLE:
+            q = rng[0] * (scale if j["type"] == "prismatic" else 1.0) if rng is not None and name in task_joints else 0.0
+            if j["lower"] is not None:
+                q = max(q, j["lower"])
+            if j["upper"] is not None:
+                q = min(q, j["upper"])
+            out[name] = float(q)
+    return out
+
+
+@dataclass(frozen=True)
+class WrittenReference:
+    """GenSim2's reference of one object folder written as an asset folder (:func:`write_reference`):
+    ``urdf`` the written ``mobility.urdf``, ``source`` the ``reference_gensim2.urdf`` it scales,
+    ``scale`` (1.0 where the JSON states none, said in ``notes``), ``joint_position_range`` (rad or
+    m; None without one), the movable ``task_joints`` and the ``initial_state`` (joint -> rad or m)
+    written to ``initial_state.json``."""
+
+    urdf: Path
+    source: Path
+    scale: float
+    joint_position_range: tuple[float, float] | None
+    task_joints: list[str]
+    initial_state: dict[str, float]
+    notes: list[str] = field(default_factory=list)
+
+
+def write_reference(folder: Path | str, out_dir: Path | str, label: str | None = None) -> WrittenReference:
+    """Write GenSim2's reference of the object ``folder`` to ``out_dir`` as an asset folder (the
+    learnability benchmark's ``human`` method, the ManiSkill environments' ``reference=True``):
+    ``reference_gensim2.urdf`` at ``reference_gensim2.json``'s scale (:func:`scale_urdf`; 1.0,
+    SAPIEN's default, where it states none), each task joint's limits ``joint_position_range``
+    within the file's own (an empty intersection keeps the range) and ``initial_state.json``
+    (:func:`reference_initial_state`). ``label``: the URDF's header comment before " at scale s"
+    (default "GenSim2 reference of <folder name>").
+
+    Raises:
+        AssetError: the folder has no ``reference_gensim2.urdf``.
+        ValueError: ``reference_gensim2.json`` is not JSON or a value not a number.
+        asset2sim.urdf.UrdfError: the reference URDF cannot be read.
+        OSError: a file cannot be read or written.
+    """
+    folder, out_dir = Path(folder), Path(out_dir)
+    ref = read_reference(folder)
+    if ref.urdf is None:
+        raise AssetError(f"no {REFERENCE_URDF} in {folder}")
+    notes = []
+    scale = ref.scale
+    if scale is None:
+        scale = 1.0
+        notes.append(f"{REFERENCE_JSON} has no scale: 1.0 (SAPIEN's default)")
+    rng = ref.joint_position_range
+    limits = None
+    if rng is not None:
+        file_joints = urdf_joints(ref.urdf)
+        limits = {}
+        for j in ref.task_joints:
+            lo = max(rng[0], file_joints[j]["lower"]) if file_joints[j]["lower"] is not None else rng[0]
+            hi = min(rng[1], file_joints[j]["upper"]) if file_joints[j]["upper"] is not None else rng[1]
+            limits[j] = (lo, hi) if lo <= hi else rng
+    urdf = scale_urdf(ref.urdf, out_dir / URDF_NAME, scale, joint_limits=limits,
+                      header=f"{label or f'GenSim2 reference of {folder.name}'} at scale {scale}")
+    state = reference_initial_state(urdf_joints(urdf), ref.task_joints, rng, scale)
+    write_json(out_dir / STATE_NAME, {"initial_joint_positions": state})
+    return WrittenReference(urdf, ref.urdf, scale, rng, list(ref.task_joints), state, notes)

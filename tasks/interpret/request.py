@@ -807,3 +807,27 @@ def request_notes(spec: RequestSpec) -> list[str]:
     if spec.ignored:
         out.append("request words not used: " + "; ".join(f"'{g}'" for g in spec.ignored[:30]) + (" ..." if len(spec.ignored) > 30 else ""))
     return out
+
+
+def parse_prompt(prompt: str | None) -> tuple[RequestSpec | None, str | None]:
+    """(RequestSpec of ``prompt`` or None, the parser's error or None)."""
+    if not prompt:
+        return None, None
+    try:
+        return parse_request(prompt), None
+    except Exception as exc:  # a parser failure must not stop the evaluation
+        return None, f"request parser failed: {type(exc).__name__}: {exc}"
+
+
+def request_warnings(spec: RequestSpec, unmatched: list[str], category: str | None) -> list[str]:
+    """What of the request the output could not honour, in plain words: nothing understood, the parser's
+    warnings, ``unmatched`` phrases (:func:`~asset2sim.tasks.interpret.named_parts.requested_joints`: naming no part of
+    the object) and the words
+    no rule used."""
+    if not spec.understood:
+        return [f"no word of the request was understood: {spec.text[:120]!r}; refined with the category's defaults"]
+    out = list(spec.warnings)
+    out += [f"'{p}' names no part of this {category or 'object'}: not applied" for p in unmatched]
+    if spec.ignored:
+        out.append("words not used: " + "; ".join(f"'{g}'" for g in spec.ignored))
+    return out

@@ -1,10 +1,15 @@
 """How big and how heavy an object of a category and size class is (m, kg;
-``size_classes.yaml``, ``categories.yaml``, ``docs/design/priors.md``)."""
+``size_classes.yaml``, ``categories.yaml``, ``docs/design/priors.md``); the evaluation's summary of
+them (:func:`size_mass_prior`, never raising) and the mass range scaled to measured extents
+(:func:`scaled_mass_range`)."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
 
 from asset2sim.schemas.request import RequestSpec, SizeClass
 from asset2sim.tasks.interpret.categories import category_prior, find_variant
@@ -148,3 +153,47 @@ def plausible_largest_dimension(category: str, request: RequestSpec | str | None
 def plausible_span(typical: float) -> tuple[float, float]:
     """(low, high) m: the plausible largest dimensions around a ``typical`` one (m), :data:`SCALE_TOLERANCE` either way."""
     return typical / SCALE_TOLERANCE, typical * SCALE_TOLERANCE
+
+
+def size_mass_prior(category: str | None, spec: RequestSpec | None = None) -> dict[str, Any]:
+    """Size target and mass prior of ``category`` with the request ``spec``'s
+    size words: {"category", "target_dims" (m, largest first), "base_dims" (m),
+    "factor", "variant", "base_mass_range" (kg), "note", "source"}, or {} without a prior.
+    """
+    if not category:
+        return {}
+    try:
+        t = target_size(category, spec)
+        cat = category_prior(category)
+        base_mass = cat.mass_range
+        if t.variant:
+            var = next((v for v in cat.variants if v.name == t.variant), None)
+            if var is not None:
+                base_mass = var.mass_range
+    except Exception:
+        return {}
+    return {"category": t.category, "target_dims": [float(x) for x in t.dims], "base_dims": [float(x) for x in t.base_dims],
+            "factor": float(t.factor), "variant": t.variant, "base_mass_range": (float(base_mass[0]), float(base_mass[1])),
+            "note": t.note, "source": f"asset2sim/priors/categories.yaml: {cat.dims_source}; {cat.mass_source}"}
+
+
+def scaled_mass_range(prior: dict[str, Any], extents: Any) -> tuple[tuple[float, float] | None, float]:
+    """Plausible mass range (kg) for closed-state ``extents`` (3,) m: the base
+    range scaled by :func:`scale_mass_range` with f the geometric mean of extent / base
+    dimension over the two largest (f^3 where that rejects f).
+
+    Returns:
+        (range or None without a base mass range, f).
+    """
+    if not prior or not prior.get("base_mass_range"):
+        return None, 1.0
+    lo, hi = prior["base_mass_range"]
+    f = 1.0
+    ext = None if extents is None else np.sort(np.asarray(extents, float).ravel())[::-1]
+    if ext is not None and len(ext) >= 2 and prior.get("base_dims") and float(ext[0]) > 0:
+        base = np.sort(np.asarray(prior["base_dims"], float))[::-1]
+        f = float(np.exp(np.mean(np.log(np.maximum(ext[:2], 1e-9) / base[:2]))))
+    try:
+        return scale_mass_range(lo, hi, f), f
+    except Exception:
+        return (lo * f**3, hi * f**3), f

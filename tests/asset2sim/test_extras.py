@@ -86,6 +86,7 @@ def test_the_maniskill_module_without_maniskill_names_its_extra(monkeypatch):
     """Without ManiSkill (or without torch, which it needs and is imported first) the module names its extra."""
     for name in ["mani_skill", *(m for m in list(sys.modules) if m.startswith("mani_skill."))]:
         monkeypatch.setitem(sys.modules, name, None)  # as if not installed, also where another test imported it
-    monkeypatch.delitem(sys.modules, "asset2sim.maniskill", raising=False)
-    with pytest.raises(MissingExtra, match=r"asset2sim\.maniskill: (ManiSkill 3|torch) is not installed: pip install 'asset2sim\[maniskill\]'"):
-        import asset2sim.maniskill  # noqa: F401
+    monkeypatch.delitem(sys.modules, "asset2sim.apps.learn.maniskill", raising=False)
+    with pytest.raises(MissingExtra, match=r"asset2sim\.apps\.learn\.maniskill: (ManiSkill 3|torch) is not installed: "
+                                           r"pip install 'asset2sim\[maniskill\]'"):
+        import asset2sim.apps.learn.maniskill  # noqa: F401

@@ -1,5 +1,5 @@
 """Tests of the evaluation's context, request matching and closed ends
-(asset2sim.tasks.evaluation.eval_context / request_match / closed_ends) on a
+(asset2sim.tasks.evaluation.eval_context, the request matched by tasks/interpret, closed_ends) on a
 real PartNet-Mobility object and the generated demo assets, and of the
 Evaluation hand-over model (asset2sim.schemas.evaluation)."""
 
@@ -16,12 +16,9 @@ from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.asset_files import EvaluationError, JointInfo, clip_to_limits
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, closed_fallback, compute_closed
 from asset2sim.tasks.evaluation.eval_context import build_context, task_joints
-from asset2sim.tasks.check.request_match import (
-    category_prior,
-    labelled_joints,
-    parse_prompt,
-    scaled_mass_range,
-)
+from asset2sim.tasks.interpret.named_parts import labelled_joints
+from asset2sim.tasks.interpret.request import parse_prompt
+from asset2sim.tasks.interpret.size_priors import scaled_mass_range, size_mass_prior
 from asset2sim.tasks.interpret.part_priors import request_label_matches
 from asset2sim.urdf import read_urdf
 from tests.conftest import SHARED, needs_shared
@@ -96,8 +93,8 @@ def test_request_words_name_links_through_the_category_synonyms(demo_root):
 
 def test_prompt_and_priors_degrade_to_empty_not_to_errors():
     assert parse_prompt(None) == (None, None)
-    assert category_prior(None) == {}
-    prior = category_prior("Stapler")
+    assert size_mass_prior(None) == {}
+    prior = size_mass_prior("Stapler")
     assert prior["category"] == "Stapler" and prior["base_mass_range"][0] < prior["base_mass_range"][1]
     rng, f = scaled_mass_range(prior, None)
     assert f == 1.0 and rng[0] <= prior["base_mass_range"][0] * 1.0001 and rng[1] >= prior["base_mass_range"][1] * 0.9999

@@ -178,3 +178,20 @@ def test_a_file_that_is_not_a_csv_manifest_fails_as_a_whole(tmp_path):
     with pytest.raises(pm.ManifestError) as info:
         pm.read_manifest_rows(m)
     assert info.value.code == "MANIFEST_BAD_HEADER"
+
+
+def test_the_gensim2_reference_is_written_as_an_asset_folder_at_its_scale(tmp_path):
+    """write_reference: the stapler's reference_gensim2.urdf at its JSON's scale, the task joint's limits within
+    GenSim2's range, the initial state at the range's lower end; a folder without a reference is refused."""
+    ref = pm.read_reference(SHARED / "103275")
+    out = pm.write_reference(SHARED / "103275", tmp_path / "ref")
+    assert out.urdf == tmp_path / "ref" / "mobility.urdf" and out.source == ref.urdf and out.scale == ref.scale
+    assert "GenSim2 reference of 103275 at scale" in out.urdf.read_text()
+    joints = pm.urdf_joints(out.urdf)
+    lo, hi = ref.joint_position_range
+    for j in ref.task_joints:
+        assert lo - 1e-9 <= joints[j]["lower"] <= joints[j]["upper"] <= hi + 1e-9
+        assert out.initial_state[j] == pytest.approx(joints[j]["lower"])
+    assert json.loads((tmp_path / "ref" / "initial_state.json").read_text()) == {"initial_joint_positions": out.initial_state}
+    with pytest.raises(AssetError, match="no reference_gensim2.urdf"):
+        pm.write_reference(tmp_path / "ref", tmp_path / "again")

@@ -14,7 +14,7 @@ import pytest
 from asset2sim.commands.refine import summary_lines
 from asset2sim.schemas.overlay import EstimatorInfo, Overlay
 from asset2sim.tasks.check.asset_files import parse_urdf
-from asset2sim.tasks.check.request_match import requested_joints
+from asset2sim.tasks.interpret.named_parts import requested_joints
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.interpret.request import LESS_THAN_HALF, parse_request
 from asset2sim.tasks.refine import refine_asset
@@ -200,7 +200,7 @@ def test_the_progress_line_shows_a_number_as_asked_not_as_a_band():
 
 @needs_shared
 def test_the_evaluation_resolves_the_same_words_as_refine():
-    """``request_match.requested_joints`` (the evaluation's as-asked check): the stapler's arm is its lid, the freezer
+    """``named_parts.requested_joints`` (the evaluation's as-asked check): the stapler's arm is its lid, the freezer
     door the smaller one, a middle drawer of two is none."""
     def run(obj: str, text: str, category: str, volumes: dict[str, float] | None = None):
         joints = parse_urdf(UrdfFile(SHARED / obj / "mobility.urdf"))[1]

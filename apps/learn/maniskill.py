@@ -1,10 +1,10 @@
 """Refined objects as ManiSkill 3 tasks (``pip install 'asset2sim[maniskill]'``).
 
-``import asset2sim.maniskill`` registers three environments with ManiSkill's
+``import asset2sim.apps.learn.maniskill`` registers three environments with ManiSkill's
 ``register_env`` (and so with ``gymnasium``)::
 
     import gymnasium as gym
-    import asset2sim.maniskill  # noqa: F401  (registers the ids)
+    import asset2sim.apps.learn.maniskill  # noqa: F401  (registers the ids)
 
     env = gym.make("Asset2Sim-OpenArticulation-v1", assets="out/", obs_mode="state", num_envs=1)
     obs, info = env.reset(seed=0)
@@ -44,7 +44,7 @@ use PGS) and steps at 240 Hz, 12 steps per control step. SAPIEN's own URDF loade
 which ManiSkill uses, drops the friction: a lid that holds open falls shut.
 
 The task joint, its closed end and the target are those of
-:func:`asset2sim.tasks.evaluation.learn_task.prepare_task` (the learnability
+:func:`asset2sim.apps.learn.task.prepare_task` (the learnability
 benchmark's task definition) for the output's ``report.json`` task turned to
 the environment's direction, with the closed end ``report.json`` records.
 Success (``evaluate``): the target reached and the joint at rest (|qdot| <=
@@ -91,7 +91,7 @@ try:
     from mani_skill.utils.structs.types import SceneConfig, SimConfig
     from sapien.wrapper.articulation_builder import LinkBuilder
 except ImportError as exc:  # ManiSkill, torch or SAPIEN not installed: one line naming the extra
-    raise MissingExtra(f"asset2sim.maniskill: {install_hint(exc)}", name=getattr(exc, "name", None)) from exc
+    raise MissingExtra(f"asset2sim.apps.learn.maniskill: {install_hint(exc)}", name=getattr(exc, "name", None)) from exc
 
 from asset2sim.engines.base import Spring
 from asset2sim.engines.loading import CollisionPiece, collision_pieces, read_urdf
@@ -101,9 +101,9 @@ from asset2sim.engines.physx_engine import (attach_collision_shapes, configure_a
 from asset2sim.output_folder import REPORT_NAME, URDF_NAME
 from asset2sim.tasks.check.contact_points import contact_point_rule
 from asset2sim.tasks.check.task_spec import VERBS
-from asset2sim.tasks.evaluation.learn_task import prepare_task, targets_for
-from asset2sim.tasks.ingest.manifest import ManifestRow, read_manifest_rows
-from asset2sim.tasks.ingest.partnet_mobility import read_category
+from asset2sim.apps.learn.task import prepare_task, targets_for
+from asset2sim.tasks.ingest.manifest import read_manifest_rows
+from asset2sim.tasks.ingest.partnet_mobility import read_category, write_reference
 from asset2sim.tasks.publish.contract import read_report_json
 from asset2sim.urdf import UrdfModel
 
@@ -338,16 +338,13 @@ def gensim2_reference(folder: str | Path, out_dir: str | Path, row: Any = None) 
     """GenSim2's reference of the PartNet-Mobility ``folder`` (``reference_gensim2.urdf`` at
     ``reference_gensim2.json``'s scale, the task joint's limits its ``joint_position_range``, starting at the range's
     lower end) written to ``out_dir`` as an asset folder, as the learnability benchmark's ``human`` method writes it
-    (:func:`asset2sim.apps.benchmark.baselines.make_human`); ``row``: the folder's manifest row, if any. Returns
-    ``out_dir``. Raises ManiSkillAssetError ``MS_NO_REFERENCE``: no usable reference in ``folder``."""
-    from asset2sim.apps.benchmark.baselines import BaselineError, make_human
-
+    (:func:`asset2sim.tasks.ingest.partnet_mobility.write_reference`); ``row``: the folder's manifest row, if any (its
+    ``id`` names the reference). Returns ``out_dir``. Raises ManiSkillAssetError ``MS_NO_REFERENCE``: no usable
+    reference in ``folder``."""
     folder = Path(folder)
-    if row is None:
-        row = ManifestRow(id=folder.name, category=read_category(folder) or "", prompt="", folder=folder)
     try:
-        make_human(row, out_dir)
-    except (BaselineError, OSError, ValueError) as exc:  # UrdfError is a ValueError
+        write_reference(folder, out_dir, f"asset2sim baseline 'human' (GenSim2 reference) of {row.id if row else folder.name}")
+    except (OSError, ValueError) as exc:  # AssetError and UrdfError are ValueErrors
         raise ManiSkillAssetError("MS_NO_REFERENCE", f"{folder}: GenSim2's reference cannot be used ({exc})") from exc
     return Path(out_dir)
 

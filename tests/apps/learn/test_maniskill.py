@@ -1,4 +1,4 @@
-"""asset2sim.maniskill: refined outputs (and raw inputs) as ManiSkill 3 environments on the CPU backend."""
+"""asset2sim.apps.learn.maniskill: refined outputs (and raw inputs) as ManiSkill 3 environments on the CPU backend."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ gym = pytest.importorskip("gymnasium", reason="gymnasium is not installed")
 torch = pytest.importorskip("torch", reason="torch is not installed (pip install 'asset2sim[maniskill]')")
 
 import asset2sim  # noqa: E402
-from asset2sim import maniskill as ams  # noqa: E402
+from asset2sim.apps.learn import maniskill as ams  # noqa: E402
 from asset2sim.demo_assets import build_box_with_lid, build_two_drawer_cabinet  # noqa: E402
 from asset2sim.engines import physx_engine  # noqa: E402
 
@@ -217,7 +217,7 @@ def task_outputs(shared_dataset, outputs, tmp_path_factory) -> Path:
 
 
 def test_the_manifest_task_id_runs_each_object_on_the_task_its_report_records(task_outputs):
-    from asset2sim.tasks.evaluation.learn_task import prepare_task, targets_for
+    from asset2sim.apps.learn.task import prepare_task, targets_for
     from asset2sim.tasks.publish.contract import read_report_json
 
     out = task_outputs / "103275"

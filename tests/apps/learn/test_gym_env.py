@@ -1,4 +1,4 @@
-"""The learnability environment (asset2sim.tasks.evaluation.learn_env) on
+"""The learnability environment (asset2sim.apps.learn.gym_env) on
 generated assets: spaces and shapes, the task instance, reward sign,
 success and failure flags. No PPO training here (benchmarks/bench_learnability.py)."""
 
@@ -11,14 +11,14 @@ pytest.importorskip("gymnasium")
 
 from asset2sim import demo_assets  # noqa: E402
 from asset2sim.tasks.check.gripper import GripperLimits  # noqa: E402
-from asset2sim.tasks.evaluation.learn_env import (  # noqa: E402
+from asset2sim.apps.learn.gym_env import (  # noqa: E402
     ACTION_DIM,
     OBS_DIM,
     LearnConfig,
     TaskEnv,
     run_episode,
 )
-from asset2sim.tasks.evaluation.learn_task import (  # noqa: E402
+from asset2sim.apps.learn.task import (  # noqa: E402
     START_FRACTION,
     START_MAX_ANGLE,
     common_start,

@@ -1,5 +1,5 @@
 """A gymnasium learning environment per manipulation task (SPEC, "Behavioral fidelity, learning feasibility"): the
-task of :func:`~asset2sim.tasks.evaluation.learn_task.prepare_task`, a force- and speed-limited gripper
+task of :func:`~asset2sim.apps.learn.task.prepare_task`, a force- and speed-limited gripper
 (:class:`~asset2sim.tasks.check.gripper.BoundedGrasp`) at the task link's contact point; action (4,) in [-1, 1]
 (gripper velocity in units of the speed limit, press flag), observation (13,) float32, reward for progress, stretch,
 slide/tip and success (definitions: docs/design/metrics.md). ``gymnasium`` is the extra ``gym``; PPO the extra ``learn``.
@@ -20,7 +20,7 @@ from asset2sim.tasks.check.contact_points import contact_point_rule, joint_frame
 from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits
 from asset2sim.tasks.check.support import SupportWatch
 from asset2sim.tasks.check.task_execution import TaskConfig
-from asset2sim.tasks.evaluation.learn_task import LearnTask
+from asset2sim.apps.learn.task import LearnTask
 from asset2sim.engines.base import session_root_options
 from asset2sim.urdf import UrdfModel, read_urdf
 
