@@ -394,16 +394,15 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, l
         log.say("stability", line)
     design = room + design
     closed_out = syn.closed_out
-    overlay, check, rounds = escalation.post_check(ctx, replace(refined, overlay=balanced), config, ws, log,
-                                                   closed=closed_tuples(closed_out))
-    overlay, check, rounds, overrides, closed_out = escalation.repair_sweep(
-        ctx, limits.strip_clips(balanced), closed_raw, (overlay, check, rounds, overrides, closed_out), st, state, config, ws, log)
+    tuned = escalation.post_check(ctx, replace(refined, overlay=balanced), config, ws, log, closed=closed_tuples(closed_out))
+    tuned = escalation.repair_sweep(ctx, limits.strip_clips(balanced), closed_raw, replace(tuned, overrides=overrides, closed=closed_out),
+                                    st, state, config, ws, log)
     # the clearance of the first pieces (carried on by pieces a repair rewrote from them) and of the final ones
-    clear = list(dict.fromkeys(first_clear + placement.clearance_notes(ctx, overlay, state, overrides, ws)))
+    clear = list(dict.fromkeys(first_clear + placement.clearance_notes(ctx, tuned.overlay, state, tuned.overrides, ws)))
     st.collision_changes = clear + list(st.collision_changes)
-    return Attempt(asset=ctx.asset, overlay=overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic, closed_out=closed_out,
-                    st=st, state=state, overrides=overrides, root_rotation=ctx.root_rotation, check=check, rounds=rounds,
-                    design=design, targets=syn.targets)
+    return Attempt(asset=ctx.asset, overlay=tuned.overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic,
+                   closed_out=tuned.closed, st=st, state=state, overrides=tuned.overrides, root_rotation=ctx.root_rotation,
+                   check=tuned.check, rounds=tuned.rounds, design=design, targets=syn.targets)
 
 
 def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: StageLog) -> placement.Synthesis:
