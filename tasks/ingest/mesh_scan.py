@@ -63,7 +63,8 @@ def _scan_obj(data: bytes, max_faces: int) -> tuple[np.ndarray, np.ndarray, dict
         lineno = data.count(b"\n", 0, bad_rec.start()) + 1
         defects["MESH_MALFORMED"] = f"line {lineno}: not an OBJ record: {bad_rec.group(1)!r}"
     try:
-        v, f, notes = mesh_io.read_obj(data, "OBJ")
+        mesh = mesh_io.read_obj(data, "OBJ")
+        v, f, notes = mesh.vertices, mesh.faces, mesh.notes
     except mesh_io.MeshReadError as exc:  # refine could not read it either: nothing more to check
         raise _Unparsable(defects.get("MESH_MALFORMED") or str(exc), mtllibs) from None
     if len(f) > max_faces:
