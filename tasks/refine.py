@@ -322,22 +322,23 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Works
     there. Returns that attempt when it passes every check, else None (``att`` loaded again)."""
     intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
     try:
-        fractions, before, after = balance.steadiest_fractions(ws.source(att.candidate), att.overlay, att.state, att.closed_out, intervals)
+        steadiest = balance.steadiest_fractions(ws.source(att.candidate), att.overlay, att.state, att.closed_out, intervals)
     except Exception as exc:  # a measurement that fails leaves the attempt as it was
         log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {one_line(exc)})")
         return None
     why = "unstable" if not att.check.stable else "toppled by a robust-rest disturbance"
-    if fractions and after.stable:
+    fractions = steadiest.fractions
+    if fractions and steadiest.after.stable:
         note = (f"stability by design: {why} at the bands' targets; "
                 + ", ".join(f"{n} opened to {f:.2f} of its range (allowed {intervals[n][0]:.2f}-{intervals[n][1]:.2f})" for n, f in fractions.items())
-                + f", where the object stands steadiest: static margin {before.margin * 1000:.3g} -> {after.margin * 1000:.3g} mm"
-                f" (asked >= {after.required * 1000:.3g} mm)")
-    elif before.stable:  # statically steady, yet unstable or toppled in simulation
+                + f", where the object stands steadiest: static margin {steadiest.before.margin * 1000:.3g} -> {steadiest.after.margin * 1000:.3g} mm"
+                f" (asked >= {steadiest.after.required * 1000:.3g} mm)")
+    elif steadiest.before.stable:  # statically steady, yet unstable or toppled in simulation
         fractions = least_openings(att, intervals)
         if not fractions:
             return None
         note = (f"stability by design: {why} at the bands' targets although statically steady (margin "
-                f"{before.margin * 1000:.3g} mm, asked >= {before.required * 1000:.3g} mm); "
+                f"{steadiest.before.margin * 1000:.3g} mm, asked >= {steadiest.before.required * 1000:.3g} mm); "
                 + ", ".join(f"{n} opened to {f:.2f} of its range, the least its band allows ({intervals[n][0]:.2f}-{intervals[n][1]:.2f})"
                             for n, f in fractions.items()))
     else:  # the opening alone does not make it steady: the resting pose may
@@ -377,15 +378,16 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, l
         syn = replace(syn, bands={**syn.bands, **{j: request_apply.band_of(f) for j, f in st.room_made.items()}})
         for line in room:
             log.say("refine_state", line)
-    state, overrides, floored, lifted = ground_clearance.apply_ground_clearance(
-        replace(kept, state=state), ws, closed_tuples(syn.closed_out))
-    st.collision_changes = list(st.collision_changes) + lifted
+    lifted = ground_clearance.apply_ground_clearance(replace(kept, state=state), ws, closed_tuples(syn.closed_out))
+    state, overrides, floored = lifted.state, lifted.overrides, lifted.state_notes
+    st.collision_changes = list(st.collision_changes) + lifted.collision_notes
     refined = Candidate(ctx.asset, syn.overlay, state, overrides, ctx.root_rotation)
     measured, moved = refined, []  # the pieces the statics are measured on: those the limits were clipped on
     if overrides is not searched.collision_overrides:  # the collision pieces changed: the limits are clipped again on them (stage 6b)
         measured = replace(refined, overlay=limits.strip_clips(syn.overlay))
         reclipped, closed_re = placement.clip_limits(measured, closed_raw, ws, config, log)
-        syn, state, moved = placement.reclipped(syn, reclipped, closed_re, state)  # the state kept in its band
+        again = placement.reclipped(syn, reclipped, closed_re, state)  # the state kept in its band
+        syn, state, moved = again.synthesis, again.state, again.notes
         refined, measured = replace(refined, state=state), replace(measured, state=state)
         st.result = {n: state.get(n, q) for n, q in st.result.items()}
     balanced, design = stability.design_for_stability(ws.source(measured), ctx.asset, syn.overlay, state, ctx.category, ctx.geometry)
