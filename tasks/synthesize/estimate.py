@@ -77,7 +77,8 @@ def _real_size(ctx: EstimationContext, real: str | None) -> tuple[str | None, st
     if real is None:
         return None, None
     largest = float(np.max(ctx.closed_extents))
-    lo, hi, typical = priors.plausible_largest_dimension(ctx.category)
+    span = priors.plausible_largest_dimension(ctx.category)
+    lo, hi, typical = span.low, span.high, span.typical
     what = f"a typical {ctx.category} is {typical:.3g} m" if typical is not None else "a household object"
     if ctx.request.size_class is not None:
         return None, f"{real}, rescaled as asked ({ctx.request.size_class})"

@@ -373,7 +373,7 @@ def _blade_depth(model: urdf.UrdfModel, pieces: dict, q: float) -> float:
 
 def groups_of(model: urdf.UrdfModel) -> dict:
     notes: list[str] = []
-    return {n: cg._group_pieces(ln, lambda g: g.path, notes)[0] for n, ln in model.links.items()}
+    return {n: cg._group_pieces(ln, lambda g: g.path, notes).pieces for n, ln in model.links.items()}
 
 
 def test_merge_keeps_the_swept_volume_of_a_joint_free(tmp_path):
