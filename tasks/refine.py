@@ -135,9 +135,9 @@ def refine_asset(
             with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx, \
                     Workspace(asset, open_containers=config.open_containers and config.convex_decomposition,
                               mesh_cache=cache) as ws:
-                ctx.task = task
-                pose_note = _interpret(ctx, log)
+                ctx, pose_note = _interpret(replace(ctx, task=task), log)
                 att, pose_note = _synthesize_and_check(ctx, est, config, ws, log, pose_note)
+                ctx = replace(ctx, root_rotation=att.root_rotation)  # the resting pose the kept attempt was made on
                 resolution = request_apply.resolve_states(ctx, att.overlay.scale)  # what each phrase set (the as-asked tier)
                 output.publish(att.candidate, ws, work)  # the output folder's files, written once
             log.say("post_check", refine_report.post_check_line(att))
@@ -272,19 +272,20 @@ def _moving_links(ctx: EstimationContext) -> list[str]:
     return sorted({ln for j in estimate.task_relevant_joints(ctx) for ln in ctx.subtrees[j]})
 
 
-def _interpret(ctx: EstimationContext, log: StageLog) -> str:
-    """Stage 3: the resting pose the request asks for ("lying flat", "sideways") into
-    ``ctx.root_rotation``. Returns the pose note ("" when none was asked)."""
+def _interpret(ctx: EstimationContext, log: StageLog) -> tuple[EstimationContext, str]:
+    """Stage 3: the resting pose the request asks for ("lying flat", "sideways"). Returns ``ctx`` with it as
+    ``root_rotation`` and the pose note ("" when none was asked)."""
     spec = ctx.request
     pose_note = ""
     if spec.pose_hint in ("lying_flat", "sideways"):
-        ctx.root_rotation, pose_note = pose.resting_rotation(ctx.session, ctx.asset, ctx.closed_state(), ctx.hull_points, _moving_links(ctx))
+        rotation, pose_note = pose.resting_rotation(ctx.session, ctx.asset, ctx.closed_state(), ctx.hull_points, _moving_links(ctx))
+        ctx = replace(ctx, root_rotation=rotation)
         log.say("request", f"pose '{spec.pose_hint}': {pose_note}")
     for note in request_notes(spec):
         log.say("request", note)
     log.say("request", f"category {ctx.category}; size {spec.size_class or 'regular'}; states " + (", ".join(js.words() for js in spec.joint_states) or "none asked"))
     log.lap("closed_state")
-    return pose_note
+    return ctx, pose_note
 
 
 # ----------------------------------------------------- 4-7: synthesize .. post-check
@@ -305,12 +306,10 @@ def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, ws:
         return att, pose_note
     why = "unstable as modelled" if not att.check.stable else "toppled by a robust-rest disturbance as modelled"
     log.say("post_check", f"{why}; {note}")
-    ctx.root_rotation = R
-    second = _attempt(ctx, est, config, ws, log)
+    second = _attempt(replace(ctx, root_rotation=R), est, config, ws, log)
     if second.check.stable and (second.check.passed or not att.check.passed) and not (
             second.check.topples and not att.check.topples):
         return second, f"{why}; {note}"
-    ctx.root_rotation = None
     return att.kept_after_another(), f"{note}; not better in simulation, kept as modelled"
 
 

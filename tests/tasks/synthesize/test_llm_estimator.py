@@ -8,6 +8,7 @@ the direct / IVW baselines."""
 from __future__ import annotations
 
 import importlib.util
+from dataclasses import replace
 import base64
 import io
 import json
@@ -429,7 +430,7 @@ def test_second_estimate_of_the_same_asset_reuses_the_reply(server, plate, monke
     est = backends.get_estimator("openai", model="m", base_url=server.url)
     with _ctx(plate) as ctx:
         ea = est.estimate(ctx)
-        ctx.root_rotation = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])  # lying on its side
+        ctx = replace(ctx, root_rotation=np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]]))  # lying on its side
         eb = est.estimate(ctx)
     a, b = ea.overlay, eb.overlay
     assert eb.bands == ea.bands and set(ea.bands) == {"hinge"}
