@@ -35,7 +35,7 @@ from asset2sim.mesh_materials import (  # re-exported: the files an OBJ needs be
 )
 
 __all__ = [
-    "MeshCache", "MeshReadError", "ObjText", "file_bytes", "forget_under", "remember", "write_file", "hull_point_sets", "is_texture_statement", "load_trimesh", "mtl_libraries",
+    "MeshCache", "MeshData", "MeshReadError", "ObjText", "file_bytes", "forget_under", "remember", "write_file", "hull_point_sets", "is_texture_statement", "load_trimesh", "mtl_libraries",
     "group_meshes", "mtl_texture_maps", "obj_groups", "obj_material_files", "obj_material_uses", "parse_vertex_lines", "read_mesh",
     "read_mtl", "read_obj", "scan_obj_text"
 ]
@@ -163,7 +163,18 @@ def _parse_obj_fast(data: bytes, groups: bool = False) -> tuple[np.ndarray, ...]
 _OTHER_LINE_ENDS = np.array([0, 11, 12, 13, 28, 29, 30], np.uint8)
 
 
-def _parse_obj_general(data: bytes, where: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
+@dataclass(frozen=True, slots=True)
+class MeshData:
+    """A mesh file's triangles in its units, not validated (indices may be out of range, vertices NaN):
+    ``vertices`` (N, 3) float64, ``faces`` (M, 3) int64 (0-based vertex indices) and ``notes`` (one line per
+    kind of record the reader skipped)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    notes: list[str] = field(default_factory=list)
+
+
+def _parse_obj_general(data: bytes, where: str) -> MeshData:
     """Line-by-line OBJ reader (polygons, negative indices, comments); MeshReadError
     on malformed records."""
     verts: list[tuple[float, float, float]] = []
@@ -195,19 +206,18 @@ def _parse_obj_general(data: bytes, where: str) -> tuple[np.ndarray, np.ndarray,
     notes = [f"{where}: {bad} face records with < 3 vertices or index 0 skipped"] if bad else []
     v = np.asarray(verts, np.float64).reshape(-1, 3)
     f = np.asarray(faces, np.int64).reshape(-1, 3)
-    return v, f, notes
+    return MeshData(v, f, notes)
 
 
-def read_obj(data: bytes, where: str = "<obj>") -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """``(vertices (N, 3) float64, faces (M, 3) int64, notes)`` of OBJ bytes,
-    polygons fan-triangulated, not validated (as :func:`read_mesh`).
+def read_obj(data: bytes, where: str = "<obj>") -> MeshData:
+    """The triangles of OBJ bytes, polygons fan-triangulated, not validated (as :func:`read_mesh`).
 
     Raises:
         MeshReadError: a malformed ``v`` or ``f`` record (names ``where`` and the line).
     """
     fast = _parse_obj_fast(data)
     if fast is not None:
-        return fast[0], fast[1], []
+        return MeshData(fast[0], fast[1])
     return _parse_obj_general(data, where)
 
 
@@ -221,9 +231,8 @@ def load_trimesh(path: Path | str, *, skip_materials: bool = False):
                         process=False, resolver=trimesh.resolvers.FilePathResolver(str(path)), **extra)
 
 
-def read_mesh(path: Path | str) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """``(vertices (N, 3) float64, faces (M, 3) int64, notes)`` of a mesh file
-    in its units, not validated (indices may be out of range, vertices NaN).
+def read_mesh(path: Path | str) -> MeshData:
+    """The triangles of a mesh file in its units, not validated (indices may be out of range, vertices NaN).
 
     Raises:
         MeshReadError: the file is missing or cannot be parsed (message names
@@ -234,7 +243,7 @@ def read_mesh(path: Path | str) -> tuple[np.ndarray, np.ndarray, list[str]]:
         if path.suffix.lower() == ".obj":
             return read_obj(file_bytes(path), str(path))
         loaded = load_trimesh(path, skip_materials=True)
-        return np.asarray(loaded.vertices, np.float64), np.asarray(loaded.faces, np.int64), []
+        return MeshData(np.asarray(loaded.vertices, np.float64), np.asarray(loaded.faces, np.int64))
     except MeshReadError:
         raise
     except Exception as exc:  # OSError, trimesh parse errors of every kind
@@ -246,17 +255,16 @@ class MeshCache:
     read-only, a failed read remembered and raised again."""
 
     def __init__(self) -> None:
-        self._store: dict[Path, tuple[np.ndarray, np.ndarray, list[str]] | MeshReadError] = {}
+        self._store: dict[Path, MeshData | MeshReadError] = {}
 
-    def get(self, path: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
-        """The mesh at ``path`` (read on first use): vertices (N, 3), faces
-        (M, 3), notes. Raises MeshReadError."""
+    def get(self, path: Path) -> MeshData:
+        """The mesh at ``path`` (read on first use), its arrays read-only. Raises MeshReadError."""
         key = Path(path)
         hit = self._store.get(key)
         if hit is None:
             try:
                 hit = read_mesh(key)
-                for a in hit[:2]:
+                for a in (hit.vertices, hit.faces):
                     a.setflags(write=False)
             except MeshReadError as exc:
                 hit = exc
@@ -344,7 +352,8 @@ def group_meshes(path: Path | str) -> list[tuple[np.ndarray, np.ndarray]]:
     """
     path = Path(path)
     if path.suffix.lower() != ".obj":
-        v, f, _ = read_mesh(path)
+        mesh = read_mesh(path)
+        v, f = mesh.vertices, mesh.faces
         return [(v, f)]
     v, groups = _obj_group_polygons(path)
     out = []

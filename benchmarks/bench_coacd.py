@@ -84,7 +84,8 @@ def main(argv: list[str] | None = None) -> int:
     for obj in ids:
         found = []
         for path in sorted((DEV / obj / "textured_objs").glob("*.obj")):
-            v, f = read_mesh(path)[:2]
+            mesh = read_mesh(path)
+            v, f = mesh.vertices, mesh.faces
             if args.min_faces <= len(f) <= args.max_faces:
                 found.append((len(f), path, v, f))
         found.sort(key=lambda c: (-c[0], c[1].name))

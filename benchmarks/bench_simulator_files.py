@@ -35,7 +35,8 @@ def signed_volume(path: Path) -> float:
     faces of a closed mesh wind outward."""
     from asset2sim.mesh_io import read_mesh
 
-    v, f, _ = read_mesh(path)
+    mesh = read_mesh(path)
+    v, f = mesh.vertices, mesh.faces
     t = np.asarray(v, float)[np.asarray(f, int)]
     return float(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0)
 

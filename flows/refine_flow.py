@@ -334,21 +334,21 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
     flow_progress.emit(ProgressEvent("run_finished", name, run.run_id, total=run.info["assets"]))
     finish, run_out = _finish_partition(log, run)
     summary, df = _run_summary(run, finish, run_out, out, timing)
-    artifacts, mlflow_run_id, tracking_error = _track(log, run, summary, finish, df, run_out)
+    tracked = _track(log, run, summary, finish, df, run_out)
     summary.update(
         flow_run_id=run.info["flow_run_id"],  # None: recorded without a Prefect flow run (nothing was dispatched)
-        mlflow_run_id=mlflow_run_id,
-        tracking_error=tracking_error,
+        mlflow_run_id=tracked.mlflow_run_id,
+        tracking_error=tracked.tracking_error,
         tracking_seconds=time.perf_counter() - t_track,
         flow_body_seconds=time.perf_counter() - t0,
         flow_started_epoch=body_started_epoch,
-        artifacts={k: str(v) for k, v in artifacts.items()},
+        artifacts={k: str(v) for k, v in tracked.artifacts.items()},
     )
     run.info.update(
         status="finished",
         outcome=run_outcome(summary),
         finished_at=datetime.now(timezone.utc).isoformat(),
-        mlflow_run_id=mlflow_run_id,
+        mlflow_run_id=tracked.mlflow_run_id,
         regression={k: summary["regression"][k] for k in ("status", "exceeded", "previous_run", "regressed", "reasons")},
         summary={k: v for k, v in summary.items() if isinstance(v, (int, float, str, type(None)))},
     )
@@ -536,9 +536,19 @@ def _run_summary(run: _Run, finish, run_out: Path, out: str | None, timing: dict
     return summary, df
 
 
-def _track(log, run: _Run, summary: dict[str, Any], finish, df, run_out: Path) -> tuple[dict[str, Any], str | None, str | None]:
+@dataclasses.dataclass(frozen=True, slots=True)
+class _Tracked:
+    """What :func:`_track` recorded: ``artifacts`` (name -> file), the ``mlflow_run_id`` and the
+    ``tracking_error`` (None when tracking worked)."""
+
+    artifacts: dict[str, Any]
+    mlflow_run_id: str | None
+    tracking_error: str | None
+
+
+def _track(log, run: _Run, summary: dict[str, Any], finish, df, run_out: Path) -> _Tracked:
     """The run's report files written (and uploaded to the output store), the MLflow run and the Prefect summary
-    artifact; returns (artifacts, MLflow run id, tracking error)."""
+    artifact."""
     artifacts = {} if df.empty else tracking.write_run_artifacts(df, run_out, title=f"{run.name} / {run.run_id}")
     artifacts.update(finish.artifacts)
     if summary["output_store"] and run_out.is_dir():  # the run's report files beside its assets in the store
@@ -551,7 +561,7 @@ def _track(log, run: _Run, summary: dict[str, Any], finish, df, run_out: Path) -
         log.warning("MLflow tracking failed: %s", tracking_error)
     if run.info["flow_run_id"]:  # in a Prefect flow run
         _prefect_summary_artifact(summary, finish.comparison, mlflow_run_id, log)
-    return artifacts, mlflow_run_id, tracking_error
+    return _Tracked(artifacts, mlflow_run_id, tracking_error)
 
 
 def _add_isolation_times(row, refined, measured) -> None:

@@ -135,9 +135,9 @@ def refine_asset(
             with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx, \
                     Workspace(asset, open_containers=config.open_containers and config.convex_decomposition,
                               mesh_cache=cache) as ws:
-                ctx.task = task
-                pose_note = _interpret(ctx, log)
+                ctx, pose_note = _interpret(replace(ctx, task=task), log)
                 att, pose_note = _synthesize_and_check(ctx, est, config, ws, log, pose_note)
+                ctx = replace(ctx, root_rotation=att.root_rotation)  # the resting pose the kept attempt was made on
                 resolution = request_apply.resolve_states(ctx, att.overlay.scale)  # what each phrase set (the as-asked tier)
                 output.publish(att.candidate, ws, work)  # the output folder's files, written once
             log.say("post_check", refine_report.post_check_line(att))
@@ -272,19 +272,20 @@ def _moving_links(ctx: EstimationContext) -> list[str]:
     return sorted({ln for j in estimate.task_relevant_joints(ctx) for ln in ctx.subtrees[j]})
 
 
-def _interpret(ctx: EstimationContext, log: StageLog) -> str:
-    """Stage 3: the resting pose the request asks for ("lying flat", "sideways") into
-    ``ctx.root_rotation``. Returns the pose note ("" when none was asked)."""
+def _interpret(ctx: EstimationContext, log: StageLog) -> tuple[EstimationContext, str]:
+    """Stage 3: the resting pose the request asks for ("lying flat", "sideways"). Returns ``ctx`` with it as
+    ``root_rotation`` and the pose note ("" when none was asked)."""
     spec = ctx.request
     pose_note = ""
     if spec.pose_hint in ("lying_flat", "sideways"):
-        ctx.root_rotation, pose_note = pose.resting_rotation(ctx.session, ctx.asset, ctx.closed_state(), ctx.hull_points, _moving_links(ctx))
+        rotation, pose_note = pose.resting_rotation(ctx.session, ctx.asset, ctx.closed_state(), ctx.hull_points, _moving_links(ctx))
+        ctx = replace(ctx, root_rotation=rotation)
         log.say("request", f"pose '{spec.pose_hint}': {pose_note}")
     for note in request_notes(spec):
         log.say("request", note)
     log.say("request", f"category {ctx.category}; size {spec.size_class or 'regular'}; states " + (", ".join(js.words() for js in spec.joint_states) or "none asked"))
     log.lap("closed_state")
-    return pose_note
+    return ctx, pose_note
 
 
 # ----------------------------------------------------- 4-7: synthesize .. post-check
@@ -305,12 +306,10 @@ def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, ws:
         return att, pose_note
     why = "unstable as modelled" if not att.check.stable else "toppled by a robust-rest disturbance as modelled"
     log.say("post_check", f"{why}; {note}")
-    ctx.root_rotation = R
-    second = _attempt(ctx, est, config, ws, log)
+    second = _attempt(replace(ctx, root_rotation=R), est, config, ws, log)
     if second.check.stable and (second.check.passed or not att.check.passed) and not (
             second.check.topples and not att.check.topples):
         return second, f"{why}; {note}"
-    ctx.root_rotation = None
     return att.kept_after_another(), f"{note}; not better in simulation, kept as modelled"
 
 
@@ -322,22 +321,23 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Works
     there. Returns that attempt when it passes every check, else None (``att`` loaded again)."""
     intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
     try:
-        fractions, before, after = balance.steadiest_fractions(ws.source(att.candidate), att.overlay, att.state, att.closed_out, intervals)
+        steadiest = balance.steadiest_fractions(ws.source(att.candidate), att.overlay, att.state, att.closed_out, intervals)
     except Exception as exc:  # a measurement that fails leaves the attempt as it was
         log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {one_line(exc)})")
         return None
     why = "unstable" if not att.check.stable else "toppled by a robust-rest disturbance"
-    if fractions and after.stable:
+    fractions = steadiest.fractions
+    if fractions and steadiest.after.stable:
         note = (f"stability by design: {why} at the bands' targets; "
                 + ", ".join(f"{n} opened to {f:.2f} of its range (allowed {intervals[n][0]:.2f}-{intervals[n][1]:.2f})" for n, f in fractions.items())
-                + f", where the object stands steadiest: static margin {before.margin * 1000:.3g} -> {after.margin * 1000:.3g} mm"
-                f" (asked >= {after.required * 1000:.3g} mm)")
-    elif before.stable:  # statically steady, yet unstable or toppled in simulation
+                + f", where the object stands steadiest: static margin {steadiest.before.margin * 1000:.3g} -> {steadiest.after.margin * 1000:.3g} mm"
+                f" (asked >= {steadiest.after.required * 1000:.3g} mm)")
+    elif steadiest.before.stable:  # statically steady, yet unstable or toppled in simulation
         fractions = least_openings(att, intervals)
         if not fractions:
             return None
         note = (f"stability by design: {why} at the bands' targets although statically steady (margin "
-                f"{before.margin * 1000:.3g} mm, asked >= {before.required * 1000:.3g} mm); "
+                f"{steadiest.before.margin * 1000:.3g} mm, asked >= {steadiest.before.required * 1000:.3g} mm); "
                 + ", ".join(f"{n} opened to {f:.2f} of its range, the least its band allows ({intervals[n][0]:.2f}-{intervals[n][1]:.2f})"
                             for n, f in fractions.items()))
     else:  # the opening alone does not make it steady: the resting pose may
@@ -377,15 +377,16 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, l
         syn = replace(syn, bands={**syn.bands, **{j: request_apply.band_of(f) for j, f in st.room_made.items()}})
         for line in room:
             log.say("refine_state", line)
-    state, overrides, floored, lifted = ground_clearance.apply_ground_clearance(
-        replace(kept, state=state), ws, closed_tuples(syn.closed_out))
-    st.collision_changes = list(st.collision_changes) + lifted
+    lifted = ground_clearance.apply_ground_clearance(replace(kept, state=state), ws, closed_tuples(syn.closed_out))
+    state, overrides, floored = lifted.state, lifted.overrides, lifted.state_notes
+    st.collision_changes = list(st.collision_changes) + lifted.collision_notes
     refined = Candidate(ctx.asset, syn.overlay, state, overrides, ctx.root_rotation)
     measured, moved = refined, []  # the pieces the statics are measured on: those the limits were clipped on
     if overrides is not searched.collision_overrides:  # the collision pieces changed: the limits are clipped again on them (stage 6b)
         measured = replace(refined, overlay=limits.strip_clips(syn.overlay))
         reclipped, closed_re = placement.clip_limits(measured, closed_raw, ws, config, log)
-        syn, state, moved = placement.reclipped(syn, reclipped, closed_re, state)  # the state kept in its band
+        again = placement.reclipped(syn, reclipped, closed_re, state)  # the state kept in its band
+        syn, state, moved = again.synthesis, again.state, again.notes
         refined, measured = replace(refined, state=state), replace(measured, state=state)
         st.result = {n: state.get(n, q) for n, q in st.result.items()}
     balanced, design = stability.design_for_stability(ws.source(measured), ctx.asset, syn.overlay, state, ctx.category, ctx.geometry)
@@ -394,16 +395,15 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, l
         log.say("stability", line)
     design = room + design
     closed_out = syn.closed_out
-    overlay, check, rounds = escalation.post_check(ctx, replace(refined, overlay=balanced), config, ws, log,
-                                                   closed=closed_tuples(closed_out))
-    overlay, check, rounds, overrides, closed_out = escalation.repair_sweep(
-        ctx, limits.strip_clips(balanced), closed_raw, (overlay, check, rounds, overrides, closed_out), st, state, config, ws, log)
+    tuned = escalation.post_check(ctx, replace(refined, overlay=balanced), config, ws, log, closed=closed_tuples(closed_out))
+    tuned = escalation.repair_sweep(ctx, limits.strip_clips(balanced), closed_raw, replace(tuned, overrides=overrides, closed=closed_out),
+                                    st, state, config, ws, log)
     # the clearance of the first pieces (carried on by pieces a repair rewrote from them) and of the final ones
-    clear = list(dict.fromkeys(first_clear + placement.clearance_notes(ctx, overlay, state, overrides, ws)))
+    clear = list(dict.fromkeys(first_clear + placement.clearance_notes(ctx, tuned.overlay, state, tuned.overrides, ws)))
     st.collision_changes = clear + list(st.collision_changes)
-    return Attempt(asset=ctx.asset, overlay=overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic, closed_out=closed_out,
-                    st=st, state=state, overrides=overrides, root_rotation=ctx.root_rotation, check=check, rounds=rounds,
-                    design=design, targets=syn.targets)
+    return Attempt(asset=ctx.asset, overlay=tuned.overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic,
+                   closed_out=tuned.closed, st=st, state=state, overrides=tuned.overrides, root_rotation=ctx.root_rotation,
+                   check=tuned.check, rounds=tuned.rounds, design=design, targets=syn.targets)
 
 
 def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: StageLog) -> placement.Synthesis:

@@ -72,7 +72,9 @@ class FakeSession(SessionDefaults):
         self.options = options
         self.behaviour = behaviour or _DEFAULT_BEHAVIOUR
         self.dt = options.conventions.timestep
-        self.joint_names, self.joint_types, self.joint_limits, self.joint_child = joint_tables(self.model)
+        tables = joint_tables(self.model)
+        self.joint_names, self.joint_types = tables.names, tables.types
+        self.joint_limits, self.joint_child = tables.limits, tables.child
         self.link_names = self.model.tree_order()
         self.steps = 0
         self._anchor = {n: (0.0, 0) for n in self.joint_names}  # value, step when set

@@ -415,7 +415,8 @@ def _write_merged_obj(folder: Path, files: tuple[str, ...], dst: Path, group: st
     material library and material ``material_0`` (the generator's)."""
     verts, faces, n = [], [], 0
     for rel in files:
-        v, f, _ = mesh_io.read_mesh(folder / rel)
+        mesh = mesh_io.read_mesh(folder / rel)
+        v, f = mesh.vertices, mesh.faces
         verts.append(v)
         faces.append(f + n)
         n += len(v)

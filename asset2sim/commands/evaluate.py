@@ -8,6 +8,7 @@ cannot be evaluated, 4 the output cannot be written.
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 from pathlib import Path
 
 from asset2sim.commands._status import INVALID_REQUEST, CommandError, os_failure, output_failure, output_folder_failure, parse_engines
@@ -59,19 +60,29 @@ def default_out(asset: Path) -> Path:
     return folder.parent / f"{folder.resolve().name}-evaluation"
 
 
-def refined_request(asset: Path, prompt: str | None, task: str | None) -> tuple[str | None, str | None, str]:
-    """(prompt, task, what was taken) for evaluating ``asset``: those given, else, for a refined output folder, the
-    request and task its ``report.json`` records (the evaluation then grades what refine graded); the third item
-    says where a request taken from the folder came from ("" when none was taken)."""
+@dataclass(frozen=True, slots=True)
+class EvaluatedRequest:
+    """The request an evaluation grades (:func:`refined_request`): ``prompt``, ``task`` and ``taken_from`` (where
+    a request taken from the folder came from, one line; "" when none was taken)."""
+
+    prompt: str | None
+    task: str | None
+    taken_from: str = ""
+
+
+def refined_request(asset: Path, prompt: str | None, task: str | None) -> EvaluatedRequest:
+    """The prompt and task for evaluating ``asset``: those given, else, for a refined output folder, the
+    request and task its ``report.json`` records (the evaluation then grades what refine graded)."""
     if prompt is not None:
-        return prompt, task, ""
+        return EvaluatedRequest(prompt, task)
     try:
         report = read_report_json(asset if asset.is_dir() else asset.parent)
     except (OSError, ValueError):  # not a refined output: evaluated as given
-        return prompt, task, ""
+        return EvaluatedRequest(prompt, task)
     if not report.prompt:
-        return prompt, task, ""
-    return report.prompt, task if task is not None else report.task, f"'{report.prompt}' (from report.json; --prompt gives another)"
+        return EvaluatedRequest(prompt, task)
+    return EvaluatedRequest(report.prompt, task if task is not None else report.task,
+                            f"'{report.prompt}' (from report.json; --prompt gives another)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -84,12 +95,12 @@ def run(args: argparse.Namespace) -> int:
     bad_out = output_folder_failure(out)
     if bad_out is not None:
         raise bad_out
-    prompt, task, asked = refined_request(args.asset, args.prompt, getattr(args, "task", None))
+    req = refined_request(args.asset, args.prompt, getattr(args, "task", None))
     try:
         with output_folder.adopting(out):  # into a refined folder: its files become the product's
-            ev = evaluate_asset(args.asset, reference=args.reference, prompt=prompt, engines=engines, seed=args.seed,
+            ev = evaluate_asset(args.asset, reference=args.reference, prompt=req.prompt, engines=engines, seed=args.seed,
                                 category=args.category, out_dir=out, write_report=not args.no_report, probes=not args.no_probes,
-                                task=task, clips=not getattr(args, "no_clips", False))
+                                task=req.task, clips=not getattr(args, "no_clips", False))
     except output_folder.OutputError as exc:
         raise output_failure(exc, out) from exc
     except OSError as exc:
@@ -115,8 +126,8 @@ def run(args: argparse.Namespace) -> int:
     other = [f for f in ev.failures if f not in ready.failures]
     if other:
         console.print(f"other checks failing: {', '.join(other)}", markup=False, soft_wrap=True)
-    if asked:
-        console.print(terminal(f"request      {asked}"), markup=False, soft_wrap=True)
+    if req.taken_from:
+        console.print(terminal(f"request      {req.taken_from}"), markup=False, soft_wrap=True)
     whys = why_it_failed(ev.metrics)
     for why in whys:  # the sentences of report.html's "Why it failed"
         console.print(f"why it failed {terminal(why)}", markup=False, soft_wrap=True)

@@ -37,11 +37,22 @@ def read_urdf(path: Path | str) -> UrdfModel:
     return urdf.read_urdf(path, joint_types=SIMULATED_JOINT_TYPES)
 
 
-def joint_tables(model: UrdfModel) -> tuple[list[str], dict[str, str], dict[str, tuple[float, float]], dict[str, str]]:
-    """Names, types, (lower, upper) limits and child links of the movable joints, in file order."""
+@dataclass(frozen=True, slots=True)
+class JointTables:
+    """The movable joints of a model, in file order (:func:`joint_tables`): ``names``, ``types`` (joint -> URDF
+    type), ``limits`` (joint -> (lower, upper), rad or m) and ``child`` (joint -> child link)."""
+
+    names: list[str]
+    types: dict[str, str]
+    limits: dict[str, tuple[float, float]]
+    child: dict[str, str]
+
+
+def joint_tables(model: UrdfModel) -> JointTables:
+    """The names, types, limits and child links of the movable joints of ``model``."""
     movable = model.movable_joints
-    return ([j.name for j in movable], {j.name: j.type for j in movable}, {j.name: (j.lower, j.upper) for j in movable},
-            {j.name: j.child for j in movable})
+    return JointTables([j.name for j in movable], {j.name: j.type for j in movable}, {j.name: (j.lower, j.upper) for j in movable},
+                       {j.name: j.child for j in movable})
 
 
 def link_friction(model: UrdfModel, link: str) -> float:

@@ -44,7 +44,8 @@ class MuJoCoSession(SessionDefaults):
         self.d = mujoco.MjData(self.m)
         self.urdf = read_urdf(urdf_path)
         self.joint_names = list(self.build.joint_names)
-        _, self.joint_types, self.joint_limits, self.joint_child = joint_tables(self.urdf)
+        tables = joint_tables(self.urdf)
+        self.joint_types, self.joint_limits, self.joint_child = tables.types, tables.limits, tables.child
         self.link_names = [mujoco.mj_id2name(self.m, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(1, self.m.nbody)]
         self._body = {n: b + 1 for b, n in enumerate(self.link_names)}
         self._geoms: dict[str, list[int]] = {n: [] for n in self.link_names}

@@ -52,7 +52,9 @@ class NewtonSession(SessionDefaults):
         self.urdf = read_urdf(urdf_path)
         pieces, notes = collision_pieces(self.urdf)
         self.notes = list(notes)
-        self.joint_names, self.joint_types, self.joint_limits, self.joint_child = joint_tables(self.urdf)
+        tables = joint_tables(self.urdf)
+        self.joint_names, self.joint_types = tables.names, tables.types
+        self.joint_limits, self.joint_child = tables.limits, tables.child
         self.link_names = self.urdf.tree_order()
         self._fixed = bool(options.fixed_base)
         poses = self._placed_poses(pieces)

@@ -126,7 +126,9 @@ class OvPhysxSession(SessionDefaults):
             raise EngineUnavailable(f"engine 'ovphysx' runs the USD export, and {self.usd} does not exist "
                                     "(asset2sim export OUT --format usd)")
         self.urdf = read_urdf(urdf_path)
-        self.joint_names, self.joint_types, self.joint_limits, self.joint_child = joint_tables(self.urdf)
+        tables = joint_tables(self.urdf)
+        self.joint_names, self.joint_types = tables.names, tables.types
+        self.joint_limits, self.joint_child = tables.limits, tables.child
         self.link_names = list(self.urdf.tree_order())
         usd_stage = Usd.Stage.Open(str(self.usd))
         prim_of_joint: dict[str, str] = {}

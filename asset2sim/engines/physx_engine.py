@@ -177,7 +177,9 @@ class PhysXSession(SessionDefaults):
             self.scene, self.system, self.dt = scene, scene.physx_system, float(scene.get_timestep())
         self.ground = self._add_ground() if options.ground and (self._owns_scene or ground) else None
         self._add_articulation(self._articulation_builder(urdf_path), pieces, urdf_path)
-        self.joint_names, self.joint_types, self.joint_limits, self.joint_child = joint_tables(self.urdf)
+        tables = joint_tables(self.urdf)
+        self.joint_names, self.joint_types = tables.names, tables.types
+        self.joint_limits, self.joint_child = tables.limits, tables.child
         self.link_names = list(self.links)
         self._states: dict[int, tuple] = {}
         self._effort = None

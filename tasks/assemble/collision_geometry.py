@@ -14,6 +14,7 @@ import hashlib
 import json
 import threading
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import cachetools
@@ -61,9 +62,19 @@ def _group_hulls(link: urdf.UrdfLink, mesh_path, notes: list[str]) -> list[tuple
     return found
 
 
+@dataclass(frozen=True, slots=True)
+class _LinkPieces:
+    """A link's collision pieces before containment (:func:`_group_pieces`): ``pieces`` (link frame), ``cores``
+    (K, 3) m (the open cavities' core points; None: none) and ``decomposed`` (the files of the groups decomposed)."""
+
+    pieces: list[Piece]
+    cores: np.ndarray | None
+    decomposed: set[str]
+
+
 def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str], decompose: bool = True,
                   slides_along: set[str] | None = None, up: np.ndarray | None = None,
-                  hulls: list[tuple[int, int, Piece]] | None = None) -> tuple[list[Piece], np.ndarray | None, set[str]]:
+                  hulls: list[tuple[int, int, Piece]] | None = None) -> _LinkPieces:
     """Pieces of every mesh collision of ``link`` (one per OBJ group, link frame: :func:`_group_hulls`, or
     ``hulls`` when given; with ``decompose``, a group holding an open cavity the link's other groups leave open
     decomposed, :func:`container_pieces.open_pieces`, unless the link slides along the links ``slides_along`` or the cavity opens
@@ -86,7 +97,7 @@ def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str], decompose: b
             out += opened[0]
             cores.append(opened[1])
             opened_files.add(str(link.collisions[k].filename))
-    return out, (np.vstack(cores) if cores else None), opened_files
+    return _LinkPieces(out, np.vstack(cores) if cores else None, opened_files)
 
 
 def _sliding_neighbours(model: urdf.UrdfModel, hulls: dict[str, list[tuple[int, int, Piece]]]) -> dict[str, set[str]]:
@@ -167,10 +178,11 @@ def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
         # the world's up, against which a cavity opens downward; none for a link whose hull a child moves in
         up = poses[name][:3, :3].T @ np.array([0.0, 0.0, 1.0]) if name in poses and name not in holding else None
         notes.extend(hull_notes[name])
-        pieces[name], core, opened = _group_pieces(link, mesh_path, notes, opening, sliding.get(name), up, hulls.get(name))
-        whole.update((name, source) for source in opened)
-        if core is not None:
-            cores[name] = core
+        grouped = _group_pieces(link, mesh_path, notes, opening, sliding.get(name), up, hulls.get(name))
+        pieces[name] = grouped.pieces
+        whole.update((name, source) for source in grouped.decomposed)
+        if grouped.cores is not None:
+            cores[name] = grouped.cores
     # a container's decomposition is not cut again around a child (a new cut would fill its cavity): only trimmed
     _resolve_containment(model, pieces, mesh_path, notes, decompose, limit, frozenset(whole))
     for name in model.links:

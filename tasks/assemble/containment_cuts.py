@@ -181,7 +181,8 @@ def _split_pieces(link: urdf.UrdfLink, source: str, mesh_path, keep_out: np.ndar
         if c.kind != "mesh" or str(c.filename) != source:
             continue
         try:
-            v, f, _ = mesh_io.read_mesh(mesh_path(c))
+            mesh = mesh_io.read_mesh(mesh_path(c))
+            v, f = mesh.vertices, mesh.faces
         except mesh_io.MeshReadError as exc:
             raise CollisionGeometryError(f"link {link.name!r}: {exc}") from exc
         v = np.asarray(v, float) * c.scale @ c.origin[:3, :3].T + c.origin[:3, 3]

@@ -37,7 +37,7 @@ def element_label(name: str | None) -> str | None:
 def _mesh_vertices(path: str) -> np.ndarray:
     """Finite vertices (n, 3) of a mesh file, file units (read-only; (0, 3) when unreadable)."""
     try:
-        v, _, _ = read_mesh(Path(path))
+        v = read_mesh(Path(path)).vertices
     except MeshReadError:
         return np.zeros((0, 3))
     v = np.asarray(v, float)

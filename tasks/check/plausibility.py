@@ -188,7 +188,7 @@ def judge(ctx: EstimationContext, dp: DeclaredPhysics, mounting: RootMount) -> J
     """
     labels = {ln.name: canonical_label(ln.semantic_label) for ln in ctx.asset.links}
     values: list[ValueVerdict] = []
-    _, _, typical = size_priors.plausible_largest_dimension(ctx.category)  # refine keeps a real size by the same rule
+    typical = size_priors.plausible_largest_dimension(ctx.category).typical  # refine keeps a real size by the same rule
     values.append(bands.scale_verdict(float(np.max(ctx.closed_extents)), typical, ctx.category))
     declared_links, patched_links = {}, {}
     for name, dl in dp.links.items():

@@ -93,14 +93,15 @@ def probe_joint(session, joint: str, closed: tuple[float, float, float], *, acti
         session.step(1)
     q0, _ = session.joint_state(joint)
     f0 = frac(q0)
-    f_target, reached_if, notes = _target(action, f0, open_range, floor_stop)
+    aim = _target(action, f0, open_range, floor_stop)
+    f_target, reached_if, notes = aim.fraction, aim.reached, aim.notes
     q_target = closed + direction * f_target * open_range
     sign = 1.0 if q_target >= q0 else -1.0  # +1 when the target needs q to increase
     weight = float(sum(session.link_masses().values())) * abs(session.options.conventions.gravity)  # the engine's masses
     hand = pusher_for(session, joint, cfg, weight, model)
     # Sliding is measured where the object stands (the footprint point, carried with the root).
     watch = SupportWatch(session, session.link_names[0])
-    _, _, lever0 = push_geometry(session, joint)
+    lever0 = push_geometry(session, joint).lever
     travel = abs(q_target - q0) * (lever0 if lever0 is not None else 1.0)
     push_s, asked_s = push_budget(cfg, hand.ramp, travel)
     n_push = int(round(push_s / dt))
@@ -120,16 +121,15 @@ def probe_joint(session, joint: str, closed: tuple[float, float, float], *, acti
         notes.append(f"push stopped at the {push_s:.0f} s cap (ProbeConfig.max_push_time): the travel ({travel:.3g} m at the "
                      f"push point, lever {lever0 if lever0 is not None else 0.0:.3g} m) and the force ramp ({hand.ramp:.3g} s) asked "
                      f"{asked_s:.0f} s")
-    rebound, kept, failure = _judge(session.joint_types[joint] == "prismatic", action, open_range, cfg, run,
-                                    holds_position, returns, notes)
+    verdict = _judge(session.joint_types[joint] == "prismatic", action, open_range, cfg, run, holds_position, returns, notes)
     return ProbeResult(
         joint=joint, joint_type=session.joint_types[joint], action=action, start=q0, target=float(q_target), start_fraction=f0,
         target_fraction=f_target, reached=bool(run.reached), time_to_reach=run.t_reach, peak_force=float(run.peak_force),
         peak_effort=float(run.peak_effort), lever_arm=run.lever, max_force=float(hand.f_max),
         root_displacement=float(run.max_disp), root_rotation=float(run.max_rot), slid=bool(run.max_disp > cfg.slide_tol),
         tipped=bool(run.max_rot > cfg.tip_tol), release_fraction=float(run.f_rel),
-        final_fraction=float(f_end) if np.isfinite(f_end) else float("nan"), rebound=bool(rebound), kept_moving=bool(kept),
-        success=not failure, failure=failure, notes=notes, trace=run.trace)
+        final_fraction=float(f_end) if np.isfinite(f_end) else float("nan"), rebound=bool(verdict.rebound), kept_moving=bool(verdict.kept),
+        success=not verdict.failure, failure=verdict.failure, notes=notes, trace=run.trace)
 
 
 def check_action(session, joint: str, action: str, open_range: float, what: str = "probe", unknown: str | None = None) -> None:
@@ -154,16 +154,25 @@ def reached_fraction(action: str, target_fraction: float) -> float:
     return target_fraction * OPEN_REACHED / OPEN_TARGET  # a target the floor set
 
 
-def _target(action: str, f0: float, open_range: float, floor_stop: float | None
-            ) -> tuple[float, Callable[[float], bool], list[str]]:
-    """(target opening fraction, whether a fraction has reached it, notes) of a probe starting at ``f0``."""
+@dataclass(frozen=True, slots=True)
+class _Aim:
+    """A probe's target (:func:`_target`): its opening ``fraction``, ``reached`` (whether an opening fraction has
+    reached it) and ``notes``."""
+
+    fraction: float
+    reached: Callable[[float], bool]
+    notes: list[str]
+
+
+def _target(action: str, f0: float, open_range: float, floor_stop: float | None) -> _Aim:
+    """The target of a probe starting at opening fraction ``f0``."""
     f_target = CLOSE_TARGET if action == "close" else (OPEN_TARGET if f0 < OPEN_REACHED else OPEN_FAR_TARGET)
     notes: list[str] = []
     if action == "open" and floor_stop is not None and floor_stop / open_range < f_target:
         f_target = max(floor_stop / open_range, 0.0)  # the floor stops the part before the target
         notes.append(f"the floor stops it {f_target:.0%} open (the object resting as it is): the open probe's target")
     at = reached_fraction(action, f_target)
-    return f_target, ((lambda f: f <= at) if action == "close" else (lambda f: f >= at)), notes
+    return _Aim(f_target, (lambda f: f <= at) if action == "close" else (lambda f: f >= at), notes)
 
 
 @dataclass
@@ -215,8 +224,9 @@ def _push(session, stroke: _Stroke, hand: Pusher, cfg: ProbeConfig, watch: Suppo
 
     def law(k, q, qd):
         nonlocal lead, force, lever
-        c, t_dir, lever = push_geometry(session, joint)
-        d = sign * t_dir
+        push = push_geometry(session, joint)
+        c, lever = push.point, push.lever
+        d = sign * push.direction
         v = sign * qd * (lever if lever is not None else 1.0)  # speed of the push point along d
         lead, force = hand.step(lead, v, dt)
         session.apply_link_force(link, force * d, c)
@@ -259,9 +269,19 @@ def _release(session, joint: str, n_rel: int, frac: Callable[[float], float], wa
     run_stroke(session, joint, n_rel, record=record)
 
 
+@dataclass(frozen=True, slots=True)
+class _Verdict:
+    """How a probe ended (:func:`_judge`): ``rebound`` (moved back towards its start after release), ``kept``
+    (kept moving after release) and ``failure`` ("" on success)."""
+
+    rebound: bool
+    kept: bool
+    failure: str
+
+
 def _judge(prismatic: bool, action: str, open_range: float, cfg: ProbeConfig, run: _Run, holds_position: bool,
-           returns: bool, notes: list[str]) -> tuple[bool, bool, str]:
-    """(rebound, kept moving, failure: "" on success) of a probe; notes what is allowed."""
+           returns: bool, notes: list[str]) -> _Verdict:
+    """How a probe ended; notes what is allowed."""
     q_end, qd_end = run.q_end, run.qd_end
     # "towards the start": for close the start is more open (larger f).
     tol = max(REBOUND_FRACTION, (REBOUND_FLOOR_PRISMATIC if prismatic else REBOUND_FLOOR_REVOLUTE) / open_range)
@@ -293,7 +313,7 @@ def _judge(prismatic: bool, action: str, open_range: float, cfg: ProbeConfig, ru
         notes.append("springs back after release (allowed: a spring its part prior or the request expects returns it)")
     if kept:
         notes.append("keeps moving after release")
-    return rebound, kept, failure
+    return _Verdict(rebound, kept, failure)
 
 
 def run_probes(session, joints: dict[str, tuple[float, float, float]], *, actions: tuple[str, ...] = ("close", "open"),
@@ -368,7 +388,7 @@ def _probe_cleared(session, first: ProbeResult, joints: dict[str, tuple[float, f
         session.restore_state(sid)
         session.set_joint_positions(opened)
         for k in opened:
-            _, _, lever = push_geometry(session, k)
+            lever = push_geometry(session, k).lever
             session.drive_joint(k, 0.0, f_max * (lever if lever is not None else 1.0))
         try:
             retry = probe_joint(session, name, joints[name], **kw)

@@ -94,14 +94,24 @@ def pusher_for(session, joint: str, cfg: ProbeConfig, weight: float, model: Urdf
     return Pusher(f_max, stiffness, damping, ramp, cfg.push_speed)
 
 
-def push_geometry(session, joint: str) -> tuple[np.ndarray, np.ndarray, float | None]:
-    """Push point (3,) m, unit direction (3,) that increases q, lever (m) or None."""
+@dataclass(frozen=True, slots=True)
+class PushGeometry:
+    """Where a hand pushes a joint's part (:func:`push_geometry`): ``point`` (3,) m, unit ``direction`` (3,)
+    that increases q, and ``lever`` (m; None for a prismatic joint)."""
+
+    point: np.ndarray
+    direction: np.ndarray
+    lever: float | None
+
+
+def push_geometry(session, joint: str) -> PushGeometry:
+    """The push point, direction and lever of ``joint``'s child at the session's state."""
     link = session.joint_child[joint]
     o, a = joint_frame_axis(session, joint, link)
     lo, hi = session.link_aabb(link)
     c = 0.5 * (lo + hi)
     if session.joint_types[joint] == "prismatic":
-        return c, a, None
+        return PushGeometry(c, a, None)
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     rr = (corners - o) - np.outer((corners - o) @ a, a)
     k = int(np.argmax(np.linalg.norm(rr, axis=1)))
@@ -109,7 +119,7 @@ def push_geometry(session, joint: str) -> tuple[np.ndarray, np.ndarray, float | 
     lever = float(np.linalg.norm(r))
     t = np.cross(a, r)
     t /= max(np.linalg.norm(t), 1e-12)
-    return c, t, max(lever, 1e-4)
+    return PushGeometry(c, t, max(lever, 1e-4))
 
 
 def push_budget(cfg: ProbeConfig, ramp: float, travel: float) -> tuple[float, float]:
@@ -133,7 +143,7 @@ def effective_mass(session, joint: str, model: UrdfModel | None = None) -> float
     child = session.joint_child[joint]
     rigid = [ln for ln in (rigid_group(model, child) if model is not None else {child}) if ln in session.link_names]
     held = session.held_physics().links
-    _, _, lever = push_geometry(session, joint)
+    lever = push_geometry(session, joint).lever
     if lever is None:
         return max(sum(held[ln].mass for ln in rigid if ln in held), 1e-4)
     o, a = joint_frame_axis(session, joint, child)

@@ -83,9 +83,19 @@ def mass_plausibility(total_mass: float, mass_range: tuple[float, float] | None,
     return _result("total_mass", float(total_mass), "kg", threshold, details, passed)
 
 
-def size_score(largest_extent: float, typical_largest: float, size_factor: float = 1.0) -> tuple[float, str, float]:
-    """Size half of prompt alignment: (score 0 / 0.5 / 1, reason, ratio L / L_target), L = ``largest_extent`` m, L_target =
-    ``typical_largest`` m x ``size_factor``. Raises ValueError: non-positive inputs."""
+@dataclass(frozen=True, slots=True)
+class SizeScore:
+    """The size half of prompt alignment (:func:`size_score`): ``score`` 0 / 0.5 / 1, ``reason`` (one line) and
+    ``ratio`` L / L_target (dimensionless)."""
+
+    score: float
+    reason: str
+    ratio: float
+
+
+def size_score(largest_extent: float, typical_largest: float, size_factor: float = 1.0) -> SizeScore:
+    """Size half of prompt alignment, L = ``largest_extent`` m against L_target = ``typical_largest`` m x
+    ``size_factor``. Raises ValueError: non-positive inputs."""
     if not (largest_extent > 0 and typical_largest > 0 and size_factor > 0):
         raise ValueError(f"size inputs must be > 0 (got {largest_extent}, {typical_largest}, {size_factor})")
     target = typical_largest * size_factor
@@ -101,7 +111,7 @@ def size_score(largest_extent: float, typical_largest: float, size_factor: float
         f"largest extent {largest_extent:.3f} m vs target {target:.3f} m "
         f"(typical {typical_largest:.3f} m x {size_factor:g}): ratio {r:.2f}, {verdict}"
     )
-    return score, reason, r
+    return SizeScore(score, reason, r)
 
 
 def band_score(fraction: float, band: str) -> tuple[float, str]:
@@ -190,10 +200,10 @@ def prompt_alignment(*, size_requested: bool, largest_extent: float | None, typi
         return _result("prompt_alignment", 0.0, "fraction", "nothing understood: not aligned", details)
     halves = []
     if typical_largest and largest_extent:
-        s, reason, ratio = size_score(largest_extent, typical_largest, size_factor)
-        details["size"] = {"score": s, "reason": reason, "ratio": ratio, "requested": size_requested,
+        size = size_score(largest_extent, typical_largest, size_factor)
+        details["size"] = {"score": size.score, "reason": size.reason, "ratio": size.ratio, "requested": size_requested,
                            "largest_extent_m": largest_extent, "target_m": typical_largest * size_factor}
-        halves.append(s)
+        halves.append(size.score)
     else:
         details["size"] = {"score": None, "reason": "no typical size known for the category or no extent measured"}
     if state_requested and not joint_checks:

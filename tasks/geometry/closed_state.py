@@ -103,7 +103,7 @@ def link_hull_points(asset: AssetDescription, cache=None) -> dict[str, np.ndarra
         for g in refs:
             if g.kind == "mesh" and g.path is not None:
                 try:
-                    v = np.asarray(cache.get(g.path)[0], float)
+                    v = np.asarray(cache.get(g.path).vertices, float)
                 except Exception:
                     continue
                 v = v[np.all(np.isfinite(v), axis=1)] * np.asarray(g.scale, float)

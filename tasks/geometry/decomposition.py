@@ -45,7 +45,11 @@ def decompose_mesh(path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
     """Convex pieces [(vertices (N, 3), faces (M, 3))] of the mesh at ``path`` (file units), from the cache or CoACD. Raises
     DecompositionUnavailable (no coacd) or ValueError (the mesh cannot be read)."""
     digest = hashlib.sha256(path.read_bytes() + json.dumps({**COACD_SETTINGS, "refit": 1}, sort_keys=True).encode()).hexdigest()
-    return _decompose(digest, lambda: read_mesh(path)[:2], str(path))
+
+    def triangles() -> tuple[np.ndarray, np.ndarray]:
+        mesh = read_mesh(path)
+        return mesh.vertices, mesh.faces
+    return _decompose(digest, triangles, str(path))
 
 
 def decompose(vertices: np.ndarray, faces: np.ndarray, settings: dict | None = None, *,

@@ -87,14 +87,25 @@ def chain_links(model: UrdfModel, joint: str) -> set[str]:
     return chain - rigid_group(model, jd.parent)
 
 
+@dataclass(frozen=True, slots=True)
+class _ChainEnd:
+    """Where a part carried by a chain stops with the chain open (:func:`_chain_far_end`): ``far`` (rad or m, at
+    the contact's onset), ``who`` (the link run into; None when the chain does not end the range) and ``opened``
+    (the chain's joints opened)."""
+
+    far: float
+    who: str | None
+    opened: list[str]
+
+
 def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed: dict[str, tuple[float, float, float]],
-                   state: dict[str, float], q_close: float, far_raw: float, range_: float) -> tuple[float, str | None, list[str]]:
-    """The chain scan (``chain_open``): (far end at the contact's onset, the link run into, the joints
-    opened), or (``far_raw``, None, []) when the chain does not end the range or the part cannot open
-    from ``q_close`` even then. The session is left at ``state`` with ``name`` at ``q_close``."""
+                   state: dict[str, float], q_close: float, far_raw: float, range_: float) -> _ChainEnd:
+    """The chain scan (``chain_open``): the far end, or ``far_raw`` run into nothing when the chain does not end
+    the range or the part cannot open from ``q_close`` even then. The session is left at ``state`` with ``name``
+    at ``q_close``."""
     pairs = collision_pairs(session, sub, chain_links(model, name) - set(sub))
     if not pairs:
-        return float(far_raw), None, []
+        return _ChainEnd(float(far_raw), None, [])
     parent_of = {j.child: j for j in model.joints}
     opened, ln = {}, model.joint(name).parent
     while ln in parent_of:
@@ -105,19 +116,19 @@ def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed:
                 opened[j.name] = kc + kd * kr
         ln = j.parent
     if not opened:
-        return float(far_raw), None, []
+        return _ChainEnd(float(far_raw), None, [])
     try:
         session.set_joint_positions({**state, **opened, name: q_close})
         _, depth = depth_scan(session, name, pairs, *sorted((q_close, far_raw)), q_close, SCAN_SAMPLES)
         base = depth.min(axis=0)
         session.set_joint_positions({name: q_close})
         if float((pair_depths(session, pairs) - base).max(initial=0.0)) > EXCESS_TOLERANCE:
-            return float(far_raw), None, []  # not free at its closed end even with the chain open: the sweep's finding
+            return _ChainEnd(float(far_raw), None, [])  # not free at its closed end even with the chain open: the sweep's finding
         far, who = free_end(session, name, q_close, far_raw, pairs, base, EXCESS_TOLERANCE, SCAN_SAMPLES, STOP_DEPTH)
         if who is None or abs(far - q_close) < MIN_FREE_FRACTION * range_:
-            return float(far_raw), None, []
+            return _ChainEnd(float(far_raw), None, [])
         far = contact_onset(session, name, far, q_close, pairs, base, BACK_OFF_FRACTION * range_)
-        return float(far), who, sorted(opened)
+        return _ChainEnd(float(far), who, sorted(opened))
     finally:
         session.set_joint_positions({**state, name: q_close})
 
@@ -252,12 +263,12 @@ class _JointScan:
         return q_close
 
     def far_end(self, clip: LimitClip, far: float, who: str | None, q_close: float, far_raw: float,
-                chain_end: tuple[float, str | None, list[str]] | None) -> tuple[float, str | None]:
+                chain_end: _ChainEnd | None) -> tuple[float, str | None]:
         """(limit on the opening side, the link run into): the chain's end when nearer, else
         ``far`` at its contact's onset when it clips ``far_raw``, else ``far_raw``."""
         side = "upper" if self.d > 0 else "lower"
         if chain_end is not None:
-            far_c, who_c, opened = chain_end
+            far_c, who_c, opened = chain_end.far, chain_end.who, chain_end.opened
             if who_c is not None and (far_c - far) * self.d < 0 and self.clips(far_raw, far_c):
                 if self.clips(far_raw, far):  # the parent's stop, at its onset, may still be nearer
                     far_s = self.onset(far, q_close)

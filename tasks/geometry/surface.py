@@ -114,7 +114,8 @@ def link_surface(link: LinkDesc, *, prefer: Literal["collision", "visual"] = "co
                 if ref.path is None:
                     raise _PieceError(f"{where}: mesh {ref.filename!r} has no resolved path")
                 try:
-                    v, f, read_notes = cache.get(ref.path)
+                    mesh = cache.get(ref.path)
+                    v, f, read_notes = mesh.vertices, mesh.faces, mesh.notes
                 except MeshReadError as exc:
                     raise _PieceError(f"{where}: {exc}") from None
                 notes.extend(f"{where}: {n}" for n in read_notes)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 import os
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -95,9 +96,19 @@ def zero_pose_bounds(model: UrdfModel, root: str | None, mesh_bounds: dict[int, 
         return np.stack([allp.min(axis=0), allp.max(axis=0)])
 
 
-def texture_header(path: Path, max_bytes: int) -> tuple[int, int, int]:
-    """(file size in bytes, width, height in pixels) of a texture map from the image header, nothing
-    decoded; a file above ``max_bytes`` is not opened (width and height -1).
+@dataclass(frozen=True, slots=True)
+class TextureHeader:
+    """What a texture map's header says (:func:`texture_header`): the file's ``size`` (bytes), its ``width`` and
+    ``height`` (pixels; -1 when the file was too large to open)."""
+
+    size: int
+    width: int
+    height: int
+
+
+def texture_header(path: Path, max_bytes: int) -> TextureHeader:
+    """The file size and pixel size of a texture map from the image header, nothing decoded; a file above
+    ``max_bytes`` is not opened (width and height -1).
 
     Raises:
         OSError: it cannot be inspected or is not a regular file.
@@ -106,7 +117,7 @@ def texture_header(path: Path, max_bytes: int) -> tuple[int, int, int]:
     """
     size = os.stat(path).st_size
     if size > max_bytes:
-        return size, -1, -1
+        return TextureHeader(size, -1, -1)
     with atomic.open_regular(path) as fh, warnings.catch_warnings():
         warnings.simplefilter("ignore", Image.DecompressionBombWarning)
         try:
@@ -114,20 +125,21 @@ def texture_header(path: Path, max_bytes: int) -> tuple[int, int, int]:
                 w, h = im.size
         except (UnidentifiedImageError, SyntaxError) as exc:
             raise ValueError(f"{type(exc).__name__}: {str(exc)[:160]}") from exc
-    return size, int(w), int(h)
+    return TextureHeader(size, int(w), int(h))
 
 
 def texture_problem(path: Path, max_bytes: int, max_pixels: int) -> tuple[str, str] | None:
     """Why a texture map cannot be loaded safely, (``TEXTURE_TOO_LARGE`` or ``TEXTURE_UNREADABLE``,
     message); None when it can."""
     try:
-        size, w, h = texture_header(path, max_bytes)
+        header = texture_header(path, max_bytes)
     except Image.DecompressionBombError as exc:
         return "TEXTURE_TOO_LARGE", f"{exc}".split(",")[0] + f" (cap {max_pixels} pixels)"
     except OSError as exc:
         return "TEXTURE_UNREADABLE", f"cannot be opened as a regular file ({exc.strerror or exc})"
     except ValueError as exc:
         return "TEXTURE_UNREADABLE", f"not an image the simulator can load ({exc})"
+    size, w, h = header.size, header.width, header.height
     if size > max_bytes:
         return "TEXTURE_TOO_LARGE", f"{size} bytes > cap {max_bytes} (PyBullet reads the whole file, twice over)"
     if w * h > max_pixels:
@@ -305,9 +317,9 @@ class MeshChecks(Recorder):
             code, msg = problem
             self.add(code, f"{owner} refers to texture {name!r}: {msg}", file=self.rel(path), line=line, link=link, referenced_by=owner)
             return
-        size, w, h = texture_header(path, pol.max_texture_bytes)
-        self._texture_totals[0] += size
-        self._texture_totals[1] += w * h
+        header = texture_header(path, pol.max_texture_bytes)
+        self._texture_totals[0] += header.size
+        self._texture_totals[1] += header.width * header.height
 
     def texture_totals(self) -> None:
         """The per-asset texture caps (bytes and pixels over every distinct texture map)."""

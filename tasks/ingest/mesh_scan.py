@@ -46,12 +46,23 @@ class _Unparsable(Exception):
         self.mtllibs = mtllibs
 
 
+@dataclass(frozen=True, slots=True)
+class _Triangles:
+    """A strict read's triangles (file units): ``vertices`` (N, 3), the valid ``faces`` (M, 3) int64, ``defects``
+    code -> message and an OBJ's ``mtllibs``."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    defects: dict[str, str]
+    mtllibs: list[str] = field(default_factory=list)
+
+
 _OBJ_NOT_RECORD = re.compile(rb"^[ \t]*([^A-Za-z#\s][^\r\n]{0,39})", re.M)
 
 
-def _scan_obj(data: bytes, max_faces: int) -> tuple[np.ndarray, np.ndarray, dict[str, str], list[str]]:
+def _scan_obj(data: bytes, max_faces: int) -> _Triangles:
     """An OBJ as refine reads it (:func:`asset2sim.mesh_io.read_obj`) plus strict checks (face cap before
-    parsing, non-records, bad indices, skipped faces): (vertices, valid triangles, defects, mtllibs)."""
+    parsing, non-records, bad indices, skipped faces)."""
     defects: dict[str, str] = {}
     approx_faces = data.count(b"\nf ") + data.count(b"\nf\t") + (1 if data[:2] in (b"f ", b"f\t") else 0)
     if approx_faces > max_faces:
@@ -63,7 +74,8 @@ def _scan_obj(data: bytes, max_faces: int) -> tuple[np.ndarray, np.ndarray, dict
         lineno = data.count(b"\n", 0, bad_rec.start()) + 1
         defects["MESH_MALFORMED"] = f"line {lineno}: not an OBJ record: {bad_rec.group(1)!r}"
     try:
-        v, f, notes = mesh_io.read_obj(data, "OBJ")
+        mesh = mesh_io.read_obj(data, "OBJ")
+        v, f, notes = mesh.vertices, mesh.faces, mesh.notes
     except mesh_io.MeshReadError as exc:  # refine could not read it either: nothing more to check
         raise _Unparsable(defects.get("MESH_MALFORMED") or str(exc), mtllibs) from None
     if len(f) > max_faces:
@@ -72,10 +84,10 @@ def _scan_obj(data: bytes, max_faces: int) -> tuple[np.ndarray, np.ndarray, dict
     if bad.any() or notes:
         what = [f"{int(bad.sum())} face(s) index vertices outside the {len(v)} defined"] if bad.any() else []
         defects["MESH_BAD_INDEX"] = "; ".join(what + [n.replace("OBJ: ", "") for n in notes])
-    return v, f[~bad], defects, mtllibs
+    return _Triangles(v, f[~bad], defects, mtllibs)
 
 
-def _scan_stl(data: bytes, max_faces: int) -> tuple[np.ndarray, np.ndarray, dict[str, str]]:
+def _scan_stl(data: bytes, max_faces: int) -> _Triangles:
     defects: dict[str, str] = {}
     if len(data) >= 84:
         n = int.from_bytes(data[80:84], "little")
@@ -85,11 +97,11 @@ def _scan_stl(data: bytes, max_faces: int) -> tuple[np.ndarray, np.ndarray, dict
             dt = np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
             tri = np.frombuffer(data, dtype=dt, count=n, offset=84)["v"].astype(np.float64)
             v = tri.reshape(-1, 3)
-            return v, np.arange(len(v)).reshape(-1, 3), defects
+            return _Triangles(v, np.arange(len(v)).reshape(-1, 3), defects)
     head = data[:512].lstrip().lower()
     if not head.startswith(b"solid"):
         defects["MESH_MALFORMED"] = "neither a binary STL (size != 84 + 50 n) nor an ASCII STL"
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), defects
+        return _Triangles(np.zeros((0, 3)), np.zeros((0, 3), np.int64), defects)
     if data.count(b"facet") // 2 > max_faces:
         raise _TooManyFaces(data.count(b"facet") // 2, max_faces, "facets (about)")
     coords = re.findall(rb"vertex\s+(\S+)\s+(\S+)\s+(\S+)", data)
@@ -97,14 +109,14 @@ def _scan_stl(data: bytes, max_faces: int) -> tuple[np.ndarray, np.ndarray, dict
         v = np.array(coords, dtype=np.float64).reshape(-1, 3)
     except ValueError:
         defects["MESH_MALFORMED"] = "an ASCII STL vertex is not numeric"
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), defects
+        return _Triangles(np.zeros((0, 3)), np.zeros((0, 3), np.int64), defects)
     if len(v) % 3:
         defects["MESH_MALFORMED"] = f"{len(v)} vertices is not a whole number of triangles"
         v = v[: len(v) - len(v) % 3]
-    return v, np.arange(len(v)).reshape(-1, 3), defects
+    return _Triangles(v, np.arange(len(v)).reshape(-1, 3), defects)
 
 
-def _scan_trimesh(data: bytes, ext: str, max_faces: int, source: str) -> tuple[np.ndarray, np.ndarray, dict[str, str]]:
+def _scan_trimesh(data: bytes, ext: str, max_faces: int, source: str) -> _Triangles:
     if ext == ".dae":
         safexml.parse_xml_bytes(data, source=source)  # DAE is XML: refuse DTDs/entities first
     import trimesh
@@ -118,7 +130,7 @@ def _scan_trimesh(data: bytes, ext: str, max_faces: int, source: str) -> tuple[n
     bad = np.any((f < 0) | (f >= len(v)), axis=1) if len(f) else np.zeros(0, bool)
     if bad.any():
         defects["MESH_BAD_INDEX"] = f"{int(bad.sum())} face(s) index beyond the {len(v)} vertices"
-    return v, f[~bad], defects
+    return _Triangles(v, f[~bad], defects)
 
 
 def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: int = 2_000_000,
@@ -158,11 +170,13 @@ def _scan_data(data: bytes, ext: str, max_faces: int, max_coordinate: float, sou
     scan = MeshScan()
     try:
         if ext == ".obj":
-            v, f, defects, scan.mtllibs = _scan_obj(data, max_faces)
+            read = _scan_obj(data, max_faces)
+            scan.mtllibs = read.mtllibs
         elif ext == ".stl":
-            v, f, defects = _scan_stl(data, max_faces)
+            read = _scan_stl(data, max_faces)
         else:
-            v, f, defects = _scan_trimesh(data, ext, max_faces, source)
+            read = _scan_trimesh(data, ext, max_faces, source)
+        v, f, defects = read.vertices, read.faces, read.defects
     except _TooManyFaces as exc:  # counted in the asset's total all the same
         scan.defects["MESH_TOO_MANY_FACES"] = str(exc)
         scan.n_faces = exc.count

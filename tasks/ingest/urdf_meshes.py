@@ -64,7 +64,8 @@ def read_urdf_converting(urdf: Path | str) -> ReadAsset:
             key = g.path.resolve()
             if key not in names:
                 try:
-                    v, f, _ = mesh_io.read_mesh(key)
+                    mesh = mesh_io.read_mesh(key)
+                    v, f = mesh.vertices, mesh.faces
                 except mesh_io.MeshReadError as exc:
                     raise StagingError(f"{urdf}: link {link.name!r}: {exc}") from exc
                 names[key] = mesh_name(key.stem, used)

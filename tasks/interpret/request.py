@@ -303,8 +303,21 @@ def _size_factors() -> dict[str, float]:
 _COMPARED = re.compile(r"(?:small|large|big)(?:ger|er|r|est|st)")
 
 
-def _parse_size(low: str, mentions: list[CategoryMention], tokens: _Tokens) -> tuple[str | None, float, str, list[_Hit], list[_Hit]]:
-    """Size class, factor, phrase, the size words used, and those pointing the other way from the first one."""
+@dataclass(frozen=True, slots=True)
+class _SizeWords:
+    """The size words of a request: ``size_class`` (None without one), its ``factor`` on the size (1 without
+    one), ``phrase`` (the words counted, comma-joined), ``hits`` (those words) and ``against`` (the words
+    pointing the other way from the first one)."""
+
+    size_class: str | None
+    factor: float
+    phrase: str
+    hits: list[_Hit]
+    against: list[_Hit]
+
+
+def _parse_size(low: str, mentions: list[CategoryMention], tokens: _Tokens) -> _SizeWords:
+    """The size class, factor, phrase, the size words used, and those pointing the other way from the first one."""
     used: list[_Hit] = []
     mention_starts = [m.start for m in mentions]  # left to right
     for h in _scan(low, _SIZE_TABLE):
@@ -318,14 +331,14 @@ def _parse_size(low: str, mentions: list[CategoryMention], tokens: _Tokens) -> t
                 continue
         used.append(h)
     if not used:
-        return None, 1.0, "", [], []
+        return _SizeWords(None, 1.0, "", [], [])
     facs = _size_factors()
     first_dir = math.copysign(1.0, math.log(facs[str(used[0].value)])) if facs[str(used[0].value)] != 1.0 else 0.0
     same = [h for h in used if first_dir == 0.0 or math.log(facs[str(h.value)]) * first_dir >= 0.0]
     best = max(same, key=lambda h: abs(math.log(facs[str(h.value)])))
     cls = str(best.value)
     counted = [h for h in same if h.value != "regular" or cls == "regular"]
-    return cls, facs[cls], ", ".join(h.text for h in counted), counted, [h for h in used if h not in same]
+    return _SizeWords(cls, facs[cls], ", ".join(h.text for h in counted), counted, [h for h in used if h not in same])
 
 
 _END_TAIL = re.compile(r"\s*(?:$|[,.;:!?)]|and\b|but\b|with\b|while\b|position\b)")
@@ -445,10 +458,20 @@ _ELIDED = re.compile(r"\s*(?:,\s*)?(?:and|or|but|then|yet)?\s*(?:also\s+|at the 
 _OTHERS = re.compile(r"(?<![\w-])(?:others|(?:the )?rest(?: of them)?|remaining(?: ones)?|other(?: ones?)?)(?![\w-])")
 
 
-def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = None
-                  ) -> tuple[list[JointStateRequest], list[_Hit], list[str], list[str]]:
-    """Joint-state requests (every joint first, then per label, then one part: the specific one wins), the
-    state hits used, warnings (contradictions) and the phrases a later one for the same part replaced."""
+@dataclass(frozen=True, slots=True)
+class _JointStates:
+    """The joint states a request asks: ``requests`` (every joint first, then per label, then one part: the
+    specific one wins), ``hits`` (the state words used), ``warnings`` (contradictions) and ``overridden`` (the
+    phrases a later one for the same part replaced)."""
+
+    requests: list[JointStateRequest]
+    hits: list[_Hit]
+    warnings: list[str]
+    overridden: list[str]
+
+
+def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = None) -> _JointStates:
+    """The joint-state requests of ``low`` (``numeric``: the states in numbers, :func:`rv.state_quantities`)."""
     bands = _state_hits(low, numeric)  # every list here is left to right and not overlapping
     parts = _parts(low, tokens)
     # ordinals without a part noun ("the second slightly open"; "the freezer open": the smallest part)
@@ -531,7 +554,7 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
         dedup[key] = js
     specific = sorted(dedup.values(), key=lambda js: 0 if js.selector == "all" and js.ordinal is None else (1 if js.ordinal is None else 2))
     kept = {js.phrase for js in specific}
-    return specific, bands + used, warnings, [p for p in dict.fromkeys(overridden) if p not in kept]
+    return _JointStates(specific, bands + used, warnings, [p for p in dict.fromkeys(overridden) if p not in kept])
 
 
 def parse_request(text: str) -> RequestSpec:
@@ -552,12 +575,13 @@ def parse_request(text: str) -> RequestSpec:
     head_starts = [head.start] if head is not None else []  # the object itself ("a wooden door")
     matched: list[tuple[int, str]] = [(head.start, head.phrase)] if head is not None else []
     tokens = _Tokens(low)
-    size_class, factor, size_phrase, size_hits, size_against = _parse_size(low, mentions, tokens)
-    warnings = [f"contradiction: size words {size_phrase!r} and " + ", ".join(repr(h.text) for h in size_against)
-                + f" point opposite ways; '{size_class}' (the first direction) is used"] if size_against else []
-    numeric, sizes, size_warn, verbs = rv.state_quantities(low, mention_starts)
-    joint_states, band_hits, contradictions, overridden = _joint_states(low, tokens, numeric)
-    warnings += size_warn + contradictions
+    size = _parse_size(low, mentions, tokens)
+    warnings = [f"contradiction: size words {size.phrase!r} and " + ", ".join(repr(h.text) for h in size.against)
+                + f" point opposite ways; '{size.size_class}' (the first direction) is used"] if size.against else []
+    numbers = rv.state_quantities(low, mention_starts)
+    sizes = numbers.sizes
+    states = _joint_states(low, tokens, numbers.states)
+    warnings += numbers.warnings + states.warnings
     vols = rv.volumes(low)
     if vols and sizes:  # a length is the closer measure of a size: the volume is named as not used
         warnings += [f"'{v.text}' is a volume; the size in numbers ({', '.join(f.text for f in sizes)}) sets the size: '{v.text}' not used"
@@ -567,8 +591,8 @@ def parse_request(text: str) -> RequestSpec:
         sizes = vols[:1]
     else:
         sizes = sizes + vols
-    if sizes and size_class is not None:
-        warnings.append(f"size words ({size_phrase}) and a size in numbers ({', '.join(f.text for f in sizes)}): the numbers are used")
+    if sizes and size.size_class is not None:
+        warnings.append(f"size words ({size.phrase}) and a size in numbers ({', '.join(f.text for f in sizes)}): the numbers are used")
     mass_found = rv.masses(low, head_starts)
     material_found = rv.materials(low, mention_starts, head_starts)
     level_found = rv.mass_levels(low, mention_starts)
@@ -577,10 +601,9 @@ def parse_request(text: str) -> RequestSpec:
     properties = _merge_properties([f.value for f in mass_found + material_found], warnings)  # type: ignore[misc]
     mass_level = _mass_level(level_found, properties, warnings)
     counts = rv.part_counts(low)
-    found: list = size_hits + size_against + band_hits + sizes + vols + verbs + mass_found + material_found + level_found + dyn_found + counts
+    found: list = size.hits + size.against + states.hits + sizes + vols + numbers.verbs + mass_found + material_found + level_found + dyn_found + counts
     matched += [(f.start, f.text) for f in found] + [(m.start(), m.group(0)) for m in rv.DESCRIPTOR_RX.finditer(low)]
-    damping, holds, spring, stiff, free, motions = _dynamics_words(low, [(f.start, f.end) for f in level_found], matched, warnings,
-                                                                    head_starts)
+    motion = _dynamics_words(low, [(f.start, f.end) for f in level_found], matched, warnings, head_starts)
     pose = None
     for h in _scan(low, _POSE_TABLE):  # the last pose word not negated
         if not _negated(low, h.start):
@@ -593,12 +616,12 @@ def parse_request(text: str) -> RequestSpec:
     unused, groups = _unused_words(low, matched, mentions)
     in_order = [" ".join(ph.split()) for _pos, ph in dict.fromkeys(sorted(matched, key=lambda t: t[0]))]  # by position, each once
     return RequestSpec(
-        text=text, category_hint=hint, size_class=size_class, size_factor=factor, size_phrase=size_phrase,  # type: ignore[arg-type]
-        joint_states=joint_states, damping=damping, holds_position=holds, spring=spring, stiff=stiff,  # type: ignore[arg-type]
-        free_moving=free, motions=motions, pose_hint=pose, mass_level=mass_level, properties=properties,  # type: ignore[arg-type]
+        text=text, category_hint=hint, size_class=size.size_class, size_factor=size.factor, size_phrase=size.phrase,  # type: ignore[arg-type]
+        joint_states=states.requests, damping=motion.damping, holds_position=motion.holds_position, spring=motion.spring,  # type: ignore[arg-type]
+        stiff=motion.stiff, free_moving=motion.free_moving, motions=motion.motions, pose_hint=pose, mass_level=mass_level, properties=properties,  # type: ignore[arg-type]
         sizes=[f.value for f in sizes], dynamics_values=[f.value for f in dyn_found],  # type: ignore[misc]
         part_counts={str(f.value[0]): int(f.value[1]) for f in counts},  # type: ignore[index]
-        ignored=groups, warnings=warnings, overridden=overridden, matched=in_order, unused_words=unused,
+        ignored=groups, warnings=warnings, overridden=states.overridden, matched=in_order, unused_words=unused,
     )
 
 
@@ -644,10 +667,23 @@ def _motion_part(low: str, start: int, end: int, head_starts: list[int]) -> str 
     return None if label == "body" else label
 
 
+@dataclass(frozen=True, slots=True)
+class _MotionWords:
+    """What a request's words about motion ask (:func:`_dynamics_words`): the ``damping`` level, whether the
+    parts should hold their position, have a spring, be stiff or move freely, and the motion phrases per part."""
+
+    damping: str
+    holds_position: bool
+    spring: bool
+    stiff: bool
+    free_moving: bool
+    motions: list[MotionPhrase]
+
+
 def _dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[tuple[int, str]],
-                    warnings: list[str], head_starts: list[int]) -> tuple[str, bool, bool, bool, bool, list[MotionPhrase]]:
-    """(damping level, holds position, spring, stiff, free moving, the motion phrases per part) from the dynamics
-    words (explicit damping phrases win over cues); phrases go to ``matched``, contradictions to ``warnings``.
+                    warnings: list[str], head_starts: list[int]) -> _MotionWords:
+    """The motion the dynamics words ask (explicit damping phrases win over cues); phrases go to ``matched``,
+    contradictions to ``warnings``.
     A mass word ("a heavy box", "a heavy 25 kg door", "a heavy drawer") is a mass, not a stiffness; "heavy" before a
     joint word ("a heavy hinge") is stiff."""
     damping, strong_set, holds, spring, stiff, free = "moderate", False, False, False, False, False
@@ -693,7 +729,7 @@ def _dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[
     levels = {str(h.value[1]) for h in hits if h.flag == "strong" and not _negated(low, h.start)}  # type: ignore[index]
     if len(levels) > 1:
         warnings.append(f"contradiction: damping levels {sorted(levels)} are all asked; '{damping}' (the last) is used")
-    return damping, holds, spring, stiff, free, motions
+    return _MotionWords(damping, holds, spring, stiff, free, motions)
 
 
 def _merge_properties(props: list[PartProperty], warnings: list[str]) -> list[PartProperty]:

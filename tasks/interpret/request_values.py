@@ -158,11 +158,21 @@ def _near_category(low: str, end: int, mention_starts: list[int], max_words: int
     return False
 
 
-def state_quantities(low: str, mention_starts: list[int]) -> tuple[list[Found], list[Found], list[str], list[Found]]:
-    """(states, sizes, warnings, verbs) in numbers: ``states`` (band, StateTarget) values (angles, lengths by
-    a state word, percentages, fractions by open), ``sizes`` SizeTarget (a length with a dimension word, or
-    before the object's name: largest), ``warnings`` for lengths that are neither, ``verbs`` a number refers to.
-    """
+@dataclass(frozen=True, slots=True)
+class StateQuantities:
+    """The numbers of a request (:func:`state_quantities`): ``states`` (band,
+    StateTarget) values (angles in rad, lengths in m by a state word, percentages and fractions by open),
+    ``sizes`` SizeTarget values (a length in m with a dimension word, or before the object's name: largest),
+    ``warnings`` for lengths that are neither, ``verbs`` the state verbs a number refers to."""
+
+    states: list[Found]
+    sizes: list[Found]
+    warnings: list[str]
+    verbs: list[Found]
+
+
+def state_quantities(low: str, mention_starts: list[int]) -> StateQuantities:
+    """The states, sizes, warnings and verbs in numbers of ``low`` (the request in lower case)."""
     states: list[Found] = []
     sizes: list[Found] = []
     warnings: list[str] = []
@@ -216,7 +226,7 @@ def state_quantities(low: str, mention_starts: list[int]) -> tuple[list[Found], 
         else:
             warnings.append(f"'{m.group(0)}' is a length but neither a size (tall/wide/deep/long) nor a state (open/out): not used")
     states.sort(key=lambda f: f.start)
-    return leftmost_longest(states), sizes, warnings, verbs
+    return StateQuantities(leftmost_longest(states), sizes, warnings, verbs)
 
 
 def volumes(low: str) -> list[Found]:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -138,16 +139,26 @@ def target_size(category: str, request: RequestSpec | str | None = None) -> Size
                       gripper_limit_factor=glf, note="; ".join(notes))
 
 
-def plausible_largest_dimension(category: str, request: RequestSpec | str | None = None) -> tuple[float, float, float | None]:
-    """(low, high, typical) m: the span of plausible largest dimensions of an object of ``category`` as
+@dataclass(frozen=True, slots=True)
+class LargestDimension:
+    """The plausible largest dimension of an object (:func:`plausible_largest_dimension`): ``low`` to ``high`` m,
+    and the ``typical`` one (m; None for ``Generic``)."""
+
+    low: float
+    high: float
+    typical: float | None
+
+
+def plausible_largest_dimension(category: str, request: RequestSpec | str | None = None) -> LargestDimension:
+    """The span of plausible largest dimensions of an object of ``category`` as
     ``request`` sizes it (:func:`target_size`): the typical largest dimension divided and multiplied by
     :data:`SCALE_TOLERANCE`; for ``Generic``, :data:`GENERIC_SIZE_M` and no typical one (None). The audit's scale
     verdict and refine's choice to keep a size in real units both read it."""
     if category == GENERIC:
         lo, hi = GENERIC_SIZE_M
-        return lo, hi, None
+        return LargestDimension(lo, hi, None)
     typical = float(max(target_size(category, request).dims))
-    return (*plausible_span(typical), typical)
+    return LargestDimension(*plausible_span(typical), typical)
 
 
 def plausible_span(typical: float) -> tuple[float, float]:

@@ -199,8 +199,18 @@ BAND_SAMPLES = 9
 MARGIN_GAIN = 2e-3
 
 
+@dataclass(frozen=True, slots=True)
+class SteadiestOpening:
+    """What :func:`steadiest_fractions` found: ``fractions`` (joint -> opening fraction it moved to; empty when
+    nothing gains), the :class:`Balance` ``before`` and ``after`` (the same when nothing moved)."""
+
+    fractions: dict[str, float]
+    before: Balance
+    after: Balance
+
+
 def steadiest_fractions(source: SimSource, overlay: Overlay, state: dict[str, float], closed: dict[str, "ClosedState"],
-                        intervals: dict[str, tuple[float, float]], samples: int = BAND_SAMPLES) -> tuple[dict[str, float], Balance, Balance]:
+                        intervals: dict[str, tuple[float, float]], samples: int = BAND_SAMPLES) -> SteadiestOpening:
     """The opening fractions within the requested bands at which a free-standing
     object stands steadiest: for each opened joint of ``intervals`` (joint ->
     allowed fraction interval (lo, hi), lo > 0), ``samples`` fractions over it,
@@ -209,9 +219,8 @@ def steadiest_fractions(source: SimSource, overlay: Overlay, state: dict[str, fl
     more than 1 mm are skipped.
 
     ``source``: the written URDF of ``overlay``; ``state``: joint -> rad or m;
-    ``closed``: joint -> ``ClosedState`` in the URDF's units. Returns (joint ->
-    fraction moved, :class:`Balance` before, after); ({}, b, b) for a mounted
-    asset or when nothing gains.
+    ``closed``: joint -> ``ClosedState`` in the URDF's units. No fraction moved
+    and the same balance before and after for a mounted asset or when nothing gains.
     """
     model = source.model()
     pieces, _ = collision_pieces(model)
@@ -220,7 +229,7 @@ def steadiest_fractions(source: SimSource, overlay: Overlay, state: dict[str, fl
         frames, pts = _world_at(s, pieces, cur)
         before = best = _balance(overlay, frames, pts)
         if overlay.mounting is not None and overlay.mounting.fixed:
-            return {}, before, before
+            return SteadiestOpening({}, before, before)
         floor = min(float(p[:, 2].min()) for p in pts.values()) if pts else 0.0
         chosen: dict[str, float] = {}
         for name, (lo, hi) in intervals.items():
@@ -238,4 +247,4 @@ def steadiest_fractions(source: SimSource, overlay: Overlay, state: dict[str, fl
             if top is not None and top.margin >= best.margin + MARGIN_GAIN:
                 best, chosen[name] = top, at
                 cur = {**cur, name: cs.position(at)}
-    return chosen, before, best
+    return SteadiestOpening(chosen, before, best)

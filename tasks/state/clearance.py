@@ -42,7 +42,7 @@ def link_pieces(model: UrdfModel, root: Path, link: str) -> list[np.ndarray]:
         if c.kind != "mesh" or not c.filename:
             continue
         path = Path(c.path) if c.path is not None else root / c.filename
-        v, _, _ = mesh_io.read_obj(mesh_io.file_bytes(path), str(path))
+        v = mesh_io.read_obj(mesh_io.file_bytes(path), str(path)).vertices
         if not len(v):
             continue
         v = np.asarray(v, float) * (c.mesh_scale if c.mesh_scale is not None else 1.0)

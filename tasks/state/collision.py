@@ -48,7 +48,8 @@ def convexity_ratio(path: Path, cache=None) -> float:
     import trimesh
 
     cache = cache or MeshCache()
-    v, f, _ = cache.get(path)
+    mesh = cache.get(path)
+    v, f = mesh.vertices, mesh.faces
     m = trimesh.Trimesh(np.asarray(v, float), np.asarray(f, int), process=False)
     try:
         hull_area = float(m.convex_hull.area)
@@ -86,7 +87,7 @@ class _PieceWorld:
                 tw = pos + R @ (np.asarray(g.origin.xyz, float) * scale)
                 self.poses[(ln, k)] = (Rw, tw)
                 self.refs[(ln, k)] = g
-                v = np.asarray(cache.get(g.path)[0], float)
+                v = np.asarray(cache.get(g.path).vertices, float)
                 self.bodies[(ln, k)] = [self._body(v[np.all(np.isfinite(v), axis=1)], g)]
 
     def _body(self, vertices: np.ndarray, g: GeometryRef) -> int:
@@ -174,7 +175,8 @@ class _Repair:
         self.world, self.cache, self.max_decompositions = world, cache, max_decompositions
         self.area = {}  # (link, k) -> surface area of the piece (input units, mesh scale applied)
         for (ln, k), g in world.refs.items():
-            v, f, _ = cache.get(g.path)
+            mesh = cache.get(g.path)
+            v, f = mesh.vertices, mesh.faces
             tri = np.asarray(v, float)[np.asarray(f, int)] * np.asarray(g.scale, float)
             self.area[(ln, k)] = float(0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
         self.link_area = {ln: sum(a for (l2, _), a in self.area.items() if l2 == ln) for ln in links}

@@ -135,26 +135,35 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
     return rep
 
 
-def apply_ground_clearance(candidate: Candidate, ws: Workspace, closed: dict[str, tuple[float, float, float]]
-                           ) -> tuple[dict[str, float], Mapping, list[str], list[str]]:
+@dataclass(frozen=True, slots=True)
+class GroundLifted:
+    """The result of :func:`apply_ground_clearance`: ``state`` (joint -> rad or m), ``overrides`` (collision
+    overrides, link -> piece files; the candidate's own object when unchanged), ``state_notes`` (a line per
+    opening the floor stopped) and ``collision_notes`` (a line per piece raised off the ground)."""
+
+    state: dict[str, float]
+    overrides: Mapping
+    state_notes: list[str]
+    collision_notes: list[str]
+
+
+def apply_ground_clearance(candidate: Candidate, ws: Workspace, closed: dict[str, tuple[float, float, float]]) -> GroundLifted:
     """Refine's step after the state search (nothing for a mounted asset): :func:`floor_limited_state` and
     :func:`ground_clearance` applied to ``candidate``'s model (loaded into ``ws``; new pieces written into its
     folder). ``closed``: joint -> (q_closed, direction, open_range), rad or m.
 
-    Returns (state, collision overrides (``candidate.collision_overrides`` itself when unchanged),
-    state notes, collision notes).
     Raises OSError: a collision file cannot be read or written.
     """
     overlay, state, overrides = candidate.overlay, dict(candidate.state), candidate.collision_overrides
     if overlay.mounting is not None and overlay.mounting.fixed:
-        return state, overrides, [], []
+        return GroundLifted(state, overrides, [], [])
     model = ws.model(candidate)
     new_state, state_notes = floor_limited_state(model, model.path, state, closed)
     rep = ground_clearance(ws.model(candidate), model.path, new_state)
     new = overrides
     if rep.pieces:
         new = {**overrides, **write_piece_overrides(rep.pieces, overlay.scale, ws.root, write.collision_folder(candidate.asset), "ground")}
-    return new_state, new, state_notes, rep.notes
+    return GroundLifted(new_state, new, state_notes, rep.notes)
 
 
 #: Gap (m) a moving part keeps above the body's lowest point where the floor

@@ -23,6 +23,17 @@ from asset2sim.tasks.synthesize import estimate, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
 
 
+@dataclass(frozen=True, slots=True)
+class Retargeted:
+    """The request's targets once the closed ends or ranges moved (:meth:`Synthesis.retargeted`): ``targets``
+    (joint -> target), ``moved`` (those that changed) and ``bands`` (joint -> band, a moved joint taking its
+    target's)."""
+
+    targets: dict[str, request_apply.JointTarget]
+    moved: dict[str, request_apply.JointTarget]
+    bands: dict[str, str]
+
+
 @dataclass
 class Synthesis:
     """Stage 4's result: the validated overlay and the state it asks for."""
@@ -39,14 +50,13 @@ class Synthesis:
         """The candidate of this synthesis: its overlay at the requested state, with the collision ``overrides``."""
         return Candidate(ctx.asset, self.overlay, self.requested, overrides or {}, ctx.root_rotation)
 
-    def retargeted(self, closed: dict[str, ClosedState]) -> tuple[dict[str, request_apply.JointTarget],
-                                                                  dict[str, request_apply.JointTarget], dict[str, str]]:
-        """(targets, those that changed, bands) once the closed ends or ranges moved to ``closed`` (output units): an
+    def retargeted(self, closed: dict[str, ClosedState]) -> Retargeted:
+        """The targets, those that changed and the bands once the closed ends or ranges moved to ``closed`` (output units): an
         angle or distance asked stays that opening from the closed end (:func:`request_apply.retarget`), and a
         retargeted joint takes its target's band."""
         targets = request_apply.retarget(self.targets, self.closed_out, closed)
         moved = {n: t for n, t in targets.items() if t is not self.targets[n]}
-        return targets, moved, {**self.bands, **{n: t.band for n, t in moved.items()}}
+        return Retargeted(targets, moved, {**self.bands, **{n: t.band for n, t in moved.items()}})
 
     def fractions(self) -> dict[str, tuple[float, float]]:
         """joint -> the opening fractions its band allows, a number or end asked winning (:func:`estimate.band_intervals`)."""
@@ -87,8 +97,8 @@ def closed_on_output(ctx: EstimationContext, syn: Synthesis, ws: Workspace, log:
     for n in moved:
         log.say("closed_state", f"joint {n}: closed end {new[n].q_closed:.4g} on the output's collision pieces "
                                 f"({syn.closed_out[n].q_closed:.4g} before); the state is placed from it")
-    targets, _, bands = syn.retargeted(new)  # the angle asked, from the new closed end
-    return replace(syn, overlay=overlay, closed_out=new, requested=requested, targets=targets, bands=bands)
+    rt = syn.retargeted(new)  # the angle asked, from the new closed end
+    return replace(syn, overlay=overlay, closed_out=new, requested=requested, targets=rt.targets, bands=rt.bands)
 
 
 def clip_synthesis(ctx: EstimationContext, syn: Synthesis, config: RefineConfig, ws: Workspace, log: StageLog,
@@ -100,15 +110,15 @@ def clip_synthesis(ctx: EstimationContext, syn: Synthesis, config: RefineConfig,
     if overlay is syn.overlay:
         return syn
     s = overlay.scale
-    targets, moved, bands = syn.retargeted(closed_out)  # an angle asked stays that angle from the closed end
-    if moved and overlay.initial_joint_positions:
+    rt = syn.retargeted(closed_out)  # an angle asked stays that angle from the closed end
+    if rt.moved and overlay.initial_joint_positions:
         overlay = overlay.model_copy(update={"initial_joint_positions": {
-            **overlay.initial_joint_positions, **{n: closed_out[n].position(t.fraction) for n, t in moved.items()}}})
+            **overlay.initial_joint_positions, **{n: closed_out[n].position(t.fraction) for n, t in rt.moved.items()}}})
     unscaled = scaled_closed(closed_out, 1.0 / s, syn.prismatic)
-    requested = estimate.state_from_bands(unscaled, bands, s, syn.prismatic)
+    requested = estimate.state_from_bands(unscaled, rt.bands, s, syn.prismatic)
     requested.update(overlay.initial_joint_positions or {})
     requested.update(at_fractions(closed_out, fractions or {}))
-    return replace(syn, overlay=overlay, closed_out=closed_out, requested=requested, targets=targets, bands=bands)
+    return replace(syn, overlay=overlay, closed_out=closed_out, requested=requested, targets=rt.targets, bands=rt.bands)
 
 
 def shut_repair(ctx: EstimationContext, syn: Synthesis, config: RefineConfig, ws: Workspace,
@@ -162,17 +172,28 @@ def clearance_lines(notes: list[str]) -> list[str]:
                                                      container_pieces.CAVITY_NOTE))]
 
 
+@dataclass(frozen=True, slots=True)
+class Reclipped:
+    """The synthesis after the limits were clipped again (:func:`reclipped`): ``synthesis``, ``state`` (joint
+    -> rad or m) and ``notes`` (one line per joint moved back into its band)."""
+
+    synthesis: Synthesis
+    state: dict[str, float]
+    notes: list[str]
+
+
 def reclipped(syn: Synthesis, overlay: Overlay, closed_after: dict[str, ClosedState],
-              state: dict[str, float]) -> tuple[Synthesis, dict[str, float], list[str]]:
+              state: dict[str, float]) -> Reclipped:
     """The synthesis and ``state`` (joint -> rad or m) after the limits were clipped again (the collision pieces
     changed after the state search: :func:`clip_limits` on the new pieces gave ``overlay`` and the closed ends
     ``closed_after``). Angles and distances asked stay the same opening from the closed end (retargeted as in
     :func:`clip_synthesis`); a joint that its band (the request's number or end first) held on ``syn.closed_out``
     but that the new range puts outside it is moved to the nearest position the band allows on ``closed_after`` (an
     opening fraction is of the range the output has); every other joint keeps its position (one a stage moved out of
-    its band on purpose, e.g. onto the floor, stays there). Returns (synthesis, state, a note per move)."""
-    targets, _, bands = syn.retargeted(closed_after)
-    new = replace(syn, overlay=overlay, closed_out=closed_after, targets=targets, bands=bands)
+    its band on purpose, e.g. onto the floor, stays there)."""
+    rt = syn.retargeted(closed_after)
+    bands = rt.bands
+    new = replace(syn, overlay=overlay, closed_out=closed_after, targets=rt.targets, bands=bands)
     before = refine_state.allowed_intervals(syn.closed_out, syn.fractions())
     after = refine_state.allowed_intervals(closed_after, new.fractions())
     out, notes = dict(state), []
@@ -185,7 +206,7 @@ def reclipped(syn: Synthesis, overlay: Overlay, closed_after: dict[str, ClosedSt
             notes.append(f"joint {n}: {q:.4g} -> {kept:.4g} ({closed_after[n].fraction(q):.3f} -> {closed_after[n].fraction(kept):.3f} "
                          f"of its range): the limits clipped again on the changed collision pieces moved its range; kept "
                          f"inside its band ({bands.get(n, 'closed')})")
-    return new, out, notes
+    return Reclipped(new, out, notes)
 
 
 def clip_limits(candidate: Candidate, closed_out: dict[str, ClosedState], ws: Workspace, config: RefineConfig,

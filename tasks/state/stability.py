@@ -107,7 +107,8 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
     moved, parts = _opened_links(asset, category)
     body = [ln for ln in overlay.links if ln not in moved]
     m_body = sum(overlay.links[ln].mass for ln in body)
-    floors, reasons, pf = _mass_floors(overlay, parts, moved, source, state, geometry)
+    least = _mass_floors(overlay, parts, moved, source, state, geometry)
+    floors, reasons, pf = least.floors, least.reasons, least.fraction
     light = [ln for ln in floors if floors[ln] < overlay.links[ln].mass * (1 - 1e-9)]
     kept = _why_kept(overlay, bal, category, floors, light, m_body, pf)
     if kept is not None:
@@ -146,9 +147,19 @@ def _opened_links(asset: AssetDescription, category: str | None) -> tuple[set[st
     return moved, parts
 
 
+@dataclass(frozen=True, slots=True)
+class _MassFloors:
+    """The least masses of the opened parts: ``floors`` (link -> kg), ``reasons`` (a line per source) and
+    ``fraction`` (the sourced part-mass fraction used, or None)."""
+
+    floors: dict[str, float]
+    reasons: list[str]
+    fraction: PartFraction | None
+
+
 def _mass_floors(overlay: Overlay, parts: dict[str, PartFraction], moved: set[str], source: SimSource, state: dict[str, float],
-                 geometry: dict[str, LinkGeometry] | None) -> tuple[dict[str, float], list[str], PartFraction | None]:
-    """(link -> least mass, kg; reasons; the sourced fraction used or None)."""
+                 geometry: dict[str, LinkGeometry] | None) -> _MassFloors:
+    """The least mass of each opened link and why."""
     total = overlay.total_mass()
     floors: dict[str, float] = {}
     reasons: list[str] = []
@@ -166,7 +177,7 @@ def _mass_floors(overlay: Overlay, parts: dict[str, PartFraction], moved: set[st
         floors.update({ln: env[ln] for ln in env_links})
         reasons.append("envelope shell mass (outer area x wall thickness x density) of "
                        + ", ".join(f"{ln} {env[ln]:.3g} kg" for ln in env_links))
-    return floors, reasons, pf
+    return _MassFloors(floors, reasons, pf)
 
 
 def _why_kept(overlay: Overlay, bal: Balance, category: str | None, floors: dict[str, float], light: list[str], m_body: float,

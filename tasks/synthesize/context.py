@@ -27,9 +27,10 @@ from asset2sim.engines.base import SessionOptions, SimSession
 from asset2sim.engines.registry import open_session
 
 
-@dataclass
+@dataclass(frozen=True)
 class EstimationContext:
-    """Everything an estimator may use (units: input asset at scale 1 unless noted)."""
+    """Everything an estimator may use (units: input asset at scale 1 unless noted); frozen: a stage that
+    changes what it holds (the task, the resting pose) hands on a copy (``dataclasses.replace``)."""
 
     asset: AssetDescription
     geometry: dict[str, LinkGeometry]

@@ -78,7 +78,8 @@ def _real_size(ctx: EstimationContext, real: str | None) -> tuple[str | None, st
     if real is None:
         return None, None
     largest = float(np.max(ctx.closed_extents))
-    lo, hi, typical = priors.plausible_largest_dimension(ctx.category)
+    span = priors.plausible_largest_dimension(ctx.category)
+    lo, hi, typical = span.low, span.high, span.typical
     what = f"a typical {ctx.category} is {typical:.3g} m" if typical is not None else "a household object"
     if ctx.request.size_class is not None:
         return None, f"{real}, rescaled as asked ({ctx.request.size_class})"
@@ -235,8 +236,9 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
         mechanism = "moves freely (asked)" if ch.free_moving else ("friction slide" if name in prismatic else "friction hinge")
         note = source + "".join(f"; request '{w.phrase}': {w.kind.replace('_', ' ')}" for w in ch.words)
         if ch.self_closing:
-            spring, hold, why = closer(ctx, loads[name], cs, unit, hold)
-            note, mechanism = f"{note}; {why}", "closer"
+            held = closer(ctx, loads[name], cs, unit, hold)
+            spring, hold = held.spring, held.hold
+            note, mechanism = f"{note}; {held.note}", "closer"
         elif ch.spring:
             load = loads[name]
             k = max(3.0 * physics.HOLD_SAFETY * max(hold, 1e-6) / max(cs.open_range * unit, 1e-6), load.gravity_stiffness * 2.0)
@@ -246,13 +248,13 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
         elif name not in prismatic and not ch.free_moving and _label(ctx, name) in COUNTERBALANCE_LABELS:
             counter = counterbalance(ctx, links, state, scale, name, fr) or lid_support(ctx, links, state, scale, name, fr)
             if counter is not None:
-                spring, hold, why = counter
-                note, balanced, mechanism = f"{note}; {why}", True, why.split(" (")[0]
+                spring, hold = counter.spring, counter.hold
+                note, balanced, mechanism = f"{note}; {counter.note}", True, counter.note.split(" (")[0]
         elif name in prismatic and not ch.free_moving and _label(ctx, name) in BALANCE_LABELS:
             bal = balance(loads[name], cs, unit)
             if bal is not None:
-                spring, hold, why = bal
-                note, balanced, mechanism = f"{note}; {why}", True, "balance"
+                spring, hold = bal.spring, bal.hold
+                note, balanced, mechanism = f"{note}; {bal.note}", True, "balance"
         impact, static, landing = 0.0, hold, ""
         if (spring is None or balanced) and not ch.free_moving and name in landed:
             # a part of a free-standing object is held by its friction where it was left when the object is set
@@ -271,9 +273,9 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
         dyn = physics.joint_dynamics(loads[name], hold, prismatic=name in prismatic, damping_level=ch.damping_level, stiff=ch.stiff,
                                      free_moving=ch.free_moving, spring=spring, source=note, impact=impact, floor=not slide)
         if slide:
-            kind, friction, why = slide_for(dyn.friction, loads[name].mass * physics.G, requested_slide(ch.words))
-            dyn = dyn.model_copy(update={"friction": friction, "source": f"{dyn.source}; {why}"})
-            mechanism = f"{kind.replace('_', ' ')} slides"
+            rides = slide_for(dyn.friction, loads[name].mass * physics.G, requested_slide(ch.words))
+            dyn = dyn.model_copy(update={"friction": rides.friction, "source": f"{dyn.source}; {rides.note}"})
+            mechanism = f"{rides.kind.replace('_', ' ')} slides"
         elif mechanism == "friction hinge" and not static > 0:
             mechanism = "free hinge"
         out[name] = dyn.model_copy(update={"holding": Holding(mechanism=mechanism, static_load=float(static),
@@ -281,12 +283,31 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
     return out
 
 
+@dataclass(frozen=True, slots=True)
+class SpringHold:
+    """A part held by a spring (a closer, a counterbalance, a lid support, a sash balance): ``spring`` (k N m/rad
+    or N/m, reference q_s rad or m), ``hold`` (the load friction still holds, N m or N) and ``note`` (one line)."""
+
+    spring: tuple[float, float]
+    hold: float
+    note: str
+
+
+@dataclass(frozen=True, slots=True)
+class SlideChoice:
+    """The slide a drawer rides on (:func:`slide_for`): ``kind`` (``slides.yaml`` key), ``friction`` (N) and
+    ``note`` (one line)."""
+
+    kind: str
+    friction: float
+    note: str
+
+
 #: Share of a closer's preload that friction may take, so that it still returns the part to its closed end.
 CLOSER_FRICTION_SHARE = 0.2
 
 
-def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, unit: float, hold: float
-           ) -> tuple[tuple[float, float], float, str]:
+def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, unit: float, hold: float) -> SpringHold:
     """The spring of a self-closing part (a door closer, a self-closing lid or slide): it presses the part into its
     closed end with a preload F0 = max(``physics.HOLD_SAFETY`` x ``hold``, ``set_down.LEAN_SAFETY`` x the set-down
     lean's load) and pulls twice that at its far end: rate k = F0 / R about a reference one range R beyond the
@@ -295,7 +316,7 @@ def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, uni
     :data:`CLOSER_FRICTION_SHARE` x F0.
 
     Returns:
-        ((k N m/rad or N/m, q_s rad or m), the friction's hold load N m or N, note).
+        the spring and the friction's hold load.
     """
     rng = max(cs.open_range * unit, 1e-9)
     preload = max(physics.HOLD_SAFETY * hold, set_down.LEAN_SAFETY * set_down.lean_load(load), 1e-6)
@@ -303,7 +324,7 @@ def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, uni
     ref = float(cs.position(0.0) * unit - cs.direction * rng)
     why = (f"self-closing: a closer spring presses it shut with {preload:.3g} {'N' if ctx.asset.joint(load.joint).type == 'prismatic' else 'N m'} "
            f"(k = {k:.4g} about {ref:.4g}, twice that fully open)")
-    return (float(k), ref), CLOSER_FRICTION_SHARE * preload / physics.HOLD_SAFETY, why
+    return SpringHold((float(k), ref), CLOSER_FRICTION_SHARE * preload / physics.HOLD_SAFETY, why)
 
 
 def _on_stop(load: physics.JointLoad, cs: ClosedState, q: float, unit: float, drift: float) -> bool:
@@ -324,8 +345,8 @@ def requested_slide(words) -> str | None:
     return next((w.mechanism for w in reversed(list(words)) if w.kind == "slides"), None)
 
 
-def slide_for(friction: float, weight: float, requested: str | None = None) -> tuple[str, float, str]:
-    """(kind, friction N, note) of the slide a drawer rides on (``asset2sim/priors/slides.yaml``, smoothest first):
+def slide_for(friction: float, weight: float, requested: str | None = None) -> SlideChoice:
+    """The slide a drawer rides on (``asset2sim/priors/slides.yaml``, smoothest first):
     the ``requested`` kind, else the first whose upper coefficient carries the ``friction`` (N) holding needs; the
     friction moved into that kind's range, mu_lo to mu_hi of the drawer's ``weight`` (N, its normal load on a
     horizontal slide). Where no kind carries it, the stiffest at its upper end: the check then says what remains."""
@@ -338,7 +359,7 @@ def slide_for(friction: float, weight: float, requested: str | None = None) -> t
     why = (f"{key.replace('_', ' ')} slides ({'as asked' if requested else 'the smoothest that holds it'}: mu "
            f"{sp.friction_coefficient[0]:g}-{sp.friction_coefficient[1]:g} of its {weight:.3g} N weight; {sp.source.strip()}): "
            f"friction {f:.3g} N = mu {f / max(weight, 1e-12):.3g}" + (f" (holding asked {friction:.3g} N)" if abs(f - friction) > 1e-9 else ""))
-    return key, f, why
+    return SlideChoice(key, f, why)
 
 
 def slide_cap(ctx: EstimationContext, joint: str, mass: float) -> float | None:
@@ -382,7 +403,7 @@ DOWNWARD_FRACTIONS = (0.25, 0.5, 0.75, 1.0)
 
 
 def counterbalance(ctx: EstimationContext, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
-                   name: str, hold_fractions) -> tuple[tuple[float, float], float, str] | None:
+                   name: str, hold_fractions) -> SpringHold | None:
     """The counterbalance spring of a hinged door or lid (:data:`COUNTERBALANCE_LABELS`) that opens downward (an
     oven's or a dishwasher's drop-down door, a drop-front desk lid): gravity pushes it open at every one of
     :data:`DOWNWARD_FRACTIONS`. Such doors
@@ -393,7 +414,7 @@ def counterbalance(ctx: EstimationContext, links: dict[str, LinkPhysics], state:
     ``hold_fractions`` and the closed end.
 
     Returns:
-        ((k N m/rad, q_s rad), hold load N m, note), or None when the part does not open downward.
+        the spring (k N m/rad, q_s rad) and hold load (N m), or None when the part does not open downward.
     """
     cs = ctx.closed[name]
     rot = ctx.root_rotation
@@ -412,7 +433,7 @@ def counterbalance(ctx: EstimationContext, links: dict[str, LinkPhysics], state:
     hold = max(abs(load(f) * cs.direction - k * f * cs.open_range) for f in fractions)
     why = (f"counterbalance spring of a door opening downward (door-balance springs of ranges and dishwashers): "
            f"k = {k:.4g} N m/rad at rest closed balances the {open_loads[-1]:.3g} N m weight moment fully open")
-    return (float(k), float(q_s)), float(hold), why
+    return SpringHold((float(k), float(q_s)), float(hold), why)
 
 
 #: Share of the top of its operating force range above which the force that lifts a hinged lid or door its weight
@@ -423,7 +444,7 @@ SUPPORT_FRACTIONS = tuple(float(f) for f in np.linspace(0.0, 1.0, 11))
 
 
 def lid_support(ctx: EstimationContext, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
-                name: str, hold_fractions) -> tuple[tuple[float, float], float, str] | None:
+                name: str, hold_fractions) -> SpringHold | None:
     """The lid support of a hinged lid or door (:data:`COUNTERBALANCE_LABELS`) that a hand could hardly move against its
     weight unaided: its largest weight moment over its range, over the lever to its far edge, is more than
     :data:`LID_SUPPORT_SHARE` of the top of its operating range (a chest's or a large case's lid). Such lids ride on
@@ -435,7 +456,7 @@ def lid_support(ctx: EstimationContext, links: dict[str, LinkPhysics], state: di
     largest remainder, and the largest over ``hold_fractions`` around the state.
 
     Returns:
-        ((k N m/rad, q_s rad), hold load N m, note), or None when the part does not need one.
+        the spring (k N m/rad, q_s rad) and hold load (N m), or None when the part does not need one.
     """
     cs = ctx.closed[name]
     j = ctx.asset.joint(name)
@@ -468,7 +489,7 @@ def lid_support(ctx: EstimationContext, links: dict[str, LinkPhysics], state: di
     why = (f"lid support (a torsion or gas spring sized to the lid's torque, as lid stays are): k = {k:.4g} N m/rad about "
            f"{q_s:.4g} rad carries the weight moment (up to {np.abs(tau).max():.3g} N m, {np.abs(tau).max() / lever:.3g} N at its "
            f"far edge against a hand's {top:g} N) to within {remainder.max():.3g} N m over its range")
-    return (float(k), q_s), float(hold), why
+    return SpringHold((float(k), q_s), float(hold), why)
 
 
 #: Parts on a vertical slide that ride on a balance (canonical labels): a hung window's sash (coil "constant
@@ -485,7 +506,7 @@ BALANCE_MIN_SHARE = 0.5
 BALANCE_VARIATION = 0.06
 
 
-def balance(load: physics.JointLoad, cs: ClosedState, unit: float) -> tuple[tuple[float, float], float, str] | None:
+def balance(load: physics.JointLoad, cs: ClosedState, unit: float) -> SpringHold | None:
     """The balance of a part on a vertical slide (:data:`BALANCE_LABELS`): a sash balance of a hung window, a
     lift-up door's counterbalance. Its pull equals the part's weight along the travel at mid-travel and varies
     by +- :data:`BALANCE_VARIATION` of it from end to end: k = 2 v |F_g| / R (N/m, R the travel in m) about the
@@ -497,7 +518,7 @@ def balance(load: physics.JointLoad, cs: ClosedState, unit: float) -> tuple[tupl
         cs: the joint's closed end (input units); ``unit``: the scale s that turns them into metres.
 
     Returns:
-        ((k N/m, q_s m), hold load N, note), or None when the weight along the travel is under
+        the spring (k N/m, q_s m) and hold load (N), or None when the weight along the travel is under
         :data:`BALANCE_MIN_SHARE` of the part's weight or the joint has no travel.
     """
     weight = load.mass * physics.G
@@ -510,7 +531,7 @@ def balance(load: physics.JointLoad, cs: ClosedState, unit: float) -> tuple[tupl
     why = (f"balance of a part on a vertical slide (sash balances of hung windows, counterbalances of lift-up doors): "
            f"k = {k:.4g} N/m about {q_s:.4g} m carries the {abs(load.gravity_load):.3g} N weight at mid-travel, "
            f"+-{BALANCE_VARIATION:.0%} from end to end")
-    return (float(k), float(q_s)), float(hold), why
+    return SpringHold((float(k), float(q_s)), float(hold), why)
 
 
 #: Opening fractions near the closed end where friction also holds a joint gravity pushes open (probes release at <= 0.10).

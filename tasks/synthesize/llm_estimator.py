@@ -92,20 +92,21 @@ class LLMEstimator:
             answer = self.client.ask(build_messages(desc, images, schema), ModelReply, schema=schema, schema_name=REPLY_SCHEMA_NAME,
                                      accept=lambda r: overlay_from_reply(ctx, r, name=self.name, model=cfg.model),
                                      max_reasks=self.max_reasks)
-            overlay, bands, notes = answer.value
+            est = answer.value
             memo = (answer.reply, answer.usage, answer.history, render_notes)
             while len(self._memo) >= self.MEMO_SIZE:
                 self._memo.pop(next(iter(self._memo)))
             self._memo[key] = memo
         else:
-            overlay, bands, notes = overlay_from_reply(ctx, memo[0], name=self.name, model=cfg.model)
+            est = overlay_from_reply(ctx, memo[0], name=self.name, model=cfg.model)
         reply, usage, history, render_notes = memo
+        overlay = est.overlay
         other = list(overlay.notes.other) + render_notes
         other.append(f"model {cfg.model}: {usage.summary()}")
         for i, errs in enumerate(history):
             other.append(f"model reply {i + 1} rejected and re-asked: " + "; ".join(errs[:5]))
         overlay = overlay.model_copy(update={"estimator": estimator_info(self.name, cfg.model, usage), "notes": overlay.notes.model_copy(update={"other": other})})
-        return estimator.Estimate(overlay=overlay, bands=dict(bands), notes=list(notes))
+        return estimator.Estimate(overlay=overlay, bands=dict(est.bands), notes=list(est.notes))
 
 
 class OpenAICompatibleEstimator(LLMEstimator):

@@ -5,6 +5,8 @@ same physics and validator as the offline estimator
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from asset2sim import __version__
 from asset2sim.models.errors import ReplyInvalid
 from asset2sim.models.usage import Usage
@@ -13,6 +15,7 @@ from asset2sim.schemas.overlay import ContactMaterial, EstimatorInfo, LinkPhysic
 from asset2sim.tasks.interpret.part_priors import material_for
 from asset2sim.tasks.synthesize import estimate, physics, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext
+from asset2sim.tasks.synthesize.estimator import Estimate
 from asset2sim.tasks.synthesize.request_apply import scaled_link
 
 MASS_AGREEMENT = 3.0
@@ -42,8 +45,8 @@ def _name_errors(where: str, names: list[str], known: set[str], unknown: str) ->
     return errors
 
 
-def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str = "llm", model: str | None = None) -> tuple[Overlay, dict[str, str], list[str]]:
-    """(overlay, band per movable joint, notes) from a model reply, validated; links and joints the reply
+def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str = "llm", model: str | None = None) -> Estimate:
+    """The overlay, band per movable joint and notes from a model reply, validated; links and joints the reply
     misses get the offline prior's material and the parser's band and words (noted). No usage info yet.
 
     Raises:
@@ -54,9 +57,10 @@ def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str =
         raise ReplyInvalid(errors)
     s = float(reply.scale.value)
     by_link = {lr.link: lr for lr in reply.links}
-    links, mat_notes, missing = _link_physics(ctx, by_link, s)
-    notes = [f"the model gave no material for {missing}; offline priors used"] if missing else []
-    links, mass_note = _within_model_mass(links, by_link)
+    read = _link_physics(ctx, by_link, s)
+    mat_notes = read.material_notes
+    notes = [f"the model gave no material for {read.missing}; offline priors used"] if read.missing else []
+    links, mass_note = _within_model_mass(read.links, by_link)
     bands, band_notes = _bands(ctx, reply)
     notes += band_notes
     state = estimate.state_from_bands(ctx.closed, bands, s, {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"})
@@ -79,12 +83,22 @@ def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str =
         validate_overlay.validate_overlay(overlay, ctx.asset, ctx.geometry)
     except validate_overlay.OverlayInvalid as exc:
         raise ReplyInvalid([f"{i.code} at {i.where}: {i.message}" for i in exc.issues if i.severity == "error" and not i.fixed]) from None
-    return overlay, bands, notes
+    return Estimate(overlay, bands, notes)
 
 
-def _link_physics(ctx: EstimationContext, by_link: dict, s: float) -> tuple[dict[str, LinkPhysics], list[str], list[str]]:
-    """(links, material notes, links without entry) at scale ``s``: geometry with the model's material, else
-    the offline prior's; ReplyInvalid for a link whose mass cannot be computed."""
+@dataclass(frozen=True, slots=True)
+class _ReplyLinks:
+    """The links' physics from a reply (:func:`_link_physics`): ``links`` (link -> physics), ``material_notes``
+    (one line per link) and ``missing`` (the links the reply has no entry for)."""
+
+    links: dict[str, LinkPhysics]
+    material_notes: list[str]
+    missing: list[str]
+
+
+def _link_physics(ctx: EstimationContext, by_link: dict, s: float) -> _ReplyLinks:
+    """The links at scale ``s``: geometry with the model's material, else the offline prior's; ReplyInvalid for a
+    link whose mass cannot be computed."""
     links: dict[str, LinkPhysics] = {}
     mat_notes, missing, errors = [], [], []
     for ln in ctx.asset.links:
@@ -107,7 +121,7 @@ def _link_physics(ctx: EstimationContext, by_link: dict, s: float) -> tuple[dict
         mat_notes.append(f"{ln.name}: {mat.name}, {mat.density:g} kg/m^3, {'shell t=' + format(mat.wall_thickness, 'g') + ' m' if mat.shell else 'solid'}")
     if errors:
         raise ReplyInvalid(errors)
-    return links, mat_notes, missing
+    return _ReplyLinks(links, mat_notes, missing)
 
 
 def _within_model_mass(links: dict[str, LinkPhysics], by_link: dict) -> tuple[dict[str, LinkPhysics], str]:

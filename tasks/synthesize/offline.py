@@ -40,11 +40,12 @@ class OfflineEstimator:
         total = sum(lp.mass for lp in links.values())
         mass_note = " + ".join(f"{lp.mass:.4g}" for lp in links.values()) + f" = {total:.4g} kg"
         lo, hi = plausible_mass_range(ctx, s)
-        links, req_mass_notes, mass_asked = request_apply.apply_masses(ctx, links, (lo, hi))
-        if req_mass_notes:
+        asked = request_apply.apply_masses(ctx, links, (lo, hi))
+        links = asked.links
+        if asked.notes:
             total = sum(lp.mass for lp in links.values())
-            mass_note += "; request: " + "; ".join(req_mass_notes) + f"; total {total:.4g} kg"
-        if total > 0 and not mass_asked and (total < lo or total > hi):
+            mass_note += "; request: " + "; ".join(asked.notes) + f"; total {total:.4g} kg"
+        if total > 0 and not asked.total_asked and (total < lo or total > hi):
             # into the plausible range, a margin inside its ends (10 %)
             target = lo * 1.1 if total < lo else hi * 0.9
             f = target / total

@@ -294,10 +294,19 @@ def range_target(mass: float, mass_range: tuple[float, float]) -> float:
     return min(max(float(mass), float(lo)), float(hi))
 
 
-def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausible: tuple[float, float]) -> tuple[dict[str, LinkPhysics], list[str], bool]:
+@dataclass(frozen=True, slots=True)
+class AskedMasses:
+    """The links with the masses a request asks (:func:`apply_masses`): ``links`` (link -> physics, kg),
+    ``notes`` (one line per change or warning) and ``total_asked`` (whether the request set the total mass)."""
+
+    links: dict[str, LinkPhysics]
+    notes: list[str]
+    total_asked: bool
+
+
+def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausible: tuple[float, float]) -> AskedMasses:
     """Masses in numbers and words on the links (inertia scaled alike): per-part masses first, then the total
-    (other links scaled), else "heavy" / "light" at 0.9 x the upper / 1.1 x the lower plausible end. Returns
-    (links, notes, whether the request set the total mass)."""
+    (other links scaled), else "heavy" / "light" at 0.9 x the upper / 1.1 x the lower plausible end."""
     notes: list[str] = []
     out = dict(links)
     fixed: set[str] = set()
@@ -325,26 +334,26 @@ def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausi
                f"'{rng.phrase}': the estimate {now:.4g} kg brought to the nearer end of the {rng.mass_range[0]:g}-{rng.mass_range[1]:g} kg asked")
         if total_req == now:
             notes.append(why + "; kept")
-            return out, notes, True
+            return AskedMasses(out, notes, True)
     lo, hi = plausible
     if total_req is None and ctx.request.mass_level is not None:
         total_req = 0.9 * hi if ctx.request.mass_level == "heavy" else 1.1 * lo
         why = f"'{ctx.request.mass_level}': {'0.9 x the upper' if ctx.request.mass_level == 'heavy' else '1.1 x the lower'} end of the plausible {lo:.3g}-{hi:.3g} kg"
     if total_req is None:
-        return out, notes, bool(fixed)
+        return AskedMasses(out, notes, bool(fixed))
     fixed_mass = sum(out[n].mass for n in fixed)
     free = [n for n in out if n not in fixed]
     free_mass = sum(out[n].mass for n in free)
     if not free or total_req <= fixed_mass:
         notes.append(f"WARNING: the requested total {total_req:.4g} kg is not above the parts' requested masses ({fixed_mass:.4g} kg); total left at {sum(lp.mass for lp in out.values()):.4g} kg")
-        return out, notes, True
+        return AskedMasses(out, notes, True)
     f = (total_req - fixed_mass) / max(free_mass, 1e-12)
     for n in free:
         out[n] = scaled_link(out[n], f, f"; x{f:.4g} to the requested total {total_req:.4g} kg")
     notes.append((why or "requested total mass") + f": {fixed_mass + free_mass:.4g} -> {total_req:.4g} kg")
     if not (lo <= total_req <= hi):
         notes.append(f"note: the requested {total_req:.4g} kg is outside the plausible {lo:.3g}-{hi:.3g} kg for this {ctx.category}; kept as asked")
-    return out, notes, True
+    return AskedMasses(out, notes, True)
 
 
 def apply_dynamics_values(ctx: "EstimationContext", joints: dict[str, JointDynamics], relevant: list[str],

@@ -33,6 +33,19 @@ UNANSWERED_SHARE = 0.1
 #: Smallest share of its friction a joint keeps in one relief round (:func:`relieve`).
 RELIEF_MIN_SHARE = 0.5
 
+
+@dataclass(frozen=True, slots=True)
+class Retuning:
+    """One step on the joints' friction and damping (:func:`relieve`, :meth:`DynamicsSearch.settle`,
+    :func:`asset2sim.tasks.tune.escalation.escalate`): ``overlay`` after it, ``changes`` joint ->
+    {"friction" (N m or N), "damping" (N m s/rad or N s/m)} changed (empty: nothing changed), ``reason`` (why,
+    one line; "" when nothing changed) and ``notes`` (one line per joint the bracketing moved or held back)."""
+
+    overlay: Overlay
+    changes: dict[str, dict[str, float]]
+    reason: str = ""
+    notes: list[str] = field(default_factory=list)
+
 @dataclass(frozen=True)
 class Setting:
     """Friction (N m or N) and damping (N m s/rad or N s/m) of one joint."""
@@ -167,13 +180,13 @@ class DynamicsSearch:
         return max(0.0, h * (float(b.lever) if b.lever else 1.0))
 
     def settle(self, before: Overlay, proposal: Overlay, changes: dict[str, dict[str, float]],
-               caps: dict[str, float] | None = None) -> tuple[Overlay, dict[str, dict[str, float]], list[str]]:
+               caps: dict[str, float] | None = None) -> Retuning:
         """Apply the bracketing rules (``docs/design/core.md``) to a round's ``proposal`` (made
         from ``before``, the round just recorded, with its ``changes``);
         ``caps``: joint -> friction cap (N m or N), raised in place by a headroom step.
 
         Returns:
-            (overlay, joint -> {"friction", "damping"} changed from ``before``, notes).
+            the overlay, its changes from ``before`` and the notes (no reason).
         """
         out = self._last or RoundOutcome()
         ov = proposal.model_copy(deep=True)
@@ -225,7 +238,7 @@ class DynamicsSearch:
                                                         "source": d0.source + f"; {why}: friction {new.friction:.3g}, damping {new.damping:.3g}"})
                 notes.append(f"{name}: {why}")
             changes[name] = {"damping": new.damping, "friction": new.friction}
-        return ov, {k: v for k, v in changes.items() if k in ov.joints}, notes
+        return Retuning(ov, {k: v for k, v in changes.items() if k in ov.joints}, notes=notes)
 
     def _unanswered(self, joint: str) -> str:
         """Why ``joint`` is raised no more ("" when it may be): its last :data:`UNANSWERED_RAISES` raises, each at
@@ -303,15 +316,15 @@ def force_excess(metrics: list[MetricResult], budgets: dict[str, operating.Opera
     return excess, why
 
 
-def relieve(overlay: Overlay, metrics: list[MetricResult], limits: operating.OperatingLimits) -> tuple[Overlay, dict[str, dict[str, float]], str]:
+def relieve(overlay: Overlay, metrics: list[MetricResult], limits: operating.OperatingLimits) -> Retuning:
     """Lower the friction (then the damping at top speed) of joints whose task
     needed more than a real operating force by the excess (:func:`force_excess`)
     / ``BUDGET_SHARE``, at most down to :data:`RELIEF_MIN_SHARE` of the friction
     per round and never below the hold floor; ``limits``' caps are lowered with them.
 
     Returns:
-        (new overlay, joint -> {"friction", "damping"} changed, reason); no
-        changes when nothing failed on force.
+        the new overlay, its changes and the reason; no changes when nothing
+        failed on force.
     """
     excess, why = force_excess(metrics, limits.budgets)
     ov = overlay.model_copy(deep=True)
@@ -335,4 +348,4 @@ def relieve(overlay: Overlay, metrics: list[MetricResult], limits: operating.Ope
         limits.damping_caps[name] = dm
         changes[name] = {"damping": dm, "friction": fr}
     reason = "; ".join(f"{j}: {w}" for j, w in why.items() if j in changes)
-    return ov, changes, reason
+    return Retuning(ov, changes, reason)

@@ -5,7 +5,8 @@ collision repairs the post-check calls for (:func:`repair_sweep`)."""
 
 from __future__ import annotations
 
-from dataclasses import replace
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay
@@ -23,11 +24,25 @@ from asset2sim.tasks.synthesize.physics import max_stable_damping
 from asset2sim.tasks.tune import dynamics_search, operating, repair, word_guard
 
 
+@dataclass(frozen=True, slots=True)
+class Tuned:
+    """What the tuning loop hands on: ``overlay`` (the friction and damping it kept), ``check`` (the last
+    post-check), ``rounds`` (its rounds in order); after :func:`repair_sweep`, also the collision pieces
+    (``overrides``, link -> piece files) and the closed ends at the output scale (``closed``, joint ->
+    :class:`ClosedState`) they were checked with (None from :func:`post_check`, which changes neither)."""
+
+    overlay: Overlay
+    check: postcheck.PostCheck
+    rounds: list[EscalationRound]
+    overrides: Mapping[str, tuple] | None = None
+    closed: dict[str, ClosedState] | None = None
+
+
 def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfig, ws: Workspace, log: StageLog,
-                closed: dict[str, tuple[float, float, float]] | None = None) -> tuple[Overlay, postcheck.PostCheck, list[EscalationRound]]:
+                closed: dict[str, tuple[float, float, float]] | None = None) -> Tuned:
     """Stage 7: post-check ``candidate`` at its refined state (``closed``: closed ends at the output scale, for the
     sweep and robust rest) and escalate damping and friction up to ``config.max_escalation_rounds`` times while
-    it fails. Returns (final overlay, last check, rounds)."""
+    it fails. Returns the final overlay, the last check and the rounds (no overrides or closed ends)."""
     asset, overlay, state = candidate.asset, candidate.overlay, dict(candidate.state)
     if overlay.initial_joint_positions is not None:
         overlay = overlay.model_copy(update={"initial_joint_positions": state})
@@ -57,7 +72,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     floors = operating.tilt_floors(overlay, overlay, asset, robust_rest.RobustRestConfig().tilt)
 
     def escalated(chk: postcheck.PostCheck) -> bool:  # this loop escalates ``chk`` (the post-check then skips the sweep)
-        return n < config.max_escalation_rounds and bool(escalate(overlay, chk, config.escalation_factor, caps, floors, dcaps)[1])
+        return n < config.max_escalation_rounds and bool(escalate(overlay, chk, config.escalation_factor, caps, floors, dcaps).changes)
 
     def with_task(chk: postcheck.PostCheck) -> postcheck.PostCheck:  # the task tier appended when refine was given a task
         if spec is not None:
@@ -76,10 +91,12 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         n += 1
         before = overlay
         # a task that needed more than a real operating force first: lower friction / damping (and their caps)
-        overlay, changes, reason = dynamics_search.relieve(overlay, check.metrics, lim)
-        if not changes:
-            overlay, changes, reason = escalate(overlay, check, config.escalation_factor, caps, floors, dcaps)
-        overlay, changes, notes = search.settle(before, overlay, changes, caps)
+        step = dynamics_search.relieve(overlay, check.metrics, lim)
+        if not step.changes:
+            step = escalate(overlay, check, config.escalation_factor, caps, floors, dcaps)
+        reason = step.reason
+        settled = search.settle(before, step.overlay, step.changes, caps)
+        overlay, notes = settled.overlay, settled.notes
         reason = "; ".join([reason, *notes]) if reason and notes else reason or "; ".join(notes)
         overlay, held = word_guard.keep(before, overlay, kept_words)
         changes = _changed(before, overlay)
@@ -109,7 +126,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         changes = {n_: {"damping": d.damping, "friction": d.friction} for n_, d in overlay.joints.items()}
         rounds.append(EscalationRound(round=rounds[-1].round + 1, metrics=check.metrics, changes=changes, reason=reason))
     log.lap("post_check")
-    return overlay, check, rounds
+    return Tuned(overlay, check, rounds)
 
 
 def _changed(before: Overlay, after: Overlay) -> dict[str, dict[str, float]]:
@@ -123,15 +140,15 @@ def _changed(before: Overlay, after: Overlay) -> dict[str, dict[str, float]]:
     return out
 
 
-def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[str, ClosedState], result: tuple, st: StateRefinement,
-                  state: dict[str, float], config: RefineConfig, ws: Workspace, log: StageLog):
+def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[str, ClosedState], result: Tuned, st: StateRefinement,
+                  state: dict[str, float], config: RefineConfig, ws: Workspace, log: StageLog) -> Tuned:
     """Stage 7b: collision repairs where the post-check shows a part held by its neighbours' pieces: a
     blocked joint sweep (:func:`asset2sim.tasks.tune.repair.sweep_repairs`, better = a better sweep score)
     or parts held together (running clearance, better = fewer failing tiers). Each repair is loaded, the
     limits clipped again from ``unclipped`` and ``closed_raw``, and post-checked; the first that is better
-    while no passed metric fails is kept. ``result``: (overlay, check, rounds, collision overrides, closed
-    ends), returned unchanged or replaced; notes go to ``st.collision_changes``."""
-    overlay, check, rounds, overrides, closed_out = result
+    while no passed metric fails is kept. ``result``: the post-check's, with its collision overrides and
+    closed ends, returned unchanged or replaced; notes go to ``st.collision_changes``."""
+    overlay, check, rounds, overrides = result.overlay, result.check, result.rounds, result.overrides
     sw = next((m for m in check.metrics if m.name == "joint_sweep"), None)
     blocked = {} if sw is None or sw.passed is not False else sweep.blocked_positions(sw)
     pairs = [] if blocked else repair.held_together_pairs(check.metrics)
@@ -162,8 +179,9 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
     for rep in repairs:
         repaired = Candidate(ctx.asset, unclipped, state, rep.overrides, ctx.root_rotation)
         clipped, closed2 = placement.clip_limits(repaired, closed_raw, ws, config, log)
-        ov2, check2, rounds2 = post_check(ctx, replace(repaired, overlay=kept_dynamics(clipped, overlay)), left, ws, log,
-                                           closed=closed_tuples(closed2))
+        tuned = post_check(ctx, replace(repaired, overlay=kept_dynamics(clipped, overlay)), left, ws, log,
+                           closed=closed_tuples(closed2))
+        check2 = tuned.check
         lost = [m.name for m in check2.metrics if (m.name, m.engine) in passed_before and m.passed is False]
         if better(check2) and not lost:
             for line in rep.notes:
@@ -171,8 +189,8 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
             st.collision_changes = list(st.collision_changes) + rep.notes
             n = len(rounds)
             rounds = rounds + [r.model_copy(update={"round": n + r.round, "reason": f"{rep.what} ({label}): {r.reason}"})
-                               for r in rounds2]
-            return ov2, check2, rounds, rep.overrides, closed2
+                               for r in tuned.rounds]
+            return Tuned(tuned.overlay, check2, rounds, rep.overrides, closed2)
         log.say("sweep_repair", f"{rep.what} not kept ({label}; failing metrics {dynamics_search.failing_tiers(check.metrics)} -> "
                                 f"{dynamics_search.failing_tiers(check2.metrics)}{'; would fail ' + ', '.join(lost) if lost else ''}); "
                                 "the asset kept as it was")
@@ -190,14 +208,14 @@ def kept_dynamics(clipped: Overlay, kept: Overlay) -> Overlay:
 def escalate(overlay: Overlay, check: postcheck.PostCheck, factor: float,
              friction_caps: dict[str, float] | None = None,
              tilt_floors: dict[str, float] | None = None,
-             damping_caps: dict[str, float] | None = None) -> tuple[Overlay, dict[str, dict[str, float]], str]:
+             damping_caps: dict[str, float] | None = None) -> dynamics_search.Retuning:
     """Raise damping and friction of the joints that oscillate, sag or are not
     held by robust rest (all joints when the root is unstable and no joint is
     singled out). ``friction_caps`` (joint -> N*m or N) bound the friction,
     ``tilt_floors`` (N*m or N) raise that of a joint robust rest does not hold,
     ``damping_caps`` (N m s/rad or N s/m) bound the damping (never below the values before).
 
-    Returns (new overlay, changes joint -> {parameter: new value}, reason).
+    Returns the new overlay, its changes (joint -> {parameter: new value}) and the reason.
     """
     other_unstable, other_osc = check.engine_failures()
     osc = list(dict.fromkeys(list(check.metric("oscillation").details.get("failing", [])) + other_osc))
@@ -243,7 +261,7 @@ def escalate(overlay: Overlay, check: postcheck.PostCheck, factor: float,
         new = d.model_copy(update={"damping": damping, "friction": friction, "source": d.source + note})
         ov.joints[name] = new
         changes[name] = {"damping": new.damping, "friction": new.friction}
-    return ov, changes, "; ".join(reason)
+    return dynamics_search.Retuning(ov, changes, "; ".join(reason))
 
 
 def joints_not_held(metrics: list[MetricResult]) -> list[str]:

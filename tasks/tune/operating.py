@@ -236,12 +236,12 @@ def operating_budgets(obj: SimObject, overlay: Overlay, closed: dict[str, tuple[
             child = session.joint_child[name]
             range_of = operating_range(category, labels.get(child) if grasp.side == "child" else None)
             paths = _paths(float(d * (state.get(name, qc) - qc) / rng), actions, whole)
-            best, lever, q_state = _tightest(session, model, name, (qc, d, rng), paths, grasp, range_of,
-                                             (mu, total) if free and ground else None, springs.get(name))
+            tight = _tightest(session, model, name, (qc, d, rng), paths, grasp, range_of,
+                              (mu, total) if free and ground else None, springs.get(name))
             session.set_joint_positions(dict(state))
-            if best is not None:
-                out[name] = _budget(name, session.joint_types[name], grasp, lever, best, q_state, lim, free_moving,
-                                    overlay.joints[name].inertia_axis)
+            if tight.best is not None:
+                out[name] = _budget(name, session.joint_types[name], grasp, tight.lever, tight.best, tight.gravity_state, lim,
+                                    free_moving, overlay.joints[name].inertia_axis)
     finally:
         session.close()
     return out
@@ -282,12 +282,21 @@ def _paths(f_state: float, actions: tuple[str, ...], whole: bool) -> list[tuple[
             for action in actions]
 
 
+@dataclass(frozen=True, slots=True)
+class _Tightest:
+    """A joint's tightest operating budget over its paths (:func:`_tightest`): ``best`` (smallest budget B,
+    smallest allowed force F N, what bounds F; None without a sample), ``lever`` (m, at the last sample; None
+    for a prismatic joint) and ``gravity_state`` (|Q| at the session's initial state, N m or N)."""
+
+    best: tuple[float, float, str] | None
+    lever: float | None
+    gravity_state: float | None
+
+
 def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[float, float, float],
               paths: list[tuple[str, np.ndarray]], grasp: _Grasp, range_of: tuple[ForceRange, str],
-              ground: tuple[float, float] | None, spring: Spring | None = None
-              ) -> tuple[tuple[float, float, str] | None, float | None, float | None]:
-    """((smallest budget B, smallest allowed force F N, what bounds F), the lever at the last sample m or None,
-    |Q| at the session's initial state) over ``paths`` ((action, opening fractions) from :func:`_paths`); Q of
+              ground: tuple[float, float] | None, spring: Spring | None = None) -> _Tightest:
+    """The tightest budget over ``paths`` ((action, opening fractions) from :func:`_paths`); Q of
     gravity and of the joint's ``spring``.
     ``range_of``: the part's operating range and where it comes from; ``ground``: (mu, whole mass kg) where the
     ground bound applies."""
@@ -304,7 +313,8 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
         s_motion = (-d if action == "close" else d) * side
         for f in fractions:
             session.set_joint_positions({**state, joint: qc + d * f * rng})
-            t, nt, lever = _grasp_motion(session, joint, grasp, prismatic, model)
+            motion = _grasp_motion(session, joint, grasp, prismatic, model)
+            t, nt, lever = motion.direction, motion.norm, motion.lever
             force, bound = range_force(rng_, where, lever)
             hand = BUDGET_SHARE * force * (lever if lever is not None else 1.0)
             fg = _ground_force(t, nt, s_motion, *ground) if ground is not None else None
@@ -322,21 +332,30 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
                 best = (b, best[1] if best else float("inf"), best[2] if best else "")
             if force < best[1]:
                 best = (best[0], force, bound)
-    return best, lever, q_state
+    return _Tightest(best, lever, q_state)
+
+
+@dataclass(frozen=True, slots=True)
+class _GraspMotion:
+    """How the grasp point moves as q grows (:func:`_grasp_motion`): ``direction`` t (3,) (m/rad or m/m),
+    ``norm`` |t| >= 1e-12 and ``lever`` >= 1e-3 m (:func:`~asset2sim.tasks.check.contact_points.grasp_lever`;
+    None for a prismatic joint)."""
+
+    direction: np.ndarray
+    norm: float
+    lever: float | None
 
 
 def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: bool,
-                  model: UrdfModel | None = None) -> tuple[np.ndarray, float, float | None]:
-    """(direction t (3,) of the grasp point's motion as q grows, |t| >= 1e-12,
-    lever >= 1e-3 m (:func:`~asset2sim.tasks.check.contact_points.grasp_lever`) or None for prismatic) at the
-    session's state."""
+                  model: UrdfModel | None = None) -> _GraspMotion:
+    """How the grasp point moves at the session's state."""
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
     lo, Rl = session.link_frame(grasp.link)
     p = np.asarray(lo, float) + np.asarray(Rl, float) @ np.asarray(grasp.point, float)
     if prismatic:
-        return a, max(float(np.linalg.norm(a)), 1e-12), None
+        return _GraspMotion(a, max(float(np.linalg.norm(a)), 1e-12), None)
     t = np.cross(a, p - o)
-    return t, max(float(np.linalg.norm(t)), 1e-12), grasp_lever(session, joint, grasp.link, grasp.point, model)
+    return _GraspMotion(t, max(float(np.linalg.norm(t)), 1e-12), grasp_lever(session, joint, grasp.link, grasp.point, model))
 
 
 def _ground_force(t: np.ndarray, nt: float, s_motion: float, mu: float, total: float) -> float | None:

@@ -6,6 +6,7 @@ positions from the stall, deeper than :data:`MIN_DEPTH`, gets its pieces improve
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 from asset2sim.engines.source import SimObject
@@ -22,11 +23,20 @@ SAMPLES = 8
 MIN_DEPTH = 0.0021
 
 
+@dataclass(frozen=True, slots=True)
+class _Stop:
+    """The deepest contact where a sweep stopped (:func:`_deepest_stop`): ``depth`` (m), the joint's ``position``
+    (rad or m) and ``pair`` (moving link, other link; None when nothing touches)."""
+
+    depth: float
+    position: float
+    pair: tuple[str, str] | None
+
+
 def _deepest_stop(session, stall: float, goal: float, joint: str, sub: list[str], others: list[str],
-                  adjacent: set[frozenset[str]], state: dict[str, float]) -> tuple[float, float, tuple[str, str] | None]:
-    """(depth m, position, (moving link, other link)) of the deepest pair
-    over :data:`SAMPLES` positions from ``stall`` to ``goal``."""
-    best = (0.0, stall, None)
+                  adjacent: set[frozenset[str]], state: dict[str, float]) -> _Stop:
+    """The deepest pair over :data:`SAMPLES` positions from ``stall`` to ``goal``."""
+    best = _Stop(0.0, stall, None)
     for k in range(SAMPLES + 1):
         q = stall + (goal - stall) * k / SAMPLES
         session.set_joint_positions({**state, joint: q})
@@ -35,8 +45,8 @@ def _deepest_stop(session, stall: float, goal: float, joint: str, sub: list[str]
                 if frozenset((a, b)) in adjacent:
                     continue
                 d = session.link_distances(a, b, 0.0)
-                if d and -min(d) > best[0]:
-                    best = (-min(d), q, (a, b))
+                if d and -min(d) > best.depth:
+                    best = _Stop(-min(d), q, (a, b))
     return best
 
 
@@ -69,7 +79,8 @@ def decompose_for_blocked(obj: SimObject, asset: AssetDescription, metric: Metri
                 continue
             sub = [ln for ln in subtrees.get(name, [session.joint_child[name]]) if ln in with_collision]
             others = [ln for ln in with_collision if ln not in sub]
-            depth, q, pair = _deepest_stop(session, stall, goal, name, sub, others, adjacent, state)
+            stop = _deepest_stop(session, stall, goal, name, sub, others, adjacent, state)
+            depth, q, pair = stop.depth, stop.position, stop.pair
             if pair is None or depth < MIN_DEPTH or set(pair) & (replaced | set(overrides)):
                 continue
             session.set_joint_positions({**state, name: q})

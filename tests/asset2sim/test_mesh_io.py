@@ -32,7 +32,8 @@ def _write(tmp_path: Path) -> Path:
 
 def test_read_mesh_general_path_matches_trimesh(tmp_path):
     p = _write(tmp_path)
-    v, f, notes = mesh_io.read_mesh(p)
+    mesh = mesh_io.read_mesh(p)
+    v, f, notes = mesh.vertices, mesh.faces, mesh.notes
     assert v.shape == (7, 3) and f.tolist() == [[0, 1, 2], [0, 2, 3], [4, 5, 6]] and notes == []
     ref = trimesh.load(str(p), force="mesh", process=False, skip_materials=True)
     assert np.allclose(np.sort(ref.vertices, axis=0), np.sort(v, axis=0))
@@ -46,7 +47,7 @@ def test_fast_and_general_parsers_agree(tmp_path):
     fast = mesh_io._parse_obj_fast(text.encode())
     general = mesh_io._parse_obj_general(text.encode(), "x")
     assert fast is not None
-    assert np.array_equal(fast[0], general[0]) and np.array_equal(fast[1], general[1])
+    assert np.array_equal(fast[0], general.vertices) and np.array_equal(fast[1], general.faces)
     assert np.array_equal(fast[0], v) and np.array_equal(fast[1], f)
 
 
@@ -64,7 +65,8 @@ def test_other_formats_go_through_trimesh(tmp_path):
     box = trimesh.creation.box(extents=(1, 2, 3))
     p = tmp_path / "b.stl"
     box.export(str(p))
-    v, f, _ = mesh_io.read_mesh(p)
+    mesh = mesh_io.read_mesh(p)
+    v, f = mesh.vertices, mesh.faces
     assert len(f) == 12 and np.allclose(np.ptp(v, axis=0), (1, 2, 3))
     (sets,) = mesh_io.hull_point_sets(p)
     assert np.allclose(np.ptp(sets, axis=0), (1, 2, 3))
@@ -85,7 +87,8 @@ def test_a_written_mesh_is_read_from_memory_while_unchanged_and_from_disk_once_c
     assert mesh_io.file_bytes(written) == BOX.encode() and mesh_io.file_bytes(copy) == BOX.encode()
     assert [len(g) for g in mesh_io.obj_groups(written)] == [4, 3] and reads == [written]  # the copy's source, once
     # the glTF read from its bytes, its buffer from its folder
-    v, f, _ = mesh_io.read_mesh(tmp_path / "model.gltf")
+    mesh = mesh_io.read_mesh(tmp_path / "model.gltf")
+    v, f = mesh.vertices, mesh.faces
     assert len(f) == 12 and np.allclose(np.ptp(v, axis=0), (1, 2, 3))
     # changed on disk (a new inode): read again; forgotten: read again
     (tmp_path / "other.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
@@ -105,7 +108,7 @@ def test_cache_reads_once_and_remembers_failures(tmp_path):
     a = cache.get(p)
     assert cache.get(p) is a and len(cache) == 1
     with pytest.raises(ValueError):
-        a[0][0, 0] = 5.0  # shared arrays are read-only
+        a.vertices[0, 0] = 5.0  # shared arrays are read-only
     with pytest.raises(mesh_io.MeshReadError):
         cache.get(tmp_path / "none.obj")
     with pytest.raises(mesh_io.MeshReadError):
@@ -171,7 +174,8 @@ def test_every_partnet_mesh_reads_like_trimesh():
     paths = sorted(SHARED.glob("*/textured_objs/*.obj"))[:300]
     assert paths
     for p in paths:
-        v, f, _ = mesh_io.read_mesh(p)
+        mesh = mesh_io.read_mesh(p)
+        v, f = mesh.vertices, mesh.faces
         ref = trimesh.load(str(p), force="mesh", process=False, skip_materials=True, maintain_order=True)
         if len(ref.faces) == 0:
             continue

@@ -81,7 +81,7 @@ def test_refined_output_round_trip(asset_id, shared_dataset, tmp_path, refine_on
             assert _close(got.inertial.inertia_in_link_axes(), link.inertial.inertia_in_link_axes()), name
         assert bool(got.collisions) == bool(link.collisions) and (not link.visuals or got.visuals), name
         if link.visuals:  # the visual meshes' bounds in the link frame, m (binary32 points)
-            want = np.concatenate([(read_mesh(v.path)[0] * v.scale) @ v.origin[:3, :3].T + v.origin[:3, 3] for v in link.visuals])
+            want = np.concatenate([(read_mesh(v.path).vertices * v.scale) @ v.origin[:3, :3].T + v.origin[:3, 3] for v in link.visuals])
             have = np.concatenate([read.meshes[v.filename][0] for v in got.visuals])
             assert np.allclose(have.min(0), want.min(0), atol=1e-6) and np.allclose(have.max(0), want.max(0), atol=1e-6), name
 
@@ -217,7 +217,8 @@ def test_staged_door_reads_back(tmp_path):
         assert np.allclose(b.origin, j.origin) and np.allclose(b.axis, j.axis)
         assert np.isclose(b.lower, j.lower) and np.isclose(b.upper, j.upper) and np.isclose(b.damping, j.damping)
     for rel, (v, f) in read.meshes.items():
-        verts, faces, _ = read_mesh(tmp_path / "st" / rel)
+        mesh = read_mesh(tmp_path / "st" / rel)
+        verts, faces = mesh.vertices, mesh.faces
         assert np.allclose(verts, v) and len(faces) == len(f)
     assert np.isclose(back.links["door_panel"].inertial.mass, 12.0)
 

@@ -48,7 +48,8 @@ def visual_mesh_problem(path: Path) -> str:
     if path.suffix.lower() not in (".obj", ".stl", ".msh"):
         return f"is a {path.suffix} file (MuJoCo reads OBJ, STL and MSH)"
     try:
-        v, f, _ = mesh_io.read_mesh(path)
+        mesh = mesh_io.read_mesh(path)
+        v, f = mesh.vertices, mesh.faces
     except mesh_io.MeshReadError as exc:
         return f"cannot be read ({exc})"
     v = np.asarray(v, float)

@@ -244,7 +244,8 @@ def _write_visuals(stage, link_path, model: UrdfModel, link: str, notes: list[st
         p = scope.AppendChild(f"visual_{k}")
         if v.kind == "mesh":
             try:
-                verts, faces, _ = read_mesh(v.path)
+                read = read_mesh(v.path)
+                verts, faces = read.vertices, read.faces
             except MeshReadError as exc:
                 notes.append(f"link {link!r} visual {k}: {exc}; left out")
                 continue

@@ -82,7 +82,8 @@ def _collision_files(urdf_path: Path) -> dict[str, list[Path]]:
 
 
 def _signed_volume(path: Path) -> float:
-    v, f, _ = read_mesh(path)
+    mesh = read_mesh(path)
+    v, f = mesh.vertices, mesh.faces
     t = v[f]
     return float(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6)
 
@@ -112,7 +113,7 @@ def test_the_quick_solid_test_decides_as_the_principal_axes_do_on_real_and_thin_
         return q if width >= flat else np.vstack([q + 0.5 * (cp.MIN_THICKNESS - width) * n,
                                                   q - 0.5 * (cp.MIN_THICKNESS - width) * n])
 
-    sets = [read_mesh(f)[0] for f in sorted((SHARED / "datasets" / "partnet_mobility" / "9912" / "textured_objs").glob("*.obj"))[:12]]
+    sets = [read_mesh(f).vertices for f in sorted((SHARED / "datasets" / "partnet_mobility" / "9912" / "textured_objs").glob("*.obj"))[:12]]
     rng = np.random.default_rng(5)
     for s in (1e-6, 3e-5, 1e-4, 2e-4, 1e-3, 0.05):
         turn = np.linalg.qr(rng.normal(size=(3, 3)))[0]
@@ -130,7 +131,8 @@ def test_piece_files_are_closed_and_wound_outward(tmp_path):
     piece = cp.Piece.of(rng.normal(size=(60, 3)))
     p = tmp_path / "p.obj"
     p.write_bytes(cp.piece_obj(piece))
-    v, f, _ = read_mesh(p)
+    mesh = read_mesh(p)
+    v, f = mesh.vertices, mesh.faces
     assert _signed_volume(p) == pytest.approx(piece.volume, rel=1e-9)
     edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
     _, counts = np.unique(edges, axis=0, return_counts=True)
@@ -175,7 +177,8 @@ def test_written_collisions_are_few_closed_convex_pieces_mujoco_loads(tmp_path):
     for paths in files.values():
         for p in paths:
             assert p.parent.name.startswith("collision")
-            v, f, _ = read_mesh(p)
+            mesh = read_mesh(p)
+            v, f = mesh.vertices, mesh.faces
             assert _signed_volume(p) > 0
             sv = np.linalg.svd(v - v.mean(axis=0), compute_uv=False)
             assert np.ptp((v - v.mean(axis=0)) @ np.linalg.svd(v - v.mean(axis=0))[2][2]) >= cp.FLAT_WIDTH
@@ -370,7 +373,7 @@ def _blade_depth(model: urdf.UrdfModel, pieces: dict, q: float) -> float:
 
 def groups_of(model: urdf.UrdfModel) -> dict:
     notes: list[str] = []
-    return {n: cg._group_pieces(ln, lambda g: g.path, notes)[0] for n, ln in model.links.items()}
+    return {n: cg._group_pieces(ln, lambda g: g.path, notes).pieces for n, ln in model.links.items()}
 
 
 def test_merge_keeps_the_swept_volume_of_a_joint_free(tmp_path):
@@ -419,7 +422,7 @@ def test_a_limit_clipped_to_the_geometry_gives_the_parent_back_its_material_beyo
     assert urdf.read_urdf(out.urdf).joint("hinge").upper == 0.4
 
     def pieces(urdf_path):
-        return {n: [cp.Piece.of(read_mesh(p)[0]) for p in ps] for n, ps in _collision_files(urdf_path).items()}
+        return {n: [cp.Piece.of(read_mesh(p).vertices) for p in ps] for n, ps in _collision_files(urdf_path).items()}
 
     kept, cut = pieces(out.urdf), pieces(declared.urdf)
     assert sum(p.volume for p in kept["body"]) > 1.02 * sum(p.volume for p in cut["body"])
@@ -775,8 +778,8 @@ def test_written_free_standing_object_rests_on_four_feet_mounted_one_is_not_leve
     _write(folder, tmp_path / "free")
     assert _feet_on_the_ground(tmp_path / "free" / "mobility.urdf") == 4
     model = urdf.read_urdf(tmp_path / "free" / "mobility.urdf")
-    lows = sorted(float(read_mesh(c.path)[0][:, 2].min()) for c in model.links["body"].collisions
-                  if float(read_mesh(c.path)[0][:, 2].max()) <= 0.01 + 1e-9)
+    lows = sorted(float(read_mesh(c.path).vertices[:, 2].min()) for c in model.links["body"].collisions
+                  if float(read_mesh(c.path).vertices[:, 2].max()) <= 0.01 + 1e-9)
     assert lows == pytest.approx([0.0] * 4, abs=1e-9)
 
     asset = extract_asset(folder)
@@ -785,8 +788,8 @@ def test_written_free_standing_object_rests_on_four_feet_mounted_one_is_not_leve
     ov, _ = validate_overlay(ov, asset, analyze_asset(asset))
     write_output(asset, ov, tmp_path / "mounted", {"hinge": 0.0})
     model = urdf.read_urdf(tmp_path / "mounted" / "mobility.urdf")
-    lows = sorted(float(read_mesh(c.path)[0][:, 2].min()) for c in model.links["body"].collisions
-                  if float(read_mesh(c.path)[0][:, 2].max()) <= 0.01 + 1e-9)
+    lows = sorted(float(read_mesh(c.path).vertices[:, 2].min()) for c in model.links["body"].collisions
+                  if float(read_mesh(c.path).vertices[:, 2].max()) <= 0.01 + 1e-9)
     assert lows == pytest.approx([0.0, 0.0, 0.0, 0.0006], abs=1e-9)
     assert _feet_on_the_ground(tmp_path / "mounted" / "mobility.urdf") == 3  # put down free, it stands on three
 
@@ -878,7 +881,7 @@ def test_drop_slivers_on_a_real_object_equals_the_full_plane_test():
             for c in link.collisions:
                 if c.kind != "mesh":
                     continue
-                v, _ = read_mesh(Path(c.path) if c.path else SHARED / aid / str(c.filename))[:2]
+                v = read_mesh(Path(c.path) if c.path else SHARED / aid / str(c.filename)).vertices
                 pc = cp.solid_piece(np.asarray(v, float) * np.asarray(c.scale, float))
                 if pc is not None:
                     pieces.append(pc)

@@ -111,7 +111,7 @@ def test_sweep_is_skipped_only_on_a_round_that_is_escalated_whatever_it_says(fau
     cfg = RefineConfig()
     rec = RecordedRuns()
     def escalated(chk):  # as refine's loop: another round whenever escalation changes something
-        return bool(escalate(ov, chk, cfg.escalation_factor)[1])
+        return bool(escalate(ov, chk, cfg.escalation_factor).changes)
 
     early = postcheck.run_post_check(UrdfFile(out / "mobility.urdf"), state, ov, cfg, closed=closed, escalated=escalated, recorded=rec)
     last = postcheck.run_post_check(UrdfFile(out / "mobility.urdf"), state, ov, cfg, closed=closed, escalated=lambda chk: False, recorded=rec)

@@ -50,10 +50,10 @@ def test_mass_plausibility_pass_fail_and_no_prior():
 @pytest.mark.parametrize("extent, score", [(0.2, 1.0), (0.29, 1.0), (0.14, 1.0), (0.40, 0.5), (0.1, 0.5), (0.5, 0.0), (0.05, 0.0)])
 def test_size_score_bands(extent, score):
     # target 0.2 m (typical 0.4 m x factor 0.5): within x1.5 scores 1, within x2.25 0.5
-    s, reason, ratio = sem.size_score(extent, 0.4, 0.5)
-    assert s == score, reason
-    assert ratio == pytest.approx(extent / 0.2)
-    assert ratio > 0 and "ratio" in reason
+    size = sem.size_score(extent, 0.4, 0.5)
+    assert size.score == score, size.reason
+    assert size.ratio == pytest.approx(extent / 0.2)
+    assert size.ratio > 0 and "ratio" in size.reason
 
 
 def test_size_score_rejects_bad_input():

@@ -462,7 +462,8 @@ def test_primitives_analytic_and_rotated():
 def test_obj_reader_styles(tmp_path, style):
     v, f = box_mesh(0.1, 0.2, 0.3)
     path = write_obj(tmp_path / f"b_{style}.obj", v, f, style=style)
-    rv, rf, _ = mesh_io.read_mesh(path)
+    mesh = mesh_io.read_mesh(path)
+    rv, rf = mesh.vertices, mesh.faces
     assert np.allclose(rv, v) and np.array_equal(rf, f)
 
 
@@ -472,7 +473,8 @@ def test_obj_reader_polygons_comments_and_colours(tmp_path):
         "v 0 0 0 1 0 0\nv 1 0 0 1 0 0\nv 1 1 0 1 0 0\nv 0 1 0 1 0 0  # coloured\n"
         "f 1 2 3 4\n# comment\nf 1/1 2/2 3/3\nl 1 2\n"
     )
-    v, f, _ = mesh_io.read_mesh(path)
+    mesh = mesh_io.read_mesh(path)
+    v, f = mesh.vertices, mesh.faces
     assert v.shape == (4, 3)
     assert f.tolist() == [[0, 1, 2], [0, 2, 3], [0, 1, 2]]
 

@@ -59,7 +59,8 @@ def test_the_pieces_handed_out_are_copies_a_caller_may_change(counted):
 
 
 def test_other_settings_are_another_decomposition(counted):
-    v, f = decomposition.read_mesh(BASE_MESH)[:2]
+    mesh = decomposition.read_mesh(BASE_MESH)
+    v, f = mesh.vertices, mesh.faces
     coarse = {**decomposition.COACD_SETTINGS, "max_convex_hull": 2}
     a = decomposition.decompose(v, f, coarse, refit=False)
     b = decomposition.decompose(v, f, coarse, refit=True)

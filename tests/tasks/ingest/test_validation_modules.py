@@ -67,7 +67,8 @@ def test_obj_scan_uses_the_shared_reader(tmp_path):
     p = tmp_path / "m.obj"
     p.write_text(cb.CUBE_V + cb.CUBE_F)
     scan = vi.scan_mesh_file(p)
-    v, f, _ = mesh_io.read_obj(p.read_bytes())
+    mesh = mesh_io.read_obj(p.read_bytes())
+    v, f = mesh.vertices, mesh.faces
     assert scan.n_faces == len(f) == 12 and scan.n_vertices == len(v) == 8
     assert scan.defects == {}
     assert np.allclose(scan.bounds, [[0, 0, 0], [1, 1, 1]])
@@ -77,7 +78,8 @@ def test_quad_and_two_gon_do_not_pair_up(tmp_path):
     """A quad followed by a 2-vertex face has 3 indices per face on average:
     the shared reader's vectorized path must not read them as two triangles."""
     data = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 1\nf 1 2 3\nf 1 2 3 4\nf 1 2\n"
-    v, f, notes = mesh_io.read_obj(data)
+    mesh = mesh_io.read_obj(data)
+    v, f, notes = mesh.vertices, mesh.faces, mesh.notes
     assert f.tolist() == [[0, 1, 2], [0, 1, 2], [0, 2, 3]] and notes
     p = tmp_path / "m.obj"
     p.write_bytes(data)

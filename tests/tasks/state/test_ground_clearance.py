@@ -49,7 +49,7 @@ def test_without_ground_clearance_the_door_drags_and_the_body_slides(tmp_path, m
     """The failure the repair removes: the same refine with the repair off
     leaves the door on the floor, and opening it pulls the body along."""
     monkeypatch.setattr(ground_clearance, "apply_ground_clearance",
-                        lambda candidate, ws, closed: (dict(candidate.state), candidate.collision_overrides, [], []))
+                        lambda candidate, ws, closed: ground_clearance.GroundLifted(dict(candidate.state), candidate.collision_overrides, [], []))
     src = build_microwave(tmp_path / "src")
     res = refine.refine_asset(src, "A microwave.", tmp_path / "out", extras=False)
     low = _lowest(tmp_path / "out" / "mobility.urdf", res.report.initial_joint_positions)

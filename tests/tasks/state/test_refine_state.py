@@ -115,7 +115,8 @@ def test_a_range_clipped_again_keeps_a_joint_inside_its_band_and_leaves_one_move
                                                      "flap": "halfway"},
                     prismatic={"drawer"}, closed_out=before, requested={}, targets={"flap": flap})
     state = {"door": 0.65 * 1.771, "lid": 0.05, "drawer": 0.1, "flap": 0.6}
-    syn2, kept, notes = reclipped(syn, None, after, state)
+    again = reclipped(syn, None, after, state)
+    syn2, kept, notes = again.synthesis, again.state, again.notes
     assert after["door"].fraction(state["door"]) > 0.65  # the old position is out of the band on the new range
     assert kept["door"] == pytest.approx(0.65 * 1.752) and after["door"].fraction(kept["door"]) == pytest.approx(0.65)
     assert kept["lid"] == state["lid"] and kept["drawer"] == state["drawer"]

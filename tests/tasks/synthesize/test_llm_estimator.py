@@ -8,6 +8,7 @@ the direct / IVW baselines."""
 from __future__ import annotations
 
 import importlib.util
+from dataclasses import replace
 import base64
 import io
 import json
@@ -166,14 +167,14 @@ def test_mass_comes_from_geometry_and_material_not_the_models_number(plate):
             mat = physics.MaterialChoice(name="ABS", density=lr["density"], shell=lr["shell"], wall_thickness=lr["wall_thickness"])
             geo[lr["link"]] = physics.link_physics(ctx.geometry[lr["link"]], s, mat).mass
             lr["mass"]["value"] = geo[lr["link"]] * 2.0  # the model's own number: 2x off, within the agreement band
-        ov, bands, _ = le.overlay_from_reply(ctx, ModelReply.model_validate(content))
+        ov = le.overlay_from_reply(ctx, ModelReply.model_validate(content)).overlay
         for ln, m in geo.items():
             assert ov.links[ln].mass == pytest.approx(m, rel=1e-9)
             assert inertia_problems(ov.links[ln].inertia.matrix()) is None
         # a model estimate 100x off: the geometry is pulled to within 3x of it, no further
         for lr in content["links"]:
             lr["mass"]["value"] = geo[lr["link"]] * 100.0
-        ov2, _, notes = le.overlay_from_reply(ctx, ModelReply.model_validate(content))
+        ov2 = le.overlay_from_reply(ctx, ModelReply.model_validate(content)).overlay
         assert ov2.total_mass() == pytest.approx(sum(geo.values()) * 100.0 / le.MASS_AGREEMENT, rel=1e-9)
         assert "every link scaled" in ov2.notes.mass_arithmetic
 
@@ -187,8 +188,8 @@ def test_dynamics_come_from_physics_with_the_models_choices(plate):
         j["damping"]["value"] = 999.0  # the model's number is not used by the asset2sim method
         low = dict(j, damping_level="low")
         high = dict(j, damping_level="high", spring=True)
-        ov_low, _, _ = le.overlay_from_reply(ctx, ModelReply.model_validate({**content, "joints": [low]}))
-        ov_high, _, _ = le.overlay_from_reply(ctx, ModelReply.model_validate({**content, "joints": [high]}))
+        ov_low = le.overlay_from_reply(ctx, ModelReply.model_validate({**content, "joints": [low]})).overlay
+        ov_high = le.overlay_from_reply(ctx, ModelReply.model_validate({**content, "joints": [high]})).overlay
         d_low, d_high = ov_low.joints["hinge"], ov_high.joints["hinge"]
         assert d_low.damping != 999.0 and "physics" in d_low.source
         # c = 2 zeta sqrt(I k): the ratio of damping ratios shows through (spring raises k further)
@@ -429,7 +430,7 @@ def test_second_estimate_of_the_same_asset_reuses_the_reply(server, plate, monke
     est = backends.get_estimator("openai", model="m", base_url=server.url)
     with _ctx(plate) as ctx:
         ea = est.estimate(ctx)
-        ctx.root_rotation = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])  # lying on its side
+        ctx = replace(ctx, root_rotation=np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]]))  # lying on its side
         eb = est.estimate(ctx)
     a, b = ea.overlay, eb.overlay
     assert eb.bands == ea.bands and set(ea.bands) == {"hinge"}

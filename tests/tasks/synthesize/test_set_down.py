@@ -97,14 +97,14 @@ def test_the_slides_table_runs_from_the_smoothest_and_says_where_each_range_come
     assert all(sp.note for sp in slides.values() if sp.estimate)
     # a drawer of 5 kg: the smoothest kind that carries what holding needs; beyond every kind, the stiffest at its top
     w = 5.0 * physics.G
-    assert estimate.slide_for(1.0, w)[0] == "roller"
-    assert estimate.slide_for(0.3 * w, w)[0] == "wood_runners"
-    kind, f, why = estimate.slide_for(0.2 * w, w)
-    assert kind == "wood_runners" and f == pytest.approx(0.25 * w) and "holding asked" in why  # raised into its range
-    kind, f, _ = estimate.slide_for(2.0 * w, w)
-    assert kind == "wood_runners" and f == pytest.approx(0.62 * w)
-    kind, f, why = estimate.slide_for(0.3 * w, w, "ball_bearing")
-    assert kind == "ball_bearing" and f == pytest.approx(0.01 * w) and "as asked" in why
+    assert estimate.slide_for(1.0, w).kind == "roller"
+    assert estimate.slide_for(0.3 * w, w).kind == "wood_runners"
+    s = estimate.slide_for(0.2 * w, w)
+    assert s.kind == "wood_runners" and s.friction == pytest.approx(0.25 * w) and "holding asked" in s.note  # raised into its range
+    s = estimate.slide_for(2.0 * w, w)
+    assert s.kind == "wood_runners" and s.friction == pytest.approx(0.62 * w)
+    s = estimate.slide_for(0.3 * w, w, "ball_bearing")
+    assert s.kind == "ball_bearing" and s.friction == pytest.approx(0.01 * w) and "as asked" in s.note
 
 
 @pytest.mark.parametrize("axis, lateral", [("0 0 1", 0.5 * 0.2), ("0 1 0", 0.5 * 0.005)])

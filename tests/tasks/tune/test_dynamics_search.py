@@ -58,11 +58,12 @@ def test_a_relief_that_would_undo_a_held_joint_returns_to_where_both_held():
     tried = _overlay({"lid": (0.31, 0.49), "body": (0.52, 0.02)})
     search.record(tried, _round(held=["body"], not_held=["lid"], slid=["lid"], peak={"lid": 2.45}))
     relief = _overlay({"lid": (0.31, 0.26), "body": (0.52, 0.02)})
-    ov, changes, notes = search.settle(tried, relief, {"lid": {"friction": 0.31, "damping": 0.26}})
+    step = search.settle(tried, relief, {"lid": {"friction": 0.31, "damping": 0.26}})
+    ov = step.overlay
     assert (ov.joints["lid"].friction, ov.joints["lid"].damping) == (0.24, 0.38)
     assert (ov.joints["body"].friction, ov.joints["body"].damping) == (0.52, 0.02)  # the held body keeps its step
-    assert changes == {"lid": {"friction": 0.24, "damping": 0.38}}
-    assert notes and "task passed" in notes[0]
+    assert step.changes == {"lid": {"friction": 0.24, "damping": 0.38}}
+    assert step.notes and "task passed" in step.notes[0]
 
 
 def test_a_joint_between_a_weak_and_a_strong_setting_is_bisected():
@@ -72,15 +73,15 @@ def test_a_joint_between_a_weak_and_a_strong_setting_is_bisected():
     search.record(_overlay({"lid": (6.3, 3.45)}), _round(held=["lid"], slid=["lid"]))
     weak = _overlay({"lid": (3.15, 0.0)})
     search.record(weak, _round(not_held=["lid"], ok=["lid"], peak={"lid": 10.0}))
-    ov, changes, _ = search.settle(weak, weak, {})
-    assert changes["lid"] == pytest.approx({"friction": 4.725, "damping": 1.725})
-    mid = ov
+    step = search.settle(weak, weak, {})
+    assert step.changes["lid"] == pytest.approx({"friction": 4.725, "damping": 1.725})
+    mid = step.overlay
     search.record(mid, _round(held=["lid"], slid=["lid"]))  # the midpoint still slides: the new strong bound
     rec = search.joints["lid"]
     assert rec.strong == Setting(4.725, 1.725) and rec.weak == Setting(3.15, 0.0)
     relief = _overlay({"lid": (2.4, 0.0)})  # relief's model goes below where robust rest failed
-    ov2, changes2, _ = search.settle(mid, relief, {"lid": {"friction": 2.4, "damping": 0.0}})
-    assert changes2["lid"] == pytest.approx({"friction": 3.9375, "damping": 0.8625})
+    step2 = search.settle(mid, relief, {"lid": {"friction": 2.4, "damping": 0.0}})
+    assert step2.changes["lid"] == pytest.approx({"friction": 3.9375, "damping": 0.8625})
 
 
 def test_a_joint_at_its_caps_takes_the_headroom_its_task_measured():
@@ -92,14 +93,14 @@ def test_a_joint_at_its_caps_takes_the_headroom_its_task_measured():
     ov0 = _overlay({"screen": (1.32, 0.345)})
     search.record(ov0, _round(not_held=["screen"], ok=["screen"], peak={"screen": 7.13}))
     caps = {"screen": 1.32}
-    ov, changes, notes = search.settle(ov0, ov0, {}, caps)
+    step = search.settle(ov0, ov0, {}, caps)
     h = (operating.BUDGET_SHARE * 7.64 - 7.13) * 0.196
-    assert ov.joints["screen"].friction == pytest.approx(1.32 + h)
-    assert ov.joints["screen"].damping == 0.345 and caps["screen"] == pytest.approx(1.32 + h)
-    assert "measured operating force" in notes[0]
+    assert step.overlay.joints["screen"].friction == pytest.approx(1.32 + h)
+    assert step.overlay.joints["screen"].damping == 0.345 and caps["screen"] == pytest.approx(1.32 + h)
+    assert "measured operating force" in step.notes[0]
     bare = DynamicsSearch()
     bare.record(ov0, _round(not_held=["screen"], ok=["screen"], peak={"screen": 7.13}))
-    assert bare.settle(ov0, ov0, {})[1] == {}
+    assert bare.settle(ov0, ov0, {}).changes == {}
 
 
 def test_a_tip_below_the_allowed_force_is_no_bound_and_an_empty_bracket_lets_the_models_decide():
@@ -114,12 +115,12 @@ def test_a_tip_below_the_allowed_force_is_no_bound_and_an_empty_bracket_lets_the
     search.record(ov0, tip)
     assert search.joints["arm"].strong is None
     up = _overlay({"arm": (0.3, 0.2)})
-    assert search.settle(ov0, up, {"arm": {"friction": 0.3, "damping": 0.2}})[0].joints["arm"].friction == 0.3
+    assert search.settle(ov0, up, {"arm": {"friction": 0.3, "damping": 0.2}}).overlay.joints["arm"].friction == 0.3
     search.record(up, _round(held=["arm"], slid=["arm"], peak={"arm": 30.0}))
     search.record(_overlay({"arm": (0.5, 0.3)}), _round(not_held=["arm"]))  # weak above strong: empty bracket
     more = _overlay({"arm": (0.9, 0.5)})
-    ov, changes, _ = search.settle(_overlay({"arm": (0.5, 0.3)}), more, {"arm": {"friction": 0.9, "damping": 0.5}})
-    assert changes == {"arm": {"friction": 0.9, "damping": 0.5}}
+    step = search.settle(_overlay({"arm": (0.5, 0.3)}), more, {"arm": {"friction": 0.9, "damping": 0.5}})
+    assert step.changes == {"arm": {"friction": 0.9, "damping": 0.5}}
 
 
 def test_the_round_failing_fewest_tiers_is_kept_latest_of_equals():
@@ -136,11 +137,11 @@ def test_a_headroom_step_stops_at_the_friction_a_hand_still_lifts_the_part_with(
     search = DynamicsSearch({"screen": _budget("screen", force_n=6.7, lever=0.22, speed=1.1)}, hand_caps={"screen": 0.9})
     ov0 = _overlay({"screen": (0.85, 0.2)})
     search.record(ov0, _round(not_held=["screen"], ok=["screen"], peak={"screen": 2.0}))
-    ov, changes, _ = search.settle(ov0, ov0, {})
-    assert changes["screen"]["friction"] == pytest.approx(0.9)
+    step = search.settle(ov0, ov0, {})
+    assert step.changes["screen"]["friction"] == pytest.approx(0.9)
     at_cap = _overlay({"screen": (0.9, 0.2)})
     search.record(at_cap, _round(not_held=["screen"], ok=["screen"], peak={"screen": 2.0}))
-    assert search.settle(at_cap, at_cap, {})[1] == {}
+    assert search.settle(at_cap, at_cap, {}).changes == {}
 
 
 @needs_shared
@@ -191,9 +192,9 @@ def test_a_joint_whose_drift_does_not_answer_two_raises_is_raised_no_more(drifts
         ov = _overlay({"arm": (f, 0.1)})
         search.record(ov, _drifting("arm", d))
     proposal = _overlay({"arm": (3 * frictions[-1], 0.3)})
-    out, changes, notes = search.settle(ov, proposal, {"arm": {"friction": 3 * frictions[-1], "damping": 0.3}})
+    step = search.settle(ov, proposal, {"arm": {"friction": 3 * frictions[-1], "damping": 0.3}})
     if raised:
-        assert changes == {"arm": {"friction": 3 * frictions[-1], "damping": 0.3}} and not notes
+        assert step.changes == {"arm": {"friction": 3 * frictions[-1], "damping": 0.3}} and not step.notes
     else:
-        assert changes == {} and out.joints["arm"].friction == frictions[-1]
-        assert notes and "raised no more" in notes[0] and "0.066 -> 0.59" in notes[0]
+        assert step.changes == {} and step.overlay.joints["arm"].friction == frictions[-1]
+        assert step.notes and "raised no more" in step.notes[0] and "0.066 -> 0.59" in step.notes[0]

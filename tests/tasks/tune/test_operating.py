@@ -140,25 +140,25 @@ def test_relieve_lowers_friction_by_the_measured_excess():
     force = MetricResult(name="operating_force", value=8.0, unit="N", passed=False, details={"attempts": [
         {"joint": "j", "passed": False, "peak_operating_force_n": 8.0, "force_range_n": [0.0, 22.2],
          "peak_torque_nm": 2.0, "torque_range_nm": [0.0, 1.5]}]})
-    new, changes, reason = dynamics_search.relieve(ov, [force], lim)
+    step = dynamics_search.relieve(ov, [force], lim)
     want = 2.0 - 0.5 / operating.BUDGET_SHARE
-    assert new.joints["j"].friction == pytest.approx(want) and changes["j"]["friction"] == pytest.approx(want)
+    assert step.overlay.joints["j"].friction == pytest.approx(want) and step.changes["j"]["friction"] == pytest.approx(want)
     assert lim.friction_caps["j"] == pytest.approx(want), "escalation may not raise it again"
-    assert "operating force" in reason
+    assert "operating force" in step.reason
     # at most half the friction in one round (part of an excess may be inertia); the rest comes off the damping
     big = force.model_copy(deep=True)
     big.details["attempts"][0]["peak_torque_nm"] = 4.0
-    new, _, _ = dynamics_search.relieve(ov, [big], lim)
+    new = dynamics_search.relieve(ov, [big], lim).overlay
     assert new.joints["j"].friction == pytest.approx(dynamics_search.RELIEF_MIN_SHARE * 2.0)
     assert new.joints["j"].damping < 0.5
     # never below the hold floor
     heavy = b.__class__(**{**b.__dict__, "gravity_state": 1.5, "hold_floor": operating.HOLD_MARGIN * 1.5})
     lim.budgets["j"] = heavy
-    new, _, _ = dynamics_search.relieve(ov, [big], lim)
+    new = dynamics_search.relieve(ov, [big], lim).overlay
     assert new.joints["j"].friction == pytest.approx(operating.HOLD_MARGIN * 1.5)
     # a task inside its range changes nothing
     ok = force.model_copy(update={"passed": True})
-    assert dynamics_search.relieve(ov, [ok], lim)[1] == {}
+    assert dynamics_search.relieve(ov, [ok], lim).changes == {}
 
 
 def _overlay_json(friction: float, damping: float) -> dict:
