@@ -20,7 +20,7 @@ from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import manipulation, metrics, parent_child, parity, robust_rest
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
-from asset2sim.tasks.assemble.export_mjcf import overlay_springs
+from asset2sim.engines.loading import overlay_springs
 
 
 class _StepRecorder:
@@ -147,7 +147,7 @@ class PostCheck:
 def overlay_object(source: SimSource, state: dict[str, float], overlay: Overlay,
                    conventions: SimConventions) -> SimObject:
     """``source`` as the post-check simulates it: at ``state`` (joint -> rad or m), with ``overlay``'s springs
-    (:func:`~asset2sim.tasks.assemble.export_mjcf.overlay_springs`) and its root as ``overlay.mounting``
+    (:func:`~asset2sim.engines.loading.overlay_springs`) and its root as ``overlay.mounting``
     declares."""
     return SimObject(source, state, overlay_springs(overlay), conventions,
                      bool(overlay.mounting is not None and overlay.mounting.fixed))

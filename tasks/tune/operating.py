@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from asset2sim.engines.base import SimSession, Spring
-from asset2sim.tasks.assemble.export_mjcf import overlay_springs
+from asset2sim.engines.loading import overlay_springs
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.source import SimObject
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
@@ -212,7 +212,7 @@ def operating_budgets(obj: SimObject, overlay: Overlay, closed: dict[str, tuple[
     -> semantic label; ``obj.fixed_base``: the root held (no ground bound), else free;
     ``ground``: apply the ground bound to a free object; ``whole``: each action along the whole range (the
     operability tier's strokes, :mod:`asset2sim.tasks.check.operability`) rather than the task's path. The joints'
-    springs are the overlay's about ``obj.state`` (:func:`~asset2sim.tasks.assemble.export_mjcf.overlay_springs`).
+    springs are the overlay's about ``obj.state`` (:func:`~asset2sim.engines.loading.overlay_springs`).
 
     Raises:
         EngineUnavailable; whatever loading ``obj.source`` raises.
