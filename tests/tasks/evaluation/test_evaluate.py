@@ -446,17 +446,15 @@ def test_reused_rest_test_gives_the_fresh_evaluation_probes_included(tmp_path):
     assert measured.metric("probes").model_dump() == fresh.metric("probes").model_dump()
 
 
-def test_a_task_naming_one_of_two_drawers_is_executed_on_the_open_one(tmp_path):
+def test_a_task_naming_one_of_two_drawers_is_executed_on_the_open_one(tmp_path, refine_once):
     """The generated two-drawer cabinet, refined closed, then one drawer set
     open in its initial_state.json: "close the drawer" is executed on that
     drawer only (task_spec.with_work_to_do), "close the drawers" on both."""
     from asset2sim import demo_assets
-    from asset2sim.tasks.refine import refine_asset
     from asset2sim.urdf import read_urdf
 
-    src = demo_assets.build_two_drawer_cabinet(tmp_path / "cab")
-    out = tmp_path / "out"
-    res = refine_asset(src, "A cabinet, closed.", out, extras=False)
+    res = refine_once(demo_assets.build_two_drawer_cabinet, "A cabinet, closed.", extras=False)
+    out = res.copy_to(tmp_path / "out")  # its initial_state.json changed below
     model = read_urdf(out / "mobility.urdf")
     drawers = sorted(j.name for j in model.movable_joints)
     assert len(drawers) == 2
