@@ -392,14 +392,13 @@ def test_evaluate_command_writes_files_and_sets_the_exit_code(tmp_path, capsys):
     assert main(["evaluate", str(tmp_path / "missing")]) == 2
 
 
-def test_evaluate_leaves_a_refine_output_as_it_was(demo_root, tmp_path, capsys):
+def test_evaluate_leaves_a_refine_output_as_it_was(demo_root, tmp_path, capsys, refine_once):
     """``asset2sim evaluate OUT`` without ``--out`` writes beside OUT: every
     file of OUT stays byte-equal and the next identical refine is skipped."""
     from asset2sim.cli import main
     from asset2sim.tasks.refine import refine_asset
 
-    out = tmp_path / "box"
-    refine_asset(demo_root / "box_lid", "a box with its lid slightly open", out, extras=False)
+    out = refine_once(demo_root / "box_lid", "a box with its lid slightly open", extras=False).copy_to(tmp_path / "box")
     before = tree_hashes(out)
     assert main(["evaluate", str(out), "--no-probes"]) in (0, 1)
     assert tree_hashes(out) == before
