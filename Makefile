@@ -9,7 +9,7 @@ RUN ?=
 
 TIMEZONE ?=
 
-.PHONY: setup demo test test-all test-lower check-install flow serve failures bench bench-eval bench-catalog clean
+.PHONY: setup demo test test-all test-lower map check-install flow serve failures bench bench-eval bench-catalog clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -38,6 +38,9 @@ test-lower: ## the fast tiers with the lowest versions pyproject.toml allows (co
 	$(LOWER_VENV)/bin/python -m pip install --quiet --upgrade pip setuptools wheel
 	$(LOWER_VENV)/bin/python -m pip install --quiet -e ".[all]" -c constraints/lower.txt
 	$(TEST_ENV) $(LOWER_VENV)/bin/python -m pytest -m "not slow" -q -n $(TEST_WORKERS) --dist loadfile
+
+map: ## write DEVELOPERS.md's map of the code from the module docstrings (tests/test_docs.py checks it is current)
+	$(PY) tools/code_map.py
 
 check-install: ## build the wheel and install it beside ManiSkill, robosuite and torch in fresh environments (long; network)
 	$(PY) benchmarks/check_install.py

@@ -192,6 +192,13 @@ def tree_hashes(root: Path) -> dict[str, str]:
     return {str(p.relative_to(root)): atomic.sha256_file(p) for p in sorted(Path(root).rglob("*")) if p.is_file() and not p.is_symlink()}
 
 
+def input_hashes(src: Path) -> dict[str, str]:
+    """:func:`tree_hashes` of an input folder, or of an input file alone (its folder may hold what a test writes)."""
+    from asset2sim import atomic
+
+    return {src.name: atomic.sha256_file(src)} if Path(src).is_file() else tree_hashes(src)
+
+
 def download_folder(uri: str, local_dir: Path) -> Path:
     """The folder at the store ``uri`` copied into ``local_dir`` (``pyarrow.fs.copy_files``)."""
     import pyarrow.fs as pafs
@@ -305,8 +312,11 @@ class RefineFactory:
     ``asset`` is a folder used as it is (the dev dataset's objects; never written), a demo object's id
     (``"box_lid"``: ``asset2sim.demo_objects.DEMO_OBJECTS``) or a builder
     ``build(folder) -> folder`` of a generated asset (``asset2sim.demo_assets.build_laptop``, ``tests.unseen_assets``
-    ...), run once into the session's own folder. Inputs are told apart by their folder name and content, so the
-    demo dataset's ``box_lid`` and a ``build_box_with_lid`` folder of that name are one input. ``prompt``, ``config`` (a ``RefineConfig``) and the keyword
+    ...), run once into the session's own folder, or an MJCF / USD / URDF file. Folders are told apart by their name
+    and content, so the demo dataset's ``box_lid`` and a ``build_box_with_lid`` folder of that name are one input; a
+    file by its resolved path and its folder's content (a host package's layout around it matters to the refine), so
+    a test's own file is refined once for the tests that share it (a module-scoped fixture) and never for another
+    test's file. ``prompt``, ``config`` (a ``RefineConfig``) and the keyword
     options of :func:`asset2sim.tasks.refine.refine_asset` (``extras``, ``task``, ``category`` ...) complete the key.
     The input is hashed before the refine and the output when it ends; :meth:`assert_untouched` fails when either
     changed since (the refine wrote into its input, or a test changed a shared folder: tests that change an output
@@ -340,9 +350,10 @@ class RefineFactory:
         from asset2sim.tasks.refine import refine_asset
 
         src = self.source(asset)
-        src_hashes = tree_hashes(src)
-        content = tuple(sorted(src_hashes.items()))  # the same input wherever it was written: one refine
-        key = (src.name, content, prompt, None if config is None else config.model_dump_json(), tuple(sorted(options.items())))
+        src_hashes = input_hashes(src)
+        content = tuple(sorted((tree_hashes(src.parent) if src.is_file() else src_hashes).items()))
+        where = str(src.resolve()) if src.is_file() else None  # a folder: the same input wherever it was written
+        key = (src.name, where, content, prompt, None if config is None else config.model_dump_json(), tuple(sorted(options.items())))
         if key not in self._done:
             self._done[key] = (*self._refined(key, src, lambda out: refine_asset(src, prompt, out, config, **options)), src_hashes)
         shared = self._done[key][0]
@@ -363,7 +374,7 @@ class RefineFactory:
             if done.is_file():
                 refined = pickle.loads(done.read_bytes())
             else:
-                out = folder / src.name
+                out = folder / (src.stem if src.is_file() else src.name)
                 refined = Refined(src, out, refine(out))
                 (folder / "refined.tmp").write_bytes(pickle.dumps(refined))
                 (folder / "refined.tmp").replace(done)
@@ -374,7 +385,7 @@ class RefineFactory:
         for shared, out_hashes, src_hashes in self._done.values():
             if shared.out == refined.out:
                 assert tree_hashes(shared.out) == out_hashes, f"a test changed the shared output {shared.out}: copy it first (Refined.copy_to)"
-                assert tree_hashes(shared.src) == src_hashes, f"the shared input {shared.src} changed"
+                assert input_hashes(shared.src) == src_hashes, f"the shared input {shared.src} changed"
                 return
         raise KeyError(f"{refined.out} is not a refine of this factory")
 

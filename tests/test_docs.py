@@ -311,6 +311,34 @@ def test_the_developers_map_names_every_module():
     assert not missing, f"modules DEVELOPERS.md does not name: {missing}"
 
 
+def test_the_developers_map_is_the_docstrings_map():
+    """DEVELOPERS.md's map of the code is what ``tools/code_map.py`` writes from the module docstrings (so it cannot
+    drift from them: ``make map`` rewrites it), one row per module, the same bytes on a second run."""
+    spec = importlib.util.spec_from_file_location("code_map", ROOT / "tools" / "code_map.py")
+    code_map = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(code_map)
+    text = (ROOT / "DEVELOPERS.md").read_text()
+    assert code_map.rewritten(text) == text, "DEVELOPERS.md's map differs from the module docstrings: run `make map`"
+    assert code_map.code_map() == code_map.code_map()
+    rows = [line for line in code_map.code_map().splitlines() if line.startswith("| `")]
+    modules = [p for folder in code_map.PACKAGES for p in (ROOT / folder).rglob("*.py") if p.name != "__init__.py"]
+    assert len(rows) == len(modules)
+    assert code_map.first_sentence("Reads :mod:`a.b`, e.g. ``x | y``. Then more.") == "Reads `a.b`, e.g. `x \\| y`"
+
+
+def test_every_benchmark_script_feeds_a_result():
+    """Every script in benchmarks/ is used: named by benchmarks/RESULTS.md, a test, a document (docs/, README.md,
+    DEVELOPERS.md, the Makefile) or another benchmark script; one nothing names goes (git history keeps it)."""
+    readers = [ROOT / "benchmarks" / "RESULTS.md", ROOT / "README.md", ROOT / "DEVELOPERS.md", ROOT / "Makefile",
+               *sorted((ROOT / "docs").rglob("*.md")), *sorted((ROOT / "tests").rglob("*.py"))]
+    scripts = sorted((ROOT / "benchmarks").glob("*.py"))
+    text = "\n".join(path.read_text() for path in readers)
+    unused = [script.name for script in scripts
+              if not re.search(rf"\b{script.stem}\b", text)
+              and not any(re.search(rf"\b{script.stem}\b", other.read_text()) for other in scripts if other != script)]
+    assert not unused, f"benchmark scripts nothing names: {unused}"
+
+
 def test_the_readme_needs_no_dev_dataset():
     """Every README command runs in a clone without ``../shared`` (the built-in objects, ``asset2sim demo``), so a
     newcomer's first hour needs no data they do not have; the snippets run in

@@ -322,13 +322,13 @@ def _tree(root: Path) -> dict[str, str]:
     return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(root.rglob("*")) if p.is_file()}
 
 
-def test_failed_force_rerun_keeps_the_earlier_complete_output(tmp_path, box, monkeypatch):
+def test_failed_force_rerun_keeps_the_earlier_complete_output(tmp_path, box, monkeypatch, refine_once):
     """--force over a complete output that then fails (here: the report step
     raises) leaves the earlier output byte for byte, marker valid, and no
     staging folder; a rerun that completes replaces it whole."""
 
-    out = tmp_path / "out"
-    first = refine_asset(box, PROMPT, out, extras=False)
+    first = refine_once(box, PROMPT, extras=False)  # a complete output (the session's, copied)
+    out = first.copy_to(tmp_path / "out")
     before = _tree(out)
     real = refine_report.build_report
 
@@ -368,11 +368,10 @@ def test_a_first_run_that_fails_mid_way_leaves_no_partial_output(tmp_path, box, 
     assert sorted(p.name for p in (tmp_path / "kept").iterdir()) == ["user.txt"]
 
 
-def test_staged_rerun_records_the_folder_the_user_named(tmp_path, box):
+def test_staged_rerun_records_the_folder_the_user_named(tmp_path, box, refine_once):
     """The evaluation of a rerun written in the staging folder names the
     output folder, not the staging folder it was written in."""
-    out = tmp_path / "out"
-    refine_asset(box, PROMPT, out, extras=True)
+    out = refine_once(box, PROMPT, extras=True).copy_to(tmp_path / "out")  # a complete output (the session's, copied)
     res = refine_asset(box, PROMPT, out, extras=True, skip_if_complete=False)
     ev = json.loads((out / "evaluation.json").read_text())
     assert ev["urdf"] == "mobility.urdf"  # relative to the folder it lies in: neither the staging folder nor a place
@@ -380,9 +379,8 @@ def test_staged_rerun_records_the_folder_the_user_named(tmp_path, box):
     assert all(Path(p).is_relative_to(out) for p in res.extras.values())
 
 
-def test_staging_path_taken_by_a_user_file_is_refused(tmp_path, box):
-    out = tmp_path / "out"
-    refine_asset(box, PROMPT, out, extras=False)
+def test_staging_path_taken_by_a_user_file_is_refused(tmp_path, box, refine_once):
+    out = refine_once(box, PROMPT, extras=False).copy_to(tmp_path / "out")  # a complete output (the session's, copied)
     of.staging_folder(out).write_text("mine")
     with pytest.raises(RefineError) as err:
         refine_asset(box, PROMPT, out, extras=False, skip_if_complete=False)
@@ -417,11 +415,10 @@ def test_refine_output_is_readable_by_others_under_umask_022(tmp_path, box):
             assert stat.S_IMODE(p.stat().st_mode) == 0o644, p
 
 
-def test_files_evaluate_writes_into_a_refined_folder_are_the_products(tmp_path, box):
+def test_files_evaluate_writes_into_a_refined_folder_are_the_products(tmp_path, box, refine_once):
     from asset2sim.cli import main
 
-    out = tmp_path / "out"
-    refine_asset(box, PROMPT, out, extras=False)
+    out = refine_once(box, PROMPT, extras=False).copy_to(tmp_path / "out")  # a complete output (the session's, copied)
     assert main(["evaluate", str(out), "--out", str(out), "--no-probes", "--no-report"]) in (0, 1)  # asked to write into it
     assert (out / "evaluation.json").is_file()
     assert "evaluation.json" in of.recorded_files(out) and of.foreign_files(out) == []
@@ -564,11 +561,11 @@ def test_outputs_are_fsynced_scratch_files_and_the_ownership_record_are_not(tmp_
     assert atomic._SCRATCH == {}
 
 
-def test_remove_owned_removes_only_the_products_files(tmp_path, box):
+def test_remove_owned_removes_only_the_products_files(tmp_path, box, refine_once):
     """The flow's clean-up after an upload (``output_folder.remove_owned``) removes what the refine recorded and
     leaves a user's file (with its folder); a folder holding only the product's files goes whole."""
-    out = tmp_path / "out"
-    refine_asset(box, PROMPT, out, extras=False)
+    refined = refine_once(box, PROMPT, extras=False)  # a complete output (the session's, copied twice)
+    out = refined.copy_to(tmp_path / "out")
     (out / "my_notes.txt").write_text("keep me")
     (out / "collision" / "mine.obj").parent.mkdir(exist_ok=True)
     (out / "collision" / "mine.obj").write_text("v 0 0 0\n")
@@ -577,6 +574,5 @@ def test_remove_owned_removes_only_the_products_files(tmp_path, box):
     assert left == ["collision/mine.obj", "my_notes.txt"]
     assert sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()) == left
     assert outside_hashes(tmp_path, out) == before
-    out2 = tmp_path / "out2"
-    refine_asset(box, PROMPT, out2, extras=False)
+    out2 = refined.copy_to(tmp_path / "out2")
     assert of.remove_owned(out2) == [] and not out2.exists()

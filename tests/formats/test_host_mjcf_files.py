@@ -19,7 +19,6 @@ mujoco = pytest.importorskip("mujoco")
 
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.formats.mjcf.physics import JOINT_PHYSICS
-from asset2sim.tasks.refine import refine_asset
 from asset2sim.urdf import read_urdf
 
 ENVIRONMENT = textwrap.dedent("""
@@ -55,9 +54,9 @@ def _environment(tree) -> mujoco.MjModel:
 
 
 @pytest.mark.parametrize("joint_name", ["goal_slidey", None], ids=["named", "unnamed"])
-def test_a_meta_world_drawer_goes_back_into_an_environment_of_its_package(tmp_path, joint_name):
+def test_a_meta_world_drawer_goes_back_into_an_environment_of_its_package(tmp_path, joint_name, refine_once):
     xml = hl.metaworld_drawer(tmp_path / "in", joint_name=joint_name)
-    res = refine_asset(xml, "A drawer, slightly open.", tmp_path / "out", RefineConfig(engines=["pybullet"]), extras=False)
+    res = refine_once(xml, "A drawer, slightly open.", RefineConfig(engines=["pybullet"]), extras=False)
     assert res.report.failure_mode == "none", res.report.failure_mode
     fragment = res.out_dir / "mjcf" / "host" / "files" / "objects" / "assets" / "drawer.xml"
     assert fragment.is_file(), res.report.notes
@@ -93,13 +92,13 @@ def test_a_meta_world_drawer_goes_back_into_an_environment_of_its_package(tmp_pa
     assert data.qpos[after.jnt_qposadr[j]] < -0.02  # it opens
 
 
-def test_a_menagerie_model_in_degrees_goes_back_into_its_scene_in_degrees(tmp_path):
+def test_a_menagerie_model_in_degrees_goes_back_into_its_scene_in_degrees(tmp_path, refine_once):
     """A Menagerie-style ``scene.xml`` including the model file, which states no ``<compiler>`` (degrees): the
     model file written again keeps its ranges in degrees, so the scene compiles the refined quarter turn."""
     door = hl.degree_door(tmp_path / "in" / "mujoco_menagerie" / "door" / "door.xml", ref=10.0)
     scene = door.parent / "scene.xml"
     scene.write_text('<mujoco model="scene"><include file="door.xml"/><worldbody><light pos="0 0 3"/></worldbody></mujoco>')
-    res = refine_asset(scene, "A door, halfway open.", tmp_path / "out", RefineConfig(engines=["pybullet"]), extras=False)
+    res = refine_once(scene, "A door, halfway open.", RefineConfig(engines=["pybullet"]), extras=False)
     assert res.report.failure_mode == "none", res.report.failure_mode
     fragment = res.out_dir / "mjcf" / "host" / "files" / "door" / "door.xml"
     copy = tmp_path / "swapped" / "mujoco_menagerie"
@@ -115,7 +114,7 @@ def test_a_menagerie_model_in_degrees_goes_back_into_its_scene_in_degrees(tmp_pa
     assert after.qpos0[after.jnt_qposadr[j]] == pytest.approx(math.radians(10.0))  # its ref kept, in degrees
 
 
-def test_a_meta_world_window_rides_on_its_sash_balance_back_in_its_package(tmp_path):
+def test_a_meta_world_window_rides_on_its_sash_balance_back_in_its_package(tmp_path, refine_once):
     """Meta-World's vertical window (generated; the frame and the sash unnamed, as Meta-World writes them), asked
     slightly open: the sash gets a balance (a preloaded spring whose reference lies beyond the 0.2 m travel, carrying
     its weight within +-6 %), so the friction that holds it at any height is a few newtons and a hand inside 22.2 N
@@ -123,7 +122,7 @@ def test_a_meta_world_window_rides_on_its_sash_balance_back_in_its_package(tmp_p
     unnamed bodies found by their joints and children: in an environment file of the package, the sash stays where
     the keyframe puts it, and a pull 5 N beyond its friction lifts it."""
     xml = hl.metaworld_window(tmp_path / "in")
-    res = refine_asset(xml, "A window, slightly open.", tmp_path / "out", RefineConfig(engines=["pybullet"]), extras=False)
+    res = refine_once(xml, "A window, slightly open.", RefineConfig(engines=["pybullet"]), extras=False)
     assert res.report.failure_mode == "none", res.report.failure_mode
     assert res.report.metric("operability").passed is True
     model = read_urdf(res.out_dir / "mobility.urdf")

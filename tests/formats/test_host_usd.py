@@ -40,10 +40,10 @@ def _attributes(stage) -> dict[tuple[str, str], object]:
     return out
 
 
-def test_a_usd_cabinet_goes_back_into_its_stage_with_the_refined_physics(tmp_path):
+def test_a_usd_cabinet_goes_back_into_its_stage_with_the_refined_physics(tmp_path, refine_once):
     src = cabinet_usd(tmp_path / "in" / "cabinet.usda")
     digest = hashlib.sha256(src.read_bytes()).hexdigest()
-    res = refine_asset(src, "A cabinet, door slightly open.", tmp_path / "out", CONFIG, extras=False)
+    res = refine_once(src, "A cabinet, door slightly open.", CONFIG, extras=False)
     assert res.report.failure_mode == "none", res.report.failure_mode
     host = res.out_dir / "usd" / "host"
     assert sorted(p.name for p in host.iterdir()) == ["cabinet.diff", "cabinet.physics.usda", "cabinet.usda"]
@@ -86,20 +86,20 @@ def test_a_usd_cabinet_goes_back_into_its_stage_with_the_refined_physics(tmp_pat
     assert len([line for line in diff if "->" in line]) == len(changed)
 
 
-def test_a_rescaled_usd_object_is_not_written_back(tmp_path):
+def test_a_rescaled_usd_object_is_not_written_back(tmp_path, refine_once):
     src = cabinet_usd(tmp_path / "in" / "cabinet.usda")
-    res = refine_asset(src, "A cabinet, door slightly open.", tmp_path / "out",
+    res = refine_once(src, "A cabinet, door slightly open.",
                        CONFIG.model_copy(update={"overrides": RequestOverrides(scale=0.5)}), extras=False)
     assert any(n.startswith("host USD not written: ") and "rescaled" in n for n in res.report.notes), res.report.notes
     assert not (res.out_dir / "usd" / "host").exists()
 
 
-def test_a_binary_usd_goes_back_as_a_binary_layer_of_the_same_name(tmp_path):
+def test_a_binary_usd_goes_back_as_a_binary_layer_of_the_same_name(tmp_path, refine_once):
     text = cabinet_usd(tmp_path / "src" / "cabinet.usda")
     src = tmp_path / "in" / "cabinet.usdc"
     src.parent.mkdir()
     assert Sdf.Layer.FindOrOpen(str(text)).Export(str(src))
-    res = refine_asset(src, "A cabinet, door slightly open.", tmp_path / "out", CONFIG, extras=False)
+    res = refine_once(src, "A cabinet, door slightly open.", CONFIG, extras=False)
     assert res.report.failure_mode == "none", res.report.failure_mode
     host = res.out_dir / "usd" / "host" / "cabinet.usdc"
     assert host.read_bytes().startswith(b"PXR-USDC")  # crate, as a .usdc must be

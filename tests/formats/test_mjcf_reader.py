@@ -253,13 +253,13 @@ def test_what_the_asset_model_cannot_take_is_refused_by_name(tmp_path, body, mes
         extract_asset_checked(xml)
 
 
-def test_an_mjcf_cabinet_is_refined_from_its_file_left_unchanged(tmp_path):
+def test_an_mjcf_cabinet_is_refined_from_its_file_left_unchanged(tmp_path, refine_once):
     folder = tmp_path / "in"
     xml = _cabinet_xml(folder)
     before = {p: p.read_bytes() for p in folder.rglob("*") if p.is_file()}
     with pytest.raises(Exception, match="inside the input folder"):
         refine_asset(xml, "A cabinet, door halfway open.", folder / "out", extras=False)
-    res = refine_asset(xml, "A cabinet, door halfway open.", tmp_path / "out", extras=False)
+    res = refine_once(xml, "A cabinet, door halfway open.", extras=False)
     assert res.report.source == str(xml.resolve())
     assert res.report.asset_id == "cabinet"
     assert any(n.startswith("input: ") and "staged as a URDF" in n for n in res.report.notes)
@@ -267,7 +267,7 @@ def test_an_mjcf_cabinet_is_refined_from_its_file_left_unchanged(tmp_path):
     q = res.report.initial_joint_positions["hinge"]
     assert 0.3 * math.radians(120) <= q <= 0.7 * math.radians(120)
     assert {p: p.read_bytes() for p in folder.rglob("*") if p.is_file()} == before
-    out_model = read_urdf(tmp_path / "out" / "mobility.urdf")
+    out_model = read_urdf(res.out / "mobility.urdf")
     assert [j.name for j in out_model.movable_joints] == ["hinge"]
 
 
@@ -296,16 +296,12 @@ def test_a_folder_holding_one_mjcf_file_is_an_asset_named_after_the_folder(tmp_p
     assert extract_asset_checked(folder)[0].input_hash != asset.input_hash  # the mesh file is part of the input
 
 
-def test_a_usd_export_is_refined_from_its_file(tmp_path):
+def test_a_usd_export_is_refined_from_its_file(demo_root, tmp_path, refine_once):
     """The USD reader behind the same extraction: an output's USD export refined as an input."""
     pytest.importorskip("pxr")
-    from asset2sim import demo_assets
-
-    root = tmp_path / "demo"
-    demo_assets.build_demo_dataset(root)
-    first = refine_asset(root / "box_lid", "A box, lid closed.", tmp_path / "first", media=False)  # the exports are first-phase
-    usd = tmp_path / "first" / "usd" / "mobility.usd"
-    res = refine_asset(usd, "A box, lid halfway open.", tmp_path / "again", extras=False)
+    first = refine_once(demo_root / "box_lid", "A box, lid closed.", media=False)  # the exports are first-phase
+    usd = first.copy_to(tmp_path / "first") / "usd" / "mobility.usd"
+    res = refine_once(usd, "A box, lid halfway open.", extras=False)
     assert res.report.source == str(usd.resolve()) and res.report.asset_id == "mobility"
     assert res.report.failure_mode == "none", res.report.failure_mode
     assert set(res.report.initial_joint_positions) == set(first.report.initial_joint_positions)

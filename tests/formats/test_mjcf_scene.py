@@ -111,18 +111,17 @@ def test_a_moving_body_without_a_name_is_labelled_by_its_joints_name(tmp_path):
     assert "leaf" not in {ln.name for ln in labels_from_names(door).links if ln.semantic_label}
 
 
-def test_an_mjcf_root_without_a_free_joint_is_refined_mounted_as_the_file_says(tmp_path):
+def test_an_mjcf_root_without_a_free_joint_is_refined_mounted_as_the_file_says(tmp_path, refine_once):
     """A lever's category prior is free-standing; MuJoCo welds a root without a free joint, so refine does too
     (the request's words and --mount still win)."""
     from asset2sim.schemas.config import RefineConfig
-    from asset2sim.tasks.refine import refine_asset
 
     (tmp_path / "in").mkdir()
     xml = _unnamed_sash(tmp_path / "in")
     config = RefineConfig(engines=["pybullet"])
-    res = refine_asset(xml, "A window, slightly open.", tmp_path / "out", config, extras=False)
+    res = refine_once(xml, "A window, slightly open.", config, extras=False)
     assert res.overlay.mounting.fixed and res.overlay.mounting.source == "the MJCF file welds the root to the world"
-    free = refine_asset(xml, "A free-standing window, slightly open.", tmp_path / "free", config, extras=False)
+    free = refine_once(xml, "A free-standing window, slightly open.", config, extras=False)
     assert not free.overlay.mounting.fixed and free.overlay.mounting.source.startswith("request")
 
 

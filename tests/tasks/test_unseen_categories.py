@@ -73,12 +73,12 @@ def test_an_unseen_category_is_interaction_ready(tmp_path, build, category, prom
     (build_kitchen_pot, "A cooking pot, slightly open."),
     (build_bucket, "A bucket with its handle halfway open."),
 ], ids=["Safe", "Oven", "KitchenPot", "Bucket"])
-def test_an_opened_part_is_held_by_a_hands_friction_or_the_verdict_says_it_is_not(tmp_path, build, prompt):
+def test_an_opened_part_is_held_by_a_hands_friction_or_the_verdict_says_it_is_not(tmp_path, build, prompt, refine_once):
     """A safe's door halfway, an oven's drop-down door mostly open (on its counterbalance spring), a pot's lid
     slightly open: every part stays operable by a hand inside its range; where robust rest's drop and tilts
     then move the part beyond its tolerance, the verdict is not_robust_at_rest at the hand's cap, never a
     part jammed to be still."""
-    res = refine_asset(build(tmp_path / "src"), prompt, tmp_path / "out", extras=False)
+    res = refine_once(build(tmp_path / "src"), prompt, extras=False)
     assert_ready_or_honestly_not_robust(res.report, res.overlay)
 
 
@@ -86,30 +86,30 @@ def test_an_opened_part_is_held_by_a_hands_friction_or_the_verdict_says_it_is_no
     (build_usb_swivel, "A tiny usb.", "joint_0"),
     (build_eyeglasses, "Tiny eyeglasses.", "joint_0"),
 ], ids=["USB", "Eyeglasses"])
-def test_a_part_of_a_few_grams_opens_while_the_other_hand_holds_the_body(tmp_path, build, prompt, joint):
+def test_a_part_of_a_few_grams_opens_while_the_other_hand_holds_the_body(tmp_path, build, prompt, joint, refine_once):
     """At a few grams (an 18 mm, 1.2 g USB stick; eyeglasses a third of their
     size) the probe's hand grips the body and takes the push's reaction.
     The same reaction also applied to the gripped root left these parts
     unmoved in PyBullet while the push rose to 2.7 N."""
     src = build(tmp_path / "src")
-    res = refine_asset(src, prompt, tmp_path / "out", media=False)  # the first phase: the verdict and evaluation.json
+    res = refine_once(src, prompt, media=False)  # the first phase: the verdict and evaluation.json
     r = res.report
     assert r.total_mass < 0.05
     assert r.failure_mode == "none", (r.failure_mode, r.readiness)
-    metrics = json.loads((tmp_path / "out" / "evaluation.json").read_text())["metrics"]
+    metrics = json.loads((res.out / "evaluation.json").read_text())["metrics"]
     probes = next(m for m in metrics if m["name"] == "probes" and m["engine"] == "pybullet")
     opened = [p for p in probes["details"]["probes"] if p["joint"] == joint and p["action"] == "open"]
     assert opened and all(p["success"] and p["peak_force"] < 1.0 for p in opened), opened
 
 
-def test_a_door_barred_by_its_own_body_is_not_reported_ready(tmp_path):
+def test_a_door_barred_by_its_own_body_is_not_reported_ready(tmp_path, refine_once):
     """Built to fail: the safe's door is barred by a part of its body. Asked
     halfway open, the door lies through the bar, which the simulators do not
     collide with it (parent and child): the bar's collision piece is kept
     (it used to be cut away at the initial state, and the safe reported
     ready) and the penetration tier fails on the parent-child depth."""
     src = build_barred_safe(tmp_path / "src")
-    res = refine_asset(src, "A safe, halfway open.", tmp_path / "out", media=False)
+    res = refine_once(src, "A safe, halfway open.", media=False)
     r = res.report
     assert r.failure_mode == "unresolved_penetration", (r.failure_mode, r.readiness)
     nested = next(m for m in r.metrics if m.name == "parent_child_penetration")
@@ -118,13 +118,13 @@ def test_a_door_barred_by_its_own_body_is_not_reported_ready(tmp_path):
 
 
 @pytest.mark.parametrize("prompt", ["A tiny oven.", "A very small oven."])
-def test_a_small_ovens_square_dial_turns_past_the_door_below_it(tmp_path, prompt):
+def test_a_small_ovens_square_dial_turns_past_the_door_below_it(tmp_path, prompt, refine_once):
     """The oven's square dial clears the door's top edge by 3.4 mm (model
     units) at rest and by 1 mm less than its corners reach while it turns:
     at a quarter of its size that is under the engines' contact margins, and
     the dial stuck at 13 % of its probe. Its collision piece is shrunk about
     its axis (noted) and it turns."""
-    res = refine_asset(build_oven(tmp_path / "src"), prompt, tmp_path / "out", media=False)
+    res = refine_once(build_oven(tmp_path / "src"), prompt, media=False)
     r = res.report
     assert r.failure_mode == "none", (r.failure_mode, r.readiness)
     assert any("shrunk" in c and "'joint_1'" in c for c in r.state.collision_changes), r.state.collision_changes
@@ -135,7 +135,7 @@ def test_a_small_ovens_square_dial_turns_past_the_door_below_it(tmp_path, prompt
     (build_bucket, "A bucket with its handle fully open.", "joint_0"),
     (build_safe, "A safe, slightly open.", "joint_0"),
 ], ids=["Toaster", "Bucket", "Safe"])
-def test_an_unseen_category_with_one_concave_mesh_per_link_is_interaction_ready(tmp_path, build, prompt, joint):
+def test_an_unseen_category_with_one_concave_mesh_per_link_is_interaction_ready(tmp_path, build, prompt, joint, refine_once):
     """PartNet-Mobility's files hold one group each, a part concave as modelled (a bail's arms and grip, a
     toaster body with its slots), where the generator's boxes are each a group of their own and so a convex
     piece for free. With every link's meshes merged into one OBJ of one group
@@ -148,7 +148,7 @@ def test_an_unseen_category_with_one_concave_mesh_per_link_is_interaction_ready(
         if meshes:
             assert len(mesh_io.obj_groups(src / meshes[0].filename)) == 1
     assert len(model.links["link_0"].visuals) == 1
-    res = refine_asset(src, prompt, tmp_path / "out", media=False)  # the first phase holds every tier, probes included
+    res = refine_once(src, prompt, media=False)  # the first phase holds every tier, probes included
     r = res.report
     assert r.failure_mode == "none", (r.failure_mode, r.readiness)
     assert all(v in (True, None) for v in r.readiness.values()), r.readiness
@@ -184,14 +184,14 @@ def _settled_in(urdf_path, body: str, joint: str, joint_q: float) -> tuple[float
         p.disconnect(cid)
 
 
-def test_a_bucket_of_one_mesh_is_hollow_and_holds_what_is_dropped_into_it(tmp_path):
+def test_a_bucket_of_one_mesh_is_hollow_and_holds_what_is_dropped_into_it(tmp_path, refine_once):
     """A bucket whose body is one OBJ group: its one convex hull would be a solid block and a cube dropped into
     it would rest on its rim. With ``open_containers`` the body's collision is a convex decomposition (noted in
     the report) and the cube falls to the bottom, below the rim by more than its own size; without it (the
     default) the cube rests on the solid hull."""
     pytest.importorskip("coacd")
     src = one_mesh_per_link(build_bucket(tmp_path / "src"))
-    res = refine_asset(src, "A bucket.", tmp_path / "out", config=RefineConfig(open_containers=True), extras=False)
+    res = refine_once(src, "A bucket.", config=RefineConfig(open_containers=True), extras=False)
     r = res.report
     assert r.failure_mode == "none", (r.failure_mode, r.readiness)
     opened = [n for n in r.state.collision_changes if "holds an open cavity" in n and "'link_1'" in n]
@@ -201,7 +201,7 @@ def test_a_bucket_of_one_mesh_is_hollow_and_holds_what_is_dropped_into_it(tmp_pa
     handle = next(j for j in model.joints if j.name == "joint_0")
     z, top, half = _settled_in(res.out_dir / "mobility.urdf", "link_1", "joint_0", handle.upper)
     assert z < top - 2.0 * half, (z, top, half)
-    solid = refine_asset(src, "A bucket.", tmp_path / "solid", extras=False)
+    solid = refine_once(src, "A bucket.", extras=False)
     assert not any("holds an open cavity" in n for n in solid.report.state.collision_changes)
     z, top, half = _settled_in(solid.out_dir / "mobility.urdf", "link_1", "joint_0", handle.upper)
     assert z > top, (z, top, half)

@@ -17,18 +17,17 @@ from asset2sim.schemas.realism import PairSet  # noqa: E402
 from asset2sim.tasks.evaluation import clips  # noqa: E402
 from asset2sim.apps.realism import defects, motion, pairs  # noqa: E402
 from asset2sim.apps.realism.pair_set import read_pair_set  # noqa: E402
-from asset2sim.tasks.refine import refine_asset  # noqa: E402
 from asset2sim.urdf import read_urdf  # noqa: E402
 from tests.conftest import SHARED, needs_shared  # noqa: E402
 
 
 @pytest.fixture(scope="module")
-def refined(demo_root, tmp_path_factory):
-    """A refined box with a lid (the demo dataset's, extras off): side ``a`` of every pair here."""
-    out = tmp_path_factory.mktemp("refined") / "box_lid"
-    res = refine_asset(demo_root / "box_lid", "a box with its lid closed", out, extras=False)
+def refined(demo_root, refine_factory):
+    """A refined box with a lid (the demo dataset's, extras off; the session's shared refine, read-only): side ``a``
+    of every pair here."""
+    res = refine_factory(demo_root / "box_lid", "a box with its lid closed", extras=False)
     assert res.report.failure_mode == "none"
-    return out
+    return res.out
 
 
 @pytest.fixture(scope="module")

@@ -55,10 +55,10 @@ def _operate(out: Path, springs: dict[str, Spring] | None = None) -> operability
 
 
 @pytest.fixture(scope="module")
-def desk(tmp_path_factory):
+def desk(tmp_path_factory, refine_factory):
     base = tmp_path_factory.mktemp("desk")
     src = build_table_with_drawer(base / "src")
-    return refine_asset(src, "A desk with its drawer closed.", base / "out", extras=False)
+    return refine_factory(src, "A desk with its drawer closed.", extras=False)
 
 
 def test_a_drawer_jammed_at_80_n_is_not_operable_and_the_products_drawer_is(desk, tmp_path):
@@ -100,11 +100,11 @@ def test_a_jammed_drawer_shows_where_the_hand_stopped(desk, tmp_path):
     assert all(shape == (200, 200, 3) for shape, _ in seen)
 
 
-def test_a_door_jammed_at_40_n_m_is_not_operable(tmp_path):
+def test_a_door_jammed_at_40_n_m_is_not_operable(tmp_path, refine_once):
     """A double-door cabinet's door with 40 N m of hinge friction (a hand at its far edge gives well under
     10 N m inside 22.2 N) is not operable; with the product's friction both doors are."""
     src = build_double_door_cabinet(tmp_path / "src")
-    res = refine_asset(src, "A cabinet with both doors closed.", tmp_path / "out", extras=False)
+    res = refine_once(src, "A cabinet with both doors closed.", extras=False)
     run = _operate(res.out_dir)
     assert run.parts and all(p.passed for p in run.parts), [s.failure for p in run.parts for s in p.strokes]
     door = run.parts[0]
@@ -113,11 +113,11 @@ def test_a_door_jammed_at_40_n_m_is_not_operable(tmp_path):
     assert jammed.passed is False and door.joint in jammed.details["failing"]
 
 
-def test_a_stiff_request_stays_inside_what_a_hand_moves(tmp_path):
+def test_a_stiff_request_stays_inside_what_a_hand_moves(tmp_path, refine_once):
     """"A very stiff drawer" asks for friction four times the hold load; refine keeps it inside the operating
     budget of the drawer (the hand's cap), and the operability tier passes."""
     src = build_table_with_drawer(tmp_path / "src")
-    res = refine_asset(src, "A desk with a very stiff drawer, closed.", tmp_path / "out", extras=False)
+    res = refine_once(src, "A desk with a very stiff drawer, closed.", extras=False)
     m = res.report.metric("operability")
     assert m.passed is True
     (name,) = list(res.overlay.joints)
@@ -125,13 +125,13 @@ def test_a_stiff_request_stays_inside_what_a_hand_moves(tmp_path):
     assert m.details["efforts"][name]["peak_force_n"] <= 44.5
 
 
-def test_a_drop_down_door_carries_its_weight_on_a_counterbalance_spring(tmp_path):
+def test_a_drop_down_door_carries_its_weight_on_a_counterbalance_spring(tmp_path, refine_once):
     """The generated range oven's bottom-hinged door opened halfway: the estimate gives it a counterbalance
     spring (at rest closed, balancing the weight moment fully open) and a hand inside 22.2 N opens and
     closes it. Counterfactual: without the spring, the friction that holds the door at its state (1.2 x its
     weight moment, operating.HOLD_MARGIN) leaves a door no hand inside the range lifts."""
     src = build_oven(tmp_path / "src")
-    res = refine_asset(src, "An oven with its door halfway open.", tmp_path / "out", extras=False)
+    res = refine_once(src, "An oven with its door halfway open.", extras=False)
     door = res.overlay.joints["joint_0"]
     assert door.stiffness > 0 and "counterbalance spring" in door.source
     assert door.spring_reference == pytest.approx(res.report.closed_positions["joint_0"], abs=1e-6)
@@ -204,12 +204,12 @@ def test_the_task_less_cabinet_is_never_ready_with_a_jammed_drawer(tmp_path):
     assert r.failure_mode in ("none", "not_robust_at_rest")
 
 
-def test_a_hung_window_sash_is_operable_on_its_balance_and_not_without_it(tmp_path, monkeypatch):
+def test_a_hung_window_sash_is_operable_on_its_balance_and_not_without_it(tmp_path, monkeypatch, refine_once):
     """A vertical sash (Meta-World's window, generated) held slightly open: with its balance a hand inside 22.2 N
     lifts and lowers it. Counterfactual: without balances (estimate.BALANCE_LABELS empty) friction must hold the
     sash's whole weight, and lifting it against both needs more than a hand's 22.2 N (not_operable)."""
     xml = hl.metaworld_window(tmp_path / "in")
-    res = refine_asset(xml, "A window, slightly open.", tmp_path / "out", extras=False)
+    res = refine_once(xml, "A window, slightly open.", extras=False)
     assert res.report.failure_mode == "none", res.report.failure_mode
     (name,) = list(res.overlay.joints)
     assert "balance" in res.overlay.joints[name].source

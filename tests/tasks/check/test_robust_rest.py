@@ -13,7 +13,6 @@ from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import available_engines, open_session
 from tests.contract_asset import write_contract_asset
 from asset2sim.tasks.check import metrics, robust_rest
-from asset2sim.tasks.refine import refine_asset
 from asset2sim.tasks.check.robust_rest import (
     RobustRestConfig,
     robust_rest_metric,
@@ -115,22 +114,22 @@ def test_the_fake_engine_skips_the_nudge(tmp_path):
     assert run.trials[0].passed is True and run.trials[1].passed is None
 
 
-def test_tilted_refined_laptop_is_put_down_touching_the_ground(tmp_path):
+def test_tilted_refined_laptop_is_put_down_touching_the_ground(tmp_path, refine_once):
     """The tilt trials put the object down touching the ground. PyBullet's
     collision-mesh vertices are not in the link frame for the refined
     (scaled) laptop, and placing by them put the tilted laptop up to 8.4 cm
     into or above the ground, from where it was thrown or fell on its edge and
     toppled (a check bug): the trial places it with the engine's exact ground
     placement."""
-    res = refine_asset(build_laptop(tmp_path / "src"), "A laptop with its screen fully open.", tmp_path / "out", extras=False)
+    res = refine_once(build_laptop(tmp_path / "src"), "A laptop with its screen fully open.", extras=False)
     state = res.report.initial_joint_positions
-    with open_session("pybullet", tmp_path / "out" / "mobility.urdf", SessionOptions(initial_state=dict(state))) as s:
+    with open_session("pybullet", res.out / "mobility.urdf", SessionOptions(initial_state=dict(state))) as s:
         saved = s.save_state()
         for name in ("tilt+x", "tilt-x", "tilt+y", "tilt-y"):
             s.restore_state(saved)
             robust_rest._disturb(s, name, RobustRestConfig())
             assert abs(s.place_on_ground()) < 1e-3, name  # already touching: nothing to move
-    run = run_robust_rest("pybullet", SimObject(UrdfFile(tmp_path / "out" / "mobility.urdf"), state))
+    run = run_robust_rest("pybullet", SimObject(UrdfFile(res.out / "mobility.urdf"), state))
     assert all(t.topple is not None and t.topple < 0.05 for t in run.trials), [t.failure for t in run.trials]
 
 
@@ -175,7 +174,7 @@ def test_an_object_that_keeps_moving_still_fails_after_the_recovery_time(tmp_pat
     assert run.trials[0].passed is False and "not at rest" in run.trials[0].failure
 
 
-def test_wheels_the_object_rolls_on_are_not_held_states_and_are_not_pushed(tmp_path):
+def test_wheels_the_object_rolls_on_are_not_held_states_and_are_not_pushed(tmp_path, refine_once):
     """A cart on four wheels (continuous joints resting on the ground): the
     wheels turn when it is tilted or nudged, as wheels do, so robust rest
     records their drift without grading it and the probes do not push them
@@ -201,7 +200,7 @@ def test_wheels_the_object_rolls_on_are_not_held_states_and_are_not_pushed(tmp_p
     a = write_contract_asset(tmp_path / "contract", lid_angle=0.4)
     with open_session("pybullet", a.urdf, SessionOptions()) as s:
         assert rolling_joints(s, subtrees(read_urdf(a.urdf))) == []
-    res = refine_asset(src, "A cart.", tmp_path / "out", media=False)  # the verdict and evaluation.json: no media
+    res = refine_once(src, "A cart.", media=False)  # the verdict and evaluation.json: no media
     rep = res.report
     assert rep.failure_mode == "none", rep.readiness
     rr = rep.metric("robust_rest")

@@ -115,13 +115,13 @@ def test_refine_writes_clips_that_the_report_plays_and_the_catalog_lists(tmp_pat
         assert (tmp_path / "again" / "clips" / c.video).read_bytes() == (out / "clips" / c.video).read_bytes()
 
 
-def test_refine_without_clips_writes_none_and_keeps_the_configuration_hash_of_the_default(demo_root, tmp_path):
+def test_refine_without_clips_writes_none_and_keeps_the_configuration_hash_of_the_default(demo_root, tmp_path, refine_once):
     assert RefineConfig(clips=True).config_hash() == RefineConfig().config_hash()
     assert RefineConfig(clips=False).config_hash() != RefineConfig().config_hash()
-    res = refine_asset(demo_root / "box_lid", "a box with its lid slightly open", tmp_path / "out", RefineConfig(clips=False))
-    assert "clips" not in res.extras and not (tmp_path / "out" / "clips").exists()
-    assert "<video" not in (tmp_path / "out" / "report.html").read_text()
-    assert clips.clip_videos(tmp_path / "out") == []
+    res = refine_once(demo_root / "box_lid", "a box with its lid slightly open", RefineConfig(clips=False))
+    assert "clips" not in res.result.extras and not (res.out / "clips").exists()
+    assert "<video" not in (res.out / "report.html").read_text()
+    assert clips.clip_videos(res.out) == []
 
 
 def test_evaluate_writes_clips_of_any_urdf_and_can_leave_them_out(tmp_path):

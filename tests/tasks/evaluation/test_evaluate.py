@@ -392,14 +392,13 @@ def test_evaluate_command_writes_files_and_sets_the_exit_code(tmp_path, capsys):
     assert main(["evaluate", str(tmp_path / "missing")]) == 2
 
 
-def test_evaluate_leaves_a_refine_output_as_it_was(demo_root, tmp_path, capsys):
+def test_evaluate_leaves_a_refine_output_as_it_was(demo_root, tmp_path, capsys, refine_once):
     """``asset2sim evaluate OUT`` without ``--out`` writes beside OUT: every
     file of OUT stays byte-equal and the next identical refine is skipped."""
     from asset2sim.cli import main
     from asset2sim.tasks.refine import refine_asset
 
-    out = tmp_path / "box"
-    refine_asset(demo_root / "box_lid", "a box with its lid slightly open", out, extras=False)
+    out = refine_once(demo_root / "box_lid", "a box with its lid slightly open", extras=False).copy_to(tmp_path / "box")
     before = tree_hashes(out)
     assert main(["evaluate", str(out), "--no-probes"]) in (0, 1)
     assert tree_hashes(out) == before
@@ -446,17 +445,15 @@ def test_reused_rest_test_gives_the_fresh_evaluation_probes_included(tmp_path):
     assert measured.metric("probes").model_dump() == fresh.metric("probes").model_dump()
 
 
-def test_a_task_naming_one_of_two_drawers_is_executed_on_the_open_one(tmp_path):
+def test_a_task_naming_one_of_two_drawers_is_executed_on_the_open_one(tmp_path, refine_once):
     """The generated two-drawer cabinet, refined closed, then one drawer set
     open in its initial_state.json: "close the drawer" is executed on that
     drawer only (task_spec.with_work_to_do), "close the drawers" on both."""
     from asset2sim import demo_assets
-    from asset2sim.tasks.refine import refine_asset
     from asset2sim.urdf import read_urdf
 
-    src = demo_assets.build_two_drawer_cabinet(tmp_path / "cab")
-    out = tmp_path / "out"
-    res = refine_asset(src, "A cabinet, closed.", out, extras=False)
+    res = refine_once(demo_assets.build_two_drawer_cabinet, "A cabinet, closed.", extras=False)
+    out = res.copy_to(tmp_path / "out")  # its initial_state.json changed below
     model = read_urdf(out / "mobility.urdf")
     drawers = sorted(j.name for j in model.movable_joints)
     assert len(drawers) == 2

@@ -12,7 +12,6 @@ import pytest
 
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.evaluation.report_changes import state_moves
-from asset2sim.tasks.refine import refine_asset
 from tests.tasks.ingest import host_layouts as hl
 
 pytest.importorskip("mujoco")
@@ -39,11 +38,11 @@ def _rows(page: str) -> dict[str, list[str]]:
 
 
 @pytest.fixture(scope="module")
-def door(tmp_path_factory):
+def door(tmp_path_factory, refine_factory):
     """robosuite's door fragment in its package's layout, refined "a door" (report.html made)."""
     base = tmp_path_factory.mktemp("robosuite")
     xml = hl.robosuite_door(base / "robosuite" / "robosuite" / "models" / "assets" / "objects" / "door.xml")
-    return refine_asset(xml, "A door.", base / "out", CONFIG)
+    return refine_factory(xml, "A door.", CONFIG)
 
 
 def test_an_mjcf_input_is_drawn_and_described_as_its_file_declares_it(door):
@@ -81,11 +80,11 @@ def test_the_latch_inside_the_door_is_one_story(door):
     assert next(x for x in declared.metrics if x.name == "parent_child_penetration").passed is True
 
 
-def test_a_spring_asked_for_has_its_own_row_with_its_unit(tmp_path):
+def test_a_spring_asked_for_has_its_own_row_with_its_unit(tmp_path, refine_once):
     """A hand-written cabinet whose request asks for a door spring: the stiffness row shows the file's none and the
     output's spring in N m/rad about its reference; damping and friction rows carry their units."""
     xml = hl.hand_written_cabinet(tmp_path / "cabinet" / "cabinet.xml")
-    res = refine_asset(xml, "A small cabinet, its door closed, with a stiffness 0.5 N m/rad.", tmp_path / "out", CONFIG)
+    res = refine_once(xml, "A small cabinet, its door closed, with a stiffness 0.5 N m/rad.", CONFIG)
     rows = _rows((res.out_dir / "report.html").read_text())
     stiffness = rows["door_hinge stiffness"]
     assert stiffness[0] == "none declared" and stiffness[1].startswith("0.5 N m/rad about "), stiffness

@@ -12,7 +12,6 @@ from asset2sim.apps.audit.audit import audit_asset
 from asset2sim.tasks.ingest.extract import extract_asset_checked
 from asset2sim.tasks.ingest.urdf_meshes import urdf_needing_conversion
 from asset2sim.tasks.interpret.part_labels import label_from_name
-from asset2sim.tasks.refine import refine_asset
 from asset2sim.urdf import read_urdf
 from tests.planted_assets import write_generated_urdf
 
@@ -37,19 +36,19 @@ def test_glb_and_ply_meshes_are_staged_as_obj_with_labels_from_names(tmp_path):
     assert any("read with trimesh and written as OBJ" in n for n in asset.staging_notes)
 
 
-def test_a_generated_urdf_is_refined_with_labels_from_names(tmp_path):
+def test_a_generated_urdf_is_refined_with_labels_from_names(tmp_path, refine_once):
     src = write_generated_urdf(tmp_path / "gen")
     before = _digest(src)
-    res = refine_asset(src, "a cabinet, door halfway open", tmp_path / "out", extras=False)
-    assert res.ready, res.report.failure_mode
+    res = refine_once(src, "a cabinet, door halfway open", extras=False)
+    assert res.result.ready, res.report.failure_mode
     assert any("part labels read from link names" in n and "link_1_door -> door" in n for n in res.report.notes)
     assert not any("no part of this" in n for n in res.report.notes)  # the request's 'door' found its part
     assert _digest(src) == before
 
 
-def test_centimetre_meshes_are_caught_by_the_size_priors(tmp_path):
+def test_centimetre_meshes_are_caught_by_the_size_priors(tmp_path, refine_once):
     src = write_generated_urdf(tmp_path / "gen_cm", unit=100.0)
-    res = refine_asset(src, "a cabinet, door halfway open", tmp_path / "out", extras=False)
+    res = refine_once(src, "a cabinet, door halfway open", extras=False)
     assert 0.005 < res.overlay.scale < 0.03
     assert any("look like centimetres read as metres" in n for n in res.report.notes)
     report = audit_asset(src, tmp_path / "audit", simulate=False).report
@@ -70,8 +69,8 @@ def test_a_unit_mistake_is_named_only_near_a_unit_factor(scale, unit):
     assert (f"look like {unit} read as metres" in text) if unit else text == ""
 
 
-def test_a_partnet_mobility_model_is_never_called_a_unit_mistake(tmp_path):
+def test_a_partnet_mobility_model_is_never_called_a_unit_mistake(tmp_path, refine_once):
     src = write_generated_urdf(tmp_path / "gen_cm", unit=100.0)
     (src / "model.urdf").rename(src / "mobility.urdf")  # the dataset's convention: normalized size, not units
-    res = refine_asset(src, "a cabinet", tmp_path / "out", extras=False)
+    res = refine_once(src, "a cabinet", extras=False)
     assert res.overlay.scale < 0.03 and not any("read as metres" in n for n in res.report.notes)

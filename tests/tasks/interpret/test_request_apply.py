@@ -15,7 +15,6 @@ from asset2sim.commands.refine import summary_lines
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
 from asset2sim.tasks.synthesize import request_apply
-from asset2sim.tasks.refine import refine_asset
 from asset2sim.tasks.synthesize import backends, estimate, llm_prompt
 from asset2sim.tasks.synthesize.context import build_context
 from tests.conftest import SHARED, needs_shared
@@ -36,11 +35,11 @@ def _lever_z(out_dir, q: float) -> float:
         return float(0.5 * (a[2] + b[2]))
 
 
-def test_toaster_lever_up_is_its_top_found_from_the_geometry(toaster, tmp_path):
+def test_toaster_lever_up_is_its_top_found_from_the_geometry(toaster, refine_once):
     """A toaster "with its lever up": the lever lands at the top of its slot. In this
     asset the top is the joint's LOWER limit and the geometric closed end is
     the bottom, so neither "closed" nor "upper limit" would pass."""
-    res = refine_asset(toaster, TOASTER, tmp_path / "out", category="Toaster", extras=False)
+    res = refine_once(toaster, TOASTER, category="Toaster", extras=False)
     r = res.report
     q = r.initial_joint_positions["lever_slide"]
     travel = LEVER_TRAVEL * r.scale
@@ -52,30 +51,30 @@ def test_toaster_lever_up_is_its_top_found_from_the_geometry(toaster, tmp_path):
     (end,) = [x for x in r.request.quantities if x.what == "lever_slide end"]
     assert end.within_tolerance and end.phrase == "lever up"
     # and "down" is the bottom
-    res2 = refine_asset(toaster, "A toaster with its lever down.", tmp_path / "out2", category="Toaster", extras=False)
+    res2 = refine_once(toaster, "A toaster with its lever down.", category="Toaster", extras=False)
     assert _lever_z(res2.out_dir, res2.report.initial_joint_positions["lever_slide"]) <= z_bottom + 0.02 * (z_top - z_bottom)
 
 
-def test_report_and_summary_list_ignored_words_missing_parts_and_contradictions(demo_root, tmp_path):
+def test_report_and_summary_list_ignored_words_missing_parts_and_contradictions(demo_root, refine_once):
     text = "A microwave with a rubber duck on top, its drawer open, the door fully open and closed, weighing 10 kg."
-    res = refine_asset(demo_root / "microwave", text, tmp_path / "out", extras=False)
-    saved = json.loads((tmp_path / "out" / "report.json").read_text())["request"]
+    res = refine_once(demo_root / "microwave", text, extras=False)
+    saved = json.loads((res.out / "report.json").read_text())["request"]
     assert saved["ignored"] == ["rubber duck"]
     warn = " | ".join(saved["warnings"])
     assert "drawer" in warn and "door" in warn and "its moving parts" in warn  # the missing part and the parts that exist
     assert "contradiction" in warn
     (mass,) = [q for q in saved["quantities"] if q["what"] == "total mass"]
     assert abs(mass["achieved"] - 10.0) <= 0.5 and mass["within_tolerance"]
-    lines = "\n".join(summary_lines(res))
+    lines = "\n".join(summary_lines(res.result))
     assert "not understood: 'rubber duck'" in lines and "contradiction" in lines and "total mass: asked 10 kg" in lines
 
 
-def test_angles_land_within_5_percent_and_a_limit_is_explained(demo_root, tmp_path):
-    res = refine_asset(demo_root / "microwave", "A microwave with the door at 30 degrees.", tmp_path / "a", extras=False)
+def test_angles_land_within_5_percent_and_a_limit_is_explained(demo_root, refine_once):
+    res = refine_once(demo_root / "microwave", "A microwave with the door at 30 degrees.", extras=False)
     r = res.report
     got = abs(r.initial_joint_positions["joint_0"] - r.closed_positions["joint_0"])
     assert abs(got - np.radians(30)) <= 0.05 * np.radians(30)
-    res = refine_asset(demo_root / "microwave", "A microwave with the door at 150 degrees.", tmp_path / "b", extras=False)
+    res = refine_once(demo_root / "microwave", "A microwave with the door at 150 degrees.", extras=False)
     r = res.report
     assert r.opening_fractions["joint_0"] >= 0.99
     assert any("beyond the joint's limit" in w for w in r.request.warnings)
@@ -119,15 +118,14 @@ def test_the_model_prompt_carries_the_numbers_and_a_departing_overlay_is_flagged
         assert "total mass" in flagged and "30 cm tall" in flagged and "glass" in flagged
 
 
-def test_a_toggle_switch_turned_on_stays_on_without_a_return_spring(tmp_path):
+def test_a_toggle_switch_turned_on_stays_on_without_a_return_spring(refine_once):
     """A toggle ("toggle_button") is a switch: "on" is its high end, and it
     stays where it is flipped: no spring (a push button's), so the probes
     that flip it find it holding (with the spring a toggle swung back from
     0.10 to 0.37 of its range: probe_failed)."""
     from tests.unseen_assets import build_toggle_switch
 
-    src = build_toggle_switch(tmp_path / "switch")
-    res = refine_asset(src, "A light switch turned on.", tmp_path / "out", extras=True)
+    res = refine_once(build_toggle_switch, "A light switch turned on.", extras=True)
     rep = res.report
     assert rep.category == "Switch" and rep.failure_mode == "none"
     assert res.overlay.joints["joint_0"].stiffness == 0.0
@@ -137,7 +135,7 @@ def test_a_toggle_switch_turned_on_stays_on_without_a_return_spring(tmp_path):
     assert probes["passed"], probes["details"]
 
 
-def test_a_range_of_masses_is_read_as_a_range(demo_root, tmp_path):
+def test_a_range_of_masses_is_read_as_a_range(demo_root, refine_once):
     """"between 20 and 30 kg" is one range, every word understood: an estimate inside it is kept, one outside is
     brought to the nearer end (not to the upper number alone, nor with 'between' left not understood); the summary and
     the as-asked tier grade it met anywhere in the range."""
@@ -149,13 +147,13 @@ def test_a_range_of_masses_is_read_as_a_range(demo_root, tmp_path):
         (p,) = spec.properties
         assert p.label is None and p.mass is None and p.mass_range == (lo, hi), (text, p)
         assert spec.ignored == [], (text, spec.ignored)
-    estimate_only = refine_asset(demo_root / "microwave", "A microwave.", tmp_path / "plain", extras=False).report.total_mass
+    estimate_only = refine_once(demo_root / "microwave", "A microwave.", extras=False).report.total_mass
     lo, hi = 0.8 * estimate_only, 1.5 * estimate_only  # the estimate lies inside: kept
-    inside = refine_asset(demo_root / "microwave", f"A microwave between {lo:.3f} and {hi:.3f} kg.", tmp_path / "in", extras=False)
+    inside = refine_once(demo_root / "microwave", f"A microwave between {lo:.3f} and {hi:.3f} kg.", extras=False)
     assert inside.report.total_mass == pytest.approx(estimate_only, rel=1e-6)
-    above = refine_asset(demo_root / "microwave", f"A microwave between {2 * hi:.3f} and {3 * hi:.3f} kg.", tmp_path / "above",
+    above = refine_once(demo_root / "microwave", f"A microwave between {2 * hi:.3f} and {3 * hi:.3f} kg.",
                          extras=False)
     assert above.report.total_mass == pytest.approx(round(2 * hi, 3), rel=0.01)  # the nearer end
     assert above.report.failure_mode == "none" and above.report.metric("request_met").passed
-    lines = "\n".join(summary_lines(above))
+    lines = "\n".join(summary_lines(above.result))
     assert f"total mass: asked {2 * hi:.4g} kg to {3 * hi:.4g} kg" in lines and "not understood" not in lines, lines

@@ -17,7 +17,6 @@ from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.interpret.named_parts import requested_joints
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.interpret.request import LESS_THAN_HALF, parse_request
-from asset2sim.tasks.refine import refine_asset
 from asset2sim.tasks.synthesize import estimate, request_apply
 from asset2sim.tasks.synthesize.context import build_context
 from asset2sim.engines.source import UrdfFile
@@ -261,11 +260,11 @@ def test_smaller_or_main_of_parts_of_one_size_names_none(tmp_path):
     assert len(res.addressed) == 1
 
 
-def test_a_toasters_lever_refined_down_is_said_with_its_label_and_phrase(generated, tmp_path):
+def test_a_toasters_lever_refined_down_is_said_with_its_label_and_phrase(generated, tmp_path, refine_once):
     """End to end on the generated toaster (its lever labelled ``slider``): "lever pushed down" sets the slider's
     lowest end, and the summary names the part and the phrase."""
-    res = refine_asset(generated["toaster"], "A toaster with its lever pushed down.", tmp_path / "out", extras=False)
-    lines = summary_lines(res)
+    res = refine_once(generated["toaster"], "A toaster with its lever pushed down.", extras=False)
+    lines = summary_lines(res.result)
     (state,) = [ln for ln in lines if ln.startswith("initial state")]
     assert "joint_0 (slider) = " in state and "(asked 'lever pushed down'), 100 % open" in state
     assert res.report.request.phrases[0].startswith("'lever pushed down': joint_0 (slider)")

@@ -29,7 +29,6 @@ import pytest
 pytest.importorskip("mujoco")
 
 from asset2sim.schemas.config import RefineConfig
-from asset2sim.tasks.refine import refine_asset
 from asset2sim.urdf import read_urdf
 
 CONFIG = RefineConfig(engines=["pybullet"])
@@ -136,9 +135,9 @@ def _run(python: str, packages: Path, script: str, *args) -> dict:
 @pytest.mark.parametrize("task, scene, prompt, policy, joint, bodies, travel", METAWORLD_TASKS,
                          ids=[t[0] for t in METAWORLD_TASKS])
 def test_a_meta_world_environment_runs_with_the_refined_object_swapped_in(metaworld_host, tmp_path, task, scene, prompt,
-                                                                          policy, joint, bodies, travel):
+                                                                          policy, joint, bodies, travel, refine_once):
     python, package = metaworld_host
-    res = refine_asset(package / "assets" / "objects" / f"{scene}.xml", prompt, tmp_path / "out", CONFIG, extras=False)
+    res = refine_once(package / "assets" / "objects" / f"{scene}.xml", prompt, CONFIG, extras=False)
     assert res.report.failure_mode == "none", res.report.failure_mode
     assert (res.out_dir / "mjcf" / "host" / "files" / "objects" / "assets" / f"{scene}.xml").is_file(), res.report.notes
     packages = _swapped(res, package, tmp_path)
@@ -153,12 +152,12 @@ def test_a_meta_world_environment_runs_with_the_refined_object_swapped_in(metawo
     assert abs(swapped["q"] - swapped["q0"]) > travel, swapped  # the policy moved the refined part
 
 
-def test_robosuite_s_door_task_runs_with_the_refined_door_swapped_in(robosuite_host, tmp_path):
+def test_robosuite_s_door_task_runs_with_the_refined_door_swapped_in(robosuite_host, tmp_path, refine_once):
     """robosuite's ``Door`` task sets the hinge's damping and friction itself (``DoorObject(friction=0.0,
     damping=0.1)``); the masses and inertias are the file's."""
     python, package = robosuite_host
     xml = package / "models" / "assets" / "objects" / "door.xml"
-    res = refine_asset(xml, "A door, slightly open.", tmp_path / "out", CONFIG, extras=False)
+    res = refine_once(xml, "A door, slightly open.", CONFIG, extras=False)
     assert res.report.failure_mode == "none", res.report.failure_mode
     assert (res.out_dir / "mjcf" / "host" / "files" / "objects" / "door.xml").is_file(), res.report.notes
     packages = _swapped(res, package, tmp_path)

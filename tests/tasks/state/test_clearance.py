@@ -160,16 +160,15 @@ def test_refine_gives_clearance_to_drawers_that_move_together(tmp_path):
     assert r.metric("task_execution").passed is True and r.metric("operating_force").passed is True
 
 
-def test_a_door_closes_past_the_door_it_meets(tmp_path):
+def test_a_door_closes_past_the_door_it_meets(tmp_path, refine_once):
     """Two doors modelled meeting at the middle with no gap (tests/unseen_assets.py): asked with the left door
     slightly open, its edge must slide past the right door's edge to close. With touching hulls the joint
     sweep closed it back only to 5 % open (blocked_joint, before the writer's running clearance); now the writer
     gives the pair 2.5 mm and the cabinet is interaction-ready, the doors apart in PyBullet."""
-    from asset2sim.tasks.refine import refine_asset
     from tests.unseen_assets import build_double_door_cabinet
 
     src = build_double_door_cabinet(tmp_path / "cabinet")
-    res = refine_asset(src, "A cabinet with its left door slightly open.", tmp_path / "out", extras=False)
+    res = refine_once(src, "A cabinet with its left door slightly open.", extras=False)
     r = res.report
     assert any("running clearance" in line and "'link_1'" in line for line in r.state.collision_changes), r.state.collision_changes
     assert r.opening_fractions["joint_0"] > 0.05 and r.opening_fractions["joint_1"] <= 0.02

@@ -31,16 +31,17 @@ def _open_probe(out):
     return next(p for p in ev.metric("probes").details["probes"] if p["action"] == "open")
 
 
-def test_door_flush_with_the_floor_is_raised_and_opens_without_the_body_sliding(tmp_path):
+def test_door_flush_with_the_floor_is_raised_and_opens_without_the_body_sliding(tmp_path, refine_once):
     src = build_microwave(tmp_path / "src")
-    res = refine.refine_asset(src, "A microwave.", tmp_path / "out", extras=False)
-    urdf = tmp_path / "out" / "mobility.urdf"
+    res = refine_once(src, "A microwave.", extras=False)
+    out = res.copy_to(tmp_path / "out")  # the evaluation below writes into it
+    urdf = out / "mobility.urdf"
     state = res.report.initial_joint_positions
     low = _lowest(urdf, state)
     assert any("link_0: collision piece" in c and "above the ground" in c for c in res.report.state.collision_changes)
     body = min(low[ln] for ln in low if ln != "link_0")
     assert low["link_0"] - body >= ground_clearance.GROUND_CLEARANCE - 1e-6
-    p = _open_probe(tmp_path / "out")
+    p = _open_probe(out)
     assert p["success"], p["failure"]
     assert p["root_displacement"] < 0.002
 
@@ -121,7 +122,7 @@ def test_pedal_pressed_below_the_floor_is_stopped_at_the_floor(tmp_path):
     assert ground_clearance.floor_limited_state(model, urdf, same, {"j": (0.0, 1.0, 1.5)}) == (same, [])
 
 
-def test_an_object_lying_flat_as_a_whole_keeps_its_moving_half_on_the_floor(tmp_path):
+def test_an_object_lying_flat_as_a_whole_keeps_its_moving_half_on_the_floor(tmp_path, refine_once):
     """15 mm tall (lower than 2 clearances), a side-hinged half with as much
     floor contact as the body is half of what the object lies on: not
     raised; a narrow flap on the same body (a lighter's lid) is raised as a
@@ -136,7 +137,7 @@ def test_an_object_lying_flat_as_a_whole_keeps_its_moving_half_on_the_floor(tmp_
     flap = _two_part(tmp_path / "f", body_lo=(0, 0, 0), body_hi=(0.4, 0.4, 0.015), part_lo=(-0.02, 0, 0),
                      part_hi=(0, 0.4, 0.015), axis="0 0 1")
     assert list(ground_clearance.ground_clearance(read_urdf(flap), flap, {"j": 0.0}).pieces) == ["part"]
-    res = refine.refine_asset(build_pliers(tmp_path / "pliers"), "Pliers, fully open.", tmp_path / "out", media=False)
+    res = refine_once(build_pliers, "Pliers, fully open.", media=False)
     assert res.report.failure_mode == "none", res.report.readiness
     assert not any("raised" in n for n in res.report.state.collision_changes)
 

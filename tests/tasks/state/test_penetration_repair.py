@@ -15,12 +15,12 @@ from tests.tasks.check.failure_assets import build_interlocked_box
 pytest.importorskip("coacd")
 
 
-def test_an_open_box_of_one_mesh_is_written_hollow_and_its_latch_goes_in(tmp_path):
+def test_an_open_box_of_one_mesh_is_written_hollow_and_its_latch_goes_in(tmp_path, refine_once):
     """With ``open_containers`` the writer gives the box's body, a container of one mesh group, a convex
     decomposition that leaves its inside open: the latch's shaft reaching into the box penetrates nothing at
     the requested state and no repair is needed."""
     src = build_interlocked_box(tmp_path / "interlocked_box")
-    r = refine_asset(src, "A box with its lid closed.", tmp_path / "out", extras=False,
+    r = refine_once(src, "A box with its lid closed.", extras=False,
                      config=RefineConfig(open_containers=True)).report
     tol = RefineConfig().penetration_tolerance
     assert any("holds an open cavity" in c and "convex pieces (CoACD)" in c for c in r.state.collision_changes), r.state.collision_changes
@@ -29,11 +29,11 @@ def test_an_open_box_of_one_mesh_is_written_hollow_and_its_latch_goes_in(tmp_pat
     assert r.failure_mode == "none", (r.failure_mode, r.readiness)
 
 
-def test_band_that_penetrates_everywhere_is_repaired(tmp_path):
+def test_band_that_penetrates_everywhere_is_repaired(tmp_path, refine_once):
     """Without ``open_containers`` (the default) the body is its solid hull: the repair's decomposition
     resolves it."""
     src = build_interlocked_box(tmp_path / "interlocked_box")
-    res = refine_asset(src, "A box with its lid closed.", tmp_path / "out", extras=False)
+    res = refine_once(src, "A box with its lid closed.", extras=False)
     r = res.report
     st = r.state
     tol = RefineConfig().penetration_tolerance
@@ -50,10 +50,10 @@ def test_band_that_penetrates_everywhere_is_repaired(tmp_path):
     assert "collision/" in (res.out_dir / "mobility.urdf").read_text()  # the repaired pieces are what the output loads
 
 
-def test_without_repair_the_band_stays_penetrating(tmp_path):
+def test_without_repair_the_band_stays_penetrating(tmp_path, refine_once):
     src = build_interlocked_box(tmp_path / "interlocked_box")
     cfg = RefineConfig(convex_decomposition=False, max_state_evaluations=120)
-    r = refine_asset(src, "A box with its lid closed.", tmp_path / "out", config=cfg, extras=False).report
+    r = refine_once(src, "A box with its lid closed.", config=cfg, extras=False).report
     assert r.state.phi_result > 3 * cfg.penetration_tolerance  # the state search alone cannot resolve it (see above)
     # the sweep's running clearance (tasks.state.clearance) may then squeeze the latch out of the body, but the
     # lid stays locked: without the decomposition the asset is never ready
@@ -62,18 +62,18 @@ def test_without_repair_the_band_stays_penetrating(tmp_path):
     assert r.failure_mode in {"unresolved_penetration", "blocked_joint", "joint_not_held"}
 
 
-def test_after_the_repair_the_lid_and_latch_sweep_their_ranges(tmp_path):
+def test_after_the_repair_the_lid_and_latch_sweep_their_ranges(tmp_path, refine_once):
     """The repaired box is interaction-ready under the sweep too: the lid
     opens upwards out of the body and the latch turns inside it."""
     src = build_interlocked_box(tmp_path / "interlocked_box")
-    r = refine_asset(src, "A box.", tmp_path / "out", extras=False).report
+    r = refine_once(src, "A box.", extras=False).report
     sw = r.metric("joint_sweep")
     assert sw.passed, sw.details["failures"]
     assert set(sw.details["joints"]) == {"joint_0", "joint_2"}
 
 
 
-def test_an_open_request_still_gets_pieces_that_let_the_lid_shut(tmp_path):
+def test_an_open_request_still_gets_pieces_that_let_the_lid_shut(tmp_path, refine_once):
     """Asked fully open, the box's requested state is clear of overlaps (the
     latch lifted out with the lid), but its closed configuration is not: the
     latch sits in the body's solid hull. Repaired only at the requested state,
@@ -81,7 +81,7 @@ def test_an_open_request_still_gets_pieces_that_let_the_lid_shut(tmp_path):
     to 0.22 rad, 13 deg open); repaired at the closed configuration first, as
     for a closed request, the lid shuts at its modelled closed end."""
     src = build_interlocked_box(tmp_path / "interlocked_box")
-    r = refine_asset(src, "A box with its lid fully open.", tmp_path / "out", extras=False).report
+    r = refine_once(src, "A box with its lid fully open.", extras=False).report
     changes = r.state.collision_changes
     assert any(c.startswith("closed configuration") for c in changes), changes
     assert any("CoACD" in c and "->" in c for c in changes)  # before -> after, per link
@@ -92,12 +92,12 @@ def test_an_open_request_still_gets_pieces_that_let_the_lid_shut(tmp_path):
     assert r.metric("joint_sweep").passed
 
 
-def test_a_partly_open_request_is_placed_from_the_end_the_lid_shuts_at(tmp_path):
+def test_a_partly_open_request_is_placed_from_the_end_the_lid_shuts_at(tmp_path, refine_once):
     """The state of an open request is placed from the closed end measured
     on the repaired pieces: "a quarter open" lands in its band of the whole
     range, not of a range cut short by hulls that overlapped when shut."""
     src = build_interlocked_box(tmp_path / "interlocked_box")
-    r = refine_asset(src, "A box with its lid a quarter open.", tmp_path / "out", extras=False).report
+    r = refine_once(src, "A box with its lid a quarter open.", extras=False).report
     assert abs(r.closed_positions["joint_0"]) <= 0.02
     assert 0.15 <= r.opening_fractions["joint_0"] <= 0.35
     assert abs(r.initial_joint_positions["joint_0"] - 0.25 * 1.8) <= 0.1 * 1.8  # a quarter of the modelled 0-1.8 rad

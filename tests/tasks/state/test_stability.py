@@ -28,8 +28,8 @@ def laptop(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def fully_open(laptop, tmp_path_factory):
-    return refine_asset(laptop, "A laptop, fully open.", tmp_path_factory.mktemp("o") / "out", extras=False)
+def fully_open(laptop, tmp_path_factory, refine_factory):
+    return refine_factory(laptop, "A laptop, fully open.", extras=False)
 
 
 def test_open_screen_tips_the_laptop_as_estimated(laptop, fully_open, tmp_path):
@@ -71,8 +71,8 @@ def test_design_balances_within_the_sourced_ratio(fully_open):
     assert any("stability by design" in n for n in r.notes)
 
 
-def test_closed_laptop_is_left_unchanged(laptop, tmp_path):
-    r = refine_asset(laptop, "A laptop, closed.", tmp_path / "c", extras=False).report
+def test_closed_laptop_is_left_unchanged(laptop, tmp_path, refine_once):
+    r = refine_once(laptop, "A laptop, closed.", extras=False).report
     assert r.failure_mode == "none" and r.design_changes == []
 
 
@@ -107,11 +107,10 @@ STAPLER = SHARED / "102990"
 
 
 @pytest.fixture(scope="module")
-def open_stapler(tmp_path_factory):
+def open_stapler(tmp_path_factory, refine_factory):
     if not STAPLER.is_dir():
         pytest.skip("PartNet-Mobility 102990 not available")
-    return refine_asset(STAPLER, "A stapler with its stapler body fully open.", tmp_path_factory.mktemp("st") / "out",
-                        extras=False)
+    return refine_factory(STAPLER, "A stapler with its stapler body fully open.", extras=False)
 
 
 @pytest.mark.slow

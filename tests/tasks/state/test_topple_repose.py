@@ -9,7 +9,6 @@ from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.tasks.check import robust_rest
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.assemble import write
-from asset2sim.tasks.refine import refine_asset
 from tests.tasks.check.failure_assets import build_edge_standing_case
 
 
@@ -19,8 +18,8 @@ def case(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def refined(case, tmp_path_factory):
-    return refine_asset(case, "A suitcase.", tmp_path_factory.mktemp("o") / "out", extras=False)
+def refined(case, tmp_path_factory, refine_factory):
+    return refine_factory(case, "A suitcase.", extras=False)
 
 
 def test_as_modelled_it_rests_but_a_tilt_topples_it(case, refined, tmp_path):

@@ -8,7 +8,6 @@ import json
 import pytest
 
 from asset2sim.demo_geometry import box_xyz
-from asset2sim.tasks.refine import refine_asset
 from asset2sim.tasks.synthesize.validate_overlay import MAX_DENSITY_FACTOR, MIN_LINK_MASS_FRACTION, solid_volume, validate_overlay
 from tests.conftest import SHARED, needs_shared
 from tests.tasks.synthesize.test_validate_overlay import _good, box  # noqa: F401 (fixture)
@@ -50,14 +49,14 @@ def _safe_with_button(folder, size: float):
     return b.write(folder)
 
 
-def test_a_small_button_on_a_heavy_safe_keeps_a_density_its_plastic_has(tmp_path):
+def test_a_small_button_on_a_heavy_safe_keeps_a_density_its_plastic_has(tmp_path, refine_once):
     """A 3 mm button on a 54 kg safe: the solver's floor (54 g) would make it
     2e5 kg/m^3 (hidden-set toasters and safes had buttons at 42,000-91,000
     kg/m^3 from it). Its mass stays within its material's density over its
     volume and over its written collision pieces, the report says why, and
     the object passes every tier."""
-    out = tmp_path / "out"
-    res = refine_asset(_safe_with_button(tmp_path / "src", 0.012), "A safe.", out, media=False)
+    res = refine_once(_safe_with_button(tmp_path / "src", 0.012), "A safe.", media=False)
+    out = res.out
     assert res.report.failure_mode == "none"
     button = json.loads((out / "overlay.json").read_text())["links"]["link_0"]
     total = sum(lp["mass"] for lp in json.loads((out / "overlay.json").read_text())["links"].values())
@@ -69,11 +68,11 @@ def test_a_small_button_on_a_heavy_safe_keeps_a_density_its_plastic_has(tmp_path
 
 
 @needs_shared
-def test_a_door_leaf_whose_pieces_are_thinner_than_the_door_is_said(tmp_path):
+def test_a_door_leaf_whose_pieces_are_thinner_than_the_door_is_said(tmp_path, refine_once):
     """Door 8877: its leaf is an open surface whose mass is its area x an
     18 mm MDF wall, while its collision piece is a flat slab; the report
     names the density that gives over the pieces."""
-    res = refine_asset(SHARED / "8877", "A door.", tmp_path / "out", media=False)
+    res = refine_once(SHARED / "8877", "A door.", media=False)
     assert res.report.failure_mode == "none"
     notes = [n for n in res.report.state.collision_changes if "collision pieces'" in n and "denser than its material" in n]
     assert notes and "'link_1'" in notes[0] and "kg/m^3 at most" in notes[0]

@@ -8,7 +8,6 @@ import pytest
 from asset2sim.demo_assets import build_object
 from asset2sim.tasks.tune import word_guard
 from asset2sim.tasks.interpret.request import parse_request
-from asset2sim.tasks.refine import refine_asset
 from asset2sim.tasks.synthesize.context import build_context
 from asset2sim.tasks.synthesize.offline import OfflineEstimator
 
@@ -77,14 +76,14 @@ def test_each_word_moves_its_part_the_way_it_says(microwave, words, changes):
     assert "request '" in asked.source
 
 
-def test_swings_freely_is_echoed_kept_and_its_conflict_named(microwave, tmp_path):
+def test_swings_freely_is_echoed_kept_and_its_conflict_named(microwave, tmp_path, refine_once):
     """"the door swings freely" on a free-standing microwave with its door half open: the door keeps the low friction
     and damping the word gives it (the post-check's escalation does not raise them), the word is echoed in report.json
     with the door's values, and since a free door does not stay half open when the object is set down, robust rest
     fails and the as-asked tier names the word and the conflict."""
     prompt = "A 14 kg microwave with its door half open; the door swings freely."
     est = _door(microwave, prompt)
-    res = refine_asset(microwave, prompt, tmp_path / "out", extras=False)
+    res = refine_once(microwave, prompt, extras=False)
     door = res.overlay.joints["joint_0"]
     assert door.damping <= est.damping * (1 + 1e-9) and door.friction <= est.friction * (1 + 1e-9)
     lines = [p for p in res.report.request.phrases if "swings freely" in p]

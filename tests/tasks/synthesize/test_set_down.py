@@ -122,11 +122,11 @@ def test_the_load_across_gravity_of_a_door_and_a_lid(tmp_path, axis, lateral):
 
 
 @pytest.mark.skipif(not BOX.is_dir(), reason="PartNet-Mobility 47645 not available")
-def test_an_open_lid_is_held_through_the_set_down_from_the_first_guess(tmp_path, monkeypatch):
+def test_an_open_lid_is_held_through_the_set_down_from_the_first_guess(tmp_path, monkeypatch, refine_once):
     """Box 47645 with its lid slightly open: the first friction (its set-down impact in the source) passes robust
     rest in the first post-check, no escalation round. Without the set-down terms the lid is not held by robust
     rest's disturbances at first and the post-check escalates."""
-    first = refine_asset(BOX, BOX_REQUEST, tmp_path / "with", extras=False, category="Box")
+    first = refine_once(BOX, BOX_REQUEST, extras=False, category="Box")
     lid = first.overlay.joints["joint_0"]
     assert "set-down impact" in lid.source
     assert len(first.report.escalation) == 1, [r.reason for r in first.report.escalation]
@@ -174,7 +174,7 @@ MICROWAVE = SHARED / "7119"
 
 
 @pytest.mark.skipif(not MICROWAVE.is_dir(), reason="PartNet-Mobility 7119 not available")
-def test_a_shut_part_is_held_through_the_set_down_by_its_hinge(tmp_path, monkeypatch):
+def test_a_shut_part_is_held_through_the_set_down_by_its_hinge(tmp_path, monkeypatch, refine_once):
     """Microwave 7119 with its door shut: no file format carries a catch, so its hinge holds twice the lean's load
     from the first guess and the first post-check passes robust rest. Without the set-down terms a 5 deg lean swings
     the shut door open and the post-check escalates."""
@@ -186,7 +186,7 @@ def test_a_shut_part_is_held_through_the_set_down_by_its_hinge(tmp_path, monkeyp
                                    {"joint_0": ctx.subtrees["joint_0"]}, root_rotation=ctx.root_rotation)["joint_0"]
     assert "catch" not in door.source and "catch_force" not in door.model_dump()
     assert door.friction >= set_down.LEAN_SAFETY * set_down.lean_load(load) * 0.999
-    first = refine_asset(MICROWAVE, "A microwave.", tmp_path / "with", extras=False, category="Microwave")
+    first = refine_once(MICROWAVE, "A microwave.", extras=False, category="Microwave")
     rr = next(m for m in first.report.escalation[0].metrics if m.name == "robust_rest")
     assert rr.passed is True, rr.details.get("failures")
     assert len(first.report.escalation) == 1, [r.reason for r in first.report.escalation]

@@ -8,7 +8,6 @@ import pytest
 from asset2sim import cli
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.formats.mjcf.reader import read_mjcf_asset
-from asset2sim.tasks.refine import refine_asset
 from tests.planted_assets import cabinet, write_generated_urdf, write_mjcf
 
 pytest.importorskip("mujoco")
@@ -19,10 +18,10 @@ def _declared_masses(xml):
     return {n: ln.inertial.mass for n, ln in read.model.links.items() if ln.inertial is not None}
 
 
-def test_plausible_values_are_kept_and_implausible_ones_replaced(tmp_path):
+def test_plausible_values_are_kept_and_implausible_ones_replaced(tmp_path, refine_once):
     xml = write_mjcf(tmp_path / "cab", "cabinet", cabinet(drawer_factor=0.01))
     declared = _declared_masses(xml)
-    res = refine_asset(xml, "a cabinet, door slightly open", tmp_path / "out", RefineConfig(keep_declared=True), extras=False)
+    res = refine_once(xml, "a cabinet, door slightly open", RefineConfig(keep_declared=True), extras=False)
     ov = res.overlay
     assert ov.scale == 1.0
     assert ov.links["body"].mass == pytest.approx(declared["body"]) and ov.links["door"].mass == pytest.approx(declared["door"])
@@ -32,9 +31,9 @@ def test_plausible_values_are_kept_and_implausible_ones_replaced(tmp_path):
     assert "kept as declared" in ov.joints["door_hinge"].source
 
 
-def test_the_request_wins_over_declared_masses_it_asks_for(tmp_path):
+def test_the_request_wins_over_declared_masses_it_asks_for(tmp_path, refine_once):
     xml = write_mjcf(tmp_path / "cab", "cabinet", cabinet())
-    res = refine_asset(xml, "a cabinet", tmp_path / "out", RefineConfig(keep_declared=True, overrides={"mass": "30kg"}), extras=False)
+    res = refine_once(xml, "a cabinet", RefineConfig(keep_declared=True, overrides={"mass": "30kg"}), extras=False)
     assert res.overlay.total_mass() == pytest.approx(30.0, rel=0.05)
     assert not any(n.startswith("keep declared: link") for n in res.report.notes)
 

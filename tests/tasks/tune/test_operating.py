@@ -23,7 +23,6 @@ from asset2sim.tasks.check.task_spec import task_actions
 from asset2sim.tasks.check.probes import ProbeConfig
 from asset2sim.tasks.geometry.analyze import analyze_asset
 from asset2sim.tasks.ingest.extract import extract_asset
-from asset2sim.tasks.refine import refine_asset
 
 
 @pytest.fixture()
@@ -56,16 +55,15 @@ def test_push_lever_is_the_far_corner_and_the_cap_leaves_the_probe_a_margin(lapt
         update={"friction": 10 * cap})}}), asset, geometry)[name] == pytest.approx(10 * cap)
 
 
-def test_laptop_friction_stays_within_what_a_hand_closes_it_with(tmp_path_factory):
+def test_laptop_friction_stays_within_what_a_hand_closes_it_with(refine_once):
     """With the task "close the laptop" refine keeps the screen hinge within the
     operating budget of a screen (22.2 N at its far edge, the torque the lever
     gives): the estimate or the escalation may not exceed its caps, and the
     post-check's own task run measures a force inside the range, as does the
     operability tier's hand opening it from closed against the screen's weight."""
-    src = demo_assets.build_laptop(tmp_path_factory.mktemp("src") / "laptop")
-    out = tmp_path_factory.mktemp("out") / "laptop"
-    res = refine_asset(src, "I want a slightly open laptop. Low damping for smooth operation.", out, extras=False,
-                       task="close the laptop")
+    res = refine_once(demo_assets.build_laptop, "I want a slightly open laptop. Low damping for smooth operation.",
+                      extras=False, task="close the laptop")
+    out = res.out
     report = json.loads((out / "report.json").read_text())
     assert report["task"] == "close the laptop"
     tiers = {m["name"]: m for m in report["metrics"]}
@@ -98,17 +96,17 @@ def _budgets(out, res, task):
                                        actions=task_actions(task), ground=bool(task))
 
 
-def test_budget_of_a_side_hinged_door_is_bounded_by_ground_friction(tmp_path):
+def test_budget_of_a_side_hinged_door_is_bounded_by_ground_friction(tmp_path, refine_once):
     """A free microwave's door is pushed horizontally: the operating force is
     at most mu M g (the ground friction of the free object), below the ADA
     22.2 N of the Microwave range; without a task (the other hand holds the
     body, as the probes do) only the range bounds it."""
     src = demo_assets.build_microwave(tmp_path / "mw")
-    res = refine_asset(src, "A small microwave with its door halfway open.", tmp_path / "out", extras=False)
+    res = refine_once(src, "A small microwave with its door halfway open.", extras=False)
     total = res.overlay.total_mass()
     (name,) = list(res.overlay.joints)
-    with_task = _budgets(tmp_path / "out", res, "close the microwave door")[name]
-    no_task = _budgets(tmp_path / "out", res, None)[name]
+    with_task = _budgets(res.out, res, "close the microwave door")[name]
+    no_task = _budgets(res.out, res, None)[name]
     ground = operating.GROUND_FRICTION * total * operating.GRAVITY
     assert ground < 22.2
     assert with_task.bound.startswith("ground friction")
@@ -171,7 +169,7 @@ def _overlay_json(friction: float, damping: float) -> dict:
     }
 
 
-def test_tilt_floor_adds_the_tilts_gravity_load(laptop, tmp_path):
+def test_tilt_floor_adds_the_tilts_gravity_load(laptop, tmp_path, refine_once):
     src, _, res = laptop
     asset = extract_asset(src)
     ov = res.overlay
@@ -183,7 +181,7 @@ def test_tilt_floor_adds_the_tilts_gravity_load(laptop, tmp_path):
     assert operating.tilt_floors(ov, ov, asset, 0.0)[name] == pytest.approx(ov.joints[name].friction)
     # a sliding drawer: its weight times sin(tilt), whatever its lever
     cab = demo_assets.build_two_drawer_cabinet(tmp_path / "cab")
-    cres = refine_asset(cab, "A small two-drawer cabinet with both drawers closed.", tmp_path / "out", extras=False)
+    cres = refine_once(cab, "A small two-drawer cabinet with both drawers closed.", extras=False)
     casset = extract_asset(cab)
     floors = operating.tilt_floors(cres.overlay, cres.overlay, casset, tilt)
     for j in casset.movable_joints():
