@@ -17,6 +17,7 @@ from asset2sim.tasks.ingest.declared import real_units
 from asset2sim.tasks.interpret import priors
 from asset2sim.tasks.interpret.operating_forces import operating_range
 from asset2sim.tasks.synthesize import physics, request_apply, set_down
+from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.interpret.named_parts import joints_of, moving_parts
 
@@ -26,9 +27,10 @@ def task_relevant_joints(ctx: EstimationContext) -> list[str]:
     return request_apply.task_relevant_joints(ctx)
 
 
-def requested_bands(ctx: EstimationContext, scale: float | None = None) -> tuple[dict[str, str], list[str]]:
-    """(joint -> band, notes with warnings first) from the request at ``scale`` (default :func:`choose_scale`)."""
-    res = request_apply.resolve_states(ctx, choose_scale(ctx)[0] if scale is None else scale)
+def requested_bands(ctx: EstimationContext, kin: SimSession, scale: float | None = None) -> tuple[dict[str, str], list[str]]:
+    """(joint -> band, notes with warnings first) from the request at ``scale`` (default :func:`choose_scale`;
+    ``kin``, the input's kinematics session, moved for ordinals and ends)."""
+    res = request_apply.resolve_states(ctx, kin, choose_scale(ctx)[0] if scale is None else scale)
     return res.bands, res.warnings + res.notes
 
 
@@ -185,10 +187,11 @@ def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tu
     return out, missing
 
 
-def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
-                       choices: dict[str, JointChoice], *, source: str) -> dict[str, JointDynamics]:
+def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPhysics], state: dict[str, float],
+                       scale: float, choices: dict[str, JointChoice], *, source: str) -> dict[str, JointDynamics]:
     """Damping, friction and stiffness of every movable joint from the scaled masses and the kinematics at
-    ``state`` (output units), shaped by ``choices`` (``docs/design/refine.md``, "Joint dynamics").
+    ``state`` (output units; ``kin``, the input's kinematics session, posed for the loads and landings), shaped
+    by ``choices`` (``docs/design/refine.md``, "Joint dynamics").
 
     Friction holds the largest gravity load within 5 % of the range around the state (the whole range when
     holding position) and where gravity pushes the part open at :data:`CLOSED_HOLD_FRACTIONS`; a spring gets
@@ -204,8 +207,8 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
     """
     prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
     rot = ctx.root_rotation
-    loads = physics.joint_loads(ctx.session, ctx.asset, links, state, scale, ctx.subtrees, root_rotation=rot)
-    landed = (set_down.landings(ctx.session, links, state, scale, ctx.subtrees, ctx.hull_points, root_rotation=rot)
+    loads = physics.joint_loads(kin, ctx.asset, links, state, scale, ctx.subtrees, root_rotation=rot)
+    landed = (set_down.landings(kin, links, state, scale, ctx.subtrees, ctx.hull_points, root_rotation=rot)
               if free_standing(ctx) else {})
     out: dict[str, JointDynamics] = {}
     for j in ctx.asset.movable_joints():
@@ -221,12 +224,12 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
         hold = 0.0
         for f in fr:
             st = {**state, name: cs.position(float(f)) * unit}
-            ld = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
+            ld = physics.joint_loads(kin, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
             hold = max(hold, abs(ld[name].gravity_load))
         # a part stays shut once closed: friction also holds a load pushing it open near its closed end
         for f in CLOSED_HOLD_FRACTIONS:
             st = {**state, name: cs.position(float(f)) * unit}
-            ld = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
+            ld = physics.joint_loads(kin, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
             if ld[name].gravity_load * cs.direction > 0:
                 hold = max(hold, abs(ld[name].gravity_load))
         if ch.free_moving and _on_stop(loads[name], cs, state[name], unit,
@@ -246,7 +249,7 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
             spring, mechanism = (k, ref), "return spring"
             hold = 0.1 * hold  # the spring carries the load; friction only adds feel
         elif name not in prismatic and not ch.free_moving and _label(ctx, name) in COUNTERBALANCE_LABELS:
-            counter = counterbalance(ctx, links, state, scale, name, fr) or lid_support(ctx, links, state, scale, name, fr)
+            counter = counterbalance(ctx, kin, links, state, scale, name, fr) or lid_support(ctx, kin, links, state, scale, name, fr)
             if counter is not None:
                 spring, hold = counter.spring, counter.hold
                 note, balanced, mechanism = f"{note}; {counter.note}", True, counter.note.split(" (")[0]
@@ -402,8 +405,8 @@ def _label(ctx: EstimationContext, joint: str) -> str | None:
 DOWNWARD_FRACTIONS = (0.25, 0.5, 0.75, 1.0)
 
 
-def counterbalance(ctx: EstimationContext, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
-                   name: str, hold_fractions) -> SpringHold | None:
+def counterbalance(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPhysics], state: dict[str, float],
+                   scale: float, name: str, hold_fractions) -> SpringHold | None:
     """The counterbalance spring of a hinged door or lid (:data:`COUNTERBALANCE_LABELS`) that opens downward (an
     oven's or a dishwasher's drop-down door, a drop-front desk lid): gravity pushes it open at every one of
     :data:`DOWNWARD_FRACTIONS`. Such doors
@@ -422,7 +425,7 @@ def counterbalance(ctx: EstimationContext, links: dict[str, LinkPhysics], state:
 
     def load(f: float) -> float:
         st = {**state, name: cs.position(float(f))}
-        return physics.joint_loads(ctx.session, ctx.asset, links, st, scale, sub, root_rotation=rot)[name].gravity_load
+        return physics.joint_loads(kin, ctx.asset, links, st, scale, sub, root_rotation=rot)[name].gravity_load
 
     open_loads = [load(f) * cs.direction for f in DOWNWARD_FRACTIONS]
     if not all(t > 0 for t in open_loads) or not cs.open_range > 0:
@@ -443,8 +446,8 @@ LID_SUPPORT_SHARE = 0.5
 SUPPORT_FRACTIONS = tuple(float(f) for f in np.linspace(0.0, 1.0, 11))
 
 
-def lid_support(ctx: EstimationContext, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
-                name: str, hold_fractions) -> SpringHold | None:
+def lid_support(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPhysics], state: dict[str, float],
+                scale: float, name: str, hold_fractions) -> SpringHold | None:
     """The lid support of a hinged lid or door (:data:`COUNTERBALANCE_LABELS`) that a hand could hardly move against its
     weight unaided: its largest weight moment over its range, over the lever to its far edge, is more than
     :data:`LID_SUPPORT_SHARE` of the top of its operating range (a chest's or a large case's lid). Such lids ride on
@@ -467,7 +470,7 @@ def lid_support(ctx: EstimationContext, links: dict[str, LinkPhysics], state: di
 
     def opening_load(f: float) -> float:
         st = {**state, name: cs.position(float(f))}
-        return cs.direction * physics.joint_loads(ctx.session, ctx.asset, links, st, scale, sub, root_rotation=rot)[name].gravity_load
+        return cs.direction * physics.joint_loads(kin, ctx.asset, links, st, scale, sub, root_rotation=rot)[name].gravity_load
 
     tau = np.array([opening_load(f) for f in SUPPORT_FRACTIONS])
     a_ = np.asarray(j.axis, float) / max(float(np.linalg.norm(j.axis)), 1e-12)

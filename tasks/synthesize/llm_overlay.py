@@ -14,6 +14,7 @@ from asset2sim.schemas.model_reply import ModelReply
 from asset2sim.schemas.overlay import ContactMaterial, EstimatorInfo, LinkPhysics, Overlay, ValidationNotes
 from asset2sim.tasks.interpret.part_priors import material_for
 from asset2sim.tasks.synthesize import estimate, physics, validate_overlay
+from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.estimator import Estimate
 from asset2sim.tasks.synthesize.request_apply import scaled_link
@@ -45,9 +46,11 @@ def _name_errors(where: str, names: list[str], known: set[str], unknown: str) ->
     return errors
 
 
-def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str = "llm", model: str | None = None) -> Estimate:
+def overlay_from_reply(ctx: EstimationContext, kin: SimSession, reply: ModelReply, *, name: str = "llm",
+                       model: str | None = None) -> Estimate:
     """The overlay, band per movable joint and notes from a model reply, validated; links and joints the reply
-    misses get the offline prior's material and the parser's band and words (noted). No usage info yet.
+    misses get the offline prior's material and the parser's band and words (noted). No usage info yet. ``kin``,
+    the input's kinematics session, is posed for the joints' loads.
 
     Raises:
         ReplyInvalid: unknown or duplicated names, a link without a computable mass, a rejected overlay.
@@ -61,10 +64,10 @@ def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str =
     mat_notes = read.material_notes
     notes = [f"the model gave no material for {read.missing}; offline priors used"] if read.missing else []
     links, mass_note = _within_model_mass(read.links, by_link)
-    bands, band_notes = _bands(ctx, reply)
+    bands, band_notes = _bands(ctx, kin, reply)
     notes += band_notes
     state = estimate.state_from_bands(ctx.closed, bands, s, {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"})
-    joints = estimate.joint_dynamics_for(ctx, links, state, s, _joint_choices(ctx, reply), source=f"{name} physics (model choices)")
+    joints = estimate.joint_dynamics_for(ctx, kin, links, state, s, _joint_choices(ctx, reply), source=f"{name} physics (model choices)")
     asked_state = bool(ctx.request.joint_states) or any(b != "closed" for b in bands.values())
     if reply.category.strip().lower() != str(ctx.category).lower():
         notes.append(f"the model calls it {reply.category!r}; the pipeline's category {ctx.category!r} is kept")
@@ -142,10 +145,10 @@ def _within_model_mass(links: dict[str, LinkPhysics], by_link: dict) -> tuple[di
     return links, mass_note
 
 
-def _bands(ctx: EstimationContext, reply: ModelReply) -> tuple[dict[str, str], list[str]]:
+def _bands(ctx: EstimationContext, kin: SimSession, reply: ModelReply) -> tuple[dict[str, str], list[str]]:
     """The model's band per movable joint (the request parser's without a model entry), and notes where
     the two differ or the model gave none."""
-    parsed, _ = estimate.requested_bands(ctx)
+    parsed, _ = estimate.requested_bands(ctx, kin)
     by_joint = {jr.joint: jr for jr in reply.joints}
     bands: dict[str, str] = {}
     notes = []

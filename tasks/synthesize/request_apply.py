@@ -21,6 +21,7 @@ from asset2sim.tasks.geometry.closed_state import links_aabb
 from asset2sim.tasks.synthesize.opening_fractions import box_center, fraction_for
 
 if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
+    from asset2sim.engines.base import SimSession
     from asset2sim.tasks.synthesize.context import EstimationContext
 
 #: Relative tolerance of a numeric request (5 %).
@@ -69,18 +70,19 @@ def task_relevant_joints(ctx: "EstimationContext") -> list[str]:
     return priors.task_relevant_joints(ctx.category, labelled)[0]
 
 
-def _centers(ctx: "EstimationContext", state: dict[str, float]) -> dict[str, np.ndarray]:
-    """joint -> (3,) world center (m, scale 1) of its moving subtree's box at ``state`` (input units)."""
-    ctx.session.set_joint_positions(state)
-    return {n: box_center(ctx, n) for n in ctx.subtrees}
+def _centers(ctx: "EstimationContext", kin: "SimSession", state: dict[str, float]) -> dict[str, np.ndarray]:
+    """joint -> (3,) world center (m, scale 1) of its moving subtree's box at ``state`` (input units; ``kin`` moved there)."""
+    kin.set_joint_positions(state)
+    return {n: box_center(ctx, kin, n) for n in ctx.subtrees}
 
 
-def _box_volumes(ctx: "EstimationContext", state: dict[str, float]) -> dict[str, float]:
-    """joint -> volume (m^3, scale 1) of its moving subtree's axis-aligned box at ``state`` (input units)."""
-    ctx.session.set_joint_positions(state)
+def _box_volumes(ctx: "EstimationContext", kin: "SimSession", state: dict[str, float]) -> dict[str, float]:
+    """joint -> volume (m^3, scale 1) of its moving subtree's axis-aligned box at ``state`` (input units; ``kin``
+    moved there)."""
+    kin.set_joint_positions(state)
     out = {}
     for n, links in ctx.subtrees.items():
-        box = links_aabb(ctx.session, links, ctx.hull_points)
+        box = links_aabb(kin, links, ctx.hull_points)
         out[n] = 0.0 if box is None else float(np.prod(np.maximum(box[1] - box[0], 0.0)))
     return out
 
@@ -91,18 +93,19 @@ def band_of(f: float) -> str:
     return min(inside or list(BAND_TARGET), key=lambda b: abs(BAND_TARGET[b] - f))
 
 
-def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
+def resolve_states(ctx: "EstimationContext", kin: "SimSession", scale: float) -> StateResolution:
     """Band per movable joint and the targets of numbers and ends at the overlay's ``scale``; joints not
     addressed are closed; a request naming a part (or a joint) overrides one that names none ("half open"),
     else a later request for a joint overrides an earlier one. Acceptance: +-5 % of a number
     (at least :data:`MIN_TOLERANCE`), +-:data:`END_TOLERANCE` of an end. Phrases applied to no joint are in
     ``unapplied``, why with each (not a phrase naming no part, "half open", that phrases naming parts refine);
-    ``requests`` says which phrase set each joint. Uses ``ctx.session`` (ordinals, ends): call it while open."""
+    ``requests`` says which phrase set each joint. ``kin``, the input's kinematics session, is moved for
+    ordinals and ends and left at the closed state."""
     res = StateResolution(bands={})
     relevant = task_relevant_joints(ctx)
     closed_state = {n: c.q_closed for n, c in ctx.closed.items()}
-    centers = _centers(ctx, closed_state) if any(jr.ordinal is not None for jr in ctx.request.joint_states) else {}
-    sizes = _box_volumes(ctx, closed_state) if any(jr.order == "size" for jr in ctx.request.joint_states) else {}
+    centers = _centers(ctx, kin, closed_state) if any(jr.ordinal is not None for jr in ctx.request.joint_states) else {}
+    sizes = _box_volumes(ctx, kin, closed_state) if any(jr.order == "size" for jr in ctx.request.joint_states) else {}
     named: list[tuple[JointStateRequest, list[str]]] = []
     cannot: list[tuple[JointStateRequest, str, str]] = []
     for jr in sorted(ctx.request.joint_states, key=lambda jr: jr.names_part):  # a part named wins over a request for "it", in any order
@@ -124,7 +127,7 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
             if jr.target is None:
                 continue
             label = ctx.asset.link(ctx.asset.joint(t).child).semantic_label or ""
-            f, why = fraction_for(ctx, t, jr.target, scale, label, closed_state)
+            f, why = fraction_for(ctx, kin, t, jr.target, scale, label, closed_state)
             if f is None:
                 res.warnings.append(f"WARNING: {t} ({label}): '{jr.phrase}' cannot be applied: {why}; the nominal band '{jr.band}' is used")
                 cannot.append((jr, t, f"{t} ({label}): cannot be applied: {why}"))
@@ -146,7 +149,7 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
     res.unapplied += _replaced(named, res.requests)
     res.warnings += count_warnings(ctx)
     if closed_state:
-        ctx.session.set_joint_positions(closed_state)
+        kin.set_joint_positions(closed_state)
     return res
 
 
@@ -596,11 +599,12 @@ def prompt_fields(spec: RequestSpec) -> dict:
     }
 
 
-def check_against_request(ctx: "EstimationContext", overlay: Overlay, targets: dict[str, JointTarget]) -> tuple[Overlay, dict[str, JointTarget]]:
+def check_against_request(ctx: "EstimationContext", kin: "SimSession", overlay: Overlay,
+                          targets: dict[str, JointTarget]) -> tuple[Overlay, dict[str, JointTarget]]:
     """(overlay, targets): every :func:`check_overlay` departure added as a ``WARNING`` note; ``targets``
-    resolved here at the overlay's scale when the estimator gave none (a model backend)."""
+    resolved here at the overlay's scale when the estimator gave none (a model backend; ``kin`` moved then)."""
     if not targets:
-        targets = resolve_states(ctx, overlay.scale).targets
+        targets = resolve_states(ctx, kin, overlay.scale).targets
     departures = check_overlay(ctx, overlay, StateResolution(bands={}, targets=targets))
     if departures:
         notes = overlay.notes.model_copy(update={"other": list(overlay.notes.other)

@@ -144,11 +144,11 @@ def test_an_open_lid_is_held_through_the_set_down_from_the_first_guess(tmp_path,
 def test_a_mounted_object_is_not_set_down():
     """The same open lid on a box the request fixes in place: the root is never dropped or leaned, so its
     friction only holds its weight."""
-    with build_context(BOX, BOX_REQUEST, category="Box") as free:
-        loose = OfflineEstimator().estimate(free).overlay.joints["joint_0"]
-    with build_context(BOX, BOX_REQUEST + " Mounted on a wall.", category="Box") as mounted:
+    with build_context(BOX, BOX_REQUEST, category="Box") as (free, kin):
+        loose = OfflineEstimator().estimate(free, kin).overlay.joints["joint_0"]
+    with build_context(BOX, BOX_REQUEST + " Mounted on a wall.", category="Box") as (mounted, kin2):
         assert mounted.mounting is not None and mounted.mounting.fixed
-        fixed = OfflineEstimator().estimate(mounted).overlay.joints["joint_0"]
+        fixed = OfflineEstimator().estimate(mounted, kin2).overlay.joints["joint_0"]
     assert "set-down impact" in loose.source and "set-down" not in fixed.source
     assert fixed.friction < loose.friction
 
@@ -158,12 +158,12 @@ def test_a_lid_its_weight_presses_onto_its_open_stop_is_held_by_the_stop():
     """Box 47645's lid fully open leans back past upright onto its stop: the drop and the lean press it there, so
     its friction only holds its weight (before, the set-down terms made a hand push 16.3 N of 22.2 N to close it,
     where 4.2 N had held it through robust rest)."""
-    with build_context(BOX, "A box, fully open.", category="Box") as ctx:
-        est = OfflineEstimator().estimate(ctx)
+    with build_context(BOX, "A box, fully open.", category="Box") as (ctx, kin):
+        est = OfflineEstimator().estimate(ctx, kin)
         lid = est.overlay.joints["joint_0"]
         cs = ctx.closed["joint_0"]
         state = {**{j.name: ctx.closed[j.name].q_closed for j in ctx.asset.movable_joints()}, "joint_0": cs.position(1.0)}
-        load = physics.joint_loads(ctx.session, ctx.asset, est.overlay.links, state, est.overlay.scale,
+        load = physics.joint_loads(kin, ctx.asset, est.overlay.links, state, est.overlay.scale,
                                    {"joint_0": ctx.subtrees["joint_0"]}, root_rotation=ctx.root_rotation)["joint_0"]
     assert load.gravity_load * cs.direction > 0  # its weight opens it further: onto the stop
     assert "set-down" not in lid.source
@@ -178,11 +178,11 @@ def test_a_shut_part_is_held_through_the_set_down_by_its_hinge(tmp_path, monkeyp
     """Microwave 7119 with its door shut: no file format carries a catch, so its hinge holds twice the lean's load
     from the first guess and the first post-check passes robust rest. Without the set-down terms a 5 deg lean swings
     the shut door open and the post-check escalates."""
-    with build_context(MICROWAVE, "A microwave.", category="Microwave") as ctx:
-        est = OfflineEstimator().estimate(ctx)
+    with build_context(MICROWAVE, "A microwave.", category="Microwave") as (ctx, kin):
+        est = OfflineEstimator().estimate(ctx, kin)
         door = est.overlay.joints["joint_0"]
         state = {j.name: ctx.closed[j.name].q_closed for j in ctx.asset.movable_joints()}
-        load = physics.joint_loads(ctx.session, ctx.asset, est.overlay.links, state, est.overlay.scale,
+        load = physics.joint_loads(kin, ctx.asset, est.overlay.links, state, est.overlay.scale,
                                    {"joint_0": ctx.subtrees["joint_0"]}, root_rotation=ctx.root_rotation)["joint_0"]
     assert "catch" not in door.source and "catch_force" not in door.model_dump()
     assert door.friction >= set_down.LEAN_SAFETY * set_down.lean_load(load) * 0.999
