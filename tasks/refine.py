@@ -23,7 +23,7 @@ from asset2sim.tasks.geometry import analyze, limits
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import overrides, request
-from asset2sim.tasks.synthesize import request_apply
+from asset2sim.tasks.synthesize import request_apply, request_findings
 from asset2sim.tasks.assemble import (write)
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.publish import extra_outputs, output, refine_report
@@ -441,7 +441,7 @@ def _synthesize(ctx: EstimationContext, run: RefineRun) -> placement.Synthesis:
         raise RefineError(f"{asset.asset_id}: {exc}", "invalid_overlay") from exc
     overlay = overlay.model_copy(update={"mounting": ctx.mounting})  # resolved with the context (build_context)
     s = overlay.scale
-    overlay, targets = request_apply.check_against_request(ctx, run.kin, overlay, result.targets)
+    overlay, targets = request_findings.check_against_request(ctx, run.kin, overlay, result.targets)
     requested = estimate.state_from_bands(ctx.closed, bands, s, prismatic)
     requested.update(overlay.initial_joint_positions or {})
     log.say("synthesize", f"{overlay.estimator.name}: scale {s:.4g}, total mass {overlay.total_mass():.4g} kg, {len(issues)} validation findings")

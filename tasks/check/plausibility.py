@@ -3,7 +3,7 @@ the declared value where plausible, the estimate where implausible or not declar
 
 Estimates are made at the size the file declares (scale 1): the geometry's mass, inertia and center of mass
 for the part's material (:func:`asset2sim.tasks.synthesize.physics.link_physics`), joint dynamics from the
-loads of the patched masses (:func:`asset2sim.tasks.synthesize.estimate.joint_dynamics_for`), operating
+loads of the patched masses (:func:`asset2sim.tasks.synthesize.joint_dynamics.joint_dynamics_for`), operating
 forces from ``operating_forces.yaml``.
 """
 
@@ -24,7 +24,8 @@ from asset2sim.tasks.interpret import size_priors
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.tasks.synthesize import physics
 from asset2sim.tasks.synthesize.context import EstimationContext
-from asset2sim.tasks.synthesize.estimate import JointChoice, joint_dynamics_for, link_material, plausible_mass_range
+from asset2sim.tasks.synthesize.estimate import link_material, plausible_mass_range
+from asset2sim.tasks.synthesize.joint_dynamics import JointChoice, joint_dynamics_for
 from asset2sim.tasks.synthesize.validate_overlay import geometry_inertia, solid_volume
 
 __all__ = ["Judgement", "judge"]

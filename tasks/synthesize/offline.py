@@ -9,8 +9,9 @@ from asset2sim.tasks.interpret import priors
 from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
-from asset2sim.tasks.synthesize.estimate import (choose_scale, joint_dynamics_for, link_material, motion_choices,
-                                                 plausible_mass_range, request_variant, state_from_bands, task_relevant_joints)
+from asset2sim.tasks.synthesize.estimate import (choose_scale, link_material, plausible_mass_range, request_variant,
+                                                 state_from_bands, task_relevant_joints)
+from asset2sim.tasks.synthesize.joint_dynamics import joint_dynamics_for, motion_choices
 from asset2sim.tasks.synthesize.estimator import Estimate, register_estimator
 
 __all__ = ["OfflineEstimator"]

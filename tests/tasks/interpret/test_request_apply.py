@@ -14,7 +14,7 @@ import pytest
 from asset2sim.commands.refine import summary_lines
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
-from asset2sim.tasks.synthesize import request_apply
+from asset2sim.tasks.synthesize import request_apply, request_findings
 from asset2sim.tasks.refine import refine_asset
 from asset2sim.tasks.synthesize import backends, estimate, llm_prompt
 from asset2sim.tasks.synthesize.context import build_context
@@ -111,11 +111,11 @@ def test_the_model_prompt_carries_the_numbers_and_a_departing_overlay_is_flagged
         (j,) = d["joints"]
         assert abs(j["requested_opening_fraction"] * ctx.closed[j["name"]].open_range - np.radians(40)) < 1e-4
         est = backends.get_estimator("offline").estimate(ctx, kin)
-        ov, _ = request_apply.check_against_request(ctx, kin, est.overlay, est.targets)
+        ov, _ = request_findings.check_against_request(ctx, kin, est.overlay, est.targets)
         assert not [n for n in ov.notes.other if "departs from the request" in n]  # the offline overlay honours it
         bad = est.overlay.model_copy(update={"scale": est.overlay.scale * 1.5, "links": {
             k: v.model_copy(update={"mass": v.mass * 3, "density": 1000.0}) for k, v in est.overlay.links.items()}})
-        flagged = "\n".join(request_apply.check_overlay(ctx, bad, request_apply.StateResolution(bands={}, targets=est.targets)))
+        flagged = "\n".join(request_findings.check_overlay(ctx, bad, request_apply.StateResolution(bands={}, targets=est.targets)))
         assert "total mass" in flagged and "30 cm tall" in flagged and "glass" in flagged
 
 

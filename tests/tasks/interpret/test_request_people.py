@@ -18,7 +18,7 @@ from asset2sim.tasks.interpret.named_parts import requested_joints
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.interpret.request import LESS_THAN_HALF, parse_request
 from asset2sim.tasks.refine import refine_asset
-from asset2sim.tasks.synthesize import estimate, request_apply
+from asset2sim.tasks.synthesize import estimate, request_apply, request_findings
 from asset2sim.tasks.synthesize.context import build_context
 from asset2sim.engines.source import UrdfFile
 from tests.conftest import SHARED, needs_shared
@@ -166,7 +166,7 @@ def test_a_bottles_volume_sets_its_size_with_the_reasoning(generated):
     with build_context(generated["bottle"], "a 500 ml bottle") as (ctx, kin):
         assert ctx.closed_volume * s ** 3 == pytest.approx(5e-4, rel=1e-6)
         overlay = Overlay(estimator=EstimatorInfo(name="test"), scale=s)
-        (q,) = [x for x in request_apply.findings(ctx, {}, {}, {}, overlay).quantities if x.what == "volume"]
+        (q,) = [x for x in request_findings.findings(ctx, {}, {}, {}, overlay).quantities if x.what == "volume"]
         assert q.within_tolerance and q.unit == "m^3"
 
 

@@ -6,7 +6,7 @@ import pytest
 
 from asset2sim.tasks.synthesize import physics
 from asset2sim.tasks.synthesize.context import build_context
-from asset2sim.tasks.synthesize.estimate import CLOSED_HOLD_FRACTIONS
+from asset2sim.tasks.synthesize.joint_dynamics import CLOSED_HOLD_FRACTIONS
 from asset2sim.tasks.synthesize.offline import OfflineEstimator
 from tests.conftest import SHARED
 

@@ -12,9 +12,9 @@ from asset2sim.engines.registry import open_session
 from asset2sim.schemas.overlay import Inertia, LinkPhysics
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.refine import refine_asset
-from asset2sim.tasks.synthesize import estimate, physics, set_down
+from asset2sim.tasks.synthesize import joint_dynamics, physics, set_down
 from asset2sim.tasks.synthesize.context import build_context
-from asset2sim.tasks.synthesize.estimate import _on_stop
+from asset2sim.tasks.synthesize.joint_dynamics import _on_stop
 from asset2sim.tasks.synthesize.offline import OfflineEstimator
 from asset2sim.tasks.ingest.extract import extract_asset
 from tests.conftest import SHARED
@@ -97,13 +97,13 @@ def test_the_slides_table_runs_from_the_smoothest_and_says_where_each_range_come
     assert all(sp.note for sp in slides.values() if sp.estimate)
     # a drawer of 5 kg: the smoothest kind that carries what holding needs; beyond every kind, the stiffest at its top
     w = 5.0 * physics.G
-    assert estimate.slide_for(1.0, w).kind == "roller"
-    assert estimate.slide_for(0.3 * w, w).kind == "wood_runners"
-    s = estimate.slide_for(0.2 * w, w)
+    assert joint_dynamics.slide_for(1.0, w).kind == "roller"
+    assert joint_dynamics.slide_for(0.3 * w, w).kind == "wood_runners"
+    s = joint_dynamics.slide_for(0.2 * w, w)
     assert s.kind == "wood_runners" and s.friction == pytest.approx(0.25 * w) and "holding asked" in s.note  # raised into its range
-    s = estimate.slide_for(2.0 * w, w)
+    s = joint_dynamics.slide_for(2.0 * w, w)
     assert s.kind == "wood_runners" and s.friction == pytest.approx(0.62 * w)
-    s = estimate.slide_for(0.3 * w, w, "ball_bearing")
+    s = joint_dynamics.slide_for(0.3 * w, w, "ball_bearing")
     assert s.kind == "ball_bearing" and s.friction == pytest.approx(0.01 * w) and "as asked" in s.note
 
 
