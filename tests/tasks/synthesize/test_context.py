@@ -5,6 +5,8 @@ and that estimators hand back the overlay with the bands as one result."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -93,6 +95,7 @@ def test_kinematic_session_is_closed_after_the_block_and_on_errors(tmp_path):
     with build_context(src, entry.prompt) as (ctx, kin):
         session = kin
         session.set_joint_positions(ctx.closed_state())  # usable inside
+    assert not any(getattr(ctx, f.name) is kin for f in dataclasses.fields(ctx))  # the context holds values only
     with pytest.raises(Exception):
         session.set_joint_positions(ctx.closed_state())
     with pytest.raises(RuntimeError, match="inside the block"):
