@@ -83,13 +83,13 @@ def main(argv: list[str] | None = None) -> int:
                         rec.update(report_queries=res.report.model_queries, failure_mode=res.report.failure_mode,
                                    scale=res.report.scale)
                     else:
-                        with build_context(src, row["prompt"], category=row["category"] or None, asset_id=row["id"]) as ctx:
+                        with build_context(src, row["prompt"], category=row["category"] or None, asset_id=row["id"]) as (ctx, kin):
                             if method == "asset2sim":
-                                ov = backends.get_estimator("openai", model="m", base_url=srv.url).estimate(ctx).overlay
+                                ov = backends.get_estimator("openai", model="m", base_url=srv.url).estimate(ctx, kin).overlay
                             elif method == "direct":
-                                ov = le.direct_overlay(ctx, client)
+                                ov = le.direct_overlay(ctx, kin, client)
                             else:
-                                ov = le.ivw_overlay(ctx, client)
+                                ov = le.ivw_overlay(ctx, kin, client)
                         rec.update(report_queries=ov.estimator.queries, scale=ov.scale, failure_mode="none")
                 except (RefineError, LLMError) as exc:
                     rec.update(error=f"{type(exc).__name__}: {exc}", failure_mode=getattr(exc, "failure_mode", "estimator_failure"))

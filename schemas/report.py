@@ -110,7 +110,7 @@ class RefineReport(BaseModel):
     stage_seconds: dict[str, float] = Field(default_factory=dict)
     notes: list[str] = Field(default_factory=list)
     request: RequestFindings | None = None
-    """The request's findings (:func:`asset2sim.tasks.synthesize.request_apply.findings`)."""
+    """The request's findings (:func:`asset2sim.tasks.synthesize.request_findings.findings`)."""
     mounting: RootMount | None = None
     """How the root was held in every check (``tasks.interpret.mounting``);
     None in reports written before it was recorded (free-standing)."""

@@ -23,7 +23,7 @@ from asset2sim.tasks.geometry import analyze, limits
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import overrides, request
-from asset2sim.tasks.synthesize import request_apply
+from asset2sim.tasks.synthesize import request_apply, request_findings
 from asset2sim.tasks.assemble import (write)
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.publish import extra_outputs, output, refine_report
@@ -41,6 +41,7 @@ from asset2sim.tasks.tune import escalation
 from asset2sim.tasks.tune import keep_declared as keep
 from asset2sim.tasks.tune.attempt import Attempt, least_openings
 from asset2sim.inert import one_line
+from asset2sim.engines.base import SimSession
 from asset2sim.engines.step_budget import StepBudgetExceeded, step_budget
 
 __all__ = ["MARKER_NAME", "REPORT_NAME", "Progress", "RefineError", "RefineResult", "is_complete", "refine_asset", "request_notes", "run_hash"]
@@ -132,13 +133,13 @@ def refine_asset(
             _announce_extract(asset_dir, asset, findings, log)
             cache = analyze.MeshCache()
             geometry = _analyze(asset, cache, log)
-            with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx, \
+            with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as (ctx, kin), \
                     Workspace(asset, open_containers=config.open_containers and config.convex_decomposition,
                               mesh_cache=cache) as ws:
-                ctx, pose_note = _interpret(replace(ctx, task=task), log)
-                att, pose_note = _synthesize_and_check(ctx, est, config, ws, log, pose_note)
+                ctx, pose_note = _interpret(replace(ctx, task=task), kin, log)
+                att, pose_note = _synthesize_and_check(ctx, RefineRun(est, kin, config, ws, log), pose_note)
                 ctx = replace(ctx, root_rotation=att.root_rotation)  # the resting pose the kept attempt was made on
-                resolution = request_apply.resolve_states(ctx, att.overlay.scale)  # what each phrase set (the as-asked tier)
+                resolution = request_apply.resolve_states(ctx, kin, att.overlay.scale)  # what each phrase set (the as-asked tier)
                 output.publish(att.candidate, ws, work)  # the output folder's files, written once
             log.say("post_check", refine_report.post_check_line(att))
             report = refine_report.build_report(ctx, prompt, chash, att, findings, pose_note, log.times, resolution)
@@ -272,13 +273,13 @@ def _moving_links(ctx: EstimationContext) -> list[str]:
     return sorted({ln for j in estimate.task_relevant_joints(ctx) for ln in ctx.subtrees[j]})
 
 
-def _interpret(ctx: EstimationContext, log: StageLog) -> tuple[EstimationContext, str]:
+def _interpret(ctx: EstimationContext, kin: SimSession, log: StageLog) -> tuple[EstimationContext, str]:
     """Stage 3: the resting pose the request asks for ("lying flat", "sideways"). Returns ``ctx`` with it as
     ``root_rotation`` and the pose note ("" when none was asked)."""
     spec = ctx.request
     pose_note = ""
     if spec.pose_hint in ("lying_flat", "sideways"):
-        rotation, pose_note = pose.resting_rotation(ctx.session, ctx.asset, ctx.closed_state(), ctx.hull_points, _moving_links(ctx))
+        rotation, pose_note = pose.resting_rotation(kin, ctx.asset, ctx.closed_state(), ctx.hull_points, _moving_links(ctx))
         ctx = replace(ctx, root_rotation=rotation)
         log.say("request", f"pose '{spec.pose_hint}': {pose_note}")
     for note in request_notes(spec):
@@ -291,39 +292,59 @@ def _interpret(ctx: EstimationContext, log: StageLog) -> tuple[EstimationContext
 # ----------------------------------------------------- 4-7: synthesize .. post-check
 
 
-def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, log: StageLog, pose_note: str) -> tuple[Attempt, str]:
+@dataclass(frozen=True)
+class RefineRun:
+    """What every attempt of one refine works with, unchanged between them: the estimator, the input's kinematics
+    session (``kin``, :func:`~asset2sim.tasks.synthesize.context.build_context`), the configuration, the workspace
+    the candidates are written to and the stage log. The estimation context travels beside it: an attempt on
+    another resting pose re-poses it."""
+
+    est: estimator.Estimator
+    kin: SimSession
+    config: RefineConfig
+    ws: Workspace
+    log: StageLog
+
+
+def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str) -> tuple[Attempt, str]:
     """Stages 4-7 once; when the object is unstable or toppled as modelled and the request named no
     pose, a steadier opening, else once more on its stablest face (kept only if better). Returns (attempt, pose note)."""
-    att = _attempt(ctx, est, config, ws, log)
+    att = _attempt(ctx, run)
     if (att.check.stable and not att.check.topples) or ctx.request.pose_hint is not None:
         return att, pose_note
-    steadier = _steadier_state(ctx, est, config, ws, log, att)
-    if steadier is not None:
-        return steadier, pose_note
+    opening = _steadier_opening(run, att)
+    if opening is not None:  # stages 4-7 once more at the steadier opening
+        fractions, design = opening
+        second = _attempt(ctx, run, fractions=fractions)
+        if second.check.passed and not second.check.topples:
+            return replace(second, design=[design, *second.design]), pose_note
+        run.log.say("stability", "the steadier opening did not pass every check: the bands' targets kept")
+        att = att.kept_after_another()
     state_in = estimate.state_from_bands(ctx.closed, att.bands, 1.0, att.prismatic)
-    R, note = pose.most_stable_rotation(ctx.session, ctx.asset, att.overlay.links, state_in, att.overlay.scale, ctx.hull_points, _moving_links(ctx), exclude_modelled=True)
+    R, note = pose.most_stable_rotation(run.kin, ctx.asset, att.overlay.links, state_in, att.overlay.scale, ctx.hull_points,
+                                        _moving_links(ctx), exclude_modelled=True)
     if R is None:
         return att, pose_note
     why = "unstable as modelled" if not att.check.stable else "toppled by a robust-rest disturbance as modelled"
-    log.say("post_check", f"{why}; {note}")
-    second = _attempt(replace(ctx, root_rotation=R), est, config, ws, log)
+    run.log.say("post_check", f"{why}; {note}")
+    second = _attempt(replace(ctx, root_rotation=R), run)
     if second.check.stable and (second.check.passed or not att.check.passed) and not (
             second.check.topples and not att.check.topples):
         return second, f"{why}; {note}"
     return att.kept_after_another(), f"{note}; not better in simulation, kept as modelled"
 
 
-def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, log: StageLog,
-                    att: Attempt) -> Attempt | None:
+def _steadier_opening(run: RefineRun, att: Attempt) -> tuple[dict[str, float], str] | None:
     """Stability by design through the opening after an unsteady attempt ``att``: the opened joints where,
     within their bands, the object stands steadiest (:func:`asset2sim.tasks.state.balance.steadiest_fractions`),
-    or, when statically steady yet unstable or toppled in simulation, the least opening each band allows. Stages 4-7 run once more from
-    there. Returns that attempt when it passes every check, else None (``att`` loaded again)."""
+    or, when statically steady yet unstable or toppled in simulation, the least opening each band allows.
+    Returns (joint -> opening fraction, the design note, logged), or None when the opening alone cannot make it
+    steady or the measurement fails (noted)."""
     intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
     try:
-        steadiest = balance.steadiest_fractions(ws.source(att.candidate), att.overlay, att.state, att.closed_out, intervals)
+        steadiest = balance.steadiest_fractions(run.ws.source(att.candidate), att.overlay, att.state, att.closed_out, intervals)
     except Exception as exc:  # a measurement that fails leaves the attempt as it was
-        log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {one_line(exc)})")
+        run.log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {one_line(exc)})")
         return None
     why = "unstable" if not att.check.stable else "toppled by a robust-rest disturbance"
     fractions = steadiest.fractions
@@ -342,21 +363,15 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Works
                             for n, f in fractions.items()))
     else:  # the opening alone does not make it steady: the resting pose may
         return None
-    log.say("stability", note)
-    second = _attempt(ctx, est, config, ws, log, fractions=fractions)
-    if second.check.passed and not second.check.topples:
-        second.design = [note, *second.design]
-        return second
-    log.say("stability", "the steadier opening did not pass every check: the bands' targets kept")
-    att.kept_after_another()
-    return None
+    run.log.say("stability", note)
+    return fractions, note
 
 
-def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, log: StageLog,
-             fractions: dict[str, float] | None = None) -> Attempt:
+def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float] | None = None) -> Attempt:
     """Stages 4-7 for the current ``ctx.root_rotation``; ``fractions`` (joint -> opening fraction)
     replace the requested state of those joints."""
-    syn = _synthesize(ctx, est, config, log)
+    config, ws, log = run.config, run.ws, run.log
+    syn = _synthesize(ctx, run)
     if fractions:
         syn = replace(syn, requested={**syn.requested, **placement.at_fractions(syn.closed_out, fractions)})
     first_clear = _write(ctx, syn, ws, log)
@@ -368,7 +383,7 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, l
         clipped = placement.closed_on_output(ctx, clipped, ws, log, shut)
     syn = clipped
     searched = syn.candidate(ctx, shut)
-    st, kept = placement.search_state(ctx, est, syn, searched, config, ws, log)
+    st, kept = placement.search_state(ctx, run.kin, run.est, syn, searched, config, ws, log)
     st.collision_changes = shut_notes + list(st.collision_changes)
     state = dict(st.result)
     room = [f"{j} ({ctx.asset.link(ctx.asset.joint(j).child).semantic_label or 'part'}) opened to {f:.2f} of its range: the request "
@@ -406,13 +421,14 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, l
                    check=tuned.check, rounds=tuned.rounds, design=design, targets=syn.targets)
 
 
-def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: StageLog) -> placement.Synthesis:
+def _synthesize(ctx: EstimationContext, run: RefineRun) -> placement.Synthesis:
     """Stage 4: the estimator's overlay (validated) and bands, the requested state at its scale.
     RefineError("estimator_failure" or "invalid_overlay")."""
+    config, log = run.config, run.log
     asset = ctx.asset
     prismatic = {j.name for j in asset.movable_joints() if j.type == "prismatic"}
     try:
-        result = est.estimate(ctx)
+        result = run.est.estimate(ctx, run.kin)
     except Exception as exc:
         code = getattr(exc, "code", None)  # a model call's fault by what happened (MODEL_REPLY_INVALID ...)
         raise RefineError(f"{asset.asset_id}: estimator {config.estimator!r} failed: {one_line(exc, 600)}", "estimator_failure",
@@ -425,7 +441,7 @@ def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: StageLog
         raise RefineError(f"{asset.asset_id}: {exc}", "invalid_overlay") from exc
     overlay = overlay.model_copy(update={"mounting": ctx.mounting})  # resolved with the context (build_context)
     s = overlay.scale
-    overlay, targets = request_apply.check_against_request(ctx, overlay, result.targets)
+    overlay, targets = request_findings.check_against_request(ctx, run.kin, overlay, result.targets)
     requested = estimate.state_from_bands(ctx.closed, bands, s, prismatic)
     requested.update(overlay.initial_joint_positions or {})
     log.say("synthesize", f"{overlay.estimator.name}: scale {s:.4g}, total mass {overlay.total_mass():.4g} kg, {len(issues)} validation findings")

@@ -99,9 +99,9 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
             (initial, declared_root), dp = _state_file(asset), _overlay_springs(asset, dp)
         else:
             initial, declared_root = dict(dp.initial_state), None
-        with build_context(asset, "", config, category=match.name) as ctx:
+        with build_context(asset, "", config, category=match.name) as (ctx, kin):
             mount = declared_root or _mounting(dp, ctx.category)
-            judged = judge(ctx, dp, mount)
+            judged = judge(ctx, kin, dp, mount)
             with quiet_stdout():  # engines print from C; the library must not
                 checks = _simulate(ctx, judged, config, initial) if simulate else []
     except AuditError:

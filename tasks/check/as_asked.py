@@ -130,7 +130,7 @@ def refine_request_met(spec: RequestSpec, res: StateResolution | None, found: Re
     ``request_apply.resolve_states``) applied to no joint, the phrases the parser replaced by a later one for the
     same part (``spec.overridden``), ``properties`` ((phrase, why) of masses, materials and joint parameters
     naming a part the object lacks, ``request_apply.unapplied_properties``), every number of ``found`` (its
-    findings, ``request_apply.findings``) of a graded kind missed beyond its tolerance, and every joint a band
+    findings, ``request_findings.findings``) of a graded kind missed beyond its tolerance, and every joint a band
     set whose opening fraction at ``state`` (rad / m, output units; ``closed_out`` the output's closed ends) lies
     outside the band. Not measured when nothing was asked or no word of it was understood."""
     if not asked_anything(spec):

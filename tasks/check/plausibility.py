@@ -3,7 +3,7 @@ the declared value where plausible, the estimate where implausible or not declar
 
 Estimates are made at the size the file declares (scale 1): the geometry's mass, inertia and center of mass
 for the part's material (:func:`asset2sim.tasks.synthesize.physics.link_physics`), joint dynamics from the
-loads of the patched masses (:func:`asset2sim.tasks.synthesize.estimate.joint_dynamics_for`), operating
+loads of the patched masses (:func:`asset2sim.tasks.synthesize.joint_dynamics.joint_dynamics_for`), operating
 forces from ``operating_forces.yaml``.
 """
 
@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from asset2sim.engines.base import SimSession
 from asset2sim.schemas.audit import ValueVerdict
 from asset2sim.schemas.overlay import EstimatorInfo, Inertia, JointDynamics, LinkPhysics, Overlay, RootMount
 from asset2sim.tasks.check import plausibility_bands as bands
@@ -23,7 +24,8 @@ from asset2sim.tasks.interpret import size_priors
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.tasks.synthesize import physics
 from asset2sim.tasks.synthesize.context import EstimationContext
-from asset2sim.tasks.synthesize.estimate import JointChoice, joint_dynamics_for, link_material, plausible_mass_range
+from asset2sim.tasks.synthesize.estimate import link_material, plausible_mass_range
+from asset2sim.tasks.synthesize.joint_dynamics import JointChoice, joint_dynamics_for
 from asset2sim.tasks.synthesize.validate_overlay import geometry_inertia, solid_volume
 
 __all__ = ["Judgement", "judge"]
@@ -123,12 +125,12 @@ def _operable(ctx: EstimationContext, j: DeclaredJoint, label: str | None) -> fl
     return rng.force_n[1] * lever if rng.force_n and lever > 0 else None
 
 
-def _judge_joints(ctx: EstimationContext, dp: DeclaredPhysics, labels: dict[str, str | None], links: dict[str, LinkPhysics],
-                  out: list[ValueVerdict]) -> tuple[dict[str, JointDynamics], dict[str, JointDynamics]]:
+def _judge_joints(ctx: EstimationContext, kin: SimSession, dp: DeclaredPhysics, labels: dict[str, str | None],
+                  links: dict[str, LinkPhysics], out: list[ValueVerdict]) -> tuple[dict[str, JointDynamics], dict[str, JointDynamics]]:
     state = ctx.closed_state()
-    loads = physics.joint_loads(ctx.session, ctx.asset, links, state, 1.0, ctx.subtrees)
+    loads = physics.joint_loads(kin, ctx.asset, links, state, 1.0, ctx.subtrees)
     choices = {n: JointChoice(spring=bool(j.stiffness)) for n, j in dp.joints.items()}
-    est = joint_dynamics_for(ctx, links, state, 1.0, choices, source="audit estimate")
+    est = joint_dynamics_for(ctx, kin, links, state, 1.0, choices, source="audit estimate")
     largest = float(np.max(ctx.closed_extents))
     declared, patched = {}, {}
     w0 = 2.0 * math.pi * physics.FLOOR_FREQUENCY_HZ
@@ -159,7 +161,7 @@ def _judge_joints(ctx: EstimationContext, dp: DeclaredPhysics, labels: dict[str,
             ends = [v for v in (j.lower, j.upper) if v is not None]
             far = max(ends, key=lambda v: abs(v - ref), default=ref)
             travel = abs(far - ref)
-            weight = physics.joint_loads(ctx.session, ctx.asset, links, {**state, name: far}, 1.0,
+            weight = physics.joint_loads(kin, ctx.asset, links, {**state, name: far}, 1.0,
                                          {name: ctx.subtrees[name]})[name].gravity_load
             carried = abs(weight) if weight * (ref - far) < 0 else 0.0  # the spring pulls against the weight there
             out.append(bands.stiffness_verdict(where, k, travel, operable, _unit(j, "stiffness"), carried))
@@ -177,9 +179,10 @@ def _judge_joints(ctx: EstimationContext, dp: DeclaredPhysics, labels: dict[str,
     return declared, patched
 
 
-def judge(ctx: EstimationContext, dp: DeclaredPhysics, mounting: RootMount) -> Judgement:
+def judge(ctx: EstimationContext, kin: SimSession, dp: DeclaredPhysics, mounting: RootMount) -> Judgement:
     """Judge every declared value of ``dp`` (the asset of ``ctx``, at scale 1; part labels those of ``ctx.asset``:
-    ``semantics.txt``'s, else read from the link names by the context builder).
+    ``semantics.txt``'s, else read from the link names by the context builder); ``kin``, the input's kinematics
+    session, is posed for the joints' loads.
 
     Returns:
         :class:`Judgement`: the verdicts in the order scale, then per link (mass, density, inertia, center of
@@ -202,7 +205,7 @@ def judge(ctx: EstimationContext, dp: DeclaredPhysics, mounting: RootMount) -> J
     if values[0].verdict == "implausible":
         notes.append("the object's size is implausible for its category: every value is judged at the size the file "
                      "declares, and the patch keeps that size (asset2sim refine rescales)")
-    declared_joints, patched_joints = _judge_joints(ctx, dp, labels, patched_links, values)
+    declared_joints, patched_joints = _judge_joints(ctx, kin, dp, labels, patched_links, values)
     info = EstimatorInfo(name="audit")
 
     def overlay(links, joints) -> Overlay:

@@ -9,7 +9,7 @@ from asset2sim.tasks.check import as_asked, parity
 from asset2sim.tasks.tune.attempt import Attempt
 from asset2sim.tasks.check.verdict import penetration_measures, post_check_failure_mode, readiness
 from asset2sim.tasks.interpret.request import request_notes
-from asset2sim.tasks.synthesize import estimate, request_apply
+from asset2sim.tasks.synthesize import estimate, joint_dynamics, request_apply, request_findings
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.schemas.overlay import Overlay
 
@@ -33,8 +33,8 @@ def build_report(ctx: EstimationContext, prompt: str, chash: str, att: Attempt, 
     """``report.json``'s model from the final attempt; ``resolution``: what each phrase of the request set
     (``request_apply.resolve_states``), for the as-asked tier (``request_met``)."""
     asset, overlay, st, state, closed_out = ctx.asset, att.overlay, att.st, att.state, att.closed_out
-    choices, missing = estimate.motion_choices(ctx, estimate.task_relevant_joints(ctx))
-    found = request_apply.findings(ctx, att.targets, closed_out, state, overlay, att.rounds, resolution,
+    choices, missing = joint_dynamics.motion_choices(ctx, estimate.task_relevant_joints(ctx))
+    found = request_findings.findings(ctx, att.targets, closed_out, state, overlay, att.rounds, resolution,
                                    motion_words={n: list(c.words) for n, c in choices.items()})
     asked = as_asked.refine_request_met(ctx.request, resolution, found, closed_out, state,
                                         request_apply.unapplied_properties(ctx) + missing)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
-from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.base import SessionOptions, SimSession
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import StateRefinement
@@ -142,15 +142,15 @@ def shut_repair(ctx: EstimationContext, syn: Synthesis, config: RefineConfig, ws
     return overrides, [head + (":" if shut.collision_changes else "")] + list(shut.collision_changes)
 
 
-def search_state(ctx: EstimationContext, est, syn: Synthesis, base: Candidate, config: RefineConfig, ws: Workspace,
-                  log: StageLog) -> tuple[StateRefinement, Candidate]:
+def search_state(ctx: EstimationContext, kin: SimSession, est, syn: Synthesis, base: Candidate, config: RefineConfig,
+                 ws: Workspace, log: StageLog) -> tuple[StateRefinement, Candidate]:
     """Stage 6: state refinement of the synthesis' candidate ``base`` (with the estimator's joint proposer when
-    it has one). Returns (refinement, the candidate with the collision overrides kept: ``base`` when unchanged)."""
+    it has one; ``kin``, the input's kinematics session, for the joints the request addresses). Returns (refinement, the candidate with the collision overrides kept: ``base`` when unchanged)."""
     proposer = est.joint_proposer(ctx) if hasattr(est, "joint_proposer") else None
     st, kept = state_search.refine_state_with_decomposition(
         base, syn.closed_out, syn.bands, config, ws, log.say, proposer=proposer,
         intervals={n: t.interval for n, t in syn.targets.items() if t.interval is not None},
-        addressed=lambda: request_apply.resolve_states(ctx, syn.overlay.scale).addressed)
+        addressed=lambda: request_apply.resolve_states(ctx, kin, syn.overlay.scale).addressed)
     log.say("refine_state", f"self-penetration {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
     log.lap("refine_state")
     return st, kept

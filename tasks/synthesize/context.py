@@ -1,6 +1,9 @@
 """The estimation context: what stages 1-4 (extract, analyze, request and
 category, geometric closed states) hand to overlay synthesis, built by
 :func:`build_context` for the refine pipeline, the baselines and benchmarks.
+The context holds values only; the input's kinematics session (PyBullet, fixed
+base, no gravity) that moves the parts to a state is handed beside it and passed
+as ``kin`` to what poses the parts (loads, landings, ordinals, ends, resting pose).
 """
 
 from __future__ import annotations
@@ -40,16 +43,14 @@ class EstimationContext:
     closed: dict[str, ClosedState]
     closed_extents: np.ndarray
     """(3,) extents of the closed object, root frame (closed ends and extents at scale 1, input units)."""
-    session: Any
-    """Fixed-base, gravity-free PyBullet session of the input asset; open only inside :func:`build_context`."""
     subtrees: dict[str, list[str]]
     joint_heights: dict[str, float] = field(default_factory=dict)
     """joint -> z (scale 1) of its moving subtree's box center in the closed state."""
     hull_points: dict[str, np.ndarray] = field(default_factory=dict)
+    """link -> (N, 3) convex-hull vertices of its collision geometry, link frame, scale 1."""
     closed_volume: float | None = None
     """Convex-hull volume of the closed object at scale 1 (the input's units cubed); measured only when the request
     asks a volume ("a 500 ml bottle"), else None."""
-    """link -> (N, 3) convex-hull vertices of its collision geometry, link frame, scale 1."""
     root_rotation: Any = None
     """(3, 3) resting-pose rotation the output will carry (``tasks.state.pose``), or None."""
     settings: dict[str, Any] = field(default_factory=dict)
@@ -74,9 +75,10 @@ def subtree_height(session: SimSession, links: list[str], hull_points: dict[str,
 @contextlib.contextmanager
 def build_context(source: AssetDescription | Path | str, prompt: str, config: RefineConfig | None = None, *, category: str | None = None,
                   asset_id: str | None = None, geometry: dict[str, LinkGeometry] | None = None, cache: analyze.MeshCache | None = None,
-                  settings: dict[str, Any] | None = None) -> Iterator[EstimationContext]:
-    """The estimation context of an asset for ``prompt``, as a context manager: ``ctx.session`` is closed
-    when the ``with`` block ends, also on errors.
+                  settings: dict[str, Any] | None = None) -> Iterator[tuple[EstimationContext, SimSession]]:
+    """The estimation context of an asset for ``prompt`` and the input's kinematics session, as a context
+    manager (``with build_context(...) as (ctx, kin)``): ``kin`` is closed when the ``with`` block ends, also on
+    errors.
 
     Args:
         source: an extracted asset, or its folder / URDF file (extracted with ``asset_id`` and ``category``).
@@ -87,7 +89,8 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
         settings: estimator knobs stored in ``ctx.settings``.
 
     Yields:
-        :class:`EstimationContext` (lengths at scale 1, in the input's units).
+        (:class:`EstimationContext` (lengths at scale 1, in the input's units), the fixed-base, gravity-free
+        PyBullet session of the input asset: what moves its parts, left at no particular state).
 
     Raises:
         asset2sim.tasks.ingest.extract.AssetError: ``source`` cannot be read.
@@ -111,7 +114,8 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
         heights = {n: subtree_height(kin, links, hull) for n, links in subtrees.items()}
         volume = (object_hull_volume(kin, {n: c.q_closed for n, c in closed.items()}, asset, hull)
                   if any(sz.dimension == "volume" for sz in meaning.request.sizes) else None)
-        yield EstimationContext(asset=asset, geometry=geometry, request=meaning.request, category=meaning.category,
-                                category_reason=meaning.category_reason, closed=closed, closed_extents=extents, session=kin,
+        ctx = EstimationContext(asset=asset, geometry=geometry, request=meaning.request, category=meaning.category,
+                                category_reason=meaning.category_reason, closed=closed, closed_extents=extents,
                                 subtrees=subtrees, joint_heights=heights, hull_points=hull, closed_volume=volume,
                                 settings=dict(settings or {}), mounting=mount)
+        yield ctx, kin

@@ -1,6 +1,7 @@
 """The estimator protocol and its registry (SPEC stage 2): an estimator turns an
-``EstimationContext`` into an :class:`Estimate` and registers a factory under its
-name on import (:mod:`asset2sim.tasks.synthesize.backends` imports the built-in ones)."""
+``EstimationContext`` (values) and the input's kinematics session (what poses
+the parts) into an :class:`Estimate` and registers a factory under its name on
+import (:mod:`asset2sim.tasks.synthesize.backends` imports the built-in ones)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import difflib
 from dataclasses import dataclass, field
 from typing import Callable, Protocol
 
+from asset2sim.engines.base import SimSession
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.synthesize import request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
@@ -32,8 +34,9 @@ class Estimator(Protocol):
 
     name: str
 
-    def estimate(self, ctx: EstimationContext) -> Estimate:
-        """Return the overlay (validated afterwards by the caller) and the bands."""
+    def estimate(self, ctx: EstimationContext, kin: SimSession) -> Estimate:
+        """Return the overlay (validated afterwards by the caller) and the bands; ``kin`` (the input's fixed-base,
+        gravity-free kinematics session, :func:`~asset2sim.tasks.synthesize.context.build_context`) may be moved."""
 
 
 _REGISTRY: dict[str, Callable[..., Estimator]] = {}

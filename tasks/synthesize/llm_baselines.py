@@ -12,6 +12,7 @@ from asset2sim.models.usage import Usage
 from asset2sim.schemas.model_reply import REPLY_SCHEMA_NAME, ModelReply, reply_json_schema
 from asset2sim.schemas.overlay import ContactMaterial, Inertia, JointDynamics, LinkPhysics, Overlay, ValidationNotes
 from asset2sim.tasks.synthesize import ivw, validate_overlay
+from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.llm_overlay import check_reply_names, estimator_info
 from asset2sim.tasks.synthesize.llm_prompt import VIEWS, build_messages, describe, render_closed_views
@@ -47,8 +48,9 @@ def _numeric_overlay(ctx: EstimationContext, name: str, model: str, usage: Usage
     )
 
 
-def direct_overlay(ctx: EstimationContext, client: LLMClient) -> Overlay:
-    """``direct`` baseline: one call with the five views, the reply's numbers applied as they are.
+def direct_overlay(ctx: EstimationContext, kin: SimSession, client: LLMClient) -> Overlay:
+    """``direct`` baseline: one call with the five views, the reply's numbers applied as they are (``kin``: the
+    input's kinematics session, for the description).
 
     Raises:
         ModelCallError: the call failed.
@@ -57,7 +59,7 @@ def direct_overlay(ctx: EstimationContext, client: LLMClient) -> Overlay:
     cfg = client.config
     schema = reply_json_schema()
     images, render_notes = render_closed_views(ctx, VIEWS, cfg.render_size)
-    answer = client.ask(build_messages(describe(ctx), images, schema), ModelReply, schema=schema, schema_name=REPLY_SCHEMA_NAME, max_reasks=0)
+    answer = client.ask(build_messages(describe(ctx, kin), images, schema), ModelReply, schema=schema, schema_name=REPLY_SCHEMA_NAME, max_reasks=0)
     r = answer.reply
     return _numeric_overlay(
         ctx, "direct", cfg.model, answer.usage, r.scale.value, {lr.link: (lr.mass.value, lr.shell) for lr in r.links},
@@ -65,10 +67,11 @@ def direct_overlay(ctx: EstimationContext, client: LLMClient) -> Overlay:
         (r.lateral_friction, r.restitution), render_notes + ["direct: one model call applied as is (no validation, no refinement)"])
 
 
-def ivw_overlay(ctx: EstimationContext, client: LLMClient, n_views: int = 5, n_calls: int = 5) -> Overlay:
+def ivw_overlay(ctx: EstimationContext, kin: SimSession, client: LLMClient, n_views: int = 5, n_calls: int = 5) -> Overlay:
     """``ivw`` baseline: ``n_calls`` calls for each of the first ``n_views`` views (one image each,
     temperature :data:`IVW_TEMPERATURE`), numbers fused per parameter by inverse-variance weighting;
-    unusable replies and failed calls are skipped (noted).
+    unusable replies and failed calls are skipped (noted). ``kin``: the input's kinematics session, for the
+    description.
 
     Raises:
         ValueError: ``n_views`` not in 1..5 or ``n_calls`` < 1.
@@ -78,7 +81,7 @@ def ivw_overlay(ctx: EstimationContext, client: LLMClient, n_views: int = 5, n_c
         raise ValueError(f"n_views must be in 1..{len(VIEWS)} and n_calls >= 1, got {n_views}, {n_calls}")
     cfg = client.config
     schema = reply_json_schema()
-    desc = describe(ctx)
+    desc = describe(ctx, kin)
     views = VIEWS[:n_views]
     images, render_notes = render_closed_views(ctx, views, cfg.render_size)
     before = client.usage.snapshot()

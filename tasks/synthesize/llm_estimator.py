@@ -14,6 +14,7 @@ from asset2sim.models.errors import ModelCallError, ReplyError, ReplyInvalid
 from asset2sim.models.usage import Usage
 from asset2sim.schemas.model_reply import PROPOSAL_SCHEMA_NAME, REPLY_SCHEMA_NAME, JointProposalReply, ModelReply, reply_json_schema
 from asset2sim.tasks.synthesize import estimator
+from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.llm_baselines import IVW_TEMPERATURE, direct_overlay, ivw_overlay
 from asset2sim.tasks.synthesize.llm_overlay import MASS_AGREEMENT, estimator_info, overlay_from_reply
@@ -73,9 +74,10 @@ class LLMEstimator:
 
         return propose
 
-    def estimate(self, ctx: EstimationContext) -> estimator.Estimate:
+    def estimate(self, ctx: EstimationContext, kin: SimSession) -> estimator.Estimate:
         """Ask the model (once per asset and request; a repeat rebuilds the overlay from the remembered
-        reply) and build the overlay with the model's band per movable joint.
+        reply) and build the overlay with the model's band per movable joint (``kin``: the input's kinematics
+        session, for the description and the joints' loads).
 
         Raises:
             ModelCallError: the network failed after the retries.
@@ -87,10 +89,10 @@ class LLMEstimator:
         memo = self._memo.get(key)
         if memo is None:
             schema = reply_json_schema()
-            desc = describe(ctx)
+            desc = describe(ctx, kin)
             images, render_notes = render_closed_views(ctx, VIEWS, cfg.render_size)
             answer = self.client.ask(build_messages(desc, images, schema), ModelReply, schema=schema, schema_name=REPLY_SCHEMA_NAME,
-                                     accept=lambda r: overlay_from_reply(ctx, r, name=self.name, model=cfg.model),
+                                     accept=lambda r: overlay_from_reply(ctx, kin, r, name=self.name, model=cfg.model),
                                      max_reasks=self.max_reasks)
             est = answer.value
             memo = (answer.reply, answer.usage, answer.history, render_notes)
@@ -98,7 +100,7 @@ class LLMEstimator:
                 self._memo.pop(next(iter(self._memo)))
             self._memo[key] = memo
         else:
-            est = overlay_from_reply(ctx, memo[0], name=self.name, model=cfg.model)
+            est = overlay_from_reply(ctx, kin, memo[0], name=self.name, model=cfg.model)
         reply, usage, history, render_notes = memo
         overlay = est.overlay
         other = list(overlay.notes.other) + render_notes

@@ -13,7 +13,8 @@ from asset2sim.models.usage import Usage
 from asset2sim.schemas.model_reply import ModelReply
 from asset2sim.schemas.overlay import ContactMaterial, EstimatorInfo, LinkPhysics, Overlay, ValidationNotes
 from asset2sim.tasks.interpret.part_priors import material_for
-from asset2sim.tasks.synthesize import estimate, physics, validate_overlay
+from asset2sim.tasks.synthesize import estimate, joint_dynamics, physics, validate_overlay
+from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.estimator import Estimate
 from asset2sim.tasks.synthesize.request_apply import scaled_link
@@ -45,9 +46,11 @@ def _name_errors(where: str, names: list[str], known: set[str], unknown: str) ->
     return errors
 
 
-def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str = "llm", model: str | None = None) -> Estimate:
+def overlay_from_reply(ctx: EstimationContext, kin: SimSession, reply: ModelReply, *, name: str = "llm",
+                       model: str | None = None) -> Estimate:
     """The overlay, band per movable joint and notes from a model reply, validated; links and joints the reply
-    misses get the offline prior's material and the parser's band and words (noted). No usage info yet.
+    misses get the offline prior's material and the parser's band and words (noted). No usage info yet. ``kin``,
+    the input's kinematics session, is posed for the joints' loads.
 
     Raises:
         ReplyInvalid: unknown or duplicated names, a link without a computable mass, a rejected overlay.
@@ -61,10 +64,10 @@ def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str =
     mat_notes = read.material_notes
     notes = [f"the model gave no material for {read.missing}; offline priors used"] if read.missing else []
     links, mass_note = _within_model_mass(read.links, by_link)
-    bands, band_notes = _bands(ctx, reply)
+    bands, band_notes = _bands(ctx, kin, reply)
     notes += band_notes
     state = estimate.state_from_bands(ctx.closed, bands, s, {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"})
-    joints = estimate.joint_dynamics_for(ctx, links, state, s, _joint_choices(ctx, reply), source=f"{name} physics (model choices)")
+    joints = joint_dynamics.joint_dynamics_for(ctx, kin, links, state, s, _joint_choices(ctx, reply), source=f"{name} physics (model choices)")
     asked_state = bool(ctx.request.joint_states) or any(b != "closed" for b in bands.values())
     if reply.category.strip().lower() != str(ctx.category).lower():
         notes.append(f"the model calls it {reply.category!r}; the pipeline's category {ctx.category!r} is kept")
@@ -142,10 +145,10 @@ def _within_model_mass(links: dict[str, LinkPhysics], by_link: dict) -> tuple[di
     return links, mass_note
 
 
-def _bands(ctx: EstimationContext, reply: ModelReply) -> tuple[dict[str, str], list[str]]:
+def _bands(ctx: EstimationContext, kin: SimSession, reply: ModelReply) -> tuple[dict[str, str], list[str]]:
     """The model's band per movable joint (the request parser's without a model entry), and notes where
     the two differ or the model gave none."""
-    parsed, _ = estimate.requested_bands(ctx)
+    parsed, _ = estimate.requested_bands(ctx, kin)
     by_joint = {jr.joint: jr for jr in reply.joints}
     bands: dict[str, str] = {}
     notes = []
@@ -159,12 +162,12 @@ def _bands(ctx: EstimationContext, reply: ModelReply) -> tuple[dict[str, str], l
     return bands, notes
 
 
-def _joint_choices(ctx: EstimationContext, reply: ModelReply) -> dict[str, estimate.JointChoice]:
+def _joint_choices(ctx: EstimationContext, reply: ModelReply) -> dict[str, joint_dynamics.JointChoice]:
     """The model's qualitative dynamics per movable joint, with the request's own words about each part kept (they win
-    where they speak); without a model entry the words alone (:func:`~asset2sim.tasks.synthesize.estimate.motion_choices`)."""
+    where they speak); without a model entry the words alone (:func:`~asset2sim.tasks.synthesize.joint_dynamics.motion_choices`)."""
     by_joint = {jr.joint: jr for jr in reply.joints}
-    parsed, _ = estimate.motion_choices(ctx, estimate.task_relevant_joints(ctx))
-    choices: dict[str, estimate.JointChoice] = {}
+    parsed, _ = joint_dynamics.motion_choices(ctx, estimate.task_relevant_joints(ctx))
+    choices: dict[str, joint_dynamics.JointChoice] = {}
     for j in ctx.asset.movable_joints():
         jr = by_joint.get(j.name)
         if jr is None:
@@ -172,8 +175,8 @@ def _joint_choices(ctx: EstimationContext, reply: ModelReply) -> dict[str, estim
             continue
         # the model's choices, and the request's own words about this part kept: a word wins where it speaks
         words = parsed[j.name]
-        choices[j.name] = estimate.JointChoice(
-            words.damping_level if any(w.kind in estimate.WORD_DAMPING for w in words.words) else jr.damping_level,
+        choices[j.name] = joint_dynamics.JointChoice(
+            words.damping_level if any(w.kind in joint_dynamics.WORD_DAMPING for w in words.words) else jr.damping_level,
             jr.holds_position or words.holds_position, jr.spring or words.spring, jr.stiff or words.stiff,
             jr.free_moving or words.free_moving, words.self_closing, words.words)
     return choices

@@ -19,6 +19,7 @@ from asset2sim.tasks.interpret.part_priors import material_for
 from asset2sim.tasks.interpret.size_priors import target_size
 from asset2sim.tasks.geometry import render
 from asset2sim.tasks.synthesize import estimate
+from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.inert import one_line
 
@@ -36,13 +37,14 @@ def _r(x: float, n: int = 5) -> float:
     return float(f"{float(x):.{n}g}")
 
 
-def describe(ctx: EstimationContext) -> dict[str, Any]:
+def describe(ctx: EstimationContext, kin: SimSession) -> dict[str, Any]:
     """The structured description sent to the model (JSON-able; m and rad at scale 1; prismatic values in
-    the input's units): category, request and its parse, extents, typical size and mass, links, movable joints."""
+    the input's units): category, request and its parse, extents, typical size and mass, links, movable joints
+    (``kin``, the input's kinematics session, moved for the request's ordinals and ends)."""
     asset = ctx.asset
     req = ctx.request
     target = target_size(ctx.category, req)
-    resolved = request_apply.resolve_states(ctx, estimate.choose_scale(ctx)[0])
+    resolved = request_apply.resolve_states(ctx, kin, estimate.choose_scale(ctx)[0])
     bands, band_notes = resolved.bands, resolved.warnings + resolved.notes
     relevant = set(estimate.task_relevant_joints(ctx))
     links = []

@@ -7,9 +7,11 @@ from asset2sim import __version__
 from asset2sim.schemas.overlay import ContactMaterial, EstimatorInfo, LinkPhysics, Overlay, ValidationNotes
 from asset2sim.tasks.interpret import priors
 from asset2sim.tasks.synthesize import physics, request_apply
+from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
-from asset2sim.tasks.synthesize.estimate import (choose_scale, joint_dynamics_for, link_material, motion_choices,
-                                                 plausible_mass_range, request_variant, state_from_bands, task_relevant_joints)
+from asset2sim.tasks.synthesize.estimate import (choose_scale, link_material, plausible_mass_range, request_variant,
+                                                 state_from_bands, task_relevant_joints)
+from asset2sim.tasks.synthesize.joint_dynamics import joint_dynamics_for, motion_choices
 from asset2sim.tasks.synthesize.estimator import Estimate, register_estimator
 
 __all__ = ["OfflineEstimator"]
@@ -23,9 +25,9 @@ class OfflineEstimator:
     def __init__(self, **settings):
         self.settings = settings
 
-    def estimate(self, ctx: EstimationContext) -> Estimate:
-        """The overlay from priors, geometry and kinematics, and the parsed
-        request's bands (:func:`requested_bands`)."""
+    def estimate(self, ctx: EstimationContext, kin: SimSession) -> Estimate:
+        """The overlay from priors, geometry and kinematics (``kin``: the input's kinematics session, posed
+        for ordinals, ends and the joints' loads), and the parsed request's bands (:func:`requested_bands`)."""
         s, size_note = choose_scale(ctx)
         # ---- links
         links: dict[str, LinkPhysics] = {}
@@ -54,12 +56,12 @@ class OfflineEstimator:
             mass_note += f"; outside the plausible {lo:g}-{hi:g} kg for {ctx.category} ({ctx.request.size_class or 'regular'}): every link scaled by {f:.3g} to {target:g} kg"
         # ---- state
         prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
-        resolved = request_apply.resolve_states(ctx, s)
+        resolved = request_apply.resolve_states(ctx, kin, s)
         bands, band_notes = resolved.bands, resolved.warnings + resolved.notes + request_apply.unmatched_properties(ctx)
         state = request_apply.state_with_targets(ctx, state_from_bands(ctx.closed, bands, s, prismatic), resolved, s)
         # ---- dynamics
         choices, _ = motion_choices(ctx, task_relevant_joints(ctx))
-        joints = joint_dynamics_for(ctx, links, state, s, choices, source="offline physics")
+        joints = joint_dynamics_for(ctx, kin, links, state, s, choices, source="offline physics")
         joints, dyn_notes = request_apply.apply_dynamics_values(ctx, joints, task_relevant_joints(ctx), state)
         band_notes += dyn_notes
         body_prior = priors.material_for(ctx.category, None, request_variant(ctx))

@@ -19,6 +19,7 @@ from asset2sim.tasks.geometry.closed_state import links_aabb
 from asset2sim.tasks.interpret.part_labels import canonical_label
 
 if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
+    from asset2sim.engines.base import SimSession
     from asset2sim.tasks.synthesize.context import EstimationContext
 
 #: Height change over the travel (fraction of the largest extent) below which a part has no "up" or "down".
@@ -34,40 +35,43 @@ END_SAMPLES = 41
 END_SNAP = 0.1
 
 
-def box_center(ctx: "EstimationContext", joint: str) -> np.ndarray:
-    """(3,) world center (m, scale 1, resting pose applied) of the joint's moving subtree's box; zeros without geometry."""
+def box_center(ctx: "EstimationContext", kin: "SimSession", joint: str) -> np.ndarray:
+    """(3,) world center (m, scale 1, resting pose applied) of the joint's moving subtree's box at ``kin``'s
+    current state; zeros without geometry."""
     R = np.asarray(ctx.root_rotation, float) if ctx.root_rotation is not None else np.eye(3)
-    box = links_aabb(ctx.session, ctx.subtrees[joint], ctx.hull_points)
+    box = links_aabb(kin, ctx.subtrees[joint], ctx.hull_points)
     return np.zeros(3) if box is None else R @ (0.5 * (box[0] + box[1]))
 
 
-def _radius(ctx: "EstimationContext", joint: str, state: dict[str, float]) -> float:
-    """Largest distance (m, scale 1) of the joint's moving hull points from its axis at ``state``."""
-    ctx.session.set_joint_positions(state)
-    child = ctx.session.joint_child[joint]
-    p0, Rc = ctx.session.link_frame(child)
-    a = Rc @ np.asarray(ctx.session.joint_axis(joint), float)
+def _radius(ctx: "EstimationContext", kin: "SimSession", joint: str, state: dict[str, float]) -> float:
+    """Largest distance (m, scale 1) of the joint's moving hull points from its axis at ``state`` (``kin`` moved there)."""
+    kin.set_joint_positions(state)
+    child = kin.joint_child[joint]
+    p0, Rc = kin.link_frame(child)
+    a = Rc @ np.asarray(kin.joint_axis(joint), float)
     a = a / max(np.linalg.norm(a), 1e-12)
     r = 0.0
     for ln in ctx.subtrees[joint]:
         v = ctx.hull_points.get(ln)
         if v is None:
             continue
-        pos, R = ctx.session.link_frame(ln)
+        pos, R = kin.link_frame(ln)
         w = v @ R.T + pos - p0
         perp = w - np.outer(w @ a, a)
         r = max(r, float(np.linalg.norm(perp, axis=1).max()))
     return r
 
 
-def _end_fraction(ctx: "EstimationContext", joint: str, end: str, closed_state: dict[str, float]) -> tuple[float | None, str]:
-    """Opening fraction of the joint's highest / lowest position in world z; None and why when it moves flat."""
+def _end_fraction(ctx: "EstimationContext", kin: "SimSession", joint: str, end: str,
+                  closed_state: dict[str, float]) -> tuple[float | None, str]:
+    """Opening fraction of the joint's highest / lowest position in world z (``kin`` moved along its travel);
+    None and why when it moves flat."""
     cs = ctx.closed[joint]
     fr = np.linspace(0.0, 1.0, END_SAMPLES)
     zs = []
     for f in fr:
-        ctx.session.set_joint_positions({**closed_state, joint: cs.position(float(f))})
-        zs.append(box_center(ctx, joint)[2])
+        kin.set_joint_positions({**closed_state, joint: cs.position(float(f))})
+        zs.append(box_center(ctx, kin, joint)[2])
     zs = np.asarray(zs)
     size = float(np.max(ctx.closed_extents)) if len(ctx.closed_extents) else 1.0
     if zs.max() - zs.min() < FLAT_TRAVEL * size:
@@ -83,10 +87,11 @@ def _end_fraction(ctx: "EstimationContext", joint: str, end: str, closed_state: 
     return float(fr[i]), f"{word} position in world z at opening fraction {fr[i]:.3g}"
 
 
-def fraction_for(ctx: "EstimationContext", joint: str, target: StateTarget, scale: float, label: str,
+def fraction_for(ctx: "EstimationContext", kin: "SimSession", joint: str, target: StateTarget, scale: float, label: str,
                  closed_state: dict[str, float]) -> tuple[float | None, str]:
     """(opening fraction ``target`` asks of ``joint``, how it was decided), None with the reason when it cannot
-    be applied; distances in m at ``scale``, ``closed_state`` in input units."""
+    be applied; distances in m at ``scale``, ``closed_state`` in input units; ``kin`` (the input's kinematics
+    session) is moved for ends and distances."""
     cs = ctx.closed[joint]
     jt = ctx.asset.joint(joint).type
     if target.kind == "fraction":
@@ -101,7 +106,7 @@ def fraction_for(ctx: "EstimationContext", joint: str, target: StateTarget, scal
                 return (0.0 if end == "on" else 1.0), f"'{target.end}' of a {canon}: {'in place, closed' if end == 'on' else 'taken off, fully open'}"
             else:
                 return (1.0 if end == "on" else 0.0), f"'{target.end}' of a {canon or 'part'}: {'fully open' if end == 'on' else 'closed'} (not a toggle switch)"
-        return _end_fraction(ctx, joint, str(end), closed_state)
+        return _end_fraction(ctx, kin, joint, str(end), closed_state)
     if target.kind == "angle":
         if jt == "prismatic":
             return None, f"{np.degrees(target.value):.4g} degrees asked of a sliding joint (it moves in metres)"
@@ -111,7 +116,7 @@ def fraction_for(ctx: "EstimationContext", joint: str, target: StateTarget, scal
     if jt == "prismatic":
         rng = cs.open_range * scale
         return float(target.value) / max(rng, 1e-12), f"{target.value:.4g} m from the closed end of a {rng:.4g} m travel"
-    r = _radius(ctx, joint, closed_state) * scale
+    r = _radius(ctx, kin, joint, closed_state) * scale
     if r <= 0:
         return None, "no geometry to measure a distance on"
     ang = float(target.value) / r

@@ -225,7 +225,7 @@ def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: boo
         impact: friction (N*m or N) beyond the holding friction that stops the part after its object is set down
             (:func:`~asset2sim.tasks.synthesize.set_down.landing_friction`; 0: none).
         floor: add the friction floor below; False where the mechanism sets its own least friction (a drawer's
-            slide, ``estimate.slide_for``).
+            slide, ``joint_dynamics.slide_for``).
 
     Friction floor: Coulomb coefficient 0.05 on the moving weight (prismatic, N; lubricated drawer slides,
     Engineering ToolBox), that force at a 1 cm pin radius (revolute, N*m). Friction and damping are capped by

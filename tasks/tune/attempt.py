@@ -3,7 +3,7 @@ the report and the extras read (:class:`Attempt`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
@@ -13,9 +13,10 @@ from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.geometry.closed_state import ClosedState
 
 
-@dataclass
+@dataclass(frozen=True)
 class Attempt:
-    """One synthesize -> validate -> write -> refine state -> post-check pass."""
+    """One synthesize -> validate -> write -> refine state -> post-check pass (frozen: a later stage that adds
+    to it hands on a copy, ``dataclasses.replace``)."""
 
     asset: AssetDescription
     overlay: Overlay
@@ -38,10 +39,9 @@ class Attempt:
         return Candidate(self.asset, self.overlay, self.state, self.overrides, self.root_rotation)
 
     def kept_after_another(self) -> "Attempt":
-        """This attempt, marked kept after another one was tried (its rest recording is not reused: the stages
-        ask the workspace for the candidate they work on, so nothing needs loading again)."""
-        self.rewritten = True
-        return self
+        """A copy of this attempt marked kept after another one was tried (its rest recording is not reused: the
+        stages ask the workspace for the candidate they work on, so nothing needs loading again)."""
+        return replace(self, rewritten=True)
 
 
 def least_openings(att: Attempt, intervals: dict[str, tuple[float, float]]) -> dict[str, float]:

@@ -18,7 +18,7 @@ from asset2sim.tasks.check import postcheck, robust_rest, sweep, task_tier
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_tuples
 from asset2sim.tasks.state import clearance, placement
-from asset2sim.tasks.synthesize import estimate
+from asset2sim.tasks.synthesize import estimate, joint_dynamics
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.physics import max_stable_damping
 from asset2sim.tasks.tune import dynamics_search, operating, repair, word_guard
@@ -66,7 +66,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     kept_words = word_guard.guards(ctx, overlay)  # the request's words about motion, at the values they set
     caps, dcaps = dict(lim.friction_caps), lim.damping_caps
     for name in overlay.joints:  # a drawer's friction never past its slide's range
-        top = estimate.slide_cap(ctx, name, sum(overlay.links[ln].mass for ln in ctx.subtrees.get(name, []) if ln in overlay.links))
+        top = joint_dynamics.slide_cap(ctx, name, sum(overlay.links[ln].mass for ln in ctx.subtrees.get(name, []) if ln in overlay.links))
         if top is not None:
             caps[name] = min(caps.get(name, top), top)
     floors = operating.tilt_floors(overlay, overlay, asset, robust_rest.RobustRestConfig().tilt)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from asset2sim.engines.base import SimSession
 from asset2sim.schemas.audit import ValueVerdict
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.check.plausibility import Judgement, judge
@@ -52,16 +53,17 @@ class KeepDeclared:
     def __getattr__(self, name):  # the inner estimator's extras (joint_proposer ...)
         return getattr(self.inner, name)
 
-    def estimate(self, ctx: EstimationContext) -> Estimate:
-        """The inner estimate at the declared size when plausible, with the plausible declared values kept."""
+    def estimate(self, ctx: EstimationContext, kin: SimSession) -> Estimate:
+        """The inner estimate at the declared size when plausible, with the plausible declared values kept
+        (``kin``: the input's kinematics session)."""
         if self.judged is None:  # the declared values and the context do not change between a refine's attempts
-            self.judged = judge(ctx, self.declared, mounting.category_mounting(ctx.category))
+            self.judged = judge(ctx, kin, self.declared, mounting.category_mounting(ctx.category))
         judged = self.judged
         size_ok = judged.values[0].quantity == "scale" and judged.values[0].verdict == "plausible"
         inner_ctx = ctx
         if size_ok and ctx.request.scale is None and not ctx.request.sizes:
             inner_ctx = dataclasses.replace(ctx, request=ctx.request.model_copy(update={"scale": 1.0}))
-        est = self.inner.estimate(inner_ctx)
+        est = self.inner.estimate(inner_ctx, kin)
         overlay, kept = self._keep(ctx, est.overlay, judged, size_ok)
         return dataclasses.replace(est, overlay=overlay, notes=[*est.notes, *kept])
 

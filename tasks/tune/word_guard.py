@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.request import MOTION_GUARDS
-from asset2sim.tasks.synthesize import estimate
+from asset2sim.tasks.synthesize import estimate, joint_dynamics
 from asset2sim.tasks.synthesize.context import EstimationContext
 
 #: Units of each guarded parameter (revolute, prismatic), for the notes.
@@ -44,8 +44,8 @@ class Guard:
 def guards(ctx: EstimationContext, overlay: Overlay) -> list[Guard]:
     """The guards of ``overlay`` (the estimate, bounded to the hand's operating range): one per parameter each word
     of ``ctx.request.motions`` sets on a joint it applies to
-    (:func:`~asset2sim.tasks.synthesize.estimate.motion_choices`), at the overlay's value."""
-    choices, _ = estimate.motion_choices(ctx, estimate.task_relevant_joints(ctx))
+    (:func:`~asset2sim.tasks.synthesize.joint_dynamics.motion_choices`), at the overlay's value."""
+    choices, _ = joint_dynamics.motion_choices(ctx, estimate.task_relevant_joints(ctx))
     out = []
     for joint, ch in choices.items():
         dyn = overlay.joints.get(joint)

@@ -22,7 +22,7 @@ from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.geometry.urdf_closed import measure_closed
 from asset2sim.tasks.interpret.part_priors import handled
 from asset2sim.tasks.refine import refine_asset
-from asset2sim.tasks.synthesize import estimate
+from asset2sim.tasks.synthesize import joint_dynamics
 from tests.conftest import needs_shared, SHARED
 from tests.tasks.ingest import host_layouts as hl
 from tests.unseen_assets import build_double_door_cabinet, build_oven, build_table_with_drawer
@@ -206,7 +206,7 @@ def test_the_task_less_cabinet_is_never_ready_with_a_jammed_drawer(tmp_path):
 
 def test_a_hung_window_sash_is_operable_on_its_balance_and_not_without_it(tmp_path, monkeypatch, refine_once):
     """A vertical sash (Meta-World's window, generated) held slightly open: with its balance a hand inside 22.2 N
-    lifts and lowers it. Counterfactual: without balances (estimate.BALANCE_LABELS empty) friction must hold the
+    lifts and lowers it. Counterfactual: without balances (joint_dynamics.BALANCE_LABELS empty) friction must hold the
     sash's whole weight, and lifting it against both needs more than a hand's 22.2 N (not_operable)."""
     xml = hl.metaworld_window(tmp_path / "in")
     res = refine_once(xml, "A window, slightly open.", extras=False)
@@ -215,7 +215,7 @@ def test_a_hung_window_sash_is_operable_on_its_balance_and_not_without_it(tmp_pa
     assert "balance" in res.overlay.joints[name].source
     effort = res.report.metric("operability").details["efforts"][name]
     assert effort["peak_force_n"] <= 22.2
-    monkeypatch.setattr(estimate, "BALANCE_LABELS", frozenset())
+    monkeypatch.setattr(joint_dynamics, "BALANCE_LABELS", frozenset())
     bare = refine_asset(xml, "A window, slightly open.", tmp_path / "bare", extras=False)
     assert bare.overlay.joints[name].stiffness == 0.0
     assert bare.report.failure_mode == "not_operable"

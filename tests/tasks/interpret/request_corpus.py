@@ -209,9 +209,9 @@ def apply_misses(entry: dict, scratch: Path) -> list[str]:
     ``request_apply.resolve_states`` at ``estimate.choose_scale``."""
     want = entry.get("apply") or {}
     out: list[str] = []
-    with build_context(asset_folder(entry["object"], scratch), entry["text"]) as ctx:
+    with build_context(asset_folder(entry["object"], scratch), entry["text"]) as (ctx, kin):
         scale, _ = estimate.choose_scale(ctx)
-        res = request_apply.resolve_states(ctx, scale)
+        res = request_apply.resolve_states(ctx, kin, scale)
     for j, exp in (want.get("joints") or {}).items():
         t = res.targets.get(j)
         if ":" not in exp:
@@ -261,7 +261,7 @@ def rates_by_phenomenon(entries: list[dict], scratch: Path) -> dict[str, tuple[i
 @lru_cache(maxsize=64)
 def closed_extents(folder: str) -> tuple[float, float, float]:
     """(3,) closed extents at scale 1 of an input asset (root frame)."""
-    with build_context(Path(folder), "") as ctx:
+    with build_context(Path(folder), "") as (ctx, kin):
         return tuple(float(x) for x in ctx.closed_extents)
 
 

@@ -14,7 +14,7 @@ import pytest
 from asset2sim.commands.refine import summary_lines
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
-from asset2sim.tasks.synthesize import request_apply
+from asset2sim.tasks.synthesize import request_apply, request_findings
 from asset2sim.tasks.synthesize import backends, estimate, llm_prompt
 from asset2sim.tasks.synthesize.context import build_context
 from tests.conftest import SHARED, needs_shared
@@ -85,16 +85,16 @@ def test_angles_land_within_5_percent_and_a_limit_is_explained(demo_root, refine
 @needs_shared
 def test_left_and_right_doors_and_top_drawer_are_resolved_in_space():
     """Fridge 11178: two side-by-side doors; the viewer's left is +y (front -x)."""
-    with build_context(SHARED / "11178", "A fridge with the left door open and the right door closed.") as ctx:
-        res = request_apply.resolve_states(ctx, 1.0)
-        c = request_apply._centers(ctx, {n: cs.q_closed for n, cs in ctx.closed.items()})
+    with build_context(SHARED / "11178", "A fridge with the left door open and the right door closed.") as (ctx, kin):
+        res = request_apply.resolve_states(ctx, kin, 1.0)
+        c = request_apply._centers(ctx, kin, {n: cs.q_closed for n, cs in ctx.closed.items()})
         left = max(c, key=lambda n: c[n][1])
         right = min(c, key=lambda n: c[n][1])
         assert res.bands[left] == "mostly" and res.bands[right] == "closed"
         assert all(v[0] < 0 for v in c.values())  # the doors are on the front (-x)
-    with build_context(SHARED / "19179", "A cabinet with the top drawer open 10 cm and the others closed.") as ctx:
+    with build_context(SHARED / "19179", "A cabinet with the top drawer open 10 cm and the others closed.") as (ctx, kin):
         s, _ = estimate.choose_scale(ctx)
-        res = request_apply.resolve_states(ctx, s)
+        res = request_apply.resolve_states(ctx, kin, s)
         top = max(ctx.joint_heights, key=ctx.joint_heights.get)
         assert set(res.targets) == {top} and res.bands[[n for n in res.bands if n != top][0]] == "closed"
         assert abs(res.targets[top].fraction * ctx.closed[top].open_range * s - 0.1) < 1e-9
@@ -102,19 +102,19 @@ def test_left_and_right_doors_and_top_drawer_are_resolved_in_space():
 
 def test_the_model_prompt_carries_the_numbers_and_a_departing_overlay_is_flagged(demo_root):
     text = "A 2 kg box with a glass lid at 40 degrees, damping 0.05 N m s/rad, 30 cm tall."
-    with build_context(demo_root / "box_lid", text) as ctx:
-        d = llm_prompt.describe(ctx)
+    with build_context(demo_root / "box_lid", text) as (ctx, kin):
+        d = llm_prompt.describe(ctx, kin)
         rp = d["request_parse"]
         assert rp["sizes_m"][0]["dimension"] == "height" and rp["joint_parameters"][0]["value"] == 0.05
         assert {p["label"]: p["material"] for p in rp["masses_and_materials"]}["lid"] == "glass"
         (j,) = d["joints"]
         assert abs(j["requested_opening_fraction"] * ctx.closed[j["name"]].open_range - np.radians(40)) < 1e-4
-        est = backends.get_estimator("offline").estimate(ctx)
-        ov, _ = request_apply.check_against_request(ctx, est.overlay, est.targets)
+        est = backends.get_estimator("offline").estimate(ctx, kin)
+        ov, _ = request_findings.check_against_request(ctx, kin, est.overlay, est.targets)
         assert not [n for n in ov.notes.other if "departs from the request" in n]  # the offline overlay honours it
         bad = est.overlay.model_copy(update={"scale": est.overlay.scale * 1.5, "links": {
             k: v.model_copy(update={"mass": v.mass * 3, "density": 1000.0}) for k, v in est.overlay.links.items()}})
-        flagged = "\n".join(request_apply.check_overlay(ctx, bad, request_apply.StateResolution(bands={}, targets=est.targets)))
+        flagged = "\n".join(request_findings.check_overlay(ctx, bad, request_apply.StateResolution(bands={}, targets=est.targets)))
         assert "total mass" in flagged and "30 cm tall" in flagged and "glass" in flagged
 
 

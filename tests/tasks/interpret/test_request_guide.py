@@ -58,9 +58,9 @@ def test_each_example_sets_the_joint_it_names_by_the_amount_it_says(request_text
     unapplied = re.findall(r"`not applied: '([^']+)'`", want)
     sizes = re.findall(r"`size=(\w+):([^`]+)`", want)
     assert joints or unapplied or sizes, want
-    with build_context(folder, request_text) as ctx:
+    with build_context(folder, request_text) as (ctx, kin):
         scale, _ = estimate.choose_scale(ctx)
-        res = request_apply.resolve_states(ctx, scale)
+        res = request_apply.resolve_states(ctx, kin, scale)
         got_sizes = {sz.dimension: got for sz, (_, _, got) in zip(ctx.request.sizes, request_apply.size_residuals(ctx, scale))}
     for j, exp in joints.items():
         t = res.targets.get(j)

@@ -17,7 +17,7 @@ from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.interpret.named_parts import requested_joints
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.interpret.request import LESS_THAN_HALF, parse_request
-from asset2sim.tasks.synthesize import estimate, request_apply
+from asset2sim.tasks.synthesize import estimate, request_apply, request_findings
 from asset2sim.tasks.synthesize.context import build_context
 from asset2sim.engines.source import UrdfFile
 from tests.conftest import SHARED, needs_shared
@@ -34,13 +34,13 @@ def generated(tmp_path_factory) -> dict[str, Path]:
 
 def resolve(folder: Path, text: str):
     """(resolution, {joint: label}, {joint: box volume m^3}, {joint: height m}, scale, scale note) of ``text`` on ``folder``."""
-    with build_context(folder, text) as ctx:
+    with build_context(folder, text) as (ctx, kin):
         s, note = estimate.choose_scale(ctx)
-        res = request_apply.resolve_states(ctx, s)
+        res = request_apply.resolve_states(ctx, kin, s)
         closed = {n: c.q_closed for n, c in ctx.closed.items()}
         labels = {j.name: ctx.asset.link(j.child).semantic_label for j in ctx.asset.movable_joints()}
-        vols = request_apply._box_volumes(ctx, closed)
-        heights = {n: float(c[2]) for n, c in request_apply._centers(ctx, closed).items()}
+        vols = request_apply._box_volumes(ctx, kin, closed)
+        heights = {n: float(c[2]) for n, c in request_apply._centers(ctx, kin, closed).items()}
         ranges = {n: c.open_range for n, c in ctx.closed.items()}
         return res, labels, vols, heights, (s, note), ranges
 
@@ -162,10 +162,10 @@ def test_mostly_closed_is_a_small_opening_not_closed(text):
 def test_a_bottles_volume_sets_its_size_with_the_reasoning(generated):
     res, _, _, _, (s, note), _ = resolve(generated["bottle"], "a 500 ml plastic water bottle with its cap unscrewed halfway")
     assert "'500 ml'" in note and "convex hull" in note
-    with build_context(generated["bottle"], "a 500 ml bottle") as ctx:
+    with build_context(generated["bottle"], "a 500 ml bottle") as (ctx, kin):
         assert ctx.closed_volume * s ** 3 == pytest.approx(5e-4, rel=1e-6)
         overlay = Overlay(estimator=EstimatorInfo(name="test"), scale=s)
-        (q,) = [x for x in request_apply.findings(ctx, {}, {}, {}, overlay).quantities if x.what == "volume"]
+        (q,) = [x for x in request_findings.findings(ctx, {}, {}, {}, overlay).quantities if x.what == "volume"]
         assert q.within_tolerance and q.unit == "m^3"
 
 

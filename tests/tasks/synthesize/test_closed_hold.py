@@ -6,7 +6,7 @@ import pytest
 
 from asset2sim.tasks.synthesize import physics
 from asset2sim.tasks.synthesize.context import build_context
-from asset2sim.tasks.synthesize.estimate import CLOSED_HOLD_FRACTIONS
+from asset2sim.tasks.synthesize.joint_dynamics import CLOSED_HOLD_FRACTIONS
 from asset2sim.tasks.synthesize.offline import OfflineEstimator
 from tests.conftest import SHARED
 
@@ -19,15 +19,15 @@ def test_a_lever_that_falls_open_from_its_closed_end_is_held_closed_by_its_frict
     friction holds the largest of those loads (x ``HOLD_SAFETY``), so a lever
     closed by a hand stays closed (the probes' close test); with only the
     requested state's load held it fell back open."""
-    with build_context(SHARED / "102703", "A toilet with its lever fully open.", category="Toilet") as ctx:
-        est = OfflineEstimator().estimate(ctx)
+    with build_context(SHARED / "102703", "A toilet with its lever fully open.", category="Toilet") as (ctx, kin):
+        est = OfflineEstimator().estimate(ctx, kin)
         ov = est.overlay
         cs = ctx.closed["joint_0"]
         state = {j.name: ctx.closed[j.name].q_closed for j in ctx.asset.movable_joints()}
         loads = []
         for f in CLOSED_HOLD_FRACTIONS + (1.0,):
             st = {**state, "joint_0": cs.position(f)}
-            ld = physics.joint_loads(ctx.session, ctx.asset, ov.links, st, ov.scale, {"joint_0": ctx.subtrees["joint_0"]},
+            ld = physics.joint_loads(kin, ctx.asset, ov.links, st, ov.scale, {"joint_0": ctx.subtrees["joint_0"]},
                                      root_rotation=ctx.root_rotation)["joint_0"]
             loads.append(ld.gravity_load * cs.direction)
     closed_load, open_load = max(loads[:-1]), loads[-1]

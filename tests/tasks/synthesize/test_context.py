@@ -5,6 +5,8 @@ and that estimators hand back the overlay with the bands as one result."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -40,11 +42,11 @@ def _check_context(ctx: EstimationContext) -> None:
 @needs_shared
 @pytest.mark.parametrize("asset_id, category, prompt", [("103275", "Stapler", STAPLER_PROMPT), ("9912", "Laptop", LAPTOP_PROMPT)])
 def test_context_of_real_assets(asset_id, category, prompt):
-    with build_context(SHARED / asset_id, prompt, category=category) as ctx:
+    with build_context(SHARED / asset_id, prompt, category=category) as (ctx, kin):
         _check_context(ctx)
         assert ctx.category == category and ctx.asset.asset_id == asset_id
         assert ctx.request.text == prompt
-        result = backends.get_estimator("offline").estimate(ctx)
+        result = backends.get_estimator("offline").estimate(ctx, kin)
     assert isinstance(result, estimator.Estimate)
     assert set(result.bands) == {j.name for j in ctx.asset.movable_joints()}
     assert set(result.bands.values()) - {"closed"}, "the request opens a part"
@@ -55,12 +57,12 @@ def test_context_of_real_assets(asset_id, category, prompt):
 @needs_shared
 def test_given_asset_and_geometry_are_reused_and_give_the_same_context():
     src = SHARED / "103275"
-    with build_context(src, STAPLER_PROMPT, category="Stapler") as by_path:
+    with build_context(src, STAPLER_PROMPT, category="Stapler") as (by_path, kin):
         pass
     asset = extract.extract_asset(src, category="Stapler")
     cache = analyze.MeshCache()
     geometry = analyze.analyze_asset(asset, cache=cache)
-    with build_context(asset, STAPLER_PROMPT, category="Stapler", geometry=geometry, cache=cache, settings={"seed": 3}) as given:
+    with build_context(asset, STAPLER_PROMPT, category="Stapler", geometry=geometry, cache=cache, settings={"seed": 3}) as (given, kin):
         assert given.asset is asset and given.geometry is geometry
         assert given.settings == {"seed": 3}
     assert {n: c.q_closed for n, c in given.closed.items()} == {n: c.q_closed for n, c in by_path.closed.items()}
@@ -75,10 +77,10 @@ def test_given_asset_and_geometry_are_reused_and_give_the_same_context():
 def test_demo_cabinet_context_finds_the_closed_drawers_and_orders_them_top_down(tmp_path):
     entry = next(e for e in demo_assets.DEMO_OBJECTS if e.asset_id == "cabinet_2drawer")
     src = demo_assets.build_two_drawer_cabinet(tmp_path / entry.asset_id)
-    with build_context(src, entry.prompt, category=entry.category) as ctx:
+    with build_context(src, entry.prompt, category=entry.category) as (ctx, kin):
         _check_context(ctx)
-        result = backends.get_estimator("offline").estimate(ctx)
-        bands, _ = estimate.requested_bands(ctx)
+        result = backends.get_estimator("offline").estimate(ctx, kin)
+        bands, _ = estimate.requested_bands(ctx, kin)
     for name, q in entry.closed_positions.items():
         assert ctx.closed[name].q_closed == pytest.approx(q, abs=1e-3)
     # joint_0 moves the top drawer, joint_1 the bottom one: "first ... closed, second slightly open"
@@ -90,14 +92,15 @@ def test_demo_cabinet_context_finds_the_closed_drawers_and_orders_them_top_down(
 def test_kinematic_session_is_closed_after_the_block_and_on_errors(tmp_path):
     entry = next(e for e in demo_assets.DEMO_OBJECTS if e.asset_id == "box_lid")
     src = demo_assets.build_box_with_lid(tmp_path / entry.asset_id)
-    with build_context(src, entry.prompt) as ctx:
-        session = ctx.session
+    with build_context(src, entry.prompt) as (ctx, kin):
+        session = kin
         session.set_joint_positions(ctx.closed_state())  # usable inside
+    assert not any(getattr(ctx, f.name) is kin for f in dataclasses.fields(ctx))  # the context holds values only
     with pytest.raises(Exception):
         session.set_joint_positions(ctx.closed_state())
     with pytest.raises(RuntimeError, match="inside the block"):
-        with build_context(src, entry.prompt) as ctx2:
-            failing = ctx2.session
+        with build_context(src, entry.prompt) as (ctx2, kin2):
+            failing = kin2
             raise RuntimeError("inside the block")
     with pytest.raises(Exception):
         failing.set_joint_positions(ctx2.closed_state())

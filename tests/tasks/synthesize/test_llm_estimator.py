@@ -159,22 +159,22 @@ def _ctx(plate: Path, prompt: str = PROMPT):
 def test_mass_comes_from_geometry_and_material_not_the_models_number(plate):
     from asset2sim.schemas.model_reply import ModelReply
 
-    with _ctx(plate) as ctx:
-        content = fake.valid_reply_content(le.describe(ctx))
+    with _ctx(plate) as (ctx, kin):
+        content = fake.valid_reply_content(le.describe(ctx, kin))
         s = content["scale"]["value"]
         geo = {}
         for lr in content["links"]:
             mat = physics.MaterialChoice(name="ABS", density=lr["density"], shell=lr["shell"], wall_thickness=lr["wall_thickness"])
             geo[lr["link"]] = physics.link_physics(ctx.geometry[lr["link"]], s, mat).mass
             lr["mass"]["value"] = geo[lr["link"]] * 2.0  # the model's own number: 2x off, within the agreement band
-        ov = le.overlay_from_reply(ctx, ModelReply.model_validate(content)).overlay
+        ov = le.overlay_from_reply(ctx, kin, ModelReply.model_validate(content)).overlay
         for ln, m in geo.items():
             assert ov.links[ln].mass == pytest.approx(m, rel=1e-9)
             assert inertia_problems(ov.links[ln].inertia.matrix()) is None
         # a model estimate 100x off: the geometry is pulled to within 3x of it, no further
         for lr in content["links"]:
             lr["mass"]["value"] = geo[lr["link"]] * 100.0
-        ov2 = le.overlay_from_reply(ctx, ModelReply.model_validate(content)).overlay
+        ov2 = le.overlay_from_reply(ctx, kin, ModelReply.model_validate(content)).overlay
         assert ov2.total_mass() == pytest.approx(sum(geo.values()) * 100.0 / le.MASS_AGREEMENT, rel=1e-9)
         assert "every link scaled" in ov2.notes.mass_arithmetic
 
@@ -182,14 +182,14 @@ def test_mass_comes_from_geometry_and_material_not_the_models_number(plate):
 def test_dynamics_come_from_physics_with_the_models_choices(plate):
     from asset2sim.schemas.model_reply import ModelReply
 
-    with _ctx(plate) as ctx:
-        content = fake.valid_reply_content(le.describe(ctx))
+    with _ctx(plate) as (ctx, kin):
+        content = fake.valid_reply_content(le.describe(ctx, kin))
         (j,) = content["joints"]
         j["damping"]["value"] = 999.0  # the model's number is not used by the asset2sim method
         low = dict(j, damping_level="low")
         high = dict(j, damping_level="high", spring=True)
-        ov_low = le.overlay_from_reply(ctx, ModelReply.model_validate({**content, "joints": [low]})).overlay
-        ov_high = le.overlay_from_reply(ctx, ModelReply.model_validate({**content, "joints": [high]})).overlay
+        ov_low = le.overlay_from_reply(ctx, kin, ModelReply.model_validate({**content, "joints": [low]})).overlay
+        ov_high = le.overlay_from_reply(ctx, kin, ModelReply.model_validate({**content, "joints": [high]})).overlay
         d_low, d_high = ov_low.joints["hinge"], ov_high.joints["hinge"]
         assert d_low.damping != 999.0 and "physics" in d_low.source
         # c = 2 zeta sqrt(I k): the ratio of damping ratios shows through (spring raises k further)
@@ -368,9 +368,9 @@ def test_direct_baseline_is_one_call_applied_as_is(server, plate, tmp_path):
     from asset2sim.tasks.assemble import write
 
     server.default = fake.valid_reply(lambda d: d["joints"][0]["damping"].update(value=7.5))
-    with _ctx(plate) as ctx:
+    with _ctx(plate) as (ctx, kin):
         client = le.make_client("openai", "m", server.url)
-        ov = le.direct_overlay(ctx, client)
+        ov = le.direct_overlay(ctx, kin, client)
         write.write_output(ctx.asset, ov, tmp_path / "direct", ov.initial_joint_positions)  # what make_direct does
     assert (tmp_path / "direct" / "mobility.urdf").is_file()
     assert server.n_chat == 1 and ov.estimator.name == "direct" and ov.estimator.queries == 1
@@ -397,9 +397,9 @@ def test_ivw_baseline_is_25_calls_fused_by_inverse_variance(server, plate, tmp_p
 
     st: dict = {}
     server.default = _varying(st)
-    with _ctx(plate) as ctx:
+    with _ctx(plate) as (ctx, kin):
         client = le.make_client("openai", "m", server.url)
-        ov = le.ivw_overlay(ctx, client)
+        ov = le.ivw_overlay(ctx, kin, client)
         write.write_output(ctx.asset, ov, tmp_path / "ivw", ov.initial_joint_positions)
     assert server.n_chat == 25 and ov.estimator.queries == 25 and ov.estimator.name == "ivw"
     per_view = [r.image_urls() for r in server.requests]
@@ -413,13 +413,13 @@ def test_ivw_baseline_is_25_calls_fused_by_inverse_variance(server, plate, tmp_p
 
 def test_ivw_skips_unusable_replies_and_fails_when_none(server, plate):
     server.push(fake.text_reply("prose"), fake.status(400))
-    with _ctx(plate) as ctx:
+    with _ctx(plate) as (ctx, kin):
         client = le.make_client("openai", "m", server.url)
-        ov = le.ivw_overlay(ctx, client, n_views=1, n_calls=3)
+        ov = le.ivw_overlay(ctx, kin, client, n_views=1, n_calls=3)
         assert "1 usable replies of 3 calls" in " ".join(ov.notes.other)
         server.push(*[fake.text_reply("prose")] * 2)
         with pytest.raises(ReplyError, match="no usable reply"):
-            le.ivw_overlay(ctx, client, n_views=2, n_calls=1)
+            le.ivw_overlay(ctx, kin, client, n_views=2, n_calls=1)
 
 
 def test_second_estimate_of_the_same_asset_reuses_the_reply(server, plate, monkeypatch):
@@ -428,17 +428,17 @@ def test_second_estimate_of_the_same_asset_reuses_the_reply(server, plate, monke
 
     monkeypatch.setenv("ASSET2SIM_LLM_CACHE_DIR", "off")  # the memo, not the disk cache
     est = backends.get_estimator("openai", model="m", base_url=server.url)
-    with _ctx(plate) as ctx:
-        ea = est.estimate(ctx)
+    with _ctx(plate) as (ctx, kin):
+        ea = est.estimate(ctx, kin)
         ctx = replace(ctx, root_rotation=np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]]))  # lying on its side
-        eb = est.estimate(ctx)
+        eb = est.estimate(ctx, kin)
     a, b = ea.overlay, eb.overlay
     assert eb.bands == ea.bands and set(ea.bands) == {"hinge"}
     assert server.n_chat == 1
     assert a.estimator.queries == b.estimator.queries == 1
     assert b.links["plate"].mass == a.links["plate"].mass
-    with _ctx(plate, "A box with its lid fully open.") as ctx2:
-        est.estimate(ctx2)
+    with _ctx(plate, "A box with its lid fully open.") as (ctx2, kin2):
+        est.estimate(ctx2, kin2)
     assert server.n_chat == 2
 
 

@@ -80,7 +80,7 @@ def test_config_overrides_keep_the_rest() -> None:
 def test_proposal_messages_summarise_the_stalled_search(tmp_path) -> None:
     plate = write_hinged_plate(tmp_path / "plate")
     schema = reply_json_schema(JointProposalReply)
-    with build_context(plate, "a box with its lid slightly open") as ctx:
+    with build_context(plate, "a box with its lid slightly open") as (ctx, kin):
         msgs = llm_prompt.proposal_messages(
             ctx,
             {"hinge": 0.1234567891, "other": 0.0},

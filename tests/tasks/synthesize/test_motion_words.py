@@ -50,8 +50,8 @@ def microwave(tmp_path_factory):
 
 
 def _door(folder, prompt: str):
-    with build_context(folder, prompt) as ctx:
-        return OfflineEstimator().estimate(ctx).overlay.joints["joint_0"]
+    with build_context(folder, prompt) as (ctx, kin):
+        return OfflineEstimator().estimate(ctx, kin).overlay.joints["joint_0"]
 
 
 @pytest.mark.parametrize("words, changes", [
@@ -99,8 +99,8 @@ def test_swings_freely_is_echoed_kept_and_its_conflict_named(microwave, tmp_path
 def test_the_guard_undoes_a_step_against_a_word_and_keeps_the_rest(microwave):
     """``word_guard.keep``: a proposal that raises a free door's damping is set back (a note says so); one that lowers
     it passes; a joint without a word is left as proposed."""
-    with build_context(microwave, "A microwave with its door halfway open; the door swings freely.") as ctx:
-        overlay = OfflineEstimator().estimate(ctx).overlay
+    with build_context(microwave, "A microwave with its door halfway open; the door swings freely.") as (ctx, kin):
+        overlay = OfflineEstimator().estimate(ctx, kin).overlay
         guards = word_guard.guards(ctx, overlay)
     assert {(g.parameter, g.way) for g in guards} == {("friction", "max"), ("damping", "max")}
     door = overlay.joints["joint_0"]

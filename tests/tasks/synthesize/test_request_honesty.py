@@ -44,11 +44,11 @@ UNKNOWN_PARTS = [
 @needs_shared
 @pytest.mark.parametrize("asset_id,category,word,prompt", UNKNOWN_PARTS, ids=[f"{a}-{w}" for a, _, w, _ in UNKNOWN_PARTS])
 def test_a_part_word_the_object_lacks_moves_no_other_part(asset_id, category, word, prompt):
-    with build_context(SHARED / asset_id, prompt, category=category) as ctx:
+    with build_context(SHARED / asset_id, prompt, category=category) as (ctx, kin):
         assert ctx.category == category and not named_parts.joints_named(ctx, word), "the object must lack the part"
         assert all(ln.semantic_label for ln in ctx.asset.links if ln.name in {j.child for j in ctx.asset.movable_joints()})
         assert any(js.label == word for js in ctx.request.joint_states), "the parser must read the word as a part"
-        res = request_apply.resolve_states(ctx, 1.0)
+        res = request_apply.resolve_states(ctx, kin, 1.0)
     assert set(res.bands.values()) == {"closed"} and not res.addressed and not res.targets
     assert any(f"'{word}'" in w and "not applied" in w for w in res.warnings), res.warnings
 
@@ -95,8 +95,8 @@ def test_the_category_main_part_a_dataset_labels_otherwise_still_takes_the_reque
     task part is its door: "door slightly open" goes to that part, warned. A
     trash can's door ranks below its lid, so the lids never stand in for it
     (test above)."""
-    with build_context(SHARED / "12085", "a dishwasher with its door slightly open", category="Dishwasher") as ctx:
+    with build_context(SHARED / "12085", "a dishwasher with its door slightly open", category="Dishwasher") as (ctx, kin):
         assert not named_parts.joints_named(ctx, "door")
-        res = request_apply.resolve_states(ctx, 1.0)
+        res = request_apply.resolve_states(ctx, kin, 1.0)
     assert res.bands == {"joint_1": "slightly_open"}
     assert any("stand in for a Dishwasher's door" in w for w in res.warnings), res.warnings

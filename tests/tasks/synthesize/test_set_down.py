@@ -12,9 +12,9 @@ from asset2sim.engines.registry import open_session
 from asset2sim.schemas.overlay import Inertia, LinkPhysics
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.refine import refine_asset
-from asset2sim.tasks.synthesize import estimate, physics, set_down
+from asset2sim.tasks.synthesize import joint_dynamics, physics, set_down
 from asset2sim.tasks.synthesize.context import build_context
-from asset2sim.tasks.synthesize.estimate import _on_stop
+from asset2sim.tasks.synthesize.joint_dynamics import _on_stop
 from asset2sim.tasks.synthesize.offline import OfflineEstimator
 from asset2sim.tasks.ingest.extract import extract_asset
 from tests.conftest import SHARED
@@ -97,13 +97,13 @@ def test_the_slides_table_runs_from_the_smoothest_and_says_where_each_range_come
     assert all(sp.note for sp in slides.values() if sp.estimate)
     # a drawer of 5 kg: the smoothest kind that carries what holding needs; beyond every kind, the stiffest at its top
     w = 5.0 * physics.G
-    assert estimate.slide_for(1.0, w).kind == "roller"
-    assert estimate.slide_for(0.3 * w, w).kind == "wood_runners"
-    s = estimate.slide_for(0.2 * w, w)
+    assert joint_dynamics.slide_for(1.0, w).kind == "roller"
+    assert joint_dynamics.slide_for(0.3 * w, w).kind == "wood_runners"
+    s = joint_dynamics.slide_for(0.2 * w, w)
     assert s.kind == "wood_runners" and s.friction == pytest.approx(0.25 * w) and "holding asked" in s.note  # raised into its range
-    s = estimate.slide_for(2.0 * w, w)
+    s = joint_dynamics.slide_for(2.0 * w, w)
     assert s.kind == "wood_runners" and s.friction == pytest.approx(0.62 * w)
-    s = estimate.slide_for(0.3 * w, w, "ball_bearing")
+    s = joint_dynamics.slide_for(0.3 * w, w, "ball_bearing")
     assert s.kind == "ball_bearing" and s.friction == pytest.approx(0.01 * w) and "as asked" in s.note
 
 
@@ -144,11 +144,11 @@ def test_an_open_lid_is_held_through_the_set_down_from_the_first_guess(tmp_path,
 def test_a_mounted_object_is_not_set_down():
     """The same open lid on a box the request fixes in place: the root is never dropped or leaned, so its
     friction only holds its weight."""
-    with build_context(BOX, BOX_REQUEST, category="Box") as free:
-        loose = OfflineEstimator().estimate(free).overlay.joints["joint_0"]
-    with build_context(BOX, BOX_REQUEST + " Mounted on a wall.", category="Box") as mounted:
+    with build_context(BOX, BOX_REQUEST, category="Box") as (free, kin):
+        loose = OfflineEstimator().estimate(free, kin).overlay.joints["joint_0"]
+    with build_context(BOX, BOX_REQUEST + " Mounted on a wall.", category="Box") as (mounted, kin2):
         assert mounted.mounting is not None and mounted.mounting.fixed
-        fixed = OfflineEstimator().estimate(mounted).overlay.joints["joint_0"]
+        fixed = OfflineEstimator().estimate(mounted, kin2).overlay.joints["joint_0"]
     assert "set-down impact" in loose.source and "set-down" not in fixed.source
     assert fixed.friction < loose.friction
 
@@ -158,12 +158,12 @@ def test_a_lid_its_weight_presses_onto_its_open_stop_is_held_by_the_stop():
     """Box 47645's lid fully open leans back past upright onto its stop: the drop and the lean press it there, so
     its friction only holds its weight (before, the set-down terms made a hand push 16.3 N of 22.2 N to close it,
     where 4.2 N had held it through robust rest)."""
-    with build_context(BOX, "A box, fully open.", category="Box") as ctx:
-        est = OfflineEstimator().estimate(ctx)
+    with build_context(BOX, "A box, fully open.", category="Box") as (ctx, kin):
+        est = OfflineEstimator().estimate(ctx, kin)
         lid = est.overlay.joints["joint_0"]
         cs = ctx.closed["joint_0"]
         state = {**{j.name: ctx.closed[j.name].q_closed for j in ctx.asset.movable_joints()}, "joint_0": cs.position(1.0)}
-        load = physics.joint_loads(ctx.session, ctx.asset, est.overlay.links, state, est.overlay.scale,
+        load = physics.joint_loads(kin, ctx.asset, est.overlay.links, state, est.overlay.scale,
                                    {"joint_0": ctx.subtrees["joint_0"]}, root_rotation=ctx.root_rotation)["joint_0"]
     assert load.gravity_load * cs.direction > 0  # its weight opens it further: onto the stop
     assert "set-down" not in lid.source
@@ -178,11 +178,11 @@ def test_a_shut_part_is_held_through_the_set_down_by_its_hinge(tmp_path, monkeyp
     """Microwave 7119 with its door shut: no file format carries a catch, so its hinge holds twice the lean's load
     from the first guess and the first post-check passes robust rest. Without the set-down terms a 5 deg lean swings
     the shut door open and the post-check escalates."""
-    with build_context(MICROWAVE, "A microwave.", category="Microwave") as ctx:
-        est = OfflineEstimator().estimate(ctx)
+    with build_context(MICROWAVE, "A microwave.", category="Microwave") as (ctx, kin):
+        est = OfflineEstimator().estimate(ctx, kin)
         door = est.overlay.joints["joint_0"]
         state = {j.name: ctx.closed[j.name].q_closed for j in ctx.asset.movable_joints()}
-        load = physics.joint_loads(ctx.session, ctx.asset, est.overlay.links, state, est.overlay.scale,
+        load = physics.joint_loads(kin, ctx.asset, est.overlay.links, state, est.overlay.scale,
                                    {"joint_0": ctx.subtrees["joint_0"]}, root_rotation=ctx.root_rotation)["joint_0"]
     assert "catch" not in door.source and "catch_force" not in door.model_dump()
     assert door.friction >= set_down.LEAN_SAFETY * set_down.lean_load(load) * 0.999
