@@ -1,9 +1,13 @@
 """Newton engine (NVIDIA Warp, on the CPU, solver Kamino) under the SPEC's
 conventions, built from the URDF reading every engine shares
-(:mod:`asset2sim.engines.loading`; ``docs/design/simulators.md``). Only the
-queries the rest-stability and oscillation tests need are answered; the others
-raise :class:`~asset2sim.engines.base.EngineUnsupported`. newton and warp (an
-optional extra) are imported when a session opens or a USD is read back.
+(:mod:`asset2sim.engines.loading`; ``docs/design/simulators.md``). The
+queries the rest-stability, oscillation and breakaway checks need are answered
+(joint efforts through ``Control.joint_f``, state snapshots); drives, link
+distances, external forces and root velocities raise
+:class:`~asset2sim.engines.base.EngineUnsupported`. Kamino holds the URDF's
+Coulomb joint friction as a bounded constraint row per DOF (``joint_friction``,
+N*m or N; Tsounis et al. 2025, arXiv:2504.19771). newton and warp (an optional
+extra) are imported when a session opens or a USD is read back.
 """
 
 from __future__ import annotations
@@ -152,6 +156,9 @@ class NewtonSession(SessionDefaults):
         self.model.joint_q.assign(q)
         self.state0, self.state1 = self.model.state(), self.model.state()
         self.control = self.model.control()
+        self._effort = np.zeros(self.model.joint_dof_count, dtype=np.float32)  # N*m or N per DOF, the next step's
+        self._applied = False
+        self._states: dict[int, tuple[dict[str, np.ndarray], np.ndarray, bool]] = {}
         self._nt.eval_fk(self.model, self.model.joint_q, self.model.joint_qd, self.state0)
 
     def _build_solver(self) -> None:
@@ -297,9 +304,41 @@ class NewtonSession(SessionDefaults):
         return max(0.0, -low) if np.isfinite(low) else 0.0
 
     # ----------------------------------------------------------------- dynamics
+    def apply_joint_effort(self, joint: str, effort: float) -> None:
+        """Generalized force (N*m or N) on a movable joint for the next step only: Newton's ``Control.joint_f``
+        at the joint's DOF, which Kamino adds to the joint's dynamics as ``tau_j`` (KeyError: not a movable joint).
+        Efforts on one joint before a step add up, as in the other engines."""
+        self._effort[self._dadr[joint]] += float(effort)
+        self._applied = True
+
+    def save_state(self) -> int:
+        """Snapshot every array of the current ``newton.State``: joint and body coordinates and velocities, and the
+        arrays Kamino keeps on the state between steps (previous joint coordinates, the joint constraints'
+        multipliers that warm-start the next solve, the total body wrenches); the pending joint efforts too."""
+        handle = max(self._states, default=0) + 1
+        self._states[handle] = ({k: v.numpy().copy() for k, v in _state_arrays(self.state0, self._wp).items()},
+                                self._effort.copy(), self._applied)
+        return handle
+
+    def restore_state(self, handle: int) -> None:
+        """Return to a snapshot of :meth:`save_state` (KeyError: an unknown or discarded handle)."""
+        arrays, effort, applied = self._states[handle]
+        current = _state_arrays(self.state0, self._wp)
+        for k, v in arrays.items():
+            if k in current and current[k].numpy().shape == v.shape:  # (n, 7) of a (n,) transform array
+                current[k].assign(v)
+        self._effort[:] = effort
+        self._applied = applied
+
+    def discard_state(self, handle: int) -> None:
+        self._states.pop(handle, None)
+
     def step(self, n: int = 1) -> None:
+        """Advance ``n`` steps of :attr:`dt` s; efforts of :meth:`apply_joint_effort` act on the first only."""
         spend(n)  # the refine's one budget of steps (asset2sim.engines.step_budget)
         for _ in range(int(n)):
+            if self._applied:
+                self.control.joint_f.assign(self._effort)
             self.state0.clear_forces()
             self._pipeline.collide(self.state0, self.contacts)
             n_contacts = int(self.contacts.rigid_contact_count.numpy()[0])
@@ -310,6 +349,10 @@ class NewtonSession(SessionDefaults):
                 self._pipeline.collide(self.state0, self.contacts)
             self.solver.step(self.state0, self.state1, self.control, self.contacts, self.dt)
             self.state0, self.state1 = self.state1, self.state0
+            if self._applied:  # efforts act for one step
+                self._effort[:] = 0.0
+                self.control.joint_f.zero_()
+                self._applied = False
 
     def held_physics(self) -> HeldPhysics:
         dofs = {n: (self._qadr[n], self._dadr[n]) for n in self._qadr}
@@ -326,8 +369,7 @@ def _unsupported(query: str):
     return method
 
 
-for _query in ("apply_joint_effort", "drive_joint", "release_joint", "link_distances", "apply_link_force", "set_root_velocity",
-               "save_state", "restore_state", "discard_state"):
+for _query in ("drive_joint", "release_joint", "link_distances", "apply_link_force", "set_root_velocity"):
     setattr(NewtonSession, _query, _unsupported(_query))
 
 #: Smallest rigid-contact capacity of the stepping pipeline and solver (Kamino's CPU cost grows with the
@@ -341,6 +383,12 @@ def _capacity_for(n_contacts: int) -> int:
     """Headroom x ``n_contacts``, rounded up to a power of two, at least :data:`CONTACT_CAPACITY_MIN`."""
     need = max(CONTACT_CAPACITY_MIN, CONTACT_CAPACITY_HEADROOM * int(n_contacts))
     return 1 << (need - 1).bit_length()
+
+
+def _state_arrays(state, wp) -> dict:
+    """Name -> warp array of every array a ``newton.State`` holds, the attributes a solver adds to it included
+    (Kamino: ``joint_q_prev``, ``joint_lambdas``, ``joint_lambdas_f``, ...)."""
+    return {k: v for k, v in vars(state).items() if isinstance(v, wp.array)}
 
 
 def _apply(pose: np.ndarray, pts: np.ndarray) -> np.ndarray:

@@ -92,7 +92,7 @@ def _session_metrics(source: SimSource, engine: str, options: SessionOptions) ->
 def engine_breakaway(source: SimSource, engine: str, options: SessionOptions) -> dict:
     """Every joint with friction pushed in ``engine`` (:mod:`asset2sim.tasks.check.breakaway`: root fixed, gravity off,
     the options' springs and state): :func:`~asset2sim.tasks.check.breakaway.breakaway_summary`, ``measured`` False
-    with the reason where the engine cannot push a joint or save its state (Newton) or does not load the asset."""
+    with the reason where the engine cannot push a joint or save its state or does not load the asset."""
     joints = source.model().movable_joints
     frictions = {j.name: float(j.friction) for j in joints}
     dampings = {j.name: float(j.damping) for j in joints}

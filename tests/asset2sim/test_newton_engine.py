@@ -1,5 +1,6 @@
 """The Newton engine (CPU): it holds what the URDF and overlay say, agrees with
-PyBullet on frames and masses, and runs the SPEC's rest and oscillation tests."""
+PyBullet on frames and masses, runs the SPEC's rest and oscillation tests, and
+pushes a joint: a joint declared with friction breaks away at it."""
 
 from __future__ import annotations
 
@@ -10,7 +11,9 @@ from asset2sim.engines.base import EngineUnsupported, SessionOptions, Spring
 from asset2sim.engines.registry import known_engines, open_session
 from tests.contract_asset import write_contract_asset
 from asset2sim.engines.loading import read_urdf
-from asset2sim.tasks.check.parity import evaluate_engines, parity_table
+from asset2sim.tasks.check import breakaway
+from asset2sim.tasks.check.parity import engine_breakaway, evaluate_engines, parity_table
+from asset2sim.engines.source import UrdfFile
 
 pytest.importorskip("newton")
 pytest.importorskip("warp")
@@ -59,7 +62,7 @@ def test_newton_holds_the_files_values_and_pybullets_frames(tmp_path):
             np.testing.assert_allclose(p1, p0, atol=1e-5)
             np.testing.assert_allclose(r1, r0, atol=1e-5)
         with pytest.raises(EngineUnsupported):
-            nt.save_state()
+            nt.drive_joint("lid_hinge", 0.1, 1.0)
     finally:
         nt.close()
         ref.close()
@@ -115,3 +118,91 @@ def test_contact_capacity_follows_the_contacts_and_never_drops_one(tmp_path, mon
         assert end > start
     np.testing.assert_allclose(pos, runs["large"][3], atol=1e-6)
     assert q == pytest.approx(runs["large"][4], abs=1e-6)
+
+
+def _one_hinge(folder, friction: float, damping: float = 0.0):
+    """A generated one-joint asset: a 0.2 x 0.2 x 0.05 m base (2 kg) and a 0.2 x 0.2 x 0.01 m lid (0.4 kg, COM 0.1 m
+    from the hinge, I about the hinge 5.35e-3 kg*m^2) on a revolute hinge along y, limits 0 to 2 rad,
+    ``friction`` N*m and ``damping`` N*m*s/rad; the URDF's path."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "mobility.urdf"
+    path.write_text(f"""<?xml version="1.0"?>
+<robot name="one_hinge">
+  <link name="base">
+    <inertial><origin xyz="0 0 0.025"/><mass value="2.0"/>
+      <inertia ixx="0.0070833" iyy="0.0070833" izz="0.0133333" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0 0.025"/><geometry><box size="0.2 0.2 0.05"/></geometry></collision>
+  </link>
+  <link name="lid">
+    <inertial><origin xyz="0.1 0 0.005"/><mass value="0.4"/>
+      <inertia ixx="0.0013367" iyy="0.0013367" izz="0.0026667" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0.1 0 0.005"/><geometry><box size="0.2 0.2 0.01"/></geometry></collision>
+  </link>
+  <joint name="hinge" type="revolute">
+    <parent link="base"/><child link="lid"/><origin xyz="-0.1 0 0.06" rpy="0 0 0"/><axis xyz="0 -1 0"/>
+    <limit lower="0" upper="2.0" effort="10" velocity="5"/>
+    <dynamics damping="{damping!r}" friction="{friction!r}"/>
+  </joint>
+</robot>
+""")
+    return path
+
+
+_PUSHED = SessionOptions(initial_state={"hinge": 0.5}, fixed_base=True, gravity=False, ground=False)
+
+
+def test_a_joint_with_friction_breaks_away_at_its_friction(tmp_path):
+    """A hinge declared with 0.3 N*m of friction (and 0.01 N*m*s/rad of damping), pushed alone by the ramp from 0.5 to
+    1.5 times its friction (root fixed, gravity off): Kamino's joint-friction row holds it until the push reaches
+    the friction, and it breaks away within 20 % of it; the state is restored afterwards."""
+    urdf = _one_hinge(tmp_path / "a", friction=0.3, damping=0.01)
+    got = engine_breakaway(UrdfFile(urdf), "newton", SessionOptions(initial_state={"hinge": 0.5}))
+    assert got["measured"], got["reason"]
+    r = got["joints"]["hinge"]
+    assert r["direction"] == 1 and r["passed"] and 0.8 <= r["ratio"] <= 1.2, r
+    with open_session("newton", urdf, _PUSHED) as s:
+        r = breakaway.joint_breakaway(s, "hinge", 0.3, 0.01)
+        assert r.passed, r
+        assert s.joint_positions()["hinge"] == pytest.approx(0.5, abs=1e-6)  # restored
+        assert s.joint_velocities()["hinge"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_the_friction_is_what_holds_the_joint(tmp_path):
+    """The same hinge with no friction in the file moves under the ramp's first push (0.5 x 0.3 N*m): what held it
+    above was the declared friction, not the solver. And an effort acts for one step only: after one step pushed by
+    0.15 N*m on I = 5.35e-3 kg*m^2 the lid turns at 0.15 / 5.35e-3 x dt = 0.12 rad/s (dt = 1/240 s), and keeps that speed
+    unpushed (no friction, no damping, gravity off)."""
+    urdf = _one_hinge(tmp_path / "b", friction=0.0)
+    with open_session("newton", urdf, _PUSHED) as s:
+        r = breakaway.joint_breakaway(s, "hinge", 0.3)
+        assert r.ratio == pytest.approx(breakaway.RAMP_FROM, abs=0.02), r
+        s.apply_joint_effort("hinge", 0.15)
+        s.step(1)
+        _, v1 = s.joint_state("hinge")
+        s.step(2)
+        _, v3 = s.joint_state("hinge")
+    inertia = 0.0013367 + 0.4 * (0.1 ** 2 + 0.005 ** 2)  # kg*m^2 about the hinge (parallel axes)
+    want = 0.15 / inertia * (1.0 / 240.0)
+    assert v1 == pytest.approx(want, rel=0.1)
+    assert v3 == pytest.approx(v1, rel=1e-3)
+
+
+def test_a_restored_state_steps_as_the_saved_one(tmp_path):
+    """save_state / restore_state: 30 steps pushed from a snapshot, restored, then 30 unpushed steps give the same
+    joint position as 30 unpushed steps from the snapshot in a fresh session (the friction rows' warm start and
+    Kamino's previous-coordinates arrays are part of the snapshot)."""
+    urdf = _one_hinge(tmp_path / "c", friction=0.3, damping=0.01)
+    with open_session("newton", urdf, _PUSHED) as fresh:
+        fresh.step(30)
+        want = fresh.joint_positions()["hinge"]
+    with open_session("newton", urdf, _PUSHED) as s:
+        h = s.save_state()
+        for _ in range(30):
+            s.apply_joint_effort("hinge", 1.0)
+            s.step(1)
+        assert s.joint_positions()["hinge"] > 0.55  # pushed well past its friction
+        s.restore_state(h)
+        s.discard_state(h)
+        assert s.joint_positions()["hinge"] == pytest.approx(0.5, abs=1e-7)
+        s.step(30)
+        assert s.joint_positions()["hinge"] == pytest.approx(want, abs=1e-6)
