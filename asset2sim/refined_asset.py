@@ -17,7 +17,6 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
-from asset2sim import urdf
 from asset2sim.engines.base import SessionOptions, Spring, session_root_options
 from asset2sim.engines.loading import CollisionPiece, collision_pieces, overlay_springs, read_urdf
 from asset2sim.output_folder import OVERLAY_NAME, REPORT_NAME, STATE_NAME, TIMINGS_NAME, URDF_NAME, OutputError, read_record
@@ -74,12 +73,6 @@ class RefinedAsset:
         """The URDF read strictly, limited to the joint types the engines build
         (:func:`asset2sim.engines.loading.read_urdf`). Raises UrdfError: naming the file, line and part."""
         return read_urdf(self.urdf_path)
-
-    @cached_property
-    def lenient_model(self) -> UrdfModel:
-        """The URDF read leniently (any asset's file, as the evaluation and the learning environments read it).
-        Raises UrdfError: unreadable XML."""
-        return urdf.read_urdf(self.urdf_path, mode="lenient")
 
     @cached_property
     def collision(self) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
@@ -146,10 +139,10 @@ class RefinedAsset:
         ``initial_state`` (rad or m; else 0); {} without an overlay. Raises ValueError: an invalid overlay."""
         return {} if self.overlay is None else overlay_springs(self.overlay, initial_state)
 
-    @cached_property
+    @property
     def springs(self) -> dict[str, Spring]:
-        """:meth:`springs_about` the folder's :attr:`initial_state` (read only when there is an overlay)."""
-        return {} if self.overlay is None else overlay_springs(self.overlay, self.initial_state)
+        """:meth:`springs_about` the folder's :attr:`initial_state`."""
+        return self.springs_about(self.initial_state)
 
     def session_options(self, conventions: SimConventions | None = None,
                         initial_state: dict[str, float] | None = None) -> SessionOptions:

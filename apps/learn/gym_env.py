@@ -22,8 +22,7 @@ from asset2sim.tasks.check.support import SupportWatch
 from asset2sim.tasks.check.task_execution import TaskConfig
 from asset2sim.apps.learn.task import LearnTask
 from asset2sim.engines.base import session_root_options
-from asset2sim.refined_asset import RefinedAsset
-from asset2sim.urdf import UrdfModel
+from asset2sim.urdf import UrdfModel, read_urdf
 
 OBS_DIM = 13  # observation length (module docstring)
 ACTION_DIM = 4  # action length: gripper velocity (3,), press flag
@@ -100,7 +99,7 @@ class TaskEnv(gym.Env):
         with quiet_stdout():
             s = open_session(self.config.engine, t.urdf, opts)
         self._session = s
-        self._model = RefinedAsset(t.urdf.parent, t.urdf.name).lenient_model
+        self._model = read_urdf(t.urdf, mode="lenient")
         self._settle(s)
         self._snapshot = s.save_state()
 
