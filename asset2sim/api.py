@@ -24,7 +24,6 @@ from typing import Any
 from pydantic import ValidationError
 
 from asset2sim.engines.base import SessionOptions, SimSession
-from asset2sim.engines.loading import read_urdf
 from asset2sim.engines.passive_joints import DeclaredPhysics
 from asset2sim.engines.registry import known_engines, open_session
 from asset2sim.input_files import load_yaml
@@ -33,7 +32,7 @@ from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.request import RequestOverrides
 from asset2sim.formats import FORMATS
-from asset2sim.engines.loading import output_session_options
+from asset2sim.refined_asset import RefinedAsset
 from asset2sim.apps.audit.audit import AuditError, AuditResult, audit_asset
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.ingest.validate_input import Finding, ValidationPolicy, validate_asset
@@ -306,23 +305,24 @@ def make_media(out_dir: str | Path, *, reference: str | Path | None = None, clip
     return _make_media(out_dir, reference=reference, clips=clips, force=force)
 
 
-def _output_folder(out_dir: str | Path) -> Path:
-    out = Path(out_dir)
-    if not (out / URDF_NAME).is_file():
-        raise ValueError(f"{out}: has no {URDF_NAME} (not an asset2sim output folder)")
-    return out
+def _output_folder(out_dir: str | Path) -> RefinedAsset:
+    """The output folder ``out_dir``. Raises ValueError: it has no ``mobility.urdf``."""
+    asset = RefinedAsset(Path(out_dir))
+    if not asset.urdf_path.is_file():
+        raise ValueError(f"{asset.folder}: has no {URDF_NAME} (not an asset2sim output folder)")
+    return asset
 
 
 def verified_options(out_dir: str | Path, conventions: SimConventions | None = None) -> SessionOptions:
     """The :class:`~asset2sim.engines.base.SessionOptions` asset2sim's checks open an output folder with
-    (:func:`asset2sim.formats.mjcf.export.output_session_options`). Raises ValueError when it is not
+    (:meth:`asset2sim.refined_asset.RefinedAsset.session_options`). Raises ValueError when it is not
     an output folder or its ``overlay.json`` is invalid."""
-    return output_session_options(_output_folder(out_dir), conventions=conventions)
+    return _output_folder(out_dir).session_options(conventions)
 
 
 def _load(engine: str, out_dir: str | Path, **attach) -> SimSession:
-    out = _output_folder(out_dir)
-    return open_session(engine, out / URDF_NAME, verified_options(out), **attach)
+    asset = _output_folder(out_dir)
+    return open_session(engine, asset.urdf_path, asset.session_options(), **attach)
 
 
 def load_pybullet(out_dir: str | Path, client: int | None = None, *, ground: bool = True) -> SimSession:
@@ -399,8 +399,8 @@ def declare_physics(articulation: Any, out_dir: str | Path) -> DeclaredPhysics:
     Raises:
         ValueError: not an output folder, or the articulation's joints are not the file's.
     """
-    out = _output_folder(out_dir)
-    return DeclaredPhysics(articulation, read_urdf(out / URDF_NAME), verified_options(out).springs)
+    asset = _output_folder(out_dir)
+    return DeclaredPhysics(articulation, asset.model, asset.session_options().springs)
 
 
 def load_mujoco(out_dir: str | Path) -> SimSession:

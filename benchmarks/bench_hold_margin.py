@@ -42,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     from asset2sim.tasks.check import robust_rest
     from asset2sim.engines.source import SimObject, UrdfFile
     from asset2sim.tasks.interpret.operating_forces import operating_range
-    from asset2sim.engines.loading import springs_from_overlay
+    from asset2sim.refined_asset import springs_from_overlay
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("asset", type=Path)

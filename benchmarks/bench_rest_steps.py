@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT))
     from asset2sim.engines.source import SimObject, UrdfFile
-    from asset2sim.engines.loading import springs_from_overlay
+    from asset2sim.refined_asset import springs_from_overlay
     from asset2sim.tasks.check import metrics, robust_rest
 
     cfg = robust_rest.RobustRestConfig()

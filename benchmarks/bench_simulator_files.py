@@ -110,7 +110,8 @@ def _file_checks(f: Path) -> tuple[dict, dict]:
     link; returns (row, initial state)."""
     import mujoco
 
-    from asset2sim.engines.loading import collision_pieces, read_initial_state, read_urdf
+    from asset2sim.engines.loading import collision_pieces, read_urdf
+    from asset2sim.refined_asset import read_initial_state
     from asset2sim.engines.mjcf import mujoco_messages
 
     urdf_path = f / "mobility.urdf"
@@ -183,8 +184,8 @@ def _mjcf_checks(f: Path, state: dict, row: dict, convert: bool) -> bool:
     with ``convert`` or without one). False when the conversion failed (``row["mjcf"]`` says why)."""
     from asset2sim.engines.base import SessionOptions
     from asset2sim.engines.mjcf import urdf_to_mjcf
-    from asset2sim.engines.loading import springs_from_overlay
-    from asset2sim.engines.loading import read_root
+    from asset2sim.refined_asset import springs_from_overlay
+    from asset2sim.refined_asset import read_root
 
     urdf_path = f / "mobility.urdf"
     xml = f / "mjcf" / "mobility.xml"

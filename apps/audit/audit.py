@@ -17,9 +17,8 @@ from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.audit import AuditReport, SimulationChecks
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay, RootMount
-from asset2sim.engines.loading import read_initial_state
+from asset2sim.refined_asset import read_initial_state, springs_from_overlay
 from asset2sim.tasks.assemble import write
-from asset2sim.engines.loading import springs_from_overlay
 from asset2sim.apps.audit import patch, report_md
 from asset2sim.tasks.check.plausibility import Judgement, judge
 from asset2sim.tasks.geometry.closed_state import closed_tuples

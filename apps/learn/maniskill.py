@@ -94,17 +94,17 @@ except ImportError as exc:  # ManiSkill, torch or SAPIEN not installed: one line
     raise MissingExtra(f"asset2sim.apps.learn.maniskill: {install_hint(exc)}", name=getattr(exc, "name", None)) from exc
 
 from asset2sim.engines.base import Spring
-from asset2sim.engines.loading import CollisionPiece, collision_pieces, read_urdf
+from asset2sim.engines.loading import CollisionPiece
 from asset2sim.engines.passive_joints import FRICTION_DRIVE_DAMPING, PassiveJoints
 from asset2sim.engines.physx_engine import (attach_collision_shapes, configure_articulation,
                                             fill_articulation_builder)
 from asset2sim.output_folder import REPORT_NAME, URDF_NAME
+from asset2sim.refined_asset import RefinedAsset
 from asset2sim.tasks.check.contact_points import contact_point_rule
 from asset2sim.tasks.check.task_spec import VERBS
 from asset2sim.apps.learn.task import prepare_task, targets_for
 from asset2sim.tasks.ingest.manifest import read_manifest_rows
 from asset2sim.tasks.ingest.partnet_mobility import read_category, write_reference
-from asset2sim.tasks.publish.contract import read_report_json
 from asset2sim.urdf import UrdfModel
 
 #: The environments' ids and the action each asks for (``task``: each object's own task, its verb's direction).
@@ -257,14 +257,14 @@ def task_object(folder: str | Path, action: str, task: str | None = None, *, def
     """
     if action not in ENV_IDS:
         raise ValueError(f"action must be one of {sorted(ENV_IDS)}, got {action!r}")
-    folder = Path(folder)
-    urdf = folder / URDF_NAME
+    asset = RefinedAsset(Path(folder))
+    folder, urdf = asset.folder, asset.urdf_path
     if not urdf.is_file():
         raise ManiSkillAssetError("MS_NOT_AN_ASSET", f"{folder}: has no {URDF_NAME}")
     report = None
     if (folder / REPORT_NAME).is_file():
         try:
-            report = read_report_json(folder)
+            report = asset.report
         except (OSError, ValueError) as exc:
             raise ManiSkillAssetError("MS_NOT_AN_ASSET", f"{folder / REPORT_NAME}: unreadable ({exc})") from exc
     recorded = task or (report.task if report else None) or default_task
@@ -282,8 +282,7 @@ def task_object(folder: str | Path, action: str, task: str | None = None, *, def
     if action != "task" and lt.action != action:
         raise ManiSkillAssetError("MS_NO_TASK_JOINT", f"{folder}: task {text!r} does not {action} a joint ({lt.rule})")
     action = lt.action
-    model = read_urdf(urdf)
-    pieces, notes = collision_pieces(model)
+    model, (pieces, notes) = asset.model, asset.collision
     q_closed, direction, open_range = lt.closed.q_closed, lt.closed.direction, lt.closed.open_range
     if report is not None and lt.joint in report.closed_positions:  # the closed end refine measured and wrote
         j = model.joint(lt.joint)

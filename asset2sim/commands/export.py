@@ -14,13 +14,12 @@ from pathlib import Path
 
 from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError, os_failure, output_failure, parse_engines
 from asset2sim.engines.registry import available_engines
-from asset2sim.engines.loading import read_initial_state
+from asset2sim.refined_asset import RefinedAsset
 from asset2sim.engines.mjcf import MjcfError
 from asset2sim.tasks.check.parity import evaluate_engines, parity_table
 from asset2sim import output_folder
 from asset2sim.formats.mjcf.export import ExportError, check_mjcf, export_mjcf
 from asset2sim.formats.usd.export import UsdExportError, check_usd, export_usd
-from asset2sim.engines.loading import read_root
 from asset2sim.urdf import UrdfError
 from asset2sim.output_folder import URDF_NAME
 
@@ -84,8 +83,8 @@ def run(args: argparse.Namespace) -> int:
 
     with _export_errors(out, "mjcf", (MjcfError, ExportError)):
         with output_folder.adopting(out):  # the MJCF files become the output folder's own
-            path = export_mjcf(out, visuals=not args.no_visuals, check=False)
-        check = check_mjcf(path, out / URDF_NAME, read_initial_state(out), fixed_base=read_root(out).fixed)
+            path = export_mjcf(asset := RefinedAsset(out), visuals=not args.no_visuals, check=False)
+        check = check_mjcf(path, asset.urdf_path, asset.initial_state, fixed_base=asset.root.fixed)
     print(f"wrote       {path}")
     print(f"total mass  {check.total_mass:.6g} kg (URDF {check.urdf_mass:.6g} kg)")
     print(f"inertials   largest COM difference {check.max_com_error:.1e} m, tensor {check.max_inertia_error:.1e} kg*m^2")
@@ -117,8 +116,8 @@ def _run_usd(args: argparse.Namespace, out: Path) -> int:
     try:
         with _export_errors(out, "usd", (UsdExportError,)):
             with output_folder.adopting(out):
-                build = export_usd(out, visuals=not args.no_visuals, check=False)
-            check = check_usd(build.path, out)
+                build = export_usd(asset := RefinedAsset(out), visuals=not args.no_visuals, check=False)
+            check = check_usd(build.path, asset)
     except ImportError as exc:  # usd-core (pxr) not installed
         raise CommandError(INVALID_REQUEST, "ENGINE_UNAVAILABLE", None, f"{exc}") from exc
     print(f"wrote       {build.path}")

@@ -1,24 +1,21 @@
 """What every engine loads from a URDF, so that all see the same inertials,
-frames and collision hulls (PyBullet's: one per OBJ group), and Bullet's
-defaults the other engines copy; and what an output folder declares for the
-session that opens it (initial state, root, springs). Pure numpy; units SI, radians.
+frames and collision hulls (PyBullet's: one per OBJ group), Bullet's
+defaults the other engines copy, and an overlay's joint springs. An output
+folder is read by :class:`asset2sim.refined_asset.RefinedAsset`. Pure numpy; units SI, radians.
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from asset2sim import file_memo, urdf
-from asset2sim.engines.base import SessionOptions, Spring, session_root_options
+from asset2sim.engines.base import Spring
 from asset2sim.mesh_io import MeshReadError, hull_point_sets
 from asset2sim.urdf import SIMULATED_JOINT_TYPES, UrdfError, UrdfModel
-from asset2sim.output_folder import OVERLAY_NAME, STATE_NAME, OutputError
-from asset2sim.schemas.config import SimConventions
-from asset2sim.schemas.overlay import Overlay, RootMount
+from asset2sim.schemas.overlay import Overlay
 
 #: What PyBullet 3.2.7 gives a link without ``<inertial>``: 1 kg, identity
 #: inertia (kg*m^2) at the link origin (Bullet's ``UrdfParser``).
@@ -174,71 +171,9 @@ def collision_pieces(model: UrdfModel, flat_thickness: float = FLAT_HULL_THICKNE
     return out, notes
 
 
-def read_initial_state(folder: Path) -> dict[str, float]:
-    """``initial_state.json`` of an output folder: joint -> rad or m ({} when
-    absent; ValueError: not the contract's shape)."""
-    p = Path(folder) / STATE_NAME
-    if not p.is_file():
-        return {}
-    data = json.loads(p.read_text())
-    q = data.get("initial_joint_positions") if isinstance(data, dict) else None
-    if not isinstance(q, dict):
-        raise ValueError(f"{p}: expected {{'initial_joint_positions': {{joint: value}}}}")
-    return {str(k): float(v) for k, v in q.items()}
-
-
-#: Key of the root declaration in ``initial_state.json``.
-ROOT_KEY = "root"
-
-
-def read_root(folder: Path | str) -> RootMount:
-    """The root declaration of an output folder's ``initial_state.json``
-    (:func:`asset2sim.tasks.assemble.write.root_record`);
-    free-standing when the file or its ``"root"`` entry is absent.
-
-    Raises:
-        OutputError: ``"root"`` is present but not the shape
-            ``root_record`` writes (names the file).
-    """
-    p = Path(folder) / STATE_NAME
-    if not p.is_file():
-        return RootMount()
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise OutputError(f"{p}: not readable JSON: {exc}") from exc
-    rec = data.get(ROOT_KEY) if isinstance(data, dict) else None
-    if rec is None:
-        return RootMount()
-    if not isinstance(rec, dict) or not isinstance(rec.get("fixed"), bool):
-        raise OutputError(f"{p}: \"{ROOT_KEY}\" must be an object with a boolean \"fixed\"")
-    fixed = rec["fixed"]
-    kind = rec.get("mounting") or ("wall-mounted" if fixed else "free-standing")
-    try:
-        return RootMount(kind=kind, fixed=fixed, source=str(rec.get("source") or f"declared in {STATE_NAME}"))
-    except ValueError as exc:
-        raise OutputError(f"{p}: \"{ROOT_KEY}\": {exc}") from exc
-
-
-def springs_from_overlay(out_dir: Path, initial_state: dict[str, float] | None = None) -> dict[str, Spring]:
-    """Joint springs of an output folder's ``overlay.json``: every joint with stiffness > 0 (N*m/rad or N/m),
-    about ``spring_reference`` (rad or m), else about the initial state (else 0). {} without an overlay.
-
-    Raises:
-        ValueError: ``overlay.json`` is not a valid overlay.
-    """
-    p = Path(out_dir) / OVERLAY_NAME
-    if not p.is_file():
-        return {}
-    try:
-        overlay = Overlay.model_validate(json.loads(p.read_text()))
-    except Exception as exc:  # pydantic.ValidationError, JSONDecodeError
-        raise ValueError(f"{p}: not a valid overlay: {exc}") from exc
-    return overlay_springs(overlay, initial_state)
-
-
 def overlay_springs(overlay: Overlay, initial_state: dict[str, float] | None = None) -> dict[str, Spring]:
-    """Joint springs of ``overlay`` as :func:`springs_from_overlay` reads them from a folder."""
+    """Joint springs of ``overlay``: every joint with stiffness > 0 (N*m/rad or N/m), about ``spring_reference``
+    (rad or m), else about ``initial_state`` (else 0)."""
     state = initial_state or {}
     return {name: joint_spring(dyn, state.get(name, 0.0)) for name, dyn in overlay.joints.items()
             if dyn.stiffness > 0}
@@ -250,18 +185,3 @@ def joint_spring(dyn, q_initial: float = 0.0) -> Spring:
     get = dyn.get if isinstance(dyn, dict) else (lambda k, default=None: getattr(dyn, k, default))
     ref = get("spring_reference")
     return Spring(stiffness=float(get("stiffness", 0.0) or 0.0), reference=float(q_initial if ref is None else ref))
-
-
-def output_session_options(out_dir: Path | str, initial_state: dict[str, float] | None = None,
-                           conventions: SimConventions | None = None) -> SessionOptions:
-    """The :class:`~asset2sim.engines.base.SessionOptions` every check and the public loaders open an output
-    folder with: ``initial_state`` (rad or m; default ``initial_state.json``), the springs of
-    ``overlay.json``, ``conventions`` (default :class:`SimConventions`) and the root as the folder declares it.
-
-    Raises:
-        ValueError: ``initial_state.json`` or ``overlay.json`` is invalid.
-    """
-    out_dir = Path(out_dir)
-    state = read_initial_state(out_dir) if initial_state is None else dict(initial_state)
-    return SessionOptions(initial_state=state, springs=springs_from_overlay(out_dir, state), conventions=conventions or SimConventions(),
-                          **session_root_options(read_root(out_dir).fixed))

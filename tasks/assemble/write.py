@@ -23,7 +23,7 @@ from asset2sim.tasks.assemble import collision_geometry
 from asset2sim.tasks.assemble.copied_meshes import copy_meshes, taken_paths
 from asset2sim.tasks.synthesize.validate_overlay import max_density
 from asset2sim.output_folder import OVERLAY_NAME, STATE_NAME, URDF_NAME, OutputError, check_location
-from asset2sim.engines.loading import ROOT_KEY, read_root  # noqa: F401  read_root: the measuring stages read it from here
+from asset2sim.refined_asset import ROOT_KEY, read_root  # noqa: F401  read_root: the measuring stages read it from here
 
 
 @dataclass

@@ -4,7 +4,6 @@ leniently) and the PartNet-Mobility sidecars through their adapter.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,6 +12,7 @@ from typing import Any
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.engines.source import SimSource
+from asset2sim.refined_asset import RefinedAsset
 from asset2sim.urdf import UrdfError
 
 #: Joint types that move (the others are fixed).
@@ -87,18 +87,17 @@ def parse_urdf(source: SimSource) -> tuple[dict[str, LinkInfo], dict[str, JointI
     return links, joints
 
 
-def read_json(path: Path) -> dict[str, Any] | None:
-    """A JSON sidecar: None when the file is absent or holds no object.
+def read_json(asset: RefinedAsset, name: str) -> dict[str, Any] | None:
+    """The JSON sidecar ``name`` of the asset's folder (:meth:`~asset2sim.refined_asset.RefinedAsset.record`, read
+    once): None when the file is absent or holds no object.
 
     Raises:
         EvaluationError: the file exists but is not readable JSON.
     """
-    if not path.is_file():
-        return None
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = asset.record(name)
     except (ValueError, OSError) as exc:
-        raise EvaluationError(f"{path}: unreadable JSON: {exc}") from exc
+        raise EvaluationError(f"{asset.folder / name}: unreadable JSON: {exc}") from exc
     return data if isinstance(data, dict) else None
 
 

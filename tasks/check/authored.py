@@ -17,8 +17,8 @@ import numpy as np
 
 from asset2sim.engines.base import EngineUnavailable, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, principal_moments
 from asset2sim.engines.registry import open_session, read_held_physics
-from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, read_initial_state, read_urdf
-from asset2sim.engines.loading import output_session_options, springs_from_overlay
+from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, read_urdf
+from asset2sim.refined_asset import output_session_options, read_initial_state, springs_from_overlay
 from asset2sim.output_folder import URDF_NAME
 
 #: The exported files each engine's own importer reads back: (engine, format, path in the output folder).

@@ -15,7 +15,7 @@ from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import SPEC_METRICS, unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import breakaway, metrics
-from asset2sim.engines.loading import output_session_options
+from asset2sim.refined_asset import output_session_options
 
 from asset2sim.engines.base import EngineUnavailable, EngineUnsupported, SessionOptions
 from asset2sim.engines.source import SimSource, UrdfFile

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from asset2sim.engines.loading import read_urdf
 from asset2sim.output_folder import URDF_NAME
-from asset2sim.engines.loading import read_root
+from asset2sim.refined_asset import read_root
 
 MJCF_PATH = "mjcf/mobility.xml"
 #: Wall-clock limit for one run of a checker's command line (s).

@@ -36,7 +36,7 @@ from asset2sim.tasks.check.task_spec import TaskSpec
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.interpret.part_priors import task_relevant_joints
 from asset2sim.output_folder import OVERLAY_NAME, REPORT_NAME, STATE_NAME, OutputError
-from asset2sim.engines.loading import read_root
+from asset2sim.refined_asset import RefinedAsset
 
 
 @dataclass
@@ -156,11 +156,10 @@ def build_context(asset: Path | str, *, reference: Path | str | None = None, pro
     folder = urdf.parent
     links, joints = parse_urdf(UrdfFile(urdf))
     notes: list[str] = []
-    overlay = read_json(folder / OVERLAY_NAME)
-    report = read_json(folder / REPORT_NAME)
-    baseline = read_json(folder / "baseline.json")
-    initial, src = _initial_state(read_json(folder / STATE_NAME), joints)
-    root_fixed = _root_fixed(folder, notes)
+    files = RefinedAsset(folder, urdf.name)
+    overlay, report, baseline = (read_json(files, name) for name in (OVERLAY_NAME, REPORT_NAME, "baseline.json"))
+    initial, src = _initial_state(read_json(files, STATE_NAME), joints)
+    root_fixed = _root_fixed(files, notes)
     ref_dir = Path(reference).resolve() if reference is not None else None
     if ref_dir is not None and not ref_dir.is_dir():
         raise EvaluationError(f"reference {ref_dir}: no such folder")
@@ -197,10 +196,10 @@ def _initial_state(st: dict[str, Any] | None, joints: dict[str, JointInfo]) -> t
     return initial, STATE_NAME if st is not None else "none: 0 clipped to the limits"
 
 
-def _root_fixed(folder: Path, notes: list[str]) -> bool:
+def _root_fixed(files: RefinedAsset, notes: list[str]) -> bool:
     """Whether ``initial_state.json`` declares the root fixed (noted); EvaluationError when unreadable."""
     try:
-        root_fixed = read_root(folder).fixed
+        root_fixed = files.root.fixed
     except OutputError as exc:
         raise EvaluationError(str(exc)) from exc
     if root_fixed:

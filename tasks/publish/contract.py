@@ -1,6 +1,6 @@
 """The output contract's bookkeeping: the code and configuration hashes, the
-completion marker (:func:`is_complete`) and the one reader and writer of
-``report.json``. The flow's job records and catalog rows built on them are
+completion marker (:func:`is_complete`) and the writer of ``report.json`` (its
+reader, :func:`read_report_json`, is :class:`asset2sim.refined_asset.RefinedAsset`'s). The flow's job records and catalog rows built on them are
 :mod:`asset2sim.flows.job_records`; ``docs/design/pipeline.md`` explains the skip key.
 """
 
@@ -9,7 +9,6 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
-import math
 import os
 import stat
 import subprocess
@@ -22,9 +21,9 @@ from asset2sim import __version__, atomic, output_folder
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.report import RefineReport
 from asset2sim.input_files import file_kind
-from asset2sim.output_folder import (MARKER_NAME, REPORT_NAME, TIMINGS_NAME, VOLATILE, OwnedFolder,
-                                    read_record)
+from asset2sim.output_folder import MARKER_NAME, REPORT_NAME, VOLATILE, OwnedFolder, read_record
 from asset2sim.output_paths import OutputError, _safe_rel
+from asset2sim.refined_asset import read_report_json  # noqa: F401  the contract's reader, named here too
 
 #: Sub-packages of ``asset2sim`` whose sources make up the code (``package-dir`` in pyproject.toml).
 CODE_PACKAGES = ("asset2sim", "asset2sim.tasks", "asset2sim.schemas", "asset2sim.apps", "asset2sim.flows")
@@ -220,41 +219,3 @@ def write_report_json(out_dir: Path | str, report: RefineReport) -> Path:
         timings["state_seconds"] = data["state"].pop("seconds", 0.0)
     output_folder.merge_timings(out_dir, timings)
     return atomic.write_json(out_dir / REPORT_NAME, data)
-
-
-def non_finite(obj: Any, where: str = "$") -> str | None:
-    """The JSON path (``$.metrics[3].value``) of the first NaN or infinity in ``obj`` (parsed JSON), or None."""
-    stack = [(obj, where)]
-    while stack:
-        value, at = stack.pop()
-        if isinstance(value, float) and not math.isfinite(value):
-            return at
-        if isinstance(value, dict):
-            stack.extend((v, f"{at}.{k}") for k, v in reversed(list(value.items())))
-        elif isinstance(value, list):
-            stack.extend((v, f"{at}[{i}]") for i, v in reversed(list(enumerate(value))))
-    return None
-
-
-def read_report_json(out_dir: Path | str) -> RefineReport:
-    """``out_dir/report.json`` as a :class:`RefineReport`, with the wall times of ``timings.json`` when it is readable
-    (:func:`write_report_json`). Raises OSError (missing, not a regular file, too large) or ValueError (invalid; a
-    NaN or infinity named by its JSON path, :func:`non_finite`)."""
-    out_dir = Path(out_dir)
-    data = read_record(out_dir / REPORT_NAME)
-    if not isinstance(data, dict):
-        raise ValueError(f"{out_dir / REPORT_NAME}: not a JSON object")
-    where = non_finite(data)
-    if where is not None:
-        raise ValueError(f"{out_dir / REPORT_NAME}: {where} is not a finite number (NaN or infinity), which asset2sim "
-                         "never writes")
-    try:
-        timings = read_record(out_dir / TIMINGS_NAME)
-    except (OSError, ValueError):
-        timings = {}
-    if isinstance(timings, dict):
-        if isinstance(timings.get("stage_seconds"), dict) and not data.get("stage_seconds"):
-            data["stage_seconds"] = timings["stage_seconds"]
-        if isinstance(data.get("state"), dict) and "seconds" not in data["state"] and isinstance(timings.get("state_seconds"), (int, float)):
-            data["state"]["seconds"] = timings["state_seconds"]
-    return RefineReport.model_validate(data)

@@ -11,7 +11,8 @@ import pytest
 
 from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.registry import available_engines, open_session
-from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, FLAT_HULL_THICKNESS, collision_pieces, read_initial_state, read_urdf
+from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, FLAT_HULL_THICKNESS, collision_pieces, read_urdf
+from asset2sim.refined_asset import read_initial_state
 from tests.contract_asset import write_contract_asset
 from tests.fake_engine import FakeBehaviour, FakeSession, fake_behaviour
 from asset2sim.urdf import UrdfError

@@ -12,7 +12,7 @@ from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import available_engines, known_engines, open_session
 from asset2sim.engines.source import UrdfFile
 from asset2sim.extras import install_hint
-from asset2sim.engines.loading import output_session_options
+from asset2sim.refined_asset import output_session_options
 from asset2sim.tasks.check import metrics
 from tests.conftest import SHARED
 from tests.contract_asset import write_contract_asset

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asset2sim.engines.loading import read_initial_state, read_urdf
+from asset2sim.engines.loading import read_urdf
+from asset2sim.refined_asset import read_initial_state
 from tests.contract_asset import write_contract_asset
 
 pytestmark = pytest.mark.mujoco
@@ -18,7 +19,7 @@ mujoco = pytest.importorskip("mujoco")
 
 from asset2sim.formats.mjcf.export import ExportError, check_mjcf, export_mjcf
 
-from asset2sim.engines.loading import springs_from_overlay
+from asset2sim.refined_asset import springs_from_overlay
 
 ROOT = Path(__file__).resolve().parents[2]
 

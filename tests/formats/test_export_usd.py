@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from tests.contract_asset import write_contract_asset
-from asset2sim.engines.loading import read_initial_state, read_urdf
+from asset2sim.engines.loading import read_urdf
+from asset2sim.refined_asset import read_initial_state
 from asset2sim.frames import quat_wxyz_matrix
 from asset2sim.schemas.overlay import Inertia
 from asset2sim.formats.mjcf.export import export_mjcf

@@ -94,7 +94,7 @@ def _round_trip(row: dict, out: Path, usd: bool = False) -> None:
     read = read_mjcf_asset(xml)
     urdf = read_urdf(out / "mobility.urdf")
     assert_same_model(read.model, urdf, row["id"])
-    from asset2sim.engines.loading import read_initial_state
+    from asset2sim.refined_asset import read_initial_state
 
     state = read_initial_state(out)  # the export's keyframe read back as the declared initial state
     assert set(read.initial_state) == {j.name for j in urdf.joints if j.type != "fixed"}, row["id"]

@@ -43,9 +43,9 @@ def _prompt(shared: Path, asset_id: str) -> str:
 def test_refined_output_round_trip(asset_id, shared_dataset, tmp_path, refine_once):
     """Links, joints (type, parent, child, origin, axis, limits, damping, friction), springs, masses, COM and
     inertia tensors of the USD export equal mobility.urdf's to 1e-6 relative; geometry sits where the URDF's does."""
-    from asset2sim.engines.loading import read_initial_state
-    from asset2sim.engines.loading import springs_from_overlay
-    from asset2sim.engines.loading import read_root
+    from asset2sim.refined_asset import read_initial_state
+    from asset2sim.refined_asset import springs_from_overlay
+    from asset2sim.refined_asset import read_root
     from asset2sim.formats.usd.export import export_usd
 
     if not (shared_dataset / asset_id / "mobility.urdf").is_file():

@@ -19,9 +19,10 @@ import numpy as np
 
 from asset2sim import atomic, file_names, output_folder
 from asset2sim.extras import import_extra
-from asset2sim.output_folder import MJCF_DIR, STATE_NAME, URDF_NAME
+from asset2sim.output_folder import MJCF_DIR, STATE_NAME
 from asset2sim.engines.base import SessionOptions
-from asset2sim.engines.loading import read_initial_state, read_root, read_urdf, springs_from_overlay
+from asset2sim.engines.loading import read_urdf
+from asset2sim.refined_asset import RefinedAsset
 from asset2sim.engines.mjcf import KEYFRAME, mujoco_messages, urdf_to_mjcf
 from asset2sim.engines.mjcf.base import load_mujoco
 from asset2sim.frames import quat_wxyz_matrix
@@ -114,12 +115,12 @@ def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float],
                      max_com_error=com_err, max_inertia_error=inertia_err)
 
 
-def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> Path:
+def export_mjcf(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: bool = True) -> Path:
     """Write ``out_dir/mjcf/<urdf stem>.xml`` (and its derived meshes) from
     ``out_dir/mobility.urdf``, ``overlay.json`` and ``initial_state.json``.
 
     Args:
-        out_dir: an output folder of the SPEC's contract.
+        out_dir: an output folder of the SPEC's contract (or its :class:`~asset2sim.refined_asset.RefinedAsset`).
         visuals: include the visual meshes (non-colliding, group 2).
         check: load the file as written with MuJoCo and run :func:`check_mjcf` before it replaces the MJCF file
             (the one compile with the visual meshes; a file that fails is not left in ``out_dir``).
@@ -136,13 +137,9 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
     """
     import_extra("mujoco", "the MJCF export")  # the one-line hint naming the extra when it is missing
 
-    out_dir = Path(out_dir)
-    urdf = out_dir / URDF_NAME
-    if not urdf.is_file():
-        raise FileNotFoundError(f"{urdf} does not exist (not an output folder?)")
-    initial = read_initial_state(out_dir)
-    springs = springs_from_overlay(out_dir, initial)
-    fixed = read_root(out_dir).fixed  # mounted: no free joint, the root welded where the file puts it
+    asset = RefinedAsset.existing(out_dir)
+    out_dir, urdf, initial, springs = asset.folder, asset.urdf_path, asset.initial_state, asset.springs
+    fixed = asset.root.fixed  # mounted: no free joint, the root welded where the file puts it
     build = urdf_to_mjcf(urdf, SessionOptions(initial_state=initial, springs=springs, fixed_base=fixed, ground=not fixed),
                          missing_inertial="massless", mesh_root=out_dir, meshdir="..", visuals=visuals, compile_visuals=not check)
     for rel, data in build.derived_meshes.items():

@@ -36,7 +36,6 @@ state.
 from __future__ import annotations
 
 import difflib
-import json
 import math
 import os
 import xml.etree.ElementTree as ET
@@ -46,15 +45,14 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim import atomic, file_names, output_folder, safexml
-from asset2sim.engines.loading import read_initial_state
+from asset2sim.refined_asset import RefinedAsset
 from asset2sim.engines.mjcf.base import FRICTION_SOLIMP, friction_solref, load_mujoco, mujoco_messages
-from asset2sim.output_folder import MJCF_DIR, OVERLAY_NAME, URDF_NAME
+from asset2sim.output_folder import MJCF_DIR, URDF_NAME
 from asset2sim.schemas.overlay import JointDynamics, LinkPhysics, Overlay
 from asset2sim.formats.mjcf import conventions, scene
 from asset2sim.formats.mjcf.conventions import ReadOptions
 from asset2sim.formats.mjcf.files import MjcfSources, OpenedMjcf, compile_mjcf, gather_mjcf, opened_mjcf, staged_sources
 from asset2sim.formats.staging import MJCF_SUFFIXES, ReadAsset, StagingError, copy_named
-from asset2sim.urdf import read_urdf
 
 #: Folder (inside the output's ``mjcf/``) of the file written for the host.
 HOST_DIR = "host"
@@ -133,12 +131,12 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
 def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: OpenedMjcf, unit: str) -> HostExport:
     import mujoco
 
-    overlay = Overlay.model_validate(json.loads((out_dir / OVERLAY_NAME).read_text()))
+    asset = RefinedAsset(out_dir)
+    overlay = asset.required_overlay()
     if not math.isclose(overlay.scale, 1.0, rel_tol=0.0, abs_tol=1e-12):
         raise HostExportError(f"{source}: the object was rescaled (x{overlay.scale:.4g}); its host file keeps the host's sizes, "
                               "so none is written (refine without --size / --scale / size words to keep the size)")
-    model = read_urdf(out_dir / URDF_NAME)
-    state = read_initial_state(out_dir)
+    model, state = asset.model, asset.initial_state
     spec, original = opened.spec, opened.model
     pick = scene.pick_object(original, source, reading.body)
     per_rad = 180.0 / math.pi if unit == "degree" else 1.0

@@ -16,14 +16,13 @@ import numpy as np
 
 from asset2sim import atomic
 from asset2sim.extras import pxr_modules as _pxr
-from asset2sim.engines.loading import (CollisionPiece, collision_pieces, principal_axes, read_initial_state, read_root, read_urdf,
-                                       springs_from_overlay)
+from asset2sim.engines.loading import CollisionPiece, principal_axes
+from asset2sim.refined_asset import RefinedAsset
 from asset2sim.formats.usd.stage import authored
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
 from asset2sim.mesh_io import MeshReadError, convex_hull_mesh, read_mesh
-from asset2sim.schemas.overlay import Overlay
 from asset2sim.urdf import UrdfJoint, UrdfModel
-from asset2sim.output_folder import OVERLAY_NAME, URDF_NAME, USD_DIR
+from asset2sim.output_folder import USD_DIR
 
 #: Relative tolerance of a value read back from the USD (binary32: 6e-8 relative, plus a degree conversion).
 FLOAT_RTOL = 1e-6
@@ -76,12 +75,12 @@ class UsdBuild:
     notes: list[str] = field(default_factory=list)
 
 
-def export_usd(out_dir: Path, *, visuals: bool = True, check: bool = True) -> UsdBuild:
+def export_usd(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: bool = True) -> UsdBuild:
     """Write ``out_dir/usd/<urdf stem>.usd`` from ``mobility.urdf``,
     ``overlay.json`` and ``initial_state.json`` (module docstring).
 
     Args:
-        out_dir: an output folder of the SPEC's contract.
+        out_dir: an output folder of the SPEC's contract (or its :class:`~asset2sim.refined_asset.RefinedAsset`).
         visuals: include the visual meshes.
         check: read the written file back and run :func:`check_usd`.
 
@@ -93,22 +92,16 @@ def export_usd(out_dir: Path, *, visuals: bool = True, check: bool = True) -> Us
         UsdExportError: the written file does not check out.
     """
     _pxr()  # ImportError first, without usd-core
-    out_dir = Path(out_dir)
-    urdf_path = out_dir / URDF_NAME
-    if not urdf_path.is_file():
-        raise FileNotFoundError(f"{urdf_path} does not exist (not an output folder?)")
-    model = read_urdf(urdf_path)
-    initial = read_initial_state(out_dir)
-    springs = springs_from_overlay(out_dir, initial)
-    fixed = read_root(out_dir).fixed
-    pieces, notes = collision_pieces(model)
+    asset = RefinedAsset.existing(out_dir)
+    model, initial, springs, fixed = asset.model, asset.initial_state, asset.springs, asset.root.fixed
+    pieces, notes = asset.collision[0], list(asset.collision[1])  # the cached notes stay as read
     stage, root_path = _new_stage(model)
     link_paths = _write_links(stage, root_path, model, initial, pieces, visuals, notes)
     joint_paths = _write_joints(stage, root_path, model, link_paths, initial, springs, fixed)
-    target = _save(stage, out_dir / USD_DIR / f"{urdf_path.stem}.usd")
+    target = _save(stage, asset.folder / USD_DIR / f"{asset.urdf_path.stem}.usd")
     build = UsdBuild(path=target, links=link_paths, joints=joint_paths, fixed_root=fixed, notes=notes)
     if check:
-        check_usd(target, out_dir)
+        check_usd(target, asset)
     return build
 
 
@@ -481,9 +474,10 @@ class UsdCheck:
     max_rel_error: float
 
 
-def check_usd(path: Path, out_dir: Path) -> UsdCheck:
+def check_usd(path: Path, out_dir: Path | RefinedAsset) -> UsdCheck:
     """Read ``path`` back (:func:`read_usd`) and compare every link's inertial and every movable joint's values with
-    ``mobility.urdf``, ``overlay.json`` and ``initial_state.json``, to :data:`FLOAT_RTOL` relative to the quantity's
+    ``mobility.urdf``, ``overlay.json`` and ``initial_state.json`` of ``out_dir`` (a folder or its
+    :class:`~asset2sim.refined_asset.RefinedAsset`), to :data:`FLOAT_RTOL` relative to the quantity's
     scale on that link or joint (COM: at least 1 mm).
 
     Raises:
@@ -492,11 +486,9 @@ def check_usd(path: Path, out_dir: Path) -> UsdCheck:
             quantity), a link or joint is missing, the articulation root or
             the mounting differs.
     """
-    out_dir = Path(out_dir)
-    model = read_urdf(out_dir / URDF_NAME)
-    initial = read_initial_state(out_dir)
-    springs = springs_from_overlay(out_dir, initial)
-    fixed = read_root(out_dir).fixed
+    asset = RefinedAsset.of(out_dir)
+    out_dir = asset.folder
+    model, initial, springs, fixed = asset.model, asset.initial_state, asset.springs, asset.root.fixed
     usd = read_usd(path)
     worst = 0.0
 
@@ -529,12 +521,8 @@ def check_usd(path: Path, out_dir: Path) -> UsdCheck:
         if got.mass is None or got.com is None or got.inertia is None:
             raise UsdExportError(f"{path}: link {name!r} lacks mass, COM or inertia in the USD")
         cmp_inertial(f"link {name!r}", got, link.inertial.mass, link.inertial.com(), link.inertial.inertia_in_link_axes())
-    overlay_path = out_dir / OVERLAY_NAME
-    if overlay_path.is_file():  # the overlay's own numbers, not only the URDF that carries them
-        try:
-            overlay = Overlay.model_validate_json(overlay_path.read_text())
-        except ValueError as exc:
-            raise ValueError(f"{overlay_path}: not a valid overlay: {exc}") from exc
+    overlay = asset.overlay
+    if overlay is not None:  # the overlay's own numbers, not only the URDF that carries them
         for name, lp in overlay.links.items():
             got = usd.links.get(name)
             if got is None or got.mass is None or got.com is None or got.inertia is None:

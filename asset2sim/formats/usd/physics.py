@@ -42,16 +42,15 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim import atomic, file_names, output_folder
-from asset2sim.engines.loading import read_initial_state
+from asset2sim.refined_asset import RefinedAsset
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, rigid_inverse
 from asset2sim.extras import pxr_modules
-from asset2sim.output_folder import OVERLAY_NAME, URDF_NAME, USD_DIR
-from asset2sim.schemas.overlay import JointDynamics, LinkPhysics, Overlay
+from asset2sim.output_folder import URDF_NAME, USD_DIR
+from asset2sim.schemas.overlay import JointDynamics, LinkPhysics
 from asset2sim.formats.staging import ReadAsset
 from asset2sim.formats.usd import reader
 from asset2sim.formats.usd.reader import DEG, FRICTION_ATTRS
 from asset2sim.formats.usd.stage import StageReading, open_stage
-from asset2sim.urdf import read_urdf
 
 __all__ = ["HOST_DIR", "HostUsdError", "HostUsdExport", "UsdEdit", "applied_schemas", "set_body_mass", "set_joint_dynamics", "write_host_usd"]
 
@@ -248,12 +247,12 @@ def write_host_usd(out_dir: Path | str, source: Path | str) -> HostUsdExport:
 
 def _write_host_usd(out_dir: Path, source: Path) -> HostUsdExport:
     _, Sdf, _, Usd, _, UsdPhysics = pxr_modules()
-    overlay = Overlay.model_validate_json((out_dir / OVERLAY_NAME).read_text())
+    asset = RefinedAsset(out_dir)
+    overlay = asset.required_overlay()
     if not math.isclose(overlay.scale, 1.0, rel_tol=0.0, abs_tol=1e-12):
         raise HostUsdError(f"{source}: the object was rescaled (x{overlay.scale:.4g}); its host stage keeps the host's sizes, "
                            "so none is written (refine without --size / --scale / size words to keep the size)")
-    model = read_urdf(out_dir / URDF_NAME)
-    state = read_initial_state(out_dir)
+    model, state = asset.model, asset.initial_state
     read = reader.read_usd_asset(source)
     ctx = open_stage(source)
     stage = ctx.stage

@@ -11,7 +11,7 @@ import pytest
 from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.registry import available_engines, open_session
 from asset2sim.engines.source import UrdfFile
-from asset2sim.engines.loading import output_session_options
+from asset2sim.refined_asset import output_session_options
 from asset2sim.tasks.check import breakaway
 from asset2sim.tasks.check.parity import engine_breakaway, evaluate_engines, parity_table
 from asset2sim.tasks.evaluation.report_html import engines_section

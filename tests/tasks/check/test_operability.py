@@ -15,7 +15,7 @@ import pytest
 from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.engines.base import Spring
 from asset2sim.schemas.report import MetricResult
-from asset2sim.engines.loading import springs_from_overlay
+from asset2sim.refined_asset import springs_from_overlay
 from asset2sim.tasks.check import operability, robust_rest
 from asset2sim.tasks.tune import operating
 from asset2sim.tasks.check.verdict import readiness

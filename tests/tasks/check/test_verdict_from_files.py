@@ -15,7 +15,7 @@ import pytest
 from asset2sim.engines.registry import available_engines
 from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.schemas.overlay import LEGACY_CATCH_KEYS
-from asset2sim.engines.loading import output_session_options
+from asset2sim.refined_asset import output_session_options
 from asset2sim.tasks.check import metrics, robust_rest
 from asset2sim.tasks.check.postcheck import measure_rest_test
 from tests.conftest import SHARED
