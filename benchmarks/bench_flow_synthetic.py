@@ -279,7 +279,7 @@ def _own_cache(args, work: Path, name: str) -> None:
 
 
 def _run(args, work: Path) -> int:
-    from asset2sim.flows.catalog import load_catalog
+    from asset2sim.flows.catalog_config import load_catalog
 
     if args.manifest is not None:
         with open(args.manifest, newline="") as fh:

@@ -29,7 +29,8 @@ from prefect.settings import PREFECT_API_URL
 
 from asset2sim.flows import catalog_compare, catalog_finish, queries, tracking
 from asset2sim import flow_progress
-from asset2sim.flows.catalog import ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog_config import load_catalog
 from asset2sim.flow_progress import ProgressEvent
 from asset2sim.flows import driver_skip, job_order, server, stages
 from asset2sim.flows.forkserver import StageServer, ready_server

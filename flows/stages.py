@@ -17,14 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from asset2sim import __version__, array_cache, atomic, output_folder
-from asset2sim.flows.catalog import (
-    Catalog,
-    CatalogError,
-    ManifestEntry,
-    ResultCatalog,
-    read_manifest_entries,
-    result_key,
-)
+from asset2sim.flows.catalog import ResultCatalog, result_key
+from asset2sim.flows.catalog_config import Catalog, CatalogError, ManifestEntry, read_manifest_entries
 from asset2sim.demo_assets import ensure_demo_dataset
 from asset2sim.flows import store as store_mod
 from asset2sim.flows.forkserver import run_forked, start_soon

@@ -141,7 +141,7 @@ def test_dask_host_is_configurable_in_the_catalog(tmp_path, prefect_server):
     local cluster's arguments (an address no test machine should open to
     its network is not opened here: only the arguments are checked)."""
     pytest.importorskip("prefect_dask")
-    from asset2sim.flows.catalog import load_catalog
+    from asset2sim.flows.catalog_config import load_catalog
     from asset2sim.flows.refine_flow import _dask_task_runner
 
     catalog = make_project(tmp_path, ASSETS, catalog_extra={"run": {"dask_host": "10.1.2.3", "dashboard": False}})

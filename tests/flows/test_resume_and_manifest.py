@@ -20,7 +20,8 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.flows.catalog import CatalogError, ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog_config import CatalogError, load_catalog
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.flows.job_records import JOB_RECORD_NAME
