@@ -7,7 +7,7 @@ CPU per task.
     .venv/bin/python benchmarks/bench_orchestration.py [--tasks 100] [--workers 2]
 
 A dataset flow runs one ``refine-metrics`` task per asset and one ``prepare`` task per batch of assets
-(``flows.refine_flow.prepare_batch_size``), so its orchestration costs about (1 + 1 / batch) times the Prefect
+(``flows.subflow.prepare_batch_size``), so its orchestration costs about (1 + 1 / batch) times the Prefect
 figure per asset. Measured on an idle machine; the numbers move with the host's load.
 """
 
