@@ -30,8 +30,9 @@ from asset2sim.flows import driver_skip, stages
 from asset2sim.flows.flow_runtime import dask_task_runner, local_cluster_config, prefect_api_for_run
 from asset2sim.flows.forkserver import StageServer
 from asset2sim.flows.store import join_uri, upload_folder
-from asset2sim.flows.stages import (FLOW_NAME, SUBFLOW_NAME, AssetJob, RegressionFailure,
-                                    code_version, flow_parameters, make_run_id, plan_run)
+from asset2sim.flows.run_plan import flow_parameters, make_run_id, plan_run
+from asset2sim.flows.stages import FLOW_NAME, SUBFLOW_NAME, AssetJob, RegressionFailure
+from asset2sim.tasks.publish.contract import code_version
 from asset2sim.flows.subflow import current_flow_run_id, emit_finished, prepare_batch_size, refine_assets
 from asset2sim.flows.job_records import Prepared, build_manifest_row, build_row
 
@@ -68,7 +69,7 @@ class DriverPlan:
 
 def plan_driver(cat, name: str, *, ids=None, limit=None, force: bool = False, out: str | None = None) -> DriverPlan:
     """Plan a run of dataset ``name`` and decide which assets are finished already (none when ``force``).
-    Raises CatalogError as :func:`asset2sim.flows.stages.plan_run`."""
+    Raises CatalogError as :func:`asset2sim.flows.run_plan.plan_run`."""
     started = datetime.now(timezone.utc)
     run_id = make_run_id(started)
     plan = plan_run(cat, name, run_id, ids=ids, limit=limit, force=force, out_store=out)

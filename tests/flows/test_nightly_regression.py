@@ -11,7 +11,7 @@ import yaml
 
 from asset2sim.flows.catalog import ResultCatalog
 from asset2sim.flows.catalog_config import load_catalog
-from asset2sim.flows.stages import flow_parameters
+from asset2sim.flows.run_plan import flow_parameters
 
 pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
 

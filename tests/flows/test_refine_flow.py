@@ -223,7 +223,7 @@ def test_force_and_subsets_when_planning_a_run(first_run):
     """``--force`` plans without earlier results (everything is redone);
     ``--ids`` / ``--limit`` select assets; unknown ids are refused."""
     from asset2sim.flows.catalog_config import CatalogError
-    from asset2sim.flows.stages import plan_run
+    from asset2sim.flows.run_plan import plan_run
 
     catalog, summary, _ = first_run
     cat = load_catalog(catalog)
