@@ -302,6 +302,7 @@ class ResultCatalog:
         import pyarrow.compute as pc
         import pyarrow.dataset as pads
 
+        # step 1: the schema read and the columns asked for
         runs = None if run is None else ({run} if isinstance(run, str) else set(run))
         # the partition columns, dictionary-encoded while scanning (one value per file)
         part_schema = pa.schema([("dataset", pa.dictionary(pa.int32(), pa.string())), ("run", pa.dictionary(pa.int32(), pa.string()))])
@@ -311,6 +312,7 @@ class ResultCatalog:
             unknown = [c for c in cols if c not in full.names]
             if unknown:
                 raise KeyError(f"no catalog column(s) {unknown}; columns: {list(full.names)}")
+        # step 2: the data files of each partition: read as they are, or compacted rows under row files
         plain: list[str] = []  # files read as they are
         overlaid: list[tuple[Any, dict[str, Any]]] = []  # (compacted, loose) needing the row-file-wins rule
         scanned: list[tuple[str, str]] = []
@@ -324,6 +326,7 @@ class ResultCatalog:
                 plain += [rf.compacted.path] if rf.compacted is not None else [i.path for _, i in sorted(rf.loose.items())]
         out_schema = full if cols is None else pa.schema([full.field(c) for c in cols])
 
+        # step 3: a scanner over the files, partition values from their paths
         names = {"dataset": {d for d, _ in scanned}, "run": {r for _, r in scanned}}
         partitioning = pads.partitioning(part_schema, flavor="hive",
                                          dictionaries={k: pa.array(sorted(v), pa.string()) for k, v in names.items()})
@@ -337,6 +340,7 @@ class ResultCatalog:
                 return dset.head(int(limit), columns=columns, filter=filter)
             return dset.to_table(columns=columns, filter=filter)
 
+        # step 4: read; a row file wins over the compacted row of its asset
         tables = [scan(plain)] if plain else []
         with_ids = None if cols is None else list(dict.fromkeys([*cols, "asset_id"]))
         for compacted, loose in overlaid:
@@ -344,6 +348,7 @@ class ResultCatalog:
             old = scan([compacted.path], with_ids)
             old = old.filter(pc.invert(pc.is_in(old["asset_id"], value_set=pa.array(sorted(loose)))))
             tables += [old if cols is None else old.select(cols), scan([i.path for _, i in sorted(loose.items())])]
+        # step 5: one table, at most ``limit`` rows
         if not tables:
             return out_schema.empty_table()
         table = pa.concat_tables(tables)

@@ -79,6 +79,7 @@ def plan_run(
     Raises:
         CatalogError: a missing or unreadable manifest, an unknown dataset, an id in ``ids`` no row has.
     """
+    # step 1: the manifest's usable rows and bad rows, in file order
     name, ds = cat.dataset(dataset)
     root = cat.dataset_root(name)
     if ds.generate == "demo":
@@ -87,6 +88,7 @@ def plan_run(
     taken = {e.asset_id for e in entries}
     bad = [BadManifestRow(manifest_row_id(err, taken), err) for err in errors]
     ordered: list[ManifestEntry | BadManifestRow] = sorted([*entries, *bad], key=_manifest_line)  # file order
+    # step 2: only the ids asked for, at most ``limit`` rows
     if ids:
         known = {e.asset_id for e in entries} | {b.asset_id for b in bad} | {b.error.id for b in bad if b.error.id}
         unknown = [i for i in ids if i not in known]
@@ -96,6 +98,7 @@ def plan_run(
         ordered = [it for it in ordered if it.asset_id in wanted or (isinstance(it, BadManifestRow) and it.error.id in wanted)]
     if limit is not None:
         ordered = ordered[: max(0, int(limit))]
+    # step 3: what the skip decision reads: earlier results, killed runs' work
     settings = cat.config.run
     config = cat.refine_config().model_dump(mode="json")
     finished = {} if force else ResultCatalog(cat.catalog_root).finished(
@@ -104,6 +107,7 @@ def plan_run(
     unrecorded = {} if force or store else unrecorded_jobs(cat, name, run_id)
     run_out = (store_mod.local_work_root() if store else cat.output_root) / name / run_id
     version = code_version()
+    # step 4: one job per usable row
     jobs = []
     for e in [it for it in ordered if not isinstance(it, BadManifestRow)]:
         ref_dir = str(e.asset_dir) if ds.reference and partnet_mobility.has_reference(e.asset_dir) else None

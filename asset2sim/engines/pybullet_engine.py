@@ -54,12 +54,14 @@ class PyBulletSession(SessionDefaults):
         self.options = options
         self._root_hold: int | None = None  # hold_root's constraint
         conv = options.conventions
+        # step 1: a physics client (taken from the pool, or the caller's)
         self._owns_client = client is None
         if client is None:
             self.cid = pybullet_clients.take(p, options.files_key)
         else:
             self.cid = int(client)
         self.body = None
+        # step 2: time step, gravity, the ground plane; load the URDF without its visual shapes
         try:
             if self._owns_client:
                 p.setTimeStep(conv.timestep, physicsClientId=self.cid)
@@ -75,6 +77,7 @@ class PyBulletSession(SessionDefaults):
         except Exception as exc:
             self._release()
             raise RuntimeError(f"PyBullet could not load {urdf_path}: {exc}") from exc
+        # step 3: the movable joints, their limits and child links; each joint's Coulomb friction as a motor
         self.base_link = p.getBodyInfo(self.body, physicsClientId=self.cid)[0].decode()
         self._link_by_index: dict[int, str] = {-1: self.base_link}
         self._has_collision: dict[int, bool] = {}
@@ -102,6 +105,7 @@ class PyBulletSession(SessionDefaults):
             self._motor(name, 0.0, float(info[7]))  # Coulomb friction
         self.link_names: list[str] = list(self._link_by_index.values())
         self._link_index = {name: idx for idx, name in reversed(list(self._link_by_index.items()))}
+        # step 4: the initial state, the object placed on the ground
         self.set_joint_positions(options.initial_state)
         if options.ground and not options.fixed_base:
             if self.plane is None:  # the caller's floor: a plane only while the exact distances are measured

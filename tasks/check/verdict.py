@@ -187,6 +187,7 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
     for m in metrics:
         if m.name != "robust_rest" or _verdict(m) is not False:
             continue
+        # step 1: per failed trial, the object not at rest, each failing joint's worst drift and the largest topple
         trials = (m.details or {}).get("trials") or {}
         worst: dict[str, tuple[float, float, str]] = {}
         toppled: tuple[float, str] | None = None
@@ -205,6 +206,7 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
                     worst[j] = (drift, tol, name)
             if "toppled" in str(t.get("failure", "")) and (toppled is None or float(t.get("topple") or 0) > toppled[0]):
                 toppled = (float(t.get("topple") or 0.0), name)
+        # step 2: one sentence per joint that moved: swung in a topple, moving at rest too, or carried by its momentum
         for j, (drift, tol, name) in sorted(worst.items()):
             t = trials.get(name) or {}
             unit = (t.get("joint_units") or {}).get(j, "rad")
@@ -224,12 +226,14 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
             out.append(f"joint '{j}' came to rest {amount} when the object {_TRIAL_WORDS.get(name, name)} ({m.engine}); its "
                        "friction and damping stay within what a hand may use on it, and at that the part's momentum carries it "
                        "out of its band. " + _holding_choices(m, metrics, j, unit == "m"))
+        # step 3: the trials the object did not come to rest in
         for name, what in restless.items():
             rest = re.search(r"at rest \(([^)]*)\)", m.threshold or "")
             out.append(f"the object was {what} when it {_TRIAL_WORDS.get(name, name)} ({m.engine}; at rest means "
                        f"{rest.group(1) if rest else 'still'} at the end of the trial): it rocks or slides on its support. A "
                        "wider footprint in this state (a smaller opening of its heavy parts) may settle; --mount fixed "
                        "when it stands fixed in use.")
+        # step 4: the toppling
         if toppled is not None:
             out.append(f"the object toppled ({toppled[0]:.2f} rad) when it {_TRIAL_WORDS.get(toppled[1], toppled[1])} "
                        f"({m.engine}): its centre of mass lies near the edge of its footprint in this state. Ask for a smaller "

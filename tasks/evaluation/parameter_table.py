@@ -29,12 +29,14 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
     rows = [_param("scale", "global", ev.scale, "-", ev.scale_source)]
     if ctx is None:
         return rows
+    # step 1: the joint parameters each check round changed
     ov, rep = ctx.overlay, ctx.report
     escal: dict[tuple[str, str], int] = {}
     for rnd in (rep or {}).get("escalation", []) or []:
         for j, ch in (rnd.get("changes") or {}).items():
             for k in ch:
                 escal[(j, k)] = rnd.get("round", 0)
+    # step 2: masses, inertias and joint dynamics from the overlay (the URDF's value where escalation changed it)
     est = ((ov or {}).get("estimator") or {}).get("name")
     if ov:
         for ln, lp in (ov.get("links") or {}).items():
@@ -61,6 +63,7 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
                     if fv is not None and val is not None and abs(fv - val) > 1e-12:
                         val, src = fv, src + " (URDF value differs from overlay; URDF shown)"
                 rows.append(_param(k, f"joint {jn}", val, _joint_unit(jt, k), src))
+    # step 3: without an overlay, the URDF's values and the engine defaults
     else:
         run = next((r for r in ev._runs.values() if r.masses), None)
         for ln, li in ctx.links.items():
@@ -75,6 +78,7 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
                 rows.append(_param(k, f"joint {jn}", 0.0 if v is None else v, _joint_unit(jd.type, k),
                                    "URDF <dynamics>" if v is not None else "engine default (0)"))
             rows.append(_param("stiffness", f"joint {jn}", 0.0, _joint_unit(jd.type, "stiffness"), "none (URDF has no springs)"))
+    # step 4: the initial joint positions and the limits
     state_src = ev.initial_state_source
     if rep and rep.get("state"):
         state_src = f"refinement ({rep['state'].get('method', '')})"

@@ -321,6 +321,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
     ``command``: the command that wrote it (``refine`` or ``evaluate``), in the title;
     ``clips``: the :class:`~asset2sim.schemas.realism.ClipSet` written beside the report (played in it); ``folder``: where the
     report is written (the URDF is named relative to it when it lies there, :func:`portable_urdf`)."""
+    # step 1: the time step, the badge and the renders (a plot of the vertices when rendering fails)
     ctx = ev._context
     dt = ctx.conventions.timestep if ctx is not None else 1.0 / 240.0
     settle_n = int(round(ctx.conventions.settle_time / dt)) if ctx is not None else 240
@@ -332,6 +333,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         except Exception as exc:  # the report falls back to a plot of the collision vertices
             error = exc
     views_html, views_what = _renders(ev, views, error)
+    # step 2: the header, the object at its initial state, the verdicts and the evidence
     joint_types = {n: j.type for n, j in ctx.joints.items()} if ctx is not None else {}
     state_text = ", ".join(f"{k} = {_joint_state(ev, k, v, joint_types.get(k, 'revolute'))}"
                            for k, v in ev.initial_state.items()) or "none"
@@ -366,6 +368,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         _penetration_details(ev),
         "<h2>Rest test</h2>",
     ]
+    # step 3: the rest test's plots per engine
     for eng, run in ev._runs.items():
         if run.trace is None:
             sections.append(f"<p class='small'>{esc(eng)}: {esc(run.error)}</p>")
@@ -374,6 +377,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         sections.append(svg_tag(plots.plot_root_drift(run.root_series, run.trace, dt, settle_n), f"root drift {eng}"))
         closed = {n: c["q_closed"] for n, c in ev.closed_positions.items()}
         sections.append(svg_tag(plots.plot_joints(run.joint_series, run.trace.joint_types, dt, settle_n, closed), f"joints {eng}"))
+    # step 4: prompt alignment, probes, parameters, notes and what the checks mean
     sections += ["<h2>Prompt alignment</h2>", _prompt_details(ev), "<h2>Passive probes</h2>", _probe_details(ev)]
     pb = ev._runs.get("pybullet")
     if pb is not None and pb.probes:

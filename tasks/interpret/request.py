@@ -381,6 +381,7 @@ class _JointStates:
 
 def _joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = None) -> _JointStates:
     """The joint-state requests of ``low`` (``numeric``: the states in numbers, :func:`rv.state_quantities`)."""
+    # step 1: the state words, the part nouns and the ordinals, left to right
     bands = _state_hits(low, numeric)  # every list here is left to right and not overlapping
     parts = _parts(low, tokens)
     # ordinals without a part noun ("the second slightly open"; "the freezer open": the smallest part)
@@ -391,6 +392,7 @@ def _joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = Non
     part_at = {p.start: p for p in parts}
     ord_starts = [o.start for o in ords]
     ord_ends = [o.end for o in ords]
+    # step 2: what the sentences build
     result: list[JointStateRequest] = []
     used: list[Hit] = []
     last_label: str | None = None
@@ -404,6 +406,7 @@ def _joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = Non
         return JointStateRequest(selector=selector, label=label, ordinal=ordinal, order=order,  # type: ignore[arg-type]
                                  band=band, target=target, phrase=phrase)  # type: ignore[arg-type]
 
+    # step 3: per state word, its subject: a part after or before it, the parts of the last state, "the others", an ordinal, else every part
     for s0, s1 in sentences(low):
         sb = bands[bisect_left(band_starts, s0): bisect_left(band_starts, s1)]
         for i, b in enumerate(sb):
@@ -449,6 +452,7 @@ def _joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = Non
                 result.append(make("label" if last_label is not None else "all", last_label, int(o.value), o.flag or "vertical", b, phrase))  # type: ignore[arg-type]
                 continue
             result.append(make("all", None, None, "vertical", b, b.text))
+    # step 4: one request per target, contradictions warned
     # one request per target: a later phrase overrides an earlier one; a different state is warned
     warnings: list[str] = []
     overridden: list[str] = []
@@ -477,6 +481,7 @@ def parse_request(text: str) -> RequestSpec:
     if not isinstance(text, str):
         raise TypeError(f"request must be a string, got {type(text).__name__}")
     check_request_length(text)
+    # step 1: the text in plain quotes and dashes; the object and the size words
     low = text.lower().replace("\u2019", "'").replace("\u2018", "'").replace("\u2013", "-").replace("\u2014", " ")  # plain quotes, dashes
     mentions = find_category_mentions(low)
     mention_starts = [m.start for m in mentions]
@@ -487,6 +492,7 @@ def parse_request(text: str) -> RequestSpec:
     size = _parse_size(low, mentions, tokens)
     warnings = [f"contradiction: size words {size.phrase!r} and " + ", ".join(repr(h.text) for h in size.against)
                 + f" point opposite ways; '{size.size_class}' (the first direction) is used"] if size.against else []
+    # step 2: states, sizes and volumes in numbers; the joint states
     numbers = rv.state_quantities(low, mention_starts)
     sizes = numbers.sizes
     states = _joint_states(low, tokens, numbers.states)
@@ -502,6 +508,7 @@ def parse_request(text: str) -> RequestSpec:
         sizes = sizes + vols
     if sizes and size.size_class is not None:
         warnings.append(f"size words ({size.phrase}) and a size in numbers ({', '.join(f.text for f in sizes)}): the numbers are used")
+    # step 3: masses, materials and explicit dynamics; the words about motion and pose
     mass_found = rv.masses(low, head_starts)
     material_found = rv.materials(low, mention_starts, head_starts)
     level_found = rv.mass_levels(low, mention_starts)
@@ -518,12 +525,14 @@ def parse_request(text: str) -> RequestSpec:
         if not negated(low, h.start):
             pose = h.value
             matched.append((h.start, h.text))
+    # step 4: what was understood and what was not
     var = variant_mention(hint, low) if hint is not None else None  # the variant's phrases count as understood
     if var is not None:
         matched += [(m.start(), m.group(0)) for ph in var[2].phrases for m in re.finditer(phrase_regex(" ".join(ph.lower().split())), low)]
     matched += [(pos, phrase) for pos, _, phrase in mounting_mentions(low)]  # "free-standing", "mounted on the wall" (tasks.interpret.mounting)
     unused, groups = _unused_words(low, matched, mentions)
     in_order = [" ".join(ph.split()) for _pos, ph in dict.fromkeys(sorted(matched, key=lambda t: t[0]))]  # by position, each once
+    # step 5: the spec
     return RequestSpec(
         text=text, category_hint=hint, size_class=size.size_class, size_factor=size.factor, size_phrase=size.phrase,  # type: ignore[arg-type]
         joint_states=states.requests, damping=motion.damping, holds_position=motion.holds_position, spring=motion.spring,  # type: ignore[arg-type]
