@@ -14,14 +14,11 @@ from asset2sim.schemas.request import MotionPhrase
 from asset2sim.tasks.interpret import request_values as rv
 from asset2sim.tasks.interpret.phrase_scan import Hit, compile_table, negated, scan
 
-
 # (regex, (kind, value), flag) - flag "strong" for explicit damping phrases. Each hit is also a
 # MotionPhrase (:func:`_motion_kind` names its kind) for the part it names.
 _FREE_VERBS = r"(?:moves?|moving|swings?|swinging|spins?|spinning|rotates?|rotating|slides?|sliding|turns?|turning|hangs?|hanging|opens?|closes?|pivots?|pivoting)"
 
-
 _ON_ITS_OWN = r"(?:on (?:its|their) own|by (?:itself|themselves)|unaided|without (?:support|help|a hand))"
-
 
 _DYN_TABLE = compile_table(
     [

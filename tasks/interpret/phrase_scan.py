@@ -12,9 +12,7 @@ from dataclasses import dataclass
 
 from asset2sim.tasks.interpret import request_values as rv
 
-
 _L = r"(?<![\w-])"
-
 
 _R = r"(?![\w-])"
 
@@ -59,9 +57,7 @@ def sentences(text: str) -> list[tuple[int, int]]:
 
 WORD_RUN = re.compile(r"[\w'-]+")
 
-
 CLAUSE_MARK = re.compile(r"[,;:]")
-
 
 TOKEN = re.compile(r"[\w'-]+|[,;:]")
 
