@@ -14,7 +14,8 @@ import numpy as np
 from asset2sim.atomic import write_text
 from asset2sim.schemas.metrics import METRIC_INFO
 from asset2sim.tasks.check.asset_files import clip_to_limits
-from asset2sim.tasks.check.verdict import UNRESOLVED_PENETRATION_MM, penetration_measures, readiness, why_it_failed
+from asset2sim.tasks.check.failure_reasons import why_it_failed
+from asset2sim.tasks.check.verdict import UNRESOLVED_PENETRATION_MM, penetration_measures, readiness
 from asset2sim.tasks.evaluation import plots
 from asset2sim.tasks.evaluation.failure_evidence import evidence_section
 from asset2sim.tasks.evaluation.html_blocks import figure, fmt, page, svg_tag, verdict_cell
@@ -118,7 +119,7 @@ def _penetration_details(ev) -> str:
 def why_section(ev) -> str:
     """``Why it failed``, at the top of the report: for every failing tier, one sentence per failing measure naming
     the tier, the parts, the measured value against its threshold and what to do, the sentences the terminal prints
-    (:func:`~asset2sim.tasks.check.verdict.why_it_failed`); empty when ready. The failing trials' evidence follows
+    (:func:`~asset2sim.tasks.check.failure_reasons.why_it_failed`); empty when ready. The failing trials' evidence follows
     under the verdicts."""
     why = why_it_failed(ev.metrics)
     return ("<h2>Why it failed</h2><ul class='why'>" + "".join(f"<li>{esc(w)}</li>" for w in why) + "</ul>") if why else ""
