@@ -238,7 +238,8 @@ def print_rounds(r: dict) -> None:
 def report_only(work: Path) -> int:
     """``--report-only``: :func:`print_tail` of the latest run recorded under ``work`` (a kept ``--work``), and
     :func:`print_order` where its ``summary.json`` is kept too."""
-    from asset2sim.flows.catalog import ResultCatalog, load_catalog
+    from asset2sim.flows.catalog import ResultCatalog
+    from asset2sim.flows.catalog_config import load_catalog
 
     cat = ResultCatalog(load_catalog(work / "catalog.yaml").catalog_root)
     runs = sorted(r for d, r in cat.runs("dev"))
@@ -297,7 +298,8 @@ def main(argv: list[str] | None = None) -> int:
         rows = build_dataset(args.manifest, work / "raw", max(1, min(len(VARIANTS) + 1, args.requests)))
         catalog = write_catalog(work, args.workers, args.media)
         from asset2sim import flow_progress
-        from asset2sim.flows.catalog import ResultCatalog, load_catalog
+        from asset2sim.flows.catalog import ResultCatalog
+        from asset2sim.flows.catalog_config import load_catalog
         from asset2sim.flows.refine_flow import run_refine_flow
 
         print(f"dataset: {len(rows)} assets ({args.requests} requests x {len(rows) // max(1, args.requests)} objects); "

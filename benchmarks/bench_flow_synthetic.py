@@ -279,7 +279,7 @@ def _own_cache(args, work: Path, name: str) -> None:
 
 
 def _run(args, work: Path) -> int:
-    from asset2sim.flows.catalog import load_catalog
+    from asset2sim.flows.catalog_config import load_catalog
 
     if args.manifest is not None:
         with open(args.manifest, newline="") as fh:
@@ -478,7 +478,7 @@ def _placed(jobs: list, work: Path, tag: str) -> list:
 def _side_by_side(args, work: Path, cat, rows: list[dict], ft: dict, occupancy: float) -> None:
     """The same stages in this process, alone and ``--workers`` at a time, on a sample of ``--sample`` assets spread
     over the manifest and over drawer counts (asset i has 1 + i % 6 drawers), against the flow's times ``ft``."""
-    from asset2sim.flows.stages import plan_run
+    from asset2sim.flows.run_plan import plan_run
 
     k = max(0, min(args.sample, len(rows)))
     sample_ids = list(dict.fromkeys(rows[min(len(rows) - 1, i * (len(rows) // max(1, k)) + i % 6)]["id"] for i in range(k)))

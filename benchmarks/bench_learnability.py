@@ -148,7 +148,8 @@ def record_flags(records: list[dict], args) -> None:
     trained output was refined from (``DIR/<method>/<id>/asset/report.json``); prints what was written."""
     if args.catalog is None:
         return
-    from asset2sim.flows.catalog import ResultCatalog, load_catalog
+    from asset2sim.flows.catalog import ResultCatalog
+    from asset2sim.flows.catalog_config import load_catalog
     from asset2sim.flows.learnability import learnability_flags, record_learnability
 
     flags = learnability_flags(records, args.flag_method)

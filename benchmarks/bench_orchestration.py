@@ -1,5 +1,5 @@
 """What the flow's orchestration costs per task: empty Prefect tasks on the flow's own Dask task runner
-(``flows.refine_flow._dask_task_runner``: local cluster, one thread per worker process, the flow's Prefect API), then
+(``flows.flow_runtime.dask_task_runner``: local cluster, one thread per worker process, the flow's Prefect API), then
 the same empty function submitted to the same cluster as plain Dask tasks; printed per process (the driver with the
 in-process Dask scheduler, the Prefect server, the Dask workers) as CPU seconds over the tasks, and as milliseconds of
 CPU per task.
@@ -7,7 +7,7 @@ CPU per task.
     .venv/bin/python benchmarks/bench_orchestration.py [--tasks 100] [--workers 2]
 
 A dataset flow runs one ``refine-metrics`` task per asset and one ``prepare`` task per batch of assets
-(``flows.refine_flow.prepare_batch_size``), so its orchestration costs about (1 + 1 / batch) times the Prefect
+(``flows.subflow.prepare_batch_size``), so its orchestration costs about (1 + 1 / batch) times the Prefect
 figure per asset. Measured on an idle machine; the numbers move with the host's load.
 """
 
@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     for k, v in QUIET_LIBRARY_LOGS.items():  # the libraries' logs off the terminal, as the commands keep them
         os.environ.setdefault(k, v)
     stages.prepare_prefect_environment(ROOT)  # before Prefect is imported, as the flow command does
-    from asset2sim.flows.refine_flow import _dask_task_runner
+    from asset2sim.flows.flow_runtime import dask_task_runner
     from prefect import flow, task
     from prefect.cache_policies import NO_CACHE
     from prefect_dask import get_dask_client
@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     load = os.getloadavg()
     results: dict[str, tuple[float, dict[str, float]]] = {}
 
-    @flow(name="bench-orchestration", persist_result=False, task_runner=_dask_task_runner(args.workers, None, dashboard=False))
+    @flow(name="bench-orchestration", persist_result=False, task_runner=dask_task_runner(args.workers, None, dashboard=False))
     def measure() -> None:
         [f.result() for f in [empty_task.submit(i) for i in range(2 * args.workers)]]  # workers warm
         before, t0 = _cpu_by_process(), time.perf_counter()

@@ -225,7 +225,8 @@ def local_flow(catalog: Path, workers: int = 2, env: dict[str, str] | None = Non
 
 def run_rows(catalog: Path, run: str | None = None):
     """The catalog rows of ``catalog``'s default dataset, of ``run`` (None: the latest run), sorted by asset id."""
-    from asset2sim.flows.catalog import ResultCatalog, load_catalog
+    from asset2sim.flows.catalog import ResultCatalog
+    from asset2sim.flows.catalog_config import load_catalog
 
     cat = load_catalog(catalog)
     name, _ = cat.dataset(None)

@@ -13,7 +13,7 @@ from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
 
 from asset2sim.flows import audit_catalog, tracking
-from asset2sim.flows.refine_flow import _dask_task_runner, _local_cluster_config, prefect_api_for_run
+from asset2sim.flows.flow_runtime import dask_task_runner, local_cluster_config, prefect_api_for_run
 from asset2sim.schemas.audit import AuditRow
 from asset2sim.apps.audit.batch import AuditTarget, audit_one, find_assets
 from asset2sim import library_dirs
@@ -49,8 +49,8 @@ def audit_flow(paths: list[str], out: str, category: str | None = None, simulate
     catalog ``rows`` (:class:`~asset2sim.schemas.audit.AuditRow`)."""
     start = time.perf_counter()
     targets = find_assets(paths)
-    runner = _dask_task_runner(workers, dask_address, dashboard=False)
-    with _local_cluster_config(dask_address, False):
+    runner = dask_task_runner(workers, dask_address, dashboard=False)
+    with local_cluster_config(dask_address, False):
         rows = _audit_each.with_options(task_runner=runner)(targets, out, category, simulate) if targets else []
     files = audit_catalog.write_audit_catalog(out, rows)
     summary = audit_summary(rows, files)

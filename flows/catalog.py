@@ -1,6 +1,6 @@
 """The pipeline's two catalogs: ``catalog.yaml`` (what to refine,
-:class:`CatalogConfig`; relative paths are relative to its folder, the
-*project root*) and the Parquet result catalog (what came out,
+:class:`~asset2sim.flows.catalog_config.CatalogConfig`, :func:`load_catalog`, in
+:mod:`asset2sim.flows.catalog_config`) and here the Parquet result catalog (what came out,
 :class:`ResultCatalog`), on a local folder or an object store
 (:mod:`asset2sim.flows.catalog_fs`). Row schema:
 :func:`~asset2sim.schemas.catalog.arrow_schema`, versioned; units are in the
@@ -15,278 +15,17 @@ import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Literal
-
-
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from typing import Any, Iterable
 
 from asset2sim.flows import catalog_fs
-from asset2sim.input_files import InputFileError, load_yaml
+from asset2sim.flows.catalog_config import CatalogConfig, CatalogError, load_catalog
 from asset2sim.schemas.catalog import ROW_COLUMNS, ROW_STATUSES, CatalogRow, arrow_schema
-from asset2sim.schemas.config import RefineConfig
-from asset2sim.tasks.ingest import partnet_mobility
 
-
-class CatalogError(ValueError):
-    """``catalog.yaml`` or a manifest is missing or invalid; the message names the file."""
-
-
-class DatasetConfig(BaseModel):
-    """One dataset of ``catalog.yaml``: ``root`` (one sub-folder per asset),
-    ``manifest`` (CSV with ``id``, ``prompt`` and optional ``category``,
-    ``reference_scale``, ``time_limit_seconds``; default ``<root>/manifest.csv``),
-    ``generate: demo`` (build the demo assets into ``root`` on first use),
-    ``reference`` (measure scale deviation against the assets' references)."""
-
-    model_config = ConfigDict(extra="forbid")
-    root: str
-    manifest: str | None = None
-    generate: Literal["demo"] | None = None
-    reference: bool = False
-    description: str = ""
-
-
-class EstimatorSettings(BaseModel):
-    """Estimator and its settings; ``retries``/``retry_delay_seconds`` apply to
-    model calls only (a failing offline estimator is not retried)."""
-
-    model_config = ConfigDict(extra="forbid")
-    name: str = "offline"
-    model: str | None = None
-    retries: int = Field(default=2, ge=0)
-    retry_delay_seconds: float = Field(default=10.0, ge=0.0)
-
-
-class RunSettings(BaseModel):
-    """How a flow run executes: ``workers`` (local Dask workers; None = CPU
-    count); ``time_limit_seconds`` per asset (s, all stages); ``isolation``:
-    ``process`` (each stage in a child forked from a per-worker stage server,
-    :mod:`asset2sim.flows.forkserver`, killed at the limit), ``spawn`` (a fresh
-    Python per stage) or ``none`` (in the worker); ``memory_limit_mb`` of that
-    child (MiB, ``RLIMIT_AS``; None = none); ``evaluate`` (the metrics stage),
-    ``probes``, ``extras`` (MJCF and USD exports, renders, clips, HTML report; ``deferred``: the exports with
-    each asset, the media (renders, clips, HTML report) after every asset's verdict, :func:`asset2sim.flows.refine_flow.media_phase`); ``refine_function``
-    (``module:function`` like :func:`asset2sim.tasks.refine.refine_asset`);
-    ``dask_host`` (where the local cluster listens; default loopback only) and
-    ``dashboard`` (false: no HTTP pages), both ignored with a Dask address."""
-
-    model_config = ConfigDict(extra="forbid")
-    workers: int | None = Field(default=2, ge=1)
-    time_limit_seconds: float = Field(default=1800.0, gt=0.0)
-    memory_limit_mb: int | None = Field(default=8192, ge=256)
-    isolation: Literal["process", "spawn", "none"] = "process"
-    evaluate: bool = True
-    probes: bool = False
-    extras: bool | Literal["deferred"] = True
-    refine_function: str = "asset2sim.tasks.refine:refine_asset"
-    dask_host: str = Field(default="127.0.0.1", min_length=1)
-    dashboard: bool = True
-
-
-class ScheduleSettings(BaseModel):
-    """The nightly deployment: cron expression, IANA time zone, dataset."""
-
-    model_config = ConfigDict(extra="forbid")
-    cron: str = "0 2 * * *"
-    timezone: str = "UTC"
-    dataset: str | None = None
-    deployment_name: str = "nightly"
-
-
-class TrackingSettings(BaseModel):
-    """MLflow: ``uri`` (None = ``MLFLOW_TRACKING_URI`` or ``sqlite:///<project>/mlflow.db``),
-    ``experiment``, ``artifact_root`` of new experiments, ``enabled``."""
-
-    model_config = ConfigDict(extra="forbid")
-    enabled: bool = True
-    uri: str | None = None
-    experiment: str = "asset2sim"
-    artifact_root: str = "mlruns"
-
-
-class RegressionSettings(BaseModel):
-    """When a run counts as a regression against the previous run
-    (:mod:`asset2sim.flows.catalog_compare`): ``max_regressed_assets`` (count),
-    ``max_pass_rate_drop`` over the common assets (fraction), ``max_metric_drift``
-    per compared metric column (its unit; rates as fractions); ``fail_flow``:
-    the flow then fails (exit status 5)."""
-
-    model_config = ConfigDict(extra="forbid")
-    max_regressed_assets: int = Field(default=0, ge=0)
-    max_pass_rate_drop: float = Field(default=0.0, ge=0.0, le=1.0)
-    max_metric_drift: dict[str, float] = Field(default_factory=dict)
-    fail_flow: bool = True
-
-
-class ResultsSettings(BaseModel):
-    """The result catalog's policies: ``code_change`` (``rerun``: a change of
-    the package source redoes finished assets; ``keep``: reuse them),
-    ``compact`` (one Parquet file per run once it ended), ``regression``."""
-
-    model_config = ConfigDict(extra="forbid")
-    code_change: Literal["rerun", "keep"] = "rerun"
-    compact: bool = True
-    regression: RegressionSettings = Field(default_factory=RegressionSettings)
-
-
-class CatalogConfig(BaseModel):
-    """Contents of ``catalog.yaml``. ``catalog_root`` is a path (relative to
-    the project root) or a URI (``s3://bucket/prefix``, :mod:`asset2sim.flows.catalog_fs`)."""
-
-    model_config = ConfigDict(extra="forbid")
-    version: int = 1
-    default_dataset: str
-    output_root: str = "data/refined"
-    catalog_root: str = "data/catalog"
-    output_store: str | None = None  # a URI or path the workers upload to (asset2sim.flows.store); None: output_root
-    datasets: dict[str, DatasetConfig]
-    estimator: EstimatorSettings = Field(default_factory=EstimatorSettings)
-    refine: dict[str, Any] = Field(default_factory=dict)  # RefineConfig fields
-    run: RunSettings = Field(default_factory=RunSettings)
-    schedule: ScheduleSettings = Field(default_factory=ScheduleSettings)
-    tracking: TrackingSettings = Field(default_factory=TrackingSettings)
-    results: ResultsSettings = Field(default_factory=ResultsSettings)
-
-
-@dataclass(frozen=True)
-class Catalog:
-    """A loaded ``catalog.yaml``: the validated config and the project root."""
-
-    path: Path
-    config: CatalogConfig
-
-    @property
-    def project_root(self) -> Path:
-        return self.path.parent
-
-    def resolve(self, rel: str | Path) -> Path:
-        """A path of the catalog, absolute (relative ones are relative to the project root)."""
-        p = Path(rel).expanduser()
-        return p if p.is_absolute() else (self.project_root / p).resolve()
-
-    def _location(self, root: str) -> Path | str:
-        """``root`` as written when it is a URI other than ``file://``, else resolved as a path."""
-        return root if catalog_fs.is_uri(root) and not root.startswith("file://") else self.resolve(root.removeprefix("file://"))
-
-    def dataset(self, name: str | None = None) -> tuple[str, DatasetConfig]:
-        """``(name, config)`` of dataset ``name`` (default: ``default_dataset``).
-
-        Raises:
-            CatalogError: no such dataset.
-        """
-        name = name or self.config.default_dataset
-        if name not in self.config.datasets:
-            raise CatalogError(f"{self.path}: no dataset {name!r}; known: {sorted(self.config.datasets)}")
-        return name, self.config.datasets[name]
-
-    def dataset_root(self, name: str | None = None) -> Path:
-        return self.resolve(self.dataset(name)[1].root)
-
-    def manifest_path(self, name: str | None = None) -> Path:
-        ds = self.dataset(name)[1]
-        return self.resolve(ds.manifest) if ds.manifest else self.resolve(ds.root) / "manifest.csv"
-
-    @property
-    def output_root(self) -> Path:
-        return self.resolve(self.config.output_root)
-
-    @property
-    def catalog_root(self) -> Path | str:
-        """The result catalog's root: an absolute local path, or the URI as written."""
-        return self._location(self.config.catalog_root)
-
-    @property
-    def output_store(self) -> str | None:
-        """The output store: the URI as written, an absolute path, or None (outputs under ``output_root``)."""
-        return str(self._location(self.config.output_store)) if self.config.output_store else None
-
-    def refine_config(self):
-        """The :class:`~asset2sim.schemas.config.RefineConfig` of this catalog
-        (estimator and model from ``estimator``, other fields from ``refine``).
-
-        Raises:
-            CatalogError: an unknown or invalid ``refine`` field.
-        """
-        fields = {"estimator": self.config.estimator.name, "model": self.config.estimator.model, **self.config.refine}
-        try:
-            return RefineConfig(**fields)
-        except ValidationError as exc:
-            raise CatalogError(f"{self.path}: invalid 'refine' settings: {exc}") from exc
-
-
-def load_catalog(path: Path | str) -> Catalog:
-    """Read and validate ``catalog.yaml``.
-
-    Raises:
-        CatalogError: the file is missing, not YAML, or does not match
-            :class:`CatalogConfig` (the message names the field).
-    """
-    path = Path(path).expanduser().resolve()
-    try:  # a regular file under 1 MiB, at most 64 YAML aliases (asset2sim.input_files.load_yaml)
-        data = load_yaml(path, what="catalog")
-    except InputFileError as exc:
-        cause = FileNotFoundError(str(exc)) if exc.code == "INPUT_NOT_FOUND" else exc  # the commands say where to run
-        raise CatalogError(f"{path}: cannot read the catalog ({exc.code}): {exc}") from cause
-    if not isinstance(data, dict):
-        raise CatalogError(f"{path}: expected a mapping at the top level")
-    try:
-        config = CatalogConfig.model_validate(data)
-    except ValidationError as exc:
-        raise CatalogError(f"{path}: {exc}") from exc
-    if config.default_dataset not in config.datasets:
-        raise CatalogError(f"{path}: default_dataset {config.default_dataset!r} is not among the datasets")
-    return Catalog(path=path, config=config)
-
-
-@dataclass(frozen=True)
-class ManifestEntry:
-    """One request of a manifest: asset id, prompt, asset folder, optional
-    category, reference scale and time limit (s), and its 1-based line."""
-
-    asset_id: str
-    prompt: str
-    asset_dir: Path
-    category: str | None = None
-    reference_scale: float | None = None
-    time_limit_seconds: float | None = None
-    line: int | None = None
-
-
-def read_manifest_entries(
-    manifest: Path | str, root: Path | str
-) -> tuple[list[ManifestEntry], list[partnet_mobility.ManifestRowError]]:
-    """Usable entries of a manifest CSV (asset folders under ``root``) and the
-    typed errors of its bad rows (:class:`~asset2sim.tasks.ingest.partnet_mobility.ManifestRowError`),
-    each in file order (:func:`asset2sim.tasks.ingest.partnet_mobility.read_manifest_rows`).
-
-    Raises:
-        CatalogError: the manifest is missing or unreadable, not UTF-8 text,
-            or has no ``id`` / ``prompt`` column.
-    """
-    manifest = Path(manifest)
-    try:
-        reading = partnet_mobility.read_manifest_rows(manifest, root)
-    except OSError as exc:
-        raise CatalogError(f"{manifest}: cannot read the manifest: {exc}") from exc
-    except partnet_mobility.ManifestError as exc:
-        raise CatalogError(str(exc)) from exc
-    entries = [ManifestEntry(r.id, r.prompt, r.folder, r.category or None, r.reference_scale, r.time_limit_seconds, r.line)
-               for r in reading.rows]
-    return entries, list(reading.errors)
-
-
-def read_manifest(manifest: Path | str, root: Path | str) -> list[ManifestEntry]:
-    """:func:`read_manifest_entries`, all or nothing.
-
-    Raises:
-        CatalogError: as :func:`read_manifest_entries`, or the first bad row
-            (naming the file and line).
-    """
-    entries, errors = read_manifest_entries(manifest, root)
-    if errors:
-        more = f" (and {len(errors) - 1} more bad row(s))" if len(errors) > 1 else ""
-        raise CatalogError(errors[0].message + more)
-    return entries
+#: The configuration side, named here too (``from asset2sim.flows.catalog import load_catalog``).
+__all__ = [
+    "COMPACTED_NAME", "CatalogConfig", "CatalogError", "Compaction", "ResultCatalog", "load_catalog", "plain_strings",
+    "plain_value", "result_key",
+]
 
 
 #: The file a run's partition is compacted into: a name no asset id can take (ids have no ``@``) and
@@ -563,6 +302,7 @@ class ResultCatalog:
         import pyarrow.compute as pc
         import pyarrow.dataset as pads
 
+        # step 1: the schema read and the columns asked for
         runs = None if run is None else ({run} if isinstance(run, str) else set(run))
         # the partition columns, dictionary-encoded while scanning (one value per file)
         part_schema = pa.schema([("dataset", pa.dictionary(pa.int32(), pa.string())), ("run", pa.dictionary(pa.int32(), pa.string()))])
@@ -572,6 +312,7 @@ class ResultCatalog:
             unknown = [c for c in cols if c not in full.names]
             if unknown:
                 raise KeyError(f"no catalog column(s) {unknown}; columns: {list(full.names)}")
+        # step 2: the data files of each partition: read as they are, or compacted rows under row files
         plain: list[str] = []  # files read as they are
         overlaid: list[tuple[Any, dict[str, Any]]] = []  # (compacted, loose) needing the row-file-wins rule
         scanned: list[tuple[str, str]] = []
@@ -585,6 +326,7 @@ class ResultCatalog:
                 plain += [rf.compacted.path] if rf.compacted is not None else [i.path for _, i in sorted(rf.loose.items())]
         out_schema = full if cols is None else pa.schema([full.field(c) for c in cols])
 
+        # step 3: a scanner over the files, partition values from their paths
         names = {"dataset": {d for d, _ in scanned}, "run": {r for _, r in scanned}}
         partitioning = pads.partitioning(part_schema, flavor="hive",
                                          dictionaries={k: pa.array(sorted(v), pa.string()) for k, v in names.items()})
@@ -598,6 +340,7 @@ class ResultCatalog:
                 return dset.head(int(limit), columns=columns, filter=filter)
             return dset.to_table(columns=columns, filter=filter)
 
+        # step 4: read; a row file wins over the compacted row of its asset
         tables = [scan(plain)] if plain else []
         with_ids = None if cols is None else list(dict.fromkeys([*cols, "asset_id"]))
         for compacted, loose in overlaid:
@@ -605,6 +348,7 @@ class ResultCatalog:
             old = scan([compacted.path], with_ids)
             old = old.filter(pc.invert(pc.is_in(old["asset_id"], value_set=pa.array(sorted(loose)))))
             tables += [old if cols is None else old.select(cols), scan([i.path for _, i in sorted(loose.items())])]
+        # step 5: one table, at most ``limit`` rows
         if not tables:
             return out_schema.empty_table()
         table = pa.concat_tables(tables)

@@ -21,7 +21,8 @@ from typing import Any, Literal
 from pydantic import BaseModel, Field
 
 from asset2sim import atomic
-from asset2sim.flows.catalog import RegressionSettings, ResultCatalog
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog_config import RegressionSettings
 from asset2sim.tasks.check.verdict import MISSING_FAILURE_MODE
 from asset2sim.inert import plot_text
 from asset2sim import library_dirs

@@ -9,7 +9,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from asset2sim.flows import queries
-from asset2sim.flows.catalog import Compaction, ResultCatalog, ResultsSettings
+from asset2sim.flows.catalog import Compaction, ResultCatalog
+from asset2sim.flows.catalog_config import ResultsSettings
 from asset2sim.flows.catalog_compare import RunComparison, compare_with_previous, write_comparison_artifacts
 
 

@@ -10,8 +10,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from asset2sim.flows.catalog import load_catalog
-from asset2sim.flows.stages import FLOW_NAME, flow_parameters
+from asset2sim.flows.catalog_config import load_catalog
+from asset2sim.flows.run_plan import flow_parameters
+from asset2sim.flows.stages import FLOW_NAME
 
 
 @dataclass(frozen=True)

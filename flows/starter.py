@@ -2,7 +2,7 @@
 objects as a dataset generated on first use and, when a folder of the user's own objects is given, that folder as
 the default dataset with a manifest listing its objects (written beside the catalog: the folder itself is only
 read). The text keeps the comments of the clone's ``catalog.yaml`` that say what each setting does; every setting
-it leaves out takes :class:`~asset2sim.flows.catalog.CatalogConfig`'s default.
+it leaves out takes :class:`~asset2sim.flows.catalog_config.CatalogConfig`'s default.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from asset2sim import atomic
-from asset2sim.flows.catalog import load_catalog
+from asset2sim.flows.catalog_config import load_catalog
 
 __all__ = ["CATALOG_NAME", "StarterCatalog", "object_folders", "starter_catalog_text", "write_starter_catalog"]
 

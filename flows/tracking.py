@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from asset2sim import atomic
-from asset2sim.flows.catalog import TrackingSettings
+from asset2sim.flows.catalog_config import TrackingSettings
 from asset2sim.flows.queries import failure_modes, run_summary
 from asset2sim.schemas.report import FAILURE_MODES
 from asset2sim.inert import plot_text, shorten
@@ -152,7 +152,7 @@ def log_flow_run(
 
     ``summary``: :func:`asset2sim.flows.queries.run_summary` plus timings (s); ``params`` stringified (cut at
     500 characters); ``artifacts``: name -> file; ``project_root``: where the default store lives; ``settings``:
-    :class:`asset2sim.flows.catalog.TrackingSettings`; ``started_at`` / ``ended_at``: the flow run's start and
+    :class:`asset2sim.flows.catalog_config.TrackingSettings`; ``started_at`` / ``ended_at``: the flow run's start and
     end (epoch s; default now).
 
     Raises:

@@ -74,7 +74,8 @@ from pathlib import Path
 import asset2sim
 from asset2sim.demo_assets import build_box_with_lid
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
-from asset2sim.flows.stages import AssetJob, make_run_id
+from asset2sim.flows.run_plan import make_run_id
+from asset2sim.flows.stages import AssetJob
 from asset2sim.flows.job_records import Prepared, RefineOutput, StageRecord, build_row
 
 shutil.copy(CATALOG_YAML, "catalog.yaml")

@@ -18,7 +18,7 @@ from asset2sim.apps.benchmark.baselines import available_methods, run_method
 from asset2sim.tasks.evaluation.evaluate import _jsonable, evaluate_asset
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRow, ManifestRowError, read_manifest_rows
 from asset2sim.tasks.evaluation.plots import plot_method_summary
-from asset2sim.tasks.evaluation.report_html import render_benchmark_index, render_benchmark_summary
+from asset2sim.tasks.evaluation.benchmark_pages import render_benchmark_index, render_benchmark_summary
 
 #: The SPEC's "Numbers to beat" (thesis results, 9-object set, Isaac Sim).
 RESEARCH_NUMBERS: list[dict[str, str]] = [

@@ -13,7 +13,8 @@ from pathlib import Path
 
 from asset2sim.commands._status import INVALID_REQUEST, CommandError, os_failure, output_failure, output_folder_failure, parse_engines
 from asset2sim.tasks.evaluation.evaluate import EvaluationError, evaluate_asset
-from asset2sim.tasks.check.verdict import readiness, why_it_failed
+from asset2sim.tasks.check.failure_reasons import why_it_failed
+from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.publish.contract import read_report_json
 from asset2sim import output_folder
 from asset2sim.commands import _output

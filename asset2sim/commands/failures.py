@@ -12,7 +12,8 @@ from pathlib import Path
 
 from asset2sim.commands._status import INVALID_REQUEST, CommandError, catalog_failure
 from asset2sim.flows import catalog_compare, queries
-from asset2sim.flows.catalog import CatalogError, ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog_config import CatalogError, load_catalog
 
 NAME = "failures"
 HELP = "Print the failure-mode breakdown of the latest run (or --run) from the Parquet catalog, and other catalog queries."

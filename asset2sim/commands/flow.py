@@ -85,7 +85,7 @@ def unwritable(exc: BaseException) -> OSError | None:
 
 def run(args: argparse.Namespace) -> int:
     t0, t0_epoch = time.perf_counter(), time.time()
-    from asset2sim.flows.catalog import CatalogError, load_catalog
+    from asset2sim.flows.catalog_config import CatalogError, load_catalog
     from asset2sim.flows.stages import prepare_prefect_environment
 
     try:

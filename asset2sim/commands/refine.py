@@ -26,7 +26,8 @@ from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import MESSAGE_FINDINGS
 from asset2sim.tasks.check.as_asked import quantity_text
-from asset2sim.tasks.check.verdict import penetration_measures, readiness, verdict_line, why_it_failed
+from asset2sim.tasks.check.failure_reasons import why_it_failed
+from asset2sim.tasks.check.verdict import penetration_measures, readiness, verdict_line
 from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_text, state_moves
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.refine import RefineError
@@ -223,7 +224,7 @@ def engine_lines(report) -> list[str]:
 
 
 def why_lines(report) -> list[str]:
-    """``why it failed SENTENCE``, one per sentence of :func:`~asset2sim.tasks.check.verdict.why_it_failed` (the
+    """``why it failed SENTENCE``, one per sentence of :func:`~asset2sim.tasks.check.failure_reasons.why_it_failed` (the
     sentences ``report.html`` shows); nothing when the output is interaction-ready."""
     if report.failure_mode == "none":
         return []

@@ -1,6 +1,6 @@
 """PyBullet (Bullet) engine under the SPEC's conventions; see :mod:`.base`.
 Coulomb friction is a zero-target-velocity motor of force ``<dynamics friction>``;
-Bullet applies ``<dynamics damping>`` itself.
+Bullet applies ``<dynamics damping>`` itself. Its collision world and viewer: :mod:`.pybullet_worlds`.
 """
 
 from __future__ import annotations
@@ -12,31 +12,11 @@ import numpy as np
 from asset2sim.engines.base import (ContactPair, EngineTraits, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults, SessionOptions,
                                     penetration_sum, register_engine, register_shape_world, register_viewer)
 from asset2sim.engines import pybullet_clients
-from asset2sim.engines.quiet import quiet_fds, quiet_stdout, startup_quiet
+from asset2sim.engines.pybullet_worlds import (
+    BULLET_JOINT_TYPES, PyBulletShapeWorld, PyBulletViewer, body_link_frame, bullet, joint_infos,
+)
+from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.step_budget import spend
-
-_TYPES = {0: "revolute", 1: "prismatic", 2: "spherical", 3: "planar", 4: "fixed"}
-
-
-def _bullet():
-    with startup_quiet():  # its build-time line
-        import pybullet
-
-    return pybullet
-
-
-def _joint_infos(p, body: int, cid: int) -> list:
-    return [p.getJointInfo(body, j, physicsClientId=cid) for j in range(p.getNumJoints(body, physicsClientId=cid))]
-
-
-def _link_frame(p, body: int, idx: int, cid: int) -> tuple[np.ndarray, np.ndarray]:
-    """World position (3,) and rotation (3, 3) of link ``idx`` (-1: the base)."""
-    if idx < 0:
-        pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=cid)
-    else:
-        st = p.getLinkState(body, idx, computeForwardKinematics=True, physicsClientId=cid)
-        pos, orn = st[4], st[5]
-    return np.array(pos, float), np.array(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
 
 
 class PyBulletSession(SessionDefaults):
@@ -49,17 +29,19 @@ class PyBulletSession(SessionDefaults):
     traits = EngineTraits(reference=True, conservative_aabb=True, springs_by_torque=True, incremental_penetration=True)
 
     def __init__(self, urdf_path: Path, options: SessionOptions, client: int | None = None, ground: bool = True):
-        p = _bullet()
+        p = bullet()
         self._p = p
         self.options = options
         self._root_hold: int | None = None  # hold_root's constraint
         conv = options.conventions
+        # step 1: a physics client (taken from the pool, or the caller's)
         self._owns_client = client is None
         if client is None:
             self.cid = pybullet_clients.take(p, options.files_key)
         else:
             self.cid = int(client)
         self.body = None
+        # step 2: time step, gravity, the ground plane; load the URDF without its visual shapes
         try:
             if self._owns_client:
                 p.setTimeStep(conv.timestep, physicsClientId=self.cid)
@@ -75,6 +57,7 @@ class PyBulletSession(SessionDefaults):
         except Exception as exc:
             self._release()
             raise RuntimeError(f"PyBullet could not load {urdf_path}: {exc}") from exc
+        # step 3: the movable joints, their limits and child links; each joint's Coulomb friction as a motor
         self.base_link = p.getBodyInfo(self.body, physicsClientId=self.cid)[0].decode()
         self._link_by_index: dict[int, str] = {-1: self.base_link}
         self._has_collision: dict[int, bool] = {}
@@ -84,10 +67,10 @@ class PyBulletSession(SessionDefaults):
         self.joint_types: dict[str, str] = {}
         self.joint_limits: dict[str, tuple[float, float]] = {}
         self.joint_child: dict[str, str] = {}
-        for j, info in enumerate(_joint_infos(p, self.body, self.cid)):
+        for j, info in enumerate(joint_infos(p, self.body, self.cid)):
             name = info[1].decode()
             self._link_by_index[j] = info[12].decode()
-            jtype = _TYPES.get(info[2], "other")
+            jtype = BULLET_JOINT_TYPES.get(info[2], "other")
             if jtype not in ("revolute", "prismatic"):
                 continue
             lo, hi = float(info[8]), float(info[9])
@@ -102,6 +85,7 @@ class PyBulletSession(SessionDefaults):
             self._motor(name, 0.0, float(info[7]))  # Coulomb friction
         self.link_names: list[str] = list(self._link_by_index.values())
         self._link_index = {name: idx for idx, name in reversed(list(self._link_by_index.items()))}
+        # step 4: the initial state, the object placed on the ground
         self.set_joint_positions(options.initial_state)
         if options.ground and not options.fixed_base:
             if self.plane is None:  # the caller's floor: a plane only while the exact distances are measured
@@ -157,7 +141,7 @@ class PyBulletSession(SessionDefaults):
 
     # ------------------------------------------------------------------ links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        return _link_frame(self._p, self.body, self.link_index(link), self.cid)
+        return body_link_frame(self._p, self.body, self.link_index(link), self.cid)
 
     def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self._p.getAABB(self.body, self.link_index(link), physicsClientId=self.cid)
@@ -242,7 +226,7 @@ class PyBulletSession(SessionDefaults):
         cache = self.__dict__.setdefault("_pairs_cache", None)
         if cache is None:
             with_shape = [i for i in self._link_by_index if p.getCollisionShapeData(self.body, i, physicsClientId=self.cid)]
-            parent = {j: info[16] for j, info in enumerate(_joint_infos(p, self.body, self.cid))}
+            parent = {j: info[16] for j, info in enumerate(joint_infos(p, self.body, self.cid))}
             cache = [(a, b) for a in with_shape for b in with_shape if a < b and parent.get(b) != a and parent.get(a) != b]
             self._pairs_cache = cache
         points = []
@@ -376,122 +360,6 @@ class PyBulletSession(SessionDefaults):
         try:
             if getattr(self, "cid", None) is not None and self._owns_client:
                 self._p.disconnect(self.cid)
-        except Exception:
-            pass
-
-
-class PyBulletShapeWorld:
-    """A :class:`~asset2sim.engines.base.ShapeWorld`: static convex mesh bodies in a private DIRECT client."""
-
-    engine = "pybullet"
-    #: Bullet's default convex hull collision margin, 1 mm, on each of two touching shapes.
-    contact_margin = 0.002
-
-    def __init__(self):
-        p = _bullet()
-        self._p = p
-        self.cid = p.connect(p.DIRECT)
-
-    def add_convex(self, vertices, scale, position, orientation) -> int:
-        p = self._p
-        shape = p.createCollisionShape(p.GEOM_MESH, vertices=np.asarray(vertices, float).tolist(),
-                                       meshScale=np.asarray(scale, float).tolist(), physicsClientId=self.cid)
-        return p.createMultiBody(0, shape, basePosition=np.asarray(position, float).tolist(),
-                                 baseOrientation=np.asarray(orientation, float).tolist(), physicsClientId=self.cid)
-
-    def set_pose(self, shape: int, position, orientation) -> None:
-        self._p.resetBasePositionAndOrientation(shape, np.asarray(position, float).tolist(), np.asarray(orientation, float).tolist(),
-                                                physicsClientId=self.cid)
-
-    def distances(self, shape_a: int, shape_b: int, max_distance: float = 0.0) -> list[float]:
-        return [pt[8] for pt in self._p.getClosestPoints(shape_a, shape_b, max_distance, physicsClientId=self.cid)]
-
-    def close(self) -> None:
-        if self.cid is not None:
-            self._p.disconnect(self.cid)
-            self.cid = None
-
-
-class PyBulletViewer:
-    """A :class:`~asset2sim.engines.base.Viewer`: the URDF (fixed base, MTL
-    colours) in a private DIRECT client, drawn by TinyRenderer on the CPU
-    (RuntimeError: Bullet could not load the file)."""
-
-    engine = "pybullet"
-
-    def __init__(self, urdf_path: Path):
-        self.cid = None
-        with quiet_fds():  # the import prints PyBullet's build time
-            self._p = p = _bullet()
-            self.cid = cid = p.connect(p.DIRECT)
-        try:
-            with quiet_fds():
-                self.body = p.loadURDF(str(urdf_path), basePosition=[0, 0, 0], useFixedBase=True, flags=p.URDF_USE_MATERIAL_COLORS_FROM_MTL,
-                                       physicsClientId=cid)
-        except Exception as exc:
-            self.close()
-            raise RuntimeError(f"PyBullet could not load {urdf_path}: {exc}") from exc
-        self._links: dict[int, str] = {-1: p.getBodyInfo(self.body, physicsClientId=cid)[0].decode()}
-        self._joints: dict[str, int] = {}
-        self.joint_names: list[str] = []
-        for j, info in enumerate(_joint_infos(p, self.body, cid)):
-            self._links[j] = info[12].decode()
-            name = info[1].decode()
-            self._joints[name] = j
-            if info[2] in (p.JOINT_REVOLUTE, p.JOINT_PRISMATIC):
-                self.joint_names.append(name)
-        self.link_names = list(self._links.values())
-        self._index = {name: idx for idx, name in reversed(list(self._links.items()))}
-
-    def visual_colors(self) -> list[tuple[str, int, tuple[float, float, float, float]]]:
-        out = []
-        counts: dict[int, int] = {}
-        for row in self._p.getVisualShapeData(self.body, physicsClientId=self.cid):
-            link = row[1]
-            k = counts.get(link, 0)
-            counts[link] = k + 1
-            out.append((self._links[link], k, tuple(row[7])))
-        return out
-
-    def set_visual_color(self, link: str, shape: int, rgba) -> None:
-        self._p.changeVisualShape(self.body, self._index[link], shapeIndex=shape, rgbaColor=list(rgba), physicsClientId=self.cid)
-
-    def set_joint_positions(self, q: dict[str, float]) -> None:
-        for name, value in q.items():
-            self._p.resetJointState(self.body, self._joints[name], float(value), 0.0, physicsClientId=self.cid)
-
-    def set_root_pose(self, position, quat_xyzw) -> None:
-        self._p.resetBasePositionAndOrientation(self.body, np.asarray(position, float).tolist(),
-                                                np.asarray(quat_xyzw, float).tolist(), physicsClientId=self.cid)
-
-    def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        return _link_frame(self._p, self.body, self._index[link], self.cid)
-
-    def draw(self, width: int, height: int, camera: dict, light: dict) -> tuple[np.ndarray, np.ndarray]:
-        p = self._p
-        view = p.computeViewMatrix(*(np.asarray(camera[k], float).tolist() for k in ("eye", "target", "up")), physicsClientId=self.cid)
-        proj = p.computeProjectionMatrixFOV(camera["fov_deg"], width / height, camera["near"], camera["far"], physicsClientId=self.cid)
-        res = p.getCameraImage(width, height, view, proj, lightDirection=np.asarray(light["direction"], float).tolist(),
-                               lightColor=list(light["color"]), lightDistance=light["distance"], shadow=int(light["shadow"]),
-                               lightAmbientCoeff=light["ambient"], lightDiffuseCoeff=light["diffuse"],
-                               lightSpecularCoeff=light["specular"], renderer=p.ER_TINY_RENDERER, physicsClientId=self.cid)
-        if res is None or len(res) < 5:
-            raise RuntimeError("PyBullet returned no image")
-        rgba = np.asarray(res[2], dtype=np.uint8).reshape(height, width, 4)
-        seg = np.asarray(res[4]).reshape(height, width)
-        return rgba, seg
-
-    def close(self) -> None:
-        if self.cid is not None:
-            try:
-                self._p.disconnect(physicsClientId=self.cid)
-            except Exception:
-                pass
-            self.cid = None
-
-    def __del__(self):  # pragma: no cover - best effort
-        try:
-            self.close()
         except Exception:
             pass
 

@@ -1,103 +1,33 @@
 """Self-contained HTML reports (CSS, PNG renders and SVG figures inline as
 ``data:`` URIs; text HTML-escaped): one asset's evaluation
-(:func:`render_report`, :func:`write_report`) and the benchmark pages
-(:func:`render_benchmark_summary`, :func:`render_benchmark_index`).
+(:func:`render_report`, :func:`write_report`) and its sections; the blocks they are made of in
+:mod:`.html_blocks`, the parameter table in :mod:`.parameter_table`, the benchmark pages in
+:mod:`.benchmark_pages`.
 """
 
 from __future__ import annotations
 
-import base64
-import io
-import math
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from asset2sim.atomic import write_text
 from asset2sim.schemas.metrics import METRIC_INFO
 from asset2sim.tasks.check.asset_files import clip_to_limits
-from asset2sim.tasks.check.verdict import UNRESOLVED_PENETRATION_MM, penetration_measures, readiness, why_it_failed
+from asset2sim.tasks.check.failure_reasons import why_it_failed
+from asset2sim.tasks.check.verdict import UNRESOLVED_PENETRATION_MM, penetration_measures, readiness
 from asset2sim.tasks.evaluation import plots
 from asset2sim.tasks.evaluation.failure_evidence import evidence_section
+from asset2sim.tasks.evaluation.html_blocks import figure, fmt, page, svg_tag, verdict_cell
+from asset2sim.tasks.evaluation.parameter_table import parameter_table
 from asset2sim.tasks.evaluation.report_changes import changes_section, esc, from_closed_text, opening_text
 from asset2sim.tasks.geometry.render import render_views
-
-CSS = """
-body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:24px;color:#1d2430;max-width:1200px}
-h1{font-size:22px;margin-bottom:4px} h2{font-size:18px;margin-top:28px;border-bottom:1px solid #d0d6de;padding-bottom:4px}
-h3{font-size:15px;margin-bottom:6px}
-table{border-collapse:collapse;margin:8px 0;font-size:13px} th,td{border:1px solid #d0d6de;padding:4px 8px;text-align:left;vertical-align:top}
-th{background:#f1f4f8} td.num{text-align:right;font-variant-numeric:tabular-nums}
-.pass{background:#d9f2dd} .fail{background:#f9d6d5} .na{background:#eef0f3;color:#5b6574} .warn{background:#fff1cc}
-.badge{display:inline-block;padding:3px 10px;border-radius:12px;font-weight:600}
-.meta{color:#4a5565;font-size:13px} img{max-width:100%;border:1px solid #e2e6ec;margin:6px 0}
-.small{font-size:12px;color:#5b6574} code{background:#f1f4f8;padding:1px 4px;border-radius:3px}
-.views{display:flex;flex-wrap:wrap;gap:8px} .views figure{margin:0} .views img{max-width:280px}
-.clips{display:flex;flex-wrap:wrap;gap:8px} .clips figure{margin:0} .clips video{border:1px solid #e2e6ec;background:#eef0f3}
-"""
-
-
-def _page(title: str, body: str) -> str:
-    """A whole HTML document: ``title`` (HTML text), the CSS, ``body`` (HTML)."""
-    return (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'/><title>{title}</title><style>{CSS}</style></head>"
-            f"<body>{body}</body></html>\n")
-
-
-def fmt(v: Any, digits: int = 4) -> str:
-    """Number formatting for tables (``-`` for None/NaN)."""
-    if v is None:
-        return "-"
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    if isinstance(v, (int, np.integer)):
-        return str(int(v))
-    if isinstance(v, (float, np.floating)):
-        if not math.isfinite(float(v)):
-            return "-"
-        return f"{float(v):.{digits}g}"
-    return esc(v)
-
-
-def img_tag(png: bytes | None, alt: str, mime: str = "image/png") -> str:
-    """An ``<img>`` with the PNG (or other ``mime`` image) inline (empty string for None)."""
-    if not png:
-        return ""
-    return f'<img alt="{esc(alt)}" src="data:{mime};base64,{base64.b64encode(png).decode()}"/>'
-
-
-def svg_tag(svg: bytes | None, alt: str) -> str:
-    """An ``<img>`` with an SVG figure inline (empty string for None)."""
-    return img_tag(svg, alt, plots.SVG_MIME)
-
-
-def verdict_cell(passed: bool | None) -> str:
-    """A colour-coded table cell for a verdict."""
-    if passed is None:
-        return '<td class="na">reported</td>'
-    return '<td class="pass">pass</td>' if passed else '<td class="fail">FAIL</td>'
-
-
-def _array_png(arr: np.ndarray) -> bytes:
-    from PIL import Image
-
-    a = np.asarray(arr)
-    if a.dtype != np.uint8:
-        a = np.clip(a * (255.0 if a.max() <= 1.0 else 1.0), 0, 255).astype(np.uint8)
-    buf = io.BytesIO()
-    Image.fromarray(a).save(buf, format="PNG")
-    return buf.getvalue()
-
-
-def _figure(image: np.ndarray, caption: str) -> str:
-    """A rendered view (H, W, 3) uint8 with its caption."""
-    return f"<figure>{img_tag(_array_png(image), caption)}<figcaption class='small'>{esc(caption)}</figcaption></figure>"
 
 
 def _renders(ev, views: dict[str, np.ndarray] | None = None, error: Exception | None = None) -> tuple[str, str]:
     """(HTML of the object views, what they are); ``views``: the renders, None when ``error`` stopped them."""
     if views is not None:
-        return f"<div class='views'>{''.join(_figure(v, k) for k, v in views.items())}</div>", "renders"
+        return f"<div class='views'>{''.join(figure(v, k) for k, v in views.items())}</div>", "renders"
     note = f"render failed ({type(error).__name__}: {error}); "
     run = next((r for r in ev._runs.values() if r.point_cloud), None)
     svg = plots.plot_object(run.point_cloud) if run is not None else None
@@ -189,7 +119,7 @@ def _penetration_details(ev) -> str:
 def why_section(ev) -> str:
     """``Why it failed``, at the top of the report: for every failing tier, one sentence per failing measure naming
     the tier, the parts, the measured value against its threshold and what to do, the sentences the terminal prints
-    (:func:`~asset2sim.tasks.check.verdict.why_it_failed`); empty when ready. The failing trials' evidence follows
+    (:func:`~asset2sim.tasks.check.failure_reasons.why_it_failed`); empty when ready. The failing trials' evidence follows
     under the verdicts."""
     why = why_it_failed(ev.metrics)
     return ("<h2>Why it failed</h2><ul class='why'>" + "".join(f"<li>{esc(w)}</li>" for w in why) + "</ul>") if why else ""
@@ -279,96 +209,6 @@ def operability_section(ev) -> str:
             "0.25 m/s, springs, gravity) must lie inside the part's real operating range.</p>"
             "<table><tr><th>engine</th><th>part</th><th>grasp</th><th>stroke</th><th>effort needed</th><th>range</th>"
             "<th>hand got it to</th><th>verdict</th><th>range source</th></tr>" + "".join(rows) + "</table>")
-
-
-def _joint_unit(jtype: str, what: str) -> str:
-    pri = jtype == "prismatic"
-    return {"damping": "N*s/m" if pri else "N*m*s/rad", "friction": "N" if pri else "N*m",
-            "stiffness": "N/m" if pri else "N*m/rad", "position": "m" if pri else "rad"}[what]
-
-
-def _param(parameter: str, where: str, value: Any, unit: str, source: str) -> dict[str, Any]:
-    """One row of :func:`parameter_rows`."""
-    return {"parameter": parameter, "where": where, "value": value, "unit": unit, "source": source}
-
-
-def parameter_rows(ev) -> list[dict[str, Any]]:
-    """Every physical parameter of the evaluated asset as {parameter, where, value, unit, source}: from ``overlay.json``
-    (and ``report.json``) when present, else from the URDF and the engine defaults."""
-    ctx = ev._context
-    rows = [_param("scale", "global", ev.scale, "-", ev.scale_source)]
-    if ctx is None:
-        return rows
-    ov, rep = ctx.overlay, ctx.report
-    escal: dict[tuple[str, str], int] = {}
-    for rnd in (rep or {}).get("escalation", []) or []:
-        for j, ch in (rnd.get("changes") or {}).items():
-            for k in ch:
-                escal[(j, k)] = rnd.get("round", 0)
-    est = ((ov or {}).get("estimator") or {}).get("name")
-    if ov:
-        for ln, lp in (ov.get("links") or {}).items():
-            src = lp.get("source") or (f"estimator {est}" if est else "overlay")
-            rows.append(_param("mass", f"link {ln}", lp.get("mass"), "kg", src))
-            if lp.get("density") is not None:
-                rows.append(_param("density", f"link {ln}", lp["density"], "kg/m^3", src))
-            inertia = lp.get("inertia") or {}
-            rows.append(_param("inertia (ixx, iyy, izz)", f"link {ln}", ", ".join(fmt(inertia.get(k)) for k in ("ixx", "iyy", "izz")),
-                               "kg*m^2", src))
-            rows.append(_param("center of mass", f"link {ln}", ", ".join(fmt(c) for c in lp.get("com", [])), "m", src))
-            if lp.get("material"):
-                rows.append(_param("material", f"link {ln}", lp["material"], "-", src))
-        for jn, jd in (ov.get("joints") or {}).items():
-            jt = ctx.joints[jn].type if jn in ctx.joints else "revolute"
-            for k in ("damping", "friction", "stiffness"):
-                src = jd.get("source") or (f"estimator {est}" if est else "overlay")
-                if (jn, k) in escal:
-                    src = f"changed after check round {escal[(jn, k)]} (the checks failed; see What asset2sim changed)"
-                val = jd.get(k)
-                # the URDF written after escalation is what is simulated
-                if k in ("damping", "friction") and jn in ctx.joints:
-                    fv = getattr(ctx.joints[jn], k)
-                    if fv is not None and val is not None and abs(fv - val) > 1e-12:
-                        val, src = fv, src + " (URDF value differs from overlay; URDF shown)"
-                rows.append(_param(k, f"joint {jn}", val, _joint_unit(jt, k), src))
-    else:
-        run = next((r for r in ev._runs.values() if r.masses), None)
-        for ln, li in ctx.links.items():
-            m = run.masses.get(ln, {}).get("mass") if run else li.mass
-            src = "URDF <inertial>" if li.mass is not None else "engine default (1 kg, inertia diag(1,1,1) kg*m^2)"
-            rows.append(_param("mass", f"link {ln}", m, "kg", src))
-        for jn, jd in ctx.joints.items():
-            if jd.type not in ("revolute", "continuous", "prismatic"):
-                continue
-            for k in ("damping", "friction"):
-                v = getattr(jd, k)
-                rows.append(_param(k, f"joint {jn}", 0.0 if v is None else v, _joint_unit(jd.type, k),
-                                   "URDF <dynamics>" if v is not None else "engine default (0)"))
-            rows.append(_param("stiffness", f"joint {jn}", 0.0, _joint_unit(jd.type, "stiffness"), "none (URDF has no springs)"))
-    state_src = ev.initial_state_source
-    if rep and rep.get("state"):
-        state_src = f"refinement ({rep['state'].get('method', '')})"
-    elif ov and ov.get("initial_joint_positions"):
-        state_src = f"estimator {est}" if est else "overlay"
-    elif ctx.baseline and ctx.baseline.get("initial_state_rule"):
-        state_src = f"baseline rule: {ctx.baseline['initial_state_rule']}"
-    for jn, q in ev.initial_state.items():
-        jt = ctx.joints[jn].type if jn in ctx.joints else "revolute"
-        rows.append(_param("initial position", f"joint {jn}", q, _joint_unit(jt, "position"), state_src))
-    for jn, jd in ctx.joints.items():
-        if jd.type in ("revolute", "prismatic"):
-            rows.append(_param("limits", f"joint {jn}", f"[{fmt(jd.lower)}, {fmt(jd.upper)}]", _joint_unit(jd.type, "position"),
-                               "URDF <limit>"))
-    return rows
-
-
-def _parameter_table(ev) -> str:
-    rows = "".join(
-        f"<tr><td>{esc(r['where'])}</td><td>{esc(r['parameter'])}</td><td class='num'>{fmt(r['value'])}</td>"
-        f"<td>{esc(r['unit'])}</td><td class='small'>{esc(r['source'])}</td></tr>"
-        for r in parameter_rows(ev)
-    )
-    return "<table><tr><th>where</th><th>parameter</th><th>value</th><th>unit</th><th>source</th></tr>" + rows + "</table>"
 
 
 def _badge(ev) -> str:
@@ -482,6 +322,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
     ``command``: the command that wrote it (``refine`` or ``evaluate``), in the title;
     ``clips``: the :class:`~asset2sim.schemas.realism.ClipSet` written beside the report (played in it); ``folder``: where the
     report is written (the URDF is named relative to it when it lies there, :func:`portable_urdf`)."""
+    # step 1: the time step, the badge and the renders (a plot of the vertices when rendering fails)
     ctx = ev._context
     dt = ctx.conventions.timestep if ctx is not None else 1.0 / 240.0
     settle_n = int(round(ctx.conventions.settle_time / dt)) if ctx is not None else 240
@@ -493,6 +334,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         except Exception as exc:  # the report falls back to a plot of the collision vertices
             error = exc
     views_html, views_what = _renders(ev, views, error)
+    # step 2: the header, the object at its initial state, the verdicts and the evidence
     joint_types = {n: j.type for n, j in ctx.joints.items()} if ctx is not None else {}
     state_text = ", ".join(f"{k} = {_joint_state(ev, k, v, joint_types.get(k, 'revolute'))}"
                            for k, v in ev.initial_state.items()) or "none"
@@ -514,11 +356,11 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         f"task-relevant: {esc(', '.join(ev.task_joints) or '-')}</p>",
         views_html,
         clips_section(clips),
-        changes_section(ctx.report if ctx is not None else None, ctx.overlay if ctx is not None else None, joint_types, views, _figure),
+        changes_section(ctx.report if ctx is not None else None, ctx.overlay if ctx is not None else None, joint_types, views, figure),
         "<h2>Verdicts</h2>",
         _verdict_table(ev),
         engines_section(ctx.report if ctx is not None else None),
-        evidence_section(ev._runs, ctx.urdf if ctx is not None else ev.urdf, dt, svg_tag, _figure, dict(ev.initial_state),
+        evidence_section(ev._runs, ctx.urdf if ctx is not None else ev.urdf, dt, svg_tag, figure, dict(ev.initial_state),
                          getattr(ev.metric("task_execution"), "details", None), ev.closed_positions, list(ev.metrics),
                          modelled_state(ctx)),
         "<h2>Operability</h2>",
@@ -527,6 +369,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         _penetration_details(ev),
         "<h2>Rest test</h2>",
     ]
+    # step 3: the rest test's plots per engine
     for eng, run in ev._runs.items():
         if run.trace is None:
             sections.append(f"<p class='small'>{esc(eng)}: {esc(run.error)}</p>")
@@ -535,11 +378,12 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         sections.append(svg_tag(plots.plot_root_drift(run.root_series, run.trace, dt, settle_n), f"root drift {eng}"))
         closed = {n: c["q_closed"] for n, c in ev.closed_positions.items()}
         sections.append(svg_tag(plots.plot_joints(run.joint_series, run.trace.joint_types, dt, settle_n, closed), f"joints {eng}"))
+    # step 4: prompt alignment, probes, parameters, notes and what the checks mean
     sections += ["<h2>Prompt alignment</h2>", _prompt_details(ev), "<h2>Passive probes</h2>", _probe_details(ev)]
     pb = ev._runs.get("pybullet")
     if pb is not None and pb.probes:
         sections.append(svg_tag(plots.plot_probes(pb.probes), "probes"))
-    sections += ["<h2>Physical parameters</h2>", _parameter_table(ev)]
+    sections += ["<h2>Physical parameters</h2>", parameter_table(ev)]
     sections.append("<h2>Notes</h2><ul>" + "".join(f"<li>{esc(n)}</li>" for n in ev.notes) + "</ul>")
     sections.append("<h2>What the checks mean</h2><table><tr><th>check</th><th>unit</th><th>what it measures</th></tr>"
                     + "".join(f"<tr><td>{esc(i.name)}</td><td>{esc(i.unit)}</td><td class='small'>{esc(i.description)}</td></tr>"
@@ -547,7 +391,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
     sections.append("<p class='small'>Simulation: PyBullet DIRECT, dt = 1/240 s, gravity -9.81 m/s^2, ground z = 0, "
                     "self-collision except parent-child, inertia from file, root free unless the asset is mounted. "
                     "The user guide (docs/guide/metrics.md in the asset2sim source) gives every threshold and convention.</p>")
-    return _page(f"asset2sim {esc(command)} {esc(ev.asset_id)}", "\n".join(sections))
+    return page(f"asset2sim {esc(command)} {esc(ev.asset_id)}", "\n".join(sections))
 
 
 def portable_urdf(ev, out_dir: Path | str) -> str:
@@ -572,84 +416,4 @@ def write_report(ev, path: Path | str, views: dict[str, np.ndarray] | None = Non
     by_refine = ctx is not None and ctx.report is not None and Path(path).resolve().parent == Path(ctx.folder).resolve()
     return write_text(Path(path), render_report(ev, views, "refine" if by_refine else "evaluate", clips, folder=Path(path).parent))
 
-
-# ------------------------------------------------------------------ benchmark pages
-def _pm(mean: float | None, sd: float | None, digits: int = 3, pct: bool = False) -> str:
-    if mean is None:
-        return "-"
-    k = 100.0 if pct else 1.0
-    s = f"{mean * k:.{digits}g}"
-    if sd is not None:
-        s += f" &plusmn; {sd * k:.{digits}g}"
-    return s + ("%" if pct else "")
-
-
-#: The summary's pass-rate columns: (statistic, count of assets with a verdict), in column order.
-_PASS_RATES = (("rest_stability_pass", "rest_n"), ("oscillation_pass", "osc_n"), ("probes_pass", "probes_n"),
-               ("sweep_pass", "sweep_n"), ("robust_rest_pass", "robust_n"), ("task_pass", "task_n"), ("force_pass", "force_n"),
-               ("ready", "ready_n"))
-
-
-def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], research: list[dict[str, str]],
-                             meta: dict[str, Any], chart: bytes | None = None) -> str:
-    """Thesis-layout tables per subset (``tables``: subset -> method -> row) beside the SPEC's numbers."""
-    cols = ["penetration (mm, toilet+stapler)", "penetration (mm, all)", "rest-stability pass", "oscillation pass",
-            "probes pass", "joint sweep pass", "robust rest pass", "task success", "operating force plausible",
-            "interaction-ready", "scale dev. vs GenSim2", "init. joint dev. (rad)", "prompt alignment", "all checks pass",
-            "median eval. time (s)", "realism (Bradley-Terry)"]
-    parts = [f"<h1>asset2sim benchmark</h1><p class='meta'>{esc(meta.get('manifest'))} &middot; methods "
-             f"{esc(', '.join(meta.get('methods', [])))} &middot; seed {esc(meta.get('seed'))} &middot; "
-             f"{esc(meta.get('rows'))} rows &middot; <a href='index.html'>per-object index</a></p>"]
-    for subset, rows in tables.items():
-        parts.append(f"<h2>{esc(subset)}</h2><table><tr><th>method</th>" + "".join(f"<th>{esc(c)}</th>" for c in cols) + "</tr>")
-        for method, r in rows.items():
-            cells = [_pm(r.get("pen_ts_mean"), r.get("pen_ts_sd")), _pm(r.get("pen_mean"), r.get("pen_sd")),
-                     *(_pm(r.get(rate), None, pct=True) + f" ({r.get(n, 0)})" for rate, n in _PASS_RATES),
-                     _pm(r.get("scale_mean"), r.get("scale_sd"), pct=False) + ("%" if r.get("scale_mean") is not None else ""),
-                     _pm(r.get("init_mean"), r.get("init_sd")), _pm(r.get("prompt_mean"), None, pct=True),
-                     _pm(r.get("all_pass"), None, pct=True), fmt(r.get("median_seconds"), 3), esc(r.get("realism", "not rated"))]
-            err = f" <span class='small'>({r.get('errors')} failed to produce)</span>" if r.get("errors") else ""
-            parts.append(f"<tr><td>{esc(method)}{err}</td>" + "".join(f"<td class='num'>{c}</td>" for c in cells) + "</tr>")
-        parts.append("</table>")
-    parts.append("<h2>Research numbers (thesis 9-object set, Isaac Sim)</h2><table><tr>"
-                 + "".join(f"<th>{esc(k)}</th>" for k in research[0]) + "</tr>"
-                 + "".join("<tr>" + "".join(f"<td>{esc(v)}</td>" for v in r.values()) + "</tr>" for r in research)
-                 + "</table>")
-    if chart:
-        parts.append("<h2>Pass rates</h2>" + svg_tag(chart, "pass rates"))
-    parts.append("<p class='small'>Ours: PyBullet under the conventions of docs/guide/metrics.md; the research measured in "
-                 "Isaac Sim (PhysX). Penetration in mm is the depth summed over self-contact points; pass rates count assets that were "
-                 "produced; (n) is the number of assets with a verdict.</p>")
-    return _page("asset2sim benchmark", "\n".join(parts))
-
-
-def render_benchmark_index(records: list[dict[str, Any]], meta: dict[str, Any]) -> str:
-    """One colour-coded row per object and method, linking to each ``report.html``."""
-    head = ["object", "category", "method", "all", "penetration (mm)", "rest", "oscillation", "ground", "divergence",
-            "joint hold", "probes", "mass (kg)", "scale dev. (%)", "init. dev.", "prompt", "time (s)", "report"]
-    rows = []
-    for r in records:
-        if r.get("error"):
-            rows.append(f"<tr><td>{esc(r['id'])}</td><td>{esc(r.get('category'))}</td><td>{esc(r['method'])}</td>"
-                        f"<td class='fail' colspan='{len(head) - 3}'>{esc(r['error'])}</td></tr>")
-            continue
-
-        def v(name: str) -> str:
-            p = r.get(f"{name}_pass")
-            cls = "na" if p is None else ("pass" if p else "fail")
-            return f"<td class='{cls}'>{fmt(r.get(name))}</td>"
-
-        link = f"<a href='{esc(r['report'])}'>report</a>" if r.get("report") else "-"
-        allcls = "pass" if r.get("all_pass") else "fail"
-        rows.append(
-            f"<tr><td>{esc(r['id'])}</td><td>{esc(r.get('category'))}</td><td>{esc(r['method'])}</td>"
-            f"<td class='{allcls}'>{'pass' if r.get('all_pass') else 'FAIL'}</td>"
-            + v("penetration") + v("rest_stability") + v("oscillation") + v("ground_penetration") + v("divergence")
-            + v("joint_hold") + v("probes") + v("total_mass")
-            + f"<td class='num'>{fmt(r.get('scale_deviation'))}</td><td class='num'>{fmt(r.get('initial_joint_deviation'))}</td>"
-            f"<td class='num'>{fmt(r.get('prompt_alignment'))}</td><td class='num'>{fmt(r.get('seconds'), 3)}</td><td>{link}</td></tr>"
-        )
-    return _page("asset2sim benchmark index", f"<h1>Benchmark index</h1><p class='meta'>{esc(meta.get('manifest'))} &middot; "
-                 "<a href='summary.html'>summary table</a> &middot; green pass, red fail, grey reported without threshold</p>"
-                 "<table><tr>" + "".join(f"<th>{esc(h)}</th>" for h in head) + "</tr>" + "".join(rows) + "</table>")
 

@@ -9,15 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.flows.catalog import (
-    ROW_COLUMNS,
-    CatalogError,
-    ResultCatalog,
-    load_catalog,
-    read_manifest,
-    read_manifest_entries,
-    result_key,
-)
+from asset2sim.flows.catalog import ROW_COLUMNS, ResultCatalog, result_key
+from asset2sim.flows.catalog_config import CatalogError, load_catalog, read_manifest, read_manifest_entries
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -12,7 +12,8 @@ import pytest
 
 from asset2sim.flows import catalog_compare, catalog_finish
 from asset2sim import flow_progress
-from asset2sim.flows.catalog import RegressionSettings, ResultCatalog, ResultsSettings
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog_config import RegressionSettings, ResultsSettings
 from asset2sim.commands import _progress
 from asset2sim.commands._progress import FlowProgress, eta_seconds
 from asset2sim.flow_progress import ProgressEvent

@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 from asset2sim.flows import catalog_fs
-from asset2sim.flows.catalog import COMPACTED_NAME, CatalogConfig, ResultCatalog, load_catalog
+from asset2sim.flows.catalog import COMPACTED_NAME, ResultCatalog
+from asset2sim.flows.catalog_config import CatalogConfig, load_catalog
 from asset2sim.schemas.catalog import SCHEMA_VERSION, SCHEMA_VERSION_KEY, CatalogRow
 from asset2sim.tasks.publish import contract
 from tests.helpers import catalog_reader_counts, local_s3_server

@@ -44,12 +44,12 @@ def test_read_urdf_gives_each_caller_its_own_model_and_reads_a_rewritten_file(de
     path = folder / "mobility.urdf"
     fresh = urdf.parse_urdf_bytes(path.read_bytes(), source=str(path), base=path.parent, mode="lenient")
     first = urdf.read_urdf(path, mode="lenient")
-    hits = urdf._READ_MEMO.hits
+    hits = urdf.reader._READ_MEMO.hits
     movable = first.movable_joints[0]
     movable.limit.upper = 99.0  # a caller changes its model (convex_collisions replaces collisions in place)
     next(iter(first.links.values())).collisions.clear()
     second = urdf.read_urdf(path, mode="lenient")
-    assert urdf._READ_MEMO.hits == hits + 1
+    assert urdf.reader._READ_MEMO.hits == hits + 1
     assert second == fresh and second.path == path
     assert second.joint(movable.name).upper != 99.0
 

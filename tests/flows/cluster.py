@@ -25,7 +25,8 @@ from pathlib import Path
 
 import psutil
 
-from asset2sim.flows.catalog import ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog_config import load_catalog
 from asset2sim.output_folder import MARKER_NAME
 
 DASK = str(Path(sys.executable).with_name("dask"))
@@ -208,7 +209,7 @@ def _main() -> int:
     finally:
         cluster.close()
         server.stop_server(proc)
-    from asset2sim.flows.catalog import read_manifest_entries
+    from asset2sim.flows.catalog_config import read_manifest_entries
 
     ids = [e.asset_id for e in read_manifest_entries(cat.manifest_path(args.dataset), cat.dataset_root(args.dataset))[0]]
     t = tally(args.catalog, args.dataset)

@@ -18,7 +18,8 @@ try:  # package layout or rootdir-on-sys.path layout
 except ImportError:
     from flowproject import make_project  # type: ignore[no-redef]
 
-from asset2sim.flows.catalog import ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog_config import load_catalog
 
 pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
 

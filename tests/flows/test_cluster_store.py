@@ -21,7 +21,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import cluster_run  # noqa: E402
 
-from asset2sim.flows import refine_flow  # noqa: E402
+from asset2sim.flows import flow_runtime  # noqa: E402
 
 BUCKET = "a2s-cluster"
 
@@ -30,7 +30,7 @@ def test_the_recipe_is_what_the_flow_sets_for_its_own_cluster():
     """The recipe's Dask settings are the ones the flow's local cluster gets (one list, two places)."""
     recipe = cluster_run.recipe()
     dask_env = {k: v for k, v in recipe.env.items() if k.startswith("DASK_")}
-    assert dask_env == refine_flow.dask_settings_env()
+    assert dask_env == flow_runtime.dask_settings_env()
     assert recipe.worker[:2] == ["dask", "worker"] and "--nthreads" in recipe.worker
     assert recipe.worker[recipe.worker.index("--nthreads") + 1] == "1"
     assert {"PREFECT_API_URL", "AWS_ENDPOINT_URL"} <= set(recipe.env)

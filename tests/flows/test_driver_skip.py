@@ -10,7 +10,8 @@ import os
 import pandas as pd
 import pytest
 
-from asset2sim.flows.catalog import ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog_config import load_catalog
 from asset2sim.flows import driver_skip
 
 pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)

@@ -17,7 +17,8 @@ from pathlib import Path
 import psutil
 import pytest
 
-from asset2sim.flows.catalog import ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog_config import load_catalog
 from asset2sim.output_folder import MARKER_NAME
 
 pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)

@@ -141,15 +141,15 @@ def test_dask_host_is_configurable_in_the_catalog(tmp_path, prefect_server):
     local cluster's arguments (an address no test machine should open to
     its network is not opened here: only the arguments are checked)."""
     pytest.importorskip("prefect_dask")
-    from asset2sim.flows.catalog import load_catalog
-    from asset2sim.flows.refine_flow import _dask_task_runner
+    from asset2sim.flows.catalog_config import load_catalog
+    from asset2sim.flows.flow_runtime import dask_task_runner
 
     catalog = make_project(tmp_path, ASSETS, catalog_extra={"run": {"dask_host": "10.1.2.3", "dashboard": False}})
     run = load_catalog(catalog).config.run
     assert run.dask_host == "10.1.2.3" and run.dashboard is False
-    kw = _dask_task_runner(2, None, host=run.dask_host, dashboard=run.dashboard).cluster_kwargs
+    kw = dask_task_runner(2, None, host=run.dask_host, dashboard=run.dashboard).cluster_kwargs
     assert kw["host"] == "10.1.2.3" and kw["dashboard_address"] is None
     assert kw["scheduler_kwargs"] == {"dashboard_address": ("10.1.2.3", 0)}  # its HTTP port: a free one
-    kw = _dask_task_runner(2, None).cluster_kwargs  # defaults: loopback, dashboard on a free port there
+    kw = dask_task_runner(2, None).cluster_kwargs  # defaults: loopback, dashboard on a free port there
     assert kw["host"] == "127.0.0.1" and kw["dashboard_address"] == ("127.0.0.1", 0)
-    assert _dask_task_runner(2, None, host="::1").cluster_kwargs["dashboard_address"] == ("::1", 0)
+    assert dask_task_runner(2, None, host="::1").cluster_kwargs["dashboard_address"] == ("::1", 0)

@@ -9,8 +9,9 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from asset2sim.flows.catalog import ResultCatalog, load_catalog
-from asset2sim.flows.stages import flow_parameters
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog_config import load_catalog
+from asset2sim.flows.run_plan import flow_parameters
 
 pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
 

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.flows.catalog import ROW_COLUMNS, ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ROW_COLUMNS, ResultCatalog
+from asset2sim.flows.catalog_config import load_catalog
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.verdict import readiness
@@ -221,8 +222,8 @@ def test_rerun_skips_finished_assets_and_a_changed_request_redoes_only_that_one(
 def test_force_and_subsets_when_planning_a_run(first_run):
     """``--force`` plans without earlier results (everything is redone);
     ``--ids`` / ``--limit`` select assets; unknown ids are refused."""
-    from asset2sim.flows.catalog import CatalogError
-    from asset2sim.flows.stages import plan_run
+    from asset2sim.flows.catalog_config import CatalogError
+    from asset2sim.flows.run_plan import plan_run
 
     catalog, summary, _ = first_run
     cat = load_catalog(catalog)

@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from asset2sim.flows.catalog import ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog_config import load_catalog
 from asset2sim.tasks.publish import contract
 
 pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)

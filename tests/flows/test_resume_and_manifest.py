@@ -20,7 +20,8 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.flows.catalog import CatalogError, ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog_config import CatalogError, load_catalog
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.flows.job_records import JOB_RECORD_NAME
@@ -157,7 +158,7 @@ def test_bad_manifest_rows_fail_alone_while_the_others_run(tmp_path, dask_addres
 
 
 def test_planning_keeps_manifest_order_and_selects_bad_rows_by_id(tmp_path):
-    from asset2sim.flows.stages import plan_run
+    from asset2sim.flows.run_plan import plan_run
 
     catalog = make_project(tmp_path, {"box_lid": "box_lid", "laptop": "laptop"})
     cat = load_catalog(catalog)

@@ -8,7 +8,7 @@ import pytest
 
 from asset2sim import demo_assets
 from asset2sim.cli import main
-from asset2sim.flows.catalog import load_catalog, read_manifest_entries
+from asset2sim.flows.catalog_config import load_catalog, read_manifest_entries
 from asset2sim.flows.starter import write_starter_catalog
 from asset2sim.schemas.config import RefineConfig
 from tests.tasks.ingest.host_layouts import robosuite_door

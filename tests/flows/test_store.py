@@ -14,7 +14,8 @@ try:  # package layout or rootdir-on-sys.path layout
 except ImportError:
     from flowproject import make_project  # type: ignore[no-redef]
 
-from asset2sim.flows.catalog import ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog_config import load_catalog
 from asset2sim.flows import store
 from asset2sim.tasks.publish.contract import is_complete
 from asset2sim.output_folder import MARKER_NAME

@@ -156,7 +156,7 @@ def test_a_part_robust_rest_moves_is_explained_with_what_to_do(tmp_path, capsys)
     passes."""
     from asset2sim import demo_assets
     from asset2sim.cli import main
-    from asset2sim.tasks.check.verdict import robust_rest_why, why_it_failed
+    from asset2sim.tasks.check.failure_reasons import robust_rest_why, why_it_failed
 
     cabinet = demo_assets.build_object("cabinet_2drawer", tmp_path / "cabinet")
     out = tmp_path / "out"

@@ -1,5 +1,5 @@
 """One explanation per failure: every failure mode's tier explained by
-:func:`asset2sim.tasks.check.verdict.why_it_failed`, on an asset built to fail that way. The terminal prints the
+:func:`asset2sim.tasks.check.failure_reasons.why_it_failed`, on an asset built to fail that way. The terminal prints the
 sentences (``why it failed ...``), ``report.html`` shows the same ones in its "Why it failed" block, and each names
 the tier, the part, the value against its threshold and what a user can do."""
 
@@ -18,7 +18,8 @@ from asset2sim import demo_assets
 from asset2sim.cli import main
 from asset2sim.schemas.report import FAILURE_MODES, MetricResult
 from asset2sim.tasks.check import metrics as spec_metrics
-from asset2sim.tasks.check.verdict import STOPPED_MODES, TIERS, readiness, why_it_failed
+from asset2sim.tasks.check.failure_reasons import why_it_failed
+from asset2sim.tasks.check.verdict import STOPPED_MODES, TIERS, readiness
 from tests.conftest import SHARED, needs_shared
 from tests.contract_asset import write_contract_asset
 from tests.tasks.check.failure_assets import build_tall_faucet

@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
-from asset2sim.tasks.evaluation.report_html import parameter_rows, render_benchmark_index, render_benchmark_summary
+from asset2sim.tasks.evaluation.benchmark_pages import render_benchmark_index, render_benchmark_summary
+from asset2sim.tasks.evaluation.parameter_table import parameter_rows
 from tests.conftest import SHARED, needs_shared
 
 

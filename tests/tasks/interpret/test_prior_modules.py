@@ -42,14 +42,19 @@ def _own_imports(module: str) -> set[str]:
         ("categories", {"prior_tables", "part_labels"}),
         ("request_values", {"part_labels"}),
         ("mounting", set()),
-        ("request", {"prior_tables", "part_labels", "categories", "request_values", "mounting"}),
+        ("phrase_scan", {"request_values"}),
+        ("motion_words", {"request_values", "phrase_scan"}),
+        ("state_words", {"request_values", "phrase_scan"}),
+        ("request", {"prior_tables", "part_labels", "categories", "request_values", "mounting", "phrase_scan", "motion_words",
+                     "state_words"}),
         ("part_priors", {"prior_tables", "part_labels", "categories"}),
         ("size_priors", {"prior_tables", "categories", "request"}),
     ],
 )
 def test_modules_import_only_the_layers_below(module: str, allowed: set[str]) -> None:
     """tables <- part labels <- categories <- request <- sizes, and the mounting
-    words (a layer of their own, read by the request parser): no way back."""
+    words, the phrase scan, the motion and the state words (layers of their own,
+    read by the request parser): no way back."""
     assert _own_imports(module) <= allowed
 
 

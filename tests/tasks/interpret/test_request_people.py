@@ -16,7 +16,8 @@ from asset2sim.schemas.overlay import EstimatorInfo, Overlay
 from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.interpret.named_parts import requested_joints
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
-from asset2sim.tasks.interpret.request import LESS_THAN_HALF, parse_request
+from asset2sim.tasks.interpret.request import parse_request
+from asset2sim.tasks.interpret.state_words import LESS_THAN_HALF
 from asset2sim.tasks.synthesize import estimate, request_apply, request_findings
 from asset2sim.tasks.synthesize.context import build_context
 from asset2sim.engines.source import UrdfFile

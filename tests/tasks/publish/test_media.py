@@ -104,7 +104,7 @@ def test_report_command_and_its_errors(deferred, tmp_path):
 def test_the_flow_defers_media_to_its_media_phase(tmp_path):
     """``run.extras: deferred``: the refine stage writes no media and the run's media phase makes them in a child
     process; a folder whose media are made already is left alone."""
-    from asset2sim.flows.catalog import RunSettings
+    from asset2sim.flows.catalog_config import RunSettings
     from asset2sim.flows.refine_flow import media_phase
     from asset2sim.flows.stages import AssetJob, prepare_asset, refine_stage
 

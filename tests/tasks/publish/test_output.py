@@ -52,7 +52,8 @@ def refined(demo_root, tmp_path_factory):
         if isinstance(path, (str, os.PathLike)) and "asset2sim-candidates-" in str(path) and not os.path.isdir(path):
             # the reader: the innermost frame of the project outside the modules that read files on a caller's behalf
             frames = [Path(f.filename) for f in traceback.extract_stack()[:-2]]
-            scratch_readers.append(next(f for f in reversed(frames) if PROJECT in f.parents and f.name not in READERS))
+            scratch_readers.append(next(f for f in reversed(frames) if PROJECT in f.parents and f.name not in READERS
+                                        and "/".join(f.parts[-2:]) not in READERS))
 
     def watching_open(file, mode="r", *a, **k):
         if not set(mode) & set("wax+"):
@@ -70,14 +71,14 @@ def refined(demo_root, tmp_path_factory):
         mp.setattr(io, "open", watching_open)
         mp.setattr(builtins, "open", watching_open)
         mp.setattr(os, "open", watching_os_open)
-        mp.setattr(urdf._READ_MEMO, "get", lambda key: None)
+        mp.setattr(urdf.reader._READ_MEMO, "get", lambda key: None)
         mp.setattr(extract._EXTRACT_MEMO, "get", lambda key: None)
         res = refine_asset(demo_root / entry.asset_id, entry.prompt, out)
     return res, out.resolve(), calls, at_publish, scratch_readers
 
 
 #: Modules that read files on a caller's behalf (the caller is the reader that counts).
-READERS = {"safexml.py", "urdf.py", "loading.py", "mesh_io.py", "atomic.py"}
+READERS = {"safexml.py", "urdf/reader.py", "loading.py", "mesh_io.py", "atomic.py"}
 PROJECT = Path(__file__).resolve().parents[3]
 
 

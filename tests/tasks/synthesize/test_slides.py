@@ -4,7 +4,7 @@ cabinet's drawers on wooden runners, and heavy drawers on ball-bearing slides.""
 from __future__ import annotations
 
 from asset2sim.prior_tables import load_priors
-from asset2sim.tasks.check.verdict import why_it_failed
+from asset2sim.tasks.check.failure_reasons import why_it_failed
 from asset2sim.tasks.synthesize.physics import G
 
 

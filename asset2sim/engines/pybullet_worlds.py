@@ -1,0 +1,153 @@
+"""PyBullet worlds beside the simulation session: the free-shape collision world
+(:class:`PyBulletShapeWorld`, distances between static convex shapes) and the viewer (:class:`PyBulletViewer`,
+images drawn by TinyRenderer on the CPU), each in a private DIRECT client, with what every PyBullet world reads:
+the quiet import (:func:`bullet`), joint infos and a link's world frame (position (3,), rotation (3, 3)).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from asset2sim.engines.quiet import quiet_fds, startup_quiet
+
+
+BULLET_JOINT_TYPES = {0: "revolute", 1: "prismatic", 2: "spherical", 3: "planar", 4: "fixed"}
+
+
+def bullet():
+    with startup_quiet():  # its build-time line
+        import pybullet
+
+    return pybullet
+
+
+def joint_infos(p, body: int, cid: int) -> list:
+    return [p.getJointInfo(body, j, physicsClientId=cid) for j in range(p.getNumJoints(body, physicsClientId=cid))]
+
+
+def body_link_frame(p, body: int, idx: int, cid: int) -> tuple[np.ndarray, np.ndarray]:
+    """World position (3,) and rotation (3, 3) of link ``idx`` (-1: the base)."""
+    if idx < 0:
+        pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=cid)
+    else:
+        st = p.getLinkState(body, idx, computeForwardKinematics=True, physicsClientId=cid)
+        pos, orn = st[4], st[5]
+    return np.array(pos, float), np.array(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
+
+
+class PyBulletShapeWorld:
+    """A :class:`~asset2sim.engines.base.ShapeWorld`: static convex mesh bodies in a private DIRECT client."""
+
+    engine = "pybullet"
+    #: Bullet's default convex hull collision margin, 1 mm, on each of two touching shapes.
+    contact_margin = 0.002
+
+    def __init__(self):
+        p = bullet()
+        self._p = p
+        self.cid = p.connect(p.DIRECT)
+
+    def add_convex(self, vertices, scale, position, orientation) -> int:
+        p = self._p
+        shape = p.createCollisionShape(p.GEOM_MESH, vertices=np.asarray(vertices, float).tolist(),
+                                       meshScale=np.asarray(scale, float).tolist(), physicsClientId=self.cid)
+        return p.createMultiBody(0, shape, basePosition=np.asarray(position, float).tolist(),
+                                 baseOrientation=np.asarray(orientation, float).tolist(), physicsClientId=self.cid)
+
+    def set_pose(self, shape: int, position, orientation) -> None:
+        self._p.resetBasePositionAndOrientation(shape, np.asarray(position, float).tolist(), np.asarray(orientation, float).tolist(),
+                                                physicsClientId=self.cid)
+
+    def distances(self, shape_a: int, shape_b: int, max_distance: float = 0.0) -> list[float]:
+        return [pt[8] for pt in self._p.getClosestPoints(shape_a, shape_b, max_distance, physicsClientId=self.cid)]
+
+    def close(self) -> None:
+        if self.cid is not None:
+            self._p.disconnect(self.cid)
+            self.cid = None
+
+
+class PyBulletViewer:
+    """A :class:`~asset2sim.engines.base.Viewer`: the URDF (fixed base, MTL
+    colours) in a private DIRECT client, drawn by TinyRenderer on the CPU
+    (RuntimeError: Bullet could not load the file)."""
+
+    engine = "pybullet"
+
+    def __init__(self, urdf_path: Path):
+        self.cid = None
+        with quiet_fds():  # the import prints PyBullet's build time
+            self._p = p = bullet()
+            self.cid = cid = p.connect(p.DIRECT)
+        try:
+            with quiet_fds():
+                self.body = p.loadURDF(str(urdf_path), basePosition=[0, 0, 0], useFixedBase=True, flags=p.URDF_USE_MATERIAL_COLORS_FROM_MTL,
+                                       physicsClientId=cid)
+        except Exception as exc:
+            self.close()
+            raise RuntimeError(f"PyBullet could not load {urdf_path}: {exc}") from exc
+        self._links: dict[int, str] = {-1: p.getBodyInfo(self.body, physicsClientId=cid)[0].decode()}
+        self._joints: dict[str, int] = {}
+        self.joint_names: list[str] = []
+        for j, info in enumerate(joint_infos(p, self.body, cid)):
+            self._links[j] = info[12].decode()
+            name = info[1].decode()
+            self._joints[name] = j
+            if info[2] in (p.JOINT_REVOLUTE, p.JOINT_PRISMATIC):
+                self.joint_names.append(name)
+        self.link_names = list(self._links.values())
+        self._index = {name: idx for idx, name in reversed(list(self._links.items()))}
+
+    def visual_colors(self) -> list[tuple[str, int, tuple[float, float, float, float]]]:
+        out = []
+        counts: dict[int, int] = {}
+        for row in self._p.getVisualShapeData(self.body, physicsClientId=self.cid):
+            link = row[1]
+            k = counts.get(link, 0)
+            counts[link] = k + 1
+            out.append((self._links[link], k, tuple(row[7])))
+        return out
+
+    def set_visual_color(self, link: str, shape: int, rgba) -> None:
+        self._p.changeVisualShape(self.body, self._index[link], shapeIndex=shape, rgbaColor=list(rgba), physicsClientId=self.cid)
+
+    def set_joint_positions(self, q: dict[str, float]) -> None:
+        for name, value in q.items():
+            self._p.resetJointState(self.body, self._joints[name], float(value), 0.0, physicsClientId=self.cid)
+
+    def set_root_pose(self, position, quat_xyzw) -> None:
+        self._p.resetBasePositionAndOrientation(self.body, np.asarray(position, float).tolist(),
+                                                np.asarray(quat_xyzw, float).tolist(), physicsClientId=self.cid)
+
+    def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        return body_link_frame(self._p, self.body, self._index[link], self.cid)
+
+    def draw(self, width: int, height: int, camera: dict, light: dict) -> tuple[np.ndarray, np.ndarray]:
+        p = self._p
+        view = p.computeViewMatrix(*(np.asarray(camera[k], float).tolist() for k in ("eye", "target", "up")), physicsClientId=self.cid)
+        proj = p.computeProjectionMatrixFOV(camera["fov_deg"], width / height, camera["near"], camera["far"], physicsClientId=self.cid)
+        res = p.getCameraImage(width, height, view, proj, lightDirection=np.asarray(light["direction"], float).tolist(),
+                               lightColor=list(light["color"]), lightDistance=light["distance"], shadow=int(light["shadow"]),
+                               lightAmbientCoeff=light["ambient"], lightDiffuseCoeff=light["diffuse"],
+                               lightSpecularCoeff=light["specular"], renderer=p.ER_TINY_RENDERER, physicsClientId=self.cid)
+        if res is None or len(res) < 5:
+            raise RuntimeError("PyBullet returned no image")
+        rgba = np.asarray(res[2], dtype=np.uint8).reshape(height, width, 4)
+        seg = np.asarray(res[4]).reshape(height, width)
+        return rgba, seg
+
+    def close(self) -> None:
+        if self.cid is not None:
+            try:
+                self._p.disconnect(physicsClientId=self.cid)
+            except Exception:
+                pass
+            self.cid = None
+
+    def __del__(self):  # pragma: no cover - best effort
+        try:
+            self.close()
+        except Exception:
+            pass

@@ -1,0 +1,283 @@
+"""Why an asset failed, in sentences a user acts on: per failing tier, what moved or touched, by how much
+against its band (mm for prismatic joints, rad for revolute ones), in which engine, and what to ask for instead
+(:data:`TIER_ADVICE`); :func:`why_it_failed` gathers them for the refine report, the terminal and ``report.html``.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+from asset2sim.tasks.check.verdict import (
+    HOLD_METRICS, PENETRATION_METRICS, TIERS, UNRESOLVED_PENETRATION_MM, metric_verdict, mode_of,
+)
+
+
+def penetration_why(metrics: list[Any]) -> list[str]:
+    """Why the penetration tier failed (``unresolved_penetration``), one sentence per failing measure: which
+    penetration, the links, the measured depth against :data:`UNRESOLVED_PENETRATION_MM`, and what a user can do;
+    empty when the tier passes. The terminal summary and ``report.html`` print the same sentences."""
+    out = []
+    for m in metrics:
+        if m.name not in PENETRATION_METRICS or metric_verdict(m) is not False:
+            continue
+        d = m.details or {}
+        if m.name == "penetration":
+            pairs = sorted(d.get("pairs") or [], key=lambda p: -float(p.get("max_depth_mm") or 0.0))
+            links = f"links '{pairs[0]['link_a']}' and '{pairs[0]['link_b']}' (not parent and child) overlap by up to " \
+                    f"{float(pairs[0]['max_depth_mm']):.1f} mm" if pairs else "links that are not parent and child overlap"
+            out.append(f"self-contact penetration {m.value:.1f} mm ({m.engine}) is above {UNRESOLVED_PENETRATION_MM:g} mm: "
+                       f"{links} at the initial state. Ask for another state (--state JOINT=closed or a smaller opening) "
+                       "or give these links collision meshes that do not overlap.")
+            continue
+        pairs = d.get("pairs") or {}
+        worst = max(pairs, key=pairs.get) if pairs else "?/?"
+        parent, _, child = worst.partition("/")
+        depth = float(pairs.get(worst, m.value or 0.0))
+        out.append(f"parent-child penetration ({m.engine}): link '{child}' is {depth:.1f} mm inside its parent '{parent}' at "
+                   f"the initial state, {float(d.get('beyond_modelled_mm') or 0.0):.1f} mm deeper than at its modelled pose "
+                   f"(fails above {UNRESOLVED_PENETRATION_MM:g} mm). Ask for a state the part reaches without entering its "
+                   "parent (--state JOINT=closed or a smaller opening), or check the joint's axis, origin and limits in the input.")
+    return out
+
+
+#: How each robust-rest trial disturbed the object, for :func:`robust_rest_why`.
+_TRIAL_WORDS = {"drop": "landed after the 2 cm drop", "tilt+x": "landed after the 5 deg tilt about +x",
+                "tilt-x": "landed after the 5 deg tilt about -x", "tilt+y": "landed after the 5 deg tilt about +y",
+                "tilt-y": "landed after the 5 deg tilt about -y", "nudge": "was nudged at 0.05 m/s"}
+
+
+def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozenset()) -> list[str]:
+    """Why robust rest failed (``not_robust_at_rest``), one sentence per part that moved (its largest drift over the
+    trials against its tolerance, and the trial) or per toppling, with what a user can do; empty when it passes. A
+    part's friction and damping stay within what a hand overcomes (the operability tier), so a drift here is the
+    part's momentum when the object lands, not a search that stopped short (``docs/guide/metrics.md``). A trial
+    the object did not come to rest in (or diverged) is one sentence too; a part that moved in a trial the object
+    toppled in is said to swing as the object falls. ``skip``: joints the rest tier already found not held
+    (:func:`why_it_failed`): their drift is said to be the same motion, with the rest tier's advice."""
+    out: list[str] = []
+    for m in metrics:
+        if m.name != "robust_rest" or metric_verdict(m) is not False:
+            continue
+        # step 1: per failed trial, the object not at rest, each failing joint's worst drift and the largest topple
+        trials = (m.details or {}).get("trials") or {}
+        worst: dict[str, tuple[float, float, str]] = {}
+        toppled: tuple[float, str] | None = None
+        restless: dict[str, str] = {}
+        for name, t in trials.items():
+            if not isinstance(t, dict) or t.get("passed") is not False:
+                continue
+            moving = [w for w in str(t.get("failure", "")).split("; ") if w.startswith(("not at rest", "diverged"))]
+            if moving and moving[0].startswith("not at rest") and t.get("d_pos") is not None and t.get("d_ori") is not None:
+                restless[name] = f"not at rest (D_pos {float(t['d_pos']):.3e} m, D_ori {float(t['d_ori']):.3e} rad)"
+            elif moving:
+                restless[name] = moving[0]
+            for j in t.get("failing_joints") or []:
+                drift, tol = float((t.get("joint_drift") or {}).get(j, 0.0)), float((t.get("joint_tolerance") or {}).get(j, 0.0))
+                if j not in worst or drift / max(tol, 1e-12) > worst[j][0] / max(worst[j][1], 1e-12):
+                    worst[j] = (drift, tol, name)
+            if "toppled" in str(t.get("failure", "")) and (toppled is None or float(t.get("topple") or 0) > toppled[0]):
+                toppled = (float(t.get("topple") or 0.0), name)
+        # step 2: one sentence per joint that moved: swung in a topple, moving at rest too, or carried by its momentum
+        for j, (drift, tol, name) in sorted(worst.items()):
+            t = trials.get(name) or {}
+            unit = (t.get("joint_units") or {}).get(j, "rad")
+            peak = (t.get("joint_peak") or {}).get(j)
+            moving = j in (t.get("moving_joints") or [])
+            amount = (f"{_joint_amount(drift, unit)} from its state{' and was still moving' if moving else ''} (band "
+                      f"{_joint_amount(tol, unit)}" + (f"; largest excursion {_joint_amount(peak, unit)}" if peak is not None else "") + ")")
+            if "toppled" in str((trials.get(name) or {}).get("failure", "")):
+                out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} and toppled "
+                           f"({m.engine}): the part swings as the object falls (the toppling is explained next). "
+                           "--mount fixed when it stands fixed in use; a mounted object is not dropped or tilted.")
+                continue
+            if j in skip:
+                out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} ({m.engine}), as "
+                           "it moves at rest with no disturbance (the rest tier). " + TIER_ADVICE["hold"])
+                continue
+            out.append(f"joint '{j}' came to rest {amount} when the object {_TRIAL_WORDS.get(name, name)} ({m.engine}); its "
+                       "friction and damping stay within what a hand may use on it, and at that the part's momentum carries it "
+                       "out of its band. " + _holding_choices(m, metrics, j, unit == "m"))
+        # step 3: the trials the object did not come to rest in
+        for name, what in restless.items():
+            rest = re.search(r"at rest \(([^)]*)\)", m.threshold or "")
+            out.append(f"the object was {what} when it {_TRIAL_WORDS.get(name, name)} ({m.engine}; at rest means "
+                       f"{rest.group(1) if rest else 'still'} at the end of the trial): it rocks or slides on its support. A "
+                       "wider footprint in this state (a smaller opening of its heavy parts) may settle; --mount fixed "
+                       "when it stands fixed in use.")
+        # step 4: the toppling
+        if toppled is not None:
+            out.append(f"the object toppled ({toppled[0]:.2f} rad) when it {_TRIAL_WORDS.get(toppled[1], toppled[1])} "
+                       f"({m.engine}): its centre of mass lies near the edge of its footprint in this state. Ask for a smaller "
+                       "opening of its heavy parts, or --mount fixed when it stands fixed in use.")
+    return out
+
+
+def _holding_choices(rr: Any, metrics: list[Any], joint: str, prismatic: bool) -> str:
+    """The choices that remain for a part robust rest found not held within a hand's operating range, only those
+    that fit the object: a lighter part; a stiffer slide or hinge than that range (which the operability tier then
+    fails); mounting, where its category is mounted in use (``rr.details["category_mounting"]``)."""
+    op = next((m for m in metrics if m.name == "operability" and m.engine == rr.engine), None)
+    eff = ((op.details or {}).get("efforts") or {}).get(joint) or {} if op is not None else {}
+    label = eff.get("label") or "part"
+    top = (eff.get("force_range_n") or [None, None])[1]
+    mech = "slide" if prismatic else "hinge"
+    choices = [f"a lighter {label} (its mass in the request, 'a 2 kg {label}', or --material)"]
+    choices.append(f"a stiffer {mech} than a hand may operate" + (f" (more than the {top:g} N of its range, {eff.get('range_of')})"
+                                                                 if top is not None else "")
+                   + ", which the operability tier then fails")
+    kind = (rr.details or {}).get("category_mounting")
+    if kind and kind != "free-standing":
+        choices.append(f"--mount fixed, as the category is used ({kind})")
+    return "What remains: " + "; ".join(choices) + "."
+
+
+def _num(v: Any, digits: int = 3) -> str:
+    return "?" if v is None else f"{float(v):.{digits}g}"
+
+
+def _joint_amount(value: float, unit: str) -> str:
+    """``12.0 mm`` for a prismatic joint's metres, ``0.050 rad`` for a revolute joint's radians."""
+    return f"{1000.0 * float(value):.1f} mm" if unit == "m" else f"{float(value):.3f} rad"
+
+
+#: What a user can do about each tier (the tail of every sentence of :func:`why_it_failed`).
+TIER_ADVICE: dict[str, str] = {
+    "stand": ("Ask for a state that keeps its centre of mass over its footprint (a smaller opening of its heavy parts, "
+              "--state JOINT=closed), or --mount fixed when it stands fixed in use."),
+    "divergence": ("Check the input's masses and inertias (asset2sim audit), or give the object a mass (--mass) or "
+                   "material (--material) so each part's inertia is estimated from its geometry."),
+    "ground": "Check the collision meshes of its lowest links (they must not reach below its feet), or --mount fixed.",
+    "oscillation": ("Ask for the part at an end of its range (--state JOINT=closed or fully), or --mount fixed when it "
+                    "stands fixed in use; check the input's springs and damping (asset2sim audit) when it declares any."),
+    "hold": ("Ask for the part nearer an end of its range (--state JOINT=closed or fully), a lighter part (--mass, "
+             "--material), or --mount fixed when it stands fixed in use."),
+    "sweep": ("Check the joint's axis, origin and limits in the input and the collision meshes where it stops "
+              "(report.html shows the sweep), or ask for a state the part moves from freely (--state JOINT=closed)."),
+    "operability": ("Ask for a lighter part or another material (--mass, --material); a part something blocks needs "
+                    "that collision mesh repaired (report.html shows where it stops)."),
+    "probes": ("A part that springs back or does not stay where it was pushed needs a spring or friction that holds it "
+               "(asset2sim audit judges an input's declared springs; refine without --keep-declared estimates them); "
+               "one whose push slid or tipped the object: --mount fixed when it stands fixed in use, or a lighter part "
+               "(--mass, --material)."),
+    "task": ("Check that --task names a part the object has and a state it reaches; --mount fixed when the object "
+             "stands fixed in use, or a lighter part (--mass, --material)."),
+    "force": ("Give the object a real mass or material (--mass, --material) so its parts weigh what real ones do, or "
+              "ask for another task (--task)."),
+    "request": ("Reword the request to name a part the object has (semantics.txt lists them) and a state it reaches, "
+                "or set the state directly (--state JOINT=VALUE)."),
+}
+
+#: The advice of a tier without its own entry in :data:`TIER_ADVICE`.
+_FALLBACK_ADVICE = {"rest": "stand", "penetration": "sweep", "robust_rest": "stand"}
+
+
+def _rest_why(metrics: list[Any]) -> list[str]:
+    """One sentence per failing rest-tier metric: what moved, by how much against its threshold, the advice."""
+    out = []
+    for m in metrics:
+        if m.name not in TIERS["rest"][0] or metric_verdict(m) is not False:
+            continue
+        d = m.details or {}
+        if m.name == "rest_stability":
+            what = ("the rest test diverged" if d.get("diverged") else
+                    f"the object moved D_pos {_num(d.get('D_pos_m'))} m and turned D_ori {_num(d.get('D_ori_rad'))} rad at rest")
+            out.append(f"{what} ({m.engine}; passes when {m.threshold}). {TIER_ADVICE['stand']}")
+        elif m.name == "settle_tilt":
+            out.append(f"the object tipped {_num(m.value)} rad while settling ({m.engine}; passes when {m.threshold}): "
+                       f"it falls over as it stands. {TIER_ADVICE['stand']}")
+        elif m.name == "divergence":
+            reasons = "; ".join(d.get("reasons") or []) or "non-finite state"
+            out.append(f"the simulation diverged ({m.engine}: {reasons}). {TIER_ADVICE['divergence']}")
+        elif m.name == "ground_penetration":
+            out.append(f"the object sank {_num(m.value)} mm into the ground ({m.engine}; passes when {m.threshold}). "
+                       f"{TIER_ADVICE['ground']}")
+        elif m.name == "oscillation":
+            joints = d.get("joints") or {}
+            for j in d.get("failing") or []:
+                e = joints.get(j) or {}
+                amp = "diverged" if e.get("diverged") else (f"{e.get('sign_changes')} sign changes of its motion, peak to peak "
+                                                            f"{_joint_amount(e.get('amplitude') or 0.0, e.get('unit', 'rad'))}")
+                out.append(f"joint '{j}' oscillates at rest ({m.engine}: {amp}; passes when {m.threshold}). "
+                           f"{TIER_ADVICE['oscillation']}")
+        else:  # state_hold (the post-check: drift, sagging) or joint_hold (the evaluation: joints, failing)
+            if m.name == "state_hold":
+                per = {j: (float((d.get("drift") or {}).get(j, 0.0)), None) for j in d.get("sagging") or []}
+            else:
+                joints = d.get("joints") or {}
+                per = {j: (float((joints.get(j) or {}).get("drift", 0.0)), joints.get(j) or {}) for j in d.get("failing") or []}
+            for j, (drift, e) in per.items():
+                unit = (e or {}).get("unit") or (d.get("units") or {}).get(j, "rad")
+                tol = (e or {}).get("tolerance", (d.get("tolerances") or {}).get(j))
+                against = f"tolerance {_joint_amount(tol, unit)}" if tol is not None else f"passes when {m.threshold}"
+                out.append(f"joint '{j}' left its initial state by {_joint_amount(drift, unit)} at rest ({m.engine}; {against}): "
+                           f"its friction does not hold the part's weight there. {TIER_ADVICE['hold']}")
+    return out
+
+
+def _failures_why(metrics: list[Any], names: tuple[str, ...], advice: str, what: str) -> list[str]:
+    """One sentence per failing metric of ``names`` from its ``details["failures"]`` (each names its joint and the
+    measured value), with its threshold and ``advice``; ``what`` says what was done."""
+    out = []
+    for m in metrics:
+        if m.name not in names or metric_verdict(m) is not False:
+            continue
+        fails = (m.details or {}).get("failures") or [f"{_num(m.value)} {m.unit}"]
+        out.append(f"{what} ({m.engine}): {'; '.join(fails)} (passes when {m.threshold}). {advice}")
+    return out
+
+
+def _request_why(metrics: list[Any]) -> list[str]:
+    """One sentence per unmet item of the request (its text carries the gap against its tolerance)."""
+    out = []
+    for m in metrics:
+        if m.name != "request_met" or metric_verdict(m) is not False:
+            continue
+        for u in (m.details or {}).get("unmet") or []:
+            out.append(f"the output is not what was asked: {u.get('text') or u.get('phrase')} (passes when {m.threshold}). "
+                       f"{TIER_ADVICE['request']}")
+    return out
+
+
+def why_it_failed(metrics: list[Any]) -> list[str]:
+    """Why an output is not interaction-ready: for every failing tier of :data:`TIERS`, in tier order (the failure
+    mode's first), one sentence per failing measure, ``MODE (TIER tier): what failed, the part(s) or joint(s), the
+    measured value against its threshold, and what a user can do`` (a request to change, an option such as
+    ``--state``, ``--mount``, ``--mass``, ``--task``, or a repair of the input). Empty when ready. The penetration
+    and robust-rest tiers are explained by :func:`penetration_why` and :func:`robust_rest_why`.
+
+    ``metrics``: :class:`~asset2sim.schemas.report.MetricResult` s (any engines), read as :func:`readiness` reads
+    them. ``refine``'s and ``evaluate``'s terminal print each as ``why it failed SENTENCE``; ``report.html`` shows
+    the same sentences in its "Why it failed" block (``docs/guide/metrics.md``). The modes of a run that stopped
+    before a verdict (:data:`STOPPED_MODES`) have no metrics: their error line names the code and the file instead.
+    """
+    metrics = list(metrics)
+    held_not = {j for m in metrics if m.name in HOLD_METRICS and metric_verdict(m) is False
+                for j in (m.details or {}).get("sagging") or (m.details or {}).get("failing") or []}
+    explain = {
+        "rest": _rest_why,
+        "penetration": penetration_why,
+        "sweep": lambda ms: _failures_why(ms, ("joint_sweep",), TIER_ADVICE["sweep"],
+                                          "a force-limited drive could not sweep the joint through its range"),
+        "operability": lambda ms: _failures_why(ms, ("operability",), TIER_ADVICE["operability"],
+                                                "a hand inside the part's real operating force could not work it"),
+        "robust_rest": lambda ms: robust_rest_why(ms, skip=held_not),
+        "probes": lambda ms: _failures_why(ms, ("probes",), TIER_ADVICE["probes"],
+                                           "a push that opens or closes the part did not do so"),
+        "task": lambda ms: _failures_why(ms, ("task_execution",), TIER_ADVICE["task"],
+                                         "a force- and speed-limited gripper could not do the task"),
+        "force": lambda ms: _failures_why(ms, ("operating_force",), TIER_ADVICE["force"],
+                                          "the task needed a force outside the part's real operating range"),
+        "request": _request_why,
+    }
+    out: list[str] = []
+    for tier, (names, _) in TIERS.items():
+        bad = [m for m in metrics if m.name in names and metric_verdict(m) is False]
+        if not bad:
+            continue
+        mode = mode_of(tier, bad)
+        sentences = explain[tier](metrics) or [
+            f"{', '.join(dict.fromkeys(f'{m.name}@{m.engine}' for m in bad))} failed (passes when {bad[0].threshold}). "
+            + TIER_ADVICE[_FALLBACK_ADVICE.get(tier, tier)]]
+        out += [f"{mode} ({tier} tier): {s}" for s in sentences]
+    return out

@@ -1,0 +1,105 @@
+"""The physical parameters of an evaluated asset as a table: :func:`parameter_rows` (parameter, where, value,
+unit, source) from ``overlay.json`` and ``report.json`` when present, else from the URDF and the engine defaults;
+:func:`parameter_table` its HTML.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from asset2sim.tasks.evaluation.html_blocks import fmt
+from asset2sim.tasks.evaluation.report_changes import esc
+
+
+def _joint_unit(jtype: str, what: str) -> str:
+    pri = jtype == "prismatic"
+    return {"damping": "N*s/m" if pri else "N*m*s/rad", "friction": "N" if pri else "N*m",
+            "stiffness": "N/m" if pri else "N*m/rad", "position": "m" if pri else "rad"}[what]
+
+
+def _param(parameter: str, where: str, value: Any, unit: str, source: str) -> dict[str, Any]:
+    """One row of :func:`parameter_rows`."""
+    return {"parameter": parameter, "where": where, "value": value, "unit": unit, "source": source}
+
+
+def parameter_rows(ev) -> list[dict[str, Any]]:
+    """Every physical parameter of the evaluated asset as {parameter, where, value, unit, source}: from ``overlay.json``
+    (and ``report.json``) when present, else from the URDF and the engine defaults."""
+    ctx = ev._context
+    rows = [_param("scale", "global", ev.scale, "-", ev.scale_source)]
+    if ctx is None:
+        return rows
+    # step 1: the joint parameters each check round changed
+    ov, rep = ctx.overlay, ctx.report
+    escal: dict[tuple[str, str], int] = {}
+    for rnd in (rep or {}).get("escalation", []) or []:
+        for j, ch in (rnd.get("changes") or {}).items():
+            for k in ch:
+                escal[(j, k)] = rnd.get("round", 0)
+    # step 2: masses, inertias and joint dynamics from the overlay (the URDF's value where escalation changed it)
+    est = ((ov or {}).get("estimator") or {}).get("name")
+    if ov:
+        for ln, lp in (ov.get("links") or {}).items():
+            src = lp.get("source") or (f"estimator {est}" if est else "overlay")
+            rows.append(_param("mass", f"link {ln}", lp.get("mass"), "kg", src))
+            if lp.get("density") is not None:
+                rows.append(_param("density", f"link {ln}", lp["density"], "kg/m^3", src))
+            inertia = lp.get("inertia") or {}
+            rows.append(_param("inertia (ixx, iyy, izz)", f"link {ln}", ", ".join(fmt(inertia.get(k)) for k in ("ixx", "iyy", "izz")),
+                               "kg*m^2", src))
+            rows.append(_param("center of mass", f"link {ln}", ", ".join(fmt(c) for c in lp.get("com", [])), "m", src))
+            if lp.get("material"):
+                rows.append(_param("material", f"link {ln}", lp["material"], "-", src))
+        for jn, jd in (ov.get("joints") or {}).items():
+            jt = ctx.joints[jn].type if jn in ctx.joints else "revolute"
+            for k in ("damping", "friction", "stiffness"):
+                src = jd.get("source") or (f"estimator {est}" if est else "overlay")
+                if (jn, k) in escal:
+                    src = f"changed after check round {escal[(jn, k)]} (the checks failed; see What asset2sim changed)"
+                val = jd.get(k)
+                # the URDF written after escalation is what is simulated
+                if k in ("damping", "friction") and jn in ctx.joints:
+                    fv = getattr(ctx.joints[jn], k)
+                    if fv is not None and val is not None and abs(fv - val) > 1e-12:
+                        val, src = fv, src + " (URDF value differs from overlay; URDF shown)"
+                rows.append(_param(k, f"joint {jn}", val, _joint_unit(jt, k), src))
+    # step 3: without an overlay, the URDF's values and the engine defaults
+    else:
+        run = next((r for r in ev._runs.values() if r.masses), None)
+        for ln, li in ctx.links.items():
+            m = run.masses.get(ln, {}).get("mass") if run else li.mass
+            src = "URDF <inertial>" if li.mass is not None else "engine default (1 kg, inertia diag(1,1,1) kg*m^2)"
+            rows.append(_param("mass", f"link {ln}", m, "kg", src))
+        for jn, jd in ctx.joints.items():
+            if jd.type not in ("revolute", "continuous", "prismatic"):
+                continue
+            for k in ("damping", "friction"):
+                v = getattr(jd, k)
+                rows.append(_param(k, f"joint {jn}", 0.0 if v is None else v, _joint_unit(jd.type, k),
+                                   "URDF <dynamics>" if v is not None else "engine default (0)"))
+            rows.append(_param("stiffness", f"joint {jn}", 0.0, _joint_unit(jd.type, "stiffness"), "none (URDF has no springs)"))
+    # step 4: the initial joint positions and the limits
+    state_src = ev.initial_state_source
+    if rep and rep.get("state"):
+        state_src = f"refinement ({rep['state'].get('method', '')})"
+    elif ov and ov.get("initial_joint_positions"):
+        state_src = f"estimator {est}" if est else "overlay"
+    elif ctx.baseline and ctx.baseline.get("initial_state_rule"):
+        state_src = f"baseline rule: {ctx.baseline['initial_state_rule']}"
+    for jn, q in ev.initial_state.items():
+        jt = ctx.joints[jn].type if jn in ctx.joints else "revolute"
+        rows.append(_param("initial position", f"joint {jn}", q, _joint_unit(jt, "position"), state_src))
+    for jn, jd in ctx.joints.items():
+        if jd.type in ("revolute", "prismatic"):
+            rows.append(_param("limits", f"joint {jn}", f"[{fmt(jd.lower)}, {fmt(jd.upper)}]", _joint_unit(jd.type, "position"),
+                               "URDF <limit>"))
+    return rows
+
+
+def parameter_table(ev) -> str:
+    rows = "".join(
+        f"<tr><td>{esc(r['where'])}</td><td>{esc(r['parameter'])}</td><td class='num'>{fmt(r['value'])}</td>"
+        f"<td>{esc(r['unit'])}</td><td class='small'>{esc(r['source'])}</td></tr>"
+        for r in parameter_rows(ev)
+    )
+    return "<table><tr><th>where</th><th>parameter</th><th>value</th><th>unit</th><th>source</th></tr>" + rows + "</table>"

@@ -1,0 +1,143 @@
+"""The request's words about how parts move: damping, holding a position, springs and self-closing, stiff or
+free motion (a phrase table), and the kinds of slides (``asset2sim/priors/slides.yaml``), each with the part it names
+(:func:`dynamics_words`, a :class:`MotionWords`).
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+from dataclasses import dataclass
+
+from asset2sim.prior_tables import load_priors
+from asset2sim.schemas.request import MotionPhrase
+from asset2sim.tasks.interpret import request_values as rv
+from asset2sim.tasks.interpret.phrase_scan import Hit, compile_table, negated, scan
+
+# (regex, (kind, value), flag) - flag "strong" for explicit damping phrases. Each hit is also a
+# MotionPhrase (:func:`_motion_kind` names its kind) for the part it names.
+_FREE_VERBS = r"(?:moves?|moving|swings?|swinging|spins?|spinning|rotates?|rotating|slides?|sliding|turns?|turning|hangs?|hanging|opens?|closes?|pivots?|pivoting)"
+
+_ON_ITS_OWN = r"(?:on (?:its|their) own|by (?:itself|themselves)|unaided|without (?:support|help|a hand))"
+
+_DYN_TABLE = compile_table(
+    [
+        (r"(?:low|little|light|minimal|minimum|reduced|small|less)[- ]damping|(?:lightly|under)[- ]?damped|(?:no|without) damping|damping[- ]free", ("damping", "low"), "strong"),
+        (r"(?:high|heavy|strong|lots of|more|significant|increased)[- ]damping|(?:well|heavily|highly|strongly|critically|over)[- ]?damped", ("damping", "high"), "strong"),
+        (r"(?:moderate|medium|normal)[- ]damping|moderately damped", ("damping", "moderate"), "strong"),
+        (r"(?:soft|slow|gentle|damped)[- ]?clos(?:e|es|ing|ure)|clos(?:es|ing) (?:slowly|gently|softly)", ("damping", "high"), "soft"),
+        (r"(?:low|little|minimal|no|reduced)[- ](?:joint |hinge |sliding )?friction|frictionless|(?:with(?:out)? (?:no |any )?|no )resistance", ("free", "low"), ""),
+        (_FREE_VERBS + r" (?:freely|loosely|easily|without resistance)", ("free", "low"), ""),
+        (r"free(?:ly)?|free[- ](?:moving|swinging|spinning|rotating|sliding)|loose(?:ly)?|floppy", ("free", "low"), ""),
+        (r"smooth(?:ly)?|easily|effortless(?:ly)?", ("damping", "low"), ""),
+        (r"heavy|heavier", ("heavy", "high"), ""),
+        (r"slow(?:ly)?|sluggish", ("damping", "high"), ""),
+        (r"holds? (?:its|their|the|it'?s) (?:position|state|pose|place|angle|opening)", ("hold", True), ""),
+        (r"holds? (?:position|in place|open|still|steady|itself (?:up|open))", ("hold", True), ""),
+        (r"stays? (?:where (?:it|they|you) (?:is put|are put|was put|were put|is left|are left|puts? (?:it|them)|leaves? (?:it|them)|is|are|was|were)|put|in place|open|up|there|still)(?: " + _ON_ITS_OWN + r")?", ("hold", True), ""),
+        (r"stays? (?:up|open) " + _ON_ITS_OWN + r"|stands? up " + _ON_ITS_OWN, ("hold", True), ""),
+        (r"(?:keeps?|maintains?) (?:its|their) (?:position|state|place|angle|pose)", ("hold", True), ""),
+        (r"remains? (?:where (?:it|they) (?:is|are)|in place|open|up|still)", ("hold", True), ""),
+        (r"(?:does not|doesn't|won't|will not|should not|shouldn't|must not|never) (?:fall|sag|drop|slam|droop|drift|move|swing|close|shut) (?:shut |closed |open |down )?(?:by itself|on its own|under (?:its own )?weight|under gravity)", ("hold", True), ""),
+        (r"self[- ]clos(?:ing|es)|clos(?:es|ing) (?:by )?(?:itself|themselves|on (?:its|their) own|automatically)|auto[- ]?clos(?:ing|e)|snaps? (?:shut|closed)|(?:door )?closer", ("spring", True), "close"),
+        (r"spring[- ]loaded|spring[- ]return(?:ed)?|springs? back|springy|springs?|self[- ]returning|returns?(?: to)?|snaps? back|pops? back|bounces? back", ("spring", True), ""),
+        (r"stiff(?:ly|er)?|hard to (?:move|turn|open|push|rotate|pull|close)|(?:high|lots of|some|more) (?:joint |hinge )?friction|with resistance|resists? (?:motion|movement|being moved)", ("stiff", True), ""),
+    ]
+)
+
+
+@functools.lru_cache(maxsize=1)
+def _slide_table() -> list[tuple[re.Pattern[str], object, str]]:
+    """The request words of each kind of slide (``asset2sim/priors/slides.yaml``)."""
+    return compile_table([(w, key, "") for key, sp in load_priors().slides.items() for w in sp.words])
+
+
+def _slide_hits(low: str) -> list[Hit]:
+    """The kinds of slide the request names ("on ball-bearing slides", "wooden runners"): values the slide keys."""
+    return scan(low, _slide_table())
+
+
+def _motion_kind(kind: str, value: object, flag: str) -> str:
+    """The :class:`~asset2sim.schemas.request.MotionPhrase` kind of a dynamics word (its table entry's kind, value
+    and flag)."""
+    if kind == "damping":
+        return "soft_close" if flag == "soft" else f"{value}_damping"
+    if kind == "spring":
+        return "self_closing" if flag == "close" else "spring"
+    return {"free": "free", "heavy": "stiff", "hold": "hold", "stiff": "stiff"}[kind]
+
+
+def _motion_part(low: str, start: int, end: int, head_starts: list[int]) -> str | None:
+    """The part a word about motion names: the part noun before it in its clause ("the door swings freely", "the
+    lid hinge has low damping"), else right after it ("a stiff handle joint", "low damping drawer slides"); None
+    for the object itself (``head_starts``: where the request names it, "a heavy oak door that swings freely") or
+    no part (the task's parts)."""
+    label = rv.part_before(low, start, mention_starts=head_starts)
+    if label is None:
+        label, _ = rv.part_after(low, end, mention_starts=head_starts)
+    return None if label == "body" else label
+
+
+@dataclass(frozen=True, slots=True)
+class MotionWords:
+    """What a request's words about motion ask (:func:`dynamics_words`): the ``damping`` level, whether the
+    parts should hold their position, have a spring, be stiff or move freely, and the motion phrases per part."""
+
+    damping: str
+    holds_position: bool
+    spring: bool
+    stiff: bool
+    free_moving: bool
+    motions: list[MotionPhrase]
+
+
+def dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[tuple[int, str]],
+                    warnings: list[str], head_starts: list[int]) -> MotionWords:
+    """The motion the dynamics words ask (explicit damping phrases win over cues); phrases go to ``matched``,
+    contradictions to ``warnings``.
+    A mass word ("a heavy box", "a heavy 25 kg door", "a heavy drawer") is a mass, not a stiffness; "heavy" before a
+    joint word ("a heavy hinge") is stiff."""
+    damping, strong_set, holds, spring, stiff, free = "moderate", False, False, False, False, False
+    motions: list[MotionPhrase] = []
+    hits = scan(low, _DYN_TABLE)
+    for h in hits:
+        kind, val = h.value  # type: ignore[misc]
+        if any(a <= h.start < b for a, b in level_spans) or (kind == "heavy" and not rv.joint_word_soon(low, h.end)):
+            continue  # "a heavy box", "a heavy 25 kg door", "a heavy drawer": a mass; "a heavy hinge": stiff
+        neg = negated(low, h.start)
+        if kind == "spring":
+            spring = not neg
+            matched.append((h.start, ("no " if neg else "") + h.text))
+            if not neg:
+                motions.append(MotionPhrase(kind=_motion_kind(kind, val, h.flag), label=_motion_part(low, h.start, h.end, head_starts),
+                                            phrase=h.text))
+            continue
+        matched.append((h.start, ("not " if neg else "") + h.text))
+        if neg:
+            continue
+        motions.append(MotionPhrase(kind=_motion_kind(kind, val, h.flag), label=_motion_part(low, h.start, h.end, head_starts),
+                                    phrase=h.text))
+        holds |= kind == "hold"
+        stiff |= kind in ("stiff", "heavy")
+        free |= kind == "free"
+        if kind in ("free", "heavy", "damping") and (h.flag == "strong" or not strong_set):
+            damping = str(val)
+            strong_set = strong_set or h.flag == "strong"
+    for h in _slide_hits(low):
+        if negated(low, h.start):
+            continue
+        matched.append((h.start, h.text))
+        motions.append(MotionPhrase(kind="slides", mechanism=str(h.value), label=_motion_part(low, h.start, h.end, head_starts) or "drawer",
+                                    phrase=h.text))
+    motions.sort(key=lambda m: low.find(m.phrase))
+    for label in dict.fromkeys(m.label for m in motions):
+        kinds = [m for m in motions if m.label == label]
+        hard = [m for m in kinds if m.kind == "stiff"]
+        loose = [m for m in kinds if m.kind == "free"]
+        if hard and loose:
+            warnings.append(f"contradiction: '{hard[0].phrase}' (stiff) and '{loose[0].phrase}' (moves freely) for the "
+                            f"{label or 'object'}; both are applied (friction x4 over the floor, then no extra floor)")
+    levels = {str(h.value[1]) for h in hits if h.flag == "strong" and not negated(low, h.start)}  # type: ignore[index]
+    if len(levels) > 1:
+        warnings.append(f"contradiction: damping levels {sorted(levels)} are all asked; '{damping}' (the last) is used")
+    return MotionWords(damping, holds, spring, stiff, free, motions)

@@ -1,0 +1,368 @@
+"""The request's words about joint states: how open each part should be ("the door half open", "the second
+drawer slightly open", "the lid and the door closed", "the others closed"), as one
+:class:`~asset2sim.schemas.request.JointStateRequest` per target (:func:`joint_states`): a band and a target
+fraction of the range, the part by label and ordinal, or every task-relevant part.
+"""
+
+from __future__ import annotations
+
+import itertools
+import re
+from bisect import bisect_left, bisect_right
+from dataclasses import dataclass
+
+from asset2sim.schemas.request import JointStateRequest, StateTarget
+from asset2sim.tasks.interpret import request_values as rv
+from asset2sim.tasks.interpret.phrase_scan import TOKEN, Hit, Tokens, compile_table, negated, scan, sentences
+
+_OPEN = r"open(?:ed)?"
+
+#: Verbs of a part's motion a degree word may follow ("pulled out halfway"): the degree is the state.
+_MOVED = (r"(?:(?:pulled|slid|drawn|pushed) (?:out|in)|pulled|slid|extended|retracted|raised|lifted|lowered|swung|tilted|"
+          r"turned|rotated|unfolded|folded|unscrewed|screwed (?:off|open)|loosened)")
+
+_ABOUT = r"(?:(?:about|around|roughly|approximately|approx\.?|some|more or less|close to|nearly|almost|just about) )?"
+
+#: Comparatives around halfway ("a little less than halfway open"): an opening fraction a step below or above it.
+_LESS = r"(?:(?:a (?:little|bit|tad)|slightly|just|somewhat) )?(?:less than|under|short of|below)"
+
+_MORE = r"(?:(?:a (?:little|bit|tad)|slightly|just|somewhat) )?(?:more than|over|past|beyond|above)"
+
+_HALF = r"(?:half[- ]?way|half(?: of the way)?|the halfway (?:point|mark))"
+
+#: Opening fraction of "less than halfway" / "more than halfway": one band step (0.1 of the range) from 0.5.
+LESS_THAN_HALF, MORE_THAN_HALF = 0.4, 0.6
+
+# (regex, band, flag) - flag "bare" for a lone "open".
+_STATE_TABLE = compile_table(
+    [
+        # negations first (longest match wins at a position)
+        (r"(?:not (?:at all |even slightly |yet )?|no longer |never )" + _OPEN + r"(?: at all)?", "closed", ""),
+        (r"no longer (?:closed|shut)", "mostly", ""),
+        (r"(?:is|are|was)n'?t " + _OPEN, "closed", ""),
+        (r"not (?:quite|fully|completely|entirely) (?:closed|shut)", "slightly_open", ""),
+        (r"not (?:closed|shut)", "halfway", ""),
+        (r"not (?:fully|completely|all the way|entirely) " + _OPEN, "mostly", ""),
+        # hedged and compared ("mostly closed": a small opening, not closed; "a little less than halfway open")
+        (r"(?:mostly|largely|almost|nearly|practically|just about|almost fully|nearly fully|not quite fully) (?:closed|shut)", "slightly_open", ""),
+        (r"(?:" + _OPEN + r" |" + _MOVED + r" )?" + _LESS + r" " + _HALF + r"(?:[- ]" + _OPEN + r")?",
+         ("halfway", StateTarget(kind="fraction", value=LESS_THAN_HALF)), ""),
+        (r"(?:" + _OPEN + r" |" + _MOVED + r" )?" + _MORE + r" " + _HALF + r"(?:[- ]" + _OPEN + r")?",
+         ("halfway", StateTarget(kind="fraction", value=MORE_THAN_HALF)), ""),
+        # closed
+        (r"(?:fully |completely |all the way )?(?:closed|shut)(?: all the way| completely| tight)?", "closed", ""),
+        (r"(?:turned|switched|shut) off", "closed", ""),
+        # fully
+        (r"(?:fully|completely|totally|maximally|wide) " + _OPEN, "fully", ""),
+        (r"(?:" + _OPEN + r" )?all the way(?: " + _OPEN + r")?", "fully", ""),
+        (_OPEN + r" (?:fully|completely|wide|to the max(?:imum)?|as far as (?:it|they) (?:can|will) go|to (?:its|their|the) (?:limit|maximum|max))", "fully", ""),
+        (r"(?:turned|switched) (?:fully )?on(?: (?:full|fully|completely|all the way))?|fully (?:extended|raised|pulled out)|pulled all the way out", "fully", ""),
+        (r"(?:" + _OPEN + r"|laid open|lying open|unfolded|folded out|swung open) flat|flat open|(?:" + _OPEN + r"|folded|swung) (?:out )?flat", "fully", ""),
+        (r"(?:folded|bent|pushed|tilted|laid|swung) (?:all the way )?back(?: flat| all the way)?", "fully", ""),
+        # named states: which end they are does not depend on the geometry
+        (r"(?:pulled|slid|drawn) (?:all the way )?out|extended|unfolded|unscrewed|deployed", "fully", ""),
+        (r"(?:(?:pulled|slid|drawn) out|extended|unfolded) (?:all the way|fully|completely)", "fully", ""),
+        (r"pushed (?:all the way )?in|retracted|folded(?: up| shut| closed| down)?|screwed (?:on|shut|closed|tight)|pressed (?:down|in)|pressed|depressed|tucked in", "closed", ""),
+        # physical ends: decided from the geometry after scaling (request_apply)
+        (r"(?:raised|lifted) (?:all the way|fully|completely|to the top)", "end:high", "end"),
+        (r"(?:in|at|to) (?:the|its|their) (?:up|raised|upper|top|highest) position|(?:raised|lifted|propped|popped|sprung|flipped|pulled|pushed|swung|tilted|turned|flicked|moved|set|left)(?: all the way)? up|raised|lifted|(?:all the way |fully )?up", "end:high", "end"),
+        (r"(?:in|at|to) (?:the|its|their) (?:down|lowered|lower|bottom|lowest) position|(?:lowered|flipped|pulled|pushed|swung|tilted|flicked|moved|set|left)(?: all the way)? down|lowered|(?:all the way |fully )?down", "end:low", "end"),
+        (r"(?:in|at|to) (?:the|its) on position|(?:set|flipped|flicked|toggled|left) on|on", "end:on", "end"),
+        (r"(?:in|at|to) (?:the|its) off position|(?:flipped|flicked|toggled|left) off|off", "end:off", "end"),
+        # mostly
+        (r"(?:mostly|largely|almost fully|nearly fully|almost completely|nearly completely|almost all the way|nearly all the way) " + _OPEN, "mostly", ""),
+        (r"(?:almost|nearly) (?:fully|all the way)(?: " + _OPEN + r")?", "mostly", ""),
+        (r"three[- ]quarters?(?: of the way)?(?:[- ]" + _OPEN + r")?", "mostly", ""),
+        (_OPEN + r" (?:most of the way|three[- ]quarters?(?: of the way)?)", "mostly", ""),
+        (_MOVED + r" (?:most of the way|three[- ]quarters?(?: of the way)?)", "mostly", ""),
+        # halfway
+        (_ABOUT + r"half[- ]?way(?:[- ]" + _OPEN + r")?|mid[- ]?way(?:[- ]" + _OPEN + r")?", "halfway", ""),
+        (_ABOUT + r"half[- ]" + _OPEN + r"|half of the way(?: " + _OPEN + r")?|half[- ](?:closed|shut)", "halfway", ""),
+        (_OPEN + r" " + _ABOUT + r"(?:half[- ]?way|half)", "halfway", ""),
+        (_MOVED + r" " + _ABOUT + r"(?:half[- ]?way|half(?: of the way)?)", "halfway", ""),
+        (r"(?:partially|partly) " + _OPEN, "halfway", ""),
+        # quarter
+        (_ABOUT + r"(?:a |one )?quarter(?:[- ]way| of the way)?[- ]" + _OPEN, "quarter", ""),
+        (_OPEN + r" " + _ABOUT + r"(?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
+        (_MOVED + r" " + _ABOUT + r"(?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
+        (r"(?:a |one )?quarter of the way", "quarter", ""),
+        # slightly open
+        (r"(?:slightly|barely|just|a (?:little |tiny )?bit|a little|a tad|a crack|a touch) " + _OPEN, "slightly_open", ""),
+        (_OPEN + r" (?:slightly|a (?:little |tiny )?bit|a little|a crack|a tad|just a (?:little|bit))", "slightly_open", ""),
+        (_MOVED + r" (?:slightly|a (?:little |tiny )?bit|a little|a tad|just a (?:little|bit))", "slightly_open", ""),
+        (r"(?:slightly |partially )?ajar|cracked(?: " + _OPEN + r")?(?: (?:a (?:little|bit|crack)|slightly))?", "slightly_open", ""),
+        (r"slightly (?:raised|lifted|pulled out|extended|apart|rotated|turned)", "slightly_open", ""),
+        # "open" after a verb that leaves it open ("the lid propped open"): as a lone "open", never the verb "to open"
+        (r"(?:propped|popped|sprung|flipped|swung|thrown|flung|left|kept|held|standing|stands|hanging|hangs|wedged) " + _OPEN, "mostly", ""),
+        # a lone "open"
+        (_OPEN, "mostly", "bare"),
+    ]
+)
+
+_VERB_AFTER = re.compile(r"\s+(?:the|a|an|its|their|it|them|up|and close|or close)\b")
+
+_VERB_BEFORE = re.compile(
+    r"(?:\bto|\bcan|\bcould|\bwill|\bwould|\bshould|\bmust|\bplease|\blet me|\band|\bor|\bto be able to)\s+$"
+)
+
+_NUM_AFTER = re.compile(
+    r"\s*(?:#|no\.?\s*|numbers?\s*)?(\d{1,2}(?:\s*(?:,\s*(?:and\s+)?|and\s+|or\s+|&\s*)\d{1,2})*)\b"
+)
+
+ORDINALS = compile_table(
+    [
+        (r"first|1st", 0, ""),
+        (r"second|2nd", 1, ""),
+        (r"third|3rd", 2, ""),
+        (r"fourth|4th", 3, ""),
+        (r"fifth|5th", 4, ""),
+        (r"top(?:most)?|upper(?:most)?|highest", 0, ""),
+        (r"bottom(?:most)?|lowest|lower|last", -1, ""),
+        (r"every|all|each|both", None, "quant"),
+        # spatial words: the flag is the order they count in (docs/guide/requests.md)
+        (r"left(?:most|[- ]hand)?", 0, "left_right"),
+        (r"right(?:most|[- ]hand)?", 0, "right_left"),
+        (r"front(?:most)?", 0, "front_back"),
+        (r"back(?:most)?|rear(?:most)?", -1, "front_back"),
+        # resolved from the geometry (tasks/interpret/named_parts.py): the middle one of an odd count, along the
+        # direction the parts are spread in; by the size of the moving part's box, smallest first ("the freezer
+        # door": a refrigerator's smaller door; "the main door": its largest)
+        (r"middle(?:most)?|cent(?:er|re)|central", 0, "middle"),
+        (r"freezer|small(?:er|est)|narrow(?:er|est)", 0, "size"),
+        (r"main|large(?:r|st)|bigg(?:er|est)|wid(?:er|est)", -1, "size"),
+        # "one door open and the other shut": one of them (the first, top to bottom), the rest by "the other"
+        (r"one", 0, "vertical"),
+    ]
+)
+
+#: Ordinal flags that only count right before the part noun ("the freezer door", not "a freezer with its door").
+_ADJACENT_ORDERS = frozenset({"middle", "size"})
+
+#: "one of its two doors": one of them, however many words name them.
+_ONE_OF = re.compile(r"one\s+of\s+(?:(?:the|its|their|his|her)\s+)?(?:(?:two|three|four|five|both|\d)\s+)?")
+
+_THE_BEFORE = re.compile(r"(?<![\w-])(?:the|its|their)\s+$")
+
+_END_TAIL = re.compile(r"\s*(?:$|[,.;:!?)]|and\b|but\b|with\b|while\b|position\b)")
+
+_BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)")
+
+_END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:are\s+)?(?:both|all|each))?"
+                       r"(?:\s+(?:is|are|was|were|set|turned|switched|flipped|pushed|pulled|left|stays?|kept))?\s+$")
+
+
+def _state_hits(low: str, numeric: list[rv.Found] | None = None) -> list[Hit]:
+    """State phrases left to right, not overlapping: the state table's words and the ``numeric`` states."""
+    nums = [Hit(f.start, f.end, f.text, f.value, "number") for f in (numeric or [])]  # left to right, not overlapping
+    num_ends = [n.end for n in nums]
+
+    def under_number(h: Hit) -> bool:  # the first number ending after h starts overlaps it when it starts before h ends
+        k = bisect_right(num_ends, h.start)
+        return k < len(nums) and nums[k].start < h.end
+
+    # a number wins over the words it overlaps ("propped open about a third of the way": a third)
+    hits = [h for h in scan(low, _STATE_TABLE) if not under_number(h)] + nums
+    return rv.leftmost_longest([h for h in hits if _is_state(low, h)])
+
+
+def _is_state(low: str, h: Hit) -> bool:
+    """False for a bare "open" that is a verb ("to open the lid") and a bare end word without a part noun before it."""
+    if h.flag == "bare":
+        return not (_VERB_AFTER.match(low, h.end) or _VERB_BEFORE.search(low[max(0, h.start - 20): h.start]))
+    if h.flag == "end" and _BARE_END.fullmatch(h.text):
+        if not _END_LEAD.search(low[max(0, h.start - 40): h.start]) or negated(low, h.start):
+            return False
+        return not (h.text.endswith(("on", "off")) and not _END_TAIL.match(low, h.end))  # "a door on a plastic body": a preposition
+    return True
+
+
+def _band_and_target(value: object) -> tuple[str, StateTarget | None]:
+    """A state hit's value -> (band, target)."""
+    if isinstance(value, tuple):
+        return value[0], value[1]
+    v = str(value)
+    if v.startswith("end:"):
+        end = v[4:]
+        return ("fully" if end in ("high", "on") else "closed"), StateTarget(kind="end", end=end)  # type: ignore[arg-type]
+    return v, None
+
+
+@dataclass
+class _Part:
+    start: int
+    end: int
+    label: str
+    ordinals: list[tuple[int, str]]
+    """(ordinal, order) pairs; order "vertical" or a spatial order."""
+    quant: bool
+    phrase_start: int
+    none: bool = False
+    """"none of the drawers open": the state is negated (open -> closed, closed -> open)."""
+
+
+_FRACTION_AHEAD = re.compile(r"\s*/\s*\d")
+
+_NONE_OF = re.compile(r"(?<![\w-])(?:none|neither) of (?:the |its |their |these |those )?$")
+
+_ORD_JOIN = re.compile(r"\s*(?:,\s*(?:and|or)?|and|or|&)\s*(?:the\s+)?$")
+
+
+def _parts(low: str, tokens: Tokens) -> list[_Part]:
+    """Part nouns with their ordinals ("the first and second drawers", "drawer 2") or quantifier."""
+    ords = scan(low, ORDINALS)  # left to right, not overlapping: ends ascend too
+    ord_ends = [o.end for o in ords]
+    # enumerations ("the first, second and third drawers"): chain[j] is the first ordinal of the run ending at ords[j]
+    chain: list[int] = []
+    for j, o in enumerate(ords):
+        prev = ords[j - 1] if j else None
+        joined = prev is not None and prev.flag != "quant" and _ORD_JOIN.match(low, prev.end, o.start) is not None
+        chain.append(chain[j - 1] if joined else j)
+    out: list[_Part] = []
+    for m in rv.PART_RX.finditer(low):
+        label = rv.part_label(m.group(0))
+        ordinals: list[tuple[int, str]] = []
+        quant = False
+        pstart = m.start()
+        n_before = bisect_right(ord_ends, m.start())  # ordinals ending before the noun
+        if n_before:
+            o = ords[n_before - 1]
+            gap = tokens.count(o.end, m.start())
+            if (gap == 0 or gap <= 2 and o.flag not in _ADJACENT_ORDERS or _ONE_OF.fullmatch(low, o.start, m.start())) \
+                    and not tokens.marks_between(o.end, m.start()):
+                if o.flag == "quant":
+                    quant = True
+                    pstart = o.start
+                else:
+                    first = chain[n_before - 1]
+                    ordinals = [(int(ords[i].value), ords[i].flag or "vertical") for i in range(first, n_before)]  # type: ignore[arg-type]
+                    pstart = ords[first].start
+        num = _NUM_AFTER.match(low, m.end())
+        if num is not None and (rv.UNIT_AHEAD.match(low, num.end()) or _FRACTION_AHEAD.match(low, num.end())):
+            num = None  # "drawer 10 cm": a distance; "door 3/4 open": a fraction
+        if not ordinals and num is not None and not quant:
+            ordinals = [(int(n) - 1, "vertical") for n in re.findall(r"\d+", num.group(1)) if int(n) >= 1]
+        none = _NONE_OF.search(low, max(0, pstart - 24), pstart)
+        out.append(_Part(m.start(), m.end(), label, ordinals, quant, none.start() if none else pstart, none is not None))
+    return out
+
+
+_FWD_STOP = {"and", "with", "but", "or", "while", "its", "the", "a", "an", "their", "his", "her", "in", "of", "for", "to", ","}
+
+
+def _forward_part(low: str, end: int, limit: int, part_at: dict[int, _Part]) -> _Part | None:
+    """A part noun (``part_at``: by start) right after a state, at most one modifier word between."""
+    for t in itertools.islice(TOKEN.finditer(low, end, limit), 2):
+        p = part_at.get(t.start())
+        if p is not None:
+            return p
+        if t.group(0) in _FWD_STOP or t.group(0) in {",", ";", ":"}:
+            return None
+    return None
+
+
+_ELIDED = re.compile(r"\s*(?:,\s*)?(?:and|or|but|then|yet)?\s*(?:also\s+|at the same time\s+)?")
+
+_OTHERS = re.compile(r"(?<![\w-])(?:others|(?:the )?rest(?: of them)?|remaining(?: ones)?|other(?: ones?)?)(?![\w-])")
+
+
+@dataclass(frozen=True, slots=True)
+class JointStates:
+    """The joint states a request asks: ``requests`` (every joint first, then per label, then one part: the
+    specific one wins), ``hits`` (the state words used), ``warnings`` (contradictions) and ``overridden`` (the
+    phrases a later one for the same part replaced)."""
+
+    requests: list[JointStateRequest]
+    hits: list[Hit]
+    warnings: list[str]
+    overridden: list[str]
+
+
+def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = None) -> JointStates:
+    """The joint-state requests of ``low`` (``numeric``: the states in numbers, :func:`rv.state_quantities`)."""
+    # step 1: the state words, the part nouns and the ordinals, left to right
+    bands = _state_hits(low, numeric)  # every list here is left to right and not overlapping
+    parts = _parts(low, tokens)
+    # ordinals without a part noun ("the second slightly open"; "the freezer open": the smallest part)
+    ords = [o for o in scan(low, ORDINALS) if o.flag == "" or o.flag in _ADJACENT_ORDERS and _THE_BEFORE.search(low, max(0, o.start - 8), o.start)]
+    band_starts = [b.start for b in bands]
+    part_starts = [p.start for p in parts]
+    part_ends = [p.end for p in parts]
+    part_at = {p.start: p for p in parts}
+    ord_starts = [o.start for o in ords]
+    ord_ends = [o.end for o in ords]
+    # step 2: what the sentences build
+    result: list[JointStateRequest] = []
+    used: list[Hit] = []
+    last_label: str | None = None
+    prev_subjects: list[_Part] = []
+    claimed: set[int] = set()
+
+    def make(selector: str, label: str | None, ordinal: int | None, order: str, b: Hit, phrase: str, none: bool = False) -> JointStateRequest:
+        band, target = _band_and_target(b.value)
+        if none:  # "none of the drawers open": closed; "none of the doors closed": open
+            band, target = ("mostly" if band == "closed" else "closed"), None
+        return JointStateRequest(selector=selector, label=label, ordinal=ordinal, order=order,  # type: ignore[arg-type]
+                                 band=band, target=target, phrase=phrase)  # type: ignore[arg-type]
+
+    # step 3: per state word, its subject: a part after or before it, the parts of the last state, "the others", an ordinal, else every part
+    for s0, s1 in sentences(low):
+        sb = bands[bisect_left(band_starts, s0): bisect_left(band_starts, s1)]
+        for i, b in enumerate(sb):
+            seg0 = sb[i - 1].end if i > 0 else s0
+            seg1 = sb[i + 1].start if i + 1 < len(sb) else s1
+            fwd = _forward_part(low, b.end, seg1, part_at)
+            # parts before the state, but not one an earlier state went forward to ("a fully open door and the cap ajar")
+            back = [p for p in parts[bisect_left(part_starts, seg0): bisect_right(part_ends, b.start)] if p.start not in claimed]
+            if fwd is not None:
+                claimed.add(fwd.start)
+            subjects: list[_Part] = []
+            if fwd is not None:
+                subjects = [fwd]
+            elif not back and i > 0 and prev_subjects and _ELIDED.fullmatch(low, seg0, b.start):
+                subjects = list(prev_subjects)  # "the lid fully open and closed": the same lid
+            elif back:
+                subjects = [back[-1]]
+                # "the lid and the door closed"
+                if len(back) >= 2 and re.fullmatch(
+                    r"\s*(?:,|and|or|&)\s*(?:(?:the|a|an|its|their)\s+)?", low[back[-2].end: back[-1].phrase_start]
+                ):
+                    subjects.insert(0, back[-2])
+            if subjects:
+                for p in subjects:
+                    start = min(p.phrase_start, b.start)
+                    end = max(p.end, b.end)
+                    phrase = " ".join(low[start:end].split())
+                    for ordinal, order in (p.ordinals if p.ordinals and not p.quant else [(None, "vertical")]):
+                        result.append(make("label", p.label, ordinal, order, b, phrase, p.none))
+                    last_label = p.label
+                prev_subjects = subjects
+                continue
+            prev_subjects = []
+            others = _OTHERS.search(low, seg0, b.start)
+            if others is not None and last_label is not None:
+                used.append(Hit(others.start(), others.end(), others.group(0), None))
+                result.append(make("label", last_label, None, "vertical", b, " ".join(low[others.start(): b.end].split())))
+                continue
+            seg_ords = ords[bisect_left(ord_starts, seg0): bisect_right(ord_ends, b.start)]
+            if seg_ords:
+                o = seg_ords[-1]
+                phrase = " ".join(low[o.start: b.end].split())
+                result.append(make("label" if last_label is not None else "all", last_label, int(o.value), o.flag or "vertical", b, phrase))  # type: ignore[arg-type]
+                continue
+            result.append(make("all", None, None, "vertical", b, b.text))
+    # step 4: one request per target, contradictions warned
+    # one request per target: a later phrase overrides an earlier one; a different state is warned
+    warnings: list[str] = []
+    overridden: list[str] = []
+    dedup: dict[tuple, JointStateRequest] = {}
+    for js in result:
+        key = (js.selector, js.label, js.ordinal, js.order)
+        old = dedup.pop(key, None)
+        if old is not None and (old.band, old.target) != (js.band, js.target):
+            who = "every task-relevant part" if js.selector == "all" else (js.label or "part") + ("" if js.ordinal is None else f" #{js.ordinal} ({js.order})")
+            warnings.append(f"contradiction: '{old.phrase}' and '{js.phrase}' both set {who}; the later one ('{js.phrase}') is used")
+            overridden.append(old.phrase)
+        dedup[key] = js
+    specific = sorted(dedup.values(), key=lambda js: 0 if js.selector == "all" and js.ordinal is None else (1 if js.ordinal is None else 2))
+    kept = {js.phrase for js in specific}
+    return JointStates(specific, bands + used, warnings, [p for p in dict.fromkeys(overridden) if p not in kept])
