@@ -9,13 +9,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from asset2sim.flows.job_order import folder_listing, start_order
+from tests.conftest import SHARED, needs_shared
+
+pytestmark = needs_shared
 
 
 def files_key(folder):
     """The key :func:`folder_listing` gives ``folder``."""
     return folder_listing(folder)[0]
 
-DEV = Path(__file__).resolve().parents[2].parent / "shared" / "datasets" / "partnet_mobility"
+DEV = SHARED
 
 
 @dataclass
