@@ -301,6 +301,21 @@ def mass_ranges(low: str) -> list[re.Match]:
     return out
 
 
+def _mass_found(low: str, m: re.Match, mention_starts: list[int] | None, **values: object) -> Found:
+    """The mass phrase ``m`` of ``low`` as a :class:`Found`: the part named after it (or, after "weighs", before it),
+    the phrase's span and text, and ``values`` (``mass`` in kg or ``mass_range`` (low, high) in kg) on its
+    ``PartProperty``."""
+    label, end = part_after(low, m.end(), mention_starts=mention_starts)
+    start = m.start()
+    w = _WEIGHS_BEFORE.search(low[max(0, m.start() - 40): m.start()])
+    if w:
+        start -= len(w.group(0))
+        if label is None:
+            label = part_before(low, start, mention_starts=mention_starts)
+    text = low[start:max(end, m.end())].strip()
+    return Found(start, max(end, m.end()), text, PartProperty(label=label, phrase=text, **values))
+
+
 def masses(low: str, mention_starts: list[int] | None = None) -> list[Found]:
     """Masses in numbers ("weighs 2 kg", "a 300 g lid": per part; "between 20 and 30 kg": a range), values
     ``PartProperty``."""
@@ -311,30 +326,14 @@ def masses(low: str, mention_starts: list[int] | None = None) -> list[Found]:
         lo = number_value(m.group("lo")) * _factor(_MASS_UNITS, m.group("lo_unit") or m.group("unit"))
         if lo <= 0 or hi <= 0:
             continue
-        label, end = part_after(low, m.end(), mention_starts=mention_starts)
-        start = m.start()
-        w = _WEIGHS_BEFORE.search(low[max(0, m.start() - 40): m.start()])
-        if w:
-            start -= len(w.group(0))
-            if label is None:
-                label = part_before(low, start, mention_starts=mention_starts)
-        text = low[start:max(end, m.end())].strip()
-        out.append(Found(start, max(end, m.end()), text, PartProperty(label=label, mass_range=(min(lo, hi), max(lo, hi)), phrase=text)))
+        out.append(_mass_found(low, m, mention_starts, mass_range=(min(lo, hi), max(lo, hi))))
     for m in _MASS_RX.finditer(low):
         if any(r.start() <= m.start() < r.end() for r in ranges):
             continue
         v = number_value(m.group("num")) * _factor(_MASS_UNITS, m.group("unit"))
         if v <= 0:
             continue
-        label, end = part_after(low, m.end(), mention_starts=mention_starts)
-        start = m.start()
-        w = _WEIGHS_BEFORE.search(low[max(0, m.start() - 40): m.start()])
-        if w:
-            start -= len(w.group(0))
-            if label is None:
-                label = part_before(low, start, mention_starts=mention_starts)
-        text = low[start:max(end, m.end())].strip()
-        out.append(Found(start, max(end, m.end()), text, PartProperty(label=label, mass=v, phrase=text)))
+        out.append(_mass_found(low, m, mention_starts, mass=v))
     return out
 
 
