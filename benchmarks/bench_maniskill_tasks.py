@@ -4,7 +4,8 @@
 
 For every output folder under ROOT and each environment of ``asset2sim.apps.learn.maniskill`` (open, close, the object's own
 task with the manifest's task where the output records none): the folder becomes a task object or is skipped with
-the code ``load_task_objects`` names. Then each folder alone is built in ``Asset2Sim-ManifestTask-v1`` on ManiSkill's
+the code ``load_task_objects`` names. Then each folder alone is built in ``Asset2Sim-ManifestTask-v1`` (in
+``Asset2Sim-OpenArticulation-v1`` where no task is recorded, as for third-party objects refined without one) on ManiSkill's
 CPU backend (Panda, state observations, no renderer), reset and stepped ``--steps`` control steps of random
 actions: "stepped", or the error's MS_* code. Prints one row per folder and the counts.
 """
@@ -40,7 +41,10 @@ def main(argv: list[str] | None = None) -> int:
     manifest = args.manifest if args.manifest.is_file() else None
     rows = {f.name: {} for f in folders}
     for action in ("open", "close", "task"):
-        objects, skipped = ams.load_task_objects(folders, action, manifest=manifest if action == "task" else None)
+        try:
+            objects, skipped = ams.load_task_objects(folders, action, manifest=manifest if action == "task" else None)
+        except ams.ManiSkillAssetError as exc:  # MS_NO_ASSETS: every folder skipped, each with its own code
+            objects, skipped = [], exc.skipped
         for obj in objects:
             rows[Path(obj.source or obj.folder).name][action] = f"task ({obj.joint})"
         for folder, error in skipped:
@@ -49,8 +53,9 @@ def main(argv: list[str] | None = None) -> int:
     stepped = 0
     for f in folders:
         t0 = time.perf_counter()
+        env_action = "task" if rows[f.name].get("task", "").startswith("task") else "open"
         try:
-            env = gym.make(ams.ENV_IDS["task"], assets=[f], manifest=manifest, num_envs=1, obs_mode="state",
+            env = gym.make(ams.ENV_IDS[env_action], assets=[f], manifest=manifest, num_envs=1, obs_mode="state",
                            render_backend="none", sim_backend="cpu")
             try:
                 env.reset(seed=0)
@@ -58,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
                     env.step(env.action_space.sample())
             finally:
                 env.close()
-            built = "stepped"
+            built = "stepped" + ("" if env_action == "task" else " (OpenArticulation: no task recorded)")
             stepped += 1
         except Exception as exc:  # recorded with its code; the next folder goes on
             built = code_of(str(exc)) + f" ({type(exc).__name__})"

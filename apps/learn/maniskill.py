@@ -134,11 +134,13 @@ class ManiSkillAssetError(ValueError):
     ``MS_NOT_AN_ASSET`` (a folder without ``mobility.urdf``), ``MS_NO_TASK_JOINT`` (no joint the task can
     move), ``MS_NO_TASK`` (``Asset2Sim-ManifestTask-v1``: no task recorded for the object), ``MS_NO_REFERENCE``
     (``reference=True``: the folder has no usable ``reference_gensim2.urdf``), ``MS_BAD_MANIFEST`` (the manifest
-    cannot be read), ``MS_BUILD`` (SAPIEN cannot build it); the message names the folder or file."""
+    cannot be read), ``MS_BUILD`` (SAPIEN cannot build it); the message names the folder or file. ``skipped``:
+    with ``MS_NO_ASSETS`` from :func:`load_task_objects`, each folder and the error that skipped it."""
 
-    def __init__(self, code: str, message: str):
+    def __init__(self, code: str, message: str, skipped: Sequence[tuple[Path, str]] = ()):
         super().__init__(f"{code}: {message}")
         self.code = code
+        self.skipped = list(skipped)
 
 
 @dataclass
@@ -299,11 +301,22 @@ def task_object(folder: str | Path, action: str, task: str | None = None, *, def
                      grasp_link="", grasp_point=np.zeros(3), base_z=0.0, task=text, notes=list(lt.notes) + notes)
     q0 = dict(zip([j.name for j in model.movable_joints], obj.start_qpos([j.name for j in model.movable_joints])))
     link, point, rule = contact_point_rule(_Kinematics(model, q0), lt.joint, model, opening_direction=direction)
-    obj.grasp_link, obj.grasp_point = link, np.asarray(point, float)
-    obj.notes.append(f"grasp point: {rule} of {link}")
+    obj.grasp_link, obj.grasp_point = _moving_link(model, link, np.asarray(point, float))
+    obj.notes.append(f"grasp point: {rule} of {link}" + (f" (on {obj.grasp_link}, which carries it)" if obj.grasp_link != link else ""))
     pts = _world_points(model, pieces, q0)  # free objects rest on the floor; mounted ones are welded standing on it
     obj.base_z = float(-pts[:, 2].min()) if len(pts) else 0.0
     return obj
+
+
+def _moving_link(model: UrdfModel, link: str, point: np.ndarray) -> tuple[str, np.ndarray]:
+    """The link that carries ``link`` (itself, or its nearest ancestor whose joint to its parent is not fixed) and
+    ``point`` (3,) m moved from ``link``'s frame into that link's: a link welded on by a fixed joint (a handle or
+    latch on its door) has no joint of its own in a SAPIEN articulation, and ManiSkill's ``Link.merge`` needs one."""
+    joint = model.parent_joint(link)
+    while joint is not None and joint.type == "fixed":
+        point = (joint.origin @ np.append(point, 1.0))[:3]
+        link, joint = joint.parent, model.parent_joint(joint.parent)
+    return link, point
 
 
 def find_assets(assets: str | Path | Sequence[str | Path]) -> list[Path]:
@@ -380,7 +393,8 @@ def load_task_objects(assets: str | Path | Sequence[str | Path], action: str,
         except ManiSkillAssetError as exc:
             skipped.append((folder, str(exc)))
     if not objects:
-        raise ManiSkillAssetError("MS_NO_ASSETS", "no asset can be a task object: " + "; ".join(f"{f}: {e}" for f, e in skipped))
+        raise ManiSkillAssetError("MS_NO_ASSETS", "no asset can be a task object: " + "; ".join(f"{f}: {e}" for f, e in skipped),
+                                  skipped)
     return objects, skipped
 
 

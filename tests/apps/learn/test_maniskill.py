@@ -160,6 +160,28 @@ def test_bad_inputs_name_the_folder_and_a_failed_asset_does_not_stop_the_others(
     assert len(skipped) == 1 and skipped[0][0] == broken and "MS_NO_TASK_JOINT" in skipped[0][1]
 
 
+def test_a_handle_on_a_fixed_joint_is_grasped_on_the_link_that_carries_it(tmp_path):
+    """robosuite's door: the handle hangs on ``latch``, welded to the door by a fixed joint; ManiSkill's link merge
+    needs a link with a joint of its own, so the grasp point moves onto the door (where the latch carries it)."""
+    from tests.tasks.ingest.host_layouts import robosuite_door
+
+    src = robosuite_door(tmp_path / "in" / "robosuite" / "models" / "assets" / "objects" / "door.xml")
+    asset2sim.refine(src, "A door.", tmp_path / "door", extras=False)
+    objects, skipped = ams.load_task_objects(tmp_path / "door", "open")
+    (obj,) = objects
+    assert not skipped and obj.model.parent_joint(obj.grasp_link).type != "fixed"
+    assert any("which carries it" in n for n in obj.notes), obj.notes
+    latch = next(j for j in obj.model.joints if j.type == "fixed" and j.parent == obj.grasp_link)
+    assert np.linalg.norm(obj.grasp_point - latch.origin[:3, 3]) < 0.3  # on the handle, not at the door's origin
+    env = _make(ams.ENV_IDS["open"], [tmp_path / "door"])
+    try:
+        env.reset(seed=0)
+        for _ in range(3):
+            env.step(env.action_space.sample())
+    finally:
+        env.close()
+
+
 def test_every_joint_gets_the_outputs_friction_damping_and_spring(outputs):
     env = _make(ams.ENV_IDS["close"], [outputs / "stapler"])
     try:
