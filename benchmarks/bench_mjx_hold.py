@@ -1,17 +1,19 @@
 """Does the MJCF export hold its initial state as MJX and host scenes run it (no no-slip pass)?
 
     python benchmarks/bench_mjx_hold.py [--root out/bench_refine] [--ids 100221,148] [--no-mjx] [--x64]
+    python benchmarks/bench_mjx_hold.py --root DIR --rollouts ROLLOUTS   # MJX column from mjx_rollout.py (a GPU's)
 
 For every output folder under ROOT (as written by ``benchmarks/bench_refine.py``) the MJCF is exported
 (``export_mjcf``) and the written file is loaded with ``mujoco.MjModel.from_xml_path``, reset to its keyframe
 ``initial`` and stepped for the robust-rest window (the SPEC's settle 1 s + test 2 s at 1/240 s, 720 steps) with
-no other change, in three ways:
+no other change, in three ways (``--export-only`` writes the exports and stops):
 
 - ``defaults``: host MuJoCo, every joint's friction solver parameters set back to MuJoCo's defaults
   (``solreffriction`` 0.02 1, ``solimpfriction`` 0.9 0.95 0.001 0.5 2: the export before it wrote its own), no no-slip;
 - ``mujoco``: host MuJoCo, the file as written;
 - ``mjx``: ``mujoco.mjx.step`` (JAX, on this machine's CPU) in one compiled loop, the file as written; JAX's
-  default float32, or float64 with ``--x64``.
+  default float32, or float64 with ``--x64``; or, with ``--rollouts``, the positions ``benchmarks/mjx_rollout.py``
+  saved for the same files on another machine (a GPU's MJX, as learners run it; writes ROOT/mjx_hold_rollouts.json).
 
 A run holds when every joint with limits comes to rest inside its robust-rest band around the keyframe (max(0.02 rad
 or 2 mm, 5 % of its range), not moving over the last 0.5 s: ``metrics.joint_settling``) and a free root is at rest
@@ -30,6 +32,10 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from mjx_rollout import step_mjx
+
 MUJOCO_DEFAULT_SOLREF = (0.02, 1.0)
 MUJOCO_DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
 
@@ -73,27 +79,9 @@ def step_host(m, d, n: int) -> np.ndarray:
     return out
 
 
-def step_mjx(m, d, n: int) -> np.ndarray:
-    """Positions (n, nq) of ``n`` ``mjx.step``s: the first alone (under ``jax_enable_x64`` the data MJX puts holds
-    int32 contact indices its step returns as int64, which a scan's carry refuses), the rest in one ``jax.lax.scan``."""
-    import jax
-    import jax.numpy as jnp
-    from mujoco import mjx
-
-    mx, dx = mjx.put_model(m), mjx.put_data(m, d)
-    dx = jax.jit(mjx.step)(mx, dx)
-    first = dx.qpos
-
-    def body(dx, _):
-        dx = mjx.step(mx, dx)
-        return dx, dx.qpos
-
-    _, traj = jax.jit(lambda dx: jax.lax.scan(body, dx, None, length=n - 1))(dx)
-    return np.asarray(jnp.concatenate([first[None], traj]), float)
-
-
-def hold(xml: Path, how: str) -> dict:
-    """One run of the file ``xml`` (``how``: defaults, mujoco, mjx) -> {"holds", "worst", "d_pos", "d_ori", "wall_s"}."""
+def hold(xml: Path, how: str, rollout: Path | None = None) -> dict:
+    """One run of the file ``xml`` (``how``: defaults, mujoco, mjx) -> {"holds", "worst", "d_pos", "d_ori", "wall_s"};
+    ``rollout``: with ``mjx``, the positions of an ``mjx_rollout.py`` run of the same file instead of a run here."""
     import mujoco
 
     from asset2sim.engines.mjcf.base import mujoco_messages
@@ -112,8 +100,15 @@ def hold(xml: Path, how: str) -> dict:
     conv = SimConventions()
     n = round((conv.settle_time + conv.test_time) / conv.timestep)
     t0 = time.perf_counter()
-    qpos = step_mjx(m, d, n) if how == "mjx" else step_host(m, d, n)
-    wall = time.perf_counter() - t0
+    device = "host"
+    if how == "mjx" and rollout is not None:
+        saved = np.load(rollout)
+        qpos, wall, device = saved["qpos"], float(saved["wall_s"]), f"{saved['device']} {saved['dtype']}"
+        if len(qpos) != n or not np.allclose(saved["q0"], q0):
+            raise ValueError(f"{rollout}: not {n} steps of {xml} from its keyframe")
+    else:
+        qpos = step_mjx(m, d, n) if how == "mjx" else step_host(m, d, n)
+        wall = time.perf_counter() - t0
     trace = trace_of(m, qpos, q0)
     settling = metrics.joint_settling(trace)
     joints_held = all(s.held for s in settling.values())
@@ -124,7 +119,8 @@ def hold(xml: Path, how: str) -> dict:
             "worst": None if worst is None else {"joint": worst[0], "settled": worst[1].settled, "band": worst[1].band,
                                                  "held": worst[1].held},
             "d_pos": None if rest is None else rest.details.get("D_pos_m"), "d_ori": None if rest is None else rest.details.get("D_ori_rad"),
-            "options": {"noslip_iterations": int(m.opt.noslip_iterations), "cone": int(m.opt.cone)}, "wall_s": wall}
+            "options": {"noslip_iterations": int(m.opt.noslip_iterations), "cone": int(m.opt.cone)}, "wall_s": wall,
+            "device": device}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -133,6 +129,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ids", default="")
     ap.add_argument("--no-mjx", action="store_true", help="host MuJoCo only")
     ap.add_argument("--x64", action="store_true", help="MJX in float64 (jax_enable_x64; JAX's default is float32)")
+    ap.add_argument("--rollouts", type=Path, default=None,
+                    help="grade the MJX column from ROLLOUTS/<id>.npz (benchmarks/mjx_rollout.py, e.g. on a GPU machine)")
+    ap.add_argument("--export-only", action="store_true", help="write each folder's mjcf/ export and stop")
     args = ap.parse_args(argv)
     if args.x64:
         import jax
@@ -147,9 +146,17 @@ def main(argv: list[str] | None = None) -> int:
     hows = ["defaults", "mujoco"] + ([] if args.no_mjx else ["mjx"])
     rows = {}
     print("object | " + " | ".join(hows) + " | worst joint settled/band (mjx or mujoco) | mjx wall s")
+    if args.export_only:
+        for folder in folders:
+            print(export_mjcf(folder))
+        return 0
     for folder in folders:
         xml = export_mjcf(folder)
-        row = {how: hold(xml, how) for how in hows}
+        saved = args.rollouts / f"{folder.name}.npz" if args.rollouts else None
+        if saved is not None and not saved.is_file():
+            print(f"{folder.name} | no rollout in {args.rollouts}", flush=True)
+            continue
+        row = {how: hold(xml, how, saved) for how in hows}
         rows[folder.name] = row
         last = row[hows[-1]]
         w = last["worst"]
@@ -159,7 +166,8 @@ def main(argv: list[str] | None = None) -> int:
               flush=True)
     counts = {h: sum(r[h]["holds"] for r in rows.values()) for h in hows}
     print("holding: " + ", ".join(f"{h} {c}/{len(rows)}" for h, c in counts.items()))
-    (args.root / ("mjx_hold_x64.json" if args.x64 else "mjx_hold.json")).write_text(json.dumps({"rows": rows, "counts": counts}, indent=1, default=float))
+    name = "mjx_hold_rollouts.json" if args.rollouts else "mjx_hold_x64.json" if args.x64 else "mjx_hold.json"
+    (args.root / name).write_text(json.dumps({"rows": rows, "counts": counts}, indent=1, default=float))
     return 0
 
 
