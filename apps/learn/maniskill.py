@@ -101,7 +101,7 @@ from asset2sim.engines.physx_engine import (attach_collision_shapes, configure_a
 from asset2sim.output_folder import REPORT_NAME, URDF_NAME
 from asset2sim.refined_asset import RefinedAsset
 from asset2sim.tasks.check.contact_points import contact_point_rule
-from asset2sim.tasks.check.task_spec import VERBS
+from asset2sim.tasks.interpret.task_words import VERBS
 from asset2sim.apps.learn.task import prepare_task, targets_for
 from asset2sim.tasks.ingest.manifest import read_manifest_rows
 from asset2sim.tasks.ingest.partnet_mobility import read_category, write_reference

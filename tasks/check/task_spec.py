@@ -1,5 +1,5 @@
 """A manipulation task ("close the microwave door", the manifest's ``task`` column or ``--task``) as
-joints, a direction (:data:`VERBS`) and a target opening fraction; the rules are in
+joints, a direction (:func:`~asset2sim.tasks.interpret.task_words.task_verb`) and a target opening fraction; the rules are in
 ``docs/design/metrics.md``, "Behaviour: passive probes".
 """
 
@@ -12,13 +12,7 @@ from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.check.asset_files import JointInfo
 from asset2sim.tasks.interpret.named_parts import labelled_joints
 from asset2sim.tasks.interpret.request import parse_prompt
-
-#: Leading verbs -> action ("close" / "open"); any other verb: both directions.
-VERBS: dict[str, str] = {
-    "close": "close", "shut": "close", "press": "close", "push down": "close", "lower": "close", "fold": "close",
-    "open": "open", "pull": "open", "pull out": "open", "lift": "open", "raise": "open", "unfold": "open",
-}
-
+from asset2sim.tasks.interpret.task_words import EVERY, task_verb
 
 @dataclass
 class TaskSpec:
@@ -34,16 +28,6 @@ class TaskSpec:
     notes: list[str] = field(default_factory=list)
 
 
-def _verb(low: str) -> tuple[str | None, str]:
-    """(action or None, the words after the verb)."""
-    for verb in sorted(VERBS, key=len, reverse=True):
-        m = re.match(rf"\s*{re.escape(verb)}\b(.*)$", low)
-        if m:
-            return VERBS[verb], m.group(1).strip()
-    m = re.match(r"\s*(\w+)\b(.*)$", low)
-    return None, (m.group(2).strip() if m else low)
-
-
 def parse_task(text: str, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
                category: str | None, task_joints: list[str]) -> TaskSpec:
     """The :class:`TaskSpec` of ``text`` for an asset's ``joints`` and
@@ -51,7 +35,7 @@ def parse_task(text: str, joints: dict[str, JointInfo], semantics: dict[str, tup
     Never raises on unknown words.
     """
     low = " ".join(str(text or "").lower().split())
-    action, rest = _verb(low)
+    action, rest = task_verb(low)
     actions = (action,) if action else ("close", "open")
     targets = {a: (CLOSE_TARGET if a == "close" else OPEN_TARGET) for a in actions}
     spec, err = parse_prompt(f"{rest} closed") if rest else (None, None)
@@ -78,21 +62,11 @@ def parse_task(text: str, joints: dict[str, JointInfo], semantics: dict[str, tup
     return TaskSpec(text, actions, targets, list(task_joints), part, rule, notes)
 
 
-def task_actions(text: str | None) -> tuple[str, ...]:
-    """The actions of a task's leading verb (:data:`VERBS`); both without a direction or a task."""
-    action, _ = _verb(" ".join(str(text or "").lower().split()))
-    return (action,) if action else ("close", "open")
-
-
-#: Words that make a task act on every joint of its part.
-_EVERY = re.compile(r"\b(?:all|every|each|both)\b")
-
-
 def with_work_to_do(spec: TaskSpec, fractions: dict[str, float]) -> TaskSpec:
     """``spec`` narrowed to the joints it has work on (``docs/design/metrics.md``, probes);
     ``fractions``: joint -> opening fraction at the initial state (missing: has work)."""
     low = " ".join(spec.text.lower().split())
-    if len(spec.actions) != 1 or len(spec.joints) < 2 or spec.rule.startswith("fallback") or _EVERY.search(low):
+    if len(spec.actions) != 1 or len(spec.joints) < 2 or spec.rule.startswith("fallback") or EVERY.search(low):
         return spec
     if spec.part and re.search(rf"\b{re.escape(spec.part.lower())}(?:s|es)\b", low):
         return spec  # "close the drawers"

@@ -30,7 +30,7 @@ from asset2sim.tasks.check.gripper_motion import TaskConfig
 from asset2sim.tasks.check.operability import gravity_force, range_force
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.check.pusher import ProbeConfig
-from asset2sim.tasks.check.task_spec import task_actions
+from asset2sim.tasks.interpret.task_words import task_actions
 from asset2sim.tasks.check.task_tier import link_labels
 from asset2sim.tasks.geometry.closed_state import subtree_links
 from asset2sim.tasks.synthesize.physics import G as GRAVITY, max_stable_friction

@@ -8,7 +8,8 @@ import pytest
 
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.check.asset_files import parse_urdf, read_semantics
-from asset2sim.tasks.check.task_spec import parse_task, task_actions, with_work_to_do
+from asset2sim.tasks.check.task_spec import parse_task, with_work_to_do
+from asset2sim.tasks.interpret.task_words import task_actions
 from asset2sim.engines.source import UrdfFile
 from tests.conftest import SHARED, needs_shared
 

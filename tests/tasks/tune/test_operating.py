@@ -19,7 +19,7 @@ from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.tune import dynamics_search, operating
 from asset2sim.tasks.interpret.operating_forces import operating_range
 from asset2sim.tasks.check.gripper import GripperLimits
-from asset2sim.tasks.check.task_spec import task_actions
+from asset2sim.tasks.interpret.task_words import task_actions
 from asset2sim.tasks.check.probes import ProbeConfig
 from asset2sim.tasks.geometry.analyze import analyze_asset
 from asset2sim.tasks.ingest.extract import extract_asset
