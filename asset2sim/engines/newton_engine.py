@@ -6,7 +6,9 @@ queries the rest-stability, oscillation and breakaway checks need are answered
 distances, external forces and root velocities raise
 :class:`~asset2sim.engines.base.EngineUnsupported`. Kamino holds the URDF's
 Coulomb joint friction as a bounded constraint row per DOF (``joint_friction``,
-N*m or N; Tsounis et al. 2025, arXiv:2504.19771). newton and warp (an optional
+N*m or N; Tsounis et al. 2025, arXiv:2504.19771). A fixed root and the links fixed
+to it are welded to the world (static shapes); ``full_model``, every link a body,
+answers the contact and mass queries. newton and warp (an optional
 extra) are imported when a session opens or a USD is read back.
 """
 
@@ -69,17 +71,22 @@ class NewtonSession(SessionDefaults):
         self._add_joints(b, poses)
         if options.ground:
             b.add_ground_plane(cfg=newton.ModelBuilder.ShapeConfig(mu=CONTACT_FRICTION))
-        self.model = b.finalize(device="cpu")
+        # every link a body: the model the contact and mass queries read (Phi between welded links included)
+        self.full_model = b.finalize(device="cpu")
+        self._full_body = dict(self._body)
+        self._welded = self._weld_fixed_root(b, poses)
+        self.model = b.finalize(device="cpu") if self._welded else self.full_model
         self._init_state()
-        self._query = newton.CollisionPipeline(self.model, publish_capacity=False)  # sized from the initial contacts
+        self._query = newton.CollisionPipeline(self.full_model, publish_capacity=False)  # sized from the initial contacts
         self._query_contacts = self._query.contacts()
-        self._query.collide(self.state0, self._query_contacts)
+        self._query_state = self.full_model.state()
+        self._query.collide(self._full_state(), self._query_contacts)
         self._capacity = _capacity_for(int(self._query_contacts.rigid_contact_count.numpy()[0]))
         self.rebuilds = 0
         self._build_solver()
-        self._ground_shape = self.model.shape_count - 1 if options.ground else -1
-        self._shape_body = self.model.shape_body.numpy()
-        self._link_of = {v: k for k, v in self._body.items()}
+        self._ground_shape = self.full_model.shape_count - 1 if options.ground else -1
+        self._shape_body = self.full_model.shape_body.numpy()
+        self._link_of = {v: k for k, v in self._full_body.items()}
 
     # ------------------------------------------------------------- building
     def _placed_poses(self, pieces: dict[str, list[CollisionPiece]]) -> dict[str, np.ndarray]:
@@ -142,6 +149,38 @@ class NewtonSession(SessionDefaults):
                 idx = b.add_joint_fixed(parent, child, **kw)
             joints.append(idx)
         b.add_articulation(joints)
+        self._joint_ids = {j.name: idx for j, idx in zip(self.urdf.joints, joints[1:])}
+
+    def _weld_fixed_root(self, b, poses: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """A fixed root: the root and every link fixed to it, through fixed joints, merged into the world
+        (``ModelBuilder.collapse_fixed_joints``; the other fixed joints kept), as a reduced-coordinate engine
+        holds a fixed base. Kamino simulates every body in maximal coordinates and would hold the welds as
+        constraint rows solved iteratively, which a chain world -> root link -> mounted body does not keep
+        rigid under a part's load: the mounted body tilts and the parts on it slide (``docs/design/simulators.md``,
+        Newton; ``benchmarks/newton_fixed_root_sag.py``). Remaps ``_body`` and ``_joint_index`` to the welded
+        model; returns the welded links' poses (link -> (4, 4)), empty with a free root or where no body would
+        remain."""
+        if not self._fixed:
+            return {}
+        welded = {self.urdf.root}
+        fixed = [j for j in self.urdf.joints if j.type not in ("revolute", "continuous", "prismatic")]
+        grew = True
+        while grew:
+            grew = False
+            for j in fixed:
+                if j.parent in welded and j.child not in welded:
+                    welded.add(j.child)
+                    grew = True
+        if len(welded) == len(self.link_names):
+            return {}
+        keep = [self._joint_ids[j.name] for j in fixed if j.child not in welded]
+        info = b.collapse_fixed_joints(joints_to_keep=keep)
+        self._body = {n: info["body_remap"][i] for n, i in self._body.items() if n not in welded}
+        self._joint_index = {n: info["joint_remap"][i] for n, i in self._joint_index.items()}
+        names = [n for n in self.link_names if n in welded]
+        self.notes.append(f"fixed root: {', '.join(names)} welded to the world (collapse_fixed_joints), "
+                          "not simulated as bodies held by fixed-joint rows")
+        return {n: poses[n] for n in names}
 
     def _init_state(self) -> None:
         """Joint addresses (``_qadr``, ``_dadr``), initial positions, states, control and body poses."""
@@ -233,6 +272,9 @@ class NewtonSession(SessionDefaults):
 
     # ------------------------------------------------------------------- links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        if link in self._welded:
+            pose = self._welded[link]
+            return pose[:3, 3].copy(), pose[:3, :3].copy()
         t = self.state0.body_q.numpy()[self._body[link]]
         x, y, z, w = (float(v) for v in t[3:7])
         return np.array(t[:3], float), np.array(quat_wxyz_matrix([w, x, y, z]))
@@ -252,11 +294,15 @@ class NewtonSession(SessionDefaults):
         return len(self._points[link]) > 0
 
     def link_masses(self) -> dict[str, float]:
-        m = self.model.body_mass.numpy()
-        return {n: float(m[i]) for n, i in self._body.items()}
+        m = self.full_model.body_mass.numpy()
+        return {n: float(m[i]) for n, i in self._full_body.items()}
 
     # -------------------------------------------------------------------- root
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.urdf.root in self._welded:
+            pose = self._welded[self.urdf.root]
+            w, x, y, z = matrix_quat_wxyz(pose[:3, :3])
+            return pose[:3, 3].copy(), np.array([x, y, z, w], float)
         t = self.state0.body_q.numpy()[self._body[self.urdf.root]]
         q = np.array(t[3:7], float)
         n = np.linalg.norm(q)
@@ -276,11 +322,12 @@ class NewtonSession(SessionDefaults):
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
         """Phi from Newton's narrow phase: separation n . (p1 - p0) - (margin0 + margin1) per point."""
         c = self._query_contacts
-        self._query.collide(self.state0, c)
+        state = self._full_state()
+        self._query.collide(state, c)
         count = int(c.rigid_contact_count.numpy()[0])
         s0, s1, p0, p1, nrm, m0, m1 = (getattr(c, f"rigid_contact_{field}").numpy()[:count]
                                        for field in ("shape0", "shape1", "point0", "point1", "normal", "margin0", "margin1"))
-        bq = self.state0.body_q.numpy()
+        bq = state.body_q.numpy()
         points = []
         for k in range(count):
             if self._ground_shape in (int(s0[k]), int(s1[k])):
@@ -291,6 +338,18 @@ class NewtonSession(SessionDefaults):
             d = float(np.dot(nrm[k], _body_point(bq[bb], p1[k]) - _body_point(bq[ba], p0[k]))) - float(m0[k]) - float(m1[k])
             points.append((self._link_of[ba], self._link_of[bb], d))
         return penetration_sum(points)
+
+    def _full_state(self):
+        """A state of :attr:`full_model` with every link's body where the session's link is (welded ones included)."""
+        if self.full_model is self.model:
+            return self.state0
+        bq = np.zeros((len(self._full_body), 7), np.float32)
+        for name, i in self._full_body.items():
+            p, r = self.link_frame(name)
+            w, x, y, z = matrix_quat_wxyz(r)
+            bq[i] = (*p, x, y, z, w)
+        self._query_state.body_q.assign(bq)
+        return self._query_state
 
     def ground_penetration(self) -> float:
         """Deepest collision vertex below z = 0 (m), from the geometry."""
@@ -356,11 +415,18 @@ class NewtonSession(SessionDefaults):
 
     def held_physics(self) -> HeldPhysics:
         dofs = {n: (self._qadr[n], self._dadr[n]) for n in self._qadr}
-        return held_physics_of_model(self.model, self.state0.joint_q.numpy(), self._body, dofs, source="urdf")
+        held = held_physics_of_model(self.model, self.state0.joint_q.numpy(), self._body, dofs, source="urdf")
+        if self._welded:  # as built, before the weld: not simulated
+            m, com, inertia = self.full_model.body_mass.numpy(), self.full_model.body_com.numpy(), self.full_model.body_inertia.numpy()
+            for n in self._welded:
+                i = self._full_body[n]
+                held.links[n] = HeldLink(mass=float(m[i]), com=np.array(com[i], float), principal=principal_moments(inertia[i]))
+            held.welded_to_world = list(self._welded)
+        return held
 
     def close(self) -> None:
         self.solver = None
-        self.model = None
+        self.model = self.full_model = None
 
 
 def _unsupported(query: str):
