@@ -179,6 +179,33 @@ def test_frictionloss_holds_without_the_noslip_pass(tmp_path):
         s.close()
 
 
+def test_joint_armature_lifts_only_a_dof_lighter_than_the_float32_floor():
+    """A dof whose effective inertia is below sqrt(float32 eps) x the model's mean inertia gets the difference as
+    armature; a heavier one, or one MuJoCo gives no inverse weight, keeps ``ARMATURE``."""
+    from asset2sim.engines.mjcf import ARMATURE, ARMATURE_FLOOR, joint_armature
+
+    assert ARMATURE_FLOOR == pytest.approx(float(np.sqrt(np.finfo(np.float32).eps)))
+    assert joint_armature(1.0 / 1.2e-6, 0.021) == pytest.approx(ARMATURE_FLOOR * 0.021 - 1.2e-6)
+    assert joint_armature(1.0 / 1e-3, 0.021) == ARMATURE
+    assert joint_armature(0.0, 0.021) == ARMATURE
+
+
+def test_a_light_part_gets_armature_and_every_contact_the_export_impedance(tmp_path):
+    """The box's 0.2 kg lid keeps ``armature="0"``; a 2 g lid on the same 1.5 kg body is lighter than the float32
+    floor and is lifted to it (MJX float32 would ratchet it along its load), and every collision geom and the ground
+    carry ``CONTACT_SOLIMP``."""
+    from asset2sim.engines.mjcf import ARMATURE, ARMATURE_FLOOR, CONTACT_SOLIMP
+
+    m = _compile(urdf_to_mjcf(write_contract_asset(tmp_path / "heavy").urdf))
+    assert np.all(m.dof_armature == ARMATURE)
+    colliding = (m.geom_contype > 0) | (m.geom_conaffinity > 0)
+    assert colliding.any() and np.allclose(m.geom_solimp[colliding], CONTACT_SOLIMP)
+    m = _compile(urdf_to_mjcf(write_contract_asset(tmp_path / "light", lid_mass=0.002).urdf))
+    dof = m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "lid_hinge")]
+    assert m.dof_armature[dof] > 0
+    assert 1.0 / m.dof_invweight0[dof] == pytest.approx(ARMATURE_FLOOR * m.stat.meaninertia, rel=0.05)
+
+
 def test_the_joints_hold_in_a_host_scene_with_its_own_options_and_defaults(tmp_path):
     """A host scene that includes the object brings its own ``<option>`` (elliptic cones, a 2 ms step) and
     ``<default>`` joint (MuJoCo's own friction solver parameters, under which this lid creeps 0.2 rad in 3 s): the

@@ -14,8 +14,8 @@ from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, CollisionPiece, collision_pieces, read_urdf
 from asset2sim.engines.mjcf.base import (DERIVED_MESH_DIR, KEYFRAME, MjcfError, compile_xml, load_mujoco, mujoco_messages, mujoco_warnings,
                                          num_text, place_on_ground, relative_to, safe_name, vec_text)
-from asset2sim.engines.mjcf.rewrite import (add_root_and_ground, place_bodies, rename_meshes, set_contacts, set_friction_solver, set_geoms,
-                                            set_inertial, set_joints, set_options)
+from asset2sim.engines.mjcf.rewrite import (add_root_and_ground, place_bodies, rename_meshes, set_armature, set_contacts, set_friction_solver,
+                                            set_geoms, set_inertial, set_joints, set_options)
 from asset2sim.engines.mjcf.visuals import add_visuals
 from asset2sim.file_names import file_stem
 from asset2sim.frames import translation_matrix
@@ -204,6 +204,7 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     add_root_and_ground(root_body, worldbody, fixed_base, ground)
 
     compiled, qpos, height = place_on_ground(root, root_body, final_assets, initial_state, fixed_base, urdf_path, notes)
+    set_armature(worldbody, compiled)
     if visuals:  # after placement: visual meshes never collide, and cost compile time
         for b in worldbody.iter("body"):
             add_visuals(b, model.links[b.get("name")], mesh_root, asset_el, meshes.files, final_assets, used, notes)

@@ -12,8 +12,8 @@ from lxml import etree
 from asset2sim.engines.base import Spring
 from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
                                        CollisionPiece, link_friction)
-from asset2sim.engines.mjcf.base import (ARMATURE, CONE, FREE_JOINT, FRICTION_SOLIMP, GROUND, MjcfError, close, friction_solref, num_text,
-                                         quat_text, safe_name, vec_text)
+from asset2sim.engines.mjcf.base import (ARMATURE, CONE, CONTACT_SOLIMP, FREE_JOINT, FRICTION_SOLIMP, GROUND, MjcfError, close, friction_solref,
+                                         joint_armature, num_text, quat_text, safe_name, vec_text)
 from asset2sim.schemas.config import SimConventions
 from asset2sim.urdf import UrdfModel
 
@@ -227,6 +227,24 @@ def set_friction_solver(worldbody, timestep: float) -> None:
         je.set("armature", num_text(ARMATURE))
 
 
+def set_armature(worldbody, compiled) -> dict[str, float]:
+    """On every hinge and slide joint under ``worldbody`` whose effective inertia in ``compiled`` (the model compiled
+    from it with :data:`~asset2sim.engines.mjcf.base.ARMATURE` on every joint) is below the float32 floor, the armature
+    :func:`~asset2sim.engines.mjcf.base.joint_armature` that lifts it there; returns joint -> armature written."""
+    import mujoco
+
+    out = {}
+    for je in worldbody.iter("joint"):
+        jid = mujoco.mj_name2id(compiled, mujoco.mjtObj.mjOBJ_JOINT, je.get("name") or "")
+        if jid < 0 or int(compiled.jnt_type[jid]) not in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)):
+            continue
+        a = joint_armature(float(compiled.dof_invweight0[compiled.jnt_dofadr[jid]]), float(compiled.stat.meaninertia))
+        if a > ARMATURE:
+            je.set("armature", num_text(a))
+            out[je.get("name")] = a
+    return out
+
+
 def set_geoms(b, link, model: UrdfModel, plist: list[CollisionPiece], geom_mesh: dict[tuple, str], visuals: bool, urdf_path: Path) -> None:
     """Name and place the body's collision geoms (one per piece) with their
     mesh (``geom_mesh``: piece key -> mesh name) and friction (MjcfError:
@@ -243,6 +261,7 @@ def set_geoms(b, link, model: UrdfModel, plist: list[CollisionPiece], geom_mesh:
             g.set("mesh", geom_mesh[(link.name, p.collision, p.group)])
         if not math.isclose(fr, BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION):
             g.set("friction", f"{num_text(fr)} 0.005 0.0001")
+        g.set("solimp", vec_text(CONTACT_SOLIMP))
         if visuals:
             g.set("group", "3")
 
@@ -255,4 +274,5 @@ def add_root_and_ground(root_body, worldbody, fixed_base: bool, ground: bool) ->
         root_body.insert(idx, fj)
     if ground:
         # friction 0: MuJoCo takes the larger friction, the link's
-        worldbody.insert(0, etree.Element("geom", name=GROUND, type="plane", size="0 0 1", friction="0 0.005 0.0001", rgba="0.8 0.8 0.8 1"))
+        worldbody.insert(0, etree.Element("geom", name=GROUND, type="plane", size="0 0 1", friction="0 0.005 0.0001",
+                                          solimp=vec_text(CONTACT_SOLIMP), rgba="0.8 0.8 0.8 1"))
