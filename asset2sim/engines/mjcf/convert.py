@@ -204,7 +204,9 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     add_root_and_ground(root_body, worldbody, fixed_base, ground)
 
     compiled, qpos, height = place_on_ground(root, root_body, final_assets, initial_state, fixed_base, urdf_path, notes)
-    set_armature(worldbody, compiled)
+    for joint, a in set_armature(worldbody, compiled).items():
+        notes.append(f"joint {joint!r}: armature {a:.3g} kg*m^2 or kg, the inertia that lifts a part this light to "
+                     "sqrt(float32 eps) of the model's mean inertia, so that MJX in float32 holds it (not in the URDF)")
     if visuals:  # after placement: visual meshes never collide, and cost compile time
         for b in worldbody.iter("body"):
             add_visuals(b, model.links[b.get("name")], mesh_root, asset_el, meshes.files, final_assets, used, notes)
