@@ -40,6 +40,17 @@ def _make(env_id: str, assets, **kw):
     return gym.make(env_id, assets=assets, num_envs=1, obs_mode="state", render_backend="none", sim_backend="cpu", **kw)
 
 
+def _reset_and_step(env_id: str, assets, steps: int = 3, **kw) -> None:
+    """Make ``env_id`` on ``assets``, reset it and step ``steps`` random actions (an error fails the test)."""
+    env = _make(env_id, assets, **kw)
+    try:
+        env.reset(seed=0)
+        for _ in range(steps):
+            env.step(env.action_space.sample())
+    finally:
+        env.close()
+
+
 @pytest.mark.parametrize("action", ["open", "close"])
 def test_each_id_runs_an_episode_on_the_cpu_backend(outputs, action):
     env = _make(ams.ENV_IDS[action], outputs)
@@ -173,13 +184,7 @@ def test_a_handle_on_a_fixed_joint_is_grasped_on_the_link_that_carries_it(tmp_pa
     assert any("which carries it" in n for n in obj.notes), obj.notes
     latch = next(j for j in obj.model.joints if j.type == "fixed" and j.parent == obj.grasp_link)
     assert np.linalg.norm(obj.grasp_point - latch.origin[:3, 3]) < 0.3  # on the handle, not at the door's origin
-    env = _make(ams.ENV_IDS["open"], [tmp_path / "door"])
-    try:
-        env.reset(seed=0)
-        for _ in range(3):
-            env.step(env.action_space.sample())
-    finally:
-        env.close()
+    _reset_and_step(ams.ENV_IDS["open"], [tmp_path / "door"])
 
 
 def test_every_joint_gets_the_outputs_friction_damping_and_spring(outputs):
@@ -347,10 +352,4 @@ def test_every_dev_output_is_a_maniskill_task_or_a_named_skip(refine_once, row):
         objects, skipped = ams.load_task_objects([res.out], action, manifest=shared / "manifest.csv" if action == "task" else None)
         assert len(objects) + len(skipped) == 1
         assert all(error.startswith("MS_") for _, error in skipped), skipped
-    env = _make(ams.ENV_IDS["task"], [res.out], manifest=shared / "manifest.csv")
-    try:
-        env.reset(seed=0)
-        for _ in range(3):
-            env.step(env.action_space.sample())
-    finally:
-        env.close()
+    _reset_and_step(ams.ENV_IDS["task"], [res.out], manifest=shared / "manifest.csv")
