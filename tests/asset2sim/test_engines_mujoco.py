@@ -265,3 +265,55 @@ def test_parent_child_exclusion_travels_with_the_file(tmp_path):
     assert _body_contacts(b.xml, b, -0.2, filterparent=False) == 0
     bare = re.sub(r"<exclude [^>]*/>", "", b.xml)
     assert _body_contacts(bare, b, -0.2, filterparent=False) > 0
+
+
+def _post_and_door(folder):
+    """A URDF of a frame with a cylindrical post (radius 0.03 m, 0.6 m long), a box door on a hinge beside it and a box
+    handle fixed to the door (the post and the handle are not parent and child: MuJoCo collides them)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "mobility.urdf"
+    path.write_text("""<?xml version="1.0"?>
+<robot name="post_and_door">
+  <link name="frame">
+    <inertial><mass value="5.0"/><inertia ixx="0.15" iyy="0.15" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0 0.3"/><geometry><cylinder radius="0.03" length="0.6"/></geometry></collision>
+  </link>
+  <link name="door">
+    <inertial><origin xyz="0.25 0 0.3"/><mass value="2.0"/>
+      <inertia ixx="0.06" iyy="0.1" izz="0.04" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0.25 0 0.3"/><geometry><box size="0.4 0.02 0.5"/></geometry></collision>
+  </link>
+  <link name="handle">
+    <inertial><origin xyz="0.35 -0.05 0.3"/><mass value="0.1"/>
+      <inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0.35 -0.05 0.3"/><geometry><box size="0.02 0.06 0.1"/></geometry></collision>
+  </link>
+  <joint name="hinge" type="revolute"><parent link="frame"/><child link="door"/><origin xyz="0.05 0 0"/>
+    <axis xyz="0 0 1"/><limit lower="0" upper="1.5" effort="10" velocity="1"/><dynamics damping="0.5" friction="0.3"/></joint>
+  <joint name="handle_fixed" type="fixed"><parent link="door"/><child link="handle"/></joint>
+</robot>
+""")
+    return path
+
+
+def test_a_collision_cylinder_becomes_a_prism_that_holds_it(tmp_path):
+    """MJX collides a cylinder with neither a box nor a mesh: the MJCF writes the post as a 20-sided convex prism whose
+    faces touch the cylinder (radius 0.03 m, half-length 0.3 m), named in the notes; it compiles and stands where the
+    cylinder stood."""
+    from asset2sim.engines.mjcf.rewrite import CYLINDER_SIDES
+
+    b = urdf_to_mjcf(_post_and_door(tmp_path / "in"), SessionOptions(fixed_base=True))
+    assert 'type="cylinder"' not in b.xml
+    assert any("frame__c0_g0" in n and "prism" in n for n in b.notes), b.notes
+    m = _compile(b)
+    g = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "frame__c0_g0")
+    assert m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH
+    mesh = int(m.geom_dataid[g])
+    v = m.mesh_vert[m.mesh_vertadr[mesh]:m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
+    assert len(v) == 2 * CYLINDER_SIDES
+    radial = np.linalg.norm(v[:, :2], axis=1)  # in the mesh's frame (MuJoCo centres it; the axis stays z)
+    assert radial.min() == pytest.approx(0.03 / np.cos(np.pi / CYLINDER_SIDES), rel=1e-6)
+    assert np.ptp(v[:, 2]) == pytest.approx(0.6, rel=1e-6)
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    assert d.geom_xpos[g][2] == pytest.approx(0.3, abs=1e-6)

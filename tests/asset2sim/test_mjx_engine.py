@@ -73,3 +73,15 @@ def test_a_refined_dev_row_holds_its_initial_state_in_mjx(refine_once, row_id):
     assert settling and all(js.held for js in settling.values()), settling
     if not opts.fixed_base:
         assert metrics.rest_stability(trace, opts.conventions, engine="mjx").passed
+
+
+def test_a_collision_cylinder_beside_a_box_steps_in_mjx(tmp_path):
+    """A frame's cylindrical post beside a box door (MJX has no cylinder-box collision): the MJCF's prism steps in
+    MJX, and the door held by its friction stays where it was put."""
+    _need_mjx()
+    from tests.asset2sim.test_engines_mujoco import _post_and_door
+
+    urdf = _post_and_door(tmp_path / "in")
+    with open_session("mjx", urdf, SessionOptions(initial_state={"hinge": 0.5}, fixed_base=True)) as s:
+        s.step(240)
+        assert s.joint_positions()["hinge"] == pytest.approx(0.5, abs=0.02)

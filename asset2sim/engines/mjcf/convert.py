@@ -14,7 +14,7 @@ from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, CollisionPiece, collision_pieces, read_urdf
 from asset2sim.engines.mjcf.base import (DERIVED_MESH_DIR, KEYFRAME, MjcfError, compile_xml, load_mujoco, mujoco_messages, mujoco_warnings,
                                          num_text, place_on_ground, relative_to, safe_name, vec_text)
-from asset2sim.engines.mjcf.rewrite import (add_root_and_ground, place_bodies, rename_meshes, set_armature, set_contacts, set_friction_solver,
+from asset2sim.engines.mjcf.rewrite import (CYLINDER_SIDES, add_root_and_ground, cylinder_prisms, place_bodies, rename_meshes, set_armature, set_contacts, set_friction_solver,
                                             set_geoms, set_inertial, set_joints, set_options)
 from asset2sim.engines.mjcf.visuals import add_visuals
 from asset2sim.file_names import file_stem
@@ -202,6 +202,9 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     set_contacts(root, model, pieces, fixed_base, notes)
     root_body = bodies[model.root]
     add_root_and_ground(root_body, worldbody, fixed_base, ground)
+    if prisms := cylinder_prisms(worldbody, asset_el):
+        notes.append(f"collision cylinders {', '.join(prisms)} written as {CYLINDER_SIDES}-sided convex prisms holding them: "
+                     "MJX collides a cylinder with neither a box nor a mesh")
 
     compiled, qpos, height = place_on_ground(root, root_body, final_assets, initial_state, fixed_base, urdf_path, notes)
     for joint, a in set_armature(worldbody, compiled).items():
