@@ -6,6 +6,7 @@ against its band (mm for prismatic joints, rad for revolute ones), in which engi
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from typing import Any
 
 from asset2sim.tasks.check.verdict import (
@@ -13,10 +14,23 @@ from asset2sim.tasks.check.verdict import (
 )
 
 
-def penetration_why(metrics: list[Any]) -> list[str]:
-    """Why the penetration tier failed (``unresolved_penetration``), one sentence per failing measure: which
-    penetration, the links, the measured depth against :data:`UNRESOLVED_PENETRATION_MM`, and what a user can do;
-    empty when the tier passes. The terminal summary and ``report.html`` print the same sentences."""
+@dataclass(frozen=True)
+class PenetrationFailure:
+    """A failing penetration measure (``metric``) and its worst pair: ``kind`` ``self-contact`` (links ``link_a`` and
+    ``link_b`` are not parent and child; the deepest pair) or ``parent-child`` (``link_a`` the parent, ``link_b`` the
+    child; the pair deepest beyond its modelled pose, what the readiness rule grades); ``depth_mm`` that pair's depth
+    (the measure's value where it names no pair, links then None)."""
+
+    metric: Any
+    kind: str
+    link_a: str | None
+    link_b: str | None
+    depth_mm: float
+
+
+def penetration_failures(metrics: list[Any]) -> list[PenetrationFailure]:
+    """Every failing penetration measure of ``metrics`` (:data:`PENETRATION_METRICS`) with its worst pair, the one
+    the sentences (:func:`penetration_why`) and the report's frames name."""
     out = []
     for m in metrics:
         if m.name not in PENETRATION_METRICS or metric_verdict(m) is not False:
@@ -24,20 +38,37 @@ def penetration_why(metrics: list[Any]) -> list[str]:
         d = m.details or {}
         if m.name == "penetration":
             pairs = sorted(d.get("pairs") or [], key=lambda p: -float(p.get("max_depth_mm") or 0.0))
-            links = f"links '{pairs[0]['link_a']}' and '{pairs[0]['link_b']}' (not parent and child) overlap by up to " \
-                    f"{float(pairs[0]['max_depth_mm']):.1f} mm" if pairs else "links that are not parent and child overlap"
+            top = pairs[0] if pairs else None
+            out.append(PenetrationFailure(m, "self-contact", top and top["link_a"], top and top["link_b"],
+                                          float(top["max_depth_mm"]) if top else float(m.value or 0.0)))
+            continue
+        pairs, modelled = d.get("pairs") or {}, d.get("modelled") or {}
+        worst = max(pairs, key=lambda k: pairs[k] - modelled.get(k, 0.0)) if pairs else None
+        parent, _, child = worst.partition("/") if worst else (None, "", None)
+        out.append(PenetrationFailure(m, "parent-child", parent, child, float(pairs[worst]) if worst else float(m.value or 0.0)))
+    return out
+
+
+def penetration_why(metrics: list[Any]) -> list[str]:
+    """Why the penetration tier failed (``unresolved_penetration``), one sentence per failing measure
+    (:func:`penetration_failures`): which penetration, the links, the measured depth against
+    :data:`UNRESOLVED_PENETRATION_MM`, and what a user can do; empty when the tier passes. The terminal summary and
+    ``report.html`` print the same sentences."""
+    out = []
+    for f in penetration_failures(metrics):
+        m = f.metric
+        if f.kind == "self-contact":
+            links = f"links '{f.link_a}' and '{f.link_b}' (not parent and child) overlap by up to {f.depth_mm:.1f} mm" \
+                if f.link_a else "links that are not parent and child overlap"
             out.append(f"self-contact penetration {m.value:.1f} mm ({m.engine}) is above {UNRESOLVED_PENETRATION_MM:g} mm: "
                        f"{links} at the initial state. Ask for another state (--state JOINT=closed or a smaller opening) "
                        "or give these links collision meshes that do not overlap.")
             continue
-        pairs = d.get("pairs") or {}
-        worst = max(pairs, key=pairs.get) if pairs else "?/?"
-        parent, _, child = worst.partition("/")
-        depth = float(pairs.get(worst, m.value or 0.0))
-        out.append(f"parent-child penetration ({m.engine}): link '{child}' is {depth:.1f} mm inside its parent '{parent}' at "
-                   f"the initial state, {float(d.get('beyond_modelled_mm') or 0.0):.1f} mm deeper than at its modelled pose "
-                   f"(fails above {UNRESOLVED_PENETRATION_MM:g} mm). Ask for a state the part reaches without entering its "
-                   "parent (--state JOINT=closed or a smaller opening), or check the joint's axis, origin and limits in the input.")
+        out.append(f"parent-child penetration ({m.engine}): link '{f.link_b or '?'}' is {f.depth_mm:.1f} mm inside its parent "
+                   f"'{f.link_a or '?'}' at the initial state, {float((m.details or {}).get('beyond_modelled_mm') or 0.0):.1f} mm "
+                   f"deeper than at its modelled pose (fails above {UNRESOLVED_PENETRATION_MM:g} mm). Ask for a state the part "
+                   "reaches without entering its parent (--state JOINT=closed or a smaller opening), or check the joint's axis, "
+                   "origin and limits in the input.")
     return out
 
 

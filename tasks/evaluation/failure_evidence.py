@@ -19,7 +19,7 @@ import numpy as np
 from asset2sim.frames import quat_wxyz_matrix, quat_xyzw_to_wxyz
 from asset2sim.tasks.check.robust_rest import RobustRestConfig, RobustRestRun, Trial, up_change
 from asset2sim.tasks.check.sweep import JointSweep, SweepConfig, SweepRun
-from asset2sim.tasks.check.verdict import PENETRATION_METRICS, metric_verdict
+from asset2sim.tasks.check.failure_reasons import penetration_failures
 from asset2sim.tasks.evaluation.plots import legend, new_figure, styled, svg_bytes
 from asset2sim.tasks.geometry.render import SceneRenderer
 from asset2sim.inert import html_text, one_line
@@ -151,29 +151,6 @@ class Highlight:
     views: tuple[str, ...] = ("perspective", "front")
 
 
-def penetration_failures(metrics: list) -> list[tuple[str, str, str, str, float, bool]]:
-    """(engine, kind, link a, link b, depth mm, parent-child) of every failing penetration measure, its deepest pair:
-    ``self-contact`` (two links that are not parent and child, the self-contact Phi) and ``parent-child`` (a child
-    deeper inside its parent than as modelled), graded by the readiness rule."""
-    out = []
-    for m in metrics:
-        if m.name not in PENETRATION_METRICS or metric_verdict(m) is not False:
-            continue
-        d = m.details or {}
-        if m.name == "penetration":
-            pairs = sorted(d.get("pairs") or [], key=lambda p: -float(p.get("max_depth_mm") or 0.0))
-            if pairs:
-                out.append((m.engine, "self-contact", pairs[0]["link_a"], pairs[0]["link_b"], float(pairs[0]["max_depth_mm"]), False))
-            continue
-        pairs = d.get("pairs") or {}
-        modelled = d.get("modelled") or {}
-        if pairs:
-            worst = max(pairs, key=lambda k: pairs[k] - modelled.get(k, 0.0))
-            parent, _, child = worst.partition("/")
-            out.append((m.engine, "parent-child", parent, child, float(pairs[worst]), True))
-    return out
-
-
 def operability_failures(metrics: list) -> list[tuple[str, dict, dict]]:
     """(engine, part summary, stroke) of every failing operability stroke (``operability`` details: the part and
     the stroke as :func:`~asset2sim.tasks.check.operability.operability_metric` records them)."""
@@ -262,7 +239,10 @@ def evidence_section(runs: dict, urdf: Path | str, dt: float, svg: Callable[[byt
     ``metrics``: the evaluation's metrics (the penetration and operability measures)."""
     others = dict(initial_state or {})
     items: list[tuple[str, Callable[[], list[Pose]], Highlight | None]] = []  # (the HTML before the frames, poses, colours)
-    for engine, kind, a, b, depth, nested in penetration_failures(metrics or []):
+    for f in penetration_failures(metrics or []):
+        if f.link_a is None:  # a measure that names no pair: nothing to draw
+            continue
+        engine, kind, a, b, depth, nested = f.metric.engine, f.kind, f.link_a, f.link_b, f.depth_mm, f.kind == "parent-child"
         what = (f"'{b}' inside its parent '{a}'" if nested else f"'{a}' and '{b}'")
         poses: list[Pose] = [("at the initial state", others, np.eye(3))]
         if nested:
