@@ -220,3 +220,17 @@ def test_a_part_that_swings_as_its_object_topples_is_not_blamed_on_momentum(tmp_
     topples = [ln for ln in lines if re.search(r"the object toppled \(\d\.\d+ rad\) when it landed after the 5 deg tilt", ln)]
     assert topples and (not swings or lines.index(topples[0]) > lines.index(swings[-1])), lines
     assert not any("momentum" in ln for ln in swings + topples)
+
+
+def test_the_sentence_and_the_frames_name_the_same_parent_child_pair():
+    """Two children inside their parent: 'drawer' 9 mm deep but modelled 8 mm deep (1 mm beyond), 'door' 7 mm deep
+    and modelled clear (7 mm beyond, what fails the rule): the sentence and the report's frames both name the door."""
+    from asset2sim.tasks.check.failure_reasons import penetration_failures, penetration_why
+
+    m = MetricResult(name="parent_child_penetration", value=7.0, unit="mm", passed=False,
+                     details={"pairs": {"body/drawer": 9.0, "body/door": 7.0}, "modelled": {"body/drawer": 8.0},
+                              "beyond_modelled_mm": 7.0})
+    (f,) = penetration_failures([m])
+    assert (f.kind, f.link_a, f.link_b, f.depth_mm) == ("parent-child", "body", "door", 7.0)
+    (sentence,) = penetration_why([m])
+    assert "link 'door' is 7.0 mm inside its parent 'body'" in sentence
