@@ -202,7 +202,12 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
     among each piece's ``neighbours`` nearest pieces (by centre). A merge that
     would newly contain any of ``others`` (k, 3) m (other links' vertices in
     this link's frame) costs more than any merge that does not; with
-    ``free_only`` such merges are never made (merging stops before one)."""
+    ``free_only`` such merges are never made (merging stops before one).
+
+    Which merges hold one of ``others`` is measured lazily: a pair enters the queue at its volume cost, a lower
+    bound of its cost, and is measured when it comes first (re-queued with the penalty when it holds a point), so a
+    pair a merge retires before it comes first is never measured. The merges made are the same as when every pair
+    is measured on entry (the queue's order over the measured costs is the same)."""
     pieces = list(pieces)
     if len(pieces) <= limit:
         return pieces
@@ -213,22 +218,24 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
     nxt = len(pieces)
     penalty = 1.0 + sum(p.volume for p in pieces) * 1e6
 
-    def cost(a: Piece, b: Piece) -> tuple[float, Piece | None]:
+    def cost(a: Piece, b: Piece) -> tuple[float, Piece | None]:  # the volume cost: a lower bound of the cost
         try:  # on support points (an inner approximation of each hull): Qhull's time grows with the points
             m = Piece.of(np.vstack([a.support, b.support]))
         except (QhullError, ValueError):
             return float("inf"), None
-        c = m.volume - a.volume - b.volume
-        if len(others):
-            lo, hi = m.points.min(axis=0), m.points.max(axis=0)
-            band = others[np.searchsorted(xs, lo[0], "left"):np.searchsorted(xs, hi[0], "right")]
-            near = band[np.all((band[:, 1:] >= lo[1:]) & (band[:, 1:] <= hi[1:]), axis=1)]
-            size = float(np.ptp(m.points, axis=0).max())
-            if len(near):
-                inside_m = np.max(near @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < -_INSIDE_EPS * size
-                if inside_m.any() and _newly_inside(near, inside_m, (a, b), -_INSIDE_EPS * size):
-                    c += penalty
-        return c, m
+        return m.volume - a.volume - b.volume, m
+
+    def holds_other(m: Piece, a: Piece, b: Piece) -> bool:  # whether merging a and b into m newly holds one of others
+        if not len(others):
+            return False
+        lo, hi = m.points.min(axis=0), m.points.max(axis=0)
+        band = others[np.searchsorted(xs, lo[0], "left"):np.searchsorted(xs, hi[0], "right")]
+        near = band[np.all((band[:, 1:] >= lo[1:]) & (band[:, 1:] <= hi[1:]), axis=1)]
+        if not len(near):
+            return False
+        size = float(np.ptp(m.points, axis=0).max())
+        inside_m = np.max(near @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < -_INSIDE_EPS * size
+        return bool(inside_m.any() and _newly_inside(near, inside_m, (a, b), -_INSIDE_EPS * size))
 
     centres: dict[int, np.ndarray] = {}
 
@@ -238,7 +245,7 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
             c = centres[i] = alive[i].points.mean(axis=0)
         return c
 
-    heap: list[tuple[float, int, int]] = []
+    heap: list[tuple[float, int, int, bool]] = []  # (cost, i, j, measured against others)
     merged: dict[tuple[int, int], Piece] = {}
 
     def push_for(i: int) -> None:
@@ -255,13 +262,16 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
             c, m = cost(alive[key[0]], alive[key[1]])
             if m is not None:
                 merged[key] = m
-                heapq.heappush(heap, (c, key[0], key[1]))
+                heapq.heappush(heap, (c, key[0], key[1], False))
 
     for i in list(alive):
         push_for(i)
     while len(alive) > limit and heap:
-        c, i, j = heapq.heappop(heap)
+        c, i, j, measured = heapq.heappop(heap)
         if i not in alive or j not in alive:
+            continue
+        if not measured and holds_other(merged[(i, j)], alive[i], alive[j]):
+            heapq.heappush(heap, (c + penalty, i, j, True))
             continue
         if free_only and c >= penalty:
             break
