@@ -17,9 +17,10 @@ from asset2sim.flows import server
 
 def dask_task_runner(workers: int | None, address: str | None, *, host: str = "127.0.0.1",
                       dashboard: bool = True):
-    """A DaskTaskRunner: the scheduler at ``address``, else a local cluster of ``workers`` single-threaded
-    processes listening on ``host`` (dashboard on a free port when ``dashboard``)."""
-    from prefect_dask import DaskTaskRunner
+    """A DaskTaskRunner (:class:`~asset2sim.flows.dask_runner.FlowDaskTaskRunner`, submissions keyed without
+    hashing): the scheduler at ``address``, else a local cluster of ``workers`` single-threaded processes listening
+    on ``host`` (dashboard on a free port when ``dashboard``)."""
+    from asset2sim.flows.dask_runner import FlowDaskTaskRunner as DaskTaskRunner
 
     if address:
         return DaskTaskRunner(address=address)

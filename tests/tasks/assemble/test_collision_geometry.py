@@ -164,6 +164,84 @@ def test_merge_does_not_swallow_another_link():
     assert cp.depth_inside(other, unguarded[0]) > 0.004  # the test can fail: one hull holds the point
 
 
+def _merge_measuring_every_pair(pieces, limit, others, free_only, neighbours=8):
+    """merge_pieces as it was, each pair's hold on ``others`` measured as it enters the queue: the reference
+    the lazy measurement must reproduce merge for merge."""
+    import heapq
+
+    from scipy.spatial import QhullError
+    pieces = list(pieces)
+    if len(pieces) <= limit:
+        return pieces
+    others = others[np.argsort(others[:, 0], kind="stable")]
+    xs = others[:, 0]
+    alive = dict(enumerate(pieces))
+    nxt, penalty = len(pieces), 1.0 + sum(p.volume for p in pieces) * 1e6
+
+    def cost(a, b):
+        try:
+            m = cp.Piece.of(np.vstack([a.support, b.support]))
+        except (QhullError, ValueError):
+            return float("inf"), None
+        c = m.volume - a.volume - b.volume
+        lo, hi = m.points.min(axis=0), m.points.max(axis=0)
+        band = others[np.searchsorted(xs, lo[0], "left"):np.searchsorted(xs, hi[0], "right")]
+        near = band[np.all((band[:, 1:] >= lo[1:]) & (band[:, 1:] <= hi[1:]), axis=1)]
+        size = float(np.ptp(m.points, axis=0).max())
+        if len(near):
+            inside = np.max(near @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < -cp._INSIDE_EPS * size
+            if inside.any() and cp._newly_inside(near, inside, (a, b), -cp._INSIDE_EPS * size):
+                c += penalty
+        return c, m
+
+    heap, merged = [], {}
+
+    def push_for(i):
+        ids = [j for j in alive if j != i]
+        if not ids:
+            return
+        cs = np.array([alive[j].points.mean(axis=0) for j in ids])
+        for o in np.argsort(np.linalg.norm(cs - alive[i].points.mean(axis=0), axis=1))[:neighbours]:
+            j = ids[int(o)]
+            key = (min(i, j), max(i, j))
+            if key not in merged:
+                c, m = cost(alive[key[0]], alive[key[1]])
+                if m is not None:
+                    merged[key] = m
+                    heapq.heappush(heap, (c, *key))
+
+    for i in list(alive):
+        push_for(i)
+    while len(alive) > limit and heap:
+        c, i, j = heapq.heappop(heap)
+        if i not in alive or j not in alive:
+            continue
+        if free_only and c >= penalty:
+            break
+        merged.pop((i, j))
+        a, b = alive.pop(i), alive.pop(j)
+        alive[nxt] = cp.Piece.of(np.vstack([a.points, b.points]), a.sources + tuple(s for s in b.sources if s not in a.sources))
+        push_for(nxt)
+        nxt += 1
+    return list(alive.values())
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_merge_measures_lazily_the_same_merges(seed):
+    """Blocks scattered with another link's points among them: merge_pieces, measuring a pair's hold on those
+    points only when the pair comes first, makes the same pieces, bit for bit, as measuring every pair on entry."""
+    rng = np.random.default_rng(seed)
+    lo = rng.uniform(0.0, 0.1, (24, 3))
+    blocks = [cp.Piece.of(_box(a, a + rng.uniform(0.005, 0.02, 3))[0]) for a in lo]
+    others = rng.uniform(0.0, 0.12, (40, 3))
+    for free_only, limit in ((True, 1), (True, 6), (False, 3)):
+        got = cp.merge_pieces(blocks, limit, others, free_only=free_only)
+        want = _merge_measuring_every_pair(blocks, limit, others, free_only)
+        assert len(got) == len(want) and len(got) >= limit
+        assert all(np.array_equal(g.points, w.points) for g, w in zip(got, want))
+    assert len(cp.merge_pieces(blocks, 1, others, free_only=True)) > 1  # the guard acts: the test can fail
+
+
 def test_written_collisions_are_few_closed_convex_pieces_mujoco_loads(tmp_path):
     """A body of 40 small blocks plus a flat plate, a lid of one block: the
     output has at most MAX_PIECES_PER_LINK closed, outward, non-flat pieces
