@@ -179,22 +179,24 @@ def refine(asset: str | Path, prompt: str = "", out_dir: str | Path = "out", *,
 
 
 def evaluate(asset: str | Path, *, prompt: str | None = None, task: str | None = None,
-             reference: str | Path | None = None, engines: tuple[str, ...] | list[str] = ("pybullet",),
+             reference: str | Path | None = None, engines: tuple[str, ...] | list[str] | None = None,
              category: str | None = None, probes: bool = True, write_to: str | Path | None = None,
              clips: bool = True) -> Evaluation:
-    """Evaluate any articulated URDF asset (a refine output or not) with every
-    metric: rest stability, penetration (mm), oscillation, the probes and,
-    when given, prompt alignment and the task. Nothing is written unless
-    ``write_to`` names a folder.
+    """Evaluate any articulated URDF asset (a refine output or not) with the checks a refine runs: rest stability,
+    penetration (mm), oscillation, state hold, the joint sweep, operability, robust rest, the task and the request as
+    asked (the verdict: ``failure_mode``), the semantic measures and the probes (reported, never deciding). A refine's
+    output folder is checked with the closed ends, request and task its ``report.json`` records, so its verdict is
+    the refine's. Nothing is written unless ``write_to`` names a folder.
 
     Args:
         asset: a folder holding one URDF (``initial_state.json``,
-            ``overlay.json`` beside it are used) or a URDF file.
-        prompt: the request to score prompt alignment against (None: skipped).
-        task: the manipulation task the probes try.
+            ``overlay.json``, ``report.json`` beside it are used) or a URDF file.
+        prompt: the request graded as asked (None: the one ``report.json`` records, else none).
+        task: the manipulation task the task tier performs and the probes try (None: ``report.json``'s, else none).
         reference: a PartNet-Mobility folder with ``reference_gensim2.json``.
-        engines: simulators to measure in (``pybullet``, ``physx``, ``mujoco``);
-            unavailable ones are recorded as skipped.
+        engines: simulators to measure in (``pybullet``, ``physx``, ``mujoco``), the manipulation tiers in each;
+            unavailable ones are recorded as skipped. None: as refine checks (the tiers in PyBullet, the rest
+            metrics in the engines a refined folder's ``report.json`` names).
         category: overrides the category found beside the asset.
         probes: run the passive probes.
         write_to: folder for ``evaluation.json`` and ``report.html``.
@@ -203,13 +205,13 @@ def evaluate(asset: str | Path, *, prompt: str | None = None, task: str | None =
 
     Returns:
         :class:`~asset2sim.schemas.evaluation.Evaluation` (pydantic;
-        ``passed``, ``metrics``, ``model_dump_json()``).
+        ``failure_mode``, ``passed``, ``metrics``, ``model_dump_json()``).
 
     Raises:
         EvaluationError: the asset cannot be evaluated (no URDF, unreadable).
         OutputError: ``write_to`` cannot be written.
     """
-    return evaluate_asset(asset, reference=reference, prompt=prompt, engines=tuple(engines), category=category,
+    return evaluate_asset(asset, reference=reference, prompt=prompt, engines=None if engines is None else tuple(engines), category=category,
                           out_dir=write_to, write_report=write_to is not None, probes=probes, task=task, clips=clips)
 
 

@@ -141,14 +141,13 @@ class RefineOutput(BaseModel):
 
 
 class Measurement(BaseModel):
-    """The metrics stage's value: the catalog's metric columns, the failed metrics (``name@engine``), wall
-    time (s) and whether the post-check's rest test or the refine's ``evaluation.json`` was reused."""
+    """The metrics stage's value: the catalog's metric columns, the failing checks of the verdict (``name@engine``),
+    wall time (s) and whether the refine's ``evaluation.json`` was reused (nothing simulated)."""
 
     model_config = ConfigDict(extra="forbid")
     columns: dict[str, Any] = Field(default_factory=dict)
     failures: list[str] = Field(default_factory=list)
     seconds: float = 0.0
-    reused_post_check: bool = False
     reused_evaluation: bool = False
 
 
@@ -213,11 +212,9 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
     refine_status = refined.status if refined is not None else None
     refine_mode = _add_refined(row, job, refined, stages, errors)
     measured_status = measured.status if measured is not None else None
-    cols, measured_failures = _add_measured(row, measured, stages)
-    verdict = asset_failure_mode(
-        input_failure=input_failure, refine_status=refine_status, refine_mode=refine_mode, measured_status=measured_status,
-        rest_stable=cols.get("rest_stable"), oscillation_pass=cols.get("oscillation_pass"),
-        chain_error_mode=(failure_mode or "crash") if error else None, measured_failures=measured_failures)
+    _add_measured(row, measured, stages)
+    verdict = asset_failure_mode(input_failure=input_failure, refine_status=refine_status, refine_mode=refine_mode,
+                                 measured_status=measured_status, chain_error_mode=(failure_mode or "crash") if error else None)
     errors += verdict.errors
     if measured is not None and measured.status in FAILED_STATUSES:
         stages["metrics"] = round(float(measured.seconds or 0.0), 4)
@@ -325,17 +322,15 @@ def extra_rounds(report: RefineReport) -> list[dict[str, Any]]:
             for prev, cur in zip(rounds, rounds[1:])]
 
 
-def _add_measured(row: CatalogRow, measured: StageRecord | None, stages: dict[str, float]) -> tuple[dict[str, Any], list[str] | None]:
-    """Add the metrics stage's columns and seconds; returns its columns and failed metrics ({}, None when it
-    did not run)."""
+def _add_measured(row: CatalogRow, measured: StageRecord | None, stages: dict[str, float]) -> None:
+    """Add the metrics stage's columns and seconds (nothing when it did not run)."""
     if measured is None or measured.status != "ok":
-        return {}, None
+        return
     m: Measurement = measured.value
     stages["metrics"] = round(float(measured.seconds or 0.0), 4)
     for col, v in m.columns.items():
         if v is not None:
             setattr(row, col, v)
-    return m.columns, list(m.failures)
 
 
 def manifest_row_id(error: ManifestRowError, taken: set[str]) -> str:

@@ -20,9 +20,9 @@ from asset2sim.flows import store as store_mod
 from asset2sim.flows.forkserver import run_forked, start_soon
 from asset2sim.flows.isolation import call_target, import_target, run_isolated
 from asset2sim.schemas.asset import AssetDescription
-from asset2sim.schemas.config import RefineConfig, SimConventions
-from asset2sim.schemas.metrics import REST_TEST_METRICS, column_values
-from asset2sim.schemas.report import MetricResult, RefineReport
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.metrics import column_values
+from asset2sim.schemas.report import RefineReport
 from asset2sim.tasks.evaluation.clips import clip_videos
 from asset2sim.tasks.evaluation.evaluate import Evaluation, evaluate_asset
 from asset2sim.tasks.ingest.extract import extract_asset_checked
@@ -274,17 +274,6 @@ def stage_refine(
     return out.model_dump(mode="json")
 
 
-def reusable_rest_test(report: RefineReport, config: dict[str, Any], engine: str = "pybullet") -> list[MetricResult] | None:
-    """The post-check's rest-test metrics in ``engine`` (:data:`asset2sim.schemas.metrics.REST_TEST_METRICS`)
-    when the metrics stage may record them: SPEC conventions and every one in the report. None otherwise."""
-    if RefineConfig(**config).sim != SimConventions():
-        return None
-    found = {m.name: m for m in report.metrics if m.engine == engine and m.name in REST_TEST_METRICS}
-    if set(found) != set(REST_TEST_METRICS):
-        return None
-    return [found[n] for n in REST_TEST_METRICS]
-
-
 def refined_evaluation(out_dir: str | Path, prompt: str, category: str | None, reference_dir: str | None) -> Evaluation | None:
     """The :class:`~asset2sim.tasks.evaluation.evaluate.Evaluation` in ``out_dir`` (``evaluation.json``) when it is
     the one the metrics stage would make (PyBullet only, same prompt, category and reference); else None."""
@@ -308,7 +297,7 @@ def measurement_from_refine(out_dir: str, prompt: str, category: str | None, ref
         return None
     if metrics_dir:
         atomic.copy_file(Path(out_dir) / EVALUATION_NAME, Path(metrics_dir) / EVALUATION_NAME)
-    return _measurement(ev, time.perf_counter() - t0, reused_post_check=True, reused_evaluation=True)
+    return _measurement(ev, time.perf_counter() - t0, reused_evaluation=True)
 
 
 def _measurement(ev: Evaluation, seconds: float, **flags: bool) -> Measurement:
@@ -323,10 +312,10 @@ def stage_metrics(
     reference_dir: str | None = None,
     probes: bool = False,
     metrics_dir: str | None = None,
-    post_check: list[dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
-    """PyBullet stability metrics of a refined asset (``evaluation.json`` into ``metrics_dir`` when given), reusing
-    refine's matching evaluation; ``post_check``: rest-test metrics JSON recorded instead of rerunning the test.
+    """The catalog's measurement of a refined asset (``evaluation.json`` into ``metrics_dir`` when given): refine's own
+    evaluation when it wrote a matching one and no probes are asked (nothing simulated), else the folder evaluated with
+    the checks refine ran (:func:`~asset2sim.tasks.evaluation.evaluate.evaluate_asset`, PyBullet; with ``probes``).
 
     Returns:
         A :class:`~asset2sim.flows.job_records.Measurement` as JSON: the catalog's metric columns
@@ -336,10 +325,9 @@ def stage_metrics(
     Raises:
         EvaluationError: the output cannot be read.
     """
-    reused = measurement_from_refine(out_dir, prompt, category, reference_dir, metrics_dir)
+    reused = None if probes else measurement_from_refine(out_dir, prompt, category, reference_dir, metrics_dir)
     if reused is not None:
         return reused.model_dump(mode="json")
-    measured = None if post_check is None else [MetricResult.model_validate(m) for m in post_check]
     with array_cache.guard(out_dir, reference_dir, metrics_dir):  # no cache entry in the refined folder or the reference
         ev = evaluate_asset(
             Path(out_dir),
@@ -350,9 +338,8 @@ def stage_metrics(
             out_dir=Path(metrics_dir) if metrics_dir else None,
             write_report=False,
             probes=probes,
-            measured=measured,
         )
-    return _measurement(ev, float(ev.seconds), reused_post_check=measured is not None).model_dump(mode="json")
+    return _measurement(ev, float(ev.seconds)).model_dump(mode="json")
 
 
 def _run_stage(job: AssetJob, name: str, target: str, kwargs: dict[str, Any], timeout: float) -> StageRecord:
@@ -425,11 +412,11 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
         if ev is not None:
             earlier = _measurement(ev, float(ev.seconds))
             return StageRecord(status="ok", value=earlier, seconds=earlier.seconds)
-    reused = measurement_from_refine(value.out_dir or job.out_dir, job.prompt, category, job.reference_dir, metrics_dir)
+    reused = None if job.probes else measurement_from_refine(value.out_dir or job.out_dir, job.prompt, category, job.reference_dir,
+                                                             metrics_dir)
     if reused is not None:  # nothing to simulate: no child process needed
         return StageRecord(status="ok", value=reused, seconds=reused.seconds)
     budget = job.time_limit_seconds - float(prepared.seconds or 0.0) - float(refined.seconds or 0.0)
-    post = reusable_rest_test(value.report, job.config)
     rec = _run_stage(
         job,
         "metrics",
@@ -441,7 +428,6 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
             "reference_dir": job.reference_dir,
             "probes": job.probes,
             "metrics_dir": metrics_dir,
-            "post_check": None if post is None else [m.model_dump(mode="json") for m in post],
         },
         budget,
     )

@@ -14,9 +14,11 @@ EVALUATION_VERSION = "1"
 
 class Evaluation(BaseModel):
     """Contents of ``evaluation.json``: ``metrics`` (one per engine for the
-    simulator metrics), ``passed`` (every verdict passed), ``failures``
-    (``name@engine``), ``initial_state`` rad/m, ``seconds`` wall time. Not
-    serialised: ``_runs`` (engine -> EngineRun) and ``_context``, for the report."""
+    simulator metrics; a refine's are its ``report.json``'s), ``failure_mode`` (the verdict: a refine's is its
+    ``report.json``'s, never decided again; else the readiness of ``metrics``), ``passed`` (ready), ``failures``
+    (the failing checks ``name@engine`` of the verdict's tiers), ``initial_state`` rad/m, ``seconds`` wall time. Not
+    serialised: ``_runs`` (engine -> the runs the checks were graded from) and ``_context`` (the evaluated files), for
+    the report."""
 
     model_config = ConfigDict(extra="forbid")
     version: str = EVALUATION_VERSION
@@ -36,6 +38,7 @@ class Evaluation(BaseModel):
     closed_positions: dict[str, dict[str, float]] = Field(default_factory=dict)
     metrics: list[MetricResult] = Field(default_factory=list)
     passed: bool = False
+    failure_mode: str | None = None
     failures: list[str] = Field(default_factory=list)
     notes: list[str] = Field(default_factory=list)
     seconds: float = 0.0

@@ -12,7 +12,7 @@ from asset2sim.schemas.request import RequestFindings
 #: Fixed vocabulary of per-asset failure modes (pipeline catalog, reports).
 FailureMode = Literal[
     "none", "invalid_input", "estimator_failure", "invalid_overlay", "unresolved_penetration", "unstable", "oscillating",
-    "joint_not_held", "blocked_joint", "not_operable", "not_robust_at_rest", "probe_failed", "task_failed", "implausible_force", "timeout",
+    "joint_not_held", "blocked_joint", "not_operable", "not_robust_at_rest", "task_failed", "implausible_force", "timeout",
     "crash", "invalid_manifest_row", "request_not_met",
 ]
 FAILURE_MODES: tuple[str, ...] = FailureMode.__args__  # type: ignore[attr-defined]
@@ -96,6 +96,10 @@ class RefineReport(BaseModel):
     initial_joint_positions: dict[str, float]
     closed_positions: dict[str, float] = Field(default_factory=dict)
     """Geometric closed end of each movable joint (rad/m, output units)."""
+    closed_ends: dict[str, dict[str, float | None]] = Field(default_factory=dict)
+    """The closed end each check used, per movable joint, decided once: ``q_closed`` (rad/m, output units),
+    ``direction`` (+1 when opening increases q), ``open_range`` (rad/m), ``lower`` / ``upper`` (None: unbounded); an output read back
+    (``asset2sim evaluate``) is checked with these."""
     requested_bands: dict[str, str] = Field(default_factory=dict)
     opening_fractions: dict[str, float] = Field(default_factory=dict)
     """|q - q_closed| / largest opening the range allows from q_closed, per joint,

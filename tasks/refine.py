@@ -24,6 +24,7 @@ from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import overrides, request
 from asset2sim.tasks.synthesize import request_apply, request_findings
+from asset2sim.tasks.check import as_asked
 from asset2sim.tasks.assemble import (write)
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.publish import extra_outputs, output, refine_report
@@ -139,15 +140,18 @@ def refine_asset(
                 ctx, pose_note = _interpret(replace(ctx, task=task), kin, log)
                 att, pose_note = _synthesize_and_check(ctx, RefineRun(est, kin, config, ws, log), pose_note)
                 ctx = replace(ctx, root_rotation=att.root_rotation)  # the resting pose the kept attempt was made on
-                resolution = request_apply.resolve_states(ctx, kin, att.overlay.scale)  # what each phrase set (the as-asked tier)
+                asked = as_asked.as_asked_tier(ctx, kin, att.overlay, att.state, att.closed_out, att.check.metrics + [
+                    m for res in att.check.engine_results.values() for m in res], targets=att.targets, rounds=att.rounds)
                 output.publish(att.candidate, ws, work)  # the output folder's files, written once
             log.say("post_check", refine_report.post_check_line(att))
-            report = refine_report.build_report(ctx, prompt, chash, att, findings, pose_note, log.times, resolution)
-            host = extra_outputs.host_files(work, asset, config, report)
+            report = refine_report.build_report(ctx, prompt, chash, att, findings, pose_note, log.times, asked)
+            extra_paths = extra_outputs.host_files(work, asset, config, report)
             report.media = "off"
-            write_report_json(work, report)
-            extra_paths = extra_outputs.write_extras(work, report, att, log, reference, shown=out_dir, clips=config.clips, media=media) if extras else {}
-            extra_paths.update(host)
+            if extras:
+                extra_paths.update(extra_outputs.write_extras(work, report, att, ctx, asked.resolution, log, reference, shown=out_dir,
+                                                              clips=config.clips, media=media))
+            report.stage_seconds = log.times
+            write_report_json(work, report)  # once, every measurement and note in it
             write_completion_marker(owner.root, asset.input_hash, chash, owner=owner)  # last, once every file exists
         except StepBudgetExceeded as exc:
             owner.abandon()

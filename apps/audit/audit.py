@@ -187,7 +187,8 @@ def _simulate(ctx, judged: Judgement, config: RefineConfig, initial: dict[str, f
             start = {**_rest_state(ctx, overlay, state), **initial}
             try:
                 urdf = _physics_urdf(ctx.asset, overlay, Path(tmp) / f"{kind}.urdf")
-                check = postcheck.run_post_check(UrdfFile(urdf), start, overlay, config, closed=closed)
+                check = postcheck.run_post_check(postcheck.overlay_object(UrdfFile(urdf), start, overlay, config.sim), config,
+                                                 closed=closed)
             except Exception as exc:  # a simulator that cannot load or step these values: said, not raised
                 out.append(SimulationChecks(physics=kind, passed=False, error=f"{type(exc).__name__}: {exc}"))
                 continue

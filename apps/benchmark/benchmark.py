@@ -33,7 +33,7 @@ RESEARCH_NUMBERS: list[dict[str, str]] = [
 ]
 
 #: Metrics flattened into one benchmark record (their names are the column prefixes).
-RECORD_METRICS = ("penetration", "ground_penetration", "rest_stability", "oscillation", "divergence", "joint_hold",
+RECORD_METRICS = ("penetration", "ground_penetration", "rest_stability", "oscillation", "divergence", "state_hold",
                   "scale_deviation", "initial_joint_deviation", "total_mass", "prompt_alignment", "probes",
                   "joint_sweep", "robust_rest", "task_execution", "operating_force")
 
@@ -149,7 +149,7 @@ def run_benchmark(manifest: Path | str, methods: list[str], out_dir: Path | str,
                 # ev.seconds is measured before evaluation.json / report.html are written
                 ev = evaluate_asset(folder / "asset", reference=row.folder, prompt=row.prompt, engines=engines,
                                     seed=seed, category=row.category or None, method=method,
-                                    out_dir=folder, write_report=reports, task=row.task or None)
+                                    out_dir=folder, write_report=reports, task=row.task or None, probes=True)
             except Exception as exc:
                 rec = dict(base, error=f"evaluation failed: {type(exc).__name__}: {exc}")
                 records.append(rec)

@@ -21,8 +21,12 @@ from asset2sim.tasks.check.probes import (
 )
 from asset2sim.tasks.check.task_spec import parse_task
 from asset2sim.tasks.check.task_tier import hold_required_by_label
-from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, compute_closed
-from asset2sim.tasks.evaluation.eval_context import Context, build_context, task_joints
+from asset2sim.refined_asset import RefinedAsset
+from asset2sim.tasks.evaluation.evaluate import EvaluationError, closed_ends, sim_object, task_joints
+from asset2sim.tasks.geometry.closed_state import ClosedState
+from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest.errors import AssetError
+from asset2sim.tasks.ingest.extract import extract_asset
 
 #: Common start of the task joint per action, opening fraction (``start="task"``).
 START_FRACTION: dict[str, float] = {"close": 0.5, "open": 0.0}
@@ -45,7 +49,7 @@ class LearnTask:
     joint: str
     joint_type: str
     action: str  # "close" or "open"
-    closed: ClosedEnd
+    closed: ClosedState
     target_fraction: float
     reach_fraction: float  # f <= this (close) or f >= this (open) counts as reached
     hold_required: bool  # the target must still hold after release (not for a joint sprung by design)
@@ -98,46 +102,53 @@ def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None =
     range > 0 to act on) or EvaluationError (unreadable asset)."""
     if start not in ("task", "asset"):
         raise ValueError(f"start must be 'task' or 'asset', got {start!r}")
-    ctx = build_context(asset, reference=reference, prompt=None, category=category, conventions=conventions)
-    ctx.task_joints, tj_rule = task_joints(ctx.joints, ctx.reference_dir, [], ctx.category, ctx.semantics)
-    spec = parse_task(task, ctx.joints, ctx.semantics, ctx.category, ctx.task_joints)
+    try:
+        urdf = partnet_mobility.find_urdf(asset).resolve()
+        desc = extract_asset(asset, category=category)
+    except AssetError as exc:
+        raise EvaluationError(str(exc)) from exc
+    files = RefinedAsset(urdf.parent, urdf.name)
+    obj, _ = sim_object(files, conventions)
+    cat = category or desc.category or "Generic"
+    chosen, tj_rule = task_joints(desc, cat, Path(reference) if reference is not None else None)
+    spec = parse_task(task, desc, cat, chosen)
     if not spec.joints:
-        raise LearnTaskError(f"{ctx.urdf}: task {task!r} names no movable joint ({spec.rule})")
+        raise LearnTaskError(f"{urdf}: task {task!r} names no movable joint ({spec.rule})")
     # Where the reference names the task's joint (GenSim2 keeps only it movable), every method acts on it.
-    candidates = [j for j in spec.joints if j in ctx.task_joints] or list(spec.joints)
+    candidates = [j for j in spec.joints if j in chosen] or list(spec.joints)
     with quiet_stdout():
-        closed, cnotes = compute_closed(ctx.urdf, ctx.joints, candidates)
-    best = _farthest(ctx, closed, candidates, spec.actions, start)
+        closed, how = closed_ends(files, candidates)
+    types = {j.name: j.type for j in desc.joints}
+    best = _farthest(dict(obj.state), types, closed, candidates, spec.actions, start)
     if best is None:
-        raise LearnTaskError(f"{ctx.urdf}: task {task!r}: none of {candidates} can open (range 0)")
+        raise LearnTaskError(f"{urdf}: task {task!r}: none of {candidates} can open (range 0)")
     _, joint, action, f0 = best
     target, reach = targets_for(action, f0)
-    notes = list(spec.notes) + cnotes + [f"task-relevant joints: {tj_rule}"]
-    label = (ctx.semantics.get(ctx.joints[joint].child) or (None, None))[1]
-    hold = hold_required_by_label({joint: label}, ctx.springs, ctx.category, free_moving=False,
-                                  spring_requested=False)[joint]
+    notes = list(spec.notes) + [f"closed ends: {how}", f"task-relevant joints: {tj_rule}"]
+    label = desc.link(desc.joint(joint).child).semantic_label
+    hold = hold_required_by_label({joint: label}, dict(obj.springs), cat, free_moving=False, spring_requested=False)[joint]
     if not hold:
-        notes.append(f"{joint} returns by its spring by design ({ctx.category} {label}): the target need not hold after release")
+        notes.append(f"{joint} returns by its spring by design ({cat} {label}): the target need not hold after release")
     return LearnTask(
-        urdf=ctx.urdf, task=task, joint=joint, joint_type=ctx.joints[joint].type, action=action, closed=closed[joint],
-        target_fraction=target, reach_fraction=reach, hold_required=hold, initial_state=dict(ctx.initial_state),
-        springs=dict(ctx.springs), root_fixed=ctx.root_fixed, conventions=ctx.conventions,
+        urdf=urdf, task=task, joint=joint, joint_type=types[joint], action=action, closed=closed[joint],
+        target_fraction=target, reach_fraction=reach, hold_required=hold, initial_state=dict(obj.state),
+        springs=dict(obj.springs), root_fixed=obj.fixed_base, conventions=obj.conventions,
         start_fraction=f0, start=start, candidates=candidates, rule=spec.rule, notes=notes,
     )
 
 
-def _farthest(ctx: Context, closed: dict[str, ClosedEnd], candidates: list[str], actions: tuple[str, ...] | list[str],
-              start: str) -> tuple[float, str, str, float] | None:
+def _farthest(state: dict[str, float], types: dict[str, str], closed: dict[str, ClosedState], candidates: list[str],
+              actions: tuple[str, ...] | list[str], start: str) -> tuple[float, str, str, float] | None:
     """(gap, joint, action, start fraction) of the pair whose target is farthest from its start (first on a tie);
-    None when no candidate has an opening range > 0."""
+    None when no candidate has an opening range > 0. ``state``: the asset's initial state (rad or m); ``types``:
+    joint -> type."""
     best: tuple[float, str, str, float] | None = None
     for j in candidates:
         c = closed[j]
         if not c.open_range > 0:
             continue
         for action in actions:
-            f0 = c.fraction(ctx.initial_state.get(j, 0.0)) if start == "asset" else \
-                common_start(action, ctx.joints[j].type, c.open_range)
+            f0 = c.fraction(state.get(j, 0.0)) if start == "asset" else common_start(action, types[j], c.open_range)
             target, _ = targets_for(action, f0)
             gap = abs(target - f0)
             if best is None or gap > best[0]:

@@ -26,7 +26,7 @@ from asset2sim.atomic import write_bytes
 from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
-from asset2sim.tasks.evaluation.closed_ends import ClosedEnd
+from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.engines.base import session_root_options
 from asset2sim.apps.realism.motion import PhysicsSide
 from asset2sim.urdf import UrdfDynamics, UrdfModel, read_urdf, resolve_mesh_path, scale_model, write_urdf
@@ -59,7 +59,7 @@ def _joint(model: UrdfModel, name: str):
     raise KeyError(f"{model.path}: no joint named {name!r}")
 
 
-def _mass_x100(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedEnd, force: float) -> PhysicsSide:
+def _mass_x100(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedState, force: float) -> PhysicsSide:
     for link in model.links.values():
         ine = link.inertial
         if ine is not None and ine.mass is not None:
@@ -69,18 +69,18 @@ def _mass_x100(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedEn
     return side
 
 
-def _zero_damping(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedEnd, force: float) -> PhysicsSide:
+def _zero_damping(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedState, force: float) -> PhysicsSide:
     _joint(model, joint).dynamics = UrdfDynamics(damping=0.0, friction=0.0)
     return side
 
 
-def _stuck_friction(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedEnd, force: float) -> PhysicsSide:
+def _stuck_friction(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedState, force: float) -> PhysicsSide:
     j = _joint(model, joint)
     j.dynamics = UrdfDynamics(damping=(j.dynamics.damping if j.dynamics else None), friction=STUCK_FRICTION_FACTOR * force)
     return side
 
 
-def _penetration(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedEnd, force: float) -> PhysicsSide:
+def _penetration(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedState, force: float) -> PhysicsSide:
     """Move the joint's origin (in the parent frame) 10 mm from the child's box center toward the parent's."""
     j = _joint(model, joint)
     with quiet_stdout():
@@ -100,21 +100,21 @@ def _penetration(model: UrdfModel, side: PhysicsSide, joint: str, closed: Closed
     return side
 
 
-def _scale_x3(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedEnd, force: float) -> PhysicsSide:
+def _scale_x3(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedState, force: float) -> PhysicsSide:
     scale_model(model, SCALE_FACTOR)
     prismatic = {j.name for j in model.joints if j.type == "prismatic"}
     state = {k: v * SCALE_FACTOR if k in prismatic else v for k, v in side.initial_state.items()}
     return replace(side, scale=side.scale * SCALE_FACTOR, initial_state=state)
 
 
-def _slamming_spring(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedEnd, force: float) -> PhysicsSide:
+def _slamming_spring(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedState, force: float) -> PhysicsSide:
     _joint(model, joint).dynamics = UrdfDynamics(damping=0.0, friction=0.0)
     k = SLAM_SHARE * force / closed.open_range
     return replace(side, springs={**side.springs, joint: Spring(stiffness=float(k), reference=float(closed.q_closed))})
 
 
 #: Defect name -> what it does to the model (in place) and the side (returned).
-DEFECTS: dict[str, Callable[[UrdfModel, PhysicsSide, str, ClosedEnd, float], PhysicsSide]] = {
+DEFECTS: dict[str, Callable[[UrdfModel, PhysicsSide, str, ClosedState, float], PhysicsSide]] = {
     "mass_x100": _mass_x100,
     "zero_damping": _zero_damping,
     "stuck_friction": _stuck_friction,
@@ -124,7 +124,7 @@ DEFECTS: dict[str, Callable[[UrdfModel, PhysicsSide, str, ClosedEnd, float], Phy
 }
 
 
-def plant_defect(side: PhysicsSide, defect: str, joint: str, closed: ClosedEnd, force_limit: float, folder: Path | str) -> PhysicsSide:
+def plant_defect(side: PhysicsSide, defect: str, joint: str, closed: ClosedState, force_limit: float, folder: Path | str) -> PhysicsSide:
     """A broken copy of ``side`` with ``defect`` (a key of :data:`DEFECTS`) on ``joint`` (``closed``: its closed end,
     rad or m; ``force_limit``: the pair's drive limit, N*m or N), its URDF written to ``folder/mobility.urdf`` with
     absolute mesh paths; ``side``'s files are not touched. The returned side's method is ``defect:<name>``.

@@ -27,8 +27,12 @@ from asset2sim.schemas.config import SimConventions
 from asset2sim.tasks.check.stroke import run_stroke
 from asset2sim.tasks.check.sweep import SweepConfig, effort_limit, joint_subtrees
 from asset2sim.tasks.evaluation.clips import Trajectory
-from asset2sim.tasks.evaluation.closed_ends import ClosedEnd
-from asset2sim.tasks.evaluation.eval_context import build_context
+from asset2sim.engines.source import SimObject
+from asset2sim.refined_asset import RefinedAsset
+from asset2sim.tasks.evaluation.evaluate import EvaluationError, sim_object
+from asset2sim.tasks.geometry.closed_state import ClosedState
+from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.engines.base import session_root_options
 from asset2sim.urdf import model_of
 
@@ -62,22 +66,26 @@ class PhysicsSide:
     scale: float = 1.0
 
 
-def side_of(ctx, method: str) -> PhysicsSide:
-    """The :class:`PhysicsSide` of an evaluation context (:class:`asset2sim.tasks.evaluation.eval_context.Context`):
+def side_of(obj: SimObject, method: str) -> PhysicsSide:
+    """The :class:`PhysicsSide` of an object as the checks simulate it (:func:`asset2sim.tasks.evaluation.evaluate.sim_object`):
     its URDF, initial state, springs and declared root."""
-    return PhysicsSide(method=method, urdf=Path(ctx.urdf), initial_state=dict(ctx.initial_state), springs=dict(ctx.springs),
-                       root_fixed=bool(ctx.root_fixed))
+    return PhysicsSide(method=method, urdf=Path(obj.source.path), initial_state=dict(obj.state), springs=dict(obj.springs),
+                       root_fixed=bool(obj.fixed_base))
 
 
 def side_from_folder(folder: Path | str, method: str) -> PhysicsSide:
     """The :class:`PhysicsSide` of an asset folder (a refine output, a benchmark method's ``asset/``): its
     URDF, ``initial_state.json``, the springs of ``overlay.json`` and the declared root, read as the
-    evaluation reads them (:func:`asset2sim.tasks.evaluation.eval_context.build_context`).
+    checks read them (:func:`asset2sim.tasks.evaluation.evaluate.sim_object`).
 
     Raises:
         EvaluationError: the folder has no readable URDF or sidecar.
     """
-    return side_of(build_context(folder), method)
+    try:
+        urdf = partnet_mobility.find_urdf(folder).resolve()
+    except AssetError as exc:
+        raise EvaluationError(str(exc)) from exc
+    return side_of(sim_object(RefinedAsset(urdf.parent, urdf.name))[0], method)
 
 
 def _session(side: PhysicsSide, joint: str, conventions: SimConventions | None):
@@ -108,7 +116,7 @@ def drive_limit(side: PhysicsSide, joint: str, open_range: float, conventions: S
         session.close()
 
 
-def push_release(side: PhysicsSide, joint: str, closed: ClosedEnd, force_limit: float, *,
+def push_release(side: PhysicsSide, joint: str, closed: ClosedState, force_limit: float, *,
                  config: PushReleaseConfig | None = None, conventions: SimConventions | None = None) -> Trajectory:
     """Simulate the script on ``side`` in PyBullet: from the initial state, drive ``joint`` toward open
     (``closed.direction``) at ``closed.open_range * side.scale / traverse_time`` with at most ``force_limit``

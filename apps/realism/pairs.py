@@ -26,8 +26,12 @@ from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.realism import Clip, ClipPair, PairSet, PairSide
 from asset2sim.tasks.evaluation.clips import (CLIP_FPS, CLIP_SIZE, CLIP_VIEWS, draw_frames, fit_cameras, fit_poses, pose_points,
                                               write_clip)
-from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, compute_closed
-from asset2sim.tasks.evaluation.eval_context import Context, build_context, task_joints
+from asset2sim.refined_asset import RefinedAsset
+from asset2sim.tasks.evaluation.evaluate import EvaluationError, closed_ends, sim_object, task_joints
+from asset2sim.tasks.geometry.closed_state import ClosedState
+from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest.errors import AssetError
+from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.geometry.render import SceneRenderer
 from asset2sim.tasks.geometry.render_camera import view_spec
 from asset2sim.apps.realism.pair_set import write_pair_set
@@ -53,15 +57,24 @@ class PairSpec:
     """the drive's limit, N*m or N (None: :func:`drive_limit` of side ``a``, computed by :func:`make_pair`)"""
 
 
-def pushed_joints(asset: Context | Path | str, limit: int = 1) -> list[tuple[str, ClosedEnd]]:
-    """The joints a pair of an asset (its evaluation context, or its folder) pushes: its task-relevant joints (the
-    evaluation's rule, :func:`asset2sim.tasks.evaluation.eval_context.task_joints`) that can open, at most ``limit``,
-    with their closed ends (rad or m). Raises EvaluationError: the folder cannot be read."""
-    ctx = asset if isinstance(asset, Context) else build_context(asset)
-    chosen, _ = task_joints(ctx.joints, ctx.reference_dir, [], ctx.category, ctx.semantics)
-    names = list(dict.fromkeys([*chosen, *ctx.movable]))
-    closed, _ = compute_closed(ctx.urdf, ctx.joints, names)
-    return [(n, closed[n]) for n in names if n in closed and closed[n].open_range > 0][:limit]
+def pushed_joints(folder: Path | str, limit: int = 1) -> list[tuple[str, ClosedState]]:
+    """The joints a pair of an asset folder pushes: its task-relevant joints (:func:`asset2sim.tasks.evaluation.evaluate.task_joints`)
+    then its other movable ones, those that can open, at most ``limit``, with their closed ends (rad or m;
+    :func:`asset2sim.tasks.evaluation.evaluate.closed_ends`). Raises EvaluationError: the folder cannot be read."""
+    files, desc = _read(folder)
+    chosen, _ = task_joints(desc, desc.category or "Generic")
+    names = list(dict.fromkeys([*chosen, *(j.name for j in desc.movable_joints())]))
+    closed, _ = closed_ends(files, names)
+    return [(n, closed[n]) for n in names if closed[n].open_range > 0][:limit]
+
+
+def _read(folder: Path | str) -> tuple[RefinedAsset, object]:
+    """(the folder's files, its asset description). Raises EvaluationError: it cannot be read."""
+    try:
+        urdf = partnet_mobility.find_urdf(folder).resolve()
+        return RefinedAsset(urdf.parent, urdf.name), extract_asset(folder)
+    except AssetError as exc:
+        raise EvaluationError(str(exc)) from exc
 
 
 @dataclass(frozen=True)
@@ -72,7 +85,7 @@ class Subject:
 
     side: PhysicsSide
     joint: str
-    closed: ClosedEnd
+    closed: ClosedState
     force_limit: float
     object_id: str
     category: str = ""
@@ -82,17 +95,18 @@ class Subject:
 def subject_of(folder: Path | str, object_id: str, conventions: SimConventions | None = None) -> Subject | None:
     """The :class:`Subject` of the asset2sim output in ``folder``, read once (None: no joint that opens). Raises
     EvaluationError: the folder cannot be read."""
-    ctx = build_context(folder)
-    joints = pushed_joints(ctx)
+    joints = pushed_joints(folder)
     if not joints:
         return None
     joint, closed = joints[0]
-    side = side_of(ctx, "asset2sim")
+    files, desc = _read(folder)
+    side = side_of(sim_object(files)[0], "asset2sim")
+    report = files.record("report.json") or {}
     return Subject(side=side, joint=joint, closed=closed, force_limit=drive_limit(side, joint, closed.open_range, conventions),
-                   object_id=object_id, category=ctx.category or "", request=str((ctx.report or {}).get("prompt") or ""))
+                   object_id=object_id, category=report.get("category") or desc.category or "", request=str(report.get("prompt") or ""))
 
 
-def _spec(subject: Subject, b: PhysicsSide, defect: str | None = None) -> tuple[PairSpec, ClosedEnd]:
+def _spec(subject: Subject, b: PhysicsSide, defect: str | None = None) -> tuple[PairSpec, ClosedState]:
     return PairSpec(a=subject.side, b=b, joint=subject.joint, object_id=subject.object_id, category=subject.category,
                     request=subject.request, defect=defect, force_limit=subject.force_limit), subject.closed
 
@@ -103,7 +117,7 @@ def _side_clips(renderer: SceneRenderer, traj, cams, folder: Path, base: Path, s
                        fps=CLIP_FPS, poster_index=len(frames[view_spec(v).name]) // 3, relative_to=base) for v in cams]
 
 
-def make_pair(spec: PairSpec, closed: ClosedEnd, pair_set: Path | str, index: int, *,
+def make_pair(spec: PairSpec, closed: ClosedState, pair_set: Path | str, index: int, *,
               config: PushReleaseConfig | None = None, conventions: SimConventions | None = None,
               views: Sequence[str] = CLIP_VIEWS) -> ClipPair:
     """Simulate ``spec``'s two sides with the same script and drive (force limit from side ``a``,
@@ -134,7 +148,7 @@ def make_pair(spec: PairSpec, closed: ClosedEnd, pair_set: Path | str, index: in
 
 
 def calibration_specs(subject: Subject, *, work: Path | str, defects: Sequence[str] | None = None
-                      ) -> tuple[list[tuple[PairSpec, ClosedEnd]], dict[str, str]]:
+                      ) -> tuple[list[tuple[PairSpec, ClosedState]], dict[str, str]]:
     """The calibration pairs of ``subject``: one per planted defect (:data:`asset2sim.apps.realism.defects.DEFECTS`,
     or ``defects``) on its pushed joint, each broken copy written under ``work/<k>/`` (``k`` the defect's number: no
     input name becomes a path). Returns (specs with the closed end, skipped: key -> why)."""
@@ -153,7 +167,7 @@ def calibration_specs(subject: Subject, *, work: Path | str, defects: Sequence[s
     return specs, skipped
 
 
-def method_specs(subject: Subject, folders: dict[str, Path]) -> tuple[list[tuple[PairSpec, ClosedEnd]], dict[str, str]]:
+def method_specs(subject: Subject, folders: dict[str, Path]) -> tuple[list[tuple[PairSpec, ClosedState]], dict[str, str]]:
     """``subject`` against every other method's asset folder of the same object (``folders``: method -> folder; an
     ``asset2sim`` entry is passed over): one pair each on the subject's pushed joint. A method whose asset cannot be
     read is skipped. Returns (specs, skipped)."""
@@ -170,7 +184,7 @@ def method_specs(subject: Subject, folders: dict[str, Path]) -> tuple[list[tuple
     return specs, skipped
 
 
-def build_pair_set(specs: Sequence[tuple[PairSpec, ClosedEnd]], pair_set: Path | str, *, skipped: dict[str, str] | None = None,
+def build_pair_set(specs: Sequence[tuple[PairSpec, ClosedState]], pair_set: Path | str, *, skipped: dict[str, str] | None = None,
                    config: PushReleaseConfig | None = None, conventions: SimConventions | None = None,
                    progress=None) -> PairSet:
     """Make every pair of ``specs`` (:func:`make_pair`, clip folders numbered in order) and write ``pairs.json``; a pair
@@ -200,7 +214,7 @@ DEFECTS_DIR = "defects"
 
 def specs_from_folders(paths: Sequence[Path | str], pair_set: Path | str, *, against: Sequence[str] = AGAINST,
                        defects: Sequence[str] | None = (), conventions: SimConventions | None = None
-                       ) -> tuple[list[tuple[PairSpec, ClosedEnd]], dict[str, str]]:
+                       ) -> tuple[list[tuple[PairSpec, ClosedState]], dict[str, str]]:
     """The pairs of ``paths``: a benchmark output folder (``<method>/<id>/asset/``, ``asset2sim benchmark``) gives,
     per object, asset2sim against each method of ``against`` it holds; a refine output folder (``report.json``
     beside ``mobility.urdf``) gives nothing by itself. ``defects`` (None: every one of
@@ -221,7 +235,7 @@ def specs_from_folders(paths: Sequence[Path | str], pair_set: Path | str, *, aga
             outputs.append((path.name, {"asset2sim": path}))
         else:
             raise FileNotFoundError(f"{path}: neither a benchmark output (asset2sim/<id>/asset/) nor a refine output (report.json)")
-    specs: list[tuple[PairSpec, ClosedEnd]] = []
+    specs: list[tuple[PairSpec, ClosedState]] = []
     skipped: dict[str, str] = {}
     for n, (object_id, folders) in enumerate(outputs):
         try:

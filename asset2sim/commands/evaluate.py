@@ -1,8 +1,9 @@
-"""``asset2sim evaluate ASSET``: evaluate any URDF asset, write evaluation.json
-and report.html (beside the asset unless ``--out``), print a verdict table.
+"""``asset2sim evaluate ASSET``: evaluate any URDF asset with the checks a refine runs (a refined output with the
+closed ends and request its report.json records), write evaluation.json and report.html (beside the asset unless
+``--out``), print a verdict table.
 
-Exit status: 0 every metric with a verdict passes, 1 one fails, 2 the asset
-cannot be evaluated, 4 the output cannot be written.
+Exit status: 0 interaction-ready, 1 a tier of the verdict fails, 2 the asset cannot be evaluated, 4 the output cannot
+be written.
 """
 
 from __future__ import annotations
@@ -21,12 +22,13 @@ from asset2sim.commands import _output
 from asset2sim.inert import markup, terminal
 
 NAME = "evaluate"
-HELP = "Evaluate an asset (any URDF): physical robustness, semantic accuracy, probes; writes evaluation.json and report.html."
+HELP = ("Evaluate an asset (any URDF) with the checks a refine runs: physical robustness, manipulation, as asked, semantic "
+        "accuracy; writes evaluation.json and report.html.")
 
 #: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
 EXITS = {
-    0: "every metric with a verdict passes",
-    1: "a metric fails",
+    0: "interaction-ready: every tier of the verdict passes",
+    1: "a tier of the verdict fails",
     2: "the asset cannot be evaluated",
     4: "the output cannot be written",
 }
@@ -39,15 +41,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "the request the asset should satisfy (default for a refined output folder: the request its report.json "
         "records, so the output is graded as refine graded it)"))
     p.add_argument("--category", default=None, help="object category (default: from the asset's files)")
-    p.add_argument("--engines", default="pybullet", help="comma-separated engines (default: pybullet)")
+    p.add_argument("--engines", default=None, help=(
+        "comma-separated engines, the manipulation tiers measured in each (default: as refine checks: the tiers in "
+        "PyBullet, the rest metrics in the engines a refined folder's report.json names, else PyBullet alone)"))
     p.add_argument("--out", type=Path, default=None,
                    help="where to write evaluation.json and report.html (default: a folder beside the asset, ASSET-evaluation; "
                         "never the asset folder itself unless named here)")
     p.add_argument("--no-report", action="store_true", help="do not write report.html")
-    p.add_argument("--no-probes", action="store_true", help="skip the passive probes")
+    p.add_argument("--no-probes", action="store_true", help="skip the passive probes (reported beside the verdict, never deciding it)")
     p.add_argument("--no-clips", action="store_true", help="with the report: skip the clips of each task-relevant joint's sweep (clips/)")
     p.add_argument("--task", default=None,
-                   help='the manipulation task, e.g. "close the microwave door": the probes try only its part and direction')
+                   help='the manipulation task, e.g. "close the microwave door": the task tier performs it, the probes try its part '
+                        'and direction (default for a refined output folder: the task its report.json records)')
     p.add_argument("--seed", type=int, default=0)
 
 
@@ -92,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     # a terminal: its width (the threshold column wraps); a pipe or file: lines kept whole for grep
     console = _output.console()
     out = args.out or default_out(args.asset)
-    engines = tuple(parse_engines(args.engines))
+    engines = tuple(parse_engines(args.engines)) if args.engines else None
     bad_out = output_folder_failure(out)
     if bad_out is not None:
         raise bad_out
@@ -124,9 +129,6 @@ def run(args: argparse.Namespace) -> int:
     if not wide:
         console.print(f"[dim]thresholds: report.html, or a terminal of {WIDE_TABLE} columns or more[/dim]")
     console.print(f"verdict      {ready.line()}", markup=False, soft_wrap=True)  # refine's words, report.html's badge
-    other = [f for f in ev.failures if f not in ready.failures]
-    if other:
-        console.print(f"other checks failing: {', '.join(other)}", markup=False, soft_wrap=True)
     if req.taken_from:
         console.print(terminal(f"request      {req.taken_from}"), markup=False, soft_wrap=True)
     whys = why_it_failed(ev.metrics)

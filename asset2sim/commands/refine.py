@@ -21,8 +21,8 @@ from asset2sim.schemas.config import RefineConfig, default_engines
 from asset2sim.tasks import refine as refine_stage
 from asset2sim.tasks.interpret.overrides import OverrideError
 from asset2sim.tasks.interpret.request import RequestTooLong
-from asset2sim.output_folder import URDF_NAME, OutputError
-from asset2sim.tasks.check.asset_files import parse_urdf
+from asset2sim.output_folder import OutputError
+from asset2sim.refined_asset import RefinedAsset
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import MESSAGE_FINDINGS
 from asset2sim.tasks.check.as_asked import quantity_text
@@ -32,7 +32,6 @@ from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.refine import RefineError
 from asset2sim.tasks.synthesize.validate_overlay import OverlayInvalid
-from asset2sim.engines.source import UrdfFile
 
 NAME = "refine"
 HELP = "Refine one asset for a natural-language request into an interaction-ready asset (an output folder: docs/guide/outputs.md)."
@@ -110,7 +109,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _joint_types(out_dir) -> dict[str, str]:
     """Joint name -> type of the output's URDF ({} when it cannot be read)."""
     try:
-        return {n: j.type for n, j in parse_urdf(UrdfFile(Path(out_dir) / URDF_NAME))[1].items()}
+        return {j.name: j.type for j in RefinedAsset(Path(out_dir)).model.joints}
     except Exception:
         return {}
 
@@ -119,7 +118,7 @@ def _joint_labels(out_dir) -> dict[str, str]:
     """Joint name -> its moving part's label in the output's ``semantics.txt`` ({} when either cannot be read)."""
     try:
         sem = read_semantics(Path(out_dir))
-        return {n: sem[j.child].label for n, j in parse_urdf(UrdfFile(Path(out_dir) / URDF_NAME))[1].items() if j.child in sem}
+        return {j.name: sem[j.child].label for j in RefinedAsset(Path(out_dir)).model.joints if j.child in sem}
     except Exception:
         return {}
 

@@ -82,7 +82,7 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
     if root_rotation is not None and not np.allclose(root_rotation, np.eye(3)):
         _rotate_root(model, asset.root_link, root_rotation)
     urdf.scale_model(model, s, geometry=False, inertials=False)
-    _set_joints(model, overlay)
+    _set_joints(model, overlay, {j.name for j in asset.joints if j.type == "fixed"})
     urdf.conform_limits(model)  # no <limit> on fixed joints; effort and velocity only where the input declared them
     if collision_out is not None:
         free = overlay.mounting is None or not overlay.mounting.fixed  # a mounted root does not stand on its footprint
@@ -134,13 +134,16 @@ def _rotate_root(model: urdf.UrdfModel, root_link: str, rotation: np.ndarray) ->
             root.inertial.origin = T @ root.inertial.origin
 
 
-def _set_joints(model: urdf.UrdfModel, overlay: Overlay) -> None:
+def _set_joints(model: urdf.UrdfModel, overlay: Overlay, fixed: set[str] = frozenset()) -> None:
     """Every joint without ``<mimic>``, ``<calibration>``, ``<safety_controller>`` and with an explicit axis; every
-    movable one with a ``<limit>`` and the overlay's ``<dynamics>`` and limits (OutputError when it lacks one)."""
+    movable one with a ``<limit>`` and the overlay's ``<dynamics>`` and limits (OutputError when it lacks one); the
+    joints in ``fixed`` (those the asset model holds, ``partnet_mobility.held_bodies``) written fixed at 0."""
     for joint in model.joints:
         joint.mimic = joint.calibration = joint.safety_controller = None
         if joint.axis_xyz is None:
             joint.axis_xyz = np.array([1.0, 0.0, 0.0])
+        if joint.name in fixed and joint.type in urdf.MOVABLE:
+            joint.type, joint.limit, joint.dynamics = "fixed", None, None
         if joint.type in urdf.MOVABLE:
             dyn = overlay.joints.get(joint.name)
             if dyn is None:

@@ -13,12 +13,19 @@ Reasoning, tolerances and their sources: ``docs/design/metrics.md`` ("As asked")
 from __future__ import annotations
 
 import math
-from typing import Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
+from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
 from asset2sim.schemas.request import BAND_INTERVAL, MOTION_GUARDS, JointStateRequest, MotionPhrase, RequestFindings, RequestSpec
 from asset2sim.tasks.geometry.closed_state import ClosedState
-from asset2sim.tasks.synthesize.request_apply import END_TOLERANCE, MIN_TOLERANCE, NUMBER_TOLERANCE, StateResolution
+from asset2sim.tasks.synthesize import joint_dynamics, request_apply, request_findings
+from asset2sim.tasks.synthesize.request_apply import END_TOLERANCE, MIN_TOLERANCE, NUMBER_TOLERANCE, JointTarget, StateResolution
+
+if TYPE_CHECKING:
+    from asset2sim.engines.base import SimSession
+    from asset2sim.tasks.synthesize.context import EstimationContext
 
 #: Opening fraction a state asked by a band may lie outside the band's interval (measurement slack): refine's
 #: smallest acceptance half-width of a number (``request_apply.MIN_TOLERANCE``, half a percent of the range).
@@ -193,8 +200,8 @@ def _failing_joints(metrics: list[MetricResult]) -> tuple[dict[str, str], dict[s
             for trial, t in (d.get("trials") or {}).items():
                 for j in (t or {}).get("failing_joints") or []:
                     held.setdefault(j, f"robust rest ({m.engine}, {trial}) finds it out of its band")
-        elif m.name in ("state_hold", "joint_hold") and m.passed is False:
-            for j in d.get("sagging") or d.get("failing") or []:
+        elif m.name == "state_hold" and m.passed is False:
+            for j in d.get("sagging") or []:
                 held.setdefault(j, f"the rest test ({m.engine}) finds it leaving its state")
         elif m.name == "operability" and m.passed is False:
             for j in d.get("failing") or []:
@@ -227,10 +234,70 @@ def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, 
             items.append({"phrase": word.phrase, "kind": "conflict", "joint": j, "reason": why, "target": None,
                           "achieved": None, "gap": None, "unit": "", "text": text})
             break
-    if not items:
+    return with_unmet(metrics, items)
+
+
+def with_unmet(metrics: list[MetricResult], items: list[dict[str, Any]]) -> list[MetricResult]:
+    """``metrics`` with the unmet ``items`` added to ``request_met`` (then failing); unchanged without either."""
+    asked = next((m for m in metrics if m.name == "request_met"), None)
+    if asked is None or asked.passed is None or not items:
         return metrics
     d = dict(asked.details or {})
     d["unmet"] = list(d.get("unmet") or []) + items
     d["graded"] = int(d.get("graded") or 0) + len(items)
     fixed = asked.model_copy(update={"value": float(len(d["unmet"])), "passed": False, "details": d})
     return [fixed if m is asked else m for m in metrics]
+
+
+@dataclass(frozen=True)
+class AsAsked:
+    """The request read once against one checked object (:func:`as_asked_tier`): ``metrics`` (the checks' metrics with
+    ``request_met`` appended and every word about motion the physics contradicts named), ``findings`` (the report's
+    account of the request) and ``resolution`` (which phrase set which joint)."""
+
+    metrics: list[MetricResult]
+    findings: RequestFindings
+    resolution: StateResolution
+
+
+def as_asked_tier(ctx: "EstimationContext", kin: "SimSession", overlay: Overlay, state: dict[str, float],
+                  closed: dict[str, ClosedState], metrics: list[MetricResult], *, targets: dict[str, JointTarget] | None = None,
+                  rounds: list | None = None) -> AsAsked:
+    """The as-asked tier of an object checked by ``metrics`` (any engines): the request of ``ctx`` resolved on its
+    parts at ``overlay.scale`` (:func:`~asset2sim.tasks.synthesize.request_apply.resolve_states`, ``kin`` the
+    kinematics session of ``ctx``'s asset), graded at ``state`` (rad or m, output units) from the ``closed`` ends
+    (output units) with ``targets`` (joint -> what a number or an end asked; default the resolution's) and the
+    escalation ``rounds`` that explain changed parameters. One reading for the state, the dynamics, this tier and
+    the report: the refine's final attempt and an output read back (``evaluate``) are graded by it alike."""
+    resolution = request_apply.resolve_states(ctx, kin, overlay.scale)
+    choices, missing = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
+    found = request_findings.findings(ctx, resolution.targets if targets is None else targets, closed, state, overlay,
+                                      rounds or [], resolution, motion_words={n: list(c.words) for n, c in choices.items()})
+    asked = refine_request_met(ctx.request, resolution, found, closed, state, request_apply.unapplied_properties(ctx) + missing)
+    words = [(w, [n for n, c in choices.items() if w in c.words]) for w in ctx.request.motions]
+    free = free_motion_conflicts(overlay, words, resolution, {j.name: j.type == "prismatic" for j in ctx.asset.movable_joints()})
+    return AsAsked(with_unmet(word_conflicts([*metrics, asked], words), free), found, resolution)
+
+
+def free_motion_conflicts(overlay: Overlay, words: list[tuple[MotionPhrase, list[str]]],
+                          resolution: StateResolution, prismatic: dict[str, bool]) -> list[dict[str, Any]]:
+    """The unmet items (kind ``conflict``) of each part asked to move freely at a state its own weight moves it from
+    (its holding mechanism :data:`~asset2sim.tasks.synthesize.joint_dynamics.HELD_AGAINST_FREE`): held there by
+    friction, which a freely moving part lacks, so the two phrases (the word, the state) cannot both hold (SPEC,
+    robust rest: the as-asked tier names the conflict). ``words``: each word with the joints it applies to;
+    ``prismatic``: joint -> whether it slides (the loads' unit, N, else N m)."""
+    items = []
+    for word, joints in words:
+        for j in joints:
+            dyn = overlay.joints.get(j)
+            if word.kind != "free" or dyn is None or dyn.holding is None or dyn.holding.mechanism != joint_dynamics.HELD_AGAINST_FREE:
+                continue
+            state = resolution.requests.get(j)
+            other = f"'{state.phrase}'" if state is not None and state.phrase else "the state it is at"
+            unit = "N" if prismatic.get(j) else "N m"
+            why = (f"its weight {'slides' if prismatic.get(j) else 'turns'} it from {other} with {dyn.holding.static_load:.3g} "
+                   f"{unit}: held there by {dyn.friction:.3g} {unit} of friction, which a part that moves freely does not have")
+            items.append({"phrase": word.phrase, "kind": "conflict", "joint": j, "reason": why, "target": None, "achieved": None,
+                          "gap": None, "unit": "", "text": f"'{word.phrase}' and {other} conflict on {j}: {why}. Drop one of "
+                                                           "the two phrases, or ask for the part at an end of its range"})
+    return items

@@ -187,10 +187,6 @@ TIER_ADVICE: dict[str, str] = {
               "(report.html shows the sweep), or ask for a state the part moves from freely (--state JOINT=closed)."),
     "operability": ("Ask for a lighter part or another material (--mass, --material); a part something blocks needs "
                     "that collision mesh repaired (report.html shows where it stops)."),
-    "probes": ("A part that springs back or does not stay where it was pushed needs a spring or friction that holds it "
-               "(asset2sim audit judges an input's declared springs; refine without --keep-declared estimates them); "
-               "one whose push slid or tipped the object: --mount fixed when it stands fixed in use, or a lighter part "
-               "(--mass, --material)."),
     "task": ("Check that --task names a part the object has and a state it reaches; --mount fixed when the object "
              "stands fixed in use, or a lighter part (--mass, --material)."),
     "force": ("Give the object a real mass or material (--mass, --material) so its parts weigh what real ones do, or "
@@ -231,15 +227,10 @@ def _rest_why(metrics: list[Any]) -> list[str]:
                                                             f"{_joint_amount(e.get('amplitude') or 0.0, e.get('unit', 'rad'))}")
                 out.append(f"joint '{j}' oscillates at rest ({m.engine}: {amp}; passes when {m.threshold}). "
                            f"{TIER_ADVICE['oscillation']}")
-        else:  # state_hold (the post-check: drift, sagging) or joint_hold (the evaluation: joints, failing)
-            if m.name == "state_hold":
-                per = {j: (float((d.get("drift") or {}).get(j, 0.0)), None) for j in d.get("sagging") or []}
-            else:
-                joints = d.get("joints") or {}
-                per = {j: (float((joints.get(j) or {}).get("drift", 0.0)), joints.get(j) or {}) for j in d.get("failing") or []}
-            for j, (drift, e) in per.items():
-                unit = (e or {}).get("unit") or (d.get("units") or {}).get(j, "rad")
-                tol = (e or {}).get("tolerance", (d.get("tolerances") or {}).get(j))
+        else:  # state_hold: drift, sagging
+            for j in d.get("sagging") or []:
+                drift, unit = float((d.get("drift") or {}).get(j, 0.0)), (d.get("units") or {}).get(j, "rad")
+                tol = (d.get("tolerances") or {}).get(j)
                 against = f"tolerance {_joint_amount(tol, unit)}" if tol is not None else f"passes when {m.threshold}"
                 out.append(f"joint '{j}' left its initial state by {_joint_amount(drift, unit)} at rest ({m.engine}; {against}): "
                            f"its friction does not hold the part's weight there. {TIER_ADVICE['hold']}")
@@ -284,7 +275,7 @@ def why_it_failed(metrics: list[Any]) -> list[str]:
     """
     metrics = list(metrics)
     held_not = {j for m in metrics if m.name in HOLD_METRICS and metric_verdict(m) is False
-                for j in (m.details or {}).get("sagging") or (m.details or {}).get("failing") or []}
+                for j in (m.details or {}).get("sagging") or []}
     explain = {
         "rest": _rest_why,
         "penetration": penetration_why,
@@ -293,8 +284,6 @@ def why_it_failed(metrics: list[Any]) -> list[str]:
         "operability": lambda ms: _failures_why(ms, ("operability",), TIER_ADVICE["operability"],
                                                 "a hand inside the part's real operating force could not work it"),
         "robust_rest": lambda ms: robust_rest_why(ms, skip=held_not),
-        "probes": lambda ms: _failures_why(ms, ("probes",), TIER_ADVICE["probes"],
-                                           "a push that opens or closes the part did not do so"),
         "task": lambda ms: _failures_why(ms, ("task_execution",), TIER_ADVICE["task"],
                                          "a force- and speed-limited gripper could not do the task"),
         "force": lambda ms: _failures_why(ms, ("operating_force",), TIER_ADVICE["force"],

@@ -20,19 +20,25 @@ MANIPULATION_METRICS: tuple[str, ...] = ("joint_sweep", "operability", "robust_r
 def measure_manipulation(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]], *,
                          recorded: RecordedRuns | None = None,
                          sweep_needed: Callable[[MetricResult], str | None] | None = None,
-                         category: str | None = None, labels: dict[str, str | None] | None = None) -> list[MetricResult]:
+                         category: str | None = None, labels: dict[str, str | None] | None = None,
+                         runs: dict | None = None, free_joints: tuple[str, ...] = ()) -> list[MetricResult]:
     """[joint_sweep, operability, robust_rest] of ``obj`` in ``engine`` (robust rest run first;
     skipped where ``obj.fixed_base``). ``closed``: joint -> (q_closed, direction,
     open range), rad or m; ``recorded``: runs taken from / recorded into it;
     ``sweep_needed(robust_rest)``: why the sweep is not needed (then the sweep and
     operability are recorded as not run, ``details["not_run"]``), or None to run them;
-    ``category`` and ``labels`` (link -> semantic label): the parts' operating ranges.
+    ``category`` and ``labels`` (link -> semantic label): the parts' operating ranges; ``runs``: metric -> the run it was
+    graded from, filled in when given; ``free_joints``: the joints the request asks to move freely (robust rest grades
+    them for coming to rest only).
 
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading raises.
     """
     fixed_base = obj.fixed_base
-    rr = robust_rest.robust_rest_metric(recorded_runs.robust_rest_run(engine, obj, recorded=recorded))
+    runs = runs if runs is not None else {}
+    rr_config = robust_rest.RobustRestConfig(free_joints=tuple(sorted(free_joints)))
+    runs["robust_rest"] = recorded_runs.robust_rest_run(engine, obj, rr_config, recorded=recorded)
+    rr = robust_rest.robust_rest_metric(runs["robust_rest"], rr_config)
     rr.details["root"] = "fixed (mounted)" if fixed_base else "free (on the ground)"
     rr.details["category_mounting"] = category_mounting(category).kind  # how the category is held in use, for the advice
     why_not = sweep_needed(rr) if sweep_needed is not None else None
@@ -42,9 +48,9 @@ def measure_manipulation(engine: str, obj: SimObject, closed: dict[str, tuple[fl
         op = MetricResult(name="operability", value=None, unit=unit("operability"), passed=None,
                           details={"not_run": why_not}, engine=engine)
     else:
-        sw = sweep.sweep_metric(recorded_runs.sweep_run(engine, obj, closed, recorded=recorded))
-        op = operability.operability_metric(recorded_runs.operability_run(
-            engine, obj, closed, category=category, labels=labels, recorded=recorded))
+        runs["joint_sweep"] = recorded_runs.sweep_run(engine, obj, closed, recorded=recorded)
+        runs["operability"] = recorded_runs.operability_run(engine, obj, closed, category=category, labels=labels, recorded=recorded)
+        sw, op = sweep.sweep_metric(runs["joint_sweep"]), operability.operability_metric(runs["operability"])
     sw.details["root"] = "fixed (mounted)" if fixed_base else "fixed (by definition of the sweep)"
     op.details["root"] = "fixed (mounted)" if fixed_base else "fixed (held by the other hand)"
     return [sw, op, rr]

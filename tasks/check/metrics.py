@@ -250,3 +250,70 @@ def joint_settling(trace: RestTrace, floors: dict[str, float] = REST_BAND_FLOORS
         out[name] = JointSettling(settled=float(abs(allq[-1] - q0)), peak=float(np.max(np.abs(allq - q0))),
                                   still_motion=float(np.max(tail) - np.min(tail)), band=band)
     return out
+
+
+#: Largest ground penetration during the rest test that passes, m (docs/design/metrics.md, "ground penetration").
+GROUND_PENETRATION_TOL = 0.005
+#: Explosion thresholds (divergence): root speed m/s, revolute rad/s, prismatic m/s.
+EXPLOSION_ROOT_SPEED = 10.0
+EXPLOSION_JOINT_SPEED_REVOLUTE = 100.0
+EXPLOSION_JOINT_SPEED_PRISMATIC = 10.0
+#: Root travel that counts as an explosion: max(1 m, 5 x largest extent).
+EXPLOSION_TRAVEL_MIN = 1.0
+EXPLOSION_TRAVEL_FACTOR = 5.0
+
+
+def ground_penetration(ground: np.ndarray, timestep: float, engine: str = "pybullet") -> MetricResult:
+    """``ground_penetration`` (mm): the deepest ground penetration ``ground`` (K,) m over every step of the rest test
+    (settling and test), against :data:`GROUND_PENETRATION_TOL`; a non-finite step fails; ``timestep`` s."""
+    g = np.asarray(ground, float)
+    finite = g[np.isfinite(g)]
+    worst = float(np.max(finite)) if len(finite) else 0.0
+    at = int(np.argmax(finite)) if len(finite) else 0
+    return MetricResult(name="ground_penetration", value=worst * 1000.0, unit=unit("ground_penetration"),
+                        passed=bool(worst <= GROUND_PENETRATION_TOL and len(finite) == len(g)),
+                        threshold=f"<= {GROUND_PENETRATION_TOL * 1000:g} mm at every step of the rest test",
+                        details={"worst_step": at, "worst_time_s": (at + 1) * timestep, "steps": int(len(g))}, engine=engine)
+
+
+def divergence_check(root: np.ndarray, joints: dict[str, np.ndarray], joint_types: dict[str, str],
+                     dt: float, largest_extent: float) -> dict:
+    """Divergence (non-finite values or an explosion) of one run: ``root`` (K, 3) m
+    and ``joints`` (joint -> (K,)) per step, ``dt`` s, ``largest_extent`` m. Returns
+    {diverged, nan, reasons, peak_root_speed m/s, root_travel m, travel_limit, peak_joint_speed}."""
+    reasons = []
+    nan = not (np.all(np.isfinite(root)) and all(np.all(np.isfinite(v)) for v in joints.values()))
+    if nan:
+        reasons.append("non-finite pose or joint position")
+    r = root[np.all(np.isfinite(root), axis=1)] if len(root) else root
+    speed = float(np.max(np.linalg.norm(np.diff(r, axis=0), axis=1)) / dt) if len(r) > 1 else 0.0
+    travel = float(np.max(np.linalg.norm(r - r[0], axis=1))) if len(r) else 0.0
+    travel_lim = max(EXPLOSION_TRAVEL_MIN, EXPLOSION_TRAVEL_FACTOR * largest_extent)
+    if speed > EXPLOSION_ROOT_SPEED:
+        reasons.append(f"root speed {speed:.3g} m/s > {EXPLOSION_ROOT_SPEED} m/s")
+    if travel > travel_lim:
+        reasons.append(f"root travelled {travel:.3g} m > {travel_lim:.3g} m")
+    peak = {}
+    for n, q in joints.items():
+        q = q[np.isfinite(q)]
+        v = float(np.max(np.abs(np.diff(q))) / dt) if len(q) > 1 else 0.0
+        peak[n] = v
+        lim = EXPLOSION_JOINT_SPEED_PRISMATIC if joint_types.get(n) == "prismatic" else EXPLOSION_JOINT_SPEED_REVOLUTE
+        if v > lim:
+            reasons.append(f"joint {n} speed {v:.3g} > {lim}")
+    return {"diverged": bool(reasons), "nan": bool(nan), "reasons": reasons, "peak_root_speed": speed, "root_travel": travel,
+            "travel_limit": travel_lim, "peak_joint_speed": peak}
+
+
+def divergence(trace: RestTrace, root: np.ndarray, joints: dict[str, np.ndarray], dt: float, largest_extent: float,
+               engine: str = "pybullet") -> MetricResult:
+    """``divergence`` of one rest test (:func:`divergence_check` of its per-step ``root`` (K, 3) m and ``joints``
+    (joint -> (K,)) series, or the trace's own divergence); ``largest_extent`` m of the object."""
+    d = divergence_check(root, joints, trace.joint_types, dt, largest_extent)
+    d["nan"] = d["nan"] or trace.diverged
+    d["diverged"] = d["diverged"] or trace.diverged
+    threshold = (f"finite, root speed <= {EXPLOSION_ROOT_SPEED} m/s, joint speed <= {EXPLOSION_JOINT_SPEED_REVOLUTE} rad/s "
+                 f"({EXPLOSION_JOINT_SPEED_PRISMATIC} m/s), root travel <= max({EXPLOSION_TRAVEL_MIN} m, "
+                 f"{EXPLOSION_TRAVEL_FACTOR} x largest extent)")
+    return MetricResult(name="divergence", value=float(d["diverged"]), unit=unit("divergence"), passed=not d["diverged"],
+                        threshold=threshold, details=d, engine=engine)

@@ -7,8 +7,9 @@ tuning's (:mod:`asset2sim.tasks.tune.escalation`).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -18,9 +19,13 @@ from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import manipulation, metrics, parent_child, parity, robust_rest
+from asset2sim.tasks.check import manipulation, metrics, parent_child, parity, robust_rest, task_tier
+from asset2sim.tasks.check.task_spec import TaskSpec
+from asset2sim.tasks.synthesize import joint_dynamics, request_apply
+from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.engines.loading import overlay_springs
+from asset2sim.tasks.geometry.urdf_closed import aabb_extents
 
 
 class _StepRecorder:
@@ -61,6 +66,8 @@ class RestRecording:
     conventions: SimConventions
     fixed_base: bool = False
     """The root was fixed (a mounted asset, ``tasks.interpret.mounting``)."""
+    extents: np.ndarray | None = None
+    """(3,) m extents of the links with collision geometry at the initial state (the divergence's travel limit)."""
 
     def matches(self, engine: str, obj: SimObject) -> bool:
         """True when this recording is the rest test of exactly ``obj`` in ``engine`` (floats compared exactly)."""
@@ -71,13 +78,14 @@ class RestRecording:
 
 def record_rest_test(session: SimSession, obj: SimObject) -> RestRecording:
     """Run the SPEC rest test on ``session`` in place, recording every step; ``obj``: what it was opened on."""
+    extents = aabb_extents(session)
     rec = _StepRecorder(session)
     trace = metrics.run_rest_test(rec, obj.conventions)
     return RestRecording(
         trace=trace, root_series=np.array(rec.root) if rec.root else np.zeros((0, 3)), ground_series=np.array(rec.ground),
         joint_series={n: np.concatenate([trace.settle_joints.get(n, np.empty(0)), trace.joints[n][1:]]) for n in trace.joints},
         engine=session.engine, urdf=obj.source.path.resolve(), initial_state=dict(obj.state), springs=dict(obj.springs),
-        conventions=obj.conventions, fixed_base=bool(session.options.fixed_base))
+        conventions=obj.conventions, fixed_base=bool(session.options.fixed_base), extents=extents)
 
 
 def measure_rest_test(engine: str, obj: SimObject) -> tuple[MetricResult, RestRecording]:
@@ -110,6 +118,9 @@ class PostCheck:
     recording: RestRecording | None = None
     recorded: RecordedRuns = field(default_factory=RecordedRuns)
     """The manipulation tiers' runs, reused by the evaluation of the same files."""
+    runs: dict[str, Any] = field(default_factory=dict)
+    """metric -> the run it was graded from (``robust_rest``, ``joint_sweep``, ``operability``, ``task_execution``): the
+    report's evidence and clips."""
     reference_holding: dict = field(default_factory=dict)
     """With other engines (``--engines``), the reference engine's side of their parity rows: ``joints_held`` (joint
     -> came to rest in its band) and ``breakaway`` (:func:`~asset2sim.tasks.check.parity.engine_breakaway`)."""
@@ -146,44 +157,47 @@ class PostCheck:
 
 def overlay_object(source: SimSource, state: dict[str, float], overlay: Overlay,
                    conventions: SimConventions) -> SimObject:
-    """``source`` as the post-check simulates it: at ``state`` (joint -> rad or m), with ``overlay``'s springs
-    (:func:`~asset2sim.engines.loading.overlay_springs`) and its root as ``overlay.mounting``
+    """``source`` as the post-check simulates it: at ``state`` (joint -> rad or m), with ``overlay``'s springs about
+    their reference, else about ``state`` (:func:`~asset2sim.engines.loading.overlay_springs`, as the output's
+    readers take them: :attr:`asset2sim.refined_asset.RefinedAsset.springs`) and its root as ``overlay.mounting``
     declares."""
-    return SimObject(source, state, overlay_springs(overlay), conventions,
+    return SimObject(source, state, overlay_springs(overlay, state), conventions,
                      bool(overlay.mounting is not None and overlay.mounting.fixed))
 
 
-def run_post_check(source: SimSource, initial_state: dict[str, float], overlay: Overlay, config: RefineConfig,
-                   closed: dict[str, tuple[float, float, float]] | None = None, *,
+def run_post_check(obj: SimObject, config: RefineConfig, closed: dict[str, tuple[float, float, float]] | None = None, *,
                    escalated: Callable[[PostCheck], bool] | None = None, recorded: RecordedRuns | None = None,
-                   category: str | None = None, labels: dict[str, str | None] | None = None) -> PostCheck:
-    """Penetration, rest stability, oscillation and sag of the written asset in
-    PyBullet, the reference engine (the root as ``overlay.mounting`` declares, said in
-    ``details["root"]``), the SPEC metrics in every other engine of
-    ``config.engines``, and with ``closed`` (joint -> (q_closed, direction,
-    open range), rad or m) robust rest and the joint sweep.
+                   category: str | None = None, labels: dict[str, str | None] | None = None,
+                   free_joints: tuple[str, ...] = ()) -> PostCheck:
+    """Penetration, rest stability, oscillation, ground penetration, divergence and the undisturbed state hold of
+    ``obj`` (:func:`overlay_object`: the written asset at its initial state, its springs, the root as declared, said
+    in ``details["root"]``) in PyBullet, the reference engine, the SPEC metrics in every other engine of
+    ``config.engines``, and with ``closed`` (joint -> (q_closed, direction, open range), rad or m) robust rest, the
+    joint sweep and operability.
 
     ``escalated(check)``: whether the caller escalates ``check``; a check that
     fails and is escalated without the sweep records it as not run, and without
     the other engines when PyBullet's own tiers fail so. ``recorded``:
     manipulation runs taken from / recorded into it. ``category`` and ``labels``
-    (link -> semantic label): the operating ranges of the operability tier."""
+    (link -> semantic label): the operating ranges of the operability tier; ``free_joints``: joints the request asks
+    to move freely (robust rest grades them for coming to rest only)."""
     engine = "pybullet"
-    conv = config.sim
-    obj = overlay_object(source, initial_state, overlay, conv)
+    conv, source = config.sim, obj.source
+    obj = replace(obj, conventions=conv)
     fixed = obj.fixed_base
     pen, recording = measure_rest_test(engine, obj)
     trace = recording.trace
     stab = metrics.rest_stability(trace, conv, engine=engine)
     osc = metrics.oscillation(trace, conv, engine=engine)
+    # undisturbed (SPEC "State hold at rest"): the floors alone, no share of the range (that is robust rest's band)
     settling = metrics.joint_settling(trace, {"revolute": config.sag_tolerance_revolute, "prismatic": config.sag_tolerance_prismatic},
-                                      timestep=conv.timestep)
+                                      timestep=conv.timestep, share=0.0)
     drift = {name: s.settled for name, s in settling.items()}
     sagging = [name for name, s in settling.items() if not s.held]
     sag_metric = MetricResult(
         name="state_hold", value=max(drift.values()) if drift else 0.0, unit=unit("state_hold"), passed=not sagging,
-        threshold=(f"every joint at rest within max({config.sag_tolerance_revolute} rad / {config.sag_tolerance_prismatic} m, "
-                   f"{metrics.REST_BAND_RANGE_SHARE:.0%} of its range) of its initial state"),
+        threshold=(f"undisturbed, every joint at rest within {config.sag_tolerance_revolute} rad / {config.sag_tolerance_prismatic} m "
+                   "of its initial state"),
         details={"drift": drift, "sagging": sagging, "peak": {n: s.peak for n, s in settling.items()},
                  "moving": [n for n, s in settling.items() if s.moving],
                  "units": {n: "m" if trace.joint_types.get(n) == "prismatic" else "rad" for n in drift},
@@ -197,14 +211,17 @@ def run_post_check(source: SimSource, initial_state: dict[str, float], overlay: 
     def run_parity() -> None:
         nonlocal engine_results, parity_done
         if not parity_done:
-            options = obj.options(springs=overlay_springs(overlay, initial_state))
+            options = obj.options()
             engine_results = {e: parity.session_metrics(source, e, options) for e in others}
             holding.update(joints_held={n: s.held for n, s in settling.items()},  # the reference engine's parity row
                            breakaway=parity.engine_breakaway(source, engine, options))
             parity_done = True
 
-    nested = parent_child.parent_child_penetration(source, initial_state, engine, conv)  # the pairs the SPEC's Phi skips
-    base = [pen, stab, osc, sag_metric, tilt, nested]
+    nested = parent_child.parent_child_penetration(source, obj.state, engine, conv)  # the pairs the SPEC's Phi skips
+    ground = metrics.ground_penetration(recording.ground_series, conv.timestep, engine=engine)
+    extent = float(np.max(recording.extents)) if recording.extents is not None and len(recording.extents) else 0.0
+    div = metrics.divergence(trace, recording.root_series, recording.joint_series, conv.timestep, extent, engine=engine)
+    base = [pen, stab, osc, sag_metric, tilt, nested, ground, div]
     for m in base:
         m.details["root"] = root_label(fixed)
     recorded = recorded if recorded is not None else RecordedRuns()
@@ -222,12 +239,37 @@ def run_post_check(source: SimSource, initial_state: dict[str, float], overlay: 
         run_parity()
         return ESCALATION_ROUND if partial_escalated(rr) else None
 
+    runs: dict[str, Any] = {}
     extra = [] if closed is None else manipulation.measure_manipulation(
-        engine, obj, closed, recorded=recorded, sweep_needed=sweep_needed, category=category, labels=labels)
+        engine, obj, closed, recorded=recorded, sweep_needed=sweep_needed, category=category, labels=labels, runs=runs,
+        free_joints=free_joints)
     if not sweep_not_run(extra):
         run_parity()
-    return PostCheck(metrics=[*base, *extra], trace=trace, sag=drift, sagging=sagging,
-                     engine_results=engine_results, recording=recording, recorded=recorded, reference_holding=holding)
+    return PostCheck(metrics=[*base, *extra], trace=trace, sag=drift, sagging=sagging, engine_results=engine_results,
+                     recording=recording, recorded=recorded, reference_holding=holding, runs=runs)
+
+
+def check_object(ctx: EstimationContext, obj: SimObject, config: RefineConfig,
+                 closed: dict[str, tuple[float, float, float]] | None = None, task: TaskSpec | None = None, *,
+                 escalated: Callable[[PostCheck], bool] | None = None, recorded: RecordedRuns | None = None) -> PostCheck:
+    """Every tier a refine measures on one object, the same for the refine's candidates and for an output read back
+    (:func:`asset2sim.tasks.evaluation.evaluate.evaluate_asset`): :func:`run_post_check` of ``obj`` (the operating
+    ranges from ``ctx``'s category and part labels; the parts its request asks to move freely, robust rest grades for
+    coming to rest only), then, with ``task`` (a parsed task on ``obj``'s joints) and
+    ``closed``, the task tier (:func:`~asset2sim.tasks.check.task_tier.run_task_tier`: the request's free motion and
+    springs say which targets must hold). Other arguments as :func:`run_post_check`.
+
+    Raises:
+        EngineUnavailable: an engine is not installed; whatever loading ``obj.source`` raises.
+    """
+    choices, _ = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
+    check = run_post_check(obj, config, closed, escalated=escalated, recorded=recorded, category=ctx.category,
+                           labels=task_tier.link_labels(ctx.asset), free_joints=tuple(n for n, c in choices.items() if c.free_moving))
+    if task is not None and closed:
+        check.metrics = [*check.metrics, *task_tier.run_task_tier(
+            "pybullet", obj, closed, task, ctx.asset, ctx.category, free_moving=ctx.request.free_moving,
+            spring_requested=ctx.request.spring, recorded=check.recorded, runs=check.runs)]
+    return check
 
 
 #: Why an escalation round records the sweep as not run (:func:`run_post_check`).

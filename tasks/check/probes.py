@@ -14,7 +14,10 @@ from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, blocking_link, joints_between
 from asset2sim.tasks.check.pusher import ProbeConfig, Pusher, push_budget, push_geometry, pusher_for, root_held
 from asset2sim.tasks.check.stroke import run_stroke
-from asset2sim.tasks.check.support import SupportWatch
+from asset2sim.tasks.check.support import SupportWatch, rolling_joints
+from asset2sim.engines.source import SimObject
+from asset2sim.mesh_io import MeshReadError
+from asset2sim.tasks.state.ground_clearance import floor_stops
 from asset2sim.tasks.geometry.limits import rigid_group, subtrees
 from asset2sim.urdf import UrdfModel
 
@@ -344,6 +347,36 @@ def run_probes(session, joints: dict[str, tuple[float, float, float]], *, action
     finally:
         session.discard_state(sid)
     return out
+
+
+def probe_object(obj: SimObject, closed: dict[str, tuple[float, float, float]], *, actions: tuple[str, ...] = ("close", "open"),
+                 holds_position: bool = False, returns: set[str] | frozenset[str] = frozenset()) -> tuple[list[ProbeResult], list[str]]:
+    """The passive probes of ``obj`` in a PyBullet session of its own, from its unstepped initial state: every joint of
+    ``closed`` (joint -> (q_closed, direction, open range), rad or m) that opens, but a wheel the object stands on
+    (the object is rolled, not it), each open probe's target ending where the floor stops the part; ``returns``: joints
+    whose close probe rebounds by design (a spring). Returns (results, notes).
+
+    Raises:
+        EngineUnavailable; whatever loading ``obj.source`` raises.
+    """
+    model = obj.source.model(mode="lenient")
+    notes: list[str] = []
+    session = obj.open("pybullet")
+    try:
+        rolling = set(rolling_joints(session, subtrees(model)))
+        targets = {n: c for n, c in closed.items() if c[2] > 0 and n not in rolling}
+        try:
+            stops = floor_stops(model, obj.source.path, dict(obj.state), targets)
+        except (OSError, MeshReadError) as exc:
+            notes.append(f"probes: where the floor stops the parts was not measured ({exc}): no stop")
+            stops = {}
+        stops = {n: s for n, s in stops.items() if s / targets[n][2] < OPEN_FAR_TARGET}
+        notes += [f"probes: the floor stops {n} {s:.3g} from its closed end, of its {targets[n][2]:.3g} range (the object resting "
+                  "as it is): an open probe's target ends there" for n, s in stops.items()]
+        return run_probes(session, targets, actions=actions, holds_position=holds_position, model=model, returns=returns,
+                          floor_stops=stops), notes
+    finally:
+        session.close()
 
 
 def _shut_in(r: ProbeResult) -> bool:

@@ -9,7 +9,7 @@ import re
 from dataclasses import dataclass, field, replace
 
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
-from asset2sim.tasks.check.asset_files import JointInfo
+from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.interpret.named_parts import labelled_joints
 from asset2sim.tasks.interpret.request import parse_prompt
 from asset2sim.tasks.interpret.task_words import EVERY, task_verb
@@ -28,10 +28,8 @@ class TaskSpec:
     notes: list[str] = field(default_factory=list)
 
 
-def parse_task(text: str, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
-               category: str | None, task_joints: list[str]) -> TaskSpec:
-    """The :class:`TaskSpec` of ``text`` for an asset's ``joints`` and
-    ``semantics`` (link -> (joint kind, label)); ``task_joints`` the fallback.
+def parse_task(text: str, asset: AssetDescription, category: str | None, task_joints: list[str]) -> TaskSpec:
+    """The :class:`TaskSpec` of ``text`` for ``asset``'s movable joints and part labels; ``task_joints`` the fallback.
     Never raises on unknown words.
     """
     low = " ".join(str(text or "").lower().split())
@@ -47,7 +45,7 @@ def parse_task(text: str, joints: dict[str, JointInfo], semantics: dict[str, tup
     if spec is not None:
         labels = [js.label for js in spec.joint_states if js.selector == "label" and js.label]
         part = labels[0] if labels else None
-        found = list(dict.fromkeys(labelled_joints(spec, joints, semantics, category)))
+        found = list(dict.fromkeys(labelled_joints(spec, asset, category)))
         if any(js.ordinal is not None for js in spec.joint_states):
             notes.append("ordinal read but not used: every joint with the label is tried")
         if spec.ignored:

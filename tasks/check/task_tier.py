@@ -11,11 +11,9 @@ from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import recorded_runs, task_execution
 from asset2sim.tasks.check.force_ranges import force_metric
-from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.check.task_spec import TaskSpec, parse_task, with_work_to_do
 from asset2sim.tasks.interpret.part_priors import spring_expected
-from asset2sim.engines.source import SimObject, UrdfFile
-from asset2sim.urdf import UrdfModel
+from asset2sim.engines.source import SimObject
 
 #: The metrics this tier adds to the post-check.
 TASK_METRICS: tuple[str, ...] = ("task_execution", "operating_force")
@@ -50,15 +48,11 @@ def hold_required(asset: AssetDescription, joints: list[str], springs: dict[str,
     return hold_required_by_label(named, springs, category, free_moving=free_moving, spring_requested=spring_requested)
 
 
-def task_spec_for(text: str, model: UrdfModel, asset: AssetDescription, category: str | None,
-                  task_joints: list[str], state: dict[str, float] | None = None,
-                  closed: dict[str, tuple[float, float, float]] | None = None) -> TaskSpec:
-    """The ``TaskSpec`` of ``text`` on the written asset's ``model`` (labels from
-    ``asset``); with ``state`` and ``closed`` (joint -> (q_closed, direction,
-    open range)) narrowed to the joints it has work on."""
-    _, joints = parse_urdf(UrdfFile(model))
-    semantics = {ln.name: (ln.semantic_joint or "", ln.semantic_label or "") for ln in asset.links if ln.semantic_label}
-    spec = parse_task(text, joints, semantics, category, task_joints)
+def task_spec_for(text: str, asset: AssetDescription, category: str | None, task_joints: list[str],
+                  state: dict[str, float] | None = None, closed: dict[str, tuple[float, float, float]] | None = None) -> TaskSpec:
+    """The ``TaskSpec`` of ``text`` on ``asset``'s joints and part labels; with ``state`` and ``closed`` (joint ->
+    (q_closed, direction, open range)) narrowed to the joints it has work on."""
+    spec = parse_task(text, asset, category, task_joints)
     if state is not None and closed:
         fractions = {n: d * (state[n] - qc) / r for n, (qc, d, r) in closed.items() if n in state and r > 0}
         spec = with_work_to_do(spec, fractions)
@@ -67,10 +61,11 @@ def task_spec_for(text: str, model: UrdfModel, asset: AssetDescription, category
 
 def run_task_tier(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]], spec: TaskSpec,
                   asset: AssetDescription, category: str | None, *, free_moving: bool, spring_requested: bool,
-                  recorded: recorded_runs.RecordedRuns | None = None) -> list[MetricResult]:
+                  recorded: recorded_runs.RecordedRuns | None = None, runs: dict | None = None) -> list[MetricResult]:
     """[``task_execution``, ``operating_force``] of the written asset ``obj`` in
     ``engine``; ``closed``: joint -> (q_closed, direction, open range) at the output scale; ``recorded``: the
-    attempt is recorded there (:func:`~asset2sim.tasks.check.recorded_runs.task_run`) for the evaluation.
+    attempt is taken from / recorded there (:func:`~asset2sim.tasks.check.recorded_runs.task_run`); ``runs``: the
+    run is put under ``task_execution`` when given (the report's evidence).
 
     Raises:
         EngineUnavailable; whatever loading ``obj.source`` raises.
@@ -81,6 +76,8 @@ def run_task_tier(engine: str, obj: SimObject, closed: dict[str, tuple[float, fl
                                  recorded=recorded,
                                  hold_required=hold_required(asset, list(joints), dict(obj.springs), category,
                                                              free_moving=free_moving, spring_requested=spring_requested))
+    if runs is not None:
+        runs["task_execution"] = run
     tm = task_execution.task_metric(run)
     tm.details["joints_rule"] = spec.rule
     return [tm, force_metric(run, category, link_labels(asset))]

@@ -32,13 +32,11 @@ STOPPED_MODES: tuple[str, ...] = ("invalid_input", "estimator_failure", "invalid
 #: reporting order. Penetration fails above :data:`UNRESOLVED_PENETRATION_MM` (no SPEC threshold), the SPEC's Phi
 #: and a child inside its parent alike (the pairs Phi skips: a door opened through a bar of its own body).
 TIERS: dict[str, tuple[tuple[str, ...], str]] = {
-    "rest": (("rest_stability", "settle_tilt", "divergence", "ground_penetration", "oscillation", "state_hold",
-              "joint_hold"), "unstable"),
+    "rest": (("rest_stability", "settle_tilt", "divergence", "ground_penetration", "oscillation", "state_hold"), "unstable"),
     "penetration": (tuple(PENETRATION_METRICS), "unresolved_penetration"),
     "sweep": (("joint_sweep",), "blocked_joint"),
     "operability": (("operability",), "not_operable"),
     "robust_rest": (("robust_rest",), "not_robust_at_rest"),
-    "probes": (("probes",), "probe_failed"),
     "task": (("task_execution",), "task_failed"),
     "force": (("operating_force",), "implausible_force"),
     "request": (("request_met",), "request_not_met"),  # as asked (tasks/check/as_asked.py), after the physical tiers
@@ -46,7 +44,7 @@ TIERS: dict[str, tuple[tuple[str, ...], str]] = {
 
 
 #: Rest-tier metrics of a joint that leaves its state (the object itself at rest).
-HOLD_METRICS: tuple[str, ...] = ("state_hold", "joint_hold")
+HOLD_METRICS: tuple[str, ...] = ("state_hold",)
 
 
 @dataclass
@@ -66,11 +64,11 @@ class Readiness:
 
     def line(self) -> str:
         """One line, the words every command and report uses (:func:`verdict_line`): ``interaction-ready (rest pass,
-        ...)`` or ``NOT READY: probe_failed (probes@pybullet, ...; rest pass, ..., probes FAIL, ...)``."""
+        ...)`` or ``NOT READY: not_robust_at_rest (robust_rest@pybullet, ...; rest pass, ..., robust_rest FAIL, ...)``."""
         return verdict_line(self.failure_mode, self.tiers, self.failures)
 
     def short(self) -> str:
-        """:meth:`line` without the tiers: ``interaction-ready`` or ``NOT READY: probe_failed (probes@pybullet)``."""
+        """:meth:`line` without the tiers: ``interaction-ready`` or ``NOT READY: not_robust_at_rest (robust_rest@pybullet)``."""
         return verdict_line(self.failure_mode, {}, self.failures)
 
 
@@ -150,31 +148,6 @@ def mode_of(tier: str, bad: list[Any]) -> str:
     return TIERS[tier][1]
 
 
-def combine_verdict(report: Any, evaluation_metrics: list[Any]) -> Readiness:
-    """Refine's final verdict once its evaluation ran: :func:`readiness` of the
-    evaluation's metrics, set on ``report`` (a ``RefineReport``, in place:
-    ``readiness`` and ``failure_mode``)."""
-    r = readiness(list(evaluation_metrics))
-    report.readiness = r.tiers
-    report.failure_mode = r.failure_mode
-    return r
-
-
-def post_check_failure_mode(check: Any) -> str:
-    """Failure mode of a refine run from its final ``PostCheck``: ``unstable``,
-    ``oscillating``, ``unresolved_penetration``, then :func:`readiness`'s mode
-    of its metrics, the first that applies."""
-    osc = check.metric("oscillation")
-    pen = check.metric("penetration")
-    if not check.stable:
-        return "unstable"
-    if not osc.passed:
-        return "oscillating"
-    if pen.value is not None and pen.value > UNRESOLVED_PENETRATION_MM:
-        return "unresolved_penetration"
-    return readiness(list(check.metrics)).failure_mode
-
-
 def exception_failure_mode(exc: BaseException, retryable: type[BaseException] | None = None) -> str:
     """Mode of an exception that stopped an asset's chain outside its stages:
     ``estimator_failure`` (or its own) for ``retryable``, ``timeout``, else ``crash``."""
@@ -195,17 +168,13 @@ class AssetVerdict:
 
 def asset_failure_mode(*, manifest_error: str | None = None, input_failure: str | None = None,
                        refine_status: str | None = None, refine_mode: str | None = None,
-                       measured_status: str | None = None, rest_stable: bool | None = None,
-                       oscillation_pass: bool | None = None, chain_error_mode: str | None = None,
-                       measured_failures: list[str] | None = None) -> AssetVerdict:
-    """Failure mode of one asset in a flow run from what each stage recorded
-    (``manifest_error``: :data:`INVALID_MANIFEST_ROW` whatever else; the input
-    check's mode, the refine stage's status and mode, the metrics stage's
-    status, verdicts and failing ``metric@engine``, a chain error's mode): the
-    first failure in stage order; a metrics-stage failure or a chain error only
-    when nothing failed before; ``crash`` when nothing was recorded."""
+                       measured_status: str | None = None, chain_error_mode: str | None = None) -> AssetVerdict:
+    """Failure mode of one asset in a flow run from what each stage recorded (``manifest_error``:
+    :data:`INVALID_MANIFEST_ROW` whatever else; the input check's mode, the refine stage's status and mode (the
+    verdict ``report.json`` records, decided once), the metrics stage's status, a chain error's mode): the first
+    failure in stage order; a metrics stage that failed to run or a chain error only when nothing failed before (the
+    metrics stage presents the record and never decides the verdict again); ``crash`` when nothing was recorded."""
     mode: str | None = None
-    errors: list[str] = []
     if manifest_error is not None:
         return AssetVerdict(INVALID_MANIFEST_ROW, [f"manifest: {manifest_error}"])
     if input_failure is not None:
@@ -214,24 +183,8 @@ def asset_failure_mode(*, manifest_error: str | None = None, input_failure: str 
         mode = refine_mode or "none"
     elif refine_status in FAILED_STATUSES:
         mode = refine_mode or ("crash" if refine_status == "error" else refine_status)  # the exception's, else timeout / crash
-    if measured_status == "ok" and mode == "none":
-        if rest_stable is False:
-            mode = "unstable"
-            errors.append("metrics stage: rest stability failed although the refine post-check passed")
-        elif oscillation_pass is False:
-            mode = "oscillating"
-            errors.append("metrics stage: oscillation failed although the refine post-check passed")
-        elif measured_failures:
-            failing = {f.split("@", 1)[0] for f in measured_failures}
-            for tier, (names, tier_mode) in TIERS.items():
-                if tier != "rest" and failing & set(names):
-                    mode = tier_mode
-                    errors.append(f"metrics stage: {tier} failed ({', '.join(f for f in measured_failures if f.split('@', 1)[0] in names)})")
-                    break
-    elif measured_status in FAILED_STATUSES and mode in (None, "none"):
+    if measured_status in FAILED_STATUSES and mode in (None, "none"):
         mode = "timeout" if measured_status == "timeout" else "crash"
     if chain_error_mode is not None and mode in (None, "none"):
         mode = chain_error_mode
-    if mode is None:
-        mode = MISSING_FAILURE_MODE
-    return AssetVerdict(mode, errors)
+    return AssetVerdict(MISSING_FAILURE_MODE if mode is None else mode, [])

@@ -81,7 +81,7 @@ def render_benchmark_index(records: list[dict[str, Any]], meta: dict[str, Any]) 
             f"<tr><td>{esc(r['id'])}</td><td>{esc(r.get('category'))}</td><td>{esc(r['method'])}</td>"
             f"<td class='{allcls}'>{'pass' if r.get('all_pass') else 'FAIL'}</td>"
             + v("penetration") + v("rest_stability") + v("oscillation") + v("ground_penetration") + v("divergence")
-            + v("joint_hold") + v("probes") + v("total_mass")
+            + v("state_hold") + v("probes") + v("total_mass")
             + f"<td class='num'>{fmt(r.get('scale_deviation'))}</td><td class='num'>{fmt(r.get('initial_joint_deviation'))}</td>"
             f"<td class='num'>{fmt(r.get('prompt_alignment'))}</td><td class='num'>{fmt(r.get('seconds'), 3)}</td><td>{link}</td></tr>"
         )

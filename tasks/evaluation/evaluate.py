@@ -1,98 +1,521 @@
-"""Evaluate any URDF asset: the interaction-readiness protocol as one task
-(:func:`evaluate_asset`; :func:`evaluate_refined` is refine's extra step).
-Context, closed ends, one run per engine, the metric registry: the sibling
-modules. Definitions: ``docs/design/metrics.md``.
+"""The evaluation of an asset, ``evaluation.json`` and ``report.html``: one record, one reading.
+
+A refine's evaluation is its own record presented (:func:`refined_evaluation`): the metrics of ``report.json``, which
+decided the verdict, and the semantic measures beside them (scale and state against GenSim2's reference, mass
+plausibility, prompt alignment), with the runs the checks were graded from as the report's evidence; nothing is read
+back or simulated again. Any other folder, a refine's output included, is read into the asset model the refine uses
+(:func:`asset2sim.tasks.synthesize.context.build_context`; the folder's files through
+:class:`~asset2sim.refined_asset.RefinedAsset`) and measured by the same checks
+(:func:`asset2sim.tasks.check.postcheck.check_object`, :func:`asset2sim.tasks.check.as_asked.as_asked_tier`) with the
+closed ends its ``report.json`` recorded, so ``asset2sim evaluate OUT`` gives the verdict the refine gave
+(:func:`evaluate_asset`). Definitions: ``docs/design/metrics.md``.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from asset2sim import output_folder
 from asset2sim.atomic import write_json
-from asset2sim.schemas.config import SimConventions
+from asset2sim.engines.source import SimObject, UrdfFile
+from asset2sim.inert import one_line
+from asset2sim.output_folder import EVALUATION_NAME, OutputError, REPORT_HTML_NAME
+from asset2sim.output_paths import raise_refusal
+from asset2sim.refined_asset import RefinedAsset
+from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.evaluation import Evaluation
-from asset2sim.schemas.metrics import REST_TEST_METRICS
+from asset2sim.schemas.overlay import EstimatorInfo, Inertia, JointDynamics, LinkPhysics, Overlay
 from asset2sim.schemas.realism import ClipSet
 from asset2sim.schemas.report import MetricResult, RefineReport
-from asset2sim.tasks.check.postcheck import RestRecording
-from asset2sim.tasks.check.recorded_runs import RecordedRuns
-from asset2sim.tasks.check.sweep import SweepRun
+from asset2sim.engines.base import EngineUnavailable
+from asset2sim.schemas.metrics import unit
+from asset2sim.tasks.check import as_asked, manipulation, postcheck, probes as probe_tier, task_tier
+from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.evaluation import clips as clip_files
-from asset2sim.tasks.check.asset_files import EvaluationError, JointInfo
-from asset2sim.tasks.evaluation.engine_run import EngineRun, run_engine, set_closed_ends
-from asset2sim.tasks.evaluation.eval_context import Context, build_context, task_joints
-from asset2sim.tasks.check import as_asked
-from asset2sim.tasks.evaluation.metric_defs import METRICS, MetricSpec, divergence_check, metric_names
-from asset2sim.tasks.interpret.named_parts import labelled_joints, motion_joints, requested_joints
-from asset2sim.tasks.check.task_spec import parse_task, with_work_to_do
+from asset2sim.tasks.evaluation import semantic_metrics as sem
 from asset2sim.tasks.evaluation.report_html import portable_urdf, write_report
-from asset2sim import output_folder
-from asset2sim.output_folder import EVALUATION_NAME, REPORT_HTML_NAME, URDF_NAME
-from asset2sim.inert import one_line
-from asset2sim.output_paths import raise_refusal
+from asset2sim.tasks.geometry.closed_state import ClosedState, closed_tuples
+from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest.errors import AssetError
+from asset2sim.tasks.ingest.extract import extract_asset
+from asset2sim.tasks.interpret.part_priors import task_relevant_joints as part_task_joints
+from asset2sim.tasks.interpret.size_priors import scaled_mass_range, size_mass_prior
+from asset2sim.tasks.geometry.urdf_closed import measure_closed_ends
+from asset2sim.schemas.asset import AssetDescription
+from asset2sim.tasks.synthesize.context import EstimationContext, build_context
+from asset2sim.tasks.synthesize.request_apply import StateResolution, task_relevant_joints
+from asset2sim.tasks.tune.attempt import Attempt
+from asset2sim.urdf import MOVABLE, UrdfError, UrdfModel, read_urdf
 
-__all__ = ["METRICS", "Evaluation", "EvaluationError", "JointInfo", "divergence_check", "evaluate_asset", "evaluate_refined",
-           "metric_names", "requested_joints", "write_evaluation"]
+__all__ = ["Evaluation", "EvaluationError", "EngineRun", "clip_joints", "evaluate_asset", "refined_evaluation", "write_evaluation"]
+
+
+class EvaluationError(ValueError):
+    """The asset cannot be evaluated (the message names the file and why)."""
+
+
+@dataclass
+class EngineRun:
+    """The runs one engine's verdicts were graded from, the report's evidence: the rest test (``trace``, per-step
+    ``root_series`` (K, 3) m and ``joint_series`` joint -> (K,) rad or m), the manipulation tiers' runs
+    (``robust_rest``, ``sweep``, ``task``) and the probes; ``error`` when the engine could not run."""
+
+    engine: str
+    error: str | None = None
+    trace: Any = None
+    root_series: np.ndarray | None = None
+    joint_series: dict[str, np.ndarray] = field(default_factory=dict)
+    robust_rest: Any = None
+    sweep: Any = None
+    task: Any = None
+    probes: list[Any] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """What ``report.html`` draws beside the metrics: the evaluated ``urdf`` and its ``model`` as written, the
+    folder's records (``report``, ``overlay``, ``baseline``: JSON objects or None), the measurement ``conventions``."""
+
+    urdf: Path
+    model: UrdfModel
+    conventions: SimConventions
+    report: dict[str, Any] | None = None
+    overlay: dict[str, Any] | None = None
+    baseline: dict[str, Any] | None = None
+
+
+def evidence_runs(check: postcheck.PostCheck, probes: list[Any] | None = None) -> dict[str, EngineRun]:
+    """engine -> :class:`EngineRun` of a post-check: PyBullet's rest test and manipulation runs (and ``probes``), the
+    other engines' verdicts only (their metrics, no recording)."""
+    rec = check.recording
+    runs = {"pybullet": EngineRun("pybullet", trace=rec.trace if rec else check.trace, root_series=rec.root_series if rec else None,
+                                  joint_series=dict(rec.joint_series) if rec else {}, robust_rest=check.runs.get("robust_rest"),
+                                  sweep=check.runs.get("joint_sweep"), task=check.runs.get("task_execution"), probes=list(probes or []))}
+    for e, results in check.engine_results.items():
+        runs[e] = EngineRun(e, error=next((str(m.details.get("error")) for m in results if m.details.get("error")), None))
+    return runs
+
+
+# ---------------------------------------------------------------- the semantic measures
+def reference_state(ref: partnet_mobility.GenSim2Reference, model: UrdfModel, scale: float | None) -> tuple[dict[str, float], str]:
+    """(GenSim2's state of the reference's task joints present in ``model``, the rule): the lower end of
+    ``joint_position_range`` (else 0) clipped to the reference URDF's limits, prismatic values times ``scale`` (else the
+    reference's, else 1). Raises UrdfError: the reference URDF cannot be read."""
+    state: dict[str, float] = {}
+    if ref.urdf is None:
+        return state, ""
+    have = {j.name for j in model.joints}
+    ref_joints = {j.name: j for j in read_urdf(ref.urdf, mode="lenient").joints}
+    rng = ref.joint_position_range
+    for n in ref.task_joints:
+        if n not in have or n not in ref_joints:
+            continue
+        jr = ref_joints[n]
+        q = float(np.clip(rng[0] if rng is not None else 0.0, jr.lower, jr.upper))
+        if jr.type == "prismatic":
+            q *= scale if scale is not None else (ref.scale or 1.0)
+        state[n] = q
+    return state, (("lower end of joint_position_range" if rng is not None else "0")
+                   + " clipped to reference_gensim2.urdf's limits (prismatic x the evaluated scale)")
+
+
+def semantic_metrics(ctx: EstimationContext, model: UrdfModel, state: dict[str, float], closed: dict[str, ClosedState],
+                     resolution: StateResolution | None, masses: dict[str, dict[str, Any]], scale: float | None, scale_source: str,
+                     reference: Path | None, length_scale: float = 1.0) -> list[MetricResult]:
+    """The SPEC's semantic measures of one object, reported and never deciding the verdict: ``scale_deviation`` and
+    ``initial_joint_deviation`` against GenSim2's ``reference`` folder, ``total_mass`` against the category's range at the
+    object's size, ``prompt_alignment`` of the request's states (the joints ``resolution`` set them on, graded from
+    the ``closed`` ends at ``state``) and size. ``masses``: link -> {"mass" kg, "source"}; ``scale``: the object's scale
+    relative to the raw input (None: unknown); ``length_scale``: the object's lengths over ``ctx``'s (its closed
+    extents), 1 when ``ctx`` was read from the object itself.
+
+    Raises:
+        EvaluationError: the reference folder or its files cannot be read.
+    """
+    out: list[MetricResult] = []
+    ref = None
+    if reference is not None:
+        try:
+            ref = partnet_mobility.read_reference(reference)
+            ref_state, rule = reference_state(ref, model, scale)
+        except (ValueError, OSError, UrdfError) as exc:
+            raise EvaluationError(f"reference {reference}: {exc}") from exc
+    out.append(sem.scale_deviation(scale, ref.scale if ref is not None else None, scale_source=scale_source))
+    if ref is None:
+        out.append(MetricResult(name="initial_joint_deviation", value=None, unit="rad", passed=None,
+                                details={"reason": "no reference given"}, engine="none"))
+    else:
+        tj = [j for j in ref.task_joints if j in state] or task_relevant_joints(ctx)
+        m = sem.initial_joint_deviation(state, ref_state, tj, {j.name: j.type for j in model.joints})
+        m.details["reference_rule"] = rule
+        out.append(m)
+    extents = np.asarray(ctx.closed_extents, float) * length_scale
+    largest = float(np.max(extents)) if extents.size and float(np.max(extents)) > 0 else None
+    prior = size_mass_prior(ctx.category, ctx.request)
+    rng, f = scaled_mass_range(prior, extents)
+    mass = sem.mass_plausibility(float(sum(v["mass"] for v in masses.values())), rng, per_link=masses, category=ctx.category)
+    mass.details.update({"size_factor_vs_prior": f, "largest_extent_m": largest, "extent_state": "closed state",
+                         "base_mass_range_kg": prior.get("base_mass_range"), "prior_source": prior.get("source")})
+    if rng is not None:
+        mass.threshold = f"{rng[0]:.3g} kg <= m <= {rng[1]:.3g} kg (category range scaled to the asset's size, f = {f:.3g})"
+    out.append(mass)
+    out.append(_prompt_alignment(ctx, model, state, closed, resolution, prior, largest))
+    return out
+
+
+def _prompt_alignment(ctx: EstimationContext, model: UrdfModel, state: dict[str, float], closed: dict[str, ClosedState],
+                      resolution: StateResolution | None, prior: dict[str, Any], largest: float | None) -> MetricResult:
+    """``prompt_alignment`` of the joints the request set (``resolution.requests``, the one reading of the request)."""
+    spec = ctx.request
+    if not spec.text:
+        return MetricResult(name="prompt_alignment", value=None, unit="fraction", details={"reason": "no prompt"}, engine="none")
+    types = {j.name: j.type for j in model.joints}
+    checks = []
+    requests = resolution.requests if resolution is not None else {}
+    for name, jr in requests.items():
+        c, q = closed.get(name), state.get(name)
+        label = ctx.asset.link(ctx.asset.joint(name).child).semantic_label
+        checks.append(sem.JointStateCheck(name, jr.band, c.fraction(q) if c is not None and q is not None else None, label, jr.phrase,
+                                          jr.target, c.direction * (q - c.q_closed) if c is not None and q is not None else None,
+                                          types.get(name, "revolute")))
+    unmatched = [p for p, _ in (resolution.unapplied if resolution is not None else [])]
+    dims = prior.get("base_dims")
+    m = sem.prompt_alignment(size_requested=spec.size_class is not None, largest_extent=largest,
+                             typical_largest=dims[0] if dims else None, size_factor=float(prior.get("factor", 1.0)),
+                             joint_checks=checks, state_requested=bool(spec.joint_states), unmatched_requests=unmatched,
+                             text=spec.text, understood=spec.understood,
+                             warnings=list(spec.warnings) + list(resolution.warnings if resolution is not None else []))
+    m.details.update({"size_class": spec.size_class, "category": ctx.category, "variant": prior.get("variant"),
+                      "extent_state": "closed state", "prior_note": prior.get("note")})
+    return m
+
+
+def _masses(overlay: Overlay | None, model: UrdfModel) -> dict[str, dict[str, Any]]:
+    """link -> {"mass" kg, "source"}: the overlay's, else the URDF's ``<inertial>``, else the engines' default 1 kg for
+    a link with geometry."""
+    if overlay is not None:
+        return {n: {"mass": float(lp.mass), "source": "overlay.json"} for n, lp in overlay.links.items()}
+    out = {}
+    for n, ln in model.links.items():
+        if ln.inertial is not None and ln.inertial.mass is not None:
+            out[n] = {"mass": float(ln.inertial.mass), "source": "file <inertial>"}
+        elif ln.collisions or ln.visuals:
+            out[n] = {"mass": 1.0, "source": "engine default (no <inertial>)"}
+    return out
+
+
+# ---------------------------------------------------------------- a refine's record presented
+def refined_evaluation(ctx: EstimationContext, att: Attempt, report: RefineReport, resolution: StateResolution | None,
+                       out_dir: Path, *, reference: Path | str | None = None, shown: Path | None = None) -> Evaluation:
+    """The evaluation of a refine's output from its record: ``report``'s metrics (the verdict's, decided once, with its
+    failure mode) and the semantic measures, the final attempt ``att``'s runs as the report's evidence; ``ctx``: the
+    refine's context (input units), ``resolution``: its reading of the request; ``out_dir``: where the output's files
+    are (``shown``: the folder as its user names it). Nothing is read back or simulated."""
+    model = read_urdf(out_dir / output_folder.URDF_NAME, mode="lenient")
+    ref = Path(reference).resolve() if reference is not None else None
+    state = dict(report.initial_joint_positions)
+    semantic = semantic_metrics(ctx, model, state, att.closed_out, resolution, _masses(att.overlay, model), report.scale,
+                                output_folder.OVERLAY_NAME, ref, length_scale=report.scale)
+    metrics = [*report.metrics, *semantic]
+    ev = _evaluation(report.asset_id, (shown or out_dir) / output_folder.URDF_NAME, metrics, report.failure_mode, method="asset2sim",
+                     prompt=report.prompt or None, reference=ref, category=report.category, scale=report.scale,
+                     scale_source=output_folder.OVERLAY_NAME, engines=list(dict.fromkeys(["pybullet", *att.check.engine_results])),
+                     state=state, state_source=output_folder.STATE_NAME, task_joints=task_relevant_joints(ctx),
+                     closed=att.closed_out, notes=[])
+    ev._runs = evidence_runs(att.check)
+    ev._context = Evidence(out_dir / output_folder.URDF_NAME, model, att.check.recording.conventions if att.check.recording else SimConventions(),
+                           report=report.model_dump(mode="json"), overlay=att.overlay.model_dump(mode="json"))
+    return ev
+
+
+def _evaluation(asset_id: str, urdf: Path, metrics: list[MetricResult], failure_mode: str, *, method: str | None, prompt: str | None,
+                reference: Path | None, category: str | None, scale: float | None, scale_source: str, engines: list[str],
+                state: dict[str, float], state_source: str, task_joints: list[str], closed: dict[str, ClosedState], notes: list[str],
+                seed: int = 0, seconds: float = 0.0) -> Evaluation:
+    """The :class:`Evaluation` of ``metrics`` (its failures ``metric@engine`` as :func:`readiness` reads them)."""
+    r = readiness(metrics)
+    return Evaluation(asset_id=asset_id, urdf=str(urdf), method=method, prompt=prompt, reference=str(reference) if reference else None,
+                      category=category, scale=scale, scale_source=scale_source, engines=engines, seed=seed, initial_state=state,
+                      initial_state_source=state_source, task_joints=task_joints,
+                      closed_positions={n: {"q_closed": c.q_closed, "direction": c.direction, "open_range": c.open_range}
+                                        for n, c in closed.items()},
+                      metrics=metrics, passed=failure_mode == "none", failure_mode=failure_mode, failures=r.failures,
+                      notes=notes, seconds=seconds)
+
+
+# ---------------------------------------------------------------- any folder, read and measured
+def file_overlay(model: UrdfModel, name: str = "file") -> Overlay:
+    """The physics a simulator loads from ``model`` when the folder holds no ``overlay.json``: every ``<inertial>`` (a
+    link with geometry and none: the engines' default 1 kg, unit inertia), every movable joint's ``<dynamics>`` (0 when
+    not written), no springs, scale 1 (the file as it is)."""
+    links = {}
+    for n, ln in model.links.items():
+        i = ln.inertial
+        if i is not None and i.mass is not None and i.mass > 0:
+            t = np.asarray(i.inertia_in_link_axes() if i.inertia is not None else np.eye(3), float)
+            links[n] = LinkPhysics(mass=float(i.mass), inertia=Inertia(ixx=t[0, 0], ixy=t[0, 1], ixz=t[0, 2], iyy=t[1, 1], iyz=t[1, 2],
+                                                                       izz=t[2, 2]), com=tuple(float(x) for x in i.com()),
+                                   source="file <inertial>")
+        elif ln.collisions or ln.visuals:
+            links[n] = LinkPhysics(mass=1.0, inertia=Inertia(ixx=1.0, iyy=1.0, izz=1.0), com=(0.0, 0.0, 0.0),
+                                   source="engine default (no <inertial>)")
+    joints = {j.name: JointDynamics(damping=j.damping, friction=j.friction, source="file <dynamics>") for j in model.movable_joints}
+    return Overlay(estimator=EstimatorInfo(name=name), scale=1.0, links=links, joints=joints)
+
+
+def closed_ends(files: RefinedAsset, joints: list[str] | None = None) -> tuple[dict[str, ClosedState], str]:
+    """(joint -> closed end of ``joints`` (default every movable joint) of the folder's URDF, where they come from): those
+    its ``report.json`` recorded when it holds them all (a refine's decision, read once), else measured
+    (:func:`~asset2sim.tasks.geometry.urdf_closed.measure_closed_ends`), a joint that does not open there (or when the
+    measurement fails) closed at its limit nearest 0 (a continuous joint at 0, range pi). Rad or m.
+
+    Raises:
+        EvaluationError: the URDF cannot be read.
+    """
+    try:
+        model = files.model
+    except (OSError, ValueError, UrdfError) as exc:
+        raise EvaluationError(f"{files.folder}: {one_line(exc)}") from exc
+    try:
+        report = files.report if (files.folder / output_folder.REPORT_NAME).is_file() else None
+    except (OSError, ValueError):  # not a refine's report: the closed ends are measured
+        report = None
+    names = [j.name for j in model.movable_joints] if joints is None else list(joints)
+    rec = report.closed_ends if report is not None else {}
+    if names and all(n in rec for n in names):
+        def bound(v, default: float) -> float:
+            return default if v is None else float(v)
+        return {n: ClosedState(n, float(rec[n]["q_closed"]), float(rec[n]["direction"]), float(rec[n]["open_range"]),
+                               bound(rec[n].get("lower"), -math.inf), bound(rec[n].get("upper"), math.inf)) for n in names}, "report.json"
+    try:
+        measured = measure_closed_ends(UrdfFile(files.urdf_path)).closed
+    except Exception:  # the geometry cannot be measured: every joint closed at its limit nearest 0
+        measured = {}
+    out = {}
+    for n in names:
+        c = measured.get(n)
+        out[n] = c if c is not None and c.open_range > 0 else _closed_fallback(model.joint(n))
+    return out, "geometry (closed_state)"
+
+
+def _closed_fallback(j) -> ClosedState:
+    """The closed end of joint ``j`` without geometry: the limit nearest 0 (continuous: 0, range pi)."""
+    lo, hi = j.lower, j.upper
+    if j.type == "continuous" or not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
+        return ClosedState(j.name, 0.0, 1.0, math.pi, -math.inf, math.inf)
+    qc = lo if abs(lo) <= abs(hi) else hi
+    return ClosedState(j.name, float(qc), 1.0 if qc == lo else -1.0, float(hi - lo), float(lo), float(hi))
+
+
+def sim_object(files: RefinedAsset, conventions: SimConventions | None = None) -> tuple[SimObject, str]:
+    """(the folder's URDF as every check simulates it, where its state comes from): at ``initial_state.json``'s state
+    (the other movable joints at 0 clipped to their limits), with ``overlay.json``'s springs and the root as declared,
+    under ``conventions`` (default the SPEC's).
+
+    Raises:
+        EvaluationError: the URDF, ``initial_state.json`` or ``overlay.json`` cannot be read.
+    """
+    try:
+        model, given = files.model, files.initial_state
+        state = {j.name: float(given.get(j.name, np.clip(0.0, j.lower, j.upper))) for j in model.movable_joints}
+        obj = SimObject(UrdfFile(files.urdf_path), state, files.springs_about(state), conventions or SimConventions(), files.root.fixed)
+    except (OSError, ValueError, UrdfError, OutputError) as exc:
+        raise EvaluationError(f"{files.folder}: {one_line(exc)}") from exc
+    return obj, output_folder.STATE_NAME if given else "none: 0 clipped to the limits"
+
+
+def task_joints(asset: AssetDescription, category: str, reference: Path | None = None) -> tuple[list[str], str]:
+    """(the task-relevant joints of ``asset``, the rule): the movable joints of GenSim2's ``reference`` that ``asset``
+    has (GenSim2 keeps only the task's joint movable), else the category's choice by part label
+    (:func:`asset2sim.tasks.interpret.part_priors.task_relevant_joints`). Raises EvaluationError: an unreadable reference."""
+    movable = [j.name for j in asset.movable_joints()]
+    if reference is not None:
+        try:
+            tj = [j for j in partnet_mobility.read_reference(reference).task_joints if j in movable]
+        except (ValueError, OSError, UrdfError) as exc:
+            raise EvaluationError(f"reference {reference}: {exc}") from exc
+        if tj:
+            return tj, "movable joints of reference_gensim2.urdf"
+    return part_task_joints(category, [(n, asset.link(asset.joint(n).child).semantic_label) for n in movable])
+
+
+def _stated_scale(report: RefineReport | None, overlay: Overlay | None, baseline: dict | None, ctx: EstimationContext,
+                  reference: Path | None) -> tuple[float | None, str]:
+    """(the evaluated object's scale relative to the raw input, its source): the first record stating one
+    (``report.json``, ``overlay.json``, ``baseline.json``), else its closed extents against those of the ``reference``
+    folder's raw ``mobility.urdf`` (largest over largest), else unknown."""
+    for value, name in ((report.scale if report else None, "report.json"), (overlay.scale if overlay else None, "overlay.json"),
+                        ((baseline or {}).get("scale"), "baseline.json")):
+        if isinstance(value, (int, float)):
+            return float(value), name
+    raw = reference / partnet_mobility.URDF_NAMES[0] if reference is not None else None
+    if raw is not None and raw.is_file():
+        try:
+            b = float(np.max(measure_closed_ends(UrdfFile(raw)).extents))
+        except Exception:  # the raw geometry cannot be measured: the scale stays unknown
+            b = 0.0
+        a = float(np.max(ctx.closed_extents))
+        if a > 0 and b > 0:
+            return a / b, "geometry: largest closed extent vs the reference folder's raw mobility.urdf"
+    return None, "unknown"
+
+
+def _read(folder: RefinedAsset, notes: list[str]) -> tuple[RefineReport | None, dict | None, dict | None, Overlay | None]:
+    """(``report.json`` as a refine's report, as JSON, ``baseline.json``, ``overlay.json``) of ``folder``, each None when
+    absent; a ``report.json`` that is not a refine's is shown in the report but not read as one (noted in ``notes``).
+    Raises EvaluationError: a file exists but cannot be read."""
+    try:
+        raw = folder.record(output_folder.REPORT_NAME)
+        baseline = folder.record("baseline.json")
+        overlay = folder.overlay
+    except (OSError, ValueError) as exc:
+        raise EvaluationError(f"{folder.folder}: {one_line(exc)}") from exc
+    report = None
+    if isinstance(raw, dict):
+        try:
+            report = folder.report
+        except (OSError, ValueError) as exc:
+            notes.append(f"report.json is not a refine's report ({one_line(exc, 200)}): its closed ends, request and task not used")
+    return report, raw if isinstance(raw, dict) else None, baseline if isinstance(baseline, dict) else None, overlay
 
 
 def evaluate_asset(
-    urdf_dir_or_path: Path | str, *, reference: Path | str | None = None, prompt: str | None = None,
-    engines: tuple[str, ...] | list[str] = ("pybullet",), seed: int = 0, category: str | None = None, method: str | None = None,
-    out_dir: Path | str | None = None, write_report: bool = False, probes: bool = True, conventions: SimConventions | None = None,
-    measured: list[MetricResult] | None = None, recording: RestRecording | None = None, views: dict[str, np.ndarray] | None = None,
-    views_state: dict[str, float] | None = None, checks: list[MetricResult] | None = None, task: str | None = None,
-    recorded: RecordedRuns | None = None, shown_urdf: Path | str | None = None, clips: bool = True,
-    evaluation_json: bool = True,
+    asset: Path | str, *, reference: Path | str | None = None, prompt: str | None = None,
+    engines: tuple[str, ...] | list[str] | None = None, seed: int = 0, category: str | None = None, method: str | None = None,
+    out_dir: Path | str | None = None, write_report: bool = False, probes: bool = False, conventions: SimConventions | None = None,
+    task: str | None = None, clips: bool = True, views: dict[str, np.ndarray] | None = None,
 ) -> Evaluation:
-    """Evaluate one asset with every registered metric.
+    """Evaluate any asset folder or URDF file with the checks a refine runs (module docstring).
 
     Args:
-        urdf_dir_or_path: asset folder or URDF file (sidecars beside it used when present).
-        reference: GenSim2's reference folder (None: no reference metrics); prompt: the request.
-        engines: engine names (unavailable ones: skipped metrics); seed, method: recorded.
-        out_dir: where ``evaluation.json`` and (``write_report``) ``report.html`` go.
-        measured: the first engine's rest-test metrics already measured (the post-check's):
-            recorded as they are, that engine's rest test not run again.
-        recording: the post-check's rest test (``RestRecording``), reused where it matches.
-        views, views_state: renders already taken (view -> (H, W, 3) uint8) at ``views_state`` (rad/m).
-        checks: the post-check's results: those not measured here (same name and engine) are recorded.
-        task: the manipulation task the probes and ``task_execution`` try (None: no task execution).
-        recorded: the post-check's sweep and robust-rest runs (``RecordedRuns``), reused when inputs match.
-        shown_urdf: the URDF path recorded instead of the evaluated one.
-        clips: with ``write_report``, also write the clips of each task-relevant joint's sweep into
-            ``out_dir/clips/`` (:func:`asset2sim.tasks.evaluation.clips.sweep_clips`) and play them in the report;
-            a clip that cannot be drawn is a note, never a failed evaluation.
-        evaluation_json: write ``evaluation.json`` into ``out_dir`` (False: only ``report.html`` and the clips, for
-            the media phase of an output whose evaluation is already written).
+        asset: folder (its URDF found as refine finds one) or URDF file; ``overlay.json``, ``initial_state.json`` (state,
+            root), ``report.json`` (the closed ends a refine decided), ``baseline.json``, ``semantics.txt`` and
+            ``meta.json`` beside it are read when present.
+        reference: GenSim2's reference folder (None: no reference measures); prompt: the request (None: the report's).
+        engines: the engines to measure in, the manipulation tiers (sweep, operability, robust rest) in each (unavailable
+            ones: skipped); None: as a refine checks, the tiers in PyBullet and the SPEC's rest metrics in the engines a
+            refined folder's ``report.json`` measured in (else PyBullet alone). seed, method: recorded.
+        category: overrides the folder's; conventions: the measurement conventions (default the SPEC's).
+        out_dir: where ``evaluation.json`` and (``write_report``) ``report.html`` and the clips (``clips``) go.
+        probes: also run the passive probes (a learnability stand-in: reported, never deciding the verdict).
+        task: the manipulation task the task tier performs (None: the report's task, else none).
+        views: renders already taken at the evaluated state (view -> (H, W, 3) uint8) for the report.
 
     Raises:
-        EvaluationError: the asset or reference cannot be read.
+        EvaluationError: the asset, its records or the reference cannot be read.
         ValueError: ``write_report`` without ``out_dir``; no engine given.
     """
     if write_report and out_dir is None:
         raise ValueError("write_report needs out_dir")
-    if not engines:
+    if engines is not None and not engines:
         raise ValueError("at least one engine is needed")
     t0 = time.perf_counter()
-    ctx = build_context(urdf_dir_or_path, reference=reference, prompt=prompt, category=category, conventions=conventions)
-    need_closed = _joints_to_close(ctx)
-    _set_task(ctx, task, need_closed)
-    reuse_engine = engines[0] if measured is not None else None
-    runs = _run_engines(ctx, engines, need_closed, probes=probes, keep_geometry=write_report, reuse_engine=reuse_engine,
-                        recording=recording, recorded=recorded)
-    results = _metric_results(ctx, runs, probes=probes, measured=measured, reuse_engine=reuse_engine, checks=checks)
-    ev = _evaluation(ctx, runs, results, engines=engines, method=method, prompt=prompt, seed=seed, shown_urdf=shown_urdf, t0=t0)
+    if reference is not None and not Path(reference).is_dir():
+        raise EvaluationError(f"reference {reference}: no such folder")
+    try:
+        urdf = partnet_mobility.find_urdf(asset).resolve()
+        files = RefinedAsset(urdf.parent, urdf.name)
+        model = files.model
+        desc = extract_asset(asset, category=category)
+    except (AssetError, UrdfError, OSError) as exc:
+        why = one_line(" ".join(str(exc).split()), 600)  # a validation refusal lists its findings after its first line
+        raise EvaluationError(why if str(Path(asset)) in why or str(Path(asset).name) in why else f"{asset}: {why}") from exc
+    notes: list[str] = []
+    report, raw_report, baseline, overlay = _read(files, notes)
+    prompt = prompt if prompt is not None else (report.prompt if report is not None else None)
+    task = task if task is not None else (report.task if report is not None else None)
+    cat = category or (report.category if report is not None else None) or (baseline or {}).get("category")
+    every = engines is not None  # the engines named: the manipulation tiers in each of them
+    recorded = sorted({m.engine for m in report.metrics} - {"none", "pybullet"}) if report is not None else []
+    engines = list(dict.fromkeys(["pybullet", *(engines if every else recorded)]))
+    config = RefineConfig(engines=engines, **({"sim": conventions} if conventions is not None else {}))
+    obj, state_source = sim_object(files, config.sim)
+    state = dict(obj.state)
+    physics = overlay if overlay is not None else file_overlay(model)
+    closed, _ = closed_ends(files) if report is not None and report.closed_ends else ({}, "")
+    if obj.fixed_base:
+        notes.append("root fixed as initial_state.json declares (mounted asset): every simulation holds it, no ground plane")
+    with build_context(desc, prompt or "", config, category=cat) as (ctx, kin):
+        closed = closed or ctx.closed
+        ct = closed_tuples(closed)
+        spec = task_tier.task_spec_for(task, desc, ctx.category, task_relevant_joints(ctx), state, ct) if task else None
+        if spec is not None:
+            notes.append(f"task {task!r}: {', '.join(spec.actions)} {', '.join(spec.joints) or 'no joint'} ({spec.rule})"
+                         + "".join(f"; {n}" for n in spec.notes))
+        check = postcheck.check_object(replace(ctx, task=task), obj, config, ct, spec)
+        measured = check.metrics + [m for res in check.engine_results.values() for m in res]
+        measured += [m for e in engines if every and e != "pybullet" for m in _manipulation(e, obj, ct, ctx, check)]
+        asked = as_asked.as_asked_tier(ctx, kin, physics.model_copy(update={"scale": 1.0}), state, closed, measured,
+                                       rounds=report.escalation if report is not None else None)
+        found = _probes(ctx, obj, closed, spec, notes) if probes else None
+        ref = Path(reference).resolve() if reference is not None else None
+        scale, source = _stated_scale(report, overlay, baseline, ctx, ref)
+        semantic = semantic_metrics(ctx, model, state, closed, asked.resolution, _masses(overlay, model), scale, source, ref)
+        metrics = [*asked.metrics, *semantic, *([probe_tier.probes_metric(found)] if found is not None else [])]
+        ev = _evaluation((report.asset_id if report is not None else None) or (baseline or {}).get("asset_id") or desc.asset_id, urdf,
+                         metrics, readiness(metrics).failure_mode,
+                         method=method or (baseline or {}).get("method") or ("asset2sim" if overlay is not None else None),
+                         prompt=prompt, reference=ref,
+                         category=ctx.category, scale=scale, scale_source=source, engines=list(engines), state=state,
+                         state_source=state_source, task_joints=task_relevant_joints(ctx), closed=closed, notes=notes, seed=seed,
+                         seconds=time.perf_counter() - t0)
+    ev._runs = evidence_runs(check, found)
+    ev._context = Evidence(urdf, model, config.sim, report=raw_report, overlay=files.record(output_folder.OVERLAY_NAME),
+                           baseline=baseline)
     if out_dir is not None:
-        same_state = views is not None and views_state is not None and dict(views_state) == dict(ev.initial_state)
-        clip_set = _write_clips(ev, runs, engines[0], out_dir) if write_report and clips else None
-        write_evaluation(ev, out_dir, report=write_report, views=views if same_state else None, clips=clip_set,
-                         evaluation_json=evaluation_json)
+        clip_set = _write_clips(ev, out_dir) if write_report and clips else None
+        write_evaluation(ev, out_dir, report=write_report, views=views, clips=clip_set)
     return ev
+
+
+def _manipulation(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]], ctx: EstimationContext,
+                  check: postcheck.PostCheck) -> list[MetricResult]:
+    """The manipulation tiers (joint sweep, operability, robust rest) of ``obj`` in another ``engine``, as the post-check
+    measures them in PyBullet (the parts asked to move freely those of ``check``); skipped where the engine is not
+    installed, failed where it cannot load or step the object."""
+    free = tuple(sorted(((check.metric("robust_rest").details or {}).get("free_moving") or {}))) if check.runs else ()
+    try:
+        return manipulation.measure_manipulation(engine, obj, closed, category=ctx.category,
+                                                 labels=task_tier.link_labels(ctx.asset), free_joints=free)
+    except EngineUnavailable as exc:
+        why, passed = {"skipped": str(exc)}, None
+    except Exception as exc:  # the object does not load or step in this engine: a failure there
+        why, passed = {"error": f"{type(exc).__name__}: {one_line(exc)}"}, False
+    return [MetricResult(name=n, value=None, unit=unit(n), passed=passed, details=dict(why), engine=engine)
+            for n in manipulation.MANIPULATION_METRICS]
+
+
+def recorded_evaluation(out_dir: Path | str, *, reference: Path | str | None = None) -> Evaluation:
+    """A refined output's ``evaluation.json`` (the record as the refine presented it; measured anew when the folder has
+    none), with the runs of its checks run again on the folder (:func:`evaluate_asset`) as ``report.html``'s evidence:
+    what the media phase draws, never a second verdict. Raises EvaluationError: the folder cannot be read."""
+    measured = evaluate_asset(out_dir, reference=reference)
+    try:
+        ev = Evaluation.model_validate(output_folder.read_record(Path(out_dir) / EVALUATION_NAME))
+    except (OSError, ValueError):
+        return measured
+    ev._runs, ev._context = measured._runs, measured._context
+    return ev
+
+
+def _probes(ctx: EstimationContext, obj: SimObject, closed: dict[str, ClosedState], spec: Any, notes: list[str]) -> list[Any]:
+    """The passive probes (:func:`asset2sim.tasks.check.probes.probe_object`) of the task's joints and actions (``spec``),
+    else of the task-relevant joints both ways; a spring's joint rebounds by design. Notes go to ``notes``."""
+    joints = spec.joints if spec is not None else task_relevant_joints(ctx)
+    targets = {n: (c.q_closed, c.direction, c.open_range) for n, c in closed.items() if n in joints}
+    hold = task_tier.hold_required(ctx.asset, list(targets), dict(obj.springs), ctx.category, free_moving=ctx.request.free_moving,
+                                   spring_requested=ctx.request.spring)
+    found, more = probe_tier.probe_object(obj, targets, actions=tuple(spec.actions) if spec is not None else ("close", "open"),
+                                          holds_position=bool(ctx.request.holds_position),
+                                          returns={n for n, h in hold.items() if not h})
+    notes += more
+    return found
 
 
 def clip_joints(task_joints: list[str], swept: list[str], labels: dict[str, str | None]) -> list[str]:
@@ -113,20 +536,19 @@ def clip_joints(task_joints: list[str], swept: list[str], labels: dict[str, str 
     return first + rest
 
 
-def _write_clips(ev: Evaluation, runs: dict[str, EngineRun], engine: str, out_dir: Path | str) -> ClipSet | None:
-    """The sweep clips of ``engine``'s run (:func:`clip_files.sweep_clips`) of the task-relevant joints, else every swept
+def _write_clips(ev: Evaluation, out_dir: Path | str) -> ClipSet | None:
+    """The sweep clips of PyBullet's run (:func:`clip_files.sweep_clips`) of the task-relevant joints, else every swept
     joint; None, with a note in ``ev.notes``, when they cannot be drawn (no sweep, no PyAV, a render error)."""
-    sweep = getattr(runs.get(engine), "sweep", None)
-    if not isinstance(sweep, SweepRun) or not sweep.joints:
-        ev.notes.append(f"clips: none ({engine} ran no joint sweep)")
+    run = ev._runs.get("pybullet")
+    sweep = getattr(run, "sweep", None)
+    if sweep is None or not sweep.joints:
+        ev.notes.append("clips: none (pybullet ran no joint sweep)")
         return None
-    ctx = ev._context
-    labels = {n: (ctx.semantics or {}).get(j.child, (None, None))[1] for n, j in ctx.joints.items()}
+    model = ev._context.model
+    labels = _joint_labels(ev._context.urdf, model)
     joints = clip_joints(ev.task_joints, [js.joint for js in sweep.joints], labels)
-    ctx_urdf = ev._context.urdf  # the files evaluated (a refine's staging folder; ``ev.urdf`` names the published one)
     try:
-        return clip_files.sweep_clips(ctx_urdf, sweep, joints, dict(ev.initial_state), out_dir,
-                                      task_run=getattr(runs.get(engine), "task", None))
+        return clip_files.sweep_clips(ev._context.urdf, sweep, joints, dict(ev.initial_state), out_dir, task_run=run.task)
     except ImportError as exc:
         ev.notes.append(f"clips skipped: {exc} (pip install av)")
     except Exception as exc:  # a clip must not cost the evaluation (a full disk shows again writing evaluation.json)
@@ -135,135 +557,35 @@ def _write_clips(ev: Evaluation, runs: dict[str, EngineRun], engine: str, out_di
     return None
 
 
-def _joints_to_close(ctx: Context) -> list[str]:
-    """The joints whose closed ends the evaluation needs: the task-relevant ones (set into ``ctx.task_joints``, their
-    rule noted), those the request names, then every movable joint (the joint sweep drives every one)."""
-    pre_req = labelled_joints(ctx.request, ctx.joints, ctx.semantics, ctx.category)
-    ctx.task_joints, tj_rule = task_joints(ctx.joints, ctx.reference_dir, pre_req, ctx.category, ctx.semantics)
-    ctx.notes.append(f"task-relevant joints: {', '.join(ctx.task_joints) or 'none'} ({tj_rule})")
-    return list(dict.fromkeys(ctx.task_joints + pre_req + ctx.movable))
-
-
-def _set_task(ctx: Context, task: str | None, need_closed: list[str]) -> None:
-    """``task`` parsed into ``ctx.task`` (None without a task: task execution is not run) and noted; of a task on
-    several joints only those with work to do at the initial state (:func:`with_work_to_do`, the closed ends first)."""
-    tspec = parse_task(task, ctx.joints, ctx.semantics, ctx.category, ctx.task_joints) if task else None
-    if tspec is not None and len(tspec.joints) > 1:
-        if need_closed and not ctx.closed:
-            set_closed_ends(ctx, need_closed)
-        tspec = with_work_to_do(tspec, {n: c.fraction(ctx.initial_state[n]) for n, c in ctx.closed.items()
-                                        if n in ctx.initial_state and c.open_range > 0})
-    ctx.task = tspec
-    if tspec is not None:
-        ctx.notes.append(f"task {task!r}: {', '.join(tspec.actions)} {', '.join(tspec.joints) or 'no joint'} ({tspec.rule})"
-                         + "".join(f"; {n}" for n in tspec.notes))
-
-
-def _run_engines(ctx: Context, engines: tuple[str, ...] | list[str], need_closed: list[str], *, probes: bool, keep_geometry: bool,
-                 reuse_engine: str | None, recording: RestRecording | None, recorded: RecordedRuns | None) -> dict[str, EngineRun]:
-    """engine -> its :class:`EngineRun`, in the order of ``engines``; errors noted. PyBullet runs first and computes
-    the closed ends of ``need_closed`` (else they are computed after the runs); ``reuse_engine`` runs no rest test."""
-    runs: dict[str, EngineRun] = {}
-    for e in sorted(engines, key=lambda e: e != "pybullet"):
-        pending = need_closed if (e == "pybullet" and not ctx.closed) else None
-        runs[e] = run_engine(ctx, e, probes=probes and e == "pybullet", keep_geometry=keep_geometry, closed_for=pending,
-                             rest_test=e != reuse_engine, recording=recording, recorded=recorded)
-        if runs[e].error:
-            ctx.notes.append(f"{e}: {runs[e].error}")
-    if need_closed and not ctx.closed:
-        set_closed_ends(ctx, need_closed)
-    return {e: runs[e] for e in engines}
-
-
-def _metric_results(ctx: Context, runs: dict[str, EngineRun], *, probes: bool, measured: list[MetricResult] | None,
-                    reuse_engine: str | None, checks: list[MetricResult] | None) -> list[MetricResult]:
-    """Every registered metric's results in registry order (``reuse_engine``'s rest-test metrics taken from
-    ``measured``), then those of ``checks`` the evaluation did not measure itself (same name and engine)."""
-    results: list[MetricResult] = []
-    for spec in METRICS.values():
-        if spec.name == "probes" and not probes:
-            continue
-        if reuse_engine is not None and spec.name in REST_TEST_METRICS:
-            results += [m for m in measured if m.name == spec.name and m.engine == reuse_engine]
-            others = {e: r for e, r in runs.items() if e != reuse_engine}
-            results += _apply(spec, ctx, others) if others else []
-        else:
-            results += _apply(spec, ctx, runs)
-    if checks:
-        have = {(m.name, m.engine) for m in results}
-        results += [m for m in checks if (m.name, m.engine) not in have]
-    # a word about motion the physical verdict contradicts, on the joints whose overlay says it applied the word
-    sources = {n: str(j.get("source") or "") for n, j in ((ctx.overlay or {}).get("joints") or {}).items()}
-    words = [(w, [n for n in joints if f"request '{w.phrase}'" in sources.get(n, "")])
-             for w, joints in motion_joints(ctx.request, ctx.joints, ctx.semantics, ctx.task_joints, ctx.category)]
-    return as_asked.word_conflicts(results, words)
-
-
-def _apply(spec: MetricSpec, ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
-    """``spec``'s results, or one failed result naming the error: one broken metric must not hide the others."""
+def _joint_labels(urdf: Path, model: UrdfModel) -> dict[str, str | None]:
+    """joint -> its moving link's part label (``semantics.txt`` beside ``urdf``; None without one)."""
     try:
-        return list(spec.fn(ctx, runs))
-    except Exception as exc:
-        return [MetricResult(name=spec.name, value=None, unit="", passed=False, details={"error": f"{type(exc).__name__}: {exc}"},
-                             engine="none")]
+        semantics = partnet_mobility.read_semantics(urdf.parent)
+    except AssetError:
+        semantics = {}
+    return {j.name: (semantics.get(j.child) or (None, None))[1] for j in model.joints if j.type in MOVABLE}
 
 
-def _evaluation(ctx: Context, runs: dict[str, EngineRun], results: list[MetricResult], *, engines: tuple[str, ...] | list[str],
-                method: str | None, prompt: str | None, seed: int, shown_urdf: Path | str | None, t0: float) -> Evaluation:
-    """The :class:`Evaluation` (``seconds`` since ``t0``, :func:`time.perf_counter`), with ``runs`` and ``ctx`` attached."""
-    failures = [f"{m.name}@{m.engine}" for m in results if m.passed is False]
-    ev = Evaluation(
-        asset_id=ctx.asset_id, urdf=str(shown_urdf or ctx.urdf),
-        method=method or (ctx.baseline or {}).get("method") or ("asset2sim" if ctx.overlay else None), prompt=prompt,
-        reference=str(ctx.reference_dir) if ctx.reference_dir else None, category=ctx.category, scale=ctx.scale,
-        scale_source=ctx.scale_source, engines=list(engines), seed=seed, initial_state=ctx.initial_state,
-        initial_state_source=ctx.initial_state_source, task_joints=ctx.task_joints,
-        closed_positions={n: {"q_closed": c.q_closed, "direction": c.direction, "open_range": c.open_range} for n, c in ctx.closed.items()},
-        metrics=results, passed=not failures and all(r.error is None for r in runs.values()),
-        failures=failures + [f"engine@{e}" for e, r in runs.items() if r.error], notes=ctx.notes, seconds=time.perf_counter() - t0,
-    )
-    ev._runs = runs
-    ev._context = ctx
-    return ev
+def write_media(ev: Evaluation, out_dir: Path | str, *, views: dict[str, np.ndarray] | None = None, clips: bool = True) -> Path:
+    """``report.html`` of ``ev`` (and its clips, with ``clips``) into ``out_dir``; returns the report's path."""
+    clip_set = _write_clips(ev, out_dir) if clips else None
+    return write_evaluation(ev, out_dir, report=True, views=views, clips=clip_set, evaluation_json=False)[REPORT_HTML_NAME]
 
 
-def evaluate_refined(out_dir: Path | str, report: RefineReport, *, recording: RestRecording | None = None,
-                     reference: Path | str | None = None, views: dict[str, np.ndarray] | None = None,
-                     views_state: dict[str, float] | None = None, checks: list[MetricResult] | None = None,
-                     recorded: RecordedRuns | None = None, shown: Path | str | None = None, clips: bool = True,
-                     html: bool = True, evaluation_json: bool = True) -> dict[str, Path]:
-    """Evaluate a refined output folder and write ``evaluation.json`` and ``report.html`` beside its ``report.json``
-    (refine's extras); the report's ``prompt``, ``category`` and ``task`` are used, the other arguments as in
-    :func:`evaluate_asset`. ``shown``: the output folder as its user will find it (the staging folder of a rerun is swapped
-    in later; None: ``out_dir``); ``clips``: write the sweep clips (``clips/``) too; ``html``: write ``report.html`` (False:
-    the verdict's phase alone, no clips); ``evaluation_json``: write ``evaluation.json`` (False: the media phase of an
-    output evaluated before). Returns the paths written ({"evaluation": path, "report": path}). Raises EvaluationError:
-    the folder cannot be read."""
-    out_dir = Path(out_dir)
-    evaluate_asset(out_dir, reference=reference, prompt=report.prompt or None, category=report.category,
-                   method="asset2sim", out_dir=out_dir, write_report=html, recording=recording,
-                   views=views, views_state=views_state, checks=checks, recorded=recorded, task=report.task,
-                   shown_urdf=None if shown is None else Path(shown) / URDF_NAME, clips=clips and html,
-                   evaluation_json=evaluation_json)
-    return {**({"evaluation": out_dir / EVALUATION_NAME} if evaluation_json else {}),
-            **({"report": out_dir / REPORT_HTML_NAME} if html else {})}
-
-
-def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True,
-                     views: dict[str, np.ndarray] | None = None, clips: ClipSet | None = None,
-                     evaluation_json: bool = True) -> dict[str, Path]:
+def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True, views: dict[str, np.ndarray] | None = None,
+                     clips: ClipSet | None = None, evaluation_json: bool = True) -> dict[str, Path]:
     """Write ``evaluation.json`` (unless ``evaluation_json`` is False) and, with ``report``, ``report.html`` (``views`` the
     renders at ``ev.initial_state`` when taken; ``clips`` the clips written in ``out_dir/clips/``, played in the report)
-    into ``out_dir`` atomically; returns {"evaluation": path, "report": path} for the files written."""
+    into ``out_dir`` atomically; returns file name -> path for the files written."""
     out_dir = Path(out_dir)
     paths = {}
     if evaluation_json:  # its wall time apart (timings.json), so two evaluations of the same files write the same bytes
         data = ev.model_dump(mode="json", exclude={"seconds"})
         data["urdf"] = portable_urdf(ev, out_dir)  # no absolute path: the same refine into two folders writes the same bytes
-        paths["evaluation"] = write_json(out_dir / EVALUATION_NAME, _jsonable(data))
+        paths[EVALUATION_NAME] = write_json(out_dir / EVALUATION_NAME, _jsonable(data))
         output_folder.merge_timings(out_dir, {"evaluation_seconds": ev.seconds})
     if report:
-        paths["report"] = write_report(ev, out_dir / REPORT_HTML_NAME, views=views, clips=clips)
+        paths[REPORT_HTML_NAME] = write_report(ev, out_dir / REPORT_HTML_NAME, views=views, clips=clips)
     return paths
 
 

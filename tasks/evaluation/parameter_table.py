@@ -31,6 +31,7 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
         return rows
     # step 1: the joint parameters each check round changed
     ov, rep = ctx.overlay, ctx.report
+    joints = {j.name: j for j in ctx.model.joints}
     escal: dict[tuple[str, str], int] = {}
     for rnd in (rep or {}).get("escalation", []) or []:
         for j, ch in (rnd.get("changes") or {}).items():
@@ -51,33 +52,32 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
             if lp.get("material"):
                 rows.append(_param("material", f"link {ln}", lp["material"], "-", src))
         for jn, jd in (ov.get("joints") or {}).items():
-            jt = ctx.joints[jn].type if jn in ctx.joints else "revolute"
+            jt = joints[jn].type if jn in joints else "revolute"
             for k in ("damping", "friction", "stiffness"):
                 src = jd.get("source") or (f"estimator {est}" if est else "overlay")
                 if (jn, k) in escal:
                     src = f"changed after check round {escal[(jn, k)]} (the checks failed; see What asset2sim changed)"
                 val = jd.get(k)
                 # the URDF written after escalation is what is simulated
-                if k in ("damping", "friction") and jn in ctx.joints:
-                    fv = getattr(ctx.joints[jn], k)
-                    if fv is not None and val is not None and abs(fv - val) > 1e-12:
+                if k in ("damping", "friction") and jn in joints:
+                    fv = getattr(joints[jn], k)
+                    if val is not None and abs(fv - val) > 1e-12:
                         val, src = fv, src + " (URDF value differs from overlay; URDF shown)"
                 rows.append(_param(k, f"joint {jn}", val, _joint_unit(jt, k), src))
     # step 3: without an overlay, the URDF's values and the engine defaults
     else:
-        run = next((r for r in ev._runs.values() if r.masses), None)
-        for ln, li in ctx.links.items():
-            m = run.masses.get(ln, {}).get("mass") if run else li.mass
-            src = "URDF <inertial>" if li.mass is not None else "engine default (1 kg, inertia diag(1,1,1) kg*m^2)"
-            rows.append(_param("mass", f"link {ln}", m, "kg", src))
-        for jn, jd in ctx.joints.items():
-            if jd.type not in ("revolute", "continuous", "prismatic"):
+        for ln, li in ctx.model.links.items():
+            declared = li.inertial is not None and li.inertial.mass is not None
+            if not declared and not (li.collisions or li.visuals):
                 continue
+            rows.append(_param("mass", f"link {ln}", li.inertial.mass if declared else 1.0, "kg",
+                               "URDF <inertial>" if declared else "engine default (1 kg, inertia diag(1,1,1) kg*m^2)"))
+        for jd in ctx.model.movable_joints:
             for k in ("damping", "friction"):
-                v = getattr(jd, k)
-                rows.append(_param(k, f"joint {jn}", 0.0 if v is None else v, _joint_unit(jd.type, k),
+                v = getattr(jd.dynamics, k, None) if jd.dynamics is not None else None
+                rows.append(_param(k, f"joint {jd.name}", 0.0 if v is None else v, _joint_unit(jd.type, k),
                                    "URDF <dynamics>" if v is not None else "engine default (0)"))
-            rows.append(_param("stiffness", f"joint {jn}", 0.0, _joint_unit(jd.type, "stiffness"), "none (URDF has no springs)"))
+            rows.append(_param("stiffness", f"joint {jd.name}", 0.0, _joint_unit(jd.type, "stiffness"), "none (URDF has no springs)"))
     # step 4: the initial joint positions and the limits
     state_src = ev.initial_state_source
     if rep and rep.get("state"):
@@ -87,11 +87,11 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
     elif ctx.baseline and ctx.baseline.get("initial_state_rule"):
         state_src = f"baseline rule: {ctx.baseline['initial_state_rule']}"
     for jn, q in ev.initial_state.items():
-        jt = ctx.joints[jn].type if jn in ctx.joints else "revolute"
+        jt = joints[jn].type if jn in joints else "revolute"
         rows.append(_param("initial position", f"joint {jn}", q, _joint_unit(jt, "position"), state_src))
-    for jn, jd in ctx.joints.items():
+    for jd in ctx.model.joints:
         if jd.type in ("revolute", "prismatic"):
-            rows.append(_param("limits", f"joint {jn}", f"[{fmt(jd.lower)}, {fmt(jd.upper)}]", _joint_unit(jd.type, "position"),
+            rows.append(_param("limits", f"joint {jd.name}", f"[{fmt(jd.lower)}, {fmt(jd.upper)}]", _joint_unit(jd.type, "position"),
                                "URDF <limit>"))
     return rows
 

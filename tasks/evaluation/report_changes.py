@@ -17,7 +17,7 @@ from typing import Any, Callable
 import numpy as np
 
 from asset2sim.tasks.check.as_asked import quantity_text
-from asset2sim.tasks.check.asset_files import find_urdf
+from asset2sim.tasks.ingest.partnet_mobility import find_urdf
 from asset2sim.tasks.geometry.render import render_views
 from asset2sim.tasks.ingest import declared as declared_mod
 from asset2sim.formats import staging

@@ -13,7 +13,8 @@ import numpy as np
 
 from asset2sim.atomic import write_text
 from asset2sim.schemas.metrics import METRIC_INFO
-from asset2sim.tasks.check.asset_files import clip_to_limits
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.source import UrdfFile
 from asset2sim.tasks.check.failure_reasons import why_it_failed
 from asset2sim.tasks.check.verdict import UNRESOLVED_PENETRATION_MM, penetration_measures, readiness
 from asset2sim.tasks.evaluation import plots
@@ -25,15 +26,33 @@ from asset2sim.tasks.geometry.render import render_views
 
 
 def _renders(ev, views: dict[str, np.ndarray] | None = None, error: Exception | None = None) -> tuple[str, str]:
-    """(HTML of the object views, what they are); ``views``: the renders, None when ``error`` stopped them."""
+    """(HTML of the object views, what they are); ``views``: the renders, None when ``error`` stopped them (then a plot
+    of the collision vertices at the initial state)."""
     if views is not None:
         return f"<div class='views'>{''.join(figure(v, k) for k, v in views.items())}</div>", "renders"
     note = f"render failed ({type(error).__name__}: {error}); "
-    run = next((r for r in ev._runs.values() if r.point_cloud), None)
-    svg = plots.plot_object(run.point_cloud) if run is not None else None
+    try:
+        svg = plots.plot_object(point_cloud(Path(ev._context.urdf), dict(ev.initial_state)))
+    except Exception:  # no engine either: the report says so
+        svg = None
     if svg is None:
         return "<p class='small'>no geometry recorded</p>", note + "no plot"
     return svg_tag(svg, "collision geometry"), note + "plot of the collision vertices per link"
+
+
+def point_cloud(urdf: Path, state: dict[str, float], max_points: int = 1500) -> dict[str, np.ndarray]:
+    """Link -> (N, 3) m collision vertices in the world frame of ``urdf`` at ``state`` (rad or m, root fixed), at most
+    ``max_points`` per link (evenly picked). Raises what loading the URDF raises."""
+    out = {}
+    with UrdfFile(urdf).open("pybullet", SessionOptions(initial_state=state, fixed_base=True, gravity=False, ground=False)) as session:
+        for name in session.link_names:
+            v = session.link_collision_vertices(name)
+            if not len(v):
+                continue
+            pos, R = session.link_frame(name)
+            w = v @ R.T + pos
+            out[name] = w[np.linspace(0, len(w) - 1, max_points).astype(int)] if len(w) > max_points else w
+    return out
 
 
 def _verdict_table(ev) -> str:
@@ -66,10 +85,10 @@ def _verdict_table(ev) -> str:
 
 def modelled_state(ctx) -> dict[str, float]:
     """Every movable joint of the evaluated URDF at 0 clipped to its limits (rad or m): the pose the asset was
-    modelled in, which a child inside its parent is graded against; {} without a context."""
+    modelled in, which a child inside its parent is graded against; {} without the evaluated files."""
     if ctx is None:
         return {}
-    return {n: clip_to_limits(0.0, j.lower, j.upper) for n, j in ctx.joints.items() if j.type in ("revolute", "prismatic", "continuous")}
+    return {j.name: float(np.clip(0.0, j.lower, j.upper)) for j in ctx.model.movable_joints}
 
 
 def measured_engines(ev) -> list[str]:
@@ -335,7 +354,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
             error = exc
     views_html, views_what = _renders(ev, views, error)
     # step 2: the header, the object at its initial state, the verdicts and the evidence
-    joint_types = {n: j.type for n, j in ctx.joints.items()} if ctx is not None else {}
+    joint_types = {j.name: j.type for j in ctx.model.joints} if ctx is not None else {}
     state_text = ", ".join(f"{k} = {_joint_state(ev, k, v, joint_types.get(k, 'revolute'))}"
                            for k, v in ev.initial_state.items()) or "none"
     sections = [
@@ -372,7 +391,8 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
     # step 3: the rest test's plots per engine
     for eng, run in ev._runs.items():
         if run.trace is None:
-            sections.append(f"<p class='small'>{esc(eng)}: {esc(run.error)}</p>")
+            sections.append(f"<p class='small'>{esc(eng)}: " + esc(run.error or "its verdicts above; the rest test recorded in "
+                                                                  "PyBullet only") + "</p>")
             continue
         sections.append(f"<h3>{esc(eng)}</h3>")
         sections.append(svg_tag(plots.plot_root_drift(run.root_series, run.trace, dt, settle_n), f"root drift {eng}"))
@@ -413,7 +433,7 @@ def write_report(ev, path: Path | str, views: dict[str, np.ndarray] | None = Non
     """Write ``report.html`` atomically (``views`` as in :func:`render_report`); returns the path. Its
     title names ``refine`` when it lies beside the refine's ``report.json`` it reports on, else ``evaluate``."""
     ctx = ev._context
-    by_refine = ctx is not None and ctx.report is not None and Path(path).resolve().parent == Path(ctx.folder).resolve()
+    by_refine = ctx is not None and ctx.report is not None and Path(path).resolve().parent == Path(ctx.urdf).resolve().parent
     return write_text(Path(path), render_report(ev, views, "refine" if by_refine else "evaluate", clips, folder=Path(path).parent))
 
 

@@ -25,6 +25,7 @@ from asset2sim.formats import read_asset_file
 from asset2sim.formats import staging
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.formats import ReadOptions
+from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.partnet_mobility import URDF_NAMES
 from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfJoint, UrdfLink, UrdfModel, parse_urdf_bytes
 
@@ -112,7 +113,8 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
         raise AssetError(f"{urdf}: the validated URDF could not be read: {exc}") from exc
     assert robot is not None
     links = [_link(ln, result.mesh_paths, result.semantics, result.replace_inertials, urdf) for ln in robot.links.values()]
-    joints = [_joint(jt) for jt in robot.joints]
+    held = partnet_mobility.held_bodies(robot.joints, {ln.name: ln.semantic_joint for ln in links})  # the part kinds as meant
+    joints = [_joint(jt, held=jt.name in held) for jt in robot.joints]
     children = {j.child for j in joints}
     roots = [ln.name for ln in links if ln.name not in children]
     if len(roots) != 1:  # validation refuses this; defensive
@@ -132,7 +134,7 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
         category=category or result.category,
         input_hash=sha256_files(files, known=_digests_read(staged_asset), named=_staged_names(staged_asset, folder)),
         staged_from=None if staged_asset is None else Path(os.path.realpath(staged_asset.read.source)),
-        staging_notes=[] if staged_asset is None else list(staged_asset.read.notes))
+        staging_notes=([] if staged_asset is None else list(staged_asset.read.notes)) + list(held.values()))
     if key is not None:
         _EXTRACT_MEMO.put(key, read, (desc, list(result.findings)))
     return desc, list(result.findings)
@@ -266,8 +268,13 @@ def _float_or_none(obj, attr: str) -> float | None:
     return None if value is None else float(value)
 
 
-def _joint(jt: UrdfJoint) -> JointDesc:
-    """The description of one joint (limits on revolute and prismatic joints only; axis default (1, 0, 0))."""
+def _joint(jt: UrdfJoint, held: bool = False) -> JointDesc:
+    """The description of one joint (limits on revolute and prismatic joints only; axis default (1, 0, 0)); ``held``:
+    a movable joint the asset's part kinds hold where it was modelled (:func:`partnet_mobility.held_bodies`), described
+    as the fixed joint the output writes."""
+    if held:
+        return JointDesc(name=jt.name, type="fixed", parent=jt.parent, child=jt.child, origin=_origin(jt.origin),
+                         axis=tuple(float(v) for v in (jt.axis_xyz if jt.axis_xyz is not None else (1.0, 0.0, 0.0))))
     lim, dyn = jt.limit, jt.dynamics
     bounded = jt.type in ("revolute", "prismatic")
     return JointDesc(

@@ -17,7 +17,7 @@ import os
 import stat
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator, NamedTuple
+from typing import Any, Iterable, Iterator, NamedTuple
 
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.manifest import (  # manifest.csv, re-exported: this module is the dataset's one adapter
@@ -145,6 +145,28 @@ def read_semantics(folder: Path) -> dict[str, Semantics]:
         if ln.entry is None:
             raise AssetError(f"{path}:{ln.lineno}: expected 'link_name joint_kind semantic_label', got {ln.text!r}")
         out[ln.link] = ln.entry  # type: ignore[index]
+    return out
+
+
+#: ``semantics.txt`` joint kinds of a part that is the object itself or does not move in use, never a handled part
+#: (SPEC, "Part functions"): ``free`` is the object's own body (a toaster's shell, a bucket's body, a laptop's base;
+#: PartNet-Mobility and GenSim2 ship some on a slider to an empty root link), ``static`` and ``heavy`` parts stay put.
+BODY_KINDS = frozenset({"free", "static", "heavy"})
+
+
+def held_bodies(joints: Iterable[Any], kinds: dict[str, str | None]) -> dict[str, str]:
+    """joint -> why, for every movable joint (revolute, continuous, prismatic) whose child link's ``semantics.txt`` kind
+    (``kinds``: link -> kind or None) is in :data:`BODY_KINDS`: the asset's own annotation says the part does not move
+    as a mechanism, so the asset model holds it where it was modelled (the joint at 0, a fixed joint), as the body does.
+    ``joints``: objects with ``name``, ``type`` and ``child``."""
+    out = {}
+    for j in joints:
+        kind = kinds.get(j.child)
+        if j.type in ("revolute", "continuous", "prismatic") and kind in BODY_KINDS:
+            what = "the object's own body" if kind == "free" else "a part that does not move in use"
+            out[j.name] = (f"joint {j.name} ({j.type}) moves link {j.child}, of kind '{kind}' in semantics.txt: {what}, held "
+                           "where it was modelled as the body holds its pose (written as a fixed joint; never handled, "
+                           "probed or set by a request)")
     return out
 
 

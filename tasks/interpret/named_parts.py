@@ -1,7 +1,6 @@
-"""The parts a request's words name on one object, matched here, in one place, for refine
-(``tasks/synthesize``, on its :class:`PartsContext`) and the evaluation (``tasks/evaluation``, on
-its joint tables: :func:`requested_joints`, :func:`motion_joints`, :func:`labelled_joints`,
-:func:`unmatched_properties`) alike: a part word names the movable joints
+"""The parts a request's words name on one object, matched here, in one place, on the refine's
+:class:`PartsContext` (the state, the dynamics, the as-asked tier and an output read back all read the request
+through it) and on a task's words (:func:`labelled_joints`): a part word names the movable joints
 whose moving link carries its label (:func:`named_joints`, ``part_priors.named_by_word``: its own
 label or a category synonym, else the synonym table), "all" or a missing label the task-relevant
 ones (warned); an ordinal picks one of them (:func:`pick`), counted top to bottom by the moving
@@ -11,17 +10,16 @@ part's box center, or left / right / front / back facing the front, or by size
 
 from __future__ import annotations
 
-from typing import Mapping, Protocol, Sequence
+from typing import Protocol, Sequence
 
 import numpy as np
 
 from asset2sim.schemas.asset import AssetDescription
-from asset2sim.schemas.request import (ORDER_ENDS, DynamicsValue, JointStateRequest, MotionPhrase, RequestSpec, StateTarget,
+from asset2sim.schemas.request import (ORDER_ENDS, DynamicsValue, JointStateRequest, RequestSpec,
                                       ordinal_words)
 from asset2sim.tasks.interpret.part_labels import BODY_LABELS, canonical_label
 from asset2sim.tasks.interpret.part_priors import named_by_word, stand_in_joints
 from asset2sim.tasks.interpret.request_values import PART_RX
-from asset2sim.urdf import MOVABLE
 
 #: Relative difference of box volume below which two parts are the same size ("the smaller door"
 #: names neither).
@@ -38,14 +36,6 @@ class PartsContext(Protocol):
     category: str
     subtrees: dict[str, list[str]]
     request: RequestSpec
-
-
-class JointEntry(Protocol):
-    """A joint of the evaluation's tables (:class:`~asset2sim.tasks.check.asset_files.JointInfo`): its
-    ``type`` and its moving ``child`` link."""
-
-    type: str
-    child: str
 
 
 def named_joints(category: str, word: str | None, joints: Sequence[str],
@@ -229,110 +219,11 @@ def count_warnings(ctx: PartsContext) -> list[str]:
     return out
 
 
-# ---------------------------------------------------------------- the evaluation's joint tables
-def _named(category: str | None, word: str | None, names: list[str], joints: Mapping[str, JointEntry],
-           semantics: dict[str, tuple[str, str]]) -> list[str]:
-    """Of ``names``, the joints whose child's label (``semantics``: link -> (kind, label)) the
-    request's part ``word`` names, as refine matches them (:func:`named_joints`)."""
-    labels = [semantics.get(joints[n].child, (None, None))[1] for n in names]
-    return named_joints(category or "Generic", word, names, labels)
-
-
-def _picked(js: JointStateRequest, names: list[str], joints: Mapping[str, JointEntry],
-            centres: dict[str, np.ndarray], volumes: dict[str, float]) -> list[str]:
-    """``names`` counted and narrowed as refine's ordinals count (:func:`pick`), by each child link's
-    ``centres`` and ``volumes``."""
-    children = {n: joints[n].child for n in names}
-    return pick(js, names, {n: centres[c] for n, c in children.items() if c in centres},
-                {n: volumes.get(c, 0.0) for n, c in children.items()})
-
-
-def requested_joints(spec: RequestSpec | None, joints: Mapping[str, JointEntry], semantics: dict[str, tuple[str, str]],
-                     centres: dict[str, np.ndarray], task_joints: list[str],
-                     category: str | None = None, volumes: dict[str, float] | None = None
-                     ) -> tuple[list[tuple[str, str, str | None, str]], list[str]]:
-    """([(joint, band, label, phrase, target)], [phrases that matched no joint])
-    of a RequestSpec's joint states: ``all`` every task-relevant joint but a continuous one, ``joint``
-    the one named, ``label`` the movable joints whose child's label the word
-    names (else the unlabelled task-relevant ones, which it may name, or the
-    task-relevant ones standing in for the category's main part the word names,
-    ``part_priors.stand_in_joints``; else none: the phrase goes to the second list),
-    top to bottom (or as the request's ``order`` counts) by ``centres`` (link -> (3,) m) or ``volumes`` (link ->
-    box volume, m^3, order ``size``), ``ordinal`` picking one (negative: from the end; :func:`_picked`); a
-    phrase naming a part or joint overrides one naming none, else a later
-    phrase overrides an earlier one."""
-    out, unmatched = [], []
-    if spec is None:
-        return out, unmatched
-    movable = [n for n, j in joints.items() if j.type in MOVABLE]
-    for js in sorted(spec.joint_states, key=lambda js: js.names_part):
-        if js.selector == "all":  # a continuous joint (a knob, a wheel) has no open or closed: not "it" (as refine applies it)
-            names = [n for n in task_joints if n in movable and joints[n].type != "continuous"]
-            if js.ordinal is not None:  # "the second slightly open", "the freezer open": one of them
-                names = _picked(js, names, joints, centres, volumes or {})
-        elif js.selector == "joint":  # an override names the joint itself
-            names = [js.joint] if js.joint in movable else []
-        else:
-            tm = [(n, semantics.get(joints[n].child, (None, None))[1]) for n in task_joints if n in movable and joints[n].type != "continuous"]
-            names = _named(category, js.label, movable, joints, semantics) \
-                or stand_in_joints(category or "", js.label, tm)[0]
-            names = _picked(js, list(names), joints, centres, volumes or {})
-        if not names and not (js.selector == "all" and js.band == "closed" and js.target is None):  # nothing opens: closed as it is
-            unmatched.append(js.phrase or f"{js.label or 'all'} {js.band}")
-        for n in names:
-            out.append((n, js.band, semantics.get(joints[n].child, (None, None))[1], js.phrase, js.target))
-    dedup: dict[str, tuple[str, str, str | None, str, StateTarget | None]] = {}
-    for item in out:
-        dedup[item[0]] = item
-    return list(dedup.values()), unmatched
-
-
-def motion_joints(spec: RequestSpec | None, joints: Mapping[str, JointEntry], semantics: dict[str, tuple[str, str]],
-                  task_joints: list[str], category: str | None = None) -> list[tuple[MotionPhrase, list[str]]]:
-    """Each word of ``spec`` about a part's motion with the movable joints it applies to, as refine applies it: a word
-    naming a part the joints whose child's label names it (:func:`_named`), one naming none ``task_joints``."""
+def labelled_joints(spec: RequestSpec | None, asset: AssetDescription, category: str | None = None) -> list[str]:
+    """Movable joints of ``asset`` the request's ``label`` joint states name (:func:`named_joints`), in request then
+    file order (repeats kept)."""
     if spec is None:
         return []
-    movable = [n for n, j in joints.items() if j.type in MOVABLE]
-    return [(w, [n for n in task_joints if n in movable] if w.label is None else _named(category, w.label, movable, joints, semantics))
-            for w in spec.motions]
-
-
-def labelled_joints(spec: RequestSpec | None, joints: Mapping[str, JointEntry], semantics: dict[str, tuple[str, str]],
-                    category: str | None = None) -> list[str]:
-    """Movable joints the request's ``label`` joint states name, in request then file order (repeats kept)."""
-    out: list[str] = []
-    if spec is None:
-        return out
-    movable = [n for n, j in joints.items() if j.type in MOVABLE]
-    for js in spec.joint_states:
-        if js.selector == "label":
-            out += _named(category, js.label, movable, joints, semantics)
-    return out
-
-
-def unmatched_properties(spec: RequestSpec | None, joints: Mapping[str, JointEntry], semantics: dict[str, tuple[str, str]],
-                         task_joints: list[str], category: str | None = None) -> list[tuple[str, str]]:
-    """(phrase, why) of every mass or material of ``spec`` naming a part no link's label (``semantics``: link ->
-    (kind, label)) carries, and every joint parameter naming a part no movable joint's child carries and none stands
-    in for (``part_priors.stand_in_joints`` over ``task_joints``)."""
-    out: list[tuple[str, str]] = []
-    if spec is None:
-        return out
-    labels = [lab for _, lab in semantics.values()]
-    what = category or "object"
-    for p in spec.properties:
-        if p.label not in (None, "body") and not named_by_word(category or "Generic", p.label, labels)[0]:
-            out.append((p.phrase, f"names a '{p.label}' but this {what} has no such part"))
-    movable = [n for n, j in joints.items() if j.type in MOVABLE]
-    for d in spec.dynamics_values:
-        if d.label is None or _named(category, d.label, movable, joints, semantics):
-            continue
-        tm = [(n, semantics.get(joints[n].child, (None, None))[1]) for n in task_joints if n in movable and joints[n].type != "continuous"]
-        try:
-            stand_in = stand_in_joints(category or "", d.label, tm)[0]
-        except Exception:  # a prior that cannot be read must not stop the evaluation
-            stand_in = []
-        if not stand_in:
-            out.append((d.phrase, f"names a '{d.label}' but no part of this {what} carries that label"))
-    return out
+    joints = asset.movable_joints()
+    names, labels = [j.name for j in joints], [asset.link(j.child).semantic_label for j in joints]
+    return [n for js in spec.joint_states if js.selector == "label" for n in named_joints(category or "Generic", js.label, names, labels)]

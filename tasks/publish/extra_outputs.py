@@ -5,22 +5,21 @@ the loss of the refined asset, except an output folder that cannot be written (`
 from __future__ import annotations
 
 import errno
-from dataclasses import replace
 from pathlib import Path
 
-from asset2sim import atomic, output_folder
+from asset2sim import output_folder
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.extras import install_hint
 from asset2sim.inert import one_line
 from asset2sim.output_paths import raise_refusal
-from asset2sim.output_folder import CLIPS_DIR, URDF_NAME, VIEWS_DIR
+from asset2sim.output_folder import CLIPS_DIR, VIEWS_DIR
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.config import RefineConfig
-from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.report import RefineReport
 from asset2sim.stage_log import StageLog
 from asset2sim.tasks.tune.attempt import Attempt
-from asset2sim.tasks.check.verdict import combine_verdict
+from asset2sim.tasks.synthesize.context import EstimationContext
+from asset2sim.tasks.synthesize.request_apply import StateResolution
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON
 from asset2sim.formats import FORMATS, ReadOptions, staging
@@ -28,7 +27,6 @@ from asset2sim.formats.mjcf.files import staged_sources
 from asset2sim.formats.mjcf.physics import write_host_mjcf
 from asset2sim.formats.usd.physics import write_host_usd
 from asset2sim.tasks.publish import media as media_phase
-from asset2sim.tasks.publish.contract import write_report_json
 
 
 #: errno values of an OSError that says nothing more can be written to the
@@ -108,18 +106,16 @@ def _host_usd(out_dir: Path, source: Path, staged_urdf: Path, config: RefineConf
 _HOST_FILES = {"mjcf": _host_mjcf, "usd": _host_usd}
 
 
-def write_extras(out_dir: Path, report: RefineReport, att: Attempt, log: StageLog, reference: Path | str | None,
-            shown: Path, clips: bool = True, media: bool = True) -> dict[str, str]:
-    """Optional outputs: MJCF and USD exports, the evaluation, and with ``media`` the renders and the HTML report (the
-    renders reused in it; without, ``report.json`` says the media phase is deferred: :mod:`asset2sim.tasks.publish.media`),
-    then ``report.json`` again with their notes and the final stage times. Each failure (an engine or
-    renderer unavailable included) is a note in the report, never the loss of the refined asset, except a
-    full disk, a quota or a read-only file system (``OUTPUT_WRITE_FAILED``). The evaluation reuses the final
-    post-check's rest test when it measured the files as they are now; ``shown``: the output folder as the
-    user named it (``out_dir`` may be a staging folder); ``clips``: the sweep clips too (``clips/``). Returns name -> path."""
-    recording = None if att.rewritten else att.check.recording
-    if recording is not None:  # measured on the workspace's files; publish wrote the same bytes here
-        recording = replace(recording, urdf=(out_dir / URDF_NAME).resolve())
+def write_extras(out_dir: Path, report: RefineReport, att: Attempt, ctx: EstimationContext, resolution: StateResolution | None,
+                 log: StageLog, reference: Path | str | None, shown: Path, clips: bool = True, media: bool = True) -> dict[str, str]:
+    """Optional outputs: the MJCF and USD exports, ``evaluation.json`` (the refine's record presented with the semantic
+    measures: :func:`asset2sim.tasks.evaluation.evaluate.refined_evaluation`, nothing simulated again) and, with
+    ``media``, the renders, the sweep clips (``clips``) and ``report.html`` (without: ``report`` says the media phase is
+    deferred, :mod:`asset2sim.tasks.publish.media`). Each failure (an engine or renderer unavailable included) is a note
+    in ``report``, never the loss of the refined asset, except a full disk, a quota or a read-only file system
+    (``OUTPUT_WRITE_FAILED``); the caller writes ``report.json`` once, after. ``ctx`` and ``resolution``: the refine's
+    context and reading of the request; ``shown``: the output folder as the user named it (``out_dir`` may be a
+    staging folder). Returns name -> path."""
     out: dict[str, str] = {}
     with quiet_stdout():  # engines and renderers print from C; the library must not
         for key, fmt in FORMATS.items():
@@ -132,8 +128,16 @@ def write_extras(out_dir: Path, report: RefineReport, att: Attempt, log: StageLo
                 raise_if_unwritable(exc, out_dir)
                 report.notes.append(f"{what} failed: {one_line(exc)}")
             log.lap(f"extras_{key}")
-        views = None
-        if media:
+        try:
+            ev = evaluate.refined_evaluation(ctx, att, report, resolution, out_dir, reference=reference, shown=shown)
+            evaluate.write_evaluation(ev, out_dir, report=False)
+        except Exception as exc:
+            raise_if_unwritable(exc, out_dir)
+            report.notes.append(f"evaluation.json failed: {type(exc).__name__}: {one_line(exc)}")
+            ev = None
+        log.lap("extras_evaluation")
+        if media and ev is not None:
+            views = None
             try:
                 views = media_phase.output_views(out_dir, report.initial_joint_positions)
                 out["views"] = str(out_dir / VIEWS_DIR)
@@ -141,26 +145,15 @@ def write_extras(out_dir: Path, report: RefineReport, att: Attempt, log: StageLo
                 raise_if_unwritable(exc, out_dir)
                 report.notes.append(f"renders failed: {one_line(exc)}")
             log.lap("extras_render")
-        try:
-            paths = evaluate.evaluate_refined(out_dir, report, recording=recording, reference=reference, recorded=att.check.recorded,
-                                              views=views, views_state=report.initial_joint_positions,
-                                              checks=list(report.metrics) if recording is not None else None,
-                                              shown=shown, clips=clips, html=media)
-            if media:
-                out["html"] = str(paths["report"])
-            if media and clips and (out_dir / CLIPS_DIR / CLIPS_JSON).is_file():
-                out["clips"] = str(out_dir / CLIPS_DIR)
-            ev = Evaluation.model_validate_json(atomic.read_regular(paths["evaluation"], output_folder.MAX_RECORD_BYTES))
-            combine_verdict(report, ev.metrics)  # report.json says what report.html says
-            asked = [m for m in ev.metrics if m.name == "request_met"]  # and names the unmet phrases the verdict read
-            report.metrics = [m for m in report.metrics if m.name != "request_met" or not asked] + asked
-        except Exception as exc:
-            raise_if_unwritable(exc, out_dir)
-            report.notes.append(f"HTML report failed: {type(exc).__name__}: {one_line(exc)}")
-        log.lap("extras_report" if media else "extras_evaluation")
+            try:
+                out["html"] = str(evaluate.write_media(ev, out_dir, views=views, clips=clips))
+                if clips and (out_dir / CLIPS_DIR / CLIPS_JSON).is_file():
+                    out["clips"] = str(out_dir / CLIPS_DIR)
+            except Exception as exc:
+                raise_if_unwritable(exc, out_dir)
+                report.notes.append(f"HTML report failed: {type(exc).__name__}: {one_line(exc)}")
+            log.lap("extras_report")
     report.media = "done" if media else "deferred"
     if not media:
         report.notes.append(f"{media_phase.DEFERRED_NOTE} (views/, clips/, report.html): `asset2sim report {shown}` makes them")
-    report.stage_seconds = log.times
-    write_report_json(out_dir, report)
     return out

@@ -54,8 +54,8 @@ def media_pending(out_dir: Path | str) -> bool:
 def make_media(out_dir: Path | str, *, reference: Path | str | None = None, clips: bool = True,
                force: bool = False) -> dict[str, str]:
     """Make the media of a complete output folder: ``views/``, ``clips/`` (with ``clips``) and ``report.html``, from the
-    folder's own files (the evaluation's engines run again to draw the report's evidence; the verdict is the one
-    ``report.json`` records). ``reference``: a PartNet-Mobility folder with the GenSim2 reference, as for refine;
+    folder's own files (its checks run again to draw the report's evidence: :func:`asset2sim.tasks.evaluation.evaluate.recorded_evaluation`;
+    the verdict and every measurement shown are the ones ``evaluation.json`` and ``report.json`` record). ``reference``: a PartNet-Mobility folder with the GenSim2 reference, as for refine;
     ``force``: make them again when ``report.json`` says they are done.
 
     Returns:
@@ -90,10 +90,8 @@ def make_media(out_dir: Path | str, *, reference: Path | str | None = None, clip
             except Exception as exc:  # a renderer unavailable: the report without its renders
                 raise_refusal(exc)  # but never a write the output guard refused
                 report.notes.append(f"renders failed: {one_line(exc)}")
-            paths = evaluate.evaluate_refined(out_dir, report, reference=reference, views=views,
-                                              views_state=dict(report.initial_joint_positions), checks=list(report.metrics),
-                                              shown=out_dir, clips=clips, html=True, evaluation_json=False)
-            out["html"] = str(paths["report"])
+            ev = evaluate.recorded_evaluation(out_dir, reference=reference)
+            out["html"] = str(evaluate.write_media(ev, out_dir, views=views, clips=clips))
             if clips and (out_dir / CLIPS_DIR / CLIPS_JSON).is_file():
                 out["clips"] = str(out_dir / CLIPS_DIR)
             report.media = "done"

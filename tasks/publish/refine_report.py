@@ -3,13 +3,15 @@ on the input, the root's mounting and the engines side by side."""
 
 from __future__ import annotations
 
+import math
+
 from asset2sim import __version__
 from asset2sim.schemas.report import RefineReport
 from asset2sim.tasks.check import as_asked, parity
 from asset2sim.tasks.tune.attempt import Attempt
-from asset2sim.tasks.check.verdict import penetration_measures, post_check_failure_mode, readiness
+from asset2sim.tasks.check.verdict import penetration_measures, readiness
 from asset2sim.tasks.interpret.request import request_notes
-from asset2sim.tasks.synthesize import estimate, joint_dynamics, request_apply, request_findings
+from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.schemas.overlay import Overlay
 
@@ -29,19 +31,12 @@ def staging_notes(asset) -> list[str]:
 
 
 def build_report(ctx: EstimationContext, prompt: str, chash: str, att: Attempt, findings: list, pose_note: str, times: dict[str, float],
-                  resolution: request_apply.StateResolution | None = None) -> RefineReport:
-    """``report.json``'s model from the final attempt; ``resolution``: what each phrase of the request set
-    (``request_apply.resolve_states``), for the as-asked tier (``request_met``)."""
+                 asked: as_asked.AsAsked) -> RefineReport:
+    """``report.json``'s model from the final attempt and its as-asked tier (``asked``: :func:`as_asked.as_asked_tier`
+    of the attempt's metrics): the verdict decided here, once, from every measurement it records."""
     asset, overlay, st, state, closed_out = ctx.asset, att.overlay, att.st, att.state, att.closed_out
-    choices, missing = joint_dynamics.motion_choices(ctx, estimate.task_relevant_joints(ctx))
-    found = request_findings.findings(ctx, att.targets, closed_out, state, overlay, att.rounds, resolution,
-                                   motion_words={n: list(c.words) for n, c in choices.items()})
-    asked = as_asked.refine_request_met(ctx.request, resolution, found, closed_out, state,
-                                        request_apply.unapplied_properties(ctx) + missing)
-    metrics = as_asked.word_conflicts(att.check.metrics + [m for res in att.check.engine_results.values() for m in res] + [asked],
-                                      [(w, [n for n, c in choices.items() if w in c.words]) for w in ctx.request.motions])
-    asked = next(m for m in metrics if m.name == "request_met")
-    mode = post_check_failure_mode(att.check)
+    metrics = asked.metrics
+    verdict = readiness(metrics)
     return RefineReport(
         asset_id=asset.asset_id,
         source=str(asset.staged_from or asset.source_dir),
@@ -61,6 +56,7 @@ def build_report(ctx: EstimationContext, prompt: str, chash: str, att: Attempt, 
         total_mass=overlay.total_mass(),
         initial_joint_positions=state,
         closed_positions={n_: c.q_closed for n_, c in closed_out.items()},
+        closed_ends={n_: closed_record(c) for n_, c in closed_out.items()},
         requested_bands=att.bands,
         opening_fractions={n_: abs(c.fraction(state[n_])) for n_, c in closed_out.items() if n_ in state},
         state=st,
@@ -68,15 +64,15 @@ def build_report(ctx: EstimationContext, prompt: str, chash: str, att: Attempt, 
         parity=parity_rows(att.check),
         escalation=att.rounds,
         validation=[f.to_issue().model_dump() for f in findings] + [i.model_dump() for i in att.issues],
-        failure_mode=readiness([asked]).failure_mode if mode == "none" else mode,  # the as-asked tier after the physical ones
-        readiness=readiness(metrics).tiers,
+        failure_mode=verdict.failure_mode,
+        readiness=verdict.tiers,
         stage_seconds=times,
         notes=staging_notes(asset) + request_notes(ctx.request) + list(overlay.notes.other)
         + ([f"resting pose ({ctx.request.pose_hint or 'stability'}): {pose_note}"] if pose_note else [])
         + [mounting_note(overlay)] + att.design,
         mounting=overlay.mounting,
         design_changes=att.design,
-        request=found,
+        request=asked.findings,
     )
 
 
@@ -96,3 +92,10 @@ def parity_rows(check) -> list[dict]:
     rows = parity.parity_table({"pybullet": base, **check.engine_results})
     rows[0].update(check.reference_holding)  # PyBullet's joints held and breakaway
     return rows
+
+
+def closed_record(c: ClosedState) -> dict[str, float]:
+    """A joint's closed end as ``report.json`` records it (``closed_ends``; rad or m, output units): ``q_closed``,
+    ``direction`` (+1 / -1), ``open_range`` and the ``lower`` / ``upper`` limits it was found in (None: unbounded)."""
+    return {"q_closed": float(c.q_closed), "direction": float(c.direction), "open_range": float(c.open_range),
+            "lower": float(c.lower) if math.isfinite(c.lower) else None, "upper": float(c.upper) if math.isfinite(c.upper) else None}

@@ -39,6 +39,12 @@ class JointChoice:
     """the request's words about this part's motion that made these choices"""
 
 
+#: The holding mechanism of a part asked to move freely at a state its own weight moves it from (the load there above
+#: a free part's friction floor, :func:`~asset2sim.tasks.synthesize.physics.friction_floor`): friction holds it where
+#: it was asked, which a freely moving part lacks; the as-asked tier names the conflict between the two phrases
+#: (SPEC, robust rest; :func:`asset2sim.tasks.check.as_asked.as_asked_tier`).
+HELD_AGAINST_FREE = "held by friction against its weight (asked to move freely)"
+
 #: Damping level each motion word asks (the last of a part's words wins, as the parser's damping does).
 WORD_DAMPING = {"free": "low", "low_damping": "low", "high_damping": "high", "soft_close": "high", "moderate_damping": "moderate"}
 
@@ -120,11 +126,13 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
             ld = physics.joint_loads(kin, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
             if ld[name].gravity_load * cs.direction > 0:
                 hold = max(hold, abs(ld[name].gravity_load))
-        if ch.free_moving and _on_stop(loads[name], cs, state[name], unit,
-                                       set_down.joint_band(cs.lower * unit, cs.upper * unit, name in prismatic)):
+        on_stop = _on_stop(loads[name], cs, state[name], unit, set_down.joint_band(cs.lower * unit, cs.upper * unit, name in prismatic))
+        if ch.free_moving and on_stop:
             hold = 0.0  # asked to move freely and resting on the stop its weight presses it onto: nothing to hold
         spring, balanced = None, False
         mechanism = "moves freely (asked)" if ch.free_moving else ("friction slide" if name in prismatic else "friction hinge")
+        if ch.free_moving and not on_stop and abs(loads[name].gravity_load) > physics.friction_floor(loads[name], name in prismatic, True):
+            mechanism = HELD_AGAINST_FREE
         note = source + "".join(f"; request '{w.phrase}': {w.kind.replace('_', ' ')}" for w in ch.words)
         if ch.self_closing:
             held = closer(ctx, loads[name], cs, unit, hold)

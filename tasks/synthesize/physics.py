@@ -209,6 +209,15 @@ def damping_for(load: JointLoad, zeta: float, stiffness: float = 0.0, floor_hz: 
     return float(2.0 * zeta * np.sqrt(max(load.inertia_axis, 0.0) * k_eff))
 
 
+def friction_floor(load: JointLoad, prismatic: bool, free_moving: bool = False) -> float:
+    """The least friction of a joint carrying ``load`` (N or N*m): Coulomb coefficient 0.05 on the moving weight
+    (prismatic, N; lubricated drawer slides, Engineering ToolBox), that force at a 1 cm pin radius (revolute, N*m); a
+    fifth of it for a part asked to move freely."""
+    weight = load.mass * G
+    floor = 0.05 * weight if prismatic else 0.05 * weight * 0.01
+    return floor * 0.2 if free_moving else floor
+
+
 def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: bool, damping_level: str = "moderate", stiff: bool = False,
                    free_moving: bool = False, spring: tuple[float, float] | None = None, source: str = "physics",
                    impact: float = 0.0, floor: bool = True) -> JointDynamics:
@@ -235,10 +244,7 @@ def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: boo
     k = spring[0] if spring else 0.0
     c = damping_for(load_at_state, zeta, k)
     c_max = max_stable_damping(load_at_state.inertia_axis)
-    weight = load_at_state.mass * G
-    floor = (0.05 * weight if prismatic else 0.05 * weight * 0.01) if floor else 0.0
-    if free_moving:
-        floor *= 0.2
+    floor = friction_floor(load_at_state, prismatic, free_moving) if floor else 0.0
     friction = HOLD_SAFETY * abs(hold_load) + floor + max(impact, 0.0)
     if stiff:
         friction = max(friction * 2.0, 4.0 * HOLD_SAFETY * abs(load_at_state.gravity_load) + 4.0 * floor)

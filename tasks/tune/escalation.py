@@ -48,10 +48,9 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         overlay = overlay.model_copy(update={"initial_joint_positions": state})
     rounds: list[EscalationRound] = []
     cand = replace(candidate, overlay=overlay)
-    recorded = postcheck.RecordedRuns()  # the manipulation tiers' runs, handed on to the evaluation
-    labels = task_tier.link_labels(asset)
+    recorded = postcheck.RecordedRuns()  # the manipulation tiers' runs, reused by a round with the same inputs
     n = 0
-    spec = task_tier.task_spec_for(ctx.task, ws.model(cand), asset, ctx.category, estimate.task_relevant_joints(ctx), state, closed) \
+    spec = task_tier.task_spec_for(ctx.task, asset, ctx.category, estimate.task_relevant_joints(ctx), state, closed) \
         if ctx.task and closed else None
     # what the task's gripper can still operate on the task's joints (operating.operating_limits); estimates above it are lowered
     lim = operating.operating_limits(postcheck.overlay_object(ws.source(cand), state, overlay, config.sim), overlay, asset,
@@ -74,15 +73,11 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     def escalated(chk: postcheck.PostCheck) -> bool:  # this loop escalates ``chk`` (the post-check then skips the sweep)
         return n < config.max_escalation_rounds and bool(escalate(overlay, chk, config.escalation_factor, caps, floors, dcaps).changes)
 
-    def with_task(chk: postcheck.PostCheck) -> postcheck.PostCheck:  # the task tier appended when refine was given a task
-        if spec is not None:
-            chk.metrics = [*chk.metrics, *task_tier.run_task_tier(
-                "pybullet", postcheck.overlay_object(ws.source(cand), state, overlay, config.sim), closed, spec, asset,
-                ctx.category, free_moving=ctx.request.free_moving, spring_requested=ctx.request.spring, recorded=recorded)]
-        return chk
+    def checked(cand: Candidate, overlay: Overlay, escalated=None) -> postcheck.PostCheck:  # every tier, the task's included
+        return postcheck.check_object(ctx, postcheck.overlay_object(ws.source(cand), state, overlay, config.sim), config, closed, spec,
+                                      escalated=escalated, recorded=recorded)
 
-    check = with_task(postcheck.run_post_check(ws.source(cand), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
-                                                     category=ctx.category, labels=labels))
+    check = checked(cand, overlay, escalated)
     rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
     search = dynamics_search.DynamicsSearch(lim.budgets, lim.hand_caps, floors)  # relief and escalation bracketed by what each round measured
     search.record(overlay, check.metrics)
@@ -107,8 +102,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
                 rounds[-1] = rounds[-1].model_copy(update={"words_kept": [*rounds[-1].words_kept, *held]})
             break
         cand = replace(cand, overlay=overlay)
-        check = with_task(postcheck.run_post_check(ws.source(cand), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
-                                                     category=ctx.category, labels=labels))
+        check = checked(cand, overlay, escalated)
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason, words_kept=held))
         search.record(overlay, check.metrics)
         tried.append((overlay, check))
@@ -121,8 +115,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         if earlier:
             overlay = tried[best][0]
             cand = replace(cand, overlay=overlay)
-        check = with_task(postcheck.run_post_check(ws.source(cand), state, overlay, config, closed=closed, recorded=recorded,
-                                                   category=ctx.category, labels=labels))
+        check = checked(cand, overlay)
         changes = {n_: {"damping": d.damping, "friction": d.friction} for n_, d in overlay.joints.items()}
         rounds.append(EscalationRound(round=rounds[-1].round + 1, metrics=check.metrics, changes=changes, reason=reason))
     log.lap("post_check")

@@ -151,7 +151,9 @@ def test_invalid_input_exits_1_and_long_request_2(box, tmp_path, capsys):
 
 
 def test_written_but_not_interaction_ready_exits_3(box, tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(refine_report, "post_check_failure_mode", lambda check: "unstable")
+    from asset2sim.tasks.check.verdict import Readiness
+
+    monkeypatch.setattr(refine_report, "readiness", lambda metrics: Readiness({"rest": False}, ["rest_stability@pybullet"], "unstable"))
     assert main(["refine", str(box), "--prompt", PROMPT, "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 3
     assert "NOT READY: unstable" in capsys.readouterr().out
     assert (tmp_path / "o" / "mobility.urdf").is_file()

@@ -15,7 +15,7 @@ from asset2sim import demo_assets
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.request import BAND_INTERVAL
-from asset2sim.tasks.check import postcheck
+from asset2sim.tasks import refine as refine_mod
 from asset2sim.tasks.refine import MARKER_NAME, RefineError, is_complete, refine_asset
 from asset2sim.tasks.synthesize.validate_overlay import inertia_problems
 from tests.helpers import assert_ready_or_honestly_not_robust
@@ -253,28 +253,19 @@ def test_plain_urdf_without_partnet_extras(tmp_path):
 # ------------------------------------------------------------ each piece of work once
 
 
-def _metrics_without_timing(ev: dict) -> list[dict]:
-    """The metrics the evaluation measures itself (refine's evaluation.json
-    also records the post-check's own checks, state_hold and settle_tilt, and
-    the post-check's rest tests in its other engines: PhysX by default), in
-    PyBullet, the engine a plain evaluation runs."""
-    from asset2sim.tasks.evaluation.evaluate import metric_names
-
-    return [{k: v for k, v in m.items() if k != "seconds"} for m in ev["metrics"]
-            if m["name"] in metric_names() and m.get("engine") in (None, "pybullet")]
-
-
-def test_refine_reads_once_and_runs_the_rest_test_once_per_check(demo_root, tmp_path, monkeypatch):
-    """The asset is read once; the extras' evaluation records the post-check's
-    rest test instead of simulating it again, and its evaluation.json (probes
-    included) equals a fresh evaluation that simulates it."""
+def test_refine_reads_once_decides_once_and_evaluate_gives_its_verdict(demo_root, tmp_path, monkeypatch):
+    """The asset is read once and the rest test run once per check round, none in the extras: evaluation.json
+    presents report.json's metrics and verdict (written once, with every tier the verdict reads), and ``asset2sim
+    evaluate`` on the output folder, read back into the same model and checked by the same checks, measures the same
+    metrics and gives the same verdict."""
     from asset2sim.tasks.check import metrics as check_metrics
-    from asset2sim.tasks.check import robust_rest
-    from asset2sim.tasks.evaluation.evaluate import _jsonable, evaluate_asset
+    from asset2sim.tasks.check.verdict import TIERS
+    from asset2sim.tasks.evaluation.evaluate import evaluate_asset
     from asset2sim.tasks.ingest import extract
+    from asset2sim.tasks.publish import contract
 
-    counts = {"extract": 0, "rest_test": 0}
-    real_extract, real_rest = extract.extract_asset_checked, check_metrics.run_rest_test
+    counts = {"extract": 0, "rest_test": 0, "report_json": 0}
+    real_extract, real_rest, real_write = extract.extract_asset_checked, check_metrics.run_rest_test, contract.write_report_json
 
     def counting_extract(*a, **k):
         if Path(a[0]).resolve() == (demo_root / "laptop").resolve():  # the input (the evaluator reads the output URDF)
@@ -285,30 +276,33 @@ def test_refine_reads_once_and_runs_the_rest_test_once_per_check(demo_root, tmp_
         counts["rest_test"] += 1
         return real_rest(*a, **k)
 
+    def counting_write(*a, **k):
+        counts["report_json"] += 1
+        return real_write(*a, **k)
+
     monkeypatch.setattr(extract, "extract_asset_checked", counting_extract)
     monkeypatch.setattr(check_metrics, "run_rest_test", counting_rest)
+    monkeypatch.setattr(refine_mod, "write_report_json", counting_write)
     entry = next(e for e in demo_assets.DEMO_OBJECTS if e.asset_id == "laptop")
     out = tmp_path / "out"
     res = refine_asset(demo_root / entry.asset_id, entry.prompt, out)
     assert "html" in res.extras, res.report.notes
-    assert counts["extract"] == 1
-    # the post-check's rest tests (tests.helpers.rest_tests_of_refine), none in the extras: the evaluation
-    # takes the last post-check's robust rest (same files, state and conventions: tasks.check.recorded_runs)
-    rounds = res.report.escalation
-    assert len(rounds) == 1 and not postcheck.sweep_not_run(rounds[0].metrics)  # the screen holds from its first guess
+    assert counts["extract"] == 1 and counts["report_json"] == 1
     assert counts["rest_test"] == rest_tests_of_refine(res.report)
+    report = json.loads((out / "report.json").read_text())
     written = json.loads((out / "evaluation.json").read_text())
-    names = {m["name"] for m in written["metrics"]}
-    assert {"ground_penetration", "divergence", "joint_hold", "probes"} <= names
-    # nothing the post-check ran is skipped; only the gripper's task tier waits for a task (refine is given none:
-    # tasks.evaluation.metric_defs._m_task)
-    skipped = {m["name"] for m in written["metrics"] if (m.get("details") or {}).get("skipped")}
-    assert skipped <= {"task_execution", "operating_force"}, skipped
+    assert written["failure_mode"] == report["failure_mode"] == res.report.failure_mode
+    assert written["metrics"][:len(report["metrics"])] == report["metrics"]  # the record, then the semantic measures
+    deciding = {n for names, _ in TIERS.values() for n in names}
+    assert not {m["name"] for m in written["metrics"][len(report["metrics"]):]} & deciding
+    assert {"ground_penetration", "divergence", "state_hold"} <= {m["name"] for m in report["metrics"]}
 
     counts["rest_test"] = 0
-    fresh = evaluate_asset(out, prompt=entry.prompt, category=res.report.category, method="asset2sim")
-    assert counts["rest_test"] == 1 + len(robust_rest.TRIALS)
-    assert _metrics_without_timing(_jsonable(fresh.model_dump(mode="json"))) == _metrics_without_timing(written)
+    fresh = evaluate_asset(out)
+    assert fresh.failure_mode == report["failure_mode"]
+    got = {(m.name, m.engine): (m.value, m.passed) for m in fresh.metrics}
+    for m in report["metrics"]:
+        assert got[(m["name"], m["engine"])] == (m["value"], m["passed"]), m["name"]
 
 
 def test_refine_takes_an_already_extracted_asset(refine_once, tmp_path, monkeypatch):

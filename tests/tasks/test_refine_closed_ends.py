@@ -9,10 +9,8 @@ from pathlib import Path
 import pytest
 
 from asset2sim.schemas.request import BAND_INTERVAL
-from asset2sim.tasks.check.asset_files import parse_urdf
-from asset2sim.tasks.evaluation.closed_ends import compute_closed
 from asset2sim.tasks.geometry.closed_state import ClosedState
-from asset2sim.tasks.geometry.urdf_closed import measure_closed, replace_positions
+from asset2sim.tasks.geometry.urdf_closed import measure_closed, measure_closed_ends, replace_positions
 from asset2sim.tasks.refine import refine_asset
 from asset2sim.engines.source import UrdfFile
 from tests.conftest import SHARED, needs_shared
@@ -53,10 +51,11 @@ def write_lever_in_slot(folder: Path) -> Path:
 
 
 def _evaluation_closed(urdf: Path, joint: str):
-    _, joints = parse_urdf(UrdfFile(urdf))
-    closed, notes = compute_closed(urdf, joints, [joint])
-    assert closed[joint].source.startswith("geometry"), notes
-    return closed[joint]
+    """The closed end the geometry of the output gives (what an evaluation of a folder without a refine's record
+    measures: ``asset2sim.tasks.evaluation.evaluate.closed_ends``)."""
+    closed = measure_closed_ends(UrdfFile(urdf)).closed[joint]
+    assert closed.open_range > 0
+    return closed
 
 
 def test_replace_positions_keeps_the_fraction_or_the_opening():

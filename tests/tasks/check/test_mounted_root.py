@@ -10,8 +10,8 @@ import pytest
 from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.check import postcheck
-from asset2sim.tasks.evaluation import eval_context
-from asset2sim.tasks.evaluation.engine_run import run_engine
+from asset2sim.refined_asset import RefinedAsset
+from asset2sim.tasks.evaluation.evaluate import sim_object
 from asset2sim.tasks.assemble import write
 from tests.tasks.check.failure_assets import build_tall_faucet
 
@@ -54,11 +54,10 @@ def test_mounted_mjcf_has_no_free_joint(mounted):
 
 def test_evaluation_runs_with_the_root_as_declared(mounted):
     ev = json.loads((mounted.out_dir / "evaluation.json").read_text())
-    assert any("root fixed" in n for n in ev.get("notes", [])), ev.get("notes")
-    ctx = eval_context.build_context(mounted.out_dir)
-    assert ctx.root_fixed
-    run = run_engine(ctx, "pybullet", probes=False)
-    assert run.error is None
+    assert all(m["details"]["root"] == "fixed (mounted)" for m in ev["metrics"] if m["name"] in ("rest_stability", "state_hold"))
+    obj, _ = sim_object(RefinedAsset(mounted.out_dir))
+    assert obj.fixed_base
+    _, run = postcheck.measure_rest_test("pybullet", obj)
     assert float(abs(run.root_series).max()) == pytest.approx(0.0, abs=1e-9)  # held at the file's origin
 
 
@@ -76,8 +75,9 @@ def test_post_check_follows_the_overlay_root(mounted):
     out = mounted.out_dir
     ov = mounted.overlay
     state = json.loads((out / "initial_state.json").read_text())["initial_joint_positions"]
-    fixed = postcheck.run_post_check(UrdfFile(out / "mobility.urdf"), state, ov, RefineConfig())
-    free = postcheck.run_post_check(UrdfFile(out / "mobility.urdf"), state, ov.model_copy(update={"mounting": None}), RefineConfig())
+    fixed = postcheck.run_post_check(postcheck.overlay_object(UrdfFile(out / "mobility.urdf"), state, ov, RefineConfig().sim), RefineConfig())
+    free = postcheck.run_post_check(postcheck.overlay_object(UrdfFile(out / "mobility.urdf"), state, ov.model_copy(update={"mounting": None}),
+                                                             RefineConfig().sim), RefineConfig())
     assert fixed.stable and fixed.recording.fixed_base
     assert not free.stable and not free.recording.fixed_base
     as_free = SimObject(UrdfFile(out / "mobility.urdf"), state, fixed.recording.springs, RefineConfig().sim, fixed_base=False)

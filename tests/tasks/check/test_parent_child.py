@@ -57,6 +57,7 @@ def test_post_check_reports_the_metric_on_the_written_output(tmp_path):
                  joints={j.name: JointDynamics(damping=0.1, friction=0.01) for j in asset.movable_joints()})
     ov, _ = validate_overlay(ov, asset, analyze_asset(asset))
     out = write_output(asset, ov, tmp_path / "out", {"hinge": 0.0})
-    check = postcheck.run_post_check(UrdfFile(out.urdf), {"hinge": 0.0}, ov, RefineConfig(engines=["pybullet"]))
+    check = postcheck.run_post_check(postcheck.overlay_object(UrdfFile(out.urdf), {"hinge": 0.0}, ov, RefineConfig().sim),
+                                     RefineConfig(engines=["pybullet"]))
     m = check.metric("parent_child_penetration")
     assert m.passed and m.value <= 2.0

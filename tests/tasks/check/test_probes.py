@@ -65,7 +65,7 @@ def _probes(ev):
 
 
 def test_smooth_drawer_is_closed_and_opened_by_the_pusher(tmp_path):
-    ev = evaluate_asset(drawer(tmp_path / "d"))
+    ev = evaluate_asset(drawer(tmp_path / "d"), probes=True)
     assert ev.closed_positions["slide"]["q_closed"] == pytest.approx(0.0, abs=0.01)
     m, p = _probes(ev)
     assert m.passed is True and m.value == 0.0
@@ -79,7 +79,7 @@ def test_smooth_drawer_is_closed_and_opened_by_the_pusher(tmp_path):
 
 
 def test_drawer_that_springs_back_fails_the_close_probe(tmp_path):
-    ev = evaluate_asset(drawer(tmp_path / "d", stiffness=200.0))
+    ev = evaluate_asset(drawer(tmp_path / "d", stiffness=200.0), probes=True)
     m, p = _probes(ev)
     assert m.passed is False
     assert p["close"]["reached"] and p["close"]["rebound"]
@@ -93,7 +93,7 @@ def test_drawer_too_stiff_for_a_light_carcass_is_not_moved_by_a_hand_force(tmp_p
     whose friction (100 N) is beyond the probe's force (2 x the weight) is not
     reached, and the held carcass does not slide (3 kg: with the 1 kg drawer
     out, the center of mass stays over the carcass)."""
-    ev = evaluate_asset(drawer(tmp_path / "d", base_mass=3.0, friction=100.0))
+    ev = evaluate_asset(drawer(tmp_path / "d", base_mass=3.0, friction=100.0), probes=True)
     m, p = _probes(ev)
     assert m.passed is False
     for action in ("close", "open"):

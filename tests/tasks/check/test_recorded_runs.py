@@ -113,8 +113,9 @@ def test_sweep_is_skipped_only_on_a_round_that_is_escalated_whatever_it_says(fau
     def escalated(chk):  # as refine's loop: another round whenever escalation changes something
         return bool(escalate(ov, chk, cfg.escalation_factor).changes)
 
-    early = postcheck.run_post_check(UrdfFile(out / "mobility.urdf"), state, ov, cfg, closed=closed, escalated=escalated, recorded=rec)
-    last = postcheck.run_post_check(UrdfFile(out / "mobility.urdf"), state, ov, cfg, closed=closed, escalated=lambda chk: False, recorded=rec)
+    obj = postcheck.overlay_object(UrdfFile(out / "mobility.urdf"), state, ov, cfg.sim)
+    early = postcheck.run_post_check(obj, cfg, closed=closed, escalated=escalated, recorded=rec)
+    last = postcheck.run_post_check(obj, cfg, closed=closed, escalated=lambda chk: False, recorded=rec)
     assert not early.passed and not last.passed
     for name in ("joint_sweep", "operability"):  # the sweep and the hand run together, or neither
         assert early.metric(name).passed is None and "not_run" in early.metric(name).details
@@ -128,20 +129,18 @@ def test_sweep_is_skipped_only_on_a_round_that_is_escalated_whatever_it_says(fau
     assert rec.hits == 1  # robust rest of the same files taken from the first check
 
 
-def test_evaluation_takes_the_post_checks_runs_only_where_inputs_match(faucet_out):
-    """refine's evaluation reused the post-check's robust rest (same files and
-    state) and reports what a fresh evaluation measures."""
+def test_an_output_read_back_is_checked_as_the_post_check_checked_it(faucet_out):
+    """The output evaluated afresh (``asset2sim evaluate``: its closed ends, state, springs and root read from its
+    files) measures the manipulation tiers the post-check measures on the same object."""
     out = faucet_out.out_dir
     ov = faucet_out.overlay
     state = json.loads((out / "initial_state.json").read_text())["initial_joint_positions"]
-    closed = _closed(out)
-    check = postcheck.run_post_check(UrdfFile(out / "mobility.urdf"), state, ov, RefineConfig(), closed=closed)
-    rec = check.recorded
-    reused = evaluate_asset(out, probes=False, recorded=rec)
+    closed = {n: (c["q_closed"], c["direction"], c["open_range"]) for n, c in faucet_out.report.closed_ends.items()}
+    check = postcheck.run_post_check(postcheck.overlay_object(UrdfFile(out / "mobility.urdf"), state, ov, RefineConfig().sim),
+                                     RefineConfig(), closed=closed, category=faucet_out.report.category)
     fresh = evaluate_asset(out, probes=False)
-    assert rec.hits >= 1  # at least robust rest; the sweep too when the evaluation's closed ends are the same
-    pick = lambda ev: [m for m in ev.metrics if m.name in ("joint_sweep", "robust_rest")]  # noqa: E731
-    assert pick(reused) == pick(fresh)
+    pick = lambda ms: [m for m in ms if m.name in ("joint_sweep", "robust_rest")]  # noqa: E731
+    assert pick(check.metrics) == pick(fresh.metrics) and len(pick(check.metrics)) == 2
 
 
 def test_task_attempt_is_reused_for_the_same_inputs_and_rerun_when_one_differs(tmp_path):
@@ -170,9 +169,9 @@ def test_task_attempt_is_reused_for_the_same_inputs_and_rerun_when_one_differs(t
 
 @needs_shared
 def test_refines_evaluation_takes_the_post_checks_task_attempt(tmp_path):
-    """Door 8877 refined with its manifest row's task: the gripper's attempt is simulated in the post-check only, the
-    evaluation takes it from the record (its task and inputs are the same), and the report's task metric is what
-    evaluating the output afresh measures."""
+    """Door 8877 refined with its manifest row's task: the gripper's attempt is simulated in the post-check's rounds
+    only (refine's evaluation presents the record), and the report's task metric is what evaluating the output afresh
+    measures."""
     import csv
     import traceback
 
@@ -191,7 +190,7 @@ def test_refines_evaluation_takes_the_post_checks_task_attempt(tmp_path):
         res = refine_asset(SHARED / "8877", row["prompt"], tmp_path / "out", task=row["task"], reference=SHARED / "8877", media=False)
     finally:
         task_execution.run_task = real
-    assert callers and all("run_task_tier" in c and "_m_task" not in c for c in callers)  # none from the evaluation
+    assert callers and all("run_task_tier" in c for c in callers) and len(callers) == len(res.report.escalation)  # once per round
     ev = json.loads((res.out_dir / "evaluation.json").read_text())
     fresh = evaluate_asset(res.out_dir, task=row["task"], prompt=row["prompt"], reference=SHARED / "8877", probes=False)
     pick = lambda ms: [(m["value"], m["passed"], m["details"].get("attempts")) for m in ms  # noqa: E731

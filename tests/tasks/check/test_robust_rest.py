@@ -183,9 +183,8 @@ def test_wheels_the_object_rolls_on_are_not_held_states_and_are_not_pushed(tmp_p
     braked them, and every wheel probe then failed ("the object moved
     instead"). A continuous joint off the ground (the contract asset has
     none on the ground) is not rolling."""
-    import json
-
     from asset2sim.tasks.check.support import rolling_joints
+    from asset2sim.tasks.evaluation.evaluate import evaluate_asset
     from asset2sim.tasks.geometry.limits import subtrees
     from asset2sim.urdf import read_urdf
     from tests.unseen_assets import build_cart
@@ -206,9 +205,8 @@ def test_wheels_the_object_rolls_on_are_not_held_states_and_are_not_pushed(tmp_p
     rr = rep.metric("robust_rest")
     assert rr.passed and all(t["rolling"] == wheels for t in rr.details["trials"].values())
     assert max(t["joint_drift"]["joint_0"] for t in rr.details["trials"].values()) > 0.02  # they did turn
-    ev = json.loads((res.out_dir / "evaluation.json").read_text())
-    probes = next(m for m in ev["metrics"] if m["name"] == "probes")
-    assert probes["details"]["probes"] == [] and probes["passed"] is None  # the cart's only movable parts are its wheels
+    probes = evaluate_asset(res.out_dir, probes=True).metric("probes")
+    assert probes.details["probes"] == [] and probes.passed is None  # the cart's only movable parts are its wheels
 
 
 # ------------------------------------------------------------------ where a part comes to rest, graded in its band

@@ -7,53 +7,55 @@ import csv
 import pytest
 
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
-from asset2sim.tasks.check.asset_files import parse_urdf, read_semantics
 from asset2sim.tasks.check.task_spec import parse_task, with_work_to_do
+from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.interpret.task_words import task_actions
-from asset2sim.engines.source import UrdfFile
 from tests.conftest import SHARED, needs_shared
 
 
 def _asset(aid: str):
-    _, joints = parse_urdf(UrdfFile(SHARED / aid / "mobility.urdf"))
-    return joints, read_semantics(SHARED / aid)
+    return extract_asset(SHARED / aid)
 
 
-def _movable(joints):
-    return [n for n, j in joints.items() if j.type in ("revolute", "prismatic", "continuous")]
+def _movable(asset):
+    return [j.name for j in asset.movable_joints()]
+
+
+def _label(asset, joint: str):
+    return asset.link(asset.joint(joint).child).semantic_label
 
 
 @needs_shared
 def test_manifest_tasks_name_their_part_and_direction():
     rows = {r["id"]: r for r in csv.DictReader(open(SHARED / "manifest.csv"))}
-    joints, sem = _asset("7236")  # microwave: "close the microwave door"
-    t = parse_task(rows["7236"]["task"], joints, sem, "Microwave", ["fallback"])
+    asset = _asset("7236")  # microwave: "close the microwave door"
+    t = parse_task(rows["7236"]["task"], asset, "Microwave", ["fallback"])
     assert t.actions == ("close",) and t.targets == {"close": CLOSE_TARGET}
-    assert t.part == "door" and t.joints and all(sem[joints[j].child][1] == "door" for j in t.joints)
-    joints, sem = _asset("20279")  # cabinet: "open the top drawer"
-    t = parse_task(rows["20279"]["task"], joints, sem, "StorageFurniture", ["fallback"])
+    assert t.part == "door" and t.joints and all(_label(asset, j) == "door" for j in t.joints)
+    asset = _asset("20279")  # cabinet: "open the top drawer"
+    t = parse_task(rows["20279"]["task"], asset, "StorageFurniture", ["fallback"])
     assert t.actions == ("open",) and t.targets == {"open": OPEN_TARGET}
-    assert t.joints and all(sem[joints[j].child][1] == "drawer" for j in t.joints)
+    assert t.joints and all(_label(asset, j) == "drawer" for j in t.joints)
     assert any("ordinal" in n for n in t.notes)
 
 
 @needs_shared
 def test_whole_object_and_unknown_tasks_fall_back_to_the_task_joints():
-    joints, sem = _asset("103275")  # stapler: "press the stapler" is a whole-object phrase
-    t = parse_task("press the stapler", joints, sem, "Stapler", ["joint_1"])
+    asset = _asset("103275")  # stapler: "press the stapler" is a whole-object phrase
+    t = parse_task("press the stapler", asset, "Stapler", ["joint_1"])
     assert t.actions == ("close",) and t.joints == ["joint_1"] and "whole object" in t.rule
-    joints, sem = _asset("148")  # faucet: "turn" has no direction
-    t = parse_task("turn the faucet handle", joints, sem, "Faucet", ["j"])
+    asset = _asset("148")  # faucet: "turn" has no direction
+    t = parse_task("turn the faucet handle", asset, "Faucet", ["j"])
     assert t.actions == ("close", "open")
-    t = parse_task("wiggle the flux capacitor", joints, sem, "Faucet", ["j"])
+    t = parse_task("wiggle the flux capacitor", asset, "Faucet", ["j"])
     assert t.actions == ("close", "open") and t.joints == ["j"] and t.rule.startswith("fallback")
 
 
 @needs_shared
 @pytest.mark.parametrize("verb,action", [("shut", "close"), ("lift", "open"), ("pull out", "open"), ("lower", "close")])
 def test_verbs(verb, action):
-    joints, sem = _asset("102703")
-    t = parse_task(f"{verb} the toilet lid", joints, sem, "Toilet", [])
+    asset = _asset("102703")
+    t = parse_task(f"{verb} the toilet lid", asset, "Toilet", [])
     assert t.actions == (action,)
 
 
@@ -71,16 +73,16 @@ def test_a_task_on_one_of_several_drawers_acts_on_the_one_with_work_to_do():
     open: the task acts on the open one; "close the drawers", "close every
     drawer", an open task (both have work) and both drawers closed (neither
     has: an asset delivered closed is still asked to close) keep both."""
-    joints, sem = _asset("19179")
-    drawers = sorted(j for j in _movable(joints) if sem[joints[j].child][1] == "drawer")
+    asset = _asset("19179")
+    drawers = sorted(j for j in _movable(asset) if _label(asset, j) == "drawer")
     assert len(drawers) == 2
     one_open = {drawers[0]: 0.12, drawers[1]: 0.0}
-    t = with_work_to_do(parse_task("close the cabinet drawer", joints, sem, "StorageFurniture", []), one_open)
+    t = with_work_to_do(parse_task("close the cabinet drawer", asset, "StorageFurniture", []), one_open)
     assert t.joints == [drawers[0]] and any(f"{drawers[1]} already closed" in n for n in t.notes)
     for text in ("close the drawers", "close every drawer", "close both drawers"):
-        assert sorted(with_work_to_do(parse_task(text, joints, sem, "StorageFurniture", []), one_open).joints) == drawers
-    assert sorted(with_work_to_do(parse_task("open the drawer", joints, sem, "StorageFurniture", []), one_open).joints) == drawers
+        assert sorted(with_work_to_do(parse_task(text, asset, "StorageFurniture", []), one_open).joints) == drawers
+    assert sorted(with_work_to_do(parse_task("open the drawer", asset, "StorageFurniture", []), one_open).joints) == drawers
     shut = {drawers[0]: 0.0, drawers[1]: 0.0}
-    assert sorted(with_work_to_do(parse_task("close the drawer", joints, sem, "StorageFurniture", []), shut).joints) == drawers
+    assert sorted(with_work_to_do(parse_task("close the drawer", asset, "StorageFurniture", []), shut).joints) == drawers
     wide = {drawers[0]: 0.9, drawers[1]: 0.1}  # open the drawer: only the second is below the open target
-    assert with_work_to_do(parse_task("open the drawer", joints, sem, "StorageFurniture", []), wide).joints == [drawers[1]]
+    assert with_work_to_do(parse_task("open the drawer", asset, "StorageFurniture", []), wide).joints == [drawers[1]]

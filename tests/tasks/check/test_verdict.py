@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
 
 from asset2sim.schemas.report import FAILURE_MODES, MetricResult
 from asset2sim.tasks.check.verdict import (
@@ -12,39 +11,16 @@ from asset2sim.tasks.check.verdict import (
     UNRESOLVED_PENETRATION_MM,
     asset_failure_mode,
     exception_failure_mode,
-    post_check_failure_mode,
     readiness,
 )
 
 
-@dataclass
-class _Check:
-    stable: bool
-    osc: bool
-    pen: float | None
-    metrics: tuple = ()
-
-    def metric(self, name):
-        if name == "oscillation":
-            return MetricResult(name=name, value=0.0, unit="joints", passed=self.osc)
-        return MetricResult(name=name, value=self.pen, unit="mm")
-
-
-def test_post_check_modes_in_order():
-    assert post_check_failure_mode(_Check(False, False, 99.0)) == "unstable"
-    assert post_check_failure_mode(_Check(True, False, 99.0)) == "oscillating"
-    assert post_check_failure_mode(_Check(True, True, UNRESOLVED_PENETRATION_MM + 0.1)) == "unresolved_penetration"
-    assert post_check_failure_mode(_Check(True, True, UNRESOLVED_PENETRATION_MM)) == "none"
-    assert post_check_failure_mode(_Check(True, True, None)) == "none"
-
-
 def test_asset_mode_first_failure_in_stage_order():
+    """The catalog's mode is the refine's verdict (report.json's, decided once); the metrics stage, which presents it,
+    changes it only when it failed to run."""
     assert asset_failure_mode(input_failure="invalid_input").failure_mode == "invalid_input"
-    assert asset_failure_mode(refine_status="ok", refine_mode="oscillating", measured_status="ok",
-                              rest_stable=False).failure_mode == "oscillating"
-    v = asset_failure_mode(refine_status="ok", refine_mode="none", measured_status="ok", rest_stable=False)
-    assert v.failure_mode == "unstable" and "metrics stage" in v.errors[0]
-    assert asset_failure_mode(refine_status="ok", measured_status="ok", oscillation_pass=False).failure_mode == "oscillating"
+    assert asset_failure_mode(refine_status="ok", refine_mode="oscillating", measured_status="ok").failure_mode == "oscillating"
+    assert asset_failure_mode(refine_status="ok", refine_mode="none", measured_status="ok").failure_mode == "none"
     assert asset_failure_mode(refine_status="timeout").failure_mode == "timeout"
     assert asset_failure_mode(refine_status="error").failure_mode == "crash"
     assert asset_failure_mode(refine_status="error", refine_mode="estimator_failure").failure_mode == "estimator_failure"
@@ -80,15 +56,16 @@ def test_readiness_names_every_failing_tier_and_the_first_mode():
     r = readiness([_m("rest_stability", True), _m("oscillation", True), _m("joint_sweep", True),
                    _m("robust_rest", False, "physx"), _m("probes", False), _m("total_mass", False)])
     assert not r.ready
-    assert {t: r.tiers[t] for t in ("rest", "penetration", "sweep", "robust_rest", "probes", "task", "force")} == {
-        "rest": True, "penetration": None, "sweep": True, "robust_rest": False, "probes": False, "task": None, "force": None}
+    assert {t: r.tiers[t] for t in ("rest", "penetration", "sweep", "robust_rest", "task", "force")} == {
+        "rest": True, "penetration": None, "sweep": True, "robust_rest": False, "task": None, "force": None}
+    assert "probes" not in r.tiers  # the probes stand in for learnability: reported, not a tier of the verdict
     assert r.tiers["request"] is None  # no request_met: not measured
-    assert r.failures == ["robust_rest@physx", "probes@pybullet"]  # semantic metrics do not decide readiness
+    assert r.failures == ["robust_rest@physx"]  # semantic metrics and the probes do not decide readiness
     assert r.failure_mode == "not_robust_at_rest"
-    assert r.line().startswith("NOT READY: not_robust_at_rest (robust_rest@physx, probes@pybullet; rest pass")
-    assert r.short() == "NOT READY: not_robust_at_rest (robust_rest@physx, probes@pybullet)"
-    ok = readiness([_m("rest_stability", True), _m("probes", None), _m("joint_sweep", True)])
-    assert ok.ready and ok.failure_mode == "none" and ok.tiers["probes"] is None
+    assert r.line().startswith("NOT READY: not_robust_at_rest (robust_rest@physx; rest pass")
+    assert r.short() == "NOT READY: not_robust_at_rest (robust_rest@physx)"
+    ok = readiness([_m("rest_stability", True), _m("probes", False), _m("joint_sweep", True)])
+    assert ok.ready and ok.failure_mode == "none"
     assert ok.line().startswith("interaction-ready")
     assert readiness([_m("oscillation", False)]).failure_mode == "oscillating"
     assert readiness([_m("state_hold", False)]).failure_mode == "joint_not_held"
@@ -99,21 +76,8 @@ def test_readiness_names_every_failing_tier_and_the_first_mode():
     pen = MetricResult(name="penetration", value=UNRESOLVED_PENETRATION_MM + 1, unit="mm", passed=None)
     assert readiness([_m("rest_stability", True), pen]).failure_mode == "unresolved_penetration"
     assert readiness([_m("oscillation", False), pen]).failure_mode == "oscillating"  # the post-check's order
-    for mode in ("blocked_joint", "not_robust_at_rest", "probe_failed", "joint_not_held"):
+    for mode in ("blocked_joint", "not_robust_at_rest", "joint_not_held"):
         assert mode in FAILURE_MODES
-
-
-def test_post_check_mode_includes_the_manipulation_tiers():
-    assert post_check_failure_mode(_Check(True, True, 0.0, (_m("joint_sweep", False),))) == "blocked_joint"
-    assert post_check_failure_mode(_Check(True, True, 0.0, (_m("robust_rest", False),))) == "not_robust_at_rest"
-
-
-def test_catalog_mode_takes_a_failing_measured_tier():
-    v = asset_failure_mode(refine_status="ok", refine_mode="none", measured_status="ok", rest_stable=True,
-                           oscillation_pass=True, measured_failures=["total_mass@none", "probes@pybullet"])
-    assert v.failure_mode == "probe_failed" and "probes@pybullet" in v.errors[0]
-    v = asset_failure_mode(refine_status="ok", refine_mode="none", measured_status="ok", measured_failures=["total_mass@none"])
-    assert v.failure_mode == "none"
 
 
 def test_a_child_deep_inside_its_parent_fails_the_penetration_tier():
@@ -144,8 +108,6 @@ def test_an_unmet_request_fails_the_request_tier_after_the_physical_ones():
     assert readiness([_m("rest_stability", True), met]).ready
     none = unmet.model_copy(update={"value": None, "passed": None})  # no request: not measured
     assert readiness([_m("rest_stability", True), none]).tiers["request"] is None
-    v = asset_failure_mode(refine_status="ok", refine_mode="none", measured_status="ok", measured_failures=["request_met@none"])
-    assert v.failure_mode == "request_not_met"  # the catalog's mode when only the evaluation found it
 
 
 def test_a_part_robust_rest_moves_is_explained_with_what_to_do(tmp_path, capsys):

@@ -128,7 +128,7 @@ def test_evaluate_writes_clips_of_any_urdf_and_can_leave_them_out(tmp_path):
     asset = tmp_path / "asset"
     write_contract_asset(asset, lid_angle=0.3)
     ev = api.evaluate(asset, write_to=tmp_path / "ev")
-    swept = [j for j in ev.task_joints] or ["lid_hinge", "post_slide"]  # no task-relevant joint: every swept joint
+    swept = list(dict.fromkeys([*ev.task_joints, "lid_hinge", "post_slide"]))  # every swept joint, the task-relevant first
     clip_set = _check_clip_folder(tmp_path / "ev", len(swept))  # no task: sweeps only
     assert [c.joint for c in clip_set.clips[::2]] == swept
     assert not any("clips failed" in n for n in ev.notes)

@@ -45,7 +45,7 @@ def _drawer(folder: Path, with_overlay: bool) -> Path:
 def report(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("rep")
     ev = evaluate_asset(_drawer(tmp / "cab", True), prompt="A small <cabinet> with its drawer slightly open & smooth.",
-                        out_dir=tmp / "out", write_report=True)
+                        out_dir=tmp / "out", write_report=True, probes=True)
     return ev, (tmp / "out" / "report.html").read_text()
 
 
@@ -133,17 +133,19 @@ def test_benchmark_pages(tmp_path):
     assert "15 &plusmn; 2" in page and "88.9%" in page and "Human (GenSim2)" in page and "thesis method" in page
 
 
-def test_write_refine_report_evaluates_the_output_folder(tmp_path):
-    from types import SimpleNamespace
+def test_the_media_of_a_refined_folder_present_its_record(tmp_path, demo_root, refine_once):
+    """The media phase of a refine's output (``asset2sim report``): its checks run again only to draw the evidence;
+    report.html shows the verdict and metrics evaluation.json records and is titled by the refine."""
+    from asset2sim.tasks.evaluation.evaluate import recorded_evaluation, write_media
 
-    from asset2sim.tasks.evaluation.evaluate import evaluate_refined
-
-    f = _drawer(tmp_path / "cab", True)
-    path = evaluate_refined(f, SimpleNamespace(prompt="a cabinet with its drawer closed", category="StorageFurniture", task=None))["report"]
-    assert path == f / "report.html" and path.is_file()
-    data = json.loads((f / "evaluation.json").read_text())
-    assert data["method"] == "asset2sim" and data["prompt"] == "a cabinet with its drawer closed"
-    assert "<h1>asset2sim refine: cab</h1>" in path.read_text()  # beside the report.json it reports on
+    out = refine_once(demo_root / "box_lid", "a box with its lid slightly open", extras=True, media=False).copy_to(tmp_path / "box")
+    recorded = json.loads((out / "evaluation.json").read_text())
+    ev = recorded_evaluation(out)
+    assert ev.failure_mode == recorded["failure_mode"] and [m.name for m in ev.metrics] == [m["name"] for m in recorded["metrics"]]
+    assert ev._runs["pybullet"].trace is not None  # the rest test drawn in the report
+    path = write_media(ev, out, clips=False)
+    assert path == out / "report.html" and "<h1>asset2sim refine: " in path.read_text()
+    assert json.loads((out / "evaluation.json").read_text()) == recorded  # the record is not written again
 
 
 @needs_shared

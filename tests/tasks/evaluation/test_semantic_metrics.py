@@ -7,13 +7,11 @@ import json
 import math
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-from asset2sim.schemas.request import JointStateRequest, RequestSpec, StateTarget
+from asset2sim.schemas.request import StateTarget
 from asset2sim.tasks.evaluation import semantic_metrics as sem
-from asset2sim.tasks.evaluation.evaluate import JointInfo, evaluate_asset, requested_joints
-from asset2sim.tasks.interpret.request import parse_request
+from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 
 # ------------------------------------------------------------------ pure definitions
 
@@ -97,43 +95,6 @@ def test_prompt_alignment_halves_and_missing_parts():
     m = sem.prompt_alignment(size_requested=False, largest_extent=None, typical_largest=None, size_factor=1.0,
                              joint_checks=[], state_requested=False)
     assert m.value is None
-
-
-def test_requested_joints_orders_drawers_top_to_bottom():
-    joints = {
-        "j_low": JointInfo("j_low", "prismatic", "body", "d_low", 0, 0.3, None, None),
-        "j_high": JointInfo("j_high", "prismatic", "body", "d_high", 0, 0.3, None, None),
-        "j_lid": JointInfo("j_lid", "revolute", "body", "lid", 0, 1.5, None, None),
-    }
-    sem_ = {"d_low": ("slider", "drawer"), "d_high": ("slider", "drawer"), "lid": ("hinge", "rotation_lid")}
-    centres = {"d_low": np.array([0, 0, 0.1]), "d_high": np.array([0, 0, 0.5]), "lid": np.array([0, 0, 0.9])}
-    spec = RequestSpec(joint_states=[
-        JointStateRequest(selector="label", label="drawer", ordinal=0, band="closed"),
-        JointStateRequest(selector="label", label="drawer", ordinal=1, band="slightly_open"),
-        JointStateRequest(selector="label", label="lid", band="halfway"),
-        JointStateRequest(selector="label", label="door", band="fully", phrase="door fully open"),
-    ])
-    req, unmatched = requested_joints(spec, joints, sem_, centres, [])
-    got = {j: band for j, band, *_ in req}
-    assert got == {"j_high": "closed", "j_low": "slightly_open", "j_lid": "halfway"}
-    assert unmatched == ["door fully open"]
-    # a part word that names nothing moves no other part, task-relevant or not
-    req, unmatched = requested_joints(spec, joints, sem_, centres, ["j_lid"])
-    assert {j: band for j, band, *_ in req}["j_lid"] == "halfway" and unmatched == ["door fully open"]
-    # ... unless the task-relevant part carries no label: the word may name it
-    req, unmatched = requested_joints(spec, joints, {**sem_, "lid": ("hinge", "")}, centres, ["j_lid"])
-    assert {j: band for j, band, *_ in req}["j_lid"] == "fully" and unmatched == []
-
-
-def test_label_matching_does_not_confuse_a_pump_lid_with_the_lid():
-    joints = {
-        "j_lid": JointInfo("j_lid", "revolute", "body", "lid", 0, 1.7, None, None),
-        "j_pump": JointInfo("j_pump", "prismatic", "body", "pump", 0, 0.01, None, None),
-    }
-    sem_ = {"lid": ("hinge", "lid"), "pump": ("slider", "pump_lid")}
-    spec = RequestSpec(joint_states=[JointStateRequest(selector="label", label="lid", band="fully")])
-    req, _ = requested_joints(spec, joints, sem_, {}, ["j_lid"], "Toilet")
-    assert [j for j, *_ in req] == ["j_lid"]
 
 
 # ------------------------------------------------------------------ end to end
@@ -260,10 +221,3 @@ def test_target_score_end_and_hinge_distance():
     assert m.value == 1.0 and m.details["joint_state_score"] is None
 
 
-def test_numeric_request_reaches_the_evaluation_as_a_target():
-    spec = parse_request("A box with its lid open 30 degrees.")
-    joints = {"j_lid": JointInfo("j_lid", "revolute", "base", "lid", 0.0, 2.0, None, None)}
-    req, unmatched = requested_joints(spec, joints, {"lid": ("hinge", "lid")}, {}, ["j_lid"], "Box")
-    assert unmatched == [] and len(req) == 1
-    target = req[0][4]
-    assert target is not None and target.kind == "angle" and abs(target.value - math.radians(30)) < 1e-9

@@ -13,14 +13,10 @@ import pytest
 
 from asset2sim.commands.refine import summary_lines
 from asset2sim.schemas.overlay import EstimatorInfo, Overlay
-from asset2sim.tasks.check.asset_files import parse_urdf
-from asset2sim.tasks.interpret.named_parts import requested_joints
-from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.interpret.request import parse_request
 from asset2sim.tasks.interpret.state_words import LESS_THAN_HALF
 from asset2sim.tasks.synthesize import estimate, request_apply, request_findings
 from asset2sim.tasks.synthesize.context import build_context
-from asset2sim.engines.source import UrdfFile
 from tests.conftest import SHARED, needs_shared
 from tests.tasks.interpret.request_assets import build_three_drawer_cabinet
 from tests.unseen_assets import build_bottle, build_double_door_cabinet, build_toaster
@@ -199,20 +195,16 @@ def test_the_progress_line_shows_a_number_as_asked_not_as_a_band():
 
 
 @needs_shared
-def test_the_evaluation_resolves_the_same_words_as_refine():
-    """``named_parts.requested_joints`` (the evaluation's as-asked check): the stapler's arm is its lid, the freezer
-    door the smaller one, a middle drawer of two is none."""
-    def run(obj: str, text: str, category: str, volumes: dict[str, float] | None = None):
-        joints = parse_urdf(UrdfFile(SHARED / obj / "mobility.urdf"))[1]
-        sem = {k: (v.joint_kind, v.label) for k, v in read_semantics(SHARED / obj).items()}
-        return requested_joints(parse_request(text), joints, sem, {}, [], category, volumes), joints
-
-    (req, unmatched), joints = run("103275", "a stapler with its arm pressed down", "Stapler")
-    assert [(joints[n].child, band) for n, band, *_ in req] == [("link_1", "closed")] and unmatched == []
-    (req, unmatched), _ = run("19179", "a cabinet with the middle drawer open", "StorageFurniture")
-    assert req == [] and unmatched == ["middle drawer open"]
-    (req, _), joints = run("11178", "a fridge with the freezer door open", "Refrigerator", {"link_0": 0.12, "link_1": 0.03})
-    assert [(joints[n].child, band) for n, band, *_ in req] == [("link_1", "mostly")]
+def test_the_words_resolve_as_people_name_the_parts():
+    """Refine's one reading of a request (the state, the as-asked tier and an output read back all use it): the
+    stapler's arm is its lid, the freezer door the smaller one, a middle drawer of two is none."""
+    res, labels, *_ = resolve(SHARED / "103275", "a stapler with its arm pressed down")
+    assert [labels[n] for n in res.addressed] == ["lid"] and res.unapplied == []
+    res, _, *_ = resolve(SHARED / "19179", "a cabinet with the middle drawer open")
+    assert not res.addressed and [p for p, _ in res.unapplied] == ["middle drawer open"]
+    res, labels, vols, *_ = resolve(SHARED / "11178", "a fridge with the freezer door open")
+    small = min(joint_of(labels, "door"), key=vols.get)
+    assert set(res.addressed) == {small} and res.bands[small] == "mostly"
 
 
 @needs_shared
@@ -230,16 +222,11 @@ def test_the_summary_prints_the_amount_from_the_closed_end_beside_what_was_asked
 
 
 @needs_shared
-def test_a_size_word_without_a_part_noun_picks_among_the_task_relevant_parts_in_refine_and_the_evaluation():
-    """"the freezer open": the smaller door in refine's resolution and in the evaluation's."""
+def test_a_size_word_without_a_part_noun_picks_among_the_task_relevant_parts():
+    """"the freezer open": the smaller door."""
     res, labels, vols, *_ = resolve(SHARED / "11178", "A fridge with the freezer open.")
     small = min(joint_of(labels, "door"), key=vols.get)
     assert set(res.addressed) == {small} and res.bands[small] == "mostly"
-    joints = parse_urdf(UrdfFile(SHARED / "11178" / "mobility.urdf"))[1]
-    sem = {k: (v.joint_kind, v.label) for k, v in read_semantics(SHARED / "11178").items()}
-    link_vols = {joints[n].child: v for n, v in vols.items()}
-    req, _ = requested_joints(parse_request("A fridge with the freezer open."), joints, sem, {}, sorted(vols), "Refrigerator", link_vols)
-    assert [n for n, *_ in req] == [small]
 
 
 def test_none_of_the_parts_negates_the_state():

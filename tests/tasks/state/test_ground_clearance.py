@@ -4,6 +4,8 @@ the door's collision pieces off the ground."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from asset2sim.demo_assets import build_microwave
@@ -27,7 +29,7 @@ def _lowest(urdf, state) -> dict[str, float]:
 
 
 def _open_probe(out):
-    ev = evaluate_asset(out)
+    ev = evaluate_asset(out, probes=True)
     return next(p for p in ev.metric("probes").details["probes"] if p["action"] == "open")
 
 
@@ -204,11 +206,11 @@ def test_the_open_probe_stops_where_the_floor_stops_the_door(tmp_path, monkeypat
     levers the box up (the object moved instead). Capped at the floor stop
     (the evaluation's floor stops) the door opens to it and the probe passes,
     with notes."""
-    from asset2sim.tasks.evaluation import engine_run
+    from asset2sim.tasks.check import probes
 
     if not with_stop:
-        monkeypatch.setattr(engine_run, "floor_stops", lambda *a, **k: {})
-    ev = evaluate_asset(_drop_door(tmp_path / "d", 1.45))
+        monkeypatch.setattr(probes, "floor_stops", lambda *a, **k: {})
+    ev = evaluate_asset(_drop_door(tmp_path / "d", 1.45), probes=True)
     m = ev.metric("probes")
     opened = next(p for p in m.details["probes"] if p["action"] == "open")
     if with_stop:
@@ -224,10 +226,15 @@ def test_the_open_probe_stops_where_the_floor_stops_the_door(tmp_path, monkeypat
 def test_a_collision_file_the_floor_stops_cannot_read_leaves_the_probes_running(tmp_path):
     """A door mesh with a two-coordinate vertex: PyBullet loads what it can,
     the floor stops are not measured (a note says why) and the probes still
-    run and report."""
+    run and report; the evaluation, which reads the asset as refine does, refuses it naming the file."""
+    from asset2sim.engines.source import SimObject, UrdfFile
+    from asset2sim.tasks.check.probes import probe_object
+    from asset2sim.tasks.evaluation.evaluate import EvaluationError
+
     f = _drop_door(tmp_path / "d", 1.45)
     (f / "door.obj").write_text("v 0 0 0\nv 1 0\nf 1 2 3\n")
-    ev = evaluate_asset(f)
-    m = ev.metric("probes")
-    assert m is not None and m.details["probes"]
-    assert any("where the floor stops the parts was not measured" in n and "door.obj" in n for n in ev.notes)
+    state = json.loads((f / "initial_state.json").read_text())["initial_joint_positions"]
+    found, notes = probe_object(SimObject(UrdfFile(f / "mobility.urdf"), state), {"flap": (0.0, 1.0, 2.5)})
+    assert found and any("where the floor stops the parts was not measured" in n and "door.obj" in n for n in notes)
+    with pytest.raises(EvaluationError, match="door.obj"):
+        evaluate_asset(f)

@@ -52,7 +52,8 @@ def test_open_screen_tips_the_laptop_as_estimated(laptop, fully_open, tmp_path):
     paths = write.write_output(asset, undone, tmp_path / "undone", r.initial_joint_positions)
     bal = balance.measure_balance(UrdfFile(paths.urdf), undone, r.initial_joint_positions)
     assert bal.margin < 0, "the estimated masses should put the COM outside the support"
-    check = postcheck.run_post_check(UrdfFile(paths.urdf), r.initial_joint_positions, undone, RefineConfig())
+    check = postcheck.run_post_check(postcheck.overlay_object(UrdfFile(paths.urdf), r.initial_joint_positions, undone, RefineConfig().sim),
+                                     RefineConfig())
     assert not check.stable
     assert estimated["links"]["link_0"]["mass"] == pytest.approx(ov.links["link_0"].mass)
 
