@@ -409,11 +409,11 @@ def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float]
         refined, measured = replace(refined, state=state), replace(measured, state=state)
         st.result = {n: state.get(n, q) for n, q in st.result.items()}
     balanced, design = stability.design_for_stability(ws.source(measured), ctx.asset, syn.overlay, state, ctx.category, ctx.geometry)
-    design = floored + moved + design
+    closed_out, ended = ground_clearance.ends_at_the_floor(syn.closed_out, lifted.stops, syn.bands)  # "fully": as far as it goes
+    design = floored + ended + moved + design
     for line in design:
         log.say("stability", line)
     design = room + design
-    closed_out = syn.closed_out
     tuned = escalation.post_check(ctx, replace(refined, overlay=balanced), config, ws, log, closed=closed_tuples(closed_out))
     tuned = escalation.repair_sweep(ctx, limits.strip_clips(balanced), closed_raw, replace(tuned, overrides=overrides, closed=closed_out),
                                     st, state, config, ws, log)
@@ -421,7 +421,7 @@ def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float]
     clear = list(dict.fromkeys(first_clear + placement.clearance_notes(ctx, tuned.overlay, state, tuned.overrides, ws)))
     st.collision_changes = clear + list(st.collision_changes)
     return Attempt(asset=ctx.asset, overlay=tuned.overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic,
-                   closed_out=tuned.closed, st=st, state=state, overrides=tuned.overrides, root_rotation=ctx.root_rotation,
+                   closed_out=ground_clearance.ends_at_the_floor(tuned.closed, lifted.stops, syn.bands)[0], st=st, state=state, overrides=tuned.overrides, root_rotation=ctx.root_rotation,
                    check=tuned.check, rounds=tuned.rounds, design=design, targets=syn.targets)
 
 

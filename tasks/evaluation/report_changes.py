@@ -169,8 +169,9 @@ def _output_value(jd: dict[str, Any], quantity: str, jtype: str) -> str:
 
 def state_moves(report: dict[str, Any]) -> dict[str, str]:
     """joint -> why its initial state is not where its request put it (the band's centre, or the number asked), in one
-    clause: stability by design opened it elsewhere within its band (``design_changes``: the reason and the margin), or
-    the state search moved it to remove self-penetration (``state``: asked vs found). Joints nothing moved are not
+    clause: stability by design opened it elsewhere within its band (``design_changes``: the reason and the margin), the
+    floor stopped its opening (``design_changes``), or the state search moved it to remove self-penetration
+    (``state``: asked vs found). Joints nothing moved are not
     listed. ``report``: ``report.json`` as a dict."""
     out: dict[str, str] = {}
     for note in report.get("design_changes") or []:
@@ -185,6 +186,10 @@ def state_moves(report: dict[str, Any]) -> dict[str, str]:
                              f"{head.removeprefix('stability by design: ')}"
                              + (f"; the object stands steadiest there{where}" if where else "")
                              + ("; the least opening its band allows" if "the least its band allows" in note else ""))
+    for note in report.get("design_changes") or []:  # the floor stopped the opening (tasks.state.ground_clearance)
+        name, _, rest = str(note).partition(": opening limited by the floor, ")
+        if rest and name in (report.get("initial_joint_positions") or {}):
+            out.setdefault(name, "stopped by the floor, where a real one stops")
     state = report.get("state") or {}
     for name, q in (report.get("initial_joint_positions") or {}).items():
         asked = (state.get("requested") or {}).get(name)

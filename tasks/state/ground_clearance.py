@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +16,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from asset2sim.tasks.assemble import write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
+from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.geometry.limits import subtrees
 from asset2sim.tasks.state.clearance import link_pieces, write_piece_overrides
 from asset2sim.urdf import UrdfModel
@@ -139,12 +140,14 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
 class GroundLifted:
     """The result of :func:`apply_ground_clearance`: ``state`` (joint -> rad or m), ``overrides`` (collision
     overrides, link -> piece files; the candidate's own object when unchanged), ``state_notes`` (a line per
-    opening the floor stopped) and ``collision_notes`` (a line per piece raised off the ground)."""
+    opening the floor stopped), ``collision_notes`` (a line per piece raised off the ground) and ``stops`` (joint ->
+    the position, rad or m, where the floor stopped its opening)."""
 
     state: dict[str, float]
     overrides: Mapping
     state_notes: list[str]
     collision_notes: list[str]
+    stops: Mapping[str, float] = field(default_factory=dict)
 
 
 def apply_ground_clearance(candidate: Candidate, ws: Workspace, closed: dict[str, tuple[float, float, float]]) -> GroundLifted:
@@ -163,7 +166,25 @@ def apply_ground_clearance(candidate: Candidate, ws: Workspace, closed: dict[str
     new = overrides
     if rep.pieces:
         new = {**overrides, **write_piece_overrides(rep.pieces, overlay.scale, ws.root, write.collision_folder(candidate.asset), "ground")}
-    return GroundLifted(new_state, new, state_notes, rep.notes)
+    return GroundLifted(new_state, new, state_notes, rep.notes, {j: q for j, q in new_state.items() if q != state.get(j)})
+
+
+def ends_at_the_floor(closed: dict[str, ClosedState], stops: Mapping[str, float], bands: dict[str, str]) -> tuple[dict[str, ClosedState], list[str]]:
+    """(closed ends, notes): the open range of each joint asked fully open (band ``fully``: "fully open", "all the way",
+    "wide open") ending where the floor stops its part (``stops``: joint -> rad or m, :class:`GroundLifted`), as far as
+    the part goes where the object stands; the other joints' as they are. ``bands``: joint -> the band asked."""
+    out, notes = dict(closed), []
+    for j, q in stops.items():
+        c = closed.get(j)
+        if c is None or bands.get(j) != "fully":
+            continue
+        reach = max(0.0, float(c.direction * (q - c.q_closed)))
+        if not 0.0 < reach < c.open_range:
+            continue
+        out[j] = replace(c, open_range=reach, notes=[*c.notes, "open end: where the floor stops the part"])
+        notes.append(f"{j}: asked fully open, it goes {reach / c.open_range:.0%} of its range where the object stands: the "
+                     f"floor stops it there (q = {q:.4g}), its open end")
+    return out, notes
 
 
 #: Gap (m) a moving part keeps above the body's lowest point where the floor

@@ -11,6 +11,7 @@ from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.demo_assets import build_laptop
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import available_engines, open_session
+from asset2sim.schemas.config import SimConventions
 from tests.contract_asset import write_contract_asset
 from asset2sim.tasks.check import metrics, robust_rest
 from asset2sim.tasks.check.robust_rest import (
@@ -261,3 +262,61 @@ def test_the_demo_laptop_screen_comes_to_rest_inside_its_band_after_the_drop(ref
     assert drop["joint_peak"][joint] >= drop["joint_drift"][joint] > 0.0
     assert drop["joint_drift"][joint] <= drop["joint_tolerance"][joint] and drop["passed"]
     assert rr.passed and res.report.failure_mode == "none"
+
+
+# ------------------------------------------------------------------ parts the request asks to move freely
+@pytest.mark.parametrize("asset_id, prompt, joints", [
+    ("microwave", "A microwave with its door half open; the door swings freely.", ["joint_0"]),
+    ("cabinet_2drawer", "A two-drawer cabinet with the top drawer open halfway; the drawers slide easily.", ["joint_0", "joint_1"]),
+])
+def test_a_part_asked_to_move_freely_is_graded_for_coming_to_rest_not_for_holding(asset_id, prompt, joints, refine_once):
+    """SPEC, robust rest: a part the request asks to move freely is not graded for holding its state under a
+    disturbance; it must come to rest (still moving fails) and its undisturbed hold is graded. The door and drawers
+    swing or slide out of the 5 % band when the object lands from a tilt, come to rest, and the object is ready; the
+    report names each exempt part and why."""
+    r = refine_once(asset_id, prompt, extras=False).report
+    rr = r.metric("robust_rest")
+    assert r.failure_mode == "none", r.readiness
+    assert set(rr.details["free_moving"]) == set(joints) and all("move freely" in v for v in rr.details["free_moving"].values())
+    trials = rr.details["trials"].values()
+    assert all(t["free"] == joints and not set(joints) & set(t["joint_tolerance"]) for t in trials)
+    band = {"microwave": 0.09, "cabinet_2drawer": 0.019}[asset_id]  # the 5 % band they would be graded in
+    assert max(t["joint_drift"][joints[0]] for t in trials) > band  # moved out of it, and came to rest
+    assert r.metric("state_hold").passed is True  # held undisturbed
+
+
+class _StillSession:
+    """What a nudge trial asks of a session when its rest test is a given recording."""
+
+    engine = "pybullet"
+
+    def root_pose(self):
+        return np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0])
+
+    def set_root_velocity(self, linear, angular) -> None:
+        pass
+
+
+def test_a_free_part_still_moving_after_a_disturbance_fails(monkeypatch):
+    """Graded for coming to rest: a free part that keeps moving at the end of the recording fails the trial."""
+    cfg = robust_rest.RobustRestConfig(free_joints=("j",))
+    q = np.concatenate([np.zeros(240), np.linspace(0.0, 0.4, 240)])  # creeping at the end
+    trace = _trace(list(q), (0.0, 1.0))
+    monkeypatch.setattr(metrics, "run_rest_test", lambda *a, **k: trace)
+    s = _StillSession()
+    t = robust_rest.run_trial(s, "nudge", {"j": 0.0}, np.array([0, 0, 0, 1.0]), SimConventions(), cfg)
+    assert t.failing_joints == ["j"] and t.free == ["j"] and "j" not in t.joint_tolerance
+    settled = _trace(list(np.concatenate([np.zeros(240), np.full(240, 0.4)])), (0.0, 1.0))  # moved, then at rest
+    monkeypatch.setattr(metrics, "run_rest_test", lambda *a, **k: settled)
+    assert robust_rest.run_trial(s, "nudge", {"j": 0.0}, np.array([0, 0, 0, 1.0]), SimConventions(), cfg).failing_joints == []
+    graded = robust_rest.run_trial(s, "nudge", {"j": 0.0}, np.array([0, 0, 0, 1.0]), SimConventions(), robust_rest.RobustRestConfig())
+    assert graded.failing_joints == ["j"]  # the same motion fails a part not asked to move freely
+
+
+def test_a_lid_asked_to_swing_freely_and_held_open_names_the_conflict(refine_once):
+    """"open halfway" and "swings freely" on a lid its weight shuts: held open by friction, which a free lid lacks;
+    the as-asked tier names the conflict between the two phrases (robust rest does not fail on it)."""
+    r = refine_once("box_lid", "A box with its lid open halfway; the lid swings freely.", extras=False).report
+    assert r.failure_mode == "request_not_met" and r.metric("robust_rest").passed is True
+    (item,) = [u for u in r.metric("request_met").details["unmet"] if u["kind"] == "conflict"]
+    assert item["phrase"] == "swings freely" and "'lid open halfway'" in item["text"] and "friction" in item["reason"]

@@ -238,3 +238,45 @@ def test_a_collision_file_the_floor_stops_cannot_read_leaves_the_probes_running(
     assert found and any("where the floor stops the parts was not measured" in n and "door.obj" in n for n in notes)
     with pytest.raises(EvaluationError, match="door.obj"):
         evaluate_asset(f)
+
+
+def _box_obj(lo, hi) -> str:
+    """OBJ text of one axis-aligned box (lo, hi) (m)."""
+    vs = [[(hi if i & m else lo)[k] for k, m in enumerate((1, 2, 4))] for i in range(8)]
+    fs = [t for a, b, c, d in ((0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5))
+          for t in ((a, b, c), (a, c, d))]
+    return "".join(f"v {x} {y} {z}\n" for x, y, z in vs) + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in fs)
+
+
+def _flat_laptop(folder):
+    """A laptop whose screen hinge at the base's back top edge turns 4.2 rad (240 deg): past 180 deg the screen swings
+    below the base, into the floor the laptop stands on."""
+    folder.mkdir(parents=True)
+    (folder / "body.obj").write_text(_box_obj((-0.16, -0.11, 0.0), (0.16, 0.11, 0.02)))
+    (folder / "screen.obj").write_text(_box_obj((-0.16, 0.0, 0.0), (0.16, 0.22, 0.008)))
+    mesh = "<visual><geometry><mesh filename='{0}'/></geometry></visual><collision><geometry><mesh filename='{0}'/></geometry></collision>"
+    (folder / "mobility.urdf").write_text(
+        "<?xml version='1.0'?><robot name='flat_laptop'><link name='base_link'/>"
+        f"<link name='body'>{mesh.format('body.obj')}</link><link name='screen'>{mesh.format('screen.obj')}</link>"
+        "<joint name='fix' type='fixed'><parent link='base_link'/><child link='body'/></joint>"
+        "<joint name='hinge' type='revolute'><parent link='body'/><child link='screen'/><origin xyz='0 -0.11 0.0205'/>"
+        "<axis xyz='1 0 0'/><limit lower='0' upper='4.2'/></joint></robot>")
+    (folder / "semantics.txt").write_text("body free laptop_base\nscreen hinge screen\n")
+    (folder / "meta.json").write_text('{"model_cat": "Laptop"}')
+    return folder
+
+
+def test_fully_open_is_as_far_as_the_part_goes_where_the_object_stands(tmp_path, refine_once):
+    """"fully open" on a laptop whose screen meets the floor before its limit: the screen opens to the floor, that is
+    its open end (recorded in report.json's closed ends, said with the stop), the request is met and the output read
+    back gives the same verdict; before, "fully" was graded against the range the floor cuts off (76 %: not met)."""
+    from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+
+    res = refine_once(_flat_laptop(tmp_path / "laptop"), "A laptop with its screen fully open.", extras=False)
+    r = res.report
+    end = r.closed_ends["hinge"]
+    assert end["open_range"] < 0.9 * 4.2 and r.initial_joint_positions["hinge"] == pytest.approx(end["q_closed"] + end["open_range"])
+    assert r.opening_fractions["hinge"] == pytest.approx(1.0) and r.metric("request_met").passed is True
+    assert any("asked fully open" in n and "floor stops it" in n for n in r.design_changes)
+    assert r.failure_mode == "none", r.readiness
+    assert evaluate_asset(res.out_dir).failure_mode == "none"
