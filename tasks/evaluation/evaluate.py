@@ -217,6 +217,7 @@ def refined_evaluation(ctx: EstimationContext, att: Attempt, report: RefineRepor
     failure mode) and the semantic measures, the final attempt ``att``'s runs as the report's evidence; ``ctx``: the
     refine's context (input units), ``resolution``: its reading of the request; ``out_dir``: where the output's files
     are (``shown``: the folder as its user names it). Nothing is read back or simulated."""
+    t0 = time.perf_counter()
     model = read_urdf(out_dir / output_folder.URDF_NAME, mode="lenient")
     ref = Path(reference).resolve() if reference is not None else None
     state = dict(report.initial_joint_positions)
@@ -227,7 +228,7 @@ def refined_evaluation(ctx: EstimationContext, att: Attempt, report: RefineRepor
                      prompt=report.prompt or None, reference=ref, category=report.category, scale=report.scale,
                      scale_source=output_folder.OVERLAY_NAME, engines=list(dict.fromkeys(["pybullet", *att.check.engine_results])),
                      state=state, state_source=output_folder.STATE_NAME, task_joints=task_relevant_joints(ctx),
-                     closed=att.closed_out, notes=[])
+                     closed=att.closed_out, notes=[], seconds=time.perf_counter() - t0)
     ev._runs = evidence_runs(att.check)
     ev._context = Evidence(out_dir / output_folder.URDF_NAME, model, att.check.recording.conventions if att.check.recording else SimConventions(),
                            report=report.model_dump(mode="json"), overlay=att.overlay.model_dump(mode="json"))
@@ -483,7 +484,7 @@ def _manipulation(engine: str, obj: SimObject, closed: dict[str, tuple[float, fl
     try:
         return manipulation.measure_manipulation(engine, obj, closed, category=ctx.category,
                                                  labels=task_tier.link_labels(ctx.asset), free_joints=free)
-    except EngineUnavailable as exc:
+    except (EngineUnavailable, KeyError) as exc:  # not installed, or no such engine
         why, passed = {"skipped": str(exc)}, None
     except Exception as exc:  # the object does not load or step in this engine: a failure there
         why, passed = {"error": f"{type(exc).__name__}: {one_line(exc)}"}, False

@@ -130,9 +130,10 @@ def test_a_toggle_switch_turned_on_stays_on_without_a_return_spring(refine_once)
     assert rep.category == "Switch" and rep.failure_mode == "none"
     assert res.overlay.joints["joint_0"].stiffness == 0.0
     assert rep.opening_fractions["joint_0"] > 0.97  # at a travel end
-    ev = json.loads((res.out_dir / "evaluation.json").read_text())
-    probes = next(m for m in ev["metrics"] if m["name"] == "probes")
-    assert probes["passed"], probes["details"]
+    from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+
+    probes = evaluate_asset(res.out_dir, probes=True).metric("probes")
+    assert probes.passed, probes.details
 
 
 def test_a_range_of_masses_is_read_as_a_range(demo_root, refine_once):

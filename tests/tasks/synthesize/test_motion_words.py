@@ -79,8 +79,9 @@ def test_each_word_moves_its_part_the_way_it_says(microwave, words, changes):
 def test_swings_freely_is_echoed_kept_and_its_conflict_named(microwave, tmp_path, refine_once):
     """"the door swings freely" on a free-standing microwave with its door half open: the door keeps the low friction
     and damping the word gives it (the post-check's escalation does not raise them), the word is echoed in report.json
-    with the door's values, and since a free door does not stay half open when the object is set down, robust rest
-    fails and the as-asked tier names the word and the conflict."""
+    with the door's values; the door swings when the object is set down, which robust rest does not grade for a part
+    asked to move freely (SPEC), and undisturbed it holds (its hinge is vertical: its weight does not turn it), so no
+    conflict is named and the request is met."""
     prompt = "A 14 kg microwave with its door half open; the door swings freely."
     est = _door(microwave, prompt)
     res = refine_once(microwave, prompt, extras=False)
@@ -88,12 +89,10 @@ def test_swings_freely_is_echoed_kept_and_its_conflict_named(microwave, tmp_path
     assert door.damping <= est.damping * (1 + 1e-9) and door.friction <= est.friction * (1 + 1e-9)
     lines = [p for p in res.report.request.phrases if "swings freely" in p]
     assert lines and "joint_0" in lines[0] and "damping" in lines[0]
-    kept = [line for r in res.report.escalation for line in r.words_kept]
-    assert kept and all("'swings freely'" in k for k in kept)
-    asked = res.report.metric("request_met")
-    conflicts = [u for u in asked.details["unmet"] if u["kind"] == "conflict"]
-    assert asked.passed is False and conflicts and conflicts[0]["phrase"] == "swings freely"
-    assert res.report.readiness["robust_rest"] is False
+    rr = res.report.metric("robust_rest")
+    assert rr.passed is True and "joint_0" in rr.details["free_moving"]
+    assert max(t["joint_drift"]["joint_0"] for t in rr.details["trials"].values()) > 0.02  # it swung, and came to rest
+    assert res.report.metric("state_hold").passed is True and res.report.metric("request_met").passed is True
 
 
 def test_the_guard_undoes_a_step_against_a_word_and_keeps_the_rest(microwave):
