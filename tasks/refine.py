@@ -35,12 +35,12 @@ from asset2sim.tasks.interpret.request import request_notes
 from asset2sim.stage_log import Progress, StageLog
 from asset2sim.tasks.publish.contract import (MARKER_NAME, REPORT_NAME, is_complete, read_report_json, run_hash, write_completion_marker,
                                               write_report_json)
-from asset2sim.tasks.state import balance, ground_clearance, pose, stability
+from asset2sim.tasks.state import ground_clearance, pose, stability
 from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 from asset2sim.tasks.tune import escalation
 from asset2sim.tasks.tune import keep_declared as keep
-from asset2sim.tasks.tune.attempt import Attempt, least_openings
+from asset2sim.tasks.tune.attempt import Attempt, steadier_opening
 from asset2sim.inert import one_line
 from asset2sim.engines.base import SimSession
 from asset2sim.engines.step_budget import StepBudgetExceeded, step_budget
@@ -316,14 +316,13 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
     att = _attempt(ctx, run)
     if (att.check.stable and not att.check.topples) or ctx.request.pose_hint is not None:
         return att, pose_note
-    opening = _steadier_opening(run, att)
+    opening = steadier_opening(run.ws, att, run.log)
     if opening is not None:  # stages 4-7 once more at the steadier opening
         fractions, design = opening
         second = _attempt(ctx, run, fractions=fractions)
         if second.check.passed and not second.check.topples:
             return replace(second, design=[design, *second.design]), pose_note
         run.log.say("stability", "the steadier opening did not pass every check: the bands' targets kept")
-        att = att.kept_after_another()
     state_in = estimate.state_from_bands(ctx.closed, att.bands, 1.0, att.prismatic)
     R, note = pose.most_stable_rotation(run.kin, ctx.asset, att.overlay.links, state_in, att.overlay.scale, ctx.hull_points,
                                         _moving_links(ctx), exclude_modelled=True)
@@ -335,40 +334,7 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
     if second.check.stable and (second.check.passed or not att.check.passed) and not (
             second.check.topples and not att.check.topples):
         return second, f"{why}; {note}"
-    return att.kept_after_another(), f"{note}; not better in simulation, kept as modelled"
-
-
-def _steadier_opening(run: RefineRun, att: Attempt) -> tuple[dict[str, float], str] | None:
-    """Stability by design through the opening after an unsteady attempt ``att``: the opened joints where,
-    within their bands, the object stands steadiest (:func:`asset2sim.tasks.state.balance.steadiest_fractions`),
-    or, when statically steady yet unstable or toppled in simulation, the least opening each band allows.
-    Returns (joint -> opening fraction, the design note, logged), or None when the opening alone cannot make it
-    steady or the measurement fails (noted)."""
-    intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
-    try:
-        steadiest = balance.steadiest_fractions(run.ws.source(att.candidate), att.overlay, att.state, att.closed_out, intervals)
-    except Exception as exc:  # a measurement that fails leaves the attempt as it was
-        run.log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {one_line(exc)})")
-        return None
-    why = "unstable" if not att.check.stable else "toppled by a robust-rest disturbance"
-    fractions = steadiest.fractions
-    if fractions and steadiest.after.stable:
-        note = (f"stability by design: {why} at the bands' targets; "
-                + ", ".join(f"{n} opened to {f:.2f} of its range (allowed {intervals[n][0]:.2f}-{intervals[n][1]:.2f})" for n, f in fractions.items())
-                + f", where the object stands steadiest: static margin {steadiest.before.margin * 1000:.3g} -> {steadiest.after.margin * 1000:.3g} mm"
-                f" (asked >= {steadiest.after.required * 1000:.3g} mm)")
-    elif steadiest.before.stable:  # statically steady, yet unstable or toppled in simulation
-        fractions = least_openings(att, intervals)
-        if not fractions:
-            return None
-        note = (f"stability by design: {why} at the bands' targets although statically steady (margin "
-                f"{steadiest.before.margin * 1000:.3g} mm, asked >= {steadiest.before.required * 1000:.3g} mm); "
-                + ", ".join(f"{n} opened to {f:.2f} of its range, the least its band allows ({intervals[n][0]:.2f}-{intervals[n][1]:.2f})"
-                            for n, f in fractions.items()))
-    else:  # the opening alone does not make it steady: the resting pose may
-        return None
-    run.log.say("stability", note)
-    return fractions, note
+    return att, f"{note}; not better in simulation, kept as modelled"
 
 
 def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float] | None = None) -> Attempt:

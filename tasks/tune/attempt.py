@@ -3,12 +3,16 @@ the report and the extras read (:class:`Attempt`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, StateRefinement
-from asset2sim.tasks.assemble.candidate import Candidate
+from asset2sim.inert import one_line
+from asset2sim.stage_log import StageLog
+from asset2sim.tasks.assemble.candidate import Candidate, Workspace
+from asset2sim.tasks.state import balance
+from asset2sim.tasks.synthesize import estimate
 from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.geometry.closed_state import ClosedState
 
@@ -32,16 +36,10 @@ class Attempt:
     rounds: list[EscalationRound]
     design: list[str] = field(default_factory=list)  # what stability by design changed and why
     targets: dict = field(default_factory=dict)  # joint -> request_apply.JointTarget
-    rewritten: bool = False  # kept after another attempt was loaded: its files may differ from those ``check`` measured
 
     @property
     def candidate(self) -> Candidate:
         return Candidate(self.asset, self.overlay, self.state, self.overrides, self.root_rotation)
-
-    def kept_after_another(self) -> "Attempt":
-        """A copy of this attempt marked kept after another one was tried (its rest recording is not reused: the
-        stages ask the workspace for the candidate they work on, so nothing needs loading again)."""
-        return replace(self, rewritten=True)
 
 
 def least_openings(att: Attempt, intervals: dict[str, tuple[float, float]]) -> dict[str, float]:
@@ -49,3 +47,37 @@ def least_openings(att: Attempt, intervals: dict[str, tuple[float, float]]) -> d
     that end (> 0) by more than 0.01 of the range."""
     return {name: float(lo) for name, (lo, hi) in intervals.items() if att.closed_out.get(name) is not None and name in att.state
             and 0 < lo < hi and att.closed_out[name].fraction(att.state[name]) > lo + 0.01}
+
+
+def steadier_opening(ws: Workspace, att: Attempt, log: StageLog) -> tuple[dict[str, float], str] | None:
+    """Stability by design through the opening after an unsteady attempt ``att``: the opened joints where,
+    within their bands, the object stands steadiest (:func:`asset2sim.tasks.state.balance.steadiest_fractions`),
+    or, when statically steady yet unstable or toppled in simulation, the least opening each band allows.
+    Returns (joint -> opening fraction, the design note, logged), or None when the opening alone cannot make it
+    steady or the measurement fails (noted). ``ws``: the workspace the attempt's candidate is loaded from; ``log``: the
+    refine's stage log."""
+    intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
+    try:
+        steadiest = balance.steadiest_fractions(ws.source(att.candidate), att.overlay, att.state, att.closed_out, intervals)
+    except Exception as exc:  # a measurement that fails leaves the attempt as it was
+        log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {one_line(exc)})")
+        return None
+    why = "unstable" if not att.check.stable else "toppled by a robust-rest disturbance"
+    fractions = steadiest.fractions
+    if fractions and steadiest.after.stable:
+        note = (f"stability by design: {why} at the bands' targets; "
+                + ", ".join(f"{n} opened to {f:.2f} of its range (allowed {intervals[n][0]:.2f}-{intervals[n][1]:.2f})" for n, f in fractions.items())
+                + f", where the object stands steadiest: static margin {steadiest.before.margin * 1000:.3g} -> {steadiest.after.margin * 1000:.3g} mm"
+                f" (asked >= {steadiest.after.required * 1000:.3g} mm)")
+    elif steadiest.before.stable:  # statically steady, yet unstable or toppled in simulation
+        fractions = least_openings(att, intervals)
+        if not fractions:
+            return None
+        note = (f"stability by design: {why} at the bands' targets although statically steady (margin "
+                f"{steadiest.before.margin * 1000:.3g} mm, asked >= {steadiest.before.required * 1000:.3g} mm); "
+                + ", ".join(f"{n} opened to {f:.2f} of its range, the least its band allows ({intervals[n][0]:.2f}-{intervals[n][1]:.2f})"
+                            for n, f in fractions.items()))
+    else:  # the opening alone does not make it steady: the resting pose may
+        return None
+    log.say("stability", note)
+    return fractions, note
