@@ -192,11 +192,16 @@ def _metric_results(ctx: Context, runs: dict[str, EngineRun], *, probes: bool, m
     if checks:
         have = {(m.name, m.engine) for m in results}
         results += [m for m in checks if (m.name, m.engine) not in have]
-    # a word about motion the physical verdict contradicts, on the joints whose overlay says it applied the word
+    # a word about motion the physical verdict contradicts, on the joints whose overlay says it applied the word; a
+    # word the overlay applied to a part the phrase does not name
     sources = {n: str(j.get("source") or "") for n, j in ((ctx.overlay or {}).get("joints") or {}).items()}
-    words = [(w, [n for n in joints if f"request '{w.phrase}'" in sources.get(n, "")])
-             for w, joints in motion_joints(ctx.request, ctx.joints, ctx.semantics, ctx.task_joints, ctx.category)]
-    return as_asked.word_conflicts(results, words)
+    r = next(iter(runs.values()), None)
+    named = motion_joints(ctx.request, ctx.joints, ctx.semantics, ctx.task_joints, ctx.category,
+                          r.link_centres if r is not None else {}, r.link_volumes if r is not None else {})
+    words = [(w, [n for n in joints if f"request '{w.phrase}'" in sources.get(n, "")]) for w, joints in named]
+    strays = [(w, [n for n, src in sources.items() if f"request '{w.phrase}'" in src
+                   and not any(n in js for v, js in named if v.phrase == w.phrase)]) for w, _ in named]
+    return as_asked.word_conflicts(results, words, strays)
 
 
 def _apply(spec: MetricSpec, ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:

@@ -45,8 +45,9 @@ WORD_DAMPING = {"free": "low", "low_damping": "low", "high_damping": "high", "so
 
 def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tuple[dict[str, JointChoice], list[tuple[str, str]]]:
     """(joint -> :class:`JointChoice`, (phrase, why) of each word naming a part the object lacks) from the request's
-    words about motion (``ctx.request.motions``): a word naming a part applies to that part's joints
-    (:func:`~asset2sim.tasks.interpret.named_parts.joints_of`), one naming none to the ``relevant`` joints (the
+    words about motion (``ctx.request.motions``): a word naming a part applies to that part's joints, or to the one
+    its ordinal names ("the main door": :func:`~asset2sim.tasks.interpret.named_parts.joints_of`), one naming none to
+    the ``relevant`` joints (the
     task's parts). A relevant joint's category may expect a return spring (a stapler's arm; ``categories.yaml``
     ``spring_labels``); a self-closing part gets high damping unless a word says otherwise (a door closer is a spring
     and a hydraulic damper)."""
@@ -54,10 +55,11 @@ def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tu
     applied: dict[str, list[MotionPhrase]] = {j.name: [] for j in ctx.asset.movable_joints()}
     missing = []
     for word in ctx.request.motions:
-        names = joints_of(ctx, word, relevant)
+        why: list[str] = []
+        names = joints_of(ctx, word, relevant, why)
         if word.label is not None and not names:
-            missing.append((word.phrase, f"names a '{word.label}' but this {ctx.category} has no such part (its moving parts: "
-                                         f"{moving_parts(ctx)})"))
+            missing.append((word.phrase, why[-1].removeprefix("WARNING: ") if why else
+                            f"names a '{word.label}' but this {ctx.category} has no such part (its moving parts: {moving_parts(ctx)})"))
         for n in names:
             if n in applied:
                 applied[n].append(word)
