@@ -27,7 +27,7 @@ from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import MESSAGE_FINDINGS
 from asset2sim.tasks.check.as_asked import quantity_text
 from asset2sim.tasks.check.failure_reasons import why_it_failed
-from asset2sim.tasks.check.verdict import penetration_measures, readiness, verdict_line
+from asset2sim.tasks.check.verdict import TIERS, penetration_measures, readiness, verdict_line
 from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_text, state_moves
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.refine import RefineError
@@ -146,14 +146,11 @@ def _state_text(name: str, q: float, report, types: dict[str, str], labels: dict
 def summary_lines(result) -> list[str]:
     """Human-readable summary of a RefineResult."""
     r = result.report
-    stab, osc = r.metric("rest_stability"), r.metric("oscillation")
+    osc = r.metric("oscillation")
     types = _joint_types(result.out_dir)
     labels = _joint_labels(result.out_dir)
     moves = state_moves(r.model_dump(mode="json"))
     state = ", ".join(_state_text(k, v, r, types, labels, moves) for k, v in r.initial_joint_positions.items()) or "(no movable joints)"
-    stability = "stability    n/a" if not stab else (f"stability    {'PASS' if stab.passed else 'FAIL'} (D_pos "
-                                                     f"{stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori "
-                                                     f"{stab.details.get('D_ori_rad', float('nan')):.2e} rad)")
     lines = [
         f"asset        {r.asset_id} ({r.category or 'no category'})",
         f"output       {result.out_dir}",
@@ -162,7 +159,7 @@ def summary_lines(result) -> list[str]:
         f"initial state {state}",
     ] + ([f"task         {r.task}"] if r.task else []) + [
         "penetration  " + ("; ".join(penetration_measures(r.metrics)) or "n/a"),
-        stability,
+        stability_line(r.metrics),
         f"oscillation  {'PASS' if osc and osc.passed else 'FAIL'}",
         _manipulation_line(r),
         _operability_line(r),
@@ -204,6 +201,19 @@ def report_line(report, out_dir) -> str:
     return f"report       {Path(out_dir) / 'report.json'} (no report.html with --no-extras: `asset2sim report {out_dir}` makes it)"
 
 
+def stability_line(metrics) -> str:
+    """The rest tier in one line, as the verdict reads it: the root's drift at rest (``rest_stability``) and every
+    other rest-tier measure that fails (a joint leaving its state, ``state_hold``): never ``PASS`` beside a verdict
+    whose rest tier fails."""
+    stab = next((m for m in metrics if m.name == "rest_stability"), None)
+    if stab is None:
+        return "stability    n/a"
+    failing = [f for f in readiness(metrics).failures if f.split("@")[0] in TIERS["rest"][0] and not f.startswith("rest_stability@")]
+    ok = bool(stab.passed) and not failing
+    return (f"stability    {'PASS' if ok else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori "
+            f"{stab.details.get('D_ori_rad', float('nan')):.2e} rad" + (f"; failing: {', '.join(failing)}" if failing else "") + ")")
+
+
 def engine_lines(report) -> list[str]:
     """One line per engine the checks ran in (``report.parity``): whether it ran, its rest test and self-contact Phi
     in the verdict's words, and the checks that fail in it (the verdict's ``metric@engine``), so no engine line reads
@@ -216,7 +226,8 @@ def engine_lines(report) -> list[str]:
             continue
         words = {True: "pass", False: "FAIL", None: "n/a"}
         here = [f.split("@")[0] for f in failing if f.endswith(f"@{row['engine']}")]
-        out.append(f"engine {row['engine']:<8} rest {words.get(row['rest_stability'], row['rest_stability'])}, oscillation "
+        rest = False if set(here) & set(TIERS["rest"][0]) else row["rest_stability"]  # the rest tier, as the verdict reads it
+        out.append(f"engine {row['engine']:<8} rest {words.get(rest, rest)}, oscillation "
                    f"{words.get(row['oscillation'], row['oscillation'])}, self-contact "
                    f"{'-' if row['penetration_mm'] is None else format(float(row['penetration_mm']), '.3f')} mm"
                    + (f"; failing here: {', '.join(here)}" if here else "") + (f" ({row['reason']})" if row["reason"] else ""))

@@ -206,6 +206,7 @@ _FALLBACK_ADVICE = {"rest": "stand", "penetration": "sweep", "robust_rest": "sta
 def _rest_why(metrics: list[Any]) -> list[str]:
     """One sentence per failing rest-tier metric: what moved, by how much against its threshold, the advice."""
     out = []
+    told: set[tuple[str, str]] = set()  # (joint, engine) a hold measure said: the post-check's and the evaluation's once
     for m in metrics:
         if m.name not in TIERS["rest"][0] or metric_verdict(m) is not False:
             continue
@@ -238,6 +239,9 @@ def _rest_why(metrics: list[Any]) -> list[str]:
                 joints = d.get("joints") or {}
                 per = {j: (float((joints.get(j) or {}).get("drift", 0.0)), joints.get(j) or {}) for j in d.get("failing") or []}
             for j, (drift, e) in per.items():
+                if (j, m.engine) in told:
+                    continue
+                told.add((j, m.engine))
                 unit = (e or {}).get("unit") or (d.get("units") or {}).get(j, "rad")
                 tol = (e or {}).get("tolerance", (d.get("tolerances") or {}).get(j))
                 against = f"tolerance {_joint_amount(tol, unit)}" if tol is not None else f"passes when {m.threshold}"

@@ -93,7 +93,8 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
     onto a stop (:func:`_on_stop`: its open end or its closed end, within its band) is held there by the stop, its
     friction only against a lean that lifts it off (g sin 5 deg |w_h| - |tau_g| cos 5 deg), and a landing that
     moves a part into a stop moves nothing. A spring or a balance carries its part's load, and a part that moves
-    freely is left free.
+    freely is left free of the friction that holds it: a word about friction or damping ("slides easily") never
+    removes the counterbalance or sash balance that holds a part against gravity.
     """
     prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
     rot = ctx.root_rotation
@@ -138,12 +139,12 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
             ref = float(np.clip(state[name] - load.gravity_load / k, cs.lower * unit, cs.upper * unit))
             spring, mechanism = (k, ref), "return spring"
             hold = 0.1 * hold  # the spring carries the load; friction only adds feel
-        elif name not in prismatic and not ch.free_moving and _label(ctx, name) in COUNTERBALANCE_LABELS:
+        elif name not in prismatic and _label(ctx, name) in COUNTERBALANCE_LABELS:  # a word about friction keeps it
             counter = counterbalance(ctx, kin, links, state, scale, name, fr) or lid_support(ctx, kin, links, state, scale, name, fr)
             if counter is not None:
                 spring, hold = counter.spring, counter.hold
                 note, balanced, mechanism = f"{note}; {counter.note}", True, counter.note.split(" (")[0]
-        elif name in prismatic and not ch.free_moving and _label(ctx, name) in BALANCE_LABELS:
+        elif name in prismatic and _label(ctx, name) in BALANCE_LABELS:  # "slides easily" is friction, not the balance
             bal = balance(loads[name], cs, unit)
             if bal is not None:
                 spring, hold = bal.spring, bal.hold

@@ -10,12 +10,14 @@ import json
 import re
 import shutil
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from asset2sim import demo_assets
 from asset2sim.cli import main
+from asset2sim.commands.refine import engine_lines, stability_line
 from asset2sim.schemas.report import FAILURE_MODES, MetricResult
 from asset2sim.tasks.check import metrics as spec_metrics
 from asset2sim.tasks.check.failure_reasons import why_it_failed
@@ -234,3 +236,29 @@ def test_the_sentence_and_the_frames_name_the_same_parent_child_pair():
     assert (f.kind, f.link_a, f.link_b, f.depth_mm) == ("parent-child", "body", "door", 7.0)
     (sentence,) = penetration_why([m])
     assert "link 'door' is 7.0 mm inside its parent 'body'" in sentence
+
+
+def _hold_metrics() -> list[MetricResult]:
+    """The rest tier as refine and its evaluation record a part that leaves its state while the object stands still:
+    the root at rest, the joint out of its band in the post-check's ``state_hold`` and the evaluation's ``joint_hold``."""
+    return [MetricResult(name="rest_stability", value=1e-5, unit="m", passed=True, engine="pybullet",
+                         details={"D_pos_m": 1e-5, "D_ori_rad": 2e-5}),
+            MetricResult(name="state_hold", value=0.1, unit="m", passed=False, engine="pybullet",
+                         details={"sagging": ["slide"], "drift": {"slide": 0.1}, "units": {"slide": "m"}, "tolerances": {"slide": 0.002}}),
+            MetricResult(name="joint_hold", value=0.1, unit="m", passed=False, engine="pybullet",
+                         details={"failing": ["slide"], "joints": {"slide": {"drift": 0.1, "unit": "m", "tolerance": 0.002}}})]
+
+
+def test_a_joint_left_its_state_is_said_once_and_no_terminal_line_reads_pass_beside_it():
+    """A sash that drops 100 mm while its window stands still: one sentence says so (the post-check's and the
+    evaluation's hold measures are one finding, one bullet in report.html), and neither the stability line nor the
+    engine line of the terminal says the rest tier passed above a verdict whose rest tier fails."""
+    metrics = _hold_metrics()
+    lines = why_it_failed(metrics)
+    assert len([ln for ln in lines if "joint 'slide' left its initial state" in ln]) == 1, lines
+    assert readiness(metrics).tiers["rest"] is False
+    line = stability_line(metrics)
+    assert line.startswith("stability    FAIL") and "state_hold@pybullet" in line, line
+    row = {"engine": "pybullet", "status": "ok", "rest_stability": True, "oscillation": True, "penetration_mm": 0.0, "reason": ""}
+    (engine,) = engine_lines(SimpleNamespace(parity=[row], metrics=metrics))
+    assert "rest FAIL" in engine and "rest pass" not in engine, engine
