@@ -29,6 +29,7 @@ from asset2sim.tasks.check.as_asked import quantity_text
 from asset2sim.tasks.check.failure_reasons import why_it_failed
 from asset2sim.tasks.check.verdict import TIERS, penetration_measures, readiness, verdict_line
 from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_text, state_moves
+from asset2sim.tasks.evaluation.report_html import host_notes
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.refine import RefineError
 from asset2sim.tasks.synthesize.validate_overlay import OverlayInvalid
@@ -164,7 +165,7 @@ def summary_lines(result) -> list[str]:
         _manipulation_line(r),
         _operability_line(r),
         f"verdict      {verdict_line(r.failure_mode, r.readiness, readiness(r.metrics).failures)}",
-    ] + why_lines(r) + as_asked_lines(r) + skipped_lines(r) + engine_lines(r) + request_lines(r.request) + [
+    ] + why_lines(r) + as_asked_lines(r) + skipped_lines(r) + engine_lines(r) + request_lines(r.request) + host_lines(r) + [
         "wall time    " + ", ".join(f"{k} {v:.2f}s" for k, v in r.stage_seconds.items()),
     ]
     return once(lines) + [report_line(r, result.out_dir)]
@@ -246,6 +247,14 @@ def skipped_lines(report) -> list[str]:
     """An export or check skipped for a missing optional dependency, one line each with the extra that would do it
     (``skipped      MJCF export: MuJoCo is not installed: pip install 'asset2sim[mujoco]'``)."""
     return [f"skipped      {n.replace(' skipped: ', ': ', 1)}" for n in report.notes if " skipped: " in n and "asset2sim[" in n]
+
+
+def host_lines(report) -> list[str]:
+    """The way back into the input's own package (an MJCF or USD input): the files written back (``mjcf/host/``,
+    ``usd/host/``), what the package's code sets over them at run time and the call that keeps the refined values
+    (robosuite's ``DoorObject(friction=..., damping=...)``), or why none was written; one line each, as report.json's
+    notes say them."""
+    return [f"host         {n}" for n in host_notes(report.notes)]
 
 
 def request_lines(found) -> list[str]:

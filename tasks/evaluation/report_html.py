@@ -259,6 +259,21 @@ def as_asked_block(ev) -> str:
             "<code>request_not_met</code>; states measured from the closed end)<ul>" + items + "</ul></div>")
 
 
+def host_notes(notes: list[str]) -> list[str]:
+    """The notes of an MJCF or USD input's write-back among a report's ``notes`` (``tasks/publish/extra_outputs.py``):
+    the files written back into the input's package, the call its code needs to keep the refined values, or why
+    nothing was written (for the terminal and :func:`host_section`)."""
+    return [n for n in notes if n.startswith(("host MJCF", "host USD"))]
+
+
+def host_section(report: dict | None) -> str:
+    """"Back into its package": the write-back of an MJCF or USD input (:func:`host_notes` of report.json's notes),
+    empty for other inputs."""
+    notes = host_notes(list((report or {}).get("notes") or []))
+    return ("<h2>Back into its package</h2><ul class='host'>" + "".join(f"<li>{esc(n)}</li>" for n in notes) + "</ul>"
+            if notes else "")
+
+
 def engines_section(report) -> str:
     """"What holds in each engine": one row per engine of ``report.parity`` (``refine --engines``): rest stability,
     the joints held at rest over the rest test, each joint's breakaway push over its declared friction (within 20 %
@@ -351,6 +366,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         f"<p>{badge}</p>",
         why_section(ev),
         as_asked_block(ev),
+        host_section(ctx.report if ctx is not None else None),
         "<h2>Object at its initial state</h2>",
         f"<p class='small'>{esc(views_what)}; joints: {esc(state_text)} ({esc(ev.initial_state_source)}); "
         f"task-relevant: {esc(', '.join(ev.task_joints) or '-')}</p>",
