@@ -125,6 +125,10 @@ def refine_asset(
             log.say("media", f"{out_dir}: " + ", ".join(sorted(made)) + " made (the deferred media phase)")
         return _completed_result(out_dir, log)
     owner = _start_output(asset, out_dir, overwrite)
+    if owner.replaced:  # an earlier output of another request or configuration: said before it goes
+        tops = sorted({r.split("/")[0] + ("/" if "/" in r else "") for r in owner.replaced})
+        log.say("output", f"WARNING: {out_dir} holds an earlier output, which this run replaces: its {len(owner.replaced)} files "
+                          f"({', '.join(tops[:8])}{', ...' if len(tops) > 8 else ''}) are removed")
     work = owner.write_path(out_dir)  # out_dir, or the staging folder that replaces a complete earlier output
     staged_input = asset.staged_from.parent if asset.staged_from is not None else None  # an MJCF / USD file's own folder
     # no cache entry in the input or output; every simulated step of every phase counted against one cap
