@@ -401,7 +401,9 @@ def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float]
     st.collision_changes = list(st.collision_changes) + lifted.collision_notes
     refined = Candidate(ctx.asset, syn.overlay, state, overrides, ctx.root_rotation)
     measured, moved = refined, []  # the pieces the statics are measured on: those the limits were clipped on
-    if overrides is not searched.collision_overrides:  # the collision pieces changed: the limits are clipped again on them (stage 6b)
+    # the state search's repairs changed the collision pieces: the limits are clipped again on them (stage 6b); a lift
+    # off the floor only shortens a piece from below, so the limits found before it stand
+    if kept.collision_overrides is not searched.collision_overrides:
         measured = replace(refined, overlay=limits.strip_clips(syn.overlay))
         reclipped, closed_re = placement.clip_limits(measured, closed_raw, ws, config, log)
         again = placement.reclipped(syn, reclipped, closed_re, state)  # the state kept in its band
