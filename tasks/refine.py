@@ -255,7 +255,8 @@ def input_shown(asset_dir: Path | str, asset: AssetDescription) -> str:
 
 
 def _announce_extract(asset_dir: Path | str, asset: AssetDescription, findings: list, log: StageLog) -> None:
-    category = asset.category or "not declared (recognised from the request and the parts next)"
+    category = (f"{asset.category} as declared (the category used is decided next, from the request and the parts)"
+                if asset.category else "not declared (recognised from the request and the parts next)")
     log.say("extract", f"{input_shown(asset_dir, asset)}: {len(asset.links)} links, {len(asset.movable_joints())} movable joints, "
             f"category {category}" + (f"; {len(findings)} validation findings (none fatal)" if findings else ""))
     log.lap("extract")
@@ -288,7 +289,7 @@ def _interpret(ctx: EstimationContext, kin: SimSession, log: StageLog) -> tuple[
         log.say("request", f"pose '{spec.pose_hint}': {pose_note}")
     for note in request_notes(spec):
         log.say("request", note)
-    log.say("request", f"category {ctx.category}; size {spec.size_class or 'regular'}; states " + (", ".join(js.words() for js in spec.joint_states) or "none asked"))
+    log.say("request", f"category {ctx.category} ({ctx.category_reason}); size {spec.size_class or 'regular'}; states " + (", ".join(js.words() for js in spec.joint_states) or "none asked"))
     log.lap("closed_state")
     return ctx, pose_note
 

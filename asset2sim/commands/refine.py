@@ -8,6 +8,7 @@ interaction-ready or not as asked (``request_not_met``), 4 output location probl
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import sys
@@ -106,6 +107,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "decomposition that leaves its inside open, so things can be put into it (needs the [coacd] extra; "
         "docs/guide/outputs.md)"))
     parser.add_argument("--quiet", "-q", action="store_true", help="print only warnings and the summary")
+    parser.add_argument("--json", action="store_true", help=(
+        "for scripts: print one JSON object instead of the progress and the summary (the output folder, the verdict, "
+        "each tier, why it failed, the files written); warnings still go to stderr"))
 
 
 def _joint_types(out_dir) -> dict[str, str]:
@@ -166,7 +170,7 @@ def summary_lines(result) -> list[str]:
         _operability_line(r),
         f"verdict      {verdict_line(r.failure_mode, r.readiness, readiness(r.metrics).failures)}",
     ] + why_lines(r) + as_asked_lines(r) + skipped_lines(r) + engine_lines(r) + request_lines(r.request) + host_lines(r) + [
-        "wall time    " + ", ".join(f"{k} {v:.2f}s" for k, v in r.stage_seconds.items()),
+        "wall time    " + wall_time_text(r.stage_seconds),
     ]
     return once(lines) + [report_line(r, result.out_dir)]
 
@@ -413,6 +417,16 @@ STAGE_WORDS = {"extract": "read", "analyze": "geometry", "closed_state": "closed
                "skip": "kept"}
 
 
+def wall_time_text(stage_seconds: dict[str, float]) -> str:
+    """The wall time per stage in the progress lines' words (:data:`STAGE_WORDS`: ``shut_repair`` and ``sweep_repair``
+    are one ``repair``), in stage order, each word once."""
+    words: dict[str, float] = {}
+    for k, v in stage_seconds.items():
+        word = STAGE_WORDS.get(k, k.replace("_", " "))
+        words[word] = words.get(word, 0.0) + float(v)
+    return ", ".join(f"{k} {v:.2f}s" for k, v in words.items())
+
+
 def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
 
@@ -420,7 +434,7 @@ def run(args: argparse.Namespace) -> int:
         line = f"[{time.perf_counter() - t0:6.2f}s] {STAGE_WORDS.get(stage, stage.replace('_', ' ')):<12} {message}"
         if message.startswith("WARNING"):  # warnings are printed with --quiet too, on stderr
             print(line, file=sys.stderr, flush=True)
-        elif not args.quiet:
+        elif not (args.quiet or getattr(args, "json", False)):
             print(line, flush=True)
 
     config = options(args)
@@ -436,6 +450,18 @@ def run(args: argparse.Namespace) -> int:
         raise output_failure(exc, args.out) from exc
     except OSError as exc:
         raise os_failure(exc, args.out, args.asset) from exc
-    for line in summary_lines(result):
-        print(line)
+    if getattr(args, "json", False):
+        print(json.dumps(json_summary(result), indent=2))
+    else:
+        for line in summary_lines(result):
+            print(line)
     return 0 if result.report.failure_mode == "none" else NOT_READY
+
+
+def json_summary(result) -> dict:
+    """``refine --json``: what a script needs of a refine, in one object: the output folder, the verdict (``ready``,
+    ``failure_mode``, each tier), why it failed (the terminal's sentences), the report and the extra files written."""
+    r = result.report
+    return {"out_dir": str(result.out_dir), "ready": r.failure_mode == "none", "failure_mode": r.failure_mode,
+            "readiness": dict(r.readiness), "why_it_failed": why_it_failed(r.metrics) if r.failure_mode != "none" else [],
+            "report": str(Path(result.out_dir) / "report.json"), "files": dict(result.extras)}

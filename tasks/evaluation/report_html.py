@@ -180,7 +180,8 @@ def operability_section(ev) -> str:
     """The operability tier as a table: per engine and handled part, the grasp, the effort each stroke needs
     (force at the grasp point N, torque about the axis N m) against the part's real range and its source,
     how far the hand got, and the verdict."""
-    rows = []
+    rows: list[str] = []
+    cited: dict[str, int] = {}  # each standard quoted once, under the table; a row names its number
     for m in [m for m in ev.metrics if m.name == "operability"]:
         if not m.details.get("parts"):
             why = m.details.get("skipped") or m.details.get("not_run") or "no handled part"
@@ -201,14 +202,16 @@ def operability_section(ev) -> str:
                     f"<td>{esc(s['action'])}</td><td class='num'>{fmt(s['needed_force_n'])} N{torque}</td>"
                     f"<td class='num'>{esc(limit)} ({esc(p['range_of'])})</td><td>{esc(got)}</td>"
                     f"<td class='{cls}'>{esc(s['failure'] or 'ok')}</td>"
-                    f"<td class='small'>{esc('; '.join(p.get('sources') or []))}</td></tr>")
+                    f"<td class='small'>{', '.join(f'[{cited.setdefault(src, len(cited) + 1)}]' for src in p.get('sources') or [])}</td></tr>")
     if not rows:
         return "<p class='small'>operability not measured</p>"
+    notes = "".join(f"<li>[{n}] {esc(src)}</li>" for src, n in cited.items())
     return ("<p class='small'>Root fixed, gravity on, the other joints held: a hand at the grasp point pushes each handled "
             "part from its closed end to its far end and back; the effort it needs (friction, damping at the hand's "
             "0.25 m/s, springs, gravity) must lie inside the part's real operating range.</p>"
             "<table><tr><th>engine</th><th>part</th><th>grasp</th><th>stroke</th><th>effort needed</th><th>range</th>"
-            "<th>hand got it to</th><th>verdict</th><th>range source</th></tr>" + "".join(rows) + "</table>")
+            "<th>hand got it to</th><th>verdict</th><th>range source</th></tr>" + "".join(rows) + "</table>"
+            + (f"<ul class='small'>{notes}</ul>" if notes else ""))
 
 
 def _badge(ev) -> str:
