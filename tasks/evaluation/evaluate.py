@@ -193,14 +193,14 @@ def _metric_results(ctx: Context, runs: dict[str, EngineRun], *, probes: bool, m
         have = {(m.name, m.engine) for m in results}
         results += [m for m in checks if (m.name, m.engine) not in have]
     # a word about motion the physical verdict contradicts, on the joints whose overlay says it applied the word; a
-    # word the overlay applied to a part the phrase does not name
+    # word naming one part by its place ("the main door") the overlay applied to another
     sources = {n: str(j.get("source") or "") for n, j in ((ctx.overlay or {}).get("joints") or {}).items()}
     r = next(iter(runs.values()), None)
     named = motion_joints(ctx.request, ctx.joints, ctx.semantics, ctx.task_joints, ctx.category,
                           r.link_centres if r is not None else {}, r.link_volumes if r is not None else {})
     words = [(w, [n for n in joints if f"request '{w.phrase}'" in sources.get(n, "")]) for w, joints in named]
-    strays = [(w, [n for n, src in sources.items() if f"request '{w.phrase}'" in src
-                   and not any(n in js for v, js in named if v.phrase == w.phrase)]) for w, _ in named]
+    strays = [(w, [n for n, src in sources.items() if f"request '{w.phrase}'" in src  # a part named by its place
+                   and not any(n in js for v, js in named if v.phrase == w.phrase)]) for w, _ in named if w.ordinal is not None]
     return as_asked.word_conflicts(results, words, strays)
 
 

@@ -211,11 +211,10 @@ def reclipped(syn: Synthesis, overlay: Overlay, closed_after: dict[str, ClosedSt
 
 def clip_limits(candidate: Candidate, closed_out: dict[str, ClosedState], ws: Workspace, config: RefineConfig,
                  log: StageLog) -> tuple[Overlay, dict[str, ClosedState]]:
-    """Stage 6b: the joint limits of ``candidate``'s overlay clipped to what its geometry allows at its scale, every
-    other joint at its closed end (:mod:`asset2sim.tasks.geometry.limits`; with a carrying chain, also against the
-    chain opened): where a part runs into the others does not move with the state the request asks.
+    """Stage 6b: the joint limits of ``candidate``'s overlay clipped to what its geometry allows at its state
+    (:mod:`asset2sim.tasks.geometry.limits`; with a carrying chain, also against the chain opened).
     Returns (overlay, closed ends)."""
-    overlay, state = candidate.overlay, {n: c.q_closed for n, c in closed_out.items()}
+    overlay, state = candidate.overlay, dict(candidate.state)
     with ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
                                                           conventions=config.sim)) as sess:
         clips = limits.geometric_limits(sess, ws.model(candidate), closed_tuples(closed_out), state)
