@@ -217,6 +217,7 @@ def test_roundtrip_through_yourdfpy_writer(model):
         _same(_normal(a), _normal(b))
 
 
+@pytest.mark.slow  # end to end: 40 generated assets through the pipeline's writer and reader
 @SETTINGS
 @given(models())
 def test_roundtrip_through_pipeline_writer(model):
