@@ -248,10 +248,10 @@ def test_roundtrip_through_pipeline_writer(model):
             expected["links"][ln.name] = (expected["links"][ln.name][0], (lp.mass, lp.inertia.matrix(), com))
         for j in a.movable_joints():
             t = list(expected["joints"][j.name])
-            # build_urdf keeps effort and velocity as the input declares them; a revolute or prismatic joint without
-            # them gets a passive part's (the URDF format requires both there)
+            # build_urdf keeps effort and velocity as the input declares them; a revolute or prismatic joint (or a
+            # continuous one with a <limit>) without them gets a passive part's (the URDF format requires both there)
             t[9], t[10] = 0.25, 0.125
-            if j.type in ("revolute", "prismatic"):
+            if j.type in ("revolute", "prismatic") or next(x.with_limit for x in model.joints if x.name == j.name):
                 t[7] = urdf.PASSIVE_EFFORT if t[7] is None else t[7]
                 t[8] = urdf.PASSIVE_VELOCITY if t[8] is None else t[8]
             expected["joints"][j.name] = tuple(t)
