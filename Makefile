@@ -15,7 +15,7 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip setuptools wheel
 
-setup: $(PY)  ## install asset2sim with every extra into .venv (the exact versions of constraints/ci.txt)
+setup: $(PY)  ## install asset2sim with [all] into .venv (every extra but mjx, newton, ovphysx, learn, maniskill, checkers; the exact versions of constraints/ci.txt)
 	$(PY) -m pip install --quiet -e ".[all]" -c constraints/ci.txt
 
 demo: ## refine the built-in demo asset (no data needed)

@@ -188,6 +188,8 @@ class OwnedFolder:
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     #: a staged run's descriptor of its staging folder, holding the lock that tells a later run it is live
     _held: int | None = field(default=None, repr=False)
+    #: the files of an earlier output this run replaces (relative paths; removed now, or when a staged run finishes)
+    replaced: tuple[str, ...] = ()
 
     def _release(self) -> None:
         if self._held is not None:
@@ -323,7 +325,7 @@ def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = Fals
         except OSError as exc:
             raise _write_failed(given, exc) from exc
         root = root.resolve()
-    owner = OwnedFolder(root=root, given=given, source=src, created=created)
+    owner = OwnedFolder(root=root, given=given, source=src, created=created, replaced=tuple(sorted(previous)))
     try:
         if previous:
             # claim first, so a kill during the removal leaves them recorded
@@ -374,7 +376,8 @@ def _start_staged(root: Path, given: Path, src: Path, previous: set[str], foreig
     except OSError:
         return None
     held = _try_lock(staging)
-    owner = OwnedFolder(root=staging.resolve(), given=given, source=src, created=True, final=root, _held=held)
+    owner = OwnedFolder(root=staging.resolve(), given=given, source=src, created=True, final=root, _held=held,
+                        replaced=tuple(sorted(previous)))
     try:
         owner._save()
     except OSError as exc:

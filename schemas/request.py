@@ -141,11 +141,18 @@ class MotionPhrase(BaseModel):
     mechanism: str | None = None
     """for ``slides``: the kind of slide named (a key of ``asset2sim/priors/slides.yaml``: ``ball_bearing``, ``roller``,
     ``lubricated``, ``wood_runners``)"""
+    ordinal: int | None = None
+    """one of the parts ``label`` names, by its place (0-based, in ``order``; negative from the end): "the main door
+    has a stiff hinge" names the largest door only; None: every part the label names"""
+    order: OrderAxis = "vertical"
+    """How ``ordinal`` counts, as a state's (:class:`JointStateRequest`)."""
 
     def short(self) -> str:
-        """``'swings freely' (door): free`` for the report's and the summary's lines."""
+        """``'swings freely' (door): free``, ``'stiff' (the largest door): stiff`` for the report's and the summary's
+        lines."""
         what = self.kind.replace("_", " ") if self.mechanism is None else f"slides: {self.mechanism.replace('_', ' ')}"
-        return f"'{self.phrase}'" + (f" ({self.label})" if self.label else "") + f": {what}"
+        part = ordinal_words(self.ordinal, self.order, self.label) if self.ordinal is not None else self.label
+        return f"'{self.phrase}'" + (f" ({part})" if part else "") + f": {what}"
 
 
 class JointStateRequest(BaseModel):

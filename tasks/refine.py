@@ -126,6 +126,10 @@ def refine_asset(
             log.say("media", f"{out_dir}: " + ", ".join(sorted(made)) + " made (the deferred media phase)")
         return _completed_result(out_dir, log)
     owner = _start_output(asset, out_dir, overwrite)
+    if owner.replaced:  # an earlier output of another request or configuration: said before it goes
+        tops = sorted({r.split("/")[0] + ("/" if "/" in r else "") for r in owner.replaced})
+        log.say("output", f"WARNING: {out_dir} holds an earlier output, which this run replaces: its {len(owner.replaced)} files "
+                          f"({', '.join(tops[:8])}{', ...' if len(tops) > 8 else ''}) are removed")
     work = owner.write_path(out_dir)  # out_dir, or the staging folder that replaces a complete earlier output
     staged_input = asset.staged_from.parent if asset.staged_from is not None else None  # an MJCF / USD file's own folder
     # no cache entry in the input or output; every simulated step of every phase counted against one cap
@@ -255,7 +259,8 @@ def input_shown(asset_dir: Path | str, asset: AssetDescription) -> str:
 
 
 def _announce_extract(asset_dir: Path | str, asset: AssetDescription, findings: list, log: StageLog) -> None:
-    category = asset.category or "not declared (recognised from the request and the parts next)"
+    category = (f"{asset.category} as declared (the category used is decided next, from the request and the parts)"
+                if asset.category else "not declared (recognised from the request and the parts next)")
     log.say("extract", f"{input_shown(asset_dir, asset)}: {len(asset.links)} links, {len(asset.movable_joints())} movable joints, "
             f"category {category}" + (f"; {len(findings)} validation findings (none fatal)" if findings else ""))
     log.lap("extract")
@@ -288,7 +293,7 @@ def _interpret(ctx: EstimationContext, kin: SimSession, log: StageLog) -> tuple[
         log.say("request", f"pose '{spec.pose_hint}': {pose_note}")
     for note in request_notes(spec):
         log.say("request", note)
-    log.say("request", f"category {ctx.category}; size {spec.size_class or 'regular'}; states " + (", ".join(js.words() for js in spec.joint_states) or "none asked"))
+    log.say("request", f"category {ctx.category} ({ctx.category_reason}); size {spec.size_class or 'regular'}; states " + (", ".join(js.words() for js in spec.joint_states) or "none asked"))
     log.lap("closed_state")
     return ctx, pose_note
 
@@ -367,7 +372,9 @@ def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float]
     st.collision_changes = list(st.collision_changes) + lifted.collision_notes
     refined = Candidate(ctx.asset, syn.overlay, state, overrides, ctx.root_rotation)
     measured, moved = refined, []  # the pieces the statics are measured on: those the limits were clipped on
-    if overrides is not searched.collision_overrides:  # the collision pieces changed: the limits are clipped again on them (stage 6b)
+    # the state search's repairs changed the collision pieces: the limits are clipped again on them (stage 6b); a lift
+    # off the floor only shortens a piece from below, so the limits found before it stand
+    if kept.collision_overrides is not searched.collision_overrides:
         measured = replace(refined, overlay=limits.strip_clips(syn.overlay))
         reclipped, closed_re = placement.clip_limits(measured, closed_raw, ws, config, log)
         again = placement.reclipped(syn, reclipped, closed_re, state)  # the state kept in its band

@@ -5,6 +5,7 @@ use the shared refines marked ``integration``."""
 
 from __future__ import annotations
 
+import collections
 import os
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -67,6 +68,19 @@ def refine_once(refine_factory) -> Iterator[Callable[..., Refined]]:
     yield get
     for r in handed:
         refine_factory.assert_untouched(r)
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    """The skipped tests counted by reason at the end of every run, most first: what this machine did not run and why
+    (the dev dataset not beside the clone, an extra not installed), instead of a bare count."""
+    skipped = terminalreporter.stats.get("skipped", [])
+    if not skipped:
+        return
+    reasons = collections.Counter(
+        (rep.longrepr[2] if isinstance(rep.longrepr, tuple) else str(rep.longrepr)).removeprefix("Skipped: ") for rep in skipped)
+    terminalreporter.write_sep("-", f"{len(skipped)} skipped, by reason")
+    for reason, n in reasons.most_common():
+        terminalreporter.write_line(f"{n:5d}  {reason}")
 
 
 def pytest_collection_modifyitems(config, items):

@@ -45,10 +45,10 @@ FOREIGN_OPTIONS = {"--no-deps", "--backend-store-uri", "--nthreads", "--nworkers
 
 #: Files each document's commands and snippets must leave in its folder.
 EXPECTED_FILES = {
-    "README.md": ["assets/laptop/mobility.urdf", "out/laptop/mobility.urdf", "out/laptop/initial_state.json",
+    "README.md": ["out/assets/laptop/mobility.urdf", "out/laptop/mobility.urdf", "out/laptop/initial_state.json",
                   "out/laptop/overlay.json", "out/laptop/report.json", "out/laptop/report.html", "out/laptop/mjcf/mobility.xml",
-                  "out/laptop/usd/mobility.usd", "eval/laptop/evaluation.json", "eval/laptop/report.html",
-                  "views/front.png", "assets/demo/manifest.csv", "bench/results.csv"],
+                  "out/laptop/usd/mobility.usd", "out/eval/laptop/evaluation.json", "out/eval/laptop/report.html",
+                  "out/views/front.png", "out/assets/demo/manifest.csv", "bench/results.csv"],
     "audit.md": ["audit/box_grams/audit.md", "audit/box_grams/patch/storage_box.xml", "audit/audit_assets.parquet",
                  "audit/audit_values.parquet", "audit_api/audit.json", "audit_flow/audit_assets.parquet",
                  "out/kept/report.json"],

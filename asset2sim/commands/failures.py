@@ -107,7 +107,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.over_time:
         table = store.read_table(args.dataset, columns=[*queries.PASS_RATE_COLUMNS])
-        print(queries.pass_rates_over_time(table, args.dataset).to_string(index=False))
+        rates = queries.pass_rates_over_time(table, args.dataset)
+        if len(rates):  # each run's start to the minute, in UTC, not the raw timestamp (NaT / None: "-")
+            rates["started_at"] = [t.strftime("%Y-%m-%d %H:%M UTC") if hasattr(t, "strftime") and t == t else "-"
+                                   for t in rates["started_at"]]
+        print(rates.to_string(index=False))
         return 0
 
     if args.run == "latest":

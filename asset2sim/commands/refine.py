@@ -8,6 +8,7 @@ interaction-ready or not as asked (``request_not_met``), 4 output location probl
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import sys
@@ -27,8 +28,9 @@ from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import MESSAGE_FINDINGS
 from asset2sim.tasks.check.as_asked import quantity_text
 from asset2sim.tasks.check.failure_reasons import why_it_failed
-from asset2sim.tasks.check.verdict import penetration_measures, readiness, verdict_line
+from asset2sim.tasks.check.verdict import TIERS, penetration_measures, readiness, verdict_line
 from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_text, state_moves
+from asset2sim.tasks.evaluation.report_html import host_notes
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.refine import RefineError
 from asset2sim.tasks.synthesize.validate_overlay import OverlayInvalid
@@ -104,6 +106,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "decomposition that leaves its inside open, so things can be put into it (needs the [coacd] extra; "
         "docs/guide/outputs.md)"))
     parser.add_argument("--quiet", "-q", action="store_true", help="print only warnings and the summary")
+    parser.add_argument("--json", action="store_true", help=(
+        "for scripts: print one JSON object instead of the progress and the summary (the output folder, the verdict, "
+        "each tier, why it failed, the files written); warnings still go to stderr"))
 
 
 def _joint_types(out_dir) -> dict[str, str]:
@@ -145,14 +150,11 @@ def _state_text(name: str, q: float, report, types: dict[str, str], labels: dict
 def summary_lines(result) -> list[str]:
     """Human-readable summary of a RefineResult."""
     r = result.report
-    stab, osc = r.metric("rest_stability"), r.metric("oscillation")
+    osc = r.metric("oscillation")
     types = _joint_types(result.out_dir)
     labels = _joint_labels(result.out_dir)
     moves = state_moves(r.model_dump(mode="json"))
     state = ", ".join(_state_text(k, v, r, types, labels, moves) for k, v in r.initial_joint_positions.items()) or "(no movable joints)"
-    stability = "stability    n/a" if not stab else (f"stability    {'PASS' if stab.passed else 'FAIL'} (D_pos "
-                                                     f"{stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori "
-                                                     f"{stab.details.get('D_ori_rad', float('nan')):.2e} rad)")
     lines = [
         f"asset        {r.asset_id} ({r.category or 'no category'})",
         f"output       {result.out_dir}",
@@ -161,13 +163,13 @@ def summary_lines(result) -> list[str]:
         f"initial state {state}",
     ] + ([f"task         {r.task}"] if r.task else []) + [
         "penetration  " + ("; ".join(penetration_measures(r.metrics)) or "n/a"),
-        stability,
+        stability_line(r.metrics),
         f"oscillation  {'PASS' if osc and osc.passed else 'FAIL'}",
         _manipulation_line(r),
         _operability_line(r),
         f"verdict      {verdict_line(r.failure_mode, r.readiness, readiness(r.metrics).failures)}",
-    ] + why_lines(r) + as_asked_lines(r) + skipped_lines(r) + engine_lines(r) + request_lines(r.request) + [
-        "wall time    " + ", ".join(f"{k} {v:.2f}s" for k, v in r.stage_seconds.items()),
+    ] + why_lines(r) + as_asked_lines(r) + skipped_lines(r) + engine_lines(r) + request_lines(r.request) + host_lines(r) + [
+        "wall time    " + wall_time_text(r.stage_seconds),
     ]
     return once(lines) + [report_line(r, result.out_dir)]
 
@@ -203,6 +205,19 @@ def report_line(report, out_dir) -> str:
     return f"report       {Path(out_dir) / 'report.json'} (no report.html with --no-extras: `asset2sim report {out_dir}` makes it)"
 
 
+def stability_line(metrics) -> str:
+    """The rest tier in one line, as the verdict reads it: the root's drift at rest (``rest_stability``) and every
+    other rest-tier measure that fails (a joint leaving its state, ``state_hold``): never ``PASS`` beside a verdict
+    whose rest tier fails."""
+    stab = next((m for m in metrics if m.name == "rest_stability"), None)
+    if stab is None:
+        return "stability    n/a"
+    failing = [f for f in readiness(metrics).failures if f.split("@")[0] in TIERS["rest"][0] and not f.startswith("rest_stability@")]
+    ok = bool(stab.passed) and not failing
+    return (f"stability    {'PASS' if ok else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori "
+            f"{stab.details.get('D_ori_rad', float('nan')):.2e} rad" + (f"; failing: {', '.join(failing)}" if failing else "") + ")")
+
+
 def engine_lines(report) -> list[str]:
     """One line per engine the checks ran in (``report.parity``): whether it ran, its rest test and self-contact Phi
     in the verdict's words, and the checks that fail in it (the verdict's ``metric@engine``), so no engine line reads
@@ -215,7 +230,8 @@ def engine_lines(report) -> list[str]:
             continue
         words = {True: "pass", False: "FAIL", None: "n/a"}
         here = [f.split("@")[0] for f in failing if f.endswith(f"@{row['engine']}")]
-        out.append(f"engine {row['engine']:<8} rest {words.get(row['rest_stability'], row['rest_stability'])}, oscillation "
+        rest = False if set(here) & set(TIERS["rest"][0]) else row["rest_stability"]  # the rest tier, as the verdict reads it
+        out.append(f"engine {row['engine']:<8} rest {words.get(rest, rest)}, oscillation "
                    f"{words.get(row['oscillation'], row['oscillation'])}, self-contact "
                    f"{'-' if row['penetration_mm'] is None else format(float(row['penetration_mm']), '.3f')} mm"
                    + (f"; failing here: {', '.join(here)}" if here else "") + (f" ({row['reason']})" if row["reason"] else ""))
@@ -234,6 +250,14 @@ def skipped_lines(report) -> list[str]:
     """An export or check skipped for a missing optional dependency, one line each with the extra that would do it
     (``skipped      MJCF export: MuJoCo is not installed: pip install 'asset2sim[mujoco]'``)."""
     return [f"skipped      {n.replace(' skipped: ', ': ', 1)}" for n in report.notes if " skipped: " in n and "asset2sim[" in n]
+
+
+def host_lines(report) -> list[str]:
+    """The way back into the input's own package (an MJCF or USD input): the files written back (``mjcf/host/``,
+    ``usd/host/``), what the package's code sets over them at run time and the call that keeps the refined values
+    (robosuite's ``DoorObject(friction=..., damping=...)``), or why none was written; one line each, as report.json's
+    notes say them."""
+    return [f"host         {n}" for n in host_notes(report.notes)]
 
 
 def request_lines(found) -> list[str]:
@@ -392,6 +416,16 @@ STAGE_WORDS = {"extract": "read", "analyze": "geometry", "closed_state": "closed
                "skip": "kept"}
 
 
+def wall_time_text(stage_seconds: dict[str, float]) -> str:
+    """The wall time per stage in the progress lines' words (:data:`STAGE_WORDS`: ``shut_repair`` and ``sweep_repair``
+    are one ``repair``), in stage order, each word once."""
+    words: dict[str, float] = {}
+    for k, v in stage_seconds.items():
+        word = STAGE_WORDS.get(k, k.replace("_", " "))
+        words[word] = words.get(word, 0.0) + float(v)
+    return ", ".join(f"{k} {v:.2f}s" for k, v in words.items())
+
+
 def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
 
@@ -399,7 +433,7 @@ def run(args: argparse.Namespace) -> int:
         line = f"[{time.perf_counter() - t0:6.2f}s] {STAGE_WORDS.get(stage, stage.replace('_', ' ')):<12} {message}"
         if message.startswith("WARNING"):  # warnings are printed with --quiet too, on stderr
             print(line, file=sys.stderr, flush=True)
-        elif not args.quiet:
+        elif not (args.quiet or getattr(args, "json", False)):
             print(line, flush=True)
 
     config = options(args)
@@ -415,6 +449,18 @@ def run(args: argparse.Namespace) -> int:
         raise output_failure(exc, args.out) from exc
     except OSError as exc:
         raise os_failure(exc, args.out, args.asset) from exc
-    for line in summary_lines(result):
-        print(line)
+    if getattr(args, "json", False):
+        print(json.dumps(json_summary(result), indent=2))
+    else:
+        for line in summary_lines(result):
+            print(line)
     return 0 if result.report.failure_mode == "none" else NOT_READY
+
+
+def json_summary(result) -> dict:
+    """``refine --json``: what a script needs of a refine, in one object: the output folder, the verdict (``ready``,
+    ``failure_mode``, each tier), why it failed (the terminal's sentences), the report and the extra files written."""
+    r = result.report
+    return {"out_dir": str(result.out_dir), "ready": r.failure_mode == "none", "failure_mode": r.failure_mode,
+            "readiness": dict(r.readiness), "why_it_failed": why_it_failed(r.metrics) if r.failure_mode != "none" else [],
+            "report": str(Path(result.out_dir) / "report.json"), "files": dict(result.extras)}

@@ -20,7 +20,7 @@ the COM in the ``<inertial><origin>`` frame, damping N*m*s/rad or N*s/m,
 friction N*m or N. Poses are (4, 4) matrices, ``rpy`` as in :mod:`asset2sim.frames`.
 """
 
-from asset2sim.urdf.edits import LIMITED_TYPES, conform_limits, scale_model
+from asset2sim.urdf.edits import LIMITED_TYPES, PASSIVE_EFFORT, PASSIVE_VELOCITY, conform_limits, scale_model
 from asset2sim.urdf.model import (
     GEOMETRY_KINDS, JOINT_TYPES, MOVABLE, SIMULATED_JOINT_TYPES, Problem, UrdfDynamics, UrdfError, UrdfGeometry,
     UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfMaterial, UrdfMimic, UrdfModel, UrdfSource, clone_model,
@@ -33,6 +33,7 @@ __all__ = [
     "DEFAULT_STYLE", "GEOMETRY_KINDS", "JOINT_TYPES", "LIMITED_TYPES", "MAX_NAME_CHARS", "MOVABLE", "Mode",
     "NumberError", "PARTNET_STYLE", "Problem", "SIMULATED_JOINT_TYPES", "UrdfDynamics", "UrdfError", "UrdfGeometry",
     "UrdfInertial", "UrdfJoint", "UrdfLimit", "UrdfLink", "UrdfMaterial", "UrdfMimic", "UrdfModel", "UrdfSource",
-    "UrdfStyle", "clone_model", "conform_limits", "model_of", "parse_number_list", "parse_urdf_bytes", "path_of",
+    "PASSIVE_EFFORT", "PASSIVE_VELOCITY", "UrdfStyle", "clone_model", "conform_limits", "model_of", "parse_number_list",
+    "parse_urdf_bytes", "path_of",
     "read_urdf", "resolve_mesh_path", "scale_model", "write_urdf",
 ]

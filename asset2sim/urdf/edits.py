@@ -21,6 +21,20 @@ def _scale_translation(m: np.ndarray, s: float) -> np.ndarray:
 #: prismatic joints; continuous joints use its effort and velocity).
 LIMITED_TYPES = ("revolute", "prismatic", "continuous")
 
+#: ``effort`` (N*m or N) of a passive joint's ``<limit>``, which the URDF format requires (urdfdom and urdf_parser_py refuse
+#: a revolute or prismatic limit without it): nothing drives the joint. Drake adds an actuator only for a non-zero effort
+#: ("joints with an effort limit of zero are not actuated", multibody/parsing); MuJoCo's URDF import bounds actuator forces
+#: (``actuatorfrcrange``) only for an effort above 0 and the model has no actuator; PyBullet stores it (``getJointInfo``)
+#: without using it (PyBullet Quickstart Guide); SAPIEN 3's URDF loader does not read it; Gazebo clamps only the forces a
+#: controller commands to it, and a passive part has none.
+PASSIVE_EFFORT = 0.0
+#: ``velocity`` (rad/s or m/s) of a passive joint's ``<limit>``, also required: no clamp on a part's own motion. Gazebo's
+#: DART physics enforces joint velocity limits (gz-physics issue 216), and Drake's planners read them, so 0 would lock
+#: the part; 100 is the speed Bullet's multibody already caps every joint at (``btMultiBody`` maximum coordinate
+#: velocity, measured in PyBullet: a free wheel under any torque stops gaining speed at 100 rad/s), far above what a
+#: handled part reaches (a door slammed shut turns a few rad/s); MuJoCo's URDF import and SAPIEN 3's loader ignore it.
+PASSIVE_VELOCITY = 100.0
+
 
 def conform_limits(model: UrdfModel, effort: float | None = None, velocity: float | None = None) -> list[str]:
     """Make every ``<limit>`` of ``model`` (in place) fit its joint: joints of types without limits lose theirs,

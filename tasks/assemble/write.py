@@ -83,7 +83,7 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
         _rotate_root(model, asset.root_link, root_rotation)
     urdf.scale_model(model, s, geometry=False, inertials=False)
     _set_joints(model, overlay, {j.name for j in asset.joints if j.type == "fixed"})
-    urdf.conform_limits(model)  # no <limit> on fixed joints; effort and velocity only where the input declared them
+    urdf.conform_limits(model, effort=urdf.PASSIVE_EFFORT, velocity=urdf.PASSIVE_VELOCITY)  # no <limit> on fixed joints; a passive part's effort and velocity where the input declared none
     if collision_out is not None:
         free = overlay.mounting is None or not overlay.mounting.fixed  # a mounted root does not stand on its footprint
         densest = {name: max_density(lp) for name, lp in overlay.links.items()}
@@ -165,7 +165,9 @@ def _urdf_comment(s: float, overlay: Overlay) -> str:
         f"load at scale 1.0. Initial joint positions (rad / m): see {STATE_NAME} (URDF has no field for them). "
         f"Joint stiffness, spring references and the reasoning notes: see {OVERLAY_NAME}"
         + (f"; springs on {', '.join(sorted(springs))}" if springs else "")
-        + ". "
+        + f". Joint limits carry effort=\"{urdf.PASSIVE_EFFORT:g}\" velocity=\"{urdf.PASSIVE_VELOCITY:g}\" where the input declared none, "
+        "as the URDF format requires: a passive part, no actuator (Drake adds none for effort 0; MuJoCo, PyBullet and "
+        "SAPIEN do not drive a joint from them) and no speed clamp below the one Bullet already applies. "
         + root_sentence(overlay.mounting)
     )
 

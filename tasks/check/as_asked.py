@@ -209,13 +209,16 @@ def _failing_joints(metrics: list[MetricResult]) -> tuple[dict[str, str], dict[s
     return held, operable
 
 
-def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, list[str]]]) -> list[MetricResult]:
+def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, list[str]]],
+                   strays: list[tuple[MotionPhrase, list[str]]] = ()) -> list[MetricResult]:
     """``metrics`` with the words about motion that the output's physical verdict contradicts added to
     ``request_met`` as unmet items (kind ``conflict``): a word that keeps a joint free or lightly damped
     (``MOTION_GUARDS`` "max": "swings freely", "low damping") on a joint robust rest or the rest test finds not held,
     or one that keeps it stiff or held ("min": "stiff", "stays where it is put", "soft-close") on a joint no hand
     inside its range can work. The word was applied as asked; holding (or operating) the part needed what it rules
-    out. ``words``: each word with the joints it applies to. ``metrics`` unchanged without a ``request_met``."""
+    out. ``words``: each word with the joints it applies to; ``strays``: each word with the joints it was applied to
+    that its phrase does not name (kind ``not_named``: "the main door has a stiff hinge" made the freezer door stiff).
+    ``metrics`` unchanged without a ``request_met``."""
     asked = next((m for m in metrics if m.name == "request_met"), None)
     if asked is None or asked.passed is None:
         return metrics
@@ -234,6 +237,11 @@ def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, 
             items.append({"phrase": word.phrase, "kind": "conflict", "joint": j, "reason": why, "target": None,
                           "achieved": None, "gap": None, "unit": "", "text": text})
             break
+    for word, joints in strays:
+        for j in joints:
+            items.append({"phrase": word.phrase, "kind": "not_named", "joint": j, "reason": "the phrase does not name this part",
+                          "target": None, "achieved": None, "gap": None, "unit": "",
+                          "text": f"'{word.phrase}': applied to {j}, a part the phrase does not name ({word.short()})"})
     return with_unmet(metrics, items)
 
 
@@ -275,8 +283,11 @@ def as_asked_tier(ctx: "EstimationContext", kin: "SimSession", overlay: Overlay,
                                       rounds or [], resolution, motion_words={n: list(c.words) for n, c in choices.items()})
     asked = refine_request_met(ctx.request, resolution, found, closed, state, request_apply.unapplied_properties(ctx) + missing)
     words = [(w, [n for n, c in choices.items() if w in c.words]) for w in ctx.request.motions]
+    sources = {n: d.source for n, d in overlay.joints.items()}
+    strays = [(w, [n for n, src in sources.items() if f"request '{w.phrase}'" in src and n not in named])  # applied elsewhere
+              for w, named in words if w.ordinal is not None]  # a word naming one part by its place ("the main door")
     free = free_motion_conflicts(overlay, words, resolution, {j.name: j.type == "prismatic" for j in ctx.asset.movable_joints()})
-    return AsAsked(with_unmet(word_conflicts([*metrics, asked], words), free), found, resolution)
+    return AsAsked(with_unmet(word_conflicts([*metrics, asked], words, strays), free), found, resolution)
 
 
 def free_motion_conflicts(overlay: Overlay, words: list[tuple[MotionPhrase, list[str]]],

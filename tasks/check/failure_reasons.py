@@ -9,6 +9,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
+from asset2sim.tasks.interpret.request import parse_request
 from asset2sim.tasks.check.verdict import (
     HOLD_METRICS, PENETRATION_METRICS, TIERS, UNRESOLVED_PENETRATION_MM, metric_verdict, mode_of,
 )
@@ -124,7 +125,7 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
                 continue
             if j in skip:
                 out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} ({m.engine}), as "
-                           "it moves at rest with no disturbance (the rest tier). " + TIER_ADVICE["hold"])
+                           "it moves at rest with no disturbance (the rest tier). " + advice("hold", asked_weight(metrics)))
                 continue
             out.append(f"joint '{j}' came to rest {amount} when the object {_TRIAL_WORDS.get(name, name)} ({m.engine}); its "
                        "friction and damping stay within what a hand may use on it, and at that the part's momentum carries it "
@@ -146,14 +147,17 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
 
 def _holding_choices(rr: Any, metrics: list[Any], joint: str, prismatic: bool) -> str:
     """The choices that remain for a part robust rest found not held within a hand's operating range, only those
-    that fit the object: a lighter part; a stiffer slide or hinge than that range (which the operability tier then
+    that fit the object: a lighter part (where the request gave it no mass or material: else that weight, kept); a
+    stiffer slide or hinge than that range (which the operability tier then
     fails); mounting, where its category is mounted in use (``rr.details["category_mounting"]``)."""
     op = next((m for m in metrics if m.name == "operability" and m.engine == rr.engine), None)
     eff = ((op.details or {}).get("efforts") or {}).get(joint) or {} if op is not None else {}
     label = eff.get("label") or "part"
     top = (eff.get("force_range_n") or [None, None])[1]
     mech = "slide" if prismatic else "hinge"
-    choices = [f"a lighter {label} (its mass in the request, 'a 2 kg {label}', or --material)"]
+    asked = asked_weight(metrics)
+    choices = [f"the weight the request gives it ({asked}) kept (Ask for the {label} without those words to have its weight "
+               "estimated)" if asked else f"a lighter {label} (its mass in the request, 'a 2 kg {label}', or --material)"]
     choices.append(f"a stiffer {mech} than a hand may operate" + (f" (more than the {top:g} N of its range, {eff.get('range_of')})"
                                                                  if top is not None else "")
                    + ", which the operability tier then fails")
@@ -202,6 +206,7 @@ _FALLBACK_ADVICE = {"rest": "stand", "penetration": "sweep", "robust_rest": "sta
 def _rest_why(metrics: list[Any]) -> list[str]:
     """One sentence per failing rest-tier metric: what moved, by how much against its threshold, the advice."""
     out = []
+    told: set[tuple[str, str]] = set()  # (joint, engine) a hold measure said: the post-check's and the evaluation's once
     for m in metrics:
         if m.name not in TIERS["rest"][0] or metric_verdict(m) is not False:
             continue
@@ -229,11 +234,14 @@ def _rest_why(metrics: list[Any]) -> list[str]:
                            f"{TIER_ADVICE['oscillation']}")
         else:  # state_hold: drift, sagging
             for j in d.get("sagging") or []:
+                if (j, m.engine) in told:
+                    continue
+                told.add((j, m.engine))
                 drift, unit = float((d.get("drift") or {}).get(j, 0.0)), (d.get("units") or {}).get(j, "rad")
                 tol = (d.get("tolerances") or {}).get(j)
                 against = f"tolerance {_joint_amount(tol, unit)}" if tol is not None else f"passes when {m.threshold}"
                 out.append(f"joint '{j}' left its initial state by {_joint_amount(drift, unit)} at rest ({m.engine}; {against}): "
-                           f"its friction does not hold the part's weight there. {TIER_ADVICE['hold']}")
+                           f"its friction does not hold the part's weight there. {advice('hold', asked_weight(metrics))}")
     return out
 
 
@@ -249,16 +257,74 @@ def _failures_why(metrics: list[Any], names: tuple[str, ...], advice: str, what:
     return out
 
 
+#: Reasons of an unmet phrase that names a part the object lacks (``as_asked.not_applied``'s, refine's and the
+#: evaluation's words): only then is the advice to name a part the object has.
+_MISSING_PART = re.compile(r"no such part|names no part|carries that label|no task-relevant|no part that opens")
+
+#: What a user can do about an unmet item of the request, by its kind (``as_asked``'s items); a conflict's own text
+#: says it.
+REQUEST_ADVICE: dict[str, str] = {
+    "missing": TIER_ADVICE["request"],
+    "not_applied": "Reword or drop the phrase (another phrase of the request may set the same part), or set the state "
+                   "directly (--state JOINT=VALUE).",
+    "state": "Ask for a state the part reaches from its closed end (its range: report.json's closed_positions), or set "
+             "it directly (--state JOINT=VALUE).",
+    "size": "Ask for sizes that one uniform scale gives this object's proportions, or set the scale (--scale).",
+    "mass": "Ask for a mass the parts' materials can make at this size, or set it directly (--mass).",
+    "not_named": "Check the output's overlay.json: a word about motion applies only to the part its phrase names "
+                 "(refine the asset again).",
+    "conflict": "",
+}
+
+
+def _request_advice(item: dict) -> str:
+    """The advice of one unmet item: from what failed (a part the object lacks, a number missed, a phrase applied
+    to the wrong part), never a generic one."""
+    kind = str(item.get("kind") or "")
+    if kind == "not_applied" and _MISSING_PART.search(str(item.get("reason") or "")):
+        return REQUEST_ADVICE["missing"]
+    return REQUEST_ADVICE.get("state" if kind == "band" else kind, REQUEST_ADVICE["not_applied"])
+
+
 def _request_why(metrics: list[Any]) -> list[str]:
-    """One sentence per unmet item of the request (its text carries the gap against its tolerance)."""
+    """One sentence per unmet item of the request (its text carries the gap against its tolerance), with the advice
+    of what failed (:func:`_request_advice`)."""
     out = []
     for m in metrics:
         if m.name != "request_met" or metric_verdict(m) is not False:
             continue
         for u in (m.details or {}).get("unmet") or []:
-            out.append(f"the output is not what was asked: {u.get('text') or u.get('phrase')} (passes when {m.threshold}). "
-                       f"{TIER_ADVICE['request']}")
+            out.append(f"the output is not what was asked: {u.get('text') or u.get('phrase')} (passes when {m.threshold})."
+                       + (f" {_request_advice(u)}" if _request_advice(u) else ""))
     return out
+
+
+def asked_weight(metrics: list[Any]) -> str | None:
+    """The request's words that set a mass or a material ("'ceramic'", "'a 3 kg lid'"), read from ``request_met``'s
+    request; None when it set none. Advice never asks for a lighter part or another material against them."""
+    text = next(((m.details or {}).get("request") for m in metrics if m.name == "request_met"), None)
+    if not text:
+        return None
+    props = [p.phrase for p in parse_request(str(text)).properties if p.mass is not None or p.material or p.mass_range]
+    return ", ".join(f"'{w}'" for w in props) or None
+
+
+#: An advice's clauses that ask for a lighter part or another material, and what stays where the request set them.
+_LIGHTER = ((re.compile(r"Ask for a lighter part or another material \(--mass, --material\); a"), "A"),
+            (re.compile(r",? (?:or )?a lighter part(?: \(--mass, --material\))?"), ""),
+            (re.compile(r"Give the object a real mass or material \(--mass, --material\) so its parts weigh what real ones "
+                        r"do, or ask"), "Ask"))
+
+
+def advice(tier: str, asked: str | None) -> str:
+    """:data:`TIER_ADVICE` of ``tier``; where the request set the mass or material (``asked``, :func:`asked_weight`) without
+    the clause that asks for a lighter part or another material, and saying the weight is as asked."""
+    text = kept = TIER_ADVICE[tier]
+    if asked is None:
+        return text
+    for rx, repl in _LIGHTER:
+        kept = rx.sub(repl, kept)
+    return text if kept == text else f"{kept} The part weighs what the {asked} asked makes it."
 
 
 def why_it_failed(metrics: list[Any]) -> list[str]:
@@ -274,19 +340,20 @@ def why_it_failed(metrics: list[Any]) -> list[str]:
     before a verdict (:data:`STOPPED_MODES`) have no metrics: their error line names the code and the file instead.
     """
     metrics = list(metrics)
+    asked = asked_weight(metrics)
     held_not = {j for m in metrics if m.name in HOLD_METRICS and metric_verdict(m) is False
                 for j in (m.details or {}).get("sagging") or []}
     explain = {
         "rest": _rest_why,
         "penetration": penetration_why,
-        "sweep": lambda ms: _failures_why(ms, ("joint_sweep",), TIER_ADVICE["sweep"],
+        "sweep": lambda ms: _failures_why(ms, ("joint_sweep",), advice("sweep", asked),
                                           "a force-limited drive could not sweep the joint through its range"),
-        "operability": lambda ms: _failures_why(ms, ("operability",), TIER_ADVICE["operability"],
+        "operability": lambda ms: _failures_why(ms, ("operability",), advice("operability", asked),
                                                 "a hand inside the part's real operating force could not work it"),
         "robust_rest": lambda ms: robust_rest_why(ms, skip=held_not),
-        "task": lambda ms: _failures_why(ms, ("task_execution",), TIER_ADVICE["task"],
+        "task": lambda ms: _failures_why(ms, ("task_execution",), advice("task", asked),
                                          "a force- and speed-limited gripper could not do the task"),
-        "force": lambda ms: _failures_why(ms, ("operating_force",), TIER_ADVICE["force"],
+        "force": lambda ms: _failures_why(ms, ("operating_force",), advice("force", asked),
                                           "the task needed a force outside the part's real operating range"),
         "request": _request_why,
     }
@@ -298,6 +365,6 @@ def why_it_failed(metrics: list[Any]) -> list[str]:
         mode = mode_of(tier, bad)
         sentences = explain[tier](metrics) or [
             f"{', '.join(dict.fromkeys(f'{m.name}@{m.engine}' for m in bad))} failed (passes when {bad[0].threshold}). "
-            + TIER_ADVICE[_FALLBACK_ADVICE.get(tier, tier)]]
+            + advice(_FALLBACK_ADVICE.get(tier, tier), asked)]
         out += [f"{mode} ({tier} tier): {s}" for s in sentences]
     return out

@@ -1,5 +1,5 @@
 """Third-party checkers on an output folder: ``urdf_parser_py`` (PyPI
-``urdf-parser-py``), ``urdf-validator`` (command ``urdf_validate``),
+``urdfdom-py``, ROS's), ``urdf-validator`` (command ``urdf_validate``),
 ``mjcf-doctor`` (on ``mjcf/mobility.xml``), Drake (``MultibodyPlant``:
 inertia validity, damping read back) and, on request only (:data:`OPT_IN`: it
 simulates in MuJoCo and PyBullet, up to minutes an object), ``simcheck``
@@ -69,9 +69,9 @@ def check_urdf_parser_py(urdf: Path) -> CheckerResult:
     warnings what its ``on_error`` hook receives.
 
     Raises:
-        CheckerUnavailable: urdf-parser-py is not installed.
+        CheckerUnavailable: urdfdom-py (urdf_parser_py) is not installed.
     """
-    _need_module("urdf_parser_py", "urdf-parser-py")
+    _need_module("urdf_parser_py", "urdfdom-py")
     from urdf_parser_py import xml_reflection
     from urdf_parser_py.urdf import URDF
 

@@ -20,7 +20,8 @@ CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:24px;color:#1d2430;max-width:1200px}
 h1{font-size:22px;margin-bottom:4px} h2{font-size:18px;margin-top:28px;border-bottom:1px solid #d0d6de;padding-bottom:4px}
 h3{font-size:15px;margin-bottom:6px}
-table{border-collapse:collapse;margin:8px 0;font-size:13px} th,td{border:1px solid #d0d6de;padding:4px 8px;text-align:left;vertical-align:top}
+table{border-collapse:collapse;margin:8px 0;font-size:13px;max-width:100%}
+th,td{border:1px solid #d0d6de;padding:4px 8px;text-align:left;vertical-align:top;overflow-wrap:anywhere}
 th{background:#f1f4f8} td.num{text-align:right;font-variant-numeric:tabular-nums}
 .pass{background:#d9f2dd} .fail{background:#f9d6d5} .na{background:#eef0f3;color:#5b6574} .warn{background:#fff1cc}
 .badge{display:inline-block;padding:3px 10px;border-radius:12px;font-weight:600}

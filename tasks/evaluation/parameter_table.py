@@ -91,8 +91,9 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
         rows.append(_param("initial position", f"joint {jn}", q, _joint_unit(jt, "position"), state_src))
     for jd in ctx.model.joints:
         if jd.type in ("revolute", "prismatic"):
+            clipped = ((ov or {}).get("joints") or {}).get(jd.name, {}).get("limit_source") or ""
             rows.append(_param("limits", f"joint {jd.name}", f"[{fmt(jd.lower)}, {fmt(jd.upper)}]", _joint_unit(jd.type, "position"),
-                               "URDF <limit>"))
+                               f"refine: {clipped}" if clipped else "the input's URDF <limit>"))
     return rows
 
 

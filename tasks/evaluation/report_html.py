@@ -199,7 +199,8 @@ def operability_section(ev) -> str:
     """The operability tier as a table: per engine and handled part, the grasp, the effort each stroke needs
     (force at the grasp point N, torque about the axis N m) against the part's real range and its source,
     how far the hand got, and the verdict."""
-    rows = []
+    rows: list[str] = []
+    cited: dict[str, int] = {}  # each standard quoted once, under the table; a row names its number
     for m in [m for m in ev.metrics if m.name == "operability"]:
         if not m.details.get("parts"):
             why = m.details.get("skipped") or m.details.get("not_run") or "no handled part"
@@ -220,14 +221,16 @@ def operability_section(ev) -> str:
                     f"<td>{esc(s['action'])}</td><td class='num'>{fmt(s['needed_force_n'])} N{torque}</td>"
                     f"<td class='num'>{esc(limit)} ({esc(p['range_of'])})</td><td>{esc(got)}</td>"
                     f"<td class='{cls}'>{esc(s['failure'] or 'ok')}</td>"
-                    f"<td class='small'>{esc('; '.join(p.get('sources') or []))}</td></tr>")
+                    f"<td class='small'>{', '.join(f'[{cited.setdefault(src, len(cited) + 1)}]' for src in p.get('sources') or [])}</td></tr>")
     if not rows:
         return "<p class='small'>operability not measured</p>"
+    notes = "".join(f"<li>[{n}] {esc(src)}</li>" for src, n in cited.items())
     return ("<p class='small'>Root fixed, gravity on, the other joints held: a hand at the grasp point pushes each handled "
             "part from its closed end to its far end and back; the effort it needs (friction, damping at the hand's "
             "0.25 m/s, springs, gravity) must lie inside the part's real operating range.</p>"
             "<table><tr><th>engine</th><th>part</th><th>grasp</th><th>stroke</th><th>effort needed</th><th>range</th>"
-            "<th>hand got it to</th><th>verdict</th><th>range source</th></tr>" + "".join(rows) + "</table>")
+            "<th>hand got it to</th><th>verdict</th><th>range source</th></tr>" + "".join(rows) + "</table>"
+            + (f"<ul class='small'>{notes}</ul>" if notes else ""))
 
 
 def _badge(ev) -> str:
@@ -276,6 +279,21 @@ def as_asked_block(ev) -> str:
         items += f"<li>{esc(d['error'])}</li>"
     return ("<div class='fail' style='padding:6px 12px;border-radius:6px'><b>Not as asked</b> (failure mode "
             "<code>request_not_met</code>; states measured from the closed end)<ul>" + items + "</ul></div>")
+
+
+def host_notes(notes: list[str]) -> list[str]:
+    """The notes of an MJCF or USD input's write-back among a report's ``notes`` (``tasks/publish/extra_outputs.py``):
+    the files written back into the input's package, the call its code needs to keep the refined values, or why
+    nothing was written (for the terminal and :func:`host_section`)."""
+    return [n for n in notes if n.startswith(("host MJCF", "host USD"))]
+
+
+def host_section(report: dict | None) -> str:
+    """"Back into its package": the write-back of an MJCF or USD input (:func:`host_notes` of report.json's notes),
+    empty for other inputs."""
+    notes = host_notes(list((report or {}).get("notes") or []))
+    return ("<h2>Back into its package</h2><ul class='host'>" + "".join(f"<li>{esc(n)}</li>" for n in notes) + "</ul>"
+            if notes else "")
 
 
 def engines_section(report) -> str:
@@ -370,6 +388,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         f"<p>{badge}</p>",
         why_section(ev),
         as_asked_block(ev),
+        host_section(ctx.report if ctx is not None else None),
         "<h2>Object at its initial state</h2>",
         f"<p class='small'>{esc(views_what)}; joints: {esc(state_text)} ({esc(ev.initial_state_source)}); "
         f"task-relevant: {esc(', '.join(ev.task_joints) or '-')}</p>",

@@ -10,7 +10,7 @@ import re
 from dataclasses import dataclass
 
 from asset2sim.prior_tables import load_priors
-from asset2sim.schemas.request import MotionPhrase
+from asset2sim.schemas.request import MotionPhrase, ordinal_words
 from asset2sim.tasks.interpret import request_values as rv
 from asset2sim.tasks.interpret.phrase_scan import Hit, compile_table, negated, scan
 
@@ -67,15 +67,19 @@ def _motion_kind(kind: str, value: object, flag: str) -> str:
     return {"free": "free", "heavy": "stiff", "hold": "hold", "stiff": "stiff"}[kind]
 
 
-def _motion_part(low: str, start: int, end: int, head_starts: list[int]) -> str | None:
-    """The part a word about motion names: the part noun before it in its clause ("the door swings freely", "the
-    lid hinge has low damping"), else right after it ("a stiff handle joint", "low damping drawer slides"); None
-    for the object itself (``head_starts``: where the request names it, "a heavy oak door that swings freely") or
-    no part (the task's parts)."""
-    label = rv.part_before(low, start, mention_starts=head_starts)
+def _motion_part(low: str, start: int, end: int, head_starts: list[int], ordinals: dict[int, tuple[int, str]]) -> dict:
+    """The part a word about motion names, as :class:`MotionPhrase` fields: the part noun before it in its clause ("the
+    door swings freely", "the lid hinge has low damping"), else right after it ("a stiff handle joint", "low damping
+    drawer slides"); its ``label`` None for the object itself (``head_starts``: where the request names it, "a heavy
+    oak door that swings freely") or no part (the task's parts); with its ``ordinal`` and ``order`` when the noun is
+    one part by its place (``ordinals``: noun end -> (ordinal, order), "the main door has a stiff hinge")."""
+    label, at = rv.part_before(low, start, mention_starts=head_starts)
     if label is None:
-        label, _ = rv.part_after(low, end, mention_starts=head_starts)
-    return None if label == "body" else label
+        label, at = rv.part_after(low, end, mention_starts=head_starts)
+    if label in (None, "body"):
+        return {"label": None}
+    place = ordinals.get(at)
+    return {"label": label} if place is None else {"label": label, "ordinal": place[0], "order": place[1]}
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,12 +96,14 @@ class MotionWords:
 
 
 def dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[tuple[int, str]],
-                    warnings: list[str], head_starts: list[int]) -> MotionWords:
+                    warnings: list[str], head_starts: list[int], ordinals: dict[int, tuple[int, str]] | None = None) -> MotionWords:
     """The motion the dynamics words ask (explicit damping phrases win over cues); phrases go to ``matched``,
-    contradictions to ``warnings``.
+    contradictions to ``warnings``; ``ordinals`` (part noun end -> (ordinal, order), ``state_words.JointStates``)
+    narrow a word to the one part its noun names by its place.
     A mass word ("a heavy box", "a heavy 25 kg door", "a heavy drawer") is a mass, not a stiffness; "heavy" before a
     joint word ("a heavy hinge") is stiff."""
     damping, strong_set, holds, spring, stiff, free = "moderate", False, False, False, False, False
+    places = ordinals or {}
     motions: list[MotionPhrase] = []
     hits = scan(low, _DYN_TABLE)
     for h in hits:
@@ -109,14 +115,14 @@ def dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[t
             spring = not neg
             matched.append((h.start, ("no " if neg else "") + h.text))
             if not neg:
-                motions.append(MotionPhrase(kind=_motion_kind(kind, val, h.flag), label=_motion_part(low, h.start, h.end, head_starts),
-                                            phrase=h.text))
+                motions.append(MotionPhrase(kind=_motion_kind(kind, val, h.flag), phrase=h.text,
+                                            **_motion_part(low, h.start, h.end, head_starts, places)))
             continue
         matched.append((h.start, ("not " if neg else "") + h.text))
         if neg:
             continue
-        motions.append(MotionPhrase(kind=_motion_kind(kind, val, h.flag), label=_motion_part(low, h.start, h.end, head_starts),
-                                    phrase=h.text))
+        motions.append(MotionPhrase(kind=_motion_kind(kind, val, h.flag), phrase=h.text,
+                                    **_motion_part(low, h.start, h.end, head_starts, places)))
         holds |= kind == "hold"
         stiff |= kind in ("stiff", "heavy")
         free |= kind == "free"
@@ -127,11 +133,12 @@ def dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[t
         if negated(low, h.start):
             continue
         matched.append((h.start, h.text))
-        motions.append(MotionPhrase(kind="slides", mechanism=str(h.value), label=_motion_part(low, h.start, h.end, head_starts) or "drawer",
-                                    phrase=h.text))
+        part = _motion_part(low, h.start, h.end, head_starts, places)
+        motions.append(MotionPhrase(kind="slides", mechanism=str(h.value), phrase=h.text, **{**part, "label": part["label"] or "drawer"}))
     motions.sort(key=lambda m: low.find(m.phrase))
-    for label in dict.fromkeys(m.label for m in motions):
-        kinds = [m for m in motions if m.label == label]
+    for part in dict.fromkeys((m.label, m.ordinal, m.order) for m in motions):  # "the main door" and "the freezer door" apart
+        kinds = [m for m in motions if (m.label, m.ordinal, m.order) == part]
+        label = ordinal_words(part[1], part[2], part[0]).removeprefix("the ") if part[1] is not None else part[0]
         hard = [m for m in kinds if m.kind == "stiff"]
         loose = [m for m in kinds if m.kind == "free"]
         if hard and loose:

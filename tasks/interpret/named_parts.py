@@ -15,7 +15,7 @@ from typing import Protocol, Sequence
 import numpy as np
 
 from asset2sim.schemas.asset import AssetDescription
-from asset2sim.schemas.request import (ORDER_ENDS, DynamicsValue, JointStateRequest, RequestSpec,
+from asset2sim.schemas.request import (ORDER_ENDS, DynamicsValue, JointStateRequest, MotionPhrase, RequestSpec,
                                       ordinal_words)
 from asset2sim.tasks.interpret.part_labels import BODY_LABELS, canonical_label
 from asset2sim.tasks.interpret.part_priors import named_by_word, stand_in_joints
@@ -30,12 +30,23 @@ _FIRST_WORDS = ORDER_ENDS
 
 class PartsContext(Protocol):
     """What refine matches part words on (its ``EstimationContext`` is one): the asset (labels,
-    joints), its category, each movable joint's moving links (``subtrees``) and the request."""
+    joints), its category, each movable joint's moving links (``subtrees``) and their closed boxes
+    (``joint_boxes``: joint -> (2, 3) m, scale 1), the resting pose (``root_rotation``) and the request."""
 
     asset: AssetDescription
     category: str
     subtrees: dict[str, list[str]]
+    joint_boxes: dict[str, np.ndarray]
+    root_rotation: object
     request: RequestSpec
+
+
+def part_boxes(ctx: PartsContext) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+    """(joint -> (3,) center, m, scale 1, the resting pose applied; joint -> volume, m^3, scale 1) of each movable
+    joint's moving subtree's box in the closed state (``ctx.joint_boxes``): what ordinals count by (:func:`pick`)."""
+    R = np.asarray(ctx.root_rotation, float) if ctx.root_rotation is not None else np.eye(3)
+    return ({n: R @ (0.5 * (b[0] + b[1])) for n, b in ctx.joint_boxes.items()},
+            {n: float(np.prod(np.maximum(b[1] - b[0], 0.0))) for n, b in ctx.joint_boxes.items()})
 
 
 def named_joints(category: str, word: str | None, joints: Sequence[str],
@@ -64,7 +75,7 @@ def _spread_order(targets: list[str], centers: dict[str, np.ndarray]) -> str:
     return "vertical" if np.ptp(c[:, 2]) >= np.ptp(c[:, 1]) else "left_right"
 
 
-def pick(jr: JointStateRequest, targets: list[str], centers: dict[str, np.ndarray],
+def pick(jr: JointStateRequest | MotionPhrase, targets: list[str], centers: dict[str, np.ndarray],
          sizes: dict[str, float], warnings: list[str] | None = None,
          notes: list[str] | None = None) -> list[str]:
     """``targets`` (joints) sorted as ``jr.order`` counts, by ``centers`` (joint -> (3,) box center,
@@ -137,12 +148,17 @@ def joints_named(ctx: PartsContext, label: str, notes: list[str] | None = None) 
     return named_joints(ctx.category, label, [j.name for j in joints], labels, notes)
 
 
-def joints_of(ctx: PartsContext, d: DynamicsValue, relevant: list[str]) -> list[str]:
-    """The joints an explicit joint parameter names: its label's (else :func:`stand_ins`; none when
-    no part stands in), or without a label ``relevant``."""
+def joints_of(ctx: PartsContext, d: DynamicsValue | MotionPhrase, relevant: list[str],
+              warnings: list[str] | None = None) -> list[str]:
+    """The joints an explicit joint parameter or a word about motion names: its label's (else :func:`stand_ins`;
+    none when no part stands in), narrowed to the one its ordinal names ("the main door": :func:`pick` by
+    :func:`part_boxes`, why none in ``warnings``), or without a label ``relevant``."""
     if d.label is None:
         return relevant
-    return joints_named(ctx, d.label) or stand_ins(ctx, d.label, relevant)[0]
+    names = joints_named(ctx, d.label) or stand_ins(ctx, d.label, relevant)[0]
+    if getattr(d, "ordinal", None) is not None:
+        names = pick(d, list(names), *part_boxes(ctx), warnings)  # type: ignore[arg-type]
+    return names
 
 
 def stand_ins(ctx: PartsContext, label: str, relevant: list[str]) -> tuple[list[str], str]:

@@ -91,11 +91,15 @@ def load_operating_forces() -> OperatingForces:
 
 def operating_range(category: str | None, label: str | None, table: OperatingForces | None = None
                     ) -> tuple[ForceRange, str]:
-    """(range of the part, where from): the category's entry for the canonical ``label`` (``<category>.<label>``),
-    else the part function's (``<label>``: a lid is judged as a lid in every category), else the category's default
-    (``<category>.default``), else ``default`` (ADA 309.4)."""
+    """(range of the part, where from): the category's entry for the label as the asset writes it (``Toilet.pump_lid``:
+    a toilet's tank lid, whose label's canonical form names a button elsewhere), else for the canonical ``label``
+    (``<category>.<label>``), else the part function's (``<label>``: a lid is judged as a lid in every category), else
+    the category's default (``<category>.default``), else ``default`` (ADA 309.4)."""
     t = table or load_operating_forces()
     cat = t.categories.get(category or "") or {}
+    raw = "_".join(label.lower().replace("-", " ").split()) if label else None
+    if raw and raw in cat:
+        return cat[raw], f"{category}.{raw}"
     lab = canonical_label(label) if label else None
     if lab and lab in cat:
         return cat[lab], f"{category}.{lab}"

@@ -182,7 +182,7 @@ def parse_request(text: str) -> RequestSpec:
     counts = rv.part_counts(low)
     found: list = size.hits + size.against + states.hits + sizes + vols + numbers.verbs + mass_found + material_found + level_found + dyn_found + counts
     matched += [(f.start, f.text) for f in found] + [(m.start(), m.group(0)) for m in rv.DESCRIPTOR_RX.finditer(low)]
-    motion = dynamics_words(low, [(f.start, f.end) for f in level_found], matched, warnings, head_starts)
+    motion = dynamics_words(low, [(f.start, f.end) for f in level_found], matched, warnings, head_starts, states.ordinals)
     pose = None
     for h in scan(low, _POSE_TABLE):  # the last pose word not negated
         if not negated(low, h.start):

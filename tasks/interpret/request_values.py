@@ -256,9 +256,9 @@ def leftmost_longest(found: list) -> list:
 _WEIGHS_BEFORE = re.compile(r"(?:weighs?|weighing|weight(?: of| is|:)?|mass(?: of| is|:)?|of)\s+(?:about |around |roughly |approximately |exactly |only |just )?$")
 
 
-def part_before(low: str, pos: int, max_words: int = 4, mention_starts: list[int] | None = None) -> str | None:
-    """The part noun closest before ``pos`` within ``max_words`` words of the clause; None when it is a
-    category mention (the object itself)."""
+def part_before(low: str, pos: int, max_words: int = 4, mention_starts: list[int] | None = None) -> tuple[str | None, int]:
+    """(label, end) of the part noun closest before ``pos`` within ``max_words`` words of the clause; the label None
+    when it is a category mention (the object itself) or there is none (end ``pos``)."""
     w0 = max(0, pos - 60)
     window = low[w0: pos]
     cut = max((m.end() for m in re.finditer(r"[,;:.!?]", window)), default=0)
@@ -267,10 +267,10 @@ def part_before(low: str, pos: int, max_words: int = 4, mention_starts: list[int
         w = m.group(0)
         start = w0 + cut + m.start()
         if PART_RX.fullmatch(w):
-            return None if mention_starts and start in mention_starts else part_label(w)
+            return (None if mention_starts and start in mention_starts else part_label(w)), start + len(w)
         if BODY_RX.fullmatch(w):
-            return "body"
-    return None
+            return "body", start + len(w)
+    return None, pos
 
 
 def part_after(low: str, end: int, max_words: int = 2, mention_starts: list[int] | None = None) -> tuple[str | None, int]:
@@ -311,7 +311,7 @@ def _mass_found(low: str, m: re.Match, mention_starts: list[int] | None, **value
     if w:
         start -= len(w.group(0))
         if label is None:
-            label = part_before(low, start, mention_starts=mention_starts)
+            label = part_before(low, start, mention_starts=mention_starts)[0]
     text = low[start:max(end, m.end())].strip()
     return Found(start, max(end, m.end()), text, PartProperty(label=label, phrase=text, **values))
 
@@ -409,7 +409,7 @@ def materials(low: str, mention_starts: list[int], head_starts: list[int] | None
         made_of = _MADE_OF.match(h.text) is not None
         label, end = (None, h.end) if made_of else part_after(low, h.end, mention_starts=head_starts)
         if made_of:
-            label = part_before(low, h.start, 3, head_starts)
+            label = part_before(low, h.start, 3, head_starts)[0]
         elif label is None:
             nxt = _next_words(low, h.end, 1)
             if not (_near_category(low, h.end, mention_starts, 2) or not nxt or nxt[0][2] in {",", ".", ";", "!", "and", "with", "but"}):
@@ -454,7 +454,7 @@ def dynamics_values(low: str, mention_starts: list[int] | None = None) -> tuple[
                 else:
                     warns.append(f"'{m.group(0)}': the unit {unit!r} does not fit {q} (expected "
                                  + " or ".join(u for qq, _mm, u in _DYN_UNITS if qq == q).replace("\\s*", " ") + "); used as a number without unit")
-            label = part_before(low, m.start(), mention_starts=mention_starts)
+            label = part_before(low, m.start(), mention_starts=mention_starts)[0]
             out.append(Found(m.start(), m.end(), m.group(0), DynamicsValue(quantity=q, value=v, motion=motion, label=label if label != "body" else None, phrase=m.group(0))))
     return leftmost_longest(out), warns
 

@@ -268,13 +268,15 @@ _OTHERS = re.compile(r"(?<![\w-])(?:others|(?:the )?rest(?: of them)?|remaining(
 @dataclass(frozen=True, slots=True)
 class JointStates:
     """The joint states a request asks: ``requests`` (every joint first, then per label, then one part: the
-    specific one wins), ``hits`` (the state words used), ``warnings`` (contradictions) and ``overridden`` (the
-    phrases a later one for the same part replaced)."""
+    specific one wins), ``hits`` (the state words used), ``warnings`` (contradictions), ``overridden`` (the
+    phrases a later one for the same part replaced) and ``ordinals`` (where each part noun named by one place ends ->
+    (ordinal, order): "the main door" -> (-1, "size"), for the words about its motion)."""
 
     requests: list[JointStateRequest]
     hits: list[Hit]
     warnings: list[str]
     overridden: list[str]
+    ordinals: dict[int, tuple[int, str]]
 
 
 def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = None) -> JointStates:
@@ -365,4 +367,5 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = None
         dedup[key] = js
     specific = sorted(dedup.values(), key=lambda js: 0 if js.selector == "all" and js.ordinal is None else (1 if js.ordinal is None else 2))
     kept = {js.phrase for js in specific}
-    return JointStates(specific, bands + used, warnings, [p for p in dict.fromkeys(overridden) if p not in kept])
+    return JointStates(specific, bands + used, warnings, [p for p in dict.fromkeys(overridden) if p not in kept],
+                       {p.end: p.ordinals[0] for p in parts if len(p.ordinals) == 1})

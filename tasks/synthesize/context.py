@@ -44,8 +44,9 @@ class EstimationContext:
     closed_extents: np.ndarray
     """(3,) extents of the closed object, root frame (closed ends and extents at scale 1, input units)."""
     subtrees: dict[str, list[str]]
-    joint_heights: dict[str, float] = field(default_factory=dict)
-    """joint -> z (scale 1) of its moving subtree's box center in the closed state."""
+    joint_boxes: dict[str, np.ndarray] = field(default_factory=dict)
+    """joint -> (2, 3) [lower, upper] corners (scale 1, the input's frame) of its moving subtree's axis-aligned box in the
+    closed state; a joint whose subtree has no geometry is left out."""
     hull_points: dict[str, np.ndarray] = field(default_factory=dict)
     """link -> (N, 3) convex-hull vertices of its collision geometry, link frame, scale 1."""
     closed_volume: float | None = None
@@ -61,15 +62,15 @@ class EstimationContext:
     """How the root is held (:func:`asset2sim.tasks.interpret.mounting.root_mounting`, resolved by :func:`build_context`);
     None: free-standing."""
 
+    @property
+    def joint_heights(self) -> dict[str, float]:
+        """joint -> z (scale 1) of its moving subtree's box center in the closed state (0 without geometry)."""
+        return {n: float(0.5 * (self.joint_boxes[n][0][2] + self.joint_boxes[n][1][2])) if n in self.joint_boxes else 0.0
+                for n in self.subtrees}
+
     def closed_state(self) -> dict[str, float]:
         """joint -> closed position (rad, or input units for prismatic joints)."""
         return {n: c.q_closed for n, c in self.closed.items()}
-
-
-def subtree_height(session: SimSession, links: list[str], hull_points: dict[str, np.ndarray]) -> float:
-    """z (m) of the center of the world box around ``links``' hull points at the current state; 0 without geometry."""
-    box = links_aabb(session, links, hull_points)
-    return 0.0 if box is None else float(0.5 * (box[0][2] + box[1][2]))
 
 
 @contextlib.contextmanager
@@ -111,11 +112,11 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
         closed = closed_positions(kin, asset, hull_points=hull)
         extents = object_extents(kin, {n: c.q_closed for n, c in closed.items()}, asset, hull)
         subtrees = {j.name: subtree_links(asset, j.child) for j in asset.movable_joints()}
-        heights = {n: subtree_height(kin, links, hull) for n, links in subtrees.items()}
+        boxes = {n: np.array(box) for n, box in ((n, links_aabb(kin, links, hull)) for n, links in subtrees.items()) if box is not None}
         volume = (object_hull_volume(kin, {n: c.q_closed for n, c in closed.items()}, asset, hull)
                   if any(sz.dimension == "volume" for sz in meaning.request.sizes) else None)
         ctx = EstimationContext(asset=asset, geometry=geometry, request=meaning.request, category=meaning.category,
                                 category_reason=meaning.category_reason, closed=closed, closed_extents=extents,
-                                subtrees=subtrees, joint_heights=heights, hull_points=hull, closed_volume=volume,
+                                subtrees=subtrees, joint_boxes=boxes, hull_points=hull, closed_volume=volume,
                                 settings=dict(settings or {}), mounting=mount)
         yield ctx, kin

@@ -51,8 +51,9 @@ WORD_DAMPING = {"free": "low", "low_damping": "low", "high_damping": "high", "so
 
 def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tuple[dict[str, JointChoice], list[tuple[str, str]]]:
     """(joint -> :class:`JointChoice`, (phrase, why) of each word naming a part the object lacks) from the request's
-    words about motion (``ctx.request.motions``): a word naming a part applies to that part's joints
-    (:func:`~asset2sim.tasks.interpret.named_parts.joints_of`), one naming none to the ``relevant`` joints (the
+    words about motion (``ctx.request.motions``): a word naming a part applies to that part's joints, or to the one
+    its ordinal names ("the main door": :func:`~asset2sim.tasks.interpret.named_parts.joints_of`), one naming none to
+    the ``relevant`` joints (the
     task's parts). A relevant joint's category may expect a return spring (a stapler's arm; ``categories.yaml``
     ``spring_labels``); a self-closing part gets high damping unless a word says otherwise (a door closer is a spring
     and a hydraulic damper)."""
@@ -60,10 +61,11 @@ def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tu
     applied: dict[str, list[MotionPhrase]] = {j.name: [] for j in ctx.asset.movable_joints()}
     missing = []
     for word in ctx.request.motions:
-        names = joints_of(ctx, word, relevant)
+        why: list[str] = []
+        names = joints_of(ctx, word, relevant, why)
         if word.label is not None and not names:
-            missing.append((word.phrase, f"names a '{word.label}' but this {ctx.category} has no such part (its moving parts: "
-                                         f"{moving_parts(ctx)})"))
+            missing.append((word.phrase, why[-1].removeprefix("WARNING: ") if why else
+                            f"names a '{word.label}' but this {ctx.category} has no such part (its moving parts: {moving_parts(ctx)})"))
         for n in names:
             if n in applied:
                 applied[n].append(word)
@@ -97,7 +99,8 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
     onto a stop (:func:`_on_stop`: its open end or its closed end, within its band) is held there by the stop, its
     friction only against a lean that lifts it off (g sin 5 deg |w_h| - |tau_g| cos 5 deg), and a landing that
     moves a part into a stop moves nothing. A spring or a balance carries its part's load, and a part that moves
-    freely is left free.
+    freely is left free of the friction that holds it: a word about friction or damping ("slides easily") never
+    removes the counterbalance or sash balance that holds a part against gravity.
     """
     prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
     rot = ctx.root_rotation
@@ -144,12 +147,12 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
             ref = float(np.clip(state[name] - load.gravity_load / k, cs.lower * unit, cs.upper * unit))
             spring, mechanism = (k, ref), "return spring"
             hold = 0.1 * hold  # the spring carries the load; friction only adds feel
-        elif name not in prismatic and not ch.free_moving and _label(ctx, name) in COUNTERBALANCE_LABELS:
+        elif name not in prismatic and _label(ctx, name) in COUNTERBALANCE_LABELS:  # a word about friction keeps it
             counter = counterbalance(ctx, kin, links, state, scale, name, fr) or lid_support(ctx, kin, links, state, scale, name, fr)
             if counter is not None:
                 spring, hold = counter.spring, counter.hold
                 note, balanced, mechanism = f"{note}; {counter.note}", True, counter.note.split(" (")[0]
-        elif name in prismatic and not ch.free_moving and _label(ctx, name) in BALANCE_LABELS:
+        elif name in prismatic and _label(ctx, name) in BALANCE_LABELS:  # "slides easily" is friction, not the balance
             bal = balance(loads[name], cs, unit)
             if bal is not None:
                 spring, hold = bal.spring, bal.hold

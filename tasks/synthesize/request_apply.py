@@ -17,9 +17,9 @@ from asset2sim.schemas.overlay import JointDynamics, LinkPhysics
 from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, JointStateRequest, RequestSpec
 from asset2sim.tasks.interpret import priors
 from asset2sim.prior_tables import MaterialPrior, load_priors
-from asset2sim.tasks.interpret.named_parts import count_warnings, joints_named, joints_of, link_named, moving_parts, stand_ins, state_targets, unit_fits
-from asset2sim.tasks.geometry.closed_state import links_aabb
-from asset2sim.tasks.synthesize.opening_fractions import box_center, fraction_for
+from asset2sim.tasks.interpret.named_parts import (count_warnings, joints_named, joints_of, link_named, moving_parts, part_boxes, stand_ins,
+                                                  state_targets, unit_fits)
+from asset2sim.tasks.synthesize.opening_fractions import fraction_for
 
 if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
     from asset2sim.engines.base import SimSession
@@ -71,23 +71,6 @@ def task_relevant_joints(ctx: "EstimationContext") -> list[str]:
     return priors.task_relevant_joints(ctx.category, labelled)[0]
 
 
-def _centers(ctx: "EstimationContext", kin: "SimSession", state: dict[str, float]) -> dict[str, np.ndarray]:
-    """joint -> (3,) world center (m, scale 1) of its moving subtree's box at ``state`` (input units; ``kin`` moved there)."""
-    kin.set_joint_positions(state)
-    return {n: box_center(ctx, kin, n) for n in ctx.subtrees}
-
-
-def _box_volumes(ctx: "EstimationContext", kin: "SimSession", state: dict[str, float]) -> dict[str, float]:
-    """joint -> volume (m^3, scale 1) of its moving subtree's axis-aligned box at ``state`` (input units; ``kin``
-    moved there)."""
-    kin.set_joint_positions(state)
-    out = {}
-    for n, links in ctx.subtrees.items():
-        box = links_aabb(kin, links, ctx.hull_points)
-        out[n] = 0.0 if box is None else float(np.prod(np.maximum(box[1] - box[0], 0.0)))
-    return out
-
-
 def band_of(f: float) -> str:
     """The band of opening fraction ``f``: of those whose interval holds it (else all), the nearest target."""
     inside = [b for b, (lo, hi) in BAND_INTERVAL.items() if lo <= f <= hi]
@@ -105,8 +88,7 @@ def resolve_states(ctx: "EstimationContext", kin: "SimSession", scale: float) ->
     res = StateResolution(bands={})
     relevant = task_relevant_joints(ctx)
     closed_state = {n: c.q_closed for n, c in ctx.closed.items()}
-    centers = _centers(ctx, kin, closed_state) if any(jr.ordinal is not None for jr in ctx.request.joint_states) else {}
-    sizes = _box_volumes(ctx, kin, closed_state) if any(jr.order == "size" for jr in ctx.request.joint_states) else {}
+    centers, sizes = part_boxes(ctx)
     named: list[tuple[JointStateRequest, list[str]]] = []
     cannot: list[tuple[JointStateRequest, str, str]] = []
     for jr in sorted(ctx.request.joint_states, key=lambda jr: jr.names_part):  # a part named wins over a request for "it", in any order

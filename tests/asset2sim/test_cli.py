@@ -15,6 +15,9 @@ import pytest
 
 from asset2sim import atomic, demo_assets
 from asset2sim.cli import command_names, main
+from asset2sim.commands.refine import wall_time_text
+from asset2sim.schemas.report import FAILURE_MODES
+from asset2sim.tasks.check.verdict import TIERS
 from asset2sim.tasks import refine as refine_mod
 from asset2sim.formats.mjcf import export as export_mjcf
 from asset2sim.tasks.publish import refine_report
@@ -592,3 +595,19 @@ def test_two_refines_of_one_input_into_two_folders_are_the_same_bytes(tmp_path, 
             assert place not in data, (f, place)
         if f.endswith((".json", ".html", ".txt", ".urdf", ".xml", ".diff")):  # words a user reads: no "SPEC"
             assert b"SPEC" not in data, f
+
+
+def test_refine_json_prints_one_object_for_scripts(box, tmp_path, capsys):
+    """``refine --json``: stdout is one JSON object (the output folder, the verdict and each tier, the report), no
+    progress lines and no summary."""
+    code = main(["refine", str(box), "--prompt", PROMPT, "--out", str(tmp_path / "o"), "--no-extras", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == (0 if out["ready"] else 3) and out["out_dir"] == str(tmp_path / "o")
+    assert out["failure_mode"] in FAILURE_MODES and set(out["readiness"]) == set(TIERS)
+    assert Path(out["report"]).is_file() and json.loads(Path(out["report"]).read_text())["failure_mode"] == out["failure_mode"]
+
+
+def test_the_wall_time_line_names_stages_as_the_progress_lines_do():
+    """``shut_repair`` and ``sweep_repair`` are the progress lines' ``repair``, said once with their summed time."""
+    text = wall_time_text({"extract": 0.1, "shut_repair": 1.0, "refine_state": 2.0, "sweep_repair": 0.5})
+    assert text == "read 0.10s, repair 1.50s, state 2.00s" and "_" not in text

@@ -215,8 +215,12 @@ def test_finish_refuses_a_missing_file_and_writes_no_marker(tmp_path, box):
 
 
 def test_refine_rerun_owns_its_files_and_marker_lists_them(tmp_path, box):
+    """A rerun of another request over a complete output: refused beside a user's file, then (allowed) it says the
+    earlier output it replaces and what of it goes, and owns only its own files."""
     out = tmp_path / "out"
-    first = refine_asset(box, PROMPT, out, extras=False)
+    said: list[str] = []
+    first = refine_asset(box, PROMPT, out, extras=False, progress=lambda stage, msg: said.append(msg))
+    assert not [m for m in said if "earlier output" in m]  # a new folder replaces nothing
     marker = json.loads((out / MARKER_NAME).read_text())
     on_disk = {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and p.name != MARKER_NAME}
     assert set(marker["files"]) | set(marker["unhashed"]) == on_disk  # the same list the whole-folder scan gave
@@ -228,8 +232,12 @@ def test_refine_rerun_owns_its_files_and_marker_lists_them(tmp_path, box):
     assert err.value.codes == ["OUTPUT_NOT_EMPTY"]
     assert is_complete(out, first.report.input_hash, first.report.config_hash)  # refused before touching anything
     before = outside_hashes(tmp_path, out)
-    again = refine_asset(box, "a small box with its lid closed", out, extras=False, overwrite=True)
+    said.clear()
+    again = refine_asset(box, "a small box with its lid closed", out, extras=False, overwrite=True,
+                         progress=lambda stage, msg: said.append(msg))
     assert not again.skipped and (out / "user_notes.txt").read_text() == "mine"
+    (told,) = [m for m in said if "earlier output" in m]  # the replace is said, with what goes
+    assert told.startswith("WARNING: ") and "report.json" in told and f"its {len(marker['files']) + 1} files" in told, told
     assert outside_hashes(tmp_path, out) == before
     assert "user_notes.txt" not in json.loads((out / MARKER_NAME).read_text())["files"]
 

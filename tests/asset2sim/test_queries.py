@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 import json
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
@@ -171,6 +172,9 @@ def test_failures_command_prints_the_latest_breakdown(store, tmp_path, capsys):
     assert out.startswith("2 slowest assets of run 20260302T020000Z-bbbbbb") and "refine.post_check" in out
     assert failures.run(_args(catalog, run="all", by="run")) == 0
     assert "20260301T020000Z-aaaaaa" in capsys.readouterr().out
+    assert failures.run(_args(catalog, over_time=True)) == 0  # each run's start as people read it, not a raw timestamp
+    out = capsys.readouterr().out
+    assert re.search(r"\d{4}-\d\d-\d\d \d\d:\d\d UTC", out) and "+00:00" not in out and ":00.0" not in out, out
     assert failures.run(_args(catalog, changes=["20260301T020000Z-aaaaaa", "20260302T020000Z-bbbbbb"])) == 0
     assert "box2" in capsys.readouterr().out
     assert failures.run(_args(catalog, over_time=True)) == 0

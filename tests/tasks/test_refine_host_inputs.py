@@ -5,6 +5,7 @@ unit is refused."""
 
 from __future__ import annotations
 
+import html
 import json
 import math
 import shutil
@@ -20,6 +21,8 @@ from asset2sim.schemas.request import RequestOverrides  # noqa: E402
 from asset2sim.apps.audit.audit import audit_asset  # noqa: E402
 from asset2sim.tasks.refine import RefineError, refine_asset  # noqa: E402
 from asset2sim.urdf import read_urdf  # noqa: E402
+from asset2sim.commands.refine import summary_lines  # noqa: E402
+from asset2sim.tasks.evaluation.report_html import host_section  # noqa: E402
 
 CONFIG = RefineConfig(engines=["pybullet"])
 
@@ -177,3 +180,32 @@ def test_an_unnamed_joint_is_refined_and_written_back_in_its_place(tmp_path):
     assert after_model.njnt == 1 and not mujoco.mj_id2name(after_model, mujoco.mjtObj.mjOBJ_JOINT, 0)
     _check_swapped(res, before_model, after_model, "drawer_link_joint", jid=0)
 
+
+
+def _door_notes(res) -> tuple[str, str]:
+    """(the written-back file's note, the DoorObject call's note) of a refined robosuite door."""
+    (written,) = [n for n in res.report.notes if n.startswith("host MJCF: mjcf/host/door.xml")]
+    (call,) = [n for n in res.report.notes if "DoorObject" in n]
+    return written, call
+
+
+def test_the_way_back_into_robosuite_is_on_the_terminal(tmp_path, refine_once):
+    """A robosuite door refined: the terminal's summary says which file to copy back into the package and the
+    DoorObject(friction=..., damping=...) call robosuite's Door task needs to keep the refined values (report.json's
+    notes, no longer only there)."""
+    xml = hl.robosuite_door(tmp_path / "in" / "robosuite" / "models" / "assets" / "objects" / "door.xml")
+    res = refine_once(xml, "A door, slightly open.", CONFIG, extras=False)
+    written, call = _door_notes(res)
+    host = [ln.removeprefix("host         ") for ln in summary_lines(res.result) if ln.startswith("host ")]
+    assert written in host and call in host, host
+    html = host_section(json.loads((res.out_dir / "report.json").read_text()))
+    assert "Back into its package" in html and "DoorObject(name=&quot;Door&quot;, friction=" in html, html
+
+
+@pytest.mark.slow  # end to end: a refine with its media (report.html)
+def test_report_html_says_the_way_back_into_robosuite(tmp_path, refine_once):
+    xml = hl.robosuite_door(tmp_path / "in" / "robosuite" / "models" / "assets" / "objects" / "door.xml")
+    res = refine_once(xml, "A door, slightly open.", CONFIG.model_copy(update={"clips": False}), extras=True)
+    _, call = _door_notes(res)
+    text = (res.out_dir / "report.html").read_text()
+    assert "<h2>Back into its package</h2>" in text and html.escape(call, quote=True) in text

@@ -21,6 +21,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
+from asset2sim import urdf
 from asset2sim.schemas.asset import AssetDescription, Origin
 from asset2sim.tasks.ingest import validate_input as vi
 from asset2sim.tasks.ingest.extract import extract_asset
@@ -216,6 +217,7 @@ def test_roundtrip_through_yourdfpy_writer(model):
         _same(_normal(a), _normal(b))
 
 
+@pytest.mark.slow  # end to end: 40 generated assets through the pipeline's writer and reader
 @SETTINGS
 @given(models())
 def test_roundtrip_through_pipeline_writer(model):
@@ -246,8 +248,12 @@ def test_roundtrip_through_pipeline_writer(model):
             expected["links"][ln.name] = (expected["links"][ln.name][0], (lp.mass, lp.inertia.matrix(), com))
         for j in a.movable_joints():
             t = list(expected["joints"][j.name])
-            # build_urdf keeps effort and velocity as the input declares them, absent ones absent (nothing invented)
+            # build_urdf keeps effort and velocity as the input declares them; a revolute or prismatic joint (or a
+            # continuous one with a <limit>) without them gets a passive part's (the URDF format requires both there)
             t[9], t[10] = 0.25, 0.125
+            if j.type in ("revolute", "prismatic") or next(x.with_limit for x in model.joints if x.name == j.name):
+                t[7] = urdf.PASSIVE_EFFORT if t[7] is None else t[7]
+                t[8] = urdf.PASSIVE_VELOCITY if t[8] is None else t[8]
             expected["joints"][j.name] = tuple(t)
         _same(expected, _normal(b))
 

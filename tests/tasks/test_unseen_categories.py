@@ -183,6 +183,7 @@ def _settled_in(urdf_path, body: str, joint: str, joint_q: float) -> tuple[float
         p.disconnect(cid)
 
 
+@pytest.mark.slow  # end to end: a CoACD decomposition of a whole container, then a drop into it
 def test_a_bucket_of_one_mesh_is_hollow_and_holds_what_is_dropped_into_it(tmp_path, refine_once):
     """A bucket whose body is one OBJ group: its one convex hull would be a solid block and a cube dropped into
     it would rest on its rim. With ``open_containers`` the body's collision is a convex decomposition (noted in

@@ -263,7 +263,8 @@ def test_written_collisions_are_few_closed_convex_pieces_mujoco_loads(tmp_path):
             assert sv[2] > 0
     model = urdf.read_urdf(out.urdf)
     assert model.joint("fix").limit is None
-    assert model.joint("hinge").limit.effort is None and model.joint("hinge").limit.velocity is None  # none declared: none invented
+    lim = model.joint("hinge").limit  # none declared: a passive part's, which the URDF format requires
+    assert (lim.effort, lim.velocity) == (urdf.PASSIVE_EFFORT, urdf.PASSIVE_VELOCITY)
     mujoco = pytest.importorskip("mujoco")
     m = mujoco.MjModel.from_xml_path(str(out.urdf))
     assert m.ngeom == len(files["body"]) + len(files["lid"])

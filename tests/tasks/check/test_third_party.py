@@ -4,6 +4,7 @@ for."""
 
 from __future__ import annotations
 
+import csv
 import importlib.util
 import shutil
 import sys
@@ -12,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from asset2sim import urdf
+from tests.conftest import SHARED
 from tests.contract_asset import write_contract_asset
 from asset2sim.tasks.check.third_party import (
     check_drake,
@@ -31,7 +33,7 @@ def _has_command(name: str) -> bool:
     return Path(sys.executable).with_name(name).is_file() or shutil.which(name) is not None
 
 
-needs_parser = pytest.mark.skipif(not _has_module("urdf_parser_py"), reason="urdf-parser-py not installed")
+needs_parser = pytest.mark.skipif(not _has_module("urdf_parser_py"), reason="urdfdom-py (urdf_parser_py) not installed")
 needs_drake = pytest.mark.skipif(not _has_module("pydrake"), reason="drake not installed")
 needs_validator = pytest.mark.skipif(not _has_command("urdf_validate"), reason="urdf-validator not installed")
 needs_doctor = pytest.mark.skipif(not _has_command("mjcf-doctor"), reason="mjcf-doctor not installed")
@@ -122,3 +124,35 @@ def test_missing_files_and_packages_are_reported_not_raised(tmp_path):
     assert isinstance(res["mjcf-doctor"], str) and "mjcf/mobility.xml" in res["mjcf-doctor"]
     for name, r in res.items():
         assert isinstance(r, str) and r.startswith("skipped") or r.tool == name
+
+
+ROWS = list(csv.DictReader((SHARED / "manifest.csv").open())) if (SHARED / "manifest.csv").is_file() else []
+
+
+def _parses_as_a_passive_part(urdf_path: Path) -> None:
+    """ROS's parser reads ``urdf_path`` without an error (it warns of the optional ``name`` of a ``<visual>``, which it
+    does not know), and every revolute or prismatic limit carries the
+    passive part's effort and velocity (``asset2sim.urdf.PASSIVE_EFFORT``, ``PASSIVE_VELOCITY``)."""
+    r = check_urdf_parser_py(urdf_path)
+    assert r.passed, r.errors
+    from urdf_parser_py.urdf import URDF
+
+    robot = URDF.from_xml_string(urdf_path.read_bytes())
+    limited = [j for j in robot.joints if j.type in ("revolute", "prismatic")]
+    assert limited and all((j.limit.effort, j.limit.velocity) == (urdf.PASSIVE_EFFORT, urdf.PASSIVE_VELOCITY) for j in limited)
+
+
+@needs_parser
+def test_a_refined_urdf_is_read_by_ros_parser(refine_once):
+    """A generated laptop refined: ROS's URDF parser (urdf_parser_py, urdfdom's rules) reads its mobility.urdf, whose
+    limits carry the effort and velocity the format requires."""
+    res = refine_once("laptop", "I want a slightly open laptop. Low damping for smooth operation.", extras=False)
+    _parses_as_a_passive_part(res.out_dir / "mobility.urdf")
+
+
+@needs_parser
+@pytest.mark.slow  # end to end: every dev row refined
+@pytest.mark.parametrize("row", ROWS, ids=[r["id"] for r in ROWS])
+def test_every_dev_rows_refined_urdf_is_read_by_ros_parser(refine_once, row):
+    res = refine_once(SHARED / row["id"], row["prompt"], extras=False)
+    _parses_as_a_passive_part(res.out_dir / "mobility.urdf")

@@ -124,6 +124,7 @@ def test_refine_without_clips_writes_none_and_keeps_the_configuration_hash_of_th
     assert clips.clip_videos(res.out) == []
 
 
+@pytest.mark.slow  # end to end: the evaluation with its media (renders and sweep clips)
 def test_evaluate_writes_clips_of_any_urdf_and_can_leave_them_out(tmp_path):
     asset = tmp_path / "asset"
     write_contract_asset(asset, lid_angle=0.3)

@@ -43,6 +43,7 @@ def test_a_lid_that_falls_fails_robust_rest_in_every_engine(tmp_path):
     assert not ev.passed
 
 
+@pytest.mark.slow  # end to end: the command line, every tier and report.html
 def test_demo_is_interaction_ready_on_every_tier_and_says_so_everywhere(tmp_path, capsys):
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out)]) == 0

@@ -58,6 +58,7 @@ def test_the_pieces_handed_out_are_copies_a_caller_may_change(counted):
     assert len(counted) == 1
 
 
+@pytest.mark.slow  # end to end: a second whole CoACD decomposition (the first stays in the fast tier)
 def test_other_settings_are_another_decomposition(counted):
     mesh = decomposition.read_mesh(BASE_MESH)
     v, f = mesh.vertices, mesh.faces

@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
+
+import pytest
 
 from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.cli import main
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
+from tests.conftest import SHARED, needs_shared
 from tests.contract_asset import write_contract_asset
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.check.sweep import run_sweep, sweep_metric
@@ -157,3 +161,20 @@ def test_refine_clips_a_shut_in_magazine_to_what_it_reaches(tmp_path):
     sweep = next(m for m in report["metrics"] if m["name"] == "joint_sweep")
     mag = sweep["details"]["joints"]["magazine"]
     assert sweep["passed"] and abs(mag["q_far"] - upper) < 1e-9 and "swept with top open" in mag["range_note"]
+
+
+@needs_shared
+@pytest.mark.slow  # end to end: a dev row refined twice
+def test_a_clipped_range_does_not_move_with_the_size_or_the_state_asked(refine_once):
+    """Refrigerator 11178, whose freezer (smaller) door runs into the body past about 100 degrees: asked 1.8 m tall with
+    the freezer door open 90 degrees, and at its default size with both doors closed, the freezer door's range is
+    clipped where its geometry stops it, the same (within 1 %) both times and beyond the 90 degrees asked (a task can
+    still open it further), never cut to the state asked; the main door keeps its whole range."""
+    tall = refine_once(SHARED / "11178", "A 1.8 m tall refrigerator with its freezer door open about 90 degrees and the main "
+                                         "door closed.", extras=False)
+    plain = refine_once(SHARED / "11178", "A refrigerator with both doors closed.", extras=False)
+    freezer = tall.overlay.joints["joint_1"].upper
+    assert freezer is not None and freezer > math.radians(95.0), freezer
+    assert plain.overlay.joints["joint_1"].upper == pytest.approx(freezer, rel=0.01)
+    assert tall.overlay.joints["joint_0"].upper is None and plain.overlay.joints["joint_0"].upper is None  # not clipped
+    assert tall.report.initial_joint_positions["joint_1"] == pytest.approx(math.pi / 2, abs=0.01)

@@ -14,6 +14,7 @@ import pytest
 from asset2sim.commands.refine import summary_lines
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
+from asset2sim.tasks.interpret.named_parts import part_boxes
 from asset2sim.tasks.synthesize import request_apply, request_findings
 from asset2sim.tasks.synthesize import backends, estimate, llm_prompt
 from asset2sim.tasks.synthesize.context import build_context
@@ -87,7 +88,7 @@ def test_left_and_right_doors_and_top_drawer_are_resolved_in_space():
     """Fridge 11178: two side-by-side doors; the viewer's left is +y (front -x)."""
     with build_context(SHARED / "11178", "A fridge with the left door open and the right door closed.") as (ctx, kin):
         res = request_apply.resolve_states(ctx, kin, 1.0)
-        c = request_apply._centers(ctx, kin, {n: cs.q_closed for n, cs in ctx.closed.items()})
+        c, _ = part_boxes(ctx)
         left = max(c, key=lambda n: c[n][1])
         right = min(c, key=lambda n: c[n][1])
         assert res.bands[left] == "mostly" and res.bands[right] == "closed"

@@ -13,6 +13,7 @@ import pytest
 
 from asset2sim.commands.refine import summary_lines
 from asset2sim.schemas.overlay import EstimatorInfo, Overlay
+from asset2sim.tasks.interpret.named_parts import part_boxes
 from asset2sim.tasks.interpret.request import parse_request
 from asset2sim.tasks.interpret.state_words import LESS_THAN_HALF
 from asset2sim.tasks.synthesize import estimate, request_apply, request_findings
@@ -34,10 +35,9 @@ def resolve(folder: Path, text: str):
     with build_context(folder, text) as (ctx, kin):
         s, note = estimate.choose_scale(ctx)
         res = request_apply.resolve_states(ctx, kin, s)
-        closed = {n: c.q_closed for n, c in ctx.closed.items()}
         labels = {j.name: ctx.asset.link(j.child).semantic_label for j in ctx.asset.movable_joints()}
-        vols = request_apply._box_volumes(ctx, kin, closed)
-        heights = {n: float(c[2]) for n, c in request_apply._centers(ctx, kin, closed).items()}
+        centers, vols = part_boxes(ctx)
+        heights = {n: float(c[2]) for n, c in centers.items()}
         ranges = {n: c.open_range for n, c in ctx.closed.items()}
         return res, labels, vols, heights, (s, note), ranges
 

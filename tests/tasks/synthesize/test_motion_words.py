@@ -3,6 +3,8 @@ in report.json and the summary, and kept from every later step of the post-check
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from asset2sim.demo_assets import build_object
@@ -10,6 +12,9 @@ from asset2sim.tasks.tune import word_guard
 from asset2sim.tasks.interpret.request import parse_request
 from asset2sim.tasks.synthesize.context import build_context
 from asset2sim.tasks.synthesize.offline import OfflineEstimator
+from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+from tests.conftest import SHARED, needs_shared
+from tests.unseen_assets import build_double_door_cabinet
 
 
 @pytest.mark.parametrize("text, kind, label", [
@@ -108,3 +113,55 @@ def test_the_guard_undoes_a_step_against_a_word_and_keeps_the_rest(microwave):
     assert kept.joints["joint_0"] == door and len(notes) == 1 and "'swings freely'" in notes[0]
     lowered = overlay.model_copy(update={"joints": {"joint_0": door.model_copy(update={"damping": door.damping / 2})}})
     assert word_guard.keep(overlay, lowered, guards) == (lowered, [])
+
+
+def _joints(folder, prompt: str) -> dict:
+    with build_context(folder, prompt) as (ctx, kin):
+        return OfflineEstimator().estimate(ctx, kin).overlay.joints
+
+
+@pytest.fixture(scope="module")
+def cabinet(tmp_path_factory):
+    return build_double_door_cabinet(tmp_path_factory.mktemp("cab") / "cabinet")
+
+
+@pytest.mark.parametrize("words, stiff", [("the left door has a stiff hinge", 1), ("the right door is stiff", 1),
+                                          ("the doors are stiff", 2), ("both doors have a stiff hinge", 2)])
+def test_a_word_applies_to_the_parts_its_phrase_names(cabinet, words, stiff):
+    """A two-door cabinet: a word naming one door by its place stiffens that door only (the other keeps what it has
+    without the word, and its source does not name the word); one naming the doors stiffens both."""
+    base = _joints(cabinet, "A cabinet with both doors closed.")
+    asked = _joints(cabinet, f"A cabinet with both doors closed; {words}.")
+    changed = [n for n in base if asked[n].friction > base[n].friction * 1.01]
+    assert len(changed) == stiff, {n: (base[n].friction, asked[n].friction) for n in base}
+    for n in set(base) - set(changed):
+        assert asked[n].friction == pytest.approx(base[n].friction) and "request '" not in asked[n].source
+
+
+@needs_shared
+def test_the_main_door_has_a_stiff_hinge_and_the_freezer_door_does_not():
+    """The refrigerator 11178 (a large and a small door), as a user asked it: "the main door has a stiff hinge" makes
+    the largest door stiff; the freezer door, asked nothing about its motion, keeps its friction."""
+    folder = SHARED / "11178"
+    states = "A 1.8 m tall refrigerator with its freezer door open about 90 degrees and the main door closed"
+    base = _joints(folder, states + ".")
+    asked = _joints(folder, states + "; the main door has a stiff hinge.")
+    assert asked["joint_0"].friction > 1.5 * base["joint_0"].friction and "request 'stiff'" in asked["joint_0"].source
+    assert asked["joint_1"].friction == pytest.approx(base["joint_1"].friction) and "request '" not in asked["joint_1"].source
+
+
+def test_the_as_asked_tier_notices_a_word_on_a_part_it_does_not_name(cabinet, refine_once, tmp_path):
+    """An output whose overlay applied "the left door has a stiff hinge" to both doors (as refine did before a word
+    applied to the part it names): the evaluation's as-asked tier fails, naming the door the phrase does not name."""
+    prompt = "A cabinet with both doors closed; the left door has a stiff hinge."
+    res = refine_once(cabinet, prompt, extras=False)
+    assert not [u for u in res.report.metric("request_met").details.get("unmet") or [] if u["kind"] == "not_named"]
+    out = res.copy_to(tmp_path / "out")
+    overlay = json.loads((out / "overlay.json").read_text())
+    stiff = [n for n, j in overlay["joints"].items() if "request 'stiff'" in j["source"]]
+    other = next(n for n in overlay["joints"] if n not in stiff)
+    overlay["joints"][other]["source"] += "; request 'stiff': stiff"
+    (out / "overlay.json").write_text(json.dumps(overlay))
+    ev = evaluate_asset(out, prompt=prompt, probes=False)
+    met = next(m for m in ev.metrics if m.name == "request_met")
+    assert met.passed is False and [u["joint"] for u in met.details["unmet"] if u["kind"] == "not_named"] == [other]

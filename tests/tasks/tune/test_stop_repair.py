@@ -70,6 +70,7 @@ def _with_overrides(urdf: Path, overrides) -> Path:
     return out
 
 
+@pytest.mark.slow  # end to end: a refine whose sweep repair runs a CoACD decomposition
 def test_a_u_hull_that_stops_on_a_rail_is_decomposed_and_the_sweep_passes(tmp_path):
     urdf = _carriage_over_rail(tmp_path / "src")
     closed = {"slide": (0.0, 1.0, 0.2)}
