@@ -296,11 +296,11 @@ def host_section(report: dict | None) -> str:
             if notes else "")
 
 
-def engines_section(report) -> str:
+def engines_section(report: dict | None) -> str:
     """"What holds in each engine": one row per engine of ``report.parity`` (``refine --engines``): rest stability,
     the joints held at rest over the rest test, each joint's breakaway push over its declared friction (within 20 %
     passes; the SPEC: "each value means the same in every engine"); empty without parity rows."""
-    rows = list(getattr(report, "parity", None) or [])
+    rows = list((report or {}).get("parity") or [])  # report.json as JSON
     if not rows:
         return ""
 

@@ -113,7 +113,7 @@ def test_refine_reports_per_engine_what_holds(refine_once):
         assert row["joints_held"] and all(row["joints_held"].values()), (engine, row["joints_held"])
         assert row["breakaway"]["measured"] and row["breakaway"]["passed"], (engine, row["breakaway"])
         assert set(row["breakaway"]["joints"]) == set(row["joints_held"])
-    html = engines_section(res.report)  # the report's "What holds in each engine"
+    html = engines_section(res.report.model_dump(mode="json"))  # the report's "What holds in each engine", from report.json
     assert "What holds in each engine" in html and html.count("<tr>") == 3
     for row in rows.values():
         for joint, r in row["breakaway"]["joints"].items():
