@@ -240,7 +240,7 @@ def test_a_collision_file_the_floor_stops_cannot_read_leaves_the_probes_running(
         evaluate_asset(f)
 
 
-def _box_obj(lo, hi) -> str:
+def _box_mesh(lo, hi) -> str:
     """OBJ text of one axis-aligned box (lo, hi) (m)."""
     vs = [[(hi if i & m else lo)[k] for k, m in enumerate((1, 2, 4))] for i in range(8)]
     fs = [t for a, b, c, d in ((0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5))
@@ -252,8 +252,8 @@ def _flat_laptop(folder):
     """A laptop whose screen hinge at the base's back top edge turns 4.2 rad (240 deg): past 180 deg the screen swings
     below the base, into the floor the laptop stands on."""
     folder.mkdir(parents=True)
-    (folder / "body.obj").write_text(_box_obj((-0.16, -0.11, 0.0), (0.16, 0.11, 0.02)))
-    (folder / "screen.obj").write_text(_box_obj((-0.16, 0.0, 0.0), (0.16, 0.22, 0.008)))
+    (folder / "body.obj").write_text(_box_mesh((-0.16, -0.11, 0.0), (0.16, 0.11, 0.02)))
+    (folder / "screen.obj").write_text(_box_mesh((-0.16, 0.0, 0.0), (0.16, 0.22, 0.008)))
     mesh = "<visual><geometry><mesh filename='{0}'/></geometry></visual><collision><geometry><mesh filename='{0}'/></geometry></collision>"
     (folder / "mobility.urdf").write_text(
         "<?xml version='1.0'?><robot name='flat_laptop'><link name='base_link'/>"
