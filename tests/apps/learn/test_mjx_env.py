@@ -11,6 +11,7 @@ pytest.importorskip("brax")
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 from brax.training.agents.ppo import train as ppo  # noqa: E402
+from mujoco import mjx  # noqa: E402
 
 from asset2sim.apps.learn.mjx_env import ACTION_DIM, OBS_DIM, TaskMjxEnv, build_scene, evaluate, wrap_for_training  # noqa: E402
 from asset2sim.apps.learn.task import prepare_task  # noqa: E402
@@ -44,10 +45,12 @@ def test_reward_follows_the_task_joint(env):
     step = jax.jit(env.step)
     qadr, (qc, direction, rng) = env.scene.qadr, env._closed
 
-    def moved_to(fraction):  # the task joint put at an opening fraction, then one step with the gripper still
+    def moved_to(fraction):  # the task joint put at an opening fraction (the gripper with it), then one step, the gripper still
         d = s.pipeline_state
-        return step(s.replace(pipeline_state=d.replace(qpos=d.qpos.at[qadr].set(qc + direction * fraction * rng))),
-                    jnp.zeros(ACTION_DIM))
+        d = mjx.kinematics(env._mx, d.replace(qpos=d.qpos.at[qadr].set(qc + direction * fraction * rng)))
+        p = env._grasp_point(d)
+        ep = {**s.info["episode"], "g": p, "p_prev": p}
+        return step(s.replace(pipeline_state=d, info={**s.info, "episode": ep}), jnp.zeros(ACTION_DIM))
 
     f0 = float(s.obs[0])
     closer, farther = moved_to(f0 - 0.1), moved_to(f0 + 0.1)
