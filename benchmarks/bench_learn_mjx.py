@@ -80,8 +80,9 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def learn(row, folder: Path, args, base: dict) -> list[dict]:
-    """PPO per seed on the row's task on ``folder``'s asset; one record per seed (or one with the error)."""
+def learn(row, folder: Path, args, base: dict):
+    """PPO per seed on the row's task on ``folder``'s asset: yields one record per seed as it ends (or one with the
+    error that left the arm n/a)."""
     import functools
 
     import jax
@@ -97,9 +98,9 @@ def learn(row, folder: Path, args, base: dict) -> list[dict]:
         env = TaskMjxEnv(build_scene(folder, task, cfg), task, cfg)
     except Exception as exc:  # noqa: BLE001 - recorded; the next arm goes on
         print(f"  {base['arm']:>9} {row.id}: n/a ({type(exc).__name__}: {exc})", flush=True)
-        return [dict(base, error=f"{type(exc).__name__}: {exc}")]
+        yield dict(base, error=f"{type(exc).__name__}: {exc}")
+        return
     base = dict(base, joint=task.joint, action=task.action, source=env.scene.source, grasp=env.scene.grasp_rule)
-    out = []
     for seed in [int(s) for s in args.seeds.split(",") if s]:
         t0 = time.perf_counter()
         last: dict = {}
@@ -120,16 +121,18 @@ def learn(row, folder: Path, args, base: dict) -> list[dict]:
             capped = False
         except _WallLimit:
             capped = True
+        except Exception as exc:  # noqa: BLE001 - recorded; the next seed goes on
+            yield dict(base, seed=seed, error=f"{type(exc).__name__}: {exc}")
+            print(f"  {base['arm']:>9} {row.id} seed {seed}: error {type(exc).__name__}: {exc}", flush=True)
+            continue
         train_s = time.perf_counter() - t0
-        policy = jax.jit(last["make_policy"](last["params"], deterministic=True))
-        ev = evaluate(env, policy, jax.random.PRNGKey(10000 + seed), args.eval_episodes)
+        ev = evaluate(env, last["make_policy"], last["params"], jax.random.PRNGKey(10000 + seed), args.eval_episodes)
         rec = dict(base, seed=seed, success_rate=float(ev["success"].mean()), reached=float(ev["reached"].mean()),
                    env_steps=int(last["step"]), train_seconds=train_s, eval_seconds=time.perf_counter() - t0 - train_s,
                    stopped_by_wall_time=capped, num_envs=args.num_envs, device=str(jax.devices()[0]))
         print(f"  {base['arm']:>9} {row.id} seed {seed}: success {rec['success_rate']:.2f} (reached {rec['reached']:.2f}) "
               f"after {rec['env_steps']} steps, {train_s:.0f} s", flush=True)
-        out.append(rec)
-    return out
+        yield rec
 
 
 class _WallLimit(Exception):

@@ -325,12 +325,15 @@ def wrap_for_training(env: Env, episode_length: int, action_repeat: int = 1, ran
     return _EpisodeAutoReset(brax_training.EpisodeWrapper(brax_training.VmapWrapper(env), episode_length, action_repeat))
 
 
-def evaluate(env: TaskMjxEnv, policy: Callable, key: jax.Array, episodes: int) -> dict[str, Any]:
-    """``episodes`` episodes of ``policy(obs (n, 13), key) -> (actions (n, 3), extras)`` (a brax inference function)
-    from resets of ``key``'s split keys, in parallel, each until its first end (at most ``env.episode_length`` steps).
-    Returns {"success": (episodes,) bool, "reached": (episodes,) bool, "final_fraction": (episodes,) float}."""
+def evaluate(env: TaskMjxEnv, make_policy: Callable, params: Any, key: jax.Array, episodes: int) -> dict[str, Any]:
+    """``episodes`` episodes of the deterministic policy ``make_policy(params, deterministic=True)`` (brax's inference
+    function: ``policy(obs (n, 13), key) -> (actions (n, 3), extras)``) from resets of ``key``'s split keys, in parallel,
+    each until its first end (at most ``env.episode_length`` steps); ``params`` are an argument of the one compiled
+    program, so every seed's policy runs the same program. Returns {"success": (episodes,) bool, "reached":
+    (episodes,) bool, "final_fraction": (episodes,) float}."""
 
-    def run(key):
+    def run(params, key):
+        policy = make_policy(params, deterministic=True)
         k_reset, k_act = jax.random.split(key)
         s = jax.vmap(env.reset)(jax.random.split(k_reset, episodes))
         off = jnp.zeros(episodes, bool)
@@ -348,5 +351,5 @@ def evaluate(env: TaskMjxEnv, policy: Callable, key: jax.Array, episodes: int) -
         (_, _, succ, reach, frac), _ = jax.lax.scan(body, init, jax.random.split(k_act, env.episode_length))
         return succ, reach, frac
 
-    succ, reach, frac = jax.jit(run)(key)
+    succ, reach, frac = jax.jit(run)(params, key)
     return {"success": np.asarray(succ), "reached": np.asarray(reach), "final_fraction": np.asarray(frac)}

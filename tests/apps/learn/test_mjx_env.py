@@ -64,7 +64,7 @@ def test_a_few_ppo_iterations_train_and_evaluate(env):
         env, num_timesteps=64, num_envs=4, episode_length=env.episode_length, wrap_env_fn=wrap_for_training,
         unroll_length=4, batch_size=4, num_minibatches=2, num_updates_per_batch=1, num_evals=2, run_evals=False,
         normalize_observations=True, seed=0)
-    ev = evaluate(env, jax.jit(make_policy(params, deterministic=True)), jax.random.PRNGKey(1), 4)
+    ev = evaluate(env, make_policy, params, jax.random.PRNGKey(1), 4)
     assert ev["success"].shape == ev["reached"].shape == (4,)
     assert np.all(np.isfinite(ev["final_fraction"]))
     assert not np.any(ev["success"] & ~ev["reached"])  # success only after reaching the target
