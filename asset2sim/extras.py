@@ -30,6 +30,7 @@ EXTRA_OF_MODULE: dict[str, tuple[str, str]] = {
     "warp": ("NVIDIA Warp", "newton"),
     "gymnasium": ("Gymnasium", "gym"),
     "stable_baselines3": ("Stable-Baselines3", "learn"),
+    "brax": ("brax", "learn-mjx"),
     "pydrake": ("Drake", "checkers"),
     "mani_skill": ("ManiSkill 3", "maniskill"),
     "torch": ("torch", "maniskill"),

@@ -7,7 +7,6 @@ slide/tip and success (definitions: docs/design/metrics.md). ``gymnasium`` is th
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -17,38 +16,16 @@ from asset2sim.engines.base import SessionOptions, SimSession
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
 from asset2sim.tasks.check.contact_points import contact_point_rule, joint_frame_axis
-from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits
+from asset2sim.tasks.check.gripper import BoundedGrasp
 from asset2sim.tasks.check.support import SupportWatch
 from asset2sim.tasks.check.task_execution import TaskConfig
-from asset2sim.apps.learn.task import LearnTask
+from asset2sim.apps.learn.task import LearnConfig, LearnTask
 from asset2sim.engines.base import session_root_options
 from asset2sim.urdf import UrdfModel, read_urdf
 
 OBS_DIM = 13  # observation length (module docstring)
 ACTION_DIM = 4  # action length: gripper velocity (3,), press flag
 _UP = np.array([0.0, 0.0, 1.0])  # world up, the direction of a press
-
-
-@dataclass
-class LearnConfig:
-    """Environment knobs (units on every field)."""
-
-    engine: str = "pybullet"  # engine name (open_session)
-    action_repeat: int = 12  # engine steps per action (12 x 1/240 s = 20 Hz control)
-    episode_time: float = 3.0  # longest episode, s
-    settle_time: float = 0.25  # shortest settling before the snapshot, s (the probes')
-    settle_max_time: float = 3.0  # longest settling, s: until joints and root are at rest
-    rest_joint_speed: tuple[float, float] = (0.05, 0.005)  # joint at rest below: revolute rad/s, prismatic m/s
-    rest_root_speed: float = 0.005  # root at rest below, m/s
-    hold_time: float = 1.0  # after success, released, the target must hold this long, s
-    reset_noise: float = 0.02  # largest random offset of the task joint at reset, opening fraction
-    slide_tol: float = 0.005  # footprint slide that counts as sliding, m (the probes')
-    tip_tol: float = 0.05  # root rotation that counts as tipping, rad (the probes')
-    progress_weight: float = 10.0  # w_p: reward for moving the whole way to the target
-    stretch_weight: float = 0.05  # w_s: penalty per step for pulling at the force limit
-    moved_penalty: float = 5.0  # w_m: penalty when the object slides or tips
-    success_bonus: float = 10.0  # w_b: bonus on success
-    limits: GripperLimits = field(default_factory=GripperLimits)  # the gripper's force and speed limits
 
 
 class TaskEnv(gym.Env):
