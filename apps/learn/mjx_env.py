@@ -201,7 +201,7 @@ class TaskMjxEnv(Env):
         return "mjx"
 
     def fraction(self, qpos: jax.Array) -> jax.Array:
-        """Opening fraction of the task joint (the task's :class:`ClosedEnd`; 0 when it cannot open)."""
+        """Opening fraction of the task joint (the task's closed end, a :class:`ClosedState`; 0 when it cannot open)."""
         qc, direction, rng = self._closed
         return direction * (qpos[self.scene.qadr] - qc) / rng if rng > 0 else jnp.zeros(())
 
