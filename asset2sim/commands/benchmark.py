@@ -11,7 +11,7 @@ import json
 import math
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_REQUEST, CommandError, parse_engines
+from asset2sim.commands._status import parse_engines
 from asset2sim.apps.benchmark.benchmark import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
 from asset2sim.commands import _output
 from asset2sim.inert import markup
@@ -120,12 +120,8 @@ def run(args: argparse.Namespace) -> int:
     def progress(method: str, rid: str, msg: str) -> None:
         console.print(f"[bold]{markup(method)}[/bold] {markup(rid)}: {markup(msg)}")
 
-    try:
-        records = run_benchmark(args.manifest, methods, out, rows=ids, seed=args.seed, engines=engines,
-                                reports=not args.no_reports, progress=progress)
-    except (KeyError, FileNotFoundError, ValueError) as exc:
-        raise CommandError(INVALID_REQUEST, "BENCHMARK_INPUT_INVALID", getattr(exc, "filename", None) or args.manifest,
-                           f"benchmark cannot run: {exc.args[0] if isinstance(exc, KeyError) and exc.args else exc}") from exc
+    records = run_benchmark(args.manifest, methods, out, rows=ids, seed=args.seed, engines=engines,
+                            reports=not args.no_reports, progress=progress)
     records = _clean(records)
     tables = benchmark_tables(records, methods)
     realism = _realism(out, methods)

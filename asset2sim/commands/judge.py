@@ -10,12 +10,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError, os_failure
+from asset2sim.commands._status import INVALID_REQUEST, CommandError
 from asset2sim.apps.realism.calibration import CALIBRATION_FILE, judge_calibration, write_calibration
-from asset2sim.apps.realism.judge import JUDGEMENTS_FILE, JudgeInputError, find_pair_set, judge_pairs
+from asset2sim.apps.realism.judge import JUDGEMENTS_FILE, find_pair_set, judge_pairs
 from asset2sim.apps.realism.scores import SCORES_FILE, judge_scores
 from asset2sim.models.config import ClientConfig
-from asset2sim.models.errors import LLMUnavailable, MissingCredentials
 
 NAME = "judge"
 HELP = ("Ask vision-language models which clip of each pair looks more realistic (both orders; a verdict kept only "
@@ -75,20 +74,11 @@ def run(args: argparse.Namespace) -> int:
         configs = [ClientConfig.from_env(j["model"], j.get("base_url"), **over) for j in judges]
     except ValueError as exc:
         raise CommandError(INVALID_REQUEST, "MODEL_CONFIG_INVALID", None, str(exc)) from None
-    try:
-        folder = find_pair_set(args.folder)
-        verdicts = judge_pairs(folder, configs, families=[j.get("family") for j in judges], workers=args.jobs)
-        cal = judge_calibration(verdicts)
-        write_calibration(folder, cal)
-        scored = judge_scores(folder, verdicts, cal)
-    except JudgeInputError as exc:
-        raise CommandError(INVALID_INPUT, "PAIRS_INVALID", exc.path, str(exc)) from None
-    except (MissingCredentials, LLMUnavailable) as exc:
-        raise CommandError(INVALID_REQUEST, "MODEL_UNAVAILABLE", None, str(exc)) from None
-    except ValueError as exc:
-        raise CommandError(INVALID_REQUEST, "JUDGES_INVALID", None, str(exc)) from None
-    except OSError as exc:
-        raise os_failure(exc, args.folder, args.folder) from None
+    folder = find_pair_set(args.folder)
+    verdicts = judge_pairs(folder, configs, families=[j.get("family") for j in judges], workers=args.jobs)
+    cal = judge_calibration(verdicts)
+    write_calibration(folder, cal)
+    scored = judge_scores(folder, verdicts, cal)
     for m in cal.models:
         print(f"{m.model} (family {m.family}): {m.pairs} pairs, {m.kept} kept ({_pct(m.kept_rate)}), "
               f"{m.orders_without_answer} questions without an answer")
