@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from asset2sim.atomic import write_bytes, write_json, write_text
+from asset2sim.inert import csv_text
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.apps.benchmark.baselines import available_methods, run_method
@@ -182,7 +183,7 @@ def write_benchmark_outputs(records: list[dict[str, Any]], methods: list[str], o
     paths = {"results.json": write_json(out_dir / "results.json", {"meta": meta, "records": records}),
              "summary.json": write_json(out_dir / "summary.json", {"meta": meta, "tables": tables, "research": RESEARCH_NUMBERS})}
     df = pd.DataFrame(records)
-    paths["results.csv"] = write_text(out_dir / "results.csv", df.to_csv(index=False))
+    paths["results.csv"] = write_text(out_dir / "results.csv", csv_text(df))  # no cell a spreadsheet runs
     try:
         buf = io.BytesIO()
         df.astype({c: "string" for c in ("failures", "error", "report") if c in df}).to_parquet(buf, index=False)
@@ -190,7 +191,7 @@ def write_benchmark_outputs(records: list[dict[str, Any]], methods: list[str], o
     except Exception as exc:  # CSV/JSON are the record; parquet is for the catalog
         meta["parquet_error"] = f"{type(exc).__name__}: {exc}"
     flat = [dict(subset=s, method=m, **row) for s, t in tables.items() for m, row in t.items()]
-    paths["summary.csv"] = write_text(out_dir / "summary.csv", pd.DataFrame(flat).to_csv(index=False))
+    paths["summary.csv"] = write_text(out_dir / "summary.csv", csv_text(pd.DataFrame(flat)))
     chart = plot_method_summary(tables["all rows"])
     paths["summary.html"] = write_text(out_dir / "summary.html", render_benchmark_summary(tables, RESEARCH_NUMBERS, meta, chart))
     paths["index.html"] = write_text(out_dir / "index.html", render_benchmark_index(records, meta))
