@@ -386,7 +386,7 @@ def _fan_out(run: _Run, jobs: list[AssetJob], fingerprints: dict[str, str | None
     cat, n_workers, address = run.cat, run.n_workers, run.address
     t_fan, t_fan_epoch = time.perf_counter(), time.time()
     sub = refine_assets.with_options(task_runner=dask_task_runner(n_workers, address, host=run.host, dashboard=run.dashboard))
-    with local_cluster_config(address, run.dashboard):
+    with local_cluster_config(address, run.dashboard, Path(jobs[0].work_dir).parent):  # the run's .work folder
         out = sub(
             [asdict(j) for j in jobs],
             str(cat.catalog_root),
