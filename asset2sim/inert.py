@@ -19,7 +19,9 @@ messages that quote them are data. Wherever they are shown they pass through the
   line, no traceback, at most :data:`MAX_LINE` characters;
 - :func:`field_errors`: pydantic's validation errors as one sentence, ``field: message; ...`` (no library text
   or URL);
-- :func:`csv_cell`: a CSV cell a spreadsheet reads as text, never as a formula.
+- :func:`csv_cell`: a CSV cell a spreadsheet reads as text, never as a formula;
+- :data:`CSP_META`: the Content-Security-Policy every HTML page asset2sim writes or serves carries, so that even a
+  name that escaped :func:`html_text` could run no script.
 
 Every function takes any object (``str()`` of it) and returns ``str``; none raises.
 """
@@ -29,7 +31,7 @@ from __future__ import annotations
 import html
 import re
 
-__all__ = ["MAX_LINE", "MAX_NAME", "csv_cell", "csv_text", "field_errors", "html_text", "markdown_text", "markup", "one_line",
+__all__ = ["CONTENT_SECURITY_POLICY", "CSP_META", "MAX_LINE", "MAX_NAME", "csv_cell", "csv_text", "field_errors", "html_text", "markdown_text", "markup", "one_line",
            "plot_text", "shorten", "terminal"]
 
 #: Characters of a one-line message (:func:`one_line`).
@@ -128,3 +130,12 @@ def csv_text(frame) -> str:
     safe = frame.map(csv_cell)
     safe.columns = [csv_cell(c) for c in safe.columns]
     return safe.to_csv(index=False)
+
+
+#: The Content-Security-Policy of every HTML page asset2sim writes (``report.html``, the benchmark pages) or serves (the
+#: rating app): no script, plugin, frame or form to another site, no ``<base>``; styles inline; images and videos from
+#: the page's own folder (``'self'``, ``file:`` for a page opened from disk) or inline ``data:``.
+CONTENT_SECURITY_POLICY = ("default-src 'none'; style-src 'unsafe-inline'; img-src 'self' file: data:; media-src 'self' file:; "
+                           "form-action 'self'; base-uri 'none'")
+#: :data:`CONTENT_SECURITY_POLICY` as the ``<meta>`` element of a page's ``<head>``.
+CSP_META = f'<meta http-equiv="Content-Security-Policy" content="{CONTENT_SECURITY_POLICY}">'

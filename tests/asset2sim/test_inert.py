@@ -188,3 +188,22 @@ def test_every_csv_is_written_through_the_spreadsheet_guard():
     assert found == []
     assert [inert.csv_cell(f) for f in FORMULAS] == ["'" + f for f in FORMULAS]
     assert inert.csv_cell(-0.5) == -0.5 and inert.csv_cell("lid") == "lid"
+
+
+def test_every_html_page_carries_the_content_security_policy():
+    """Every page asset2sim writes or serves declares the one policy (no script, no plugin, no form or base to another
+    site) in its ``<head>``: the report's and the benchmark's pages (``html_blocks.page``) and the rating app's, whose
+    responses carry it as a header too; a module that starts an HTML document without it fails here."""
+    from asset2sim.apps.realism import rating_app
+    from asset2sim.tasks.evaluation.html_blocks import page
+
+    head = page("t", "<p>b</p>").split("</head>")[0]
+    assert inert.CSP_META in head and "script-src" not in inert.CONTENT_SECURITY_POLICY
+    assert "default-src 'none'" in inert.CONTENT_SECURITY_POLICY
+    assert rating_app._HEADERS["Content-Security-Policy"].startswith(inert.CONTENT_SECURITY_POLICY)
+    root = Path(__file__).resolve().parents[2]
+    for folder in ("asset2sim", "tasks", "flows", "apps"):
+        for path in (root / folder).rglob("*.py"):
+            text = path.read_text()
+            if re.search(r"<!doctype html", text, re.I) and "CSP_META" not in text:
+                raise AssertionError(f"{path.relative_to(root)} writes an HTML page without CSP_META")
