@@ -11,7 +11,9 @@ import math
 from pathlib import Path
 from typing import Any, Callable
 
+from asset2sim import output_folder
 from asset2sim.atomic import write_bytes, write_json, write_text
+from asset2sim.output_paths import raise_refusal
 from asset2sim.inert import csv_text
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.tasks.check.verdict import readiness
@@ -129,38 +131,41 @@ def run_benchmark(manifest: Path | str, methods: list[str], out_dir: Path | str,
         + [e for e in reading.errors if rows is None or e.id in rows], key=lambda r: r.line or 0)
     say = progress or (lambda m, i, msg: None)
     records = []
-    for method in methods:
-        for row in sel:
-            if isinstance(row, ManifestRowError):
-                rec = {"id": row.id or f"line {row.line}", "category": None, "method": method,
-                       "thesis_set": row.line in lines[:9], "error": f"manifest row {row.code}: {row.message}"}
+    with output_folder.guarding(out_dir):  # no method's or evaluation's file through a symlinked subfolder
+        for method in methods:
+            for row in sel:
+                if isinstance(row, ManifestRowError):
+                    rec = {"id": row.id or f"line {row.line}", "category": None, "method": method,
+                           "thesis_set": row.line in lines[:9], "error": f"manifest row {row.code}: {row.message}"}
+                    records.append(rec)
+                    say(method, rec["id"], rec["error"])
+                    continue
+                folder = out_dir / method / row.id
+                base: dict[str, Any] = {"id": row.id, "category": row.category, "method": method, "thesis_set": row.id in thesis}
+                try:
+                    res = run_method(method, row, folder / "asset", seed=seed)
+                except Exception as exc:
+                    raise_refusal(exc)
+                    rec = dict(base, error=f"{type(exc).__name__}: {exc}")
+                    records.append(rec)
+                    say(method, row.id, f"method failed: {rec['error']}")
+                    continue
+                try:
+                    # ev.seconds is measured before evaluation.json / report.html are written
+                    ev = evaluate_asset(folder / "asset", reference=row.folder, prompt=row.prompt, engines=engines,
+                                        seed=seed, category=row.category or None, method=method,
+                                        out_dir=folder, write_report=reports, task=row.task or None)
+                except Exception as exc:
+                    raise_refusal(exc)
+                    rec = dict(base, error=f"evaluation failed: {type(exc).__name__}: {exc}")
+                    records.append(rec)
+                    say(method, row.id, rec["error"])
+                    continue
+                rec = evaluation_record(ev, row, method)
+                rec.update(base, method_seconds=res.seconds, model_queries=res.model_queries,
+                           report=f"{method}/{row.id}/report.html" if reports else None)
                 records.append(rec)
-                say(method, rec["id"], rec["error"])
-                continue
-            folder = out_dir / method / row.id
-            base: dict[str, Any] = {"id": row.id, "category": row.category, "method": method, "thesis_set": row.id in thesis}
-            try:
-                res = run_method(method, row, folder / "asset", seed=seed)
-            except Exception as exc:
-                rec = dict(base, error=f"{type(exc).__name__}: {exc}")
-                records.append(rec)
-                say(method, row.id, f"method failed: {rec['error']}")
-                continue
-            try:
-                # ev.seconds is measured before evaluation.json / report.html are written
-                ev = evaluate_asset(folder / "asset", reference=row.folder, prompt=row.prompt, engines=engines,
-                                    seed=seed, category=row.category or None, method=method,
-                                    out_dir=folder, write_report=reports, task=row.task or None)
-            except Exception as exc:
-                rec = dict(base, error=f"evaluation failed: {type(exc).__name__}: {exc}")
-                records.append(rec)
-                say(method, row.id, rec["error"])
-                continue
-            rec = evaluation_record(ev, row, method)
-            rec.update(base, method_seconds=res.seconds, model_queries=res.model_queries,
-                       report=f"{method}/{row.id}/report.html" if reports else None)
-            records.append(rec)
-            say(method, row.id, f"{'pass' if rec['all_pass'] else 'fail: ' + rec['failures']} ({ev.seconds:.2f} s)")
+                say(method, row.id, f"{'pass' if rec['all_pass'] else 'fail: ' + rec['failures']} ({ev.seconds:.2f} s)")
     return records
 
 

@@ -4,7 +4,7 @@ Every check derives its step counts from simulated seconds over the time step (t
 rest's trials, operability's strokes, the gripper's task, the probes, the escalation's rounds), so a time step
 inside its range but small multiplies them all; :class:`~asset2sim.schemas.config.SimConventions` bounds the time
 step from below and the rest test's own steps, and this budget bounds the sum. A step's cost grows with the bodies
-and contacts of the object (a 32-link object steps 10-20 times slower than a box), so the budget also carries a
+and contacts of the object (32 links step about 5 times slower than a box with a lid), so the budget also carries a
 deadline in wall-clock seconds, checked before every step. Each session's ``step(n)`` spends ``n`` from the budget
 of the current context (:func:`spend`); past either bound, :class:`StepBudgetExceeded` ends the work at once: the
 run fails with a named error, never a different verdict (``docs/design/trust.md``, "Bounded work"). Outside
