@@ -73,7 +73,7 @@ class CommandError(Exception):
                     break
             for suffix in (f": {self.path}", f": {os.path.abspath(self.path)}"):
                 msg = msg.removesuffix(suffix)
-        where = f"{self.path}: " if self.path else ""
+        where = f"{self.path}: " if self.path and not msg.startswith(self.path) else ""
         prog = f"asset2sim {command}" if command else "asset2sim"
         return f"{prog}: {self.code}: {where}{msg}"
 

@@ -1,7 +1,7 @@
 """``asset2sim benchmark manifest.csv``: run methods on every manifest row,
 evaluate each result, write the thesis table (CSV, JSON, HTML, Parquet) and an
 index page, print the tables. Exit status 1 when ``--compare`` finds a
-difference from an earlier run (timings excluded), else 0.
+difference from an earlier run (timings excluded), 4 when the output cannot be written, else 0.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ NAME = "benchmark"
 HELP = "Run methods (defaults, human, direct, asset2sim) on a manifest, evaluate each, write the thesis table and an index page."
 
 #: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
-EXITS = {0: "done", 1: "--compare found a difference from the earlier run"}
+EXITS = {0: "done", 1: "--compare found a difference from the earlier run", 4: "the output cannot be written"}
 
 #: Record fields excluded from the reproducibility comparison (wall times; the report link, absent with --no-reports).
 TIMING_FIELDS = ("seconds", "method_seconds", "report")

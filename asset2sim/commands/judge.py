@@ -3,7 +3,8 @@ verdicts kept only when they agree), calibrated on the planted-defect pairs; wit
 families, their agreement (Cohen's kappa). Protocol: docs/guide/realism.md.
 
 Exit status: 0 judged; 1 no pair set or an invalid one; 2 a bad option, a model that cannot be used, or
-``MODEL_CALLS_FAILED``: every call to a model failed (its verdicts are still written, each without an answer)."""
+``MODEL_CALLS_FAILED``: every call to a model failed (its verdicts are still written, each without an answer); 4 the
+folder cannot be written."""
 
 from __future__ import annotations
 
@@ -22,7 +23,8 @@ HELP = ("Ask vision-language models which clip of each pair looks more realistic
         "writes judgements.parquet and judge_calibration.json beside pairs.json (docs/guide/realism.md).")
 
 #: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
-EXITS = {0: "judged", 1: "no pair set or an invalid one", 2: "a model that cannot be used, or every call to a model failed"}
+EXITS = {0: "judged", 1: "no pair set or an invalid one", 2: "a model that cannot be used, or every call to a model failed",
+         4: "the folder cannot be written"}
 
 
 class _JudgeOption(argparse.Action):
