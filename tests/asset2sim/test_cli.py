@@ -590,3 +590,18 @@ def test_two_refines_of_one_input_into_two_folders_are_the_same_bytes(tmp_path, 
             assert place not in data, (f, place)
         if f.endswith((".json", ".html", ".txt", ".urdf", ".xml", ".diff")):  # words a user reads: no "SPEC"
             assert b"SPEC" not in data, f
+
+
+@pytest.mark.parametrize("argv, code", [
+    (["render", "{box}", "--out", "{box}"], "OUTPUT_IS_INPUT"),
+    (["render", "{box}/mobility.urdf", "--out", "{box}/views"], "OUTPUT_INSIDE_INPUT"),
+    (["evaluate", "{box}", "--out", "{box}"], "OUTPUT_IS_INPUT"),
+    (["evaluate", "{box}", "--out", "{box}/eval"], "OUTPUT_INSIDE_INPUT"),
+])
+def test_render_and_evaluate_refuse_the_input_folder_as_out(box, argv, code, capsys):
+    """As refine and audit do: status 4, one line, nothing written into the input."""
+    before = tree_hashes(box)
+    assert main([a.format(box=box) for a in argv]) == 4
+    line = _one_line(capsys.readouterr().err)
+    assert line.startswith(f"asset2sim {argv[0]}: {code}: "), line
+    assert tree_hashes(box) == before
