@@ -26,6 +26,7 @@ from pydantic import ValidationError
 from asset2sim.engines.base import SessionOptions, SimSession
 from asset2sim.engines.passive_joints import DeclaredPhysics
 from asset2sim.engines.registry import known_engines, open_session
+from asset2sim.inert import field_errors
 from asset2sim.input_files import load_yaml
 from asset2sim.output_folder import URDF_NAME
 from asset2sim.schemas.config import RefineConfig, SimConventions
@@ -77,7 +78,7 @@ def load_config(config: RefineConfig | Mapping[str, Any] | str | Path | None) ->
     try:
         return _known_engines(RefineConfig.model_validate(dict(config)), source)
     except ValidationError as exc:
-        raise ValueError(f"{source}: {_field_errors(exc)}") from exc
+        raise ValueError(f"{source}: {field_errors(exc)}") from exc
 
 
 def _known_engines(config: RefineConfig, source: str) -> RefineConfig:
@@ -88,15 +89,6 @@ def _known_engines(config: RefineConfig, source: str) -> RefineConfig:
     if unknown:
         raise ValueError(f"{source}: engines: unknown engine(s) {', '.join(unknown)}; known: {', '.join(known)}")
     return config
-
-
-def _field_errors(exc: ValidationError) -> str:
-    """``field: message; ...`` of a pydantic validation error, one line."""
-    out = []
-    for e in exc.errors():
-        field, msg = ".".join(str(x) for x in e["loc"]) or "value", e["msg"].removeprefix("Value error, ")
-        out.append(msg if msg.startswith(f"{field}: ") else f"{field}: {msg}")  # a message naming its field: once
-    return "; ".join(out)
 
 
 def merge_overrides(base: RequestOverrides, more: RequestOverrides | Mapping[str, Any]) -> RequestOverrides:
@@ -111,7 +103,7 @@ def merge_overrides(base: RequestOverrides, more: RequestOverrides | Mapping[str
     try:
         return RequestOverrides.model_validate(merged)
     except ValidationError as exc:
-        raise ValueError(f"overrides: {_field_errors(exc)}") from exc
+        raise ValueError(f"overrides: {field_errors(exc)}") from exc
 
 
 def refine(asset: str | Path, prompt: str = "", out_dir: str | Path = "out", *,

@@ -2,10 +2,11 @@
 
 Subcommands are the modules of :mod:`asset2sim.commands`, each defining
 ``NAME``, ``HELP``, ``add_arguments(parser)`` and ``run(args) -> int``; only
-the module of the command given is imported. :func:`main` turns a
-:class:`asset2sim.commands._status.CommandError` into one line and its status,
-any other exception into one line naming a log of the traceback (status 70).
-Statuses: docs/guide/outputs.md ("Exit statuses").
+the module of the command given is imported. :func:`main` turns what a
+command lets out into one line and its status by the one table of
+:mod:`asset2sim.commands._status` (``ERRORS``), anything that table does not read
+into one line naming a log of the traceback (status 70); SIGTERM unwinds as
+Ctrl-C does (status 143). Statuses: docs/guide/outputs.md ("Exit statuses").
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import pkgutil
 import sys
 import tempfile
 import re
+import signal
 import threading
 import time
 import traceback
@@ -35,9 +37,8 @@ import asset2sim.commands as commands  # noqa: E402
 from asset2sim import __version__, allocator, library_dirs  # noqa: E402
 from asset2sim.commands import _output, _status  # noqa: E402
 from asset2sim.commands._output import inert_streams  # noqa: E402
-from asset2sim.commands._status import INTERNAL_ERROR, INTERRUPTED, INVALID_REQUEST, CommandError  # noqa: E402
+from asset2sim.commands._status import INTERNAL_ERROR, INTERRUPTED, INVALID_REQUEST, TERMINATED, CommandError  # noqa: E402
 from asset2sim.engines.quiet import STARTUP_MESSAGES  # noqa: E402
-from asset2sim.extras import EXTRA_OF_MODULE, install_hint, missing_module  # noqa: E402
 
 
 #: Environment defaults that keep the libraries' logs off the terminal (Prefect's console handler at CRITICAL: a failed
@@ -65,10 +66,11 @@ _NEGATIVE_NUMBER = re.compile(r"^-\d+$|^-\d*\.\d+$")
 def exit_statuses_text(own: dict[int, str] | None = None) -> str:
     """Exit statuses with their meanings, one phrase each (``--help``): every status of
     :mod:`asset2sim.commands._status`, or a command's own (its module's ``EXITS``) with those every command shares
-    (2 a usage error, 70 an internal error, 130 interrupted)."""
+    (2 a usage error, 70 an internal error, 130 interrupted, 143 terminated)."""
     if own is None:
         return ", ".join(f"{code} {meaning}" for code, meaning in _status.EXIT_STATUSES.items())
-    shared = {INVALID_REQUEST: "usage error", INTERNAL_ERROR: "internal error", INTERRUPTED: "interrupted"}
+    shared = {INVALID_REQUEST: "usage error", INTERNAL_ERROR: "internal error", INTERRUPTED: "interrupted",
+              TERMINATED: "terminated"}
     merged = {**shared, **own} if INVALID_REQUEST in own else {**own, **shared}
     return ", ".join(f"{code} {merged[code]}" for code in sorted(merged))
 
@@ -222,28 +224,43 @@ def _main(argv: list[str] | None = None) -> int:
         for name, value in QUIET_LIBRARY_LOGS.items():
             os.environ.setdefault(name, value)
     command = getattr(args, "command", None)
+    previous = _on_sigterm()
     try:
         return int(args._run(args) or 0)
-    except CommandError as exc:
-        if debug:
-            traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
-        print("\n".join(exc.lines(command)), file=sys.stderr, flush=True)
-        return exc.status
-    except KeyboardInterrupt:
-        print(f"asset2sim {command}: INTERRUPTED", file=sys.stderr, flush=True)
-        return INTERRUPTED
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (:class:`Terminated`): cleaned up as the stack unwound
+        print(f"asset2sim {command}: {'TERMINATED' if isinstance(exc, Terminated) else 'INTERRUPTED'}", file=sys.stderr, flush=True)
+        return TERMINATED if isinstance(exc, Terminated) else INTERRUPTED
     except BrokenPipeError:  # the reader of a pipe stopped (`| head`): what it wanted was written
         closed_pipe()
         return 0
-    except ImportError as exc:  # an optional dependency missing: the extra named; any other import error is a bug
-        if missing_module(exc) not in EXTRA_OF_MODULE:
+    except Exception as exc:  # the one place that turns a failure into a status: _status.ERRORS, else a bug
+        err = _status.failure(exc, command, args)
+        if err is None:
             return internal_error(command, exc, debug)
         if debug:
             traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
-        print(CommandError(INVALID_REQUEST, "EXTRA_MISSING", None, install_hint(exc)).line(command), file=sys.stderr, flush=True)
-        return INVALID_REQUEST
-    except Exception as exc:  # the one place that turns a bug into a status
-        return internal_error(command, exc, debug)
+        print("\n".join(err.lines(command)), file=sys.stderr, flush=True)
+        return err.status
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the command is, so that it unwinds as Ctrl-C does (a refine's staging folder removed,
+    servers and clusters stopped): exit status 143."""
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated()
+
+
+def _on_sigterm():
+    """SIGTERM raises :class:`Terminated` in the main thread while a command runs; returns the handler it replaced
+    (None off the main thread, where no handler can be set)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _raise_terminated)
 
 
 def closed_pipe() -> None:

@@ -25,6 +25,7 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 
 from asset2sim import atomic, file_names, output_paths
+from asset2sim.inert import csv_cell
 from asset2sim.demo_geometry import DemoArticulation, fmt_number, mtl_text, obj_text
 from asset2sim.demo_objects import DEMO_OBJECTS, LAPTOP_MODEL_OPENING, DemoObject
 from asset2sim.frames import pose_matrix, translation_matrix
@@ -309,7 +310,7 @@ def manifest_text() -> str:
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["id", "category", "prompt", "task"])
     for entry in DEMO_OBJECTS:
-        w.writerow([entry.asset_id, entry.category, entry.prompt, entry.task])
+        w.writerow([csv_cell(v) for v in (entry.asset_id, entry.category, entry.prompt, entry.task)])
     return buf.getvalue()
 
 

@@ -16,7 +16,12 @@ messages that quote them are data. Wherever they are shown they pass through the
 - :func:`plot_text`: a matplotlib label: ``$`` escaped, so a name is never read as mathtext (the figures also
   draw with ``text.parse_math`` off, :data:`asset2sim.tasks.evaluation.plots.STYLE`);
 - :func:`one_line`: a message stored or shown in one sentence (a note, ``report.json``, an error line): its first
-  line, no traceback, at most :data:`MAX_LINE` characters.
+  line, no traceback, at most :data:`MAX_LINE` characters;
+- :func:`field_errors`: pydantic's validation errors as one sentence, ``field: message; ...`` (no library text
+  or URL);
+- :func:`csv_cell`: a CSV cell a spreadsheet reads as text, never as a formula;
+- :data:`CSP_META`: the Content-Security-Policy every HTML page asset2sim writes or serves carries, so that even a
+  name that escaped :func:`html_text` could run no script.
 
 Every function takes any object (``str()`` of it) and returns ``str``; none raises.
 """
@@ -26,7 +31,8 @@ from __future__ import annotations
 import html
 import re
 
-__all__ = ["MAX_LINE", "MAX_NAME", "html_text", "markdown_text", "markup", "one_line", "plot_text", "shorten", "terminal"]
+__all__ = ["CONTENT_SECURITY_POLICY", "CSP_META", "MAX_LINE", "MAX_NAME", "csv_cell", "csv_text", "field_errors", "html_text", "markdown_text", "markup", "one_line",
+           "plot_text", "shorten", "terminal"]
 
 #: Characters of a one-line message (:func:`one_line`).
 MAX_LINE = 300
@@ -97,3 +103,39 @@ def one_line(text: object, limit: int = MAX_LINE) -> str:
     lines = [ln.strip() for ln in s.splitlines() if ln.strip()]
     s = terminal(lines[0] if lines else "", newlines=False)
     return s if len(s) <= limit else s[: max(0, limit - 3)].rstrip() + "..."
+
+
+def field_errors(exc: object) -> str:
+    """A pydantic ``ValidationError`` as one sentence, ``field.sub: message; ...`` (a message naming its field says it
+    once; ``Value error, `` dropped): the field and what is wrong, without pydantic's type tags, input echo or URL."""
+    out = []
+    for e in exc.errors():  # type: ignore[attr-defined]
+        field, msg = ".".join(str(x) for x in e["loc"]) or "value", str(e["msg"]).removeprefix("Value error, ")
+        out.append(msg if msg.startswith(f"{field}: ") else f"{field}: {msg}")
+    return one_line("; ".join(out), 4 * MAX_LINE)
+
+
+#: What a spreadsheet reads as the start of a formula (OWASP, "CSV Injection"): ``= + - @``, a tab, a carriage return.
+FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_cell(value: object) -> object:
+    """``value`` as a CSV cell a spreadsheet shows as text: a string that starts like a formula (:data:`FORMULA_START`)
+    gets a leading ``'``; numbers and every other value unchanged (a negative number stays a number)."""
+    return "'" + value if isinstance(value, str) and value.startswith(FORMULA_START) else value
+
+
+def csv_text(frame) -> str:
+    """The CSV text (no index) of a pandas DataFrame with every cell through :func:`csv_cell`, the header too."""
+    safe = frame.map(csv_cell)
+    safe.columns = [csv_cell(c) for c in safe.columns]
+    return safe.to_csv(index=False)
+
+
+#: The Content-Security-Policy of every HTML page asset2sim writes (``report.html``, the benchmark pages) or serves (the
+#: rating app): no script, plugin, frame or form to another site, no ``<base>``; styles inline; images and videos from
+#: the page's own folder (``'self'``, ``file:`` for a page opened from disk) or inline ``data:``.
+CONTENT_SECURITY_POLICY = ("default-src 'none'; style-src 'unsafe-inline'; img-src 'self' file: data:; media-src 'self' file:; "
+                           "form-action 'self'; base-uri 'none'")
+#: :data:`CONTENT_SECURITY_POLICY` as the ``<meta>`` element of a page's ``<head>``.
+CSP_META = f'<meta http-equiv="Content-Security-Policy" content="{CONTENT_SECURITY_POLICY}">'

@@ -157,11 +157,12 @@ def guarding(folder: Path | str) -> Iterator[Path]:
 
 def check_destination(path: Path | str, folder: Path | str) -> Path:
     """``path`` (a file a writer opens itself, not through :mod:`asset2sim.atomic`: a database) checked by the one
-    output guard against ``folder`` (:func:`guarding`), and refused when it is a symlink (itself, or a file a
-    library creates beside it, such as SQLite's ``-wal``); returns ``path``.
+    output guard against ``folder`` (:func:`guarding`), and refused when it is a symlink or a hard link (itself, or a
+    file a library creates beside it, such as SQLite's ``-wal``): a write in place would change the file it shares
+    its bytes with, outside the folder; returns ``path``. (An atomic write replaces a link instead.)
 
     Raises:
-        OutputError: ``OUTPUT_SYMLINK_ESCAPES``.
+        OutputError: ``OUTPUT_SYMLINK_ESCAPES``, ``OUTPUT_HARD_LINK``.
     """
     path = Path(path)
     if write_inside(path, folder, Path(os.path.realpath(folder))) is None:
@@ -170,6 +171,9 @@ def check_destination(path: Path | str, folder: Path | str) -> Path:
         if p.is_symlink():
             raise OutputError(f"{p} is a symlink (to {os.path.realpath(p)}); asset2sim writes its own file there: remove it",
                               "OUTPUT_SYMLINK_ESCAPES", p)
+        if p.is_file() and p.stat().st_nlink > 1:
+            raise OutputError(f"{p} is a hard link of another file ({p.stat().st_nlink} names); asset2sim writes its own "
+                              "file there: remove it or copy it", "OUTPUT_HARD_LINK", p)
     return path
 
 

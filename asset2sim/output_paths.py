@@ -29,6 +29,7 @@ CODES = {
     "OUTPUT_WRITE_FAILED": "the output folder cannot be created or written (permissions, read-only, full disk)",
     "OUTPUT_SYMLINK_ESCAPES": "a file would be written through a symlink leading out of the output folder",
     "OUTPUT_PATH_ESCAPES": "a file would be written outside the output folder through '..' (a name used as a path)",
+    "OUTPUT_HARD_LINK": "a file asset2sim writes in place (the ratings database) is a hard link of another file",
     "OUTPUT_NAME_CONFLICT": "two different input files would be copied to one output path, or onto a file of the contract",
     "OUTPUT_INCOMPLETE": "a file the run wrote is missing at the end (no completion marker written)",
     "OUTPUT_OUTSIDE_INPUT": "a referenced file lies outside the asset folder",

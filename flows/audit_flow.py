@@ -50,7 +50,7 @@ def audit_flow(paths: list[str], out: str, category: str | None = None, simulate
     start = time.perf_counter()
     targets = find_assets(paths)
     runner = dask_task_runner(workers, dask_address, dashboard=False)
-    with local_cluster_config(dask_address, False):
+    with local_cluster_config(dask_address, False, out):
         rows = _audit_each.with_options(task_runner=runner)(targets, out, category, simulate) if targets else []
     files = audit_catalog.write_audit_catalog(out, rows)
     summary = audit_summary(rows, files)

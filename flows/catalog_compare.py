@@ -24,7 +24,7 @@ from asset2sim import atomic
 from asset2sim.flows.catalog import ResultCatalog
 from asset2sim.flows.catalog_config import RegressionSettings
 from asset2sim.tasks.check.verdict import MISSING_FAILURE_MODE
-from asset2sim.inert import plot_text
+from asset2sim.inert import csv_text, plot_text
 from asset2sim import library_dirs
 
 #: Metric columns compared between runs: column -> (unit, True when higher is better).
@@ -308,7 +308,7 @@ def write_comparison_artifacts(cmp: RunComparison, history, out_dir: Path | str)
     data["status"] = cmp.status
     paths = {"comparison.json": atomic.write_text(out_dir / "comparison.json", json.dumps(data, indent=2) + "\n")}
     flips = pd.DataFrame([f.model_dump() for f in cmp.flips], columns=list(VerdictFlip.model_fields))
-    paths["verdict_flips.csv"] = atomic.write_text(out_dir / "verdict_flips.csv", flips.to_csv(index=False))
+    paths["verdict_flips.csv"] = atomic.write_text(out_dir / "verdict_flips.csv", csv_text(flips))
     fig = pass_rate_figure(history, cmp.run, title=f"{cmp.dataset}: pass rate over runs")
     buf = io.BytesIO()
     fig.savefig(buf, format="png")

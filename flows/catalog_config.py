@@ -12,6 +12,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from asset2sim.flows import catalog_fs
+from asset2sim.inert import field_errors
 from asset2sim.input_files import InputFileError, load_yaml
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.ingest import partnet_mobility
@@ -201,7 +202,7 @@ class Catalog:
         try:
             return RefineConfig(**fields)
         except ValidationError as exc:
-            raise CatalogError(f"{self.path}: invalid 'refine' settings: {exc}") from exc
+            raise CatalogError(f"{self.path}: invalid 'refine' settings: {field_errors(exc)}") from exc
 
 
 def load_catalog(path: Path | str) -> Catalog:
@@ -222,7 +223,7 @@ def load_catalog(path: Path | str) -> Catalog:
     try:
         config = CatalogConfig.model_validate(data)
     except ValidationError as exc:
-        raise CatalogError(f"{path}: {exc}") from exc
+        raise CatalogError(f"{path}: {field_errors(exc)}") from exc
     if config.default_dataset not in config.datasets:
         raise CatalogError(f"{path}: default_dataset {config.default_dataset!r} is not among the datasets")
     return Catalog(path=path, config=config)

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -61,19 +63,25 @@ def dask_settings_env() -> dict[str, str]:
 
 
 @contextlib.contextmanager
-def local_cluster_config(address: str | None, dashboard: bool):
+def local_cluster_config(address: str | None, dashboard: bool, scratch_in: Path | str):
     """Dask configuration for a local cluster: :data:`DASK_SETTINGS`; without ``dashboard``, no HTTP routes on
-    scheduler and workers."""
+    scheduler and workers; Dask's temporary folder (its workers' scratch space and lock files, else left in the
+    user's TMPDIR) a new hidden folder in ``scratch_in`` (the run's own), removed when the block ends."""
     if address:
         yield
         return
     import dask
 
-    settings = dict(DASK_SETTINGS)
+    Path(scratch_in).mkdir(parents=True, exist_ok=True)
+    scratch = tempfile.mkdtemp(prefix=".dask-", dir=scratch_in)
+    settings = {**DASK_SETTINGS, "temporary-directory": scratch}
     if not dashboard:
         settings.update({"distributed.scheduler.http.routes": [], "distributed.worker.http.routes": []})
-    with dask.config.set(settings):
-        yield
+    try:
+        with dask.config.set(settings):
+            yield
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 def _prefect_api_url() -> str | None:

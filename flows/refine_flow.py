@@ -30,6 +30,7 @@ from asset2sim.flows import driver_skip, stages
 from asset2sim.flows.flow_runtime import dask_task_runner, local_cluster_config, prefect_api_for_run
 from asset2sim.flows.forkserver import StageServer
 from asset2sim.flows.store import join_uri, upload_folder
+from asset2sim.output_paths import write_inside
 from asset2sim.flows.run_plan import flow_parameters, make_run_id, plan_run
 from asset2sim.flows.stages import FLOW_NAME, SUBFLOW_NAME, AssetJob, RegressionFailure
 from asset2sim.tasks.publish.contract import code_version
@@ -181,6 +182,8 @@ def _start_run(log, cat, name: str, planned: DriverPlan, workers, dask_address, 
         "dask_address": address,
         "code_version": jobs[0].code_version if jobs else code_version(),
     }
+    if jobs:  # the run's folder in the output root as named and as resolved: never through a symlinked dataset folder
+        write_inside(Path(jobs[0].work_dir).parent.parent, cat.output_root, cat.output_root.resolve())
     store.write_run_info(name, run_id, info)
     host = dask_host or cat.config.run.dask_host
     dashboard = cat.config.run.dashboard if dashboard is None else bool(dashboard)
@@ -386,7 +389,7 @@ def _fan_out(run: _Run, jobs: list[AssetJob], fingerprints: dict[str, str | None
     cat, n_workers, address = run.cat, run.n_workers, run.address
     t_fan, t_fan_epoch = time.perf_counter(), time.time()
     sub = refine_assets.with_options(task_runner=dask_task_runner(n_workers, address, host=run.host, dashboard=run.dashboard))
-    with local_cluster_config(address, run.dashboard):
+    with local_cluster_config(address, run.dashboard, Path(jobs[0].work_dir).parent):  # the run's .work folder
         out = sub(
             [asdict(j) for j in jobs],
             str(cat.catalog_root),

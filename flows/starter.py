@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from asset2sim import atomic
+from asset2sim.inert import csv_cell
 from asset2sim.flows.catalog_config import load_catalog
 
 __all__ = ["CATALOG_NAME", "StarterCatalog", "object_folders", "starter_catalog_text", "write_starter_catalog"]
@@ -148,7 +149,7 @@ def write_starter_catalog(folder: Path | str, objects: Path | str | None = None,
             text = io.StringIO()
             writer = csv.writer(text, lineterminator="\n")
             writer.writerow(["id", "category", "prompt", "task"])
-            writer.writerows([d.name, "", "", ""] for d in found)
+            writer.writerows([csv_cell(d.name), "", "", ""] for d in found)  # a folder named =cmd stays text
             atomic.write_text(manifest, text.getvalue())
             listed, count = manifest, len(found)
         own = {"name": default, "description": f"The objects of {root.name}/, one per sub-folder.",

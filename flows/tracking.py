@@ -17,7 +17,7 @@ from asset2sim import atomic
 from asset2sim.flows.catalog_config import TrackingSettings
 from asset2sim.flows.queries import failure_modes, run_summary
 from asset2sim.schemas.report import FAILURE_MODES
-from asset2sim.inert import plot_text, shorten
+from asset2sim.inert import csv_text, plot_text, shorten
 from asset2sim import library_dirs
 
 #: Columns of the run's summary table, in order.
@@ -79,7 +79,7 @@ def write_run_artifacts(df, out_dir: Path | str, title: str = "") -> dict[str, P
     """Write ``summary.csv``, ``summary.json`` (:func:`asset2sim.flows.queries.run_summary`)
     and ``failure_modes.png`` into ``out_dir`` atomically; returns name -> path."""
     out_dir = Path(out_dir)
-    paths = {"summary.csv": atomic.write_text(out_dir / "summary.csv", summary_table(df).to_csv(index=False))}
+    paths = {"summary.csv": atomic.write_text(out_dir / "summary.csv", csv_text(summary_table(df)))}
     paths["summary.json"] = atomic.write_json(out_dir / "summary.json", _jsonable(run_summary(df)))
     fig = failure_mode_figure(df, title)
     buf = io.BytesIO()

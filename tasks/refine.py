@@ -13,7 +13,7 @@ from pathlib import Path
 
 from asset2sim import array_cache, atomic, output_folder
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
-from asset2sim.schemas.config import MAX_REFINE_STEPS, RefineConfig
+from asset2sim.schemas.config import MAX_REFINE_SECONDS, MAX_REFINE_STEPS, RefineConfig
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import RefineReport
 from asset2sim.schemas.request import RequestSpec
@@ -133,7 +133,7 @@ def refine_asset(
     work = owner.write_path(out_dir)  # out_dir, or the staging folder that replaces a complete earlier output
     staged_input = asset.staged_from.parent if asset.staged_from is not None else None  # an MJCF / USD file's own folder
     # no cache entry in the input or output; every simulated step of every phase counted against one cap
-    with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference), step_budget(MAX_REFINE_STEPS):
+    with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference), step_budget(MAX_REFINE_STEPS, MAX_REFINE_SECONDS):
         try:
             _announce_extract(asset_dir, asset, findings, log)
             cache = analyze.MeshCache()

@@ -876,6 +876,19 @@ def _cases() -> list[Case]:
           _model_case(_attr("joint", "lid_hinge", lower="-90", upper="0")), note="degrees written as radians"))
     add(C("limit_prismatic_beyond_size", "refine_agreement", "JOINT_LIMIT_IMPLAUSIBLE",
           _model_case(_attr("joint", "drawer_slide", upper="30")), note="30 m of travel on an object about 1.6 m across"))
+    # --- finite but absurd numbers: refused by validate as by refine, never an overflow further on
+    add(C("axis_1e308", "refine_agreement", "JOINT_AXIS_IMPLAUSIBLE", _model_case(_attr("joint", "lid_hinge", axis="1e308 1e308 0")),
+          note="passed validate; refine printed numpy overflow warnings and ended exit 70 in the sweep"))
+    add(C("axis_1e-9", "refine_agreement", "JOINT_AXIS_IMPLAUSIBLE", _model_case(_attr("joint", "lid_hinge", axis="1e-9 0 0")),
+          note="passed validate; refine's sweep could not move the joint"))
+    add(C("limit_continuous_1e308", "refine_agreement", "JOINT_LIMIT_IMPLAUSIBLE",
+          _model_case(_attr("joint", "lid_hinge", type="continuous", lower="-1e308", upper="1e308")),
+          note="passed validate; refine ended ESTIMATOR_FAILED with pydantic's error count"))
+    add(C("inertial_com_1e308", "refine_agreement", "INERTIAL_ORIGIN_IMPLAUSIBLE", _model_case(_attr("inertial", "lid", xyz="1e308 0 0")),
+          note="passed validate; refine ended ESTIMATOR_FAILED"))
+    add(C("inertial_mass_1e308", "refine_agreement", "INERTIAL_IMPLAUSIBLE",
+          _model_case(_attr("inertial", "lid", mass="1e308", ixx="1e308", iyy="1e308", izz="1e308")),
+          note="passed validate with numpy overflow warnings; the audit and --keep-declared overflowed to infinity"))
     add(C("mimic_joint", "refine_agreement", "JOINT_MIMIC_UNSUPPORTED", _model_case(_mimic),
           note="was silently dropped from the output"))
     # --- every URDF joint type is carried through or refused here, never an internal error

@@ -138,6 +138,32 @@ def write_cupboard_without_extras(folder: Path) -> Path:
     return folder
 
 
+_CUBE = "".join(f"v {x} {y} {z}\n" for x in (-0.05, 0.05) for y in (-0.05, 0.05) for z in (-0.05, 0.05)) + \
+    "f 1 3 4\nf 1 4 2\nf 5 6 8\nf 5 8 7\nf 1 2 6\nf 1 6 5\nf 3 7 8\nf 3 8 4\nf 1 5 7\nf 1 7 3\nf 2 4 8\nf 2 8 6\n"
+
+
+def write_hinge_bank(folder: Path, n: int) -> Path:
+    """A PartNet-Mobility-shaped folder: a plate and ``n`` cubes of 10 cm on z hinges, in rows 12 cm apart (no two
+    touch); 32 of them is the joint cap, the case of a refine bounded in steps but not in time
+    (``benchmarks/bench_refine_deadline.py``)."""
+    (folder / "textured_objs").mkdir(parents=True, exist_ok=True)
+    (folder / "textured_objs" / "cube.obj").write_text(_CUBE)
+    side = 0.12 * (int(n ** 0.5) + 2)
+    plate = "".join(f"v {x} {y} {z}\n" for x in (-side / 2, side / 2) for y in (-side / 2, side / 2) for z in (-0.02, 0.0))
+    (folder / "textured_objs" / "plate.obj").write_text(plate + _CUBE[_CUBE.index("f "):])
+    mesh = '<{0}><geometry><mesh filename="textured_objs/{1}.obj"/></geometry></{0}>'
+    parts = [f'<link name="base">{mesh.format("visual", "plate")}{mesh.format("collision", "plate")}</link>']
+    cols = int(n ** 0.5) + 1
+    for i in range(n):
+        x, y = 0.12 * (i % cols) - side / 2 + 0.12, 0.12 * (i // cols) - side / 2 + 0.12
+        parts.append(f'<link name="link_{i}">{mesh.format("visual", "cube")}{mesh.format("collision", "cube")}</link>'
+                     f'<joint name="joint_{i}" type="revolute"><origin xyz="{x:.3f} {y:.3f} 0.051"/><axis xyz="0 0 1"/>'
+                     f'<parent link="base"/><child link="link_{i}"/><limit lower="0" upper="1.5"/></joint>')
+    (folder / "mobility.urdf").write_text(f'<?xml version="1.0"?><robot name="links_{n}">{"".join(parts)}</robot>\n')
+    (folder / "semantics.txt").write_text("".join(f"link_{i} hinge knob\n" for i in range(n)) + "base heavy body\n")
+    return folder
+
+
 def free_port() -> int:
     """A TCP port free on 127.0.0.1 now."""
     with socket.socket() as s:

@@ -11,7 +11,10 @@ import math
 from pathlib import Path
 from typing import Any, Callable
 
+from asset2sim import output_folder
 from asset2sim.atomic import write_bytes, write_json, write_text
+from asset2sim.output_paths import raise_refusal
+from asset2sim.inert import csv_text
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.apps.benchmark.baselines import available_methods, run_method
@@ -128,38 +131,41 @@ def run_benchmark(manifest: Path | str, methods: list[str], out_dir: Path | str,
         + [e for e in reading.errors if rows is None or e.id in rows], key=lambda r: r.line or 0)
     say = progress or (lambda m, i, msg: None)
     records = []
-    for method in methods:
-        for row in sel:
-            if isinstance(row, ManifestRowError):
-                rec = {"id": row.id or f"line {row.line}", "category": None, "method": method,
-                       "thesis_set": row.line in lines[:9], "error": f"manifest row {row.code}: {row.message}"}
+    with output_folder.guarding(out_dir):  # no method's or evaluation's file through a symlinked subfolder
+        for method in methods:
+            for row in sel:
+                if isinstance(row, ManifestRowError):
+                    rec = {"id": row.id or f"line {row.line}", "category": None, "method": method,
+                           "thesis_set": row.line in lines[:9], "error": f"manifest row {row.code}: {row.message}"}
+                    records.append(rec)
+                    say(method, rec["id"], rec["error"])
+                    continue
+                folder = out_dir / method / row.id
+                base: dict[str, Any] = {"id": row.id, "category": row.category, "method": method, "thesis_set": row.id in thesis}
+                try:
+                    res = run_method(method, row, folder / "asset", seed=seed)
+                except Exception as exc:
+                    raise_refusal(exc)
+                    rec = dict(base, error=f"{type(exc).__name__}: {exc}")
+                    records.append(rec)
+                    say(method, row.id, f"method failed: {rec['error']}")
+                    continue
+                try:
+                    # ev.seconds is measured before evaluation.json / report.html are written
+                    ev = evaluate_asset(folder / "asset", reference=row.folder, prompt=row.prompt, engines=engines,
+                                        seed=seed, category=row.category or None, method=method,
+                                        out_dir=folder, write_report=reports, task=row.task or None, probes=True)
+                except Exception as exc:
+                    raise_refusal(exc)
+                    rec = dict(base, error=f"evaluation failed: {type(exc).__name__}: {exc}")
+                    records.append(rec)
+                    say(method, row.id, rec["error"])
+                    continue
+                rec = evaluation_record(ev, row, method)
+                rec.update(base, method_seconds=res.seconds, model_queries=res.model_queries,
+                           report=f"{method}/{row.id}/report.html" if reports else None)
                 records.append(rec)
-                say(method, rec["id"], rec["error"])
-                continue
-            folder = out_dir / method / row.id
-            base: dict[str, Any] = {"id": row.id, "category": row.category, "method": method, "thesis_set": row.id in thesis}
-            try:
-                res = run_method(method, row, folder / "asset", seed=seed)
-            except Exception as exc:
-                rec = dict(base, error=f"{type(exc).__name__}: {exc}")
-                records.append(rec)
-                say(method, row.id, f"method failed: {rec['error']}")
-                continue
-            try:
-                # ev.seconds is measured before evaluation.json / report.html are written
-                ev = evaluate_asset(folder / "asset", reference=row.folder, prompt=row.prompt, engines=engines,
-                                    seed=seed, category=row.category or None, method=method,
-                                    out_dir=folder, write_report=reports, task=row.task or None, probes=True)
-            except Exception as exc:
-                rec = dict(base, error=f"evaluation failed: {type(exc).__name__}: {exc}")
-                records.append(rec)
-                say(method, row.id, rec["error"])
-                continue
-            rec = evaluation_record(ev, row, method)
-            rec.update(base, method_seconds=res.seconds, model_queries=res.model_queries,
-                       report=f"{method}/{row.id}/report.html" if reports else None)
-            records.append(rec)
-            say(method, row.id, f"{'pass' if rec['all_pass'] else 'fail: ' + rec['failures']} ({ev.seconds:.2f} s)")
+                say(method, row.id, f"{'pass' if rec['all_pass'] else 'fail: ' + rec['failures']} ({ev.seconds:.2f} s)")
     return records
 
 
@@ -182,7 +188,7 @@ def write_benchmark_outputs(records: list[dict[str, Any]], methods: list[str], o
     paths = {"results.json": write_json(out_dir / "results.json", {"meta": meta, "records": records}),
              "summary.json": write_json(out_dir / "summary.json", {"meta": meta, "tables": tables, "research": RESEARCH_NUMBERS})}
     df = pd.DataFrame(records)
-    paths["results.csv"] = write_text(out_dir / "results.csv", df.to_csv(index=False))
+    paths["results.csv"] = write_text(out_dir / "results.csv", csv_text(df))  # no cell a spreadsheet runs
     try:
         buf = io.BytesIO()
         df.astype({c: "string" for c in ("failures", "error", "report") if c in df}).to_parquet(buf, index=False)
@@ -190,7 +196,7 @@ def write_benchmark_outputs(records: list[dict[str, Any]], methods: list[str], o
     except Exception as exc:  # CSV/JSON are the record; parquet is for the catalog
         meta["parquet_error"] = f"{type(exc).__name__}: {exc}"
     flat = [dict(subset=s, method=m, **row) for s, t in tables.items() for m, row in t.items()]
-    paths["summary.csv"] = write_text(out_dir / "summary.csv", pd.DataFrame(flat).to_csv(index=False))
+    paths["summary.csv"] = write_text(out_dir / "summary.csv", csv_text(pd.DataFrame(flat)))
     chart = plot_method_summary(tables["all rows"])
     paths["summary.html"] = write_text(out_dir / "summary.html", render_benchmark_summary(tables, RESEARCH_NUMBERS, meta, chart))
     paths["index.html"] = write_text(out_dir / "index.html", render_benchmark_index(records, meta))

@@ -41,7 +41,7 @@ from typing import TYPE_CHECKING, Sequence
 from urllib.parse import parse_qs, quote
 
 from asset2sim.apps.realism.ratings import RatingError, RatingStore, Showing, check_rater, media_path, side
-from asset2sim.inert import html_text
+from asset2sim.inert import CONTENT_SECURITY_POLICY, CSP_META, html_text
 
 if TYPE_CHECKING:
     from fastapi import FastAPI, Request
@@ -52,7 +52,8 @@ MAX_FORM_BYTES = 16_384
 _KINDS = {"video": "video/webm", "poster": "image/png"}
 #: Headers of every page: ``same-origin`` sends no referrer to another site, and lets a browser's form post carry
 #: the app's own ``Origin`` (under ``no-referrer`` browsers send ``Origin: null``, which the app refuses).
-_HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "same-origin", "X-Content-Type-Options": "nosniff"}
+_HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "same-origin", "X-Content-Type-Options": "nosniff",
+            "Content-Security-Policy": CONTENT_SECURITY_POLICY + "; frame-ancestors 'none'"}
 _STATUS = {"RATER_INVALID": 400, "PAIR_UNKNOWN": 404, "ANSWER_INVALID": 400, "PAIR_NOT_SHOWN": 409, "ANSWER_CONFLICT": 409,
            "ORIGIN_REFUSED": 403, "TOKEN_INVALID": 403, "ANSWER_TOO_LARGE": 413, "STORE_FAILED": 503}
 #: Host names every app answers to (besides the address it serves and ``allowed_hosts``).
@@ -79,7 +80,7 @@ textarea { width: 100%; }
 def _page(title: str, body: str, status: int = 200) -> "HTMLResponse":
     from fastapi.responses import HTMLResponse
 
-    doc = (f"<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{html_text(title)}</title>"
+    doc = (f"<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">{CSP_META}<title>{html_text(title)}</title>"
            f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><style>{_STYLE}</style></head>"
            f"<body>{body}</body></html>\n")
     return HTMLResponse(doc, status_code=status, headers=_HEADERS)

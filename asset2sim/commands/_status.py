@@ -1,7 +1,8 @@
 """Exit statuses of the ``asset2sim`` command line (their meaning:
 docs/guide/outputs.md, "Exit statuses"), the expected-failure exception the
-commands raise (:mod:`asset2sim.cli` prints it as one line and exits with its
-status) and the helpers that turn failures into it.
+commands raise, and the one table (:data:`ERRORS`) that turns any other exception
+a command lets out into one line and its status (:func:`failure`, called by
+:mod:`asset2sim.cli`).
 """
 
 from __future__ import annotations
@@ -9,12 +10,15 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable
+from typing import Callable, Iterable
 
 from asset2sim.engines.registry import known_engines
+from asset2sim.extras import EXTRA_OF_MODULE, install_hint, missing_module
 from asset2sim.input_files import allow_outside
-from asset2sim.output_folder import OutputError
+from asset2sim.output_folder import OutputError, product_folder_as_named
+from asset2sim.output_paths import check_location
 
 INVALID_INPUT = 1
 INVALID_REQUEST = 2
@@ -23,6 +27,8 @@ OUTPUT_LOCATION = 4
 REGRESSION = 5
 INTERNAL_ERROR = 70
 INTERRUPTED = 130
+#: 128 + SIGTERM (15): stopped by ``kill`` (or a scheduler) and cleaned up as for Ctrl-C.
+TERMINATED = 143
 
 #: Every exit status with its meaning, as ``asset2sim --help`` lists them (docs/guide/outputs.md has the codes).
 EXIT_STATUSES = {
@@ -34,6 +40,7 @@ EXIT_STATUSES = {
     REGRESSION: "a flow run regressed against the previous run",
     INTERNAL_ERROR: "internal error",
     INTERRUPTED: "interrupted",
+    TERMINATED: "terminated (SIGTERM)",
 }
 
 
@@ -66,11 +73,187 @@ class CommandError(Exception):
                     break
             for suffix in (f": {self.path}", f": {os.path.abspath(self.path)}"):
                 msg = msg.removesuffix(suffix)
-        where = f"{self.path}: " if self.path else ""
+        where = f"{self.path}: " if self.path and not msg.startswith(self.path) else ""
         prog = f"asset2sim {command}" if command else "asset2sim"
         return f"{prog}: {self.code}: {where}{msg}"
 
 
+# ------------------------------------------------------------------ the one table of failures
+@dataclass(frozen=True)
+class Reading:
+    """How an exception reads to the user of a command: ``status``; ``code`` (the exception's own upper-case
+    ``code`` wins when it has one); ``path``: ``"exc"`` the exception's own (``path``, ``filename``), else the
+    command's input; ``"input"`` the command's input; None no path; ``prefix`` before the exception's message."""
+
+    status: int
+    code: str
+    path: str | None = "exc"
+    prefix: str = ""
+
+
+#: Exceptions that say the disk cannot take more: whatever file they name, the output is what cannot be written.
+UNWRITABLE_ERRNOS = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None), errno.EROFS) if e is not None)
+#: What the command line adds to an output-location message (the library names no options).
+_HINTS = {"OUTPUT_NOT_EMPTY": "pass --overwrite to do so"}
+
+
+def _chain(exc: BaseException) -> list[BaseException]:
+    """``exc`` and its causes and contexts, each once."""
+    out: list[BaseException] = []
+    while exc is not None and all(exc is not e for e in out):
+        out.append(exc)
+        exc = exc.__cause__ or exc.__context__
+    return out
+
+
+def errno_name(exc: OSError) -> str:
+    """``EROFS``, ``ENOSPC`` ... of an OSError (``OSERROR`` when unknown)."""
+    return errno.errorcode.get(exc.errno or 0, "OSERROR")
+
+
+def _inside(path: str | os.PathLike | None, folder: Path | str) -> bool:
+    """True when ``path`` is ``folder`` or lies in it, as written or with symlinks resolved."""
+    if path is None:
+        return False
+    p = os.fsdecode(path)
+    for a, b in ((os.path.abspath(p), os.path.abspath(folder)), (os.path.realpath(p), os.path.realpath(folder))):
+        if a == b or a.startswith(b.rstrip(os.sep) + os.sep):
+            return True
+    return False
+
+
+def output_failure(exc: OutputError, outs: list[Path], _inp=None, _reading=None) -> CommandError:
+    """Status 4 with the output guard's code (``[ERRNO]`` added when an OSError caused it), path and sentence."""
+    code = exc.code
+    if isinstance(exc.__cause__, OSError):
+        code = f"{code} [{errno_name(exc.__cause__)}]"
+    msg = str(exc) + (f"; {_HINTS[exc.code]}" if exc.code in _HINTS else "")
+    return CommandError(OUTPUT_LOCATION, code, exc.path or (outs[0] if outs else None), msg)
+
+
+def os_failure(exc: OSError, outs: list[Path], inp, reading: Reading | None) -> CommandError:
+    """An OSError: under an output folder of the command, or a full / read-only disk anywhere in its chain ->
+    status 4 ``OUTPUT_WRITE_FAILED [ERRNO]``; else the command's reading of an unreadable input (default status 1
+    ``INPUT_READ_FAILED [ERRNO]``)."""
+    full = next((c for c in _chain(exc) if isinstance(c, OSError) and c.errno in UNWRITABLE_ERRNOS), None)
+    if full is not None or any(_inside(p, out) for p in (exc.filename, exc.filename2) for out in outs):
+        exc = full or exc
+        return CommandError(OUTPUT_LOCATION, f"OUTPUT_WRITE_FAILED [{errno_name(exc)}]", exc.filename or (outs[0] if outs else None),
+                            exc.strerror or str(exc))
+    reading = reading or Reading(INVALID_INPUT, "INPUT_READ_FAILED")
+    return CommandError(reading.status, f"{reading.code} [{errno_name(exc)}]", exc.filename or inp,
+                        reading.prefix + (exc.strerror or str(exc)))
+
+
+def catalog_failure(exc: Exception, _outs, catalog, _reading=None) -> CommandError:
+    """Status 2 for a ``catalog.yaml`` that cannot be used: ``CATALOG_NOT_FOUND`` (run where it is, or pass
+    ``--catalog``) or ``CATALOG_INVALID`` with the reason."""
+    if isinstance(exc.__cause__, FileNotFoundError):
+        return CommandError(INVALID_REQUEST, "CATALOG_NOT_FOUND", catalog, "no such file; run the command in the "
+                            "project's folder (where catalog.yaml is) or pass --catalog PATH")
+    where = Path(catalog).expanduser().resolve() if catalog else ""
+    return CommandError(INVALID_REQUEST, "CATALOG_INVALID", catalog, str(exc).removeprefix(f"{where}: "))
+
+
+def extra_failure(exc: ImportError, _outs, _inp, _reading=None) -> CommandError | None:
+    """Status 2 ``EXTRA_MISSING`` naming the extra of a missing optional dependency; None for any other import
+    error (a bug)."""
+    if missing_module(exc) not in EXTRA_OF_MODULE:
+        return None
+    return CommandError(INVALID_REQUEST, "EXTRA_MISSING", None, install_hint(exc))
+
+
+Converter = Callable[[BaseException, list, object, "Reading | None"], "CommandError | None"]
+
+#: Every command's reading of the exceptions it lets out, by class name (looked up along the exception's classes,
+#: ``"COMMAND Class"`` before ``"Class"``): a :class:`Reading`, or a function ``(exc, output folders, input,
+#: the command's reading of OSError) -> CommandError | None``. Anything not here is a bug: status 70, the traceback
+#: in a log (:func:`asset2sim.cli.internal_error`). The statuses: docs/guide/outputs.md, "Exit statuses".
+ERRORS: dict[str, Reading | Converter] = {
+    # every command
+    "OutputError": output_failure,  # the output guard's refusals (symlinks, hard links, names, locations): 4
+    "OSError": os_failure,
+    "ImportError": extra_failure,
+    "CatalogError": catalog_failure,
+    "AssetError": Reading(INVALID_INPUT, "INPUT_UNREADABLE", "input"),
+    "MissingCredentials": Reading(INVALID_REQUEST, "MODEL_UNAVAILABLE", None),
+    "LLMUnavailable": Reading(INVALID_REQUEST, "MODEL_UNAVAILABLE", None),
+    "PairSetError": Reading(INVALID_INPUT, "PAIRS_INVALID"),
+    "JudgeInputError": Reading(INVALID_INPUT, "PAIRS_INVALID"),
+    "NotRated": Reading(NOT_READY, "NOT_RATED", "input"),
+    "RenderError": Reading(INVALID_INPUT, "RENDER_FAILED", "input"),
+    "EvaluationError": Reading(INVALID_REQUEST, "EVALUATION_INPUT_INVALID", "input"),
+    # one command's own
+    "audit FileNotFoundError": Reading(INVALID_INPUT, "AUDIT_INPUT_MISSING", None),
+    "benchmark ValueError": Reading(INVALID_REQUEST, "BENCHMARK_INPUT_INVALID", "exc", "benchmark cannot run: "),
+    "benchmark KeyError": Reading(INVALID_REQUEST, "BENCHMARK_INPUT_INVALID", "exc", "benchmark cannot run: "),
+    "benchmark FileNotFoundError": Reading(INVALID_REQUEST, "BENCHMARK_INPUT_INVALID", "exc", "benchmark cannot run: "),
+    "evaluate ValueError": Reading(INVALID_REQUEST, "EVALUATION_INPUT_INVALID", "input"),
+    "evaluate OSError": Reading(INVALID_REQUEST, "EVALUATION_INPUT_UNREADABLE"),
+    "export ValueError": Reading(INVALID_REQUEST, "EXPORT_INPUT_INVALID", "exc", "cannot export: "),
+    "export FileNotFoundError": Reading(INVALID_REQUEST, "EXPORT_INPUT_INVALID", "exc", "cannot export: "),
+    "export OSError": Reading(INVALID_REQUEST, "EXPORT_INPUT_UNREADABLE"),
+    "export MjcfError": Reading(INVALID_INPUT, "EXPORT_CHECK_FAILED", "input"),
+    "export ExportError": Reading(INVALID_INPUT, "EXPORT_CHECK_FAILED", "input"),
+    "export UsdExportError": Reading(INVALID_INPUT, "EXPORT_CHECK_FAILED", "input"),
+    "failures ValueError": catalog_failure,
+    "init FileExistsError": Reading(OUTPUT_LOCATION, "OUTPUT_EXISTS", None),
+    "init NotADirectoryError": Reading(INVALID_INPUT, "OBJECTS_NOT_A_FOLDER", None),
+    "init ValueError": Reading(INVALID_INPUT, "OBJECTS_NONE_FOUND", None),
+    "judge ValueError": Reading(INVALID_REQUEST, "JUDGES_INVALID", None),
+    "pairs FileNotFoundError": Reading(INVALID_INPUT, "PAIRS_INPUT_INVALID", None),
+    "rate FileNotFoundError": Reading(INVALID_INPUT, "PAIRS_MISSING"),
+    "render ValueError": Reading(INVALID_REQUEST, "RENDER_INPUT_INVALID"),
+    "render KeyError": Reading(INVALID_REQUEST, "RENDER_INPUT_INVALID", "input"),
+    "render OSError": Reading(INVALID_REQUEST, "RENDER_INPUT_INVALID"),
+}
+
+#: The arguments naming what a command reads, first found first (its output folders: ``--out``, ``--asset-out``,
+#: ``--dataset``, and the folder ``init``, ``rate`` and ``judge`` write into).
+_INPUT_ARGS = ("asset", "manifest", "objects", "folder", "catalog", "out")
+_OUTPUT_ARGS = {"init": ("folder",), "rate": ("folder",), "judge": ("folder",), "export": ("out/format",)}
+
+
+def _arg_paths(args, names: Iterable[str]) -> list[Path]:
+    out = []
+    for name in names:
+        head, _, sub = name.partition("/")
+        value = getattr(args, head, None)
+        if value is not None and not isinstance(value, (list, tuple)):
+            out.append(Path(value) / getattr(args, sub) if sub else Path(value))
+    return out
+
+
+def _message(exc: BaseException) -> str:
+    if isinstance(exc, KeyError) and exc.args:
+        return str(exc.args[0])
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror
+    return str(exc) or type(exc).__name__
+
+
+def failure(exc: BaseException, command: str | None, args=None) -> CommandError | None:
+    """The :class:`CommandError` of an exception a command let out, read by :data:`ERRORS` (``args``: its parsed
+    arguments, for the paths); None when the table has no reading of it (a bug)."""
+    if isinstance(exc, CommandError):
+        return exc
+    outs = _arg_paths(args, _OUTPUT_ARGS.get(command or "", ("out", "asset_out", "dataset")))
+    inputs = _arg_paths(args, _INPUT_ARGS)
+    inp = inputs[0] if inputs else None
+    names = [c.__name__ for c in type(exc).__mro__]
+    reading = next((ERRORS[k] for n in names for k in (f"{command} {n}", n) if k in ERRORS), None)
+    if reading is None:
+        return None
+    if not isinstance(reading, Reading):
+        own = ERRORS.get(f"{command} OSError")
+        return reading(exc, outs, inp, own if isinstance(own, Reading) else None)
+    code = getattr(exc, "code", None)
+    code = code if isinstance(code, str) and code.isupper() else reading.code
+    where = {"exc": getattr(exc, "path", None) or getattr(exc, "filename", None) or inp, "input": inp}.get(reading.path or "")
+    return CommandError(reading.status, code, where, reading.prefix + _message(exc))
+
+
+# ------------------------------------------------------------------ shared checks and options
 def join_codes(codes: Iterable[str]) -> str:
     """Distinct codes in first-seen order, joined by ``,`` (``""`` when none)."""
     return ",".join(dict.fromkeys(c for c in codes if c))
@@ -89,61 +272,21 @@ def parse_engines(text: str | None, option: str = "--engines") -> list[str]:
     return names
 
 
-def _inside(path: str | os.PathLike | None, folder: Path | str) -> bool:
-    """True when ``path`` is ``folder`` or lies in it, as written or with symlinks resolved."""
-    if path is None:
-        return False
-    p = os.fsdecode(path)
-    for a, b in ((os.path.abspath(p), os.path.abspath(folder)), (os.path.realpath(p), os.path.realpath(folder))):
-        if a == b or a.startswith(b.rstrip(os.sep) + os.sep):
-            return True
-    return False
+def check_out(out: Path | str, inputs: Iterable[Path | str] = (), *, adopt: bool = False) -> None:
+    """Refuse an output folder before any work: ``OUTPUT_NOT_A_FOLDER`` when it exists and is not a folder, and,
+    for each input (a folder, or a file's folder), ``OUTPUT_IS_INPUT`` / ``OUTPUT_INSIDE_INPUT`` /
+    ``OUTPUT_CONTAINS_INPUT`` (also through a symlink; :func:`asset2sim.output_paths.check_location`), unless
+    ``adopt`` and ``out`` lies in an output folder asset2sim wrote (its files become that folder's own).
 
-
-def errno_name(exc: OSError) -> str:
-    """``EROFS``, ``ENOSPC`` ... of an OSError (``OSERROR`` when unknown)."""
-    return errno.errorcode.get(exc.errno or 0, "OSERROR")
-
-
-def os_failure(exc: OSError, out: Path | str | None, inp: Path | str | None, input_status: int = INVALID_INPUT,
-               input_code: str = "INPUT_READ_FAILED") -> CommandError:
-    """An OSError of a command: under ``out`` or a full / read-only disk ->
-    status 4 ``OUTPUT_WRITE_FAILED [ERRNO]``; else ``input_status`` ``input_code [ERRNO]``."""
-    name = errno_name(exc)
-    paths = [exc.filename, exc.filename2]
-    full = exc.errno in (errno.ENOSPC, errno.EROFS, getattr(errno, "EDQUOT", -1))
-    if out is not None and (full or any(_inside(p, out) for p in paths)):
-        return CommandError(OUTPUT_LOCATION, f"OUTPUT_WRITE_FAILED [{name}]", exc.filename or out, exc.strerror or str(exc))
-    return CommandError(input_status, f"{input_code} [{name}]", exc.filename or inp, exc.strerror or str(exc))
-
-
-def output_folder_failure(out: Path | str) -> CommandError | None:
-    """``OUTPUT_NOT_A_FOLDER`` (status 4) when ``out`` exists and is not a folder, else None."""
+    Raises:
+        OutputError: status 4 by :data:`ERRORS`.
+    """
     if os.path.lexists(out) and not os.path.isdir(out):
-        return CommandError(OUTPUT_LOCATION, "OUTPUT_NOT_A_FOLDER", out, "exists and is not a folder")
-    return None
-
-
-#: What the command line adds to an output-location message (the library names no options).
-_HINTS = {"OUTPUT_NOT_EMPTY": "pass --overwrite to do so"}
-
-
-def output_failure(exc: OutputError, out: Path | str) -> CommandError:
-    """Status 4 with the output error's code (``[ERRNO]`` added when an OSError caused it) and path."""
-    code = exc.code
-    if isinstance(exc.__cause__, OSError):
-        code = f"{code} [{errno_name(exc.__cause__)}]"
-    msg = str(exc) + (f"; {_HINTS[exc.code]}" if exc.code in _HINTS else "")
-    return CommandError(OUTPUT_LOCATION, code, exc.path or out, msg)
-
-
-def catalog_failure(exc: Exception, catalog: Path | str) -> CommandError:
-    """Status 2 for a ``catalog.yaml`` that cannot be used: ``CATALOG_NOT_FOUND`` (run where it is, or pass
-    ``--catalog``) or ``CATALOG_INVALID`` with the reason."""
-    if isinstance(exc.__cause__, FileNotFoundError):
-        return CommandError(INVALID_REQUEST, "CATALOG_NOT_FOUND", catalog, "no such file; run the command in the "
-                            "project's folder (where catalog.yaml is) or pass --catalog PATH")
-    return CommandError(INVALID_REQUEST, "CATALOG_INVALID", catalog, str(exc).removeprefix(f"{Path(catalog).expanduser().resolve()}: "))
+        raise OutputError("exists and is not a folder", "OUTPUT_NOT_A_FOLDER", out)
+    if adopt and product_folder_as_named(out) is not None:
+        return
+    for given in (g for g in inputs if os.path.exists(g)):  # a missing input is named as such later
+        check_location(given if os.path.isdir(given) else os.path.dirname(os.path.abspath(given)), out)
 
 
 def add_allow_outside(parser) -> None:

@@ -14,10 +14,9 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, OUTPUT_LOCATION, CommandError,
-                                        add_allow_outside, output_folder_failure, outside_paths)
+from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, add_allow_outside, check_out,
+                                        outside_paths)
 from asset2sim.input_files import allowed_folders, set_allowed_outside
-from asset2sim.output_paths import OutputError, check_location
 from asset2sim.flows import audit_catalog
 from asset2sim.apps.audit.batch import AuditTarget, audit_one, find_assets
 from asset2sim.schemas.config import RefineConfig
@@ -66,34 +65,16 @@ def _run_all(targets: list[AuditTarget], out: Path | None, category: str | None,
         return [f.result() for f in futures]
 
 
-def _out_outside_inputs(out: Path, inputs: list[Path]) -> None:
-    """CommandError status 4 ``OUTPUT_IS_INPUT`` / ``OUTPUT_INSIDE_INPUT`` / ``OUTPUT_CONTAINS_INPUT`` when ``out`` is
-    an input folder (a path given, or the folder of an input file), lies inside one or holds one (its per-asset
-    folders could be the input's), also through a symlink: nothing is written there."""
-    for given in inputs:
-        folder = Path(given) if Path(given).is_dir() else Path(given).parent
-        try:
-            check_location(folder, out)
-        except OutputError as exc:
-            if exc.code in ("OUTPUT_IS_INPUT", "OUTPUT_INSIDE_INPUT", "OUTPUT_CONTAINS_INPUT"):
-                raise CommandError(OUTPUT_LOCATION, exc.code, out, f"{exc}: the audit writes nothing into its input") from None
-
-
 def run(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     if args.jobs < 1:
         raise CommandError(INVALID_REQUEST, "JOBS_INVALID", None, f"--jobs must be >= 1, got {args.jobs}")
-    try:
-        targets = find_assets(args.paths)
-    except FileNotFoundError as exc:
-        raise CommandError(INVALID_INPUT, "AUDIT_INPUT_MISSING", None, str(exc)) from exc
+    targets = find_assets(args.paths)
     if not targets:
         raise CommandError(INVALID_INPUT, "AUDIT_NO_ASSETS", None, f"no URDF, MJCF or USD asset in {', '.join(map(str, args.paths))}")
-    if args.out is not None and (bad := output_folder_failure(args.out)) is not None:
-        raise bad
-    if args.out is not None:
-        _out_outside_inputs(args.out, [*args.paths, *(t.path for t in targets)])
+    if args.out is not None:  # never into an input (a path given, or an input file's folder), nor around one
+        check_out(args.out, [*args.paths, *(t.path for t in targets)])
     if args.flow:
         if args.body or args.mjcf_angle:
             raise CommandError(INVALID_REQUEST, "OPTION_NOT_IN_FLOW", None, "--body and --mjcf-angle apply to an audit run here; "

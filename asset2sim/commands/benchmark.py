@@ -1,7 +1,7 @@
 """``asset2sim benchmark manifest.csv``: run methods on every manifest row,
 evaluate each result, write the thesis table (CSV, JSON, HTML, Parquet) and an
 index page, print the tables. Exit status 1 when ``--compare`` finds a
-difference from an earlier run (timings excluded), else 0.
+difference from an earlier run (timings excluded), 4 when the output cannot be written, else 0.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import json
 import math
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_REQUEST, CommandError, parse_engines
+from asset2sim.commands._status import parse_engines
 from asset2sim.apps.benchmark.benchmark import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
 from asset2sim.commands import _output
 from asset2sim.inert import markup
@@ -20,7 +20,7 @@ NAME = "benchmark"
 HELP = "Run methods (defaults, human, direct, asset2sim) on a manifest, evaluate each, write the thesis table and an index page."
 
 #: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
-EXITS = {0: "done", 1: "--compare found a difference from the earlier run"}
+EXITS = {0: "done", 1: "--compare found a difference from the earlier run", 4: "the output cannot be written"}
 
 #: Record fields excluded from the reproducibility comparison (wall times; the report link, absent with --no-reports).
 TIMING_FIELDS = ("seconds", "method_seconds", "report")
@@ -120,12 +120,8 @@ def run(args: argparse.Namespace) -> int:
     def progress(method: str, rid: str, msg: str) -> None:
         console.print(f"[bold]{markup(method)}[/bold] {markup(rid)}: {markup(msg)}")
 
-    try:
-        records = run_benchmark(args.manifest, methods, out, rows=ids, seed=args.seed, engines=engines,
-                                reports=not args.no_reports, progress=progress)
-    except (KeyError, FileNotFoundError, ValueError) as exc:
-        raise CommandError(INVALID_REQUEST, "BENCHMARK_INPUT_INVALID", getattr(exc, "filename", None) or args.manifest,
-                           f"benchmark cannot run: {exc.args[0] if isinstance(exc, KeyError) and exc.args else exc}") from exc
+    records = run_benchmark(args.manifest, methods, out, rows=ids, seed=args.seed, engines=engines,
+                            reports=not args.no_reports, progress=progress)
     records = _clean(records)
     tables = benchmark_tables(records, methods)
     realism = _realism(out, methods)

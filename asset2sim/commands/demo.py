@@ -18,9 +18,8 @@ from pathlib import Path
 
 from asset2sim import demo_assets
 from asset2sim.commands import refine as refine_cmd
-from asset2sim.commands._status import INVALID_REQUEST, OUTPUT_LOCATION, CommandError, output_failure
+from asset2sim.commands._status import INVALID_REQUEST, CommandError
 from asset2sim.demo_objects import DEMO_OBJECTS
-from asset2sim.output_paths import OutputError
 
 NAME = "demo"
 HELP = "Build a built-in articulated object (a box with a hinged lid, a two-drawer cabinet, a laptop ...) and refine it."
@@ -55,22 +54,13 @@ def _entry(asset_id: str):
                        f"(known: {', '.join(known)}; `asset2sim demo --list`)")
 
 
-def _write(what: str, fn, folder: Path) -> Path:
-    try:
-        return fn(folder)
-    except OutputError as exc:  # a folder holding files the generator did not write: refused, nothing touched
-        raise output_failure(exc, folder) from exc
-    except OSError as exc:
-        raise CommandError(OUTPUT_LOCATION, "OUTPUT_WRITE_FAILED", folder, f"{what} not written: {exc}") from exc
-
-
 def run(args: argparse.Namespace) -> int:
     if args.list:
         for o in DEMO_OBJECTS:
             print(f"{o.asset_id:<16} {o.category:<17} {o.prompt}  (task: {o.task})")
         return 0
     if args.dataset is not None:
-        root = _write("the demo dataset", demo_assets.build_demo_dataset, args.dataset)
+        root = demo_assets.build_demo_dataset(args.dataset)
         print(f"wrote {len(DEMO_OBJECTS)} objects and {root / 'manifest.csv'}")
         return 0
     entry = _entry(args.object)
@@ -78,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(INVALID_REQUEST, "DEMO_NOTHING_TO_DO", None, "--no-refine writes only the input folder: give --asset-out DIR")
     with tempfile.TemporaryDirectory(prefix="asset2sim-demo-") as tmp:
         folder = args.asset_out if args.asset_out is not None else Path(tmp) / entry.asset_id
-        src = _write("the input folder", lambda f: demo_assets.build_object(entry.asset_id, f), folder)
+        src = demo_assets.build_object(entry.asset_id, folder)
         print(f"built demo asset {src} ({entry.category})")
         if args.no_refine:
             return 0

@@ -12,8 +12,8 @@ import argparse
 from dataclasses import dataclass
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_REQUEST, CommandError, os_failure, output_failure, output_folder_failure, parse_engines
-from asset2sim.tasks.evaluation.evaluate import EvaluationError, evaluate_asset
+from asset2sim.commands._status import check_out, parse_engines
+from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.check.failure_reasons import why_it_failed
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.publish.contract import read_report_json
@@ -96,24 +96,14 @@ def run(args: argparse.Namespace) -> int:
 
     # a terminal: its width (the threshold column wraps); a pipe or file: lines kept whole for grep
     console = _output.console()
-    out = args.out or default_out(args.asset)
+    out = args.out = args.out or default_out(args.asset)
     engines = tuple(parse_engines(args.engines)) if args.engines else None
-    bad_out = output_folder_failure(out)
-    if bad_out is not None:
-        raise bad_out
+    check_out(out, [args.asset], adopt=True)  # never into the input, but into a refined folder (its own files then)
     req = refined_request(args.asset, args.prompt, getattr(args, "task", None))
-    try:
-        with output_folder.adopting(out):  # into a refined folder: its files become the product's
-            ev = evaluate_asset(args.asset, reference=args.reference, prompt=req.prompt, engines=engines, seed=args.seed,
-                                category=args.category, out_dir=out, write_report=not args.no_report, probes=not args.no_probes,
-                                task=req.task, clips=not getattr(args, "no_clips", False))
-    except output_folder.OutputError as exc:
-        raise output_failure(exc, out) from exc
-    except OSError as exc:
-        raise os_failure(exc, out, args.asset, INVALID_REQUEST, "EVALUATION_INPUT_UNREADABLE") from exc
-    except (EvaluationError, ValueError) as exc:
-        raise CommandError(INVALID_REQUEST, getattr(exc, "code", None) or "EVALUATION_INPUT_INVALID", args.asset,
-                           str(exc)) from exc
+    with output_folder.adopting(out):
+        ev = evaluate_asset(args.asset, reference=args.reference, prompt=req.prompt, engines=engines, seed=args.seed,
+                            category=args.category, out_dir=out, write_report=not args.no_report, probes=not args.no_probes,
+                            task=req.task, clips=not getattr(args, "no_clips", False))
     ready = readiness(list(ev.metrics))
     table = Table(title=f"{markup(ev.asset_id)} ({markup(ev.category or 'no category')}): {markup(ready.short())}")
     wide = console.width >= WIDE_TABLE  # a narrow terminal gets the table without the thresholds' column

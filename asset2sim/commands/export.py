@@ -8,19 +8,15 @@ fails, 2 the folder cannot be exported, 4 the output cannot be written.
 from __future__ import annotations
 
 import argparse
-import contextlib
-from collections.abc import Iterator
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError, os_failure, output_failure, parse_engines
+from asset2sim.commands._status import INVALID_REQUEST, CommandError, parse_engines
 from asset2sim.engines.registry import available_engines
 from asset2sim.refined_asset import RefinedAsset
-from asset2sim.engines.mjcf import MjcfError
 from asset2sim.tasks.check.parity import evaluate_engines, parity_table
 from asset2sim import output_folder
-from asset2sim.formats.mjcf.export import ExportError, check_mjcf, export_mjcf
-from asset2sim.formats.usd.export import UsdExportError, check_usd, export_usd
-from asset2sim.urdf import UrdfError
+from asset2sim.formats.mjcf.export import check_mjcf, export_mjcf
+from asset2sim.formats.usd.export import check_usd, export_usd
 from asset2sim.output_folder import URDF_NAME
 
 NAME = "export"
@@ -53,23 +49,6 @@ def _fmt(v, spec: str = ".3g") -> str:
     return format(v, spec)
 
 
-@contextlib.contextmanager
-def _export_errors(out: Path, folder: str, check_errors: tuple[type[Exception], ...]) -> Iterator[None]:
-    """An export's failures as :class:`CommandError` naming the file (``check_errors``: ``EXPORT_CHECK_FAILED``)."""
-    try:
-        yield
-    except output_folder.OutputError as exc:
-        raise output_failure(exc, out) from exc
-    except UrdfError as exc:
-        raise CommandError(INVALID_REQUEST, exc.code, out, f"cannot export: {exc}") from exc
-    except (FileNotFoundError, ValueError) as exc:
-        raise CommandError(INVALID_REQUEST, "EXPORT_INPUT_INVALID", getattr(exc, "filename", None) or out, f"cannot export: {exc}") from exc
-    except OSError as exc:
-        raise os_failure(exc, out / folder, out, INVALID_REQUEST, "EXPORT_INPUT_UNREADABLE") from exc
-    except check_errors as exc:
-        raise CommandError(INVALID_INPUT, "EXPORT_CHECK_FAILED", out, str(exc)) from exc
-
-
 def run(args: argparse.Namespace) -> int:
     out = args.out
     parity = parse_engines(args.parity, "--parity") if args.parity else []
@@ -81,10 +60,9 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(INVALID_REQUEST, "ENGINE_UNAVAILABLE", None,
                            "MuJoCo is not installed; install the extra: pip install 'asset2sim[mujoco]'")
 
-    with _export_errors(out, "mjcf", (MjcfError, ExportError)):
-        with output_folder.adopting(out):  # the MJCF files become the output folder's own
-            path = export_mjcf(asset := RefinedAsset(out), visuals=not args.no_visuals, check=False)
-        check = check_mjcf(path, asset.urdf_path, asset.initial_state, fixed_base=asset.root.fixed)
+    with output_folder.adopting(out):  # the MJCF files become the output folder's own
+        path = export_mjcf(asset := RefinedAsset(out), visuals=not args.no_visuals, check=False)
+    check = check_mjcf(path, asset.urdf_path, asset.initial_state, fixed_base=asset.root.fixed)
     print(f"wrote       {path}")
     print(f"total mass  {check.total_mass:.6g} kg (URDF {check.urdf_mass:.6g} kg)")
     print(f"inertials   largest COM difference {check.max_com_error:.1e} m, tensor {check.max_inertia_error:.1e} kg*m^2")
@@ -113,13 +91,9 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_usd(args: argparse.Namespace, out: Path) -> int:
     """``--format usd``: write ``OUT/usd/mobility.usd``, read it back and print the check."""
-    try:
-        with _export_errors(out, "usd", (UsdExportError,)):
-            with output_folder.adopting(out):
-                build = export_usd(asset := RefinedAsset(out), visuals=not args.no_visuals, check=False)
-            check = check_usd(build.path, asset)
-    except ImportError as exc:  # usd-core (pxr) not installed
-        raise CommandError(INVALID_REQUEST, "ENGINE_UNAVAILABLE", None, f"{exc}") from exc
+    with output_folder.adopting(out):
+        build = export_usd(asset := RefinedAsset(out), visuals=not args.no_visuals, check=False)
+    check = check_usd(build.path, asset)
     print(f"wrote       {build.path}")
     print(f"read back   {check.links} links, {check.joints} movable joints; largest relative difference "
           f"{check.max_rel_error:.1e} (binary32 attributes)")

@@ -10,10 +10,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_REQUEST, CommandError, catalog_failure
+from asset2sim.commands._status import INVALID_REQUEST, CommandError
 from asset2sim.flows import catalog_compare, queries
 from asset2sim.flows.catalog import ResultCatalog
-from asset2sim.flows.catalog_config import CatalogError, load_catalog
+from asset2sim.flows.catalog_config import load_catalog
 
 NAME = "failures"
 HELP = "Print the failure-mode breakdown of the latest run (or --run) from the Parquet catalog, and other catalog queries."
@@ -82,11 +82,8 @@ def latest_worked(store: ResultCatalog, dataset: str | None) -> tuple[tuple[str,
 def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
-    try:
-        cat = load_catalog(args.catalog)
-        store = ResultCatalog(cat.catalog_root)
-    except (CatalogError, ValueError) as exc:
-        raise catalog_failure(exc, args.catalog) from exc
+    cat = load_catalog(args.catalog)
+    store = ResultCatalog(cat.catalog_root)
     latest = _latest(store, args.dataset)
     if latest is None:
         print(f"the catalog {cat.catalog_root} has no rows" + (f" for dataset {args.dataset!r}" if args.dataset else "")

@@ -7,15 +7,13 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import errno
 import os
 import sys
 import time
 from pathlib import Path
 
 from asset2sim.commands._progress import FlowProgress
-from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, OUTPUT_LOCATION, REGRESSION, CommandError, catalog_failure,
-                                        errno_name)
+from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, REGRESSION, CommandError
 from asset2sim.flow_progress import listening
 from asset2sim.commands import _output
 
@@ -66,32 +64,12 @@ def _fmt(v, pct: bool = False) -> str:
     return f"{100 * v:.1f}%" if pct else (f"{v:.3g}" if isinstance(v, float) else str(v))
 
 
-#: errno values that say nothing more can be written: a full disk, an exhausted quota, a read-only file system.
-UNWRITABLE_ERRNOS = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None), errno.EROFS) if e is not None)
-
-
-def unwritable(exc: BaseException) -> OSError | None:
-    """The OSError in ``exc`` or its chain (causes and contexts, as Prefect re-raises a flow's failure) whose errno is
-    in :data:`UNWRITABLE_ERRNOS`, or None."""
-    seen: set[int] = set()
-    cur: BaseException | None = exc
-    while cur is not None and id(cur) not in seen:
-        seen.add(id(cur))
-        if isinstance(cur, OSError) and cur.errno in UNWRITABLE_ERRNOS:
-            return cur
-        cur = cur.__cause__ or cur.__context__
-    return None
-
-
 def run(args: argparse.Namespace) -> int:
     t0, t0_epoch = time.perf_counter(), time.time()
-    from asset2sim.flows.catalog_config import CatalogError, load_catalog
+    from asset2sim.flows.catalog_config import load_catalog
     from asset2sim.flows.stages import prepare_prefect_environment
 
-    try:
-        cat = load_catalog(args.catalog)
-    except CatalogError as exc:
-        raise catalog_failure(exc, args.catalog) from exc
+    cat = load_catalog(args.catalog)
     prepare_prefect_environment(cat.project_root)  # before Prefect is imported
     if args.serve:
         return _serve(args, cat)
@@ -102,23 +80,13 @@ def run(args: argparse.Namespace) -> int:
 
     ids = [i.strip() for i in args.ids.split(",") if i.strip()] if args.ids else None
     progress = FlowProgress(live=live)
-    try:
-        with contextlib.ExitStack() as stack:
-            if not getattr(args, "no_progress", False):
-                stack.enter_context(listening(progress))
-            stack.callback(progress.close)
-            summary = run_refine_flow(cat.path, args.dataset, args.workers, args.dask_address, ids=ids, limit=args.limit, force=args.force,
-                                      out=getattr(args, "out", None), dask_host=getattr(args, "dask_host", None),
-                                      dashboard=False if getattr(args, "no_dashboard", False) else None)
-    except CatalogError as exc:
-        raise CommandError(INVALID_REQUEST, "CATALOG_INVALID", None, str(exc)) from exc
-    except OSError as exc:
-        full = unwritable(exc)
-        if full is None:
-            raise
-        raise CommandError(OUTPUT_LOCATION, f"OUTPUT_WRITE_FAILED [{errno_name(full)}]", full.filename or cat.output_root,
-                           f"{full.strerror or full}: the run's outputs or catalog cannot be written (free space, a quota, a "
-                           "read-only file system); finished assets are kept and a rerun goes on from them") from exc
+    with contextlib.ExitStack() as stack:  # a full disk: status 4 naming the file (finished assets are kept)
+        if not getattr(args, "no_progress", False):
+            stack.enter_context(listening(progress))
+        stack.callback(progress.close)
+        summary = run_refine_flow(cat.path, args.dataset, args.workers, args.dask_address, ids=ids, limit=args.limit, force=args.force,
+                                  out=getattr(args, "out", None), dask_host=getattr(args, "dask_host", None),
+                                  dashboard=False if getattr(args, "no_dashboard", False) else None)
     total = time.perf_counter() - t0
     prefect_s = max(0.0, float(summary.get("flow_started_epoch") or t0_epoch) - t0_epoch)
     dask_s = float(summary.get("dask_startup_seconds") or 0.0) + float(summary.get("dask_teardown_seconds") or 0.0)

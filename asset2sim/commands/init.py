@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_INPUT, OUTPUT_LOCATION, CommandError, os_failure
 
 NAME = "init"
 HELP = ("Write a starter catalog.yaml (the demo dataset, and a folder of your own objects with --objects) for "
@@ -30,16 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from asset2sim.flows.starter import write_starter_catalog
 
-    try:
-        made = write_starter_catalog(args.folder, args.objects, force=args.force)
-    except FileExistsError as exc:
-        raise CommandError(OUTPUT_LOCATION, "OUTPUT_EXISTS", None, str(exc)) from exc
-    except NotADirectoryError as exc:
-        raise CommandError(INVALID_INPUT, "OBJECTS_NOT_A_FOLDER", None, str(exc)) from exc
-    except ValueError as exc:
-        raise CommandError(INVALID_INPUT, "OBJECTS_NONE_FOUND", None, str(exc)) from exc
-    except OSError as exc:
-        raise os_failure(exc, args.folder, args.objects) from exc
+    made = write_starter_catalog(args.folder, args.objects, force=args.force)
     print(f"wrote {made.catalog} (default dataset {made.dataset})")
     if made.manifest is not None:
         print(f"wrote {made.manifest}: {made.objects} object(s), each with an empty request; add a prompt (and a task) per row")

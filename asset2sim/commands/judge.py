@@ -3,19 +3,19 @@ verdicts kept only when they agree), calibrated on the planted-defect pairs; wit
 families, their agreement (Cohen's kappa). Protocol: docs/guide/realism.md.
 
 Exit status: 0 judged; 1 no pair set or an invalid one; 2 a bad option, a model that cannot be used, or
-``MODEL_CALLS_FAILED``: every call to a model failed (its verdicts are still written, each without an answer)."""
+``MODEL_CALLS_FAILED``: every call to a model failed (its verdicts are still written, each without an answer); 4 the
+folder cannot be written."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError, os_failure
+from asset2sim.commands._status import INVALID_REQUEST, CommandError
 from asset2sim.apps.realism.calibration import CALIBRATION_FILE, judge_calibration, write_calibration
-from asset2sim.apps.realism.judge import JUDGEMENTS_FILE, JudgeInputError, find_pair_set, judge_pairs
+from asset2sim.apps.realism.judge import JUDGEMENTS_FILE, find_pair_set, judge_pairs
 from asset2sim.apps.realism.scores import SCORES_FILE, judge_scores
 from asset2sim.models.config import ClientConfig
-from asset2sim.models.errors import LLMUnavailable, MissingCredentials
 
 NAME = "judge"
 HELP = ("Ask vision-language models which clip of each pair looks more realistic (both orders; a verdict kept only "
@@ -23,7 +23,8 @@ HELP = ("Ask vision-language models which clip of each pair looks more realistic
         "writes judgements.parquet and judge_calibration.json beside pairs.json (docs/guide/realism.md).")
 
 #: This command's exit statuses (``--help`` lists them with those of every command: 2 usage, 70, 130).
-EXITS = {0: "judged", 1: "no pair set or an invalid one", 2: "a model that cannot be used, or every call to a model failed"}
+EXITS = {0: "judged", 1: "no pair set or an invalid one", 2: "a model that cannot be used, or every call to a model failed",
+         4: "the folder cannot be written"}
 
 
 class _JudgeOption(argparse.Action):
@@ -75,20 +76,11 @@ def run(args: argparse.Namespace) -> int:
         configs = [ClientConfig.from_env(j["model"], j.get("base_url"), **over) for j in judges]
     except ValueError as exc:
         raise CommandError(INVALID_REQUEST, "MODEL_CONFIG_INVALID", None, str(exc)) from None
-    try:
-        folder = find_pair_set(args.folder)
-        verdicts = judge_pairs(folder, configs, families=[j.get("family") for j in judges], workers=args.jobs)
-        cal = judge_calibration(verdicts)
-        write_calibration(folder, cal)
-        scored = judge_scores(folder, verdicts, cal)
-    except JudgeInputError as exc:
-        raise CommandError(INVALID_INPUT, "PAIRS_INVALID", exc.path, str(exc)) from None
-    except (MissingCredentials, LLMUnavailable) as exc:
-        raise CommandError(INVALID_REQUEST, "MODEL_UNAVAILABLE", None, str(exc)) from None
-    except ValueError as exc:
-        raise CommandError(INVALID_REQUEST, "JUDGES_INVALID", None, str(exc)) from None
-    except OSError as exc:
-        raise os_failure(exc, args.folder, args.folder) from None
+    folder = find_pair_set(args.folder)
+    verdicts = judge_pairs(folder, configs, families=[j.get("family") for j in judges], workers=args.jobs)
+    cal = judge_calibration(verdicts)
+    write_calibration(folder, cal)
+    scored = judge_scores(folder, verdicts, cal)
     for m in cal.models:
         print(f"{m.model} (family {m.family}): {m.pairs} pairs, {m.kept} kept ({_pct(m.kept_rate)}), "
               f"{m.orders_without_answer} questions without an answer")

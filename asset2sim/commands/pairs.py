@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError, output_folder_failure
+from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError, check_out
 from asset2sim.commands import _output
 from asset2sim.inert import markup
 
@@ -56,14 +56,9 @@ def run(args: argparse.Namespace) -> int:
         unknown = sorted(set(defects) - set(DEFECTS))
         if unknown:
             raise CommandError(INVALID_REQUEST, "DEFECT_UNKNOWN", None, f"unknown defects {unknown}; known: {sorted(DEFECTS)}")
-    bad_out = output_folder_failure(out)
-    if bad_out is not None:
-        raise bad_out
+    check_out(out)
     against = tuple(m.strip() for m in args.against.split(",") if m.strip())
-    try:
-        specs, skipped = specs_from_folders(args.folders, out, against=against, defects=defects)
-    except FileNotFoundError as exc:
-        raise CommandError(INVALID_INPUT, "PAIRS_INPUT_INVALID", None, str(exc)) from exc
+    specs, skipped = specs_from_folders(args.folders, out, against=against, defects=defects)
     pair_set = build_pair_set(specs, out, skipped=skipped, progress=lambda text: console.print(markup(text)))
     for key, why in pair_set.skipped.items():
         console.print(f"[yellow]skipped {markup(key)}: {markup(why)}[/yellow]")

@@ -14,11 +14,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, NOT_READY, OUTPUT_LOCATION, CommandError
+from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, OUTPUT_LOCATION, CommandError
 from asset2sim.apps.realism.rating_app import serve
 from asset2sim.apps.realism.pair_set import PairSetError, find_pair_set
-from asset2sim.apps.realism.ratings import RATINGS_FILE, RatingsDatabaseError
-from asset2sim.apps.realism.scores import SCORES_FILE, NotRated, realism_scores
+from asset2sim.apps.realism.ratings import RATINGS_FILE
+from asset2sim.apps.realism.scores import SCORES_FILE, realism_scores
 from asset2sim.commands import _output
 from asset2sim.inert import markup
 
@@ -79,35 +79,21 @@ def run(args: argparse.Namespace) -> int:
     if args.tracking_uri and not args.scores:
         raise CommandError(INVALID_REQUEST, "TRACKING_WITHOUT_SCORES", None, "--tracking-uri goes with --scores")
     folder = pair_set_folder(args.folder)
+    if args.scores:
+        return _scores(folder, args.tracking_uri)
+    # a browser must name a host the app answers to: every interface is reached here as 127.0.0.1
+    shown = "127.0.0.1" if args.host in ("", "0.0.0.0", "::") else args.host
+    shown = f"[{shown}]" if ":" in shown else shown
+    print(f"rating app for {folder}: http://{shown}:{args.port}/  (Ctrl-C stops)", flush=True)
     try:
-        if args.scores:
-            return _scores(folder, args.tracking_uri)
-        # a browser must name a host the app answers to: every interface is reached here as 127.0.0.1
-        shown = "127.0.0.1" if args.host in ("", "0.0.0.0", "::") else args.host
-        shown = f"[{shown}]" if ":" in shown else shown
-        print(f"rating app for {folder}: http://{shown}:{args.port}/  (Ctrl-C stops)", flush=True)
-        try:
-            serve(folder, host=args.host, port=args.port, allowed_hosts=args.allow_host)
-        except KeyboardInterrupt:  # uvicorn stopped gracefully (ratings.parquet synced) and re-raised Ctrl-C
-            pass
-        except SystemExit as exc:  # uvicorn could not start (the port taken): it logged why
-            raise CommandError(OUTPUT_LOCATION, "PORT_UNAVAILABLE", None,
-                               f"cannot listen on {args.host}:{args.port} (in use or not allowed)") from exc
-        print(f"stopped; ratings in {folder / RATINGS_FILE}", flush=True)
-        return 0
-    except FileNotFoundError as exc:
-        raise CommandError(INVALID_INPUT, "PAIRS_MISSING", exc.filename, exc.strerror or str(exc)) from exc
-    except RatingsDatabaseError as exc:
-        raise CommandError(INVALID_INPUT, exc.code, exc.path, str(exc)) from None
-    except PairSetError as exc:
-        raise CommandError(INVALID_INPUT, "PAIRS_INVALID", exc.path, str(exc)) from exc
-    except NotRated as exc:
-        raise CommandError(NOT_READY, "NOT_RATED", folder, str(exc)) from exc
-    except ImportError as exc:  # the app's server (fastapi, uvicorn) or MLflow not installed
-        raise CommandError(INVALID_REQUEST, "EXTRA_MISSING", None,
-                           f"{exc.name or exc} is not installed: pip install 'asset2sim[realism]' (MLflow: 'asset2sim[pipeline]')") from exc
-    except OSError as exc:
-        raise CommandError(OUTPUT_LOCATION, "FOLDER_UNWRITABLE", exc.filename or folder, str(exc)) from exc
+        serve(folder, host=args.host, port=args.port, allowed_hosts=args.allow_host)
+    except KeyboardInterrupt:  # uvicorn stopped gracefully (ratings.parquet synced) and re-raised Ctrl-C
+        pass
+    except SystemExit as exc:  # uvicorn could not start (the port taken): it logged why
+        raise CommandError(OUTPUT_LOCATION, "PORT_UNAVAILABLE", None,
+                           f"cannot listen on {args.host}:{args.port} (in use or not allowed)") from exc
+    print(f"stopped; ratings in {folder / RATINGS_FILE}", flush=True)
+    return 0
 
 
 def _scores(folder: Path, tracking_uri: str | None) -> int:

@@ -15,8 +15,8 @@ import sys
 import time
 from pathlib import Path
 
-from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, add_allow_outside, join_codes,
-                                        os_failure, outside_paths, output_failure, parse_engines)
+from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, add_allow_outside, failure,
+                                        join_codes, outside_paths, parse_engines)
 from asset2sim.api import load_config, merge_overrides
 from asset2sim.schemas.config import RefineConfig, default_engines
 from asset2sim.tasks import refine as refine_stage
@@ -325,7 +325,7 @@ def _refine_failure(exc: RefineError, args: argparse.Namespace) -> CommandError:
     mode starts the message."""
     cause = exc.__cause__
     if isinstance(cause, OutputError):
-        return output_failure(cause, args.out)
+        return failure(cause, NAME, args)
     codes = list(exc.codes)
     if isinstance(cause, OverlayInvalid) and not codes:
         codes = [i.code for i in cause.issues if i.severity == "error" and not i.fixed]
@@ -445,10 +445,6 @@ def run(args: argparse.Namespace) -> int:
                                                overwrite=getattr(args, "overwrite", False), media=not getattr(args, "defer_media", False))
     except RefineError as exc:
         raise _refine_failure(exc, args) from exc
-    except OutputError as exc:  # e.g. an output file missing at the end: no completion marker
-        raise output_failure(exc, args.out) from exc
-    except OSError as exc:
-        raise os_failure(exc, args.out, args.asset) from exc
     if getattr(args, "json", False):
         print(json.dumps(json_summary(result), indent=2))
     else:

@@ -11,11 +11,9 @@ import argparse
 import time
 from pathlib import Path
 
-from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, OUTPUT_LOCATION, CommandError, errno_name, output_failure,
-                                        output_folder_failure)
+from asset2sim.commands._status import INVALID_REQUEST, CommandError, check_out
 from asset2sim import output_folder
-from asset2sim.tasks.geometry.render import (VIEWS, RenderError, SceneRenderer, read_joint_state, render_contact_sheet, resolve_urdf,
-                                             write_png)
+from asset2sim.tasks.geometry.render import VIEWS, SceneRenderer, read_joint_state, render_contact_sheet, resolve_urdf, write_png
 
 NAME = "render"
 HELP = "Render textured views (front, back, left, right, perspective; optionally top) of an asset at a joint state to PNGs."
@@ -43,37 +41,18 @@ def run(args: argparse.Namespace) -> int:
     unknown = [v for v in views if v not in VIEWS]
     if unknown or not views:
         raise CommandError(INVALID_REQUEST, "VIEW_UNKNOWN", None, f"--views: unknown view(s) {unknown}; known views: {list(VIEWS)}")
-    bad_out = output_folder_failure(args.out)
-    if bad_out is not None:
-        raise bad_out
-    try:
-        urdf = resolve_urdf(args.asset)
-        state = read_joint_state(args.state) if args.state is not None else {}
-    except (OSError, ValueError) as exc:
-        where = args.state if args.state is not None and args.asset.exists() else args.asset
-        raise CommandError(INVALID_REQUEST, "RENDER_INPUT_INVALID", getattr(exc, "filename", None) or where, str(exc)) from exc
+    check_out(args.out, [args.asset], adopt=True)  # never into the input, but into a refined folder (its own views then)
+    urdf = resolve_urdf(args.asset)
+    state = read_joint_state(args.state) if args.state is not None else {}
     t0 = time.perf_counter()
-    try:
-        with SceneRenderer(urdf, size=tuple(args.size), backend=args.backend, shadows=args.shadows) as r:
-            r.set_joint_positions(state)
-            images = {v: r.render(v) for v in views}
-            load = r.timings.prepare + r.timings.load
-    except KeyError as exc:  # unknown joint or view
-        raise CommandError(INVALID_REQUEST, "RENDER_INPUT_INVALID", args.state or urdf, str(exc.args[0] if exc.args else exc)) from exc
-    except (OSError, ValueError) as exc:
-        raise CommandError(INVALID_REQUEST, "RENDER_INPUT_INVALID", urdf, str(exc)) from exc
-    except RenderError as exc:
-        raise CommandError(INVALID_INPUT, "RENDER_FAILED", urdf, str(exc)) from exc
-    try:
-        with output_folder.adopting(args.out):  # views written into a refined folder become its own
-            written = [write_png(args.out / f"{v}.png", img) for v, img in images.items()]
-            if args.sheet:
-                written.append(write_png(args.out / "contact_sheet.png", render_contact_sheet(images, title=urdf.parent.name)))
-    except output_folder.OutputError as exc:
-        raise output_failure(exc, args.out) from exc
-    except OSError as exc:
-        raise CommandError(OUTPUT_LOCATION, f"OUTPUT_WRITE_FAILED [{errno_name(exc)}]", exc.filename or args.out,
-                           exc.strerror or str(exc)) from exc
+    with SceneRenderer(urdf, size=tuple(args.size), backend=args.backend, shadows=args.shadows) as r:
+        r.set_joint_positions(state)
+        images = {v: r.render(v) for v in views}
+        load = r.timings.prepare + r.timings.load
+    with output_folder.adopting(args.out):
+        written = [write_png(args.out / f"{v}.png", img) for v, img in images.items()]
+        if args.sheet:
+            written.append(write_png(args.out / "contact_sheet.png", render_contact_sheet(images, title=urdf.parent.name)))
     total = time.perf_counter() - t0
     for path in written:
         print(path)

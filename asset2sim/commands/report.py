@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from asset2sim.commands._status import CommandError, OUTPUT_LOCATION, output_failure
+from asset2sim.commands._status import CommandError, OUTPUT_LOCATION
 
 NAME = "report"
 HELP = "Make the renders, clips and report.html of a refined output folder whose refine deferred them (--defer-media)."
@@ -30,15 +30,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from asset2sim import output_folder
     from asset2sim.tasks.publish.media import make_media
 
     if not args.out.is_dir():
         raise CommandError(OUTPUT_LOCATION, "OUTPUT_INCOMPLETE", args.out, "not a folder; give the --out folder of a refine")
-    try:
-        made = make_media(args.out, reference=args.reference, clips=not args.no_clips, force=args.force)
-    except output_folder.OutputError as exc:
-        raise output_failure(exc, args.out) from exc
+    made = make_media(args.out, reference=args.reference, clips=not args.no_clips, force=args.force)
     if not made:
         print(f"{args.out}: media already made (report.html); --force makes them again")
     for name, path in sorted(made.items()):

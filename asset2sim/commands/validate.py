@@ -9,8 +9,7 @@ import argparse
 import json
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError, add_allow_outside, outside_paths
-from asset2sim.tasks.ingest.errors import AssetError
+from asset2sim.commands._status import INVALID_REQUEST, CommandError, add_allow_outside, outside_paths
 from asset2sim.tasks.ingest.extract import validate_any
 from asset2sim.formats import ReadOptions
 from asset2sim.tasks.ingest.validate_input import CODES, ValidationPolicy, has_errors
@@ -46,11 +45,8 @@ def run(args: argparse.Namespace) -> int:
     overrides = {c: "error" for c in args.error}
     overrides.update({c: "warning" for c in args.allow})
     policy = ValidationPolicy(overrides=overrides, warnings_as_errors=args.strict, check_mesh_contents=not args.paths_only)
-    try:
-        with outside_paths(args):
-            findings, notes = validate_any(args.asset, policy, ReadOptions(body=args.body, mjcf_angle=args.mjcf_angle))
-    except AssetError as exc:
-        raise CommandError(INVALID_INPUT, "INPUT_UNREADABLE", args.asset, str(exc)) from exc
+    with outside_paths(args):
+        findings, notes = validate_any(args.asset, policy, ReadOptions(body=args.body, mjcf_angle=args.mjcf_angle))
     infos = bool(getattr(args, "verbose", False)) and not args.quiet  # how the input was read: behind --verbose
     if args.json:
         shown = [f for f in findings if not (args.quiet and f.severity == "info")]

@@ -27,7 +27,7 @@ from asset2sim.models.replies import excerpt, parse_reply, reask_text
 from asset2sim.models.transport import NO_KEY, call_bounds, classify, import_litellm, retry_after_s
 from asset2sim.models.usage import Answer, Completion, M, T, Usage
 
-CACHE_FORMAT = 1
+CACHE_FORMAT = 2
 
 #: Slack (bytes) of a reply record beyond its content: key, digest, model, finish reason.
 RECORD_OVERHEAD_BYTES = 64 << 10
@@ -37,6 +37,15 @@ def _code(message: str) -> str | None:
     """The ``MODEL_*`` code a failure message starts with, or None."""
     head = message.split(":", 1)[0]
     return head if head.startswith("MODEL_") and head.replace("_", "").isalpha() else None
+
+
+def _root_cause(exc: BaseException) -> BaseException:
+    """The first exception of ``exc``'s chain (what the network said, under the libraries' wrappers)."""
+    seen = {id(exc)}
+    while (nxt := exc.__cause__ or exc.__context__) is not None and id(nxt) not in seen:
+        seen.add(id(nxt))
+        exc = nxt
+    return exc
 
 
 def record_digest(key: str, model: Any, content: Any, finish_reason: Any) -> str:
@@ -83,12 +92,12 @@ class LLMClient:
 
     # ------------------------------------------------------------------ the reply cache
     def cache_key(self, messages: list[dict[str, Any]], schema: dict[str, Any] | None,
-                  temperature: float | None) -> str:
-        """sha256 (hex) of the model, messages, schema and sampling parameters (not the key or
-        base URL)."""
-        blob = json.dumps({"format": CACHE_FORMAT, "model": self.config.model, "messages": messages,
-                           "schema": schema, "temperature": temperature,
-                           "max_tokens": self.config.max_tokens},
+                  temperature: float | None, schema_name: str = "reply") -> str:
+        """sha256 (hex) of everything that decides a reply: the model, the server (base URL), the
+        messages, the schema and its name, and the sampling parameters (never the API key)."""
+        blob = json.dumps({"format": CACHE_FORMAT, "model": self.config.model, "base_url": self.config.base_url,
+                           "messages": messages, "schema": schema, "schema_name": schema_name,
+                           "temperature": temperature, "max_tokens": self.config.max_tokens},
                           sort_keys=True, separators=(",", ":")).encode()
         return hashlib.sha256(blob).hexdigest()
 
@@ -195,7 +204,7 @@ class LLMClient:
             ModelCallError: a non-retryable error, or every attempt failed.
         """
         temp = self.config.temperature if temperature == "config" else temperature
-        key = self.cache_key(messages, schema, temp)
+        key = self.cache_key(messages, schema, temp, schema_name)
         rec = self.cache_get(key)
         if rec is not None:
             u = Usage(cached=1)
@@ -236,9 +245,15 @@ class LLMClient:
                     if bounds.tripped == "deadline":
                         retryable, detail = True, f"{cfg.timeout_s:g} s"
                         kind = "MODEL_DEADLINE_EXCEEDED: timeout, no reply within the deadline"
+                    elif bounds.failure and bounds.failure[0] == "MODEL_REDIRECT_REFUSED":
+                        retryable, detail, kind = False, "", f"MODEL_REDIRECT_REFUSED: {bounds.failure[1]}"
                     elif bounds.failure and bounds.failure[0] == "MODEL_CONNECTION_REFUSED":
                         cls, retryable, detail = ConnectionRefused, True, ""
                         kind = f"MODEL_CONNECTION_REFUSED: {bounds.failure[1]}"
+                    elif bounds.requests and bounds.status is None:  # no HTTP status arrived: not an HTTP error
+                        retryable, status, detail = True, None, one_line(_root_cause(exc), 200)
+                        kind = ("MODEL_CONNECTION_FAILED: the connection to the server ended before an HTTP "
+                                "status arrived")
                     elif bounds.status is not None and 200 <= bounds.status < 300:
                         cls, retryable, status = ReplyUnreadable, True, bounds.status
                         kind = (f"MODEL_REPLY_INVALID: the server answered HTTP {bounds.status} "
@@ -323,7 +338,8 @@ class LLMClient:
             temperature: float | None | str = "config") -> Answer[M, T]:
         """Ask until a reply parses strictly into ``reply_model`` and ``accept(reply)`` returns (it
         raises :class:`ReplyInvalid` to reject), re-asking at most ``max_reasks`` times with the
-        problems. Parsed replies are cached even when rejected, so a rerun replays the exchange.
+        problems. Only a reply that parsed and was accepted is cached (keyed by everything that
+        decides it, :meth:`cache_key`): a rejected one is asked again on a rerun.
 
         Raises:
             ModelCallError: the network failed (see :meth:`complete`).
@@ -338,13 +354,14 @@ class LLMClient:
             total.add(comp.usage)
             reply, errors = self._problems(comp, reply_model)
             if reply is not None:
-                if not comp.cached:
-                    self.cache_put(comp.key, comp)
                 try:
                     value = reply if accept is None else accept(reply)
-                    return Answer(reply, value, history, total)  # type: ignore[arg-type]
                 except ReplyInvalid as exc:
                     errors = list(exc.errors)
+                else:
+                    if not comp.cached:
+                        self.cache_put(comp.key, comp)
+                    return Answer(reply, value, history, total)  # type: ignore[arg-type]
             history.append(errors)
             if attempt < max_reasks:
                 said = excerpt(comp.content or (comp.refusal or ""), 4000)

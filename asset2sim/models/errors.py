@@ -17,9 +17,10 @@ class MissingCredentials(LLMError):
 
 class ModelCallError(LLMError):
     """A call failed (not retryable, or retries exhausted) after ``attempts`` tries; ``status``: the
-    last HTTP status; ``code``: what happened (``MODEL_HTTP_ERROR`` a status the server sent,
-    ``MODEL_CALL_FAILED`` anything else; the subclasses below name the rest). The message is one
-    sentence: no traceback, no second line."""
+    last HTTP status (None when none arrived); ``code``: what happened (``MODEL_HTTP_ERROR`` a status the
+    server sent, ``MODEL_CONNECTION_FAILED`` a connection that ended before any status,
+    ``MODEL_REDIRECT_REFUSED`` a redirect, never followed, ``MODEL_CALL_FAILED`` anything else; the
+    subclasses below name the rest). The message is one sentence: no traceback, no second line."""
 
     code = "MODEL_CALL_FAILED"
 

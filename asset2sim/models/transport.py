@@ -20,8 +20,10 @@ inflated in steps that never hold more than the cap, the *decoded* bytes counted
 several encodings (gzip inside gzip) is refused before it is inflated (``invalid``). What happened
 is recorded on the attempt's :class:`CallBounds` (``failure``: the code and one sentence;
 ``status``: the HTTP status the server sent), so the client names a fault by what it was (an
-invalid reply, too large, the deadline, a refused connection) whatever exception litellm wraps it
-in.
+invalid reply, too large, the deadline, a refused connection, a connection that never got an HTTP
+status) whatever exception litellm wraps it in. A redirect is never followed: the request (the
+prompt, the part names) goes to the server the user named and nowhere else
+(``MODEL_REDIRECT_REFUSED``, ``docs/design/trust.md``).
 """
 
 from __future__ import annotations
@@ -64,8 +66,9 @@ class CallBounds:
     :func:`call_bounds`) for connecting, sending and every read, ``max_bytes`` read in all.
     ``received``: bytes read so far; ``tripped``: ``"deadline"``, ``"size"`` or ``"invalid"`` once
     a bound stopped the attempt, else None; ``status``: the HTTP status of the attempt's last
-    response (None before one arrives); ``failure``: (code, one sentence) of what went wrong at the
-    transport (a refused connection, an undecodable body)."""
+    response (None before one arrives); ``requests``: requests sent through the bounded transport;
+    ``failure``: (code, one sentence) of what went wrong at the transport (a refused connection, a
+    redirect, an undecodable body)."""
 
     def __init__(self, deadline_s: float, max_bytes: int):
         self.deadline_s = float(deadline_s)
@@ -74,6 +77,7 @@ class CallBounds:
         self.received = 0
         self.tripped: str | None = None
         self.status: int | None = None
+        self.requests = 0
         self.failure: tuple[str, str] | None = None
 
     def left(self) -> float:
@@ -273,6 +277,7 @@ def _decoded_transport(inner):
             if bounds is None:
                 return self.wrapped.handle_request(request)
             request.headers["Accept-Encoding"] = "identity"
+            bounds.requests += 1
             try:
                 response = self.wrapped.handle_request(request)
             except httpx.ConnectError as exc:
@@ -283,6 +288,13 @@ def _decoded_transport(inner):
                                       f"{url.scheme}://{url.host}:{url.port or ''} ({why})")
                 raise
             bounds.status = response.status_code
+            if response.has_redirect_location:  # never sent on: the user named one server
+                response.close()
+                url, to = request.url, response.headers.get("location", "")
+                bounds.failure = ("MODEL_REDIRECT_REFUSED", f"the server at {url.scheme}://{url.host}:{url.port or ''} "
+                                  f"answered HTTP {response.status_code} with a redirect to {one_line(to, 160)!r}, not "
+                                  "followed (give that address as --base-url to use it)")
+                raise httpx.TransportError(bounds.failure[1], request=request)
             try:
                 body = decode_body(response.stream, _codings(response.headers), bounds)
             except BodyRefused as exc:
@@ -303,7 +315,7 @@ def _decoded_transport(inner):
 
 def _install_bounded_transport(litellm) -> None:
     """Give litellm bounded connections that decode bodies themselves (:func:`decode_body`), unless
-    the user set ``client_session`` / ``sync_transport``: an ``httpx.Client`` (redirects followed,
+    the user set ``client_session`` / ``sync_transport``: an ``httpx.Client`` (redirects not followed,
     proxies and certificates from the environment as httpx reads them, every proxy's transport
     bounded too) and a plain transport. The providers litellm reaches through its own HTTP handler
     take one transport for every URL, which would drop the proxies of the environment: with
@@ -312,7 +324,7 @@ def _install_bounded_transport(litellm) -> None:
 
     bound = _bounder()
     if getattr(litellm, "client_session", None) is None:
-        client = httpx.Client(follow_redirects=True)
+        client = httpx.Client(follow_redirects=False)
         for transport in [client._transport, *client._mounts.values()]:
             if transport is not None:
                 bound(transport)

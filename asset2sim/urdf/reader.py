@@ -241,7 +241,7 @@ class _Reader:
             ax = self.nums(a, "xyz", 3, default=(1.0, 0.0, 0.0), joint=name)
             if ax is not None:
                 j.axis_xyz = np.asarray(ax, float)
-                norm = math.sqrt(sum(x * x for x in ax))
+                norm = math.hypot(*ax)  # no overflow for huge components (the validator bounds the length)
                 if norm < 1e-12:
                     if jtype in _MOVING_TYPES:  # ignored by simulators on fixed joints
                         self.problem("JOINT_AXIS_ZERO", f"axis {a.get('xyz')!r} has zero length", line=_line(a), joint=name)

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from asset2sim.inert import CSP_META
 from asset2sim.tasks.evaluation import plots
 from asset2sim.tasks.evaluation.report_changes import esc
 
@@ -34,7 +35,7 @@ th{background:#f1f4f8} td.num{text-align:right;font-variant-numeric:tabular-nums
 
 def page(title: str, body: str) -> str:
     """A whole HTML document: ``title`` (HTML text), the CSS, ``body`` (HTML)."""
-    return (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'/><title>{title}</title><style>{CSS}</style></head>"
+    return (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'/>{CSP_META}<title>{title}</title><style>{CSS}</style></head>"
             f"<body>{body}</body></html>\n")
 
 

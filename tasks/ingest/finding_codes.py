@@ -95,11 +95,12 @@ CODES: dict[str, CodeInfo] = {
     # joint values
     "JOINT_AXIS_ZERO": _c("error", "joints", "zero axis on a movable joint"),
     "JOINT_AXIS_NOT_UNIT": _c("info", "joints", "axis not of unit length (simulators normalize it)"),
+    "JOINT_AXIS_IMPLAUSIBLE": _c("error", "joints", "an axis of length outside [1e-3, 1e3] (1e308 overflows, 1e-9 vanishes): an axis is a direction, written as a unit vector"),
     "JOINT_LIMIT_MISSING": _c("error", "joints", "revolute or prismatic joint without <limit>"),
     "JOINT_LIMIT_INCOMPLETE": _c("warning", "joints", "<limit> without lower or upper (URDF default 0)"),
     "JOINT_LIMIT_REVERSED": _c("error", "joints", "lower > upper"),
     "JOINT_LIMIT_EQUAL": _c("warning", "joints", "lower == upper: the joint cannot move"),
-    "JOINT_LIMIT_IMPLAUSIBLE": _c("error", "joints", "revolute limit beyond +-4 pi (two turns), or prismatic travel beyond the object's size"),
+    "JOINT_LIMIT_IMPLAUSIBLE": _c("error", "joints", "revolute or continuous limit beyond +-4 pi (two turns), or prismatic travel beyond the object's size"),
     "JOINT_RANGE_WRONG_UNIT": _c("warning", "joints", "a revolute range spanning less than a degree or a prismatic travel under a millimetre: a range that only makes sense in the other unit (radians read as degrees, millimetres as metres); refine refuses it"),
     "JOINT_EFFORT_NEGATIVE": _c("error", "joints", "effort < 0"),
     "JOINT_VELOCITY_NEGATIVE": _c("error", "joints", "velocity < 0"),
@@ -111,6 +112,8 @@ CODES: dict[str, CodeInfo] = {
     "INERTIAL_MASS_ZERO_STATIC": _c("info", "inertials", "mass 0 on a static link (root or fixed child)"),
     "INERTIA_NOT_POSITIVE_DEFINITE": _c("warning", "inertials", "an eigenvalue <= 0; replaced by an estimate"),
     "INERTIA_TRIANGLE_INEQUALITY": _c("warning", "inertials", "principal moments violate I1 <= I2 + I3; replaced by an estimate"),
+    "INERTIAL_IMPLAUSIBLE": _c("error", "inertials", "a mass or inertia entry beyond +-1e9 (kg, kg*m^2): no object's, and 1e308 overflows to infinity"),
+    "INERTIAL_ORIGIN_IMPLAUSIBLE": _c("error", "inertials", "a center of mass beyond +-2e5 file units of its link (MAX_COORDINATE, as for mesh vertices)"),
     # geometry and mesh references
     "GEOMETRY_MISSING": _c("error", "geometry", "<visual>/<collision> whose <geometry> is not exactly one <box|cylinder|sphere|mesh>"),
     "GEOMETRY_SIZE_NONPOSITIVE": _c("error", "geometry", "box size, radius or length <= 0"),

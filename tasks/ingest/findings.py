@@ -23,7 +23,7 @@ MeshUse = Literal["collision", "mass", "visual"]
 
 __all__ = [
     "Action", "CODES", "DEFAULT_POLICY", "Finding", "IMAGE_EXTENSIONS", "MAX_COORDINATE", "MAX_LINKS",
-    "MAX_MOVABLE_JOINTS", "MAX_NAME_CHARS", "MAX_BUILT_FACES", "MAX_REVOLUTE_LIMIT", "MAX_TEXTURE_BYTES", "MAX_TEXTURE_PIXELS", "MAX_TOTAL_TEXTURE_BYTES",
+    "MAX_MOVABLE_JOINTS", "MAX_NAME_CHARS", "MAX_BUILT_FACES", "MAX_REVOLUTE_LIMIT", "AXIS_LENGTH", "MAX_INERTIAL", "MAX_TEXTURE_BYTES", "MAX_TEXTURE_PIXELS", "MAX_TOTAL_TEXTURE_BYTES",
     "MAX_TOTAL_TEXTURE_PIXELS", "MAX_TOTAL_FACES", "MESH_EXTENSIONS", "MESH_USE_DEPENDENT", "MOVABLE_TYPES", "MeshUse",
     "Recorder", "SEMANTIC_KINDS", "SIMULATOR_MESH_EXTENSIONS", "Severity", "ValidationPolicy", "ValidationResult",
     "asset_size_range", "errors", "has_errors",
@@ -42,6 +42,15 @@ MAX_MOVABLE_JOINTS = 32
 #: 2,000 characters and cannot load a 10,000-character link name; real assets' names are far shorter.
 #: |revolute limit| above this (rad, two turns) cannot be meant as a stop.
 MAX_REVOLUTE_LIMIT = 4.0 * math.pi
+#: Lengths a joint axis may have (file units are none: an axis is a direction): simulators normalise it, but
+#: ``1e308 1e308 0`` overflows the norm and ``1e-9 0 0`` loses the direction in float64 arithmetic done before
+#: normalising (a sweep that cannot move the joint was measured on it); a unit vector written with any rounding
+#: lies far inside.
+AXIS_LENGTH = (1e-3, 1e3)
+#: |mass| (kg) or |inertia entry| (kg*m^2; kg*mm^2 in a file drawn in millimetres: a 50 kg cabinet is 4e6) above
+#: this is no object's (a million tonnes); an inertial of 1e308 overflowed the audit's and ``--keep-declared``'s
+#: arithmetic to infinity.
+MAX_INERTIAL = 1e9
 #: Total triangles per asset (refine's time and memory grow linearly; docs/design/validation.md "Face cap").
 MAX_TOTAL_FACES = 1_000_000
 #: Triangles of a URDF as the simulators build them: every ``<visual>`` and ``<collision>`` mesh reference counts
@@ -138,7 +147,9 @@ class ValidationPolicy:
         asset_size_range: (lowest, highest) object size, file units; None: :func:`asset_size_range`.
         max_texture_bytes, max_texture_pixels: per texture file, bytes and width x height.
         max_total_texture_bytes, max_total_texture_pixels: the same over every distinct texture map.
-        max_revolute_limit: |lower| and |upper| of a revolute joint, rad.
+        max_revolute_limit: |lower| and |upper| of a revolute or continuous joint, rad.
+        axis_length: (shortest, longest) length of a movable joint's axis.
+        max_inertial: |mass| (kg) and |inertia entries| (kg*m^2) of an ``<inertial>``.
         max_prismatic_travel: |lower| and |upper| of a prismatic joint / the object's diagonal at the zero pose.
         check_mesh_contents: read meshes (False: paths only, much faster).
         max_extra_bytes: cap for semantics.txt and meta.json, bytes.
@@ -163,6 +174,8 @@ class ValidationPolicy:
     max_total_texture_bytes: int = MAX_TOTAL_TEXTURE_BYTES
     max_total_texture_pixels: int = MAX_TOTAL_TEXTURE_PIXELS
     max_revolute_limit: float = MAX_REVOLUTE_LIMIT
+    axis_length: tuple[float, float] = AXIS_LENGTH
+    max_inertial: float = MAX_INERTIAL
     max_prismatic_travel: float = 1.0
     check_mesh_contents: bool = True
     max_extra_bytes: int = 1024 * 1024

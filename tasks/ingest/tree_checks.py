@@ -251,7 +251,11 @@ class TreeChecks(Recorder):
                 elif mass == 0:
                     self.add("INERTIAL_MASS_ZERO_STATIC", "mass 0 on a static link (the simulator may treat it as fixed)",
                              line=ine.line, link=ln.name, mass=0.0)
-            if inertia is not None and not (mass == 0 and ln.name not in moving and not any(inertia)):
+            big = [v for v in (mass, *(inertia or ())) if v is not None and abs(v) > self.policy.max_inertial]
+            if big:  # refused: the audit and --keep-declared would compute with it (1e308 squared is inf)
+                self.add("INERTIAL_IMPLAUSIBLE", f"<inertial> value {big[0]!r} beyond +-{self.policy.max_inertial:g} "
+                         "(kg, kg*m^2): no object asset2sim refines weighs or turns like that", line=ine.line, link=ln.name)
+            elif inertia is not None and not (mass == 0 and ln.name not in moving and not any(inertia)):
                 code, lam = check_inertia(*inertia)
                 if code is not None:
                     why = ("an eigenvalue <= 0" if code == "INERTIA_NOT_POSITIVE_DEFINITE"

@@ -1,10 +1,11 @@
 """The URDF checks of the validator (:class:`UrdfChecks`): the encoding, every problem the URDF reader
 (:func:`asset2sim.urdf.parse_urdf_bytes`, mode ``"collect"``) meets as a finding, ``<texture>``
-files and revolute limits.
+files and the bounds of the joints' and inertials' numbers.
 """
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -92,7 +93,7 @@ class UrdfChecks(Recorder):
             for g in ln.visuals:
                 if g.material is not None:
                     self.texture(g.material, link_name(ln.name))
-        self.revolute_limits(model)
+        self.joint_numbers(model)
         for mat in model.materials:
             self.texture(mat, None)
         return model
@@ -119,19 +120,37 @@ class UrdfChecks(Recorder):
             self.add("TEXTURE_PATH_REFUSED", f"<texture filename={fname!r}>: {ref.message} ({ref.code})",
                      line=mat.texture_line, link=link, reason=ref.code)
 
-    def revolute_limits(self, model: UrdfModel) -> None:
-        """Revolute limits within ``policy.max_revolute_limit`` rad (a missing one is 0, an unreadable one
-        skips the joint)."""
-        cap = self.policy.max_revolute_limit
+    def joint_numbers(self, model: UrdfModel) -> None:
+        """The numbers of every joint and inertial bounded, so that nothing the validator passes overflows or vanishes
+        in refine's arithmetic: a movable joint's axis of length in ``policy.axis_length`` (``JOINT_AXIS_IMPLAUSIBLE``),
+        revolute and continuous limits within ``policy.max_revolute_limit`` rad (``JOINT_LIMIT_IMPLAUSIBLE``; a missing
+        one is 0, an unreadable one skips the joint; prismatic travel: :meth:`joint_travel`), every inertial's center of
+        mass within ``policy.max_coordinate`` of its link (``INERTIAL_ORIGIN_IMPLAUSIBLE``). Origins of geometry and
+        joints are bounded by the object's size (``ASSET_SIZE_IMPLAUSIBLE``)."""
+        cap, (short, long) = self.policy.max_revolute_limit, self.policy.axis_length
         for j in model.joints:
+            axis = j.axis_xyz
+            if j.type in ("revolute", "continuous", "prismatic") and axis is not None:
+                norm = math.hypot(*map(float, axis))
+                if norm > long or 1e-12 <= norm < short:  # below 1e-12: JOINT_AXIS_ZERO, the reader's
+                    self.add("JOINT_AXIS_IMPLAUSIBLE", f"axis xyz=({', '.join(f'{v:.6g}' for v in axis)}) has length "
+                             f"{norm:.6g}, outside [{short:g}, {long:g}]: an axis is a direction, written as a unit vector "
+                             "(e.g. 0 0 1)", line=j.line, joint=joint_name(j.name), norm=norm)
             lim = j.limit
-            if j.type != "revolute" or lim is None or lim.unreadable & {"lower", "upper"}:
+            if j.type not in ("revolute", "continuous") or lim is None or lim.unreadable & {"lower", "upper"}:
                 continue
             lo_v = 0.0 if lim.lower is None else lim.lower
             hi_v = 0.0 if lim.upper is None else lim.upper
             if max(abs(lo_v), abs(hi_v)) <= cap:
                 continue
-            self.add("JOINT_LIMIT_IMPLAUSIBLE", f"revolute limits [{lo_v!r}, {hi_v!r}] rad go beyond +-{cap:.4g} rad "
-                     "(two turns): not a stop anyone means (degrees written as radians?); write the stop "
-                     "angles in radians, or type=\"continuous\" for a joint that turns freely",
+            fix = ('write the stop angles in radians, or type="continuous" for a joint that turns freely' if j.type == "revolute"
+                   else "leave them out for a joint that turns freely (asset2sim reads them as its operating range)")
+            self.add("JOINT_LIMIT_IMPLAUSIBLE", f"{j.type} limits [{lo_v!r}, {hi_v!r}] rad go beyond +-{cap:.4g} rad "
+                     f"(two turns): not a range anyone means (degrees written as radians?); {fix}",
                      line=lim.line, joint=joint_name(j.name), lower=lo_v, upper=hi_v, cap=cap)
+        for ln in model.link_elements:
+            com = None if ln.inertial is None else ln.inertial.origin[:3, 3]
+            if com is not None and max(map(abs, com)) > self.policy.max_coordinate:
+                self.add("INERTIAL_ORIGIN_IMPLAUSIBLE", f"the center of mass <origin xyz=({', '.join(f'{v:.6g}' for v in com)})> "
+                         f"lies beyond +-{self.policy.max_coordinate:g} file units of its link: outside any object asset2sim "
+                         "can scale to a household size", line=ln.inertial.line, link=link_name(ln.name))

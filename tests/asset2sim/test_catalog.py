@@ -71,6 +71,27 @@ def test_invalid_catalogs_name_the_problem(tmp_path):
         load_catalog(p).refine_config()
 
 
+def test_a_field_error_is_one_sentence_naming_the_field(tmp_path, capsys):
+    """pydantic's errors in catalog.yaml and in a refine configuration read as one sentence naming the field: no type
+    tag, input echo or pydantic URL, whether ``failures`` or ``refine --config`` meets them."""
+    from asset2sim.cli import main
+
+    p = tmp_path / "catalog.yaml"
+    p.write_text("datasets: {a: {root: x}}\ndefault_dataset: a\nrefine: {extras: false}\n")
+    with pytest.raises(CatalogError) as err:
+        load_catalog(p).refine_config()
+    p.write_text("datasets: {a: {root: x}}\ndefault_dataset: a\nbogus: 1\n")
+    assert main(["failures", "--catalog", str(p)]) == 2
+    config = tmp_path / "config.yaml"
+    config.write_text("sim: {timestep: 0, colour: red}\n")
+    assert main(["refine", str(tmp_path), "--config", str(config), "--out", str(tmp_path / "o")]) == 2
+    lines = [str(err.value), *capsys.readouterr().err.splitlines()]
+    assert "extras: Extra inputs are not permitted" in lines[0], lines
+    assert "bogus: Extra inputs are not permitted" in lines[1] and "sim.colour" in lines[2] and "sim.timestep" in lines[2], lines
+    for line in lines:
+        assert "pydantic" not in line and "http" not in line and "type=" not in line and "\n" not in line, line
+
+
 def test_manifest_parsing(tmp_path):
     m = tmp_path / "manifest.csv"
     m.write_text("id,category,prompt,reference_scale\n7119,Microwave,A microwave.,0.3\nbox,,A box.,\n")

@@ -611,3 +611,16 @@ def test_the_wall_time_line_names_stages_as_the_progress_lines_do():
     """``shut_repair`` and ``sweep_repair`` are the progress lines' ``repair``, said once with their summed time."""
     text = wall_time_text({"extract": 0.1, "shut_repair": 1.0, "refine_state": 2.0, "sweep_repair": 0.5})
     assert text == "read 0.10s, repair 1.50s, state 2.00s" and "_" not in text
+@pytest.mark.parametrize("argv, code", [
+    (["render", "{box}", "--out", "{box}"], "OUTPUT_IS_INPUT"),
+    (["render", "{box}/mobility.urdf", "--out", "{box}/views"], "OUTPUT_INSIDE_INPUT"),
+    (["evaluate", "{box}", "--out", "{box}"], "OUTPUT_IS_INPUT"),
+    (["evaluate", "{box}", "--out", "{box}/eval"], "OUTPUT_INSIDE_INPUT"),
+])
+def test_render_and_evaluate_refuse_the_input_folder_as_out(box, argv, code, capsys):
+    """As refine and audit do: status 4, one line, nothing written into the input."""
+    before = tree_hashes(box)
+    assert main([a.format(box=box) for a in argv]) == 4
+    line = _one_line(capsys.readouterr().err)
+    assert line.startswith(f"asset2sim {argv[0]}: {code}: "), line
+    assert tree_hashes(box) == before

@@ -9,7 +9,6 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-import pytest
 
 from asset2sim import inert
 
@@ -133,3 +132,77 @@ def test_libraries_see_no_terminal_through_the_inert_stream_the_commands_console
     finally:
         os.close(master)
         os.close(slave)
+
+
+#: Cells a spreadsheet would run (OWASP "CSV Injection"): a refused manifest id, a category, a prompt.
+FORMULAS = ["=cmd|'-C calc'!A0", "+1+cmd|' /C calc'!A0", "-2+3", "@SUM(A1:A9)", "\t=1+1", "\r=1+1"]
+
+
+def _spreadsheet_cells(path: Path) -> list[str]:
+    """Every cell of a CSV file as a spreadsheet reads it (the csv module, the first line included)."""
+    import csv
+
+    with open(path, newline="", encoding="utf-8") as fh:
+        return [cell for row in csv.reader(fh) for cell in row]
+
+
+def _no_formula(cells: list[str]) -> None:
+    for cell in cells:
+        if cell.startswith(inert.FORMULA_START):
+            float(cell)  # a number (-0.5) is shown as one; anything else starting so would be run
+
+
+def test_the_benchmark_writes_no_formula_cell(tmp_path):
+    """A manifest whose rows are all refused (ids and categories a spreadsheet runs): ``results.csv`` and
+    ``summary.csv`` hold them as text (a leading '), read back cell by cell as a spreadsheet would."""
+    from asset2sim.apps.benchmark import benchmark
+
+    manifest = tmp_path / "manifest.csv"
+    ids = FORMULAS[:4]  # (a leading tab or carriage return is stripped from an id: those two are categories here)
+    rows = "".join(f'"{i}","{c}","{c}",,,0.5,\n' for i, c in zip(ids, FORMULAS[2:]))
+    manifest.write_text("id,category,prompt,task,notes,reference_scale,x\n" + rows)
+    records = benchmark.run_benchmark(manifest, ["defaults"], tmp_path / "bench", reports=False)
+    assert {r["id"] for r in records} == set(ids) and all(r["error"] for r in records)
+    benchmark.write_benchmark_outputs(records, ["defaults"], tmp_path / "bench", {"manifest": str(manifest)})
+    cells = _spreadsheet_cells(tmp_path / "bench" / "results.csv")
+    assert {"'" + i for i in ids} <= set(cells), cells
+    _no_formula(cells)
+    _no_formula(_spreadsheet_cells(tmp_path / "bench" / "summary.csv"))
+
+
+def test_every_csv_is_written_through_the_spreadsheet_guard():
+    """No module writes CSV but through :func:`asset2sim.inert.csv_text` (a DataFrame) or :func:`~asset2sim.inert.csv_cell`
+    (each cell of a ``csv.writer`` row), so no writer added later forgets it."""
+    root = Path(__file__).resolve().parents[2]
+    found = []
+    for folder in ("asset2sim", "tasks", "flows", "apps", "schemas"):
+        for path in (root / folder).rglob("*.py"):
+            text = path.read_text()
+            if path.name == "inert.py":
+                continue
+            for m in re.finditer(r"\.to_csv\(|csv\.writer\(|csv\.DictWriter\(", text):
+                if m.group(0).startswith("csv.") and "csv_cell(" in text:
+                    continue
+                found.append(f"{path.relative_to(root)}: {m.group(0)}")
+    assert found == []
+    assert [inert.csv_cell(f) for f in FORMULAS] == ["'" + f for f in FORMULAS]
+    assert inert.csv_cell(-0.5) == -0.5 and inert.csv_cell("lid") == "lid"
+
+
+def test_every_html_page_carries_the_content_security_policy():
+    """Every page asset2sim writes or serves declares the one policy (no script, no plugin, no form or base to another
+    site) in its ``<head>``: the report's and the benchmark's pages (``html_blocks.page``) and the rating app's, whose
+    responses carry it as a header too; a module that starts an HTML document without it fails here."""
+    from asset2sim.apps.realism import rating_app
+    from asset2sim.tasks.evaluation.html_blocks import page
+
+    head = page("t", "<p>b</p>").split("</head>")[0]
+    assert inert.CSP_META in head and "script-src" not in inert.CONTENT_SECURITY_POLICY
+    assert "default-src 'none'" in inert.CONTENT_SECURITY_POLICY
+    assert rating_app._HEADERS["Content-Security-Policy"].startswith(inert.CONTENT_SECURITY_POLICY)
+    root = Path(__file__).resolve().parents[2]
+    for folder in ("asset2sim", "tasks", "flows", "apps"):
+        for path in (root / folder).rglob("*.py"):
+            text = path.read_text()
+            if re.search(r"<!doctype html", text, re.I) and "CSP_META" not in text:
+                raise AssertionError(f"{path.relative_to(root)} writes an HTML page without CSP_META")

@@ -357,6 +357,29 @@ def test_failed_force_rerun_keeps_the_earlier_complete_output(tmp_path, box, mon
     assert set(json.loads((out / MARKER_NAME).read_text())["files"]) == set(_tree(out)) - {MARKER_NAME, of.TIMINGS_NAME}
 
 
+def test_sigterm_during_a_rerun_cleans_up_as_ctrl_c_does(tmp_path, box, monkeypatch, refine_once, capsys):
+    """``kill`` (SIGTERM) in the middle of a --force rerun unwinds as Ctrl-C does: the staging folder beside the output
+    is removed at once (not left for the next run), the earlier output is kept byte for byte, exit status 143 with
+    one line."""
+    from asset2sim import cli
+
+    first = refine_once(box, PROMPT, extras=False)
+    out = first.copy_to(tmp_path / "out")
+    before = _tree(out)
+
+    def killed(*a, **k):  # the moment a scheduler sends SIGTERM: the staged rerun is half written
+        assert of.staging_folder(out).is_dir()
+        os.kill(os.getpid(), signal.SIGTERM)
+        raise AssertionError("SIGTERM did not stop the command")
+
+    monkeypatch.setattr(refine_report, "build_report", killed)
+    previous = signal.getsignal(signal.SIGTERM)
+    assert cli.main(["refine", str(box), "-p", PROMPT, "--out", str(out), "--no-extras", "--force", "-q"]) == 143
+    assert signal.getsignal(signal.SIGTERM) is previous  # the command's handler is gone with it
+    assert capsys.readouterr().err.strip().splitlines() == ["asset2sim refine: TERMINATED"]
+    assert not of.staging_folder(out).exists() and _tree(out) == before
+
+
 def test_a_first_run_that_fails_mid_way_leaves_no_partial_output(tmp_path, box, monkeypatch):
     """An internal error after the writer ran (here: the report step raises)
     removes what the run wrote: no URDF without its report, no folder."""

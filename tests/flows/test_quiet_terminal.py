@@ -28,14 +28,17 @@ FLOW_LINE = re.compile(r"^(run \S+ of dataset |\[\d+/\d+\] |  |regression check|
 
 
 def test_a_flow_prints_no_third_party_lines(tmp_path):
-    root = tmp_path / "proj"
+    """... and leaves nothing in a fresh TMPDIR (Dask's lock files were left there)."""
+    root, tmpdir = tmp_path / "proj", tmp_path / "tmp"
+    tmpdir.mkdir()
     catalog = make_project(root, {"box_lid": "box_lid"}, catalog_extra={
         "run": {"refine_function": "asset2sim.tasks.refine:refine_asset", "workers": 1, "evaluate": False,
                 "time_limit_seconds": 300, "dashboard": False}})
     env = {k: v for k, v in os.environ.items()
            if k not in (STARTUP_MESSAGES, "PREFECT_API_URL", "PREFECT_LOGGING_LEVEL", *QUIET_LIBRARY_LOGS)}
     done = subprocess.run([sys.executable, "-m", "asset2sim", "flow", "--catalog", str(catalog), "--workers", "1"],
-                          cwd=root, env=env, capture_output=True, text=True, timeout=420)
+                          cwd=root, env={**env, "TMPDIR": str(tmpdir)}, capture_output=True, text=True, timeout=420)
+    assert list(tmpdir.iterdir()) == []
     assert done.returncode == 0, done.stderr[-3000:]
     lines = done.stdout.splitlines()
     assert any(ln.startswith("[1/1] box_lid: done") for ln in lines), done.stdout

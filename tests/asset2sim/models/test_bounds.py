@@ -260,3 +260,79 @@ def test_a_refused_connection_is_named(tmp_path):
         LLMClient(cfg).complete(MESSAGES)
     assert err.value.code == "MODEL_CONNECTION_REFUSED" and "gave up after 2 attempts" in str(err.value), str(err.value)
     _one_sentence(str(err.value))
+
+
+class _Listener:
+    """A TCP listener on 127.0.0.2 that records every connection it gets (and answers nothing): the host a redirect
+    names, which must receive no request."""
+
+    def __init__(self):
+        import socket
+        import threading
+
+        self.sock = socket.socket()
+        self.sock.bind(("127.0.0.2", 0))
+        self.sock.listen(8)
+        self.sock.settimeout(0.2)
+        self.port = self.sock.getsockname()[1]
+        self.received: list[bytes] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread.start()
+
+    def _serve(self):
+        while not self._stop.is_set():
+            try:
+                conn, _ = self.sock.accept()
+            except OSError:
+                continue
+            with conn:
+                conn.settimeout(1.0)
+                try:
+                    self.received.append(conn.recv(65536) or b"(connected)")
+                except OSError:
+                    self.received.append(b"(connected)")
+
+    def close(self):
+        self._stop.set()
+        self._thread.join(5)
+        self.sock.close()
+
+
+@pytest.mark.parametrize("code", [307, 308, 302])
+def test_a_redirect_to_another_host_is_not_followed(tmp_path, code):
+    """The server at --base-url (127.0.0.1) answers a redirect to 127.0.0.2: the prompt is sent nowhere else (the
+    second listener receives nothing), the call is not retried, and the error says so in one sentence."""
+    other = _Listener()
+    try:
+        to = f"http://127.0.0.2:{other.port}/v1/chat/completions"
+        with fake.FakeOpenAIServer(fake.status(code, headers={"Location": to}), lifetime_s=60) as srv:
+            with pytest.raises(ModelCallError) as err:
+                client(srv, tmp_path, max_attempts=3).complete(MESSAGES)
+            asked = srv.n_chat
+    finally:
+        other.close()
+    assert other.received == [] and asked == 1, (other.received, asked)
+    assert err.value.code == "MODEL_REDIRECT_REFUSED" and "127.0.0.2" in str(err.value), str(err.value)
+    _one_sentence(str(err.value))
+
+
+def _many_headers(server, req) -> None:
+    """An HTTP answer whose 20,000 header lines no client reads: the connection ends before any status is taken."""
+    h = req.handler
+    try:
+        h.wfile.write(b"HTTP/1.1 200 OK\r\n" + b"".join(b"X-Pad-%d: x\r\n" % i for i in range(20_000)) + b"\r\n")
+        h.wfile.flush()
+    except OSError:
+        pass
+    h.close_connection = True
+
+
+def test_a_connection_without_an_http_status_is_not_called_an_http_error(tmp_path):
+    with fake.FakeOpenAIServer(_many_headers, lifetime_s=60) as srv:
+        with pytest.raises(ModelCallError) as err:
+            client(srv, tmp_path, max_attempts=2, timeout_s=20).complete(MESSAGES)
+    text = str(err.value)
+    assert err.value.code == "MODEL_CONNECTION_FAILED" and err.value.status is None, text
+    assert "HTTP 500" not in text and "litellm" not in text and "http" not in text.split(":", 2)[-1], text
+    _one_sentence(text)

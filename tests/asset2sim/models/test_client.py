@@ -287,10 +287,31 @@ def test_accept_rejection_is_reasked_and_replayed_from_cache(server, tmp_path):
     a = ask(client(server, tmp_path), accept=accept)
     assert a.value == "ok" and server.n_chat == 2
     assert "'body' is not a link" in server.requests[1].body["messages"][-1]["content"]
-    # a rerun replays both replies from the cache: no calls
+    # a rerun asks again for the rejected reply (never cached) and replays the accepted one from the cache
     seen.clear()
     b = ask(client(server, tmp_path), accept=accept)
-    assert b.value == "ok" and server.n_chat == 2 and b.usage.cached == 2 and b.usage.calls == 0
+    assert b.value == "ok" and server.n_chat == 3 and b.usage.cached == 1 and b.usage.calls == 1
+
+
+def test_only_accepted_replies_are_cached_and_the_key_names_the_server(tmp_path):
+    """A server whose replies parse but fail validation: nothing is cached, so a rerun against a fixed server (another
+    base URL) asks that server and succeeds; the cache key holds the base URL (the same prompt to two servers is two
+    entries) but never the API key."""
+
+    def reject(r):
+        raise errors.ReplyInvalid(["links.0.link: 'body' is not a link of the asset"])
+
+    with fake.FakeOpenAIServer(lifetime_s=60) as broken, fake.FakeOpenAIServer(lifetime_s=60) as fixed:
+        with pytest.raises(errors.ReplyError):
+            ask(client(broken, tmp_path), accept=reject)
+        assert broken.n_chat == 3 and not list((tmp_path / "cache").rglob("*.json"))
+        good = client(fixed, tmp_path)
+        assert ask(good).usage.calls == 1 and fixed.n_chat == 1
+        assert len(list((tmp_path / "cache").rglob("*.json"))) == 1
+        keys = {client(srv, tmp_path).cache_key(messages(), {"a": 1}, 0.0) for srv in (broken, fixed)}
+        assert len(keys) == 2
+        keyed = lc.LLMClient(replace(good.config, api_key="sk-secret"))
+        assert keyed.cache_key(messages(), {"a": 1}, 0.0) == good.cache_key(messages(), {"a": 1}, 0.0)
 
 
 # ------------------------------------------------------------------- caching
