@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from asset2sim.engines.base import SimSession
+from asset2sim.tasks.check.stroke import run_stroke
 
 #: The push ramps from this share of the declared friction ...
 RAMP_FROM = 0.5
@@ -104,18 +105,22 @@ def joint_breakaway(session: SimSession, joint: str, friction: float, damping: f
     speed = START_SPEED.get(jtype, 1e-3)
     resolution = RESOLUTION.get(jtype, 0.0)
     saved = session.save_state()
+    last = {"push": 0.0, "run": 0, "v": 0.0}
+
+    def law(k, q, qd):  # the ramp's push, the spring's pull k (q - q_s) met
+        last["push"] = friction * (RAMP_FROM + (RAMP_TO - RAMP_FROM) * k / n)
+        hold = spring.stiffness * (q - spring.reference) if spring is not None and spring.stiffness > 0 else 0.0
+        session.apply_joint_effort(joint, direction * last["push"] + hold)
+
+    def moving(k, q, qd):
+        last["run"] = last["run"] + 1 if direction * qd > speed else 0
+        last["v"] = qd
+        return last["run"] >= START_STEPS
+
     try:
-        run = 0
-        for i in range(n + 1):
-            push = friction * (RAMP_FROM + (RAMP_TO - RAMP_FROM) * i / n)
-            q, _ = session.joint_state(joint)
-            hold = spring.stiffness * (q - spring.reference) if spring is not None and spring.stiffness > 0 else 0.0
-            session.apply_joint_effort(joint, direction * push + hold)
-            session.step(1)
-            _, v = session.joint_state(joint)
-            run = run + 1 if direction * v > speed else 0
-            if run >= START_STEPS:
-                return JointBreakaway(joint, friction, max(push - damping * direction * v, 0.0), direction, resolution)
+        run_stroke(session, joint, n + 1, law, moving)
+        if last["run"] >= START_STEPS:
+            return JointBreakaway(joint, friction, max(last["push"] - damping * direction * last["v"], 0.0), direction, resolution)
         return JointBreakaway(joint, friction, None, direction, resolution)
     finally:
         session.restore_state(saved)

@@ -4,7 +4,8 @@ and pass rule (``docs/design/metrics.md``): the joint sweep's force-limited driv
 operability's hand, each to an opening fraction (:func:`reach_stroke`;
 :mod:`~asset2sim.tasks.check.sweep`, :mod:`~asset2sim.tasks.check.operability`), the probes'
 pusher (:mod:`~asset2sim.tasks.check.probes`), the task's gripper
-(:mod:`~asset2sim.tasks.check.gripper_motion`) and a realism pair's push and release
+(:mod:`~asset2sim.tasks.check.gripper_motion`), the breakaway's ramp
+(:mod:`~asset2sim.tasks.check.breakaway`) and a realism pair's push and release
 (:mod:`asset2sim.apps.realism.motion`).
 """
 
