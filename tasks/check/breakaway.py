@@ -105,23 +105,21 @@ def joint_breakaway(session: SimSession, joint: str, friction: float, damping: f
     speed = START_SPEED.get(jtype, 1e-3)
     resolution = RESOLUTION.get(jtype, 0.0)
     saved = session.save_state()
-    last = {"push": 0.0, "run": 0, "v": 0.0}
+    ramp = friction * np.linspace(RAMP_FROM, RAMP_TO, n + 1)  # the push at each step
+    speeds: list[float] = []  # the joint's speed along the push after each step
 
-    def law(k, q, qd):  # the ramp's push, the spring's pull k (q - q_s) met
-        last["push"] = friction * (RAMP_FROM + (RAMP_TO - RAMP_FROM) * k / n)
+    def law(k, q, qd):  # the push, the spring's pull k (q - q_s) met
         hold = spring.stiffness * (q - spring.reference) if spring is not None and spring.stiffness > 0 else 0.0
-        session.apply_joint_effort(joint, direction * last["push"] + hold)
+        session.apply_joint_effort(joint, direction * ramp[k] + hold)
 
-    def moving(k, q, qd):
-        last["run"] = last["run"] + 1 if direction * qd > speed else 0
-        last["v"] = qd
-        return last["run"] >= START_STEPS
+    def started(k, q, qd):
+        speeds.append(direction * qd)
+        return k >= START_STEPS and min(speeds[-START_STEPS:]) > speed
 
     try:
-        run_stroke(session, joint, n + 1, law, moving)
-        if last["run"] >= START_STEPS:
-            return JointBreakaway(joint, friction, max(last["push"] - damping * direction * last["v"], 0.0), direction, resolution)
-        return JointBreakaway(joint, friction, None, direction, resolution)
+        end = run_stroke(session, joint, n + 1, law, started)
+        brk = max(ramp[end.steps - 1] - damping * speeds[-1], 0.0) if end.stopped else None
+        return JointBreakaway(joint, friction, brk, direction, resolution)
     finally:
         session.restore_state(saved)
         session.discard_state(saved)
