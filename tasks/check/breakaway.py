@@ -118,7 +118,7 @@ def joint_breakaway(session: SimSession, joint: str, friction: float, damping: f
 
     try:
         end = run_stroke(session, joint, n + 1, law, started)
-        brk = max(ramp[end.steps - 1] - damping * speeds[-1], 0.0) if end.stopped else None
+        brk = max(float(ramp[end.steps - 1]) - damping * speeds[-1], 0.0) if end.stopped else None
         return JointBreakaway(joint, friction, brk, direction, resolution)
     finally:
         session.restore_state(saved)
