@@ -1,8 +1,6 @@
-"""A hand's press against a stop: a handled part pushed into each end of its range (from :data:`START` of the range before
-it) by a hand at its grasp point,
-with at most a given force (the top of its operating range, or 20 N) rising over :data:`RAMP_TIME`, moving no faster than the hand's speed
-(0.25 m/s at the grasp point, operability's hand: a force-limited velocity drive of the engine) and pressing on at
-full force where the stop holds it, on the stroke runner.
+"""A hand's press against a stop: a handled part moved from its state into each end of its range by a hand at its grasp point at the hand's speed (0.25 m/s at the grasp point, operability's hand: a force-limited
+velocity drive of the engine), then pressed there with a force rising over :data:`RAMP_TIME` to a given top (the top
+of its operating range, or 20 N) and held for :data:`HOLD_TIME`, on the stroke runner.
 
 It passes when the engine stays stable (every reading finite, the part never faster than :data:`DIVERGED` times the
 hand's speed), the part goes at most :data:`BOUND` past the limit it is pressed into (1 degree, 2 mm) and, where
@@ -25,8 +23,9 @@ from asset2sim.tasks.check.sweep import HOLD_FORCE
 #: state its deepest contact may sink where geometry stops it first (m).
 BOUND = {"revolute": math.radians(1.0), "prismatic": 2e-3}
 SINK = 2e-3
-#: The press starts this share of the range before the stop (the other joints at the session's state).
-START = 0.05
+#: The hand has reached the stop within this share of the range (or when twice the time at its speed is up: geometry
+#: stopped it first).
+REACHED = 0.005
 #: A part faster than this many times the hand's speed has left the hand: the engine diverged.
 DIVERGED = 50.0
 #: How long the hand presses on once the part no longer moves toward the stop (s), and the time its force takes to
@@ -55,10 +54,8 @@ class Press:
 
 
 def press_joint(session: SimSession, joint: str, limit: float, effort: float, speed: float) -> Press:
-    """Press ``joint`` of an open session from :data:`START` of its range before ``limit`` (rad or m, one end of its
-    range) toward it
-    with at most ``effort`` (N*m or N) at most at ``speed`` (rad/s or m/s), for twice the travel at that speed plus
-    :data:`HOLD_TIME`, the other joints held still (``HOLD_FORCE`` beyond their friction); the state is restored
+    """Move ``joint`` of an open session from its current state to ``limit`` (rad or m, one end of its range) at ``speed`` (rad/s or m/s) with at most ``effort`` (N*m or N), then press it there with ``effort``
+    (module docstring), the other joints held still (``HOLD_FORCE`` beyond their friction); the state is restored
     afterwards.
 
     Raises:
@@ -66,13 +63,21 @@ def press_joint(session: SimSession, joint: str, limit: float, effort: float, sp
     """
     lower, upper = session.joint_limits[joint]
     s = 1.0 if abs(limit - upper) < abs(limit - lower) else -1.0
-    q0 = limit - s * START * (upper - lower)
+    q0 = session.joint_state(joint)[0]
     dt = session.options.conventions.timestep
-    steps = int(round((2.0 * abs(limit - q0) / speed + HOLD_TIME) / dt)) + 1
+    approach = int(round(2.0 * abs(limit - q0) / speed / dt))  # steps the hand has to reach the stop
+    steps = approach + int(round((RAMP_TIME + HOLD_TIME) / dt)) + 1
+    pressing: list[int] = []  # the step the hand began to press
     far = [-np.inf, False]  # the farthest past the limit, diverged
 
-    def law(k, q, qd):  # the hand's speed with at most its force, rising over RAMP_TIME
-        session.drive_joint(joint, s * speed, effort * min(1.0, (k + 1) * dt / RAMP_TIME))
+    def law(k, q, qd):  # at the hand's speed to the stop, then its force rising over RAMP_TIME
+        if not pressing and (s * (q - limit) >= -REACHED * (upper - lower) or k >= approach):
+            session.release_joint(joint)
+            pressing.append(k)
+        if pressing:
+            session.apply_joint_effort(joint, s * effort * min(1.0, (k - pressing[0] + 1) * dt / RAMP_TIME))
+        else:
+            session.drive_joint(joint, s * speed, effort)
 
     def record(k, q, qd):
         if not (np.isfinite(q) and np.isfinite(qd)) or abs(qd) > DIVERGED * speed:
@@ -87,7 +92,6 @@ def press_joint(session: SimSession, joint: str, limit: float, effort: float, sp
 
     saved = session.save_state()
     try:
-        session.set_joint_positions({**session.joint_positions(), joint: q0})
         deep = deepest()
         run_stroke(session, joint, steps, law, record, held, HOLD_FORCE)
         sank = deepest() - deep if not far[1] else float("nan")
