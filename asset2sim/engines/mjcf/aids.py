@@ -18,7 +18,7 @@ b = 2 / (dmax tc), k = 1 / (dmax^2 tc^2 z^2)); a joint's effective inertia I is 
 - **limit solver** (``solreflimit``, ``solimplimit``): a part a hand presses into its limit with the hand's most
   effort tau (``SessionOptions.press_efforts``, from the part's operating range) rests r = (1 - d) / d dmax^2 tc^2 z^2
   tau / I past it. Where MuJoCo's defaults give more than 1 degree (2 mm), the limit is written at two time steps and
-  impedance 0.99. A stop that gives way by degrees lets the part's hulls sink into the body they close on, and the
+  the least impedance from 0.99 to 0.9999 that keeps it within half of that. A stop that gives way by degrees lets the part's hulls sink into the body they close on, and the
   contacts then throw a free object (a stapler pressed at 20 N: QACC NaN in MuJoCo).
 - **collision prism**: a collision cylinder, which MJX collides with neither a box nor a mesh, written as the convex
   prism that holds it (:func:`asset2sim.engines.mjcf.rewrite.cylinder_prisms`).
@@ -45,9 +45,11 @@ from asset2sim.schemas.report import SolverAid
 #: MuJoCo's default ``solref`` and ``solimp`` of every constraint (MuJoCo XML reference, ``option``/``geom``).
 DEFAULT_SOLREF = (0.02, 1.0)
 DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
-#: The stiffest joint limit written (impedance; the time constant at two steps, :func:`friction_solref`).
-LIMIT_IMPEDANCE = 0.99
-LIMIT_SOLIMP = (LIMIT_IMPEDANCE, LIMIT_IMPEDANCE, 0.001, 0.5, 2.0)
+#: The joint limit's aid: the time constant at two steps (:func:`friction_solref`) and the least impedance in this
+#: range whose rest overrun under the press is at most :data:`LIMIT_MARGIN` of the bound (MuJoCo's largest, mjMAXIMP,
+#: where none is).
+LIMIT_IMPEDANCE = (0.99, 0.9999)
+LIMIT_MARGIN = 0.5
 #: How far a held part may move in :data:`CREEP_TIME`, or past a stop (rad for a hinge, m for a slide).
 BOUND = {"hinge": math.radians(1.0), "slide": 2e-3}
 CREEP_TIME = 10.0
@@ -125,9 +127,12 @@ def add_solver_aids(worldbody, compiled, qpos: np.ndarray, press: dict[str, floa
         if effort and limited:
             over = limit_overrun(DEFAULT_SOLREF, DEFAULT_SOLIMP, effort, inertia + arm)
             if over > bound:
-                written = {"solreflimit": vec_text(stiff_ref), "solimplimit": vec_text(LIMIT_SOLIMP)}
+                # (1 - d) d tc^2 tau / I = LIMIT_MARGIN bound, d near 1
+                d = float(np.clip(1.0 - LIMIT_MARGIN * bound * (inertia + arm) / (stiff_ref[0] ** 2 * effort), *LIMIT_IMPEDANCE))
+                solimp = (d, d, 0.001, 0.5, 2.0)
+                written = {"solreflimit": vec_text(stiff_ref), "solimplimit": vec_text(solimp)}
                 je.attrib.update(written)
-                after = limit_overrun(stiff_ref, LIMIT_SOLIMP, effort, inertia + arm)
+                after = limit_overrun(stiff_ref, solimp, effort, inertia + arm)
                 aids.append(SolverAid(kind="limit_solver", element=name, written=written, measure=over / bound, criterion=(
                     f"at MuJoCo's defaults a hand's press of {effort:.3g} {force} (the top of its operating range) rests "
                     f"{show(over):.3g} {unit} past its limit ({show(bound):g} {unit} allowed)"),
