@@ -147,7 +147,8 @@ class RefinedAsset:
     def session_options(self, conventions: SimConventions | None = None,
                         initial_state: dict[str, float] | None = None) -> SessionOptions:
         """The :class:`~asset2sim.engines.base.SessionOptions` every check and the public loaders open the folder
-        with: ``initial_state`` (rad or m; default :attr:`initial_state`), the overlay's springs about it,
+        with: ``initial_state`` (rad or m; default :attr:`initial_state`), the overlay's springs about it, the hand's
+        :attr:`press_efforts`,
         ``conventions`` (default :class:`SimConventions`) and the root as declared.
 
         Raises:
@@ -155,7 +156,18 @@ class RefinedAsset:
         """
         state = self.initial_state if initial_state is None else dict(initial_state)
         return SessionOptions(initial_state=state, springs=self.springs_about(state), conventions=conventions or SimConventions(),
-                              **session_root_options(self.root.fixed))
+                              press_efforts=self.press_efforts, **session_root_options(self.root.fixed))
+
+    @cached_property
+    def press_efforts(self) -> dict[str, float]:
+        """joint -> the most effort a hand presses it with (N*m, N for a prismatic joint): the operability check's hand
+        in ``report.json``, the top of the part's operating range at its grasp point; {} without either."""
+        try:
+            m = self.report.metric("operability")
+        except (OSError, ValueError):
+            return {}
+        parts = m.details.get("parts", {}) if m is not None else {}
+        return {j: float(p["hand_force_n"]) * float(p.get("lever_m") or 1.0) for j, p in parts.items() if p.get("hand_force_n")}
 
     @cached_property
     def report(self) -> RefineReport:

@@ -15,7 +15,8 @@ no other change, in three ways (``--export-only`` writes the exports and stops):
   default float32, or float64 with ``--x64``; or, with ``--rollouts``, the positions ``benchmarks/mjx_rollout.py``
   saved for the same files on another machine (a GPU's MJX, as learners run it; writes ROOT/mjx_hold_rollouts.json).
 
-A run holds when every joint with limits comes to rest inside its robust-rest band around the keyframe (max(0.02 rad
+It also steps on to :data:`CREEP_TIME` s after the settle: every joint with friction must move at most 1 degree
+(2 mm) there (the creep column, the largest per object in degrees or mm). A run holds when every joint with limits comes to rest inside its robust-rest band around the keyframe (max(0.02 rad
 or 2 mm, 5 % of its range), not moving over the last 0.5 s: ``metrics.joint_settling``) and a free root is at rest
 over the 2 s test (D_pos <= 1 mm, D_ori <= 0.01 rad: ``metrics.rest_stability``). Prints one row per object (the
 worst joint's settled/band) and the counts; writes ROOT/mjx_hold.json (``--x64``: ROOT/mjx_hold_x64.json).
@@ -36,6 +37,10 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from mjx_rollout import step_mjx
 
+#: Creep: every joint with friction moves at most CREEP_BOUND degrees (hinge) or mm (slide) over CREEP_TIME s after
+#: the settle.
+CREEP_TIME = 10.0
+CREEP_BOUND = {"hinge": 1.0, "slide": 2.0}
 MUJOCO_DEFAULT_SOLREF = (0.02, 1.0)
 MUJOCO_DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
 
@@ -98,7 +103,9 @@ def hold(xml: Path, how: str, rollout: Path | None = None) -> dict:
     mujoco.mj_forward(m, d)
     q0 = d.qpos.copy()
     conv = SimConventions()
-    n = round((conv.settle_time + conv.test_time) / conv.timestep)
+    n_rest = round((conv.settle_time + conv.test_time) / conv.timestep)
+    n_set = round(conv.settle_time / conv.timestep)
+    n = max(n_rest, n_set + round(CREEP_TIME / conv.timestep))
     t0 = time.perf_counter()
     device = "host"
     if how == "mjx" and rollout is not None:
@@ -109,6 +116,16 @@ def hold(xml: Path, how: str, rollout: Path | None = None) -> dict:
     else:
         qpos = step_mjx(m, d, n) if how == "mjx" else step_host(m, d, n)
         wall = time.perf_counter() - t0
+    creep = {}  # joint with friction -> how far it moved over CREEP_TIME after the settle (deg or mm)
+    for j in range(m.njnt):
+        kind = int(m.jnt_type[j])
+        if kind in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)) and m.dof_frictionloss[m.jnt_dofadr[j]] > 0:
+            a = int(m.jnt_qposadr[j])
+            moved = float(np.abs(qpos[n_set:, a] - qpos[n_set - 1, a]).max())
+            hinge = kind == int(mujoco.mjtJoint.mjJNT_HINGE)
+            creep[mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j)] = (float(np.degrees(moved)) if hinge else 1e3 * moved,
+                                                                          CREEP_BOUND["hinge" if hinge else "slide"])
+    qpos = qpos[:n_rest]
     trace = trace_of(m, qpos, q0)
     settling = metrics.joint_settling(trace)
     joints_held = all(s.held for s in settling.values())
@@ -119,6 +136,7 @@ def hold(xml: Path, how: str, rollout: Path | None = None) -> dict:
             "worst": None if worst is None else {"joint": worst[0], "settled": worst[1].settled, "band": worst[1].band,
                                                  "held": worst[1].held},
             "d_pos": None if rest is None else rest.details.get("D_pos_m"), "d_ori": None if rest is None else rest.details.get("D_ori_rad"),
+            "creep": creep, "creep_ok": all(v <= b for v, b in creep.values()),
             "options": {"noslip_iterations": int(m.opt.noslip_iterations), "cone": int(m.opt.cone)}, "wall_s": wall,
             "device": device}
 
@@ -162,10 +180,14 @@ def main(argv: list[str] | None = None) -> int:
         w = last["worst"]
         worst = "-" if w is None else f"{w['joint']} {w['settled']:.4f}/{w['band']:.3f}"
         wall = f"{row['mjx']['wall_s']:.1f}" if "mjx" in row else "-"
-        print(f"{folder.name} | " + " | ".join("holds" if row[h]["holds"] else "MOVES" for h in hows) + f" | {worst} | {wall}",
+        creep = " | ".join(f"{max((v for v, _ in row[h]['creep'].values()), default=0.0):.3f}" + ("" if row[h]["creep_ok"] else " CREEPS")
+                           for h in hows)
+        print(f"{folder.name} | " + " | ".join("holds" if row[h]["holds"] else "MOVES" for h in hows) + f" | {worst} | {wall} | creep {creep}",
               flush=True)
     counts = {h: sum(r[h]["holds"] for r in rows.values()) for h in hows}
     print("holding: " + ", ".join(f"{h} {c}/{len(rows)}" for h, c in counts.items()))
+    print(f"creep within 1 deg / 2 mm in {CREEP_TIME:g} s: "
+          + ", ".join(f"{h} {sum(r[h]['creep_ok'] for r in rows.values())}/{len(rows)}" for h in hows))
     name = "mjx_hold_rollouts.json" if args.rollouts else "mjx_hold_x64.json" if args.x64 else "mjx_hold.json"
     (args.root / name).write_text(json.dumps({"rows": rows, "counts": counts}, indent=1, default=float))
     return 0

@@ -1,5 +1,5 @@
 """Export MJCF and USD and run the SPEC's metrics in PyBullet, PhysX (SAPIEN),
-MuJoCo and Newton for every refined output folder under a root (default:
+MuJoCo, MJX, PhysX on the USD (ovphysx) and Newton for every refined output folder under a root (default:
 out/bench_refine, as written by benchmarks/bench_refine.py); print the parity
 table (loaded, rest stable, oscillation, Phi and deepest point per engine),
 the objects where the engines disagree, the holding table (per engine: the
@@ -10,7 +10,7 @@ accounted: does it start to move within 20 % of its declared friction,
 table (what each engine holds after loading, against the files).
 
     python benchmarks/bench_parity.py [--root out/bench_refine] [--ids 103275,7236]
-        [--engines pybullet,physx,mujoco,newton] [--reuse] [--no-authored]
+        [--engines pybullet,physx,mujoco,mjx,ovphysx,newton] [--reuse] [--no-authored]
 
 Newton (Kamino on the CPU) takes 1-3 minutes per object. Each (object,
 engine) result is stored in FOLDER/parity/ENGINE.json with a hash of the
@@ -31,7 +31,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-ENGINES = ("pybullet", "physx", "mujoco", "newton")  # also: mjx (MJX on JAX), ovphysx (the USD export in PhysX)
+#: The six paths: PyBullet and asset2sim's SAPIEN on the URDF, host MuJoCo (float64, no no-slip pass) and MJX (JAX's
+#: float32, the CPU here) on the MJCF's physics, PhysX on the USD export (ovphysx), Newton.
+ENGINES = ("pybullet", "physx", "mujoco", "mjx", "ovphysx", "newton")
 #: The files a parity result depends on.
 INPUTS = ("mobility.urdf", "initial_state.json", "overlay.json")
 #: A disagreement in the deepest point (mm) worth explaining: PyBullet's

@@ -69,6 +69,22 @@ class StateRefinement(BaseModel):
     search opened to make room (:func:`asset2sim.tasks.state.refine_state.joints_in_the_way`)."""
 
 
+class SolverAid(BaseModel):
+    """A solver parameter an export writes beyond the files' physics (``asset2sim.engines.mjcf.aids``): its ``kind``,
+    the joint or geom (``element``) it is written on, the attributes ``written``, the pre-flight ``criterion`` that
+    asked for it with its ``measure`` (the predicted quantity over its bound: above 1 the aid is needed) and its
+    ``effect`` on the part's dynamics."""
+
+    model_config = ConfigDict(extra="forbid")
+    kind: str
+    element: str
+    written: dict[str, str]
+    criterion: str
+    measure: float
+    effect: str = ""
+    file: str = "mjcf"
+
+
 class RefineReport(BaseModel):
     """Contents of ``report.json``."""
 
@@ -123,6 +139,8 @@ class RefineReport(BaseModel):
     pass, False fail, None not measured; ``failure_mode`` is the first failing tier's."""
     design_changes: list[str] = Field(default_factory=list)
     """What stability by design changed and why (``tasks.state.stability``)."""
+    solver_aids: list[SolverAid] = Field(default_factory=list)
+    """The solver aids the exports wrote, each with its criterion (read back from the exported files)."""
     media: Literal["done", "deferred", "off"] | None = None
     """The media phase (renders in ``views/``, sweep clips in ``clips/``, ``report.html``): ``done``;
     ``deferred`` (``refine --defer-media``, a flow with ``extras: deferred``: ``asset2sim report OUT`` makes

@@ -55,6 +55,9 @@ class SessionOptions:
     ground: bool = True
     conventions: SimConventions = field(default_factory=SimConventions)
     files_key: str | None = None
+    press_efforts: dict[str, float] = field(default_factory=dict)
+    """joint -> the most effort (N*m or N) a hand presses it with, the top of its operating range (an output folder's
+    ``report.json``): what the MJCF's limit aid is judged on (:mod:`asset2sim.engines.mjcf.aids`)."""
 
 
 def session_root_options(fixed: bool) -> dict[str, bool]:

@@ -99,8 +99,9 @@ class MuJoCoSession(SessionDefaults):
 
     def drive_joint(self, joint: str, velocity: float, max_force: float) -> None:
         """A force-limited velocity drive in ``qfrc_applied`` before each step:
-        tau = clip(f_c sign(v) + c v + 0.5 * I_eff * (v - qdot) / dt, +-(max_force + f_c + |c v|))
-        (f_c ``frictionloss``, c damping, I_eff = 1 / (M^-1)_ii from ``mj_solveM``:
+        tau = clip(f_c sign(v) + c v + Q + 0.5 * I_eff * (v - qdot) / dt, +-(max_force + f_c + |c v|))
+        (f_c ``frictionloss``, c damping, Q the bias and spring forces of the last step (``qfrc_bias - qfrc_spring``:
+        gravity and the spring held, as PyBullet's velocity motor holds them), I_eff = 1 / (M^-1)_ii from ``mj_solveM``:
         half the velocity error removed per step, stable for any inertia)."""
         if joint not in self._dadr:
             raise KeyError(joint)
@@ -122,6 +123,7 @@ class MuJoCoSession(SessionDefaults):
             mj.mj_solveM(self.m, self.d, x.reshape(1, -1), e.reshape(1, -1))
             inertia = 1.0 / max(float(x[i]), 1e-12)
             load = float(self.m.dof_frictionloss[i]) * float(np.sign(v)) + float(self.m.dof_damping[i]) * v
+            load += float(self.d.qfrc_bias[i] - self.d.qfrc_spring[i])  # gravity and the spring held, as a motor does
             limit = fmax + float(self.m.dof_frictionloss[i]) + abs(float(self.m.dof_damping[i]) * v)
             tau = float(np.clip(load + 0.5 * inertia * (v - float(self.d.qvel[i])) / dt, -limit, limit))
             self.d.qfrc_applied[i] += tau

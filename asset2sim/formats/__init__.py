@@ -26,6 +26,7 @@ class Format:
     into the asset model; ``export(out_dir, visuals=True, check=True) -> Path`` an output folder written in the
     format (``label`` + `` export`` in notes);
     ``patch(source, read, children, links, joints, folder, staged_urdf) -> Path`` the audit's patched input;
+    ``aids(path) -> list[SolverAid]`` the solver aids an exported file carries (read back from it);
     ``suffixes`` its file names' suffixes (lower case);
     ``is_model(path)`` whether a file of the format is a whole model (not an include fragment); ``declares_root``
     whether the file declares how its root is held (no free joint: welded); ``real_units`` the sentence why its
@@ -35,6 +36,7 @@ class Format:
     read: Callable[[Path, ReadOptions | None], ReadAsset]
     export: Callable[..., Path]
     patch: Callable[..., Path]
+    aids: Callable[[Path], list]
     suffixes: tuple[str, ...]
     is_model: Callable[[Path], bool]
     declares_root: bool
@@ -55,10 +57,10 @@ def _export_usd(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
 #: Format name -> its entries.
 FORMATS: dict[str, Format] = {
     "mjcf": Format(label="MJCF", read=mjcf_reader.read_mjcf_asset, export=mjcf_export.export_mjcf,
-                   patch=mjcf_physics.write_patched_mjcf, suffixes=staging.MJCF_SUFFIXES,
+                   patch=mjcf_physics.write_patched_mjcf, aids=mjcf_export.solver_aids, suffixes=staging.MJCF_SUFFIXES,
                    is_model=lambda path: staging.root_element(path) == "mujoco", declares_root=True,
                    real_units="an MJCF file ({name}: MuJoCo's lengths are metres)"),
-    "usd": Format(label="USD", read=_read_usd, export=_export_usd, patch=usd_physics.write_patched_usd,
+    "usd": Format(label="USD", read=_read_usd, export=_export_usd, patch=usd_physics.write_patched_usd, aids=lambda path: [],
                   suffixes=staging.USD_SUFFIXES, is_model=lambda path: True, declares_root=False,
                   real_units="a USD stage ({name}, read in metres through its metersPerUnit)"),
 }

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from asset2sim.engines.base import SimSession
+from asset2sim.tasks.check.stroke import run_stroke
 
 #: The push ramps from this share of the declared friction ...
 RAMP_FROM = 0.5
@@ -104,19 +105,21 @@ def joint_breakaway(session: SimSession, joint: str, friction: float, damping: f
     speed = START_SPEED.get(jtype, 1e-3)
     resolution = RESOLUTION.get(jtype, 0.0)
     saved = session.save_state()
+    ramp = friction * np.linspace(RAMP_FROM, RAMP_TO, n + 1)  # the push at each step
+    speeds: list[float] = []  # the joint's speed along the push after each step
+
+    def law(k, q, qd):  # the push, the spring's pull k (q - q_s) met
+        hold = spring.stiffness * (q - spring.reference) if spring is not None and spring.stiffness > 0 else 0.0
+        session.apply_joint_effort(joint, direction * ramp[k] + hold)
+
+    def started(k, q, qd):
+        speeds.append(direction * qd)
+        return k >= START_STEPS and min(speeds[-START_STEPS:]) > speed
+
     try:
-        run = 0
-        for i in range(n + 1):
-            push = friction * (RAMP_FROM + (RAMP_TO - RAMP_FROM) * i / n)
-            q, _ = session.joint_state(joint)
-            hold = spring.stiffness * (q - spring.reference) if spring is not None and spring.stiffness > 0 else 0.0
-            session.apply_joint_effort(joint, direction * push + hold)
-            session.step(1)
-            _, v = session.joint_state(joint)
-            run = run + 1 if direction * v > speed else 0
-            if run >= START_STEPS:
-                return JointBreakaway(joint, friction, max(push - damping * direction * v, 0.0), direction, resolution)
-        return JointBreakaway(joint, friction, None, direction, resolution)
+        end = run_stroke(session, joint, n + 1, law, started)
+        brk = max(float(ramp[end.steps - 1]) - damping * speeds[-1], 0.0) if end.stopped else None
+        return JointBreakaway(joint, friction, brk, direction, resolution)
     finally:
         session.restore_state(saved)
         session.discard_state(saved)

@@ -4,7 +4,8 @@ and pass rule (``docs/design/metrics.md``): the joint sweep's force-limited driv
 operability's hand, each to an opening fraction (:func:`reach_stroke`;
 :mod:`~asset2sim.tasks.check.sweep`, :mod:`~asset2sim.tasks.check.operability`), the probes'
 pusher (:mod:`~asset2sim.tasks.check.probes`), the task's gripper
-(:mod:`~asset2sim.tasks.check.gripper_motion`) and a realism pair's push and release
+(:mod:`~asset2sim.tasks.check.gripper_motion`), the breakaway's ramp
+(:mod:`~asset2sim.tasks.check.breakaway`) and a realism pair's push and release
 (:mod:`asset2sim.apps.realism.motion`).
 """
 
@@ -20,10 +21,12 @@ from asset2sim.engines.base import SimSession
 
 @dataclass(frozen=True)
 class StrokeEnd:
-    """Where a stroke ended: after ``steps`` engine steps, the joint at ``q`` (rad or m)."""
+    """Where a stroke ended: after ``steps`` engine steps, the joint at ``q`` (rad or m); ``stopped``: a callback
+    ended it."""
 
     steps: int
     q: float
+    stopped: bool = False
 
 
 def run_stroke(session: SimSession, joint: str, steps: int, law: Callable | None = None,
@@ -41,13 +44,13 @@ def run_stroke(session: SimSession, joint: str, steps: int, law: Callable | None
     q, qd = session.joint_state(joint)
     for k in range(steps):
         if law is not None and law(k, q, qd):
-            return StrokeEnd(k, q)
+            return StrokeEnd(k, q, True)
         for other in held:
             session.drive_joint(other, 0.0, hold_force)
         session.step(1)
         q, qd = session.joint_state(joint)
         if record is not None and record(k + 1, q, qd):
-            return StrokeEnd(k + 1, q)
+            return StrokeEnd(k + 1, q, True)
     return StrokeEnd(steps, q)
 
 

@@ -122,6 +122,7 @@ def write_extras(out_dir: Path, report: RefineReport, att: Attempt, ctx: Estimat
             what = f"{fmt.label} export"
             try:
                 out[key] = str(fmt.export(out_dir))
+                report.solver_aids += fmt.aids(Path(out[key]))  # read back from the file as written
             except ImportError as exc:  # MuJoCo / usd-core (pxr) not installed: the extra that would do it named
                 report.notes.append(f"{what} skipped: {install_hint(exc)}")
             except Exception as exc:  # export must not lose the refined asset

@@ -157,16 +157,18 @@ def _lid_after(build, seconds: float, solref=None, solimp=None, options: str = "
 
 
 def test_frictionloss_holds_without_the_noslip_pass(tmp_path):
-    """MuJoCo's soft friction lets a held lid creep; the MJCF holds it with no no-slip pass (MJX has none) through each
-    joint's own friction solver parameters, and with MuJoCo's defaults for them the same lid creeps past its rest band
-    (0.1 rad: 5 % of its 2 rad range), so the parameters are what holds it."""
+    """MuJoCo's soft friction lets a held lid creep; the MJCF holds it with no no-slip pass (MJX has none) through the
+    friction solver aid its creep criterion asks for, and with MuJoCo's defaults the same lid creeps past its rest band
+    (0.1 rad: 5 % of its 2 rad range), so the aid is what holds it."""
     from asset2sim.engines.mjcf import ARMATURE, FRICTION_SOLIMP, friction_solref
 
     a = write_contract_asset(tmp_path, lid_angle=0.6, lid_friction=0.5, lid_damping=0.0)
     b = urdf_to_mjcf(a.urdf, SessionOptions(initial_state=a.initial_state))
     m = _compile(b)
+    dof = m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "lid_hinge")]
     assert m.opt.noslip_iterations == 0 and m.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
-    assert np.allclose(m.dof_solref[6:], friction_solref(1 / 240)) and np.allclose(m.dof_solimp[6:], FRICTION_SOLIMP)
+    assert np.allclose(m.dof_solref[dof], friction_solref(1 / 240)) and np.allclose(m.dof_solimp[dof], FRICTION_SOLIMP)
+    assert ("friction_solver", "lid_hinge") in {(x.kind, x.element) for x in b.aids}
     assert np.all(m.dof_armature == ARMATURE)
     assert _lid_after(b, 3.0) == pytest.approx(0.6, abs=1e-3)
     assert abs(_lid_after(b, 3.0, (0.02, 1.0), (0.9, 0.95, 0.001, 0.5, 2.0)) - 0.6) > 0.1
@@ -179,31 +181,30 @@ def test_frictionloss_holds_without_the_noslip_pass(tmp_path):
         s.close()
 
 
-def test_joint_armature_lifts_only_a_dof_lighter_than_the_float32_floor():
-    """A dof whose effective inertia is below sqrt(float32 eps) x the model's mean inertia gets the difference as
-    armature; a heavier one, or one MuJoCo gives no inverse weight, keeps ``ARMATURE``."""
-    from asset2sim.engines.mjcf import ARMATURE, ARMATURE_FLOOR, joint_armature
+def test_armature_only_on_a_light_part_held_by_the_stiff_friction_and_contacts_at_mujocos_defaults(tmp_path):
+    """The box's 0.2 kg lid gets no armature; a 2 g lid on the same 1.5 kg body, held by the stiff friction aid, is
+    lighter than the float32 floor and is lifted to it, named with its criterion and its effect; a frictionless 2 g lid
+    gets neither. The object's own contacts keep MuJoCo's default impedance; the ground carries the ground aid."""
+    from asset2sim.engines.mjcf import ARMATURE, ARMATURE_FLOOR
+    from asset2sim.engines.mjcf.aids import DEFAULT_SOLIMP, GROUND_SOLIMP
 
-    assert ARMATURE_FLOOR == pytest.approx(float(np.sqrt(np.finfo(np.float32).eps)))
-    assert joint_armature(1.0 / 1.2e-6, 0.021) == pytest.approx(ARMATURE_FLOOR * 0.021 - 1.2e-6)
-    assert joint_armature(1.0 / 1e-3, 0.021) == ARMATURE
-    assert joint_armature(0.0, 0.021) == ARMATURE
-
-
-def test_a_light_part_gets_armature_and_every_contact_the_export_impedance(tmp_path):
-    """The box's 0.2 kg lid keeps ``armature="0"``; a 2 g lid on the same 1.5 kg body is lighter than the float32
-    floor and is lifted to it (MJX float32 would ratchet it along its load), and every collision geom and the ground
-    carry ``CONTACT_SOLIMP``."""
-    from asset2sim.engines.mjcf import ARMATURE, ARMATURE_FLOOR, CONTACT_SOLIMP
-
-    m = _compile(urdf_to_mjcf(write_contract_asset(tmp_path / "heavy").urdf))
-    assert np.all(m.dof_armature == ARMATURE)
+    b = urdf_to_mjcf(write_contract_asset(tmp_path / "heavy").urdf)
+    m = _compile(b)
+    assert np.all(m.dof_armature == ARMATURE) and "armature" not in {x.kind for x in b.aids}
     colliding = (m.geom_contype > 0) | (m.geom_conaffinity > 0)
-    assert colliding.any() and np.allclose(m.geom_solimp[colliding], CONTACT_SOLIMP)
-    m = _compile(urdf_to_mjcf(write_contract_asset(tmp_path / "light", lid_mass=0.002).urdf))
+    ground = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "ground")
+    colliding[ground] = False
+    assert colliding.any() and np.allclose(m.geom_solimp[colliding], DEFAULT_SOLIMP)
+    assert np.allclose(m.geom_solimp[ground], GROUND_SOLIMP) and ("ground_contact_impedance", "ground") in {(x.kind, x.element) for x in b.aids}
+    b = urdf_to_mjcf(write_contract_asset(tmp_path / "light", lid_mass=0.002, lid_friction=0.01).urdf)
+    m = _compile(b)
     dof = m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "lid_hinge")]
     assert m.dof_armature[dof] > 0
     assert 1.0 / m.dof_invweight0[dof] == pytest.approx(ARMATURE_FLOOR * m.stat.meaninertia, rel=0.05)
+    arm = next(x for x in b.aids if x.kind == "armature")
+    assert arm.element == "lid_hinge" and arm.measure > 1 and "natural frequency" in arm.effect
+    b = urdf_to_mjcf(write_contract_asset(tmp_path / "free", lid_mass=0.002, lid_friction=0.0).urdf)
+    assert not {("armature", "lid_hinge"), ("friction_solver", "lid_hinge")} & {(x.kind, x.element) for x in b.aids}
 
 
 def test_the_joints_hold_in_a_host_scene_with_its_own_options_and_defaults(tmp_path):

@@ -44,6 +44,7 @@ def test_friction_holds_a_loaded_lid_and_lets_an_overloaded_one_fall(tmp_path):
         s.step(720)
         assert s.joint_positions()["lid_hinge"] == pytest.approx(0.6, abs=1e-3)
         assert s.held_physics().engine == "mjx"
+        assert "armature" not in {a.kind for a in s.build.aids}  # it holds in float32 without one: none written
     falls = write_contract_asset(tmp_path / "falls", lid_angle=0.6, lid_friction=0.1, lid_damping=0.0)
     ends = {}
     for engine in ("mjx", "mujoco"):
@@ -61,7 +62,7 @@ ROWS = {r["id"]: r for r in csv.DictReader((SHARED / "manifest.csv").open())} if
 def test_a_refined_dev_row_holds_its_initial_state_in_mjx(refine_once, row_id):
     """The treasure chest's lid (it fell 0.40 rad in 3 s with MuJoCo's default friction solver parameters and no no-slip
     pass) and the mounted faucet (elliptic cones made MJX fail to trace it): every part comes to rest in its
-    robust-rest band, and a free root stays at rest, over the robust-rest window."""
+    robust-rest band, and a free root stays at rest, over the robust-rest window, with no armature aid."""
     _need_mjx()
     if row_id not in ROWS:
         pytest.skip(f"dev dataset not found at {SHARED}")
@@ -69,8 +70,10 @@ def test_a_refined_dev_row_holds_its_initial_state_in_mjx(refine_once, row_id):
     opts = output_session_options(res.out)
     with UrdfFile(res.out / "mobility.urdf").open("mjx", opts) as s:
         trace = metrics.run_rest_test(s, opts.conventions)
+        aids = {a.kind for a in s.build.aids}
     settling = metrics.joint_settling(trace)
     assert settling and all(js.held for js in settling.values()), settling
+    assert "armature" not in aids  # held in MJX float32 without an armature aid, and none written
     if not opts.fixed_base:
         assert metrics.rest_stability(trace, opts.conventions, engine="mjx").passed
 

@@ -257,3 +257,21 @@ def test_real_outputs_export(out_dir, tmp_path):
     check = check_mjcf(path, copy / "mobility.urdf", read_initial_state(copy))
     assert math.isclose(check.total_mass, check.urdf_mass, rel_tol=1e-6)
     assert check.keyframe == pytest.approx({k: check.initial_state.get(k, 0.0) for k in check.keyframe}, abs=1e-12)
+
+
+def test_report_json_lists_the_solver_aids_the_mjcf_carries_and_reading_it_back_names_them(refine_once):
+    """A refine's MJCF export names each solver aid on its joint or geom with its criterion; ``report.json`` lists
+    the same aids, read back from the file, and the MJCF reader notes each one as not carried."""
+    from asset2sim.formats import read_asset_file
+    from asset2sim.formats.mjcf.export import solver_aids
+
+    res = refine_once("box_lid", "a small box with its lid closed", extras=True, media=False)
+    xml = res.out / "mjcf" / "mobility.xml"
+    aids = solver_aids(xml)
+    assert aids and res.report.solver_aids == aids
+    joints = {j.name for j in read_urdf(res.out / "mobility.urdf").movable_joints}
+    for a in aids:
+        assert a.criterion and a.measure > 0 and a.written
+        assert a.element in joints or a.kind in ("ground_contact_impedance", "collision_prism")
+    notes = read_asset_file(xml, "mjcf").notes
+    assert sum(n.startswith("solver aid ") for n in notes) == len(aids)

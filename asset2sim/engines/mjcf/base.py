@@ -30,8 +30,9 @@ GROUND = "ground"
 #: ``noslip_iterations`` is written (MJX and most host scenes run without the no-slip pass), so nothing needs elliptic
 #: cones any more (``docs/design/simulators.md``, "MuJoCo's soft constraints").
 CONE = "pyramidal"
-#: Per-dof solver parameters of a joint's dry friction (``frictionloss``), written on every joint so that they travel
-#: with the body into MJX and host scenes whatever their ``<default>``: MuJoCo's friction loss is a soft constraint, and
+#: Per-dof solver parameters of a joint's dry friction (``frictionloss``), written on a joint whose creep at MuJoCo's
+#: defaults the pre-flight criterion of :mod:`asset2sim.engines.mjcf.aids` finds too fast (on the joint itself, so
+#: that they travel with the body into MJX and host scenes whatever their ``<default>``): MuJoCo's friction loss is a soft constraint, and
 #: a joint loaded below its friction creeps at v = tau (1 - d) / (d I) * d timeconst / 2 (impedance d, time constant
 #: timeconst, joint inertia I; MuJoCo documentation, "Computation: soft constraints"). The stiffest the solver allows
 #: stops that creep: impedance at MuJoCo's largest (``mjMAXIMP`` 0.9999) and the time constant at two time steps
@@ -40,7 +41,7 @@ CONE = "pyramidal"
 FRICTION_SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
 #: Damping ratio of the friction constraint's reference acceleration (critical).
 FRICTION_DAMPRATIO = 1.0
-#: Joint armature (kg*m^2 or kg) written on every joint whose own inertia is above :data:`ARMATURE_FLOOR`: 0, a passive
+#: Joint armature (kg*m^2 or kg) written on every joint that needs no armature aid (:mod:`.aids`): 0, a passive
 #: hinge or slide has no rotor, and an explicit 0 keeps a host scene's ``<default>`` armature from adding inertia the
 #: files do not hold.
 ARMATURE = 0.0
@@ -55,26 +56,8 @@ ARMATURE = 0.0
 #: ``armature``, MuJoCo's term for inertia added to a dof's diagonal that makes a simulation more stable (MuJoCo XML
 #: reference, ``joint/armature``): on the 21 dev outputs 4 small parts (a lever, a pedal, two handles) get 6e-6 to
 #: 3e-4 kg*m^2, the inertia of the linkages such parts drive or of a 100 g handle at 5 cm; 1e-4 of the scale was
-#: measured too little for the lever (:func:`joint_armature`; ``docs/design/simulators.md``).
+#: measured too little for the lever (:mod:`.aids`; ``docs/design/simulators.md``).
 ARMATURE_FLOOR = float(np.sqrt(np.finfo(np.float32).eps))
-#: Contact impedance (``solimp``) on every collision geom and the ground plane the MJCF writes: MuJoCo's default with
-#: ``dmin`` 0.7 for 0.9. A resting contact is at ``dmin`` (its penetration, ~0.01 mm, is far below the 1 mm ``width``),
-#: and the same float32 error is amplified by d / (1 - d): 9 at 0.9, 2.3 at 0.7. MJX float32 rocked a 16.5 kg fridge
-#: 1.3 mm on its feet at 0.9 (limit 1 mm), 0.85 still did, 0.8 to 0.5 hold it within 0.03 mm; 0.7 keeps a margin, and a
-#: host floor at MuJoCo's default 0.9 mixes with it (``solmix``, mean) to 0.8, which still holds. The cost: a resting
-#: contact sinks 0.035 mm instead of 0.008 mm.
-CONTACT_SOLIMP = (0.7, 0.95, 0.001, 0.5, 2.0)
-
-
-def joint_armature(invweight: float, meaninertia: float) -> float:
-    """Armature (kg*m^2 or kg) of a hinge or slide dof of inverse weight ``invweight`` (``MjModel.dof_invweight0``,
-    compiled without armature: 1 / its effective inertia) in a model of mean inertia ``meaninertia``: what lifts its
-    effective inertia to :data:`ARMATURE_FLOOR` x ``meaninertia``, else :data:`ARMATURE`."""
-    if not (invweight > 0.0 and math.isfinite(invweight)):
-        return ARMATURE
-    return max(ARMATURE, ARMATURE_FLOOR * float(meaninertia) - 1.0 / float(invweight))
-
-
 def friction_solref(timestep: float) -> tuple[float, float]:
     """``solreffriction`` (time constant s, damping ratio) for a model stepped at ``timestep`` s: the time constant at
     2 ``timestep``, the least MuJoCo's ``refsafe`` flag keeps (a smaller one is raised to it), critically damped."""

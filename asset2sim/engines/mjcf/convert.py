@@ -12,15 +12,17 @@ from lxml import etree
 
 from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, CollisionPiece, collision_pieces, read_urdf
-from asset2sim.engines.mjcf.base import (DERIVED_MESH_DIR, KEYFRAME, MjcfError, compile_xml, load_mujoco, mujoco_messages, mujoco_warnings,
+from asset2sim.engines.mjcf.base import (DERIVED_MESH_DIR, GROUND, KEYFRAME, MjcfError, compile_xml, load_mujoco, mujoco_messages, mujoco_warnings,
                                          num_text, place_on_ground, relative_to, safe_name, vec_text)
-from asset2sim.engines.mjcf.rewrite import (CYLINDER_SIDES, add_root_and_ground, cylinder_prisms, place_bodies, rename_meshes, set_armature, set_contacts, set_friction_solver,
-                                            set_geoms, set_inertial, set_joints, set_options)
+from asset2sim.engines.mjcf.aids import add_solver_aids, ground_aid, prism_aid, write_aids
+from asset2sim.engines.mjcf.rewrite import (add_root_and_ground, cylinder_prisms, place_bodies, rename_meshes, set_contacts, set_geoms,
+                                            set_inertial, set_joints, set_options, zero_armature)
 from asset2sim.engines.mjcf.visuals import add_visuals
 from asset2sim.file_names import file_stem
 from asset2sim.frames import translation_matrix
 from asset2sim.mesh_io import convex_hull_mesh
 from asset2sim.schemas.config import SimConventions
+from asset2sim.schemas.report import SolverAid
 from asset2sim.urdf import UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfModel, UrdfStyle, write_urdf
 
 
@@ -126,7 +128,8 @@ class MjcfBuild:
     """An MJCF text and what it needs: ``derived_meshes`` path (from ``meshdir``)
     -> OBJ bytes to write; ``mesh_files`` path -> source file referenced as it
     is; ``initial_qpos`` (nq,) of the keyframe; ``joint_names`` movable joints
-    in qpos order; ``notes`` what changed; ``root_height`` m the root was lifted.
+    in qpos order; ``notes`` what changed; ``root_height`` m the root was lifted; ``aids`` the solver aids written
+    (:mod:`asset2sim.engines.mjcf.aids`).
     """
 
     xml: str
@@ -136,6 +139,7 @@ class MjcfBuild:
     joint_names: list[str]
     notes: list[str] = field(default_factory=list)
     root_height: float = 0.0
+    aids: list[SolverAid] = field(default_factory=list)
 
     def assets(self) -> dict[str, bytes]:
         """Every mesh as bytes, keyed as the MJCF names them (for in-memory compiles)."""
@@ -198,18 +202,18 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     worldbody = root.find("worldbody")
     geom_mesh = {key: file_to_mesh[v] for key, v in meshes.names.items()}
     bodies = _rewrite_bodies(worldbody, model, spec, pieces, geom_mesh, springs, missing_inertial, visuals, notes)
-    set_friction_solver(worldbody, conv.timestep)
+    zero_armature(worldbody)
     set_contacts(root, model, pieces, fixed_base, notes)
     root_body = bodies[model.root]
     add_root_and_ground(root_body, worldbody, fixed_base, ground)
-    if prisms := cylinder_prisms(worldbody, asset_el):
-        notes.append(f"collision cylinders {', '.join(prisms)} written as {CYLINDER_SIDES}-sided convex prisms holding them: "
-                     "MJX collides a cylinder with neither a box nor a mesh")
+    prisms = cylinder_prisms(worldbody, asset_el)
 
     compiled, qpos, height = place_on_ground(root, root_body, final_assets, initial_state, fixed_base, urdf_path, notes)
-    for joint, a in set_armature(worldbody, compiled).items():
-        notes.append(f"joint {joint!r}: armature {a:.3g} kg*m^2 or kg, the inertia that lifts a part this light to "
-                     "sqrt(float32 eps) of the model's mean inertia, so that MJX in float32 holds it (not in the URDF)")
+    aids = [prism_aid(g) for g in prisms] + add_solver_aids(worldbody, compiled, qpos, opts.press_efforts, conv.timestep)
+    if ground and not fixed_base:
+        aids.append(ground_aid(worldbody.find(f"geom[@name='{GROUND}']")))
+    write_aids(root, aids)
+    notes += [f"solver aid on {a.element!r}: {a.kind} {a.written} ({a.criterion}; {a.effect})" for a in aids]
     if visuals:  # after placement: visual meshes never collide, and cost compile time
         for b in worldbody.iter("body"):
             add_visuals(b, model.links[b.get("name")], mesh_root, asset_el, meshes.files, final_assets, used, notes)
@@ -221,7 +225,7 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
         compile_xml(xml, final_assets, urdf_path)
     order = [mujoco.mj_id2name(compiled, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(compiled.njnt)]
     return MjcfBuild(xml=xml, derived_meshes=meshes.derived, mesh_files=meshes.files, initial_qpos=qpos,
-                     joint_names=[n for n in order if n in movable], notes=notes, root_height=height)
+                     joint_names=[n for n in order if n in movable], notes=notes, root_height=height, aids=aids)
 
 
 def _rewrite_bodies(worldbody, model: UrdfModel, spec, pieces: dict[str, list[CollisionPiece]], geom_mesh: dict[tuple, str],

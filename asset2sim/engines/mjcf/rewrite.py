@@ -12,8 +12,7 @@ from lxml import etree
 from asset2sim.engines.base import Spring
 from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
                                        CollisionPiece, link_friction)
-from asset2sim.engines.mjcf.base import (ARMATURE, CONE, CONTACT_SOLIMP, FREE_JOINT, FRICTION_SOLIMP, GROUND, MjcfError, close, friction_solref,
-                                         joint_armature, num_text, quat_text, safe_name, vec_text)
+from asset2sim.engines.mjcf.base import ARMATURE, CONE, FREE_JOINT, GROUND, MjcfError, close, num_text, quat_text, safe_name, vec_text
 from asset2sim.schemas.config import SimConventions
 from asset2sim.urdf import UrdfModel
 
@@ -215,34 +214,12 @@ def set_joints(b, link, model: UrdfModel, spec, springs: dict[str, Spring], urdf
     return names
 
 
-def set_friction_solver(worldbody, timestep: float) -> None:
-    """On every hinge and slide joint under ``worldbody``, its dry friction's solver parameters for a model stepped at
-    ``timestep`` s (``solreffriction`` :func:`~asset2sim.engines.mjcf.base.friction_solref`, ``solimpfriction``
-    :data:`~asset2sim.engines.mjcf.base.FRICTION_SOLIMP`) and ``armature``
-    :data:`~asset2sim.engines.mjcf.base.ARMATURE`, on the joint itself so that they travel with the body into MJX and
-    host scenes whatever their ``<default>``."""
+def zero_armature(worldbody) -> None:
+    """``armature`` :data:`~asset2sim.engines.mjcf.base.ARMATURE` on every joint under ``worldbody``, on the joint itself
+    so that a host scene's ``<default>`` adds no inertia the files do not hold (an aid may raise it:
+    :mod:`asset2sim.engines.mjcf.aids`)."""
     for je in worldbody.iter("joint"):
-        je.set("solreffriction", vec_text(friction_solref(timestep)))
-        je.set("solimpfriction", vec_text(FRICTION_SOLIMP))
         je.set("armature", num_text(ARMATURE))
-
-
-def set_armature(worldbody, compiled) -> dict[str, float]:
-    """On every hinge and slide joint under ``worldbody`` whose effective inertia in ``compiled`` (the model compiled
-    from it with :data:`~asset2sim.engines.mjcf.base.ARMATURE` on every joint) is below the float32 floor, the armature
-    :func:`~asset2sim.engines.mjcf.base.joint_armature` that lifts it there; returns joint -> armature written."""
-    import mujoco
-
-    out = {}
-    for je in worldbody.iter("joint"):
-        jid = mujoco.mj_name2id(compiled, mujoco.mjtObj.mjOBJ_JOINT, je.get("name") or "")
-        if jid < 0 or int(compiled.jnt_type[jid]) not in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)):
-            continue
-        a = joint_armature(float(compiled.dof_invweight0[compiled.jnt_dofadr[jid]]), float(compiled.stat.meaninertia))
-        if a > ARMATURE:
-            je.set("armature", num_text(a))
-            out[je.get("name")] = a
-    return out
 
 
 def set_geoms(b, link, model: UrdfModel, plist: list[CollisionPiece], geom_mesh: dict[tuple, str], visuals: bool, urdf_path: Path) -> None:
@@ -261,7 +238,6 @@ def set_geoms(b, link, model: UrdfModel, plist: list[CollisionPiece], geom_mesh:
             g.set("mesh", geom_mesh[(link.name, p.collision, p.group)])
         if not math.isclose(fr, BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION):
             g.set("friction", f"{num_text(fr)} 0.005 0.0001")
-        g.set("solimp", vec_text(CONTACT_SOLIMP))
         if visuals:
             g.set("group", "3")
 
@@ -302,4 +278,4 @@ def add_root_and_ground(root_body, worldbody, fixed_base: bool, ground: bool) ->
     if ground:
         # friction 0: MuJoCo takes the larger friction, the link's
         worldbody.insert(0, etree.Element("geom", name=GROUND, type="plane", size="0 0 1", friction="0 0.005 0.0001",
-                                          solimp=vec_text(CONTACT_SOLIMP), rgba="0.8 0.8 0.8 1"))
+                                          rgba="0.8 0.8 0.8 1"))

@@ -9,6 +9,7 @@ A re-export removes the pieces it no longer uses, only those the folder records 
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
@@ -24,7 +25,10 @@ from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.loading import read_urdf
 from asset2sim.refined_asset import RefinedAsset
 from asset2sim.engines.mjcf import KEYFRAME, mujoco_messages, urdf_to_mjcf
+from asset2sim.engines.mjcf.aids import AIDS_TEXT
 from asset2sim.engines.mjcf.base import load_mujoco
+from asset2sim.safexml import parse_xml_file
+from asset2sim.schemas.report import SolverAid
 from asset2sim.frames import quat_wxyz_matrix
 
 MASS_RTOL = 1e-6
@@ -140,7 +144,8 @@ def export_mjcf(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: bo
     asset = RefinedAsset.existing(out_dir)
     out_dir, urdf, initial, springs = asset.folder, asset.urdf_path, asset.initial_state, asset.springs
     fixed = asset.root.fixed  # mounted: no free joint, the root welded where the file puts it
-    build = urdf_to_mjcf(urdf, SessionOptions(initial_state=initial, springs=springs, fixed_base=fixed, ground=not fixed),
+    build = urdf_to_mjcf(urdf, SessionOptions(initial_state=initial, springs=springs, fixed_base=fixed, ground=not fixed,
+                                              press_efforts=asset.press_efforts),
                          missing_inertial="massless", mesh_root=out_dir, meshdir="..", visuals=visuals, compile_visuals=not check)
     for rel, data in build.derived_meshes.items():
         dst = file_names.join_inside(out_dir, rel)
@@ -151,6 +156,17 @@ def export_mjcf(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: bo
     # checked as written, before it replaces the file: a file MuJoCo refuses never lands
     return atomic.write_text(xml_path, _header(build.notes, fixed) + own_folder_paths(build.xml) + "\n",
                              check=(lambda tmp: check_mjcf(tmp, urdf, initial, fixed_base=fixed, shown=xml_path)) if check else None)
+
+
+def solver_aids(xml_path: Path) -> list[SolverAid]:
+    """The solver aids an exported MJCF file carries in its custom text
+    :data:`~asset2sim.engines.mjcf.aids.AIDS_TEXT`, read back from the file ([] without it).
+
+    Raises:
+        XMLSecurityError, ET.ParseError, ValueError: the file is not an MJCF export (its XML or the aids' JSON).
+    """
+    text = parse_xml_file(xml_path).find(f"custom/text[@name='{AIDS_TEXT}']")
+    return [] if text is None else [SolverAid.model_validate(a) for a in json.loads(text.get("data", "[]"))]
 
 
 _FILE_ATTR = re.compile(r'(<(?:mesh|texture|hfield|skin)\b[^>]*?\bfile=")(?![/\\])')

@@ -27,7 +27,7 @@ Conventions (MJCF -> URDF):
   ``stiffness`` about ``springref`` is a declared spring; the largest force of
   the joint's ``actuatorfrcrange`` or of an actuator driving it is the limit's
   effort. ``armature``, tendons and equality constraints have no URDF element
-  and are noted.
+  and are noted, and so is each solver aid an asset2sim export names (:mod:`asset2sim.engines.mjcf.aids`).
 - A geom with ``contype`` and ``conaffinity`` 0 is a visual; any other is a
   collision, and a body without visual geoms shows its collision geoms. Boxes,
   spheres and cylinders stay primitives; capsules, ellipsoids and meshes are
@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from asset2sim.engines.mjcf.aids import read_aids
 from asset2sim.engines.mjcf.base import load_mujoco
 from asset2sim.frames import axis_angle_matrix, quat_wxyz_matrix, rigid_inverse, rigid_matrix, translation_matrix
 from asset2sim.formats.mjcf import conventions
@@ -365,3 +366,5 @@ class _Reader:
             self.notes.append(f"{m.ntendon} tendon(s) not carried (URDF has no element for them)")
         if m.neq:
             self.notes.append(f"{m.neq} equality constraint(s) not carried (URDF has no element for them)")
+        self.notes += [f"solver aid {a.kind} on {a.element!r} {a.written} ({a.criterion}; {a.effect}): not carried, an aid of "
+                       "the MJCF solver only" for a in read_aids(m)]

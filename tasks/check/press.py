@@ -1,0 +1,104 @@
+"""A hand's press against a stop: a handled part moved from its state into each end of its range by a hand at its grasp point at the hand's speed (0.25 m/s at the grasp point, operability's hand: a force-limited
+velocity drive of the engine), then pressed there with a force rising over :data:`RAMP_TIME` to a given top (the top
+of its operating range, or 20 N) and held for :data:`HOLD_TIME`, on the stroke runner.
+
+It passes when the engine stays stable (every reading finite, the part never faster than :data:`DIVERGED` times the
+hand's speed), the part goes at most :data:`BOUND` past the limit it is pressed into (1 degree, 2 mm) and, where
+another link stops it first, the deepest self-contact point at the end of the press lies at most :data:`SINK`
+(2 mm) deeper than at the initial state.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from asset2sim.engines.base import SimSession
+from asset2sim.tasks.check.stroke import run_stroke
+from asset2sim.tasks.check.sweep import HOLD_FORCE
+
+#: How far past a limit a pressed part may go (rad revolute, m prismatic), and how much deeper than at its initial
+#: state its deepest contact may sink where geometry stops it first (m).
+BOUND = {"revolute": math.radians(1.0), "prismatic": 2e-3}
+SINK = 2e-3
+#: The hand has reached the stop within this share of the range (or when twice the time at its speed is up: geometry
+#: stopped it first).
+REACHED = 0.005
+#: A part faster than this many times the hand's speed has left the hand: the engine diverged.
+DIVERGED = 50.0
+#: How long the hand presses on once the part no longer moves toward the stop (s), and the time its force takes to
+#: rise from 0 (operability's hand, :class:`~asset2sim.tasks.check.operability.OperabilityConfig` ``ramp_time``).
+HOLD_TIME = 0.5
+RAMP_TIME = 0.25
+
+
+@dataclass(frozen=True)
+class Press:
+    """One press of ``joint`` toward its ``limit`` (rad or m) with at most ``effort`` (N*m or N): the farthest it
+    went ``past`` the limit (rad or m; <= 0 inside it), how much deeper its deepest self-contact ``sank`` (m) and
+    whether the engine ``diverged``."""
+
+    joint: str
+    limit: float
+    effort: float
+    past: float
+    sank: float
+    diverged: bool
+    bound: float
+
+    @property
+    def passed(self) -> bool:
+        return not self.diverged and self.past <= self.bound and self.sank <= SINK
+
+
+def press_joint(session: SimSession, joint: str, limit: float, effort: float, speed: float) -> Press:
+    """Move ``joint`` of an open session from its current state to ``limit`` (rad or m, one end of its range) at ``speed`` (rad/s or m/s) with at most ``effort`` (N*m or N), then press it there with ``effort``
+    (module docstring), the other joints held still (``HOLD_FORCE`` beyond their friction); the state is restored
+    afterwards.
+
+    Raises:
+        EngineUnsupported: the engine cannot apply a joint effort or save its state.
+    """
+    lower, upper = session.joint_limits[joint]
+    s = 1.0 if abs(limit - upper) < abs(limit - lower) else -1.0
+    q0 = session.joint_state(joint)[0]
+    dt = session.options.conventions.timestep
+    approach = int(round(2.0 * abs(limit - q0) / speed / dt))  # steps the hand has to reach the stop
+    steps = approach + int(round((RAMP_TIME + HOLD_TIME) / dt)) + 1
+    pressing: list[int] = []  # the step the hand began to press
+    far = [-np.inf, False]  # the farthest past the limit, diverged
+
+    def law(k, q, qd):  # at the hand's speed to the stop, then its force rising over RAMP_TIME
+        if not pressing and (s * (q - limit) >= -REACHED * (upper - lower) or k >= approach):
+            session.release_joint(joint)
+            pressing.append(k)
+        if pressing:
+            session.apply_joint_effort(joint, s * effort * min(1.0, (k - pressing[0] + 1) * dt / RAMP_TIME))
+        else:
+            session.drive_joint(joint, s * speed, effort)
+
+    def record(k, q, qd):
+        if not (np.isfinite(q) and np.isfinite(qd)) or abs(qd) > DIVERGED * speed:
+            far[1] = True
+            return True
+        far[0] = max(far[0], s * (q - limit))
+        return False
+
+    held = [o for o in session.joint_types if o != joint]  # the other parts held where they are (operability's)
+    def deepest() -> float:
+        return max((p.max_depth for p in session.self_penetration()[1]), default=0.0)
+
+    saved = session.save_state()
+    try:
+        deep = deepest()
+        run_stroke(session, joint, steps, law, record, held, HOLD_FORCE)
+        sank = deepest() - deep if not far[1] else float("nan")
+    finally:
+        for o in [joint, *held]:
+            session.release_joint(o)
+        session.restore_state(saved)
+        session.discard_state(saved)
+    kind = session.joint_types.get(joint, "revolute")
+    return Press(joint, limit, effort, float(far[0]), float(sank), bool(far[1]), BOUND.get(kind, BOUND["revolute"]))
