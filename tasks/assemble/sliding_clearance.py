@@ -248,6 +248,18 @@ def _swept_gap(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis: np.ndarra
     return float(gaps[a, i]), float(angles[a]), (axes[a, i] if ahead[a, i] >= behind[a, i] else -axes[a, i])
 
 
+def _still_axes_gap(p: np.ndarray, q: np.ndarray, origin: np.ndarray, turns: np.ndarray, nq: np.ndarray) -> float:
+    """A lower bound (m) of :func:`_swept_gap`'s least gap of ``p`` (k, 3) turned by ``turns`` (A, 3, 3) about
+    ``origin`` (3,) against ``q`` (l, 3): the same over ``q``'s face normals ``nq`` (F, 3) alone, which do not turn
+    (a gap over some of the axes is at most the gap over all); at a fraction of its cost."""
+    if not len(turns):
+        return np.inf
+    sp = np.matmul(np.matmul(p - origin, turns.transpose(0, 2, 1)) + origin, nq.T)  # (A, k, F)
+    sq = q @ nq.T  # (l, F)
+    gaps = np.maximum(sq.min(axis=0) - sp.max(axis=1), sp.min(axis=1) - sq.max(axis=0))  # (A, F)
+    return float(gaps.max(axis=1).min())
+
+
 def _clear_turning_piece(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis: np.ndarray, angles: np.ndarray,
                          turns: np.ndarray | None = None, normals: tuple[np.ndarray, np.ndarray] | None = None
                          ) -> tuple[np.ndarray, float, float] | None:
@@ -260,6 +272,8 @@ def _clear_turning_piece(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis:
     turns = _turns(axis, angles) if turns is None else turns
     normals = (_normals(p), _normals(q)) if normals is None else normals
     if _sat_on(p, q, np.vstack(normals))[0] < RUNNING_CLEARANCE - 1e-9:
+        return None
+    if _still_axes_gap(p, q, origin, turns, normals[1]) >= SWEPT_TRIGGER + 1e-9:  # the same answer, cheaper
         return None
     g, a, n = _swept_gap(p, q, origin, axis, angles, turns, normals)
     least = g
