@@ -185,13 +185,13 @@ def build_safe(folder: Path) -> Path:
 MODELLED_OVERLAP = 0.006
 
 
-def build_french_door_oven(folder: Path) -> Path:
+def build_french_door_oven(folder: Path, overlap: float = MODELLED_OVERLAP) -> Path:
     """A French-door wall oven (0.8 x 0.8 x 0.6 units carcass) whose two doors (``door``, revolute 0-1.57 rad about
-    vertical axes at the outer edges) meet at the middle overlapping :data:`MODELLED_OVERLAP` units, as
-    PartNet-Mobility's meshes often overlap where parts meet: no state of the closed band separates them (closing
-    one door slides its edge along the other's)."""
+    vertical axes at the outer edges) meet at the middle overlapping ``overlap`` units, as PartNet-Mobility's meshes
+    often overlap where parts meet: no state of the closed band separates them (closing one door slides its edge
+    along the other's)."""
     b = _Builder("u_french_oven", "Oven")
-    w, h, d, t, o = 0.4, 0.4, 0.3, 0.04, MODELLED_OVERLAP / 2
+    w, h, d, t, o = 0.4, 0.4, 0.3, 0.04, overlap / 2
     b.body("link_2", "oven_body", _carcass(b, "oven_body", w, h, d, t, _DARK))
     b.moving("link_0", "hinge", "door", [b.part("door", box_xyz(-w, o, -h, h, d, d + 0.04), _STEEL)],
              "revolute", "link_2", (-w, 0.0, d), (0.0, -1.0, 0.0), 0.0, 1.57)

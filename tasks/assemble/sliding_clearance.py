@@ -191,7 +191,8 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
                     except (QhullError, ValueError):
                         continue
                     boxes[ln][i] = pieces[ln][i].points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
-                    pairs.add((ln, other))
+                    if joint is not None:  # a sliding pair (a fixed one slides along nothing)
+                        pairs.add((ln, other))
                     notes.append(f"link {ln!r}: collision piece {i} given {used * 1000:.2g} mm {RUNNING_CLEARANCE_NOTE} against "
                                  f"{other!r} (gap {g * 1000:.2g} mm, {why})")
     return pairs

@@ -42,6 +42,18 @@ def test_a_panel_sunk_into_a_rail_both_fixed_to_the_body_is_cleared(refine_once)
     assert len(notes) == 1 and notes[0].startswith("link 'link_2'"), r.state.collision_changes  # the smaller part squeezed
 
 
+def test_an_overlap_deeper_than_a_modelling_one_is_left_with_the_reason(tmp_path, refine_once):
+    """Doors 30 mm inside each other (object units) are no modelling overlap: the writer leaves them, and the report
+    says which pair is left, how deep, over which intervals its joints were searched, and that no state of them
+    separates the pair."""
+    r = refine_once(build_french_door_oven(tmp_path / "oven", overlap=0.03), "A wall oven with both doors closed.",
+                    extras=False).report
+    assert r.failure_mode == "unresolved_penetration", (r.failure_mode, r.readiness)
+    (left,) = [c for c in r.state.collision_changes if "left at the state found" in c]
+    assert left.startswith(f"self-penetration {r.state.phi_result * 1000:.3g} mm left at the state found: 'link_0' and 'link_1' ")
+    assert "joint_0 over [0, " in left and "joint_1 over [0, " in left and "separates them" in left, left
+
+
 def _pieces(folder) -> tuple[dict[str, np.ndarray], list[str]]:
     """link -> the vertices (k, 3) of its one collision piece in the object's frame at the modelled pose; notes."""
     model = urdf.read_urdf(folder / "mobility.urdf")
