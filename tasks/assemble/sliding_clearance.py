@@ -155,7 +155,7 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
     that slides is squeezed back (:func:`clear_sliding_contact`) by the first
     joint in file order that moves it, once per pair of pieces; and likewise
     every contact between two links only fixed joints join (:func:`_fixed_pairs`:
-    nothing moves, so nothing is a stop), the first in file order squeezed. Notes
+    nothing moves, so nothing is a stop), the smaller of the two squeezed. Notes
     name each change; returns the (moving link, other link) pairs given clearance."""
     pairs: set[tuple[str, str]] = set()
     poses = model.link_poses(reference_state(model))

@@ -41,7 +41,8 @@ def refine_state_with_decomposition(candidate: Candidate, closed_out, bands, con
 def _left_note(candidate: Candidate, st, closed_out, bands, intervals, config: RefineConfig, ws: Workspace) -> str:
     """Why the search left Phi above the tolerance: each of the (up to 3) deepest link pairs at the state found
     (``st.result``) with its depth, and the joints on its kinematic path with the interval each was searched over
-    (the requested band within the limits); none of those states, nor a collision piece change, cleared it."""
+    (the requested band within the limits); none of those states, nor a collision piece change (where the repair is
+    on), cleared it."""
     allowed = refine_state.allowed_intervals(closed_out, estimate.band_intervals(bands, intervals))
     with ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=st.result,
                                                           conventions=config.sim)) as sess:
@@ -53,7 +54,7 @@ def _left_note(candidate: Candidate, st, closed_out, bands, intervals, config: R
         said.append(f"'{c.link_a}' and '{c.link_b}' {c.depth * 1000:.3g} mm ({where})")
     return (f"self-penetration {st.phi_result * 1000:.3g} mm left at the state found: " + "; ".join(said)
             + f". No state of those intervals (the band asked within the limits; {st.evaluations} states tried) separates "
-            "them, and no collision piece change lowered it")
+            + ("them, and no collision piece change lowered it" if config.convex_decomposition else "them (collision repair off)"))
 
 
 def _refine(candidate: Candidate, closed_out, bands, config, ws: Workspace, say, proposer, intervals, addressed):
