@@ -148,7 +148,7 @@ def refine_asset(
             write_report_json(work, report)
             extra_paths = extra_outputs.write_extras(work, report, att, log, reference, shown=out_dir, clips=config.clips, media=media) if extras else {}
             extra_paths.update(host)
-            output_folder.merge_timings(work, {"stage_cpu_seconds": log.cpu})  # beside the wall times, unhashed
+            output_folder.merge_timings(work, {"stage_cpu_seconds": log.cpu})
             write_completion_marker(owner.root, asset.input_hash, chash, owner=owner)  # last, once every file exists
         except StepBudgetExceeded as exc:
             owner.abandon()

@@ -274,7 +274,8 @@ def _clear_turning_piece(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis:
     normals = (_normals(p), _normals(q)) if normals is None else normals
     if _sat_on(p, q, np.vstack(normals))[0] < RUNNING_CLEARANCE - 1e-9:
         return None
-    if _still_axes_gap(p, q, origin, turns, normals[1]) >= SWEPT_TRIGGER + 1e-9:  # the same answer, cheaper
+    # the answer below, cheaper where it is None
+    if _still_axes_gap(p, q, origin, turns, normals[1]) >= SWEPT_TRIGGER + 1e-9:
         return None
     g, a, n = _swept_gap(p, q, origin, axis, angles, turns, normals)
     least = g
