@@ -12,15 +12,18 @@ Progress = Callable[[str, str], None]
 
 class StageLog:
     """Progress messages (``say(stage, message)``) and wall time per stage (``times``: stage -> s, summed
-    over repeats; :meth:`lap` charges the time since the previous lap)."""
+    over repeats; :meth:`lap` charges the time since the previous lap), and this process's CPU time likewise
+    (``cpu``: stage -> s, every thread's: what a stage costs on a machine other work shares)."""
 
     def __init__(self, progress: Progress | None):
         self.say: Progress = progress or (lambda stage, msg: None)
         self.times: dict[str, float] = {}
-        self._t = time.perf_counter()
+        self.cpu: dict[str, float] = {}
+        self._t, self._c = time.perf_counter(), time.process_time()
 
     def lap(self, stage: str) -> None:
         """Charge the time since the previous lap to ``stage``."""
-        now = time.perf_counter()
+        now, cpu = time.perf_counter(), time.process_time()
         self.times[stage] = self.times.get(stage, 0.0) + (now - self._t)
-        self._t = now
+        self.cpu[stage] = self.cpu.get(stage, 0.0) + (cpu - self._c)
+        self._t, self._c = now, cpu

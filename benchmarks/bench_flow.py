@@ -1,6 +1,7 @@
 """Throughput of the dataset flow on real objects, the verdict's phase and the media phase apart.
 
-    .venv/bin/python benchmarks/bench_flow.py [--requests 5] [--workers 2] [--work DIR] [--media now|deferred]
+    .venv/bin/python benchmarks/bench_flow.py [--requests 5] [--workers 2] [--work DIR] [--media now|deferred] [--cache off]
+    .venv/bin/python benchmarks/bench_flow.py --requests 1 --cache off      # objects as unseen: each refined once, cold
     .venv/bin/python benchmarks/bench_flow.py --work DIR --report-only      # the tail of a kept run, again
 
 1. Builds a dataset of the dev rows (``../shared/datasets/partnet_mobility/manifest.csv``) times ``--requests``
@@ -23,7 +24,14 @@
    extra round (the catalog's ``postcheck_rounds`` and ``extra_rounds``: :func:`rounds`); and the CPU of every process
    of the flow by role (driver, Prefect server, Dask workers, stage servers ...: ``flow_cpu.FlowCpu``) beside the
    refine children's, over the first phase from the flow's start to its last row and from its first row to its last,
-   with the share of the machine that refines nothing; writes ``DIR/summary.json``.
+   with the share of the machine that refines nothing; and the :data:`SLOWEST` slowest assets (wall) with the stage
+   that took most of each, in wall and in CPU s (``timings.json``'s ``stage_seconds`` and ``stage_cpu_seconds``);
+   writes ``DIR/summary.json``.
+
+``--requests 1 --cache off`` refines objects as a user meets them for the first time: one request each (the row's
+own) and the on-disk cache off (``ASSET2SIM_CACHE=off``, :mod:`asset2sim.array_cache`), so no geometry, piece or
+CoACD decomposition is reused between the requests of an object or between the flow's stages (by default the run
+has an empty cache of its own, which an object's later requests and its metrics stage read).
 
 Goals: >= 2,000 assets an hour for the first phase on 2 cores, post-check rounds median 1, p99 <= 6x and max <= 10x
 the median, less than 8 % of the machine on processes that refine nothing. Numbers from a loaded machine (see the
@@ -54,6 +62,8 @@ from flow_cpu import FlowCpu, print_report  # noqa: E402
 
 #: An asset above this many times the median first-phase time (wall or CPU) is listed in the tail.
 TAIL_FACTOR = 3.0
+#: The slowest assets (wall) listed with the stage that took most of each.
+SLOWEST = 5
 
 #: The requests of each object after its own (``{n}``: the category's noun).
 VARIANTS = ("A {n}.", "A {n}, halfway open.", "A {n}, fully open.", "A small {n}.")
@@ -122,24 +132,26 @@ def tail(df, factor: float = TAIL_FACTOR) -> dict:
                      "p99_over_median": p99 / med if med else None,
                      "max_over_median": max(vals.values(), default=0.0) / med if med else None}
     rows = {r["asset_id"]: r for r in df.to_dict("records")}
-    listed = []
-    for aid in sorted(times, key=lambda a: -cpu[a]):
-        w, c = wall[aid] / (out["wall"]["median"] or 1.0), cpu[aid] / (out["cpu"]["median"] or 1.0)
-        if w <= factor and c <= factor:
-            continue
+
+    def entry(aid: str) -> dict:
         folder = Path(str(rows[aid].get("out_dir") or ""))
-        stages, coacd = {}, 0
+        stages, stages_cpu, coacd = {}, {}, 0
         try:
-            stages = json.loads((folder / "timings.json").read_text())["stage_seconds"]
+            timings = json.loads((folder / "timings.json").read_text())
+            stages, stages_cpu = timings["stage_seconds"], timings.get("stage_cpu_seconds") or {}
             notes = json.dumps(json.loads((folder / "report.json").read_text()).get("state", {}).get("collision_changes", []))
             coacd = sum(int(n) for n in re.findall(r"replaced by (\d+) convex pieces \(CoACD\)", notes))
         except (OSError, ValueError, KeyError, AttributeError):
             pass
         top = max(stages.items(), key=lambda kv: kv[1], default=("-", 0.0))
-        listed.append({"asset": aid, "wall_s": wall[aid], "wall_x": w, "cpu_s": cpu[aid], "cpu_x": c,
-                       "failure_mode": rows[aid].get("failure_mode") or "none", "top_stage": top[0], "top_stage_s": top[1],
-                       "coacd_pieces": coacd})
-    out["above"] = listed
+        top_cpu = max(stages_cpu.items(), key=lambda kv: kv[1], default=("-", 0.0))
+        return {"asset": aid, "wall_s": wall[aid], "wall_x": wall[aid] / (out["wall"]["median"] or 1.0), "cpu_s": cpu[aid],
+                "cpu_x": cpu[aid] / (out["cpu"]["median"] or 1.0), "failure_mode": rows[aid].get("failure_mode") or "none",
+                "top_stage": top[0], "top_stage_s": top[1], "top_cpu_stage": top_cpu[0], "top_cpu_stage_s": top_cpu[1],
+                "coacd_pieces": coacd}
+
+    out["above"] = [e for e in map(entry, sorted(times, key=lambda a: -cpu[a])) if e["wall_x"] > factor or e["cpu_x"] > factor]
+    out["slowest"] = [entry(a) for a in sorted(times, key=lambda a: -wall[a])[:SLOWEST]]
     return out
 
 
@@ -176,11 +188,14 @@ def print_tail(t: dict, factor: float = TAIL_FACTOR) -> None:
         q = t[name]
         print(f"  per asset {name}: median {q['median']:.2f} s, p99 {q['p99']:.2f} s = {q['p99_over_median'] or 0:.2f}x, "
               f"max {q['max']:.2f} s = {q['max_over_median'] or 0:.2f}x the median")
-    print(f"  above {factor:g}x the median (wall or CPU), slowest CPU first:")
-    for e in t["above"]:
-        print(f"    {e['asset']:<12} wall {e['wall_s']:6.2f} s ({e['wall_x']:4.1f}x) CPU {e['cpu_s']:6.2f} s ({e['cpu_x']:4.1f}x) "
-              f"{e['failure_mode']:<18} longest stage {e['top_stage']} {e['top_stage_s']:.2f} s"
-              + (f", CoACD pieces kept {e['coacd_pieces']}" if e["coacd_pieces"] else ""))
+    for title, listed in ((f"above {factor:g}x the median (wall or CPU), slowest CPU first", t["above"]),
+                          (f"the {SLOWEST} slowest (wall)", t.get("slowest", []))):
+        print(f"  {title}:")
+        for e in listed:
+            print(f"    {e['asset']:<12} wall {e['wall_s']:6.2f} s ({e['wall_x']:4.1f}x) CPU {e['cpu_s']:6.2f} s ({e['cpu_x']:4.1f}x) "
+                  f"{e['failure_mode']:<18} longest stage {e['top_stage']} {e['top_stage_s']:.2f} s"
+                  + (f", most CPU {e['top_cpu_stage']} {e['top_cpu_stage_s']:.2f} s" if e.get("top_cpu_stage", "-") != "-" else "")
+                  + (f", CoACD pieces kept {e['coacd_pieces']}" if e["coacd_pieces"] else ""))
 
 
 def rounds(df) -> dict:
@@ -285,6 +300,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--media", choices=("deferred", "now"), default="deferred",
                     help="deferred (default): run.extras deferred; now: media with each asset")
+    ap.add_argument("--cache", choices=("fresh", "off"), default="fresh",
+                    help="fresh (default): an empty on-disk cache of the run's own; off: none (ASSET2SIM_CACHE=off)")
     ap.add_argument("--work", type=Path, default=None, help="work folder (default: a temporary one, removed)")
     ap.add_argument("--report-only", action="store_true", help="with --work: print the tail of the run kept there")
     args = ap.parse_args(argv)
@@ -293,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
             ap.error("--report-only needs --work DIR")
         return report_only(args.work)
     work = args.work or Path(tempfile.mkdtemp(prefix="a2s-bench-flow-"))
-    os.environ.setdefault("ASSET2SIM_CACHE", str(work / "cache"))  # an empty on-disk cache of its own
+    os.environ.setdefault("ASSET2SIM_CACHE", "off" if args.cache == "off" else str(work / "cache"))  # else empty, its own
     try:
         rows = build_dataset(args.manifest, work / "raw", max(1, min(len(VARIANTS) + 1, args.requests)))
         catalog = write_catalog(work, args.workers, args.media)
@@ -302,8 +319,8 @@ def main(argv: list[str] | None = None) -> int:
         from asset2sim.flows.catalog_config import load_catalog
         from asset2sim.flows.refine_flow import run_refine_flow
 
-        print(f"dataset: {len(rows)} assets ({args.requests} requests x {len(rows) // max(1, args.requests)} objects); "
-              f"load before: {_load()}", flush=True)
+        print(f"dataset: {len(rows)} assets ({args.requests} requests x {len(rows) // max(1, args.requests)} objects), "
+              f"on-disk cache {os.environ['ASSET2SIM_CACHE']}; load before: {_load()}", flush=True)
         t0 = time.perf_counter()
         with FlowCpu() as cpu, flow_progress.listening(_phase_marks(cpu)):
             summary = run_refine_flow(catalog, workers=args.workers)
@@ -326,7 +343,7 @@ def main(argv: list[str] | None = None) -> int:
                "per_asset_s": {"median": med, "p90": p90, "p99": p99, "p99_over_median": p99 / med if med else None},
                "stages_s": {k: dict(zip(("median", "p90", "p99"), quantiles(v))) for k, v in sorted(stages.items())},
                "failure_modes": df["failure_mode"].fillna("none").value_counts().to_dict(), "tail": tail(df),
-               "workers": args.workers, "media": args.media, "load_after": _load(),
+               "workers": args.workers, "media": args.media, "cache": os.environ["ASSET2SIM_CACHE"], "load_after": _load(),
                "order": order_check(df, work / "raw", args.workers, assets_s), "rounds": rounds(df),
                "cpu": {k: cpu.report(a, "last row") for k, a in (("first_phase", "start"), ("assets", "first row"))
                        if a in cpu.snapshots and "last row" in cpu.snapshots}}

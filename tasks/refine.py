@@ -156,6 +156,7 @@ def refine_asset(
                                                               clips=config.clips, media=media))
             report.stage_seconds = log.times
             write_report_json(work, report)  # once, every measurement and note in it
+            output_folder.merge_timings(work, {"stage_cpu_seconds": log.cpu})
             write_completion_marker(owner.root, asset.input_hash, chash, owner=owner)  # last, once every file exists
         except StepBudgetExceeded as exc:
             owner.abandon()

@@ -181,6 +181,41 @@ def build_safe(folder: Path) -> Path:
     return b.write(folder)
 
 
+#: How far (units) the parts of :func:`build_french_door_oven` and :func:`build_safe_with_panels` overlap as modelled.
+MODELLED_OVERLAP = 0.006
+
+
+def build_french_door_oven(folder: Path, overlap: float = MODELLED_OVERLAP) -> Path:
+    """A French-door wall oven (0.8 x 0.8 x 0.6 units carcass) whose two doors (``door``, revolute 0-1.57 rad about
+    vertical axes at the outer edges) meet at the middle overlapping ``overlap`` units, as PartNet-Mobility's meshes
+    often overlap where parts meet: no state of the closed band separates them (closing one door slides its edge
+    along the other's)."""
+    b = _Builder("u_french_oven", "Oven")
+    w, h, d, t, o = 0.4, 0.4, 0.3, 0.04, overlap / 2
+    b.body("link_2", "oven_body", _carcass(b, "oven_body", w, h, d, t, _DARK))
+    b.moving("link_0", "hinge", "door", [b.part("door", box_xyz(-w, o, -h, h, d, d + 0.04), _STEEL)],
+             "revolute", "link_2", (-w, 0.0, d), (0.0, -1.0, 0.0), 0.0, 1.57)
+    b.moving("link_1", "hinge", "door", [b.part("door", box_xyz(-o, w, -h, h, d, d + 0.04), _STEEL)],
+             "revolute", "link_2", (w, 0.0, d), (0.0, 1.0, 0.0), 0.0, 1.57)
+    return b.write(folder)
+
+
+def build_safe_with_panels(folder: Path) -> Path:
+    """A variant of :func:`build_safe` whose top rail (``frame``, 0.1 units tall across the front above the door) and
+    the lock panel on it (``panel``) are links of their own, each fixed to the body, the panel sunk
+    :data:`MODELLED_OVERLAP` units into the rail: no joint moves the two apart, so no state separates them."""
+    b = _Builder("u_safe_panels", "Safe")
+    w, h, d, t, o = 0.4, 0.45, 0.4, 0.06, MODELLED_OVERLAP
+    b.body("link_3", "safe_body", _carcass(b, "safe_body", w, h, d, t, _GREY))
+    b.moving("link_0", "hinge", "door", [b.part("door", box_xyz(-w, w, -h, h - 0.1, d, d + 0.06), _GREY)],
+             "revolute", "link_3", (-w, 0.0, d + 0.03), (0.0, -1.0, 0.0), 0.0, 1.75)
+    b.moving("link_1", "static", "frame", [b.part("frame", box_xyz(-w, w, h - 0.1, h, d, d + 0.06), _DARK)],
+             "fixed", "link_3", (0.0, 0.0, 0.0), None)
+    b.moving("link_2", "static", "panel", [b.part("panel", box_xyz(-0.1, 0.1, h - 0.08, h - 0.02, d + 0.06 - o, d + 0.08), _STEEL)],
+             "fixed", "link_3", (0.0, 0.0, 0.0), None)
+    return b.write(folder)
+
+
 def build_barred_safe(folder: Path) -> Path:
     """A variant of :func:`build_safe` built to fail: a bar of the body
     (0.1 x 0.06 units in section, on two posts) runs across the front 2 cm

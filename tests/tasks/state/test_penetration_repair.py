@@ -4,6 +4,8 @@ runs again; the report gives the before and after."""
 
 from __future__ import annotations
 
+import csv
+
 import pytest
 
 from asset2sim.schemas.config import RefineConfig
@@ -137,4 +139,23 @@ def test_a_tiny_stapler_gets_the_decomposition_its_regular_size_gets(tmp_path):
     r = refine_asset(SHARED / "103275", "A tiny stapler.", tmp_path / "out", extras=False).report
     assert r.failure_mode == "none", r.failure_mode
     assert any("CoACD" in c for c in r.state.collision_changes), r.state.collision_changes
+    assert r.state.phi_result <= RefineConfig().penetration_tolerance
+
+
+@needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own, CoACD counted
+def test_the_repair_decomposes_no_piece_an_earlier_change_already_cleared(tmp_path, monkeypatch):
+    """Stapler 102990's shut repair: once the arm's piece (original-6) is decomposed, the base's piece original-22
+    no longer overlaps the arm at all, so no decomposition of it can lower the pair's penetration; it used to be
+    decomposed anyway (6 s of CPU, then rejected). The repair's result is the same."""
+    from asset2sim.tasks.state import collision
+
+    decomposed: list[str] = []
+    real = collision.decompose_mesh
+    monkeypatch.setattr(collision, "decompose_mesh", lambda path: decomposed.append(path.name) or real(path))
+    prompt = next(row["prompt"] for row in csv.DictReader(open(SHARED / "manifest.csv", newline="")) if row["id"] == "102990")
+    r = refine_asset(SHARED / "102990", prompt, tmp_path / "out", extras=False).report
+    assert "original-22.obj" not in decomposed and {"original-6.obj", "original-20.obj"} <= set(decomposed), decomposed
+    changes = " ".join(r.state.collision_changes)
+    assert "original-6.obj replaced by 5 convex pieces" in changes and "original-20.obj replaced by 13 convex pieces" in changes
     assert r.state.phi_result <= RefineConfig().penetration_tolerance
