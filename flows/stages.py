@@ -276,13 +276,16 @@ def stage_refine(
 
 def refined_evaluation(out_dir: str | Path, prompt: str, category: str | None, reference_dir: str | None) -> Evaluation | None:
     """The :class:`~asset2sim.tasks.evaluation.evaluate.Evaluation` in ``out_dir`` (``evaluation.json``) when it is
-    the one the metrics stage would make (PyBullet only, same prompt, category and reference); else None."""
+    the one the metrics stage would make (PyBullet's columns in it, the same prompt and reference, the category asked
+    for when one was); else None. The refine's record is the verdict (one reading of an object): the metrics stage
+    presents it rather than measuring the folder again."""
     try:
         ev = Evaluation.model_validate_json((Path(out_dir) / EVALUATION_NAME).read_text())
     except (OSError, ValueError):
         return None
     ref = str(Path(reference_dir).resolve()) if reference_dir else None
-    if ev.engines != ["pybullet"] or ev.prompt != (prompt or None) or ev.category != category or ev.reference != ref:
+    if ("pybullet" not in ev.engines or ev.prompt != (prompt or None) or (category is not None and ev.category != category)
+            or ev.reference != ref):
         return None
     return ev
 

@@ -46,6 +46,7 @@ from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.interpret.part_priors import task_relevant_joints as part_task_joints
 from asset2sim.tasks.interpret.size_priors import scaled_mass_range, size_mass_prior
+from asset2sim.tasks.interpret.request import request_warnings
 from asset2sim.tasks.geometry.urdf_closed import measure_closed_ends
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
@@ -190,7 +191,7 @@ def _prompt_alignment(ctx: EstimationContext, model: UrdfModel, state: dict[str,
                              typical_largest=dims[0] if dims else None, size_factor=float(prior.get("factor", 1.0)),
                              joint_checks=checks, state_requested=bool(spec.joint_states), unmatched_requests=unmatched,
                              text=spec.text, understood=spec.understood,
-                             warnings=list(spec.warnings) + list(resolution.warnings if resolution is not None else []))
+                             warnings=request_warnings(spec, unmatched, ctx.category) + list(resolution.warnings if resolution is not None else []))
     m.details.update({"size_class": spec.size_class, "category": ctx.category, "variant": prior.get("variant"),
                       "extent_state": "closed state", "prior_note": prior.get("note")})
     return m
