@@ -29,7 +29,7 @@ TEST_ENV := env -u PYTHONDONTWRITEBYTECODE
 test: ## the fast tiers: unit and integration tests (end-to-end tests, marked slow, left out) on TEST_WORKERS processes
 	$(TEST_ENV) $(PY) -m pytest -m "not slow" -q -n $(TEST_WORKERS) --dist loadfile
 
-test-all: ## the whole suite, every tier (what CI runs), on TEST_WORKERS processes
+test-all: ## the whole suite, every tier (the end-to-end tier included; before a release), on TEST_WORKERS processes
 	$(TEST_ENV) $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 LOWER_VENV ?= .venv-lower

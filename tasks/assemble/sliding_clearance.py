@@ -152,7 +152,9 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
     link a movable joint moves and a link it does not move (parent-child
     pairs excepted), measured at :func:`reference_state`: each moving piece in
     contact with an overlap of at most :data:`MODELLED_OVERLAP` along a face
-    that slides is squeezed back (:func:`clear_sliding_contact`) by the first
+    that slides (at most :data:`TOUCHING_OVERLAP` against one of its own
+    ancestors: a part deeper inside the link that carries it, a latch in the
+    body its lid is hinged to, is the state stage's collision repair) is squeezed back (:func:`clear_sliding_contact`) by the first
     joint in file order that moves it, once per pair of pieces; and likewise
     every contact between two links only fixed joints join (:func:`_fixed_pairs`:
     nothing moves, so nothing is a stop), the smaller of the two squeezed. Notes
@@ -162,12 +164,22 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
     done: set[tuple[str, int, str, int]] = set()
     boxes = {ln: [(p.points @ poses[ln][:3, :3].T + poses[ln][:3, 3]) for p in pl] for ln, pl in pieces.items()}
     still = lambda c: np.zeros(3)  # noqa: E731  a point of a pair no joint moves apart
+    parent_of = {j.child: j.parent for j in model.joints}
+
+    def ancestors(link: str) -> set[str]:
+        out: set[str] = set()
+        while link in parent_of and parent_of[link] not in out:
+            link = parent_of[link]
+            out.add(link)
+        return out
+
     moving = [(f"sliding along {j.name!r}", ln, others, j) for j, ln, others in _moving_links(model, pieces)]
     for why, ln, others, joint in moving + [("no joint moves them apart", ln, others, None) for ln, others in _fixed_pairs(model, pieces)]:
         inv = np.linalg.inv(poses[ln])
         velocity = still if joint is None else joint_velocity(joint, inv @ poses[joint.child])
         for other in others:
             To = inv @ poses[other]
+            deepest = TOUCHING_OVERLAP if joint is not None and (other in ancestors(ln) or ln in ancestors(other)) else MODELLED_OVERLAP
             for k, Q in enumerate(pieces[other]):
                 qw = boxes[other][k]
                 for i, P in enumerate(pieces[ln]):
@@ -179,7 +191,7 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
                         continue  # bounding boxes apart by more than the clearance
                     try:
                         hit = clear_sliding_contact(P.points, Q.points @ To[:3, :3].T + To[:3, 3], velocity,
-                                                    deepest=MODELLED_OVERLAP)
+                                                    deepest=deepest)
                     except ValueError:
                         continue
                     if hit is None:

@@ -376,7 +376,8 @@ def test_sigterm_during_a_rerun_cleans_up_as_ctrl_c_does(tmp_path, box, monkeypa
     previous = signal.getsignal(signal.SIGTERM)
     assert cli.main(["refine", str(box), "-p", PROMPT, "--out", str(out), "--no-extras", "--force", "-q"]) == 143
     assert signal.getsignal(signal.SIGTERM) is previous  # the command's handler is gone with it
-    assert capsys.readouterr().err.strip().splitlines() == ["asset2sim refine: TERMINATED"]
+    lines = capsys.readouterr().err.strip().splitlines()  # the --force warning naming what a finished rerun replaces
+    assert lines[-1] == "asset2sim refine: TERMINATED" and all("which this run replaces" in x for x in lines[:-1]), lines
     assert not of.staging_folder(out).exists() and _tree(out) == before
 
 

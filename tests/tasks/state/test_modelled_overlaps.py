@@ -48,7 +48,9 @@ def test_an_overlap_deeper_than_a_modelling_one_is_left_with_the_reason(tmp_path
     separates the pair."""
     r = refine_once(build_french_door_oven(tmp_path / "oven", overlap=0.03), "A wall oven with both doors closed.",
                     extras=False).report
-    assert r.failure_mode == "unresolved_penetration", (r.failure_mode, r.readiness)
+    # the penetration tier fails; the rest tier, graded first, may fail before it (the doors pushing each other)
+    assert r.readiness["penetration"] is False and r.failure_mode in {"unresolved_penetration", "joint_not_held"}, (
+        r.failure_mode, r.readiness)
     (left,) = [c for c in r.state.collision_changes if "left at the state found" in c]
     assert left.startswith(f"self-penetration {r.state.phi_result * 1000:.3g} mm left at the state found: 'link_0' and 'link_1' ")
     assert "joint_0 over [0, " in left and "joint_1 over [0, " in left and "separates them" in left, left
