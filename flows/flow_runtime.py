@@ -104,18 +104,16 @@ def _prefect_api_url() -> str | None:
 def prefect_api_for_run(project_root: Path | str):
     """Yield the Prefect API URL of one flow run: the configured ``PREFECT_API_URL``, else a temporary server stopped
     when the block ends (main thread only). RuntimeError: it did not start (log: ``<project>/.prefect/server.log``)."""
-    from prefect.settings import (
-        PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS,
-        temporary_settings,
-    )
+    from prefect.settings import temporary_settings
 
     url = PREFECT_API_URL.value()
     if url:
         yield str(url)
         return
-    proc, url = server.start_local_server(
-        project_root, timeout=float(PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS.value()), ephemeral=True
-    )
+    # Prefect's 20 s default is too short for a first start (it migrates a fresh SQLite database) on a busy machine:
+    # 180 s unless the user set PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS (prepare_prefect_environment's default)
+    timeout = float(os.environ.get("PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS", "180"))
+    proc, url = server.start_local_server(project_root, timeout=timeout, ephemeral=True)
     try:
         with temporary_settings({PREFECT_API_URL: url}):
             try:
