@@ -39,8 +39,8 @@ MAX_REFINE_STEPS = 3_000_000
 #: step; past it the refine ends with ``SIM_TIME_EXCEEDED``, failure mode ``timeout``, never another verdict): the
 #: step cap above bounds work in steps, but a step's cost grows with the object's bodies and contacts, and 32 revolute
 #: links step about 5 times slower than a box with a lid (``benchmarks/bench_refine_deadline.py``), so the step cap alone
-#: let one refine run 35-50 minutes. 15 minutes is ten times the longest refine of a dev object in every engine measured
-#: (Newton's 86 s, ``benchmarks/RESULTS.md``).
+#: let one refine run 35-50 minutes. 15 minutes is several times the longest refine of a dev object measured in any
+#: engine.
 MAX_REFINE_SECONDS = 900.0
 #: Simulated seconds every refine spends besides its rest tests, at least (robust rest's trials and the sweep of its
 #: one joint): the smallest refine of the dev objects simulated 11.8 s (the door 8877). A configuration whose time step
