@@ -48,7 +48,7 @@ def test_the_command_line_hides_them_unless_verbose(demo_root, tmp_path, verbose
 
 #: What refine itself prints on stdout: progress lines (``[  0.29s] extract ...``) and the summary's labels.
 REFINE_LINE = re.compile(r"^(\[\s*\d+\.\d+s\] |(asset|output|scale|total mass|initial state|task|penetration|stability|oscillation|"
-                         r"manipulation|operability|verdict|why it failed|NOT AS ASKED|engine|request|media|wall time|skipped|report) )")
+                         r"manipulation|operability|verdict|why it failed|NOT AS ASKED|engine|request|host|media|wall time|skipped|report) )")
 
 
 @pytest.mark.slow  # end to end: the command line

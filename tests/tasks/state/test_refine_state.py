@@ -127,11 +127,10 @@ def test_a_range_clipped_again_keeps_a_joint_inside_its_band_and_leaves_one_move
 
 @pytest.mark.slow  # end to end: a dev object refined on its own
 @needs_shared
-def test_a_fridge_asked_halfway_open_stays_halfway_when_its_limits_are_clipped_again(tmp_path):
-    """PartNet-Mobility 11178: the ground clearance changes the fridge's collision pieces after the state search,
-    the limits clipped again on them shorten the lower door's range (1.771 -> 1.752 rad), and the door placed at
-    the top of the halfway band stays inside it: the evaluation, measuring the output's own ranges, finds the
-    request met."""
+def test_a_fridge_asked_halfway_open_stays_halfway_after_the_ground_clearance(tmp_path):
+    """PartNet-Mobility 11178: the ground clearance changes the fridge's collision pieces after the state search; the
+    limits are not clipped again on them (a lift off the floor only shortens a piece from below), so the doors stay
+    inside the halfway band and the request is met."""
     from asset2sim.tasks.refine import refine_asset
 
     res = refine_asset(SHARED / "11178", "A refrigerator, halfway open.", tmp_path / "out", category="Refrigerator", media=False)
@@ -140,4 +139,3 @@ def test_a_fridge_asked_halfway_open_stays_halfway_when_its_limits_are_clipped_a
     assert all(lo - 1e-6 <= f <= hi + 1e-6 for f in r.opening_fractions.values()), r.opening_fractions
     assert r.metric("request_met").passed, r.metric("request_met").details
     assert r.failure_mode == "none", (r.failure_mode, r.readiness)
-    assert any("joint_1" in n and "kept inside its band (halfway)" in n for n in r.design_changes), r.design_changes
