@@ -132,7 +132,7 @@ def _decide(
         return None
     if entry.job_category != job.category or not job.finished:
         return None
-    rhash = run_hash(entry.input_hash, RefineConfig(**job.config), job.prompt, job.category)
+    rhash = run_hash(RefineConfig(**job.config), job.prompt, job.category)
     chash = config_hash_of(job, rhash)
     row = job.finished.get(result_key(job.asset_id, entry.input_hash, chash))
     if row is None:

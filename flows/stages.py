@@ -206,7 +206,7 @@ def prepare_asset(job: AssetJob) -> Prepared:
         rec.failure_mode, rec.error, rec.seconds = "invalid_input", f"{type(exc).__name__}: {exc}", time.perf_counter() - t0
         rec.cpu_seconds = time.thread_time() - c0
         return rec
-    rhash = run_hash(asset.input_hash, RefineConfig(**job.config), job.prompt, job.category)
+    rhash = run_hash(RefineConfig(**job.config), job.prompt, job.category)
     chash = job_config_hash(job, rhash)
     rec.ok = True
     rec.input_hash, rec.config_hash, rec.refine_config_hash = asset.input_hash, chash, rhash
