@@ -186,9 +186,9 @@ def decide_skips(
         return {aid: p for aid, p in pool.map(one, todo) if p is not None}
 
 
-def fingerprints(jobs: list[Any], threads: int = 8) -> dict[str, str | None]:
+def fingerprints(jobs: list[Any]) -> dict[str, str | None]:
     """:func:`input_fingerprint` of every job's asset folder (asset id -> fingerprint)."""
     if not jobs:
         return {}
-    with ThreadPoolExecutor(max_workers=max(1, min(threads, len(jobs)))) as pool:
+    with ThreadPoolExecutor(max_workers=max(1, min(8, len(jobs)))) as pool:
         return dict(zip((j.asset_id for j in jobs), pool.map(lambda j: input_fingerprint(j.asset_dir), jobs)))
