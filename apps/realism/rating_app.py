@@ -40,7 +40,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 from urllib.parse import parse_qs, quote
 
-from asset2sim.apps.realism.ratings import RatingError, RatingStore, Showing, check_rater, media_path, side
+from asset2sim.apps.realism.pair_set import media_path
+from asset2sim.apps.realism.ratings import RatingError, RatingStore, Showing, check_rater, side
 from asset2sim.inert import CONTENT_SECURITY_POLICY, CSP_META, html_text
 
 if TYPE_CHECKING:
