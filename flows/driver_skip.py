@@ -132,7 +132,7 @@ def _decide(
         return None
     if entry.job_category != job.category or not job.finished:
         return None
-    rhash = run_hash(entry.input_hash, RefineConfig(**job.config), job.prompt, job.category)
+    rhash = run_hash(RefineConfig(**job.config), job.prompt, job.category)
     chash = config_hash_of(job, rhash)
     row = job.finished.get(result_key(job.asset_id, entry.input_hash, chash))
     if row is None:
@@ -186,9 +186,9 @@ def decide_skips(
         return {aid: p for aid, p in pool.map(one, todo) if p is not None}
 
 
-def fingerprints(jobs: list[Any], threads: int = 8) -> dict[str, str | None]:
+def fingerprints(jobs: list[Any]) -> dict[str, str | None]:
     """:func:`input_fingerprint` of every job's asset folder (asset id -> fingerprint)."""
     if not jobs:
         return {}
-    with ThreadPoolExecutor(max_workers=max(1, min(threads, len(jobs)))) as pool:
+    with ThreadPoolExecutor(max_workers=max(1, min(8, len(jobs)))) as pool:
         return dict(zip((j.asset_id for j in jobs), pool.map(lambda j: input_fingerprint(j.asset_dir), jobs)))

@@ -63,14 +63,14 @@ def folder_listing(asset_dir: Path | str) -> tuple[str | None, int]:
     return hashlib.sha256("\n".join(sorted(items)).encode()).hexdigest(), size
 
 
-def start_order(jobs: Sequence[J], folder_of=lambda j: j.asset_dir, threads: int = 8) -> list[J]:
-    """``jobs`` in the order a flow starts them (module docstring): jobs whose folders (``folder_of(job)``) have
+def start_order(jobs: Sequence[J]) -> list[J]:
+    """``jobs`` in the order a flow starts them (module docstring): jobs whose folders (``job.asset_dir``) have
     the same key (:func:`folder_listing`) form a group; round ``r`` holds the ``r``-th job of every group, the groups by
     decreasing geometry bytes (:func:`folder_listing`), equal sizes in the order of their first job. Jobs without a
     key (a folder that cannot be listed: size 0; an asset given as one file: its size) form groups of their own."""
     jobs = list(jobs)
-    with ThreadPoolExecutor(max_workers=max(1, min(threads, len(jobs) or 1))) as pool:
-        listings = list(pool.map(lambda j: folder_listing(folder_of(j)), jobs))
+    with ThreadPoolExecutor(max_workers=max(1, min(8, len(jobs) or 1))) as pool:
+        listings = list(pool.map(lambda j: folder_listing(j.asset_dir), jobs))
     groups: dict[object, list[J]] = {}
     sizes: dict[object, int] = {}
     for k, (job, (key, size)) in enumerate(zip(jobs, listings)):

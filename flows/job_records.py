@@ -348,11 +348,11 @@ def manifest_row_id(error: ManifestRowError, taken: set[str]) -> str:
 
 
 def build_manifest_row(error: ManifestRowError, *, asset_id: str, run_id: str, config: dict[str, Any], code_version: str,
-                       flow_run_id: str | None = None, at: float | None = None) -> CatalogRow:
+                       flow_run_id: str | None = None) -> CatalogRow:
     """The failed catalog row of an unusable manifest row (``invalid_manifest_row``, its code and message as
-    the error); ``at`` epoch s."""
+    the error), stamped now."""
     verdict = asset_failure_mode(manifest_error=f"{error.code}: {error.message}")
-    when = _utc(at if at is not None else time.time())
+    when = _utc(time.time())
     return CatalogRow(
         asset_id=asset_id, status="failed", failure_mode=verdict.failure_mode, error="\n".join(verdict.errors),
         estimator=config.get("estimator"), model=config.get("model"), code_version=code_version, code_hash=contract.code_hash(),

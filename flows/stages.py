@@ -117,7 +117,7 @@ def finished_in_store(row: dict[str, Any] | None, input_hash: str) -> dict[str, 
     return finished_result(row, input_hash)
 
 
-def publish_stage(job: AssetJob, refined: StageRecord, measured: StageRecord | None = None) -> StageRecord:
+def publish_stage(job: AssetJob, refined: StageRecord) -> StageRecord:
     """Publish stage: upload the refined and metrics folders to ``job.out_uri`` / ``job.metrics_uri`` and delete
     the local copies; ``value``: ``{"out_uri", "files", "bytes", "clips"}`` (``clips``: the folder's clip videos,
     :func:`asset2sim.tasks.evaluation.clips.clip_videos`, read before the local copy goes); a refused upload is status
@@ -186,7 +186,7 @@ def refine_chain(job: AssetJob, prepared: Prepared) -> ChainResult:
     try:
         res.measured = metrics_stage(job, prepared, refined)
         if job.out_uri:
-            res.published = publish_stage(job, refined, res.measured)
+            res.published = publish_stage(job, refined)
     except Exception as exc:  # recorded in the row, like a failed stage
         res.error = exc
     return res
@@ -206,7 +206,7 @@ def prepare_asset(job: AssetJob) -> Prepared:
         rec.failure_mode, rec.error, rec.seconds = "invalid_input", f"{type(exc).__name__}: {exc}", time.perf_counter() - t0
         rec.cpu_seconds = time.thread_time() - c0
         return rec
-    rhash = run_hash(asset.input_hash, RefineConfig(**job.config), job.prompt, job.category)
+    rhash = run_hash(RefineConfig(**job.config), job.prompt, job.category)
     chash = job_config_hash(job, rhash)
     rec.ok = True
     rec.input_hash, rec.config_hash, rec.refine_config_hash = asset.input_hash, chash, rhash

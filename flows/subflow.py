@@ -163,7 +163,7 @@ class _AssetRecorder:
         elif published is not None and published.status == "error":
             publish_error = f"publish: {published.error}"
         if exc is None and prepared is not None and prepared.resume is not None and refined is not None and refined.status == "ok":
-            skipped = _record_resumed(self.store, job, prepared, refined, measured, self.starts[job.asset_id])
+            skipped = _record_resumed(self.store, prepared, refined, measured, self.starts[job.asset_id])
             if skipped is not None:
                 prepared, refined, measured = skipped, None, None
         row = build_row(
@@ -272,7 +272,7 @@ def _add_isolation_times(row, refined, measured) -> None:
         row.stage_seconds = json.dumps(stages_s, sort_keys=True)
 
 
-def _record_resumed(store: ResultCatalog, job: AssetJob, prepared: Prepared, refined, measured,
+def _record_resumed(store: ResultCatalog, prepared: Prepared, refined, measured,
                     started: float) -> Prepared | None:
     """Write the row a killed run owed for its complete folder (``prepared.resume``) into its partition; return
     ``prepared`` with that row as ``skip``, or None when that row would not be ``done``."""

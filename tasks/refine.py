@@ -118,7 +118,7 @@ def refine_asset(
     _check_overrides(asset, config)
     if config.keep_declared:
         est = _keep_declared(est, asset_dir, asset)
-    chash = run_hash(asset.input_hash, config, prompt + (f"\ntask: {task}" if task else ""), category)
+    chash = run_hash(config, prompt + (f"\ntask: {task}" if task else ""), category)
     if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
         output_folder.remove_stale_staging(out_dir)  # what a killed --force run left beside it
         if extras and media and media_phase.media_pending(out_dir):  # a deferred media phase, resumed

@@ -104,7 +104,7 @@ def build_scene(folder: Path | str, task: LearnTask, config: LearnConfig | None 
     if task.start == "task":
         init[task.joint] = task.closed.q_closed + task.closed.direction * task.start_fraction * task.closed.open_range
     d.qpos[qadr] = init.get(task.joint, d.qpos[qadr])
-    _settle(m, d, qadr, dadr, cfg, prismatic=task.joint_type == "prismatic")
+    _settle(m, d, cfg)
     opts = SessionOptions(initial_state=init, springs=dict(task.springs), conventions=task.conventions,
                           **session_root_options(task.root_fixed))
     with quiet_stdout():
@@ -140,7 +140,7 @@ def build_scene(folder: Path | str, task: LearnTask, config: LearnConfig | None 
                     source=source, grasp_rule=rule)
 
 
-def _settle(m, d, qadr: int, dadr: int, cfg: LearnConfig, prismatic: bool) -> None:
+def _settle(m, d, cfg: LearnConfig) -> None:
     """Step the host data at least ``settle_time``, then in chunks of ``action_repeat`` until the root (free joint)
     moves slower than ``rest_root_speed`` and every joint slower than ``rest_joint_speed``, at most ``settle_max_time``."""
     dt = float(m.opt.timestep)

@@ -40,7 +40,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 from urllib.parse import parse_qs, quote
 
-from asset2sim.apps.realism.ratings import RatingError, RatingStore, Showing, check_rater, media_path, side
+from asset2sim.apps.realism.pair_set import media_path
+from asset2sim.apps.realism.ratings import RatingError, RatingStore, Showing, check_rater, side
 from asset2sim.inert import CONTENT_SECURITY_POLICY, CSP_META, html_text
 
 if TYPE_CHECKING:
@@ -234,10 +235,10 @@ def _clip_response(store: RatingStore, media: dict, rater: str, index: int, posi
                                                                   "X-Content-Type-Options": "nosniff"})
 
 
-def create_app(folder: Path | str, *, store: RatingStore | None = None, host: str = "127.0.0.1",
+def create_app(folder: Path | str, *, host: str = "127.0.0.1",
                allowed_hosts: Sequence[str] = ()) -> "FastAPI":
     """The rating app of the pair set in ``folder`` (``pairs.json``; answers in ``ratings.sqlite`` and
-    ``ratings.parquet`` there). ``store``: an open store of that folder to use (default: one opened here).
+    ``ratings.parquet`` there).
     ``host``: the address served; requests must name it, a loopback name or one of ``allowed_hosts`` in their
     ``Host`` header (:func:`allowed_host_names`). At shutdown (the app's lifespan) ``ratings.parquet`` is
     synced and the store closed. Protections: the module docstring.
@@ -251,7 +252,7 @@ def create_app(folder: Path | str, *, store: RatingStore | None = None, host: st
     from fastapi.responses import HTMLResponse, RedirectResponse, Response
     from starlette.middleware.trustedhost import TrustedHostMiddleware
 
-    store = store or RatingStore(folder)
+    store = RatingStore(folder)
     media = _media_table(store)
     secret = store.form_secret()
 

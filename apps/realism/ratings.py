@@ -36,7 +36,6 @@ from typing import Literal, NamedTuple
 from asset2sim import atomic, output_folder
 from asset2sim.schemas.realism import ClipPair, PairSide, Rating
 from asset2sim.apps.realism.pair_set import PAIRS_JSON as PAIRS_FILE, PairSetError, read_pair_set
-from asset2sim.apps.realism.pair_set import media_path  # noqa: F401  (the rating app's media check)
 
 DATABASE_FILE = "ratings.sqlite"
 RATINGS_FILE = "ratings.parquet"

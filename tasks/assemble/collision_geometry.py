@@ -354,17 +354,16 @@ DENSITY_NOTE = "denser than its material"
 
 
 def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: dict[str, float] | None = None,
-                      mesh_base: Path | None = None, *, decompose: bool = True, level: bool = False,
+                      *, decompose: bool = True, level: bool = False,
                       max_density: dict[str, float] | None = None, open_containers: bool = False) -> list[str]:
     """Replace the mesh collisions of every link of ``model`` (in place) by the pieces of :func:`link_pieces`,
     written as ``out_dir/folder/<link>_hull<i>_<digest>.obj`` (link frame, m; an unchanged file is not
     rewritten). Primitive collisions stay.
 
     Args:
-        out_dir: the output folder.
+        out_dir: the output folder (relative collision filenames without a ``path`` resolve in it).
         folder: folder (relative to ``out_dir``) of the pieces.
         state: the initial state (joint -> rad or m).
-        mesh_base: folder of relative collision filenames without a ``path`` (default ``out_dir``).
         level: the object is free-standing: its footprint at ``state`` is made planar.
         max_density: link -> the densest its material may be (kg/m^3): a link whose inertial mass over its
             pieces' volume exceeds it is noted.
@@ -377,10 +376,9 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
         CollisionGeometryError: a collision mesh cannot be read.
     """
     out_dir = Path(out_dir)
-    base = Path(mesh_base) if mesh_base is not None else out_dir
 
     def mesh_path(g: urdf.UrdfGeometry) -> Path:
-        return Path(g.path) if g.path is not None else base / str(g.filename)
+        return Path(g.path) if g.path is not None else out_dir / str(g.filename)
 
     pieces, notes = link_pieces(model, mesh_path, state, decompose=decompose, level=level and state is not None,
                                 open_containers=open_containers)

@@ -9,7 +9,6 @@ written atomically; the input folder is never written.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 

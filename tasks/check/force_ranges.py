@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.task_execution import TaskRun
-from asset2sim.tasks.interpret.operating_forces import OperatingForces, load_operating_forces, operating_range
+from asset2sim.tasks.interpret.operating_forces import load_operating_forces, operating_range
 
 
 def _inside(v: float | None, r: tuple[float, float] | None) -> bool | None:
@@ -15,15 +15,14 @@ def _inside(v: float | None, r: tuple[float, float] | None) -> bool | None:
     return bool(r[0] <= v <= r[1])
 
 
-def force_metric(run: TaskRun, category: str | None, link_labels: dict[str, str | None],
-                 table: OperatingForces | None = None) -> MetricResult:
+def force_metric(run: TaskRun, category: str | None, link_labels: dict[str, str | None]) -> MetricResult:
     """``operating_force``: the peak operating force (N) and torque (N m) of
     every attempt that moved a joint, against :func:`operating_range` of the
     category and the grasped child link's label (``link_labels``: link ->
     semantic label; a parent-side grasp takes the category's default). Value:
     the largest peak operating force; ``passed`` None when nothing moved.
     """
-    t = table or load_operating_forces()
+    t = load_operating_forces()
     rows = []
     bad = []
     for a in run.attempts:

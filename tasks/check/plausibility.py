@@ -128,7 +128,7 @@ def _operable(ctx: EstimationContext, j: DeclaredJoint, label: str | None) -> fl
 def _judge_joints(ctx: EstimationContext, kin: SimSession, dp: DeclaredPhysics, labels: dict[str, str | None],
                   links: dict[str, LinkPhysics], out: list[ValueVerdict]) -> tuple[dict[str, JointDynamics], dict[str, JointDynamics]]:
     state = ctx.closed_state()
-    loads = physics.joint_loads(kin, ctx.asset, links, state, 1.0, ctx.subtrees)
+    loads = physics.joint_loads(kin, links, state, 1.0, ctx.subtrees)
     choices = {n: JointChoice(spring=bool(j.stiffness)) for n, j in dp.joints.items()}
     est = joint_dynamics_for(ctx, kin, links, state, 1.0, choices, source="audit estimate")
     largest = float(np.max(ctx.closed_extents))
@@ -161,7 +161,7 @@ def _judge_joints(ctx: EstimationContext, kin: SimSession, dp: DeclaredPhysics, 
             ends = [v for v in (j.lower, j.upper) if v is not None]
             far = max(ends, key=lambda v: abs(v - ref), default=ref)
             travel = abs(far - ref)
-            weight = physics.joint_loads(kin, ctx.asset, links, {**state, name: far}, 1.0,
+            weight = physics.joint_loads(kin, links, {**state, name: far}, 1.0,
                                          {name: ctx.subtrees[name]})[name].gravity_load
             carried = abs(weight) if weight * (ref - far) < 0 else 0.0  # the spring pulls against the weight there
             out.append(bands.stiffness_verdict(where, k, travel, operable, _unit(j, "stiffness"), carried))

@@ -52,7 +52,7 @@ class RestRecording:
 
     ``root_series`` (K, 3) m root position after every step of settling and
     test; ``ground_series`` (K,) m deepest ground penetration; ``joint_series``
-    joint -> (K,) rad or m. The other fields identify the simulation (:meth:`matches`).
+    joint -> (K,) rad or m. The other fields identify the simulation.
     """
 
     trace: metrics.RestTrace
@@ -68,12 +68,6 @@ class RestRecording:
     """The root was fixed (a mounted asset, ``tasks.interpret.mounting``)."""
     extents: np.ndarray | None = None
     """(3,) m extents of the links with collision geometry at the initial state (the divergence's travel limit)."""
-
-    def matches(self, engine: str, obj: SimObject) -> bool:
-        """True when this recording is the rest test of exactly ``obj`` in ``engine`` (floats compared exactly)."""
-        return (self.fixed_base == bool(obj.fixed_base) and self.engine == engine and self.urdf == obj.source.path.resolve()
-                and dict(self.initial_state) == dict(obj.state) and dict(self.springs) == dict(obj.springs)
-                and self.conventions == obj.conventions)
 
 
 def record_rest_test(session: SimSession, obj: SimObject) -> RestRecording:

@@ -133,8 +133,8 @@ def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed:
         session.set_joint_positions({**state, name: q_close})
 
 
-def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, float, float]], state: dict[str, float],
-                     confirm_stops: bool = True) -> dict[str, LimitClip]:
+def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, float, float]],
+                     state: dict[str, float]) -> dict[str, LimitClip]:
     """Geometric limits of every joint of ``closed`` (module docstring): each joint's range against the links
     rigid with its parent (:func:`rigid_group`) and, for a part carried by a chain of other parts (a stapler's
     magazine hinged on its top), against the chain's links with the chain's joints at the state and open
@@ -144,8 +144,6 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
         session, model: a fixed-base :class:`~asset2sim.engines.base.SimSession` of the URDF ``model``.
         closed: joint -> (q_closed, direction +-1, open range), rad or m, at the session's scale.
         state: joint -> position (rad or m) the other joints hold (the sweep's start state).
-        confirm_stops: a contact ends the range only when its excess reaches :data:`STOP_DEPTH`
-            further on (the end then at the contact's onset); False: any contact.
 
     Returns:
         joint -> :class:`LimitClip` (continuous joints and joints not in the session are left out).
@@ -165,7 +163,7 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
         pairs = collision_pairs(session, sub, rigid_group(model, model.joint(name).parent) - set(sub))
         out[name] = _raw_clip(name, lo, hi, qc, d, rng)
         if pairs:
-            scan = _JointScan(session, name, lo, hi, qc, d, rng, pairs, STOP_DEPTH if confirm_stops else None)
+            scan = _JointScan(session, name, lo, hi, qc, d, rng, pairs)
             out[name] = scan.clip(out[name], model, sub, parent_of, closed, state)
     session.set_joint_positions(state)
     return out
@@ -195,7 +193,6 @@ class _JointScan:
     d: float
     rng: float
     pairs: list[tuple[str, str]]
-    stop_depth: float | None
     base: np.ndarray | None = None
 
     def free_end(self, q_from: float, q_to: float, stop_depth: float | None = None,
@@ -225,7 +222,7 @@ class _JointScan:
             return clip
         far_raw, back_raw = (self.hi, self.lo) if self.d > 0 else (self.lo, self.hi)
         self.session.set_joint_positions({self.name: q_close})
-        far, who = self.free_end(q_close, far_raw, self.stop_depth)
+        far, who = self.free_end(q_close, far_raw, STOP_DEPTH)
         span = abs(far - q_close)
         if span < MIN_FREE_FRACTION * self.rng:
             clip.notes.append(f"blocked at its closed end by {who} (free {span:.3g} of {self.rng:.3g}): collision geometry, limit kept")
@@ -295,7 +292,7 @@ class _JointScan:
             clip.notes.append(_limit_note(side, back_raw, back, "): the new closed end"))
         elif self.clips(back_raw, self.qc):
             self.session.set_joint_positions({self.name: self.qc})
-            b, who_b = self.free_end(self.qc, back_raw, self.stop_depth)
+            b, who_b = self.free_end(self.qc, back_raw, STOP_DEPTH)
             if self.clips(back_raw, b):
                 back = b = self.onset(b, self.qc)
                 clip.notes.append(_limit_note(side, back_raw, b, f", beyond the closed end): runs into {who_b}"))

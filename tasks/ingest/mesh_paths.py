@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
+from asset2sim.input_files import file_kind as _kind, inside
 from asset2sim.tasks.ingest.findings import MESH_EXTENSIONS
 
 __all__ = ["MeshReference", "file_kind", "inside", "read_regular", "resolve_mesh_reference"]
@@ -31,18 +32,6 @@ class MeshReference:
 _URI = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*://")
 _SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]{1,}:")  # 'data:', 'mailto:' (not 'C:')
 _DRIVE = re.compile(r"^[A-Za-z]:[\\/]")
-
-
-def inside(path: str, root: str) -> bool:
-    return path == root or path.startswith(root.rstrip(os.sep) + os.sep)
-
-
-_KINDS = ((stat.S_ISFIFO, "FIFO"), (stat.S_ISCHR, "character device"), (stat.S_ISBLK, "block device"),
-          (stat.S_ISSOCK, "socket"), (stat.S_ISDIR, "directory"), (stat.S_ISREG, "regular file"))
-
-
-def _kind(mode: int) -> str:
-    return next((name for test, name in _KINDS if test(mode)), "special file")
 
 
 def file_kind(filename: str, base: Path | str) -> str | None:

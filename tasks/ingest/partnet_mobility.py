@@ -255,15 +255,15 @@ def read_reference(folder: Path | str) -> GenSim2Reference:
 
 
 def scale_urdf(src: Path | str, dst: Path | str, scale: float, *, joint_limits: dict[str, tuple[float, float]] | None = None,
-               header: str = "", copy_meshes: bool = True) -> Path:
+               header: str = "") -> Path:
     """Write a copy of URDF ``src`` with the uniform scale ``scale`` (> 0) baked in
     (:func:`asset2sim.urdf.scale_model`: mesh scales, primitive sizes, origins,
     prismatic limits, inertia x s^2, masses kept) to ``dst``; returns ``dst``.
 
     ``joint_limits``: joint -> (lower, upper), input units, replacing the file's;
-    ``header``: a comment atop ``<robot>``; ``copy_meshes``: copy the meshes inside
-    ``src``'s folder beside ``dst`` (relative paths, with the MTL libraries and textures an OBJ names
-    inside that folder), else absolute paths.
+    ``header``: a comment atop ``<robot>``. The meshes inside ``src``'s folder are copied beside ``dst``
+    (relative paths, with the MTL libraries and textures an OBJ names inside that folder), others
+    referenced by absolute path.
     Raises ValueError: bad scale, ``package://`` mesh paths, an unknown joint; UrdfError: ``src`` unreadable."""
     if not (math.isfinite(scale) and scale > 0):
         raise ValueError(f"scale must be a finite number > 0, got {scale}")
@@ -278,7 +278,7 @@ def scale_urdf(src: Path | str, dst: Path | str, scale: float, *, joint_limits: 
             if fname.startswith("package://"):
                 raise ValueError(f"{src}: link {link.name!r}: package:// mesh paths are not supported")
             mesh_src = (src.parent / fname.removeprefix("file://")).resolve()
-            if copy_meshes and mesh_src.is_relative_to(src.parent):
+            if mesh_src.is_relative_to(src.parent):
                 to_copy.add(mesh_src)
                 g.filename = mesh_src.relative_to(src.parent).as_posix()
             else:

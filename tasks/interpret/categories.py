@@ -1,7 +1,6 @@
 """Which category an asset is (``categories.yaml``): names and synonyms, request
 mentions, and :func:`recognize_category` weighing request words, ``model_cat``
-and semantic labels (``Generic`` for thin evidence; ``docs/design/priors.md``); :func:`category_name`
-the evaluation's never-raising name of it.
+and semantic labels (``Generic`` for thin evidence; ``docs/design/priors.md``).
 """
 
 from __future__ import annotations
@@ -285,14 +284,3 @@ def _best_match(ev: _Evidence, text: str) -> CategoryMatch:
         reason += "; against: " + ", ".join(f"{n} ({s:.1f}: {', '.join(why[n])})" for n, s in others)
     return CategoryMatch(name=best, prior=load_priors().categories[best], confidence=round(max(0.0, min(1.0, conf)), 3), reason=reason,
                          variant=find_variant(best, text), scores={k: round(v, 3) for k, v in scores.items()})
-
-
-def category_name(prompt: str | None, model_cat: str | None = None, labels: list[str] | None = None) -> str | None:
-    """Category from the request, ``model_cat`` and ``labels``; ``model_cat`` when that fails."""
-    if not prompt and not model_cat:
-        return None
-    try:
-        m = recognize_category(model_cat, labels or [], prompt or "")
-    except Exception:
-        return model_cat
-    return getattr(m, "name", None) or model_cat

@@ -8,7 +8,7 @@ from __future__ import annotations
 from asset2sim.prior_tables import GENERIC, GRASPABLE_WIDTH_M, SIZE_CLASSES, PriorsError, load_priors, load_priors_from
 from asset2sim.tasks.interpret.categories import category_prior, find_variant, recognize_category, request_category, resolve_category
 from asset2sim.tasks.interpret.part_labels import canonical_label
-from asset2sim.tasks.interpret.part_priors import (handled, material, material_for, part_role, request_label_matches,
+from asset2sim.tasks.interpret.part_priors import (material, material_for, part_role, request_label_matches,
                                                    spring_expected, task_relevant_joints, task_relevant_rank)
 from asset2sim.tasks.interpret.size_priors import (MASS_FLOOR_KG, fits_gripper, gripper_limit_factor, mass_range,
                                                    plausible_largest_dimension, scale_mass_range, size_factor, target_size)

@@ -99,9 +99,9 @@ def _hash16(blob: dict[str, Any]) -> str:
     return hashlib.sha256(json.dumps(blob, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def run_hash(input_hash: str, config: RefineConfig, prompt: str, category: str | None) -> str:
+def run_hash(config: RefineConfig, prompt: str, category: str | None) -> str:
     """Configuration hash of one refine run (hex, 16): SHA-256 of the configuration's own hash, the prompt,
-    the category override and the package version (``input_hash`` is not part of it)."""
+    the category override and the package version."""
     return _hash16({"config": config.config_hash(), "prompt": prompt, "category": category, "version": __version__})
 
 

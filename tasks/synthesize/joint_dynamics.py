@@ -104,7 +104,7 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
     """
     prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
     rot = ctx.root_rotation
-    loads = physics.joint_loads(kin, ctx.asset, links, state, scale, ctx.subtrees, root_rotation=rot)
+    loads = physics.joint_loads(kin, links, state, scale, ctx.subtrees, root_rotation=rot)
     landed = (set_down.landings(kin, links, state, scale, ctx.subtrees, ctx.hull_points, root_rotation=rot)
               if free_standing(ctx) else {})
     out: dict[str, JointDynamics] = {}
@@ -121,12 +121,12 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
         hold = 0.0
         for f in fr:
             st = {**state, name: cs.position(float(f)) * unit}
-            ld = physics.joint_loads(kin, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
+            ld = physics.joint_loads(kin, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
             hold = max(hold, abs(ld[name].gravity_load))
         # a part stays shut once closed: friction also holds a load pushing it open near its closed end
         for f in CLOSED_HOLD_FRACTIONS:
             st = {**state, name: cs.position(float(f)) * unit}
-            ld = physics.joint_loads(kin, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
+            ld = physics.joint_loads(kin, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
             if ld[name].gravity_load * cs.direction > 0:
                 hold = max(hold, abs(ld[name].gravity_load))
         on_stop = _on_stop(loads[name], cs, state[name], unit, set_down.joint_band(cs.lower * unit, cs.upper * unit, name in prismatic))
@@ -324,7 +324,7 @@ def counterbalance(ctx: EstimationContext, kin: SimSession, links: dict[str, Lin
 
     def load(f: float) -> float:
         st = {**state, name: cs.position(float(f))}
-        return physics.joint_loads(kin, ctx.asset, links, st, scale, sub, root_rotation=rot)[name].gravity_load
+        return physics.joint_loads(kin, links, st, scale, sub, root_rotation=rot)[name].gravity_load
 
     open_loads = [load(f) * cs.direction for f in DOWNWARD_FRACTIONS]
     if not all(t > 0 for t in open_loads) or not cs.open_range > 0:
@@ -369,7 +369,7 @@ def lid_support(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPh
 
     def opening_load(f: float) -> float:
         st = {**state, name: cs.position(float(f))}
-        return cs.direction * physics.joint_loads(kin, ctx.asset, links, st, scale, sub, root_rotation=rot)[name].gravity_load
+        return cs.direction * physics.joint_loads(kin, links, st, scale, sub, root_rotation=rot)[name].gravity_load
 
     tau = np.array([opening_load(f) for f in SUPPORT_FRACTIONS])
     a_ = np.asarray(j.axis, float) / max(float(np.linalg.norm(j.axis)), 1e-12)

@@ -9,7 +9,6 @@ and the direct / IVW baselines: ``docs/design/model_backends.md``.
 from __future__ import annotations
 
 from asset2sim.models.client import LLMClient, make_client, model_string
-from asset2sim.models.config import ClientConfig
 from asset2sim.models.errors import ModelCallError, ReplyError, ReplyInvalid
 from asset2sim.models.usage import Usage
 from asset2sim.schemas.model_reply import PROPOSAL_SCHEMA_NAME, REPLY_SCHEMA_NAME, JointProposalReply, ModelReply, reply_json_schema

@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from asset2sim.schemas.asset import AssetDescription, LinkGeometry
+from asset2sim.schemas.asset import LinkGeometry
 from asset2sim.schemas.overlay import Inertia, JointDynamics, LinkPhysics
 from asset2sim.tasks.synthesize.validate_overlay import geometry_inertia
 
@@ -107,7 +107,7 @@ class JointLoad:
     a lean of the object turns into load (:func:`lean_load`)."""
 
 
-def joint_loads(session, asset: AssetDescription, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
+def joint_loads(session, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
                 subtrees: dict[str, list[str]], *, root_rotation: np.ndarray | None = None) -> dict[str, JointLoad]:
     """:class:`JointLoad` of every joint of ``subtrees`` at ``state`` (output units). ``session``: a
     fixed-base session of the unscaled input asset, its kinematics scaled by ``scale`` here; ``links``: the

@@ -21,8 +21,7 @@ from asset2sim.tasks.synthesize.estimator import Estimate, Estimator
 
 __all__ = ["KeepDeclared"]
 
-#: Quantities a kept link or joint takes from the declared physics.
-LINK_QUANTITIES = ("mass", "inertia", "center_of_mass")
+#: Quantities a kept joint takes from the declared physics.
 JOINT_QUANTITIES = ("damping", "friction")
 
 

@@ -80,7 +80,7 @@ def refine_fake(asset_dir, prompt, out_dir, config=None, *, category=None, asset
     asset = extract_asset(asset_dir, asset_id=aid, category=category)
     if progress:
         progress("extract", f"{len(asset.links)} links")
-    chash = run_hash(asset.input_hash, config, prompt, category)
+    chash = run_hash(config, prompt, category)
     out_dir.mkdir(parents=True, exist_ok=True)
     shutil.copytree(asset_dir / "textured_objs", out_dir / "textured_objs", dirs_exist_ok=True)
     atomic.copy_file(asset_dir / "mobility.urdf", out_dir / "mobility.urdf")

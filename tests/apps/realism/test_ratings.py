@@ -20,11 +20,11 @@ from asset2sim.apps.realism.ratings import (
     RatingStore,
     check_rater,
     left_slot,
-    media_path,
     read_pair_set,
     read_ratings,
     side,
 )
+from asset2sim.apps.realism.pair_set import media_path
 from asset2sim.apps.realism.scores import SCORES_FILE, NotRated, read_scores, realism_scores, write_scores
 from tests.realism_fixtures import write_pair_set
 

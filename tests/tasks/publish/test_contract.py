@@ -17,10 +17,10 @@ from asset2sim.flows.job_records import (JOB_RECORD_NAME, JobRecord, Measurement
 
 def test_hashes_change_with_what_changes_the_result():
     cfg = RefineConfig()
-    h = run_hash("in", cfg, "a laptop", None)
-    assert h == run_hash("in", cfg, "a laptop", None) and len(h) == 16
-    assert h != run_hash("in", cfg, "a closed laptop", None)
-    assert h != run_hash("in", cfg.model_copy(update={"seed": 7}), "a laptop", None)
+    h = run_hash(cfg, "a laptop", None)
+    assert h == run_hash(cfg, "a laptop", None) and len(h) == 16
+    assert h != run_hash(cfg, "a closed laptop", None)
+    assert h != run_hash(cfg.model_copy(update={"seed": 7}), "a laptop", None)
     kw = dict(refine_function="m:f", evaluate=True, probes=False, extras=True, reference=False, reference_scale=None)
     base = flow_config_hash(h, **kw)
     assert base != flow_config_hash(h, **{**kw, "probes": True}) and base != flow_config_hash("x" * 16, **kw)

@@ -27,7 +27,7 @@ def test_a_lever_that_falls_open_from_its_closed_end_is_held_closed_by_its_frict
         loads = []
         for f in CLOSED_HOLD_FRACTIONS + (1.0,):
             st = {**state, "joint_0": cs.position(f)}
-            ld = physics.joint_loads(kin, ctx.asset, ov.links, st, ov.scale, {"joint_0": ctx.subtrees["joint_0"]},
+            ld = physics.joint_loads(kin, ov.links, st, ov.scale, {"joint_0": ctx.subtrees["joint_0"]},
                                      root_rotation=ctx.root_rotation)["joint_0"]
             loads.append(ld.gravity_load * cs.direction)
     closed_load, open_load = max(loads[:-1]), loads[-1]

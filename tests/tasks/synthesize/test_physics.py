@@ -33,7 +33,7 @@ def test_revolute_gravity_load_matches_statics(tmp_path, q, scale):
     try:
         links = _plate_links(arm * scale)
         links["plate"] = links["plate"].model_copy(update={"com": (arm * scale / 2, 0.0, 0.005 * scale)})
-        loads = physics.joint_loads(s, asset, links, {"hinge": q}, scale, {"hinge": subtree_links(asset, "plate")})
+        loads = physics.joint_loads(s, links, {"hinge": q}, scale, {"hinge": subtree_links(asset, "plate")})
     finally:
         s.close()
     m, g = 0.5, physics.G
@@ -56,7 +56,7 @@ def test_vertical_axis_has_no_gravity_load(tmp_path):
     asset = extract_asset(write_hinged_plate(tmp_path / "p", axis="0 0 1"))
     s = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
     try:
-        loads = physics.joint_loads(s, asset, _plate_links(0.4), {"hinge": 0.3}, 1.0, {"hinge": ["plate"]})
+        loads = physics.joint_loads(s, _plate_links(0.4), {"hinge": 0.3}, 1.0, {"hinge": ["plate"]})
     finally:
         s.close()
     assert abs(loads["hinge"].gravity_load) < 1e-9
@@ -69,7 +69,7 @@ def test_prismatic_load_is_weight_along_axis(tmp_path, axis, expected):
     s = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
     links = {"block": LinkPhysics(mass=2.0, inertia=Inertia(ixx=0.01, iyy=0.01, izz=0.01), com=(0, 0, 0))}
     try:
-        loads = physics.joint_loads(s, asset, links, {"slide": 0.1}, 1.0, {"slide": ["block"]})
+        loads = physics.joint_loads(s, links, {"slide": 0.1}, 1.0, {"slide": ["block"]})
     finally:
         s.close()
     assert loads["slide"].gravity_load == pytest.approx(expected * 2.0 * physics.G, abs=1e-6)

@@ -115,7 +115,7 @@ def test_the_load_across_gravity_of_a_door_and_a_lid(tmp_path, axis, lateral):
     links = {"plate": LinkPhysics(mass=0.5, inertia=Inertia(ixx=1e-3, iyy=1e-3, izz=1e-3), com=(0.2, 0.0, 0.005))}
     s = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
     try:
-        ld = physics.joint_loads(s, asset, links, {"hinge": 0.0}, 1.0, {"hinge": ["plate"]})["hinge"]
+        ld = physics.joint_loads(s, links, {"hinge": 0.0}, 1.0, {"hinge": ["plate"]})["hinge"]
     finally:
         s.close()
     assert ld.lateral_moment == pytest.approx(lateral, rel=1e-6)
@@ -163,7 +163,7 @@ def test_a_lid_its_weight_presses_onto_its_open_stop_is_held_by_the_stop():
         lid = est.overlay.joints["joint_0"]
         cs = ctx.closed["joint_0"]
         state = {**{j.name: ctx.closed[j.name].q_closed for j in ctx.asset.movable_joints()}, "joint_0": cs.position(1.0)}
-        load = physics.joint_loads(kin, ctx.asset, est.overlay.links, state, est.overlay.scale,
+        load = physics.joint_loads(kin, est.overlay.links, state, est.overlay.scale,
                                    {"joint_0": ctx.subtrees["joint_0"]}, root_rotation=ctx.root_rotation)["joint_0"]
     assert load.gravity_load * cs.direction > 0  # its weight opens it further: onto the stop
     assert "set-down" not in lid.source
@@ -182,7 +182,7 @@ def test_a_shut_part_is_held_through_the_set_down_by_its_hinge(tmp_path, monkeyp
         est = OfflineEstimator().estimate(ctx, kin)
         door = est.overlay.joints["joint_0"]
         state = {j.name: ctx.closed[j.name].q_closed for j in ctx.asset.movable_joints()}
-        load = physics.joint_loads(kin, ctx.asset, est.overlay.links, state, est.overlay.scale,
+        load = physics.joint_loads(kin, est.overlay.links, state, est.overlay.scale,
                                    {"joint_0": ctx.subtrees["joint_0"]}, root_rotation=ctx.root_rotation)["joint_0"]
     assert "catch" not in door.source and "catch_force" not in door.model_dump()
     assert door.friction >= set_down.LEAN_SAFETY * set_down.lean_load(load) * 0.999
