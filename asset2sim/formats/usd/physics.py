@@ -47,15 +47,13 @@ from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, rigid_inverse
 from asset2sim.extras import pxr_modules
 from asset2sim.output_folder import URDF_NAME, USD_DIR
 from asset2sim.schemas.overlay import JointDynamics, LinkPhysics
-from asset2sim.formats.staging import ReadAsset
+from asset2sim.formats.staging import HOST_DIR, ReadAsset
 from asset2sim.formats.usd import reader
 from asset2sim.formats.usd.reader import DEG, FRICTION_ATTRS
 from asset2sim.formats.usd.stage import StageReading, open_stage
 
 __all__ = ["HOST_DIR", "HostUsdError", "HostUsdExport", "UsdEdit", "applied_schemas", "set_body_mass", "set_joint_dynamics", "write_host_usd"]
 
-#: Folder (inside the output's ``usd/``) of the files written for the host.
-HOST_DIR = "host"
 #: Relative tolerance of the check that the written stage holds the refined values (binary32 attributes).
 VALUE_RTOL = 1e-5
 #: A value within this difference (relative to its magnitude) of the one the stage holds is left as it is: a value
