@@ -374,10 +374,8 @@ class NewtonSession(SessionDefaults):
         """Snapshot every array of the current ``newton.State``: joint and body coordinates and velocities, and the
         arrays Kamino keeps on the state between steps (previous joint coordinates, the joint constraints'
         multipliers that warm-start the next solve, the total body wrenches); the pending joint efforts too."""
-        handle = max(self._states, default=0) + 1
-        self._states[handle] = ({k: v.numpy().copy() for k, v in _state_arrays(self.state0, self._wp).items()},
-                                self._effort.copy(), self._applied)
-        return handle
+        return self._keep_state(({k: v.numpy().copy() for k, v in _state_arrays(self.state0, self._wp).items()},
+                                 self._effort.copy(), self._applied))
 
     def restore_state(self, handle: int) -> None:
         """Return to a snapshot of :meth:`save_state` (KeyError: an unknown or discarded handle)."""
@@ -388,9 +386,6 @@ class NewtonSession(SessionDefaults):
                 current[k].assign(v)
         self._effort[:] = effort
         self._applied = applied
-
-    def discard_state(self, handle: int) -> None:
-        self._states.pop(handle, None)
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` steps of :attr:`dt` s; efforts of :meth:`apply_joint_effort` act on the first only."""

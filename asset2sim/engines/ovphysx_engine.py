@@ -232,9 +232,7 @@ class OvPhysxSession(SessionDefaults):
         self._applied = True
 
     def save_state(self) -> int:
-        handle = max(self._states, default=0) + 1
-        self._states[handle] = (self._read(self._q), self._read(self._qd), self._read(self._root), self._read(self._root_v))
-        return handle
+        return self._keep_state((self._read(self._q), self._read(self._qd), self._read(self._root), self._read(self._root_v)))
 
     def restore_state(self, handle: int) -> None:
         q, qd, root, root_v = self._states[handle]
@@ -242,9 +240,6 @@ class OvPhysxSession(SessionDefaults):
         self._qd.write(qd)
         self._root.write(root)
         self._root_v.write(root_v)
-
-    def discard_state(self, handle: int) -> None:
-        self._states.pop(handle, None)
 
     def step(self, n: int = 1) -> None:
         spend(n)  # the refine's one budget of steps (asset2sim.engines.step_budget)
