@@ -53,7 +53,7 @@ from asset2sim.formats.mjcf import conventions, scene
 from asset2sim.formats.mjcf.conventions import ReadOptions
 from asset2sim.formats.mjcf.files import MjcfSources, OpenedMjcf, compile_mjcf, gather_mjcf, opened_mjcf, staged_sources
 from asset2sim.formats.mjcf.export import MASS_RTOL
-from asset2sim.formats.staging import HOST_DIR, MJCF_SUFFIXES, ReadAsset, StagingError, copy_named
+from asset2sim.formats.staging import HOST_DIR, host_overlay, MJCF_SUFFIXES, ReadAsset, StagingError, copy_named
 
 #: Folder (inside ``mjcf/host/``) of the input's files holding the object, written again.
 FILES_DIR = "files"
@@ -127,10 +127,7 @@ def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: 
     import mujoco
 
     asset = RefinedAsset(out_dir)
-    overlay = asset.required_overlay()
-    if not math.isclose(overlay.scale, 1.0, rel_tol=0.0, abs_tol=1e-12):
-        raise HostExportError(f"{source}: the object was rescaled (x{overlay.scale:.4g}); its host file keeps the host's sizes, "
-                              "so none is written (refine without --size / --scale / size words to keep the size)")
+    overlay = host_overlay(asset, source, "file", HostExportError)
     model, state = asset.model, asset.initial_state
     spec, original = opened.spec, opened.model
     pick = scene.pick_object(original, source, reading.body)
