@@ -281,7 +281,8 @@ class OpenedMjcf:
         Raises:
             StagingError: MuJoCo cannot compile it (its message, naming the file).
         """
-        mujoco = load_mujoco()
+        # ImportError without MuJoCo, before anything is pointed at the copy
+        load_mujoco()
         spec, tmp = self.spec, self.folder
         try:
             with mujoco_messages() as caught:
