@@ -414,6 +414,13 @@ class EngineUnavailable(RuntimeError):
     """The engine's Python package is not installed (an optional extra)."""
 
 
+def unsupported(message: str) -> Callable:
+    """A session method for a query the engine does not answer: it raises :class:`EngineUnsupported` ``message``."""
+    def method(self, *args, **kwargs):
+        raise EngineUnsupported(message)
+    return method
+
+
 def register_engine(name: str, factory: EngineFactory) -> None:
     """Register ``factory(urdf_path, options) -> SimSession`` under ``name``."""
     _ENGINES[name] = factory

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
-                                    SessionOptions, penetration_sum, principal_moments, register_engine, register_file_reader)
+                                    SessionOptions, penetration_sum, principal_moments, register_engine, register_file_reader,
+                                    unsupported)
 from asset2sim.engines.loading import (BOX_CORNERS, BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS,
                                        BULLET_PLANE_FRICTION, CollisionPiece, collision_pieces, joint_tables, read_urdf)
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
@@ -424,14 +425,8 @@ class NewtonSession(SessionDefaults):
         self.model = self.full_model = None
 
 
-def _unsupported(query: str):
-    def method(self, *args, **kwargs):
-        raise EngineUnsupported(f"newton: {query} is not implemented")
-    return method
-
-
 for _query in ("drive_joint", "release_joint", "link_distances", "apply_link_force", "set_root_velocity"):
-    setattr(NewtonSession, _query, _unsupported(_query))
+    setattr(NewtonSession, _query, unsupported(f"newton: {_query} is not implemented"))
 
 #: Smallest rigid-contact capacity of the stepping pipeline and solver (Kamino's CPU cost grows with the
 #: capacity); the session sizes it at CONTACT_CAPACITY_HEADROOM x the initial contacts and grows it

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import EngineUnavailable, EngineUnsupported, SessionDefaults, SessionOptions, register_engine
+from asset2sim.engines.base import EngineUnavailable, SessionDefaults, SessionOptions, register_engine, unsupported
 from asset2sim.engines.loading import collision_pieces, joint_tables, read_urdf
 from asset2sim.engines.step_budget import spend
 from asset2sim.extras import pxr_modules
@@ -259,31 +259,6 @@ class OvPhysxSession(SessionDefaults):
         fr = self._read(self._friction)[0]
         return {j: tuple(float(x) for x in fr[i]) for j, i in self._dof.items() if j in self._sign}
 
-    # ---------------------------------------------------------- not answered
-    def _unsupported(self, what: str):
-        raise EngineUnsupported(f"ovphysx: {what} is not read from the USD runtime here")
-
-    def self_penetration(self):
-        self._unsupported("contacts (penetration)")
-
-    def ground_penetration(self) -> float:
-        self._unsupported("ground penetration")
-
-    def link_frame(self, link: str):
-        self._unsupported("link frames")
-
-    def link_aabb(self, link: str):
-        self._unsupported("link boxes")
-
-    def drive_joint(self, joint: str, velocity: float, max_force: float) -> None:
-        self._unsupported("joint drives")
-
-    def release_joint(self, joint: str) -> None:
-        self._unsupported("joint drives")
-
-    def apply_link_force(self, link: str, force, point) -> None:
-        self._unsupported("link forces")
-
     def close(self) -> None:
         physx, stage = getattr(self, "_physx", None), getattr(self, "_stage", None)
         try:
@@ -300,4 +275,8 @@ class OvPhysxSession(SessionDefaults):
                 self._dir = None
 
 
+for _query, _what in (("self_penetration", "contacts (penetration)"), ("ground_penetration", "ground penetration"),
+                      ("link_frame", "link frames"), ("link_aabb", "link boxes"), ("drive_joint", "joint drives"),
+                      ("release_joint", "joint drives"), ("apply_link_force", "link forces")):
+    setattr(OvPhysxSession, _query, unsupported(f"ovphysx: {_what} is not read from the USD runtime here"))
 register_engine("ovphysx", OvPhysxSession)
