@@ -23,7 +23,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from asset2sim.engines.base import SessionOptions, SimSession
+from asset2sim.engines.base import SimSession
 from asset2sim.engines.passive_joints import DeclaredPhysics
 from asset2sim.engines.registry import known_engines, open_session
 from asset2sim.inert import field_errors
@@ -305,13 +305,6 @@ def _output_folder(out_dir: str | Path) -> RefinedAsset:
     if not asset.urdf_path.is_file():
         raise ValueError(f"{asset.folder}: has no {URDF_NAME} (not an asset2sim output folder)")
     return asset
-
-
-def verified_options(out_dir: str | Path, conventions: SimConventions | None = None) -> SessionOptions:
-    """The :class:`~asset2sim.engines.base.SessionOptions` asset2sim's checks open an output folder with
-    (:meth:`asset2sim.refined_asset.RefinedAsset.session_options`). Raises ValueError when it is not
-    an output folder or its ``overlay.json`` is invalid."""
-    return _output_folder(out_dir).session_options(conventions)
 
 
 def _load(engine: str, out_dir: str | Path, **attach) -> SimSession:

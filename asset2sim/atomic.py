@@ -222,20 +222,24 @@ def write_text(path: Path | str, text: str, *, durable: bool = True, check: Call
     return write_bytes(path, text.encode("utf-8"), durable=durable, check=check)
 
 
-def _check_finite(obj: Any, where: str = "$") -> None:
-    if isinstance(obj, float) and not math.isfinite(obj):
-        raise ValueError(f"non-finite number at {where} cannot be written as JSON")
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            _check_finite(v, f"{where}.{k}")
-    elif isinstance(obj, (list, tuple)):
-        for i, v in enumerate(obj):
-            _check_finite(v, f"{where}[{i}]")
+def non_finite(obj: Any, where: str = "$") -> str | None:
+    """The JSON path (``$.metrics[3].value``) of the first NaN or infinity in ``obj`` (JSON values; tuples as lists), or None."""
+    stack = [(obj, where)]
+    while stack:
+        value, at = stack.pop()
+        if isinstance(value, float) and not math.isfinite(value):
+            return at
+        if isinstance(value, dict):
+            stack.extend((v, f"{at}.{k}") for k, v in reversed(list(value.items())))
+        elif isinstance(value, (list, tuple)):
+            stack.extend((v, f"{at}[{i}]") for i, v in reversed(list(enumerate(value))))
+    return None
 
 
 def write_json(path: Path | str, obj: Any, indent: int = 2, *, durable: bool = True) -> Path:
     """Write ``obj`` as strict JSON (no NaN/inf; raises ValueError) atomically (``durable`` as in :func:`write_bytes`)."""
-    _check_finite(obj)
+    if (where := non_finite(obj)) is not None:
+        raise ValueError(f"non-finite number at {where} cannot be written as JSON")
     return write_text(path, json.dumps(obj, indent=indent, sort_keys=False, allow_nan=False) + "\n", durable=durable)
 
 

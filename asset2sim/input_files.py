@@ -26,6 +26,8 @@ import stat
 from pathlib import Path
 from typing import Iterator
 
+from asset2sim import atomic
+
 __all__ = ["DEFAULT_MAX_BYTES", "InputFileError", "MAX_CONFIG_BYTES", "MAX_YAML_ALIASES", "MAX_YAML_DEPTH", "MAX_YAML_NODES",
            "allow_outside", "allowed_folders", "allowed_outside", "check_file", "file_kind", "inside", "load_yaml", "read_file",
            "read_head", "set_allowed_outside"]
@@ -195,25 +197,13 @@ def read_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: in
 
 def read_head(path: Path | str, n: int = 4096) -> bytes | None:
     """The first ``n`` bytes of ``path`` when it is a regular file (opened without blocking); None for a
-    missing, unreadable or special file (a FIFO, ``/dev/zero``), which is never read."""
+    missing, unreadable or special file (a FIFO, ``/dev/zero``), which is never read
+    (:func:`asset2sim.atomic.open_regular`)."""
     try:
-        st = os.stat(str(path))
+        with atomic.open_regular(path) as fh:
+            return fh.read(n)
     except (OSError, ValueError):
         return None
-    if not stat.S_ISREG(st.st_mode):
-        return None
-    try:
-        fd = os.open(str(path), os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
-    except OSError:
-        return None
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            return None
-        return os.read(fd, n)
-    except OSError:
-        return None
-    finally:
-        os.close(fd)
 
 
 #: Cap of a configuration file (``--config``, ``catalog.yaml``), bytes.

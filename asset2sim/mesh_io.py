@@ -19,6 +19,7 @@ import threading
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import cachetools
 import numpy as np
@@ -408,16 +409,17 @@ def convex_hull_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return hull.points[used], remap[tri]
 
 
-def hull_obj(points: np.ndarray) -> bytes:
+def hull_obj(points: np.ndarray, num: Callable[[float], str] = repr) -> bytes:
     """OBJ bytes of :func:`convex_hull_mesh` of ``points`` (n, 3), vertices
-    written exactly (``repr``).
+    written exactly (``num`` of each coordinate: ``repr``, or MJCF's
+    :func:`asset2sim.engines.mjcf.base.num_text`).
 
     Raises:
         scipy.spatial.QhullError: fewer than 4 points not in one plane.
         ValueError: ``points`` is not (n, 3).
     """
     verts, tris = convex_hull_mesh(points)
-    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in verts]
+    lines = [f"v {num(x)} {num(y)} {num(z)}" for x, y, z in verts.tolist()]
     lines += [f"f {i} {j} {k}" for i, j, k in tris + 1]
     return ("\n".join(lines) + "\n").encode()
 

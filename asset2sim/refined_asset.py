@@ -11,12 +11,12 @@ trust checks (:func:`asset2sim.tasks.publish.contract.verify_output`) and the wr
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Any
 
+from asset2sim.atomic import non_finite
 from asset2sim.engines.base import SessionOptions, Spring, session_root_options
 from asset2sim.engines.loading import CollisionPiece, collision_pieces, overlay_springs, read_urdf
 from asset2sim.output_folder import OVERLAY_NAME, REPORT_NAME, STATE_NAME, TIMINGS_NAME, URDF_NAME, OutputError, read_record
@@ -193,20 +193,6 @@ class RefinedAsset:
             if isinstance(state, dict) and "seconds" not in state and isinstance(timings.get("state_seconds"), (int, float)):
                 state["seconds"] = timings["state_seconds"]
         return RefineReport.model_validate(data)
-
-
-def non_finite(obj: Any, where: str = "$") -> str | None:
-    """The JSON path (``$.metrics[3].value``) of the first NaN or infinity in ``obj`` (parsed JSON), or None."""
-    stack = [(obj, where)]
-    while stack:
-        value, at = stack.pop()
-        if isinstance(value, float) and not math.isfinite(value):
-            return at
-        if isinstance(value, dict):
-            stack.extend((v, f"{at}.{k}") for k, v in reversed(list(value.items())))
-        elif isinstance(value, list):
-            stack.extend((v, f"{at}[{i}]") for i, v in reversed(list(enumerate(value))))
-    return None
 
 
 def read_initial_state(folder: Path | str) -> dict[str, float]:

@@ -15,6 +15,7 @@ from asset2sim.engines.registry import available_engines
 from asset2sim.refined_asset import RefinedAsset
 from asset2sim.tasks.check.parity import evaluate_engines, parity_table
 from asset2sim import output_folder
+from asset2sim.formats import FORMATS
 from asset2sim.formats.mjcf.export import check_mjcf, export_mjcf
 from asset2sim.formats.usd.export import check_usd, export_usd
 from asset2sim.output_folder import URDF_NAME
@@ -29,8 +30,6 @@ EXITS = {
     2: "the folder cannot be exported",
     4: "the output cannot be written",
 }
-
-FORMATS = ("mjcf", "usd")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

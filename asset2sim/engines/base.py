@@ -281,6 +281,7 @@ class SimSession(Protocol):
 class SessionDefaults:
     """Mixed into every session class: a context manager that closes it;
     ``step_ground_penetration`` = ``ground_penetration`` (no contact cache);
+    snapshots kept in ``_states`` (:meth:`_keep_state`, ``discard_state``);
     ``hold_root`` / ``release_root`` of an engine without a bounded root
     constraint (a no-op on a fixed base, else :class:`EngineUnsupported`); ``place_on_ground`` of an
     engine without an exact lowest point (:class:`EngineUnsupported`); the cautious :class:`EngineTraits`
@@ -310,6 +311,16 @@ class SessionDefaults:
 
     def place_on_ground(self) -> float:
         raise EngineUnsupported(f"{self.engine}: no exact lowest collision point to place on the ground")
+
+    def _keep_state(self, state) -> int:
+        """Keep a snapshot in the session's ``_states`` (handle -> snapshot) of an engine without saved states of its
+        own; its handle for :meth:`restore_state`."""
+        handle = max(self._states, default=0) + 1
+        self._states[handle] = state
+        return handle
+
+    def discard_state(self, handle: int) -> None:
+        self._states.pop(handle, None)
 
 
 class ShapeWorld(Protocol):
@@ -401,6 +412,13 @@ _VIEWERS: dict[str, Callable[[Path], Viewer]] = {}
 
 class EngineUnavailable(RuntimeError):
     """The engine's Python package is not installed (an optional extra)."""
+
+
+def unsupported(message: str) -> Callable:
+    """A session method for a query the engine does not answer: it raises :class:`EngineUnsupported` ``message``."""
+    def method(self, *args, **kwargs):
+        raise EngineUnsupported(message)
+    return method
 
 
 def register_engine(name: str, factory: EngineFactory) -> None:

@@ -243,16 +243,11 @@ class MuJoCoSession(SessionDefaults):
         mj = self._mj
         state = np.empty(mj.mj_stateSize(self.m, self._state_sig))
         mj.mj_getState(self.m, self.d, state, self._state_sig)
-        handle = max(self._states, default=0) + 1
-        self._states[handle] = state
-        return handle
+        return self._keep_state(state)
 
     def restore_state(self, handle: int) -> None:
         self._mj.mj_setState(self.m, self.d, self._states[handle], self._state_sig)
         self._mj.mj_forward(self.m, self.d)
-
-    def discard_state(self, handle: int) -> None:
-        self._states.pop(handle, None)
 
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
-                                    SessionOptions, penetration_sum, principal_moments, register_engine, register_file_reader)
+                                    SessionOptions, penetration_sum, principal_moments, register_engine, register_file_reader,
+                                    unsupported)
 from asset2sim.engines.loading import (BOX_CORNERS, BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS,
                                        BULLET_PLANE_FRICTION, CollisionPiece, collision_pieces, joint_tables, read_urdf)
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
@@ -374,10 +375,8 @@ class NewtonSession(SessionDefaults):
         """Snapshot every array of the current ``newton.State``: joint and body coordinates and velocities, and the
         arrays Kamino keeps on the state between steps (previous joint coordinates, the joint constraints'
         multipliers that warm-start the next solve, the total body wrenches); the pending joint efforts too."""
-        handle = max(self._states, default=0) + 1
-        self._states[handle] = ({k: v.numpy().copy() for k, v in _state_arrays(self.state0, self._wp).items()},
-                                self._effort.copy(), self._applied)
-        return handle
+        return self._keep_state(({k: v.numpy().copy() for k, v in _state_arrays(self.state0, self._wp).items()},
+                                 self._effort.copy(), self._applied))
 
     def restore_state(self, handle: int) -> None:
         """Return to a snapshot of :meth:`save_state` (KeyError: an unknown or discarded handle)."""
@@ -388,9 +387,6 @@ class NewtonSession(SessionDefaults):
                 current[k].assign(v)
         self._effort[:] = effort
         self._applied = applied
-
-    def discard_state(self, handle: int) -> None:
-        self._states.pop(handle, None)
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` steps of :attr:`dt` s; efforts of :meth:`apply_joint_effort` act on the first only."""
@@ -429,14 +425,8 @@ class NewtonSession(SessionDefaults):
         self.model = self.full_model = None
 
 
-def _unsupported(query: str):
-    def method(self, *args, **kwargs):
-        raise EngineUnsupported(f"newton: {query} is not implemented")
-    return method
-
-
 for _query in ("drive_joint", "release_joint", "link_distances", "apply_link_force", "set_root_velocity"):
-    setattr(NewtonSession, _query, _unsupported(_query))
+    setattr(NewtonSession, _query, unsupported(f"newton: {_query} is not implemented"))
 
 #: Smallest rigid-contact capacity of the stepping pipeline and solver (Kamino's CPU cost grows with the
 #: capacity); the session sizes it at CONTACT_CAPACITY_HEADROOM x the initial contacts and grows it

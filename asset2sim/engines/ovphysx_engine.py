@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import EngineUnavailable, EngineUnsupported, SessionDefaults, SessionOptions, register_engine
+from asset2sim.engines.base import EngineUnavailable, SessionDefaults, SessionOptions, register_engine, unsupported
 from asset2sim.engines.loading import collision_pieces, joint_tables, read_urdf
 from asset2sim.engines.step_budget import spend
 from asset2sim.extras import pxr_modules
@@ -232,9 +232,7 @@ class OvPhysxSession(SessionDefaults):
         self._applied = True
 
     def save_state(self) -> int:
-        handle = max(self._states, default=0) + 1
-        self._states[handle] = (self._read(self._q), self._read(self._qd), self._read(self._root), self._read(self._root_v))
-        return handle
+        return self._keep_state((self._read(self._q), self._read(self._qd), self._read(self._root), self._read(self._root_v)))
 
     def restore_state(self, handle: int) -> None:
         q, qd, root, root_v = self._states[handle]
@@ -242,9 +240,6 @@ class OvPhysxSession(SessionDefaults):
         self._qd.write(qd)
         self._root.write(root)
         self._root_v.write(root_v)
-
-    def discard_state(self, handle: int) -> None:
-        self._states.pop(handle, None)
 
     def step(self, n: int = 1) -> None:
         spend(n)  # the refine's one budget of steps (asset2sim.engines.step_budget)
@@ -264,31 +259,6 @@ class OvPhysxSession(SessionDefaults):
         fr = self._read(self._friction)[0]
         return {j: tuple(float(x) for x in fr[i]) for j, i in self._dof.items() if j in self._sign}
 
-    # ---------------------------------------------------------- not answered
-    def _unsupported(self, what: str):
-        raise EngineUnsupported(f"ovphysx: {what} is not read from the USD runtime here")
-
-    def self_penetration(self):
-        self._unsupported("contacts (penetration)")
-
-    def ground_penetration(self) -> float:
-        self._unsupported("ground penetration")
-
-    def link_frame(self, link: str):
-        self._unsupported("link frames")
-
-    def link_aabb(self, link: str):
-        self._unsupported("link boxes")
-
-    def drive_joint(self, joint: str, velocity: float, max_force: float) -> None:
-        self._unsupported("joint drives")
-
-    def release_joint(self, joint: str) -> None:
-        self._unsupported("joint drives")
-
-    def apply_link_force(self, link: str, force, point) -> None:
-        self._unsupported("link forces")
-
     def close(self) -> None:
         physx, stage = getattr(self, "_physx", None), getattr(self, "_stage", None)
         try:
@@ -305,4 +275,8 @@ class OvPhysxSession(SessionDefaults):
                 self._dir = None
 
 
+for _query, _what in (("self_penetration", "contacts (penetration)"), ("ground_penetration", "ground penetration"),
+                      ("link_frame", "link frames"), ("link_aabb", "link boxes"), ("drive_joint", "joint drives"),
+                      ("release_joint", "joint drives"), ("apply_link_force", "link forces")):
+    setattr(OvPhysxSession, _query, unsupported(f"ovphysx: {_what} is not read from the USD runtime here"))
 register_engine("ovphysx", OvPhysxSession)

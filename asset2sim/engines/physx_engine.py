@@ -413,9 +413,7 @@ class PhysXSession(SessionDefaults):
 
     # ------------------------------------------------------------------ state
     def save_state(self) -> int:
-        handle = max(self._states, default=0) + 1
-        self._states[handle] = self._state()
-        return handle
+        return self._keep_state(self._state())
 
     def restore_state(self, handle: int) -> None:
         self._set_state(self._states[handle])
@@ -433,9 +431,6 @@ class PhysXSession(SessionDefaults):
                               state):
             put(value)
         self._effort = None if state[6] is None else state[6].copy()
-
-    def discard_state(self, handle: int) -> None:
-        self._states.pop(handle, None)
 
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import atexit
 import hashlib
 import json
+import math
 import os
 import re
 import threading
@@ -41,6 +42,13 @@ SOURCE_DIR = "source"
 #: File suffixes read as MJCF and as OpenUSD.
 MJCF_SUFFIXES = (".xml", ".mjcf")
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
+#: Triangles one MJCF model or USD stage may build, every ``<mesh>`` element or mesh prim counted (one file named by
+#: 60 elements is built 60 times): MuJoCo's compiler took 1.6 GB for 2,000,000 (10 references of a 200,000-face STL,
+#: about 800 bytes a face) and 4.5 GB for 6,000,000; this keeps a refine of an MJCF or USD input under 2 GB (the
+#: staged URDF then meets the validator's face caps).
+MAX_BUILT_FACES = 1_000_000
+#: Folder (inside the output's ``mjcf/`` or ``usd/``) of the files written for the host.
+HOST_DIR = "host"
 
 
 class StagingError(ValueError):
@@ -182,6 +190,17 @@ def other_format_file(asset: Path | str) -> tuple[Path, str] | None:
     if p.is_dir() and len(found) > 1:  # a model's <mujocoinclude> files beside it are not objects of their own
         found = [(f, fmt) for f, fmt in found if fmt != "mjcf" or root_element(f) == "mujoco"]
     return found[0] if len(found) == 1 else None
+
+
+def host_overlay(asset, source: Path, what: str, error: type[Exception]):
+    """The :class:`~asset2sim.schemas.overlay.Overlay` of the output folder ``asset``
+    (:class:`~asset2sim.refined_asset.RefinedAsset`) for writing its physics back into the host's ``source``; raises
+    ``error`` when the object was rescaled (the host ``what``, file or stage, keeps the host's sizes)."""
+    overlay = asset.required_overlay()
+    if not math.isclose(overlay.scale, 1.0, rel_tol=0.0, abs_tol=1e-12):
+        raise error(f"{source}: the object was rescaled (x{overlay.scale:.4g}); its host {what} keeps the host's sizes, "
+                    "so none is written (refine without --size / --scale / size words to keep the size)")
+    return overlay
 
 
 def numbered(name: str, used: set[str]) -> str:

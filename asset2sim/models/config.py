@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +21,11 @@ def _env_float(name: str, default: float) -> float:
     if not math.isfinite(x) or x < 0:
         raise ValueError(f"environment variable {name}={v!r} must be a finite number >= 0")
     return x
+
+
+#: The fields ``from_env`` reads from ``ASSET2SIM_LLM_<FIELD>`` (a number, its default the field's).
+_ENV_KNOBS = ("timeout_s", "max_attempts", "backoff_s", "max_backoff_s", "max_retry_after_s", "max_reply_chars",
+              "max_reply_bytes", "max_tokens")
 
 
 def default_cache_dir() -> Path:
@@ -72,8 +77,9 @@ class ClientConfig:
 
     @classmethod
     def from_env(cls, model: str, base_url: str | None = None, **overrides) -> "ClientConfig":
-        """Config for ``model`` with knobs from ``ASSET2SIM_LLM_*`` variables (names and defaults
-        below; ``ASSET2SIM_LLM_CACHE_DIR=off`` disables the cache); keyword ``overrides`` win.
+        """Config for ``model`` with knobs from ``ASSET2SIM_LLM_*`` variables (:data:`_ENV_KNOBS`: the field's
+        name in upper case, e.g. ``ASSET2SIM_LLM_TIMEOUT_S``, its default the field's; ``ASSET2SIM_LLM_RENDER_SIZE``;
+        ``ASSET2SIM_LLM_CACHE_DIR=off`` disables the cache); keyword ``overrides`` win.
 
         Raises:
             ValueError: a malformed environment value.
@@ -83,14 +89,8 @@ class ClientConfig:
         kw: dict[str, Any] = dict(
             model=model,
             base_url=base_url,
-            timeout_s=_env_float("ASSET2SIM_LLM_TIMEOUT_S", 120.0),
-            max_attempts=int(_env_float("ASSET2SIM_LLM_MAX_ATTEMPTS", 4)),
-            backoff_s=_env_float("ASSET2SIM_LLM_BACKOFF_S", 2.0),
-            max_backoff_s=_env_float("ASSET2SIM_LLM_MAX_BACKOFF_S", 60.0),
-            max_retry_after_s=_env_float("ASSET2SIM_LLM_MAX_RETRY_AFTER_S", 300.0),
-            max_reply_chars=int(_env_float("ASSET2SIM_LLM_MAX_REPLY_CHARS", 1_000_000)),
-            max_reply_bytes=int(_env_float("ASSET2SIM_LLM_MAX_REPLY_BYTES", 16 << 20)),
-            max_tokens=int(_env_float("ASSET2SIM_LLM_MAX_TOKENS", 16384)),
+            **{f.name: type(f.default)(_env_float(f"ASSET2SIM_LLM_{f.name.upper()}", f.default))
+               for f in fields(cls) if f.name in _ENV_KNOBS},
             cache_dir=None if cache_env.lower() in ("off", "none", "0") else default_cache_dir(),
             render_size=(size, size),
         )

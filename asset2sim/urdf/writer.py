@@ -122,16 +122,12 @@ def _write_material(out: _Out, depth: int, mat: UrdfMaterial) -> None:
 
 def _write_shape(out: _Out, depth: int, g: UrdfGeometry) -> None:
     def body(d: int) -> None:
-        f = out.fmt
         if g.kind == "mesh":
             scale = None if g.mesh_scale is None else out.vec(g.mesh_scale)
             out.leaf(d, "mesh", (("filename", g.filename), ("scale", scale)))
         elif g.kind is not None:
-            out.leaf(d, g.kind, (
-                ("size", None if g.size is None else out.vec(g.size)),
-                ("radius", None if g.radius is None else f(g.radius)),
-                ("length", None if g.length is None else f(g.length)),
-            ))
+            out.leaf(d, g.kind, (("size", None if g.size is None else out.vec(g.size)), ("radius", _num_or_none(out, g.radius)),
+                                 ("length", _num_or_none(out, g.length))))
 
     out.element(depth, "geometry", (), body)
 

@@ -20,18 +20,10 @@ from asset2sim.engines.mjcf.rewrite import (add_root_and_ground, cylinder_prisms
 from asset2sim.engines.mjcf.visuals import add_visuals
 from asset2sim.file_names import file_stem
 from asset2sim.frames import translation_matrix
-from asset2sim.mesh_io import convex_hull_mesh
+from asset2sim.mesh_io import hull_obj
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.report import SolverAid
 from asset2sim.urdf import UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfModel, UrdfStyle, write_urdf
-
-
-def hull_obj(points: np.ndarray) -> bytes:
-    """OBJ bytes of the convex hull of ``points`` (k, 3) m, faces outward."""
-    verts, tris = convex_hull_mesh(points)
-    lines = [f"v {vec_text(v)}" for v in verts]
-    lines += [f"f {i} {j} {k}" for i, j, k in tris + 1]
-    return ("\n".join(lines) + "\n").encode()
 
 
 @dataclass
@@ -66,7 +58,7 @@ def mesh_assets(pieces: dict[str, list[CollisionPiece]], mesh_root: Path) -> Mes
                 scale = None if np.allclose(p.scale, 1.0) else np.asarray(p.scale, float)
             else:
                 rel = f"{DERIVED_MESH_DIR}/{file_stem(name)}__c{p.collision}_g{p.group}.obj"
-                data = hull_obj(p.points)
+                data = hull_obj(p.points, num_text)
                 out.derived[rel] = data
                 scale = None
             vname = f"piece{len(out.virtual)}.obj"

@@ -31,6 +31,7 @@ from asset2sim.safexml import parse_xml_file
 from asset2sim.schemas.report import SolverAid
 from asset2sim.frames import quat_wxyz_matrix
 
+#: Relative tolerance of the check that a written MJCF file carries the refined masses.
 MASS_RTOL = 1e-6
 _DERIVED = re.compile(r".+__c\d+_g\d+\.obj$")
 

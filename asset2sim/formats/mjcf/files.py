@@ -40,7 +40,7 @@ from asset2sim.engines.mjcf.base import load_mujoco, mujoco_messages
 from asset2sim.extras import import_extra
 from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, allowed_outside, inside, read_file
 from asset2sim.formats.mjcf import conventions
-from asset2sim.formats.staging import SOURCE_DIR, StagingError, input_tree, read_of, read_snapshot, write_snapshot
+from asset2sim.formats.staging import MAX_BUILT_FACES, SOURCE_DIR, StagingError, input_tree, read_of, read_snapshot, write_snapshot
 
 __all__ = ["MAX_INCLUDES", "MAX_INCLUDE_DEPTH", "MAX_TOTAL_BYTES", "MjcfSources", "OpenedMjcf", "compile_mjcf", "gather_mjcf",
            "opened_mjcf", "staged_sources"]
@@ -51,10 +51,6 @@ MAX_INCLUDES = 256
 MAX_INCLUDE_DEPTH = 16
 #: Bytes of every file a model names together (each file: :data:`asset2sim.input_files.DEFAULT_MAX_BYTES`).
 MAX_TOTAL_BYTES = 1024 * 1024 * 1024
-#: Triangles MuJoCo builds for one model, every ``<mesh>`` element counted (one file named by 60 elements is built 60
-#: times): MuJoCo's compiler took 1.6 GB for 2,000,000 (10 references of a 200,000-face STL, about 800 bytes a face)
-#: and 4.5 GB for 6,000,000; this keeps a refine of an MJCF input under 2 GB.
-MAX_BUILT_FACES = 1_000_000
 #: Elements whose file attribute MuJoCo resolves through ``meshdir`` / ``texturedir``.
 _MESHDIR_TAGS = frozenset({"mesh", "skin", "hfield"})
 _TEXDIR_TAGS = frozenset({"texture"})
@@ -285,7 +281,8 @@ class OpenedMjcf:
         Raises:
             StagingError: MuJoCo cannot compile it (its message, naming the file).
         """
-        mujoco = load_mujoco()
+        # ImportError without MuJoCo, before anything is pointed at the copy
+        load_mujoco()
         spec, tmp = self.spec, self.folder
         try:
             with mujoco_messages() as caught:

@@ -46,26 +46,21 @@ import numpy as np
 
 from asset2sim import atomic, file_names, output_folder, safexml
 from asset2sim.refined_asset import RefinedAsset
-from asset2sim.engines.mjcf.base import FRICTION_SOLIMP, friction_solref, load_mujoco, mujoco_messages
+from asset2sim.engines.mjcf.base import FRICTION_SOLIMP, KEYFRAME, friction_solref, load_mujoco, mujoco_messages
 from asset2sim.output_folder import MJCF_DIR, URDF_NAME
 from asset2sim.schemas.overlay import JointDynamics, LinkPhysics, Overlay
 from asset2sim.formats.mjcf import conventions, scene
 from asset2sim.formats.mjcf.conventions import ReadOptions
 from asset2sim.formats.mjcf.files import MjcfSources, OpenedMjcf, compile_mjcf, gather_mjcf, opened_mjcf, staged_sources
-from asset2sim.formats.staging import MJCF_SUFFIXES, ReadAsset, StagingError, copy_named
+from asset2sim.formats.mjcf.export import MASS_RTOL
+from asset2sim.formats.staging import HOST_DIR, host_overlay, MJCF_SUFFIXES, ReadAsset, StagingError, copy_named
 
-#: Folder (inside the output's ``mjcf/``) of the file written for the host.
-HOST_DIR = "host"
 #: Folder (inside ``mjcf/host/``) of the input's files holding the object, written again.
 FILES_DIR = "files"
 #: Their unified diff against the package's files (inside ``mjcf/host/``).
 FILES_DIFF = "files.diff"
 #: Joint attributes a package file takes from the refined joint (in the file's units).
 JOINT_PHYSICS = ("damping", "frictionloss", "solreffriction", "solimpfriction", "stiffness", "springref", "range")
-#: The keyframe holding the refined initial state.
-KEYFRAME = "initial"
-#: Relative tolerance of the check that the written file carries the refined masses.
-MASS_RTOL = 1e-6
 
 
 class HostExportError(RuntimeError):
@@ -132,10 +127,7 @@ def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: 
     import mujoco
 
     asset = RefinedAsset(out_dir)
-    overlay = asset.required_overlay()
-    if not math.isclose(overlay.scale, 1.0, rel_tol=0.0, abs_tol=1e-12):
-        raise HostExportError(f"{source}: the object was rescaled (x{overlay.scale:.4g}); its host file keeps the host's sizes, "
-                              "so none is written (refine without --size / --scale / size words to keep the size)")
+    overlay = host_overlay(asset, source, "file", HostExportError)
     model, state = asset.model, asset.initial_state
     spec, original = opened.spec, opened.model
     pick = scene.pick_object(original, source, reading.body)

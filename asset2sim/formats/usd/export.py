@@ -6,7 +6,6 @@ Prim layout and unit conversions: docs/design/simulators.md, "USD export".
 
 from __future__ import annotations
 
-import math
 import os
 import tempfile
 from dataclasses import dataclass, field
@@ -18,6 +17,7 @@ from asset2sim import atomic
 from asset2sim.extras import pxr_modules as _pxr
 from asset2sim.engines.loading import CollisionPiece, principal_axes
 from asset2sim.refined_asset import RefinedAsset
+from asset2sim.formats.usd.reader import DEG
 from asset2sim.formats.usd.stage import authored
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
 from asset2sim.mesh_io import MeshReadError, convex_hull_mesh, read_mesh
@@ -26,8 +26,6 @@ from asset2sim.output_folder import USD_DIR
 
 #: Relative tolerance of a value read back from the USD (binary32: 6e-8 relative, plus a degree conversion).
 FLOAT_RTOL = 1e-6
-#: Degrees per radian (UsdPhysics angles, limits and angular gains are per degree).
-DEG = 180.0 / math.pi
 
 
 class UsdExportError(RuntimeError):

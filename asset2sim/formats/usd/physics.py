@@ -34,7 +34,6 @@ A refine that rescaled the object writes no such files: the host's geometry woul
 
 from __future__ import annotations
 
-import math
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,15 +46,13 @@ from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, rigid_inverse
 from asset2sim.extras import pxr_modules
 from asset2sim.output_folder import URDF_NAME, USD_DIR
 from asset2sim.schemas.overlay import JointDynamics, LinkPhysics
-from asset2sim.formats.staging import ReadAsset
+from asset2sim.formats.staging import HOST_DIR, ReadAsset, host_overlay
 from asset2sim.formats.usd import reader
 from asset2sim.formats.usd.reader import DEG, FRICTION_ATTRS
 from asset2sim.formats.usd.stage import StageReading, open_stage
 
 __all__ = ["HOST_DIR", "HostUsdError", "HostUsdExport", "UsdEdit", "applied_schemas", "set_body_mass", "set_joint_dynamics", "write_host_usd"]
 
-#: Folder (inside the output's ``usd/``) of the files written for the host.
-HOST_DIR = "host"
 #: Relative tolerance of the check that the written stage holds the refined values (binary32 attributes).
 VALUE_RTOL = 1e-5
 #: A value within this difference (relative to its magnitude) of the one the stage holds is left as it is: a value
@@ -248,10 +245,7 @@ def write_host_usd(out_dir: Path | str, source: Path | str) -> HostUsdExport:
 def _write_host_usd(out_dir: Path, source: Path) -> HostUsdExport:
     _, Sdf, _, Usd, _, UsdPhysics = pxr_modules()
     asset = RefinedAsset(out_dir)
-    overlay = asset.required_overlay()
-    if not math.isclose(overlay.scale, 1.0, rel_tol=0.0, abs_tol=1e-12):
-        raise HostUsdError(f"{source}: the object was rescaled (x{overlay.scale:.4g}); its host stage keeps the host's sizes, "
-                           "so none is written (refine without --size / --scale / size words to keep the size)")
+    overlay = host_overlay(asset, source, "stage", HostUsdError)
     model, state = asset.model, asset.initial_state
     read = reader.read_usd_asset(source)
     ctx = open_stage(source)

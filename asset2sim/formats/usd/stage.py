@@ -18,7 +18,7 @@ import numpy as np
 from asset2sim.frames import rigid_matrix, rigid_part
 from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, check_file
 from asset2sim.extras import pxr_modules
-from asset2sim.formats.staging import StagingError, input_tree, mesh_name, rgba_material
+from asset2sim.formats.staging import MAX_BUILT_FACES, StagingError, input_tree, mesh_name, rgba_material
 from asset2sim.urdf import UrdfGeometry, UrdfLink, UrdfMaterial
 
 
@@ -73,9 +73,6 @@ class StageReading:
 
 #: Layers per stage (sublayers, references and payloads, each counted once).
 MAX_LAYERS = 1024
-#: Triangles the reader builds from one stage, every mesh prim counted (the limit MuJoCo's compiler sets for MJCF:
-#: :data:`asset2sim.formats.mjcf.files.MAX_BUILT_FACES`; the staged URDF then meets the validator's face caps).
-MAX_BUILT_FACES = 1_000_000
 
 
 def _layer_file(identifier: str) -> tuple[str, bool]:
