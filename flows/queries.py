@@ -219,15 +219,7 @@ def slowest_assets(df, n: int = 10, run: str | None = None):
     import pandas as pd
 
     if _is_table(df):
-        import pyarrow.compute as pc
-
-        t = plain_strings(df)
-        if run is not None:
-            t = t.filter(pc.equal(t["run"], run))
-        t = t.filter(pc.invert(pc.equal(pc.fill_null(t["status"], ""), "skipped")))
-        t = t.filter(pc.is_valid(t["wall_seconds"]))
-        t = pc.take(t, pc.select_k_unstable(t, k=min(int(n), t.num_rows), sort_keys=[("wall_seconds", "descending")])) if t.num_rows else t
-        df = t.to_pandas()
+        df = plain_strings(df).to_pandas()
     if run is not None:
         df = df[df["run"] == run]
     df = df[df["status"] != "skipped"]
@@ -321,13 +313,7 @@ def failed_assets(df, run: str | None = None, limit: int | None = None):
     import pandas as pd
 
     if _is_table(df):
-        import pyarrow.compute as pc
-
-        t = plain_strings(df)
-        if run is not None:
-            t = t.filter(pc.equal(t["run"], run))
-        t = t.filter(pc.invert(pc.equal(pc.fill_null(t["failure_mode"], MISSING_FAILURE_MODE), "none")))
-        df = (t.slice(0, int(limit)) if limit is not None else t).to_pandas()
+        df = plain_strings(df).to_pandas()
     if run is not None:
         df = df[df["run"] == run]
     d = df[df["failure_mode"].fillna(MISSING_FAILURE_MODE) != "none"]
