@@ -132,20 +132,12 @@ def status_counts(df) -> dict[str, Any]:
 def run_summary(df) -> dict[str, Any]:
     """Numbers of one run's rows (pass rates as fractions in [0, 1], penetration
     mm, seconds) of a DataFrame: what MLflow logs as the run's metrics."""
-    n = int(len(df))
-    out: dict[str, Any] = {
-        "assets": n,
-        "done": int((df["status"] == "done").sum()) if n else 0,
-        "skipped": int((df["status"] == "skipped").sum()) if n else 0,
-        "failed": int((df["status"] == "failed").sum()) if n else 0,
-    }
-    if n == 0:
-        out.update(pass_rate_all=None, stability_pass_rate=None, oscillation_pass_rate=None)
-        out["failure_modes"] = {m: 0 for m in FAILURE_MODES}
+    counts = status_counts(df)
+    out: dict[str, Any] = {k: counts[k] for k in ("assets", "done", "skipped", "failed")}
+    if not len(df):
+        out.update(pass_rate_all=None, stability_pass_rate=None, oscillation_pass_rate=None, failure_modes=counts["failure_modes"])
         return out
-    modes = df["failure_mode"].fillna(MISSING_FAILURE_MODE)
-    out["failure_modes"] = {m: int((modes == m).sum()) for m in FAILURE_MODES}
-    out["pass_rate_all"] = float((modes == "none").mean())
+    out.update(failure_modes=counts["failure_modes"], pass_rate_all=counts["pass_rate_all"])
     out["stability_pass_rate"] = _rate(df["rest_stable"])
     out["oscillation_pass_rate"] = _rate(df["oscillation_pass"])
     pen = df["penetration_mm"].dropna().astype(float)
