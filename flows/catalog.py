@@ -394,11 +394,11 @@ class ResultCatalog:
             return {}
         keys = keys.set_column(keys.schema.get_field_index("run"), "run", keys["run"].cast(pa.string()))
         kdf = keys.select(["asset_id", "input_hash", "config_hash", "run"]).to_pandas()
-        kdf["_key"] = kdf["asset_id"] + "|" + kdf["input_hash"].fillna("") + "|" + kdf["config_hash"].fillna("")
+        kdf["_key"] = _keys(kdf)
         latest = kdf.sort_values("run", kind="stable").drop_duplicates("_key", keep="last")
         # pass 2: whole rows, only of the runs that hold a latest result
         rows = self.read(dataset, sorted(latest["run"].unique()), filter=expr)
-        rows = rows.assign(_key=rows["asset_id"] + "|" + rows["input_hash"].fillna("") + "|" + rows["config_hash"].fillna(""))
+        rows = rows.assign(_key=_keys(rows))
         rows = rows.merge(latest[["_key", "run"]], on=["_key", "run"], how="inner").drop(columns="_key")
         recs = [{k: plain_value(v) for k, v in rec.items()} for rec in rows.to_dict("records")]
         return {result_key(r["asset_id"], r["input_hash"], r["config_hash"]): r for r in recs}
@@ -443,6 +443,11 @@ def plain_value(v: Any) -> Any:
         if pd.isna(v):
             return None
     return v.item() if hasattr(v, "item") else v
+
+
+def _keys(df):
+    """:func:`result_key` of every row of a DataFrame (a Series)."""
+    return df["asset_id"] + "|" + df["input_hash"].fillna("") + "|" + df["config_hash"].fillna("")
 
 
 def result_key(asset_id: str, input_hash: str | None, config_hash: str | None) -> str:
