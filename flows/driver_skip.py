@@ -130,21 +130,12 @@ def _decide(job: Any, entry: InputEntry | None, fingerprint: str | None, code: s
         return None
     if entry.job_category != job.category or not job.finished:
         return None
-    rhash, chash, skip = reusable(job, entry.input_hash)
-    if skip is None:
+    rec = reusable(Prepared(worker=f"{socket.gethostname()}:{os.getpid()} (driver)", category=entry.category,
+                            links=entry.links, movable_joints=entry.movable_joints), job, entry.input_hash)
+    if rec.skip is None:
         return None
-    return Prepared(
-        ok=True,
-        worker=f"{socket.gethostname()}:{os.getpid()} (driver)",
-        input_hash=entry.input_hash,
-        config_hash=chash,
-        refine_config_hash=rhash,
-        category=entry.category,
-        links=entry.links,
-        movable_joints=entry.movable_joints,
-        skip=skip,
-        seconds=time.perf_counter() - t0,
-    )
+    rec.seconds = time.perf_counter() - t0
+    return rec
 
 
 def decide_skips(

@@ -117,12 +117,13 @@ def finished_in_store(row: dict[str, Any] | None, input_hash: str) -> dict[str, 
     return finished_result(row, input_hash)
 
 
-def reusable(job: AssetJob, input_hash: str) -> tuple[str, str, dict[str, Any] | None]:
-    """``(refine config hash, flow config hash, the earlier finished row to reuse or None)`` of ``job`` for an asset
-    of ``input_hash`` (:func:`finished_in_store` of ``job.finished``)."""
-    rhash = run_hash(RefineConfig(**job.config), job.prompt, job.category)
-    chash = job_config_hash(job, rhash)
-    return rhash, chash, finished_in_store(job.finished.get(result_key(job.asset_id, input_hash, chash)), input_hash)
+def reusable(rec: Prepared, job: AssetJob, input_hash: str) -> Prepared:
+    """``rec`` made the record of ``job``'s asset read (``ok``) with ``input_hash``: its configuration hashes and
+    ``skip``, the earlier finished row to reuse (:func:`finished_in_store` of ``job.finished``; None: none)."""
+    rec.ok, rec.input_hash, rec.refine_config_hash = True, input_hash, run_hash(RefineConfig(**job.config), job.prompt, job.category)
+    rec.config_hash = job_config_hash(job, rec.refine_config_hash)
+    rec.skip = finished_in_store(job.finished.get(result_key(job.asset_id, input_hash, rec.config_hash)), input_hash)
+    return rec
 
 
 def publish_stage(job: AssetJob, refined: StageRecord) -> StageRecord:
@@ -214,9 +215,7 @@ def prepare_asset(job: AssetJob) -> Prepared:
         rec.failure_mode, rec.error, rec.seconds = "invalid_input", f"{type(exc).__name__}: {exc}", time.perf_counter() - t0
         rec.cpu_seconds = time.thread_time() - c0
         return rec
-    rhash, chash, rec.skip = reusable(job, asset.input_hash)
-    rec.ok = True
-    rec.input_hash, rec.config_hash, rec.refine_config_hash = asset.input_hash, chash, rhash
+    chash, rhash = reusable(rec, job, asset.input_hash).config_hash, rec.refine_config_hash
     rec.category = job.category or asset.category
     rec.links, rec.movable_joints = len(asset.links), len(asset.movable_joints())
     if rec.skip is None:
