@@ -121,7 +121,6 @@ class ResultCatalog:
 
     def _drop_compacted_row(self, dataset: str, run: str, asset_id: str) -> bool:
         """Rewrite the run's compacted file (atomically) without the row of ``asset_id``; False when it holds none."""
-        import pyarrow.compute as pc
         import pyarrow.fs as pafs
 
         paths = [f"{self._run_path(dataset, run)}/{name}" for name in (COMPACTED_NAME, LEGACY_COMPACTED_NAME)]
@@ -129,10 +128,10 @@ class ResultCatalog:
         if compacted is None:  # two stats, not a listing of the partition: cheap for every row a run appends
             return False
         table = self._read_files([compacted.path])
-        keep = pc.invert(pc.equal(table["asset_id"], asset_id))
-        if not table.num_rows or pc.all(keep).as_py():
+        kept = _without(table, [asset_id])
+        if kept.num_rows == table.num_rows:
             return False
-        catalog_fs.write_bytes(self.location, compacted.path, _parquet_bytes(table.filter(keep)))
+        catalog_fs.write_bytes(self.location, compacted.path, _parquet_bytes(kept))
         return True
 
     def write_run_info(self, dataset: str, run: str, info: dict[str, Any]) -> Path | str:
