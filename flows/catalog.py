@@ -86,8 +86,11 @@ class ResultCatalog:
 
     def run_dir(self, dataset: str, run: str) -> Path | str:
         """The run's partition: a local :class:`~pathlib.Path`, or a URI on an object store."""
-        p = self._run_path(dataset, run)
-        return Path(p) if self.location.local else self.location.display(p)
+        return self._shown(self._run_path(dataset, run))
+
+    def _shown(self, path: str) -> Path | str:
+        """``path`` of the catalog as callers see it: a local :class:`~pathlib.Path`, or a URI on an object store."""
+        return Path(path) if self.location.local else self.location.display(path)
 
     def append_row(self, dataset: str, run: str, row: CatalogRow | dict[str, Any]) -> Path | str:
         """Write one row (a :class:`~asset2sim.schemas.catalog.CatalogRow`, or a
@@ -114,11 +117,10 @@ class ResultCatalog:
         path = f"{self._run_path(dataset, run)}/{aid}.parquet"
         catalog_fs.write_bytes(self.location, path, _parquet_bytes(table))
         self._drop_compacted_row(dataset, run, aid)  # the row file holds it now: each row in one file
-        return Path(path) if self.location.local else self.location.display(path)
+        return self._shown(path)
 
     def _drop_compacted_row(self, dataset: str, run: str, asset_id: str) -> bool:
         """Rewrite the run's compacted file (atomically) without the row of ``asset_id``; False when it holds none."""
-        import pyarrow.compute as pc
         import pyarrow.fs as pafs
 
         paths = [f"{self._run_path(dataset, run)}/{name}" for name in (COMPACTED_NAME, LEGACY_COMPACTED_NAME)]
@@ -126,17 +128,17 @@ class ResultCatalog:
         if compacted is None:  # two stats, not a listing of the partition: cheap for every row a run appends
             return False
         table = self._read_files([compacted.path])
-        keep = pc.invert(pc.equal(table["asset_id"], asset_id))
-        if not table.num_rows or pc.all(keep).as_py():
+        kept = _without(table, [asset_id])
+        if kept.num_rows == table.num_rows:
             return False
-        catalog_fs.write_bytes(self.location, compacted.path, _parquet_bytes(table.filter(keep)))
+        catalog_fs.write_bytes(self.location, compacted.path, _parquet_bytes(kept))
         return True
 
     def write_run_info(self, dataset: str, run: str, info: dict[str, Any]) -> Path | str:
         """Write the run's metadata ``_run.json`` atomically (replacing it)."""
         path = f"{self._run_path(dataset, run)}/{RUN_INFO_NAME}"
         catalog_fs.write_bytes(self.location, path, (json.dumps(info, indent=2, default=str) + "\n").encode())
-        return Path(path) if self.location.local else self.location.display(path)
+        return self._shown(path)
 
     def run_info(self, dataset: str, run: str) -> dict[str, Any] | None:
         """The run's ``_run.json``; None when absent or unreadable."""
@@ -170,7 +172,7 @@ class ResultCatalog:
         catalog_fs.write_bytes(self.location, path, _parquet_bytes(table))
         for info in self._run_files(dataset, run).loose.values():
             catalog_fs.delete_file(self.location, info.path)
-        return Path(path) if self.location.local else self.location.display(path)
+        return self._shown(path)
 
     def delete_row(self, dataset: str, run: str, asset_id: str) -> bool:
         """Remove the row of ``asset_id`` from the run (its row file, and from
@@ -191,7 +193,6 @@ class ResultCatalog:
             OSError: the filesystem refused a write (the row files then stay).
         """
         import pyarrow as pa
-        import pyarrow.compute as pc
 
         t0 = time.perf_counter()
         files = self._run_files(dataset, run)
@@ -204,7 +205,7 @@ class ResultCatalog:
         new = self._read_files([info.path for info in loose.values()]) if loose else None
         if files.compacted is not None:
             old = self._read_files([files.compacted.path])
-            old = old.filter(pc.invert(pc.is_in(old["asset_id"], value_set=pa.array(sorted(loose), pa.string()))))
+            old = _without(old, loose)
             new = old if new is None else pa.concat_tables([old, new])
         new = new.sort_by("asset_id")
         data = _parquet_bytes(new)
@@ -221,7 +222,7 @@ class ResultCatalog:
             elif cur is not None:  # rewritten meanwhile: its row file holds the row, the compacted file must not
                 changed.append(aid)
         if changed:
-            new = new.filter(pc.invert(pc.is_in(new["asset_id"], value_set=pa.array(sorted(changed), pa.string()))))
+            new = _without(new, changed)
             data = _parquet_bytes(new)
             catalog_fs.write_bytes(self.location, path, data)
         return Compaction(dataset, run, new.num_rows, removed, len(data), time.perf_counter() - t0)
@@ -299,7 +300,6 @@ class ResultCatalog:
             KeyError: a column the catalog does not have.
         """
         import pyarrow as pa
-        import pyarrow.compute as pc
         import pyarrow.dataset as pads
 
         # step 1: the schema read and the columns asked for
@@ -346,7 +346,7 @@ class ResultCatalog:
         for compacted, loose in overlaid:
             # the compacted rows of the assets that have a row file (which wins)
             old = scan([compacted.path], with_ids)
-            old = old.filter(pc.invert(pc.is_in(old["asset_id"], value_set=pa.array(sorted(loose)))))
+            old = _without(old, loose)
             tables += [old if cols is None else old.select(cols), scan([i.path for _, i in sorted(loose.items())])]
         # step 5: one table, at most ``limit`` rows
         if not tables:
@@ -393,11 +393,11 @@ class ResultCatalog:
             return {}
         keys = keys.set_column(keys.schema.get_field_index("run"), "run", keys["run"].cast(pa.string()))
         kdf = keys.select(["asset_id", "input_hash", "config_hash", "run"]).to_pandas()
-        kdf["_key"] = kdf["asset_id"] + "|" + kdf["input_hash"].fillna("") + "|" + kdf["config_hash"].fillna("")
+        kdf["_key"] = _keys(kdf)
         latest = kdf.sort_values("run", kind="stable").drop_duplicates("_key", keep="last")
         # pass 2: whole rows, only of the runs that hold a latest result
         rows = self.read(dataset, sorted(latest["run"].unique()), filter=expr)
-        rows = rows.assign(_key=rows["asset_id"] + "|" + rows["input_hash"].fillna("") + "|" + rows["config_hash"].fillna(""))
+        rows = rows.assign(_key=_keys(rows))
         rows = rows.merge(latest[["_key", "run"]], on=["_key", "run"], how="inner").drop(columns="_key")
         recs = [{k: plain_value(v) for k, v in rec.items()} for rec in rows.to_dict("records")]
         return {result_key(r["asset_id"], r["input_hash"], r["config_hash"]): r for r in recs}
@@ -411,6 +411,14 @@ def plain_strings(table, names=("dataset", "run")):
         if name in names and pa.types.is_dictionary(table.schema.field(i).type):
             table = table.set_column(i, name, table.column(i).cast(pa.string()))
     return table
+
+
+def _without(table, asset_ids):
+    """``table`` without the rows of ``asset_ids``."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    return table.filter(pc.invert(pc.is_in(table["asset_id"], value_set=pa.array(sorted(asset_ids), pa.string()))))
 
 
 def _parquet_bytes(table) -> bytes:
@@ -434,6 +442,11 @@ def plain_value(v: Any) -> Any:
         if pd.isna(v):
             return None
     return v.item() if hasattr(v, "item") else v
+
+
+def _keys(df):
+    """:func:`result_key` of every row of a DataFrame (a Series)."""
+    return df["asset_id"] + "|" + df["input_hash"].fillna("") + "|" + df["config_hash"].fillna("")
 
 
 def result_key(asset_id: str, input_hash: str | None, config_hash: str | None) -> str:

@@ -13,7 +13,6 @@ when any limit is exceeded. :func:`comparison_lines` gives the text.
 
 from __future__ import annotations
 
-import io
 import json
 from pathlib import Path
 from typing import Any, Literal
@@ -23,9 +22,9 @@ from pydantic import BaseModel, Field
 from asset2sim import atomic
 from asset2sim.flows.catalog import ResultCatalog
 from asset2sim.flows.catalog_config import RegressionSettings
+from asset2sim.flows.tracking import new_figure, write_png
 from asset2sim.tasks.check.verdict import MISSING_FAILURE_MODE
 from asset2sim.inert import csv_text, plot_text
-from asset2sim import library_dirs
 
 #: Metric columns compared between runs: column -> (unit, True when higher is better).
 COMPARED_METRICS: dict[str, tuple[str, bool]] = {
@@ -268,14 +267,7 @@ def pass_rate_figure(history, current_run: str | None = None, title: str = ""):
     """A matplotlib Figure: the pass rates per run (all checks, rest
     stability, oscillation; fractions) in run order, ``current_run`` marked.
     ``history``: :func:`asset2sim.flows.queries.pass_rates_over_time`."""
-    library_dirs.configure()  # before matplotlib's first import
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(7.0, 3.6), dpi=100)
-    ax = fig.add_subplot(1, 1, 1)
+    fig, ax = new_figure(7.0, 3.6)
     x = list(range(len(history)))
     for col, label, color in (("pass_rate_all", "all checks", "#4caf50"), ("stability_pass_rate", "rest stability", "#2196f3"),
                               ("oscillation_pass_rate", "oscillation", "#9c27b0")):
@@ -310,9 +302,7 @@ def write_comparison_artifacts(cmp: RunComparison, history, out_dir: Path | str)
     flips = pd.DataFrame([f.model_dump() for f in cmp.flips], columns=list(VerdictFlip.model_fields))
     paths["verdict_flips.csv"] = atomic.write_text(out_dir / "verdict_flips.csv", csv_text(flips))
     fig = pass_rate_figure(history, cmp.run, title=f"{cmp.dataset}: pass rate over runs")
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    paths["pass_rate_over_runs.png"] = atomic.write_bytes(out_dir / "pass_rate_over_runs.png", buf.getvalue())
+    paths["pass_rate_over_runs.png"] = write_png(out_dir / "pass_rate_over_runs.png", fig)
     return paths
 
 

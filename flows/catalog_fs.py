@@ -82,11 +82,17 @@ def write_bytes(loc: Location, path: str, data: bytes) -> None:
     if loc.local:
         atomic.write_bytes(Path(path), data)
         return
+    with open_output(loc, path) as fh:
+        fh.write(data)
+
+
+def open_output(loc: Location, path: str):
+    """An output stream to file ``path`` of a store ``loc`` (not local), parent folders created where the filesystem
+    has them."""
     if loc.fs.type_name not in ("s3", "gcs"):  # object stores have no folders to make (a marker object would be one more request)
         with contextlib.suppress(OSError):  # a filesystem without directories
             loc.fs.create_dir(path.rsplit("/", 1)[0], recursive=True)
-    with loc.fs.open_output_stream(path) as fh:
-        fh.write(data)
+    return loc.fs.open_output_stream(path)
 
 
 def read_bytes(loc: Location, path: str) -> bytes | None:

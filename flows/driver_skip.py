@@ -15,10 +15,10 @@ from pathlib import Path
 from typing import Any
 
 from asset2sim.flows import catalog_fs
-from asset2sim.flows.catalog import ResultCatalog, result_key
-from asset2sim.schemas.config import RefineConfig
-from asset2sim.tasks.publish.contract import code_hash, run_hash
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.tasks.publish.contract import code_hash
 from asset2sim.flows.job_records import Prepared
+from asset2sim.flows.stages import reusable
 
 #: The input index of a dataset, beside its run partitions (not a partition:
 #: the catalog's readers list only ``run=`` folders).
@@ -124,42 +124,24 @@ def entry_for(job: Any, prepared: Prepared, fingerprint: str | None) -> InputEnt
     )
 
 
-def _decide(
-    job: Any, entry: InputEntry | None, fingerprint: str | None, code: str, config_hash_of, finished_check
-) -> Prepared | None:
+def _decide(job: Any, entry: InputEntry | None, fingerprint: str | None, code: str) -> Prepared | None:
     t0 = time.perf_counter()
     if entry is None or fingerprint is None or entry.fingerprint != fingerprint or entry.code_hash != code:
         return None
     if entry.job_category != job.category or not job.finished:
         return None
-    rhash = run_hash(RefineConfig(**job.config), job.prompt, job.category)
-    chash = config_hash_of(job, rhash)
-    row = job.finished.get(result_key(job.asset_id, entry.input_hash, chash))
-    if row is None:
+    rec = reusable(Prepared(worker=f"{socket.gethostname()}:{os.getpid()} (driver)", category=entry.category,
+                            links=entry.links, movable_joints=entry.movable_joints), job, entry.input_hash)
+    if rec.skip is None:
         return None
-    skip = finished_check(row, entry.input_hash)
-    if skip is None:
-        return None
-    return Prepared(
-        ok=True,
-        worker=f"{socket.gethostname()}:{os.getpid()} (driver)",
-        input_hash=entry.input_hash,
-        config_hash=chash,
-        refine_config_hash=rhash,
-        category=entry.category,
-        links=entry.links,
-        movable_joints=entry.movable_joints,
-        skip=skip,
-        seconds=time.perf_counter() - t0,
-    )
+    rec.seconds = time.perf_counter() - t0
+    return rec
 
 
 def decide_skips(
     jobs: list[Any],
     index: dict[str, InputEntry],
     fingerprints: dict[str, str | None],
-    config_hash_of,
-    finished_check,
 ) -> dict[str, Prepared]:
     """The jobs the driver can skip: asset id -> the prepared record (with
     ``skip`` the earlier catalog row) the input stage would have returned.
@@ -167,10 +149,7 @@ def decide_skips(
     Args:
         jobs: ``AssetJob`` s of the run (``finished``: their earlier rows).
         index: :func:`read_index`; fingerprints: asset id -> :func:`input_fingerprint`.
-        config_hash_of: ``(job, refine_config_hash) -> flow config hash``
-            (``asset2sim.flows.stages.job_config_hash``).
-        finished_check: the skip rule, ``(row, input_hash) -> row or None``
-            (``asset2sim.flows.stages.finished_in_store``).
+    The skip rule: :func:`asset2sim.flows.stages.reusable`.
     """
     code = code_hash()
     todo = [j for j in jobs if j.finished and j.asset_id in index]
@@ -178,9 +157,7 @@ def decide_skips(
         return {}
 
     def one(job):
-        return job.asset_id, _decide(
-            job, index.get(job.asset_id), fingerprints.get(job.asset_id), code, config_hash_of, finished_check
-        )
+        return job.asset_id, _decide(job, index.get(job.asset_id), fingerprints.get(job.asset_id), code)
 
     with ThreadPoolExecutor(max_workers=min(8, len(todo))) as pool:
         return {aid: p for aid, p in pool.map(one, todo) if p is not None}

@@ -166,6 +166,11 @@ class StageRecord(BaseModel):
     worker: str | None = None
 
 
+def _s(seconds: float | None) -> float:
+    """A stage's seconds as ``stage_seconds`` holds them (0.1 ms; None: 0)."""
+    return round(float(seconds or 0.0), 4)
+
+
 def _utc(ts: float | None) -> datetime | None:
     return None if ts is None else datetime.fromtimestamp(ts, timezone.utc)
 
@@ -199,9 +204,9 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
     row = _row_head(job, prepared, refined, flow_run_id, started_at, finished_at)
     stages: dict[str, float] = {}
     if prepared.seconds is not None:
-        stages["prepare"] = round(float(prepared.seconds), 4)
+        stages["prepare"] = _s(prepared.seconds)
     if prepared.cpu_seconds is not None:
-        stages["cpu.prepare"] = round(float(prepared.cpu_seconds), 4)
+        stages["cpu.prepare"] = _s(prepared.cpu_seconds)
     if prepared.skip is not None:  # reuse an earlier finished result
         return _reused_row(row, prepared.skip, stages)
     errors: list[str] = []
@@ -217,7 +222,7 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
                                  measured_status=measured_status, chain_error_mode=(failure_mode or "crash") if error else None)
     errors += verdict.errors
     if measured is not None and measured.status in FAILED_STATUSES:
-        stages["metrics"] = round(float(measured.seconds or 0.0), 4)
+        stages["metrics"] = _s(measured.seconds)
         errors.append(f"metrics: {measured.error_type} {measured.error}".strip())
     if error:
         errors.append(error)
@@ -270,9 +275,9 @@ def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages:
         row.out_dir = value.out_dir or job.out_dir
         row.clips = json.dumps(clip_videos(row.out_dir)) if row.out_dir else None
         row.media = report.media
-        stages["refine"] = round(float(refined.seconds or 0.0), 4)
+        stages["refine"] = _s(refined.seconds)
         for k, v in report.stage_seconds.items():
-            stages[f"refine.{k}"] = round(float(v), 4)
+            stages[f"refine.{k}"] = _s(v)
         row.scale = report.scale
         row.total_mass_kg = report.total_mass
         row.initial_state = json.dumps(report.initial_joint_positions or {}, sort_keys=True)
@@ -291,7 +296,7 @@ def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages:
                 setattr(row, col, post[col])
         return report.failure_mode
     if refined is not None and refined.status in FAILED_STATUSES:
-        stages["refine"] = round(float(refined.seconds or 0.0), 4)
+        stages["refine"] = _s(refined.seconds)
         errors.append(f"refine: {refined.error_type} {refined.error}".strip())
         if refined.status == "crash" and refined.log_tail:
             errors.append(refined.log_tail[-600:])
@@ -327,7 +332,7 @@ def _add_measured(row: CatalogRow, measured: StageRecord | None, stages: dict[st
     if measured is None or measured.status != "ok":
         return
     m: Measurement = measured.value
-    stages["metrics"] = round(float(measured.seconds or 0.0), 4)
+    stages["metrics"] = _s(measured.seconds)
     for col, v in m.columns.items():
         if v is not None:
             setattr(row, col, v)

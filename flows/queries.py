@@ -102,12 +102,6 @@ def _as_rate(series):
     return series.astype("boolean").astype("Float64").astype(float)
 
 
-def _bool_rate_parts(series):
-    """(count of True, count of non-null) of a nullable boolean column, as float Series."""
-    s = _as_rate(series)
-    return s.fillna(0.0), s.notna().astype(float)
-
-
 def _rate(series) -> float | None:
     s = _as_rate(series).dropna()
     return float(s.mean()) if len(s) else None
@@ -138,20 +132,12 @@ def status_counts(df) -> dict[str, Any]:
 def run_summary(df) -> dict[str, Any]:
     """Numbers of one run's rows (pass rates as fractions in [0, 1], penetration
     mm, seconds) of a DataFrame: what MLflow logs as the run's metrics."""
-    n = int(len(df))
-    out: dict[str, Any] = {
-        "assets": n,
-        "done": int((df["status"] == "done").sum()) if n else 0,
-        "skipped": int((df["status"] == "skipped").sum()) if n else 0,
-        "failed": int((df["status"] == "failed").sum()) if n else 0,
-    }
-    if n == 0:
-        out.update(pass_rate_all=None, stability_pass_rate=None, oscillation_pass_rate=None)
-        out["failure_modes"] = {m: 0 for m in FAILURE_MODES}
+    counts = status_counts(df)
+    out: dict[str, Any] = {k: counts[k] for k in ("assets", "done", "skipped", "failed")}
+    if not len(df):
+        out.update(pass_rate_all=None, stability_pass_rate=None, oscillation_pass_rate=None, failure_modes=counts["failure_modes"])
         return out
-    modes = df["failure_mode"].fillna(MISSING_FAILURE_MODE)
-    out["failure_modes"] = {m: int((modes == m).sum()) for m in FAILURE_MODES}
-    out["pass_rate_all"] = float((modes == "none").mean())
+    out.update(failure_modes=counts["failure_modes"], pass_rate_all=counts["pass_rate_all"])
     out["stability_pass_rate"] = _rate(df["rest_stable"])
     out["oscillation_pass_rate"] = _rate(df["oscillation_pass"])
     pen = df["penetration_mm"].dropna().astype(float)
@@ -176,40 +162,11 @@ PASS_RATE_COLUMNS = ("status", "failure_mode", "rest_stable", "oscillation_pass"
 def pass_rates_over_time(df, dataset: str | None = None):
     """Per run (chronological): start time, assets, the pass rates (all
     checks, rest stability, oscillation) and mean penetration (mm)."""
-    import pandas as pd
+    import pyarrow as pa
 
     cols = ["dataset", "run", "started_at", "assets", "pass_rate_all", "stability_pass_rate",
             "oscillation_pass_rate", "penetration_mm_mean", "failed"]  # fmt: skip
-    if _is_table(df):
-        return _pass_rates_arrow(df, dataset, cols)
-    if dataset is not None:
-        df = df[df["dataset"] == dataset]
-    if df.empty:
-        return pd.DataFrame(columns=cols)
-    st_ok, st_n = _bool_rate_parts(df["rest_stable"])
-    os_ok, os_n = _bool_rate_parts(df["oscillation_pass"])
-    pen = pd.to_numeric(df["penetration_mm"], errors="coerce")
-    d = pd.DataFrame({
-        "dataset": df["dataset"], "run": df["run"], "started_at": df["started_at"],
-        "pass": (df["failure_mode"].fillna(MISSING_FAILURE_MODE) == "none").astype(float),
-        "failed": (df["status"] == "failed").astype(int),
-        "st_ok": st_ok, "st_n": st_n, "os_ok": os_ok, "os_n": os_n,
-        "pen_sum": pen.fillna(0.0), "pen_n": pen.notna().astype(float),
-    })  # fmt: skip
-    g = d.groupby(["dataset", "run"], sort=True)
-    agg = g.agg(started_at=("started_at", "min"), assets=("pass", "size"), pass_rate_all=("pass", "mean"),
-                st_ok=("st_ok", "sum"), st_n=("st_n", "sum"), os_ok=("os_ok", "sum"), os_n=("os_n", "sum"),
-                pen_sum=("pen_sum", "sum"), pen_n=("pen_n", "sum"), failed=("failed", "sum")).reset_index()  # fmt: skip
-
-    def ratio(num, den):
-        return [None if n == 0 else float(x / n) for x, n in zip(agg[num], agg[den])]
-
-    agg["stability_pass_rate"] = ratio("st_ok", "st_n")
-    agg["oscillation_pass_rate"] = ratio("os_ok", "os_n")
-    agg["penetration_mm_mean"] = ratio("pen_sum", "pen_n")
-    agg["assets"] = agg["assets"].astype(int)
-    agg["failed"] = agg["failed"].astype(int)
-    return agg[cols]
+    return _pass_rates_arrow(df if _is_table(df) else pa.Table.from_pandas(df, preserve_index=False), dataset, cols)
 
 
 def _pass_rates_arrow(t, dataset: str | None, cols: list[str]):
@@ -254,15 +211,7 @@ def slowest_assets(df, n: int = 10, run: str | None = None):
     import pandas as pd
 
     if _is_table(df):
-        import pyarrow.compute as pc
-
-        t = plain_strings(df)
-        if run is not None:
-            t = t.filter(pc.equal(t["run"], run))
-        t = t.filter(pc.invert(pc.equal(pc.fill_null(t["status"], ""), "skipped")))
-        t = t.filter(pc.is_valid(t["wall_seconds"]))
-        t = pc.take(t, pc.select_k_unstable(t, k=min(int(n), t.num_rows), sort_keys=[("wall_seconds", "descending")])) if t.num_rows else t
-        df = t.to_pandas()
+        df = plain_strings(df).to_pandas()
     if run is not None:
         df = df[df["run"] == run]
     df = df[df["status"] != "skipped"]
@@ -356,13 +305,7 @@ def failed_assets(df, run: str | None = None, limit: int | None = None):
     import pandas as pd
 
     if _is_table(df):
-        import pyarrow.compute as pc
-
-        t = plain_strings(df)
-        if run is not None:
-            t = t.filter(pc.equal(t["run"], run))
-        t = t.filter(pc.invert(pc.equal(pc.fill_null(t["failure_mode"], MISSING_FAILURE_MODE), "none")))
-        df = (t.slice(0, int(limit)) if limit is not None else t).to_pandas()
+        df = plain_strings(df).to_pandas()
     if run is not None:
         df = df[df["run"] == run]
     d = df[df["failure_mode"].fillna(MISSING_FAILURE_MODE) != "none"]

@@ -26,7 +26,7 @@ from asset2sim import flow_progress
 from asset2sim.flows.catalog import ResultCatalog
 from asset2sim.flows.catalog_config import load_catalog
 from asset2sim.flow_progress import ProgressEvent
-from asset2sim.flows import driver_skip, stages
+from asset2sim.flows import driver_skip
 from asset2sim.flows.flow_runtime import dask_task_runner, local_cluster_config, prefect_api_for_run
 from asset2sim.flows.forkserver import StageServer
 from asset2sim.flows.store import join_uri, upload_folder
@@ -75,9 +75,7 @@ def plan_driver(cat, name: str, *, ids=None, limit=None, force: bool = False, ou
     run_id = make_run_id(started)
     plan = plan_run(cat, name, run_id, ids=ids, limit=limit, force=force, out_store=out)
     fps = driver_skip.fingerprints(plan.jobs)
-    skips = {} if force else driver_skip.decide_skips(
-        plan.jobs, driver_skip.read_index(ResultCatalog(cat.catalog_root), name), fps,
-        stages.job_config_hash, stages.finished_in_store)
+    skips = {} if force else driver_skip.decide_skips(plan.jobs, driver_skip.read_index(ResultCatalog(cat.catalog_root), name), fps)
     return DriverPlan(run_id=run_id, started=started, plan=plan, fingerprints=fps, skips=skips)
 
 

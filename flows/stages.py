@@ -117,6 +117,15 @@ def finished_in_store(row: dict[str, Any] | None, input_hash: str) -> dict[str, 
     return finished_result(row, input_hash)
 
 
+def reusable(rec: Prepared, job: AssetJob, input_hash: str) -> Prepared:
+    """``rec`` made the record of ``job``'s asset read (``ok``) with ``input_hash``: its configuration hashes and
+    ``skip``, the earlier finished row to reuse (:func:`finished_in_store` of ``job.finished``; None: none)."""
+    rec.ok, rec.input_hash, rec.refine_config_hash = True, input_hash, run_hash(RefineConfig(**job.config), job.prompt, job.category)
+    rec.config_hash = job_config_hash(job, rec.refine_config_hash)
+    rec.skip = finished_in_store(job.finished.get(result_key(job.asset_id, input_hash, rec.config_hash)), input_hash)
+    return rec
+
+
 def publish_stage(job: AssetJob, refined: StageRecord) -> StageRecord:
     """Publish stage: upload the refined and metrics folders to ``job.out_uri`` / ``job.metrics_uri`` and delete
     the local copies; ``value``: ``{"out_uri", "files", "bytes", "clips"}`` (``clips``: the folder's clip videos,
@@ -206,13 +215,9 @@ def prepare_asset(job: AssetJob) -> Prepared:
         rec.failure_mode, rec.error, rec.seconds = "invalid_input", f"{type(exc).__name__}: {exc}", time.perf_counter() - t0
         rec.cpu_seconds = time.thread_time() - c0
         return rec
-    rhash = run_hash(RefineConfig(**job.config), job.prompt, job.category)
-    chash = job_config_hash(job, rhash)
-    rec.ok = True
-    rec.input_hash, rec.config_hash, rec.refine_config_hash = asset.input_hash, chash, rhash
+    chash, rhash = reusable(rec, job, asset.input_hash).config_hash, rec.refine_config_hash
     rec.category = job.category or asset.category
     rec.links, rec.movable_joints = len(asset.links), len(asset.movable_joints())
-    rec.skip = finished_in_store(job.finished.get(result_key(job.asset_id, asset.input_hash, chash)), asset.input_hash)
     if rec.skip is None:
         found = resumable_output(job.resumable, asset.input_hash, chash, rhash)
         rec.resume = None if found is None else found.model_dump(mode="json")

@@ -5,7 +5,6 @@ upload, the completion marker last (docs/design/pipeline.md, "Outputs on object 
 
 from __future__ import annotations
 
-import contextlib
 import json
 import shutil
 import tempfile
@@ -13,7 +12,7 @@ import time
 from pathlib import Path
 
 from asset2sim import __version__
-from asset2sim.flows.catalog_fs import is_uri, open_location
+from asset2sim.flows.catalog_fs import is_uri, list_files, open_location, open_output
 from asset2sim.output_folder import MARKER_NAME
 
 #: Bytes per read when uploading (files are streamed, not held whole in memory).
@@ -68,10 +67,7 @@ def upload_folder(local_dir: Path | str, uri: str) -> dict[str, float | int]:
             shutil.copyfile(p, tmp)
             tmp.replace(dest)
         else:
-            if loc.fs.type_name not in ("s3", "gcs"):
-                with contextlib.suppress(OSError):
-                    loc.fs.create_dir(dest.rsplit("/", 1)[0], recursive=True)
-            with open(p, "rb") as src, loc.fs.open_output_stream(dest) as out:
+            with open(p, "rb") as src, open_output(loc, dest) as out:
                 while chunk := src.read(CHUNK_BYTES):
                     out.write(chunk)
         total += p.stat().st_size
@@ -90,7 +86,7 @@ def store_complete(uri: str, input_hash: str, config_hash: str) -> bool:
         base = loc.base
         with loc.fs.open_input_stream(f"{base}/{MARKER_NAME}") as fh:
             data = json.loads(fh.read(16 * 1024 * 1024))
-        infos = loc.fs.get_file_info(pafs.FileSelector(base, allow_not_found=True, recursive=True))
+        infos = list_files(loc, base, recursive=True)
     except (OSError, ValueError):
         return False
     if not isinstance(data, dict) or not isinstance(data.get("files", {}), dict):

@@ -39,20 +39,33 @@ def summary_table(df):
     return df.sort_values("asset_id")[cols].reset_index(drop=True)
 
 
-def failure_mode_figure(df, title: str = ""):
-    """A matplotlib Figure: stacked bars of failure modes per category (assets; ``none`` green)."""
+def new_figure(width: float, height: float):
+    """``(fig, ax)``: a matplotlib Figure ``width`` x ``height`` in at 100 dpi (the Agg backend) with one Axes."""
     library_dirs.configure()  # before matplotlib's first import
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     from matplotlib.figure import Figure
-    from matplotlib.ticker import MaxNLocator
 
+    fig = Figure(figsize=(width, height), dpi=100)
+    return fig, fig.add_subplot(1, 1, 1)
+
+
+def write_png(path: Path, fig) -> Path:
+    """``fig`` written atomically as a PNG at ``path``."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    return atomic.write_bytes(path, buf.getvalue())
+
+
+def failure_mode_figure(df, title: str = ""):
+    """A matplotlib Figure: stacked bars of failure modes per category (assets; ``none`` green)."""
     table = failure_modes(df, by="category")
     table = table.drop(index="total", errors="ignore")
     modes = [m for m in FAILURE_MODES if m in table.columns and table[m].sum() > 0]
-    fig = Figure(figsize=(max(5.0, 0.9 * len(table) + 2.5), 4.0), dpi=100)
-    ax = fig.add_subplot(1, 1, 1)
+    fig, ax = new_figure(max(5.0, 0.9 * len(table) + 2.5), 4.0)
+    from matplotlib.ticker import MaxNLocator
+
     colors = {
         "none": "#4caf50", "invalid_input": "#9e9e9e", "estimator_failure": "#795548",
         "invalid_overlay": "#ff9800", "unresolved_penetration": "#e91e63", "unstable": "#f44336",
@@ -81,10 +94,7 @@ def write_run_artifacts(df, out_dir: Path | str, title: str = "") -> dict[str, P
     out_dir = Path(out_dir)
     paths = {"summary.csv": atomic.write_text(out_dir / "summary.csv", csv_text(summary_table(df)))}
     paths["summary.json"] = atomic.write_json(out_dir / "summary.json", _jsonable(run_summary(df)))
-    fig = failure_mode_figure(df, title)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    paths["failure_modes.png"] = atomic.write_bytes(out_dir / "failure_modes.png", buf.getvalue())
+    paths["failure_modes.png"] = write_png(out_dir / "failure_modes.png", failure_mode_figure(df, title))
     return paths
 
 
