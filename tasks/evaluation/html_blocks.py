@@ -8,7 +8,7 @@ from __future__ import annotations
 import base64
 import io
 import math
-from typing import Any
+from typing import Any, Iterable
 
 import numpy as np
 
@@ -64,6 +64,11 @@ def img_tag(png: bytes | None, alt: str, mime: str = "image/png") -> str:
 def svg_tag(svg: bytes | None, alt: str) -> str:
     """An ``<img>`` with an SVG figure inline (empty string for None)."""
     return img_tag(svg, alt, plots.SVG_MIME)
+
+
+def table(head: Iterable[Any], rows: Iterable[str] | str) -> str:
+    """A table: one header row of the texts ``head`` (escaped), then ``rows`` (HTML, ``<tr>`` rows as they are)."""
+    return "<table><tr>" + "".join(f"<th>{esc(h)}</th>" for h in head) + "</tr>" + "".join(rows) + "</table>"
 
 
 def verdict_cell(passed: bool | None) -> str:

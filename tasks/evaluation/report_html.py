@@ -19,7 +19,7 @@ from asset2sim.tasks.check.failure_reasons import why_it_failed
 from asset2sim.tasks.check.verdict import UNRESOLVED_PENETRATION_MM, penetration_measures, readiness
 from asset2sim.tasks.evaluation import plots
 from asset2sim.tasks.evaluation.failure_evidence import evidence_section
-from asset2sim.tasks.evaluation.html_blocks import figure, fmt, page, svg_tag, verdict_cell
+from asset2sim.tasks.evaluation.html_blocks import figure, fmt, page, svg_tag, table, verdict_cell
 from asset2sim.tasks.evaluation.parameter_table import parameter_table
 from asset2sim.tasks.evaluation.report_changes import changes_section, esc, from_closed_text, opening_text
 from asset2sim.tasks.geometry.render import render_views
@@ -77,10 +77,7 @@ def _verdict_table(ev) -> str:
             f"<tr><td>{esc(m.name)}</td><td>{esc(m.engine)}</td><td class='num'>{val}</td><td>{esc(m.unit)}</td>"
             f"{verdict_cell(m.passed)}<td class='small'>{esc(m.threshold)}</td><td class='small'>{esc(extra)}</td></tr>"
         )
-    return (
-        "<table><tr><th>metric</th><th>engine</th><th>value</th><th>unit</th><th>verdict</th><th>threshold</th>"
-        "<th>notes</th></tr>" + "".join(rows) + "</table>"
-    )
+    return table(("metric", "engine", "value", "unit", "verdict", "threshold", "notes"), rows)
 
 
 def modelled_state(ctx) -> dict[str, float]:
@@ -116,11 +113,8 @@ def _penetration_details(ev) -> str:
             f"<td class='num'>{fmt(p['max_depth_mm'])}</td><td class='num'>{p['points']}</td></tr>"
             for p in m.details["pairs"]
         )
-        out.append(
-            f"<h3>Self-contact: penetrating link pairs ({esc(m.engine)}; {'pass' if m.passed else 'FAIL'}: {esc(m.threshold)})</h3>"
-            f"<table><tr><th>link a</th><th>link b</th><th>sum of depths (mm)</th><th>deepest point (mm)</th><th>points</th></tr>"
-            f"{rows}</table>"
-        )
+        out.append(f"<h3>Self-contact: penetrating link pairs ({esc(m.engine)}; {'pass' if m.passed else 'FAIL'}: {esc(m.threshold)})</h3>"
+                   + table(("link a", "link b", "sum of depths (mm)", "deepest point (mm)", "points"), rows))
     for m in ev.metrics:  # the pairs the self-contact Phi skips: a child inside its parent
         pairs = m.details.get("pairs") if m.name == "parent_child_penetration" else None
         if not pairs:
@@ -129,9 +123,8 @@ def _penetration_details(ev) -> str:
         rows = "".join(f"<tr><td>{esc(k.partition('/')[0])}</td><td>{esc(k.partition('/')[2])}</td><td class='num'>{fmt(v)}</td>"
                        f"<td class='num'>{fmt(modelled.get(k, 0.0))}</td><td class='num'>{fmt(max(v - modelled.get(k, 0.0), 0.0))}</td>"
                        f"{verdict_cell(max(v - modelled.get(k, 0.0), 0.0) <= UNRESOLVED_PENETRATION_MM)}</tr>" for k, v in pairs.items())
-        out.append(f"<h3>A child inside its parent ({esc(m.engine)}; {esc(m.threshold)})</h3><table><tr><th>parent</th>"
-                   "<th>child</th><th>depth (mm)</th><th>at its modelled pose (mm)</th><th>deeper than modelled (mm)</th>"
-                   f"<th>verdict</th></tr>{rows}</table>")
+        out.append(f"<h3>A child inside its parent ({esc(m.engine)}; {esc(m.threshold)})</h3>" + table(
+            ("parent", "child", "depth (mm)", "at its modelled pose (mm)", "deeper than modelled (mm)", "verdict"), rows))
     return "".join(out)
 
 
@@ -170,7 +163,7 @@ def _prompt_details(ev) -> str:
     if d.get("joint_state_score") is None:
         rows.append(f"<tr><td>joint state</td><td>-</td><td>-</td><td class='small'>{esc(d.get('joint_state_reason'))}</td></tr>")
     return (f"<p>score <b>{fmt(m.value, 3)}</b> for <i>{esc(d.get('request'))}</i></p>" + _request_warnings(d)
-            + "<table><tr><th>part</th><th>requested</th><th>score</th><th>reason</th></tr>" + "".join(rows) + "</table>")
+            + table(("part", "requested", "score", "reason"), rows))
 
 
 def _probe_details(ev) -> str:
@@ -190,9 +183,8 @@ def _probe_details(ev) -> str:
             f"<td>{fmt(p['rebound'])}</td><td>{fmt(p['kept_moving'])}</td>"
             f"<td class='{cls}'>{esc(p['failure'] or 'ok')}</td><td class='small'>{esc('; '.join(p['notes']))}</td></tr>"
         )
-    return ("<table><tr><th>joint</th><th>probe</th><th>start</th><th>target</th><th>reached (crossed the line that counts)</th><th>peak force</th>"
-            "<th>peak torque/force</th><th>object moved</th><th>rebound</th><th>kept moving</th><th>verdict</th><th>notes</th></tr>"
-            + "".join(rows) + "</table>")
+    return table(("joint", "probe", "start", "target", "reached (crossed the line that counts)", "peak force", "peak torque/force",
+                  "object moved", "rebound", "kept moving", "verdict", "notes"), rows)
 
 
 def operability_section(ev) -> str:
@@ -228,8 +220,7 @@ def operability_section(ev) -> str:
     return ("<p class='small'>Root fixed, gravity on, the other joints held: a hand at the grasp point pushes each handled "
             "part from its closed end to its far end and back; the effort it needs (friction, damping at the hand's "
             "0.25 m/s, springs, gravity) must lie inside the part's real operating range.</p>"
-            "<table><tr><th>engine</th><th>part</th><th>grasp</th><th>stroke</th><th>effort needed</th><th>range</th>"
-            "<th>hand got it to</th><th>verdict</th><th>range source</th></tr>" + "".join(rows) + "</table>"
+            + table(("engine", "part", "grasp", "stroke", "effort needed", "range", "hand got it to", "verdict", "range source"), rows)
             + (f"<ul class='small'>{notes}</ul>" if notes else ""))
 
 
@@ -315,16 +306,15 @@ def engines_section(report: dict | None) -> str:
     intro = ("<p class='small'>Each engine of <code>--engines</code> on the same files: rest stability, the joints that come "
              "to rest in their band, and the push at which each joint with friction starts to move (root fixed, gravity off, "
              "springs accounted), as a multiple of its declared friction f; within 0.8-1.2 f passes.</p>")
-    out = ["<h2>What holds in each engine</h2>", intro,
-           "<table><tr><th>engine</th><th>status</th><th>rest stability</th><th>joints held</th><th>breakaway</th></tr>"]
+    cells = []
     for r in rows:
         held = r.get("joints_held") or {}
         held_text = ", ".join(f"{esc(j)}{'' if ok else ' (moves)'}" for j, ok in held.items()) or "-"
-        out.append(f"<tr><td>{esc(r.get('engine'))}</td><td>{esc(r.get('status'))} <span class='small'>{esc(r.get('reason') or '')}</span>"
-                   f"</td><td>{verdict_cell(r.get('rest_stability'))}</td><td class='small'>{held_text}</td>"
-                   f"<td>{breakaway_cell(r.get('breakaway'))}</td></tr>")
-    out.append("</table>")
-    return "\n".join(out)
+        cells.append(f"\n<tr><td>{esc(r.get('engine'))}</td><td>{esc(r.get('status'))} <span class='small'>{esc(r.get('reason') or '')}</span>"
+                     f"</td><td>{verdict_cell(r.get('rest_stability'))}</td><td class='small'>{held_text}</td>"
+                     f"<td>{breakaway_cell(r.get('breakaway'))}</td></tr>")
+    return f"<h2>What holds in each engine</h2>\n{intro}\n" + table(("engine", "status", "rest stability", "joints held", "breakaway"),
+                                                                      [*cells, "\n"])
 
 
 def clips_section(clip_set, folder: str = "clips") -> str:
@@ -424,9 +414,9 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         sections.append(svg_tag(plots.plot_probes(pb.probes), "probes"))
     sections += ["<h2>Physical parameters</h2>", parameter_table(ev)]
     sections.append("<h2>Notes</h2><ul>" + "".join(f"<li>{esc(n)}</li>" for n in ev.notes) + "</ul>")
-    sections.append("<h2>What the checks mean</h2><table><tr><th>check</th><th>unit</th><th>what it measures</th></tr>"
-                    + "".join(f"<tr><td>{esc(i.name)}</td><td>{esc(i.unit)}</td><td class='small'>{esc(i.description)}</td></tr>"
-                              for i in METRIC_INFO.values() if ev.metric(i.name) is not None) + "</table>")
+    sections.append("<h2>What the checks mean</h2>" + table(("check", "unit", "what it measures"), (
+        f"<tr><td>{esc(i.name)}</td><td>{esc(i.unit)}</td><td class='small'>{esc(i.description)}</td></tr>"
+        for i in METRIC_INFO.values() if ev.metric(i.name) is not None)))
     sections.append("<p class='small'>Simulation: PyBullet DIRECT, dt = 1/240 s, gravity -9.81 m/s^2, ground z = 0, "
                     "self-collision except parent-child, inertia from file, root free unless the asset is mounted. "
                     "The user guide (docs/guide/metrics.md in the asset2sim source) gives every threshold and convention.</p>")
