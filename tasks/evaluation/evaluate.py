@@ -390,8 +390,7 @@ def _read(folder: RefinedAsset, notes: list[str]) -> tuple[RefineReport | None, 
 def evaluate_asset(
     asset: Path | str, *, reference: Path | str | None = None, prompt: str | None = None,
     engines: tuple[str, ...] | list[str] | None = None, seed: int = 0, category: str | None = None, method: str | None = None,
-    out_dir: Path | str | None = None, write_report: bool = False, probes: bool = False, conventions: SimConventions | None = None,
-    task: str | None = None, clips: bool = True, views: dict[str, np.ndarray] | None = None,
+    out_dir: Path | str | None = None, write_report: bool = False, probes: bool = False, task: str | None = None, clips: bool = True,
 ) -> Evaluation:
     """Evaluate any asset folder or URDF file with the checks a refine runs (module docstring).
 
@@ -403,11 +402,10 @@ def evaluate_asset(
         engines: the engines to measure in, the manipulation tiers (sweep, operability, robust rest) in each (unavailable
             ones: skipped); None: as a refine checks, the tiers in PyBullet and the SPEC's rest metrics in the engines a
             refined folder's ``report.json`` measured in (else PyBullet alone). seed, method: recorded.
-        category: overrides the folder's; conventions: the measurement conventions (default the SPEC's).
+        category: overrides the folder's; the measurement conventions are the SPEC's.
         out_dir: where ``evaluation.json`` and (``write_report``) ``report.html`` and the clips (``clips``) go.
         probes: also run the passive probes (a learnability stand-in: reported, never deciding the verdict).
         task: the manipulation task the task tier performs (None: the report's task, else none).
-        views: renders already taken at the evaluated state (view -> (H, W, 3) uint8) for the report.
 
     Raises:
         EvaluationError: the asset, its records or the reference cannot be read.
@@ -436,7 +434,7 @@ def evaluate_asset(
     every = engines is not None  # the engines named: the manipulation tiers in each of them
     recorded = sorted({m.engine for m in report.metrics} - {"none", "pybullet"}) if report is not None else []
     engines = list(dict.fromkeys(["pybullet", *(engines if every else recorded)]))
-    config = RefineConfig(engines=engines, **({"sim": conventions} if conventions is not None else {}))
+    config = RefineConfig(engines=engines)
     obj, state_source = sim_object(files, config.sim)
     state = dict(obj.state)
     physics = overlay if overlay is not None else file_overlay(model)
@@ -472,7 +470,7 @@ def evaluate_asset(
                            baseline=baseline)
     if out_dir is not None:
         clip_set = _write_clips(ev, out_dir) if write_report and clips else None
-        write_evaluation(ev, out_dir, report=write_report, views=views, clips=clip_set)
+        write_evaluation(ev, out_dir, report=write_report, clips=clip_set)
     return ev
 
 
