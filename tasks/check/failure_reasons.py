@@ -167,8 +167,8 @@ def _holding_choices(rr: Any, metrics: list[Any], joint: str, prismatic: bool) -
     return "What remains: " + "; ".join(choices) + "."
 
 
-def _num(v: Any, digits: int = 3) -> str:
-    return "?" if v is None else f"{float(v):.{digits}g}"
+def _num(v: Any) -> str:
+    return "?" if v is None else f"{float(v):.3g}"
 
 
 def _joint_amount(value: float, unit: str) -> str:

@@ -10,13 +10,13 @@ from asset2sim.tasks.evaluation.html_blocks import fmt, page, svg_tag, table
 from asset2sim.tasks.evaluation.report_changes import esc
 
 
-def _pm(mean: float | None, sd: float | None, digits: int = 3, pct: bool = False) -> str:
+def _pm(mean: float | None, sd: float | None, pct: bool = False) -> str:
     if mean is None:
         return "-"
     k = 100.0 if pct else 1.0
-    s = f"{mean * k:.{digits}g}"
+    s = f"{mean * k:.3g}"
     if sd is not None:
-        s += f" &plusmn; {sd * k:.{digits}g}"
+        s += f" &plusmn; {sd * k:.3g}"
     return s + ("%" if pct else "")
 
 
@@ -41,7 +41,7 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
         for method, r in rows.items():
             row = [_pm(r.get("pen_ts_mean"), r.get("pen_ts_sd")), _pm(r.get("pen_mean"), r.get("pen_sd")),
                      *(_pm(r.get(rate), None, pct=True) + f" ({r.get(n, 0)})" for rate, n in _PASS_RATES),
-                     _pm(r.get("scale_mean"), r.get("scale_sd"), pct=False) + ("%" if r.get("scale_mean") is not None else ""),
+                     _pm(r.get("scale_mean"), r.get("scale_sd")) + ("%" if r.get("scale_mean") is not None else ""),
                      _pm(r.get("init_mean"), r.get("init_sd")), _pm(r.get("prompt_mean"), None, pct=True),
                      _pm(r.get("all_pass"), None, pct=True), fmt(r.get("median_seconds"), 3), esc(r.get("realism", "not rated"))]
             err = f" <span class='small'>({r.get('errors')} failed to produce)</span>" if r.get("errors") else ""

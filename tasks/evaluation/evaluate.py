@@ -252,7 +252,7 @@ def _evaluation(asset_id: str, urdf: Path, metrics: list[MetricResult], failure_
 
 
 # ---------------------------------------------------------------- any folder, read and measured
-def file_overlay(model: UrdfModel, name: str = "file") -> Overlay:
+def file_overlay(model: UrdfModel) -> Overlay:
     """The physics a simulator loads from ``model`` when the folder holds no ``overlay.json``: every ``<inertial>`` (a
     link with geometry and none: the engines' default 1 kg, unit inertia), every movable joint's ``<dynamics>`` (0 when
     not written), no springs, scale 1 (the file as it is)."""
@@ -268,7 +268,7 @@ def file_overlay(model: UrdfModel, name: str = "file") -> Overlay:
             links[n] = LinkPhysics(mass=1.0, inertia=Inertia(ixx=1.0, iyy=1.0, izz=1.0), com=(0.0, 0.0, 0.0),
                                    source="engine default (no <inertial>)")
     joints = {j.name: JointDynamics(damping=j.damping, friction=j.friction, source="file <dynamics>") for j in model.movable_joints}
-    return Overlay(estimator=EstimatorInfo(name=name), scale=1.0, links=links, joints=joints)
+    return Overlay(estimator=EstimatorInfo(name="file"), scale=1.0, links=links, joints=joints)
 
 
 def closed_ends(files: RefinedAsset, joints: list[str] | None = None) -> tuple[dict[str, ClosedState], str]:

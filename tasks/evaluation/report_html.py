@@ -40,9 +40,9 @@ def _renders(ev, views: dict[str, np.ndarray] | None = None, error: Exception | 
     return svg_tag(svg, "collision geometry"), note + "plot of the collision vertices per link"
 
 
-def point_cloud(urdf: Path, state: dict[str, float], max_points: int = 1500) -> dict[str, np.ndarray]:
+def point_cloud(urdf: Path, state: dict[str, float]) -> dict[str, np.ndarray]:
     """Link -> (N, 3) m collision vertices in the world frame of ``urdf`` at ``state`` (rad or m, root fixed), at most
-    ``max_points`` per link (evenly picked). Raises what loading the URDF raises."""
+    1500 per link (evenly picked). Raises what loading the URDF raises."""
     out = {}
     with UrdfFile(urdf).open("pybullet", SessionOptions(initial_state=state, fixed_base=True, gravity=False, ground=False)) as session:
         for name in session.link_names:
@@ -51,7 +51,7 @@ def point_cloud(urdf: Path, state: dict[str, float], max_points: int = 1500) -> 
                 continue
             pos, R = session.link_frame(name)
             w = v @ R.T + pos
-            out[name] = w[np.linspace(0, len(w) - 1, max_points).astype(int)] if len(w) > max_points else w
+            out[name] = w[np.linspace(0, len(w) - 1, 1500).astype(int)] if len(w) > 1500 else w
     return out
 
 
@@ -317,10 +317,10 @@ def engines_section(report: dict | None) -> str:
                                                                       [*cells, "\n"])
 
 
-def clips_section(clip_set, folder: str = "clips") -> str:
+def clips_section(clip_set) -> str:
     """HTML playing every clip of ``clip_set`` (a :class:`~asset2sim.schemas.realism.ClipSet`; None or empty:
-    nothing), one row per joint and motion, the videos looping muted with their poster frames; ``folder``: the
-    clips' folder relative to the report."""
+    nothing), one row per joint and motion, the videos looping muted with their poster frames (in ``clips/`` beside
+    the report)."""
     if clip_set is None or not (clip_set.clips or clip_set.skipped):
         return ""
     rows: dict[tuple[str, str], list] = {}
@@ -333,7 +333,7 @@ def clips_section(clip_set, folder: str = "clips") -> str:
     for (joint, motion), cs in rows.items():
         parts.append(f"<h3>{esc(joint)}: {esc(what.get(motion, motion))}</h3><div class='clips'>")
         for c in cs:
-            src, poster = (esc(f"{folder}/{p}") for p in (c.video, c.poster))
+            src, poster = (esc(f"clips/{p}") for p in (c.video, c.poster))
             parts.append(f"<figure><video src='{src}' poster='{poster}' width='{c.width}' height='{c.height}' autoplay loop muted "
                          f"playsinline controls></video><figcaption>{esc(c.view)} view, {c.duration_s:.1f} s</figcaption></figure>")
         parts.append("</div>")
