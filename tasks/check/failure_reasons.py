@@ -245,6 +245,13 @@ def _rest_why(metrics: list[Any]) -> list[str]:
     return out
 
 
+#: What the check of a tier told by its metrics' ``details["failures"]`` did (:func:`_failures_why`).
+_DONE = {"sweep": "a force-limited drive could not sweep the joint through its range",
+         "operability": "a hand inside the part's real operating force could not work it",
+         "task": "a force- and speed-limited gripper could not do the task",
+         "force": "the task needed a force outside the part's real operating range"}
+
+
 def _failures_why(metrics: list[Any], names: tuple[str, ...], advice: str, what: str) -> list[str]:
     """One sentence per failing metric of ``names`` from its ``details["failures"]`` (each names its joint and the
     measured value), with its threshold and ``advice``; ``what`` says what was done."""
@@ -343,27 +350,16 @@ def why_it_failed(metrics: list[Any]) -> list[str]:
     asked = asked_weight(metrics)
     held_not = {j for m in metrics if m.name in HOLD_METRICS and metric_verdict(m) is False
                 for j in (m.details or {}).get("sagging") or []}
-    explain = {
-        "rest": _rest_why,
-        "penetration": penetration_why,
-        "sweep": lambda ms: _failures_why(ms, ("joint_sweep",), advice("sweep", asked),
-                                          "a force-limited drive could not sweep the joint through its range"),
-        "operability": lambda ms: _failures_why(ms, ("operability",), advice("operability", asked),
-                                                "a hand inside the part's real operating force could not work it"),
-        "robust_rest": lambda ms: robust_rest_why(ms, skip=held_not),
-        "task": lambda ms: _failures_why(ms, ("task_execution",), advice("task", asked),
-                                         "a force- and speed-limited gripper could not do the task"),
-        "force": lambda ms: _failures_why(ms, ("operating_force",), advice("force", asked),
-                                          "the task needed a force outside the part's real operating range"),
-        "request": _request_why,
-    }
+    explain = {"rest": _rest_why, "penetration": penetration_why, "robust_rest": lambda ms: robust_rest_why(ms, skip=held_not),
+               "request": _request_why}
     out: list[str] = []
     for tier, (names, _) in TIERS.items():
         bad = [m for m in metrics if m.name in names and metric_verdict(m) is False]
         if not bad:
             continue
         mode = mode_of(tier, bad)
-        sentences = explain[tier](metrics) or [
+        sentences = (explain[tier](metrics) if tier in explain else
+                     _failures_why(metrics, names, advice(tier, asked), _DONE[tier])) or [
             f"{', '.join(dict.fromkeys(f'{m.name}@{m.engine}' for m in bad))} failed (passes when {bad[0].threshold}). "
             + advice(_FALLBACK_ADVICE.get(tier, tier), asked)]
         out += [f"{mode} ({tier} tier): {s}" for s in sentences]
