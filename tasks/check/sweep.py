@@ -16,6 +16,7 @@ from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root_options, joints_between
 from asset2sim.tasks.check.contact_points import joint_frame_axis
+from asset2sim.tasks.check.metrics import EXPLOSION_JOINT_SPEED_PRISMATIC, EXPLOSION_JOINT_SPEED_REVOLUTE
 from asset2sim.tasks.check.stroke import Reach, reach_stroke
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.synthesize.physics import G
@@ -23,10 +24,6 @@ from asset2sim.urdf import UrdfModel
 
 #: Fraction of the range that counts as reached (SPEC: >= 95 % both ways).
 REACH_FRACTION = 0.95
-#: Joint speeds that count as divergence, rad/s and m/s (as the evaluation's
-#: divergence metric, :mod:`asset2sim.tasks.evaluation.metric_defs`).
-DIVERGED_SPEED_REVOLUTE = 100.0
-DIVERGED_SPEED_PRISMATIC = 10.0
 #: Force limit (N*m or N) of the zero-velocity drive that holds the joints not swept: far
 #: above any part's operating force (a second hand or a fixture holding the rest), so they do not yield.
 HOLD_FORCE = 1000.0
@@ -181,7 +178,7 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     v_max = open_range / cfg.traverse_time
     limit = effort_limit(session, joint, links, open_range, cfg)
     session.set_joint_positions({**initial_state, joint: closed})
-    vdiv = DIVERGED_SPEED_PRISMATIC if jtype == "prismatic" else DIVERGED_SPEED_REVOLUTE
+    vdiv = EXPLOSION_JOINT_SPEED_PRISMATIC if jtype == "prismatic" else EXPLOSION_JOINT_SPEED_REVOLUTE  # the divergence metric's
     max_pen, worst = _deepest(session)
     trace: dict[str, list[float]] = {"t": [], "fraction": [], "phase": []}
 
