@@ -240,19 +240,12 @@ def _badge(ev) -> str:
     return html
 
 
-def _opening(ev, joint: str, q: float) -> str:
-    """`` (45 % open)`` for a joint whose closed end is known, else empty."""
-    c = ev.closed_positions.get(joint)
-    if not c or not c.get("open_range"):
-        return ""
-    return f" ({opening_text(c['direction'] * (q - c['q_closed']) / c['open_range'])})"
-
-
 def _joint_state(ev, joint: str, q: float, jtype: str) -> str:
-    """A joint's initial state from its closed end (``"20.8 deg from closed (18 % open)"``); its own coordinate,
-    labelled so, when the closed end is unknown."""
+    """A joint's initial state from its closed end (``"20.8 deg from closed (18 % open)"``, the opening where its range
+    is known); its own coordinate, labelled so, when the closed end is unknown."""
     c = ev.closed_positions.get(joint)
-    return from_closed_text(q, c.get("q_closed") if c else None, jtype) + _opening(ev, joint, q)
+    return from_closed_text(q, c.get("q_closed") if c else None, jtype) + (
+        f" ({opening_text(c['direction'] * (q - c['q_closed']) / c['open_range'])})" if c and c.get("open_range") else "")
 
 
 def as_asked_block(ev) -> str:
