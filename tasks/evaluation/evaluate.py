@@ -568,24 +568,19 @@ def _joint_labels(urdf: Path, model: UrdfModel) -> dict[str, str | None]:
 
 def write_media(ev: Evaluation, out_dir: Path | str, *, views: dict[str, np.ndarray] | None = None, clips: bool = True) -> Path:
     """``report.html`` of ``ev`` (and its clips, with ``clips``) into ``out_dir``; returns the report's path."""
-    clip_set = _write_clips(ev, out_dir) if clips else None
-    return write_evaluation(ev, out_dir, report=True, views=views, clips=clip_set, evaluation_json=False)[REPORT_HTML_NAME]
+    return write_report(ev, Path(out_dir) / REPORT_HTML_NAME, views=views, clips=_write_clips(ev, out_dir) if clips else None)
 
 
-def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True, views: dict[str, np.ndarray] | None = None,
-                     clips: ClipSet | None = None, evaluation_json: bool = True) -> dict[str, Path]:
-    """Write ``evaluation.json`` (unless ``evaluation_json`` is False) and, with ``report``, ``report.html`` (``views`` the
-    renders at ``ev.initial_state`` when taken; ``clips`` the clips written in ``out_dir/clips/``, played in the report)
-    into ``out_dir`` atomically; returns file name -> path for the files written."""
+def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True, clips: ClipSet | None = None) -> dict[str, Path]:
+    """Write ``evaluation.json`` and, with ``report``, ``report.html`` (``clips`` the clips written in ``out_dir/clips/``,
+    played in the report) into ``out_dir`` atomically; returns file name -> path for the files written."""
     out_dir = Path(out_dir)
-    paths = {}
-    if evaluation_json:  # its wall time apart (timings.json), so two evaluations of the same files write the same bytes
-        data = ev.model_dump(mode="json", exclude={"seconds"})
-        data["urdf"] = portable_urdf(ev, out_dir)  # no absolute path: the same refine into two folders writes the same bytes
-        paths[EVALUATION_NAME] = write_json(out_dir / EVALUATION_NAME, _jsonable(data))
-        output_folder.merge_timings(out_dir, {"evaluation_seconds": ev.seconds})
+    data = ev.model_dump(mode="json", exclude={"seconds"})  # its wall time apart (timings.json): the same files, the same bytes
+    data["urdf"] = portable_urdf(ev, out_dir)  # no absolute path: the same refine into two folders writes the same bytes
+    paths = {EVALUATION_NAME: write_json(out_dir / EVALUATION_NAME, _jsonable(data))}
+    output_folder.merge_timings(out_dir, {"evaluation_seconds": ev.seconds})
     if report:
-        paths[REPORT_HTML_NAME] = write_report(ev, out_dir / REPORT_HTML_NAME, views=views, clips=clips)
+        paths[REPORT_HTML_NAME] = write_report(ev, out_dir / REPORT_HTML_NAME, clips=clips)
     return paths
 
 
