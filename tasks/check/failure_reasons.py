@@ -74,9 +74,8 @@ def penetration_why(metrics: list[Any]) -> list[str]:
 
 
 #: How each robust-rest trial disturbed the object, for :func:`robust_rest_why`.
-_TRIAL_WORDS = {"drop": "landed after the 2 cm drop", "tilt+x": "landed after the 5 deg tilt about +x",
-                "tilt-x": "landed after the 5 deg tilt about -x", "tilt+y": "landed after the 5 deg tilt about +y",
-                "tilt-y": "landed after the 5 deg tilt about -y", "nudge": "was nudged at 0.05 m/s"}
+_TRIAL_WORDS = {"drop": "landed after the 2 cm drop", "nudge": "was nudged at 0.05 m/s",
+                **{f"tilt{s}{a}": f"landed after the 5 deg tilt about {s}{a}" for s in "+-" for a in "xy"}}
 
 
 def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozenset()) -> list[str]:
