@@ -321,7 +321,7 @@ def project(cam: Camera, points: np.ndarray, size: tuple[int, int]) -> np.ndarra
     return px
 
 
-def draw_mark(image: np.ndarray, xy: np.ndarray, radius: int = 4) -> np.ndarray:
+def draw_mark(image: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """``image`` (H, W, 3) uint8 with a red dot in a white ring at pixel ``xy`` (2,) (nothing when NaN or
     outside): where the gripper holds the part."""
     if not np.all(np.isfinite(xy)):
@@ -330,8 +330,8 @@ def draw_mark(image: np.ndarray, xy: np.ndarray, radius: int = 4) -> np.ndarray:
     yy, xx = np.ogrid[:h, :w]
     d2 = (xx - xy[0]) ** 2 + (yy - xy[1]) ** 2
     out = image.copy()
-    out[d2 <= (radius + 1.5) ** 2] = (255, 255, 255)
-    out[d2 <= radius ** 2] = (220, 30, 30)
+    out[d2 <= 5.5 ** 2] = (255, 255, 255)  # a ring 1.5 px wide around a dot of 4 px radius
+    out[d2 <= 4 ** 2] = (220, 30, 30)
     return out
 
 

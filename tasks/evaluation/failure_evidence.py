@@ -46,11 +46,11 @@ def failing(runs: dict) -> tuple[list[tuple[str, JointSweep]], list[tuple[str, T
 
 
 @styled
-def trial_plot(trial: Trial, dt: float, config: RobustRestConfig | None = None) -> bytes:
+def trial_plot(trial: Trial, dt: float) -> bytes:
     """SVG of one trial: the tilt (rad) of the up direction at placement, after settling and over the test,
     against the topple tolerance; each joint's position (rad or m) over settling and test (the first three), with
     its tolerance band around the initial state. Time 0: the end of settling."""
-    cfg = config or RobustRestConfig()
+    cfg = RobustRestConfig()
     tr = trial.trace
     q_ref = trial.reference_quat if trial.reference_quat is not None else tr.q0
     joints = list(tr.joints.items())[:3]
@@ -97,10 +97,10 @@ def trial_poses(trial: Trial) -> list[Pose]:
 
 
 @styled
-def sweep_plot(js: JointSweep, config: SweepConfig | None = None) -> bytes:
+def sweep_plot(js: JointSweep) -> bytes:
     """SVG of one joint sweep: the opening fraction over time, opening then closing, against the fractions
-    that count as reached (``config.reach_fraction`` open, 1 - it closed)."""
-    cfg = config or SweepConfig()
+    that count as reached (the sweep's ``reach_fraction`` open, 1 - it closed)."""
+    cfg = SweepConfig()
     t, f, ph = (np.asarray(js.trace[k], float) for k in ("t", "fraction", "phase"))
     fig, ((a,),) = new_figure(1, 1, 1000.0, 260.0)
     a.set(title=f"sweep of {js.joint}: {js.failure}", xlabel="time since the sweep started (s)",
