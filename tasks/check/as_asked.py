@@ -58,9 +58,9 @@ def quantity_text(value: float | None, unit: str) -> str:
     return f"{v:.4g} {unit}".rstrip()
 
 
-def not_applied(phrase: str, reason: str, joint: str | None = None) -> dict[str, Any]:
+def not_applied(phrase: str, reason: str) -> dict[str, Any]:
     """An unmet item: ``phrase`` applied to no part (``reason`` says why)."""
-    return _unmet(phrase, "not_applied", joint, reason, f"'{phrase}': not applied: {reason}")
+    return _unmet(phrase, "not_applied", None, reason, f"'{phrase}': not applied: {reason}")
 
 
 def _unmet(phrase: str, kind: str, joint: str | None, reason: str, text: str) -> dict[str, Any]:

@@ -123,8 +123,7 @@ def effort_limit(session: SimSession, joint: str, links: list[str], open_range: 
 DAMPED_SPEED_MARGIN = 2.0
 
 
-def damping_caps(obj: SimObject, closed: dict[str, tuple[float, float, float]],
-                 config: SweepConfig | None = None) -> dict[str, float]:
+def damping_caps(obj: SimObject, closed: dict[str, tuple[float, float, float]]) -> dict[str, float]:
     """Joint -> the largest viscous damping (N m s/rad or N s/m) with which
     the sweep's drive still traverses the range in time: c_max = E T /
     (``DAMPED_SPEED_MARGIN`` R), E :func:`effort_limit` at the closed end, T
@@ -135,7 +134,7 @@ def damping_caps(obj: SimObject, closed: dict[str, tuple[float, float, float]],
     Raises:
         EngineUnavailable: PyBullet is not installed; whatever loading ``obj.source`` raises.
     """
-    cfg = config or SweepConfig()
+    cfg = SweepConfig()
     source, initial_state = obj.source, dict(obj.state)
     model = source.model()
     subtrees = joint_subtrees(model)
@@ -343,9 +342,9 @@ def run_sweep(engine: str, obj: SimObject, closed: dict[str, tuple[float, float,
     return run
 
 
-def sweep_metric(run: SweepRun, config: SweepConfig | None = None) -> MetricResult:
+def sweep_metric(run: SweepRun) -> MetricResult:
     """The ``joint_sweep`` metric: value = failing joints; passes iff none fails (None when none was swept)."""
-    cfg = config or SweepConfig()
+    cfg = SweepConfig()
     failing = [j.joint for j in run.joints if not j.passed]
     return MetricResult(
         name="joint_sweep", value=float(len(failing)), unit=unit("joint_sweep"), passed=(not failing) if run.joints else None,
