@@ -27,8 +27,6 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
     (and ``report.json``) when present, else from the URDF and the engine defaults."""
     ctx = ev._context
     rows = [_param("scale", "global", ev.scale, "-", ev.scale_source)]
-    if ctx is None:
-        return rows
     # step 1: the joint parameters each check round changed
     ov, rep = ctx.overlay, ctx.report
     joints = {j.name: j for j in ctx.model.joints}

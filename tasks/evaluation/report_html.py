@@ -82,9 +82,7 @@ def _verdict_table(ev) -> str:
 
 def modelled_state(ctx) -> dict[str, float]:
     """Every movable joint of the evaluated URDF at 0 clipped to its limits (rad or m): the pose the asset was
-    modelled in, which a child inside its parent is graded against; {} without the evaluated files."""
-    if ctx is None:
-        return {}
+    modelled in, which a child inside its parent is graded against."""
     return {j.name: float(np.clip(0.0, j.lower, j.upper)) for j in ctx.model.movable_joints}
 
 
@@ -344,8 +342,8 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
     report is written (the URDF is named relative to it when it lies there, :func:`portable_urdf`)."""
     # step 1: the time step, the badge and the renders (a plot of the vertices when rendering fails)
     ctx = ev._context
-    dt = ctx.conventions.timestep if ctx is not None else 1.0 / 240.0
-    settle_n = int(round(ctx.conventions.settle_time / dt)) if ctx is not None else 240
+    dt = ctx.conventions.timestep
+    settle_n = int(round(ctx.conventions.settle_time / dt))
     badge = _badge(ev)
     error = None
     if views is None:
@@ -355,7 +353,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
             error = exc
     views_html, views_what = _renders(ev, views, error)
     # step 2: the header, the object at its initial state, the verdicts and the evidence
-    joint_types = {j.name: j.type for j in ctx.model.joints} if ctx is not None else {}
+    joint_types = {j.name: j.type for j in ctx.model.joints}
     state_text = ", ".join(f"{k} = {_joint_state(ev, k, v, joint_types.get(k, 'revolute'))}"
                            for k, v in ev.initial_state.items()) or "none"
     sections = [
@@ -364,24 +362,24 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         f"engines {esc(', '.join(measured_engines(ev)))} &middot; scale {fmt(ev.scale)} ({esc(ev.scale_source)})</p>",
         f"<p class='meta'>URDF <code>{esc(portable_urdf(ev, folder) if folder is not None else ev.urdf)}</code>"
         + (f" &middot; input <code>{esc(Path(str(ctx.report['source'])).name)}</code>"
-           if ctx is not None and ctx.report and ctx.report.get("source") else "") + "<br/>"
+           if ctx.report and ctx.report.get("source") else "") + "<br/>"
         f"request: <i>{esc(ev.prompt or '-')}</i><br/>"
         f"reference: <code>{esc(ev.reference or '-')}</code></p>",
         _request_warnings(pa.details) if (pa := ev.metric("prompt_alignment")) is not None else "",
         f"<p>{badge}</p>",
         why_section(ev),
         as_asked_block(ev),
-        host_section(ctx.report if ctx is not None else None),
+        host_section(ctx.report),
         "<h2>Object at its initial state</h2>",
         f"<p class='small'>{esc(views_what)}; joints: {esc(state_text)} ({esc(ev.initial_state_source)}); "
         f"task-relevant: {esc(', '.join(ev.task_joints) or '-')}</p>",
         views_html,
         clips_section(clips),
-        changes_section(ctx.report if ctx is not None else None, ctx.overlay if ctx is not None else None, joint_types, views, figure),
+        changes_section(ctx.report, ctx.overlay, joint_types, views, figure),
         "<h2>Verdicts</h2>",
         _verdict_table(ev),
-        engines_section(ctx.report if ctx is not None else None),
-        evidence_section(ev._runs, ctx.urdf if ctx is not None else ev.urdf, dt, svg_tag, figure, dict(ev.initial_state),
+        engines_section(ctx.report),
+        evidence_section(ev._runs, ctx.urdf, dt, svg_tag, figure, dict(ev.initial_state),
                          getattr(ev.metric("task_execution"), "details", None), ev.closed_positions, list(ev.metrics),
                          modelled_state(ctx)),
         "<h2>Operability</h2>",
@@ -420,10 +418,8 @@ def portable_urdf(ev, out_dir: Path | str) -> str:
     """The evaluated URDF as ``evaluation.json`` and ``report.html`` name it: relative to ``out_dir`` (the folder they
     are written to) when the URDF lies in it, as a refine's output does (``mobility.urdf``), so a moved or copied
     output names no place it is not; else the path as given."""
-    ctx = getattr(ev, "_context", None)
-    evaluated = Path(ctx.urdf) if ctx is not None else Path(ev.urdf)
     folder = Path(out_dir).resolve()
-    for candidate in (evaluated, Path(ev.urdf)):
+    for candidate in (Path(ev._context.urdf), Path(ev.urdf)):
         try:
             return candidate.resolve().relative_to(folder).as_posix()
         except (ValueError, OSError):
@@ -435,7 +431,7 @@ def write_report(ev, path: Path | str, views: dict[str, np.ndarray] | None = Non
     """Write ``report.html`` atomically (``views`` as in :func:`render_report`); returns the path. Its
     title names ``refine`` when it lies beside the refine's ``report.json`` it reports on, else ``evaluate``."""
     ctx = ev._context
-    by_refine = ctx is not None and ctx.report is not None and Path(path).resolve().parent == Path(ctx.urdf).resolve().parent
+    by_refine = ctx.report is not None and Path(path).resolve().parent == Path(ctx.urdf).resolve().parent
     return write_text(Path(path), render_report(ev, views, "refine" if by_refine else "evaluate", clips, folder=Path(path).parent))
 
 
