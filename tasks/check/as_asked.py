@@ -58,10 +58,16 @@ def quantity_text(value: float | None, unit: str) -> str:
     return f"{v:.4g} {unit}".rstrip()
 
 
-def not_applied(phrase: str, reason: str, joint: str | None = None) -> dict[str, Any]:
+def not_applied(phrase: str, reason: str) -> dict[str, Any]:
     """An unmet item: ``phrase`` applied to no part (``reason`` says why)."""
-    return {"phrase": phrase, "kind": "not_applied", "joint": joint, "reason": reason, "target": None, "achieved": None,
-            "gap": None, "unit": "", "text": f"'{phrase}': not applied: {reason}"}
+    return _unmet(phrase, "not_applied", None, reason, f"'{phrase}': not applied: {reason}")
+
+
+def _unmet(phrase: str, kind: str, joint: str | None, reason: str, text: str) -> dict[str, Any]:
+    """An unmet item that asks no number: ``phrase``, its ``kind``, the ``joint`` it concerns, ``reason`` and the one-line
+    ``text``."""
+    return {"phrase": phrase, "kind": kind, "joint": joint, "reason": reason, "target": None, "achieved": None, "gap": None,
+            "unit": "", "text": text}
 
 
 def missed(phrase: str, *, kind: str, target: float, achieved: float, unit: str, tolerance: float,
@@ -234,14 +240,12 @@ def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, 
                     f"{'needs more friction or damping than' if 'max' in ways else 'needs it easier to move than'} the word "
                     "allows. Drop the word, ask for the part at an end of its range, or --mount fixed where the object is "
                     "mounted in use")
-            items.append({"phrase": word.phrase, "kind": "conflict", "joint": j, "reason": why, "target": None,
-                          "achieved": None, "gap": None, "unit": "", "text": text})
+            items.append(_unmet(word.phrase, "conflict", j, why, text))
             break
     for word, joints in strays:
         for j in joints:
-            items.append({"phrase": word.phrase, "kind": "not_named", "joint": j, "reason": "the phrase does not name this part",
-                          "target": None, "achieved": None, "gap": None, "unit": "",
-                          "text": f"'{word.phrase}': applied to {j}, a part the phrase does not name ({word.short()})"})
+            items.append(_unmet(word.phrase, "not_named", j, "the phrase does not name this part",
+                                f"'{word.phrase}': applied to {j}, a part the phrase does not name ({word.short()})"))
     return with_unmet(metrics, items)
 
 
@@ -308,7 +312,6 @@ def free_motion_conflicts(overlay: Overlay, words: list[tuple[MotionPhrase, list
             unit = "N" if prismatic.get(j) else "N m"
             why = (f"its weight {'slides' if prismatic.get(j) else 'turns'} it from {other} with {dyn.holding.static_load:.3g} "
                    f"{unit}: held there by {dyn.friction:.3g} {unit} of friction, which a part that moves freely does not have")
-            items.append({"phrase": word.phrase, "kind": "conflict", "joint": j, "reason": why, "target": None, "achieved": None,
-                          "gap": None, "unit": "", "text": f"'{word.phrase}' and {other} conflict on {j}: {why}. Drop one of "
-                                                           "the two phrases, or ask for the part at an end of its range"})
+            items.append(_unmet(word.phrase, "conflict", j, why, f"'{word.phrase}' and {other} conflict on {j}: {why}. Drop one of "
+                                "the two phrases, or ask for the part at an end of its range"))
     return items

@@ -169,11 +169,10 @@ def compare_physics(held: HeldPhysics, authored: HeldPhysics, tol: Tolerances | 
     return out
 
 
-def held_by_engines(out_dir: Path, engines: list[str], *, files: bool = True,
-                    tol: Tolerances | None = None) -> list[AuthoredCheck]:
+def held_by_engines(out_dir: Path, engines: list[str]) -> list[AuthoredCheck]:
     """Load ``out_dir`` in each engine (no step) and compare what it holds with
-    the files; with ``files`` also each of :data:`EXPORTED_FILES` with its
-    engine's importer. One :class:`AuthoredCheck` per (engine, file).
+    the files, and each of :data:`EXPORTED_FILES` with its engine's importer (the default :class:`Tolerances`). One
+    :class:`AuthoredCheck` per (engine, file).
 
     Raises:
         FileNotFoundError: no ``mobility.urdf``.
@@ -193,26 +192,25 @@ def held_by_engines(out_dir: Path, engines: list[str], *, files: bool = True,
             results.append(AuthoredCheck(engine, "urdf", "error", reason=f"{type(exc).__name__}: {exc}"))
             continue
         try:
-            results.append(compare_physics(session.held_physics(), authored, tol))
+            results.append(compare_physics(session.held_physics(), authored))
         except EngineUnsupported as exc:
             results.append(AuthoredCheck(engine, "urdf", "skipped", reason=str(exc)))
         finally:
             session.close()
-    if files:
-        for engine, fmt, rel in EXPORTED_FILES:
-            if engine not in engines:
-                continue
-            path = out_dir / rel
-            if not path.is_file():
-                results.append(AuthoredCheck(engine, fmt, "skipped", reason=f"{rel} not exported"))
-                continue
-            try:
-                held = read_held_physics(engine, fmt, path, list(authored.links), list(authored.joints))
-            except (EngineUnavailable, EngineUnsupported) as exc:
-                results.append(AuthoredCheck(engine, fmt, "skipped", reason=str(exc)))
-                continue
-            except Exception as exc:
-                results.append(AuthoredCheck(engine, fmt, "error", reason=f"{type(exc).__name__}: {exc}"))
-                continue
-            results.append(compare_physics(held, authored, tol))
+    for engine, fmt, rel in EXPORTED_FILES:
+        if engine not in engines:
+            continue
+        path = out_dir / rel
+        if not path.is_file():
+            results.append(AuthoredCheck(engine, fmt, "skipped", reason=f"{rel} not exported"))
+            continue
+        try:
+            held = read_held_physics(engine, fmt, path, list(authored.links), list(authored.joints))
+        except (EngineUnavailable, EngineUnsupported) as exc:
+            results.append(AuthoredCheck(engine, fmt, "skipped", reason=str(exc)))
+            continue
+        except Exception as exc:
+            results.append(AuthoredCheck(engine, fmt, "error", reason=f"{type(exc).__name__}: {exc}"))
+            continue
+        results.append(compare_physics(held, authored))
     return results

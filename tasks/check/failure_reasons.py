@@ -74,9 +74,8 @@ def penetration_why(metrics: list[Any]) -> list[str]:
 
 
 #: How each robust-rest trial disturbed the object, for :func:`robust_rest_why`.
-_TRIAL_WORDS = {"drop": "landed after the 2 cm drop", "tilt+x": "landed after the 5 deg tilt about +x",
-                "tilt-x": "landed after the 5 deg tilt about -x", "tilt+y": "landed after the 5 deg tilt about +y",
-                "tilt-y": "landed after the 5 deg tilt about -y", "nudge": "was nudged at 0.05 m/s"}
+_TRIAL_WORDS = {"drop": "landed after the 2 cm drop", "nudge": "was nudged at 0.05 m/s",
+                **{f"tilt{s}{a}": f"landed after the 5 deg tilt about {s}{a}" for s in "+-" for a in "xy"}}
 
 
 def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozenset()) -> list[str]:
@@ -167,8 +166,8 @@ def _holding_choices(rr: Any, metrics: list[Any], joint: str, prismatic: bool) -
     return "What remains: " + "; ".join(choices) + "."
 
 
-def _num(v: Any, digits: int = 3) -> str:
-    return "?" if v is None else f"{float(v):.{digits}g}"
+def _num(v: Any) -> str:
+    return "?" if v is None else f"{float(v):.3g}"
 
 
 def _joint_amount(value: float, unit: str) -> str:
@@ -243,6 +242,13 @@ def _rest_why(metrics: list[Any]) -> list[str]:
                 out.append(f"joint '{j}' left its initial state by {_joint_amount(drift, unit)} at rest ({m.engine}; {against}): "
                            f"its friction does not hold the part's weight there. {advice('hold', asked_weight(metrics))}")
     return out
+
+
+#: What the check of a tier told by its metrics' ``details["failures"]`` did (:func:`_failures_why`).
+_DONE = {"sweep": "a force-limited drive could not sweep the joint through its range",
+         "operability": "a hand inside the part's real operating force could not work it",
+         "task": "a force- and speed-limited gripper could not do the task",
+         "force": "the task needed a force outside the part's real operating range"}
 
 
 def _failures_why(metrics: list[Any], names: tuple[str, ...], advice: str, what: str) -> list[str]:
@@ -343,27 +349,16 @@ def why_it_failed(metrics: list[Any]) -> list[str]:
     asked = asked_weight(metrics)
     held_not = {j for m in metrics if m.name in HOLD_METRICS and metric_verdict(m) is False
                 for j in (m.details or {}).get("sagging") or []}
-    explain = {
-        "rest": _rest_why,
-        "penetration": penetration_why,
-        "sweep": lambda ms: _failures_why(ms, ("joint_sweep",), advice("sweep", asked),
-                                          "a force-limited drive could not sweep the joint through its range"),
-        "operability": lambda ms: _failures_why(ms, ("operability",), advice("operability", asked),
-                                                "a hand inside the part's real operating force could not work it"),
-        "robust_rest": lambda ms: robust_rest_why(ms, skip=held_not),
-        "task": lambda ms: _failures_why(ms, ("task_execution",), advice("task", asked),
-                                         "a force- and speed-limited gripper could not do the task"),
-        "force": lambda ms: _failures_why(ms, ("operating_force",), advice("force", asked),
-                                          "the task needed a force outside the part's real operating range"),
-        "request": _request_why,
-    }
+    explain = {"rest": _rest_why, "penetration": penetration_why, "robust_rest": lambda ms: robust_rest_why(ms, skip=held_not),
+               "request": _request_why}
     out: list[str] = []
     for tier, (names, _) in TIERS.items():
         bad = [m for m in metrics if m.name in names and metric_verdict(m) is False]
         if not bad:
             continue
         mode = mode_of(tier, bad)
-        sentences = explain[tier](metrics) or [
+        sentences = (explain[tier](metrics) if tier in explain else
+                     _failures_why(metrics, names, advice(tier, asked), _DONE[tier])) or [
             f"{', '.join(dict.fromkeys(f'{m.name}@{m.engine}' for m in bad))} failed (passes when {bad[0].threshold}). "
             + advice(_FALLBACK_ADVICE.get(tier, tier), asked)]
         out += [f"{mode} ({tier} tier): {s}" for s in sentences]

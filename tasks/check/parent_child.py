@@ -29,13 +29,12 @@ CONTACT_MARGIN: dict[str, float] = {"pybullet": 0.002, "mujoco": 0.0}
 
 
 def parent_child_penetration(source: SimSource, initial_state: dict[str, float], engine: str = "pybullet",
-                             conventions: SimConventions | None = None,
-                             tolerance: float = UNRESOLVED_PENETRATION_MM / 1000.0) -> MetricResult:
+                             conventions: SimConventions | None = None) -> MetricResult:
     """Deepest penetration (mm) of a child link's collision shapes into its
     parent's at ``initial_state`` (joint -> rad or m), :data:`CONTACT_MARGIN`
     removed. ``details["pairs"]``: "parent/child" -> mm; ``details["modelled"]``: the same with every joint
     at :func:`~asset2sim.tasks.assemble.joint_sweep.reference_state`; ``details["beyond_modelled_mm"]``: the most a
-    pair is deeper than there. Passes when no pair is more than ``tolerance`` m deeper than as modelled (a part drawn
+    pair is deeper than there. Passes when no pair is more than :data:`UNRESOLVED_PENETRATION_MM` deeper than as modelled (a part drawn
     inside its parent, as robosuite draws a door's latch, is as the asset says: no simulator collides the pair), the
     rule :func:`~asset2sim.tasks.check.verdict.readiness` reads. Engines not in :data:`CONTACT_MARGIN` are replaced by
     PyBullet.
@@ -70,8 +69,8 @@ def parent_child_penetration(source: SimSource, initial_state: dict[str, float],
     beyond = max((d - modelled.get(k, 0.0) for k, d in pairs.items()), default=0.0)
     beyond = round(max(beyond, 0.0), 4)
     return MetricResult(name="parent_child_penetration", value=worst, unit=unit("parent_child_penetration"),
-                        passed=beyond <= tolerance * 1000.0,
-                        threshold=f"a child at most {tolerance * 1000:g} mm deeper inside its parent than as modelled "
+                        passed=beyond <= UNRESOLVED_PENETRATION_MM,
+                        threshold=f"a child at most {UNRESOLVED_PENETRATION_MM:g} mm deeper inside its parent than as modelled "
                                   "(the pair collided; the self-contact penetration leaves it out)",
                         details={"pairs": pairs, "beyond_modelled_mm": beyond, "modelled": modelled,
                                  "margin_removed_mm": margin * 1000.0}, engine=engine)

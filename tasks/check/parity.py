@@ -11,7 +11,6 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import SPEC_METRICS, unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import breakaway, metrics
@@ -30,11 +29,10 @@ def _not_run(engine: str, key: str, reason: str, passed: bool | None) -> list[Me
                          engine=engine) for n in METRICS]
 
 
-def evaluate_engines(urdf_dir: Path, engines: list[str], *, initial_state: dict[str, float] | None = None,
-                     conventions: SimConventions | None = None) -> dict[str, list[MetricResult]]:
+def evaluate_engines(urdf_dir: Path, engines: list[str], *, initial_state: dict[str, float] | None = None) -> dict[str, list[MetricResult]]:
     """engine -> [penetration (mm), rest stability, oscillation] of one output folder in each of ``engines``
     (duplicates dropped; :func:`session_metrics`), ``initial_state`` overriding the folder's, the root as the
-    folder declares it.
+    folder declares it, under the SPEC's conventions.
 
     Raises:
         FileNotFoundError: no ``mobility.urdf`` in ``urdf_dir``.
@@ -43,7 +41,7 @@ def evaluate_engines(urdf_dir: Path, engines: list[str], *, initial_state: dict[
     urdf = Path(urdf_dir) / URDF_NAME
     if not urdf.is_file():
         raise FileNotFoundError(f"{urdf} does not exist (not an output folder?)")
-    options = output_session_options(urdf_dir, initial_state, conventions)
+    options = output_session_options(urdf_dir, initial_state)
     return {e: session_metrics(UrdfFile(urdf), e, options) for e in dict.fromkeys(engines)}
 
 

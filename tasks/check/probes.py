@@ -320,7 +320,7 @@ def _judge(prismatic: bool, action: str, open_range: float, cfg: ProbeConfig, ru
 
 
 def run_probes(session, joints: dict[str, tuple[float, float, float]], *, actions: tuple[str, ...] = ("close", "open"),
-               config: ProbeConfig | None = None, holds_position: bool = False, model: UrdfModel | None = None,
+               holds_position: bool = False, model: UrdfModel | None = None,
                returns: set[str] | frozenset[str] = frozenset(), floor_stops: dict[str, float] | None = None
                ) -> list[ProbeResult]:
     """Probe every joint of ``joints`` (joint -> (q_closed, direction,
@@ -337,7 +337,7 @@ def run_probes(session, joints: dict[str, tuple[float, float, float]], *, action
         for name, (closed, direction, rng) in joints.items():
             for action in actions:
                 session.restore_state(sid)
-                kw = dict(action=action, config=config, holds_position=holds_position, model=model,
+                kw = dict(action=action, holds_position=holds_position, model=model,
                           returns=name in returns, floor_stop=(floor_stops or {}).get(name))
                 r = probe_joint(session, name, (closed, direction, rng), **kw)
                 if model is not None and _shut_in(r):
@@ -435,8 +435,8 @@ def _probe_cleared(session, first: ProbeResult, joints: dict[str, tuple[float, f
     return None
 
 
-def probes_metric(results: list[ProbeResult], *, engine: str = "pybullet") -> MetricResult:
-    """Aggregate probes: value = failed probes; passes iff none failed (None with nothing probed)."""
+def probes_metric(results: list[ProbeResult]) -> MetricResult:
+    """Aggregate PyBullet's probes: value = failed probes; passes iff none failed (None with nothing probed)."""
     failed = [r for r in results if not r.success]
     return MetricResult(
         name="probes", value=float(len(failed)), unit="failed probes", passed=(not failed) if results else None,
@@ -444,4 +444,4 @@ def probes_metric(results: list[ProbeResult], *, engine: str = "pybullet") -> Me
         "weighs at most 22.2 N), without the object sliding (> 5 mm) or tipping (> 0.05 rad) and a closed joint "
         "does not spring back",
         details={"probes": [r.summary() for r in results], "failures": [f"{r.joint} {r.action}: {r.failure}" for r in failed]},
-        engine=engine)
+        engine="pybullet")

@@ -97,11 +97,11 @@ class RecordedRuns:
         self.runs[key] = copy.deepcopy(run)
 
 
-def sweep_run(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]],
-              config: sweep.SweepConfig | None = None, *, recorded: RecordedRuns | None = None) -> sweep.SweepRun:
+def sweep_run(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]], *,
+              recorded: RecordedRuns | None = None) -> sweep.SweepRun:
     """:func:`asset2sim.tasks.check.sweep.run_sweep`, taken from ``recorded`` when
     a run of exactly these inputs is there, else simulated and recorded into it."""
-    cfg = config or sweep.SweepConfig()
+    cfg = sweep.SweepConfig()
     return _recorded(recorded, lambda: sweep.run_sweep(engine, obj, closed, cfg),
                      "joint_sweep", engine, _swept(obj), cfg, closed)
 
@@ -141,10 +141,9 @@ class _OperabilityInputs:
 
 def operability_run(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]], *,
                     category: str | None = None, labels: dict[str, str | None] | None = None,
-                    config: operability.OperabilityConfig | None = None,
                     recorded: RecordedRuns | None = None) -> operability.OperabilityRun:
     """:func:`asset2sim.tasks.check.operability.run_operability` (same arguments), recorded as :func:`sweep_run`."""
-    cfg = config or operability.OperabilityConfig()
+    cfg = operability.OperabilityConfig()
     inputs = _OperabilityInputs(cfg, category, tuple(sorted((str(k), str(v)) for k, v in (labels or {}).items() if v)))
     return _recorded(recorded, lambda: operability.run_operability(engine, obj, closed, category=category, labels=labels,
                                                                    config=cfg),

@@ -250,7 +250,7 @@ def robust_rest_metric(run: RobustRestRun, config: RobustRestConfig | None = Non
         engine=run.engine)
 
 
-def toppled(metric: MetricResult, config: RobustRestConfig | None = None) -> bool:
+def toppled(metric: MetricResult) -> bool:
     """Whether a trial of a ``robust_rest`` metric toppled the object (up
     direction more than ``topple_tol`` rad off the vertical); False when none measured it.
 
@@ -259,6 +259,6 @@ def toppled(metric: MetricResult, config: RobustRestConfig | None = None) -> boo
     """
     if metric.name != "robust_rest":
         raise ValueError(f"not a robust_rest metric: {metric.name!r}")
-    tol = (config or RobustRestConfig()).topple_tol
+    tol = RobustRestConfig().topple_tol
     trials = metric.details.get("trials") or {}
     return any(t.get("topple") is not None and float(t["topple"]) > tol for t in trials.values())

@@ -16,6 +16,7 @@ from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root_options, joints_between
 from asset2sim.tasks.check.contact_points import joint_frame_axis
+from asset2sim.tasks.check.metrics import EXPLOSION_JOINT_SPEED_PRISMATIC, EXPLOSION_JOINT_SPEED_REVOLUTE
 from asset2sim.tasks.check.stroke import Reach, reach_stroke
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.synthesize.physics import G
@@ -23,10 +24,6 @@ from asset2sim.urdf import UrdfModel
 
 #: Fraction of the range that counts as reached (SPEC: >= 95 % both ways).
 REACH_FRACTION = 0.95
-#: Joint speeds that count as divergence, rad/s and m/s (as the evaluation's
-#: divergence metric, :mod:`asset2sim.tasks.evaluation.metric_defs`).
-DIVERGED_SPEED_REVOLUTE = 100.0
-DIVERGED_SPEED_PRISMATIC = 10.0
 #: Force limit (N*m or N) of the zero-velocity drive that holds the joints not swept: far
 #: above any part's operating force (a second hand or a fixture holding the rest), so they do not yield.
 HOLD_FORCE = 1000.0
@@ -126,8 +123,7 @@ def effort_limit(session: SimSession, joint: str, links: list[str], open_range: 
 DAMPED_SPEED_MARGIN = 2.0
 
 
-def damping_caps(obj: SimObject, closed: dict[str, tuple[float, float, float]],
-                 config: SweepConfig | None = None) -> dict[str, float]:
+def damping_caps(obj: SimObject, closed: dict[str, tuple[float, float, float]]) -> dict[str, float]:
     """Joint -> the largest viscous damping (N m s/rad or N s/m) with which
     the sweep's drive still traverses the range in time: c_max = E T /
     (``DAMPED_SPEED_MARGIN`` R), E :func:`effort_limit` at the closed end, T
@@ -138,7 +134,7 @@ def damping_caps(obj: SimObject, closed: dict[str, tuple[float, float, float]],
     Raises:
         EngineUnavailable: PyBullet is not installed; whatever loading ``obj.source`` raises.
     """
-    cfg = config or SweepConfig()
+    cfg = SweepConfig()
     source, initial_state = obj.source, dict(obj.state)
     model = source.model()
     subtrees = joint_subtrees(model)
@@ -181,7 +177,7 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     v_max = open_range / cfg.traverse_time
     limit = effort_limit(session, joint, links, open_range, cfg)
     session.set_joint_positions({**initial_state, joint: closed})
-    vdiv = DIVERGED_SPEED_PRISMATIC if jtype == "prismatic" else DIVERGED_SPEED_REVOLUTE
+    vdiv = EXPLOSION_JOINT_SPEED_PRISMATIC if jtype == "prismatic" else EXPLOSION_JOINT_SPEED_REVOLUTE  # the divergence metric's
     max_pen, worst = _deepest(session)
     trace: dict[str, list[float]] = {"t": [], "fraction": [], "phase": []}
 
@@ -346,9 +342,9 @@ def run_sweep(engine: str, obj: SimObject, closed: dict[str, tuple[float, float,
     return run
 
 
-def sweep_metric(run: SweepRun, config: SweepConfig | None = None) -> MetricResult:
+def sweep_metric(run: SweepRun) -> MetricResult:
     """The ``joint_sweep`` metric: value = failing joints; passes iff none fails (None when none was swept)."""
-    cfg = config or SweepConfig()
+    cfg = SweepConfig()
     failing = [j.joint for j in run.joints if not j.passed]
     return MetricResult(
         name="joint_sweep", value=float(len(failing)), unit=unit("joint_sweep"), passed=(not failing) if run.joints else None,

@@ -90,11 +90,6 @@ def verdict_line(failure_mode: str, tiers: dict[str, bool | None], failures: lis
 def metric_verdict(m: Any) -> bool | None:
     """A metric's pass/fail as the readiness verdict reads it (:data:`PENETRATION_METRICS`: at most
     :data:`UNRESOLVED_PENETRATION_MM`, a child inside its parent beyond its modelled pose); None: not graded."""
-    return _verdict(m)
-
-
-def _verdict(m: Any) -> bool | None:
-    """A metric's pass/fail for readiness (:data:`PENETRATION_METRICS`: at most :data:`UNRESOLVED_PENETRATION_MM`)."""
     if m.name in PENETRATION_METRICS:
         value = (m.details or {}).get(PENETRATION_METRICS[m.name] or "", m.value)
         return None if value is None else bool(value <= UNRESOLVED_PENETRATION_MM)
@@ -108,8 +103,8 @@ def readiness(metrics: list[Any]) -> Readiness:
     failures: list[str] = []
     mode = "none"
     for tier, (names, tier_mode) in TIERS.items():
-        ms = [m for m in metrics if m.name in names and _verdict(m) is not None]
-        bad = [m for m in ms if _verdict(m) is False]
+        ms = [m for m in metrics if m.name in names and metric_verdict(m) is not None]
+        bad = [m for m in ms if metric_verdict(m) is False]
         tiers[tier] = None if not ms else not bad
         failures += list(dict.fromkeys(f"{m.name}@{m.engine}" for m in bad))
         if bad and mode == "none":
@@ -126,7 +121,7 @@ def penetration_measures(metrics: list[Any]) -> list[str]:
     for m in metrics:
         if m.name not in PENETRATION_METRICS or m.value is None:
             continue
-        verdict = {True: "pass", False: "FAIL", None: "n/a"}[_verdict(m)]
+        verdict = {True: "pass", False: "FAIL", None: "n/a"}[metric_verdict(m)]
         if m.name == "penetration":
             out.append(f"self-contact {m.value:.3f} mm ({m.engine}) {verdict}")
             continue

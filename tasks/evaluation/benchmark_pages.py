@@ -6,17 +6,17 @@ from __future__ import annotations
 
 from typing import Any
 
-from asset2sim.tasks.evaluation.html_blocks import fmt, page, svg_tag
+from asset2sim.tasks.evaluation.html_blocks import fmt, page, svg_tag, table
 from asset2sim.tasks.evaluation.report_changes import esc
 
 
-def _pm(mean: float | None, sd: float | None, digits: int = 3, pct: bool = False) -> str:
+def _pm(mean: float | None, sd: float | None, pct: bool = False) -> str:
     if mean is None:
         return "-"
     k = 100.0 if pct else 1.0
-    s = f"{mean * k:.{digits}g}"
+    s = f"{mean * k:.3g}"
     if sd is not None:
-        s += f" &plusmn; {sd * k:.{digits}g}"
+        s += f" &plusmn; {sd * k:.3g}"
     return s + ("%" if pct else "")
 
 
@@ -37,20 +37,18 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
              f"{esc(', '.join(meta.get('methods', [])))} &middot; seed {esc(meta.get('seed'))} &middot; "
              f"{esc(meta.get('rows'))} rows &middot; <a href='index.html'>per-object index</a></p>"]
     for subset, rows in tables.items():
-        parts.append(f"<h2>{esc(subset)}</h2><table><tr><th>method</th>" + "".join(f"<th>{esc(c)}</th>" for c in cols) + "</tr>")
+        cells = []
         for method, r in rows.items():
-            cells = [_pm(r.get("pen_ts_mean"), r.get("pen_ts_sd")), _pm(r.get("pen_mean"), r.get("pen_sd")),
+            row = [_pm(r.get("pen_ts_mean"), r.get("pen_ts_sd")), _pm(r.get("pen_mean"), r.get("pen_sd")),
                      *(_pm(r.get(rate), None, pct=True) + f" ({r.get(n, 0)})" for rate, n in _PASS_RATES),
-                     _pm(r.get("scale_mean"), r.get("scale_sd"), pct=False) + ("%" if r.get("scale_mean") is not None else ""),
+                     _pm(r.get("scale_mean"), r.get("scale_sd")) + ("%" if r.get("scale_mean") is not None else ""),
                      _pm(r.get("init_mean"), r.get("init_sd")), _pm(r.get("prompt_mean"), None, pct=True),
                      _pm(r.get("all_pass"), None, pct=True), fmt(r.get("median_seconds"), 3), esc(r.get("realism", "not rated"))]
             err = f" <span class='small'>({r.get('errors')} failed to produce)</span>" if r.get("errors") else ""
-            parts.append(f"<tr><td>{esc(method)}{err}</td>" + "".join(f"<td class='num'>{c}</td>" for c in cells) + "</tr>")
-        parts.append("</table>")
-    parts.append("<h2>Research numbers (thesis 9-object set, Isaac Sim)</h2><table><tr>"
-                 + "".join(f"<th>{esc(k)}</th>" for k in research[0]) + "</tr>"
-                 + "".join("<tr>" + "".join(f"<td>{esc(v)}</td>" for v in r.values()) + "</tr>" for r in research)
-                 + "</table>")
+            cells.append(f"\n<tr><td>{esc(method)}{err}</td>" + "".join(f"<td class='num'>{c}</td>" for c in row) + "</tr>")
+        parts.append(f"<h2>{esc(subset)}</h2>" + table(["method", *cols], [*cells, "\n"]))
+    parts.append("<h2>Research numbers (thesis 9-object set, Isaac Sim)</h2>" + table(
+        research[0], ("<tr>" + "".join(f"<td>{esc(v)}</td>" for v in r.values()) + "</tr>" for r in research)))
     if chart:
         parts.append("<h2>Pass rates</h2>" + svg_tag(chart, "pass rates"))
     parts.append("<p class='small'>Ours: PyBullet under the conventions of docs/guide/metrics.md; the research measured in "
@@ -87,4 +85,4 @@ def render_benchmark_index(records: list[dict[str, Any]], meta: dict[str, Any]) 
         )
     return page("asset2sim benchmark index", f"<h1>Benchmark index</h1><p class='meta'>{esc(meta.get('manifest'))} &middot; "
                  "<a href='summary.html'>summary table</a> &middot; green pass, red fail, grey reported without threshold</p>"
-                 "<table><tr>" + "".join(f"<th>{esc(h)}</th>" for h in head) + "</tr>" + "".join(rows) + "</table>")
+                 + table(head, rows))

@@ -275,7 +275,7 @@ def sweep_clips(urdf: Path | str, sweep: SweepRun, joints: Sequence[str], others
                 clips.append(write_clip(folder, f"sweep_{n:02d}_{v}", frames[view_spec(v).name], joint=js.joint, motion="sweep",
                                         view=v, fps=fps, poster_index=poster))
         if task_run is not None:
-            more, why = task_clips(urdf, task_run, out_dir, renderer=r)
+            more, why = task_clips(task_run, out_dir, r)
             clips += more
             skipped.update(why)
     clip_set = ClipSet(clips=clips, skipped=skipped)
@@ -321,7 +321,7 @@ def project(cam: Camera, points: np.ndarray, size: tuple[int, int]) -> np.ndarra
     return px
 
 
-def draw_mark(image: np.ndarray, xy: np.ndarray, radius: int = 4) -> np.ndarray:
+def draw_mark(image: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """``image`` (H, W, 3) uint8 with a red dot in a white ring at pixel ``xy`` (2,) (nothing when NaN or
     outside): where the gripper holds the part."""
     if not np.all(np.isfinite(xy)):
@@ -330,18 +330,17 @@ def draw_mark(image: np.ndarray, xy: np.ndarray, radius: int = 4) -> np.ndarray:
     yy, xx = np.ogrid[:h, :w]
     d2 = (xx - xy[0]) ** 2 + (yy - xy[1]) ** 2
     out = image.copy()
-    out[d2 <= (radius + 1.5) ** 2] = (255, 255, 255)
-    out[d2 <= radius ** 2] = (220, 30, 30)
+    out[d2 <= 5.5 ** 2] = (255, 255, 255)  # a ring 1.5 px wide around a dot of 4 px radius
+    out[d2 <= 4 ** 2] = (220, 30, 30)
     return out
 
 
-def task_clips(urdf: Path | str, task_run, out_dir: Path | str, *,
-               renderer: SceneRenderer | None = None) -> tuple[list[Clip], dict[str, str]]:
+def task_clips(task_run, out_dir: Path | str, r: SceneRenderer) -> tuple[list[Clip], dict[str, str]]:
     """Clips of each recorded attempt of ``task_run`` (a :class:`~asset2sim.tasks.check.task_execution.TaskRun`, at
     most :data:`MAX_CLIP_JOINTS`; views, size and rate as :func:`sweep_clips`): the object as the gripper moved it
     (root free or mounted as simulated), the grasp point drawn as a red dot while held, written into
-    ``out_dir/clips/task_<n>_<view>.*``. Returns (clips, skipped: ``<joint> <action>`` -> why); ``renderer``: one
-    of ``urdf`` at :data:`CLIP_SIZE` already open (else one is opened). Raises as :func:`sweep_clips`."""
+    ``out_dir/clips/task_<n>_<view>.*`` by the renderer ``r`` of the object at :data:`CLIP_SIZE`. Returns (clips, skipped:
+    ``<joint> <action>`` -> why). Raises as :func:`sweep_clips`."""
     views, size, fps, max_attempts = CLIP_VIEWS, CLIP_SIZE, CLIP_FPS, MAX_CLIP_JOINTS
     folder = Path(out_dir) / CLIPS_DIR
     out: list[Clip] = []
@@ -352,19 +351,15 @@ def task_clips(urdf: Path | str, task_run, out_dir: Path | str, *,
             todo.append((att, task_trajectory(att)))
         except ValueError as exc:
             skipped[f"{att.joint} {att.action}"] = str(exc)
-    if not todo:
-        return out, skipped
-    with contextlib.ExitStack() as stack:
-        r = renderer or stack.enter_context(SceneRenderer(urdf, size=size, supersample=1))
-        for n, (att, traj) in enumerate(todo):
-            cams = fit_cameras(pose_points(r, fit_poses(traj, fps)), views, size)
-            idx = traj.sampled(fps)
-            frames = draw_frames(r, traj, cams, fps)
-            for v in views:
-                name = view_spec(v).name
-                marked = [draw_mark(img, project(cams[name], traj.marks[i][None], size)[0]) for img, i in zip(frames[name], idx)]
-                out.append(write_clip(folder, f"task_{n:02d}_{v}", marked, joint=att.joint, motion="task", view=v, fps=fps,
-                                      poster_index=len(marked) // 2))
+    for n, (att, traj) in enumerate(todo):
+        cams = fit_cameras(pose_points(r, fit_poses(traj, fps)), views, size)
+        idx = traj.sampled(fps)
+        frames = draw_frames(r, traj, cams, fps)
+        for v in views:
+            name = view_spec(v).name
+            marked = [draw_mark(img, project(cams[name], traj.marks[i][None], size)[0]) for img, i in zip(frames[name], idx)]
+            out.append(write_clip(folder, f"task_{n:02d}_{v}", marked, joint=att.joint, motion="task", view=v, fps=fps,
+                                  poster_index=len(marked) // 2))
     return out, skipped
 
 

@@ -252,7 +252,7 @@ def _evaluation(asset_id: str, urdf: Path, metrics: list[MetricResult], failure_
 
 
 # ---------------------------------------------------------------- any folder, read and measured
-def file_overlay(model: UrdfModel, name: str = "file") -> Overlay:
+def file_overlay(model: UrdfModel) -> Overlay:
     """The physics a simulator loads from ``model`` when the folder holds no ``overlay.json``: every ``<inertial>`` (a
     link with geometry and none: the engines' default 1 kg, unit inertia), every movable joint's ``<dynamics>`` (0 when
     not written), no springs, scale 1 (the file as it is)."""
@@ -268,7 +268,7 @@ def file_overlay(model: UrdfModel, name: str = "file") -> Overlay:
             links[n] = LinkPhysics(mass=1.0, inertia=Inertia(ixx=1.0, iyy=1.0, izz=1.0), com=(0.0, 0.0, 0.0),
                                    source="engine default (no <inertial>)")
     joints = {j.name: JointDynamics(damping=j.damping, friction=j.friction, source="file <dynamics>") for j in model.movable_joints}
-    return Overlay(estimator=EstimatorInfo(name=name), scale=1.0, links=links, joints=joints)
+    return Overlay(estimator=EstimatorInfo(name="file"), scale=1.0, links=links, joints=joints)
 
 
 def closed_ends(files: RefinedAsset, joints: list[str] | None = None) -> tuple[dict[str, ClosedState], str]:
@@ -390,8 +390,7 @@ def _read(folder: RefinedAsset, notes: list[str]) -> tuple[RefineReport | None, 
 def evaluate_asset(
     asset: Path | str, *, reference: Path | str | None = None, prompt: str | None = None,
     engines: tuple[str, ...] | list[str] | None = None, seed: int = 0, category: str | None = None, method: str | None = None,
-    out_dir: Path | str | None = None, write_report: bool = False, probes: bool = False, conventions: SimConventions | None = None,
-    task: str | None = None, clips: bool = True, views: dict[str, np.ndarray] | None = None,
+    out_dir: Path | str | None = None, write_report: bool = False, probes: bool = False, task: str | None = None, clips: bool = True,
 ) -> Evaluation:
     """Evaluate any asset folder or URDF file with the checks a refine runs (module docstring).
 
@@ -403,11 +402,10 @@ def evaluate_asset(
         engines: the engines to measure in, the manipulation tiers (sweep, operability, robust rest) in each (unavailable
             ones: skipped); None: as a refine checks, the tiers in PyBullet and the SPEC's rest metrics in the engines a
             refined folder's ``report.json`` measured in (else PyBullet alone). seed, method: recorded.
-        category: overrides the folder's; conventions: the measurement conventions (default the SPEC's).
+        category: overrides the folder's; the measurement conventions are the SPEC's.
         out_dir: where ``evaluation.json`` and (``write_report``) ``report.html`` and the clips (``clips``) go.
         probes: also run the passive probes (a learnability stand-in: reported, never deciding the verdict).
         task: the manipulation task the task tier performs (None: the report's task, else none).
-        views: renders already taken at the evaluated state (view -> (H, W, 3) uint8) for the report.
 
     Raises:
         EvaluationError: the asset, its records or the reference cannot be read.
@@ -436,7 +434,7 @@ def evaluate_asset(
     every = engines is not None  # the engines named: the manipulation tiers in each of them
     recorded = sorted({m.engine for m in report.metrics} - {"none", "pybullet"}) if report is not None else []
     engines = list(dict.fromkeys(["pybullet", *(engines if every else recorded)]))
-    config = RefineConfig(engines=engines, **({"sim": conventions} if conventions is not None else {}))
+    config = RefineConfig(engines=engines)
     obj, state_source = sim_object(files, config.sim)
     state = dict(obj.state)
     physics = overlay if overlay is not None else file_overlay(model)
@@ -472,7 +470,7 @@ def evaluate_asset(
                            baseline=baseline)
     if out_dir is not None:
         clip_set = _write_clips(ev, out_dir) if write_report and clips else None
-        write_evaluation(ev, out_dir, report=write_report, views=views, clips=clip_set)
+        write_evaluation(ev, out_dir, report=write_report, clips=clip_set)
     return ev
 
 
@@ -570,24 +568,19 @@ def _joint_labels(urdf: Path, model: UrdfModel) -> dict[str, str | None]:
 
 def write_media(ev: Evaluation, out_dir: Path | str, *, views: dict[str, np.ndarray] | None = None, clips: bool = True) -> Path:
     """``report.html`` of ``ev`` (and its clips, with ``clips``) into ``out_dir``; returns the report's path."""
-    clip_set = _write_clips(ev, out_dir) if clips else None
-    return write_evaluation(ev, out_dir, report=True, views=views, clips=clip_set, evaluation_json=False)[REPORT_HTML_NAME]
+    return write_report(ev, Path(out_dir) / REPORT_HTML_NAME, views=views, clips=_write_clips(ev, out_dir) if clips else None)
 
 
-def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True, views: dict[str, np.ndarray] | None = None,
-                     clips: ClipSet | None = None, evaluation_json: bool = True) -> dict[str, Path]:
-    """Write ``evaluation.json`` (unless ``evaluation_json`` is False) and, with ``report``, ``report.html`` (``views`` the
-    renders at ``ev.initial_state`` when taken; ``clips`` the clips written in ``out_dir/clips/``, played in the report)
-    into ``out_dir`` atomically; returns file name -> path for the files written."""
+def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True, clips: ClipSet | None = None) -> dict[str, Path]:
+    """Write ``evaluation.json`` and, with ``report``, ``report.html`` (``clips`` the clips written in ``out_dir/clips/``,
+    played in the report) into ``out_dir`` atomically; returns file name -> path for the files written."""
     out_dir = Path(out_dir)
-    paths = {}
-    if evaluation_json:  # its wall time apart (timings.json), so two evaluations of the same files write the same bytes
-        data = ev.model_dump(mode="json", exclude={"seconds"})
-        data["urdf"] = portable_urdf(ev, out_dir)  # no absolute path: the same refine into two folders writes the same bytes
-        paths[EVALUATION_NAME] = write_json(out_dir / EVALUATION_NAME, _jsonable(data))
-        output_folder.merge_timings(out_dir, {"evaluation_seconds": ev.seconds})
+    data = ev.model_dump(mode="json", exclude={"seconds"})  # its wall time apart (timings.json): the same files, the same bytes
+    data["urdf"] = portable_urdf(ev, out_dir)  # no absolute path: the same refine into two folders writes the same bytes
+    paths = {EVALUATION_NAME: write_json(out_dir / EVALUATION_NAME, _jsonable(data))}
+    output_folder.merge_timings(out_dir, {"evaluation_seconds": ev.seconds})
     if report:
-        paths[REPORT_HTML_NAME] = write_report(ev, out_dir / REPORT_HTML_NAME, views=views, clips=clips)
+        paths[REPORT_HTML_NAME] = write_report(ev, out_dir / REPORT_HTML_NAME, clips=clips)
     return paths
 
 

@@ -20,6 +20,7 @@ from asset2sim.frames import quat_wxyz_matrix, quat_xyzw_to_wxyz
 from asset2sim.tasks.check.robust_rest import RobustRestConfig, RobustRestRun, Trial, up_change
 from asset2sim.tasks.check.sweep import JointSweep, SweepConfig, SweepRun
 from asset2sim.tasks.check.failure_reasons import penetration_failures
+from asset2sim.tasks.evaluation.html_blocks import table
 from asset2sim.tasks.evaluation.plots import legend, new_figure, styled, svg_bytes
 from asset2sim.tasks.geometry.render import SceneRenderer
 from asset2sim.inert import html_text, one_line
@@ -45,11 +46,11 @@ def failing(runs: dict) -> tuple[list[tuple[str, JointSweep]], list[tuple[str, T
 
 
 @styled
-def trial_plot(trial: Trial, dt: float, config: RobustRestConfig | None = None) -> bytes:
+def trial_plot(trial: Trial, dt: float) -> bytes:
     """SVG of one trial: the tilt (rad) of the up direction at placement, after settling and over the test,
     against the topple tolerance; each joint's position (rad or m) over settling and test (the first three), with
     its tolerance band around the initial state. Time 0: the end of settling."""
-    cfg = config or RobustRestConfig()
+    cfg = RobustRestConfig()
     tr = trial.trace
     q_ref = trial.reference_quat if trial.reference_quat is not None else tr.q0
     joints = list(tr.joints.items())[:3]
@@ -96,10 +97,10 @@ def trial_poses(trial: Trial) -> list[Pose]:
 
 
 @styled
-def sweep_plot(js: JointSweep, config: SweepConfig | None = None) -> bytes:
+def sweep_plot(js: JointSweep) -> bytes:
     """SVG of one joint sweep: the opening fraction over time, opening then closing, against the fractions
-    that count as reached (``config.reach_fraction`` open, 1 - it closed)."""
-    cfg = config or SweepConfig()
+    that count as reached (the sweep's ``reach_fraction`` open, 1 - it closed)."""
+    cfg = SweepConfig()
     t, f, ph = (np.asarray(js.trace[k], float) for k in ("t", "fraction", "phase"))
     fig, ((a,),) = new_figure(1, 1, 1000.0, 260.0)
     a.set(title=f"sweep of {js.joint}: {js.failure}", xlabel="time since the sweep started (s)",
@@ -185,9 +186,7 @@ def _stroke_table(part: dict, stroke: dict) -> str:
              ("reached", f"{100 * float(stroke.get('reached') or 0):.0f} % open"),
              ("force it needed (N)", stroke.get("needed_force_n")), ("the hand's range (N)", top),
              ("torque it needed (N m)", stroke.get("needed_torque_nm")), ("stopped by", stroke.get("stopped_by") or "-")]
-    return ("<table><tr>" + "".join(f"<th>{html_text(k)}</th>" for k, _ in cells) + "</tr><tr>"
-            + "".join(f"<td>{html_text('-' if v is None else f'{v:.3g}' if isinstance(v, float) else v)}</td>" for _, v in cells)
-            + "</tr></table>")
+    return _one_row(cells)
 
 
 def draw_poses(renderer: SceneRenderer, poses: list[Pose], highlight: Highlight | None = None) -> dict[str, np.ndarray]:
@@ -219,10 +218,14 @@ def _task_table(attempt: dict) -> str:
     cells = [("reached the target", attempt.get("reached")), ("held after release", attempt.get("held")),
              ("peak gripper force (N)", attempt.get("peak_force_n")), ("object slid (mm)", 1000 * (attempt.get("root_slide_m") or 0.0)),
              ("object tilted (rad)", attempt.get("root_tilt_rad")), ("gripper at its force limit", attempt.get("force_limited"))]
-    return ("<table><tr>" + "".join(f"<th>{html_text(k)}</th>" for k, _ in cells) + "</tr><tr>"
-            + "".join(f"<td>{html_text(('yes' if v else 'no') if isinstance(v, bool) else f'{v:.3g}' if isinstance(v, float) else v)}</td>"
-                      for _, v in cells)
-            + "</tr></table>")
+    return _one_row(cells)
+
+
+def _one_row(cells: list[tuple[str, object]]) -> str:
+    """A table of one row: (header, value) ``cells``, a float to 3 digits, a truth as yes / no, None as ``-``."""
+    def text(v: object) -> object:
+        return "-" if v is None else ("yes" if v else "no") if isinstance(v, bool) else f"{v:.3g}" if isinstance(v, float) else v
+    return table((k for k, _ in cells), ["<tr>", *(f"<td>{html_text(text(v))}</td>" for _, v in cells), "</tr>"])
 
 
 def evidence_section(runs: dict, urdf: Path | str, dt: float, svg: Callable[[bytes, str], str],

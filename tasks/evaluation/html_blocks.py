@@ -8,13 +8,12 @@ from __future__ import annotations
 import base64
 import io
 import math
-from typing import Any
+from typing import Any, Iterable
 
 import numpy as np
 
-from asset2sim.inert import CSP_META
+from asset2sim.inert import CSP_META, html_text
 from asset2sim.tasks.evaluation import plots
-from asset2sim.tasks.evaluation.report_changes import esc
 
 
 CSS = """
@@ -51,19 +50,24 @@ def fmt(v: Any, digits: int = 4) -> str:
         if not math.isfinite(float(v)):
             return "-"
         return f"{float(v):.{digits}g}"
-    return esc(v)
+    return html_text(v)
 
 
 def img_tag(png: bytes | None, alt: str, mime: str = "image/png") -> str:
     """An ``<img>`` with the PNG (or other ``mime`` image) inline (empty string for None)."""
     if not png:
         return ""
-    return f'<img alt="{esc(alt)}" src="data:{mime};base64,{base64.b64encode(png).decode()}"/>'
+    return f'<img alt="{html_text(alt)}" src="data:{mime};base64,{base64.b64encode(png).decode()}"/>'
 
 
 def svg_tag(svg: bytes | None, alt: str) -> str:
     """An ``<img>`` with an SVG figure inline (empty string for None)."""
     return img_tag(svg, alt, plots.SVG_MIME)
+
+
+def table(head: Iterable[Any], rows: Iterable[str] | str) -> str:
+    """A table: one header row of the texts ``head`` (escaped), then ``rows`` (HTML, ``<tr>`` rows as they are)."""
+    return "<table><tr>" + "".join(f"<th>{html_text(h)}</th>" for h in head) + "</tr>" + "".join(rows) + "</table>"
 
 
 def verdict_cell(passed: bool | None) -> str:
@@ -86,4 +90,4 @@ def array_png(arr: np.ndarray) -> bytes:
 
 def figure(image: np.ndarray, caption: str) -> str:
     """A rendered view (H, W, 3) uint8 with its caption."""
-    return f"<figure>{img_tag(array_png(image), caption)}<figcaption class='small'>{esc(caption)}</figcaption></figure>"
+    return f"<figure>{img_tag(array_png(image), caption)}<figcaption class='small'>{html_text(caption)}</figcaption></figure>"

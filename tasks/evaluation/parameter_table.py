@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from asset2sim.tasks.evaluation.html_blocks import fmt
+from asset2sim.tasks.evaluation.html_blocks import fmt, table
 from asset2sim.tasks.evaluation.report_changes import esc
 
 
@@ -27,8 +27,6 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
     (and ``report.json``) when present, else from the URDF and the engine defaults."""
     ctx = ev._context
     rows = [_param("scale", "global", ev.scale, "-", ev.scale_source)]
-    if ctx is None:
-        return rows
     # step 1: the joint parameters each check round changed
     ov, rep = ctx.overlay, ctx.report
     joints = {j.name: j for j in ctx.model.joints}
@@ -98,9 +96,6 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
 
 
 def parameter_table(ev) -> str:
-    rows = "".join(
+    return table(("where", "parameter", "value", "unit", "source"), (
         f"<tr><td>{esc(r['where'])}</td><td>{esc(r['parameter'])}</td><td class='num'>{fmt(r['value'])}</td>"
-        f"<td>{esc(r['unit'])}</td><td class='small'>{esc(r['source'])}</td></tr>"
-        for r in parameter_rows(ev)
-    )
-    return "<table><tr><th>where</th><th>parameter</th><th>value</th><th>unit</th><th>source</th></tr>" + rows + "</table>"
+        f"<td>{esc(r['unit'])}</td><td class='small'>{esc(r['source'])}</td></tr>" for r in parameter_rows(ev)))

@@ -92,19 +92,19 @@ def legend(ax, twin=None, loc: str = "upper right") -> None:
         ax.legend(handles, labels, loc=loc)
 
 
-def thinned(points: np.ndarray, most: int = MAX_SCATTER) -> np.ndarray:
-    """At most ``most`` of ``points`` (k, ...), an even stride over them in their order (the first kept)."""
-    return points[:: max(1, -(-len(points) // most))]
+def thinned(points: np.ndarray) -> np.ndarray:
+    """At most :data:`MAX_SCATTER` of ``points`` (k, ...), an even stride over them in their order (the first kept)."""
+    return points[:: max(1, -(-len(points) // MAX_SCATTER))]
 
 
 @styled
-def plot_object(point_cloud: dict[str, np.ndarray], title: str = "") -> bytes | None:
+def plot_object(point_cloud: dict[str, np.ndarray]) -> bytes | None:
     """Front (x-z), side (y-z) and top (x-y) views of the collision vertices per
     link (``point_cloud``: link -> (N, 3) m, world, initial state); None without points."""
     pts = {k: np.asarray(v, float) for k, v in point_cloud.items() if len(v)}
     if not pts:
         return None
-    fig, axes = new_figure(1, 3, 1100, 360, title or "collision geometry at the initial state (ground z = 0)")
+    fig, axes = new_figure(1, 3, 1100, 360, "collision geometry at the initial state (ground z = 0)")
     views = [(0, 2, "front: x (m)", "z (m)"), (1, 2, "side: y (m)", "z (m)"), (0, 1, "top: x (m)", "y (m)")]
     for n, (ax, (i, j, xl, yl)) in enumerate(zip(axes[0], views)):
         for k, (name, v) in enumerate(sorted(pts.items())):

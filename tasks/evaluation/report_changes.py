@@ -22,6 +22,7 @@ from asset2sim.tasks.geometry.render import render_views
 from asset2sim.tasks.ingest import declared as declared_mod
 from asset2sim.formats import staging
 from asset2sim.inert import html_text, one_line
+from asset2sim.tasks.evaluation.html_blocks import table
 
 #: Views shown for the input and the output, side by side.
 COMPARED_VIEWS = ("perspective", "front")
@@ -297,9 +298,9 @@ def changes_section(report: dict[str, Any] | None, overlay: dict[str, Any] | Non
         return ""
     side = read_input(report.get("source"))
     try:
-        table = ("<table><tr><th>what</th><th>input (" + esc(side.name) + ")</th><th>output</th><th>why</th></tr>"
-                 + "".join(change_rows(report, overlay, joint_types, side)) + "</table>")
-        return "<h2>What asset2sim changed</h2>" + before_after(side, after, img) + table + understood(report.get("request"))
+        return ("<h2>What asset2sim changed</h2>" + before_after(side, after, img)
+                + table(("what", f"input ({side.name})", "output", "why"), change_rows(report, overlay, joint_types, side))
+                + understood(report.get("request")))
     finally:
         side.close()
 
@@ -332,5 +333,4 @@ def understood(found: dict[str, Any] | None) -> str:
         rows.append(_row("words not used", "", "", "; ".join(found["ignored"])))
     if not rows:
         return ""
-    return ("<h3>The request as understood</h3><table><tr><th>what</th><th>asked</th><th>output</th><th>note</th></tr>"
-            + "".join(rows) + "</table>")
+    return "<h3>The request as understood</h3>" + table(("what", "asked", "output", "note"), rows)

@@ -19,7 +19,7 @@ from asset2sim.tasks.check.failure_reasons import why_it_failed
 from asset2sim.tasks.check.verdict import UNRESOLVED_PENETRATION_MM, penetration_measures, readiness
 from asset2sim.tasks.evaluation import plots
 from asset2sim.tasks.evaluation.failure_evidence import evidence_section
-from asset2sim.tasks.evaluation.html_blocks import figure, fmt, page, svg_tag, verdict_cell
+from asset2sim.tasks.evaluation.html_blocks import figure, fmt, page, svg_tag, table, verdict_cell
 from asset2sim.tasks.evaluation.parameter_table import parameter_table
 from asset2sim.tasks.evaluation.report_changes import changes_section, esc, from_closed_text, opening_text
 from asset2sim.tasks.geometry.render import render_views
@@ -40,9 +40,9 @@ def _renders(ev, views: dict[str, np.ndarray] | None = None, error: Exception | 
     return svg_tag(svg, "collision geometry"), note + "plot of the collision vertices per link"
 
 
-def point_cloud(urdf: Path, state: dict[str, float], max_points: int = 1500) -> dict[str, np.ndarray]:
+def point_cloud(urdf: Path, state: dict[str, float]) -> dict[str, np.ndarray]:
     """Link -> (N, 3) m collision vertices in the world frame of ``urdf`` at ``state`` (rad or m, root fixed), at most
-    ``max_points`` per link (evenly picked). Raises what loading the URDF raises."""
+    1500 per link (evenly picked). Raises what loading the URDF raises."""
     out = {}
     with UrdfFile(urdf).open("pybullet", SessionOptions(initial_state=state, fixed_base=True, gravity=False, ground=False)) as session:
         for name in session.link_names:
@@ -51,7 +51,7 @@ def point_cloud(urdf: Path, state: dict[str, float], max_points: int = 1500) -> 
                 continue
             pos, R = session.link_frame(name)
             w = v @ R.T + pos
-            out[name] = w[np.linspace(0, len(w) - 1, max_points).astype(int)] if len(w) > max_points else w
+            out[name] = w[np.linspace(0, len(w) - 1, 1500).astype(int)] if len(w) > 1500 else w
     return out
 
 
@@ -77,17 +77,12 @@ def _verdict_table(ev) -> str:
             f"<tr><td>{esc(m.name)}</td><td>{esc(m.engine)}</td><td class='num'>{val}</td><td>{esc(m.unit)}</td>"
             f"{verdict_cell(m.passed)}<td class='small'>{esc(m.threshold)}</td><td class='small'>{esc(extra)}</td></tr>"
         )
-    return (
-        "<table><tr><th>metric</th><th>engine</th><th>value</th><th>unit</th><th>verdict</th><th>threshold</th>"
-        "<th>notes</th></tr>" + "".join(rows) + "</table>"
-    )
+    return table(("metric", "engine", "value", "unit", "verdict", "threshold", "notes"), rows)
 
 
 def modelled_state(ctx) -> dict[str, float]:
     """Every movable joint of the evaluated URDF at 0 clipped to its limits (rad or m): the pose the asset was
-    modelled in, which a child inside its parent is graded against; {} without the evaluated files."""
-    if ctx is None:
-        return {}
+    modelled in, which a child inside its parent is graded against."""
     return {j.name: float(np.clip(0.0, j.lower, j.upper)) for j in ctx.model.movable_joints}
 
 
@@ -116,11 +111,8 @@ def _penetration_details(ev) -> str:
             f"<td class='num'>{fmt(p['max_depth_mm'])}</td><td class='num'>{p['points']}</td></tr>"
             for p in m.details["pairs"]
         )
-        out.append(
-            f"<h3>Self-contact: penetrating link pairs ({esc(m.engine)}; {'pass' if m.passed else 'FAIL'}: {esc(m.threshold)})</h3>"
-            f"<table><tr><th>link a</th><th>link b</th><th>sum of depths (mm)</th><th>deepest point (mm)</th><th>points</th></tr>"
-            f"{rows}</table>"
-        )
+        out.append(f"<h3>Self-contact: penetrating link pairs ({esc(m.engine)}; {'pass' if m.passed else 'FAIL'}: {esc(m.threshold)})</h3>"
+                   + table(("link a", "link b", "sum of depths (mm)", "deepest point (mm)", "points"), rows))
     for m in ev.metrics:  # the pairs the self-contact Phi skips: a child inside its parent
         pairs = m.details.get("pairs") if m.name == "parent_child_penetration" else None
         if not pairs:
@@ -129,9 +121,8 @@ def _penetration_details(ev) -> str:
         rows = "".join(f"<tr><td>{esc(k.partition('/')[0])}</td><td>{esc(k.partition('/')[2])}</td><td class='num'>{fmt(v)}</td>"
                        f"<td class='num'>{fmt(modelled.get(k, 0.0))}</td><td class='num'>{fmt(max(v - modelled.get(k, 0.0), 0.0))}</td>"
                        f"{verdict_cell(max(v - modelled.get(k, 0.0), 0.0) <= UNRESOLVED_PENETRATION_MM)}</tr>" for k, v in pairs.items())
-        out.append(f"<h3>A child inside its parent ({esc(m.engine)}; {esc(m.threshold)})</h3><table><tr><th>parent</th>"
-                   "<th>child</th><th>depth (mm)</th><th>at its modelled pose (mm)</th><th>deeper than modelled (mm)</th>"
-                   f"<th>verdict</th></tr>{rows}</table>")
+        out.append(f"<h3>A child inside its parent ({esc(m.engine)}; {esc(m.threshold)})</h3>" + table(
+            ("parent", "child", "depth (mm)", "at its modelled pose (mm)", "deeper than modelled (mm)", "verdict"), rows))
     return "".join(out)
 
 
@@ -170,7 +161,7 @@ def _prompt_details(ev) -> str:
     if d.get("joint_state_score") is None:
         rows.append(f"<tr><td>joint state</td><td>-</td><td>-</td><td class='small'>{esc(d.get('joint_state_reason'))}</td></tr>")
     return (f"<p>score <b>{fmt(m.value, 3)}</b> for <i>{esc(d.get('request'))}</i></p>" + _request_warnings(d)
-            + "<table><tr><th>part</th><th>requested</th><th>score</th><th>reason</th></tr>" + "".join(rows) + "</table>")
+            + table(("part", "requested", "score", "reason"), rows))
 
 
 def _probe_details(ev) -> str:
@@ -190,9 +181,8 @@ def _probe_details(ev) -> str:
             f"<td>{fmt(p['rebound'])}</td><td>{fmt(p['kept_moving'])}</td>"
             f"<td class='{cls}'>{esc(p['failure'] or 'ok')}</td><td class='small'>{esc('; '.join(p['notes']))}</td></tr>"
         )
-    return ("<table><tr><th>joint</th><th>probe</th><th>start</th><th>target</th><th>reached (crossed the line that counts)</th><th>peak force</th>"
-            "<th>peak torque/force</th><th>object moved</th><th>rebound</th><th>kept moving</th><th>verdict</th><th>notes</th></tr>"
-            + "".join(rows) + "</table>")
+    return table(("joint", "probe", "start", "target", "reached (crossed the line that counts)", "peak force", "peak torque/force",
+                  "object moved", "rebound", "kept moving", "verdict", "notes"), rows)
 
 
 def operability_section(ev) -> str:
@@ -228,8 +218,7 @@ def operability_section(ev) -> str:
     return ("<p class='small'>Root fixed, gravity on, the other joints held: a hand at the grasp point pushes each handled "
             "part from its closed end to its far end and back; the effort it needs (friction, damping at the hand's "
             "0.25 m/s, springs, gravity) must lie inside the part's real operating range.</p>"
-            "<table><tr><th>engine</th><th>part</th><th>grasp</th><th>stroke</th><th>effort needed</th><th>range</th>"
-            "<th>hand got it to</th><th>verdict</th><th>range source</th></tr>" + "".join(rows) + "</table>"
+            + table(("engine", "part", "grasp", "stroke", "effort needed", "range", "hand got it to", "verdict", "range source"), rows)
             + (f"<ul class='small'>{notes}</ul>" if notes else ""))
 
 
@@ -249,19 +238,12 @@ def _badge(ev) -> str:
     return html
 
 
-def _opening(ev, joint: str, q: float) -> str:
-    """`` (45 % open)`` for a joint whose closed end is known, else empty."""
-    c = ev.closed_positions.get(joint)
-    if not c or not c.get("open_range"):
-        return ""
-    return f" ({opening_text(c['direction'] * (q - c['q_closed']) / c['open_range'])})"
-
-
 def _joint_state(ev, joint: str, q: float, jtype: str) -> str:
-    """A joint's initial state from its closed end (``"20.8 deg from closed (18 % open)"``); its own coordinate,
-    labelled so, when the closed end is unknown."""
+    """A joint's initial state from its closed end (``"20.8 deg from closed (18 % open)"``, the opening where its range
+    is known); its own coordinate, labelled so, when the closed end is unknown."""
     c = ev.closed_positions.get(joint)
-    return from_closed_text(q, c.get("q_closed") if c else None, jtype) + _opening(ev, joint, q)
+    return from_closed_text(q, c.get("q_closed") if c else None, jtype) + (
+        f" ({opening_text(c['direction'] * (q - c['q_closed']) / c['open_range'])})" if c and c.get("open_range") else "")
 
 
 def as_asked_block(ev) -> str:
@@ -315,22 +297,21 @@ def engines_section(report: dict | None) -> str:
     intro = ("<p class='small'>Each engine of <code>--engines</code> on the same files: rest stability, the joints that come "
              "to rest in their band, and the push at which each joint with friction starts to move (root fixed, gravity off, "
              "springs accounted), as a multiple of its declared friction f; within 0.8-1.2 f passes.</p>")
-    out = ["<h2>What holds in each engine</h2>", intro,
-           "<table><tr><th>engine</th><th>status</th><th>rest stability</th><th>joints held</th><th>breakaway</th></tr>"]
+    cells = []
     for r in rows:
         held = r.get("joints_held") or {}
         held_text = ", ".join(f"{esc(j)}{'' if ok else ' (moves)'}" for j, ok in held.items()) or "-"
-        out.append(f"<tr><td>{esc(r.get('engine'))}</td><td>{esc(r.get('status'))} <span class='small'>{esc(r.get('reason') or '')}</span>"
-                   f"</td><td>{verdict_cell(r.get('rest_stability'))}</td><td class='small'>{held_text}</td>"
-                   f"<td>{breakaway_cell(r.get('breakaway'))}</td></tr>")
-    out.append("</table>")
-    return "\n".join(out)
+        cells.append(f"\n<tr><td>{esc(r.get('engine'))}</td><td>{esc(r.get('status'))} <span class='small'>{esc(r.get('reason') or '')}</span>"
+                     f"</td><td>{verdict_cell(r.get('rest_stability'))}</td><td class='small'>{held_text}</td>"
+                     f"<td>{breakaway_cell(r.get('breakaway'))}</td></tr>")
+    return f"<h2>What holds in each engine</h2>\n{intro}\n" + table(("engine", "status", "rest stability", "joints held", "breakaway"),
+                                                                      [*cells, "\n"])
 
 
-def clips_section(clip_set, folder: str = "clips") -> str:
+def clips_section(clip_set) -> str:
     """HTML playing every clip of ``clip_set`` (a :class:`~asset2sim.schemas.realism.ClipSet`; None or empty:
-    nothing), one row per joint and motion, the videos looping muted with their poster frames; ``folder``: the
-    clips' folder relative to the report."""
+    nothing), one row per joint and motion, the videos looping muted with their poster frames (in ``clips/`` beside
+    the report)."""
     if clip_set is None or not (clip_set.clips or clip_set.skipped):
         return ""
     rows: dict[tuple[str, str], list] = {}
@@ -343,7 +324,7 @@ def clips_section(clip_set, folder: str = "clips") -> str:
     for (joint, motion), cs in rows.items():
         parts.append(f"<h3>{esc(joint)}: {esc(what.get(motion, motion))}</h3><div class='clips'>")
         for c in cs:
-            src, poster = (esc(f"{folder}/{p}") for p in (c.video, c.poster))
+            src, poster = (esc(f"clips/{p}") for p in (c.video, c.poster))
             parts.append(f"<figure><video src='{src}' poster='{poster}' width='{c.width}' height='{c.height}' autoplay loop muted "
                          f"playsinline controls></video><figcaption>{esc(c.view)} view, {c.duration_s:.1f} s</figcaption></figure>")
         parts.append("</div>")
@@ -361,8 +342,8 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
     report is written (the URDF is named relative to it when it lies there, :func:`portable_urdf`)."""
     # step 1: the time step, the badge and the renders (a plot of the vertices when rendering fails)
     ctx = ev._context
-    dt = ctx.conventions.timestep if ctx is not None else 1.0 / 240.0
-    settle_n = int(round(ctx.conventions.settle_time / dt)) if ctx is not None else 240
+    dt = ctx.conventions.timestep
+    settle_n = int(round(ctx.conventions.settle_time / dt))
     badge = _badge(ev)
     error = None
     if views is None:
@@ -372,7 +353,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
             error = exc
     views_html, views_what = _renders(ev, views, error)
     # step 2: the header, the object at its initial state, the verdicts and the evidence
-    joint_types = {j.name: j.type for j in ctx.model.joints} if ctx is not None else {}
+    joint_types = {j.name: j.type for j in ctx.model.joints}
     state_text = ", ".join(f"{k} = {_joint_state(ev, k, v, joint_types.get(k, 'revolute'))}"
                            for k, v in ev.initial_state.items()) or "none"
     sections = [
@@ -381,24 +362,24 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         f"engines {esc(', '.join(measured_engines(ev)))} &middot; scale {fmt(ev.scale)} ({esc(ev.scale_source)})</p>",
         f"<p class='meta'>URDF <code>{esc(portable_urdf(ev, folder) if folder is not None else ev.urdf)}</code>"
         + (f" &middot; input <code>{esc(Path(str(ctx.report['source'])).name)}</code>"
-           if ctx is not None and ctx.report and ctx.report.get("source") else "") + "<br/>"
+           if ctx.report and ctx.report.get("source") else "") + "<br/>"
         f"request: <i>{esc(ev.prompt or '-')}</i><br/>"
         f"reference: <code>{esc(ev.reference or '-')}</code></p>",
         _request_warnings(pa.details) if (pa := ev.metric("prompt_alignment")) is not None else "",
         f"<p>{badge}</p>",
         why_section(ev),
         as_asked_block(ev),
-        host_section(ctx.report if ctx is not None else None),
+        host_section(ctx.report),
         "<h2>Object at its initial state</h2>",
         f"<p class='small'>{esc(views_what)}; joints: {esc(state_text)} ({esc(ev.initial_state_source)}); "
         f"task-relevant: {esc(', '.join(ev.task_joints) or '-')}</p>",
         views_html,
         clips_section(clips),
-        changes_section(ctx.report if ctx is not None else None, ctx.overlay if ctx is not None else None, joint_types, views, figure),
+        changes_section(ctx.report, ctx.overlay, joint_types, views, figure),
         "<h2>Verdicts</h2>",
         _verdict_table(ev),
-        engines_section(ctx.report if ctx is not None else None),
-        evidence_section(ev._runs, ctx.urdf if ctx is not None else ev.urdf, dt, svg_tag, figure, dict(ev.initial_state),
+        engines_section(ctx.report),
+        evidence_section(ev._runs, ctx.urdf, dt, svg_tag, figure, dict(ev.initial_state),
                          getattr(ev.metric("task_execution"), "details", None), ev.closed_positions, list(ev.metrics),
                          modelled_state(ctx)),
         "<h2>Operability</h2>",
@@ -424,9 +405,9 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         sections.append(svg_tag(plots.plot_probes(pb.probes), "probes"))
     sections += ["<h2>Physical parameters</h2>", parameter_table(ev)]
     sections.append("<h2>Notes</h2><ul>" + "".join(f"<li>{esc(n)}</li>" for n in ev.notes) + "</ul>")
-    sections.append("<h2>What the checks mean</h2><table><tr><th>check</th><th>unit</th><th>what it measures</th></tr>"
-                    + "".join(f"<tr><td>{esc(i.name)}</td><td>{esc(i.unit)}</td><td class='small'>{esc(i.description)}</td></tr>"
-                              for i in METRIC_INFO.values() if ev.metric(i.name) is not None) + "</table>")
+    sections.append("<h2>What the checks mean</h2>" + table(("check", "unit", "what it measures"), (
+        f"<tr><td>{esc(i.name)}</td><td>{esc(i.unit)}</td><td class='small'>{esc(i.description)}</td></tr>"
+        for i in METRIC_INFO.values() if ev.metric(i.name) is not None)))
     sections.append("<p class='small'>Simulation: PyBullet DIRECT, dt = 1/240 s, gravity -9.81 m/s^2, ground z = 0, "
                     "self-collision except parent-child, inertia from file, root free unless the asset is mounted. "
                     "The user guide (docs/guide/metrics.md in the asset2sim source) gives every threshold and convention.</p>")
@@ -437,10 +418,8 @@ def portable_urdf(ev, out_dir: Path | str) -> str:
     """The evaluated URDF as ``evaluation.json`` and ``report.html`` name it: relative to ``out_dir`` (the folder they
     are written to) when the URDF lies in it, as a refine's output does (``mobility.urdf``), so a moved or copied
     output names no place it is not; else the path as given."""
-    ctx = getattr(ev, "_context", None)
-    evaluated = Path(ctx.urdf) if ctx is not None else Path(ev.urdf)
     folder = Path(out_dir).resolve()
-    for candidate in (evaluated, Path(ev.urdf)):
+    for candidate in (Path(ev._context.urdf), Path(ev.urdf)):
         try:
             return candidate.resolve().relative_to(folder).as_posix()
         except (ValueError, OSError):
@@ -452,7 +431,7 @@ def write_report(ev, path: Path | str, views: dict[str, np.ndarray] | None = Non
     """Write ``report.html`` atomically (``views`` as in :func:`render_report`); returns the path. Its
     title names ``refine`` when it lies beside the refine's ``report.json`` it reports on, else ``evaluate``."""
     ctx = ev._context
-    by_refine = ctx is not None and ctx.report is not None and Path(path).resolve().parent == Path(ctx.urdf).resolve().parent
+    by_refine = ctx.report is not None and Path(path).resolve().parent == Path(ctx.urdf).resolve().parent
     return write_text(Path(path), render_report(ev, views, "refine" if by_refine else "evaluate", clips, folder=Path(path).parent))
 
 
