@@ -102,6 +102,12 @@ def _as_rate(series):
     return series.astype("boolean").astype("Float64").astype(float)
 
 
+def _bool_rate_parts(series):
+    """(count of True, count of non-null) of a nullable boolean column, as float Series."""
+    s = _as_rate(series)
+    return s.fillna(0.0), s.notna().astype(float)
+
+
 def _rate(series) -> float | None:
     s = _as_rate(series).dropna()
     return float(s.mean()) if len(s) else None
@@ -162,11 +168,40 @@ PASS_RATE_COLUMNS = ("status", "failure_mode", "rest_stable", "oscillation_pass"
 def pass_rates_over_time(df, dataset: str | None = None):
     """Per run (chronological): start time, assets, the pass rates (all
     checks, rest stability, oscillation) and mean penetration (mm)."""
-    import pyarrow as pa
+    import pandas as pd
 
     cols = ["dataset", "run", "started_at", "assets", "pass_rate_all", "stability_pass_rate",
             "oscillation_pass_rate", "penetration_mm_mean", "failed"]  # fmt: skip
-    return _pass_rates_arrow(df if _is_table(df) else pa.Table.from_pandas(df, preserve_index=False), dataset, cols)
+    if _is_table(df):
+        return _pass_rates_arrow(df, dataset, cols)
+    if dataset is not None:
+        df = df[df["dataset"] == dataset]
+    if df.empty:
+        return pd.DataFrame(columns=cols)
+    st_ok, st_n = _bool_rate_parts(df["rest_stable"])
+    os_ok, os_n = _bool_rate_parts(df["oscillation_pass"])
+    pen = pd.to_numeric(df["penetration_mm"], errors="coerce")
+    d = pd.DataFrame({
+        "dataset": df["dataset"], "run": df["run"], "started_at": df["started_at"],
+        "pass": (df["failure_mode"].fillna(MISSING_FAILURE_MODE) == "none").astype(float),
+        "failed": (df["status"] == "failed").astype(int),
+        "st_ok": st_ok, "st_n": st_n, "os_ok": os_ok, "os_n": os_n,
+        "pen_sum": pen.fillna(0.0), "pen_n": pen.notna().astype(float),
+    })  # fmt: skip
+    g = d.groupby(["dataset", "run"], sort=True)
+    agg = g.agg(started_at=("started_at", "min"), assets=("pass", "size"), pass_rate_all=("pass", "mean"),
+                st_ok=("st_ok", "sum"), st_n=("st_n", "sum"), os_ok=("os_ok", "sum"), os_n=("os_n", "sum"),
+                pen_sum=("pen_sum", "sum"), pen_n=("pen_n", "sum"), failed=("failed", "sum")).reset_index()  # fmt: skip
+
+    def ratio(num, den):
+        return [None if n == 0 else float(x / n) for x, n in zip(agg[num], agg[den])]
+
+    agg["stability_pass_rate"] = ratio("st_ok", "st_n")
+    agg["oscillation_pass_rate"] = ratio("os_ok", "os_n")
+    agg["penetration_mm_mean"] = ratio("pen_sum", "pen_n")
+    agg["assets"] = agg["assets"].astype(int)
+    agg["failed"] = agg["failed"].astype(int)
+    return agg[cols]
 
 
 def _pass_rates_arrow(t, dataset: str | None, cols: list[str]):
