@@ -12,6 +12,7 @@ codes: ``docs/guide/validation.md`` (from :data:`CODES`). The checks live in
 
 from __future__ import annotations
 
+import difflib
 import json
 import os
 import stat
@@ -38,6 +39,18 @@ __all__ = [
 ]
 
 
+def _did_you_mean(path: Path, most: int = 3) -> str:
+    """``"; did you mean NAME, ...?"`` with up to ``most`` names in ``path``'s folder close to its name
+    (:func:`difflib.get_close_matches`, ratio >= 0.6; the folder's first 10,000 entries), else ``""``."""
+    try:
+        with os.scandir(path.parent) as it:
+            names = [e.name for _, e in zip(range(10_000), it)]
+    except OSError:
+        return ""
+    close = difflib.get_close_matches(path.name, sorted(names), n=most, cutoff=0.6)
+    return f"; did you mean {', '.join(close)}?" if close else ""
+
+
 class _Validator(UrdfChecks, TreeChecks, MeshChecks):
     """One run: files, then the URDF checks, then meshes, then extras."""
 
@@ -47,7 +60,7 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
         try:
             st = os.stat(asset)
         except OSError:
-            self.add("ASSET_NOT_FOUND", "no such file or folder", file=str(asset))
+            self.add("ASSET_NOT_FOUND", "no such file or folder" + _did_you_mean(asset), file=str(asset))
             return None
         if stat.S_ISDIR(st.st_mode):
             folder = asset

@@ -236,6 +236,17 @@ def test_validation_failure_names_path_once_and_codes_once(tmp_path, capsys):
         assert " | " not in line and "validation error(s)" not in line
 
 
+def test_a_mistyped_path_gets_the_close_names_of_its_folder(tmp_path, capsys):
+    """A name one or two letters off one in its folder: the error names the close ones; nothing close, nothing said."""
+    for name in ("box_lid", "laptop", "cabinet_2drawer"):
+        (tmp_path / name).mkdir()
+    assert main(["refine", str(tmp_path / "box_lidd"), "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 1
+    line = _one_line(capsys.readouterr().err)
+    assert line.endswith("no such file or folder; did you mean box_lid?"), line
+    assert main(["validate", str(tmp_path / "zzzz")]) == 1
+    assert "did you mean" not in capsys.readouterr().out
+
+
 def test_a_wrong_path_is_named_once(tmp_path, capsys):
     missing = tmp_path / "no_such_asset"
     assert main(["refine", str(missing), "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 1
