@@ -18,6 +18,7 @@ from asset2sim.frames import axis_angle_matrix
 from asset2sim.tasks.assemble.convex_pieces import Piece
 from asset2sim.tasks.assemble.joint_sweep import reference_state
 from asset2sim.tasks.geometry import limits
+from asset2sim.tasks.geometry.closed_state import tree_path
 
 #: Words every note of :func:`running_clearance` (and of the state stage's clearance repair) carries.
 RUNNING_CLEARANCE_NOTE = "running clearance"
@@ -164,22 +165,14 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
     done: set[tuple[str, int, str, int]] = set()
     boxes = {ln: [(p.points @ poses[ln][:3, :3].T + poses[ln][:3, 3]) for p in pl] for ln, pl in pieces.items()}
     still = lambda c: np.zeros(3)  # noqa: E731  a point of a pair no joint moves apart
-    parent_of = {j.child: j.parent for j in model.joints}
-
-    def ancestors(link: str) -> set[str]:
-        out: set[str] = set()
-        while link in parent_of and parent_of[link] not in out:
-            link = parent_of[link]
-            out.add(link)
-        return out
-
     moving = [(f"sliding along {j.name!r}", ln, others, j) for j, ln, others in _moving_links(model, pieces)]
     for why, ln, others, joint in moving + [("no joint moves them apart", ln, others, None) for ln, others in _fixed_pairs(model, pieces)]:
         inv = np.linalg.inv(poses[ln])
         velocity = still if joint is None else joint_velocity(joint, inv @ poses[joint.child])
         for other in others:
             To = inv @ poses[other]
-            deepest = TOUCHING_OVERLAP if joint is not None and (other in ancestors(ln) or ln in ancestors(other)) else MODELLED_OVERLAP
+            lineal = not all(tree_path(model.joints, ln, other))  # one link carries the other: an empty side of the path
+            deepest = TOUCHING_OVERLAP if joint is not None and lineal else MODELLED_OVERLAP
             for k, Q in enumerate(pieces[other]):
                 qw = boxes[other][k]
                 for i, P in enumerate(pieces[ln]):
