@@ -15,7 +15,6 @@ import argparse
 import atexit
 import contextlib
 import ctypes
-import difflib
 import importlib
 import io
 import os
@@ -37,6 +36,7 @@ import asset2sim.commands as commands  # noqa: E402
 from asset2sim import __version__, allocator, library_dirs  # noqa: E402
 from asset2sim.commands import _output, _status  # noqa: E402
 from asset2sim.commands._output import inert_streams  # noqa: E402
+from asset2sim.inert import did_you_mean  # noqa: E402
 from asset2sim.commands._status import INTERNAL_ERROR, INTERRUPTED, INVALID_REQUEST, TERMINATED, CommandError  # noqa: E402
 from asset2sim.engines.quiet import STARTUP_MESSAGES  # noqa: E402
 
@@ -73,12 +73,6 @@ def exit_statuses_text(own: dict[int, str] | None = None) -> str:
               TERMINATED: "terminated"}
     merged = {**shared, **own} if INVALID_REQUEST in own else {**own, **shared}
     return ", ".join(f"{code} {merged[code]}" for code in sorted(merged))
-
-
-def did_you_mean(word: str, choices) -> str:
-    """``"; did you mean X?"`` for the closest of ``choices`` to a mistyped ``word`` (difflib), else ``""``."""
-    close = difflib.get_close_matches(word, sorted(set(choices)), n=1, cutoff=0.6)
-    return f"; did you mean {close[0]}?" if close else ""
 
 
 def unknown_options(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:

@@ -28,6 +28,7 @@ Every function takes any object (``str()`` of it) and returns ``str``; none rais
 
 from __future__ import annotations
 
+import difflib
 import html
 import re
 
@@ -139,3 +140,10 @@ CONTENT_SECURITY_POLICY = ("default-src 'none'; style-src 'unsafe-inline'; img-s
                            "form-action 'self'; base-uri 'none'")
 #: :data:`CONTENT_SECURITY_POLICY` as the ``<meta>`` element of a page's ``<head>``.
 CSP_META = f'<meta http-equiv="Content-Security-Policy" content="{CONTENT_SECURITY_POLICY}">'
+
+
+def did_you_mean(word: str, choices, most: int = 1) -> str:
+    """``"; did you mean X, Y?"``: up to ``most`` of ``choices`` closest to a mistyped ``word``
+    (:func:`difflib.get_close_matches`, ratio >= 0.6), else ``""``."""
+    close = difflib.get_close_matches(word, sorted(set(choices)), n=most, cutoff=0.6)
+    return f"; did you mean {', '.join(close)}?" if close else ""

@@ -12,7 +12,6 @@ codes: ``docs/guide/validation.md`` (from :data:`CODES`). The checks live in
 
 from __future__ import annotations
 
-import difflib
 import json
 import os
 import stat
@@ -30,6 +29,7 @@ from asset2sim.tasks.ingest.mesh_paths import inside, read_regular, resolve_mesh
 from asset2sim.tasks.ingest.mesh_scan import scan_mesh_file
 from asset2sim.tasks.ingest.tree_checks import TreeChecks, check_inertia
 from asset2sim.tasks.ingest.urdf_checks import UrdfChecks
+from asset2sim.inert import did_you_mean
 from asset2sim.urdf import NumberError, parse_number_list
 
 __all__ = [
@@ -41,14 +41,13 @@ __all__ = [
 
 def _did_you_mean(path: Path, most: int = 3) -> str:
     """``"; did you mean NAME, ...?"`` with up to ``most`` names in ``path``'s folder close to its name
-    (:func:`difflib.get_close_matches`, ratio >= 0.6; the folder's first 10,000 entries), else ``""``."""
+    (:func:`asset2sim.inert.did_you_mean`; the folder's first 10,000 entries), else ``""``."""
     try:
         with os.scandir(path.parent) as it:
             names = [e.name for _, e in zip(range(10_000), it)]
     except OSError:
         return ""
-    close = difflib.get_close_matches(path.name, sorted(names), n=most, cutoff=0.6)
-    return f"; did you mean {', '.join(close)}?" if close else ""
+    return did_you_mean(path.name, names, most)
 
 
 class _Validator(UrdfChecks, TreeChecks, MeshChecks):
