@@ -110,9 +110,7 @@ def prefect_api_for_run(project_root: Path | str):
     if url:
         yield str(url)
         return
-    # Prefect's 20 s default is too short for a first start (it migrates a fresh SQLite database) on a busy machine:
-    # 180 s unless the user set PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS (prepare_prefect_environment's default)
-    timeout = float(os.environ.get("PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS", "180"))
+    timeout = float(os.environ.get("PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS", server.STARTUP_TIMEOUT))
     proc, url = server.start_local_server(project_root, timeout=timeout, ephemeral=True)
     try:
         with temporary_settings({PREFECT_API_URL: url}):

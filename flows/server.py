@@ -12,7 +12,11 @@ from pathlib import Path
 
 from asset2sim.flows import lifeline
 
-__all__ = ["start_local_server", "stop_server"]
+__all__ = ["STARTUP_TIMEOUT", "start_local_server", "stop_server"]
+
+#: Seconds a run's own Prefect server may take to answer unless ``PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS`` is
+#: set: a first start migrates a fresh SQLite database, slower than Prefect's 20 s default on a busy machine.
+STARTUP_TIMEOUT = 180.0
 
 
 def start_local_server(project_root: Path | str, timeout: float = 120.0, *, ephemeral: bool = False):

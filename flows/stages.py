@@ -16,6 +16,7 @@ from typing import Any
 
 from asset2sim import __version__, array_cache, atomic, output_folder
 from asset2sim.flows.catalog import result_key
+from asset2sim.flows import server
 from asset2sim.flows import store as store_mod
 from asset2sim.flows.forkserver import run_forked, start_soon
 from asset2sim.flows.isolation import call_target, import_target, run_isolated
@@ -452,8 +453,7 @@ def prepare_prefect_environment(project_root: Path | str) -> dict[str, str]:
         "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
         "DO_NOT_TRACK": "1",
         "MLFLOW_DISABLE_TELEMETRY": "true",  # no ~/.config/mlflow/telemetry.json, no usage sent
-        # a first start migrates a fresh SQLite database: slower than Prefect's 20 s on a busy machine
-        "PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS": "180",
+        "PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS": f"{server.STARTUP_TIMEOUT:g}",  # a fresh database's first start
     }
     set_now = {k: v for k, v in defaults.items() if k not in os.environ}
     os.environ.update(set_now)
