@@ -21,7 +21,10 @@ register_engine("fake", FakeSession)  # every test of the process can open_sessi
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("ASSET2SIM_SHARED", ROOT.parent / "shared")) / "datasets" / "partnet_mobility"
 
-needs_shared = pytest.mark.skipif(not SHARED.is_dir(), reason=f"dev dataset not found at {SHARED}")
+#: The one reason a test that needs the dev dataset (or a row of it) skips with when it is not here: the skip summary
+#: counts them as one cause.
+NO_SHARED = f"dev dataset not found at {SHARED}"
+needs_shared = pytest.mark.skipif(not SHARED.is_dir(), reason=NO_SHARED)
 #: CI sets CI=true and always lays the dev dataset beside the clone: there a missing dataset (or a row of its manifest)
 #: fails the run instead of skipping every test that needs it; a plain ``make test`` without ``../shared`` skips them.
 IN_CI = os.environ.get("CI", "").strip().lower() in ("1", "true", "yes")
@@ -42,7 +45,7 @@ def pytest_sessionstart(session):
 @pytest.fixture(scope="session")
 def shared_dataset() -> Path:
     if not SHARED.is_dir():
-        pytest.skip(f"dev dataset not found at {SHARED}")
+        pytest.skip(NO_SHARED)
     return SHARED
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.conftest import SHARED
+from tests.conftest import NO_SHARED, SHARED
 from asset2sim.engines.base import EngineUnsupported, SessionOptions
 from asset2sim.engines.registry import open_session, open_shape_world, open_viewer
 from tests.contract_asset import write_contract_asset
@@ -38,7 +38,7 @@ def _need(engine: str) -> None:
 def _urdf(kind: str, tmp_path: Path) -> tuple[Path, dict[str, float]]:
     if kind == "real":
         if not REAL.is_file():
-            pytest.skip("PartNet-Mobility 100221 is not available here")
+            pytest.skip(NO_SHARED)
         return REAL, {"joint_0": 0.4}
     a = write_contract_asset(tmp_path, lid_angle=0.4, post_height=0.02)
     return a.urdf, dict(a.initial_state)

@@ -14,7 +14,7 @@ from asset2sim.engines.source import UrdfFile
 from asset2sim.extras import install_hint
 from asset2sim.refined_asset import output_session_options
 from asset2sim.tasks.check import metrics
-from tests.conftest import SHARED
+from tests.conftest import NO_SHARED, SHARED
 from tests.contract_asset import write_contract_asset
 
 pytestmark = pytest.mark.mujoco
@@ -65,7 +65,7 @@ def test_a_refined_dev_row_holds_its_initial_state_in_mjx(refine_once, row_id):
     robust-rest band, and a free root stays at rest, over the robust-rest window, with no armature aid."""
     _need_mjx()
     if row_id not in ROWS:
-        pytest.skip(f"dev dataset not found at {SHARED}")
+        pytest.skip(NO_SHARED)
     res = refine_once(SHARED / row_id, ROWS[row_id]["prompt"], extras=False)
     opts = output_session_options(res.out)
     with UrdfFile(res.out / "mobility.urdf").open("mjx", opts) as s:

@@ -10,13 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.conftest import SHARED
+from tests.conftest import NO_SHARED, SHARED
 from asset2sim import urdf
 from tests.contract_asset import write_contract_asset
 
 DATASET = SHARED
 REAL = sorted(DATASET.glob("*/mobility.urdf")) + sorted(DATASET.glob("*/reference_gensim2.urdf"))
-needs_dataset = pytest.mark.skipif(not REAL, reason="shared PartNet-Mobility dataset not available")
+needs_dataset = pytest.mark.skipif(not REAL, reason=NO_SHARED)
 _NUMBER = re.compile(r"-?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?")
 
 

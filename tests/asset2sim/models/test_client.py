@@ -17,6 +17,7 @@ import pytest
 if importlib.util.find_spec("litellm") is None:  # not imported here: the client imports it quietly
     pytest.skip("model backends need litellm (pip install 'asset2sim[llm]')", allow_module_level=True)
 
+from asset2sim.array_cache import CacheWarning  # noqa: E402
 from asset2sim.schemas.model_reply import ModelReply, reply_json_schema  # noqa: E402
 from asset2sim.models import client as lc  # noqa: E402
 from asset2sim.models import errors, replies, transport  # noqa: E402
@@ -342,7 +343,8 @@ def test_invalid_replies_are_not_cached_and_corrupt_cache_is_ignored(server, tmp
     assert len(files) == 1
     files[0].write_text("{not json")
     n = server.n_chat
-    ask(c)
+    with pytest.warns(CacheWarning, match=r"reply cache: record .* rejected: unreadable .*asking again"):
+        ask(c)
     assert server.n_chat == n + 1
 
 

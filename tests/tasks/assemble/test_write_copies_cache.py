@@ -12,7 +12,7 @@ import pytest
 from asset2sim import demo_assets
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.assemble import copied_meshes
-from tests.conftest import SHARED
+from tests.conftest import NO_SHARED, SHARED
 
 
 @pytest.fixture
@@ -55,7 +55,7 @@ def test_cached_answer_equals_a_fresh_one_and_follows_edits(cabinet):
 def test_cache_on_a_real_asset_is_identical(tmp_path):
     src = SHARED / "100221"
     if not (src / "mobility.urdf").is_file():
-        pytest.skip("PartNet-Mobility object 100221 not available")
+        pytest.skip(NO_SHARED)
     shutil.copytree(src, tmp_path / "a")
     asset = extract_asset(tmp_path / "a")
     fresh = copied_meshes._mesh_copies(asset)
@@ -73,7 +73,7 @@ def test_only_meshes_naming_outside_files_are_edited_line_by_line(tmp_path, monk
     statement, and a file whose bytes change is edited again."""
     src = SHARED / "100221"
     if not (src / "mobility.urdf").is_file():
-        pytest.skip("PartNet-Mobility object 100221 not available")
+        pytest.skip(NO_SHARED)
     shutil.copytree(src, tmp_path / "a")
     objs = sorted((tmp_path / "a").rglob("*.obj"))
     obj, crlf = objs[0], objs[1]

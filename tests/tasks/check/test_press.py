@@ -15,7 +15,7 @@ from asset2sim.engines.source import UrdfFile
 from asset2sim.refined_asset import RefinedAsset
 from asset2sim.tasks.check.gripper import GripperLimits
 from asset2sim.tasks.check.press import press_joint
-from tests.conftest import SHARED
+from tests.conftest import NO_SHARED, SHARED
 from tests.contract_asset import write_contract_asset
 
 pytestmark = pytest.mark.mujoco
@@ -53,7 +53,7 @@ def test_a_dev_staplers_handled_parts_hold_a_hands_press_in_every_engine(refine_
     lever from the report's operability hand): no engine diverges and no part goes more than 1 degree (2 mm) past
     its limit or 2 mm deeper into a contact, in PyBullet, MuJoCo and MJX."""
     if row_id not in ROWS:
-        pytest.skip(f"dev dataset not found at {SHARED}")
+        pytest.skip(NO_SHARED)
     res = refine_once(SHARED / row_id, ROWS[row_id]["prompt"], extras=False)
     asset = RefinedAsset(res.out)
     parts = {j: p for j, p in asset.report.metric("operability").details["parts"].items() if p.get("hand_force_n")}

@@ -1,8 +1,6 @@
 """The convex decomposition's process cache: a decomposition asked for again in a process is not computed again,
 with the on-disk cache off, and what it hands out is the same as a fresh CoACD run's."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -10,7 +8,8 @@ coacd = pytest.importorskip("coacd")
 
 from asset2sim.tasks.geometry import decomposition  # noqa: E402
 
-DEV = Path(__file__).resolve().parents[4] / "shared" / "datasets" / "partnet_mobility"
+from tests.conftest import NO_SHARED, SHARED as DEV  # noqa: E402
+
 #: The stapler's base (PartNet-Mobility 102990): the mesh its collision repair decomposes (5 pieces).
 BASE_MESH = DEV / "102990" / "textured_objs" / "original-6.obj"
 
@@ -19,7 +18,7 @@ BASE_MESH = DEV / "102990" / "textured_objs" / "original-6.obj"
 def counted(monkeypatch):
     """The on-disk cache off, the process cache empty, and the list of CoACD calls made."""
     if not BASE_MESH.is_file():
-        pytest.skip("the PartNet-Mobility dev rows are not here")
+        pytest.skip(NO_SHARED)
     monkeypatch.setenv("ASSET2SIM_CACHE", "off")
     monkeypatch.setattr(decomposition, "_MEMO", type(decomposition._MEMO)(maxsize=decomposition._MEMO.maxsize))
     calls = []

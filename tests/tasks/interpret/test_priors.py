@@ -17,7 +17,7 @@ from asset2sim.tasks.interpret import priors as P
 from asset2sim.tasks.interpret.request import parse_request
 
 ROOT = Path(__file__).resolve().parents[3]
-DATASET = ROOT.parent / "shared" / "datasets" / "partnet_mobility"
+from tests.conftest import NO_SHARED, SHARED as DATASET  # noqa: E402
 PRIORS_DIR = Path(str(resources.files("asset2sim.priors")))
 
 #: The 46 PartNet-Mobility categories (model_cat values).
@@ -329,7 +329,7 @@ def test_request_label_matches() -> None:
 def _manifest_rows() -> list[dict[str, str]]:
     manifest = DATASET / "manifest.csv"
     if not manifest.exists():
-        pytest.skip("shared dataset not present")
+        pytest.skip(NO_SHARED)
     return list(csv.DictReader(manifest.open()))
 
 

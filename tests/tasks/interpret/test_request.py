@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-from pathlib import Path
 
 import pytest
 from hypothesis import given, settings
@@ -13,7 +12,7 @@ from asset2sim.schemas.request import BAND_TARGET, RequestSpec
 from asset2sim.tasks.interpret.priors import size_factor
 from asset2sim.tasks.interpret.request import parse_request
 
-DATASET = Path(__file__).resolve().parents[3].parent / "shared" / "datasets" / "partnet_mobility"
+from tests.conftest import NO_SHARED, SHARED as DATASET
 
 
 def states(spec: RequestSpec) -> list[tuple[str, str | None, int | None, str]]:
@@ -93,7 +92,7 @@ def test_manifest_prompts(asset_id: str) -> None:
 def test_manifest_prompts_match_the_dataset() -> None:
     manifest = DATASET / "manifest.csv"
     if not manifest.exists():
-        pytest.skip("shared dataset not present")
+        pytest.skip(NO_SHARED)
     rows = {r["id"]: r["prompt"] for r in csv.DictReader(manifest.open())}
     assert set(rows) == set(MANIFEST_EXPECTED)
     for asset_id, (prompt, *_rest) in MANIFEST_EXPECTED.items():

@@ -19,12 +19,12 @@ from asset2sim.tasks.publish.contract import is_complete
 from asset2sim.tasks.publish.media import make_media, media_pending
 from asset2sim.tasks.refine import refine_asset
 
-DEV = Path(__file__).resolve().parents[3].parent / "shared" / "datasets" / "partnet_mobility"
+from tests.conftest import NO_SHARED, SHARED as DEV
 BOX = DEV / "100221"
 PROMPT = "A box with its lid slightly open."
 MEDIA = ("views", "clips", REPORT_HTML_NAME)
 
-pytestmark = pytest.mark.skipif(not BOX.is_dir(), reason=f"dev dataset not found at {DEV}")
+pytestmark = pytest.mark.skipif(not BOX.is_dir(), reason=NO_SHARED)
 
 
 def _files(folder: Path) -> set[str]:

@@ -18,7 +18,7 @@ from asset2sim.tasks.assemble import write
 from asset2sim.tasks.refine import refine_asset
 from asset2sim.tasks.state import balance, stability
 from asset2sim.tasks.geometry.analyze import analyze_asset
-from tests.conftest import SHARED, needs_shared
+from tests.conftest import NO_SHARED, SHARED, needs_shared
 from tests.tasks.check.failure_assets import build_tipping_laptop
 
 
@@ -110,7 +110,7 @@ STAPLER = SHARED / "102990"
 @pytest.fixture(scope="module")
 def open_stapler(tmp_path_factory, refine_factory):
     if not STAPLER.is_dir():
-        pytest.skip("PartNet-Mobility 102990 not available")
+        pytest.skip(NO_SHARED)
     return refine_factory(STAPLER, "A stapler with its stapler body fully open.", extras=False)
 
 

@@ -8,9 +8,9 @@ from asset2sim.tasks.synthesize import physics
 from asset2sim.tasks.synthesize.context import build_context
 from asset2sim.tasks.synthesize.joint_dynamics import CLOSED_HOLD_FRACTIONS
 from asset2sim.tasks.synthesize.offline import OfflineEstimator
-from tests.conftest import SHARED
+from tests.conftest import NO_SHARED, SHARED
 
-pytestmark = pytest.mark.skipif(not (SHARED / "102703").is_dir(), reason="PartNet-Mobility 102703 not available")
+pytestmark = pytest.mark.skipif(not (SHARED / "102703").is_dir(), reason=NO_SHARED)
 
 
 def test_a_lever_that_falls_open_from_its_closed_end_is_held_closed_by_its_friction():

@@ -35,7 +35,7 @@ from asset2sim.models.errors import ReplyError  # noqa: E402
 from asset2sim.tasks.refine import MARKER_NAME, RefineError, refine_asset  # noqa: E402
 from asset2sim.tasks.synthesize.validate_overlay import inertia_problems  # noqa: E402
 from tests import fake_openai_server as fake  # noqa: E402
-from tests.conftest import SHARED  # noqa: E402
+from tests.conftest import NO_SHARED, SHARED  # noqa: E402
 from tests.helpers import write_hinged_plate  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -322,7 +322,7 @@ REAL = [
 
 
 @pytest.mark.slow  # end to end: the command line on dev objects
-@pytest.mark.skipif(not SHARED.is_dir(), reason=f"dev dataset not found at {SHARED}")
+@pytest.mark.skipif(not SHARED.is_dir(), reason=NO_SHARED)
 def test_cli_refine_real_objects_in_process(server, tmp_path, capsys):
     """``asset2sim refine ... --estimator openai`` (the CLI entry point, in this
     process; exports, renders and the HTML report skipped) on two real objects."""
@@ -341,7 +341,7 @@ def test_cli_refine_real_objects_in_process(server, tmp_path, capsys):
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not SHARED.is_dir(), reason=f"dev dataset not found at {SHARED}")
+@pytest.mark.skipif(not SHARED.is_dir(), reason=NO_SHARED)
 def test_cli_refine_real_objects_with_the_fake_server(server, tmp_path):
     """The literal command in a subprocess, the first object with every extra."""
     env = dict(os.environ)

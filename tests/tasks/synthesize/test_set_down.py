@@ -17,7 +17,7 @@ from asset2sim.tasks.synthesize.context import build_context
 from asset2sim.tasks.synthesize.joint_dynamics import _on_stop
 from asset2sim.tasks.synthesize.offline import OfflineEstimator
 from asset2sim.tasks.ingest.extract import extract_asset
-from tests.conftest import SHARED
+from tests.conftest import NO_SHARED, SHARED
 from tests.helpers import write_hinged_plate
 
 BOX = SHARED / "47645"
@@ -121,7 +121,7 @@ def test_the_load_across_gravity_of_a_door_and_a_lid(tmp_path, axis, lateral):
     assert ld.lateral_moment == pytest.approx(lateral, rel=1e-6)
 
 
-@pytest.mark.skipif(not BOX.is_dir(), reason="PartNet-Mobility 47645 not available")
+@pytest.mark.skipif(not BOX.is_dir(), reason=NO_SHARED)
 def test_an_open_lid_is_held_through_the_set_down_from_the_first_guess(tmp_path, monkeypatch, refine_once):
     """Box 47645 with its lid slightly open: the first friction (its set-down impact in the source) passes robust
     rest in the first post-check, no escalation round. Without the set-down terms the lid is not held by robust
@@ -140,7 +140,7 @@ def test_an_open_lid_is_held_through_the_set_down_from_the_first_guess(tmp_path,
     assert len(without.report.escalation) > 1
 
 
-@pytest.mark.skipif(not BOX.is_dir(), reason="PartNet-Mobility 47645 not available")
+@pytest.mark.skipif(not BOX.is_dir(), reason=NO_SHARED)
 def test_a_mounted_object_is_not_set_down():
     """The same open lid on a box the request fixes in place: the root is never dropped or leaned, so its
     friction only holds its weight."""
@@ -153,7 +153,7 @@ def test_a_mounted_object_is_not_set_down():
     assert fixed.friction < loose.friction
 
 
-@pytest.mark.skipif(not BOX.is_dir(), reason="PartNet-Mobility 47645 not available")
+@pytest.mark.skipif(not BOX.is_dir(), reason=NO_SHARED)
 def test_a_lid_its_weight_presses_onto_its_open_stop_is_held_by_the_stop():
     """Box 47645's lid fully open leans back past upright onto its stop: the drop and the lean press it there, so
     its friction only holds its weight (before, the set-down terms made a hand push 16.3 N of 22.2 N to close it,
@@ -173,7 +173,7 @@ def test_a_lid_its_weight_presses_onto_its_open_stop_is_held_by_the_stop():
 MICROWAVE = SHARED / "7119"
 
 
-@pytest.mark.skipif(not MICROWAVE.is_dir(), reason="PartNet-Mobility 7119 not available")
+@pytest.mark.skipif(not MICROWAVE.is_dir(), reason=NO_SHARED)
 def test_a_shut_part_is_held_through_the_set_down_by_its_hinge(tmp_path, monkeypatch, refine_once):
     """Microwave 7119 with its door shut: no file format carries a catch, so its hinge holds twice the lean's load
     from the first guess and the first post-check passes robust rest. Without the set-down terms a 5 deg lean swings
