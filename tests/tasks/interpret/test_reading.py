@@ -9,7 +9,6 @@ import importlib.util
 import json
 import math
 import typing
-from pathlib import Path
 
 import pytest
 
@@ -25,9 +24,8 @@ from asset2sim.models import client as lc  # noqa: E402
 from asset2sim.models.config import ClientConfig  # noqa: E402
 from asset2sim.tasks.interpret import reading as lr  # noqa: E402
 from tests import fake_openai_server as fake  # noqa: E402
-from tests.conftest import needs_shared  # noqa: E402
+from tests.conftest import SHARED as DEV, needs_shared  # noqa: E402
 
-DEV = Path(__file__).resolve().parents[4] / "shared" / "datasets" / "partnet_mobility"
 FRIDGE = "a fridge with the freezer door open 90 degrees and the main door closed"
 
 
