@@ -5,8 +5,9 @@
 - Every command and Python snippet of README.md and docs/guide/*.md runs:
   the fenced ``python`` blocks (one namespace per document) and the
   ``asset2sim ...`` lines of ``bash`` / ``console`` blocks, in document
-  order, in one temporary folder per document, with ``../shared`` replaced
-  by the real shared folder. A command expects exit status 0 unless its line
+  order, in one temporary folder per document, where ``partnet-mobility/``
+  (the folder the guide says PartNet-Mobility is unpacked in) is the dev
+  dataset, as written. A command expects exit status 0 unless its line
   says ``# exit status N``. A block that cannot run here carries
   ``<!-- not run in tests: REASON -->`` right above it.
 - The command-line help cites no document users do not have.
@@ -30,7 +31,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 #: The dev dataset, as tests/conftest.py finds it (ASSET2SIM_SHARED, else ../shared beside the repository).
 SHARED = Path(os.environ.get("ASSET2SIM_SHARED", ROOT.parent / "shared")) / "datasets" / "partnet_mobility"
-SHARED_FOLDER = SHARED.parents[1]  # the folder the documents call ../shared
+#: The folder the guide names PartNet-Mobility's (``partnet-mobility/103275``), relative to where its commands run.
+PARTNET = "partnet-mobility"
 DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs" / "guide").glob("*.md"))]
 NOT_RUN = re.compile(r"^<!-- not run in tests: (.*?) -->$")
 MAX_NOT_RUN = 7  # the guide's recipe for N machines among them: tests/flows/test_cluster_store.py runs it
@@ -136,7 +138,6 @@ def _first_module(code: str) -> str | None:
 def _steps(path: Path) -> tuple[list[dict], list[str]]:
     """The runnable steps of a document and the blocks skipped because their
     simulator is not installed."""
-    shared = str(SHARED_FOLDER)
     steps, skipped = [], []
     bin_dir = Path(sys.executable).parent
     continues_skipped = False  # a block without imports of its own goes on from the one before it
@@ -145,7 +146,7 @@ def _steps(path: Path) -> tuple[list[dict], list[str]]:
         if kind is None or block["not_run"] is not None:
             continue
         where = f"{path.relative_to(ROOT)}:{block['line']}"
-        code = block["code"].replace("../shared", shared)
+        code = block["code"]
         if kind == "python":
             module = _first_module(code)
             if module is not None and importlib.util.find_spec(module) is None:
@@ -273,7 +274,8 @@ def test_command_help_cites_no_spec():
 @pytest.mark.parametrize("doc", DOCUMENTS, ids=lambda p: p.name)
 def test_document_commands_and_snippets_run(doc, tmp_path):
     text = doc.read_text()
-    if "../shared" in text and not SHARED.is_dir():
+    uses_dataset = f"{PARTNET}/" in text
+    if uses_dataset and not SHARED.is_dir():
         pytest.skip(f"dev dataset not found at {SHARED}")
     steps, skipped = _steps(doc)
     setup = SETUP.get(doc.name)
@@ -285,6 +287,8 @@ def test_document_commands_and_snippets_run(doc, tmp_path):
     (tmp_path / "steps.json").write_text(json.dumps(steps))
     work = tmp_path / "work"
     work.mkdir()
+    if uses_dataset:  # where the guide's reader unpacked PartNet-Mobility: the dev rows
+        (work / PARTNET).symlink_to(SHARED, target_is_directory=True)
     proc = subprocess.run([sys.executable, __file__, str(tmp_path / "steps.json")], cwd=work,
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout[-6000:] + proc.stderr[-3000:]
@@ -347,3 +351,10 @@ def test_the_readme_needs_no_dev_dataset():
     text = (ROOT / "README.md").read_text()
     assert "../shared" not in text and "shared/datasets" not in text
     assert "asset2sim demo --object" in text and "Bring your own assets" in text
+
+
+def test_the_guide_names_partnet_mobility_as_its_reader_has_it():
+    """The guide's commands on PartNet-Mobility objects name the folder a reader unpacked it in
+    (``partnet-mobility/103275``), never this repository's development layout (``../shared/datasets/...``)."""
+    for doc in DOCUMENTS:
+        assert "../shared" not in doc.read_text() and "shared/datasets" not in doc.read_text(), doc.name
