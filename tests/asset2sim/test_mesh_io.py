@@ -3,6 +3,7 @@ PartNet-Mobility meshes."""
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -176,7 +177,9 @@ def test_every_partnet_mesh_reads_like_trimesh():
     for p in paths:
         mesh = mesh_io.read_mesh(p)
         v, f = mesh.vertices, mesh.faces
-        ref = trimesh.load(str(p), force="mesh", process=False, skip_materials=True, maintain_order=True)
+        with warnings.catch_warnings():  # trimesh's own texture handling warns on some dev meshes' coordinates: the
+            warnings.simplefilter("ignore", RuntimeWarning)  # reference's vertices and faces are what is compared
+            ref = trimesh.load(str(p), force="mesh", process=False, skip_materials=True, maintain_order=True)
         if len(ref.faces) == 0:
             continue
         # trimesh drops unreferenced vertices; compare the triangles' corner coordinates
