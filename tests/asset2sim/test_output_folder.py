@@ -29,6 +29,7 @@ from asset2sim.tasks.assemble import copied_meshes, write
 from asset2sim.formats.mjcf import export as export_mjcf
 from asset2sim.tasks.publish import refine_report
 from asset2sim.tasks.refine import MARKER_NAME, RefineError, is_complete, refine_asset
+from asset2sim.schemas.config import RefineConfig
 from tests import corpus_builder as cb
 
 PROMPT = "a small box with its lid slightly open"
@@ -316,13 +317,14 @@ def test_failed_write_during_extras_leaves_no_marker(tmp_path, box, monkeypatch)
 
     monkeypatch.setattr(atomic, "_create_temp", full_disk)
     out = tmp_path / "out"
+    no_clips = RefineConfig(clips=False)  # report.html without the sweep clips: the write that fails is the report's
     with pytest.raises(of.OutputError) as err:
-        refine_asset(box, PROMPT, out, extras=True)
+        refine_asset(box, PROMPT, out, no_clips, extras=True)
     assert err.value.code == "OUTPUT_WRITE_FAILED" and "report.html" in str(err.value)
     assert isinstance(err.value.__cause__, OSError) and err.value.__cause__.errno == errno.ENOSPC
     assert not (out / MARKER_NAME).exists()
     monkeypatch.setattr(atomic, "_create_temp", real)
-    res = refine_asset(box, PROMPT, out, extras=True)  # the rerun redoes it (nothing foreign in the folder)
+    res = refine_asset(box, PROMPT, out, no_clips, extras=True)  # the rerun redoes it (nothing foreign in the folder)
     assert not res.skipped and (out / "report.html").is_file() and (out / MARKER_NAME).is_file()
 
 
