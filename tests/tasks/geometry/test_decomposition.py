@@ -7,7 +7,6 @@ import pytest
 coacd = pytest.importorskip("coacd")
 
 from asset2sim.tasks.geometry import decomposition  # noqa: E402
-
 from tests.conftest import NO_SHARED, SHARED as DEV  # noqa: E402
 
 #: The stapler's base (PartNet-Mobility 102990): the mesh its collision repair decomposes (5 pieces).

@@ -15,9 +15,9 @@ from hypothesis import strategies as st
 
 from asset2sim.tasks.interpret import priors as P
 from asset2sim.tasks.interpret.request import parse_request
+from tests.conftest import NO_SHARED, SHARED as DATASET
 
 ROOT = Path(__file__).resolve().parents[3]
-from tests.conftest import NO_SHARED, SHARED as DATASET  # noqa: E402
 PRIORS_DIR = Path(str(resources.files("asset2sim.priors")))
 
 #: The 46 PartNet-Mobility categories (model_cat values).

@@ -18,8 +18,8 @@ from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.publish.contract import is_complete
 from asset2sim.tasks.publish.media import make_media, media_pending
 from asset2sim.tasks.refine import refine_asset
-
 from tests.conftest import NO_SHARED, SHARED as DEV
+
 BOX = DEV / "100221"
 PROMPT = "A box with its lid slightly open."
 MEDIA = ("views", "clips", REPORT_HTML_NAME)
