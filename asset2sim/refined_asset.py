@@ -55,6 +55,15 @@ class RefinedAsset:
             raise FileNotFoundError(f"{asset.urdf_path} does not exist (not an output folder?)")
         return asset
 
+    @classmethod
+    def held(cls, folder: "Path | str", report: RefineReport) -> "RefinedAsset":
+        """The folder as a refine holds it before ``report.json`` is written: :attr:`report` is ``report`` (the
+        verdict record in memory), every other file read from ``folder``. The exports a refine writes read the
+        hand's :attr:`press_efforts` from it, as they do from the folder later."""
+        asset = cls(Path(folder))
+        asset.__dict__["report"] = report  # the cached_property's value, as if read
+        return asset
+
     @property
     def urdf_path(self) -> Path:
         """The folder's URDF file."""

@@ -13,6 +13,7 @@ from asset2sim.extras import install_hint
 from asset2sim.inert import one_line
 from asset2sim.output_paths import raise_refusal
 from asset2sim.output_folder import CLIPS_DIR, VIEWS_DIR
+from asset2sim.refined_asset import RefinedAsset
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.report import RefineReport
@@ -117,11 +118,12 @@ def write_extras(out_dir: Path, report: RefineReport, att: Attempt, ctx: Estimat
     context and reading of the request; ``shown``: the output folder as the user named it (``out_dir`` may be a
     staging folder). Returns name -> path."""
     out: dict[str, str] = {}
+    held = RefinedAsset.held(out_dir, report)  # the exports read the verdict record from memory, not a stale file
     with quiet_stdout():  # engines and renderers print from C; the library must not
         for key, fmt in FORMATS.items():
             what = f"{fmt.label} export"
             try:
-                out[key] = str(fmt.export(out_dir))
+                out[key] = str(fmt.export(held))
                 report.solver_aids += fmt.aids(Path(out[key]))  # read back from the file as written
             except ImportError as exc:  # MuJoCo / usd-core (pxr) not installed: the extra that would do it named
                 report.notes.append(f"{what} skipped: {install_hint(exc)}")

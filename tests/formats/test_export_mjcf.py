@@ -259,9 +259,11 @@ def test_real_outputs_export(out_dir, tmp_path):
     assert check.keyframe == pytest.approx({k: check.initial_state.get(k, 0.0) for k in check.keyframe}, abs=1e-12)
 
 
-def test_report_json_lists_the_solver_aids_the_mjcf_carries_and_reading_it_back_names_them(refine_once):
+def test_report_json_lists_the_solver_aids_the_mjcf_carries_and_reading_it_back_names_them(refine_once, tmp_path):
     """A refine's MJCF export names each solver aid on its joint or geom with its criterion; ``report.json`` lists
-    the same aids, read back from the file, and the MJCF reader notes each one as not carried."""
+    the same aids, read back from the file, and the MJCF reader notes each one as not carried. The refine's export
+    reads the hand's press from the verdict it holds: the same file as exporting the finished folder again, the lid's
+    limit aid included (a 20 N press at its far edge rests past MuJoCo's default limit)."""
     from asset2sim.formats import read_asset_file
     from asset2sim.formats.mjcf.export import solver_aids
 
@@ -275,3 +277,6 @@ def test_report_json_lists_the_solver_aids_the_mjcf_carries_and_reading_it_back_
         assert a.element in joints or a.kind in ("ground_contact_impedance", "collision_prism")
     notes = read_asset_file(xml, "mjcf").notes
     assert sum(n.startswith("solver aid ") for n in notes) == len(aids)
+    assert any(a.kind == "limit_solver" for a in aids)
+    again = export_mjcf(res.copy_to(tmp_path / "again"))
+    assert again.read_bytes() == xml.read_bytes()
