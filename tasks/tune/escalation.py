@@ -210,7 +210,7 @@ def escalate(overlay: Overlay, check: postcheck.PostCheck, factor: float,
 
     Returns the new overlay, its changes (joint -> {parameter: new value}) and the reason.
     """
-    other_unstable, other_osc = check.engine_failures()
+    other_osc = check.engine_failures()[1]
     osc = list(dict.fromkeys(list(check.metric("oscillation").details.get("failing", [])) + other_osc))
     not_held = joints_not_held(check.metrics)
     targets = list(dict.fromkeys(list(osc) + list(check.sagging) + not_held))
