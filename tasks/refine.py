@@ -280,7 +280,7 @@ def _analyze(asset: AssetDescription, cache: analyze.MeshCache, log: StageLog) -
 
 def _moving_links(ctx: EstimationContext) -> list[str]:
     """Links moved by the task-relevant joints (sorted)."""
-    return sorted({ln for j in estimate.task_relevant_joints(ctx) for ln in ctx.subtrees[j]})
+    return sorted({ln for j in request_apply.task_relevant_joints(ctx) for ln in ctx.subtrees[j]})
 
 
 def _interpret(ctx: EstimationContext, kin: SimSession, log: StageLog) -> tuple[EstimationContext, str]:

@@ -22,7 +22,7 @@ from asset2sim.tasks.ingest import urdf_meshes
 from asset2sim.tasks.ingest.mesh_scan import MeshScan, is_flat, scan_mesh_file
 from asset2sim.urdf import UrdfGeometry, UrdfLink, UrdfModel
 
-__all__ = ["MeshChecks", "geometry_corners", "texture_problem", "zero_pose_bounds"]
+__all__ = ["MeshChecks", "box_corners", "geometry_corners", "texture_problem", "zero_pose_bounds"]
 
 
 def _transform_moments(mom, origin, scale):
@@ -35,7 +35,7 @@ def _transform_moments(mom, origin, scale):
         return n, as1 + n * t, a @ s2 @ a.T + np.outer(as1, t) + np.outer(t, as1) + n * np.outer(t, t)
 
 
-def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """The 8 corners (8, 3) of the axis-aligned box [lo, hi]."""
     return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], float)
 
@@ -48,14 +48,14 @@ def geometry_corners(g: UrdfGeometry, bounds: np.ndarray | None = None) -> np.nd
     if g.kind == "mesh":
         if bounds is None:
             return None
-        c = _box_corners(bounds[0], bounds[1]) * g.scale
+        c = box_corners(bounds[0], bounds[1]) * g.scale
     elif g.kind == "box" and g.size is not None:
         h = np.asarray(g.size, float) / 2.0
-        c = _box_corners(-h, h)
+        c = box_corners(-h, h)
     elif g.kind in ("cylinder", "sphere") and g.radius is not None:
         r = g.radius
         h = np.array((2 * r, 2 * r, g.length if g.kind == "cylinder" else 2 * r), float) / 2.0
-        c = _box_corners(-h, h)
+        c = box_corners(-h, h)
     else:
         return None
     return c @ g.origin[:3, :3].T + g.origin[:3, 3]

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from asset2sim.prior_tables import load_priors
 from asset2sim.schemas.request import MotionPhrase, ordinal_words
 from asset2sim.tasks.interpret import request_values as rv
-from asset2sim.tasks.interpret.phrase_scan import Hit, compile_table, negated, scan
+from asset2sim.tasks.interpret.phrase_scan import compile_table, negated, scan
 
 # (regex, (kind, value), flag) - flag "strong" for explicit damping phrases. Each hit is also a
 # MotionPhrase (:func:`_motion_kind` names its kind) for the part it names.
@@ -48,13 +48,9 @@ _DYN_TABLE = compile_table(
 
 @functools.lru_cache(maxsize=1)
 def _slide_table() -> list[tuple[re.Pattern[str], object, str]]:
-    """The request words of each kind of slide (``asset2sim/priors/slides.yaml``)."""
+    """The request words of each kind of slide (``asset2sim/priors/slides.yaml``: "on ball-bearing slides", "wooden
+    runners"); a hit's value is the slide's key."""
     return compile_table([(w, key, "") for key, sp in load_priors().slides.items() for w in sp.words])
-
-
-def _slide_hits(low: str) -> list[Hit]:
-    """The kinds of slide the request names ("on ball-bearing slides", "wooden runners"): values the slide keys."""
-    return scan(low, _slide_table())
 
 
 def _motion_kind(kind: str, value: object, flag: str) -> str:
@@ -129,7 +125,7 @@ def dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[t
         if kind in ("free", "heavy", "damping") and (h.flag == "strong" or not strong_set):
             damping = str(val)
             strong_set = strong_set or h.flag == "strong"
-    for h in _slide_hits(low):
+    for h in scan(low, _slide_table()):
         if negated(low, h.start):
             continue
         matched.append((h.start, h.text))

@@ -17,11 +17,6 @@ from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
 
 
-def task_relevant_joints(ctx: EstimationContext) -> list[str]:
-    """Movable joints whose moving part tasks manipulate (:func:`request_apply.task_relevant_joints`)."""
-    return request_apply.task_relevant_joints(ctx)
-
-
 def requested_bands(ctx: EstimationContext, kin: SimSession, scale: float | None = None) -> tuple[dict[str, str], list[str]]:
     """(joint -> band, notes with warnings first) from the request at ``scale`` (default :func:`choose_scale`;
     ``kin``, the input's kinematics session, moved for ordinals and ends)."""

@@ -296,8 +296,7 @@ def free_standing(ctx: EstimationContext) -> bool:
 
 def _label(ctx: EstimationContext, joint: str) -> str | None:
     """Canonical part label of ``joint``'s child link, None when unlabelled."""
-    child = ctx.asset.joint(joint).child
-    return priors.canonical_label(next((ln.semantic_label for ln in ctx.asset.links if ln.name == child), None))
+    return priors.canonical_label(ctx.asset.link(ctx.asset.joint(joint).child).semantic_label)
 
 
 #: Opening fractions at which gravity must push a part open for it to count as opening downward (:func:`counterbalance`).

@@ -13,11 +13,10 @@ from asset2sim.models.usage import Usage
 from asset2sim.schemas.model_reply import ModelReply
 from asset2sim.schemas.overlay import ContactMaterial, EstimatorInfo, LinkPhysics, Overlay, ValidationNotes
 from asset2sim.tasks.interpret.part_priors import material_for
-from asset2sim.tasks.synthesize import estimate, joint_dynamics, physics, validate_overlay
+from asset2sim.tasks.synthesize import estimate, joint_dynamics, physics, request_apply, validate_overlay
 from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.estimator import Estimate
-from asset2sim.tasks.synthesize.request_apply import scaled_link
 
 MASS_AGREEMENT = 3.0
 """Largest factor between the geometric total mass and the model's own
@@ -140,7 +139,7 @@ def _within_model_mass(links: dict[str, LinkPhysics], by_link: dict) -> tuple[di
         if ratio > MASS_AGREEMENT or ratio < 1.0 / MASS_AGREEMENT:
             target = model_total * (MASS_AGREEMENT if ratio > MASS_AGREEMENT else 1.0 / MASS_AGREEMENT)
             f = target / geo_known
-            links = {n: scaled_link(lp, f, f"; x{f:.3g} to within {MASS_AGREEMENT:g}x of the model's mass estimate") for n, lp in links.items()}
+            links = {n: request_apply.scaled_link(lp, f, f"; x{f:.3g} to within {MASS_AGREEMENT:g}x of the model's mass estimate") for n, lp in links.items()}
             mass_note += f"; more than {MASS_AGREEMENT:g}x apart: every link scaled by {f:.3g}"
     return links, mass_note
 
@@ -166,7 +165,7 @@ def _joint_choices(ctx: EstimationContext, reply: ModelReply) -> dict[str, joint
     """The model's qualitative dynamics per movable joint, with the request's own words about each part kept (they win
     where they speak); without a model entry the words alone (:func:`~asset2sim.tasks.synthesize.joint_dynamics.motion_choices`)."""
     by_joint = {jr.joint: jr for jr in reply.joints}
-    parsed, _ = joint_dynamics.motion_choices(ctx, estimate.task_relevant_joints(ctx))
+    parsed, _ = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
     choices: dict[str, joint_dynamics.JointChoice] = {}
     for j in ctx.asset.movable_joints():
         jr = by_joint.get(j.name)

@@ -46,7 +46,7 @@ def describe(ctx: EstimationContext, kin: SimSession) -> dict[str, Any]:
     target = target_size(ctx.category, req)
     resolved = request_apply.resolve_states(ctx, kin, estimate.choose_scale(ctx)[0])
     bands, band_notes = resolved.bands, resolved.warnings + resolved.notes
-    relevant = set(estimate.task_relevant_joints(ctx))
+    relevant = set(request_apply.task_relevant_joints(ctx))
     links = []
     for ln in asset.links:
         g = ctx.geometry.get(ln.name)

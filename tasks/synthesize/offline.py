@@ -9,8 +9,7 @@ from asset2sim.tasks.interpret import priors
 from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
-from asset2sim.tasks.synthesize.estimate import (choose_scale, link_material, plausible_mass_range, request_variant,
-                                                 state_from_bands, task_relevant_joints)
+from asset2sim.tasks.synthesize.estimate import choose_scale, link_material, plausible_mass_range, request_variant, state_from_bands
 from asset2sim.tasks.synthesize.joint_dynamics import joint_dynamics_for, motion_choices
 from asset2sim.tasks.synthesize.estimator import Estimate, register_estimator
 
@@ -60,9 +59,9 @@ class OfflineEstimator:
         bands, band_notes = resolved.bands, resolved.warnings + resolved.notes + request_apply.unmatched_properties(ctx)
         state = request_apply.state_with_targets(ctx, state_from_bands(ctx.closed, bands, s, prismatic), resolved, s)
         # ---- dynamics
-        choices, _ = motion_choices(ctx, task_relevant_joints(ctx))
+        choices, _ = motion_choices(ctx, request_apply.task_relevant_joints(ctx))
         joints = joint_dynamics_for(ctx, kin, links, state, s, choices, source="offline physics")
-        joints, dyn_notes = request_apply.apply_dynamics_values(ctx, joints, task_relevant_joints(ctx), state)
+        joints, dyn_notes = request_apply.apply_dynamics_values(ctx, joints, request_apply.task_relevant_joints(ctx), state)
         band_notes += dyn_notes
         body_prior = priors.material_for(ctx.category, None, request_variant(ctx))
         body_mat = link_material(ctx, None)

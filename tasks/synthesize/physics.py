@@ -201,10 +201,10 @@ def max_stable_friction(inertia_axis: float, timestep: float = TIMESTEP) -> floa
     return float(FRICTION_LOCK_SHARE * max(inertia_axis, 0.0) * MAX_JOINT_SPEED / timestep)
 
 
-def damping_for(load: JointLoad, zeta: float, stiffness: float = 0.0, floor_hz: float = FLOOR_FREQUENCY_HZ) -> float:
+def damping_for(load: JointLoad, zeta: float, stiffness: float = 0.0) -> float:
     """Viscous damping c = 2 zeta sqrt(I k_eff) (N*m*s/rad or N*s/m), with
-    k_eff = max(gravity stiffness, spring stiffness, I (2 pi f0)^2)."""
-    w0 = 2.0 * np.pi * floor_hz
+    k_eff = max(gravity stiffness, spring stiffness, I (2 pi f0)^2), f0 = :data:`FLOOR_FREQUENCY_HZ`."""
+    w0 = 2.0 * np.pi * FLOOR_FREQUENCY_HZ
     k_eff = max(load.gravity_stiffness, stiffness, load.inertia_axis * w0 * w0)
     return float(2.0 * zeta * np.sqrt(max(load.inertia_axis, 0.0) * k_eff))
 

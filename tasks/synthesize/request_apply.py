@@ -233,35 +233,29 @@ def requested_material(ctx: "EstimationContext", link: str) -> MaterialPrior | N
     return None if best is None else load_priors().materials[best[1]]
 
 
-def unmatched_properties(ctx: "EstimationContext") -> list[str]:
-    """Warnings for masses, materials and joint parameters naming a part the object lacks."""
-    out = []
+def _missing_parts(ctx: "EstimationContext") -> list[tuple[str, str, list[str] | None, str]]:
+    """(phrase, why, stand-in joints, how they stand in) of every mass or material naming a part the object lacks
+    (no stand-ins), then of every joint parameter naming a part no joint carries."""
     links = [ln.name for ln in ctx.asset.links]
-    for p in ctx.request.properties:
-        if p.label not in (None, "body") and not any(link_named(ctx, ln, p.label) for ln in links):
-            out.append(f"WARNING: '{p.phrase}' names a '{p.label}' but this {ctx.category} has no such part; its moving parts: "
-                       f"{moving_parts(ctx)}; not applied")
+    out = [(p.phrase, f"names a '{p.label}' but this {ctx.category} has no such part", None, "") for p in ctx.request.properties
+           if p.label not in (None, "body") and not any(link_named(ctx, ln, p.label) for ln in links)]
     for d in ctx.request.dynamics_values:
         if d.label is not None and not joints_named(ctx, d.label):
             to, how = stand_ins(ctx, d.label, task_relevant_joints(ctx))
-            out.append(f"WARNING: '{d.phrase}' names a '{d.label}' but no part of this {ctx.category} carries that label; its moving "
-                       f"parts: {moving_parts(ctx)}; " + (f"applied to {how} {to}" if to else "not applied"))
+            out.append((d.phrase, f"names a '{d.label}' but no part of this {ctx.category} carries that label", to, how))
     return out
+
+
+def unmatched_properties(ctx: "EstimationContext") -> list[str]:
+    """Warnings for masses, materials and joint parameters naming a part the object lacks."""
+    return [f"WARNING: '{phrase}' {why}; its moving parts: {moving_parts(ctx)}; " + (f"applied to {how} {to}" if to else "not applied")
+            for phrase, why, to, how in _missing_parts(ctx)]
 
 
 def unapplied_properties(ctx: "EstimationContext") -> list[tuple[str, str]]:
     """(phrase, why) of every mass or material naming a part the object lacks, and every joint parameter naming a
     part no joint carries and none stands in for (:func:`unmatched_properties` warns of both)."""
-    out = []
-    links = [ln.name for ln in ctx.asset.links]
-    for p in ctx.request.properties:
-        if p.label not in (None, "body") and not any(link_named(ctx, ln, p.label) for ln in links):
-            out.append((p.phrase, f"names a '{p.label}' but this {ctx.category} has no such part (its moving parts: {moving_parts(ctx)})"))
-    for d in ctx.request.dynamics_values:
-        if d.label is not None and not joints_named(ctx, d.label) and not stand_ins(ctx, d.label, task_relevant_joints(ctx))[0]:
-            out.append((d.phrase, f"names a '{d.label}' but no part of this {ctx.category} carries that label (its moving parts: "
-                                  f"{moving_parts(ctx)})"))
-    return out
+    return [(phrase, f"{why} (its moving parts: {moving_parts(ctx)})") for phrase, why, to, _ in _missing_parts(ctx) if not to]
 
 
 def scaled_link(lp: LinkPhysics, f: float, note: str) -> LinkPhysics:

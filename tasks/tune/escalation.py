@@ -18,7 +18,7 @@ from asset2sim.tasks.check import postcheck, robust_rest, sweep, task_tier
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_tuples
 from asset2sim.tasks.state import clearance, placement
-from asset2sim.tasks.synthesize import estimate, joint_dynamics
+from asset2sim.tasks.synthesize import joint_dynamics, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.physics import max_stable_damping
 from asset2sim.tasks.tune import dynamics_search, operating, repair, word_guard
@@ -50,7 +50,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     cand = replace(candidate, overlay=overlay)
     recorded = postcheck.RecordedRuns()  # the manipulation tiers' runs, reused by a round with the same inputs
     n = 0
-    spec = task_tier.task_spec_for(ctx.task, asset, ctx.category, estimate.task_relevant_joints(ctx), state, closed) \
+    spec = task_tier.task_spec_for(ctx.task, asset, ctx.category, request_apply.task_relevant_joints(ctx), state, closed) \
         if ctx.task and closed else None
     # what the task's gripper can still operate on the task's joints (operating.operating_limits); estimates above it are lowered
     lim = operating.operating_limits(postcheck.overlay_object(ws.source(cand), state, overlay, config.sim), overlay, asset,
@@ -210,7 +210,7 @@ def escalate(overlay: Overlay, check: postcheck.PostCheck, factor: float,
 
     Returns the new overlay, its changes (joint -> {parameter: new value}) and the reason.
     """
-    other_unstable, other_osc = check.engine_failures()
+    other_osc = check.engine_failures()[1]
     osc = list(dict.fromkeys(list(check.metric("oscillation").details.get("failing", [])) + other_osc))
     not_held = joints_not_held(check.metrics)
     targets = list(dict.fromkeys(list(osc) + list(check.sagging) + not_held))

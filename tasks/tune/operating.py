@@ -23,6 +23,7 @@ from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.check import sweep
 from asset2sim.tasks.check.blockers import fixed_root_options
 from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, grasp_side, joint_frame_axis, subtree
+from asset2sim.tasks.ingest.mesh_checks import box_corners
 from asset2sim.tasks.interpret.operating_forces import ForceRange, operating_range
 from asset2sim.tasks.interpret.part_priors import handled
 from asset2sim.tasks.check.gripper import GripperLimits
@@ -83,8 +84,7 @@ def push_lever(overlay: Overlay, asset: AssetDescription, joint: str, geometry: 
     if g is None:
         return 0.0
     lo, hi = np.asarray(g.bbox_min, float), np.asarray(g.bbox_max, float)
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    return float(_off_axis(corners, _unit_axis(asset, joint)).max()) * float(overlay.scale)
+    return float(_off_axis(box_corners(lo, hi), _unit_axis(asset, joint)).max()) * float(overlay.scale)
 
 
 def com_lever(overlay: Overlay, asset: AssetDescription, joint: str) -> float:

@@ -11,11 +11,9 @@ from dataclasses import dataclass
 
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.request import MOTION_GUARDS
-from asset2sim.tasks.synthesize import estimate, joint_dynamics
+from asset2sim.tasks.synthesize import joint_dynamics, request_apply, request_findings
 from asset2sim.tasks.synthesize.context import EstimationContext
 
-#: Units of each guarded parameter (revolute, prismatic), for the notes.
-_UNITS = {"damping": ("N m s/rad", "N s/m"), "friction": ("N m", "N"), "stiffness": ("N m/rad", "N/m")}
 
 
 @dataclass(frozen=True)
@@ -36,7 +34,7 @@ class Guard:
 
     def note(self, wanted: float) -> str:
         """``joint_1: 'swings freely' keeps its damping at 0.795 N m s/rad (the step asked 2.39)``."""
-        unit = _UNITS[self.parameter][1 if self.prismatic else 0]
+        unit = request_findings.DYNAMICS_UNITS[self.parameter][1 if self.prismatic else 0]
         return (f"{self.joint}: '{self.phrase}' keeps its {self.parameter} at {self.value:.3g} {unit} "
                 f"(the step asked {wanted:.3g})")
 
@@ -45,7 +43,7 @@ def guards(ctx: EstimationContext, overlay: Overlay) -> list[Guard]:
     """The guards of ``overlay`` (the estimate, bounded to the hand's operating range): one per parameter each word
     of ``ctx.request.motions`` sets on a joint it applies to
     (:func:`~asset2sim.tasks.synthesize.joint_dynamics.motion_choices`), at the overlay's value."""
-    choices, _ = joint_dynamics.motion_choices(ctx, estimate.task_relevant_joints(ctx))
+    choices, _ = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
     out = []
     for joint, ch in choices.items():
         dyn = overlay.joints.get(joint)
