@@ -42,10 +42,12 @@ class Judgement:
     notes: list[str] = field(default_factory=list)
 
 
-def _unit(j: DeclaredJoint, what: str) -> str:
-    prismatic = j.type == "prismatic"
+def joint_unit(jtype: str, what: str) -> str:
+    """The unit of a joint's ``what`` (``damping``, ``friction``, ``stiffness``, ``position``) for a joint of type
+    ``jtype`` (prismatic: linear; else rotational)."""
+    prismatic = jtype == "prismatic"
     return {"damping": "N*s/m" if prismatic else "N*m*s/rad", "friction": "N" if prismatic else "N*m",
-            "stiffness": "N/m" if prismatic else "N*m/rad"}[what]
+            "stiffness": "N/m" if prismatic else "N*m/rad", "position": "m" if prismatic else "rad"}[what]
 
 
 def _link_physics(mass: float, inertia: np.ndarray, com: np.ndarray, source: str, material: str = "") -> LinkPhysics:
@@ -139,7 +141,7 @@ def _judge_joints(ctx: EstimationContext, kin: SimSession, dp: DeclaredPhysics, 
             continue
         where, ld, e = f"joint {name}", loads[name], est[name]
         k = float(j.stiffness or 0.0)
-        du, fu = _unit(j, "damping"), _unit(j, "friction")
+        du, fu = joint_unit(j.type, "damping"), joint_unit(j.type, "friction")
         operable = _operable(ctx, j, labels.get(j.child))
         travel = (j.upper - j.lower) if j.lower is not None and j.upper is not None else 2 * math.pi
         c_op = bands.operating_damping(operable, travel)
@@ -164,7 +166,7 @@ def _judge_joints(ctx: EstimationContext, kin: SimSession, dp: DeclaredPhysics, 
             weight = physics.joint_loads(kin, links, {**state, name: far}, 1.0,
                                          {name: ctx.subtrees[name]})[name].gravity_load
             carried = abs(weight) if weight * (ref - far) < 0 else 0.0  # the spring pulls against the weight there
-            out.append(bands.stiffness_verdict(where, k, travel, operable, _unit(j, "stiffness"), carried))
+            out.append(bands.stiffness_verdict(where, k, travel, operable, joint_unit(j.type, "stiffness"), carried))
         out.append(bands.limits_verdict(where, j.type, j.lower, j.upper, largest))
         c = damping if damp_v.verdict == "plausible" else (c_est if k > 0 else e.damping)
         f = friction if fric_v.verdict == "plausible" else e.friction
