@@ -18,6 +18,7 @@ from asset2sim.engines.base import SimSession
 from asset2sim.schemas.audit import ValueVerdict
 from asset2sim.schemas.overlay import EstimatorInfo, Inertia, JointDynamics, LinkPhysics, Overlay, RootMount
 from asset2sim.tasks.check import plausibility_bands as bands
+from asset2sim.tasks.check.contact_points import box_corners
 from asset2sim.tasks.interpret import operating_forces
 from asset2sim.tasks.ingest.declared import DeclaredJoint, DeclaredLink, DeclaredPhysics
 from asset2sim.tasks.interpret import size_priors
@@ -111,7 +112,7 @@ def _lever(ctx: EstimationContext, j: DeclaredJoint) -> float:
     axis = np.asarray(ctx.asset.joint(j.name).axis, float)
     axis = axis / max(np.linalg.norm(axis), 1e-12)
     lo, hi = np.asarray(geom.bbox_min, float), np.asarray(geom.bbox_max, float)
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    corners = box_corners(lo, hi)
     radial = corners - np.outer(corners @ axis, axis)
     return float(np.linalg.norm(radial, axis=1).max())
 
