@@ -23,7 +23,7 @@ from asset2sim.tasks.check.probes import (
 from asset2sim.tasks.check.task_spec import parse_task
 from asset2sim.tasks.check.task_tier import hold_required_by_label
 from asset2sim.refined_asset import RefinedAsset
-from asset2sim.tasks.evaluation.evaluate import EvaluationError, closed_ends, sim_object, task_joints
+from asset2sim.tasks.evaluation.folder_reading import EvaluationError, closed_ends, sim_object, task_joints
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.errors import AssetError

@@ -29,7 +29,7 @@ from asset2sim.tasks.check.sweep import SweepConfig, effort_limit, joint_subtree
 from asset2sim.tasks.evaluation.clips import Trajectory
 from asset2sim.engines.source import SimObject
 from asset2sim.refined_asset import RefinedAsset
-from asset2sim.tasks.evaluation.evaluate import EvaluationError, sim_object
+from asset2sim.tasks.evaluation.folder_reading import EvaluationError, sim_object
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.errors import AssetError
@@ -67,7 +67,7 @@ class PhysicsSide:
 
 
 def side_of(obj: SimObject, method: str) -> PhysicsSide:
-    """The :class:`PhysicsSide` of an object as the checks simulate it (:func:`asset2sim.tasks.evaluation.evaluate.sim_object`):
+    """The :class:`PhysicsSide` of an object as the checks simulate it (:func:`asset2sim.tasks.evaluation.folder_reading.sim_object`):
     its URDF, initial state, springs and declared root."""
     return PhysicsSide(method=method, urdf=Path(obj.source.path), initial_state=dict(obj.state), springs=dict(obj.springs),
                        root_fixed=bool(obj.fixed_base))
@@ -76,7 +76,7 @@ def side_of(obj: SimObject, method: str) -> PhysicsSide:
 def side_from_folder(folder: Path | str, method: str) -> PhysicsSide:
     """The :class:`PhysicsSide` of an asset folder (a refine output, a benchmark method's ``asset/``): its
     URDF, ``initial_state.json``, the springs of ``overlay.json`` and the declared root, read as the
-    checks read them (:func:`asset2sim.tasks.evaluation.evaluate.sim_object`).
+    checks read them (:func:`asset2sim.tasks.evaluation.folder_reading.sim_object`).
 
     Raises:
         EvaluationError: the folder has no readable URDF or sidecar.

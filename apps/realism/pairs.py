@@ -27,7 +27,7 @@ from asset2sim.schemas.realism import Clip, ClipPair, PairSet, PairSide
 from asset2sim.tasks.evaluation.clips import (CLIP_FPS, CLIP_SIZE, CLIP_VIEWS, draw_frames, fit_cameras, fit_poses, pose_points,
                                               write_clip)
 from asset2sim.refined_asset import RefinedAsset
-from asset2sim.tasks.evaluation.evaluate import EvaluationError, closed_ends, sim_object, task_joints
+from asset2sim.tasks.evaluation.folder_reading import EvaluationError, closed_ends, sim_object, task_joints
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.errors import AssetError
@@ -58,9 +58,9 @@ class PairSpec:
 
 
 def pushed_joints(folder: Path | str, limit: int = 1) -> list[tuple[str, ClosedState]]:
-    """The joints a pair of an asset folder pushes: its task-relevant joints (:func:`asset2sim.tasks.evaluation.evaluate.task_joints`)
+    """The joints a pair of an asset folder pushes: its task-relevant joints (:func:`asset2sim.tasks.evaluation.folder_reading.task_joints`)
     then its other movable ones, those that can open, at most ``limit``, with their closed ends (rad or m;
-    :func:`asset2sim.tasks.evaluation.evaluate.closed_ends`). Raises EvaluationError: the folder cannot be read."""
+    :func:`asset2sim.tasks.evaluation.folder_reading.closed_ends`). Raises EvaluationError: the folder cannot be read."""
     files, desc = _read(folder)
     chosen, _ = task_joints(desc, desc.category or "Generic")
     names = list(dict.fromkeys([*chosen, *(j.name for j in desc.movable_joints())]))

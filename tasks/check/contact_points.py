@@ -115,6 +115,11 @@ def handle_points(model: UrdfModel, link: str) -> np.ndarray:
     return np.concatenate(pts) if pts else np.zeros((0, 3))
 
 
+def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The 8 corners (8, 3) of the axis-aligned box [``lo`` (3,), ``hi`` (3,)], in their unit."""
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], dtype=float)
+
+
 def _session_points(session, link: str) -> np.ndarray:
     """The engine's collision vertices (k, 3) of ``link``, else its AABB corners, in the link frame."""
     v = np.asarray(session.link_collision_vertices(link), float).reshape(-1, 3)
@@ -122,7 +127,7 @@ def _session_points(session, link: str) -> np.ndarray:
         return v
     lo, hi = session.link_aabb(link)
     o, R = session.link_frame(link)
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    corners = box_corners(lo, hi)
     return (corners - np.asarray(o, float)) @ np.asarray(R, float)
 
 

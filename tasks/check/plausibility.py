@@ -18,6 +18,7 @@ from asset2sim.engines.base import SimSession
 from asset2sim.schemas.audit import ValueVerdict
 from asset2sim.schemas.overlay import EstimatorInfo, Inertia, JointDynamics, LinkPhysics, Overlay, RootMount
 from asset2sim.tasks.check import plausibility_bands as bands
+from asset2sim.tasks.check.contact_points import box_corners
 from asset2sim.tasks.interpret import operating_forces
 from asset2sim.tasks.ingest.declared import DeclaredJoint, DeclaredLink, DeclaredPhysics
 from asset2sim.tasks.interpret import size_priors
@@ -42,10 +43,12 @@ class Judgement:
     notes: list[str] = field(default_factory=list)
 
 
-def _unit(j: DeclaredJoint, what: str) -> str:
-    prismatic = j.type == "prismatic"
+def joint_unit(jtype: str, what: str) -> str:
+    """The unit of a joint's ``what`` (``damping``, ``friction``, ``stiffness``, ``position``) for a joint of type
+    ``jtype`` (prismatic: linear; else rotational)."""
+    prismatic = jtype == "prismatic"
     return {"damping": "N*s/m" if prismatic else "N*m*s/rad", "friction": "N" if prismatic else "N*m",
-            "stiffness": "N/m" if prismatic else "N*m/rad"}[what]
+            "stiffness": "N/m" if prismatic else "N*m/rad", "position": "m" if prismatic else "rad"}[what]
 
 
 def _link_physics(mass: float, inertia: np.ndarray, com: np.ndarray, source: str, material: str = "") -> LinkPhysics:
@@ -109,7 +112,7 @@ def _lever(ctx: EstimationContext, j: DeclaredJoint) -> float:
     axis = np.asarray(ctx.asset.joint(j.name).axis, float)
     axis = axis / max(np.linalg.norm(axis), 1e-12)
     lo, hi = np.asarray(geom.bbox_min, float), np.asarray(geom.bbox_max, float)
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    corners = box_corners(lo, hi)
     radial = corners - np.outer(corners @ axis, axis)
     return float(np.linalg.norm(radial, axis=1).max())
 
@@ -139,7 +142,7 @@ def _judge_joints(ctx: EstimationContext, kin: SimSession, dp: DeclaredPhysics, 
             continue
         where, ld, e = f"joint {name}", loads[name], est[name]
         k = float(j.stiffness or 0.0)
-        du, fu = _unit(j, "damping"), _unit(j, "friction")
+        du, fu = joint_unit(j.type, "damping"), joint_unit(j.type, "friction")
         operable = _operable(ctx, j, labels.get(j.child))
         travel = (j.upper - j.lower) if j.lower is not None and j.upper is not None else 2 * math.pi
         c_op = bands.operating_damping(operable, travel)
@@ -164,7 +167,7 @@ def _judge_joints(ctx: EstimationContext, kin: SimSession, dp: DeclaredPhysics, 
             weight = physics.joint_loads(kin, links, {**state, name: far}, 1.0,
                                          {name: ctx.subtrees[name]})[name].gravity_load
             carried = abs(weight) if weight * (ref - far) < 0 else 0.0  # the spring pulls against the weight there
-            out.append(bands.stiffness_verdict(where, k, travel, operable, _unit(j, "stiffness"), carried))
+            out.append(bands.stiffness_verdict(where, k, travel, operable, joint_unit(j.type, "stiffness"), carried))
         out.append(bands.limits_verdict(where, j.type, j.lower, j.upper, largest))
         c = damping if damp_v.verdict == "plausible" else (c_est if k > 0 else e.damping)
         f = friction if fric_v.verdict == "plausible" else e.friction

@@ -89,12 +89,9 @@ def measure_rest_test(engine: str, obj: SimObject) -> tuple[MetricResult, RestRe
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading the URDF raises.
     """
-    session = obj.open(engine)
-    try:
+    with obj.open(engine) as session:
         pen = metrics.penetration(session)
         recording = record_rest_test(session, obj)
-    finally:
-        session.close()
     return pen, recording
 
 

@@ -361,8 +361,7 @@ def probe_object(obj: SimObject, closed: dict[str, tuple[float, float, float]], 
     """
     model = obj.source.model(mode="lenient")
     notes: list[str] = []
-    session = obj.open("pybullet")
-    try:
+    with obj.open("pybullet") as session:
         rolling = set(rolling_joints(session, subtrees(model)))
         targets = {n: c for n, c in closed.items() if c[2] > 0 and n not in rolling}
         try:
@@ -375,8 +374,6 @@ def probe_object(obj: SimObject, closed: dict[str, tuple[float, float, float]], 
                   "as it is): an open probe's target ends there" for n, s in stops.items()]
         return run_probes(session, targets, actions=actions, holds_position=holds_position, model=model, returns=returns,
                           floor_stops=stops), notes
-    finally:
-        session.close()
 
 
 def _shut_in(r: ProbeResult) -> bool:

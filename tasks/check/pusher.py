@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from asset2sim.engines.base import EngineUnsupported
-from asset2sim.tasks.check.contact_points import joint_frame_axis
+from asset2sim.tasks.check.contact_points import box_corners, joint_frame_axis
 from asset2sim.tasks.geometry.limits import rigid_group
 from asset2sim.urdf import UrdfModel
 
@@ -112,7 +112,7 @@ def push_geometry(session, joint: str) -> PushGeometry:
     c = 0.5 * (lo + hi)
     if session.joint_types[joint] == "prismatic":
         return PushGeometry(c, a, None)
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    corners = box_corners(lo, hi)
     rr = (corners - o) - np.outer((corners - o) @ a, a)
     k = int(np.argmax(np.linalg.norm(rr, axis=1)))
     c, r = corners[k], rr[k]

@@ -201,12 +201,9 @@ def run_robust_rest(engine: str, obj: SimObject, config: RobustRestConfig | None
     if obj.fixed_base:
         run.skipped = "root fixed as the asset declares: a mounted object is not dropped, tilted or nudged"
         return run
-    session = obj.open(engine)
-    try:
+    with obj.open(engine) as session:
         rolling = support.rolling_joints(session, subtrees(obj.source.model(mode="lenient")))
         run.trials = run_trials(session, dict(obj.state), obj.conventions, cfg, rolling)
-    finally:
-        session.close()
     return run
 
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from asset2sim.tasks.check.contact_points import box_corners
+
 
 class SupportWatch:
     """Slide (m) and tip (rad) of ``link`` of ``session`` since construction;
@@ -55,7 +57,7 @@ def link_world_vertices(session, link: str) -> np.ndarray:
         p, R = session.link_frame(link)
         return np.asarray(v, float) @ np.asarray(R, float).T + np.asarray(p, float)
     lo, hi = session.link_aabb(link)
-    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], dtype=float)
+    return box_corners(lo, hi)
 
 
 def rolling_joints(session, moved: dict[str, list[str]]) -> list[str]:

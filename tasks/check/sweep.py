@@ -15,7 +15,7 @@ from asset2sim.engines.source import SimObject
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root_options, joints_between
-from asset2sim.tasks.check.contact_points import joint_frame_axis
+from asset2sim.tasks.check.contact_points import box_corners, joint_frame_axis
 from asset2sim.tasks.check.metrics import EXPLOSION_JOINT_SPEED_PRISMATIC, EXPLOSION_JOINT_SPEED_REVOLUTE
 from asset2sim.tasks.check.stroke import Reach, reach_stroke
 from asset2sim.tasks.geometry import limits
@@ -97,7 +97,7 @@ def _lever(session: SimSession, joint: str, links: list[str]) -> float:
         v = session.link_collision_vertices(ln)
         if not len(v):
             lo, hi = session.link_aabb(ln)
-            v_w = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+            v_w = box_corners(lo, hi)
         else:
             p, Rl = session.link_frame(ln)
             v_w = v @ Rl.T + p

@@ -7,14 +7,9 @@ from __future__ import annotations
 
 from typing import Any
 
+from asset2sim.tasks.check.plausibility import joint_unit
 from asset2sim.tasks.evaluation.html_blocks import fmt, table
 from asset2sim.tasks.evaluation.report_changes import esc
-
-
-def _joint_unit(jtype: str, what: str) -> str:
-    pri = jtype == "prismatic"
-    return {"damping": "N*s/m" if pri else "N*m*s/rad", "friction": "N" if pri else "N*m",
-            "stiffness": "N/m" if pri else "N*m/rad", "position": "m" if pri else "rad"}[what]
 
 
 def _param(parameter: str, where: str, value: Any, unit: str, source: str) -> dict[str, Any]:
@@ -61,7 +56,7 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
                     fv = getattr(joints[jn], k)
                     if val is not None and abs(fv - val) > 1e-12:
                         val, src = fv, src + " (URDF value differs from overlay; URDF shown)"
-                rows.append(_param(k, f"joint {jn}", val, _joint_unit(jt, k), src))
+                rows.append(_param(k, f"joint {jn}", val, joint_unit(jt, k), src))
     # step 3: without an overlay, the URDF's values and the engine defaults
     else:
         for ln, li in ctx.model.links.items():
@@ -73,9 +68,9 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
         for jd in ctx.model.movable_joints:
             for k in ("damping", "friction"):
                 v = getattr(jd.dynamics, k, None) if jd.dynamics is not None else None
-                rows.append(_param(k, f"joint {jd.name}", 0.0 if v is None else v, _joint_unit(jd.type, k),
+                rows.append(_param(k, f"joint {jd.name}", 0.0 if v is None else v, joint_unit(jd.type, k),
                                    "URDF <dynamics>" if v is not None else "engine default (0)"))
-            rows.append(_param("stiffness", f"joint {jd.name}", 0.0, _joint_unit(jd.type, "stiffness"), "none (URDF has no springs)"))
+            rows.append(_param("stiffness", f"joint {jd.name}", 0.0, joint_unit(jd.type, "stiffness"), "none (URDF has no springs)"))
     # step 4: the initial joint positions and the limits
     state_src = ev.initial_state_source
     if rep and rep.get("state"):
@@ -86,11 +81,11 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
         state_src = f"baseline rule: {ctx.baseline['initial_state_rule']}"
     for jn, q in ev.initial_state.items():
         jt = joints[jn].type if jn in joints else "revolute"
-        rows.append(_param("initial position", f"joint {jn}", q, _joint_unit(jt, "position"), state_src))
+        rows.append(_param("initial position", f"joint {jn}", q, joint_unit(jt, "position"), state_src))
     for jd in ctx.model.joints:
         if jd.type in ("revolute", "prismatic"):
             clipped = ((ov or {}).get("joints") or {}).get(jd.name, {}).get("limit_source") or ""
-            rows.append(_param("limits", f"joint {jd.name}", f"[{fmt(jd.lower)}, {fmt(jd.upper)}]", _joint_unit(jd.type, "position"),
+            rows.append(_param("limits", f"joint {jd.name}", f"[{fmt(jd.lower)}, {fmt(jd.upper)}]", joint_unit(jd.type, "position"),
                                f"refine: {clipped}" if clipped else "the input's URDF <limit>"))
     return rows
 

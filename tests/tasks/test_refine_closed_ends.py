@@ -52,7 +52,7 @@ def write_lever_in_slot(folder: Path) -> Path:
 
 def _evaluation_closed(urdf: Path, joint: str):
     """The closed end the geometry of the output gives (what an evaluation of a folder without a refine's record
-    measures: ``asset2sim.tasks.evaluation.evaluate.closed_ends``)."""
+    measures: ``asset2sim.tasks.evaluation.folder_reading.closed_ends``)."""
     closed = measure_closed_ends(UrdfFile(urdf)).closed[joint]
     assert closed.open_range > 0
     return closed

@@ -11,7 +11,7 @@ from asset2sim.engines.source import UrdfFile
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.check import postcheck
 from asset2sim.refined_asset import RefinedAsset
-from asset2sim.tasks.evaluation.evaluate import sim_object
+from asset2sim.tasks.evaluation.folder_reading import sim_object
 from asset2sim.tasks.assemble import write
 from tests.tasks.check.failure_assets import build_tall_faucet
 

@@ -14,7 +14,7 @@ import pytest
 from asset2sim.refined_asset import RefinedAsset
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.evaluation.evaluate import EvaluationError, closed_ends, reference_state, sim_object, task_joints
+from asset2sim.tasks.evaluation.folder_reading import EvaluationError, closed_ends, reference_state, sim_object, task_joints
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.interpret.named_parts import labelled_joints
@@ -109,7 +109,7 @@ def test_closed_end_of_the_demo_lid_comes_from_geometry(demo_root):
 def test_a_joint_that_does_not_open_is_closed_at_its_limit_nearest_zero(tmp_path, demo_root):
     """A joint whose geometry cannot say where it closes (here: no mesh file readable) falls back to its limit nearest 0,
     a continuous one to 0 with a range of pi."""
-    from asset2sim.tasks.evaluation.evaluate import _closed_fallback
+    from asset2sim.tasks.evaluation.folder_reading import _closed_fallback
 
     model = read_urdf(demo_root / "box_lid" / "mobility.urdf", mode="lenient")
     j = model.movable_joints[0]

@@ -9,7 +9,7 @@ import math
 import pytest
 
 from asset2sim.tasks.check.as_asked import as_asked_tier
-from asset2sim.tasks.evaluation.evaluate import file_overlay
+from asset2sim.tasks.evaluation.folder_reading import file_overlay
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.synthesize.context import build_context
 from asset2sim.urdf import read_urdf
