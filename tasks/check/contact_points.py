@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.mesh_io import MeshReadError, read_mesh
+from asset2sim.tasks.ingest.mesh_checks import box_corners
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.urdf import UrdfGeometry, UrdfModel
 
@@ -113,11 +114,6 @@ def handle_points(model: UrdfModel, link: str) -> np.ndarray:
           [g for g in ln.visuals if element_label(g.name) in HANDLE_LABELS]
     pts = [p for p in (geometry_points(g) for g in els) if len(p)]
     return np.concatenate(pts) if pts else np.zeros((0, 3))
-
-
-def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """The 8 corners (8, 3) of the axis-aligned box [``lo`` (3,), ``hi`` (3,)], in their unit."""
-    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], dtype=float)
 
 
 def _session_points(session, link: str) -> np.ndarray:

@@ -18,7 +18,7 @@ from asset2sim.engines.base import SimSession
 from asset2sim.schemas.audit import ValueVerdict
 from asset2sim.schemas.overlay import EstimatorInfo, Inertia, JointDynamics, LinkPhysics, Overlay, RootMount
 from asset2sim.tasks.check import plausibility_bands as bands
-from asset2sim.tasks.check.contact_points import box_corners
+from asset2sim.tasks.ingest.mesh_checks import box_corners
 from asset2sim.tasks.interpret import operating_forces
 from asset2sim.tasks.ingest.declared import DeclaredJoint, DeclaredLink, DeclaredPhysics
 from asset2sim.tasks.interpret import size_priors

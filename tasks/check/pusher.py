@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from asset2sim.engines.base import EngineUnsupported
-from asset2sim.tasks.check.contact_points import box_corners, joint_frame_axis
+from asset2sim.tasks.check.contact_points import joint_frame_axis
+from asset2sim.tasks.ingest.mesh_checks import box_corners
 from asset2sim.tasks.geometry.limits import rigid_group
 from asset2sim.urdf import UrdfModel
 

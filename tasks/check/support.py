@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from asset2sim.tasks.check.contact_points import box_corners
+from asset2sim.tasks.ingest.mesh_checks import box_corners
 
 
 class SupportWatch:

@@ -15,7 +15,8 @@ from asset2sim.engines.source import SimObject
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root_options, joints_between
-from asset2sim.tasks.check.contact_points import box_corners, joint_frame_axis
+from asset2sim.tasks.check.contact_points import joint_frame_axis
+from asset2sim.tasks.ingest.mesh_checks import box_corners
 from asset2sim.tasks.check.metrics import EXPLOSION_JOINT_SPEED_PRISMATIC, EXPLOSION_JOINT_SPEED_REVOLUTE
 from asset2sim.tasks.check.stroke import Reach, reach_stroke
 from asset2sim.tasks.geometry import limits
