@@ -225,14 +225,17 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
             return float("inf"), None
         return m.volume - a.volume - b.volume, m
 
-    tops: dict[int, np.ndarray] = {}
+    tops: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # alive piece -> (largest plane value of each of others, measured)
 
-    def top(i: int) -> np.ndarray:  # the largest plane value of each of others in alive piece i, computed once
-        t = tops.get(i)
-        if t is None:
+    def top(i: int, rows: np.ndarray) -> np.ndarray:  # of others[rows] (two rows or more) in alive piece i, each row measured once
+        value, done = tops.setdefault(i, (np.zeros(len(others)), np.zeros(len(others), bool)))
+        todo = rows[~done[rows]]
+        if len(todo):
+            todo = np.union1d(todo, rows[:2])  # two rows or more: a matrix product
             q = alive[i]
-            t = tops[i] = np.max(others @ q.equations[:, :3].T + q.equations[:, 3], axis=1)
-        return t
+            value[todo] = np.max(others[todo] @ q.equations[:, :3].T + q.equations[:, 3], axis=1)
+            done[todo] = True
+        return value[rows]
 
     def holds_other(m: Piece, i: int, j: int) -> bool:  # whether merging alive pieces i and j into m newly holds one of others
         if not len(others):
@@ -253,7 +256,7 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
             for q in (alive[i], alive[j]):
                 held |= np.max(near @ q.equations[:, :3].T + q.equations[:, 3], axis=1) < threshold
         else:  # a row of a matrix product (two rows or more) reads the same in any such product holding it
-            held = (top(i)[rows] < threshold) | (top(j)[rows] < threshold)
+            held = (top(i, rows) < threshold) | (top(j, rows) < threshold)
         return bool((inside_m & ~held).any())
 
     centres: dict[int, np.ndarray] = {}
@@ -296,6 +299,8 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
             break
         merged.pop((i, j))
         a, b = alive.pop(i), alive.pop(j)
+        for k in (i, j):
+            tops.pop(k, None)
         alive[nxt] = Piece.of(np.vstack([a.points, b.points]), a.sources + tuple(s for s in b.sources if s not in a.sources))
         push_for(nxt)
         nxt += 1
