@@ -207,7 +207,9 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
     Which merges hold one of ``others`` is measured lazily: a pair enters the queue at its volume cost, a lower
     bound of its cost, and is measured when it comes first (re-queued with the penalty when it holds a point), so a
     pair a merge retires before it comes first is never measured. The merges made are the same as when every pair
-    is measured on entry (the queue's order over the measured costs is the same)."""
+    is measured on entry (the queue's order over the measured costs is the same). A piece's planes are measured on
+    each of ``others`` once, when a box first asks for it: a row of a matrix product of two rows or more reads the
+    same, bit for bit, in any such product holding it (a lone row, a matrix-vector product, is measured as such)."""
     pieces = list(pieces)
     if len(pieces) <= limit:
         return pieces
@@ -225,39 +227,28 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
             return float("inf"), None
         return m.volume - a.volume - b.volume, m
 
-    tops: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # alive piece -> (largest plane value of each of others, measured)
+    tops: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # piece -> (largest plane value of each of others, measured)
 
-    def top(i: int, rows: np.ndarray) -> np.ndarray:  # of others[rows] (two rows or more) in alive piece i, each row measured once
+    def top(i: int, rows: np.ndarray) -> np.ndarray:  # of others[rows] in alive piece i
+        q = alive[i]
+        if len(rows) < 2:
+            return np.max(others[rows] @ q.equations[:, :3].T + q.equations[:, 3], axis=1)
         value, done = tops.setdefault(i, (np.zeros(len(others)), np.zeros(len(others), bool)))
         todo = rows[~done[rows]]
         if len(todo):
-            todo = np.union1d(todo, rows[:2])  # two rows or more: a matrix product
-            q = alive[i]
+            todo = np.union1d(todo, rows[:2])
             value[todo] = np.max(others[todo] @ q.equations[:, :3].T + q.equations[:, 3], axis=1)
             done[todo] = True
         return value[rows]
 
     def holds_other(m: Piece, i: int, j: int) -> bool:  # whether merging alive pieces i and j into m newly holds one of others
-        if not len(others):
-            return False
         lo, hi = m.points.min(axis=0), m.points.max(axis=0)
         start = np.searchsorted(xs, lo[0], "left")
         band = others[start:np.searchsorted(xs, hi[0], "right")]
         rows = start + np.flatnonzero(np.all((band[:, 1:] >= lo[1:]) & (band[:, 1:] <= hi[1:]), axis=1))
-        if not len(rows):
-            return False
-        near = others[rows]
         threshold = -_INSIDE_EPS * float(np.ptp(m.points, axis=0).max())
-        inside_m = np.max(near @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < threshold
-        if not inside_m.any():
-            return False
-        if len(rows) < 2:  # a one-row product rounds as a matrix-vector product: measured as such
-            held = np.zeros(1, bool)
-            for q in (alive[i], alive[j]):
-                held |= np.max(near @ q.equations[:, :3].T + q.equations[:, 3], axis=1) < threshold
-        else:  # a row of a matrix product (two rows or more) reads the same in any such product holding it
-            held = (top(i, rows) < threshold) | (top(j, rows) < threshold)
-        return bool((inside_m & ~held).any())
+        inside = np.max(others[rows] @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < threshold
+        return bool(inside.any() and (inside & (top(i, rows) >= threshold) & (top(j, rows) >= threshold)).any())
 
     centres: dict[int, np.ndarray] = {}
 
@@ -299,8 +290,6 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
             break
         merged.pop((i, j))
         a, b = alive.pop(i), alive.pop(j)
-        for k in (i, j):
-            tops.pop(k, None)
         alive[nxt] = Piece.of(np.vstack([a.points, b.points]), a.sources + tuple(s for s in b.sources if s not in a.sources))
         push_for(nxt)
         nxt += 1
