@@ -207,7 +207,9 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
     Which merges hold one of ``others`` is measured lazily: a pair enters the queue at its volume cost, a lower
     bound of its cost, and is measured when it comes first (re-queued with the penalty when it holds a point), so a
     pair a merge retires before it comes first is never measured. The merges made are the same as when every pair
-    is measured on entry (the queue's order over the measured costs is the same)."""
+    is measured on entry (the queue's order over the measured costs is the same). A piece's planes are measured on
+    each of ``others`` once, when a box first asks for it: a row of a matrix product of two rows or more reads the
+    same, bit for bit, in any such product holding it (a lone row, a matrix-vector product, is measured as such)."""
     pieces = list(pieces)
     if len(pieces) <= limit:
         return pieces
@@ -225,17 +227,28 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
             return float("inf"), None
         return m.volume - a.volume - b.volume, m
 
-    def holds_other(m: Piece, a: Piece, b: Piece) -> bool:  # whether merging a and b into m newly holds one of others
-        if not len(others):
-            return False
+    tops: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # piece -> (largest plane value of each of others, measured)
+
+    def top(i: int, rows: np.ndarray) -> np.ndarray:  # of others[rows] in alive piece i
+        q = alive[i]
+        if len(rows) < 2:
+            return np.max(others[rows] @ q.equations[:, :3].T + q.equations[:, 3], axis=1)
+        value, done = tops.setdefault(i, (np.zeros(len(others)), np.zeros(len(others), bool)))
+        todo = rows[~done[rows]]
+        if len(todo):
+            todo = np.union1d(todo, rows[:2])
+            value[todo] = np.max(others[todo] @ q.equations[:, :3].T + q.equations[:, 3], axis=1)
+            done[todo] = True
+        return value[rows]
+
+    def holds_other(m: Piece, i: int, j: int) -> bool:  # whether merging alive pieces i and j into m newly holds one of others
         lo, hi = m.points.min(axis=0), m.points.max(axis=0)
-        band = others[np.searchsorted(xs, lo[0], "left"):np.searchsorted(xs, hi[0], "right")]
-        near = band[np.all((band[:, 1:] >= lo[1:]) & (band[:, 1:] <= hi[1:]), axis=1)]
-        if not len(near):
-            return False
-        size = float(np.ptp(m.points, axis=0).max())
-        inside_m = np.max(near @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < -_INSIDE_EPS * size
-        return bool(inside_m.any() and _newly_inside(near, inside_m, (a, b), -_INSIDE_EPS * size))
+        start = np.searchsorted(xs, lo[0], "left")
+        band = others[start:np.searchsorted(xs, hi[0], "right")]
+        rows = start + np.flatnonzero(np.all((band[:, 1:] >= lo[1:]) & (band[:, 1:] <= hi[1:]), axis=1))
+        threshold = -_INSIDE_EPS * float(np.ptp(m.points, axis=0).max())
+        inside = np.max(others[rows] @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < threshold
+        return bool(inside.any() and (inside & (top(i, rows) >= threshold) & (top(j, rows) >= threshold)).any())
 
     centres: dict[int, np.ndarray] = {}
 
@@ -270,7 +283,7 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
         c, i, j, measured = heapq.heappop(heap)
         if i not in alive or j not in alive:
             continue
-        if not measured and holds_other(merged[(i, j)], alive[i], alive[j]):
+        if not measured and holds_other(merged[(i, j)], i, j):
             heapq.heappush(heap, (c + penalty, i, j, True))
             continue
         if free_only and c >= penalty:
@@ -287,31 +300,6 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
             rest.append(Piece.of(np.vstack([a.points, b.points]), a.sources + b.sources))
         return rest
     return list(alive.values())
-
-
-def _newly_inside(near: np.ndarray, inside_m: np.ndarray, parts: tuple[Piece, ...], threshold: float) -> bool:
-    """Whether a point of ``near`` (k, 3) m flagged in ``inside_m`` (k,) bool lies inside none of ``parts``
-    (the largest plane value of a point below ``threshold`` m: inside). The parts' planes are measured on the
-    flagged points only when they are at most half of ``near``; where one of them reads within
-    :func:`_rounding_margin` of ``threshold`` (a row's value may round differently in a smaller product), and
-    when most points are flagged, all of ``near`` is measured as a whole instead."""
-
-    def whole() -> bool:
-        full = np.zeros(len(near), bool)
-        for q in parts:
-            full |= np.max(near @ q.equations[:, :3].T + q.equations[:, 3], axis=1) < threshold
-        return bool((inside_m & ~full).any())
-
-    if 2 * int(np.count_nonzero(inside_m)) > len(near):
-        return whole()
-    sub = near[inside_m]
-    before = np.zeros(len(sub), bool)
-    for p in parts:
-        v = np.max(sub @ p.equations[:, :3].T + p.equations[:, 3], axis=1)
-        if np.any(np.abs(v - threshold) <= _rounding_margin(sub, p.equations)):
-            return whole()
-        before |= v < threshold
-    return bool((~before).any())
 
 
 def clip_piece(piece: Piece, normal: np.ndarray, offset: float) -> Piece | None:

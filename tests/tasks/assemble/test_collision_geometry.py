@@ -190,7 +190,10 @@ def _merge_measuring_every_pair(pieces, limit, others, free_only, neighbours=8):
         size = float(np.ptp(m.points, axis=0).max())
         if len(near):
             inside = np.max(near @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < -cp._INSIDE_EPS * size
-            if inside.any() and cp._newly_inside(near, inside, (a, b), -cp._INSIDE_EPS * size):
+            held = np.zeros(len(near), bool)
+            for q in (a, b):
+                held |= np.max(near @ q.equations[:, :3].T + q.equations[:, 3], axis=1) < -cp._INSIDE_EPS * size
+            if (inside & ~held).any():
                 c += penalty
         return c, m
 
@@ -929,24 +932,16 @@ def test_the_quick_outside_test_never_contradicts_the_full_one():
     assert not cp._surely_outside(np.zeros((0, 3)), box, tol)
 
 
-def test_newly_inside_matches_the_full_measure_at_the_threshold():
-    """Points of another link inside a merged hull and, flagged or not, inside one of its parts: the answer on the
-    flagged points alone equals the full measure, also for points exactly on a part's face (the fallback)."""
+def test_a_row_of_a_plane_product_reads_the_same_in_any_product_holding_it():
+    """merge_pieces measures a piece's planes on all points of another link once and reads the rows a box holds
+    from it: each row of a matrix product of two rows or more equals that row in a product of fewer rows."""
     rng = np.random.default_rng(3)
-    a = cp.Piece.of(_box([0, 0, 0], [0.02, 0.02, 0.02])[0])
-    b = cp.Piece.of(_box([0.03, 0, 0], [0.05, 0.02, 0.02])[0])
-    m = cp.Piece.of(np.vstack([a.points, b.points]))
-    for near in (rng.uniform([0, 0, 0], [0.05, 0.02, 0.02], (400, 3)),  # some in the gap between a and b
-                 rng.uniform([0, 0, 0], [0.02, 0.02, 0.02], (50, 3)),  # all inside a
-                 np.array([[0.02, 0.01, 0.01], [0.025, 0.01, 0.01]])):  # on a's face, and in the gap
-        size = float(np.ptp(m.points, axis=0).max())
-        thr = -cp._INSIDE_EPS * size
-        inside_m = np.max(near @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < thr
-        before = np.zeros(len(near), bool)
-        for p in (a, b):
-            before |= np.max(near @ p.equations[:, :3].T + p.equations[:, 3], axis=1) < thr
-        assert cp._newly_inside(near, inside_m, (a, b), thr) == bool((inside_m & ~before).any())
-    assert cp._newly_inside(np.array([[0.025, 0.01, 0.01]]), np.array([True]), (a, b), thr)  # the gap: newly held
+    for _ in range(200):
+        points, planes = rng.normal(size=(int(rng.integers(2, 3000)), 3)), rng.normal(size=(int(rng.integers(4, 400)), 4))
+        full = points @ planes[:, :3].T + planes[:, 3]
+        rows = np.flatnonzero(rng.random(len(points)) < rng.random())
+        if len(rows) >= 2:
+            assert np.array_equal(points[rows] @ planes[:, :3].T + planes[:, 3], full[rows])
 
 
 @pytest.mark.slow  # end to end: a real object's whole decomposition
