@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.engines.base import EngineUnavailable, SessionDefaults, SessionOptions, register_engine, unsupported
-from asset2sim.engines.loading import collision_pieces, joint_tables, read_urdf
+from asset2sim.engines.loading import collision_pieces, read_urdf
 from asset2sim.engines.step_budget import spend
 from asset2sim.extras import pxr_modules
 
@@ -126,9 +126,7 @@ class OvPhysxSession(SessionDefaults):
             raise EngineUnavailable(f"engine 'ovphysx' runs the USD export, and {self.usd} does not exist "
                                     "(asset2sim export OUT --format usd)")
         self.urdf = read_urdf(urdf_path)
-        tables = joint_tables(self.urdf)
-        self.joint_names, self.joint_types = tables.names, tables.types
-        self.joint_limits, self.joint_child = tables.limits, tables.child
+        self._set_joint_tables(self.urdf)
         self.link_names = list(self.urdf.tree_order())
         usd_stage = Usd.Stage.Open(str(self.usd))
         prim_of_joint: dict[str, str] = {}
