@@ -198,13 +198,16 @@ class OvPhysxSession(SessionDefaults):
         binding.read(out)
         return out
 
+    def _by_joint(self, binding) -> dict[str, float]:
+        """The first articulation's DOF values of ``binding``, by URDF joint, along the URDF axes."""
+        values = self._read(binding)[0]
+        return {j: self._sign[j] * float(values[i]) for j, i in self._dof.items() if j in self._sign}
+
     def joint_positions(self) -> dict[str, float]:
-        q = self._read(self._q)[0]
-        return {j: self._sign[j] * float(q[i]) for j, i in self._dof.items() if j in self._sign}
+        return self._by_joint(self._q)
 
     def joint_velocities(self) -> dict[str, float]:
-        v = self._read(self._qd)[0]
-        return {j: self._sign[j] * float(v[i]) for j, i in self._dof.items() if j in self._sign}
+        return self._by_joint(self._qd)
 
     def joint_state(self, joint: str) -> tuple[float, float]:
         i = self._dof[joint]

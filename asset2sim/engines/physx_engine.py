@@ -55,6 +55,12 @@ def _axis_frame(axis: np.ndarray) -> np.ndarray:
     return t
 
 
+def _hull_vertices(shape, pose: np.ndarray) -> np.ndarray:
+    """Vertices (k, 3) m of a cooked convex mesh ``shape``, scaled, in the frame where its pose is ``pose`` (4, 4)."""
+    v = np.asarray(shape.get_vertices(), float) * np.asarray(shape.get_scale(), float)
+    return v @ pose[:3, :3].T + pose[:3, 3]
+
+
 def new_scene(gravity: float = -9.81, timestep: float = 1.0 / 240.0) -> "sapien.Scene":
     """A SAPIEN scene of its own CPU PhysX system: ``gravity`` m/s^2 along z,
     PGS, time step ``timestep`` s (SAPIEN's global configuration kept)."""
@@ -176,7 +182,9 @@ class PhysXSession(ArrayJoints, SessionDefaults):
         else:
             self.scene, self.system, self.dt = scene, scene.physx_system, float(scene.get_timestep())
         self.ground = self._add_ground() if options.ground and (self._owns_scene or ground) else None
-        self._add_articulation(self._articulation_builder(urdf_path), pieces, urdf_path)
+        builder = fill_articulation_builder(self.scene.create_articulation_builder(), self.urdf, urdf_path,
+                                            fixed_base=options.fixed_base, notes=self.notes)
+        self._add_articulation(builder, pieces, urdf_path)
         self._set_joint_tables(self.urdf)
         self.link_names = list(self.links)
         self._states: dict[int, tuple] = {}
@@ -202,11 +210,6 @@ class PhysXSession(ArrayJoints, SessionDefaults):
         self._ground_entity = ent
         return comp
 
-    def _articulation_builder(self, urdf_path: Path):
-        """SAPIEN's articulation builder: every link's joint (x along the URDF axis) and inertia."""
-        return fill_articulation_builder(self.scene.create_articulation_builder(), self.urdf, urdf_path,
-                                         fixed_base=self.options.fixed_base, notes=self.notes)
-
     def _add_articulation(self, builder, pieces: dict, urdf_path: Path) -> None:
         """Build the articulation with its collision shapes into the scene (``links``, ``art``)."""
         entities = builder.build_entities(fix_root_link=self.options.fixed_base)
@@ -214,15 +217,12 @@ class PhysXSession(ArrayJoints, SessionDefaults):
         for ent in entities:
             comp = ent.find_component_by_type(physx.PhysxArticulationLinkComponent)
             self.links[comp.name] = comp
-            self._attach_shapes(comp, pieces[comp.name], urdf_path)
+            attach_collision_shapes(comp, self.urdf, pieces[comp.name], urdf_path, self.notes)
         for ent in entities:
             self.scene.add_entity(ent)
         self._entities = list(entities)
         self.art = entities[0].find_component_by_type(physx.PhysxArticulationLinkComponent).articulation
         configure_articulation(self.art)
-
-    def _attach_shapes(self, comp, pieces: list, urdf_path: Path) -> None:
-        attach_collision_shapes(comp, self.urdf, pieces, urdf_path, self.notes)
 
     def _passive_drives(self, urdf_path: Path) -> None:
         """Joint tables and each movable joint's passive zero-velocity drive
@@ -293,9 +293,7 @@ class PhysXSession(ArrayJoints, SessionDefaults):
         out = []
         for shape in self.links[link].get_collision_shapes():
             if isinstance(shape, physx.PhysxCollisionShapeConvexMesh):
-                t = shape.get_local_pose().to_transformation_matrix()
-                v = np.asarray(shape.get_vertices(), float) * np.asarray(shape.get_scale(), float)
-                out.append(v @ t[:3, :3].T + t[:3, 3])
+                out.append(_hull_vertices(shape, shape.get_local_pose().to_transformation_matrix()))
         return np.concatenate(out) if out else np.zeros((0, 3))
 
     def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
@@ -345,10 +343,9 @@ class PhysXSession(ArrayJoints, SessionDefaults):
         for comp in self.links.values():
             link_pose = comp.get_pose().to_transformation_matrix()
             for shape in comp.get_collision_shapes():
-                t = link_pose @ shape.get_local_pose().to_transformation_matrix()
                 if isinstance(shape, physx.PhysxCollisionShapeConvexMesh):
-                    v = np.asarray(shape.get_vertices(), float) * np.asarray(shape.get_scale(), float)
-                    low = min(low, float((v @ t[:3, :3].T + t[:3, 3])[:, 2].min()))
+                    t = link_pose @ shape.get_local_pose().to_transformation_matrix()
+                    low = min(low, float(_hull_vertices(shape, t)[:, 2].min()))
                 else:
                     aabb = comp.compute_global_aabb_tight()
                     low = min(low, float(aabb[0][2]))
