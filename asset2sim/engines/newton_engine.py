@@ -23,7 +23,7 @@ from asset2sim.engines.base import (ArrayJoints, ContactPair, EngineUnsupported,
                                     unsupported)
 from asset2sim.engines.loading import (BOX_CORNERS, BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS,
                                        BULLET_PLANE_FRICTION, CollisionPiece, collision_pieces, read_urdf)
-from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
+from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, quat_wxyz_to_xyzw
 from asset2sim.mesh_io import convex_hull_mesh
 from asset2sim.engines.step_budget import spend
 
@@ -274,8 +274,7 @@ class NewtonSession(ArrayJoints, SessionDefaults):
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         if self.urdf.root in self._welded:
             pose = self._welded[self.urdf.root]
-            w, x, y, z = matrix_quat_wxyz(pose[:3, :3])
-            return pose[:3, 3].copy(), np.array([x, y, z, w], float)
+            return pose[:3, 3].copy(), quat_wxyz_to_xyzw(matrix_quat_wxyz(pose[:3, :3]))
         t = self.state0.body_q.numpy()[self._body[self.urdf.root]]
         q = np.array(t[3:7], float)
         n = np.linalg.norm(q)
@@ -319,8 +318,7 @@ class NewtonSession(ArrayJoints, SessionDefaults):
         bq = np.zeros((len(self._full_body), 7), np.float32)
         for name, i in self._full_body.items():
             p, r = self.link_frame(name)
-            w, x, y, z = matrix_quat_wxyz(r)
-            bq[i] = (*p, x, y, z, w)
+            bq[i] = (*p, *quat_wxyz_to_xyzw(matrix_quat_wxyz(r)))
         self._query_state.body_q.assign(bq)
         return self._query_state
 
@@ -379,10 +377,7 @@ class NewtonSession(ArrayJoints, SessionDefaults):
         dofs = {n: (self._qadr[n], self._dadr[n]) for n in self._qadr}
         held = held_physics_of_model(self.model, self.state0.joint_q.numpy(), self._body, dofs, source="urdf")
         if self._welded:  # as built, before the weld: not simulated
-            m, com, inertia = self.full_model.body_mass.numpy(), self.full_model.body_com.numpy(), self.full_model.body_inertia.numpy()
-            for n in self._welded:
-                i = self._full_body[n]
-                held.links[n] = HeldLink(mass=float(m[i]), com=np.array(com[i], float), principal=principal_moments(inertia[i]))
+            held.links.update(_held_links(self.full_model, {n: self._full_body[n] for n in self._welded}))
             held.welded_to_world = list(self._welded)
         return held
 
@@ -429,8 +424,14 @@ def _body_point(t: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 
 def _wp_transform(wp, pose: np.ndarray):
-    w, x, y, z = (float(v) for v in matrix_quat_wxyz(pose[:3, :3]))
-    return wp.transform(wp.vec3(*map(float, pose[:3, 3])), wp.quat(x, y, z, w))
+    return wp.transform(wp.vec3(*map(float, pose[:3, 3])), wp.quat(*quat_wxyz_to_xyzw(matrix_quat_wxyz(pose[:3, :3]))))
+
+
+def _held_links(model, bodies: dict[str, int]) -> dict[str, HeldLink]:
+    """Mass, COM and principal moments of the bodies (link -> body index) of a finalized ``newton.Model``."""
+    mass, com, inertia = model.body_mass.numpy(), model.body_com.numpy(), model.body_inertia.numpy()
+    return {n: HeldLink(mass=float(mass[i]), com=np.array(com[i], float), principal=principal_moments(inertia[i]))
+            for n, i in bodies.items()}
 
 
 def held_physics_of_model(model, joint_q: np.ndarray, bodies: dict[str, int], dofs: dict[str, tuple[int, int]],
@@ -439,9 +440,7 @@ def held_physics_of_model(model, joint_q: np.ndarray, bodies: dict[str, int], do
     of +-:data:`NEWTON_UNLIMITED` or more read as unlimited; reference None
     without stiffness). ``bodies``: link -> body index; ``dofs``: joint ->
     (q index, dof index)."""
-    mass, com, inertia = model.body_mass.numpy(), model.body_com.numpy(), model.body_inertia.numpy()
-    links = {n: HeldLink(mass=float(mass[i]), com=np.array(com[i], float), principal=principal_moments(inertia[i]))
-             for n, i in bodies.items()}
+    links = _held_links(model, bodies)
     lo, hi = model.joint_limit_lower.numpy(), model.joint_limit_upper.numpy()
     kd, fr, ke = model.joint_target_kd.numpy(), model.joint_friction.numpy(), model.joint_target_ke.numpy()
     tp = model.joint_target_q.numpy()  # per coordinate, like joint_q
