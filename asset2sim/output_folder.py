@@ -14,7 +14,6 @@ are read through :func:`read_record` (regular files only). Errors are
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import json
 import os
 import shutil
@@ -27,6 +26,7 @@ from typing import Any, Iterable, Iterator
 from asset2sim import atomic
 from asset2sim.output_paths import (MARKER_NAME, RECORD_NAME, OutputError, _entries, _prune_empty, _remove_with_temps, _safe_rel,
                                     _within, check_location, write_inside)
+from asset2sim.output_staging import is_staging_folder, remove_stale, staging_folder, try_lock
 
 #: The files and folders of an output folder (the SPEC's contract and the extras).
 URDF_NAME = "mobility.urdf"
@@ -113,6 +113,22 @@ _ACTIVE_LOCK = threading.Lock()
 _GUARDS: list["_Guard"] = []
 
 
+def _observe(root: Path, owner: "OwnedFolder") -> "OwnedFolder | None":
+    """Record the atomic writes into ``root`` in ``owner`` (:func:`_dispatch`); returns the owner it replaces."""
+    with _ACTIVE_LOCK:
+        previous = _ACTIVE.get(root)
+        _ACTIVE[root] = owner
+        atomic.add_observer(_dispatch)
+    return previous
+
+
+def _stop_observing_if_idle() -> None:
+    """Drop :func:`_dispatch` from the atomic writer's observers when no folder is owned or guarded (under
+    ``_ACTIVE_LOCK``)."""
+    if not _ACTIVE and not _GUARDS:
+        atomic.remove_observer(_dispatch)
+
+
 def _dispatch(paths: list[Path]) -> None:
     """The atomic writer's observer: hands each destination to the guarded and the owned folders (either may
     refuse it)."""
@@ -151,8 +167,7 @@ def guarding(folder: Path | str) -> Iterator[Path]:
     finally:
         with _ACTIVE_LOCK:
             _GUARDS.remove(guard)
-            if not _ACTIVE and not _GUARDS:
-                atomic.remove_observer(_dispatch)
+            _stop_observing_if_idle()
 
 
 def check_destination(path: Path | str, folder: Path | str) -> Path:
@@ -296,8 +311,7 @@ class OwnedFolder:
         with _ACTIVE_LOCK:
             if _ACTIVE.get(self.root) is self:
                 del _ACTIVE[self.root]
-            if not _ACTIVE and not _GUARDS:
-                atomic.remove_observer(_dispatch)
+            _stop_observing_if_idle()
 
 
 def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = False) -> OwnedFolder:
@@ -341,18 +355,8 @@ def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = Fals
         owner._save()
     except OSError as exc:
         raise _write_failed(given, exc) from exc
-    with _ACTIVE_LOCK:
-        _ACTIVE[root] = owner
-        atomic.add_observer(_dispatch)
+    _observe(root, owner)
     return owner
-
-
-STAGING_SUFFIX = ".asset2sim-next"
-
-
-def staging_folder(root: Path) -> Path:
-    """``.<name>.asset2sim-next`` beside ``root``."""
-    return root.parent / f".{root.name}{STAGING_SUFFIX}"
 
 
 def _start_staged(root: Path, given: Path, src: Path, previous: set[str], foreign: list[str]) -> "OwnedFolder | None":
@@ -369,17 +373,17 @@ def _start_staged(root: Path, given: Path, src: Path, previous: set[str], foreig
         return None
     staging = staging_folder(root)
     if os.path.lexists(staging):
-        if not _ours(staging):
+        if not is_staging_folder(staging):
             raise OutputError(f"{staging} (the staging folder of {given}) exists and is not asset2sim's; remove it",
                               "OUTPUT_NAME_CONFLICT", staging)
-        if not _remove_stale(staging):
+        if not remove_stale(staging):
             raise OutputError(f"{staging} (the staging folder of {given}) is being written by another run; wait for it to end",
                               "OUTPUT_NAME_CONFLICT", staging)
     try:
         staging.mkdir(mode=stat.S_IMODE(root.stat().st_mode))
     except OSError:
         return None
-    held = _try_lock(staging)
+    held = try_lock(staging)
     owner = OwnedFolder(root=staging.resolve(), given=given, source=src, created=True, final=root, _held=held,
                         replaced=tuple(sorted(previous)))
     try:
@@ -387,46 +391,8 @@ def _start_staged(root: Path, given: Path, src: Path, previous: set[str], foreig
     except OSError as exc:
         shutil.rmtree(staging, ignore_errors=True)
         raise _write_failed(given, exc) from exc
-    with _ACTIVE_LOCK:
-        _ACTIVE[owner.root] = owner
-        atomic.add_observer(_dispatch)
+    _observe(owner.root, owner)
     return owner
-
-
-def _ours(staging: Path) -> bool:
-    """A staging folder asset2sim made: a real folder, empty or holding its bookkeeping files."""
-    try:
-        return staging.is_dir() and not staging.is_symlink() and (
-            not any(staging.iterdir()) or any((staging / n).exists() for n in _BOOKKEEPING))
-    except OSError:
-        return False
-
-
-def _try_lock(folder: Path) -> int | None:
-    """A descriptor of ``folder`` holding an exclusive ``flock`` (released when closed, or when the process ends,
-    killed or not); None when another process holds it or the folder cannot be locked."""
-    try:
-        fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
-    except OSError:
-        return None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        os.close(fd)
-        return None
-    return fd
-
-
-def _remove_stale(staging: Path) -> bool:
-    """Remove a staging folder no live run holds (a killed run's leftovers); False when a run still writes it."""
-    fd = _try_lock(staging)
-    if fd is None:
-        return False
-    try:
-        shutil.rmtree(staging, ignore_errors=True)
-    finally:
-        os.close(fd)
-    return not os.path.lexists(staging)
 
 
 def remove_stale_staging(out_dir: Path | str) -> bool:
@@ -438,7 +404,7 @@ def remove_stale_staging(out_dir: Path | str) -> bool:
     except (OSError, RuntimeError):
         return False
     staging = staging_folder(root)
-    return os.path.lexists(staging) and _ours(staging) and _remove_stale(staging)
+    return os.path.lexists(staging) and is_staging_folder(staging) and remove_stale(staging)
 
 
 def remove_owned(out_dir: Path | str) -> list[str]:
@@ -501,10 +467,7 @@ def adopting(path: Path | str) -> Iterator[OwnedFolder | None]:
             return
         root = named.resolve()
         owner = OwnedFolder(root=root, given=named, source=None, files=_listed(root / RECORD_NAME))
-        with _ACTIVE_LOCK:
-            previous = _ACTIVE.get(root)
-            _ACTIVE[root] = owner
-            atomic.add_observer(_dispatch)
+        previous = _observe(root, owner)
         try:
             yield owner
         finally:
@@ -513,5 +476,4 @@ def adopting(path: Path | str) -> Iterator[OwnedFolder | None]:
                     _ACTIVE[root] = previous
                 elif _ACTIVE.get(root) is owner:
                     del _ACTIVE[root]
-                if not _ACTIVE and not _GUARDS:
-                    atomic.remove_observer(_dispatch)
+                _stop_observing_if_idle()

@@ -18,7 +18,7 @@ import numpy as np
 
 from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
                                     SessionOptions, principal_moments)
-from asset2sim.engines.loading import BOX_CORNERS, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, collision_pieces, joint_tables, read_urdf
+from asset2sim.engines.loading import BOX_CORNERS, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, collision_pieces, read_urdf
 from asset2sim.frames import quat_wxyz_matrix
 
 
@@ -72,9 +72,7 @@ class FakeSession(SessionDefaults):
         self.options = options
         self.behaviour = behaviour or _DEFAULT_BEHAVIOUR
         self.dt = options.conventions.timestep
-        tables = joint_tables(self.model)
-        self.joint_names, self.joint_types = tables.names, tables.types
-        self.joint_limits, self.joint_child = tables.limits, tables.child
+        self._set_joint_tables(self.model)
         self.link_names = self.model.tree_order()
         self.steps = 0
         self._anchor = {n: (0.0, 0) for n in self.joint_names}  # value, step when set

@@ -17,7 +17,8 @@ from asset2sim.tasks.check.parity import evaluate_engines, parity_table
 from asset2sim import output_folder
 from asset2sim.formats import FORMATS
 from asset2sim.formats.mjcf.export import check_mjcf, export_mjcf
-from asset2sim.formats.usd.export import check_usd, export_usd
+from asset2sim.formats.usd.check import check_usd
+from asset2sim.formats.usd.export import export_usd
 from asset2sim.output_folder import URDF_NAME
 
 NAME = "export"

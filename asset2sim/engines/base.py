@@ -322,6 +322,41 @@ class SessionDefaults:
     def discard_state(self, handle: int) -> None:
         self._states.pop(handle, None)
 
+    def _set_joint_tables(self, model) -> None:
+        """``joint_names``, ``joint_types``, ``joint_limits`` and ``joint_child`` of the movable joints of ``model``
+        (an :class:`~asset2sim.urdf.UrdfModel`), in file order."""
+        self.joint_names = [j.name for j in model.movable_joints]
+        self.joint_types = {j.name: j.type for j in model.movable_joints}
+        self.joint_limits = {j.name: (j.lower, j.upper) for j in model.movable_joints}
+        self.joint_child = {j.name: j.child for j in model.movable_joints}
+
+
+class ArrayJoints:
+    """Mixed into a session whose engine holds joint positions and velocities in flat arrays: its joint queries.
+    The session gives ``_qadr`` / ``_dadr`` (movable joint -> index of its position / velocity), ``_joint_q()`` /
+    ``_joint_qd()`` (the arrays, writable: views or copies) and ``_put_joints(q, qd)`` (writes both back and updates
+    the link poses)."""
+
+    def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
+        jq, jd = self._joint_q(), self._joint_qd()
+        for name, v in q.items():
+            if name in self._qadr:
+                jq[self._qadr[name]] = float(v)
+                if zero_velocity:
+                    jd[self._dadr[name]] = 0.0
+        self._put_joints(jq, jd)
+
+    def joint_positions(self) -> dict[str, float]:
+        jq = self._joint_q()
+        return {n: float(jq[a]) for n, a in self._qadr.items()}
+
+    def joint_velocities(self) -> dict[str, float]:
+        jd = self._joint_qd()
+        return {n: float(jd[a]) for n, a in self._dadr.items()}
+
+    def joint_state(self, joint: str) -> tuple[float, float]:
+        return float(self._joint_q()[self._qadr[joint]]), float(self._joint_qd()[self._dadr[joint]])
+
 
 class ShapeWorld(Protocol):
     """Free static convex shapes in a private collision world: distance queries."""

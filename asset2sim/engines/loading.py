@@ -34,24 +34,6 @@ def read_urdf(path: Path | str) -> UrdfModel:
     return urdf.read_urdf(path, joint_types=SIMULATED_JOINT_TYPES)
 
 
-@dataclass(frozen=True, slots=True)
-class JointTables:
-    """The movable joints of a model, in file order (:func:`joint_tables`): ``names``, ``types`` (joint -> URDF
-    type), ``limits`` (joint -> (lower, upper), rad or m) and ``child`` (joint -> child link)."""
-
-    names: list[str]
-    types: dict[str, str]
-    limits: dict[str, tuple[float, float]]
-    child: dict[str, str]
-
-
-def joint_tables(model: UrdfModel) -> JointTables:
-    """The names, types, limits and child links of the movable joints of ``model``."""
-    movable = model.movable_joints
-    return JointTables([j.name for j in movable], {j.name: j.type for j in movable}, {j.name: (j.lower, j.upper) for j in movable},
-                       {j.name: j.child for j in movable})
-
-
 def link_friction(model: UrdfModel, link: str) -> float:
     """PyBullet's contact friction of a link on the ground plane: its lateral friction x the plane's."""
     lat = model.links[link].lateral_friction

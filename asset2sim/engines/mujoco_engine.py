@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
+from asset2sim.engines.base import (ArrayJoints, ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
                                     SessionOptions, penetration_sum, register_engine, register_file_reader)
-from asset2sim.engines.loading import BOX_CORNERS, joint_tables, read_urdf
+from asset2sim.engines.loading import BOX_CORNERS, read_urdf
 from asset2sim.engines.mjcf import GROUND, KEYFRAME, MjcfError, lowest_point, mujoco_messages, urdf_to_mjcf
 from asset2sim.engines.mjcf.base import load_mujoco as _mujoco, mesh_vertices, safe_name
 from asset2sim.engines.step_budget import spend
@@ -27,7 +27,7 @@ def _compile(load, path) -> object:
         raise MjcfError(f"MuJoCo could not compile {path}: {exc}") from exc
 
 
-class MuJoCoSession(SessionDefaults):
+class MuJoCoSession(ArrayJoints, SessionDefaults):
     """A :class:`~asset2sim.engines.base.SimSession` in MuJoCo, compiled from
     :func:`urdf_to_mjcf` in memory (links without ``<inertial>``: PyBullet's
     default); ``notes``: what the conversion changed (UrdfError, MjcfError)."""
@@ -43,9 +43,8 @@ class MuJoCoSession(SessionDefaults):
         self.m = _compile(lambda: mujoco.MjModel.from_xml_string(self.build.xml, assets=self.build.assets()), urdf_path)
         self.d = mujoco.MjData(self.m)
         self.urdf = read_urdf(urdf_path)
-        self.joint_names = list(self.build.joint_names)
-        tables = joint_tables(self.urdf)
-        self.joint_types, self.joint_limits, self.joint_child = tables.types, tables.limits, tables.child
+        self._set_joint_tables(self.urdf)
+        self.joint_names = list(self.build.joint_names)  # MuJoCo's compiled order
         self.link_names = [mujoco.mj_id2name(self.m, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(1, self.m.nbody)]
         self._body = {n: b + 1 for b, n in enumerate(self.link_names)}
         self._geoms: dict[str, list[int]] = {n: [] for n in self.link_names}
@@ -68,24 +67,14 @@ class MuJoCoSession(SessionDefaults):
         mujoco.mj_forward(self.m, self.d)
 
     # ------------------------------------------------------------------ state
-    def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
-        for name, v in q.items():
-            a = self._qadr.get(name)
-            if a is None:
-                continue
-            self.d.qpos[a] = float(v)
-            if zero_velocity:
-                self.d.qvel[self._dadr[name]] = 0.0
-        self._mj.mj_forward(self.m, self.d)
+    def _joint_q(self) -> np.ndarray:
+        return self.d.qpos
 
-    def joint_positions(self) -> dict[str, float]:
-        return {n: float(self.d.qpos[a]) for n, a in self._qadr.items()}
+    def _joint_qd(self) -> np.ndarray:
+        return self.d.qvel
 
-    def joint_velocities(self) -> dict[str, float]:
-        return {n: float(self.d.qvel[a]) for n, a in self._dadr.items()}
-
-    def joint_state(self, joint: str) -> tuple[float, float]:
-        return float(self.d.qpos[self._qadr[joint]]), float(self.d.qvel[self._dadr[joint]])
+    def _put_joints(self, q: np.ndarray, qd: np.ndarray) -> None:
+        self._mj.mj_forward(self.m, self.d)  # q, qd: MjData's own arrays
 
     def joint_axis(self, joint: str) -> np.ndarray:
         jid = self._mj.mj_name2id(self.m, self._mj.mjtObj.mjOBJ_JOINT, joint)

@@ -14,17 +14,16 @@ extra) are imported when a session opens or a USD is read back.
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
+from asset2sim.engines.base import (ArrayJoints, ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
                                     SessionOptions, penetration_sum, principal_moments, register_engine, register_file_reader,
                                     unsupported)
 from asset2sim.engines.loading import (BOX_CORNERS, BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS,
-                                       BULLET_PLANE_FRICTION, CollisionPiece, collision_pieces, joint_tables, read_urdf)
-from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
+                                       BULLET_PLANE_FRICTION, CollisionPiece, collision_pieces, read_urdf)
+from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, quat_wxyz_to_xyzw
 from asset2sim.mesh_io import convex_hull_mesh
 from asset2sim.engines.step_budget import spend
 
@@ -44,7 +43,7 @@ def import_newton():
     return wp, newton
 
 
-class NewtonSession(SessionDefaults):
+class NewtonSession(ArrayJoints, SessionDefaults):
     """A :class:`~asset2sim.engines.base.SimSession` in Newton on the CPU;
     ``notes``: flat pieces made slabs (UrdfError: the URDF or a mesh cannot be read)."""
 
@@ -59,9 +58,7 @@ class NewtonSession(SessionDefaults):
         self.urdf = read_urdf(urdf_path)
         pieces, notes = collision_pieces(self.urdf)
         self.notes = list(notes)
-        tables = joint_tables(self.urdf)
-        self.joint_names, self.joint_types = tables.names, tables.types
-        self.joint_limits, self.joint_child = tables.limits, tables.child
+        self._set_joint_tables(self.urdf)
         self.link_names = self.urdf.tree_order()
         self._fixed = bool(options.fixed_base)
         poses = self._placed_poses(pieces)
@@ -98,10 +95,8 @@ class NewtonSession(SessionDefaults):
         for name in self.link_names:
             pts = [self._piece_points(p) for p in pieces.get(name, [])]
             self._points[name] = np.vstack(pts) if pts else np.zeros((0, 3))
-        lift = 0.0
-        if not self._fixed:
-            lows = [(_apply(poses[n], v)[:, 2].min()) for n, v in self._points.items() if len(v)]
-            lift = -min(lows) if lows else 0.0
+        lows = [] if self._fixed else [_apply(poses[n], v)[:, 2].min() for n, v in self._points.items() if len(v)]
+        lift = -min(lows) if lows else 0.0
         root_pose = np.eye(4)
         root_pose[2, 3] = lift
         return self.urdf.link_poses(self.options.initial_state, root_pose)
@@ -126,13 +121,9 @@ class NewtonSession(SessionDefaults):
     def _add_joints(self, b, poses: dict[str, np.ndarray]) -> None:
         """The root joint, every URDF joint (damping and spring as a drive) and
         the articulation; sets ``_joint_index`` (movable joint -> Newton index)."""
-        wp = self._wp
-        joints = []
-        root = self.urdf.root
-        if self._fixed:
-            joints.append(b.add_joint_fixed(-1, self._body[root], parent_xform=_wp_transform(wp, poses[root]), label="root"))
-        else:
-            joints.append(b.add_joint_free(self._body[root], parent_xform=_wp_transform(wp, poses[root]), label="root"))
+        wp, root = self._wp, self.urdf.root
+        root_kw = dict(parent_xform=_wp_transform(wp, poses[root]), label="root")
+        joints = [b.add_joint_fixed(-1, self._body[root], **root_kw) if self._fixed else b.add_joint_free(self._body[root], **root_kw)]
         self._joint_index: dict[str, int] = {}
         for j in self.urdf.joints:
             kw = dict(parent_xform=_wp_transform(wp, j.origin), label=j.name)
@@ -165,13 +156,10 @@ class NewtonSession(SessionDefaults):
             return {}
         welded = {self.urdf.root}
         fixed = [j for j in self.urdf.joints if j.type not in ("revolute", "continuous", "prismatic")]
-        grew = True
-        while grew:
-            grew = False
-            for j in fixed:
-                if j.parent in welded and j.child not in welded:
-                    welded.add(j.child)
-                    grew = True
+        for name in self.link_names:  # the tree order: a parent before its children
+            pj = self.urdf.parent_joint(name)
+            if pj is not None and pj.type not in ("revolute", "continuous", "prismatic") and pj.parent in welded:
+                welded.add(name)
         if len(welded) == len(self.link_names):
             return {}
         keep = [self._joint_ids[j.name] for j in fixed if j.child not in welded]
@@ -240,31 +228,17 @@ class NewtonSession(SessionDefaults):
             b.add_shape_cylinder(body, xform=xf, radius=float(piece.radius), half_height=0.5 * float(piece.length), cfg=cfg)
 
     # ------------------------------------------------------------------ joints
-    def _refresh(self, jq: np.ndarray, jd: np.ndarray) -> None:
+    def _joint_q(self) -> np.ndarray:
+        return self.state0.joint_q.numpy()
+
+    def _joint_qd(self) -> np.ndarray:
+        return self.state0.joint_qd.numpy()
+
+    def _put_joints(self, jq: np.ndarray, jd: np.ndarray) -> None:
         """Set the state's joint coordinates and velocities, and the bodies' poses."""
         self.state0.joint_q.assign(jq)
         self.state0.joint_qd.assign(jd)
         self._nt.eval_fk(self.model, self.state0.joint_q, self.state0.joint_qd, self.state0)
-
-    def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
-        jq, jd = self.state0.joint_q.numpy(), self.state0.joint_qd.numpy()
-        for name, v in q.items():
-            if name in self._qadr:
-                jq[self._qadr[name]] = float(v)
-                if zero_velocity:
-                    jd[self._dadr[name]] = 0.0
-        self._refresh(jq, jd)
-
-    def joint_positions(self) -> dict[str, float]:
-        jq = self.state0.joint_q.numpy()
-        return {n: float(jq[a]) for n, a in self._qadr.items()}
-
-    def joint_velocities(self) -> dict[str, float]:
-        jd = self.state0.joint_qd.numpy()
-        return {n: float(jd[a]) for n, a in self._dadr.items()}
-
-    def joint_state(self, joint: str) -> tuple[float, float]:
-        return float(self.state0.joint_q.numpy()[self._qadr[joint]]), float(self.state0.joint_qd.numpy()[self._dadr[joint]])
 
     def joint_axis(self, joint: str) -> np.ndarray:
         if joint not in self._qadr:
@@ -276,9 +250,7 @@ class NewtonSession(SessionDefaults):
         if link in self._welded:
             pose = self._welded[link]
             return pose[:3, 3].copy(), pose[:3, :3].copy()
-        t = self.state0.body_q.numpy()[self._body[link]]
-        x, y, z, w = (float(v) for v in t[3:7])
-        return np.array(t[:3], float), np.array(quat_wxyz_matrix([w, x, y, z]))
+        return _body_frame(self.state0.body_q.numpy()[self._body[link]])
 
     def link_collision_vertices(self, link: str) -> np.ndarray:
         return self._points[link].copy()
@@ -302,8 +274,7 @@ class NewtonSession(SessionDefaults):
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         if self.urdf.root in self._welded:
             pose = self._welded[self.urdf.root]
-            w, x, y, z = matrix_quat_wxyz(pose[:3, :3])
-            return pose[:3, 3].copy(), np.array([x, y, z, w], float)
+            return pose[:3, 3].copy(), quat_wxyz_to_xyzw(matrix_quat_wxyz(pose[:3, :3]))
         t = self.state0.body_q.numpy()[self._body[self.urdf.root]]
         q = np.array(t[3:7], float)
         n = np.linalg.norm(q)
@@ -313,11 +284,11 @@ class NewtonSession(SessionDefaults):
         """Teleport the root and zero its velocity (EngineUnsupported: fixed root)."""
         if self._fixed:
             raise EngineUnsupported("newton: the root of a fixed-base session cannot be moved")
-        jq, jd = self.state0.joint_q.numpy(), self.state0.joint_qd.numpy()
+        jq, jd = self._joint_q(), self._joint_qd()
         jq[0:3] = np.asarray(pos, float)
         jq[3:7] = np.asarray(orn_xyzw, float)
         jd[0:6] = 0.0
-        self._refresh(jq, jd)
+        self._put_joints(jq, jd)
 
     # ----------------------------------------------------------------- contact
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
@@ -347,21 +318,14 @@ class NewtonSession(SessionDefaults):
         bq = np.zeros((len(self._full_body), 7), np.float32)
         for name, i in self._full_body.items():
             p, r = self.link_frame(name)
-            w, x, y, z = matrix_quat_wxyz(r)
-            bq[i] = (*p, x, y, z, w)
+            bq[i] = (*p, *quat_wxyz_to_xyzw(matrix_quat_wxyz(r)))
         self._query_state.body_q.assign(bq)
         return self._query_state
 
     def ground_penetration(self) -> float:
         """Deepest collision vertex below z = 0 (m), from the geometry."""
-        if not self.options.ground:
-            return 0.0
-        low = np.inf
-        for name, pts in self._points.items():
-            if len(pts):
-                p, r = self.link_frame(name)
-                low = min(low, float((pts @ r.T + p)[:, 2].min()))
-        return max(0.0, -low) if np.isfinite(low) else 0.0
+        lows = [float(self.link_aabb(name)[0][2]) for name, pts in self._points.items() if len(pts)]
+        return max(0.0, -min(lows)) if self.options.ground and lows else 0.0
 
     # ----------------------------------------------------------------- dynamics
     def apply_joint_effort(self, joint: str, effort: float) -> None:
@@ -413,10 +377,7 @@ class NewtonSession(SessionDefaults):
         dofs = {n: (self._qadr[n], self._dadr[n]) for n in self._qadr}
         held = held_physics_of_model(self.model, self.state0.joint_q.numpy(), self._body, dofs, source="urdf")
         if self._welded:  # as built, before the weld: not simulated
-            m, com, inertia = self.full_model.body_mass.numpy(), self.full_model.body_com.numpy(), self.full_model.body_inertia.numpy()
-            for n in self._welded:
-                i = self._full_body[n]
-                held.links[n] = HeldLink(mass=float(m[i]), com=np.array(com[i], float), principal=principal_moments(inertia[i]))
+            held.links.update(_held_links(self.full_model, {n: self._full_body[n] for n in self._welded}))
             held.welded_to_world = list(self._welded)
         return held
 
@@ -451,14 +412,26 @@ def _apply(pose: np.ndarray, pts: np.ndarray) -> np.ndarray:
     return np.asarray(pts, float) @ pose[:3, :3].T + pose[:3, 3]
 
 
-def _body_point(t: np.ndarray, p: np.ndarray) -> np.ndarray:
+def _body_frame(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Position (3,) m and rotation (3, 3) of a Warp transform (7,) p, x, y, z, w."""
     x, y, z, w = (float(v) for v in t[3:7])
-    return np.array(quat_wxyz_matrix([w, x, y, z])) @ np.asarray(p, float) + np.asarray(t[:3], float)
+    return np.array(t[:3], float), np.array(quat_wxyz_matrix([w, x, y, z]))
+
+
+def _body_point(t: np.ndarray, p: np.ndarray) -> np.ndarray:
+    pos, rot = _body_frame(t)
+    return rot @ np.asarray(p, float) + pos
 
 
 def _wp_transform(wp, pose: np.ndarray):
-    w, x, y, z = (float(v) for v in matrix_quat_wxyz(pose[:3, :3]))
-    return wp.transform(wp.vec3(*map(float, pose[:3, 3])), wp.quat(x, y, z, w))
+    return wp.transform(wp.vec3(*map(float, pose[:3, 3])), wp.quat(*quat_wxyz_to_xyzw(matrix_quat_wxyz(pose[:3, :3]))))
+
+
+def _held_links(model, bodies: dict[str, int]) -> dict[str, HeldLink]:
+    """Mass, COM and principal moments of the bodies (link -> body index) of a finalized ``newton.Model``."""
+    mass, com, inertia = model.body_mass.numpy(), model.body_com.numpy(), model.body_inertia.numpy()
+    return {n: HeldLink(mass=float(mass[i]), com=np.array(com[i], float), principal=principal_moments(inertia[i]))
+            for n, i in bodies.items()}
 
 
 def held_physics_of_model(model, joint_q: np.ndarray, bodies: dict[str, int], dofs: dict[str, tuple[int, int]],
@@ -467,9 +440,7 @@ def held_physics_of_model(model, joint_q: np.ndarray, bodies: dict[str, int], do
     of +-:data:`NEWTON_UNLIMITED` or more read as unlimited; reference None
     without stiffness). ``bodies``: link -> body index; ``dofs``: joint ->
     (q index, dof index)."""
-    mass, com, inertia = model.body_mass.numpy(), model.body_com.numpy(), model.body_inertia.numpy()
-    links = {n: HeldLink(mass=float(mass[i]), com=np.array(com[i], float), principal=principal_moments(inertia[i]))
-             for n, i in bodies.items()}
+    links = _held_links(model, bodies)
     lo, hi = model.joint_limit_lower.numpy(), model.joint_limit_upper.numpy()
     kd, fr, ke = model.joint_target_kd.numpy(), model.joint_friction.numpy(), model.joint_target_ke.numpy()
     tp = model.joint_target_q.numpy()  # per coordinate, like joint_q
@@ -522,19 +493,6 @@ def held_physics_of_usd(path: Path, links: list[str] | None = None, joints: list
             dofs[names[lab]] = (int(qs[i]), int(ds[i]))
     return held_physics_of_model(model, model.joint_q.numpy(), bodies, dofs, source=f"usd ({Path(path).name}, add_usd)")
 
-
-# Registering needs the packages (else ImportError: the engine is unavailable);
-# looked up, not imported: importing newton and warp takes seconds.
-def _installed(package: str) -> bool:
-    try:
-        return importlib.util.find_spec(package) is not None
-    except ValueError:  # sys.modules[package] is None: blocked
-        return False
-
-
-for _package in ("newton", "warp", "scipy"):
-    if not _installed(_package):
-        raise ImportError(f"No module named {_package!r} (pip install 'asset2sim[newton]')")
 
 register_engine("newton", NewtonSession)
 register_file_reader("newton", "usd", held_physics_of_usd)

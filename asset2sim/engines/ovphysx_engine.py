@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.engines.base import EngineUnavailable, SessionDefaults, SessionOptions, register_engine, unsupported
-from asset2sim.engines.loading import collision_pieces, joint_tables, read_urdf
+from asset2sim.engines.loading import collision_pieces, read_urdf
 from asset2sim.engines.step_budget import spend
 from asset2sim.extras import pxr_modules
 
@@ -126,9 +126,7 @@ class OvPhysxSession(SessionDefaults):
             raise EngineUnavailable(f"engine 'ovphysx' runs the USD export, and {self.usd} does not exist "
                                     "(asset2sim export OUT --format usd)")
         self.urdf = read_urdf(urdf_path)
-        tables = joint_tables(self.urdf)
-        self.joint_names, self.joint_types = tables.names, tables.types
-        self.joint_limits, self.joint_child = tables.limits, tables.child
+        self._set_joint_tables(self.urdf)
         self.link_names = list(self.urdf.tree_order())
         usd_stage = Usd.Stage.Open(str(self.usd))
         prim_of_joint: dict[str, str] = {}
@@ -200,13 +198,16 @@ class OvPhysxSession(SessionDefaults):
         binding.read(out)
         return out
 
+    def _by_joint(self, binding) -> dict[str, float]:
+        """The first articulation's DOF values of ``binding``, by URDF joint, along the URDF axes."""
+        values = self._read(binding)[0]
+        return {j: self._sign[j] * float(values[i]) for j, i in self._dof.items() if j in self._sign}
+
     def joint_positions(self) -> dict[str, float]:
-        q = self._read(self._q)[0]
-        return {j: self._sign[j] * float(q[i]) for j, i in self._dof.items() if j in self._sign}
+        return self._by_joint(self._q)
 
     def joint_velocities(self) -> dict[str, float]:
-        v = self._read(self._qd)[0]
-        return {j: self._sign[j] * float(v[i]) for j, i in self._dof.items() if j in self._sign}
+        return self._by_joint(self._qd)
 
     def joint_state(self, joint: str) -> tuple[float, float]:
         i = self._dof[joint]

@@ -17,10 +17,10 @@ with startup_quiet():
     import sapien
     from sapien import physx
 
-from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
+from asset2sim.engines.base import (ArrayJoints, ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
                                     SessionOptions, penetration_sum, register_engine)
 from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
-                                       collision_pieces, joint_tables, link_friction, principal_axes, read_urdf)
+                                       collision_pieces, link_friction, principal_axes, read_urdf)
 from asset2sim.frames import matrix_quat_wxyz
 from asset2sim.engines.passive_joints import FRICTION_DRIVE_DAMPING, PassiveJoints
 from asset2sim.engines.step_budget import spend
@@ -53,6 +53,12 @@ def _axis_frame(axis: np.ndarray) -> np.ndarray:
     t = np.eye(4)
     t[:3, 0], t[:3, 1], t[:3, 2] = a, b, c
     return t
+
+
+def _hull_vertices(shape, pose: np.ndarray) -> np.ndarray:
+    """Vertices (k, 3) m of a cooked convex mesh ``shape``, scaled, in the frame where its pose is ``pose`` (4, 4)."""
+    v = np.asarray(shape.get_vertices(), float) * np.asarray(shape.get_scale(), float)
+    return v @ pose[:3, :3].T + pose[:3, 3]
 
 
 def new_scene(gravity: float = -9.81, timestep: float = 1.0 / 240.0) -> "sapien.Scene":
@@ -155,7 +161,7 @@ def configure_articulation(art) -> None:
     art.set_solver_velocity_iterations(SOLVER_ITERATIONS[1])
 
 
-class PhysXSession(SessionDefaults):
+class PhysXSession(ArrayJoints, SessionDefaults):
     """A :class:`~asset2sim.engines.base.SimSession` in PhysX through SAPIEN 3:
     a CPU scene of its own, or (``scene``) the caller's, left as it is
     (``ground`` False: no plane added to it); ``notes``: what had to change
@@ -176,10 +182,10 @@ class PhysXSession(SessionDefaults):
         else:
             self.scene, self.system, self.dt = scene, scene.physx_system, float(scene.get_timestep())
         self.ground = self._add_ground() if options.ground and (self._owns_scene or ground) else None
-        self._add_articulation(self._articulation_builder(urdf_path), pieces, urdf_path)
-        tables = joint_tables(self.urdf)
-        self.joint_names, self.joint_types = tables.names, tables.types
-        self.joint_limits, self.joint_child = tables.limits, tables.child
+        builder = fill_articulation_builder(self.scene.create_articulation_builder(), self.urdf, urdf_path,
+                                            fixed_base=options.fixed_base, notes=self.notes)
+        self._add_articulation(builder, pieces, urdf_path)
+        self._set_joint_tables(self.urdf)
         self.link_names = list(self.links)
         self._states: dict[int, tuple] = {}
         self._effort = None
@@ -204,11 +210,6 @@ class PhysXSession(SessionDefaults):
         self._ground_entity = ent
         return comp
 
-    def _articulation_builder(self, urdf_path: Path):
-        """SAPIEN's articulation builder: every link's joint (x along the URDF axis) and inertia."""
-        return fill_articulation_builder(self.scene.create_articulation_builder(), self.urdf, urdf_path,
-                                         fixed_base=self.options.fixed_base, notes=self.notes)
-
     def _add_articulation(self, builder, pieces: dict, urdf_path: Path) -> None:
         """Build the articulation with its collision shapes into the scene (``links``, ``art``)."""
         entities = builder.build_entities(fix_root_link=self.options.fixed_base)
@@ -216,15 +217,12 @@ class PhysXSession(SessionDefaults):
         for ent in entities:
             comp = ent.find_component_by_type(physx.PhysxArticulationLinkComponent)
             self.links[comp.name] = comp
-            self._attach_shapes(comp, pieces[comp.name], urdf_path)
+            attach_collision_shapes(comp, self.urdf, pieces[comp.name], urdf_path, self.notes)
         for ent in entities:
             self.scene.add_entity(ent)
         self._entities = list(entities)
         self.art = entities[0].find_component_by_type(physx.PhysxArticulationLinkComponent).articulation
         configure_articulation(self.art)
-
-    def _attach_shapes(self, comp, pieces: list, urdf_path: Path) -> None:
-        attach_collision_shapes(comp, self.urdf, pieces, urdf_path, self.notes)
 
     def _passive_drives(self, urdf_path: Path) -> None:
         """Joint tables and each movable joint's passive zero-velocity drive
@@ -232,7 +230,7 @@ class PhysXSession(SessionDefaults):
         active = [j.name for j in self.art.active_joints]
         if sorted(active) != sorted(self.joint_names):
             raise PhysXError(f"{urdf_path}: PhysX built joints {active}, the URDF has {self.joint_names}")
-        self._index = {n: i for i, n in enumerate(active)}
+        self._index = self._qadr = self._dadr = {n: i for i, n in enumerate(active)}
         self._joints = list(self.art.active_joints)
         self._passive = PassiveJoints.from_urdf(self.urdf, self.options.springs, active)
         self._passive.configure(self._joints)
@@ -241,30 +239,15 @@ class PhysXSession(SessionDefaults):
         self._drive: dict[int, tuple[float, float]] = {}  # joint index -> (target velocity, force limit beyond friction)
 
     # ------------------------------------------------------------------ state
-    def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
-        qpos = np.asarray(self.art.get_qpos(), np.float32).copy()
-        qvel = np.asarray(self.art.get_qvel(), np.float32).copy()
-        for name, v in q.items():
-            i = self._index.get(name)
-            if i is None:
-                continue
-            qpos[i] = float(v)
-            if zero_velocity:
-                qvel[i] = 0.0
-        self.art.set_qpos(qpos)
-        self.art.set_qvel(qvel)
+    def _joint_q(self) -> np.ndarray:
+        return np.asarray(self.art.get_qpos(), np.float32).copy()
 
-    def joint_positions(self) -> dict[str, float]:
-        qpos = self.art.get_qpos()
-        return {n: float(qpos[i]) for n, i in self._index.items()}
+    def _joint_qd(self) -> np.ndarray:
+        return np.asarray(self.art.get_qvel(), np.float32).copy()
 
-    def joint_velocities(self) -> dict[str, float]:
-        qvel = self.art.get_qvel()
-        return {n: float(qvel[i]) for n, i in self._index.items()}
-
-    def joint_state(self, joint: str) -> tuple[float, float]:
-        i = self._index[joint]
-        return float(self.art.get_qpos()[i]), float(self.art.get_qvel()[i])
+    def _put_joints(self, q: np.ndarray, qd: np.ndarray) -> None:
+        self.art.set_qpos(q)
+        self.art.set_qvel(qd)
 
     def joint_axis(self, joint: str) -> np.ndarray:
         """The URDF axis (3,) (PhysX's joint x axis is built on it)."""
@@ -310,9 +293,7 @@ class PhysXSession(SessionDefaults):
         out = []
         for shape in self.links[link].get_collision_shapes():
             if isinstance(shape, physx.PhysxCollisionShapeConvexMesh):
-                t = shape.get_local_pose().to_transformation_matrix()
-                v = np.asarray(shape.get_vertices(), float) * np.asarray(shape.get_scale(), float)
-                out.append(v @ t[:3, :3].T + t[:3, 3])
+                out.append(_hull_vertices(shape, shape.get_local_pose().to_transformation_matrix()))
         return np.concatenate(out) if out else np.zeros((0, 3))
 
     def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
@@ -362,10 +343,9 @@ class PhysXSession(SessionDefaults):
         for comp in self.links.values():
             link_pose = comp.get_pose().to_transformation_matrix()
             for shape in comp.get_collision_shapes():
-                t = link_pose @ shape.get_local_pose().to_transformation_matrix()
                 if isinstance(shape, physx.PhysxCollisionShapeConvexMesh):
-                    v = np.asarray(shape.get_vertices(), float) * np.asarray(shape.get_scale(), float)
-                    low = min(low, float((v @ t[:3, :3].T + t[:3, 3])[:, 2].min()))
+                    t = link_pose @ shape.get_local_pose().to_transformation_matrix()
+                    low = min(low, float(_hull_vertices(shape, t)[:, 2].min()))
                 else:
                     aabb = comp.compute_global_aabb_tight()
                     low = min(low, float(aabb[0][2]))

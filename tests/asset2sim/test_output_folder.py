@@ -25,6 +25,7 @@ from asset2sim.engines.registry import open_session
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.ingest.validate_input import validate_asset
 from asset2sim import output_folder as of
+from asset2sim.output_staging import STAGING_SUFFIX
 from asset2sim.tasks.assemble import copied_meshes, write
 from asset2sim.formats.mjcf import export as export_mjcf
 from asset2sim.tasks.publish import refine_report
@@ -409,7 +410,7 @@ def test_staged_rerun_records_the_folder_the_user_named(tmp_path, box, refine_on
     res = refine_asset(box, PROMPT, out, extras=True, skip_if_complete=False)
     ev = json.loads((out / "evaluation.json").read_text())
     assert ev["urdf"] == "mobility.urdf"  # relative to the folder it lies in: neither the staging folder nor a place
-    assert of.STAGING_SUFFIX not in (out / "report.html").read_text()
+    assert STAGING_SUFFIX not in (out / "report.html").read_text()
     assert all(Path(p).is_relative_to(out) for p in res.extras.values())
 
 

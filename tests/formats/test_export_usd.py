@@ -22,14 +22,8 @@ pxr = pytest.importorskip("pxr")
 
 from pxr import Usd, UsdGeom, UsdPhysics  # noqa: E402
 
-from asset2sim.formats.usd.export import (  # noqa: E402
-    DEG,
-    UsdExportError,
-    check_usd,
-    export_usd,
-    principal_axes,
-    read_usd,
-)
+from asset2sim.formats.usd.check import UsdExportError, check_usd, read_usd  # noqa: E402
+from asset2sim.formats.usd.export import DEG, export_usd, principal_axes  # noqa: E402
 
 
 def _tilt_lid_inertial(urdf: Path) -> None:
