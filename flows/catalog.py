@@ -19,7 +19,7 @@ from typing import Any, Iterable
 
 from asset2sim.flows import catalog_fs
 from asset2sim.flows.catalog_config import CatalogConfig, CatalogError, load_catalog
-from asset2sim.schemas.catalog import ROW_COLUMNS, ROW_STATUSES, CatalogRow, arrow_schema
+from asset2sim.schemas.catalog import ROW_COLUMNS, ROW_STATUSES, CatalogRow, arrow_schema, parquet_bytes
 
 #: The configuration side, named here too (``from asset2sim.flows.catalog import load_catalog``).
 __all__ = [
@@ -422,13 +422,8 @@ def _without(table, asset_ids):
 
 
 def _parquet_bytes(table) -> bytes:
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
     table = table.replace_schema_metadata({**(table.schema.metadata or {}), **(arrow_schema(with_version=True).metadata or {})})
-    buf = pa.BufferOutputStream()
-    pq.write_table(table, buf, compression="zstd")
-    return buf.getvalue().to_pybytes()
+    return parquet_bytes(table, compression="zstd")
 
 
 def plain_value(v: Any) -> Any:
