@@ -13,7 +13,7 @@ import numpy as np
 
 from asset2sim.apps.learn.task import prepare_task, targets_for
 from asset2sim.engines.base import Spring
-from asset2sim.engines.loading import CollisionPiece
+from asset2sim.engines.loading import BOX_CORNERS, CollisionPiece
 from asset2sim.output_folder import REPORT_NAME, URDF_NAME
 from asset2sim.refined_asset import RefinedAsset
 from asset2sim.tasks.check.contact_points import contact_point_rule
@@ -113,12 +113,10 @@ def _piece_points(p: CollisionPiece) -> np.ndarray:
     if p.kind == "hull":
         local = np.asarray(p.points, float)
     elif p.kind == "box":
-        h = np.asarray(p.size, float) / 2
-        local = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float) * h
+        local = BOX_CORNERS * (np.asarray(p.size, float) / 2)
     else:
         r = float(p.radius or 0.0)
-        hl = float(p.length or 2 * r) / 2 if p.kind == "cylinder" else r
-        local = np.array([[sx * r, sy * r, sz * hl] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
+        local = BOX_CORNERS * [r, r, float(p.length or 2 * r) / 2 if p.kind == "cylinder" else r]
     return local @ p.origin[:3, :3].T + p.origin[:3, 3]
 
 
