@@ -35,6 +35,8 @@ COMPACTED_NAME = "rows@compacted.parquet"
 #: and replaced by :data:`COMPACTED_NAME` at the run's next compaction.
 LEGACY_COMPACTED_NAME = "_compacted.parquet"
 RUN_INFO_NAME = "_run.json"
+#: ``_run.json``'s ``outcome`` of a run that refined nothing: every asset finished before and reused (``skipped``).
+NOTHING_TO_DO = "nothing_to_do"
 
 _PART_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
 
