@@ -129,6 +129,14 @@ def model_arrow_schema(model: type[BaseModel], **own_types):
     return pa.schema([(name, own_types.get(name) or arrow_type(f.annotation)) for name, f in model.model_fields.items()])
 
 
+def parquet_models(path, model: type[BaseModel]) -> list:
+    """The rows of the Parquet file ``path`` as ``model`` instances. Raises OSError (unreadable), ValueError (not
+    a Parquet file, or rows that are not ``model``'s)."""
+    import pyarrow.parquet as pq
+
+    return [model.model_validate(row) for row in pq.read_table(path).to_pylist()]
+
+
 def parquet_bytes(table, **write_options) -> bytes:
     """An Arrow table as the bytes of a Parquet file (``write_options``: :func:`pyarrow.parquet.write_table`'s)."""
     import pyarrow as pa

@@ -29,7 +29,7 @@ from asset2sim.models.client import LLMClient
 from asset2sim.models.config import ClientConfig
 from asset2sim.models.errors import ModelCallError
 from asset2sim.models.usage import Usage
-from asset2sim.schemas.catalog import model_arrow_schema, parquet_bytes
+from asset2sim.schemas.catalog import model_arrow_schema, parquet_bytes, parquet_models
 from asset2sim.schemas.realism import ClipPair, JudgeVerdict, PairSet, PairSide
 from asset2sim.apps.realism import pair_set
 from asset2sim.apps.realism.judge_reply import Reading, read_reply
@@ -292,11 +292,8 @@ def read_judgements(folder: Path | str) -> list[JudgeVerdict]:
     Raises:
         JudgeInputError: missing or not a judgements file (naming it).
     """
-    import pyarrow.parquet as pq
-
     path = Path(folder) / JUDGEMENTS_FILE
     try:
-        rows = pq.read_table(path).to_pylist()
-        return [JudgeVerdict.model_validate(r) for r in rows]
+        return parquet_models(path, JudgeVerdict)
     except (OSError, ValueError) as exc:
         raise JudgeInputError(path, f"not a readable judgements file ({str(exc)[:300]})") from None

@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Literal, NamedTuple
 
 from asset2sim import atomic, output_folder
-from asset2sim.schemas.catalog import model_arrow_schema, parquet_bytes
+from asset2sim.schemas.catalog import model_arrow_schema, parquet_bytes, parquet_models
 from asset2sim.schemas.realism import ClipPair, PairSide, Rating
 from asset2sim.apps.realism.pair_set import PAIRS_JSON as PAIRS_FILE, PairSetError, read_pair_set
 
@@ -353,10 +353,7 @@ def ratings_parquet_bytes(ratings: list[Rating]) -> bytes:
 
 def read_ratings(path: Path | str) -> list[Rating]:
     """The :class:`Rating` rows of a ``ratings.parquet`` file (PairSetError naming the file when it is not one)."""
-    import pyarrow.parquet as pq
-
     try:
-        rows = pq.read_table(path).to_pylist()
-        return [Rating(**row) for row in rows]
+        return parquet_models(path, Rating)
     except (OSError, ValueError) as exc:
         raise PairSetError(path, f"not a ratings table: {exc}") from exc

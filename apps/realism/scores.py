@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from asset2sim import atomic
-from asset2sim.schemas.catalog import model_arrow_schema, parquet_bytes
+from asset2sim.schemas.catalog import model_arrow_schema, parquet_bytes, parquet_models
 from asset2sim.schemas.realism import MethodScore
 from asset2sim.apps.realism.bradley_terry import ELO_PER_UNIT, fit_bradley_terry
 from asset2sim.apps.realism.ratings import DATABASE_FILE, RATINGS_FILE, PairSetError, RatingStore, read_ratings
@@ -29,10 +29,8 @@ class NotRated(ValueError):
 def read_scores(path: Path | str) -> list[MethodScore]:
     """The :class:`MethodScore` rows of a ``realism_scores.parquet`` (PairSetError naming the file when it is
     not one)."""
-    import pyarrow.parquet as pq
-
     try:
-        return [MethodScore(**row) for row in pq.read_table(path).to_pylist()]
+        return parquet_models(path, MethodScore)
     except (OSError, ValueError) as exc:
         raise PairSetError(path, f"not a realism scores table: {exc}") from exc
 
