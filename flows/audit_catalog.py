@@ -5,11 +5,11 @@ per category)."""
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 from asset2sim import atomic
 from asset2sim.schemas.audit import AuditReport, AuditRow
+from asset2sim.schemas.catalog import parquet_bytes
 from asset2sim.apps.audit.audit import AUDIT_JSON
 
 #: File names of the audit catalog inside the output folder.
@@ -21,11 +21,8 @@ AUDIT_MODES = ("none", "implausible_values", "values_missing", "declared_physics
 
 def _write_parquet(path: Path, df) -> None:
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
-    buf = io.BytesIO()
-    pq.write_table(pa.Table.from_pandas(df, preserve_index=False), buf)
-    atomic.write_bytes(path, buf.getvalue())
+    atomic.write_bytes(path, parquet_bytes(pa.Table.from_pandas(df, preserve_index=False)))
 
 
 def values_frame(rows: list[AuditRow]):

@@ -19,7 +19,7 @@ from typing import Any, Iterable
 
 from asset2sim.flows import catalog_fs
 from asset2sim.flows.catalog_config import CatalogConfig, CatalogError, load_catalog
-from asset2sim.schemas.catalog import ROW_COLUMNS, ROW_STATUSES, CatalogRow, arrow_schema
+from asset2sim.schemas.catalog import ROW_COLUMNS, ROW_STATUSES, CatalogRow, arrow_schema, parquet_bytes
 
 #: The configuration side, named here too (``from asset2sim.flows.catalog import load_catalog``).
 __all__ = [
@@ -35,6 +35,8 @@ COMPACTED_NAME = "rows@compacted.parquet"
 #: and replaced by :data:`COMPACTED_NAME` at the run's next compaction.
 LEGACY_COMPACTED_NAME = "_compacted.parquet"
 RUN_INFO_NAME = "_run.json"
+#: ``_run.json``'s ``outcome`` of a run that refined nothing: every asset finished before and reused (``skipped``).
+NOTHING_TO_DO = "nothing_to_do"
 
 _PART_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
 
@@ -422,13 +424,8 @@ def _without(table, asset_ids):
 
 
 def _parquet_bytes(table) -> bytes:
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
     table = table.replace_schema_metadata({**(table.schema.metadata or {}), **(arrow_schema(with_version=True).metadata or {})})
-    buf = pa.BufferOutputStream()
-    pq.write_table(table, buf, compression="zstd")
-    return buf.getvalue().to_pybytes()
+    return parquet_bytes(table, compression="zstd")
 
 
 def plain_value(v: Any) -> Any:

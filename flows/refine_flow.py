@@ -23,7 +23,7 @@ from prefect.settings import PREFECT_API_URL
 
 from asset2sim.flows import catalog_compare, catalog_finish, queries, tracking
 from asset2sim import flow_progress
-from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog import NOTHING_TO_DO, ResultCatalog
 from asset2sim.flows.catalog_config import load_catalog
 from asset2sim.flow_progress import ProgressEvent
 from asset2sim.flows import driver_skip
@@ -130,10 +130,6 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
         log.error("%s", report)
         raise RegressionFailure(report, summary)
     return summary
-
-
-#: ``_run.json``'s ``outcome`` of a run that refined nothing: every asset finished before and reused (``skipped``).
-NOTHING_TO_DO = "nothing_to_do"
 
 
 def run_outcome(summary: dict[str, Any]) -> str:

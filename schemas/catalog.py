@@ -106,7 +106,9 @@ class CatalogRow(BaseModel):
 ROW_COLUMNS: tuple[str, ...] = tuple(CatalogRow.model_fields)
 
 
-def _arrow_type(annotation):
+def arrow_type(annotation):
+    """The Arrow type of a pydantic field's annotation (str, a Literal, bool, int, float, datetime, each optionally
+    None). Raises TypeError: any other annotation."""
     import pyarrow as pa
 
     args = [a for a in typing.get_args(annotation) if a is not type(None)]
@@ -119,12 +121,36 @@ def _arrow_type(annotation):
     return by_type[base]
 
 
+def model_arrow_schema(model: type[BaseModel], **own_types):
+    """The Arrow schema of a pydantic model's rows: one nullable column per field, in order, of its
+    :func:`arrow_type` (``own_types``: a field's Arrow type when it is not that)."""
+    import pyarrow as pa
+
+    return pa.schema([(name, own_types.get(name) or arrow_type(f.annotation)) for name, f in model.model_fields.items()])
+
+
+def parquet_models(path, model: type[BaseModel]) -> list:
+    """The rows of the Parquet file ``path`` as ``model`` instances. Raises OSError (unreadable), ValueError (not
+    a Parquet file, or rows that are not ``model``'s)."""
+    import pyarrow.parquet as pq
+
+    return [model.model_validate(row) for row in pq.read_table(path).to_pylist()]
+
+
+def parquet_bytes(table, **write_options) -> bytes:
+    """An Arrow table as the bytes of a Parquet file (``write_options``: :func:`pyarrow.parquet.write_table`'s)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink, **write_options)
+    return sink.getvalue().to_pybytes()
+
+
 def arrow_schema(with_version: bool = False):
     """The Parquet (pyarrow) schema of :class:`CatalogRow`, every column
     nullable; ``with_version``: :data:`SCHEMA_VERSION` in its metadata."""
-    import pyarrow as pa
-
-    schema = pa.schema([(name, _arrow_type(f.annotation)) for name, f in CatalogRow.model_fields.items()])
+    schema = model_arrow_schema(CatalogRow)
     if with_version:
         schema = schema.with_metadata({SCHEMA_VERSION_KEY: str(SCHEMA_VERSION).encode()})
     return schema

@@ -19,7 +19,6 @@ from __future__ import annotations
 import base64
 import re
 import threading
-import typing
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any, Sequence
@@ -30,6 +29,7 @@ from asset2sim.models.client import LLMClient
 from asset2sim.models.config import ClientConfig
 from asset2sim.models.errors import ModelCallError
 from asset2sim.models.usage import Usage
+from asset2sim.schemas.catalog import model_arrow_schema, parquet_bytes, parquet_models
 from asset2sim.schemas.realism import ClipPair, JudgeVerdict, PairSet, PairSide
 from asset2sim.apps.realism import pair_set
 from asset2sim.apps.realism.judge_reply import Reading, read_reply
@@ -272,36 +272,18 @@ def judge_pairs(folder: Path | str, configs: Sequence[ClientConfig], *, families
 
 
 # ----------------------------------------------------------------------------- judgements.parquet
-def _arrow_type(name: str, annotation: Any):
-    """The Arrow type of a JudgeVerdict field (str, int, float, bool, each optionally None)."""
-    import pyarrow as pa
-
-    args = [a for a in typing.get_args(annotation) if a is not type(None)] or [annotation]
-    table = {str: pa.string(), int: pa.int64(), float: pa.float64(), bool: pa.bool_()}
-    if len(args) != 1 or args[0] not in table:
-        raise TypeError(f"JudgeVerdict.{name}: type {annotation!r} has no Parquet column type here")
-    return table[args[0]]
-
-
 def judgement_schema():
     """The Arrow schema of ``judgements.parquet``: one column per :class:`JudgeVerdict` field, in order."""
-    import pyarrow as pa
-
-    return pa.schema([pa.field(name, _arrow_type(name, f.annotation)) for name, f in JudgeVerdict.model_fields.items()])
+    return model_arrow_schema(JudgeVerdict)
 
 
 def write_judgements(folder: Path | str, verdicts: Sequence[JudgeVerdict]) -> Path:
     """``folder/judgements.parquet`` (rows of :class:`JudgeVerdict`), written atomically. Raises OSError."""
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
-    schema = judgement_schema()
-    rows = [v.model_dump() for v in verdicts]
-    table = pa.Table.from_pylist(rows, schema=schema)
-    sink = pa.BufferOutputStream()
-    pq.write_table(table, sink)
+    table = pa.Table.from_pylist([v.model_dump() for v in verdicts], schema=judgement_schema())
     with output_folder.guarding(folder):
-        return atomic.write_bytes(Path(folder) / JUDGEMENTS_FILE, sink.getvalue().to_pybytes())
+        return atomic.write_bytes(Path(folder) / JUDGEMENTS_FILE, parquet_bytes(table))
 
 
 def read_judgements(folder: Path | str) -> list[JudgeVerdict]:
@@ -310,11 +292,8 @@ def read_judgements(folder: Path | str) -> list[JudgeVerdict]:
     Raises:
         JudgeInputError: missing or not a judgements file (naming it).
     """
-    import pyarrow.parquet as pq
-
     path = Path(folder) / JUDGEMENTS_FILE
     try:
-        rows = pq.read_table(path).to_pylist()
-        return [JudgeVerdict.model_validate(r) for r in rows]
+        return parquet_models(path, JudgeVerdict)
     except (OSError, ValueError) as exc:
         raise JudgeInputError(path, f"not a readable judgements file ({str(exc)[:300]})") from None

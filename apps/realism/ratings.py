@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Literal, NamedTuple
 
 from asset2sim import atomic, output_folder
+from asset2sim.schemas.catalog import model_arrow_schema, parquet_bytes, parquet_models
 from asset2sim.schemas.realism import ClipPair, PairSide, Rating
 from asset2sim.apps.realism.pair_set import PAIRS_JSON as PAIRS_FILE, PairSetError, read_pair_set
 
@@ -345,26 +346,14 @@ class RatingStore:
 def ratings_parquet_bytes(ratings: list[Rating]) -> bytes:
     """``ratings`` as the bytes of a Parquet file, one row per :class:`Rating` (its fields as columns)."""
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
-    schema = pa.schema([
-        ("rater", pa.string()), ("pair_id", pa.string()), ("object_id", pa.string()), ("left", pa.string()),
-        ("right", pa.string()), ("choice", pa.string()), ("winner", pa.string()), ("loser", pa.string()),
-        ("score", pa.int8()), ("comment", pa.string()), ("shown_at", pa.float64()), ("answered_at", pa.float64()),
-        ("seconds", pa.float64()),
-    ])  # fmt: skip
-    table = pa.Table.from_pylist([r.model_dump() for r in ratings], schema=schema)
-    sink = pa.BufferOutputStream()
-    pq.write_table(table, sink)
-    return sink.getvalue().to_pybytes()
+    schema = model_arrow_schema(Rating, score=pa.int8())
+    return parquet_bytes(pa.Table.from_pylist([r.model_dump() for r in ratings], schema=schema))
 
 
 def read_ratings(path: Path | str) -> list[Rating]:
     """The :class:`Rating` rows of a ``ratings.parquet`` file (PairSetError naming the file when it is not one)."""
-    import pyarrow.parquet as pq
-
     try:
-        rows = pq.read_table(path).to_pylist()
-        return [Rating(**row) for row in rows]
+        return parquet_models(path, Rating)
     except (OSError, ValueError) as exc:
         raise PairSetError(path, f"not a ratings table: {exc}") from exc

@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from asset2sim import atomic
+from asset2sim.schemas.catalog import model_arrow_schema, parquet_bytes, parquet_models
 from asset2sim.schemas.realism import MethodScore
 from asset2sim.apps.realism.bradley_terry import ELO_PER_UNIT, fit_bradley_terry
 from asset2sim.apps.realism.ratings import DATABASE_FILE, RATINGS_FILE, PairSetError, RatingStore, read_ratings
@@ -25,22 +26,11 @@ class NotRated(ValueError):
     """No answer to score (realism is then "not rated", never invented)."""
 
 
-def _arrow_schema():
-    import pyarrow as pa
-
-    return pa.schema([
-        ("source", pa.string()), ("method", pa.string()), ("strength", pa.float64()), ("ci_low", pa.float64()),
-        ("ci_high", pa.float64()), ("elo", pa.float64()), ("comparisons", pa.int64()), ("wins", pa.int64()),
-    ])  # fmt: skip
-
-
 def read_scores(path: Path | str) -> list[MethodScore]:
     """The :class:`MethodScore` rows of a ``realism_scores.parquet`` (PairSetError naming the file when it is
     not one)."""
-    import pyarrow.parquet as pq
-
     try:
-        return [MethodScore(**row) for row in pq.read_table(path).to_pylist()]
+        return parquet_models(path, MethodScore)
     except (OSError, ValueError) as exc:
         raise PairSetError(path, f"not a realism scores table: {exc}") from exc
 
@@ -50,15 +40,12 @@ def write_scores(path: Path | str, scores: list[MethodScore]) -> Path:
     ``source`` none of ``scores`` has; returns the path. Raises PairSetError (an unreadable existing file),
     OSError."""
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
     path = Path(path)
     sources = {s.source for s in scores}
     kept = [s for s in read_scores(path) if s.source not in sources] if path.exists() else []
-    table = pa.Table.from_pylist([s.model_dump() for s in [*kept, *scores]], schema=_arrow_schema())
-    sink = pa.BufferOutputStream()
-    pq.write_table(table, sink)
-    return atomic.write_bytes(path, sink.getvalue().to_pybytes())
+    table = pa.Table.from_pylist([s.model_dump() for s in [*kept, *scores]], schema=model_arrow_schema(MethodScore))
+    return atomic.write_bytes(path, parquet_bytes(table))
 
 
 def realism_scores(folder: Path | str, *, write: bool = True) -> list[MethodScore]:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import statistics
 from pathlib import Path
 
 from asset2sim.commands._status import parse_engines
@@ -143,8 +144,7 @@ def run(args: argparse.Namespace) -> int:
     console.print(rt)
     secs = sorted(r["seconds"] for r in records if not r.get("error") and r.get("seconds") is not None)
     if secs:
-        med = secs[len(secs) // 2] if len(secs) % 2 else 0.5 * (secs[len(secs) // 2 - 1] + secs[len(secs) // 2])
-        console.print(f"median evaluation time per asset: {med:.2f} s over {len(secs)} evaluations (goal <= 1.5 s; "
+        console.print(f"median evaluation time per asset: {statistics.median(secs):.2f} s over {len(secs)} evaluations (goal <= 1.5 s; "
                       f"method runs, report writing and start-up excluded)")
     console.print(f"wrote {out / 'summary.html'}, {out / 'index.html'}, results.csv/json/parquet, summary.csv/json", markup=False)
     if args.compare is not None:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from asset2sim.commands._status import INVALID_REQUEST, CommandError
 from asset2sim.flows import catalog_compare, queries
-from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog import NOTHING_TO_DO, ResultCatalog
 from asset2sim.flows.catalog_config import load_catalog
 
 NAME = "failures"
@@ -60,10 +60,6 @@ def format_table(table) -> str:
 def _latest(store: ResultCatalog, dataset: str | None) -> tuple[str, str] | None:
     """(dataset, run) of the most recent run (run ids start with the UTC start time)."""
     return max(store.runs(dataset), key=lambda p: (p[1], p[0]), default=None)
-
-
-#: ``_run.json``'s ``outcome`` of a run that refined nothing (``asset2sim.flows.refine_flow.NOTHING_TO_DO``).
-NOTHING_TO_DO = "nothing_to_do"
 
 
 def latest_worked(store: ResultCatalog, dataset: str | None) -> tuple[tuple[str, str] | None, list[str]]:
