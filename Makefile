@@ -9,7 +9,7 @@ RUN ?=
 
 TIMEZONE ?=
 
-.PHONY: setup demo test test-all test-lower map check-install flow serve failures bench bench-eval bench-catalog clean
+.PHONY: setup demo test test-cpu test-all test-lower map check-install flow serve failures bench bench-eval bench-catalog clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -28,6 +28,11 @@ TEST_WORKERS ?= 2
 TEST_ENV := env -u PYTHONDONTWRITEBYTECODE
 test: ## the fast tiers: unit and integration tests (end-to-end tests, marked slow, left out) on TEST_WORKERS processes
 	$(TEST_ENV) $(PY) -m pytest -m "not slow" -q -n $(TEST_WORKERS) --dist loadfile
+
+test-cpu: ## the fast tiers as `make test`, then their CPU seconds per test and per module's collection (benchmarks/pytest_cpu.py): their cost without a shared machine's wall-clock noise
+	rm -rf out/test_cpu
+	$(TEST_ENV) PYTEST_CPU_DIR=out/test_cpu PYTHONPATH=$(CURDIR)/benchmarks $(PY) -m pytest -p pytest_cpu -m "not slow" -q -n $(TEST_WORKERS) --dist loadfile
+	$(PY) benchmarks/pytest_cpu.py out/test_cpu
 
 test-all: ## the whole suite, every tier (the end-to-end tier included; before a release), on TEST_WORKERS processes
 	$(TEST_ENV) $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile

@@ -177,7 +177,8 @@ def test_full_disk_while_writing_the_report_exits_4_with_enospc(name, box, tmp_p
     """A full disk met by the report writer (``report.html`` among the extras,
     ``report.json`` after the post-check) is the documented
     ``OUTPUT_WRITE_FAILED [ENOSPC]`` naming the file, not ``OUTPUT_INCOMPLETE``
-    (which the missing ``report.html`` gave, the error having become a note)."""
+    (which the missing ``report.html`` gave, the error having become a note). Without the sweep clips, which it
+    does not check."""
     monkeypatch.setattr(refine_mod.media_phase.render, "render_views", lambda *a, **k: None)
     monkeypatch.setattr(export_mjcf, "export_mjcf", lambda *a, **k: None)
     real = atomic._create_temp
@@ -188,7 +189,7 @@ def test_full_disk_while_writing_the_report_exits_4_with_enospc(name, box, tmp_p
         return real(path)
 
     monkeypatch.setattr(atomic, "_create_temp", full_disk)
-    assert main(["refine", str(box), "--prompt", PROMPT, "--out", str(tmp_path / "o"), "-q"]) == 4
+    assert main(["refine", str(box), "--prompt", PROMPT, "--out", str(tmp_path / "o"), "--no-clips", "-q"]) == 4
     line = _one_line(capsys.readouterr().err)
     assert "OUTPUT_WRITE_FAILED [ENOSPC]" in line and name in line, line
     assert not (tmp_path / "o" / ".asset2sim-complete.json").exists()

@@ -13,6 +13,7 @@ import base64
 import io
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -45,10 +46,8 @@ BUDGET = MAX_ATTEMPTS * 3  # HTTP tries per call x (first reply + 2 re-asks)
 KEYS = ("OPENAI_API_KEY", "GEMINI_API_KEY", "GOOGLE_API_KEY", "ANTHROPIC_API_KEY")
 
 
-@pytest.fixture(autouse=True)
-def llm_env(monkeypatch, tmp_path):
-    """Small delays and timeouts for tests, a fresh reply cache, no API keys."""
-    monkeypatch.setenv("ASSET2SIM_LLM_CACHE_DIR", str(tmp_path / "llm_cache"))
+def _llm_env(monkeypatch, cache: Path) -> None:
+    monkeypatch.setenv("ASSET2SIM_LLM_CACHE_DIR", str(cache))
     monkeypatch.setenv("ASSET2SIM_LLM_TIMEOUT_S", "2")
     monkeypatch.setenv("ASSET2SIM_LLM_BACKOFF_S", "0.05")
     monkeypatch.setenv("ASSET2SIM_LLM_MAX_BACKOFF_S", "0.2")
@@ -58,9 +57,27 @@ def llm_env(monkeypatch, tmp_path):
         monkeypatch.delenv(k, raising=False)
 
 
+@pytest.fixture(autouse=True)
+def llm_env(monkeypatch, tmp_path):
+    """Small delays and timeouts for tests, a fresh reply cache (``tmp_path / "llm_cache"``), no API keys."""
+    _llm_env(monkeypatch, tmp_path / "llm_cache")
+
+
 @pytest.fixture
 def plate(tmp_path) -> Path:
     return write_hinged_plate(tmp_path / "plate")
+
+
+@pytest.fixture(scope="module")
+def first_refine(tmp_path_factory):
+    """The plate refined once with the fake server's default reply, for the tests that read that refine: the server,
+    the plate, the output folder, the result and the reply cache folder (a test that refines again works on copies)."""
+    root = tmp_path_factory.mktemp("first_refine")
+    with pytest.MonkeyPatch.context() as mp, fake.FakeOpenAIServer() as srv:
+        _llm_env(mp, root / "llm_cache")
+        plate = write_hinged_plate(root / "plate")
+        res = refine_asset(plate, PROMPT, root / "out", config(srv), extras=False)
+        yield srv, plate, root / "out", res, root / "llm_cache"
 
 
 def config(server) -> RefineConfig:
@@ -106,9 +123,8 @@ def assert_valid_output(out: Path) -> Overlay:
 
 
 # ---------------------------------------------------------------- happy path
-def test_refine_with_an_openai_compatible_server(server, plate, tmp_path):
-    out = tmp_path / "out"
-    res = refine_asset(plate, PROMPT, out, config(server), extras=False)
+def test_refine_with_an_openai_compatible_server(first_refine):
+    server, _, out, res, _ = first_refine
     ov = assert_valid_output(out)
     assert server.n_chat == 1
     assert res.report.estimator == "openai" and res.report.model == "openai/m" and res.report.model_queries == 1
@@ -140,9 +156,10 @@ def test_refine_with_an_openai_compatible_server(server, plate, tmp_path):
     assert 0.05 <= res.report.opening_fractions["hinge"] <= 0.35
 
 
-def test_rerun_makes_no_calls(server, plate, tmp_path):
-    out = tmp_path / "out"
-    first = refine_asset(plate, PROMPT, out, config(server), extras=False)
+def test_rerun_makes_no_calls(first_refine, tmp_path):
+    server, plate, done, first, cache = first_refine
+    out = shutil.copytree(done, tmp_path / "out")  # the first refine's output and reply cache, copied
+    shutil.copytree(cache, tmp_path / "llm_cache")
     again = refine_asset(plate, PROMPT, out, config(server), extras=False, skip_if_complete=False)
     assert server.n_chat == 1
     assert again.report.model_queries == 0 and again.overlay.estimator.tokens == 0
