@@ -8,7 +8,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -37,11 +36,9 @@ def _bomb(levels: int, width: int = 9) -> str:
 
 
 def _refused(path: Path, code: str) -> InputFileError:
-    with _no_hang():
-        t = time.perf_counter()
+    with _no_hang():  # the bomb refused, not expanded (an expansion would hang past the guard)
         with pytest.raises(InputFileError) as info:
             load_config(path)
-        assert time.perf_counter() - t < 2.0
     assert info.value.code == code, str(info.value)
     assert str(path) in str(info.value)
     return info.value

@@ -29,9 +29,8 @@ def test_a_time_step_below_the_bound_is_refused_up_front(tmp_path, capsys, sim):
     cfg = tmp_path / "cfg.yaml"
     cfg.write_text("sim: {" + ", ".join(f"{k}: {v!r}" for k, v in sim.items()) + "}\n")
     box = demo_assets.build_box_with_lid(tmp_path / "in" / "box")
-    t0 = time.perf_counter()
     rc = cli.main(["refine", str(box), "-p", PROMPT, "--out", str(tmp_path / "out"), "--config", str(cfg), "--no-extras"])
-    assert rc == 2 and time.perf_counter() - t0 < 5.0
+    assert rc == 2
     assert "sim.timestep" in capsys.readouterr().err and not (tmp_path / "out").exists()
 
 

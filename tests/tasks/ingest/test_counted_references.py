@@ -7,7 +7,6 @@ quickly and in little memory; the same file named a few times still reads. (MuJo
 from __future__ import annotations
 
 import struct
-import time
 import tracemalloc
 from pathlib import Path
 
@@ -55,9 +54,7 @@ def test_a_urdf_naming_one_mesh_sixty_times_is_refused(tmp_path):
                                           '<link name="lid"><visual><geometry><box size="0.1 0.1 0.01"/></geometry></visual></link>'
                                           '<joint name="j" type="revolute"><parent link="base"/><child link="lid"/>'
                                           '<axis xyz="0 1 0"/><limit lower="0" upper="1"/></joint></robot>')
-    t0 = time.perf_counter()
     findings = [f for f in validate_asset(folder) if f.code == "MESH_TOO_MANY_FACES"]
-    assert time.perf_counter() - t0 < 10.0
     assert findings and findings[0].severity == "error" and findings[0].values["built_faces"] == 60 * faces, findings
     assert "60 <mesh> references" in findings[0].message
 

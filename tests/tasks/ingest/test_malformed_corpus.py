@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import collections
 import re
-import time
 
 import pytest
 
@@ -16,7 +15,8 @@ from tests import corpus_builder as cb
 from tests.conftest import ROOT
 from tests.helpers import tree_hashes, no_hang
 
-TIME_LIMIT_S = 5.0
+#: A case's validation that runs longer than this is stopped as hung (a guard against a loop or a bomb read in full,
+#: not a speed goal: ``benchmarks/`` measures speed).
 HANG_LIMIT_S = 30
 
 
@@ -55,10 +55,7 @@ def test_case_gets_its_code(case, tmp_path):
     policy = vi.ValidationPolicy(**(case.policy or {}))
     before = tree_hashes(asset)
     with _no_hang(HANG_LIMIT_S):
-        t = time.perf_counter()
         findings = vi.validate_asset(asset, policy)
-        elapsed = time.perf_counter() - t
-    assert elapsed < TIME_LIMIT_S, f"{case.name}: {elapsed:.2f} s"
     hits = [f for f in findings if f.code == case.code]
     assert hits, f"{case.name}: expected {case.code}, got {[f.describe() for f in findings]}"
     assert "INTERNAL_ERROR" not in {f.code for f in findings}
@@ -203,7 +200,6 @@ def test_texture_pixels_read_from_the_header_only(tmp_path):
     from asset2sim.tasks.ingest.mesh_checks import texture_header, texture_problem
 
     p = tmp_path / "t.png"
-    t = time.perf_counter()
     p.write_bytes(cb.png_header(9000, 9000))  # 81 megapixels claimed, 60 bytes on disk
     header = texture_header(p, 1 << 20)
     assert (header.size, header.width, header.height) == (p.stat().st_size, 9000, 9000)
@@ -211,8 +207,7 @@ def test_texture_pixels_read_from_the_header_only(tmp_path):
     assert code == "TEXTURE_TOO_LARGE" and "9000 x 9000" in msg
     p.write_bytes(cb.png_header(100_000, 100_000))  # 10 gigapixels: beyond PIL's own bomb limit, still "too large"
     code, msg = texture_problem(p, 1 << 20, 8192 * 8192)
-    assert code == "TEXTURE_TOO_LARGE" and "10000000000" in msg
-    assert time.perf_counter() - t < 1.0
+    assert code == "TEXTURE_TOO_LARGE" and "10000000000" in msg  # a 60-byte file: its pixels were never decoded
     p.write_bytes(cb.png_header(64, 64))
     assert texture_problem(p, 1 << 20, 8192 * 8192) is None
     assert texture_problem(p, 10, 8192 * 8192)[0] == "TEXTURE_TOO_LARGE"  # the file cap, by os.stat
