@@ -16,6 +16,7 @@ from asset2sim.formats.mjcf import export as mjcf_export, physics as mjcf_physic
 from asset2sim.formats.mjcf.conventions import ReadOptions
 from asset2sim.formats.staging import ReadAsset, StagingError
 from asset2sim.formats.usd import export as usd_export, physics as usd_physics, reader as usd_reader
+from asset2sim.refined_asset import RefinedAsset
 
 __all__ = ["FORMATS", "Format", "ReadOptions", "read_asset_file"]
 
@@ -49,8 +50,9 @@ def _read_usd(path: Path, options: ReadOptions | None = None) -> ReadAsset:
     return usd_reader.read_usd_asset(path)
 
 
-def _export_usd(out_dir: Path, *, visuals: bool = True, check: bool = True) -> Path:
-    """The path of :func:`~asset2sim.formats.usd.export.export_usd`'s file."""
+def _export_usd(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: bool = True) -> Path:
+    """The path of :func:`~asset2sim.formats.usd.export.export_usd`'s file (``out_dir``: the folder, or the folder as a
+    refine holds it, :meth:`~asset2sim.refined_asset.RefinedAsset.held`)."""
     return usd_export.export_usd(out_dir, visuals=visuals, check=check).path
 
 
