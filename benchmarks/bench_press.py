@@ -4,9 +4,13 @@ from its initial state into each end of its range at its grasp point (``report.j
 lever, the top of its operating range) with 20 N and with that top, at most at the hand's speed (0.25 m/s at the
 grasp point). Prints per part, engine and force how far past the limit it went (deg or mm, and mm at the grasp
 point: at 1/240 s a hand at 0.25 m/s moves the grasp point 1 mm a step, several degrees on a 3 cm lever), how much
-deeper its deepest self-contact sank (mm) and whether the engine diverged; then the counts.
+deeper its deepest self-contact sank (mm), whether the engine diverged and the share of the force the hand pressed
+with at the farthest step (none: the hand still moved it at its speed; a small share: the one step a part resting at
+its stop moves freely, ``asset2sim.tasks.check.press.Press``); then the counts. ``--root-hold constraint``: the root loaded free and
+held by the engine's bounded fixed constraint (``hold_root``, 1000 N) instead of a fixed base.
 
     python benchmarks/bench_press.py --root DIR [--ids 102990,103275] [--engines pybullet,mujoco,mjx] [--forces 20,top]
+        [--root-hold fixed|constraint]
 """
 
 from __future__ import annotations
@@ -26,13 +30,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ids", default="")
     ap.add_argument("--engines", default="pybullet,mujoco,mjx")
     ap.add_argument("--forces", default="20,top", help="N at the grasp point, 'top' the top of the operating range")
+    ap.add_argument("--root-hold", choices=("fixed", "constraint"), default="fixed")
     args = ap.parse_args(argv)
 
+    from asset2sim.engines.base import EngineUnsupported
     from asset2sim.engines.quiet import quiet_stdout
     from asset2sim.engines.source import UrdfFile
     from asset2sim.refined_asset import RefinedAsset
     from asset2sim.tasks.check.gripper import GripperLimits
     from asset2sim.tasks.check.press import press_joint
+    from asset2sim.tasks.check.sweep import HOLD_FORCE
 
     speed = GripperLimits().max_speed_m_s
     folders = sorted(p.parent for p in args.root.glob("*/mobility.urdf"))
@@ -47,12 +54,18 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{f.name:>7}  no handled part", flush=True)
             continue
         options = asset.session_options()
-        options = type(options)(**{**options.__dict__, "fixed_base": True, "gravity": True, "ground": False})
+        fixed = args.root_hold == "fixed"
+        options = type(options)(**{**options.__dict__, "fixed_base": fixed, "gravity": True, "ground": False})
         for engine in args.engines.split(","):
             t0 = time.perf_counter()
             with quiet_stdout():
                 session = UrdfFile(asset.urdf_path).open(engine, options)
             try:
+                try:
+                    session.hold_root(HOLD_FORCE)
+                except EngineUnsupported as exc:
+                    print(f"{f.name:>7} {engine:<8} skipped: {exc}", flush=True)
+                    continue
                 for j, p in parts.items():
                     lever = p.get("lever_m")
                     lo, hi = session.joint_limits[j]
@@ -67,8 +80,9 @@ def main(argv: list[str] | None = None) -> int:
                             c[1] += r.passed
                             c[2] += r.diverged
                             c[3] += r.passed or (not r.diverged and r.sank <= 2e-3 and at_grasp <= 2e-3)
+                            share = "" if r.peak_effort is None else f", at {r.peak_effort / r.effort:4.0%} of the force"
                             print(f"{f.name:>7} {engine:<8} {j:<9} {newton:6.1f} N into {limit:+.3f}: past {r.past * k:+8.3f} {unit}"
-                                  f" ({at_grasp * 1e3:+.2f} mm at the grasp point), contact {r.sank * 1e3:+6.2f} mm"
+                                  f" ({at_grasp * 1e3:+.2f} mm at the grasp point{share}), contact {r.sank * 1e3:+6.2f} mm"
                                   f"{'  DIVERGED' if r.diverged else ''}{'' if r.passed else '  FAIL'}", flush=True)
             finally:
                 session.close()

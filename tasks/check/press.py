@@ -37,8 +37,11 @@ RAMP_TIME = 0.25
 @dataclass(frozen=True)
 class Press:
     """One press of ``joint`` toward its ``limit`` (rad or m) with at most ``effort`` (N*m or N): the farthest it
-    went ``past`` the limit (rad or m; <= 0 inside it), how much deeper its deepest self-contact ``sank`` (m) and
-    whether the engine ``diverged``."""
+    went ``past`` the limit (rad or m; <= 0 inside it), the hand's force on it at that step ``peak_effort`` (N*m or
+    N; None while the hand still moved it toward the stop at its speed), how much deeper its deepest self-contact
+    ``sank`` (m) and whether the engine ``diverged``. A peak at a small share of ``effort`` is the one step an engine
+    lets a part resting at its stop move freely: MuJoCo and Bullet make a limit's constraint only once the joint is
+    past it, so a part at its stop moves (force / inertia) dt^2 in that step."""
 
     joint: str
     limit: float
@@ -47,6 +50,7 @@ class Press:
     sank: float
     diverged: bool
     bound: float
+    peak_effort: float | None = None
 
     @property
     def passed(self) -> bool:
@@ -68,14 +72,16 @@ def press_joint(session: SimSession, joint: str, limit: float, effort: float, sp
     approach = int(round(2.0 * abs(limit - q0) / speed / dt))  # steps the hand has to reach the stop
     steps = approach + int(round((RAMP_TIME + HOLD_TIME) / dt)) + 1
     pressing: list[int] = []  # the step the hand began to press
-    far = [-np.inf, False]  # the farthest past the limit, diverged
+    far = [-np.inf, False, None]  # the farthest past the limit, diverged, the hand's force then
+    force = [None]  # the hand's force of the current step (None: still driven at its speed)
 
     def law(k, q, qd):  # at the hand's speed to the stop, then its force rising over RAMP_TIME
         if not pressing and (s * (q - limit) >= -REACHED * (upper - lower) or k >= approach):
             session.release_joint(joint)
             pressing.append(k)
         if pressing:
-            session.apply_joint_effort(joint, s * effort * min(1.0, (k - pressing[0] + 1) * dt / RAMP_TIME))
+            force[0] = effort * min(1.0, (k - pressing[0] + 1) * dt / RAMP_TIME)
+            session.apply_joint_effort(joint, s * force[0])
         else:
             session.drive_joint(joint, s * speed, effort)
 
@@ -83,7 +89,8 @@ def press_joint(session: SimSession, joint: str, limit: float, effort: float, sp
         if not (np.isfinite(q) and np.isfinite(qd)) or abs(qd) > DIVERGED * speed:
             far[1] = True
             return True
-        far[0] = max(far[0], s * (q - limit))
+        if s * (q - limit) > far[0]:
+            far[0], far[2] = s * (q - limit), force[0]
         return False
 
     held = [o for o in session.joint_types if o != joint]  # the other parts held where they are (operability's)
@@ -101,4 +108,4 @@ def press_joint(session: SimSession, joint: str, limit: float, effort: float, sp
         session.restore_state(saved)
         session.discard_state(saved)
     kind = session.joint_types.get(joint, "revolute")
-    return Press(joint, limit, effort, float(far[0]), float(sank), bool(far[1]), BOUND.get(kind, BOUND["revolute"]))
+    return Press(joint, limit, effort, float(far[0]), float(sank), bool(far[1]), BOUND.get(kind, BOUND["revolute"]), far[2])

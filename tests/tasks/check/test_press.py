@@ -43,6 +43,19 @@ def test_a_lid_pressed_open_overruns_mujocos_default_limit_and_holds_with_the_li
         assert press_joint(s, "lid_hinge", 2.0, effort, SPEED / lever).passed
 
 
+def test_a_part_resting_at_its_stop_moves_freely_for_the_step_a_press_begins_in_pybullet(tmp_path):
+    """The box's 50 g post rests at its lower stop (no gravity, no friction: nothing presses it there) and is pressed
+    into it: Bullet makes the limit's constraint only once the joint is past it, so in the farthest step the post
+    moved as a free body under the hand's force of that step, (F / m) dt^2, and the press reports that force."""
+    a = write_contract_asset(tmp_path, post_height=0.0, post_friction=0.0)
+    opts = SessionOptions(initial_state=dict(a.initial_state), fixed_base=True, ground=False, gravity=False)
+    with open_session("pybullet", a.urdf, opts) as s:
+        r = press_joint(s, "post_slide", 0.0, 20.0, SPEED)
+        dt = s.options.conventions.timestep
+    assert r.peak_effort is not None and 0.0 < r.peak_effort < 20.0
+    assert r.past == pytest.approx(r.peak_effort / a.masses["post"] * dt**2, rel=0.05)
+
+
 ROWS = {r["id"]: r for r in csv.DictReader((SHARED / "manifest.csv").open())} if (SHARED / "manifest.csv").is_file() else {}
 
 
