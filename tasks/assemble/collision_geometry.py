@@ -13,7 +13,6 @@ from __future__ import annotations
 import hashlib
 import json
 import threading
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -270,20 +269,27 @@ PIECES_CODE = ("asset2sim.tasks.assemble.collision_geometry", "asset2sim.tasks.a
 
 def _piece_keys(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool, opening: bool = False
                 ) -> tuple[str, str | None]:
-    """(in-process key, on-disk key) of :func:`link_pieces`' state-independent result: :func:`_model_digest` of
-    the collision meshes' names and bytes, not of where the files lie (the final candidate written into the output
-    folder finds the pieces made for it in the workspace); the on-disk key also of the source of
+    """(in-process key, on-disk key) of :func:`link_pieces`' state-independent result: the digest of everything it
+    reads, each collision mesh as its file name and bytes, not where the file lies (the final candidate written into
+    the output folder finds the pieces made for it in the workspace); the on-disk key also of the source of
     :data:`PIECES_CODE`, None when that or a mesh cannot be read."""
-    unread: list[Path] = []
-
-    def content(path: Path) -> bytes:
-        try:
-            return hashlib.sha256(mesh_io.file_bytes(path)).digest()
-        except OSError:
-            unread.append(path)
-            return str(path).encode()
-
-    key = _model_digest(model, mesh_path, limit, decompose, content, opening)
+    parts: list[bytes | str] = [repr((limit, decompose, opening))]
+    unread = False
+    for name, link in model.links.items():
+        parts.append(name)
+        for c in link.collisions:
+            parts.append(repr((c.kind, c.size, c.radius, c.length, c.filename)))
+            parts.append(np.asarray(c.origin, float).tobytes() + np.asarray(c.scale, float).tobytes())
+            if c.kind == "mesh":
+                try:
+                    parts.append(hashlib.sha256(mesh_io.file_bytes(mesh_path(c))).digest())
+                except OSError:  # made again, with the reader's error, when asked for
+                    unread = True
+                    parts.append(str(mesh_path(c)))
+    for j in model.joints:
+        parts.append(repr((j.name, j.type, j.parent, j.child, j.lower, j.upper)))
+        parts.append(np.asarray(j.origin, float).tobytes() + np.asarray(j.axis, float).tobytes())
+    key = array_cache.digest(*parts)
     try:
         code = array_cache.source_digest(*PIECES_CODE)
     except (ImportError, OSError, TypeError):
@@ -319,23 +325,6 @@ def _load_pieces(key: str, model: urdf.UrdfModel) -> tuple[dict[str, list[Piece]
         return pieces, [str(x) for x in meta["notes"]]
     except (KeyError, ValueError, TypeError, UnicodeDecodeError):
         return None
-
-
-def _model_digest(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
-                  mesh_id: Callable[[Path], bytes], opening: bool = False) -> str:
-    """Digest of everything :func:`link_pieces` reads (each mesh as its file name and ``mesh_id`` of its file)."""
-    parts: list[bytes | str] = [repr((limit, decompose, opening))]
-    for name, link in model.links.items():
-        parts.append(name)
-        for c in link.collisions:
-            parts.append(repr((c.kind, c.size, c.radius, c.length, c.filename)))
-            parts.append(np.asarray(c.origin, float).tobytes() + np.asarray(c.scale, float).tobytes())
-            if c.kind == "mesh":
-                parts.append(mesh_id(Path(mesh_path(c))))
-    for j in model.joints:
-        parts.append(repr((j.name, j.type, j.parent, j.child, j.lower, j.upper)))
-        parts.append(np.asarray(j.origin, float).tobytes() + np.asarray(j.axis, float).tobytes())
-    return array_cache.digest(*parts)
 
 
 #: Words of the note on a link denser over its pieces than its material allows.
