@@ -19,6 +19,7 @@ from typing import Any
 from asset2sim.atomic import non_finite
 from asset2sim.engines.base import SessionOptions, Spring, session_root_options
 from asset2sim.engines.loading import CollisionPiece, collision_pieces, overlay_springs, read_urdf
+from asset2sim.mesh_io import MeshCache
 from asset2sim.output_folder import OVERLAY_NAME, REPORT_NAME, STATE_NAME, TIMINGS_NAME, URDF_NAME, OutputError, read_record
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.overlay import Overlay, RootMount
@@ -40,6 +41,9 @@ class RefinedAsset:
     folder: Path
     urdf_name: str = URDF_NAME
     _records: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
+    meshes: MeshCache = field(default_factory=MeshCache, init=False, repr=False, compare=False)
+    """The folder's mesh files as read (:class:`~asset2sim.mesh_io.MeshCache`): the MJCF and USD exports of one
+    refine parse each visual mesh once."""
 
     @classmethod
     def of(cls, folder: "Path | str | RefinedAsset") -> "RefinedAsset":

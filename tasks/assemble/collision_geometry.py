@@ -13,7 +13,6 @@ from __future__ import annotations
 import hashlib
 import json
 import threading
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -137,21 +136,21 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
         CollisionGeometryError: a collision mesh cannot be read.
     """
     opening = decompose and open_containers
-    key = _cache_key(model, mesh_path, limit, decompose, opening)
-    done = _cached_pieces(key, model, mesh_path, limit, decompose, opening)
+    key, disk_key = _piece_keys(model, mesh_path, limit, decompose, opening)
+    done = _cached_pieces(key, disk_key, model, mesh_path, limit, decompose, opening)
     if state is not None:
         skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())), bool(level))
         done = _recalled(_STATE_CACHE, skey) or _remember(_STATE_CACHE, skey, _state_pieces(model, done, state, decompose, level))
     return {k: list(v) for k, v in done[0].items()}, list(done[1])
 
 
-def _cached_pieces(key: str, model: urdf.UrdfModel, mesh_path, limit: int,
+def _cached_pieces(key: str, disk_key: str | None, model: urdf.UrdfModel, mesh_path, limit: int,
                    decompose: bool, opening: bool) -> tuple[dict[str, list[Piece]], list[str]]:
-    """:func:`link_pieces`' state-independent (pieces, notes), from the process's or the disk's cache, else made."""
+    """:func:`link_pieces`' state-independent (pieces, notes), from the process's or the disk's cache (keys of
+    :func:`_piece_keys`), else made."""
     hit = _recalled(_PIECE_CACHE, key)
     if hit is not None:
         return hit
-    disk_key = _content_key(model, mesh_path, limit, decompose, opening)
     hit = _load_pieces(disk_key, model) if disk_key is not None else None
     if hit is not None:
         return _remember(_PIECE_CACHE, key, hit)
@@ -237,9 +236,9 @@ def _state_pieces(model: urdf.UrdfModel, hit: tuple[dict[str, list[Piece]], list
     return pieces, notes
 
 
-#: Pieces made in this process, by :func:`_cache_key` (the oldest of 16 dropped).
+#: Pieces made in this process, by :func:`_piece_keys`' first key (the oldest of 16 dropped).
 _PIECE_CACHE: cachetools.FIFOCache = cachetools.FIFOCache(maxsize=16)
-#: What :func:`link_pieces` returned, by (:func:`_cache_key`, initial state) (the oldest of 16 dropped).
+#: What :func:`link_pieces` returned, by (:func:`_piece_keys`' first key, initial state) (the oldest of 16 dropped).
 _STATE_CACHE: cachetools.FIFOCache = cachetools.FIFOCache(maxsize=16)
 _CACHE_LOCK = threading.Lock()
 
@@ -268,21 +267,34 @@ PIECES_CODE = ("asset2sim.tasks.assemble.collision_geometry", "asset2sim.tasks.a
                "asset2sim.tasks.geometry.decomposition", "asset2sim.tasks.geometry.voxels")
 
 
-def _content_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool, opening: bool = False) -> str | None:
-    """The on-disk key: :func:`_model_digest` with the collision meshes' bytes and the source of
-    :data:`PIECES_CODE`; None when either cannot be read."""
+def _piece_keys(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool, opening: bool = False
+                ) -> tuple[str, str | None]:
+    """(in-process key, on-disk key) of :func:`link_pieces`' state-independent result: the digest of everything it
+    reads, each collision mesh as its file name and bytes, not where the file lies (the final candidate written into
+    the output folder finds the pieces made for it in the workspace); the on-disk key also of the source of
+    :data:`PIECES_CODE`, None when that or a mesh cannot be read."""
+    parts: list[bytes | str] = [repr((limit, decompose, opening))]
+    unread = False
+    for name, link in model.links.items():
+        parts.append(name)
+        for c in link.collisions:
+            parts.append(repr((c.kind, c.size, c.radius, c.length, c.filename)))
+            parts.append(np.asarray(c.origin, float).tobytes() + np.asarray(c.scale, float).tobytes())
+            if c.kind == "mesh":
+                try:
+                    parts.append(hashlib.sha256(mesh_io.file_bytes(mesh_path(c))).digest())
+                except OSError:  # made again, with the reader's error, when asked for
+                    unread = True
+                    parts.append(str(mesh_path(c)))
+    for j in model.joints:
+        parts.append(repr((j.name, j.type, j.parent, j.child, j.lower, j.upper)))
+        parts.append(np.asarray(j.origin, float).tobytes() + np.asarray(j.axis, float).tobytes())
+    key = array_cache.digest(*parts)
     try:
         code = array_cache.source_digest(*PIECES_CODE)
     except (ImportError, OSError, TypeError):
-        return None
-
-    def content(path: Path) -> bytes | None:
-        try:
-            return hashlib.sha256(mesh_io.file_bytes(path)).digest()
-        except OSError:
-            return None
-
-    return _model_digest(model, mesh_path, limit, decompose, content, code, opening)
+        return key, None
+    return key, None if unread else array_cache.digest(code, key)
 
 
 def _store_pieces(key: str, hit: tuple[dict[str, list[Piece]], list[str]]) -> None:
@@ -313,40 +325,6 @@ def _load_pieces(key: str, model: urdf.UrdfModel) -> tuple[dict[str, list[Piece]
         return pieces, [str(x) for x in meta["notes"]]
     except (KeyError, ValueError, TypeError, UnicodeDecodeError):
         return None
-
-
-def _model_digest(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
-                  mesh_id: Callable[[Path], bytes | None], prefix: str = "", opening: bool = False) -> str | None:
-    """Digest of everything :func:`link_pieces` reads (each mesh as ``mesh_id`` of its file), after ``prefix``;
-    None when ``mesh_id`` gives None."""
-    parts: list[bytes | str] = [prefix, repr((limit, decompose, opening))]
-    for name, link in model.links.items():
-        parts.append(name)
-        for c in link.collisions:
-            parts.append(repr((c.kind, c.size, c.radius, c.length)))
-            parts.append(np.asarray(c.origin, float).tobytes() + np.asarray(c.scale, float).tobytes())
-            if c.kind == "mesh":
-                ident = mesh_id(Path(mesh_path(c)))
-                if ident is None:
-                    return None
-                parts.append(ident)
-    for j in model.joints:
-        parts.append(repr((j.name, j.type, j.parent, j.child, j.lower, j.upper)))
-        parts.append(np.asarray(j.origin, float).tobytes() + np.asarray(j.axis, float).tobytes())
-    return array_cache.digest(*parts)
-
-
-def _cache_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool, opening: bool = False) -> str:
-    """The in-process key: :func:`_model_digest` with each mesh file's resolved path, mtime and size."""
-
-    def identity(path: Path) -> bytes:
-        try:
-            st = path.stat()
-            return repr((str(path.resolve()), st.st_mtime_ns, st.st_size)).encode()
-        except OSError:
-            return str(path).encode()
-
-    return _model_digest(model, mesh_path, limit, decompose, identity, opening=opening)
 
 
 #: Words of the note on a link denser over its pieces than its material allows.

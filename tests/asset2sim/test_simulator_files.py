@@ -10,6 +10,7 @@ import pytest
 
 from asset2sim import urdf
 from asset2sim.engines.mjcf.visuals import visual_mesh_problem
+from asset2sim.mesh_io import MeshCache
 
 _URDF = """<?xml version="1.0"?>
 <robot name="t">
@@ -64,8 +65,8 @@ def test_single_triangle_visual_is_left_out_and_the_mjcf_compiles(tiny):
     mujoco = pytest.importorskip("mujoco")
     from asset2sim.engines.mjcf import urdf_to_mjcf
 
-    assert "fewer than 4" in visual_mesh_problem(tiny.parent / "tri.obj")
-    assert visual_mesh_problem(tiny.parent / "box.obj") == ""
+    assert "fewer than 4" in visual_mesh_problem(tiny.parent / "tri.obj", MeshCache())
+    assert visual_mesh_problem(tiny.parent / "box.obj", MeshCache()) == ""
     build = urdf_to_mjcf(tiny, visuals=True)
     assert any("tri.obj" in n and "not exported" in n for n in build.notes)
     m = mujoco.MjModel.from_xml_string(build.xml, assets=build.assets())

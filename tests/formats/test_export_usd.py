@@ -290,3 +290,18 @@ def test_parent_child_pairs_filtered_and_friction_as_physx_reads_it(tmp_path):
         assert f"PhysxJointAxisAPI:{dof}" in prim.GetMetadata("apiSchemas").GetAddedOrExplicitItems()
         for effort in ("staticFrictionEffort", "dynamicFrictionEffort"):
             assert prim.GetAttribute(f"physxJointAxis:{dof}:{effort}").Get() == pytest.approx(j.friction, rel=1e-7)
+
+
+def test_the_two_exports_of_one_folder_read_each_visual_mesh_once(contract, monkeypatch):
+    """The MJCF and USD exports of one held folder (as a refine writes them) parse each visual mesh file once."""
+    from asset2sim import mesh_io
+    from asset2sim.refined_asset import RefinedAsset
+
+    reads = []
+    real = mesh_io.read_obj
+    monkeypatch.setattr(mesh_io, "read_obj", lambda data, where: reads.append(Path(where)) or real(data, where))
+    held = RefinedAsset(contract)
+    export_mjcf(held)
+    export_usd(held)
+    visuals = {v.path for link in read_urdf(contract / "mobility.urdf").links.values() for v in link.visuals if v.kind == "mesh"}
+    assert visuals and sorted(reads) == sorted(visuals)

@@ -20,7 +20,7 @@ from asset2sim.engines.mjcf.rewrite import (add_root_and_ground, cylinder_prisms
 from asset2sim.engines.mjcf.visuals import add_visuals
 from asset2sim.file_names import file_stem
 from asset2sim.frames import translation_matrix
-from asset2sim.mesh_io import hull_obj
+from asset2sim.mesh_io import MeshCache, hull_obj
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.report import SolverAid
 from asset2sim.urdf import UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfModel, UrdfStyle, write_urdf
@@ -141,7 +141,8 @@ class MjcfBuild:
 
 
 def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *, missing_inertial: str = "massless",
-                 mesh_root: Path | None = None, meshdir: str = ".", visuals: bool = False, compile_visuals: bool = True) -> MjcfBuild:
+                 mesh_root: Path | None = None, meshdir: str = ".", visuals: bool = False, compile_visuals: bool = True,
+                 visual_meshes: MeshCache | None = None) -> MjcfBuild:
     """Convert a URDF into MJCF under the SPEC's conventions, as a session of ``options`` opens it.
 
     Args:
@@ -158,6 +159,7 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
             collision geoms go to group 3).
         compile_visuals: with ``visuals``, compile the text with them (False: the caller loads the file it
             writes, as :func:`asset2sim.formats.mjcf.export.export_mjcf` does).
+        visual_meshes: where the visual mesh files are read (default: a :class:`~asset2sim.mesh_io.MeshCache` of its own).
 
     Raises:
         UrdfError: the URDF cannot be read.
@@ -208,7 +210,8 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     notes += [f"solver aid on {a.element!r}: {a.kind} {a.written} ({a.criterion}; {a.effect})" for a in aids]
     if visuals:  # after placement: visual meshes never collide, and cost compile time
         for b in worldbody.iter("body"):
-            add_visuals(b, model.links[b.get("name")], mesh_root, asset_el, meshes.files, final_assets, used, notes)
+            add_visuals(b, model.links[b.get("name")], mesh_root, asset_el, meshes.files, final_assets, used, notes,
+                        visual_meshes if visual_meshes is not None else MeshCache())
     key = etree.SubElement(etree.SubElement(root, "keyframe"), "key", name=KEYFRAME)  # the initial state
     key.set("qpos", vec_text(qpos))
     etree.indent(root, space="  ")

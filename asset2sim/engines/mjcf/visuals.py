@@ -43,12 +43,12 @@ def mtl_colour(obj: Path) -> str:
 MIN_MESH_VERTICES = 4
 
 
-def visual_mesh_problem(path: Path) -> str:
-    """Why MuJoCo would refuse ``path`` as a visual mesh ("" when it takes it)."""
+def visual_mesh_problem(path: Path, meshes: mesh_io.MeshCache) -> str:
+    """Why MuJoCo would refuse ``path`` (read through ``meshes``) as a visual mesh ("" when it takes it)."""
     if path.suffix.lower() not in (".obj", ".stl", ".msh"):
         return f"is a {path.suffix} file (MuJoCo reads OBJ, STL and MSH)"
     try:
-        mesh = mesh_io.read_mesh(path)
+        mesh = meshes.get(path)
         v, f = mesh.vertices, mesh.faces
     except mesh_io.MeshReadError as exc:
         return f"cannot be read ({exc})"
@@ -61,14 +61,15 @@ def visual_mesh_problem(path: Path) -> str:
     return ""
 
 
-def add_visuals(body, link, mesh_root: Path, asset_el, files: dict, assets: dict, used: set, notes: list) -> None:
-    """Append ``link``'s visuals to ``body`` as non-colliding geoms (group 2)."""
+def add_visuals(body, link, mesh_root: Path, asset_el, files: dict, assets: dict, used: set, notes: list,
+                meshes: mesh_io.MeshCache) -> None:
+    """Append ``link``'s visuals to ``body`` as non-colliding geoms (group 2), their files read through ``meshes``."""
     for k, v in enumerate(link.visuals):
         g = etree.SubElement(body, "geom", name=f"{safe_name(link.name)}__v{k}", pos=vec_text(v.origin[:3, 3]),
                              quat=quat_text(v.origin[:3, :3]), contype="0", conaffinity="0", group="2")
         if v.kind == "mesh":
             rel = relative_to(v.path, mesh_root) if v.path is not None and v.path.is_file() else None
-            why = "is missing or outside the asset folder" if rel is None else visual_mesh_problem(v.path)
+            why = "is missing or outside the asset folder" if rel is None else visual_mesh_problem(v.path, meshes)
             if why:
                 body.remove(g)
                 notes.append(f"link {link.name!r} visual {k} ({v.filename}) {why}: not exported"

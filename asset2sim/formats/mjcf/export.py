@@ -147,7 +147,8 @@ def export_mjcf(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: bo
     fixed = asset.root.fixed  # mounted: no free joint, the root welded where the file puts it
     build = urdf_to_mjcf(urdf, SessionOptions(initial_state=initial, springs=springs, fixed_base=fixed, ground=not fixed,
                                               press_efforts=asset.press_efforts),
-                         missing_inertial="massless", mesh_root=out_dir, meshdir="..", visuals=visuals, compile_visuals=not check)
+                         missing_inertial="massless", mesh_root=out_dir, meshdir="..", visuals=visuals, compile_visuals=not check,
+                         visual_meshes=asset.meshes)
     for rel, data in build.derived_meshes.items():
         dst = file_names.join_inside(out_dir, rel)
         if not (dst.is_file() and dst.read_bytes() == data):

@@ -21,7 +21,7 @@ from asset2sim.formats.staging import numbered
 from asset2sim.formats.usd.check import check_usd
 from asset2sim.formats.usd.reader import DEG
 from asset2sim.frames import matrix_quat_wxyz
-from asset2sim.mesh_io import MeshReadError, convex_hull_mesh, read_mesh
+from asset2sim.mesh_io import MeshCache, MeshReadError, convex_hull_mesh
 from asset2sim.urdf import UrdfJoint, UrdfModel
 from asset2sim.output_folder import USD_DIR
 
@@ -80,7 +80,7 @@ def export_usd(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: boo
     model, initial, springs, fixed = asset.model, asset.initial_state, asset.springs, asset.root.fixed
     pieces, notes = asset.collision[0], list(asset.collision[1])  # the cached notes stay as read
     stage, root_path = _new_stage(model)
-    link_paths = _write_links(stage, root_path, model, initial, pieces, visuals, notes)
+    link_paths = _write_links(stage, root_path, model, initial, pieces, visuals, notes, asset.meshes)
     joint_paths = _write_joints(stage, root_path, model, link_paths, initial, springs, fixed)
     target = _save(stage, asset.folder / USD_DIR / f"{asset.urdf_path.stem}.usd")
     build = UsdBuild(path=target, links=link_paths, joints=joint_paths, fixed_root=fixed, notes=notes)
@@ -111,9 +111,9 @@ def _new_stage(model: UrdfModel):
 
 
 def _write_links(stage, root_path, model: UrdfModel, initial: dict[str, float], pieces: dict[str, list[CollisionPiece]],
-                 visuals: bool, notes: list[str]) -> dict[str, str]:
+                 visuals: bool, notes: list[str], meshes: MeshCache) -> dict[str, str]:
     """Every link as a rigid body under ``root_path``, posed at the initial
-    state, with its visuals (``visuals``) and collision pieces; returns URDF
+    state, with its visuals (``visuals``, their files read through ``meshes``) and collision pieces; returns URDF
     link name -> prim path."""
     Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
     link_names = _names(model.tree_order(), Tf.MakeValidIdentifier)
@@ -124,7 +124,7 @@ def _write_links(stage, root_path, model: UrdfModel, initial: dict[str, float], 
         link_paths[name] = str(path)
         _write_body(stage, path, model, name, poses[name], notes)
         if visuals:
-            _write_visuals(stage, path, model, name, notes)
+            _write_visuals(stage, path, model, name, notes, meshes)
         _write_collisions(stage, path, pieces.get(name, []))
     return link_paths
 
@@ -213,7 +213,7 @@ def _save(stage, target: Path) -> Path:
     return target
 
 
-def _write_visuals(stage, link_path, model: UrdfModel, link: str, notes: list[str]) -> None:
+def _write_visuals(stage, link_path, model: UrdfModel, link: str, notes: list[str], meshes: MeshCache) -> None:
     Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
     scope = link_path.AppendChild("visuals")
     UsdGeom.Scope.Define(stage, scope)
@@ -221,7 +221,7 @@ def _write_visuals(stage, link_path, model: UrdfModel, link: str, notes: list[st
         p = scope.AppendChild(f"visual_{k}")
         if v.kind == "mesh":
             try:
-                read = read_mesh(v.path)
+                read = meshes.get(v.path)
                 verts, faces = read.vertices, read.faces
             except MeshReadError as exc:
                 notes.append(f"link {link!r} visual {k}: {exc}; left out")

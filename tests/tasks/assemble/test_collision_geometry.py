@@ -787,7 +787,7 @@ def test_pieces_are_kept_on_disk_by_content_and_code(tmp_path, monkeypatch):
     # the code's source is part of the key
     array_cache.source_digest.cache_clear()
     monkeypatch.setattr(cg, "PIECES_CODE", cg.PIECES_CODE + ("asset2sim.atomic",))
-    assert cg._content_key(urdf.read_urdf(folder / "mobility.urdf"), lambda g: folder / str(g.filename), 16, True) != entries[0].stem
+    assert cg._piece_keys(urdf.read_urdf(folder / "mobility.urdf"), lambda g: folder / str(g.filename), 16, True)[1] != entries[0].stem
     # off: nothing written
     monkeypatch.setenv("ASSET2SIM_CACHE", "off")
     assert array_cache.cache_dir() is None
@@ -796,6 +796,28 @@ def test_pieces_are_kept_on_disk_by_content_and_code(tmp_path, monkeypatch):
     pieces_of(folder)
     assert not (tmp_path / "cache").exists()
 
+
+
+def test_pieces_made_once_per_process_wherever_the_meshes_lie(tmp_path, monkeypatch):
+    """With the on-disk cache off, the same meshes under the same names in another folder (a candidate written into
+    the workspace, then published into the output folder) are not cut into pieces again; a changed mesh is."""
+    import shutil
+    from tests.tasks.state.test_clearance import write_stacked_drawers
+
+    monkeypatch.setenv("ASSET2SIM_CACHE", "off")
+    cg._PIECE_CACHE.clear()
+    cg._STATE_CACHE.clear()
+    made = []
+    real = cg._made_pieces
+    monkeypatch.setattr(cg, "_made_pieces", lambda *a, **k: made.append(a) or real(*a, **k))
+    a = write_stacked_drawers(tmp_path / "a").parent
+    shutil.copytree(a, tmp_path / "b")
+    results = [cg.link_pieces(urdf.read_urdf(f / "mobility.urdf"), lambda g, f=f: f / str(g.filename), {})
+               for f in (a, tmp_path / "b")]
+    assert len(made) == 1 and results[0][1] == results[1][1]
+    (tmp_path / "b" / "upper.obj").write_text((tmp_path / "b" / "upper.obj").read_text().replace("0.045", "0.044"))
+    cg.link_pieces(urdf.read_urdf(tmp_path / "b" / "mobility.urdf"), lambda g: tmp_path / "b" / str(g.filename))
+    assert len(made) == 2
 
 def _wobbly(tmp_path: Path, short: float) -> Path:
     """A 0.2 m square slab on four 1 cm feet, one foot ``short`` m shorter

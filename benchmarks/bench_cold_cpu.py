@@ -1,0 +1,72 @@
+"""CPU seconds of one object refined cold, stage by stage: each dev row refined as an unseen object (the on-disk
+cache off, ``ASSET2SIM_CACHE=off``) in a fresh process, with the flow's first phase (verdict and exports, media
+deferred), so that nothing one refine made serves the next.
+
+    nice -n 10 .venv/bin/python benchmarks/bench_cold_cpu.py [--ids 9912,102990] [--work DIR]
+
+Prints per row the CPU seconds (user + system) of the refine call and of each stage (``timings.json``'s
+``stage_cpu_seconds``), then the totals; imports and interpreter start-up are outside the figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DEV = ROOT.parent / "shared" / "datasets" / "partnet_mobility"
+
+
+def _one(row_id: str, prompt: str, out: Path) -> None:
+    """Refine one row cold in this process; print a JSON line: the refine's CPU s and the stages' CPU s."""
+    os.environ["ASSET2SIM_CACHE"] = "off"
+    from asset2sim.tasks.refine import refine_asset
+
+    c0 = time.process_time()
+    refine_asset(DEV / row_id, prompt, out, skip_if_complete=False, extras=True, media=False)
+    cpu = time.process_time() - c0
+    stages = json.loads((out / "timings.json").read_text())["stage_cpu_seconds"]
+    print(json.dumps({"cpu": cpu, "stages": stages}))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--manifest", type=Path, default=DEV / "manifest.csv")
+    ap.add_argument("--ids", default="", help="comma-separated subset of ids")
+    ap.add_argument("--work", type=Path, default=None, help="output folder (default: a temporary one)")
+    ap.add_argument("--one", nargs=3, help=argparse.SUPPRESS)  # internal: ID PROMPT OUT, one row in this process
+    args = ap.parse_args(argv)
+    if args.one:
+        _one(args.one[0], args.one[1], Path(args.one[2]))
+        return 0
+    rows = list(csv.DictReader(args.manifest.open()))
+    wanted = [i.strip() for i in args.ids.split(",") if i.strip()]
+    rows = [r for r in rows if not wanted or r["id"] in wanted]
+    work = args.work or Path(tempfile.mkdtemp(prefix="a2s-cold-cpu-"))
+    print(f"load {' '.join(f'{x:.2f}' for x in os.getloadavg())}; CPU s per row, cache off, media deferred")
+    total: dict[str, float] = {}
+    for r in rows:
+        proc = subprocess.run([sys.executable, __file__, "--one", r["id"], r["prompt"], str(work / r["id"])],
+                              capture_output=True, text=True)
+        if proc.returncode != 0:
+            print(f"{r['id']:>7} failed: {proc.stderr.strip().splitlines()[-1:]}")
+            continue
+        res = json.loads(proc.stdout.strip().splitlines()[-1])
+        total["refine"] = total.get("refine", 0.0) + res["cpu"]
+        for k, v in res["stages"].items():
+            total[k] = total.get(k, 0.0) + v
+        print(f"{r['id']:>7} {r['category']:<16} {res['cpu']:6.2f} | "
+              + " ".join(f"{k}={v:.2f}" for k, v in res["stages"].items() if v >= 0.05), flush=True)
+    print("total   " + " ".join(f"{k}={v:.2f}" for k, v in total.items() if v >= 0.05))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
