@@ -6,7 +6,8 @@ workers included): what the test tiers cost, free of the wall-clock noise of a s
 
 As a pytest plugin (``-p pytest_cpu``, ``benchmarks/`` on ``PYTHONPATH``; ``PYTEST_ADDOPTS="-p pytest_cpu"`` for
 ``make test``) each process writes ``PYTEST_CPU_DIR/<worker>.tsv``: a test's CPU (``getrusage``: the process and the
-children it waited for) over its setup, call and teardown, and each module's collection (its imports). Run as a script
+children it waited for) over its setup, call and teardown, each module's collection (its imports), and the process's
+``os.fsync`` calls with their wall seconds (waits on the disk that the CPU figures leave out). Run as a script
 it prints the sums per process and the ``--top`` tests and modules.
 """
 
@@ -21,6 +22,22 @@ from pathlib import Path
 import pytest
 
 _ROWS: list[tuple[str, float, float, str]] = []  # (kind: test | collect, cpu s, wall s, node id)
+
+
+_FSYNC = [0, 0.0]  # os.fsync calls of this process and their wall seconds (waits on the disk, not CPU)
+_os_fsync = os.fsync
+
+
+def _timed_fsync(fd):
+    t0 = time.perf_counter()
+    try:
+        return _os_fsync(fd)
+    finally:
+        _FSYNC[0] += 1
+        _FSYNC[1] += time.perf_counter() - t0
+
+
+os.fsync = _timed_fsync
 
 
 def _cpu() -> float:
@@ -51,7 +68,8 @@ def pytest_unconfigure(config):
         return
     Path(folder).mkdir(parents=True, exist_ok=True)
     name = os.environ.get("PYTEST_XDIST_WORKER", f"main-{os.getpid()}")
-    Path(folder, f"{name}.tsv").write_text("".join(f"{k}\t{c:.3f}\t{w:.3f}\t{n}\n" for k, c, w, n in _ROWS))
+    rows = [*_ROWS, ("fsync", _FSYNC[0], _FSYNC[1], "os.fsync calls (cpu column: count)")]
+    Path(folder, f"{name}.tsv").write_text("".join(f"{k}\t{c:.3f}\t{w:.3f}\t{n}\n" for k, c, w, n in rows))
 
 
 def main() -> None:
@@ -61,7 +79,7 @@ def main() -> None:
     args = ap.parse_args()
     rows = []
     for path in sorted(args.folder.glob("*.tsv")):
-        kinds: dict[str, list[float]] = {"test": [0.0, 0.0, 0], "collect": [0.0, 0.0, 0]}
+        kinds: dict[str, list[float]] = {"test": [0.0, 0.0, 0], "collect": [0.0, 0.0, 0], "fsync": [0.0, 0.0, 0]}
         for line in path.read_text().splitlines():
             kind, cpu, wall, node = line.split("\t")
             kinds[kind][0] += float(cpu)
@@ -69,9 +87,13 @@ def main() -> None:
             kinds[kind][2] += 1
             rows.append((float(cpu), float(wall), kind, node))
         for kind, (cpu, wall, n) in kinds.items():
-            print(f"{path.stem:10s} {kind:8s} {n:5d} items  cpu {cpu:8.1f} s  wall {wall:8.1f} s")
+            if kind == "fsync":
+                print(f"{path.stem:10s} fsync    {int(cpu):5d} calls  wall {wall:8.1f} s")
+            else:
+                print(f"{path.stem:10s} {kind:8s} {n:5d} items  cpu {cpu:8.1f} s  wall {wall:8.1f} s")
     print(f"{'all':10s} test     cpu {sum(r[0] for r in rows if r[2] == 'test'):8.1f} s")
     print(f"{'all':10s} collect  cpu {sum(r[0] for r in rows if r[2] == 'collect'):8.1f} s")
+    print(f"{'all':10s} fsync    {int(sum(r[0] for r in rows if r[2] == 'fsync')):5d} calls  wall {sum(r[1] for r in rows if r[2] == 'fsync'):8.1f} s")
     for kind in ("test", "collect"):
         print(f"\nthe {args.top} costliest ({kind}), cpu s, wall s:")
         for cpu, wall, _, node in sorted((r for r in rows if r[2] == kind), reverse=True)[:args.top]:

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from asset2sim import atomic
 from asset2sim.engines.base import register_engine
 from tests.fake_engine import FakeSession
 from tests.helpers import RefineFactory, Refined
@@ -40,6 +41,31 @@ def pytest_sessionstart(session):
     if not rows or missing:
         raise pytest.UsageError(f"CI=true but the dev dataset is missing at {SHARED}" + (f" (rows {missing})" if missing else "")
                                 + ": CI lays ../shared beside the clone; its tests fail instead of skipping")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def scratch_temp_folders(tmp_path_factory) -> Iterator[list[Path]]:
+    """The session's temporary folders (this process's and, under pytest-xdist, the run's, which holds the shared
+    refines) as scratch (``asset2sim.atomic.add_scratch``): files written there are atomic without ``fsync``, which
+    guards only against a crash of the machine, and no test's folder has to outlive one (the ``fsync`` calls were a
+    good part of the tier's wall time). A test of the durable writes opts out (``durable_writes``)."""
+    base = tmp_path_factory.getbasetemp()
+    folders = [base.parent] if os.environ.get("PYTEST_XDIST_WORKER") else [base]
+    for folder in folders:
+        atomic.add_scratch(folder)
+    yield folders
+    for folder in folders:
+        atomic.remove_scratch(folder)
+
+
+@pytest.fixture()
+def durable_writes(scratch_temp_folders) -> Iterator[None]:
+    """Writes with ``fsync`` again (:func:`scratch_temp_folders` undone) for one test of the durable writes."""
+    for folder in scratch_temp_folders:
+        atomic.remove_scratch(folder)
+    yield
+    for folder in scratch_temp_folders:
+        atomic.add_scratch(folder)
 
 
 @pytest.fixture(scope="session")

@@ -569,7 +569,7 @@ def test_reference_leaves_folder(ref, inside):
     assert copied_meshes.reference_leaves_folder(ref, "meshes/base.mtl") is (not inside)
 
 
-def test_outputs_are_fsynced_scratch_files_and_the_ownership_record_are_not(tmp_path, box, monkeypatch):
+def test_outputs_are_fsynced_scratch_files_and_the_ownership_record_are_not(tmp_path, box, monkeypatch, durable_writes):
     """Each output file is synced (the file and its folder) before it counts as written; a scratch folder's files
     (``atomic.add_scratch``) and the ownership record are written atomically without ``fsync``; a refine leaves no
     scratch folder registered."""
