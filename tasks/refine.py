@@ -11,6 +11,8 @@ import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from threadpoolctl import threadpool_limits
+
 from asset2sim import array_cache, atomic, output_folder
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import MAX_REFINE_SECONDS, MAX_REFINE_STEPS, RefineConfig
@@ -132,8 +134,10 @@ def refine_asset(
                           f"({', '.join(tops[:8])}{', ...' if len(tops) > 8 else ''}) are removed")
     work = owner.write_path(out_dir)  # out_dir, or the staging folder that replaces a complete earlier output
     staged_input = asset.staged_from.parent if asset.staged_from is not None else None  # an MJCF / USD file's own folder
-    # no cache entry in the input or output; every simulated step of every phase counted against one cap
-    with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference), step_budget(MAX_REFINE_STEPS, MAX_REFINE_SECONDS):
+    # no cache entry in the input or output; every simulated step of every phase counted against one cap; one BLAS
+    # thread, as `asset2sim refine` and the flow's workers run (docs/design/pipeline.md "Throughput")
+    with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference), step_budget(MAX_REFINE_STEPS, MAX_REFINE_SECONDS), \
+            threadpool_limits(limits=1, user_api="blas"):
         try:
             _announce_extract(asset_dir, asset, findings, log)
             cache = analyze.MeshCache()

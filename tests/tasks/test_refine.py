@@ -329,3 +329,21 @@ def test_refine_takes_an_already_extracted_asset(refine_once, tmp_path, monkeypa
         return d
 
     assert strip(handed) == strip(read_here)
+
+
+def test_a_refine_runs_its_stages_on_one_blas_thread(demo_root, tmp_path, monkeypatch):
+    """In any process (the API's, a test's), a refine's stages run on one BLAS thread, as `asset2sim refine` and the
+    flow's workers run them: OpenBLAS's threads spin on the refine's small arrays (CPU time, no wall time)."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    seen = []
+
+    def stop(*args):
+        seen.append([lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"])
+        raise KeyboardInterrupt("stopped after the first stage")
+
+    monkeypatch.setattr(refine_mod, "_analyze", stop)
+    with threadpool_limits(limits=2, user_api="blas"), pytest.raises(KeyboardInterrupt):
+        refine_asset(demo_root / "laptop", "open", tmp_path / "out", extras=False, skip_if_complete=False)
+    assert seen and seen[0] and set(seen[0]) == {1}
+    assert {lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"} == {2}  # restored after it
