@@ -5,7 +5,9 @@ deferred), so that nothing one refine made serves the next.
     nice -n 10 .venv/bin/python benchmarks/bench_cold_cpu.py [--ids 9912,102990] [--work DIR]
 
 Prints per row the CPU seconds (user + system) of the refine call and of each stage (``timings.json``'s
-``stage_cpu_seconds``), then the totals; imports and interpreter start-up are outside the figures.
+``stage_cpu_seconds``), then the totals; imports and interpreter start-up are outside the figures. Each row's process
+has the environment Dask's nanny gives the flow's workers (:data:`WORKER_ENV`, unless set already): one OpenMP thread
+(CoACD's), one BLAS thread.
 """
 
 from __future__ import annotations
@@ -22,6 +24,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 DEV = ROOT.parent / "shared" / "datasets" / "partnet_mobility"
+#: What Dask's nanny sets in the flow's workers (``distributed.nanny.pre-spawn-environ``), inherited by their stage children.
+WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MALLOC_TRIM_THRESHOLD_": "65536"}
 
 
 def _one(row_id: str, prompt: str, out: Path) -> None:
@@ -50,11 +54,12 @@ def main(argv: list[str] | None = None) -> int:
     wanted = [i.strip() for i in args.ids.split(",") if i.strip()]
     rows = [r for r in rows if not wanted or r["id"] in wanted]
     work = args.work or Path(tempfile.mkdtemp(prefix="a2s-cold-cpu-"))
-    print(f"load {' '.join(f'{x:.2f}' for x in os.getloadavg())}; CPU s per row, cache off, media deferred")
+    print(f"load {' '.join(f'{x:.2f}' for x in os.getloadavg())}; CPU s per row, cache off, media deferred, "
+          f"{os.environ.get('OMP_NUM_THREADS', WORKER_ENV['OMP_NUM_THREADS'])} OpenMP thread(s)")
     total: dict[str, float] = {}
     for r in rows:
         proc = subprocess.run([sys.executable, __file__, "--one", r["id"], r["prompt"], str(work / r["id"])],
-                              capture_output=True, text=True)
+                              capture_output=True, text=True, env={**WORKER_ENV, **os.environ})
         if proc.returncode != 0:
             print(f"{r['id']:>7} failed: {proc.stderr.strip().splitlines()[-1:]}")
             continue
