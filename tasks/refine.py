@@ -27,7 +27,7 @@ from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import overrides, request
 from asset2sim.tasks.synthesize import request_apply, request_findings
 from asset2sim.tasks.check import as_asked
-from asset2sim.tasks.assemble import (write)
+from asset2sim.tasks.assemble import write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.publish import extra_outputs, output, refine_report
 from asset2sim.tasks.publish import media as media_phase
@@ -137,7 +137,7 @@ def refine_asset(
     # no cache entry in the input or output; every simulated step of every phase counted against one cap; one BLAS
     # thread, as `asset2sim refine` and the flow's workers run (docs/design/pipeline.md "Throughput")
     with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference), step_budget(MAX_REFINE_STEPS, MAX_REFINE_SECONDS), \
-            threadpool_limits(limits=1, user_api="blas"):
+            threadpool_limits(1, "blas"):
         try:
             _announce_extract(asset_dir, asset, findings, log)
             cache = analyze.MeshCache()
@@ -198,13 +198,11 @@ def _open_estimator(config: RefineConfig) -> estimator.Estimator:
 
 
 def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, category: str | None,
-             extracted: tuple[AssetDescription, list[Finding]] | None = None,
-             config: RefineConfig | None = None) -> tuple[AssetDescription, list[Finding]]:
+             extracted: tuple[AssetDescription, list[Finding]] | None, config: RefineConfig) -> tuple[AssetDescription, list[Finding]]:
     """Stage 1: the checked asset and its validation findings (``extracted`` when
     already read; an MJCF input read as ``config.body`` and ``config.mjcf`` say); the output folder checked against
     it. RefineError("invalid_input") with the codes, also for a joint range that only makes sense in the other
     unit (``JOINT_RANGE_WRONG_UNIT``: never part of an interaction-ready output)."""
-    config = config or RefineConfig()
     try:
         if extracted is None:
             reading = ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle)

@@ -74,8 +74,7 @@ def at_fractions(closed: dict[str, ClosedState], fractions: dict[str, float]) ->
     return {n: closed[n].position(f) for n, f in fractions.items() if n in closed}
 
 
-def closed_on_output(ctx: EstimationContext, syn: Synthesis, ws: Workspace, log: StageLog,
-                      overrides: dict | None = None) -> Synthesis:
+def closed_on_output(ctx: EstimationContext, syn: Synthesis, ws: Workspace, log: StageLog, overrides: dict) -> Synthesis:
     """Stage 5a: the closed ends measured on the synthesis' candidate (with the collision ``overrides``;
     :mod:`asset2sim.tasks.geometry.urdf_closed`), the requested state and the overlay's initial positions
     moved onto them. Unchanged when the measurement fails."""
@@ -102,7 +101,7 @@ def closed_on_output(ctx: EstimationContext, syn: Synthesis, ws: Workspace, log:
 
 
 def clip_synthesis(ctx: EstimationContext, syn: Synthesis, config: RefineConfig, ws: Workspace, log: StageLog,
-                    overrides: dict | None = None, fractions: dict[str, float] | None = None) -> Synthesis:
+                    overrides: dict, fractions: dict[str, float] | None) -> Synthesis:
     """Stage 5b: the limits clipped to the geometry of the synthesis' candidate (with the collision
     ``overrides``) before the state search and the requested state recomputed from the bands over the
     clipped ranges (``fractions`` win over the bands' targets). ``syn`` itself when nothing was clipped."""
