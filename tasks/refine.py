@@ -42,7 +42,7 @@ from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_o
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 from asset2sim.tasks.tune import escalation
 from asset2sim.tasks.tune import keep_declared as keep
-from asset2sim.tasks.tune.attempt import Attempt, steadier_opening
+from asset2sim.tasks.tune.attempt import Attempt, settled_attempt, steadier_opening
 from asset2sim.inert import one_line
 from asset2sim.engines.base import SimSession
 from asset2sim.engines.step_budget import StepBudgetExceeded, step_budget
@@ -170,9 +170,6 @@ def refine_asset(
             raise
     extra_paths = {k: str(out_dir / Path(v).relative_to(work)) if Path(v).is_relative_to(work) else v for k, v in extra_paths.items()}
     return RefineResult(out_dir=out_dir, report=report, overlay=att.overlay, extras=extra_paths)
-
-
-# ------------------------------------------------------------------ progress
 
 
 # ---------------------------------------------------------- 1-3: extract .. interpret
@@ -322,7 +319,9 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
     """Stages 4-7 once; when the object is unstable or toppled as modelled and the request named no
     pose, a steadier opening, else once more on its stablest face (kept only if better). Returns (attempt, pose note)."""
     att = _attempt(ctx, run)
-    if (att.check.stable and not att.check.topples) or ctx.request.pose_hint is not None:
+    if ctx.request.pose_hint is not None:  # the pose asked is kept: put down where it rests when it leans as it settles
+        return settled_attempt(att, pose_note, lambda rotation: _attempt(replace(ctx, root_rotation=rotation), run))
+    if att.check.stable and not att.check.topples:
         return att, pose_note
     opening = steadier_opening(run.ws, att, run.log)
     if opening is not None:  # stages 4-7 once more at the steadier opening

@@ -262,7 +262,8 @@ def _forward_part(low: str, end: int, limit: int, part_at: dict[int, _Part]) -> 
 
 _ELIDED = re.compile(r"\s*(?:,\s*)?(?:and|or|but|then|yet)?\s*(?:also\s+|at the same time\s+)?")
 
-_OTHERS = re.compile(r"(?<![\w-])(?:others|(?:the )?rest(?: of them)?|remaining(?: ones)?|other(?: ones?)?)(?![\w-])")
+#: "the others", "the rest", "the remaining ones": the parts of the last label no other phrase set.
+OTHERS = re.compile(r"(?<![\w-])(?:others|(?:the )?rest(?: of them)?|remaining(?: ones)?|other(?: ones?)?)(?![\w-])")
 
 
 @dataclass(frozen=True, slots=True)
@@ -340,7 +341,7 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = None
                 prev_subjects = subjects
                 continue
             prev_subjects = []
-            others = _OTHERS.search(low, seg0, b.start)
+            others = OTHERS.search(low, seg0, b.start)
             if others is not None and last_label is not None:
                 used.append(Hit(others.start(), others.end(), others.group(0), None))
                 result.append(make("label", last_label, None, "vertical", b, " ".join(low[others.start(): b.end].split())))

@@ -19,6 +19,7 @@ from asset2sim.tasks.interpret import priors
 from asset2sim.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.interpret.named_parts import (count_warnings, joints_named, joints_of, link_named, moving_parts, part_boxes, stand_ins,
                                                   state_targets, unit_fits)
+from asset2sim.tasks.interpret.state_words import OTHERS
 from asset2sim.tasks.synthesize.opening_fractions import fraction_for
 
 if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
@@ -139,11 +140,13 @@ def resolve_states(ctx: "EstimationContext", kin: "SimSession", scale: float) ->
 def _replaced(named: list[tuple[JointStateRequest, list[str]]], requests: dict[str, JointStateRequest]) -> list[tuple[str, str]]:
     """(phrase, why) of the phrases naming parts whose every joint a later phrase of the request set (``named``:
     (request, its joints) in resolution order; ``requests``: joint -> the request that won it). A phrase naming no
-    part ("half open") refined by one naming a part, and a phrase a typed override (``selector`` joint) replaced,
-    are not among them."""
+    part ("half open") refined by one naming a part, a phrase a typed override (``selector`` joint) replaced, and
+    "the others closed" where no other part is left (the phrase asks for the parts the others did not set), are not
+    among them."""
     out = []
     for jr, joints in named:
-        if not joints or not jr.names_part or jr.selector == "joint" or any(requests.get(t) is jr for t in joints):
+        if not joints or not jr.names_part or jr.selector == "joint" or any(requests.get(t) is jr for t in joints) \
+                or OTHERS.match(jr.phrase):
             continue
         winners = [requests[t] for t in joints if t in requests]
         if all(w.selector == "joint" for w in winners):

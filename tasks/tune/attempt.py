@@ -3,7 +3,10 @@ the report and the extras read (:class:`Attempt`)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+
+import numpy as np
 
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
@@ -11,7 +14,7 @@ from asset2sim.schemas.report import EscalationRound, StateRefinement
 from asset2sim.inert import one_line
 from asset2sim.stage_log import StageLog
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
-from asset2sim.tasks.state import balance
+from asset2sim.tasks.state import balance, pose
 from asset2sim.tasks.synthesize import estimate
 from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.geometry.closed_state import ClosedState
@@ -81,3 +84,21 @@ def steadier_opening(ws: Workspace, att: Attempt, log: StageLog) -> tuple[dict[s
         return None
     log.say("stability", note)
     return fractions, note
+
+
+def settled_attempt(att: Attempt, pose_note: str, redo: Callable[[np.ndarray], Attempt]) -> tuple[Attempt, str]:
+    """For a resting pose the request named: when ``att`` failed rest by leaning out of it as it settled, at most
+    :data:`~asset2sim.tasks.state.pose.SETTLE_LEAN_LIMIT`, the attempt ``redo`` (stages 4-7 on a root rotation (3, 3),
+    world = R root) makes on the pose it came to rest in (:func:`~asset2sim.tasks.state.pose.settled_rotation`), kept
+    when it rests there and passes at least as much; else ``att``. Returns (attempt, pose note)."""
+    trace = att.check.trace
+    settled = None if att.check.stable or trace.diverged or trace.initial_root_quat is None else \
+        pose.settled_rotation(trace.initial_root_quat, trace.root_quat[-1])
+    if settled is None:
+        return att, pose_note
+    rotation, angle = settled
+    second = redo(rotation @ (np.eye(3) if att.root_rotation is None else np.asarray(att.root_rotation, float)))
+    if not (second.check.stable and (second.check.passed or not att.check.passed)):
+        return att, pose_note
+    leaned = f"put down leaning {np.degrees(angle):.1f} deg, where it came to rest on its supports as it settled"
+    return second, "; ".join(filter(None, (pose_note, leaned)))

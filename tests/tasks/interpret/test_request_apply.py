@@ -99,6 +99,10 @@ def test_left_and_right_doors_and_top_drawer_are_resolved_in_space():
         top = max(ctx.joint_heights, key=ctx.joint_heights.get)
         assert set(res.targets) == {top} and res.bands[[n for n in res.bands if n != top][0]] == "closed"
         assert abs(res.targets[top].fraction * ctx.closed[top].open_range * s - 0.1) < 1e-9
+    # one drawer only (20279): "the others" is left with no part, which asks nothing (not a phrase a later one replaced)
+    with build_context(SHARED / "20279", "A bedside cabinet with the top drawer open halfway and the others closed.") as (ctx, kin):
+        res = request_apply.resolve_states(ctx, kin, estimate.choose_scale(ctx)[0])
+        assert res.bands == {"joint_0": "halfway"} and res.unapplied == []
 
 
 def test_the_model_prompt_carries_the_numbers_and_a_departing_overlay_is_flagged(demo_root):
