@@ -134,10 +134,9 @@ def refine_asset(
                           f"({', '.join(tops[:8])}{', ...' if len(tops) > 8 else ''}) are removed")
     work = owner.write_path(out_dir)  # out_dir, or the staging folder that replaces a complete earlier output
     staged_input = asset.staged_from.parent if asset.staged_from is not None else None  # an MJCF / USD file's own folder
-    # no cache entry in the input or output; every simulated step of every phase counted against one cap; one BLAS
-    # thread, as `asset2sim refine` and the flow's workers run (docs/design/pipeline.md "Throughput")
-    with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference), step_budget(MAX_REFINE_STEPS, MAX_REFINE_SECONDS), \
-            threadpool_limits(1, "blas"):
+    # no cache entry in the input or output; every simulated step of every phase counted against one cap; one BLAS thread,
+    with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference), threadpool_limits(1, "blas"), \
+            step_budget(MAX_REFINE_STEPS, MAX_REFINE_SECONDS):  # as the CLI and the flow's workers run (docs/design/pipeline.md)
         try:
             _announce_extract(asset_dir, asset, findings, log)
             cache = analyze.MeshCache()
