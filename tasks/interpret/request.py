@@ -184,8 +184,8 @@ def parse_request(text: str) -> RequestSpec:
     matched += [(f.start, f.text) for f in found] + [(m.start(), m.group(0)) for m in rv.DESCRIPTOR_RX.finditer(low)]
     motion = dynamics_words(low, [(f.start, f.end) for f in level_found], matched, warnings, head_starts, states.ordinals)
     pose = None
-    for h in scan(low, _POSE_TABLE):  # the last pose word not negated
-        if not negated(low, h.start):
+    for h in scan(low, _POSE_TABLE):  # the last pose word not negated nor a part's state ("the handle upright")
+        if not negated(low, h.start) and not any(b.start < h.end and h.start < b.end for b in states.hits):
             pose = h.value
             matched.append((h.start, h.text))
     # step 4: what was understood and what was not

@@ -65,7 +65,7 @@ _STATE_TABLE = compile_table(
         (r"pushed (?:all the way )?in|retracted|folded(?: up| shut| closed| down)?|screwed (?:on|shut|closed|tight)|pressed (?:down|in)|pressed|depressed|tucked in", "closed", ""),
         # physical ends: decided from the geometry after scaling (request_apply)
         (r"(?:raised|lifted) (?:all the way|fully|completely|to the top)", "end:high", "end"),
-        (r"(?:in|at|to) (?:the|its|their) (?:up|raised|upper|top|highest) position|(?:raised|lifted|propped|popped|sprung|flipped|pulled|pushed|swung|tilted|turned|flicked|moved|set|left)(?: all the way)? up|raised|lifted|(?:all the way |fully )?up", "end:high", "end"),
+        (r"(?:in|at|to) (?:the|its|their) (?:up|raised|upper|top|highest) position|(?:raised|lifted|propped|popped|sprung|flipped|pulled|pushed|swung|tilted|turned|flicked|moved|set|left)(?: all the way)? up|raised|lifted|(?:all the way |fully )?up|upright", "end:high", "end"),
         (r"(?:in|at|to) (?:the|its|their) (?:down|lowered|lower|bottom|lowest) position|(?:lowered|flipped|pulled|pushed|swung|tilted|flicked|moved|set|left)(?: all the way)? down|lowered|(?:all the way |fully )?down", "end:low", "end"),
         (r"(?:in|at|to) (?:the|its) on position|(?:set|flipped|flicked|toggled|left) on|on", "end:on", "end"),
         (r"(?:in|at|to) (?:the|its) off position|(?:flipped|flicked|toggled|left) off|off", "end:off", "end"),
@@ -145,7 +145,7 @@ _THE_BEFORE = re.compile(r"(?<![\w-])(?:the|its|their)\s+$")
 
 _END_TAIL = re.compile(r"\s*(?:$|[,.;:!?)]|and\b|but\b|with\b|while\b|position\b)")
 
-_BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)")
+_BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)|upright")  # "the handle upright": a part's end
 
 _END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:are\s+)?(?:both|all|each))?"
                        r"(?:\s+(?:is|are|was|were|set|turned|switched|flipped|pushed|pulled|left|stays?|kept))?\s+$")

@@ -356,6 +356,14 @@ def test_pose_words(text: str, pose: str | None) -> None:
     assert parse_request(text).pose_hint == pose
 
 
+def test_upright_after_a_part_is_that_parts_state() -> None:
+    """"the handle upright" is the handle at its raised end, not the object's resting pose."""
+    spec = parse_request("A handbag with the handle upright.")
+    assert spec.pose_hint is None
+    assert [(j.label, j.band, j.target.end, j.phrase) for j in spec.joint_states] == [("handle", "fully", "high", "handle upright")]
+    assert parse_request("a suitcase standing upright with the handle up").pose_hint == "upright"
+
+
 @pytest.mark.parametrize(
     "text, cat",
     [
