@@ -93,7 +93,7 @@ _STATE_TABLE = compile_table(
         (r"(?:slightly |partially )?ajar|cracked(?: " + _OPEN + r")?(?: (?:a (?:little|bit|crack)|slightly))?", "slightly_open", ""),
         (r"slightly (?:raised|lifted|pulled out|extended|apart|rotated|turned)", "slightly_open", ""),
         # "open" after a verb that leaves it open ("the lid propped open"): as a lone "open", never the verb "to open"
-        (r"(?:propped|popped|sprung|flipped|swung|thrown|flung|left|kept|held|standing|stands|hanging|hangs|wedged) " + _OPEN, "mostly", ""),
+        (r"(?:propped|popped|sprung|flipped|swung|thrown|flung|left|kept|held|standing|stands|hanging|hangs|wedged) " + _OPEN, "mostly", "bare"),
         # a lone "open"
         (_OPEN, "mostly", "bare"),
     ]
@@ -167,7 +167,7 @@ def _state_hits(low: str, numeric: list[rv.Found] | None = None) -> list[Hit]:
 
 def _is_state(low: str, h: Hit) -> bool:
     """False for a bare "open" that is a verb ("to open the lid") and a bare end word without a part noun before it."""
-    if h.flag == "bare":
+    if h.flag == "bare" and h.text.startswith("open"):
         return not (_VERB_AFTER.match(low, h.end) or _VERB_BEFORE.search(low[max(0, h.start - 20): h.start]))
     if h.flag == "end" and _BARE_END.fullmatch(h.text):
         if not _END_LEAD.search(low[max(0, h.start - 40): h.start]) or negated(low, h.start):
@@ -295,6 +295,7 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = None
     ord_ends = [o.end for o in ords]
     # step 2: what the sentences build
     result: list[JointStateRequest] = []
+    lone: set[int] = set()  # ids of the requests of a lone "open" ("the lid wide open, held open": "wide open" says more)
     used: list[Hit] = []
     last_label: str | None = None
     prev_subjects: list[_Part] = []
@@ -304,8 +305,11 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = None
         band, target = _band_and_target(b.value)
         if none:  # "none of the drawers open": closed; "none of the doors closed": open
             band, target = ("mostly" if band == "closed" else "closed"), None
-        return JointStateRequest(selector=selector, label=label, ordinal=ordinal, order=order,  # type: ignore[arg-type]
-                                 band=band, target=target, phrase=phrase)  # type: ignore[arg-type]
+        js = JointStateRequest(selector=selector, label=label, ordinal=ordinal, order=order,  # type: ignore[arg-type]
+                               band=band, target=target, phrase=phrase)  # type: ignore[arg-type]
+        if b.flag == "bare" and not none:
+            lone.add(id(js))
+        return js
 
     # step 3: per state word, its subject: a part after or before it, the parts of the last state, "the others", an ordinal, else every part
     for s0, s1 in sentences(low):
@@ -361,6 +365,8 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = None
     for js in result:
         key = (js.selector, js.label, js.ordinal, js.order)
         old = dedup.pop(key, None)
+        if old is not None and old.band != "closed" and lone & {id(js), id(old)}:
+            js, old = (old if id(js) in lone else js), None  # a lone "open" and a more exact opening of one part: the exact one
         if old is not None and (old.band, old.target) != (js.band, js.target):
             who = "every task-relevant part" if js.selector == "all" else (js.label or "part") + ("" if js.ordinal is None else f" #{js.ordinal} ({js.order})")
             warnings.append(f"contradiction: '{old.phrase}' and '{js.phrase}' both set {who}; the later one ('{js.phrase}') is used")

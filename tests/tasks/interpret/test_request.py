@@ -505,3 +505,14 @@ def test_a_named_variant_is_understood_not_ignored():
     assert parse_request("A mini fridge with its door open.").ignored == []
     # a word near the category that is no variant is still reported
     assert parse_request("A purple faucet.").ignored == ["purple"]
+
+
+@pytest.mark.parametrize("text, band", [("A trash can with the lid wide open, held open.", "fully"),
+                                        ("a trash can with the lid open, wide open", "fully"),
+                                        ("a laptop with the screen open 45 degrees and propped open", "halfway")])
+def test_a_lone_open_beside_a_more_exact_opening_of_the_part_is_no_contradiction(text: str, band: str) -> None:
+    """"held open", "propped open" or a bare "open" says less than "wide open" or "45 degrees" for the same part: the
+    exact one is kept, nothing is warned or overridden (the request tier would fail the phrase as not applied)."""
+    spec = parse_request(text)
+    assert [j.band for j in spec.joint_states] == [band] and spec.warnings == []
+    assert "contradiction" in " ".join(parse_request("a trash can with the lid closed, held open").warnings)
