@@ -236,10 +236,14 @@ def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, 
             why = (held.get(j) if "max" in ways else None) or (operable.get(j) if "min" in ways else None)
             if why is None:
                 continue
-            text = (f"'{word.phrase}': applied to {j} as asked, and {why}: holding the part where it was asked "
-                    f"{'needs more friction or damping than' if 'max' in ways else 'needs it easier to move than'} the word "
-                    "allows. Drop the word, ask for the part at an end of its range, or --mount fixed where the object is "
-                    "mounted in use")
+            if "max" in ways or word.kind == "hold":  # holding the part against its weight is what the word rules out
+                need = ("needs more friction or damping than the word allows" if "max" in ways else
+                        "needs more friction than a hand inside that range moves")
+                text = (f"'{word.phrase}': applied to {j} as asked, and {why}: holding the part where it was asked {need}. "
+                        "Drop the word, ask for the part at an end of its range, or --mount fixed where the object is mounted in use")
+            else:  # "stiff", "soft-close", "spring-loaded": the word itself makes the part too hard to work
+                text = (f"'{word.phrase}': applied to {j} as asked, and {why}: working it needs less friction, damping or "
+                        "spring than the word sets. Drop the word")
             items.append(_unmet(word.phrase, "conflict", j, why, text))
             break
     for word, joints in strays:

@@ -7,7 +7,8 @@ import math
 
 import pytest
 
-from asset2sim.schemas.request import JointStateRequest, QuantityOutcome, RequestFindings, RequestSpec, StateTarget
+from asset2sim.schemas.report import MetricResult
+from asset2sim.schemas.request import JointStateRequest, MotionPhrase, QuantityOutcome, RequestFindings, RequestSpec, StateTarget
 from asset2sim.tasks.check import as_asked
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.geometry.closed_state import ClosedState
@@ -113,3 +114,17 @@ def test_quantities_read_for_people():
     assert as_asked.quantity_text(0.0125, "m") == "12.5 mm" and as_asked.quantity_text(1.5, "m") == "1.5 m"
     assert as_asked.quantity_text(0.18, "opening fraction") == "18.0 % of the range"
     assert as_asked.quantity_text(None, "kg") == "-"
+
+
+@pytest.mark.parametrize("kind, phrase, advice", [("stiff", "stiff", "Drop the word"),
+                                                  ("hold", "holds its position", "at an end of its range")])
+def test_a_word_that_makes_a_part_too_hard_to_work_gets_advice_that_fits_it(kind: str, phrase: str, advice: str) -> None:
+    """A part no hand inside its range can work: "stiff" made it so (drop the word; its state does not matter), "holds
+    its position" needs friction to hold it where asked (an end of its range needs less)."""
+    operability = MetricResult(name="operability", value=1.0, unit="parts", passed=False, engine="pybullet",
+                               details={"failing": ["joint_1"]})
+    asked = MetricResult(name="request_met", value=0.0, unit="unmet phrases", passed=True, engine="none", details={})
+    metrics = as_asked.word_conflicts([operability, asked], [(MotionPhrase(kind=kind, phrase=phrase), ["joint_1"])])
+    (item,) = next(m for m in metrics if m.name == "request_met").details["unmet"]
+    assert item["kind"] == "conflict" and advice in item["text"]
+    assert kind == "hold" or "end of its range" not in item["text"] and "holding" not in item["text"]
