@@ -28,7 +28,7 @@ _DYN_TABLE = compile_table(
         (r"(?:soft|slow|gentle|damped)[- ]?clos(?:e|es|ing|ure)|clos(?:es|ing) (?:slowly|gently|softly)", ("damping", "high"), "soft"),
         (r"(?:low|little|minimal|no|reduced)[- ](?:joint |hinge |sliding )?friction|frictionless|(?:with(?:out)? (?:no |any )?|no )resistance", ("free", "low"), ""),
         (_FREE_VERBS + r" (?:freely|loosely|easily|without resistance)", ("free", "low"), ""),
-        (r"free(?:ly)?|free[- ](?:moving|swinging|spinning|rotating|sliding)|loose(?:ly)?|floppy", ("free", "low"), ""),
+        (r"free to (?:move|swing|spin|rotate|turn|slide)|free(?:ly)?|free[- ](?:moving|swinging|spinning|rotating|sliding)|loose(?:ly)?|floppy", ("free", "low"), ""),
         (r"smooth(?:ly)?|easily|effortless(?:ly)?", ("damping", "low"), ""),
         (r"heavy|heavier", ("heavy", "high"), ""),
         (r"slow(?:ly)?|sluggish", ("damping", "high"), ""),

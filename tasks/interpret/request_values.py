@@ -24,7 +24,7 @@ PART_WORDS = (
     r"lids?|doors?|drawers?|screens?|displays?|seats?|handles?|switch(?:es)?|levers?|knobs?|"
     r"buttons?|caps?|trays?|shel(?:f|ves)|racks?|flaps?|covers?|hatch(?:es)?|gates?|panels?|"
     r"blades?|windows?|sash(?:es)?|pedals?|straps?|spouts?|legs?|wheels?|keys?|toggles?|sliders?|arms?|"
-    r"containers?|carafes?|jugs?|temples?|lens(?:es)?|dials?|bails?|plungers?|triggers?"
+    r"containers?|carafes?|jugs?|temples?|lens(?:es)?|dials?|bails?|plungers?|triggers?|turntables?"
 )
 PART_RX = re.compile(r"(?<![\w-])(?:" + PART_WORDS + r")(?![\w-])")
 #: Words for the object's fixed body (material per part: "on a plastic body").
@@ -103,6 +103,8 @@ _ANGLE_RX = re.compile(_L + _QTY.format(units=_unit_rx(_ANGLE_UNITS)))
 _LENGTH_RX = re.compile(_L + _QTY.format(units=_unit_rx(_LENGTH_UNITS)))
 _MASS_RX = re.compile(_L + _QTY.format(units=_unit_rx(_MASS_UNITS)))
 _VOLUME_RX = re.compile(_L + _QTY.format(units=_unit_rx(_VOLUME_UNITS)))
+#: "at a right angle", "open at right angles", "perpendicular": 90 degrees.
+_RIGHT_ANGLE_RX = re.compile(_L + r"(?:(?:a )?right[- ]angles?|perpendicular)" + _R)
 _PERCENT_RX = re.compile(_L + r"(?P<num>" + NUM + r")\s*(?:%|percent|per cent)(?![\w])")
 _THIRDS_RX = re.compile(
     _L + r"(?P<frac>(?:two|2)[- ]thirds?|(?:a|one|1)[- ]third|(?P<n>\d)\s*/\s*(?P<d>[1-9]))"
@@ -185,8 +187,8 @@ def state_quantities(low: str, mention_starts: list[int]) -> StateQuantities:
         end = m.end() + (len(a.group(0)) if a else 0)
         return start, end
 
-    for m in _ANGLE_RX.finditer(low):
-        v = number_value(m.group("num")) * _factor(_ANGLE_UNITS, m.group("unit"))
+    for m in [*_ANGLE_RX.finditer(low), *_RIGHT_ANGLE_RX.finditer(low)]:
+        v = number_value(m.group("num")) * _factor(_ANGLE_UNITS, m.group("unit")) if "num" in m.re.groupindex else math.pi / 2
         s, e = widen(m)
         states.append(Found(s, e, low[s:e].strip(), ("halfway", StateTarget(kind="angle", value=v))))
     for m in _PERCENT_RX.finditer(low):

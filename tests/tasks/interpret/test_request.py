@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import math
 
 import pytest
 from hypothesis import given, settings
@@ -516,3 +517,18 @@ def test_a_lone_open_beside_a_more_exact_opening_of_the_part_is_no_contradiction
     spec = parse_request(text)
     assert [j.band for j in spec.joint_states] == [band] and spec.warnings == []
     assert "contradiction" in " ".join(parse_request("a trash can with the lid closed, held open").warnings)
+
+
+@pytest.mark.parametrize("text, label", [("A 1.5 kg laptop with the screen at a right angle.", "screen"),
+                                         ("a laptop with its screen open at right angles", "screen"),
+                                         ("a door open perpendicular to the wall", "door")])
+def test_a_right_angle_is_90_degrees(text: str, label: str) -> None:
+    (js,) = parse_request(text).joint_states
+    assert js.label == label and js.target.kind == "angle" and js.target.value == pytest.approx(math.pi / 2)
+
+
+def test_the_turntable_free_to_spin_names_the_tray_not_the_task_part() -> None:
+    """"the turntable free to spin": a word about the turntable's motion (label tray), not the door's."""
+    spec = parse_request("A microwave with the door closed and the turntable free to spin.")
+    assert [(m.kind, m.label, m.phrase) for m in spec.motions] == [("free", "tray", "free to spin")]
+    assert "spin" not in spec.ignored
