@@ -100,12 +100,12 @@ def fraction_for(ctx: "EstimationContext", kin: "SimSession", joint: str, target
         end = target.end
         canon = canonical_label(label) or label
         if end in ("on", "off"):
-            if canon in TOGGLE_LABELS:
-                end = "high" if end == "on" else "low"
-            elif canon in COVER_LABELS:
+            if canon in COVER_LABELS:
                 return (0.0 if end == "on" else 1.0), f"'{target.end}' of a {canon}: {'in place, closed' if end == 'on' else 'taken off, fully open'}"
-            else:
-                return (1.0 if end == "on" else 0.0), f"'{target.end}' of a {canon or 'part'}: {'fully open' if end == 'on' else 'closed'} (not a toggle switch)"
+            f, why = _end_fraction(ctx, kin, joint, "high" if end == "on" else "low", closed_state) if canon in TOGGLE_LABELS else (None, "")
+            # a toggle flipped up for on; one that turns flat (a faucet's handle) or another part: as "turned on" / "turned off"
+            return (f, why) if f is not None else ((1.0 if end == "on" else 0.0), f"'{target.end}' of a {canon or 'part'}: "
+                                                   f"{'fully open' if end == 'on' else 'closed'} ({why or 'not a toggle switch'})")
         return _end_fraction(ctx, kin, joint, str(end), closed_state)
     if target.kind == "angle":
         if jt == "prismatic":

@@ -266,3 +266,12 @@ def test_a_cap_off_is_taken_off_and_on_is_in_place(generated):
     assert res.targets[cap].kind == "end" and res.targets[cap].fraction == 1.0
     res, *_ = resolve(generated["bottle"], "A bottle with the cap on.")
     assert res.targets[cap].fraction == 0.0
+
+
+@needs_shared
+def test_a_faucet_handle_on_or_off_reads_as_turned_on_or_off():
+    """A faucet's handle (label switch) turns flat, so no height tells "on" from "off": "handle off" is its closed end
+    and "handle on" its far end, as "turned off" / "turned on" read; neither fails as not applied."""
+    for text, fraction in (("a faucet, handle off", 0.0), ("a faucet with the handle on", 1.0)):
+        res, *_ = resolve(SHARED / "148", text)
+        assert res.unapplied == [] and res.targets["joint_0"].fraction == fraction, text
