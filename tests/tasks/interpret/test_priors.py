@@ -142,6 +142,7 @@ def test_regular_sizes_match_real_products(cat: str, longest: tuple[float, float
         ("StorageFurniture", "a small bedside cabinet", (0.45, 0.6), "bedside cabinet"),
         ("Door", "a small cabinet-sized door", (0.4, 0.7), "cabinet door"),
         ("TrashCan", "a very small personal trash can", (0.2, 0.35), None),
+        ("TrashCan", "a wheelie bin with the lid open", (0.93, 1.1), "wheelie bin"),
         ("Faucet", "a kitchen faucet", (0.2, 0.45), "kitchen faucet"),
         ("Microwave", "a microwave", (0.45, 0.55), None),
     ],
