@@ -76,10 +76,10 @@ _STATE_TABLE = compile_table(
         (_OPEN + r" (?:most of the way|three[- ]quarters?(?: of the way)?)", "mostly", ""),
         (_MOVED + r" (?:most of the way|three[- ]quarters?(?: of the way)?)", "mostly", ""),
         # halfway
-        (_ABOUT + r"half[- ]?way(?:[- ]" + _OPEN + r")?|mid[- ]?way(?:[- ]" + _OPEN + r")?", "halfway", ""),
+        (_ABOUT + r"(?:half|mid)[- ]?way(?:[- ]" + _OPEN + r"| out)?", "halfway", ""),
         (_ABOUT + r"half[- ]" + _OPEN + r"|half of the way(?: " + _OPEN + r")?|half[- ](?:closed|shut)", "halfway", ""),
         (_OPEN + r" " + _ABOUT + r"(?:half[- ]?way|half)", "halfway", ""),
-        (_MOVED + r" " + _ABOUT + r"(?:half[- ]?way|half(?: of the way)?)", "halfway", ""),
+        (_MOVED + r" " + _ABOUT + r"(?:half[- ]?way|half(?: of the way)?)(?: out)?", "halfway", ""),
         (r"(?:partially|partly) " + _OPEN, "halfway", ""),
         # quarter
         (_ABOUT + r"(?:a |one )?quarter(?:[- ]way| of the way)?[- ]" + _OPEN, "quarter", ""),

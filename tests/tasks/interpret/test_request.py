@@ -532,3 +532,10 @@ def test_the_turntable_free_to_spin_names_the_tray_not_the_task_part() -> None:
     spec = parse_request("A microwave with the door closed and the turntable free to spin.")
     assert [(m.kind, m.label, m.phrase) for m in spec.motions] == [("free", "tray", "free to spin")]
     assert "spin" not in spec.ignored
+
+
+@pytest.mark.parametrize("text", ["A 45 cm wide dishwasher with the rack halfway out.", "a drawer pulled halfway out"])
+def test_halfway_out_is_one_state_phrase(text: str) -> None:
+    spec = parse_request(text)
+    assert [j.band for j in spec.joint_states] == ["halfway"] and spec.joint_states[0].phrase.endswith("halfway out")
+    assert spec.ignored == []
