@@ -160,8 +160,14 @@ def _state_hits(low: str, numeric: list[rv.Found] | None = None) -> list[Hit]:
         k = bisect_right(num_ends, h.start)
         return k < len(nums) and nums[k].start < h.end
 
-    # a number wins over the words it overlaps ("propped open about a third of the way": a third)
-    hits = [h for h in scan(low, _STATE_TABLE) if not under_number(h)] + nums
+    words = []
+    for h in scan(low, _STATE_TABLE):  # a number wins over the words it overlaps ("propped open about a third of the way")
+        k = bisect_left(num_ends, h.end)  # and takes in the words right before it ("tilted back 120 degrees")
+        if k < len(nums) and not low[h.end: nums[k].start].strip() and nums[k].start >= h.end:
+            nums[k] = Hit(h.start, nums[k].end, low[h.start: nums[k].end], nums[k].value, "number")
+        elif not under_number(h):
+            words.append(h)
+    hits = words + nums
     return rv.leftmost_longest([h for h in hits if _is_state(low, h)])
 
 

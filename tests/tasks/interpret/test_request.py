@@ -539,3 +539,13 @@ def test_halfway_out_is_one_state_phrase(text: str) -> None:
     spec = parse_request(text)
     assert [j.band for j in spec.joint_states] == ["halfway"] and spec.joint_states[0].phrase.endswith("halfway out")
     assert spec.ignored == []
+
+
+@pytest.mark.parametrize("text, degrees", [("A laptop with the screen tilted back 120 degrees.", 120),
+                                           ("a lid open halfway 90 degrees", 90)])
+def test_state_words_right_before_a_number_are_one_state_with_it(text: str, degrees: float) -> None:
+    """"tilted back 120 degrees": the number says how far; not a second state of the screen ("tilted back": fully)
+    that the request tier would fail as overridden."""
+    spec = parse_request(text)
+    (js,) = spec.joint_states
+    assert js.target.value == pytest.approx(math.radians(degrees)) and spec.warnings == [] and spec.ignored == []
