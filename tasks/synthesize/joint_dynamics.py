@@ -65,7 +65,7 @@ def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tu
         names = joints_of(ctx, word, relevant, why)
         if word.label is not None and not names:
             missing.append((word.phrase, why[-1].removeprefix("WARNING: ") if why else
-                            f"names a '{word.label}' but this {ctx.category} has no such part (its moving parts: {moving_parts(ctx)})"))
+                            f"names a '{word.label}' but this {ctx.category} has no such moving part (its moving parts: {moving_parts(ctx)})"))
         for n in names:
             if n in applied:
                 applied[n].append(word)

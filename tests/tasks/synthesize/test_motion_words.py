@@ -10,6 +10,7 @@ import pytest
 from asset2sim.demo_assets import build_object
 from asset2sim.tasks.tune import word_guard
 from asset2sim.tasks.interpret.request import parse_request
+from asset2sim.tasks.synthesize import joint_dynamics
 from asset2sim.tasks.synthesize.context import build_context
 from asset2sim.tasks.synthesize.offline import OfflineEstimator
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
@@ -165,3 +166,12 @@ def test_the_as_asked_tier_notices_a_word_on_a_part_it_does_not_name(cabinet, re
     ev = evaluate_asset(out, prompt=prompt, probes=False)
     met = next(m for m in ev.metrics if m.name == "request_met")
     assert met.passed is False and [u["joint"] for u in met.details["unmet"] if u["kind"] == "not_named"] == [other]
+
+
+@needs_shared
+def test_a_word_about_a_part_the_asset_has_fixed_says_it_does_not_move():
+    """The trash can's wheels are fixed joints in its URDF: "the wheels roll freely" names parts it has but that do not
+    move, and the reason says so (not that the object has no wheels)."""
+    with build_context(SHARED / "102155", "a trash can whose wheels roll freely") as (ctx, _kin):
+        _, missing = joint_dynamics.motion_choices(ctx, [])
+    assert [why for _, why in missing] == ["names a 'wheel' but this TrashCan has no such moving part (its moving parts: lid)"]
