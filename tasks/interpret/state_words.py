@@ -210,6 +210,9 @@ _FRACTION_AHEAD = re.compile(r"\s*/\s*\d")
 
 _NONE_OF = re.compile(r"(?<![\w-])(?:none|neither) of (?:the |its |their |these |those )?$")
 
+#: "lying on its back with the lid open": "with" starts another noun phrase, the place word is not the lid's.
+_WITH = re.compile(r"(?<![\w-])with(?![\w-])")
+
 _ORD_JOIN = re.compile(r"\s*(?:,\s*(?:and|or)?|and|or|&)\s*(?:the\s+)?$")
 
 
@@ -234,7 +237,7 @@ def _parts(low: str, tokens: Tokens) -> list[_Part]:
             o = ords[n_before - 1]
             gap = tokens.count(o.end, m.start())
             if (gap == 0 or gap <= 2 and o.flag not in _ADJACENT_ORDERS or _ONE_OF.fullmatch(low, o.start, m.start())) \
-                    and not tokens.marks_between(o.end, m.start()):
+                    and not tokens.marks_between(o.end, m.start()) and not _WITH.search(low, o.end, m.start()):
                 if o.flag == "quant":
                     quant = True
                     pstart = o.start

@@ -549,3 +549,12 @@ def test_state_words_right_before_a_number_are_one_state_with_it(text: str, degr
     spec = parse_request(text)
     (js,) = spec.joint_states
     assert js.target.value == pytest.approx(math.radians(degrees)) and spec.warnings == [] and spec.ignored == []
+
+
+def test_a_place_word_of_the_pose_is_not_the_next_parts_ordinal() -> None:
+    """"lying on its back with the lid open": "back" is where the case lies, not which lid (on an object with a front
+    and a back lid it would pick the back one); "with" starts the part's own phrase."""
+    (js,) = parse_request("A suitcase lying on its back with the lid open 30 degrees.").joint_states
+    assert (js.label, js.ordinal, js.phrase) == ("lid", None, "lid open 30 degrees")
+    (js,) = parse_request("a fridge with the left door open").joint_states
+    assert (js.ordinal, js.order) == (0, "left_right")
