@@ -39,7 +39,8 @@ _DYN_TABLE = compile_table(
         (r"(?:keeps?|maintains?) (?:its|their) (?:position|state|place|angle|pose)", ("hold", True), ""),
         (r"remains? (?:where (?:it|they) (?:is|are)|in place|open|up|still)", ("hold", True), ""),
         (r"(?:does not|doesn't|won't|will not|should not|shouldn't|must not|never) (?:fall|sag|drop|slam|droop|drift|move|swing|close|shut) (?:shut |closed |open |down )?(?:by itself|on its own|under (?:its own )?weight|under gravity)", ("hold", True), ""),
-        (r"self[- ]clos(?:ing|es)|clos(?:es|ing) (?:by )?(?:itself|themselves|on (?:its|their) own|automatically)|auto[- ]?clos(?:ing|e)|snaps? (?:shut|closed)|(?:door )?closer", ("spring", True), "close"),
+        (r"self[- ]clos(?:ing|es)|clos(?:es|ing) (?:by )?(?:itself|themselves|on (?:its|their) own|automatically)|auto[- ]?clos(?:ing|e)|snaps? (?:shut|closed)|(?:door )?closer"
+         r"|(?:swings?|pulls?) (?:shut|closed)(?: by (?:itself|themselves)| on (?:its|their) own| automatically)?|shuts? (?:by (?:itself|themselves)|on (?:its|their) own|automatically)", ("spring", True), "close"),
         (r"spring[- ]loaded|spring[- ]return(?:ed)?|springs? back|springy|springs?|self[- ]returning|returns?(?: to)?|snaps? back|pops? back|bounces? back", ("spring", True), ""),
         (r"stiff(?:ly|er)?|hard to (?:move|turn|open|push|rotate|pull|close)|(?:high|lots of|some|more) (?:joint |hinge )?friction|with resistance|resists? (?:motion|movement|being moved)", ("stiff", True), ""),
     ]

@@ -210,6 +210,10 @@ _FRACTION_AHEAD = re.compile(r"\s*/\s*\d")
 
 _NONE_OF = re.compile(r"(?<![\w-])(?:none|neither) of (?:the |its |their |these |those )?$")
 
+#: What may follow a state's phrase in a later one that says it more exactly ("turned on" -> "turned on halfway"):
+#: words, no conjunction or mark ("fully open and closed" is two states).
+_MORE_EXACTLY = re.compile(r" (?!(?:and|or|but|then|yet)\b)[\w -]+")
+
 #: "lying on its back with the lid open": "with" starts another noun phrase, the place word is not the lid's.
 _WITH = re.compile(r"(?<![\w-])with(?![\w-])")
 
@@ -376,6 +380,8 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = None
         old = dedup.pop(key, None)
         if old is not None and old.band != "closed" and lone & {id(js), id(old)}:
             js, old = (old if id(js) in lone else js), None  # a lone "open" and a more exact opening of one part: the exact one
+        elif old is not None and _MORE_EXACTLY.fullmatch(js.phrase.removeprefix(old.phrase)) and js.phrase.startswith(old.phrase):
+            old = None  # "the handle turned on halfway": the later phrase is the earlier one said more exactly
         if old is not None and (old.band, old.target) != (js.band, js.target):
             who = "every task-relevant part" if js.selector == "all" else (js.label or "part") + ("" if js.ordinal is None else f" #{js.ordinal} ({js.order})")
             warnings.append(f"contradiction: '{old.phrase}' and '{js.phrase}' both set {who}; the later one ('{js.phrase}') is used")

@@ -558,3 +558,14 @@ def test_a_place_word_of_the_pose_is_not_the_next_parts_ordinal() -> None:
     assert (js.label, js.ordinal, js.phrase) == ("lid", None, "lid open 30 degrees")
     (js,) = parse_request("a fridge with the left door open").joint_states
     assert (js.ordinal, js.order) == (0, "left_right")
+
+
+def test_a_later_phrase_that_says_the_earlier_one_more_exactly_is_no_contradiction() -> None:
+    """"the handle turned on halfway": "turned on" (fully) is the start of "turned on halfway"; one state, not two."""
+    spec = parse_request("A faucet with the handle turned on halfway; the handle stays where it is put.")
+    assert [(j.label, j.band) for j in spec.joint_states] == [("handle", "halfway")] and spec.warnings == []
+
+
+@pytest.mark.parametrize("text", ["A door half open that swings shut on its own.", "a door that shuts by itself"])
+def test_swings_shut_on_its_own_is_self_closing(text: str) -> None:
+    assert [m.kind for m in parse_request(text).motions] == ["self_closing"] and parse_request(text).ignored == []
