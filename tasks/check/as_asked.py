@@ -241,9 +241,13 @@ def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, 
                         "needs more friction than a hand inside that range moves")
                 text = (f"'{word.phrase}': applied to {j} as asked, and {why}: holding the part where it was asked {need}. "
                         "Drop the word, ask for the part at an end of its range, or --mount fixed where the object is mounted in use")
-            else:  # "stiff", "soft-close", "spring-loaded": the word itself makes the part too hard to work
-                text = (f"'{word.phrase}': applied to {j} as asked, and {why}: working it needs less friction, damping or "
-                        "spring than the word sets. Drop the word")
+            elif word.kind in ("spring", "self_closing"):  # the friction that holds the state against the spring
+                text = (f"'{word.phrase}': applied to {j} as asked, and {why}: holding the part where it was asked against "
+                        "its spring needs more friction than a hand inside that range moves. Drop the word or ask for the "
+                        "part where its spring rests")
+            else:  # "stiff", "soft-close": the word itself makes the part too hard to work
+                text = (f"'{word.phrase}': applied to {j} as asked, and {why}: working it needs less friction or damping "
+                        "than the word sets. Drop the word")
             items.append(_unmet(word.phrase, "conflict", j, why, text))
             break
     for word, joints in strays:
