@@ -315,8 +315,8 @@ class RefineRun:
 
 
 def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str) -> tuple[Attempt, str]:
-    """Stages 4-7 once; when the object is unstable or toppled as modelled and the request named no
-    pose, a steadier opening, else once more on its stablest face (kept only if better). Returns (attempt, pose note)."""
+    """Stages 4-7 once; when unstable or toppled as modelled, a named pose put down where it rests (:func:`settled_attempt`);
+    else a steadier opening, then its stablest face (kept only if better). Returns (attempt, pose note)."""
     att = _attempt(ctx, run)
     if ctx.request.pose_hint is not None:  # the pose asked is kept: put down where it rests when it leans as it settles
         return settled_attempt(att, pose_note, lambda rotation: _attempt(replace(ctx, root_rotation=rotation), run))

@@ -11,7 +11,7 @@ import numpy as np
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.geometry.closed_state import links_aabb
 
-from asset2sim.frames import axis_rotation, quat_wxyz_matrix, quat_xyzw_to_wxyz, quat_wxyz_matrix, quat_xyzw_to_wxyz
+from asset2sim.frames import axis_rotation, quat_wxyz_matrix, quat_xyzw_to_wxyz
 
 
 def resting_rotation(session, asset: AssetDescription, state: dict[str, float], hull_points: dict[str, np.ndarray],
@@ -127,26 +127,6 @@ def most_stable_rotation(session, asset: AssetDescription, links: dict, state: d
     if label == "as modelled" or margin < MIN_MARGIN_FRACTION * size:
         return None, f"no clearly stabler resting face (modelled margin {margin0 * 1000:.1f} mm, best {label} {margin * 1000:.1f} mm)"
     return R, f"rests {label} (static margin {margin * 1000:.1f} mm; {margin0 * 1000:.1f} mm as modelled)"
-
-
-#: The lean a settling object may add to a resting pose the request named ("upright", "lying flat", "sideways") and still
-#: be in that pose, rad: an object whose modelled base is not flat (a suitcase on wheels and feet of different heights)
-#: rocks a few degrees onto its supports as it settles. 10 degrees is twice robust rest's 5-degree tilt (SPEC): a lean a
-#: person still calls upright; an object that turns further has fallen toward another face.
-SETTLE_LEAN_LIMIT = np.radians(10.0)
-
-
-def settled_rotation(placed_xyzw, rested_xyzw) -> tuple[np.ndarray, float] | None:
-    """(rotation (3, 3) in the world frame from the root as placed to the root where it came to rest, its angle rad),
-    from the root's quaternions (4,) xyzw as placed and at the end of the rest test; None when the angle exceeds
-    :data:`SETTLE_LEAN_LIMIT` or a quaternion is not finite. Composed on the left of the resting pose's rotation
-    (world = R root), it puts the object down where it rests."""
-    q0, q1 = np.asarray(placed_xyzw, float), np.asarray(rested_xyzw, float)
-    if not (np.all(np.isfinite(q0)) and np.all(np.isfinite(q1))):
-        return None
-    rel = quat_wxyz_matrix(quat_xyzw_to_wxyz(q1)) @ quat_wxyz_matrix(quat_xyzw_to_wxyz(q0)).T
-    angle = float(np.arccos(np.clip((np.trace(rel) - 1.0) / 2.0, -1.0, 1.0)))
-    return (rel, angle) if angle <= SETTLE_LEAN_LIMIT else None
 
 
 #: The lean a settling object may add to a resting pose the request named ("upright", "lying flat", "sideways") and
