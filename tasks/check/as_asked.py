@@ -236,19 +236,18 @@ def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, 
             why = (held.get(j) if "max" in ways else None) or (operable.get(j) if "min" in ways else None)
             if why is None:
                 continue
+            head = f"'{word.phrase}': applied to {j} as asked, and {why}: "
             if "max" in ways or word.kind == "hold":  # holding the part against its weight is what the word rules out
                 need = ("needs more friction or damping than the word allows" if "max" in ways else
                         "needs more friction than a hand inside that range moves")
-                text = (f"'{word.phrase}': applied to {j} as asked, and {why}: holding the part where it was asked {need}. "
+                text = (f"holding the part where it was asked {need}. "
                         "Drop the word, ask for the part at an end of its range, or --mount fixed where the object is mounted in use")
             elif word.kind in ("spring", "self_closing"):  # the friction that holds the state against the spring
-                text = (f"'{word.phrase}': applied to {j} as asked, and {why}: holding the part where it was asked against "
-                        "its spring needs more friction than a hand inside that range moves. Drop the word or ask for the "
-                        "part where its spring rests")
+                text = ("holding the part where it was asked against its spring needs more friction than a hand inside "
+                        "that range moves. Drop the word or ask for the part where its spring rests")
             else:  # "stiff", "soft-close": the word itself makes the part too hard to work
-                text = (f"'{word.phrase}': applied to {j} as asked, and {why}: working it needs less friction or damping "
-                        "than the word sets. Drop the word")
-            items.append(_unmet(word.phrase, "conflict", j, why, text))
+                text = "working it needs less friction or damping than the word sets. Drop the word"
+            items.append(_unmet(word.phrase, "conflict", j, why, head + text))
             break
     for word, joints in strays:
         for j in joints:
