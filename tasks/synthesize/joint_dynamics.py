@@ -173,7 +173,8 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
                                                         0.0 if balanced else ld.gravity_load)
         slide = name in prismatic and _label(ctx, name) in SLIDE_LABELS and not ch.free_moving
         dyn = physics.joint_dynamics(loads[name], hold, prismatic=name in prismatic, damping_level=ch.damping_level, stiff=ch.stiff,
-                                     free_moving=ch.free_moving, spring=spring, source=note, impact=impact, floor=not slide)
+                                     free_moving=ch.free_moving, spring=spring, source=note, impact=impact, floor=not slide,
+                                     stiff_least=stiff_least(ctx, name, scale, name in prismatic) if ch.stiff else 0.0)
         if slide:
             rides = slide_for(dyn.friction, loads[name].mass * physics.G, requested_slide(ch.words))
             dyn = dyn.model_copy(update={"friction": rides.friction, "source": f"{dyn.source}; {rides.note}"})
@@ -360,9 +361,7 @@ def lid_support(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPh
         the spring (k N m/rad, q_s rad) and hold load (N m), or None when the part does not need one.
     """
     cs = ctx.closed[name]
-    j = ctx.asset.joint(name)
-    pts = ctx.hull_points.get(j.child)
-    if not cs.open_range > 0 or pts is None or not len(pts):
+    if not cs.open_range > 0:
         return None
     rot, sub = ctx.root_rotation, {name: ctx.subtrees[name]}
 
@@ -371,9 +370,7 @@ def lid_support(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPh
         return cs.direction * physics.joint_loads(kin, links, st, scale, sub, root_rotation=rot)[name].gravity_load
 
     tau = np.array([opening_load(f) for f in SUPPORT_FRACTIONS])
-    a_ = np.asarray(j.axis, float) / max(float(np.linalg.norm(j.axis)), 1e-12)
-    p = np.asarray(pts, float) * scale
-    lever = float(np.linalg.norm(p - np.outer(p @ a_, a_), axis=1).max())
+    lever = far_edge(ctx, name, scale)
     top = (operating_range(ctx.category, _label(ctx, name))[0].force_n or (0.0, np.inf))[1]
     if not lever > 0 or np.abs(tau).max() / lever <= LID_SUPPORT_SHARE * top:
         return None
@@ -391,6 +388,35 @@ def lid_support(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPh
            f"{q_s:.4g} rad carries the weight moment (up to {np.abs(tau).max():.3g} N m, {np.abs(tau).max() / lever:.3g} N at its "
            f"far edge against a hand's {top:g} N) to within {remainder.max():.3g} N m over its range")
     return SpringHold((float(k), q_s), float(hold), why)
+
+
+def far_edge(ctx: EstimationContext, name: str, scale: float) -> float:
+    """Lever (m) of a hand at the far edge of revolute joint ``name``'s part: the largest distance of its link's hull
+    points (``ctx.hull_points``, input units, joint frame) from the axis at ``scale``; 0 without hull points."""
+    j = ctx.asset.joint(name)
+    pts = ctx.hull_points.get(j.child)
+    if pts is None or not len(pts):
+        return 0.0
+    a_ = np.asarray(j.axis, float) / max(float(np.linalg.norm(j.axis)), 1e-12)
+    p = np.asarray(pts, float) * scale
+    return float(np.linalg.norm(p - np.outer(p @ a_, a_), axis=1).max())
+
+
+#: Share of the top of a part's operating range that a stiff part (the request's "stiff") takes at least at its far
+#: edge (a hinge) or along its slide against its friction alone: a quarter, 5.6 N at a door's edge where ADA 404.2.9
+#: allows 22.2 N (a free door's hinge takes under 1 N), so that "stiff" is felt on a part whose weight loads nothing (a
+#: door in its frame, a faucet handle), and the hand keeps three quarters of its range for gravity, springs and damping.
+STIFF_EFFORT_SHARE = 0.25
+
+
+def stiff_least(ctx: EstimationContext, name: str, scale: float, prismatic: bool) -> float:
+    """Least friction of stiff joint ``name`` (N m, or N for a prismatic joint): :data:`STIFF_EFFORT_SHARE` of the top
+    of its operating range (``operating_forces.yaml``): its force range's top at :func:`far_edge` for a hinge (or its
+    torque range's top), its force range's top for a slide; 0 where neither is known."""
+    rng = operating_range(ctx.category, _label(ctx, name))[0]
+    if rng.torque_nm is not None and not prismatic:
+        return STIFF_EFFORT_SHARE * rng.torque_nm[1]
+    return STIFF_EFFORT_SHARE * (rng.force_n or (0.0, 0.0))[1] * (1.0 if prismatic else far_edge(ctx, name, scale))
 
 
 #: Parts on a vertical slide that ride on a balance (canonical labels): a hung window's sash (coil "constant

@@ -220,7 +220,7 @@ def friction_floor(load: JointLoad, prismatic: bool, free_moving: bool = False) 
 
 def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: bool, damping_level: str = "moderate", stiff: bool = False,
                    free_moving: bool = False, spring: tuple[float, float] | None = None, source: str = "physics",
-                   impact: float = 0.0, floor: bool = True) -> JointDynamics:
+                   impact: float = 0.0, floor: bool = True, stiff_least: float = 0.0) -> JointDynamics:
     """Damping, friction and stiffness of one joint from its loads.
 
     Args:
@@ -228,13 +228,15 @@ def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: boo
         hold_load: largest |gravity load| (N*m or N) friction must hold.
         prismatic: joint type (sets units and the friction floor).
         damping_level: "low" | "moderate" | "high" (:data:`DAMPING_RATIO`).
-        stiff: a stiff joint is asked for: friction x 4 over the floor load.
+        stiff: a stiff joint is asked for: friction x 2, and x 4 over the floor load, and at least ``stiff_least``.
         free_moving: "moves freely": no extra friction floor.
         spring: (stiffness, reference) when a spring is intended.
         impact: friction (N*m or N) beyond the holding friction that stops the part after its object is set down
             (:func:`~asset2sim.tasks.synthesize.set_down.landing_friction`; 0: none).
         floor: add the friction floor below; False where the mechanism sets its own least friction (a drawer's
             slide, ``joint_dynamics.slide_for``).
+        stiff_least: least friction (N*m or N) of a stiff joint, from the hand that operates it
+            (:func:`~asset2sim.tasks.synthesize.joint_dynamics.stiff_least`).
 
     Friction floor: Coulomb coefficient 0.05 on the moving weight (prismatic, N; lubricated drawer slides,
     Engineering ToolBox), that force at a 1 cm pin radius (revolute, N*m). Friction and damping are capped by
@@ -247,7 +249,7 @@ def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: boo
     floor = friction_floor(load_at_state, prismatic, free_moving) if floor else 0.0
     friction = HOLD_SAFETY * abs(hold_load) + floor + max(impact, 0.0)
     if stiff:
-        friction = max(friction * 2.0, 4.0 * HOLD_SAFETY * abs(load_at_state.gravity_load) + 4.0 * floor)
+        friction = max(friction * 2.0, 4.0 * HOLD_SAFETY * abs(load_at_state.gravity_load) + 4.0 * floor, stiff_least)
         c *= 2.0
     c = min(c, c_max)
     if load_at_state.inertia_axis > 0:  # above it the engine's friction motor locks the joint

@@ -139,6 +139,29 @@ def test_a_word_applies_to_the_parts_its_phrase_names(cabinet, words, stiff):
         assert asked[n].friction == pytest.approx(base[n].friction) and "request '" not in asked[n].source
 
 
+def _stiff_edge_forces(folder, prompt: str) -> dict[str, float]:
+    """Joint -> its friction over its far edge's lever (N) under ``prompt``."""
+    with build_context(folder, prompt) as (ctx, kin):
+        overlay = OfflineEstimator().estimate(ctx, kin).overlay
+        return {n: jd.friction / joint_dynamics.far_edge(ctx, n, overlay.scale) for n, jd in overlay.joints.items()}
+
+
+def test_a_stiff_door_its_weight_does_not_load_is_felt_at_its_edge(cabinet):
+    """A cabinet's doors turn about vertical axes, so their weight loads nothing: "stiff" was four times a pin's
+    friction (a tenth of a newton at a door's edge) where nothing else holds the door. A stiff door takes at least a
+    quarter of the top of its operating range (22.2 N, ADA 811.4) at its far edge."""
+    forces = _stiff_edge_forces(cabinet, "A cabinet mounted on the wall with both doors closed; the doors are stiff.")
+    assert len(forces) == 2 and all(f >= 0.25 * 22.2 for f in forces.values()), forces
+
+
+@needs_shared
+def test_a_stiff_faucet_handle_takes_a_hand_to_turn():
+    """Faucet 148's handle (manifest: "a stiff handle joint") on a horizontal axis through its centre of mass: a stiff
+    handle takes at least a quarter of ADA 606.4's 22.2 N at its tip, not the 0.3 N a pin's friction gave it."""
+    forces = _stiff_edge_forces(SHARED / "148", "A kitchen faucet with its handle turned off and a stiff handle joint.")
+    assert forces["joint_0"] >= 0.25 * 22.2, forces
+
+
 @needs_shared
 def test_the_main_door_has_a_stiff_hinge_and_the_freezer_door_does_not():
     """The refrigerator 11178 (a large and a small door), as a user asked it: "the main door has a stiff hinge" makes
