@@ -174,7 +174,7 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
         slide = name in prismatic and _label(ctx, name) in SLIDE_LABELS and not ch.free_moving
         dyn = physics.joint_dynamics(loads[name], hold, prismatic=name in prismatic, damping_level=ch.damping_level, stiff=ch.stiff,
                                      free_moving=ch.free_moving, spring=spring, source=note, impact=impact, floor=not slide,
-                                     stiff_least=stiff_least(ctx, name, scale, name in prismatic) if ch.stiff else 0.0)
+                                     stiff_least=stiff_least(ctx, name, scale, name in prismatic) if ch.stiff and spring is None else 0.0)
         if slide:
             rides = slide_for(dyn.friction, loads[name].mass * physics.G, requested_slide(ch.words))
             dyn = dyn.model_copy(update={"friction": rides.friction, "source": f"{dyn.source}; {rides.note}"})
@@ -405,7 +405,8 @@ def far_edge(ctx: EstimationContext, name: str, scale: float) -> float:
 #: Share of the top of a part's operating range that a stiff part (the request's "stiff") takes at least at its far
 #: edge (a hinge) or along its slide against its friction alone: a quarter, 5.6 N at a door's edge where ADA 404.2.9
 #: allows 22.2 N (a free door's hinge takes under 1 N), so that "stiff" is felt on a part whose weight loads nothing (a
-#: door in its frame, a faucet handle), and the hand keeps three quarters of its range for gravity, springs and damping.
+#: door in its frame, a faucet handle), and the hand keeps three quarters of its range for gravity and damping. A part
+#: on a spring (a closer, a return spring, a balance) is felt through its spring: "stiff" only doubles its friction.
 STIFF_EFFORT_SHARE = 0.25
 
 
