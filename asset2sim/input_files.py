@@ -217,11 +217,11 @@ MAX_YAML_DEPTH = 64
 MAX_YAML_NODES = 100_000
 
 
-def load_yaml(path: Path | str, *, max_bytes: int = MAX_CONFIG_BYTES, what: str = "configuration file"):
-    """The YAML document at ``path``, read under :func:`read_file`'s policy and built by PyYAML's safe loader
-    (plain data only: no Python objects) with at most :data:`MAX_YAML_ALIASES` aliases, :data:`MAX_YAML_DEPTH` levels
-    of nesting and :data:`MAX_YAML_NODES` nodes once every alias is expanded (counted on the parsed graph, before
-    anything is built).
+def load_yaml(path: Path | str, *, what: str = "configuration file"):
+    """The YAML document at ``path``, read under :func:`read_file`'s policy (at most :data:`MAX_CONFIG_BYTES`) and
+    built by PyYAML's safe loader (plain data only: no Python objects) with at most :data:`MAX_YAML_ALIASES` aliases,
+    :data:`MAX_YAML_DEPTH` levels of nesting and :data:`MAX_YAML_NODES` nodes once every alias is expanded (counted
+    on the parsed graph, before anything is built).
 
     Raises:
         InputFileError: ``INPUT_NOT_FOUND``, ``INPUT_NOT_REGULAR_FILE`` (a FIFO, ``/dev/zero``),
@@ -230,7 +230,7 @@ def load_yaml(path: Path | str, *, max_bytes: int = MAX_CONFIG_BYTES, what: str 
     """
     import yaml
 
-    data = read_file(path, max_bytes=max_bytes, what=what)
+    data = read_file(path, max_bytes=MAX_CONFIG_BYTES, what=what)
 
     class _Bounded(yaml.SafeLoader):
         aliases = 0

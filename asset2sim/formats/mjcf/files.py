@@ -236,22 +236,18 @@ def mesh_faces(data: bytes, name: str) -> int:
     return len(data) // 50
 
 
-def gather_mjcf(path: Path | str, tree: Path | str | None = None) -> MjcfSources:
-    """Check and read the MJCF file at ``path`` and every file it names (module docstring); nothing else is opened.
-
-    Args:
-        path: the ``<mujoco>`` file. tree: the folder its references must stay in (default: its package's asset
-            folder for a file of a known package, :func:`~asset2sim.formats.mjcf.conventions.package_tree`, so
-            Meta-World's ``../scene`` includes read; else :func:`~asset2sim.formats.staging.input_tree`, the
-            file's folder). Every reader of the file (extraction, the audit's patch, the host write-back) so reads
-            the same files.
+def gather_mjcf(path: Path | str) -> MjcfSources:
+    """Check and read the MJCF file at ``path`` (the ``<mujoco>`` file) and every file it names (module docstring);
+    nothing else is opened. The references must stay in its package's asset folder for a file of a known package
+    (:func:`~asset2sim.formats.mjcf.conventions.package_tree`, so Meta-World's ``../scene`` includes read), else in
+    :func:`~asset2sim.formats.staging.input_tree`, the file's folder. Every reader of the file (extraction, the
+    audit's patch, the host write-back) so reads the same files.
 
     Raises:
         StagingError: with ``code`` (module docstring), naming the file and the reference.
     """
     path = Path(os.path.abspath(str(path)))
-    if tree is None:
-        tree = conventions.package_tree(path)
+    tree = conventions.package_tree(path)
     root = Path(os.path.abspath(str(tree))) if tree is not None else input_tree(path)
     return _Gather(path, root).run()
 
