@@ -222,9 +222,9 @@ def write_text(path: Path | str, text: str, *, durable: bool = True, check: Call
     return write_bytes(path, text.encode("utf-8"), durable=durable, check=check)
 
 
-def non_finite(obj: Any, where: str = "$") -> str | None:
+def non_finite(obj: Any) -> str | None:
     """The JSON path (``$.metrics[3].value``) of the first NaN or infinity in ``obj`` (JSON values; tuples as lists), or None."""
-    stack = [(obj, where)]
+    stack = [(obj, "$")]
     while stack:
         value, at = stack.pop()
         if isinstance(value, float) and not math.isfinite(value):
@@ -236,11 +236,12 @@ def non_finite(obj: Any, where: str = "$") -> str | None:
     return None
 
 
-def write_json(path: Path | str, obj: Any, indent: int = 2, *, durable: bool = True) -> Path:
-    """Write ``obj`` as strict JSON (no NaN/inf; raises ValueError) atomically (``durable`` as in :func:`write_bytes`)."""
+def write_json(path: Path | str, obj: Any, *, durable: bool = True) -> Path:
+    """Write ``obj`` as strict JSON (no NaN/inf; raises ValueError), indented by 2, atomically (``durable`` as in
+    :func:`write_bytes`)."""
     if (where := non_finite(obj)) is not None:
         raise ValueError(f"non-finite number at {where} cannot be written as JSON")
-    return write_text(path, json.dumps(obj, indent=indent, sort_keys=False, allow_nan=False) + "\n", durable=durable)
+    return write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n", durable=durable)
 
 
 def copy_files(pairs: Iterable[tuple[Path | str, Path | str]]) -> list[Path]:

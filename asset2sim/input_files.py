@@ -217,11 +217,11 @@ MAX_YAML_DEPTH = 64
 MAX_YAML_NODES = 100_000
 
 
-def load_yaml(path: Path | str, *, max_bytes: int = MAX_CONFIG_BYTES, max_aliases: int = MAX_YAML_ALIASES,
-              max_depth: int = MAX_YAML_DEPTH, max_nodes: int = MAX_YAML_NODES, what: str = "configuration file"):
-    """The YAML document at ``path``, read under :func:`read_file`'s policy and built by PyYAML's safe loader
-    (plain data only: no Python objects) with at most ``max_aliases`` aliases, ``max_depth`` levels of nesting and
-    ``max_nodes`` nodes once every alias is expanded (counted on the parsed graph, before anything is built).
+def load_yaml(path: Path | str, *, what: str = "configuration file"):
+    """The YAML document at ``path``, read under :func:`read_file`'s policy (at most :data:`MAX_CONFIG_BYTES`) and
+    built by PyYAML's safe loader (plain data only: no Python objects) with at most :data:`MAX_YAML_ALIASES` aliases,
+    :data:`MAX_YAML_DEPTH` levels of nesting and :data:`MAX_YAML_NODES` nodes once every alias is expanded (counted
+    on the parsed graph, before anything is built).
 
     Raises:
         InputFileError: ``INPUT_NOT_FOUND``, ``INPUT_NOT_REGULAR_FILE`` (a FIFO, ``/dev/zero``),
@@ -230,7 +230,7 @@ def load_yaml(path: Path | str, *, max_bytes: int = MAX_CONFIG_BYTES, max_aliase
     """
     import yaml
 
-    data = read_file(path, max_bytes=max_bytes, what=what)
+    data = read_file(path, max_bytes=MAX_CONFIG_BYTES, what=what)
 
     class _Bounded(yaml.SafeLoader):
         aliases = 0
@@ -239,13 +239,13 @@ def load_yaml(path: Path | str, *, max_bytes: int = MAX_CONFIG_BYTES, max_aliase
         def compose_node(self, parent, index):
             if self.check_event(yaml.AliasEvent):
                 self.aliases += 1
-                if self.aliases > max_aliases:
-                    raise InputFileError("YAML_ALIAS_LIMIT", path, f"{what} {path}: more than {max_aliases} YAML aliases "
+                if self.aliases > MAX_YAML_ALIASES:
+                    raise InputFileError("YAML_ALIAS_LIMIT", path, f"{what} {path}: more than {MAX_YAML_ALIASES} YAML aliases "
                                          "(*name); refused before expanding them")
             self.depth += 1
             try:
-                if self.depth > max_depth:
-                    raise InputFileError("YAML_TOO_DEEP", path, f"{what} {path}: YAML nested deeper than {max_depth} levels")
+                if self.depth > MAX_YAML_DEPTH:
+                    raise InputFileError("YAML_TOO_DEEP", path, f"{what} {path}: YAML nested deeper than {MAX_YAML_DEPTH} levels")
                 return super().compose_node(parent, index)
             finally:
                 self.depth -= 1
@@ -275,9 +275,9 @@ def load_yaml(path: Path | str, *, max_bytes: int = MAX_CONFIG_BYTES, max_aliase
             return sizes[id(n)]
 
         total = expanded(node)
-        if total > max_nodes:
+        if total > MAX_YAML_NODES:
             raise InputFileError("YAML_ALIAS_LIMIT", path, f"{what} {path}: its aliases expand to {total} YAML nodes, above the "
-                                 f"cap of {max_nodes}; refused before expanding them")
+                                 f"cap of {MAX_YAML_NODES}; refused before expanding them")
         return loader.construct_document(node)
     except yaml.YAMLError as exc:
         raise InputFileError("YAML_MALFORMED", path, f"{what} {path}: not YAML: {exc}") from None

@@ -278,6 +278,6 @@ def read_xml_file(path: Path | str, limits: XMLLimits | None = None) -> bytes:
     return data
 
 
-def parse_xml_file(path: Path | str, limits: XMLLimits | None = None) -> SourceElement:
-    """:func:`read_xml_file` then :func:`parse_xml_bytes` (same errors)."""
-    return parse_xml_bytes(read_xml_file(path, limits), source=str(path), limits=limits)
+def parse_xml_file(path: Path | str) -> SourceElement:
+    """:func:`read_xml_file` then :func:`parse_xml_bytes` under the default limits (same errors)."""
+    return parse_xml_bytes(read_xml_file(path), source=str(path))

@@ -54,8 +54,8 @@ def _strip_fence(text: str) -> str:
     return t
 
 
-def json_depth_exceeds(text: str, limit: int = MAX_JSON_DEPTH) -> bool:
-    """Whether ``text`` opens more than ``limit`` arrays / objects inside each other (outside
+def json_depth_exceeds(text: str) -> bool:
+    """Whether ``text`` opens more than :data:`MAX_JSON_DEPTH` arrays / objects inside each other (outside
     strings): one linear pass, no recursion, so a reply nested 100,000 deep is refused before a
     decoder recurses into it."""
     depth = 0
@@ -75,7 +75,7 @@ def json_depth_exceeds(text: str, limit: int = MAX_JSON_DEPTH) -> bool:
             in_string = True
         elif c in "[{":
             depth += 1
-            if depth > limit:
+            if depth > MAX_JSON_DEPTH:
                 return True
         elif c in "]}":
             depth -= 1

@@ -121,6 +121,11 @@ def _bounder():
     docstring)."""
     import httpcore
 
+    def connect_time(timeout):
+        """The time a connection or TLS handshake may take within :func:`call_bounds` (``timeout`` outside)."""
+        bounds = getattr(_BOUNDS, "current", None)
+        return timeout if bounds is None else _bounded_time(timeout, bounds, httpcore.ConnectTimeout)
+
     class BoundedStream(httpcore.NetworkStream):
         def __init__(self, inner):
             self._inner = inner
@@ -159,10 +164,7 @@ def _bounder():
             self._inner.close()
 
         def start_tls(self, ssl_context, server_hostname=None, timeout=None):
-            bounds = getattr(_BOUNDS, "current", None)
-            if bounds is not None:
-                timeout = _bounded_time(timeout, bounds, httpcore.ConnectTimeout)
-            return BoundedStream(self._inner.start_tls(ssl_context, server_hostname, timeout))
+            return BoundedStream(self._inner.start_tls(ssl_context, server_hostname, connect_time(timeout)))
 
         def get_extra_info(self, info: str):
             return self._inner.get_extra_info(info)
@@ -171,18 +173,12 @@ def _bounder():
         def __init__(self, inner):
             self._inner = inner
 
-        def _timeout(self, timeout):
-            bounds = getattr(_BOUNDS, "current", None)
-            if bounds is None:
-                return timeout
-            return _bounded_time(timeout, bounds, httpcore.ConnectTimeout)
-
         def connect_tcp(self, host, port, timeout=None, local_address=None, socket_options=None):
-            return BoundedStream(self._inner.connect_tcp(host, port, self._timeout(timeout),
+            return BoundedStream(self._inner.connect_tcp(host, port, connect_time(timeout),
                                                          local_address, socket_options))
 
         def connect_unix_socket(self, path, timeout=None, socket_options=None):
-            return BoundedStream(self._inner.connect_unix_socket(path, self._timeout(timeout),
+            return BoundedStream(self._inner.connect_unix_socket(path, connect_time(timeout),
                                                                  socket_options))
 
         def sleep(self, seconds: float) -> None:

@@ -414,9 +414,9 @@ def parse_urdf_bytes(data: bytes, *, source: str = "<bytes>", base: Path | str |
 
 
 def read_urdf(path: Path | str, *, mode: Mode = "strict", joint_types: Iterable[str] = JOINT_TYPES,
-              on_problem: Callable[[Problem], None] | None = None, limits: safexml.XMLLimits | None = None) -> UrdfModel:
+              on_problem: Callable[[Problem], None] | None = None) -> UrdfModel:
     """Read a URDF file into a :class:`UrdfModel` (mesh paths resolved against
-    its folder). Arguments as for :func:`parse_urdf_bytes`. An unchanged file
+    its folder; the default XML caps). Arguments as for :func:`parse_urdf_bytes`. An unchanged file
     read before with the same arguments (no ``on_problem``) is not parsed
     again: the caller gets its own copy (:data:`_READ_MEMO`).
 
@@ -426,7 +426,7 @@ def read_urdf(path: Path | str, *, mode: Mode = "strict", joint_types: Iterable[
             content is not acceptable; names the file, line and link or joint.
     """
     path = Path(path)
-    key = None if on_problem is not None else (os.path.abspath(path), mode, tuple(joint_types), limits)
+    key = None if on_problem is not None else (os.path.abspath(path), mode, tuple(joint_types))
     if key is not None:
         model = _READ_MEMO.get(key)
         if model is not None:
@@ -434,11 +434,11 @@ def read_urdf(path: Path | str, *, mode: Mode = "strict", joint_types: Iterable[
             return model
     files = file_memo.identities([path])  # before reading: a file changed while read is not remembered
     try:
-        data = safexml.read_xml_file(path, limits)
+        data = safexml.read_xml_file(path)
     except safexml.SafeXMLError as exc:
         raise UrdfError(f"cannot read URDF: {exc.detail}", code=exc.code, source=str(path)) from None
     model = parse_urdf_bytes(data, source=str(path), base=path.parent, mode=mode, joint_types=joint_types,
-                             on_problem=on_problem, limits=limits)
+                             on_problem=on_problem)
     if model is None:
         raise UrdfError("not a URDF (see the reported problems)", code="URDF_UNREADABLE", source=str(path))
     model.path = path
@@ -472,6 +472,6 @@ def path_of(source: UrdfSource) -> Path:
     return Path(source)
 
 
-#: Models read by :func:`read_urdf`, by (absolute path, mode, joint types, XML limits).
+#: Models read by :func:`read_urdf`, by (absolute path, mode, joint types).
 _READ_MEMO: file_memo.FileMemo[UrdfModel] = file_memo.FileMemo(lambda m: clone_model(m), max_entries=32)
 

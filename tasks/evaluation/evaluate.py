@@ -198,30 +198,27 @@ def refined_evaluation(ctx: EstimationContext, att: Attempt, report: RefineRepor
     semantic = semantic_metrics(ctx, model, state, att.closed_out, resolution, _masses(att.overlay, model), report.scale,
                                 output_folder.OVERLAY_NAME, ref, length_scale=report.scale)
     metrics = [*report.metrics, *semantic]
-    ev = _evaluation(report.asset_id, (shown or out_dir) / output_folder.URDF_NAME, metrics, report.failure_mode, method="asset2sim",
-                     prompt=report.prompt or None, reference=ref, category=report.category, scale=report.scale,
-                     scale_source=output_folder.OVERLAY_NAME, engines=list(dict.fromkeys(["pybullet", *att.check.engine_results])),
-                     state=state, state_source=output_folder.STATE_NAME, task_joints=task_relevant_joints(ctx),
-                     closed=att.closed_out, notes=[], seconds=time.perf_counter() - t0)
+    ev = _evaluation((shown or out_dir) / output_folder.URDF_NAME, ref, att.closed_out, metrics, report.failure_mode,
+                     asset_id=report.asset_id, method="asset2sim", prompt=report.prompt or None, category=report.category,
+                     scale=report.scale, scale_source=output_folder.OVERLAY_NAME,
+                     engines=list(dict.fromkeys(["pybullet", *att.check.engine_results])), initial_state=state,
+                     initial_state_source=output_folder.STATE_NAME, task_joints=task_relevant_joints(ctx),
+                     seconds=time.perf_counter() - t0)
     ev._runs = evidence_runs(att.check)
     ev._context = Evidence(out_dir / output_folder.URDF_NAME, model, att.check.recording.conventions if att.check.recording else SimConventions(),
                            report=report.model_dump(mode="json"), overlay=att.overlay.model_dump(mode="json"))
     return ev
 
 
-def _evaluation(asset_id: str, urdf: Path, metrics: list[MetricResult], failure_mode: str, *, method: str | None, prompt: str | None,
-                reference: Path | None, category: str | None, scale: float | None, scale_source: str, engines: list[str],
-                state: dict[str, float], state_source: str, task_joints: list[str], closed: dict[str, ClosedState], notes: list[str],
-                seed: int = 0, seconds: float = 0.0) -> Evaluation:
-    """The :class:`Evaluation` of ``metrics`` (its failures ``metric@engine`` as :func:`readiness` reads them)."""
-    r = readiness(metrics)
-    return Evaluation(asset_id=asset_id, urdf=str(urdf), method=method, prompt=prompt, reference=str(reference) if reference else None,
-                      category=category, scale=scale, scale_source=scale_source, engines=engines, seed=seed, initial_state=state,
-                      initial_state_source=state_source, task_joints=task_joints,
+def _evaluation(urdf: Path, reference: Path | None, closed: dict[str, ClosedState], metrics: list[MetricResult], failure_mode: str,
+                **fields: Any) -> Evaluation:
+    """The :class:`Evaluation` of ``metrics`` (its failures ``metric@engine`` as :func:`readiness` reads them) with the
+    ``closed`` ends and the other ``fields`` of :class:`Evaluation` as given."""
+    return Evaluation(urdf=str(urdf), reference=str(reference) if reference else None,
                       closed_positions={n: {"q_closed": c.q_closed, "direction": c.direction, "open_range": c.open_range}
                                         for n, c in closed.items()},
-                      metrics=metrics, passed=failure_mode == "none", failure_mode=failure_mode, failures=r.failures,
-                      notes=notes, seconds=seconds)
+                      metrics=metrics, passed=failure_mode == "none", failure_mode=failure_mode, failures=readiness(metrics).failures,
+                      **fields)
 
 
 def evaluate_asset(
@@ -295,13 +292,12 @@ def evaluate_asset(
         scale, source = stated_scale(report, overlay, baseline, ctx, ref)
         semantic = semantic_metrics(ctx, model, state, closed, asked.resolution, _masses(overlay, model), scale, source, ref)
         metrics = [*asked.metrics, *semantic, *([probe_tier.probes_metric(found)] if found is not None else [])]
-        ev = _evaluation((report.asset_id if report is not None else None) or (baseline or {}).get("asset_id") or desc.asset_id, urdf,
-                         metrics, readiness(metrics).failure_mode,
+        ev = _evaluation(urdf, ref, closed, metrics, readiness(metrics).failure_mode,
+                         asset_id=(report.asset_id if report is not None else None) or (baseline or {}).get("asset_id") or desc.asset_id,
                          method=method or (baseline or {}).get("method") or ("asset2sim" if overlay is not None else None),
-                         prompt=prompt, reference=ref,
-                         category=ctx.category, scale=scale, scale_source=source, engines=list(engines), state=state,
-                         state_source=state_source, task_joints=task_relevant_joints(ctx), closed=closed, notes=notes, seed=seed,
-                         seconds=time.perf_counter() - t0)
+                         prompt=prompt, category=ctx.category, scale=scale, scale_source=source, engines=list(engines),
+                         initial_state=state, initial_state_source=state_source, task_joints=task_relevant_joints(ctx), notes=notes,
+                         seed=seed, seconds=time.perf_counter() - t0)
     ev._runs = evidence_runs(check, found)
     ev._context = Evidence(urdf, model, config.sim, report=raw_report, overlay=files.record(output_folder.OVERLAY_NAME),
                            baseline=baseline)

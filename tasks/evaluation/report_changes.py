@@ -199,22 +199,11 @@ def state_moves(report: dict[str, Any]) -> dict[str, str]:
     return out
 
 
-def change_rows(report: dict[str, Any], overlay: dict[str, Any] | None, joint_types: dict[str, str],
-                side: InputSide | None = None) -> list[str]:
+def change_rows(report: dict[str, Any], ov: dict[str, Any], joint_types: dict[str, str], side: InputSide) -> list[str]:
     """The table rows (HTML) of every change refine made, each with its reason, the input column as the input's own
-    file declares it (``side``, :func:`read_input`; read here when None): scale, total mass, joint limits clipped to
-    the geometry, the joint state, every movable joint's damping, friction and (when either side has a spring)
-    stiffness with their units, collision pieces, stability by design and the root's mounting."""
-    own = side is None
-    side = read_input(report.get("source")) if side is None else side
-    try:
-        return _change_rows(report, overlay or {}, joint_types, side)
-    finally:
-        if own:
-            side.close()
-
-
-def _change_rows(report: dict[str, Any], ov: dict[str, Any], joint_types: dict[str, str], side: InputSide) -> list[str]:
+    file declares it (``side``, :func:`read_input`): scale, total mass, joint limits clipped to the geometry, the joint
+    state, every movable joint's damping, friction and (when either side has a spring) stiffness with their units,
+    collision pieces, stability by design and the root's mounting; ``ov``: ``overlay.json`` as a dict."""
     notes = ov.get("notes") or {}
     rows = [_row("scale", "1 (the input's units)", f"{float(report.get('scale', 1.0)):.4g}", notes.get("size", ""))]
     rows.append(_row("total mass", _declared_mass(side), f"{float(report.get('total_mass', 0.0)):.4g} kg",
@@ -299,7 +288,7 @@ def changes_section(report: dict[str, Any] | None, overlay: dict[str, Any] | Non
     side = read_input(report.get("source"))
     try:
         return ("<h2>What asset2sim changed</h2>" + before_after(side, after, img)
-                + table(("what", f"input ({side.name})", "output", "why"), change_rows(report, overlay, joint_types, side))
+                + table(("what", f"input ({side.name})", "output", "why"), change_rows(report, overlay or {}, joint_types, side))
                 + understood(report.get("request")))
     finally:
         side.close()

@@ -272,14 +272,13 @@ def _joint(jt: UrdfJoint, held: bool = False) -> JointDesc:
     """The description of one joint (limits on revolute and prismatic joints only; axis default (1, 0, 0)); ``held``:
     a movable joint the asset's part kinds hold where it was modelled (:func:`partnet_mobility.held_bodies`), described
     as the fixed joint the output writes."""
+    axis = tuple(float(v) for v in (jt.axis_xyz if jt.axis_xyz is not None else (1.0, 0.0, 0.0)))
     if held:
-        return JointDesc(name=jt.name, type="fixed", parent=jt.parent, child=jt.child, origin=_origin(jt.origin),
-                         axis=tuple(float(v) for v in (jt.axis_xyz if jt.axis_xyz is not None else (1.0, 0.0, 0.0))))
+        return JointDesc(name=jt.name, type="fixed", parent=jt.parent, child=jt.child, origin=_origin(jt.origin), axis=axis)
     lim, dyn = jt.limit, jt.dynamics
     bounded = jt.type in ("revolute", "prismatic")
     return JointDesc(
-        name=jt.name, type=jt.type, parent=jt.parent, child=jt.child, origin=_origin(jt.origin),
-        axis=tuple(float(v) for v in (jt.axis_xyz if jt.axis_xyz is not None else (1.0, 0.0, 0.0))),
+        name=jt.name, type=jt.type, parent=jt.parent, child=jt.child, origin=_origin(jt.origin), axis=axis,
         lower=_float_or_none(lim, "lower") if bounded else None, upper=_float_or_none(lim, "upper") if bounded else None,
         effort=_float_or_none(lim, "effort"), velocity=_float_or_none(lim, "velocity"),
         damping=_float_or_none(dyn, "damping"), friction=_float_or_none(dyn, "friction"))

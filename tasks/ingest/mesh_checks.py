@@ -306,7 +306,7 @@ class MeshChecks(Recorder):
                     assert tex.path is not None
                     self.texture_file(tex.path, tname, self.rel(ref.path), link=link)
 
-    def texture_file(self, path: Path, name: str, owner: str, *, line: int | None = None, link: str | None = None) -> None:
+    def texture_file(self, path: Path, name: str, owner: str, *, link: str | None = None) -> None:
         """The texture caps on one texture map, each real file once; ``owner`` the file that names it."""
         if path in self._textures_seen:
             return
@@ -315,7 +315,7 @@ class MeshChecks(Recorder):
         problem = texture_problem(path, pol.max_texture_bytes, pol.max_texture_pixels)
         if problem is not None:
             code, msg = problem
-            self.add(code, f"{owner} refers to texture {name!r}: {msg}", file=self.rel(path), line=line, link=link, referenced_by=owner)
+            self.add(code, f"{owner} refers to texture {name!r}: {msg}", file=self.rel(path), link=link, referenced_by=owner)
             return
         header = texture_header(path, pol.max_texture_bytes)
         self._texture_totals[0] += header.size

@@ -132,9 +132,8 @@ def _resolve(value: str, base: str, tree: str, source: Path, what: str) -> str:
 
 
 class _Gather:
-    def __init__(self, path: Path, tree: Path, max_file_bytes: int, max_total_bytes: int, limits: safexml.XMLLimits):
+    def __init__(self, path: Path, tree: Path):
         self.path, self.tree = path, str(tree)
-        self.max_file, self.max_total, self.limits = max_file_bytes, max_total_bytes, limits
         self.files: dict[str, bytes] = {}
         self.real: dict[str, Path] = {}
         self.total = 0
@@ -148,19 +147,19 @@ class _Gather:
         if key in self.files:
             return self.files[key]
         try:
-            data = read_file(key, tree=self.tree, max_bytes=self.max_file, what=f"{self.path.name}: {what}")
+            data = read_file(key, tree=self.tree, what=f"{self.path.name}: {what}")
         except InputFileError as exc:
             raise _from_input_error(exc) from None
         self.total += len(data)
-        if self.total > self.max_total:
-            raise _refuse("INPUT_TOO_LARGE", f"{self.path}: the files it names exceed {self.max_total} bytes together; not read")
+        if self.total > MAX_TOTAL_BYTES:
+            raise _refuse("INPUT_TOO_LARGE", f"{self.path}: the files it names exceed {MAX_TOTAL_BYTES} bytes together; not read")
         self.files[key], self.real[key] = data, Path(os.path.realpath(key))
         return data
 
     def document(self, key: str, what: str, depth: int, stack: tuple[str, ...] = ()) -> None:
         data = self.read(key, what)
         try:
-            root = safexml.parse_xml_bytes(data, source=key, limits=self.limits)
+            root = safexml.parse_xml_bytes(data, source=key)
         except safexml.SafeXMLError as exc:
             raise _refuse(exc.code, str(exc)) from None
         name = os.path.relpath(key, self.main_dir)
@@ -208,8 +207,8 @@ class _Gather:
                 if key not in faces_of:
                     faces_of[key] = mesh_faces(data, key)
                 built_faces += faces_of[key]
-            if built_bytes > self.max_total:
-                raise _refuse("INPUT_TOO_LARGE", f"{self.path}: the files its elements name come to more than {self.max_total} "
+            if built_bytes > MAX_TOTAL_BYTES:
+                raise _refuse("INPUT_TOO_LARGE", f"{self.path}: the files its elements name come to more than {MAX_TOTAL_BYTES} "
                               "bytes as MuJoCo builds them (every element naming a file counts, a file named twice twice); not read")
             if built_faces > MAX_BUILT_FACES:
                 raise _refuse("INPUT_TOO_LARGE", f"{self.path}: its <mesh> elements come to {built_faces} triangles or more as "
@@ -237,27 +236,20 @@ def mesh_faces(data: bytes, name: str) -> int:
     return len(data) // 50
 
 
-def gather_mjcf(path: Path | str, tree: Path | str | None = None, *, max_file_bytes: int = DEFAULT_MAX_BYTES,
-                max_total_bytes: int = MAX_TOTAL_BYTES, limits: safexml.XMLLimits = safexml.DEFAULT_LIMITS) -> MjcfSources:
-    """Check and read the MJCF file at ``path`` and every file it names (module docstring); nothing else is opened.
-
-    Args:
-        path: the ``<mujoco>`` file. tree: the folder its references must stay in (default: its package's asset
-            folder for a file of a known package, :func:`~asset2sim.formats.mjcf.conventions.package_tree`, so
-            Meta-World's ``../scene`` includes read; else :func:`~asset2sim.formats.staging.input_tree`, the
-            file's folder). Every reader of the file (extraction, the audit's patch, the host write-back) so reads
-            the same files.
-        max_file_bytes: cap per file, bytes. max_total_bytes: cap over all files, bytes.
-        limits: the XML parser's caps for the model file and its includes.
+def gather_mjcf(path: Path | str) -> MjcfSources:
+    """Check and read the MJCF file at ``path`` (the ``<mujoco>`` file) and every file it names (module docstring);
+    nothing else is opened. The references must stay in its package's asset folder for a file of a known package
+    (:func:`~asset2sim.formats.mjcf.conventions.package_tree`, so Meta-World's ``../scene`` includes read), else in
+    :func:`~asset2sim.formats.staging.input_tree`, the file's folder. Every reader of the file (extraction, the
+    audit's patch, the host write-back) so reads the same files.
 
     Raises:
         StagingError: with ``code`` (module docstring), naming the file and the reference.
     """
     path = Path(os.path.abspath(str(path)))
-    if tree is None:
-        tree = conventions.package_tree(path)
+    tree = conventions.package_tree(path)
     root = Path(os.path.abspath(str(tree))) if tree is not None else input_tree(path)
-    return _Gather(path, root, max_file_bytes, max_total_bytes, limits).run()
+    return _Gather(path, root).run()
 
 
 def _mirrored(tmp: str, path: str) -> str:

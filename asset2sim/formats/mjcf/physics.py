@@ -140,8 +140,7 @@ def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: 
         if link is None:
             raise HostExportError(f"{source}: body {name!r} has no link in the refined {URDF_NAME}")
         offset = np.zeros(3)
-        jids = [j for j in range(int(original.body_jntadr[b]), int(original.body_jntadr[b]) + int(original.body_jntnum[b]))
-                if int(original.jnt_type[j]) in (scene.JNT_HINGE, scene.JNT_SLIDE)]
+        jids = scene.body_joints(original, b, (scene.JNT_HINGE, scene.JNT_SLIDE))
         if jids:
             offset = np.asarray(original.jnt_pos[jids[0]], float)  # the link frame sits on the joint
         carries = int(original.body_geomnum[b]) > 0 or explicit.get(original.body(b).name, False)
@@ -168,8 +167,7 @@ def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: 
     diff_path = file_names.join_inside(folder, file_names.file_stem(source.stem) + ".diff")
     atomic.write_bytes(diff_path, diff.encode("utf-8"))
     moving = {scene.label(original, b): [_joint_physics(next(x for x in spec.joints if x.id == j), bool(original.jnt_limited[j]))
-                                              for j in range(int(original.body_jntadr[b]), int(original.body_jntadr[b]) + int(original.body_jntnum[b]))
-                                              if int(original.jnt_type[j]) in (scene.JNT_HINGE, scene.JNT_SLIDE)]
+                                              for j in scene.body_joints(original, b, (scene.JNT_HINGE, scene.JNT_SLIDE))]
               for b in pick.bodies}
     files = write_package_files(folder / FILES_DIR, source, xml, set(bodies), {b: v for b, v in moving.items() if v},
                                 sources=opened.sources)

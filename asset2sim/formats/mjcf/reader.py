@@ -153,8 +153,8 @@ class _Reader:
     def _joint(self, b: int, is_root: bool) -> tuple[int | None, np.ndarray]:
         """(the body's joint id or None, the URDF link frame (4, 4) in the body frame)."""
         m, mj = self.m, self.mj
-        n, adr = int(m.body_jntnum[b]), int(m.body_jntadr[b])
-        ids = list(range(adr, adr + n))
+        ids = scene.body_joints(m, b)
+        n = len(ids)
         free = [j for j in ids if m.jnt_type[j] == mj.mjtJoint.mjJNT_FREE]
         if free and not is_root:
             raise StagingError(f"{self.path}: body {self.body_name(b)!r} has a free joint below the root")

@@ -55,13 +55,15 @@ def subtree(m, b: int) -> list[int]:
     return out
 
 
+def body_joints(m, b: int, types: tuple[int, ...] | None = None) -> list[int]:
+    """The ids of the joints on body ``b`` (those of ``types``, :data:`JNT_FREE` ..., when given), in order."""
+    adr = int(m.body_jntadr[b])
+    return [j for j in range(adr, adr + int(m.body_jntnum[b])) if types is None or int(m.jnt_type[j]) in types]
+
+
 def joint_types(m, bodies: list[int]) -> list[int]:
     """The types (:data:`JNT_FREE` ...) of every joint on ``bodies``."""
-    out = []
-    for b in bodies:
-        adr, n = int(m.body_jntadr[b]), int(m.body_jntnum[b])
-        out.extend(int(m.jnt_type[j]) for j in range(adr, adr + n))
-    return out
+    return [int(m.jnt_type[j]) for b in bodies for j in body_joints(m, b)]
 
 
 def _matches(m, b: int, name: str) -> bool:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.frames import rigid_matrix, rigid_part
-from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, check_file
+from asset2sim.input_files import InputFileError, check_file
 from asset2sim.extras import pxr_modules
 from asset2sim.formats.staging import MAX_BUILT_FACES, StagingError, input_tree, mesh_name, rgba_material
 from asset2sim.urdf import UrdfGeometry, UrdfLink, UrdfMaterial
@@ -82,11 +82,12 @@ def _layer_file(identifier: str) -> tuple[str, bool]:
     return identifier, False
 
 
-def open_layers(path: Path | str, tree: Path | str | None = None, *, max_bytes: int = DEFAULT_MAX_BYTES) -> list:
+def open_layers(path: Path | str) -> list:
     """Open the root layer at ``path`` and every layer it composes (sublayers, references, payloads, in variants
     too: ``Sdf.Layer.GetCompositionAssetDependencies``), each checked before pxr opens it: a regular file inside
-    ``tree`` (default :func:`~asset2sim.formats.staging.input_tree`, the file's folder; symlinks resolved)
-    under ``max_bytes``. A stage opened on the first layer returned finds the others open and opens no other file.
+    the file's folder (:func:`~asset2sim.formats.staging.input_tree`; symlinks resolved) under
+    :data:`~asset2sim.input_files.DEFAULT_MAX_BYTES`. A stage opened on the first layer returned finds the others
+    open and opens no other file.
 
     Returns:
         The open ``Sdf.Layer`` objects, the root first (keep them alive while the stage is open).
@@ -99,11 +100,11 @@ def open_layers(path: Path | str, tree: Path | str | None = None, *, max_bytes: 
     """
     _, Sdf, _, _, _, _ = pxr_modules()
     path = Path(os.path.abspath(str(path)))
-    root = os.path.abspath(str(tree)) if tree is not None else str(input_tree(path))
+    root = str(input_tree(path))
 
     def check(file: str, what: str) -> None:
         try:
-            check_file(file, tree=root, max_bytes=max_bytes, what=what)
+            check_file(file, tree=root, what=what)
         except InputFileError as exc:
             code = "USD_LAYER_OUTSIDE_ASSET" if exc.code == "INPUT_OUTSIDE_TREE" and what != "USD file" else exc.code
             raise StagingError(str(exc), code=code) from None
