@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 from asset2sim.schemas.request import JointStateRequest, StateTarget
 from asset2sim.tasks.interpret import request_values as rv
+from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.tasks.interpret.phrase_scan import TOKEN, Hit, Tokens, compile_table, negated, scan, sentences
 
 _OPEN = r"open(?:ed)?"
@@ -62,7 +63,10 @@ _STATE_TABLE = compile_table(
         # named states: which end they are does not depend on the geometry
         (r"(?:pulled|slid|drawn) (?:all the way )?out|extended|unfolded|unscrewed|deployed", "fully", ""),
         (r"(?:(?:pulled|slid|drawn) out|extended|unfolded) (?:all the way|fully|completely)", "fully", ""),
-        (r"pushed (?:all the way )?in|retracted|folded(?: up| shut| closed| down)?|screwed (?:on|shut|closed|tight)|pressed (?:down|in)|pressed|depressed|tucked in", "closed", ""),
+        (r"retracted|folded(?: up| shut| closed| down)?|screwed (?:on|shut|closed|tight)|tucked in", "closed", ""),
+        (r"(?:pressed|depressed)(?: all the way)?(?: down| in)?|pushed (?:all the way )?in", "pressed", ""),
+        # a part "lying flat" (not the object: a part noun right before it) is opened out flat, or to its limit
+        (r"(?:lying|laid|lies|lay|resting|rests) (?:open )?flat", "fully", "part"),
         # physical ends: decided from the geometry after scaling (request_apply)
         (r"(?:raised|lifted) (?:all the way|fully|completely|to the top)", "end:high", "end"),
         (r"(?:in|at|to) (?:the|its|their) (?:up|raised|upper|top|highest) position|(?:raised|lifted|propped|popped|sprung|flipped|pulled|pushed|swung|tilted|turned|flicked|moved|set|left)(?: all the way)? up|raised|lifted|(?:all the way |fully )?up|upright", "end:high", "end"),
@@ -145,6 +149,10 @@ _THE_BEFORE = re.compile(r"(?<![\w-])(?:the|its|their)\s+$")
 
 _END_TAIL = re.compile(r"\s*(?:$|[,.;:!?)]|and\b|but\b|with\b|while\b|position\b)")
 
+#: Labels a person presses away from their rest (a spring returns them to the closed end): "pressed" is the far end.
+#: A pedal is labelled ``foot``; a "plunger" or "trigger" word keeps its own label when the object has no button.
+PRESSED_LABELS = frozenset({"button", "lever", "trigger", "plunger", "foot"})
+
 _BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)|upright")  # "the handle upright": a part's end
 
 _END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:are\s+)?(?:both|all|each))?"
@@ -173,6 +181,8 @@ def _state_hits(low: str, numeric: list[rv.Found] | None = None) -> list[Hit]:
 
 def _is_state(low: str, h: Hit) -> bool:
     """False for a bare "open" that is a verb ("to open the lid") and a bare end word without a part noun before it."""
+    if h.flag == "part":
+        return _END_LEAD.search(low[max(0, h.start - 40): h.start]) is not None
     if h.flag == "bare" and h.text.startswith("open"):
         return not (_VERB_AFTER.match(low, h.end) or _VERB_BEFORE.search(low[max(0, h.start - 20): h.start]))
     if h.flag == "end" and _BARE_END.fullmatch(h.text):
@@ -182,11 +192,13 @@ def _is_state(low: str, h: Hit) -> bool:
     return True
 
 
-def _band_and_target(value: object) -> tuple[str, StateTarget | None]:
-    """A state hit's value -> (band, target)."""
+def _band_and_target(value: object, label: str | None = None) -> tuple[str, StateTarget | None]:
+    """A state hit's value -> (band, target); ``label``: the part it names (None: every part)."""
     if isinstance(value, tuple):
         return value[0], value[1]
     v = str(value)
+    if v == "pressed":  # a button, lever, trigger or pedal pressed is at its far end; a stapler's arm pressed down is closed
+        return ("fully" if canonical_label(label or "") in PRESSED_LABELS else "closed"), None
     if v.startswith("end:"):
         end = v[4:]
         return ("fully" if end in ("high", "on") else "closed"), StateTarget(kind="end", end=end)  # type: ignore[arg-type]
@@ -315,7 +327,7 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = None
     claimed: set[int] = set()
 
     def make(selector: str, label: str | None, ordinal: int | None, order: str, b: Hit, phrase: str, none: bool = False) -> JointStateRequest:
-        band, target = _band_and_target(b.value)
+        band, target = _band_and_target(b.value, label)
         if none:  # "none of the drawers open": closed; "none of the doors closed": open
             band, target = ("mostly" if band == "closed" else "closed"), None
         js = JointStateRequest(selector=selector, label=label, ordinal=ordinal, order=order,  # type: ignore[arg-type]

@@ -55,6 +55,22 @@ def test_a_toasters_lever_is_its_slider(generated):
 
 
 @needs_shared
+def test_a_pressed_lever_is_at_its_far_end_and_a_part_lying_flat_is_opened_flat():
+    """A flush lever or button pressed is its far end (its spring returns it to the closed end), a stapler's arm
+    pressed down its closed end; "its screen lying flat" is the screen's state (opened flat), not the laptop's pose."""
+    res, labels, *_ = resolve(SHARED / "102703", "A toilet with the flush lever pressed.")
+    (lever,) = joint_of(labels, "lever")
+    assert res.unapplied == [] and res.bands[lever] == "fully"
+    assert parse_request("A toilet with its flush button pushed in.").joint_states[0].band == "fully"
+    assert parse_request("A cabinet with the drawers pushed in.").joint_states[0].band == "closed"
+    spec = parse_request("A laptop with its screen lying flat.")
+    assert spec.pose_hint is None and [(j.label, j.band) for j in spec.joint_states] == [("screen", "fully")]
+    res, labels, *_ = resolve(SHARED / "9748", spec.text)
+    assert res.unapplied == [] and [res.bands[j] for j in res.addressed] == ["fully"]
+    assert parse_request("A suitcase lying flat with its lid closed.").pose_hint == "lying_flat"
+
+
+@needs_shared
 def test_a_staplers_arm_is_its_lid():
     res, labels, *_ = resolve(SHARED / "103275", "a heavy 2 lb stapler with a stiff spring-loaded arm pressed down")
     (lid,) = joint_of(labels, "lid")
