@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 from asset2sim.schemas.request import JointStateRequest, StateTarget
 from asset2sim.tasks.interpret import request_values as rv
-from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.tasks.interpret.phrase_scan import TOKEN, Hit, Tokens, compile_table, negated, scan, sentences
 
 _OPEN = r"open(?:ed)?"
@@ -150,7 +149,7 @@ _THE_BEFORE = re.compile(r"(?<![\w-])(?:the|its|their)\s+$")
 _END_TAIL = re.compile(r"\s*(?:$|[,.;:!?)]|and\b|but\b|with\b|while\b|position\b)")
 
 #: Labels a person presses away from their rest (a spring returns them to the closed end): "pressed" is the far end.
-#: A pedal is labelled ``foot``; a "plunger" or "trigger" word keeps its own label when the object has no button.
+#: Labels as :func:`request_values.part_label` names the part words (a pedal is a ``foot``, a key a ``button``).
 PRESSED_LABELS = frozenset({"button", "lever", "trigger", "plunger", "foot"})
 
 _BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)|upright")  # "the handle upright": a part's end
@@ -198,7 +197,7 @@ def _band_and_target(value: object, label: str | None = None) -> tuple[str, Stat
         return value[0], value[1]
     v = str(value)
     if v == "pressed":  # a button, lever, trigger or pedal pressed is at its far end; a stapler's arm pressed down is closed
-        return ("fully" if canonical_label(label or "") in PRESSED_LABELS else "closed"), None
+        return ("fully" if label in PRESSED_LABELS else "closed"), None
     if v.startswith("end:"):
         end = v[4:]
         return ("fully" if end in ("high", "on") else "closed"), StateTarget(kind="end", end=end)  # type: ignore[arg-type]
