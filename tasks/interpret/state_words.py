@@ -17,6 +17,8 @@ from asset2sim.tasks.interpret.phrase_scan import TOKEN, Hit, Tokens, compile_ta
 
 _OPEN = r"open(?:ed)?"
 
+_FLAT = r"(?:lying|laid|lies|lay|resting|rests) (?:open )?flat"
+
 #: Verbs of a part's motion a degree word may follow ("pulled out halfway"): the degree is the state.
 _MOVED = (r"(?:(?:pulled|slid|drawn|pushed) (?:out|in)|pulled|slid|extended|retracted|raised|lifted|lowered|swung|tilted|"
           r"turned|rotated|unfolded|folded|unscrewed|screwed (?:off|open)|loosened)")
@@ -65,7 +67,7 @@ _STATE_TABLE = compile_table(
         (r"retracted|folded(?: up| shut| closed| down)?|screwed (?:on|shut|closed|tight)|tucked in", "closed", ""),
         (r"(?:pressed|depressed)(?: all the way)?(?: down| in)?|pushed (?:all the way )?in", "pressed", ""),
         # a part "lying flat" (not the object: a part noun right before it) is opened out flat, or to its limit
-        (r"(?:lying|laid|lies|lay|resting|rests) (?:open )?flat", "fully", "part"),
+        (_FLAT, "fully", "end"),
         # physical ends: decided from the geometry after scaling (request_apply)
         (r"(?:raised|lifted) (?:all the way|fully|completely|to the top)", "end:high", "end"),
         (r"(?:in|at|to) (?:the|its|their) (?:up|raised|upper|top|highest) position|(?:raised|lifted|propped|popped|sprung|flipped|pulled|pushed|swung|tilted|turned|flicked|moved|set|left)(?: all the way)? up|raised|lifted|(?:all the way |fully )?up|upright", "end:high", "end"),
@@ -148,11 +150,10 @@ _THE_BEFORE = re.compile(r"(?<![\w-])(?:the|its|their)\s+$")
 
 _END_TAIL = re.compile(r"\s*(?:$|[,.;:!?)]|and\b|but\b|with\b|while\b|position\b)")
 
-#: Labels a person presses away from their rest (a spring returns them to the closed end): "pressed" is the far end.
-#: Labels as :func:`request_values.part_label` names the part words (a pedal is a ``foot``, a key a ``button``).
+#: Labels (:func:`request_values.part_label`'s) pressed from their rest, the closed end: "pressed" is the far end.
 PRESSED_LABELS = frozenset({"button", "lever", "trigger", "plunger", "foot"})
 
-_BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)|upright")  # "the handle upright": a part's end
+_BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)|upright|" + _FLAT)  # "the handle upright": a part's end
 
 _END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:are\s+)?(?:both|all|each))?"
                        r"(?:\s+(?:is|are|was|were|set|turned|switched|flipped|pushed|pulled|left|stays?|kept))?\s+$")
@@ -180,8 +181,6 @@ def _state_hits(low: str, numeric: list[rv.Found] | None = None) -> list[Hit]:
 
 def _is_state(low: str, h: Hit) -> bool:
     """False for a bare "open" that is a verb ("to open the lid") and a bare end word without a part noun before it."""
-    if h.flag == "part":
-        return _END_LEAD.search(low[max(0, h.start - 40): h.start]) is not None
     if h.flag == "bare" and h.text.startswith("open"):
         return not (_VERB_AFTER.match(low, h.end) or _VERB_BEFORE.search(low[max(0, h.start - 20): h.start]))
     if h.flag == "end" and _BARE_END.fullmatch(h.text):
@@ -196,7 +195,7 @@ def _band_and_target(value: object, label: str | None = None) -> tuple[str, Stat
     if isinstance(value, tuple):
         return value[0], value[1]
     v = str(value)
-    if v == "pressed":  # a button, lever, trigger or pedal pressed is at its far end; a stapler's arm pressed down is closed
+    if v == "pressed":  # a stapler's arm pressed down is closed
         return ("fully" if label in PRESSED_LABELS else "closed"), None
     if v.startswith("end:"):
         end = v[4:]
