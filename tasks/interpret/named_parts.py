@@ -208,9 +208,11 @@ def state_targets(ctx: PartsContext, jr: JointStateRequest, relevant: list[str],
     if named and not targets:
         targets, how = stand_ins(ctx, str(jr.label), relevant)
         applied = f"applied to {how} {targets}" if targets else "not applied"
-        warnings.append(f"WARNING: the request names a '{jr.label}' ('{jr.phrase}') but no part of "
-                        f"this {ctx.category} carries that label; its moving parts: "
-                        f"{moving_parts(ctx)}; '{jr.phrase}' {applied}")
+        fixed = any(link_named(ctx, ln.name, str(jr.label)) for ln in ctx.asset.links)  # a wheel on a fixed joint
+        warnings.append(f"WARNING: the request names a '{jr.label}' ('{jr.phrase}') but "
+                        + (f"this {ctx.category}'s {jr.label} is on a fixed joint (it does not move)" if fixed else
+                           f"no part of this {ctx.category} carries that label")
+                        + f"; its moving parts: {moving_parts(ctx)}; '{jr.phrase}' {applied}")
         if not targets:
             return []
     if not named:

@@ -17,6 +17,8 @@ from asset2sim.tasks.interpret.phrase_scan import TOKEN, Hit, Tokens, compile_ta
 
 _OPEN = r"open(?:ed)?"
 
+_FLAT = r"(?:lying|laid|lies|lay|resting|rests) (?:open )?flat"
+
 #: Verbs of a part's motion a degree word may follow ("pulled out halfway"): the degree is the state.
 _MOVED = (r"(?:(?:pulled|slid|drawn|pushed) (?:out|in)|pulled|slid|extended|retracted|raised|lifted|lowered|swung|tilted|"
           r"turned|rotated|unfolded|folded|unscrewed|screwed (?:off|open)|loosened)")
@@ -62,7 +64,10 @@ _STATE_TABLE = compile_table(
         # named states: which end they are does not depend on the geometry
         (r"(?:pulled|slid|drawn) (?:all the way )?out|extended|unfolded|unscrewed|deployed", "fully", ""),
         (r"(?:(?:pulled|slid|drawn) out|extended|unfolded) (?:all the way|fully|completely)", "fully", ""),
-        (r"pushed (?:all the way )?in|retracted|folded(?: up| shut| closed| down)?|screwed (?:on|shut|closed|tight)|pressed (?:down|in)|pressed|depressed|tucked in", "closed", ""),
+        (r"retracted|folded(?: up| shut| closed| down)?|screwed (?:on|shut|closed|tight)|tucked in", "closed", ""),
+        (r"(?:pressed|depressed)(?: all the way)?(?: down| in)?|pushed (?:all the way )?in", "pressed", ""),
+        # a part "lying flat" (not the object: a part noun right before it) is opened out flat, or to its limit
+        (_FLAT, "fully", "end"),
         # physical ends: decided from the geometry after scaling (request_apply)
         (r"(?:raised|lifted) (?:all the way|fully|completely|to the top)", "end:high", "end"),
         (r"(?:in|at|to) (?:the|its|their) (?:up|raised|upper|top|highest) position|(?:raised|lifted|propped|popped|sprung|flipped|pulled|pushed|swung|tilted|turned|flicked|moved|set|left)(?: all the way)? up|raised|lifted|(?:all the way |fully )?up|upright", "end:high", "end"),
@@ -145,7 +150,10 @@ _THE_BEFORE = re.compile(r"(?<![\w-])(?:the|its|their)\s+$")
 
 _END_TAIL = re.compile(r"\s*(?:$|[,.;:!?)]|and\b|but\b|with\b|while\b|position\b)")
 
-_BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)|upright")  # "the handle upright": a part's end
+#: Labels (:func:`request_values.part_label`'s) pressed from their rest, the closed end: "pressed" is the far end.
+PRESSED_LABELS = frozenset({"button", "lever", "trigger", "plunger", "foot"})
+
+_BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)|upright|" + _FLAT)  # "the handle upright": a part's end
 
 _END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:are\s+)?(?:both|all|each))?"
                        r"(?:\s+(?:is|are|was|were|set|turned|switched|flipped|pushed|pulled|left|stays?|kept))?\s+$")
@@ -182,11 +190,13 @@ def _is_state(low: str, h: Hit) -> bool:
     return True
 
 
-def _band_and_target(value: object) -> tuple[str, StateTarget | None]:
-    """A state hit's value -> (band, target)."""
+def _band_and_target(value: object, label: str | None = None) -> tuple[str, StateTarget | None]:
+    """A state hit's value -> (band, target); ``label``: the part it names (None: every part)."""
     if isinstance(value, tuple):
         return value[0], value[1]
     v = str(value)
+    if v == "pressed":  # a stapler's arm pressed down is closed
+        return ("fully" if label in PRESSED_LABELS else "closed"), None
     if v.startswith("end:"):
         end = v[4:]
         return ("fully" if end in ("high", "on") else "closed"), StateTarget(kind="end", end=end)  # type: ignore[arg-type]
@@ -315,7 +325,7 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = None
     claimed: set[int] = set()
 
     def make(selector: str, label: str | None, ordinal: int | None, order: str, b: Hit, phrase: str, none: bool = False) -> JointStateRequest:
-        band, target = _band_and_target(b.value)
+        band, target = _band_and_target(b.value, label)
         if none:  # "none of the drawers open": closed; "none of the doors closed": open
             band, target = ("mostly" if band == "closed" else "closed"), None
         js = JointStateRequest(selector=selector, label=label, ordinal=ordinal, order=order,  # type: ignore[arg-type]

@@ -55,6 +55,33 @@ def test_a_toasters_lever_is_its_slider(generated):
 
 
 @needs_shared
+def test_a_pressed_lever_is_at_its_far_end_and_a_part_lying_flat_is_opened_flat():
+    """A flush lever or button pressed is its far end (its spring returns it to the closed end), a stapler's arm
+    pressed down its closed end; "its screen lying flat" is the screen's state (opened flat), not the laptop's pose."""
+    res, labels, *_ = resolve(SHARED / "102703", "A toilet with the flush lever pressed.")
+    (lever,) = joint_of(labels, "lever")
+    assert res.unapplied == [] and res.bands[lever] == "fully"
+    assert parse_request("A toilet with its flush button pushed in.").joint_states[0].band == "fully"
+    assert parse_request("A cabinet with the drawers pushed in.").joint_states[0].band == "closed"
+    spec = parse_request("A laptop with its screen lying flat.")
+    assert spec.pose_hint is None and [(j.label, j.band) for j in spec.joint_states] == [("screen", "fully")]
+    res, labels, *_ = resolve(SHARED / "9748", spec.text)
+    assert res.unapplied == [] and [res.bands[j] for j in res.addressed] == ["fully"]
+    assert parse_request("A suitcase lying flat with its lid closed.").pose_hint == "lying_flat"
+
+
+@needs_shared
+def test_a_state_asked_of_a_part_on_a_fixed_joint_says_it_does_not_move():
+    """Trash can 102155's wheels are in semantics.txt but on fixed joints: "its wheel fully open" is not applied
+    because the wheel does not move, not because the object has no wheel; a part it lacks still says so."""
+    res, *_ = resolve(SHARED / "102155", "A trash can with its wheel fully open.")
+    ((phrase, why),) = res.unapplied
+    assert phrase == "wheel fully open" and "wheel is on a fixed joint (it does not move)" in why and "no part" not in why
+    res, *_ = resolve(SHARED / "102155", "A trash can with its drawer open.")
+    assert "no part of this TrashCan carries that label" in res.unapplied[0][1]
+
+
+@needs_shared
 def test_a_staplers_arm_is_its_lid():
     res, labels, *_ = resolve(SHARED / "103275", "a heavy 2 lb stapler with a stiff spring-loaded arm pressed down")
     (lid,) = joint_of(labels, "lid")
