@@ -264,17 +264,3 @@ def read_manifest_entries(
     entries = [ManifestEntry(r.id, r.prompt, r.folder, r.category or None, r.reference_scale, r.time_limit_seconds, r.line)
                for r in reading.rows]
     return entries, list(reading.errors)
-
-
-def read_manifest(manifest: Path | str, root: Path | str) -> list[ManifestEntry]:
-    """:func:`read_manifest_entries`, all or nothing.
-
-    Raises:
-        CatalogError: as :func:`read_manifest_entries`, or the first bad row
-            (naming the file and line).
-    """
-    entries, errors = read_manifest_entries(manifest, root)
-    if errors:
-        more = f" (and {len(errors) - 1} more bad row(s))" if len(errors) > 1 else ""
-        raise CatalogError(errors[0].message + more)
-    return entries

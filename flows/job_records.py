@@ -102,7 +102,7 @@ def report_tokens(report: RefineReport, out_dir: Path | str) -> int | None:
 class Prepared(BaseModel):
     """What the flow's input stage found for one asset: ``skip`` the earlier catalog row to reuse, ``resume``
     an earlier run's :class:`JobRecord` whose complete folder to record, ``asset`` and ``findings`` handed to
-    the refine stage (:meth:`extracted`); ``seconds`` wall time, ``cpu_seconds`` the CPU time (user + system) of the
+    the refine stage; ``seconds`` wall time, ``cpu_seconds`` the CPU time (user + system) of the
     thread that read the asset."""
 
     model_config = ConfigDict(extra="forbid")
@@ -122,10 +122,6 @@ class Prepared(BaseModel):
     error: str | None = None
     asset: AssetDescription | None = None
     findings: list[Finding] = Field(default_factory=list)
-
-    def extracted(self) -> tuple[AssetDescription, list[Finding]] | None:
-        """``(asset, findings)`` for ``refine_asset(extracted=...)``; None when the asset was not read."""
-        return None if self.asset is None else (self.asset, list(self.findings))
 
 
 class RefineOutput(BaseModel):
