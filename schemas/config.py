@@ -16,6 +16,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from asset2sim.schemas import Frozen
 from asset2sim.schemas.request import RequestOverrides
 
 
@@ -98,10 +99,9 @@ def default_engines() -> list[str]:
     return ["pybullet", "physx"] if importlib.util.find_spec("sapien") is not None else ["pybullet"]
 
 
-class MjcfConfig(BaseModel):
+class MjcfConfig(Frozen):
     """How an MJCF input is read."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     angle: Literal["radian", "degree"] | None = None
     """The unit of the file's angles (joint ranges, ``euler``, ``ref``), winning over its ``<compiler angle>``
     and its host package's convention; None: as the package that compiles it reads it

@@ -4,15 +4,16 @@ from __future__ import annotations
 
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
+from pydantic import Field, PrivateAttr
 
+from asset2sim.schemas import Strict
 from asset2sim.schemas.report import MetricResult
 
 #: Version of the ``evaluation.json`` layout.
 EVALUATION_VERSION = "1"
 
 
-class Evaluation(BaseModel):
+class Evaluation(Strict):
     """Contents of ``evaluation.json``: ``metrics`` (one per engine for the
     simulator metrics; a refine's are its ``report.json``'s), ``failure_mode`` (the verdict: a refine's is its
     ``report.json``'s, never decided again; else the readiness of ``metrics``), ``passed`` (ready), ``failures``
@@ -20,7 +21,6 @@ class Evaluation(BaseModel):
     serialised: ``_runs`` (engine -> the runs the checks were graded from) and ``_context`` (the evaluated files), for
     the report."""
 
-    model_config = ConfigDict(extra="forbid")
     version: str = EVALUATION_VERSION
     asset_id: str
     urdf: str

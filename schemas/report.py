@@ -4,8 +4,9 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from asset2sim.schemas import Strict
 from asset2sim.schemas.overlay import RootMount
 from asset2sim.schemas.request import RequestFindings
 
@@ -18,14 +19,13 @@ FailureMode = Literal[
 FAILURE_MODES: tuple[str, ...] = FailureMode.__args__  # type: ignore[attr-defined]
 
 
-class MetricResult(BaseModel):
+class MetricResult(Strict):
     """One measured metric.
 
     ``value`` in ``unit``; ``passed`` is None when the metric has no threshold;
     ``threshold`` human-readable; ``details`` metric-specific (JSON-able).
     """
 
-    model_config = ConfigDict(extra="forbid")
     name: str
     value: float | None
     unit: str
@@ -35,10 +35,9 @@ class MetricResult(BaseModel):
     engine: str = "pybullet"
 
 
-class EscalationRound(BaseModel):
+class EscalationRound(Strict):
     """One post-check round: what was measured and what was changed."""
 
-    model_config = ConfigDict(extra="forbid")
     round: int
     metrics: list[MetricResult]
     changes: dict[str, dict[str, float]] = Field(default_factory=dict)
@@ -49,10 +48,9 @@ class EscalationRound(BaseModel):
     (``tasks/tune/word_guard.py``), one line each."""
 
 
-class StateRefinement(BaseModel):
+class StateRefinement(Strict):
     """What state refinement did (penetrations in m, states rad/m)."""
 
-    model_config = ConfigDict(extra="forbid")
     requested: dict[str, float]
     result: dict[str, float]
     phi_requested: float
@@ -69,13 +67,12 @@ class StateRefinement(BaseModel):
     search opened to make room (:func:`asset2sim.tasks.state.refine_state.joints_in_the_way`)."""
 
 
-class SolverAid(BaseModel):
+class SolverAid(Strict):
     """A solver parameter an export writes beyond the files' physics (``asset2sim.engines.mjcf.aids``): its ``kind``,
     the joint or geom (``element``) it is written on, the attributes ``written``, the pre-flight ``criterion`` that
     asked for it with its ``measure`` (the predicted quantity over its bound: above 1 the aid is needed) and its
     ``effect`` on the part's dynamics."""
 
-    model_config = ConfigDict(extra="forbid")
     kind: str
     element: str
     written: dict[str, str]
@@ -85,10 +82,9 @@ class SolverAid(BaseModel):
     file: str = "mjcf"
 
 
-class RefineReport(BaseModel):
+class RefineReport(Strict):
     """Contents of ``report.json``."""
 
-    model_config = ConfigDict(extra="forbid")
     asset_id: str
     source: str
     prompt: str
