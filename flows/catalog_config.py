@@ -100,7 +100,7 @@ class RegressionSettings(Strict):
 
     max_regressed_assets: int = Field(default=0, ge=0)
     max_pass_rate_drop: float = Field(default=0.0, ge=0.0, le=1.0)
-    max_metric_drift: dict[str, float] = Field(default_factory=dict)
+    max_metric_drift: dict[str, float] = {}
     fail_flow: bool = True
 
 
@@ -125,7 +125,7 @@ class CatalogConfig(Strict):
     output_store: str | None = None  # a URI or path the workers upload to (asset2sim.flows.store); None: output_root
     datasets: dict[str, DatasetConfig]
     estimator: EstimatorSettings = Field(default_factory=EstimatorSettings)
-    refine: dict[str, Any] = Field(default_factory=dict)  # RefineConfig fields
+    refine: dict[str, Any] = {}  # RefineConfig fields
     run: RunSettings = Field(default_factory=RunSettings)
     schedule: ScheduleSettings = Field(default_factory=ScheduleSettings)
     tracking: TrackingSettings = Field(default_factory=TrackingSettings)

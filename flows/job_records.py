@@ -12,7 +12,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict
 
 from asset2sim.schemas import Strict
 from asset2sim import atomic
@@ -121,7 +121,7 @@ class Prepared(Strict):
     failure_mode: str | None = None
     error: str | None = None
     asset: AssetDescription | None = None
-    findings: list[Finding] = Field(default_factory=list)
+    findings: list[Finding] = []
 
 
 class RefineOutput(Strict):
@@ -131,7 +131,7 @@ class RefineOutput(Strict):
     report: RefineReport
     out_dir: str
     skipped: bool = False
-    progress: list[list[Any]] = Field(default_factory=list)
+    progress: list[list[Any]] = []
     tokens: int | None = None
 
 
@@ -139,8 +139,8 @@ class Measurement(Strict):
     """The metrics stage's value: the catalog's metric columns, the failing checks of the verdict (``name@engine``),
     wall time (s) and whether the refine's ``evaluation.json`` was reused (nothing simulated)."""
 
-    columns: dict[str, Any] = Field(default_factory=dict)
-    failures: list[str] = Field(default_factory=list)
+    columns: dict[str, Any] = {}
+    failures: list[str] = []
     seconds: float = 0.0
     reused_evaluation: bool = False
 

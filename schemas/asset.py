@@ -8,8 +8,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field
-
 from asset2sim.schemas import Frozen, Strict
 
 Vec3 = tuple[float, float, float]
@@ -61,8 +59,8 @@ class LinkDesc(Strict):
     """A link: its geometry and (PartNet-Mobility) semantics."""
 
     name: str
-    visuals: list[GeometryRef] = Field(default_factory=list)
-    collisions: list[GeometryRef] = Field(default_factory=list)
+    visuals: list[GeometryRef] = []
+    collisions: list[GeometryRef] = []
     semantic_label: str | None = None
     """Part label from ``semantics.txt`` (e.g. ``lid``, ``drawer``, ``door``)."""
     semantic_joint: str | None = None
@@ -156,7 +154,7 @@ class LinkGeometry(Strict):
     inertia_shell: tuple[Vec3, Vec3, Vec3]
     n_meshes: int = 0
     n_faces: int = 0
-    notes: list[str] = Field(default_factory=list)
+    notes: list[str] = []
 
     @property
     def extents(self) -> Vec3:

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
-
 from asset2sim.schemas import Strict
 from asset2sim.schemas.report import MetricResult
 
@@ -52,8 +50,8 @@ class SimulationChecks(Strict):
 
     physics: Literal["declared", "patched"]
     passed: bool
-    failures: list[str] = Field(default_factory=list)
-    metrics: list[MetricResult] = Field(default_factory=list)
+    failures: list[str] = []
+    metrics: list[MetricResult] = []
     error: str = ""
     """Why the checks could not run (then ``passed`` is False and ``metrics`` empty)."""
 
@@ -69,15 +67,15 @@ class AuditReport(Strict):
     format: Literal["urdf", "mjcf", "usd"]
     category: str
     category_reason: str = ""
-    labels: dict[str, str] = Field(default_factory=dict)
+    labels: dict[str, str] = {}
     """link -> the part label the audit used (from ``semantics.txt`` or inferred from the link name)."""
     root_fixed: bool
     root_source: str = ""
-    values: list[ValueVerdict] = Field(default_factory=list)
-    checks: list[SimulationChecks] = Field(default_factory=list)
+    values: list[ValueVerdict] = []
+    checks: list[SimulationChecks] = []
     patch: str | None = None
     """The patched file, relative to the audit's output folder (None: nothing implausible, or no ``--out``)."""
-    notes: list[str] = Field(default_factory=list)
+    notes: list[str] = []
 
     @property
     def implausible(self) -> list[ValueVerdict]:
@@ -110,9 +108,9 @@ class AuditRow(Strict):
     failure_mode: str
     values: int = 0
     implausible_count: int = 0
-    implausible: list[str] = Field(default_factory=list)
+    implausible: list[str] = []
     declared_passed: bool | None = None
-    declared_failures: list[str] = Field(default_factory=list)
+    declared_failures: list[str] = []
     patched_passed: bool | None = None
     patch: str | None = None
     out_dir: str | None = None

@@ -153,7 +153,7 @@ class ValidationNotes(_Strict):
     material: str = ""
     mass_arithmetic: str = ""
     units: str = "SI units; angles in radians; prismatic values in metres after scaling."
-    other: list[str] = Field(default_factory=list)
+    other: list[str] = []
 
 
 MountingKind = Literal["free-standing", "counter-mounted", "wall-mounted", "floor-mounted", "hangs-in-frame"]
@@ -177,8 +177,8 @@ class Overlay(_Strict):
     """Uniform scale factor s applied to the input asset (dimensionless)."""
     category: str | None = None
     contact_material: ContactMaterial | None = None
-    links: dict[str, LinkPhysics] = Field(default_factory=dict)
-    joints: dict[str, JointDynamics] = Field(default_factory=dict)
+    links: dict[str, LinkPhysics] = {}
+    joints: dict[str, JointDynamics] = {}
     initial_joint_positions: dict[str, float] | None = None
     """Only when the request asks for a state (output units: rad or m)."""
     notes: ValidationNotes = Field(default_factory=ValidationNotes)

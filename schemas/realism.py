@@ -44,7 +44,7 @@ class Clip(Frozen):
     view: str
     video: str
     poster: str
-    frames: list[str] = Field(default_factory=list)
+    frames: list[str] = []
     fps: float
     n_frames: int
     duration_s: float
@@ -56,8 +56,8 @@ class ClipSet(Frozen):
     """``clips/clips.json`` of an output folder: every clip written there (paths relative to ``clips/``)."""
 
     version: str = REALISM_VERSION
-    clips: list[Clip] = Field(default_factory=list)
-    skipped: dict[str, str] = Field(default_factory=dict)
+    clips: list[Clip] = []
+    skipped: dict[str, str] = {}
     """joint -> why it has no clip"""
 
 
@@ -92,8 +92,8 @@ class PairSet(Frozen):
     """``pairs.json``: the pairs judges see (paths relative to the folder of ``pairs.json``)."""
 
     version: str = REALISM_VERSION
-    pairs: list[ClipPair] = Field(default_factory=list)
-    skipped: dict[str, str] = Field(default_factory=dict)
+    pairs: list[ClipPair] = []
+    skipped: dict[str, str] = {}
     """object id / method -> why no pair was made"""
 
 

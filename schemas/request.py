@@ -219,7 +219,7 @@ class RequestSpec(Strict):
     size_factor: float = 1.0
     """Multiplier on the category's typical size implied by the size words."""
     size_phrase: str = ""
-    joint_states: list[JointStateRequest] = Field(default_factory=list)
+    joint_states: list[JointStateRequest] = []
     damping: DampingLevel = "moderate"
     holds_position: bool = False
     """"holds its position": friction must hold the requested state against gravity."""
@@ -229,37 +229,37 @@ class RequestSpec(Strict):
     """"stiff"/"heavy" joints asked for (higher friction / damping)."""
     free_moving: bool = False
     """"moving freely": low friction."""
-    motions: list[MotionPhrase] = Field(default_factory=list)
+    motions: list[MotionPhrase] = []
     """The words about how parts move, each with the part it names (None: the task's parts), in the request's order;
     ``damping``, ``holds_position``, ``spring``, ``stiff`` and ``free_moving`` summarise them for the whole object."""
     pose_hint: Literal["upright", "lying_flat", "sideways"] | None = None
-    sizes: list[SizeTarget] = Field(default_factory=list)
+    sizes: list[SizeTarget] = []
     """Sizes in numbers ("30 cm tall"); they win over the size words."""
     mass_level: Literal["light", "heavy"] | None = None
     """"a heavy box": the upper (lower) end of the plausible mass range."""
-    properties: list[PartProperty] = Field(default_factory=list)
+    properties: list[PartProperty] = []
     """Masses and materials, whole object or per part."""
-    dynamics_values: list[DynamicsValue] = Field(default_factory=list)
+    dynamics_values: list[DynamicsValue] = []
     """Explicit damping / friction / stiffness values."""
-    ignored: list[str] = Field(default_factory=list)
+    ignored: list[str] = []
     """Groups of consecutive words no rule used (function words aside)."""
-    part_counts: dict[str, int] = Field(default_factory=dict)
+    part_counts: dict[str, int] = {}
     """Counts of parts named ("a two-drawer cabinet" -> {"drawer": 2}); a
     different count on the object is a warning."""
-    warnings: list[str] = Field(default_factory=list)
+    warnings: list[str] = []
     """Contradictions and numbers the parser could not use."""
-    overridden: list[str] = Field(default_factory=list)
+    overridden: list[str] = []
     """Phrases of joint states a later phrase for the same part replaced ("the door open 90 degrees and the door
     closed": the first), each once: asked and not applied (the as-asked verdict, ``tasks/check/as_asked.py``)."""
-    matched: list[str] = Field(default_factory=list)
+    matched: list[str] = []
     """Every phrase the parser recognised (for the report)."""
     mount: Literal["fixed", "free"] | None = None
     """The mounting an override gives (wins over the words and the category prior)."""
     scale: float | None = Field(None, gt=0.0)
     """The uniform scale an override gives (wins over sizes and size words)."""
-    overrides: list[str] = Field(default_factory=list)
+    overrides: list[str] = []
     """The overrides as the user gave them (``--mass 12 kg`` ...), for the report."""
-    unused_words: list[str] = Field(default_factory=list)
+    unused_words: list[str] = []
     """Words of the request no rule used (function words, part labels and
     category names excepted), in order, each once."""
     parser: Literal["offline", "model"] = "offline"
@@ -357,11 +357,11 @@ class RequestFindings(Strict):
     """The report's account of the request: unused word groups, warnings,
     what was asked beyond bands and every number with what was achieved."""
 
-    ignored: list[str] = Field(default_factory=list)
-    warnings: list[str] = Field(default_factory=list)
-    asked: list[str] = Field(default_factory=list)
-    quantities: list[QuantityOutcome] = Field(default_factory=list)
-    phrases: list[str] = Field(default_factory=list)
+    ignored: list[str] = []
+    warnings: list[str] = []
+    asked: list[str] = []
+    quantities: list[QuantityOutcome] = []
+    phrases: list[str] = []
     """Each state phrase of the request with the parts it set (joint and label), the amount set from the closed
     end and the amount asked, or why it was not applied, in the request's order."""
 

@@ -17,8 +17,6 @@ from itertools import combinations
 from pathlib import Path
 from typing import Hashable, Sequence
 
-from pydantic import Field
-
 from asset2sim.schemas import Strict
 from asset2sim import atomic
 from asset2sim.schemas.realism import JudgeVerdict
@@ -98,8 +96,8 @@ class ModelCalibration(Strict):
     sensitivity_of_kept: float | None
     calibrated: bool
     why: str
-    defects: dict[str, DefectTally] = Field(default_factory=dict)
-    method_wins: dict[str, MethodWins] = Field(default_factory=dict)
+    defects: dict[str, DefectTally] = {}
+    method_wins: dict[str, MethodWins] = {}
     calls: int = 0
     prompt_tokens: int = 0
     completion_tokens: int = 0
@@ -126,8 +124,8 @@ class JudgeCalibration(Strict):
     rubric_version: str = RUBRIC_VERSION
     sensitivity_threshold: float = SENSITIVITY_THRESHOLD
     min_defect_pairs: int = MIN_DEFECT_PAIRS
-    models: list[ModelCalibration] = Field(default_factory=list)
-    kappa: list[KappaReport] = Field(default_factory=list)
+    models: list[ModelCalibration] = []
+    kappa: list[KappaReport] = []
 
     def model(self, name: str) -> ModelCalibration:
         """The calibration of model ``name`` (KeyError when absent)."""
