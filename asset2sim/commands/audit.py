@@ -43,15 +43,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help="where to write each asset's audit.json, audit.md and patch/, and the audit catalog (Parquet); "
                         "default: print only")
-    p.add_argument("--category", default=None, help="object category for every asset (default: from the files and names)")
-    p.add_argument("--body", default=None, help="the body (MJCF) whose subtree is the object, in a scene with several objects with joints")
+    p.add_argument("--category", help="object category for every asset (default: from the files and names)")
+    p.add_argument("--body", help="the body (MJCF) whose subtree is the object, in a scene with several objects with joints")
     p.add_argument("--mjcf-angle", choices=("radian", "degree"), default=None,
                    help="the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention")
     p.add_argument("--no-sim", action="store_true", help="judge the values only; skip the simulation checks")
     p.add_argument("--jobs", type=int, default=1, help="assets audited at once (processes; default 1)")
     p.add_argument("--flow", action="store_true",
                    help="run as the Prefect audit flow on a Dask cluster of --jobs workers (needs --out; logs the run to MLflow)")
-    p.add_argument("--dask-address", default=None, help="with --flow: an existing Dask scheduler instead of a local cluster")
+    p.add_argument("--dask-address", help="with --flow: an existing Dask scheduler instead of a local cluster")
     p.add_argument("--json", action="store_true", help="print the catalog rows as JSON lines instead of tables")
     add_allow_outside(p)
 

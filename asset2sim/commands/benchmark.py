@@ -32,11 +32,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("manifest", type=Path, help="manifest.csv (id, category, prompt, ..., reference_scale)")
     p.add_argument("--methods", default="defaults,human,direct,asset2sim", help="comma-separated methods")
     p.add_argument("--out", type=Path, default=Path("bench"), help="output folder (default bench/)")
-    p.add_argument("--ids", default=None, help="comma-separated manifest ids to run (default all)")
+    p.add_argument("--ids", help="comma-separated manifest ids to run (default all)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--engines", default="pybullet", help="comma-separated evaluation engines")
     p.add_argument("--no-reports", action="store_true", help="skip the per-asset report.html files")
-    p.add_argument("--compare", type=Path, default=None, help="results.json of an earlier run to check reproducibility against")
+    p.add_argument("--compare", type=Path, help="results.json of an earlier run to check reproducibility against")
 
 
 def compare_records(a: list[dict], b: list[dict], rel: float = 1e-9) -> list[str]:

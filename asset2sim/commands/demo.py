@@ -33,8 +33,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--list", action="store_true", help="list the built-in objects with their default requests and exit")
     parser.add_argument("--object", default="box_lid", metavar="ID", help=f"which built-in object ({ids}; default box_lid)")
     parser.add_argument("--out", "-o", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
-    parser.add_argument("--prompt", "-p", default=None, help="the request (default: the object's own, see --list)")
-    parser.add_argument("--task", default=None, help="the manipulation task the gripper executes (default: the object's category's)")
+    parser.add_argument("--prompt", "-p", help="the request (default: the object's own, see --list)")
+    parser.add_argument("--task", help="the manipulation task the gripper executes (default: the object's category's)")
     parser.add_argument("--asset-out", type=Path, default=None,
                         help="also keep the object's input folder here (mobility.urdf, meshes, semantics.txt) to refine it yourself")
     parser.add_argument("--no-refine", action="store_true", help="with --asset-out: write the input folder only")

@@ -36,12 +36,12 @@ EXITS = {
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("asset", type=Path, help="asset folder (mobility.urdf, initial_state.json ...) or a URDF file")
-    p.add_argument("--reference", type=Path, default=None, help="PartNet-Mobility folder with reference_gensim2.json/.urdf")
-    p.add_argument("--prompt", default=None, help=(
+    p.add_argument("--reference", type=Path, help="PartNet-Mobility folder with reference_gensim2.json/.urdf")
+    p.add_argument("--prompt", help=(
         "the request the asset should satisfy (default for a refined output folder: the request its report.json "
         "records, so the output is graded as refine graded it)"))
-    p.add_argument("--category", default=None, help="object category (default: from the asset's files)")
-    p.add_argument("--engines", default=None, help=(
+    p.add_argument("--category", help="object category (default: from the asset's files)")
+    p.add_argument("--engines", help=(
         "comma-separated engines, the manipulation tiers measured in each (default: as refine checks: the tiers in "
         "PyBullet, the rest metrics in the engines a refined folder's report.json names, else PyBullet alone)"))
     p.add_argument("--out", type=Path, default=None,

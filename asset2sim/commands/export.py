@@ -37,7 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("out", type=Path, help="output folder (mobility.urdf, initial_state.json, overlay.json)")
     parser.add_argument("--format", "-f", choices=FORMATS, default="mjcf", help="export format (default: mjcf)")
     parser.add_argument("--no-visuals", action="store_true", help="collision geometry only (no visual meshes)")
-    parser.add_argument("--parity", metavar="ENGINES", default=None, help=(
+    parser.add_argument("--parity", metavar="ENGINES", help=(
         "also run the physical checks (penetration, rest stability, oscillation) in these engines, e.g. pybullet,physx,mujoco"))
 
 

@@ -31,7 +31,7 @@ MAX_LISTED = 50
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")
-    parser.add_argument("--dataset", default=None, help="dataset (default: the dataset of the latest run)")
+    parser.add_argument("--dataset", help="dataset (default: the dataset of the latest run)")
     parser.add_argument("--run", default="latest", help="run id, or 'latest' (default), or 'all'")
     parser.add_argument("--by", default="category", help="group by these columns, comma-separated (default category)")
     parser.add_argument("--over-time", action="store_true", help="pass rates per run, oldest first")

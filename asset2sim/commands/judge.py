@@ -52,7 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="server of the --model before it (a local server needs no API key)")
     parser.add_argument("--family", dest="family", action=_JudgeOption, metavar="NAME",
                         help="model family of the --model before it (default: the leading letters of its name)")
-    parser.add_argument("--timeout", type=float, default=None, metavar="S",
+    parser.add_argument("--timeout", type=float, metavar="S",
                         help="deadline of one HTTP attempt in seconds: connecting, sending and the whole reply "
                              "(default: ASSET2SIM_LLM_TIMEOUT_S or 120)")
     parser.add_argument("--jobs", type=int, default=4, metavar="N", help="pairs asked at once per model (default 4)")

@@ -52,37 +52,37 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes), a URDF file, or an MJCF (.xml) or OpenUSD (.usd, .usda, .usdc, .usdz) file")
     parser.add_argument("--prompt", "-p", default="", help='the request, e.g. "I want a slightly open stapler."')
     parser.add_argument("--out", "-o", type=Path, required=True, help="output folder (must not be inside the input)")
-    parser.add_argument("--category", default=None, help="override the asset's category (meta.json model_cat)")
-    parser.add_argument("--task", default=None, help=(
+    parser.add_argument("--category", help="override the asset's category (meta.json model_cat)")
+    parser.add_argument("--task", help=(
         'the manipulation task, e.g. "close the microwave door": the post-check executes it with a force- and '
         "speed-limited gripper (tiers task and force) and friction and damping are kept to what a real operating "
         "force overcomes in its direction (docs/guide/metrics.md)"))
-    parser.add_argument("--estimator", default=None, help=(
+    parser.add_argument("--estimator", help=(
         "overlay estimator: offline (the default, no network); llm (any litellm model, e.g. --model gemini/gemini-2.5-flash, "
         "key from the provider's environment variable); openai (an OpenAI-compatible server: --base-url URL --model M). "
         "See docs/guide/model_backends.md"))
-    parser.add_argument("--model", default=None, help="model for llm/openai: a litellm model string (provider/name) or the server's model name")
-    parser.add_argument("--base-url", default=None, help="base URL of an OpenAI-compatible or local server (vLLM, Ollama, llama.cpp); needs no key")
-    parser.add_argument("--request-parser", choices=("offline", "model"), default=None, help=(
+    parser.add_argument("--model", help="model for llm/openai: a litellm model string (provider/name) or the server's model name")
+    parser.add_argument("--base-url", help="base URL of an OpenAI-compatible or local server (vLLM, Ollama, llama.cpp); needs no key")
+    parser.add_argument("--request-parser", choices=("offline", "model"), help=(
         "who parses the request into its typed intent: offline (the default) or model (the --estimator llm/openai model, "
         "with the intent's JSON schema; the offline parse is kept, with a note, when the model's parse is invalid or the "
         "call fails; docs/guide/requests.md)"))
-    parser.add_argument("--engines", default=None, help=(
+    parser.add_argument("--engines", help=(
         "comma-separated engines the asset must pass in (pybullet,physx,mujoco,newton); missing ones are skipped and "
         "reported (default: pybullet, and physx where SAPIEN is installed)"))
     over = parser.add_argument_group("overrides", "typed values that win over the request's words (strings carry units)")
-    over.add_argument("--mass", default=None, help="total mass, e.g. 12kg or 500g")
-    over.add_argument("--size", default=None, help="largest extent of the closed object, e.g. 0.5m or 30cm")
-    over.add_argument("--scale", type=float, default=None, help="uniform scale of the input (wins over --size)")
+    over.add_argument("--mass", help="total mass, e.g. 12kg or 500g")
+    over.add_argument("--size", help="largest extent of the closed object, e.g. 0.5m or 30cm")
+    over.add_argument("--scale", type=float, help="uniform scale of the input (wins over --size)")
     over.add_argument("--state", action="append", default=[], metavar="NAME=VALUE",
                       help="a joint (by joint name or part label) at an angle (30deg, 0.5rad), a distance (2cm), an opening "
                            "fraction (0.4) or a band (closed, slightly_open, quarter, halfway, mostly, fully); repeatable")
-    over.add_argument("--mount", choices=("fixed", "free"), default=None, help="root fixed where the file puts it, or free on the ground")
-    over.add_argument("--material", default=None, help="material of the whole object (a materials.yaml key, e.g. steel_sheet)")
-    parser.add_argument("--body", default=None, help=(
+    over.add_argument("--mount", choices=("fixed", "free"), help="root fixed where the file puts it, or free on the ground")
+    over.add_argument("--material", help="material of the whole object (a materials.yaml key, e.g. steel_sheet)")
+    parser.add_argument("--body", help=(
         "the body (MJCF) whose subtree is the object, in a scene with several objects with joints (default: the one "
         "subtree under the world body with hinge or slide joints; tables and walls around it are left out)"))
-    parser.add_argument("--mjcf-angle", choices=("radian", "degree"), default=None, help=(
+    parser.add_argument("--mjcf-angle", choices=("radian", "degree"), help=(
         "the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention (default: "
         "as the package compiles it: robosuite, RoboCasa, LIBERO, Meta-World and Franka Kitchen fragments in radians; "
         "docs/guide/inputs.md)"))

@@ -24,7 +24,7 @@ EXITS = {0: "no error", 1: "the asset is refused"}
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes), a URDF file, or an MJCF (.xml) or "
                         "OpenUSD (.usd, .usda, .usdc, .usdz) file (the files it names checked first)")
-    parser.add_argument("--body", default=None, help="the body (MJCF) whose subtree is the object, in a scene with several objects with joints")
+    parser.add_argument("--body", help="the body (MJCF) whose subtree is the object, in a scene with several objects with joints")
     parser.add_argument("--mjcf-angle", choices=("radian", "degree"), default=None,
                         help="the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention")
     parser.add_argument("--json", action="store_true", help="print the findings as a JSON list instead of text")
