@@ -43,8 +43,8 @@ class EstimatorSettings(Strict):
 
     name: str = "offline"
     model: str | None = None
-    retries: int = Field(default=2, ge=0)
-    retry_delay_seconds: float = Field(default=10.0, ge=0.0)
+    retries: int = Field(2, ge=0)
+    retry_delay_seconds: float = Field(10.0, ge=0.0)
 
 
 class RunSettings(Strict):
@@ -60,15 +60,15 @@ class RunSettings(Strict):
     ``dask_host`` (where the local cluster listens; default loopback only) and
     ``dashboard`` (false: no HTTP pages), both ignored with a Dask address."""
 
-    workers: int | None = Field(default=2, ge=1)
-    time_limit_seconds: float = Field(default=1800.0, gt=0.0)
-    memory_limit_mb: int | None = Field(default=8192, ge=256)
+    workers: int | None = Field(2, ge=1)
+    time_limit_seconds: float = Field(1800.0, gt=0.0)
+    memory_limit_mb: int | None = Field(8192, ge=256)
     isolation: Literal["process", "spawn", "none"] = "process"
     evaluate: bool = True
     probes: bool = False
     extras: bool | Literal["deferred"] = True
     refine_function: str = "asset2sim.tasks.refine:refine_asset"
-    dask_host: str = Field(default="127.0.0.1", min_length=1)
+    dask_host: str = Field("127.0.0.1", min_length=1)
     dashboard: bool = True
 
 
@@ -98,8 +98,8 @@ class RegressionSettings(Strict):
     per compared metric column (its unit; rates as fractions); ``fail_flow``:
     the flow then fails (exit status 5)."""
 
-    max_regressed_assets: int = Field(default=0, ge=0)
-    max_pass_rate_drop: float = Field(default=0.0, ge=0.0, le=1.0)
+    max_regressed_assets: int = Field(0, ge=0)
+    max_pass_rate_drop: float = Field(0.0, ge=0.0, le=1.0)
     max_metric_drift: dict[str, float] = {}
     fail_flow: bool = True
 

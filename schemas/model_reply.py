@@ -160,7 +160,7 @@ class ProposedState(_Strict):
     """A candidate initial state: positions of some joints (the others stay)."""
 
     joints: list[JointValue] = Field(max_length=64)
-    reason: str = Field(default="", max_length=MAX_TEXT)
+    reason: str = Field("", max_length=MAX_TEXT)
 
 
 class JointProposalReply(_Strict):

@@ -55,7 +55,7 @@ class ContactMaterial(_Strict):
     and restitution (dimensionless, 0..1)."""
 
     lateral_friction: float = Field(ge=0.0)
-    restitution: float = Field(default=0.0, ge=0.0, le=1.0)
+    restitution: float = Field(0.0, ge=0.0, le=1.0)
     note: str = ""
 
 

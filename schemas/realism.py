@@ -115,7 +115,7 @@ class Rating(Frozen):
     choice: Choice
     winner: str
     loser: str
-    score: int | None = Field(default=None, ge=1, le=5)
+    score: int | None = Field(None, ge=1, le=5)
     comment: str = ""
     shown_at: float
     answered_at: float
