@@ -58,6 +58,12 @@ class CommandError(Exception):
         self.message = message
         self.problems = [CommandError(status, c, p, m) for c, p, m in problems]
 
+    @classmethod
+    def invalid(cls, code: str, message: str) -> "CommandError":
+        """Status 2 (:data:`INVALID_REQUEST`) without a path: an option, a setting or a request the command cannot
+        use."""
+        return cls(INVALID_REQUEST, code, None, message)
+
     def lines(self, command: str | None) -> list[str]:
         """One :meth:`line` per problem (the error's own line when it lists none)."""
         return [p.line(command) for p in self.problems] or [self.line(command)]
@@ -160,7 +166,7 @@ def extra_failure(exc: ImportError, _outs, _inp, _reading=None) -> CommandError 
     error (a bug)."""
     if missing_module(exc) not in EXTRA_OF_MODULE:
         return None
-    return CommandError(INVALID_REQUEST, "EXTRA_MISSING", None, install_hint(exc))
+    return CommandError.invalid("EXTRA_MISSING", install_hint(exc))
 
 
 Converter = Callable[[BaseException, list, object, "Reading | None"], "CommandError | None"]
@@ -267,8 +273,8 @@ def parse_engines(text: str | None, option: str = "--engines") -> list[str]:
     known = known_engines()
     unknown = [n for n in names if n not in known]
     if unknown:
-        raise CommandError(INVALID_REQUEST, "ENGINE_UNKNOWN", None,
-                           f"{option}: unknown engine(s) {', '.join(unknown)}; known: {', '.join(known)}")
+        raise CommandError.invalid("ENGINE_UNKNOWN",
+                                   f"{option}: unknown engine(s) {', '.join(unknown)}; known: {', '.join(known)}")
     return names
 
 

@@ -14,7 +14,7 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, add_allow_outside, check_out,
+from asset2sim.commands._status import (INVALID_INPUT, NOT_READY, CommandError, add_allow_outside, check_out,
                                         outside_paths)
 from asset2sim.input_files import allowed_folders, set_allowed_outside
 from asset2sim.flows import audit_catalog
@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     if args.jobs < 1:
-        raise CommandError(INVALID_REQUEST, "JOBS_INVALID", None, f"--jobs must be >= 1, got {args.jobs}")
+        raise CommandError.invalid("JOBS_INVALID", f"--jobs must be >= 1, got {args.jobs}")
     targets = find_assets(args.paths)
     if not targets:
         raise CommandError(INVALID_INPUT, "AUDIT_NO_ASSETS", None, f"no URDF, MJCF or USD asset in {', '.join(map(str, args.paths))}")
@@ -77,13 +77,13 @@ def run(args: argparse.Namespace) -> int:
         check_out(args.out, [*args.paths, *(t.path for t in targets)])
     if args.flow:
         if args.body or args.mjcf_angle:
-            raise CommandError(INVALID_REQUEST, "OPTION_NOT_IN_FLOW", None, "--body and --mjcf-angle apply to an audit run here; "
-                               "leave out --flow to use them")
+            raise CommandError.invalid("OPTION_NOT_IN_FLOW", "--body and --mjcf-angle apply to an audit run here; "
+                                       "leave out --flow to use them")
         if args.out is None:
-            raise CommandError(INVALID_REQUEST, "OUT_REQUIRED", None, "--flow writes the audit catalog: give --out")
+            raise CommandError.invalid("OUT_REQUIRED", "--flow writes the audit catalog: give --out")
         if args.allow_outside_paths:
-            raise CommandError(INVALID_REQUEST, "OPTION_CONFLICT", None, "--allow-outside-paths applies to audits in this "
-                               "process and its --jobs; the --flow's Dask workers do not take it")
+            raise CommandError.invalid("OPTION_CONFLICT", "--allow-outside-paths applies to audits in this "
+                                       "process and its --jobs; the --flow's Dask workers do not take it")
         from asset2sim.flows.audit_flow import run_audit_flow
 
         summary = run_audit_flow(args.paths, args.out, category=args.category, simulate=not args.no_sim, workers=args.jobs,

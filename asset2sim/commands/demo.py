@@ -18,7 +18,7 @@ from pathlib import Path
 
 from asset2sim import demo_assets
 from asset2sim.commands import refine as refine_cmd
-from asset2sim.commands._status import INVALID_REQUEST, CommandError
+from asset2sim.commands._status import CommandError
 from asset2sim.demo_objects import DEMO_OBJECTS
 
 NAME = "demo"
@@ -50,8 +50,8 @@ def _entry(asset_id: str):
     known = [o.asset_id for o in DEMO_OBJECTS]
     close = difflib.get_close_matches(asset_id, known, n=1)
     hint = f"; did you mean {close[0]!r}?" if close else ""
-    raise CommandError(INVALID_REQUEST, "DEMO_OBJECT_UNKNOWN", None, f"--object {asset_id!r} is not a built-in object{hint} "
-                       f"(known: {', '.join(known)}; `asset2sim demo --list`)")
+    raise CommandError.invalid("DEMO_OBJECT_UNKNOWN", f"--object {asset_id!r} is not a built-in object{hint} "
+                               f"(known: {', '.join(known)}; `asset2sim demo --list`)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     entry = _entry(args.object)
     if args.no_refine and args.asset_out is None:
-        raise CommandError(INVALID_REQUEST, "DEMO_NOTHING_TO_DO", None, "--no-refine writes only the input folder: give --asset-out DIR")
+        raise CommandError.invalid("DEMO_NOTHING_TO_DO", "--no-refine writes only the input folder: give --asset-out DIR")
     with tempfile.TemporaryDirectory(prefix="asset2sim-demo-") as tmp:
         folder = args.asset_out if args.asset_out is not None else Path(tmp) / entry.asset_id
         src = demo_assets.build_object(entry.asset_id, folder)

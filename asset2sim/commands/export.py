@@ -57,8 +57,8 @@ def run(args: argparse.Namespace) -> int:
     if args.format == "usd":
         return _run_usd(args, out)
     if "mujoco" not in available_engines():
-        raise CommandError(INVALID_REQUEST, "ENGINE_UNAVAILABLE", None,
-                           "MuJoCo is not installed; install the extra: pip install 'asset2sim[mujoco]'")
+        raise CommandError.invalid("ENGINE_UNAVAILABLE",
+                                   "MuJoCo is not installed; install the extra: pip install 'asset2sim[mujoco]'")
 
     with output_folder.adopting(out):  # the MJCF files become the output folder's own
         path = export_mjcf(asset := RefinedAsset(out), visuals=not args.no_visuals, check=False)

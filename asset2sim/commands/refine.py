@@ -401,12 +401,12 @@ def options(args: argparse.Namespace) -> RefineConfig:
     for item in getattr(args, "state", None) or []:
         name, eq, value = item.partition("=")
         if not eq or not name.strip() or not value.strip():
-            raise CommandError(INVALID_REQUEST, "OVERRIDE_INVALID", None, f"--state {item!r}: write NAME=VALUE, e.g. lid=30deg")
+            raise CommandError.invalid("OVERRIDE_INVALID", f"--state {item!r}: write NAME=VALUE, e.g. lid=30deg")
         state[name.strip()] = value.strip()
     try:
         overrides = merge_overrides(base.overrides, {**given, **({"state": state} if state else {})})
     except ValueError as exc:
-        raise CommandError(INVALID_REQUEST, "OVERRIDE_INVALID", None, option_error(str(exc), given, state)) from exc
+        raise CommandError.invalid("OVERRIDE_INVALID", option_error(str(exc), given, state)) from exc
     return base.model_copy(update={**fields, "overrides": overrides})
 
 

@@ -9,7 +9,7 @@ import argparse
 import json
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_REQUEST, CommandError, add_allow_outside, outside_paths
+from asset2sim.commands._status import CommandError, add_allow_outside, outside_paths
 from asset2sim.tasks.ingest.extract import validate_any
 from asset2sim.formats import ReadOptions
 from asset2sim.tasks.ingest.validate_input import CODES, ValidationPolicy, has_errors
@@ -40,8 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     unknown = [c for c in args.error + args.allow if c not in CODES]
     if unknown:
-        raise CommandError(INVALID_REQUEST, "CODE_UNKNOWN", None, f"--error/--allow: unknown code(s): {', '.join(unknown)} "
-                           "(docs/guide/validation.md lists the codes)")
+        raise CommandError.invalid("CODE_UNKNOWN", f"--error/--allow: unknown code(s): {', '.join(unknown)} "
+                                   "(docs/guide/validation.md lists the codes)")
     overrides = {c: "error" for c in args.error}
     overrides.update({c: "warning" for c in args.allow})
     policy = ValidationPolicy(overrides=overrides, warnings_as_errors=args.strict, check_mesh_contents=not args.paths_only)
