@@ -146,7 +146,7 @@ class RefineConfig(BaseModel):
     tub) a convex decomposition that leaves the inside open, instead of one solid hull, so that things can be put
     into it (needs CoACD and ``convex_decomposition``; off by default: it costs CoACD time per container;
     ``docs/guide/outputs.md``)."""
-    engines: list[str] = Field(default_factory=lambda: default_engines())
+    engines: list[str] = Field(default_factory=default_engines)
     """Engines the post-check must pass in (worst case); PyBullet first. One to 8 distinct engine names; which
     names exist is checked against the engine registry by :func:`asset2sim.api.load_config` (the CLI, the API and
     configuration files) and by refine."""

@@ -301,21 +301,21 @@ class RequestIntent(Strict):
     """The object's category named by the request (e.g. ``Stapler``, ``Refrigerator``), or null."""
     size_class: SizeClass | None = None
     """The size words' class, or null when none is said."""
-    joint_states: list[JointStateRequest] = Field(default_factory=list, max_length=64)
+    joint_states: list[JointStateRequest] = Field([], max_length=64)
     """One entry per part state asked, in the request's order."""
-    sizes: list[SizeTarget] = Field(default_factory=list, max_length=16)
+    sizes: list[SizeTarget] = Field([], max_length=16)
     pose_hint: Literal["upright", "lying_flat", "sideways"] | None = None
     mass_level: Literal["light", "heavy"] | None = None
-    properties: list[PartProperty] = Field(default_factory=list, max_length=64)
-    dynamics_values: list[DynamicsValue] = Field(default_factory=list, max_length=64)
+    properties: list[PartProperty] = Field([], max_length=64)
+    dynamics_values: list[DynamicsValue] = Field([], max_length=64)
     damping: DampingLevel = "moderate"
     holds_position: bool = False
     spring: bool = False
     stiff: bool = False
     free_moving: bool = False
-    motions: list[MotionPhrase] = Field(default_factory=list, max_length=64)
+    motions: list[MotionPhrase] = Field([], max_length=64)
     """One entry per word about how a part moves, with the part it names (null: the task's parts)."""
-    part_counts: list[PartCount] = Field(default_factory=list, max_length=64)
+    part_counts: list[PartCount] = Field([], max_length=64)
     mount: Literal["fixed", "free"] | None = None
     """The mounting asked ("mounted on the wall": fixed; "free-standing": free), or null."""
 
@@ -457,7 +457,7 @@ class RequestOverrides(BaseModel):
     mass: float | None = Field(None, gt=0.0, le=1e5)
     size: float | None = Field(None, gt=0.0, le=100.0)
     scale: float | None = Field(None, ge=1e-4, le=1e4)
-    state: dict[str, StateOverride] = Field(default_factory=dict, max_length=256)
+    state: dict[str, StateOverride] = Field({}, max_length=256)
     mount: Literal["fixed", "free"] | None = None
     material: str | None = Field(None, min_length=1, max_length=64)
 
