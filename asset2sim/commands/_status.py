@@ -297,6 +297,13 @@ def add_allow_outside(parser) -> None:
                              "rule holds: regular files under the size cap)")
 
 
+def add_mjcf_reading(parser) -> None:
+    """``--body`` and ``--mjcf-angle``: how a command reads an MJCF input (:class:`asset2sim.formats.ReadOptions`)."""
+    parser.add_argument("--body", help="the body (MJCF) whose subtree is the object, in a scene with several objects with joints")
+    parser.add_argument("--mjcf-angle", choices=("radian", "degree"),
+                        help="the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention")
+
+
 @contextlib.contextmanager
 def outside_paths(args):
     """The block run with ``--allow-outside-paths`` in force (CommandError status 2 ``INPUT_NOT_FOUND``: not a folder)."""

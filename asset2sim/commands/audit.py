@@ -14,8 +14,8 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from asset2sim.commands._status import (INVALID_INPUT, NOT_READY, CommandError, add_allow_outside, check_out,
-                                        outside_paths)
+from asset2sim.commands._status import (INVALID_INPUT, NOT_READY, CommandError, add_allow_outside, add_mjcf_reading,
+                                        check_out, outside_paths)
 from asset2sim.input_files import allowed_folders, set_allowed_outside
 from asset2sim.flows import audit_catalog
 from asset2sim.apps.audit.batch import AuditTarget, audit_one, find_assets
@@ -40,13 +40,11 @@ EXITS = {
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("paths", type=Path, nargs="+", metavar="PATH",
                    help="an asset (URDF folder or file, MJCF .xml, USD file, or a folder holding one), or a folder of many")
-    p.add_argument("--out", type=Path, default=None,
+    p.add_argument("--out", type=Path,
                    help="where to write each asset's audit.json, audit.md and patch/, and the audit catalog (Parquet); "
                         "default: print only")
     p.add_argument("--category", help="object category for every asset (default: from the files and names)")
-    p.add_argument("--body", help="the body (MJCF) whose subtree is the object, in a scene with several objects with joints")
-    p.add_argument("--mjcf-angle", choices=("radian", "degree"), default=None,
-                   help="the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention")
+    add_mjcf_reading(p)
     p.add_argument("--no-sim", action="store_true", help="judge the values only; skip the simulation checks")
     p.add_argument("--jobs", type=int, default=1, help="assets audited at once (processes; default 1)")
     p.add_argument("--flow", action="store_true",

@@ -35,10 +35,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", "-o", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
     parser.add_argument("--prompt", "-p", help="the request (default: the object's own, see --list)")
     parser.add_argument("--task", help="the manipulation task the gripper executes (default: the object's category's)")
-    parser.add_argument("--asset-out", type=Path, default=None,
+    parser.add_argument("--asset-out", type=Path,
                         help="also keep the object's input folder here (mobility.urdf, meshes, semantics.txt) to refine it yourself")
     parser.add_argument("--no-refine", action="store_true", help="with --asset-out: write the input folder only")
-    parser.add_argument("--dataset", type=Path, default=None,
+    parser.add_argument("--dataset", type=Path,
                         help="write every built-in object and a manifest.csv into this folder (for benchmark and flow) and exit")
     parser.add_argument("--no-extras", action="store_true", help="skip MJCF export, renders and the HTML report")
 

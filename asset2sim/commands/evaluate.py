@@ -44,13 +44,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--engines", help=(
         "comma-separated engines, the manipulation tiers measured in each (default: as refine checks: the tiers in "
         "PyBullet, the rest metrics in the engines a refined folder's report.json names, else PyBullet alone)"))
-    p.add_argument("--out", type=Path, default=None,
+    p.add_argument("--out", type=Path,
                    help="where to write evaluation.json and report.html (default: a folder beside the asset, ASSET-evaluation; "
                         "never the asset folder itself unless named here)")
     p.add_argument("--no-report", action="store_true", help="do not write report.html")
     p.add_argument("--no-probes", action="store_true", help="skip the passive probes (reported beside the verdict, never deciding it)")
     p.add_argument("--no-clips", action="store_true", help="with the report: skip the clips of each task-relevant joint's sweep (clips/)")
-    p.add_argument("--task", default=None,
+    p.add_argument("--task",
                    help='the manipulation task, e.g. "close the microwave door": the task tier performs it, the probes try its part '
                         'and direction (default for a refined output folder: the task its report.json records)')
     p.add_argument("--seed", type=int, default=0)

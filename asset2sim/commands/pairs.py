@@ -27,7 +27,7 @@ EXITS = {0: "pairs written", 1: "no input folder could be read or no pair could 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("folders", type=Path, nargs="+", metavar="FOLDER",
                    help="a benchmark output folder (asset2sim benchmark --out) or refine output folders")
-    p.add_argument("--out", type=Path, default=None,
+    p.add_argument("--out", type=Path,
                    help="the pair-set folder (default: FOLDER/realism for one benchmark folder; needed otherwise)")
     p.add_argument("--against", default=",".join(("human", "direct", "defaults")),
                    help="methods of a benchmark folder to pair asset2sim with (comma-separated; default human,direct,defaults)")

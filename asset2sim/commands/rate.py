@@ -46,7 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scores", action="store_true",
                    help="instead of serving: print the Bradley-Terry scores of the ratings so far, "
                         "write realism_scores.parquet")
-    p.add_argument("--tracking-uri", default=None,
+    p.add_argument("--tracking-uri",
                    help="with --scores: also log the scores to this MLflow tracking store (e.g. sqlite:///mlflow.db)")
 
 

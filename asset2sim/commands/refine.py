@@ -86,7 +86,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention (default: "
         "as the package compiles it: robosuite, RoboCasa, LIBERO, Meta-World and Franka Kitchen fragments in radians; "
         "docs/guide/inputs.md)"))
-    parser.add_argument("--config", type=Path, default=None,
+    parser.add_argument("--config", type=Path,
                         help="YAML file of refine options (estimator, model, engines, sim, overrides: {mass: 12kg, state: {lid: 30deg}} ...); "
                              "flags given on the command line win over it")
     add_allow_outside(parser)

@@ -24,7 +24,7 @@ EXITS = {0: "every view written", 1: "rendering failed", 2: "bad input", 4: "the
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes) or a URDF file")
-    parser.add_argument("--state", type=Path, default=None,
+    parser.add_argument("--state", type=Path,
                         help='initial_state.json ({"initial_joint_positions": {joint: value}}, rad or m); default: all joints at zero')
     parser.add_argument("--out", "-o", type=Path, required=True, help="output folder for <view>.png")
     parser.add_argument("--views", default="front,back,left,right,perspective",
