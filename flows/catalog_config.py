@@ -111,7 +111,7 @@ class ResultsSettings(Strict):
 
     code_change: Literal["rerun", "keep"] = "rerun"
     compact: bool = True
-    regression: RegressionSettings = Field(default_factory=RegressionSettings)
+    regression: RegressionSettings = RegressionSettings()
 
 
 class CatalogConfig(Strict):
@@ -124,12 +124,12 @@ class CatalogConfig(Strict):
     catalog_root: str = "data/catalog"
     output_store: str | None = None  # a URI or path the workers upload to (asset2sim.flows.store); None: output_root
     datasets: dict[str, DatasetConfig]
-    estimator: EstimatorSettings = Field(default_factory=EstimatorSettings)
+    estimator: EstimatorSettings = EstimatorSettings()
     refine: dict[str, Any] = {}  # RefineConfig fields
-    run: RunSettings = Field(default_factory=RunSettings)
-    schedule: ScheduleSettings = Field(default_factory=ScheduleSettings)
-    tracking: TrackingSettings = Field(default_factory=TrackingSettings)
-    results: ResultsSettings = Field(default_factory=ResultsSettings)
+    run: RunSettings = RunSettings()
+    schedule: ScheduleSettings = ScheduleSettings()
+    tracking: TrackingSettings = TrackingSettings()
+    results: ResultsSettings = ResultsSettings()
 
 
 @dataclass(frozen=True)

@@ -122,7 +122,7 @@ class RefineConfig(BaseModel):
     """Who turns the request into its typed intent: the offline parser (the default), or the model of ``estimator``
     ``llm`` / ``openai`` (``model``) with the intent's JSON schema, the offline parse kept when the model's reply
     is invalid or the call fails (``docs/guide/requests.md``)."""
-    sim: SimConventions = Field(default_factory=SimConventions)
+    sim: SimConventions = SimConventions()
     penetration_tolerance: float = Field(1e-3, gt=0.0, le=1.0)
     """Phi below which the state is accepted, m (sum over contact points)."""
     state_lambda: float = Field(0.05, ge=0.0, le=1e3)
@@ -163,9 +163,9 @@ class RefineConfig(BaseModel):
     body: str | None = None
     """The body (MJCF) whose subtree is the object, in a scene holding several objects with joints; None: the one
     subtree under the world body that carries hinge or slide joints (``docs/guide/inputs.md``)."""
-    mjcf: MjcfConfig = Field(default_factory=MjcfConfig)
+    mjcf: MjcfConfig = MjcfConfig()
     """How an MJCF input is read (:class:`MjcfConfig`)."""
-    overrides: RequestOverrides = Field(default_factory=RequestOverrides)
+    overrides: RequestOverrides = RequestOverrides()
     """Typed values that win over the request's words (:class:`~asset2sim.schemas.request.RequestOverrides`)."""
 
     @field_validator("engines")

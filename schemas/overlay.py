@@ -181,7 +181,7 @@ class Overlay(_Strict):
     joints: dict[str, JointDynamics] = {}
     initial_joint_positions: dict[str, float] | None = None
     """Only when the request asks for a state (output units: rad or m)."""
-    notes: ValidationNotes = Field(default_factory=ValidationNotes)
+    notes: ValidationNotes = ValidationNotes()
     mounting: RootMount | None = None
     """How the root is held (None: free-standing, the SPEC's convention)."""
 
