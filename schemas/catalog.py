@@ -14,6 +14,8 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, field_validator
 
+from asset2sim.schemas import Strict
+
 #: Version of the row schema in every Parquet file's metadata; columns are only
 #: ever added (nullable), so a reader of version N reads every older file
 #: (version 2 added ``code_hash``, version 3 ``request_warnings``, version 4 ``clips``, version 5 ``operable`` and
@@ -26,7 +28,7 @@ RowStatus = Literal["done", "skipped", "failed"]
 ROW_STATUSES: tuple[str, ...] = RowStatus.__args__  # type: ignore[attr-defined]
 
 
-class CatalogRow(BaseModel):
+class CatalogRow(Strict):
     """One asset's result in one flow run (``dataset`` and ``run`` are the
     partition folders): ``status`` done, skipped (``source_run`` reused) or
     failed; ``initial_state`` JSON {joint: rad or m}; ``stage_seconds`` JSON
@@ -45,7 +47,7 @@ class CatalogRow(BaseModel):
     ``reason``: the round's own account); ``code_hash`` what the skip rule compares.
     Non-finite floats are null."""
 
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    model_config = ConfigDict(validate_assignment=True)
 
     asset_id: str
     category: str | None = None

@@ -14,9 +14,9 @@ import math
 import re
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import ConfigDict, Field, field_validator, model_validator
 
-from asset2sim.schemas import Frozen
+from asset2sim.schemas import Frozen, Strict
 from asset2sim.schemas.request import RequestOverrides
 
 
@@ -56,12 +56,12 @@ REST_BAND_FLOORS: dict[str, float] = {"revolute": 0.02, "prismatic": 0.002}
 REST_BAND_RANGE_SHARE = 0.05
 
 
-class SimConventions(BaseModel):
+class SimConventions(Frozen):
     """SPEC conventions for every simulator measurement. Every field is finite and bounded (pydantic refuses
     the rest, naming the field): a time step in [:data:`MIN_TIMESTEP`, 0.05] s, settle and test times up to
     :data:`MAX_PHASE_TIME`, at most :data:`MAX_MEASUREMENT_STEPS` steps per measurement."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    model_config = ConfigDict(allow_inf_nan=False)
     timestep: float = Field(1.0 / 240.0, ge=MIN_TIMESTEP, le=0.05)
     """s, at least :data:`MIN_TIMESTEP`"""
     gravity: float = Field(-9.81, ge=-100.0, le=100.0)
@@ -108,10 +108,10 @@ class MjcfConfig(Frozen):
     (:mod:`asset2sim.formats.mjcf.conventions`, ``docs/guide/inputs.md``)."""
 
 
-class RefineConfig(BaseModel):
+class RefineConfig(Strict):
     """Knobs of the refine pipeline (units on every field)."""
 
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    model_config = ConfigDict(allow_inf_nan=False)
     estimator: str = Field("offline", min_length=1, max_length=64)
     """Registered estimator name (``offline``, ``llm``, ``openai`` ...)."""
     model: str | None = Field(None, min_length=1, max_length=256)

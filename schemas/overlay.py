@@ -11,7 +11,9 @@ from __future__ import annotations
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import ConfigDict, Field, model_validator
+
+from asset2sim.schemas import Strict
 
 SCHEMA_VERSION = "1.0"
 
@@ -23,8 +25,8 @@ Vec3 = tuple[float, float, float]
 SCALE_RANGE: tuple[float, float] = (1e-4, 1e4)
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+class _Strict(Strict):
+    model_config = ConfigDict(allow_inf_nan=False)
 
 
 class Inertia(_Strict):

@@ -8,7 +8,7 @@ import math
 import re
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import ConfigDict, Field, field_validator
 
 from asset2sim.schemas import Frozen, Strict
 
@@ -445,7 +445,7 @@ class StateOverride(Frozen):
         raise ValueError(f"{where}: unknown unit {unit!r} in {raw!r} (angles: deg, rad; distances: m, cm, mm)")
 
 
-class RequestOverrides(BaseModel):
+class RequestOverrides(Frozen):
     """Typed values that win over the request's words (command line, API,
     configuration file; strings carry units, numbers are SI): ``mass`` kg in
     (0, 1e5], ``size`` m (largest extent) in (0, 100], ``scale`` in [1e-4, 1e4]
@@ -453,7 +453,7 @@ class RequestOverrides(BaseModel):
     -> :class:`StateOverride`, at most 256), ``mount``, ``material`` (a name of
     at most 64 characters). Finite numbers only."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    model_config = ConfigDict(allow_inf_nan=False)
     mass: float | None = Field(None, gt=0.0, le=1e5)
     size: float | None = Field(None, gt=0.0, le=100.0)
     scale: float | None = Field(None, ge=1e-4, le=1e4)
