@@ -72,8 +72,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"built demo asset {src} ({entry.category})")
         if args.no_refine:
             return 0
-        ns = argparse.Namespace(asset=src, prompt=args.prompt if args.prompt is not None else entry.prompt, out=args.out,
-                                category=None, task=args.task if args.task is not None else entry.task, estimator="offline",
-                                model=None, base_url=None, force=True, no_extras=args.no_extras, quiet=False, engines="pybullet",
-                                overwrite=False)
+        parser = argparse.ArgumentParser()  # refine's own options, each at its default but these
+        refine_cmd.add_arguments(parser)
+        ns = parser.parse_args([f"--out={args.out}", "--estimator=offline", "--engines=pybullet", "--force", "--", str(src)])
+        ns.prompt = args.prompt if args.prompt is not None else entry.prompt
+        ns.task = args.task if args.task is not None else entry.task
+        ns.no_extras = args.no_extras
         return refine_cmd.run(ns)

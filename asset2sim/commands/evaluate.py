@@ -99,11 +99,11 @@ def run(args: argparse.Namespace) -> int:
     out = args.out = args.out or default_out(args.asset)
     engines = tuple(parse_engines(args.engines)) if args.engines else None
     check_out(out, [args.asset], adopt=True)  # never into the input, but into a refined folder (its own files then)
-    req = refined_request(args.asset, args.prompt, getattr(args, "task", None))
+    req = refined_request(args.asset, args.prompt, args.task)
     with output_folder.adopting(out):
         ev = evaluate_asset(args.asset, reference=args.reference, prompt=req.prompt, engines=engines, seed=args.seed,
                             category=args.category, out_dir=out, write_report=not args.no_report, probes=not args.no_probes,
-                            task=req.task, clips=not getattr(args, "no_clips", False))
+                            task=req.task, clips=not args.no_clips)
     ready = readiness(list(ev.metrics))
     table = Table(title=f"{markup(ev.asset_id)} ({markup(ev.category or 'no category')}): {markup(ready.short())}")
     wide = console.width >= WIDE_TABLE  # a narrow terminal gets the table without the thresholds' column

@@ -377,28 +377,28 @@ def options(args: argparse.Namespace) -> RefineConfig:
     given (CommandError status 2 ``CONFIG_INVALID`` / ``OVERRIDE_INVALID``, or the code of a file refused unread:
     ``INPUT_NOT_REGULAR_FILE``, ``INPUT_TOO_LARGE``, ``YAML_ALIAS_LIMIT`` ...)."""
     try:
-        base = load_config(args.config) if getattr(args, "config", None) else RefineConfig()
+        base = load_config(args.config) if args.config else RefineConfig()
     except (OSError, ValueError) as exc:
         raise CommandError(INVALID_REQUEST, getattr(exc, "code", None) or "CONFIG_INVALID", args.config, str(exc)) from exc
     fields = {k: v for k, v in (("estimator", args.estimator), ("model", args.model), ("base_url", args.base_url),
-                                ("request_parser", getattr(args, "request_parser", None))) if v is not None}
-    if getattr(args, "keep_declared", False):
+                                ("request_parser", args.request_parser)) if v is not None}
+    if args.keep_declared:
         fields["keep_declared"] = True
-    if getattr(args, "no_clips", False):
+    if args.no_clips:
         fields["clips"] = False
-    if getattr(args, "open_containers", False):
+    if args.open_containers:
         fields["open_containers"] = True
-    if getattr(args, "body", None):
+    if args.body:
         fields["body"] = args.body
-    if getattr(args, "mjcf_angle", None):
+    if args.mjcf_angle:
         fields["mjcf"] = base.mjcf.model_copy(update={"angle": args.mjcf_angle})
-    engines = getattr(args, "engines", None)
-    if engines or not getattr(args, "config", None):
+    engines = args.engines
+    if engines or not args.config:
         listed = parse_engines(engines or ",".join(default_engines()))
         fields["engines"] = ["pybullet"] + [e for e in listed if e != "pybullet"]
-    given = {k: v for k in ("mass", "size", "scale", "mount", "material") if (v := getattr(args, k, None)) is not None}
+    given = {k: v for k in ("mass", "size", "scale", "mount", "material") if (v := getattr(args, k)) is not None}
     state = {}
-    for item in getattr(args, "state", None) or []:
+    for item in args.state or []:
         name, eq, value = item.partition("=")
         if not eq or not name.strip() or not value.strip():
             raise CommandError.invalid("OVERRIDE_INVALID", f"--state {item!r}: write NAME=VALUE, e.g. lid=30deg")
@@ -433,19 +433,19 @@ def run(args: argparse.Namespace) -> int:
         line = f"[{time.perf_counter() - t0:6.2f}s] {STAGE_WORDS.get(stage, stage.replace('_', ' ')):<12} {message}"
         if message.startswith("WARNING"):  # warnings are printed with --quiet too, on stderr
             print(line, file=sys.stderr, flush=True)
-        elif not (args.quiet or getattr(args, "json", False)):
+        elif not (args.quiet or args.json):
             print(line, flush=True)
 
     config = options(args)
     try:
         with outside_paths(args):
             result = refine_stage.refine_asset(args.asset, args.prompt, args.out, config, category=args.category,
-                                               task=getattr(args, "task", None) or None, progress=progress,
+                                               task=args.task or None, progress=progress,
                                                skip_if_complete=not args.force, extras=not args.no_extras,
-                                               overwrite=getattr(args, "overwrite", False), media=not getattr(args, "defer_media", False))
+                                               overwrite=args.overwrite, media=not args.defer_media)
     except RefineError as exc:
         raise _refine_failure(exc, args) from exc
-    if getattr(args, "json", False):
+    if args.json:
         print(json.dumps(json_summary(result), indent=2))
     else:
         for line in summary_lines(result):
