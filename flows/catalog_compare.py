@@ -17,7 +17,7 @@ import json
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel
 
 from asset2sim import atomic
 from asset2sim.flows.catalog import ResultCatalog
@@ -84,10 +84,10 @@ class RunComparison(BaseModel):
     regressed: int = 0
     improved: int = 0
     changed: int = 0
-    flips: list[VerdictFlip] = Field(default_factory=list)
-    metrics: list[MetricDrift] = Field(default_factory=list)
+    flips: list[VerdictFlip] = []
+    metrics: list[MetricDrift] = []
     exceeded: bool = False
-    reasons: list[str] = Field(default_factory=list)
+    reasons: list[str] = []
     nothing_done: bool = False
     """The run reused every asset's earlier result: not compared, no drift recorded."""
 

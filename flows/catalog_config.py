@@ -9,8 +9,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import Field, ValidationError
 
+from asset2sim.schemas import Strict
 from asset2sim.flows import catalog_fs
 from asset2sim.inert import field_errors
 from asset2sim.input_files import InputFileError, load_yaml
@@ -22,14 +23,13 @@ class CatalogError(ValueError):
     """``catalog.yaml`` or a manifest is missing or invalid; the message names the file."""
 
 
-class DatasetConfig(BaseModel):
+class DatasetConfig(Strict):
     """One dataset of ``catalog.yaml``: ``root`` (one sub-folder per asset),
     ``manifest`` (CSV with ``id``, ``prompt`` and optional ``category``,
     ``reference_scale``, ``time_limit_seconds``; default ``<root>/manifest.csv``),
     ``generate: demo`` (build the demo assets into ``root`` on first use),
     ``reference`` (measure scale deviation against the assets' references)."""
 
-    model_config = ConfigDict(extra="forbid")
     root: str
     manifest: str | None = None
     generate: Literal["demo"] | None = None
@@ -37,18 +37,17 @@ class DatasetConfig(BaseModel):
     description: str = ""
 
 
-class EstimatorSettings(BaseModel):
+class EstimatorSettings(Strict):
     """Estimator and its settings; ``retries``/``retry_delay_seconds`` apply to
     model calls only (a failing offline estimator is not retried)."""
 
-    model_config = ConfigDict(extra="forbid")
     name: str = "offline"
     model: str | None = None
-    retries: int = Field(default=2, ge=0)
-    retry_delay_seconds: float = Field(default=10.0, ge=0.0)
+    retries: int = Field(2, ge=0)
+    retry_delay_seconds: float = Field(10.0, ge=0.0)
 
 
-class RunSettings(BaseModel):
+class RunSettings(Strict):
     """How a flow run executes: ``workers`` (local Dask workers; None = CPU
     count); ``time_limit_seconds`` per asset (s, all stages); ``isolation``:
     ``process`` (each stage in a child forked from a per-worker stage server,
@@ -61,82 +60,76 @@ class RunSettings(BaseModel):
     ``dask_host`` (where the local cluster listens; default loopback only) and
     ``dashboard`` (false: no HTTP pages), both ignored with a Dask address."""
 
-    model_config = ConfigDict(extra="forbid")
-    workers: int | None = Field(default=2, ge=1)
-    time_limit_seconds: float = Field(default=1800.0, gt=0.0)
-    memory_limit_mb: int | None = Field(default=8192, ge=256)
+    workers: int | None = Field(2, ge=1)
+    time_limit_seconds: float = Field(1800.0, gt=0.0)
+    memory_limit_mb: int | None = Field(8192, ge=256)
     isolation: Literal["process", "spawn", "none"] = "process"
     evaluate: bool = True
     probes: bool = False
     extras: bool | Literal["deferred"] = True
     refine_function: str = "asset2sim.tasks.refine:refine_asset"
-    dask_host: str = Field(default="127.0.0.1", min_length=1)
+    dask_host: str = Field("127.0.0.1", min_length=1)
     dashboard: bool = True
 
 
-class ScheduleSettings(BaseModel):
+class ScheduleSettings(Strict):
     """The nightly deployment: cron expression, IANA time zone, dataset."""
 
-    model_config = ConfigDict(extra="forbid")
     cron: str = "0 2 * * *"
     timezone: str = "UTC"
     dataset: str | None = None
     deployment_name: str = "nightly"
 
 
-class TrackingSettings(BaseModel):
+class TrackingSettings(Strict):
     """MLflow: ``uri`` (None = ``MLFLOW_TRACKING_URI`` or ``sqlite:///<project>/mlflow.db``),
     ``experiment``, ``artifact_root`` of new experiments, ``enabled``."""
 
-    model_config = ConfigDict(extra="forbid")
     enabled: bool = True
     uri: str | None = None
     experiment: str = "asset2sim"
     artifact_root: str = "mlruns"
 
 
-class RegressionSettings(BaseModel):
+class RegressionSettings(Strict):
     """When a run counts as a regression against the previous run
     (:mod:`asset2sim.flows.catalog_compare`): ``max_regressed_assets`` (count),
     ``max_pass_rate_drop`` over the common assets (fraction), ``max_metric_drift``
     per compared metric column (its unit; rates as fractions); ``fail_flow``:
     the flow then fails (exit status 5)."""
 
-    model_config = ConfigDict(extra="forbid")
-    max_regressed_assets: int = Field(default=0, ge=0)
-    max_pass_rate_drop: float = Field(default=0.0, ge=0.0, le=1.0)
-    max_metric_drift: dict[str, float] = Field(default_factory=dict)
+    max_regressed_assets: int = Field(0, ge=0)
+    max_pass_rate_drop: float = Field(0.0, ge=0.0, le=1.0)
+    max_metric_drift: dict[str, float] = {}
     fail_flow: bool = True
 
 
-class ResultsSettings(BaseModel):
+class ResultsSettings(Strict):
     """The result catalog's policies: ``code_change`` (``rerun``: a change of
     the package source redoes finished assets; ``keep``: reuse them),
     ``compact`` (one Parquet file per run once it ended), ``regression``."""
 
-    model_config = ConfigDict(extra="forbid")
     code_change: Literal["rerun", "keep"] = "rerun"
     compact: bool = True
-    regression: RegressionSettings = Field(default_factory=RegressionSettings)
+    regression: RegressionSettings = RegressionSettings()
 
 
-class CatalogConfig(BaseModel):
+class CatalogConfig(Strict):
     """Contents of ``catalog.yaml``. ``catalog_root`` is a path (relative to
     the project root) or a URI (``s3://bucket/prefix``, :mod:`asset2sim.flows.catalog_fs`)."""
 
-    model_config = ConfigDict(extra="forbid")
     version: int = 1
     default_dataset: str
     output_root: str = "data/refined"
     catalog_root: str = "data/catalog"
     output_store: str | None = None  # a URI or path the workers upload to (asset2sim.flows.store); None: output_root
     datasets: dict[str, DatasetConfig]
-    estimator: EstimatorSettings = Field(default_factory=EstimatorSettings)
-    refine: dict[str, Any] = Field(default_factory=dict)  # RefineConfig fields
-    run: RunSettings = Field(default_factory=RunSettings)
-    schedule: ScheduleSettings = Field(default_factory=ScheduleSettings)
-    tracking: TrackingSettings = Field(default_factory=TrackingSettings)
-    results: ResultsSettings = Field(default_factory=ResultsSettings)
+    estimator: EstimatorSettings = EstimatorSettings()
+    refine: dict[str, Any] = {}  # RefineConfig fields
+    run: RunSettings = RunSettings()
+    schedule: ScheduleSettings = ScheduleSettings()
+    tracking: TrackingSettings = TrackingSettings()
+    results: ResultsSettings = ResultsSettings()
 
 
 @dataclass(frozen=True)
@@ -264,17 +257,3 @@ def read_manifest_entries(
     entries = [ManifestEntry(r.id, r.prompt, r.folder, r.category or None, r.reference_scale, r.time_limit_seconds, r.line)
                for r in reading.rows]
     return entries, list(reading.errors)
-
-
-def read_manifest(manifest: Path | str, root: Path | str) -> list[ManifestEntry]:
-    """:func:`read_manifest_entries`, all or nothing.
-
-    Raises:
-        CatalogError: as :func:`read_manifest_entries`, or the first bad row
-            (naming the file and line).
-    """
-    entries, errors = read_manifest_entries(manifest, root)
-    if errors:
-        more = f" (and {len(errors) - 1} more bad row(s))" if len(errors) > 1 else ""
-        raise CatalogError(errors[0].message + more)
-    return entries

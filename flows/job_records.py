@@ -12,8 +12,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict
 
+from asset2sim.schemas import Strict
 from asset2sim import atomic
 from asset2sim.output_folder import OVERLAY_NAME, read_record
 from asset2sim.schemas.asset import AssetDescription
@@ -99,13 +100,12 @@ def report_tokens(report: RefineReport, out_dir: Path | str) -> int | None:
     return None
 
 
-class Prepared(BaseModel):
+class Prepared(Strict):
     """What the flow's input stage found for one asset: ``skip`` the earlier catalog row to reuse, ``resume``
     an earlier run's :class:`JobRecord` whose complete folder to record, ``asset`` and ``findings`` handed to
-    the refine stage (:meth:`extracted`); ``seconds`` wall time, ``cpu_seconds`` the CPU time (user + system) of the
+    the refine stage; ``seconds`` wall time, ``cpu_seconds`` the CPU time (user + system) of the
     thread that read the asset."""
 
-    model_config = ConfigDict(extra="forbid")
     ok: bool = False
     worker: str | None = None
     seconds: float | None = None
@@ -121,32 +121,26 @@ class Prepared(BaseModel):
     failure_mode: str | None = None
     error: str | None = None
     asset: AssetDescription | None = None
-    findings: list[Finding] = Field(default_factory=list)
-
-    def extracted(self) -> tuple[AssetDescription, list[Finding]] | None:
-        """``(asset, findings)`` for ``refine_asset(extracted=...)``; None when the asset was not read."""
-        return None if self.asset is None else (self.asset, list(self.findings))
+    findings: list[Finding] = []
 
 
-class RefineOutput(BaseModel):
+class RefineOutput(Strict):
     """The refine stage's value: the report, the folder, whether a complete folder was reused, progress
     ``[stage, message, t_s]`` and the model tokens (None: unknown)."""
 
-    model_config = ConfigDict(extra="forbid")
     report: RefineReport
     out_dir: str
     skipped: bool = False
-    progress: list[list[Any]] = Field(default_factory=list)
+    progress: list[list[Any]] = []
     tokens: int | None = None
 
 
-class Measurement(BaseModel):
+class Measurement(Strict):
     """The metrics stage's value: the catalog's metric columns, the failing checks of the verdict (``name@engine``),
     wall time (s) and whether the refine's ``evaluation.json`` was reused (nothing simulated)."""
 
-    model_config = ConfigDict(extra="forbid")
-    columns: dict[str, Any] = Field(default_factory=dict)
-    failures: list[str] = Field(default_factory=list)
+    columns: dict[str, Any] = {}
+    failures: list[str] = []
     seconds: float = 0.0
     reused_evaluation: bool = False
 

@@ -97,19 +97,9 @@ def _failure_counts_arrow(table, keys: list[str], run: str | None):
     return grouped.set_index([*keys, "failure_mode"])["count_all"]
 
 
-def _as_rate(series):
-    """A nullable boolean column (object True/False/None) as floats 1/0/NaN, vectorised."""
-    return series.astype("boolean").astype("Float64").astype(float)
-
-
-def _bool_rate_parts(series):
-    """(count of True, count of non-null) of a nullable boolean column, as float Series."""
-    s = _as_rate(series)
-    return s.fillna(0.0), s.notna().astype(float)
-
-
 def _rate(series) -> float | None:
-    s = _as_rate(series).dropna()
+    """The mean of a nullable boolean column (object True/False/None) over its non-null values; None when none."""
+    s = series.astype("boolean").astype("Float64").astype(float).dropna()
     return float(s.mean()) if len(s) else None
 
 
@@ -167,50 +157,15 @@ PASS_RATE_COLUMNS = ("status", "failure_mode", "rest_stable", "oscillation_pass"
 
 def pass_rates_over_time(df, dataset: str | None = None):
     """Per run (chronological): start time, assets, the pass rates (all
-    checks, rest stability, oscillation) and mean penetration (mm)."""
-    import pandas as pd
-
-    cols = ["dataset", "run", "started_at", "assets", "pass_rate_all", "stability_pass_rate",
-            "oscillation_pass_rate", "penetration_mm_mean", "failed"]  # fmt: skip
-    if _is_table(df):
-        return _pass_rates_arrow(df, dataset, cols)
-    if dataset is not None:
-        df = df[df["dataset"] == dataset]
-    if df.empty:
-        return pd.DataFrame(columns=cols)
-    st_ok, st_n = _bool_rate_parts(df["rest_stable"])
-    os_ok, os_n = _bool_rate_parts(df["oscillation_pass"])
-    pen = pd.to_numeric(df["penetration_mm"], errors="coerce")
-    d = pd.DataFrame({
-        "dataset": df["dataset"], "run": df["run"], "started_at": df["started_at"],
-        "pass": (df["failure_mode"].fillna(MISSING_FAILURE_MODE) == "none").astype(float),
-        "failed": (df["status"] == "failed").astype(int),
-        "st_ok": st_ok, "st_n": st_n, "os_ok": os_ok, "os_n": os_n,
-        "pen_sum": pen.fillna(0.0), "pen_n": pen.notna().astype(float),
-    })  # fmt: skip
-    g = d.groupby(["dataset", "run"], sort=True)
-    agg = g.agg(started_at=("started_at", "min"), assets=("pass", "size"), pass_rate_all=("pass", "mean"),
-                st_ok=("st_ok", "sum"), st_n=("st_n", "sum"), os_ok=("os_ok", "sum"), os_n=("os_n", "sum"),
-                pen_sum=("pen_sum", "sum"), pen_n=("pen_n", "sum"), failed=("failed", "sum")).reset_index()  # fmt: skip
-
-    def ratio(num, den):
-        return [None if n == 0 else float(x / n) for x, n in zip(agg[num], agg[den])]
-
-    agg["stability_pass_rate"] = ratio("st_ok", "st_n")
-    agg["oscillation_pass_rate"] = ratio("os_ok", "os_n")
-    agg["penetration_mm_mean"] = ratio("pen_sum", "pen_n")
-    agg["assets"] = agg["assets"].astype(int)
-    agg["failed"] = agg["failed"].astype(int)
-    return agg[cols]
-
-
-def _pass_rates_arrow(t, dataset: str | None, cols: list[str]):
-    """:func:`pass_rates_over_time` of an Arrow table: one group-by in Arrow."""
+    checks, rest stability, oscillation) and mean penetration (mm); one group-by in Arrow (a DataFrame is read
+    as an Arrow table first)."""
     import pandas as pd
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    t = plain_strings(t)
+    cols = ["dataset", "run", "started_at", "assets", "pass_rate_all", "stability_pass_rate",
+            "oscillation_pass_rate", "penetration_mm_mean", "failed"]  # fmt: skip
+    t = plain_strings(df) if _is_table(df) else pa.Table.from_pandas(df[["dataset", "run", *PASS_RATE_COLUMNS]], preserve_index=False)
     if dataset is not None:
         t = t.filter(pc.equal(t["dataset"], dataset))
     if t.num_rows == 0:
@@ -219,7 +174,7 @@ def _pass_rates_arrow(t, dataset: str | None, cols: list[str]):
         "dataset": t["dataset"], "run": t["run"], "started_at": t["started_at"],
         "pass": pc.equal(pc.fill_null(t["failure_mode"], MISSING_FAILURE_MODE), "none").cast(pa.float64()),
         "stable": t["rest_stable"].cast(pa.float64()), "osc": t["oscillation_pass"].cast(pa.float64()),
-        "pen": t["penetration_mm"], "failed": pc.equal(t["status"], "failed").cast(pa.int64()),
+        "pen": t["penetration_mm"].cast(pa.float64()), "failed": pc.equal(t["status"], "failed").cast(pa.int64()),
     })  # fmt: skip
     agg = work.group_by(["dataset", "run"]).aggregate([
         ("started_at", "min"), ("pass", "count"), ("pass", "mean"), ("stable", "mean"),

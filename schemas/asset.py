@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from asset2sim.schemas import Frozen, Strict
 
 Vec3 = tuple[float, float, float]
 
@@ -16,15 +16,14 @@ JointType = Literal["revolute", "continuous", "prismatic", "fixed", "floating", 
 GeometryKind = Literal["mesh", "box", "cylinder", "sphere"]
 
 
-class Origin(BaseModel):
+class Origin(Frozen):
     """A URDF ``<origin>``: translation ``xyz`` (m) and rotation ``rpy`` (rad)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
     xyz: Vec3 = (0.0, 0.0, 0.0)
     rpy: Vec3 = (0.0, 0.0, 0.0)
 
 
-class GeometryRef(BaseModel):
+class GeometryRef(Strict):
     """One ``<visual>`` or ``<collision>`` element of a link.
 
     For ``kind == "mesh"``: ``filename`` is the string written in the URDF,
@@ -32,7 +31,6 @@ class GeometryRef(BaseModel):
     For primitives: ``size`` (box, (3,) m), ``radius`` and ``length`` (m).
     """
 
-    model_config = ConfigDict(extra="forbid")
     role: Literal["visual", "collision"]
     kind: GeometryKind
     name: str | None = None
@@ -45,26 +43,24 @@ class GeometryRef(BaseModel):
     length: float | None = None
 
 
-class GivenInertial(BaseModel):
+class GivenInertial(Strict):
     """An ``<inertial>`` present in the input file (kept for reporting/validation).
 
     ``mass`` in kg; ``inertia`` (3, 3) in kg*m^2 about the COM in the frame of
     ``origin``.
     """
 
-    model_config = ConfigDict(extra="forbid")
     mass: float
     origin: Origin = Origin()
     inertia: tuple[Vec3, Vec3, Vec3]
 
 
-class LinkDesc(BaseModel):
+class LinkDesc(Strict):
     """A link: its geometry and (PartNet-Mobility) semantics."""
 
-    model_config = ConfigDict(extra="forbid")
     name: str
-    visuals: list[GeometryRef] = Field(default_factory=list)
-    collisions: list[GeometryRef] = Field(default_factory=list)
+    visuals: list[GeometryRef] = []
+    collisions: list[GeometryRef] = []
     semantic_label: str | None = None
     """Part label from ``semantics.txt`` (e.g. ``lid``, ``drawer``, ``door``)."""
     semantic_joint: str | None = None
@@ -76,14 +72,13 @@ class LinkDesc(BaseModel):
         return bool(self.visuals or self.collisions)
 
 
-class JointDesc(BaseModel):
+class JointDesc(Strict):
     """A joint. ``lower``/``upper`` in rad (revolute) or m (prismatic), ``None``
     when absent (continuous, fixed). ``axis`` (3,) unit vector in the joint frame.
     ``effort`` N or N*m, ``velocity`` rad/s or m/s, ``damping``/``friction`` as
     given in the file (SI units of the joint type), ``None`` when absent.
     """
 
-    model_config = ConfigDict(extra="forbid")
     name: str
     type: JointType
     parent: str
@@ -102,10 +97,9 @@ class JointDesc(BaseModel):
         return self.type in ("revolute", "continuous", "prismatic")
 
 
-class AssetDescription(BaseModel):
+class AssetDescription(Strict):
     """Everything the extraction stage knows about one input asset."""
 
-    model_config = ConfigDict(extra="forbid")
     asset_id: str
     source_dir: Path
     urdf_path: Path
@@ -142,13 +136,12 @@ class AssetDescription(BaseModel):
         return next((joint for joint in self.joints if joint.child == link_name), None)
 
 
-class LinkGeometry(BaseModel):
+class LinkGeometry(Strict):
     """Mesh analysis of one link at scale 1, in the link frame: ``volume`` m^3
     (exact when watertight, else by ``volume_method``), ``area`` m^2, bounding
     box and ``com`` (3,) m, ``inertia_solid`` / ``inertia_shell`` (3, 3)
     kg*m^2 per kg about ``com`` (filled solid, thin shell)."""
 
-    model_config = ConfigDict(extra="forbid")
     link: str
     volume: float
     volume_method: str
@@ -161,7 +154,7 @@ class LinkGeometry(BaseModel):
     inertia_shell: tuple[Vec3, Vec3, Vec3]
     n_meshes: int = 0
     n_faces: int = 0
-    notes: list[str] = Field(default_factory=list)
+    notes: list[str] = []
 
     @property
     def extents(self) -> Vec3:

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
-
+from asset2sim.schemas import Strict
 from asset2sim.schemas.report import MetricResult
 
 #: Version of the ``audit.json`` layout.
@@ -23,7 +22,7 @@ Quantity = Literal["scale", "mass", "density", "inertia", "center_of_mass", "dam
 Verdict = Literal["plausible", "implausible", "not_declared"]
 
 
-class ValueVerdict(BaseModel):
+class ValueVerdict(Strict):
     """One declared value against the product's estimate.
 
     ``where``: ``object``, ``link <name>`` or ``joint <name>``; ``declared`` the value the file gives (None
@@ -32,7 +31,6 @@ class ValueVerdict(BaseModel):
     or missing); ``verdict`` ``plausible``, ``implausible`` or ``not_declared``; ``reason`` one sentence
     with the numbers; ``patched`` the value the patch writes (None: left as declared)."""
 
-    model_config = ConfigDict(extra="forbid")
     where: str
     quantity: Quantity
     unit: str
@@ -46,24 +44,22 @@ class ValueVerdict(BaseModel):
     patched: float | None = None
 
 
-class SimulationChecks(BaseModel):
+class SimulationChecks(Strict):
     """The rest, robust-rest and sweep tiers run on one set of physics (``declared`` or ``patched``):
     ``passed`` every tier passed; ``failures`` the names of the failing tiers; ``metrics`` what was measured."""
 
-    model_config = ConfigDict(extra="forbid")
     physics: Literal["declared", "patched"]
     passed: bool
-    failures: list[str] = Field(default_factory=list)
-    metrics: list[MetricResult] = Field(default_factory=list)
+    failures: list[str] = []
+    metrics: list[MetricResult] = []
     error: str = ""
     """Why the checks could not run (then ``passed`` is False and ``metrics`` empty)."""
 
 
-class AuditReport(BaseModel):
+class AuditReport(Strict):
     """Contents of ``audit.json``: the asset, its format, what the audit read it as, every judged value, the
     simulation checks on the declared and on the patched physics, and the patch written."""
 
-    model_config = ConfigDict(extra="forbid")
     version: str = AUDIT_VERSION
     asset_id: str
     source: str
@@ -71,15 +67,15 @@ class AuditReport(BaseModel):
     format: Literal["urdf", "mjcf", "usd"]
     category: str
     category_reason: str = ""
-    labels: dict[str, str] = Field(default_factory=dict)
+    labels: dict[str, str] = {}
     """link -> the part label the audit used (from ``semantics.txt`` or inferred from the link name)."""
     root_fixed: bool
     root_source: str = ""
-    values: list[ValueVerdict] = Field(default_factory=list)
-    checks: list[SimulationChecks] = Field(default_factory=list)
+    values: list[ValueVerdict] = []
+    checks: list[SimulationChecks] = []
     patch: str | None = None
     """The patched file, relative to the audit's output folder (None: nothing implausible, or no ``--out``)."""
-    notes: list[str] = Field(default_factory=list)
+    notes: list[str] = []
 
     @property
     def implausible(self) -> list[ValueVerdict]:
@@ -99,13 +95,12 @@ class AuditReport(BaseModel):
         return "declared_physics_fails" if declared is not None and not declared.passed else "none"
 
 
-class AuditRow(BaseModel):
+class AuditRow(Strict):
     """One asset's row of the audit catalog (``audit_assets.parquet``): ``failure_mode`` as
     :attr:`AuditReport.failure_mode`, or ``audit_failed`` with ``error`` when the asset could not be audited;
     ``implausible`` ``<where>: <quantity>`` of each implausible value; ``declared_passed`` / ``patched_passed``
     the simulation checks on each physics (None: not run)."""
 
-    model_config = ConfigDict(extra="forbid")
     asset_id: str
     source: str
     format: str = ""
@@ -113,9 +108,9 @@ class AuditRow(BaseModel):
     failure_mode: str
     values: int = 0
     implausible_count: int = 0
-    implausible: list[str] = Field(default_factory=list)
+    implausible: list[str] = []
     declared_passed: bool | None = None
-    declared_failures: list[str] = Field(default_factory=list)
+    declared_failures: list[str] = []
     patched_passed: bool | None = None
     patch: str | None = None
     out_dir: str | None = None

@@ -10,9 +10,11 @@ import math
 import types
 import typing
 from datetime import datetime
-from typing import Literal, Optional
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, field_validator
+
+from asset2sim.schemas import Strict
 
 #: Version of the row schema in every Parquet file's metadata; columns are only
 #: ever added (nullable), so a reader of version N reads every older file
@@ -26,7 +28,7 @@ RowStatus = Literal["done", "skipped", "failed"]
 ROW_STATUSES: tuple[str, ...] = RowStatus.__args__  # type: ignore[attr-defined]
 
 
-class CatalogRow(BaseModel):
+class CatalogRow(Strict):
     """One asset's result in one flow run (``dataset`` and ``run`` are the
     partition folders): ``status`` done, skipped (``source_run`` reused) or
     failed; ``initial_state`` JSON {joint: rad or m}; ``stage_seconds`` JSON
@@ -45,53 +47,53 @@ class CatalogRow(BaseModel):
     ``reason``: the round's own account); ``code_hash`` what the skip rule compares.
     Non-finite floats are null."""
 
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    model_config = ConfigDict(validate_assignment=True)
 
     asset_id: str
-    category: Optional[str] = None
-    prompt: Optional[str] = None
+    category: str | None = None
+    prompt: str | None = None
     status: RowStatus
-    failure_mode: Optional[str] = None
-    error: Optional[str] = None
-    estimator: Optional[str] = None
-    model: Optional[str] = None
-    scale: Optional[float] = None
-    reference_scale: Optional[float] = None
-    scale_deviation_pct: Optional[float] = None
-    total_mass_kg: Optional[float] = None
-    initial_state: Optional[str] = None
-    penetration_mm: Optional[float] = None
-    rest_stable: Optional[bool] = None
-    d_pos_m: Optional[float] = None
-    d_ori_rad: Optional[float] = None
-    oscillation_pass: Optional[bool] = None
-    prompt_alignment: Optional[float] = None
-    operable: Optional[bool] = None
-    operating_efforts: Optional[str] = None
-    request_warnings: Optional[str] = None
-    request_met: Optional[bool] = None
-    request_unmet: Optional[str] = None
-    clips: Optional[str] = None
-    media: Optional[str] = None
-    learnable: Optional[bool] = None
-    learnability: Optional[str] = None
-    postcheck_rounds: Optional[int] = None
-    extra_rounds: Optional[str] = None
-    model_queries: Optional[int] = None
-    tokens: Optional[int] = None
-    wall_seconds: Optional[float] = None
-    stage_seconds: Optional[str] = None
-    input_hash: Optional[str] = None
-    config_hash: Optional[str] = None
-    refine_config_hash: Optional[str] = None
-    code_version: Optional[str] = None
-    code_hash: Optional[str] = None
-    out_dir: Optional[str] = None
-    source_run: Optional[str] = None
-    flow_run_id: Optional[str] = None
-    worker: Optional[str] = None
-    started_at: Optional[datetime] = None
-    finished_at: Optional[datetime] = None
+    failure_mode: str | None = None
+    error: str | None = None
+    estimator: str | None = None
+    model: str | None = None
+    scale: float | None = None
+    reference_scale: float | None = None
+    scale_deviation_pct: float | None = None
+    total_mass_kg: float | None = None
+    initial_state: str | None = None
+    penetration_mm: float | None = None
+    rest_stable: bool | None = None
+    d_pos_m: float | None = None
+    d_ori_rad: float | None = None
+    oscillation_pass: bool | None = None
+    prompt_alignment: float | None = None
+    operable: bool | None = None
+    operating_efforts: str | None = None
+    request_warnings: str | None = None
+    request_met: bool | None = None
+    request_unmet: str | None = None
+    clips: str | None = None
+    media: str | None = None
+    learnable: bool | None = None
+    learnability: str | None = None
+    postcheck_rounds: int | None = None
+    extra_rounds: str | None = None
+    model_queries: int | None = None
+    tokens: int | None = None
+    wall_seconds: float | None = None
+    stage_seconds: str | None = None
+    input_hash: str | None = None
+    config_hash: str | None = None
+    refine_config_hash: str | None = None
+    code_version: str | None = None
+    code_hash: str | None = None
+    out_dir: str | None = None
+    source_run: str | None = None
+    flow_run_id: str | None = None
+    worker: str | None = None
+    started_at: datetime | None = None
+    finished_at: datetime | None = None
 
     @field_validator("*", mode="before")
     @classmethod

@@ -14,8 +14,9 @@ import math
 import re
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import ConfigDict, Field, field_validator, model_validator
 
+from asset2sim.schemas import Frozen, Strict
 from asset2sim.schemas.request import RequestOverrides
 
 
@@ -55,12 +56,12 @@ REST_BAND_FLOORS: dict[str, float] = {"revolute": 0.02, "prismatic": 0.002}
 REST_BAND_RANGE_SHARE = 0.05
 
 
-class SimConventions(BaseModel):
+class SimConventions(Frozen):
     """SPEC conventions for every simulator measurement. Every field is finite and bounded (pydantic refuses
     the rest, naming the field): a time step in [:data:`MIN_TIMESTEP`, 0.05] s, settle and test times up to
     :data:`MAX_PHASE_TIME`, at most :data:`MAX_MEASUREMENT_STEPS` steps per measurement."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    model_config = ConfigDict(allow_inf_nan=False)
     timestep: float = Field(1.0 / 240.0, ge=MIN_TIMESTEP, le=0.05)
     """s, at least :data:`MIN_TIMESTEP`"""
     gravity: float = Field(-9.81, ge=-100.0, le=100.0)
@@ -98,20 +99,19 @@ def default_engines() -> list[str]:
     return ["pybullet", "physx"] if importlib.util.find_spec("sapien") is not None else ["pybullet"]
 
 
-class MjcfConfig(BaseModel):
+class MjcfConfig(Frozen):
     """How an MJCF input is read."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     angle: Literal["radian", "degree"] | None = None
     """The unit of the file's angles (joint ranges, ``euler``, ``ref``), winning over its ``<compiler angle>``
     and its host package's convention; None: as the package that compiles it reads it
     (:mod:`asset2sim.formats.mjcf.conventions`, ``docs/guide/inputs.md``)."""
 
 
-class RefineConfig(BaseModel):
+class RefineConfig(Strict):
     """Knobs of the refine pipeline (units on every field)."""
 
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    model_config = ConfigDict(allow_inf_nan=False)
     estimator: str = Field("offline", min_length=1, max_length=64)
     """Registered estimator name (``offline``, ``llm``, ``openai`` ...)."""
     model: str | None = Field(None, min_length=1, max_length=256)
@@ -122,7 +122,7 @@ class RefineConfig(BaseModel):
     """Who turns the request into its typed intent: the offline parser (the default), or the model of ``estimator``
     ``llm`` / ``openai`` (``model``) with the intent's JSON schema, the offline parse kept when the model's reply
     is invalid or the call fails (``docs/guide/requests.md``)."""
-    sim: SimConventions = Field(default_factory=SimConventions)
+    sim: SimConventions = SimConventions()
     penetration_tolerance: float = Field(1e-3, gt=0.0, le=1.0)
     """Phi below which the state is accepted, m (sum over contact points)."""
     state_lambda: float = Field(0.05, ge=0.0, le=1e3)
@@ -146,7 +146,7 @@ class RefineConfig(BaseModel):
     tub) a convex decomposition that leaves the inside open, instead of one solid hull, so that things can be put
     into it (needs CoACD and ``convex_decomposition``; off by default: it costs CoACD time per container;
     ``docs/guide/outputs.md``)."""
-    engines: list[str] = Field(default_factory=lambda: default_engines())
+    engines: list[str] = Field(default_factory=default_engines)
     """Engines the post-check must pass in (worst case); PyBullet first. One to 8 distinct engine names; which
     names exist is checked against the engine registry by :func:`asset2sim.api.load_config` (the CLI, the API and
     configuration files) and by refine."""
@@ -163,9 +163,9 @@ class RefineConfig(BaseModel):
     body: str | None = None
     """The body (MJCF) whose subtree is the object, in a scene holding several objects with joints; None: the one
     subtree under the world body that carries hinge or slide joints (``docs/guide/inputs.md``)."""
-    mjcf: MjcfConfig = Field(default_factory=MjcfConfig)
+    mjcf: MjcfConfig = MjcfConfig()
     """How an MJCF input is read (:class:`MjcfConfig`)."""
-    overrides: RequestOverrides = Field(default_factory=RequestOverrides)
+    overrides: RequestOverrides = RequestOverrides()
     """Typed values that win over the request's words (:class:`~asset2sim.schemas.request.RequestOverrides`)."""
 
     @field_validator("engines")

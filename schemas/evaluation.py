@@ -4,15 +4,16 @@ from __future__ import annotations
 
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
+from pydantic import PrivateAttr
 
+from asset2sim.schemas import Strict
 from asset2sim.schemas.report import MetricResult
 
 #: Version of the ``evaluation.json`` layout.
 EVALUATION_VERSION = "1"
 
 
-class Evaluation(BaseModel):
+class Evaluation(Strict):
     """Contents of ``evaluation.json``: ``metrics`` (one per engine for the
     simulator metrics; a refine's are its ``report.json``'s), ``failure_mode`` (the verdict: a refine's is its
     ``report.json``'s, never decided again; else the readiness of ``metrics``), ``passed`` (ready), ``failures``
@@ -20,7 +21,6 @@ class Evaluation(BaseModel):
     serialised: ``_runs`` (engine -> the runs the checks were graded from) and ``_context`` (the evaluated files), for
     the report."""
 
-    model_config = ConfigDict(extra="forbid")
     version: str = EVALUATION_VERSION
     asset_id: str
     urdf: str
@@ -30,17 +30,17 @@ class Evaluation(BaseModel):
     category: str | None = None
     scale: float | None = None
     scale_source: str = ""
-    engines: list[str] = Field(default_factory=list)
+    engines: list[str] = []
     seed: int = 0
-    initial_state: dict[str, float] = Field(default_factory=dict)
+    initial_state: dict[str, float] = {}
     initial_state_source: str = ""
-    task_joints: list[str] = Field(default_factory=list)
-    closed_positions: dict[str, dict[str, float]] = Field(default_factory=dict)
-    metrics: list[MetricResult] = Field(default_factory=list)
+    task_joints: list[str] = []
+    closed_positions: dict[str, dict[str, float]] = {}
+    metrics: list[MetricResult] = []
     passed: bool = False
     failure_mode: str | None = None
-    failures: list[str] = Field(default_factory=list)
-    notes: list[str] = Field(default_factory=list)
+    failures: list[str] = []
+    notes: list[str] = []
     seconds: float = 0.0
     _runs: dict[str, Any] = PrivateAttr(default_factory=dict)
     _context: Any = PrivateAttr(default=None)

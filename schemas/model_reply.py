@@ -11,6 +11,7 @@ from typing import Annotated, Any
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
 
+from asset2sim.schemas import Strict
 from asset2sim.schemas.request import DampingLevel, StateBand
 
 REPLY_SCHEMA_NAME = "asset2sim_overlay_reply"
@@ -21,8 +22,8 @@ MAX_TEXT = 2000
 MAX_NAME = 200
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, use_attribute_docstrings=True)
+class _Strict(Strict):
+    model_config = ConfigDict(allow_inf_nan=False, use_attribute_docstrings=True)
 
 
 def _short(v: str, limit: int) -> str:
@@ -160,7 +161,7 @@ class ProposedState(_Strict):
     """A candidate initial state: positions of some joints (the others stay)."""
 
     joints: list[JointValue] = Field(max_length=64)
-    reason: str = Field(default="", max_length=MAX_TEXT)
+    reason: str = Field("", max_length=MAX_TEXT)
 
 
 class JointProposalReply(_Strict):

@@ -11,7 +11,9 @@ from __future__ import annotations
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import ConfigDict, Field, model_validator
+
+from asset2sim.schemas import Strict
 
 SCHEMA_VERSION = "1.0"
 
@@ -23,8 +25,8 @@ Vec3 = tuple[float, float, float]
 SCALE_RANGE: tuple[float, float] = (1e-4, 1e4)
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+class _Strict(Strict):
+    model_config = ConfigDict(allow_inf_nan=False)
 
 
 class Inertia(_Strict):
@@ -55,7 +57,7 @@ class ContactMaterial(_Strict):
     and restitution (dimensionless, 0..1)."""
 
     lateral_friction: float = Field(ge=0.0)
-    restitution: float = Field(default=0.0, ge=0.0, le=1.0)
+    restitution: float = Field(0.0, ge=0.0, le=1.0)
     note: str = ""
 
 
@@ -153,7 +155,7 @@ class ValidationNotes(_Strict):
     material: str = ""
     mass_arithmetic: str = ""
     units: str = "SI units; angles in radians; prismatic values in metres after scaling."
-    other: list[str] = Field(default_factory=list)
+    other: list[str] = []
 
 
 MountingKind = Literal["free-standing", "counter-mounted", "wall-mounted", "floor-mounted", "hangs-in-frame"]
@@ -177,11 +179,11 @@ class Overlay(_Strict):
     """Uniform scale factor s applied to the input asset (dimensionless)."""
     category: str | None = None
     contact_material: ContactMaterial | None = None
-    links: dict[str, LinkPhysics] = Field(default_factory=dict)
-    joints: dict[str, JointDynamics] = Field(default_factory=dict)
+    links: dict[str, LinkPhysics] = {}
+    joints: dict[str, JointDynamics] = {}
     initial_joint_positions: dict[str, float] | None = None
     """Only when the request asks for a state (output units: rad or m)."""
-    notes: ValidationNotes = Field(default_factory=ValidationNotes)
+    notes: ValidationNotes = ValidationNotes()
     mounting: RootMount | None = None
     """How the root is held (None: free-standing, the SPEC's convention)."""
 

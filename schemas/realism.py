@@ -20,7 +20,9 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
+
+from asset2sim.schemas import Frozen
 
 #: Version of the clips.json / pairs.json layout.
 REALISM_VERSION = "1"
@@ -31,19 +33,18 @@ REALISM_VERSION = "1"
 Motion = Literal["sweep", "push_release", "task"]
 
 
-class Clip(BaseModel):
+class Clip(Frozen):
     """One rendered clip: ``video`` (WebM, VP9) and ``poster`` (PNG, the frame of the largest opening),
     paths relative to the JSON file naming the clip; ``frames`` a few stills (PNG) spread over the clip,
     for model judges; ``view`` the camera (``asset2sim.tasks.geometry.render_camera.VIEWS``); ``fps`` frames
     per second; ``n_frames`` frames in ``video``; ``duration_s`` simulated time shown, s."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     joint: str
     motion: Motion
     view: str
     video: str
     poster: str
-    frames: list[str] = Field(default_factory=list)
+    frames: list[str] = []
     fps: float
     n_frames: int
     duration_s: float
@@ -51,26 +52,24 @@ class Clip(BaseModel):
     height: int
 
 
-class ClipSet(BaseModel):
+class ClipSet(Frozen):
     """``clips/clips.json`` of an output folder: every clip written there (paths relative to ``clips/``)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     version: str = REALISM_VERSION
-    clips: list[Clip] = Field(default_factory=list)
-    skipped: dict[str, str] = Field(default_factory=dict)
+    clips: list[Clip] = []
+    skipped: dict[str, str] = {}
     """joint -> why it has no clip"""
 
 
-class PairSide(BaseModel):
+class PairSide(Frozen):
     """One side of a pair: the ``method`` whose physics it shows (``asset2sim``, ``human``, ``direct``,
     ``defaults``, or ``defect:<name>`` for a planted defect) and its clips, one per view."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     method: str
     clips: list[Clip]
 
 
-class ClipPair(BaseModel):
+class ClipPair(Frozen):
     """Two clips of one object and joint that differ only in physics.
 
     ``pair_id`` a digest of both sides' clip bytes and methods (stable across runs of the same inputs);
@@ -78,7 +77,6 @@ class ClipPair(BaseModel):
     the other; which side is shown left is drawn per rater and pair, never stored here.
     ``defect``: the planted defect on side ``b`` (a calibration pair), else None."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     pair_id: str
     object_id: str
     category: str
@@ -90,27 +88,25 @@ class ClipPair(BaseModel):
     defect: str | None = None
 
 
-class PairSet(BaseModel):
+class PairSet(Frozen):
     """``pairs.json``: the pairs judges see (paths relative to the folder of ``pairs.json``)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     version: str = REALISM_VERSION
-    pairs: list[ClipPair] = Field(default_factory=list)
-    skipped: dict[str, str] = Field(default_factory=dict)
+    pairs: list[ClipPair] = []
+    skipped: dict[str, str] = {}
     """object id / method -> why no pair was made"""
 
 
 Choice = Literal["left", "right"]
 
 
-class Rating(BaseModel):
+class Rating(Frozen):
     """One person's answer to one pair (a row of ``ratings.parquet``).
 
     ``left`` / ``right``: the methods shown on each side; ``winner`` / ``loser`` the methods chosen and not
     chosen; ``score`` the optional 1-5 realism score of the chosen side; ``shown_at`` / ``answered_at``
     POSIX times, s; ``seconds`` the time the rater took."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     rater: str
     pair_id: str
     object_id: str
@@ -119,20 +115,19 @@ class Rating(BaseModel):
     choice: Choice
     winner: str
     loser: str
-    score: int | None = Field(default=None, ge=1, le=5)
+    score: int | None = Field(None, ge=1, le=5)
     comment: str = ""
     shown_at: float
     answered_at: float
     seconds: float
 
 
-class JudgeVerdict(BaseModel):
+class JudgeVerdict(Frozen):
     """A model judge's verdict on one pair (a row of ``judgements.parquet``): asked in both orders;
     ``first`` / ``second`` the method each order chose (None: no usable answer); ``kept`` only when both
     orders chose the same method, which is then ``winner``; ``failed_calls`` the questions (of the two) whose
     model call failed (time-out, deadline, reply too large, HTTP error after the retries)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     model: str
     family: str
     pair_id: str
@@ -152,12 +147,11 @@ class JudgeVerdict(BaseModel):
     failed_calls: int = 0
 
 
-class MethodScore(BaseModel):
+class MethodScore(Frozen):
     """Bradley-Terry realism of one method (a row of ``realism_scores.parquet``): ``strength`` the log
     strength (the methods' mean is 0) with its 95 % interval; ``elo`` the same on the Elo scale
     (400 / ln 10 per unit, mean 1000); ``source`` ``people`` or a judge model."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     source: str
     method: str
     strength: float

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
-
+from asset2sim.schemas import Strict
 from asset2sim.schemas.overlay import RootMount
 from asset2sim.schemas.request import RequestFindings
 
@@ -18,64 +17,60 @@ FailureMode = Literal[
 FAILURE_MODES: tuple[str, ...] = FailureMode.__args__  # type: ignore[attr-defined]
 
 
-class MetricResult(BaseModel):
+class MetricResult(Strict):
     """One measured metric.
 
     ``value`` in ``unit``; ``passed`` is None when the metric has no threshold;
     ``threshold`` human-readable; ``details`` metric-specific (JSON-able).
     """
 
-    model_config = ConfigDict(extra="forbid")
     name: str
     value: float | None
     unit: str
     passed: bool | None = None
     threshold: str = ""
-    details: dict[str, Any] = Field(default_factory=dict)
+    details: dict[str, Any] = {}
     engine: str = "pybullet"
 
 
-class EscalationRound(BaseModel):
+class EscalationRound(Strict):
     """One post-check round: what was measured and what was changed."""
 
-    model_config = ConfigDict(extra="forbid")
     round: int
     metrics: list[MetricResult]
-    changes: dict[str, dict[str, float]] = Field(default_factory=dict)
+    changes: dict[str, dict[str, float]] = {}
     """joint -> {parameter: new value}"""
     reason: str = ""
-    words_kept: list[str] = Field(default_factory=list)
+    words_kept: list[str] = []
     """Changes this round's step asked and a word of the request about the part's motion kept from it
     (``tasks/tune/word_guard.py``), one line each."""
 
 
-class StateRefinement(BaseModel):
+class StateRefinement(Strict):
     """What state refinement did (penetrations in m, states rad/m)."""
 
-    model_config = ConfigDict(extra="forbid")
     requested: dict[str, float]
     result: dict[str, float]
     phi_requested: float
     phi_result: float
     evaluations: int
     method: str
-    worst_pairs: list[dict[str, Any]] = Field(default_factory=list)
-    collision_changes: list[str] = Field(default_factory=list)
+    worst_pairs: list[dict[str, Any]] = []
+    collision_changes: list[str] = []
     seconds: float = 0.0
     model_queries: int = 0
     """Model calls made by the state search (joint proposals when it stalled)."""
-    room_made: dict[str, float] = Field(default_factory=dict)
+    room_made: dict[str, float] = {}
     """joint -> opening fraction of each joint the request left closed that the
     search opened to make room (:func:`asset2sim.tasks.state.refine_state.joints_in_the_way`)."""
 
 
-class SolverAid(BaseModel):
+class SolverAid(Strict):
     """A solver parameter an export writes beyond the files' physics (``asset2sim.engines.mjcf.aids``): its ``kind``,
     the joint or geom (``element``) it is written on, the attributes ``written``, the pre-flight ``criterion`` that
     asked for it with its ``measure`` (the predicted quantity over its bound: above 1 the aid is needed) and its
     ``effect`` on the part's dynamics."""
 
-    model_config = ConfigDict(extra="forbid")
     kind: str
     element: str
     written: dict[str, str]
@@ -85,10 +80,9 @@ class SolverAid(BaseModel):
     file: str = "mjcf"
 
 
-class RefineReport(BaseModel):
+class RefineReport(Strict):
     """Contents of ``report.json``."""
 
-    model_config = ConfigDict(extra="forbid")
     asset_id: str
     source: str
     prompt: str
@@ -110,36 +104,36 @@ class RefineReport(BaseModel):
     total_mass: float
     """kg"""
     initial_joint_positions: dict[str, float]
-    closed_positions: dict[str, float] = Field(default_factory=dict)
+    closed_positions: dict[str, float] = {}
     """Geometric closed end of each movable joint (rad/m, output units)."""
-    closed_ends: dict[str, dict[str, float | None]] = Field(default_factory=dict)
+    closed_ends: dict[str, dict[str, float | None]] = {}
     """The closed end each check used, per movable joint, decided once: ``q_closed`` (rad/m, output units),
     ``direction`` (+1 when opening increases q), ``open_range`` (rad/m), ``lower`` / ``upper`` (None: unbounded); an output read back
     (``asset2sim evaluate``) is checked with these."""
-    requested_bands: dict[str, str] = Field(default_factory=dict)
-    opening_fractions: dict[str, float] = Field(default_factory=dict)
+    requested_bands: dict[str, str] = {}
+    opening_fractions: dict[str, float] = {}
     """|q - q_closed| / largest opening the range allows from q_closed, per joint,
     at the written initial state (the measure the state bands use)."""
     state: StateRefinement | None = None
-    metrics: list[MetricResult] = Field(default_factory=list)
-    parity: list[dict[str, Any]] = Field(default_factory=list)
+    metrics: list[MetricResult] = []
+    parity: list[dict[str, Any]] = []
     """One row per engine of ``--engines`` (``tasks.parity.parity_table``)."""
-    escalation: list[EscalationRound] = Field(default_factory=list)
-    validation: list[dict[str, Any]] = Field(default_factory=list)
+    escalation: list[EscalationRound] = []
+    validation: list[dict[str, Any]] = []
     failure_mode: str = "none"
-    stage_seconds: dict[str, float] = Field(default_factory=dict)
-    notes: list[str] = Field(default_factory=list)
+    stage_seconds: dict[str, float] = {}
+    notes: list[str] = []
     request: RequestFindings | None = None
     """The request's findings (:func:`asset2sim.tasks.synthesize.request_findings.findings`)."""
     mounting: RootMount | None = None
     """How the root was held in every check (``tasks.interpret.mounting``);
     None in reports written before it was recorded (free-standing)."""
-    readiness: dict[str, bool | None] = Field(default_factory=dict)
+    readiness: dict[str, bool | None] = {}
     """Interaction-readiness per tier (``tasks.check.verdict.TIERS``): True
     pass, False fail, None not measured; ``failure_mode`` is the first failing tier's."""
-    design_changes: list[str] = Field(default_factory=list)
+    design_changes: list[str] = []
     """What stability by design changed and why (``tasks.state.stability``)."""
-    solver_aids: list[SolverAid] = Field(default_factory=list)
+    solver_aids: list[SolverAid] = []
     """The solver aids the exports wrote, each with its criterion (read back from the exported files)."""
     media: Literal["done", "deferred", "off"] | None = None
     """The media phase (renders in ``views/``, sweep clips in ``clips/``, ``report.html``): ``done``;

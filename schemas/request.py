@@ -8,7 +8,9 @@ import math
 import re
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import ConfigDict, Field, field_validator
+
+from asset2sim.schemas import Frozen, Strict
 
 SizeClass = Literal["tiny", "very_small", "small", "regular", "large", "very_large"]
 StateBand = Literal["closed", "slightly_open", "quarter", "halfway", "mostly", "fully"]
@@ -58,35 +60,32 @@ def ordinal_words(ordinal: int, order: str, label: str | None) -> str:
 moving part's box volume, smallest first ("the freezer door" 0, "the main door" -1)."""
 
 
-class StateTarget(BaseModel):
+class StateTarget(Strict):
     """A state in numbers or by a physical end, resolved against the scaled
     geometry: ``kind`` ``fraction`` (``value`` 0..1 from the closed end),
     ``angle`` (rad), ``distance`` (m, output scale) or ``end`` (``high`` /
     ``low`` world z of the moving part, ``on`` / ``off`` a toggle's ends)."""
 
-    model_config = ConfigDict(extra="forbid")
     kind: TargetKind
     value: float | None = None
     end: EndName | None = None
 
 
-class SizeTarget(BaseModel):
+class SizeTarget(Strict):
     """A size in numbers: ``value`` m along ``dimension`` (height: world z of
     the closed object; width / depth: larger / smaller horizontal extent), or
     for ``volume`` m^3, a container's volume ("a 500 ml bottle") compared with
     the closed object's convex-hull volume."""
 
-    model_config = ConfigDict(extra="forbid")
     dimension: Dimension
     value: float = Field(gt=0.0)
     phrase: str = ""
 
 
-class PartProperty(BaseModel):
+class PartProperty(Strict):
     """A mass (kg) or material (``materials.yaml`` key) asked for the whole
     object (``label`` None), its body (``label`` "body") or a named part."""
 
-    model_config = ConfigDict(extra="forbid")
     label: str | None = None
     mass: float | None = None
     mass_range: tuple[float, float] | None = None
@@ -96,12 +95,11 @@ class PartProperty(BaseModel):
     phrase: str = ""
 
 
-class DynamicsValue(BaseModel):
+class DynamicsValue(Strict):
     """An explicit joint damping, friction or stiffness (SI units of the joint
     type); ``motion`` the joints its unit fits; ``label`` the part (None: the
     task-relevant joints)."""
 
-    model_config = ConfigDict(extra="forbid")
     quantity: Literal["damping", "friction", "stiffness"]
     value: float = Field(ge=0.0)
     motion: Literal["rotational", "linear", "any"] = "any"
@@ -129,12 +127,11 @@ MOTION_GUARDS: dict[str, dict[str, str]] = {
 }
 
 
-class MotionPhrase(BaseModel):
+class MotionPhrase(Strict):
     """A word about how a part moves ("the door swings freely", "a stiff handle joint", "the lid stays where it is
     put", "a self-closing door"): ``kind`` (:data:`MOTION_GUARDS`), ``label`` the part it names (None: the parts the
     object's task acts on) and ``phrase`` the request's words."""
 
-    model_config = ConfigDict(extra="forbid")
     kind: MotionKind
     label: str | None = None
     phrase: str = ""
@@ -155,12 +152,11 @@ class MotionPhrase(BaseModel):
         return f"'{self.phrase}'" + (f" ({part})" if part else "") + f": {what}"
 
 
-class JointStateRequest(BaseModel):
+class JointStateRequest(Strict):
     """The state asked for one joint or a group: ``selector`` ``all`` (the
     task-relevant joints), ``joint`` (named ``joint``) or ``label`` (moving
     links labelled ``label``), narrowed by ``ordinal`` (0-based, in ``order``)."""
 
-    model_config = ConfigDict(extra="forbid")
     selector: Literal["all", "label", "joint"] = "all"
     label: str | None = None
     joint: str | None = None
@@ -213,10 +209,9 @@ class JointStateRequest(BaseModel):
         return self.selector == "joint" or (self.selector != "all" and bool(self.label))
 
 
-class RequestSpec(BaseModel):
+class RequestSpec(Strict):
     """What a request asks for."""
 
-    model_config = ConfigDict(extra="forbid")
     text: str = ""
     category_hint: str | None = None
     """Category named by the request (e.g. ``Stapler``), if any."""
@@ -224,7 +219,7 @@ class RequestSpec(BaseModel):
     size_factor: float = 1.0
     """Multiplier on the category's typical size implied by the size words."""
     size_phrase: str = ""
-    joint_states: list[JointStateRequest] = Field(default_factory=list)
+    joint_states: list[JointStateRequest] = []
     damping: DampingLevel = "moderate"
     holds_position: bool = False
     """"holds its position": friction must hold the requested state against gravity."""
@@ -234,37 +229,37 @@ class RequestSpec(BaseModel):
     """"stiff"/"heavy" joints asked for (higher friction / damping)."""
     free_moving: bool = False
     """"moving freely": low friction."""
-    motions: list[MotionPhrase] = Field(default_factory=list)
+    motions: list[MotionPhrase] = []
     """The words about how parts move, each with the part it names (None: the task's parts), in the request's order;
     ``damping``, ``holds_position``, ``spring``, ``stiff`` and ``free_moving`` summarise them for the whole object."""
     pose_hint: Literal["upright", "lying_flat", "sideways"] | None = None
-    sizes: list[SizeTarget] = Field(default_factory=list)
+    sizes: list[SizeTarget] = []
     """Sizes in numbers ("30 cm tall"); they win over the size words."""
     mass_level: Literal["light", "heavy"] | None = None
     """"a heavy box": the upper (lower) end of the plausible mass range."""
-    properties: list[PartProperty] = Field(default_factory=list)
+    properties: list[PartProperty] = []
     """Masses and materials, whole object or per part."""
-    dynamics_values: list[DynamicsValue] = Field(default_factory=list)
+    dynamics_values: list[DynamicsValue] = []
     """Explicit damping / friction / stiffness values."""
-    ignored: list[str] = Field(default_factory=list)
+    ignored: list[str] = []
     """Groups of consecutive words no rule used (function words aside)."""
-    part_counts: dict[str, int] = Field(default_factory=dict)
+    part_counts: dict[str, int] = {}
     """Counts of parts named ("a two-drawer cabinet" -> {"drawer": 2}); a
     different count on the object is a warning."""
-    warnings: list[str] = Field(default_factory=list)
+    warnings: list[str] = []
     """Contradictions and numbers the parser could not use."""
-    overridden: list[str] = Field(default_factory=list)
+    overridden: list[str] = []
     """Phrases of joint states a later phrase for the same part replaced ("the door open 90 degrees and the door
     closed": the first), each once: asked and not applied (the as-asked verdict, ``tasks/check/as_asked.py``)."""
-    matched: list[str] = Field(default_factory=list)
+    matched: list[str] = []
     """Every phrase the parser recognised (for the report)."""
     mount: Literal["fixed", "free"] | None = None
     """The mounting an override gives (wins over the words and the category prior)."""
     scale: float | None = Field(None, gt=0.0)
     """The uniform scale an override gives (wins over sizes and size words)."""
-    overrides: list[str] = Field(default_factory=list)
+    overrides: list[str] = []
     """The overrides as the user gave them (``--mass 12 kg`` ...), for the report."""
-    unused_words: list[str] = Field(default_factory=list)
+    unused_words: list[str] = []
     """Words of the request no rule used (function words, part labels and
     category names excepted), in order, each once."""
     parser: Literal["offline", "model"] = "offline"
@@ -279,10 +274,9 @@ class RequestSpec(BaseModel):
         return bool(self.matched) or not self.text.strip()
 
 
-class PartCount(BaseModel):
+class PartCount(Strict):
     """A count of parts the request names ("a two-drawer cabinet": ``label`` drawer, ``count`` 2)."""
 
-    model_config = ConfigDict(extra="forbid")
     label: str = Field(min_length=1, max_length=64)
     count: int = Field(ge=1, le=64)
 
@@ -296,33 +290,32 @@ INTENT_FIELDS = ("category_hint", "size_class", "joint_states", "sizes", "pose_h
 # The docstring below is this schema's description, sent to models verbatim with every request parse: it
 # stays word for word (the module it names is now tasks/interpret/reading.py), or every request changes and
 # every cached parse is asked again.
-class RequestIntent(BaseModel):
+class RequestIntent(Strict):
     """The typed intent of a request: per part the reference (label, ordinal and order), the state (band), the
     amount and its unit (``target``: a fraction, an angle in rad, a distance in m or an end) and the source words
     (``phrase``); the object's size (class and numbers in m or m^3), pose, mass (kg), materials, dynamics and
     mounting. The same fields, with the same types, as :class:`RequestSpec` (:data:`INTENT_FIELDS`;
     ``part_counts`` as a list); a model's parse is validated into it (``tasks/synthesize/llm_request.py``)."""
 
-    model_config = ConfigDict(extra="forbid")
     category_hint: str | None = None
     """The object's category named by the request (e.g. ``Stapler``, ``Refrigerator``), or null."""
     size_class: SizeClass | None = None
     """The size words' class, or null when none is said."""
-    joint_states: list[JointStateRequest] = Field(default_factory=list, max_length=64)
+    joint_states: list[JointStateRequest] = Field([], max_length=64)
     """One entry per part state asked, in the request's order."""
-    sizes: list[SizeTarget] = Field(default_factory=list, max_length=16)
+    sizes: list[SizeTarget] = Field([], max_length=16)
     pose_hint: Literal["upright", "lying_flat", "sideways"] | None = None
     mass_level: Literal["light", "heavy"] | None = None
-    properties: list[PartProperty] = Field(default_factory=list, max_length=64)
-    dynamics_values: list[DynamicsValue] = Field(default_factory=list, max_length=64)
+    properties: list[PartProperty] = Field([], max_length=64)
+    dynamics_values: list[DynamicsValue] = Field([], max_length=64)
     damping: DampingLevel = "moderate"
     holds_position: bool = False
     spring: bool = False
     stiff: bool = False
     free_moving: bool = False
-    motions: list[MotionPhrase] = Field(default_factory=list, max_length=64)
+    motions: list[MotionPhrase] = Field([], max_length=64)
     """One entry per word about how a part moves, with the part it names (null: the task's parts)."""
-    part_counts: list[PartCount] = Field(default_factory=list, max_length=64)
+    part_counts: list[PartCount] = Field([], max_length=64)
     mount: Literal["fixed", "free"] | None = None
     """The mounting asked ("mounted on the wall": fixed; "free-standing": free), or null."""
 
@@ -341,10 +334,9 @@ class RequestIntent(BaseModel):
         return out
 
 
-class QuantityOutcome(BaseModel):
+class QuantityOutcome(Strict):
     """A number the request asked and what the output has (same unit)."""
 
-    model_config = ConfigDict(extra="forbid")
     what: str
     """e.g. ``joint_0 angle``, ``height``, ``total mass``."""
     phrase: str = ""
@@ -361,16 +353,15 @@ class QuantityOutcome(BaseModel):
     ``size``, the total ``mass``, a joint's ``dynamics`` value; "" in reports written before it was recorded."""
 
 
-class RequestFindings(BaseModel):
+class RequestFindings(Strict):
     """The report's account of the request: unused word groups, warnings,
     what was asked beyond bands and every number with what was achieved."""
 
-    model_config = ConfigDict(extra="forbid")
-    ignored: list[str] = Field(default_factory=list)
-    warnings: list[str] = Field(default_factory=list)
-    asked: list[str] = Field(default_factory=list)
-    quantities: list[QuantityOutcome] = Field(default_factory=list)
-    phrases: list[str] = Field(default_factory=list)
+    ignored: list[str] = []
+    warnings: list[str] = []
+    asked: list[str] = []
+    quantities: list[QuantityOutcome] = []
+    phrases: list[str] = []
     """Each state phrase of the request with the parts it set (joint and label), the amount set from the closed
     end and the amount asked, or why it was not applied, in the request's order."""
 
@@ -414,11 +405,10 @@ def parse_quantity(text: str | float | int, units: dict[str, float], what: str) 
     return value * units[unit]
 
 
-class StateOverride(BaseModel):
+class StateOverride(Frozen):
     """One joint's state as an override: ``fraction`` (0..1), ``angle`` (rad)
     or ``distance`` (m) from the closed end, or a ``band``; ``text`` as written."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     kind: Literal["fraction", "angle", "distance", "band"]
     value: float | None = None
     band: StateBand | None = None
@@ -455,7 +445,7 @@ class StateOverride(BaseModel):
         raise ValueError(f"{where}: unknown unit {unit!r} in {raw!r} (angles: deg, rad; distances: m, cm, mm)")
 
 
-class RequestOverrides(BaseModel):
+class RequestOverrides(Frozen):
     """Typed values that win over the request's words (command line, API,
     configuration file; strings carry units, numbers are SI): ``mass`` kg in
     (0, 1e5], ``size`` m (largest extent) in (0, 100], ``scale`` in [1e-4, 1e4]
@@ -463,11 +453,11 @@ class RequestOverrides(BaseModel):
     -> :class:`StateOverride`, at most 256), ``mount``, ``material`` (a name of
     at most 64 characters). Finite numbers only."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    model_config = ConfigDict(allow_inf_nan=False)
     mass: float | None = Field(None, gt=0.0, le=1e5)
     size: float | None = Field(None, gt=0.0, le=100.0)
     scale: float | None = Field(None, ge=1e-4, le=1e4)
-    state: dict[str, StateOverride] = Field(default_factory=dict, max_length=256)
+    state: dict[str, StateOverride] = Field({}, max_length=256)
     mount: Literal["fixed", "free"] | None = None
     material: str | None = Field(None, min_length=1, max_length=64)
 

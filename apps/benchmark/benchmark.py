@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import math
+import statistics
 from pathlib import Path
 from typing import Any, Callable
 
@@ -99,8 +100,8 @@ def summarize(records: list[dict[str, Any]], methods: list[str]) -> dict[str, di
         row["force_pass"], row["force_n"] = _rate([r.get("operating_force_pass") for r in ok])
         row["ready"], row["ready_n"] = _rate([r.get("ready") for r in ok])
         row["all_pass"], _ = _rate([r["all_pass"] for r in ok])
-        secs = sorted(r["seconds"] for r in ok if r.get("seconds") is not None)
-        row["median_seconds"] = (secs[len(secs) // 2] if len(secs) % 2 else 0.5 * (secs[len(secs) // 2 - 1] + secs[len(secs) // 2])) if secs else None
+        secs = [r["seconds"] for r in ok if r.get("seconds") is not None]
+        row["median_seconds"] = statistics.median(secs) if secs else None
         out[m] = row
     return out
 

@@ -17,8 +17,7 @@ from itertools import combinations
 from pathlib import Path
 from typing import Hashable, Sequence
 
-from pydantic import BaseModel, ConfigDict, Field
-
+from asset2sim.schemas import Strict
 from asset2sim import atomic
 from asset2sim.schemas.realism import JudgeVerdict
 from asset2sim.apps.realism.judge import RUBRIC_VERSION
@@ -62,31 +61,28 @@ def cohen_kappa(a: Sequence[Hashable], b: Sequence[Hashable]) -> float | None:
     return (p_o - p_e) / (1.0 - p_e)
 
 
-class DefectTally(BaseModel):
+class DefectTally(Strict):
     """One kind of planted defect: ``pairs`` asked, ``kept`` order-consistent, ``caught`` kept on the intact side."""
 
-    model_config = ConfigDict(extra="forbid")
     pairs: int = 0
     kept: int = 0
     caught: int = 0
 
 
-class MethodWins(BaseModel):
+class MethodWins(Strict):
     """A method's kept verdicts on plain (non-defect) pairs: ``comparisons`` it took part in, ``wins``."""
 
-    model_config = ConfigDict(extra="forbid")
     comparisons: int = 0
     wins: int = 0
     win_rate: float | None = None
 
 
-class ModelCalibration(BaseModel):
+class ModelCalibration(Strict):
     """One judge model: ``pairs`` asked (each in both orders), ``kept`` order-consistent verdicts and their
     rate, ``orders_without_answer`` (refusals, unusable prose, failed calls); on defect pairs the
     ``sensitivity`` (caught / defect pairs, the headline) and ``sensitivity_of_kept`` (caught / kept),
     per defect kind; ``calibrated`` with ``why``; win rates per method on plain pairs; usage summed."""
 
-    model_config = ConfigDict(extra="forbid")
     model: str
     family: str
     pairs: int
@@ -100,19 +96,18 @@ class ModelCalibration(BaseModel):
     sensitivity_of_kept: float | None
     calibrated: bool
     why: str
-    defects: dict[str, DefectTally] = Field(default_factory=dict)
-    method_wins: dict[str, MethodWins] = Field(default_factory=dict)
+    defects: dict[str, DefectTally] = {}
+    method_wins: dict[str, MethodWins] = {}
     calls: int = 0
     prompt_tokens: int = 0
     completion_tokens: int = 0
     cost_usd: float = 0.0
 
 
-class KappaReport(BaseModel):
+class KappaReport(Strict):
     """Agreement of two judge models over the pairs both kept (labels: the winning side, ``a`` or ``b``):
     ``agreement`` the observed fraction, ``kappa`` Cohen's kappa (None: undefined)."""
 
-    model_config = ConfigDict(extra="forbid")
     model_1: str
     family_1: str
     model_2: str
@@ -123,15 +118,14 @@ class KappaReport(BaseModel):
     kappa: float | None
 
 
-class JudgeCalibration(BaseModel):
+class JudgeCalibration(Strict):
     """``judge_calibration.json``: the criteria and every judge's calibration and pairwise agreement."""
 
-    model_config = ConfigDict(extra="forbid")
     rubric_version: str = RUBRIC_VERSION
     sensitivity_threshold: float = SENSITIVITY_THRESHOLD
     min_defect_pairs: int = MIN_DEFECT_PAIRS
-    models: list[ModelCalibration] = Field(default_factory=list)
-    kappa: list[KappaReport] = Field(default_factory=list)
+    models: list[ModelCalibration] = []
+    kappa: list[KappaReport] = []
 
     def model(self, name: str) -> ModelCalibration:
         """The calibration of model ``name`` (KeyError when absent)."""

@@ -58,6 +58,12 @@ class CommandError(Exception):
         self.message = message
         self.problems = [CommandError(status, c, p, m) for c, p, m in problems]
 
+    @classmethod
+    def invalid(cls, code: str, message: str) -> "CommandError":
+        """Status 2 (:data:`INVALID_REQUEST`) without a path: an option, a setting or a request the command cannot
+        use."""
+        return cls(INVALID_REQUEST, code, None, message)
+
     def lines(self, command: str | None) -> list[str]:
         """One :meth:`line` per problem (the error's own line when it lists none)."""
         return [p.line(command) for p in self.problems] or [self.line(command)]
@@ -160,7 +166,7 @@ def extra_failure(exc: ImportError, _outs, _inp, _reading=None) -> CommandError 
     error (a bug)."""
     if missing_module(exc) not in EXTRA_OF_MODULE:
         return None
-    return CommandError(INVALID_REQUEST, "EXTRA_MISSING", None, install_hint(exc))
+    return CommandError.invalid("EXTRA_MISSING", install_hint(exc))
 
 
 Converter = Callable[[BaseException, list, object, "Reading | None"], "CommandError | None"]
@@ -176,26 +182,22 @@ ERRORS: dict[str, Reading | Converter] = {
     "ImportError": extra_failure,
     "CatalogError": catalog_failure,
     "AssetError": Reading(INVALID_INPUT, "INPUT_UNREADABLE", "input"),
-    "MissingCredentials": Reading(INVALID_REQUEST, "MODEL_UNAVAILABLE", None),
-    "LLMUnavailable": Reading(INVALID_REQUEST, "MODEL_UNAVAILABLE", None),
-    "PairSetError": Reading(INVALID_INPUT, "PAIRS_INVALID"),
-    "JudgeInputError": Reading(INVALID_INPUT, "PAIRS_INVALID"),
+    **dict.fromkeys(("MissingCredentials", "LLMUnavailable"), Reading(INVALID_REQUEST, "MODEL_UNAVAILABLE", None)),
+    **dict.fromkeys(("PairSetError", "JudgeInputError"), Reading(INVALID_INPUT, "PAIRS_INVALID")),
     "NotRated": Reading(NOT_READY, "NOT_RATED", "input"),
     "RenderError": Reading(INVALID_INPUT, "RENDER_FAILED", "input"),
     "EvaluationError": Reading(INVALID_REQUEST, "EVALUATION_INPUT_INVALID", "input"),
     # one command's own
     "audit FileNotFoundError": Reading(INVALID_INPUT, "AUDIT_INPUT_MISSING", None),
-    "benchmark ValueError": Reading(INVALID_REQUEST, "BENCHMARK_INPUT_INVALID", "exc", "benchmark cannot run: "),
-    "benchmark KeyError": Reading(INVALID_REQUEST, "BENCHMARK_INPUT_INVALID", "exc", "benchmark cannot run: "),
-    "benchmark FileNotFoundError": Reading(INVALID_REQUEST, "BENCHMARK_INPUT_INVALID", "exc", "benchmark cannot run: "),
+    **dict.fromkeys(("benchmark ValueError", "benchmark KeyError", "benchmark FileNotFoundError"),
+                    Reading(INVALID_REQUEST, "BENCHMARK_INPUT_INVALID", "exc", "benchmark cannot run: ")),
     "evaluate ValueError": Reading(INVALID_REQUEST, "EVALUATION_INPUT_INVALID", "input"),
     "evaluate OSError": Reading(INVALID_REQUEST, "EVALUATION_INPUT_UNREADABLE"),
-    "export ValueError": Reading(INVALID_REQUEST, "EXPORT_INPUT_INVALID", "exc", "cannot export: "),
-    "export FileNotFoundError": Reading(INVALID_REQUEST, "EXPORT_INPUT_INVALID", "exc", "cannot export: "),
+    **dict.fromkeys(("export ValueError", "export FileNotFoundError"),
+                    Reading(INVALID_REQUEST, "EXPORT_INPUT_INVALID", "exc", "cannot export: ")),
     "export OSError": Reading(INVALID_REQUEST, "EXPORT_INPUT_UNREADABLE"),
-    "export MjcfError": Reading(INVALID_INPUT, "EXPORT_CHECK_FAILED", "input"),
-    "export ExportError": Reading(INVALID_INPUT, "EXPORT_CHECK_FAILED", "input"),
-    "export UsdExportError": Reading(INVALID_INPUT, "EXPORT_CHECK_FAILED", "input"),
+    **dict.fromkeys(("export MjcfError", "export ExportError", "export UsdExportError"),
+                    Reading(INVALID_INPUT, "EXPORT_CHECK_FAILED", "input")),
     "failures ValueError": catalog_failure,
     "init FileExistsError": Reading(OUTPUT_LOCATION, "OUTPUT_EXISTS", None),
     "init NotADirectoryError": Reading(INVALID_INPUT, "OBJECTS_NOT_A_FOLDER", None),
@@ -203,9 +205,8 @@ ERRORS: dict[str, Reading | Converter] = {
     "judge ValueError": Reading(INVALID_REQUEST, "JUDGES_INVALID", None),
     "pairs FileNotFoundError": Reading(INVALID_INPUT, "PAIRS_INPUT_INVALID", None),
     "rate FileNotFoundError": Reading(INVALID_INPUT, "PAIRS_MISSING"),
-    "render ValueError": Reading(INVALID_REQUEST, "RENDER_INPUT_INVALID"),
+    **dict.fromkeys(("render ValueError", "render OSError"), Reading(INVALID_REQUEST, "RENDER_INPUT_INVALID")),
     "render KeyError": Reading(INVALID_REQUEST, "RENDER_INPUT_INVALID", "input"),
-    "render OSError": Reading(INVALID_REQUEST, "RENDER_INPUT_INVALID"),
 }
 
 #: The arguments naming what a command reads, first found first (its output folders: ``--out``, ``--asset-out``,
@@ -267,8 +268,8 @@ def parse_engines(text: str | None, option: str = "--engines") -> list[str]:
     known = known_engines()
     unknown = [n for n in names if n not in known]
     if unknown:
-        raise CommandError(INVALID_REQUEST, "ENGINE_UNKNOWN", None,
-                           f"{option}: unknown engine(s) {', '.join(unknown)}; known: {', '.join(known)}")
+        raise CommandError.invalid("ENGINE_UNKNOWN",
+                                   f"{option}: unknown engine(s) {', '.join(unknown)}; known: {', '.join(known)}")
     return names
 
 
@@ -294,6 +295,13 @@ def add_allow_outside(parser) -> None:
     parser.add_argument("--allow-outside-paths", action="append", default=[], type=Path, metavar="DIR",
                         help="let MJCF and USD inputs name files in DIR too, outside their own folder (repeatable; every other "
                              "rule holds: regular files under the size cap)")
+
+
+def add_mjcf_reading(parser) -> None:
+    """``--body`` and ``--mjcf-angle``: how a command reads an MJCF input (:class:`asset2sim.formats.ReadOptions`)."""
+    parser.add_argument("--body", help="the body (MJCF) whose subtree is the object, in a scene with several objects with joints")
+    parser.add_argument("--mjcf-angle", choices=("radian", "degree"),
+                        help="the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention")
 
 
 @contextlib.contextmanager

@@ -14,8 +14,8 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, add_allow_outside, check_out,
-                                        outside_paths)
+from asset2sim.commands._status import (INVALID_INPUT, NOT_READY, CommandError, add_allow_outside, add_mjcf_reading,
+                                        check_out, outside_paths)
 from asset2sim.input_files import allowed_folders, set_allowed_outside
 from asset2sim.flows import audit_catalog
 from asset2sim.apps.audit.batch import AuditTarget, audit_one, find_assets
@@ -40,18 +40,16 @@ EXITS = {
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("paths", type=Path, nargs="+", metavar="PATH",
                    help="an asset (URDF folder or file, MJCF .xml, USD file, or a folder holding one), or a folder of many")
-    p.add_argument("--out", type=Path, default=None,
+    p.add_argument("--out", type=Path,
                    help="where to write each asset's audit.json, audit.md and patch/, and the audit catalog (Parquet); "
                         "default: print only")
-    p.add_argument("--category", default=None, help="object category for every asset (default: from the files and names)")
-    p.add_argument("--body", default=None, help="the body (MJCF) whose subtree is the object, in a scene with several objects with joints")
-    p.add_argument("--mjcf-angle", choices=("radian", "degree"), default=None,
-                   help="the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention")
+    p.add_argument("--category", help="object category for every asset (default: from the files and names)")
+    add_mjcf_reading(p)
     p.add_argument("--no-sim", action="store_true", help="judge the values only; skip the simulation checks")
     p.add_argument("--jobs", type=int, default=1, help="assets audited at once (processes; default 1)")
     p.add_argument("--flow", action="store_true",
                    help="run as the Prefect audit flow on a Dask cluster of --jobs workers (needs --out; logs the run to MLflow)")
-    p.add_argument("--dask-address", default=None, help="with --flow: an existing Dask scheduler instead of a local cluster")
+    p.add_argument("--dask-address", help="with --flow: an existing Dask scheduler instead of a local cluster")
     p.add_argument("--json", action="store_true", help="print the catalog rows as JSON lines instead of tables")
     add_allow_outside(p)
 
@@ -69,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     if args.jobs < 1:
-        raise CommandError(INVALID_REQUEST, "JOBS_INVALID", None, f"--jobs must be >= 1, got {args.jobs}")
+        raise CommandError.invalid("JOBS_INVALID", f"--jobs must be >= 1, got {args.jobs}")
     targets = find_assets(args.paths)
     if not targets:
         raise CommandError(INVALID_INPUT, "AUDIT_NO_ASSETS", None, f"no URDF, MJCF or USD asset in {', '.join(map(str, args.paths))}")
@@ -77,13 +75,13 @@ def run(args: argparse.Namespace) -> int:
         check_out(args.out, [*args.paths, *(t.path for t in targets)])
     if args.flow:
         if args.body or args.mjcf_angle:
-            raise CommandError(INVALID_REQUEST, "OPTION_NOT_IN_FLOW", None, "--body and --mjcf-angle apply to an audit run here; "
-                               "leave out --flow to use them")
+            raise CommandError.invalid("OPTION_NOT_IN_FLOW", "--body and --mjcf-angle apply to an audit run here; "
+                                       "leave out --flow to use them")
         if args.out is None:
-            raise CommandError(INVALID_REQUEST, "OUT_REQUIRED", None, "--flow writes the audit catalog: give --out")
+            raise CommandError.invalid("OUT_REQUIRED", "--flow writes the audit catalog: give --out")
         if args.allow_outside_paths:
-            raise CommandError(INVALID_REQUEST, "OPTION_CONFLICT", None, "--allow-outside-paths applies to audits in this "
-                               "process and its --jobs; the --flow's Dask workers do not take it")
+            raise CommandError.invalid("OPTION_CONFLICT", "--allow-outside-paths applies to audits in this "
+                                       "process and its --jobs; the --flow's Dask workers do not take it")
         from asset2sim.flows.audit_flow import run_audit_flow
 
         summary = run_audit_flow(args.paths, args.out, category=args.category, simulate=not args.no_sim, workers=args.jobs,

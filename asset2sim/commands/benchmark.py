@@ -15,6 +15,7 @@ from pathlib import Path
 from asset2sim.commands._status import parse_engines
 from asset2sim.apps.benchmark.benchmark import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
 from asset2sim.commands import _output
+from asset2sim.tasks.evaluation.evaluate import _jsonable
 from asset2sim.inert import markup
 
 NAME = "benchmark"
@@ -31,21 +32,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("manifest", type=Path, help="manifest.csv (id, category, prompt, ..., reference_scale)")
     p.add_argument("--methods", default="defaults,human,direct,asset2sim", help="comma-separated methods")
     p.add_argument("--out", type=Path, default=Path("bench"), help="output folder (default bench/)")
-    p.add_argument("--ids", default=None, help="comma-separated manifest ids to run (default all)")
+    p.add_argument("--ids", help="comma-separated manifest ids to run (default all)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--engines", default="pybullet", help="comma-separated evaluation engines")
     p.add_argument("--no-reports", action="store_true", help="skip the per-asset report.html files")
-    p.add_argument("--compare", type=Path, default=None, help="results.json of an earlier run to check reproducibility against")
-
-
-def _clean(obj):
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_clean(v) for v in obj]
-    return obj
+    p.add_argument("--compare", type=Path, help="results.json of an earlier run to check reproducibility against")
 
 
 def compare_records(a: list[dict], b: list[dict], rel: float = 1e-9) -> list[str]:
@@ -123,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
 
     records = run_benchmark(args.manifest, methods, out, rows=ids, seed=args.seed, engines=engines,
                             reports=not args.no_reports, progress=progress)
-    records = _clean(records)
+    records = _jsonable(records)  # strict JSON, as results.json holds them (--compare reads that)
     tables = benchmark_tables(records, methods)
     realism = _realism(out, methods)
     for summary in tables.values():

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from asset2sim import demo_assets
 from asset2sim.commands import refine as refine_cmd
-from asset2sim.commands._status import INVALID_REQUEST, CommandError
+from asset2sim.commands._status import CommandError
 from asset2sim.demo_objects import DEMO_OBJECTS
 
 NAME = "demo"
@@ -33,12 +33,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--list", action="store_true", help="list the built-in objects with their default requests and exit")
     parser.add_argument("--object", default="box_lid", metavar="ID", help=f"which built-in object ({ids}; default box_lid)")
     parser.add_argument("--out", "-o", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
-    parser.add_argument("--prompt", "-p", default=None, help="the request (default: the object's own, see --list)")
-    parser.add_argument("--task", default=None, help="the manipulation task the gripper executes (default: the object's category's)")
-    parser.add_argument("--asset-out", type=Path, default=None,
+    parser.add_argument("--prompt", "-p", help="the request (default: the object's own, see --list)")
+    parser.add_argument("--task", help="the manipulation task the gripper executes (default: the object's category's)")
+    parser.add_argument("--asset-out", type=Path,
                         help="also keep the object's input folder here (mobility.urdf, meshes, semantics.txt) to refine it yourself")
     parser.add_argument("--no-refine", action="store_true", help="with --asset-out: write the input folder only")
-    parser.add_argument("--dataset", type=Path, default=None,
+    parser.add_argument("--dataset", type=Path,
                         help="write every built-in object and a manifest.csv into this folder (for benchmark and flow) and exit")
     parser.add_argument("--no-extras", action="store_true", help="skip MJCF export, renders and the HTML report")
 
@@ -50,8 +50,8 @@ def _entry(asset_id: str):
     known = [o.asset_id for o in DEMO_OBJECTS]
     close = difflib.get_close_matches(asset_id, known, n=1)
     hint = f"; did you mean {close[0]!r}?" if close else ""
-    raise CommandError(INVALID_REQUEST, "DEMO_OBJECT_UNKNOWN", None, f"--object {asset_id!r} is not a built-in object{hint} "
-                       f"(known: {', '.join(known)}; `asset2sim demo --list`)")
+    raise CommandError.invalid("DEMO_OBJECT_UNKNOWN", f"--object {asset_id!r} is not a built-in object{hint} "
+                               f"(known: {', '.join(known)}; `asset2sim demo --list`)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -65,15 +65,17 @@ def run(args: argparse.Namespace) -> int:
         return 0
     entry = _entry(args.object)
     if args.no_refine and args.asset_out is None:
-        raise CommandError(INVALID_REQUEST, "DEMO_NOTHING_TO_DO", None, "--no-refine writes only the input folder: give --asset-out DIR")
+        raise CommandError.invalid("DEMO_NOTHING_TO_DO", "--no-refine writes only the input folder: give --asset-out DIR")
     with tempfile.TemporaryDirectory(prefix="asset2sim-demo-") as tmp:
         folder = args.asset_out if args.asset_out is not None else Path(tmp) / entry.asset_id
         src = demo_assets.build_object(entry.asset_id, folder)
         print(f"built demo asset {src} ({entry.category})")
         if args.no_refine:
             return 0
-        ns = argparse.Namespace(asset=src, prompt=args.prompt if args.prompt is not None else entry.prompt, out=args.out,
-                                category=None, task=args.task if args.task is not None else entry.task, estimator="offline",
-                                model=None, base_url=None, force=True, no_extras=args.no_extras, quiet=False, engines="pybullet",
-                                overwrite=False)
+        parser = argparse.ArgumentParser()  # refine's own options, each at its default but these
+        refine_cmd.add_arguments(parser)
+        ns = parser.parse_args([f"--out={args.out}", "--estimator=offline", "--engines=pybullet", "--force", "--", str(src)])
+        ns.prompt = args.prompt if args.prompt is not None else entry.prompt
+        ns.task = args.task if args.task is not None else entry.task
+        ns.no_extras = args.no_extras
         return refine_cmd.run(ns)

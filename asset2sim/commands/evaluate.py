@@ -36,21 +36,21 @@ EXITS = {
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("asset", type=Path, help="asset folder (mobility.urdf, initial_state.json ...) or a URDF file")
-    p.add_argument("--reference", type=Path, default=None, help="PartNet-Mobility folder with reference_gensim2.json/.urdf")
-    p.add_argument("--prompt", default=None, help=(
+    p.add_argument("--reference", type=Path, help="PartNet-Mobility folder with reference_gensim2.json/.urdf")
+    p.add_argument("--prompt", help=(
         "the request the asset should satisfy (default for a refined output folder: the request its report.json "
         "records, so the output is graded as refine graded it)"))
-    p.add_argument("--category", default=None, help="object category (default: from the asset's files)")
-    p.add_argument("--engines", default=None, help=(
+    p.add_argument("--category", help="object category (default: from the asset's files)")
+    p.add_argument("--engines", help=(
         "comma-separated engines, the manipulation tiers measured in each (default: as refine checks: the tiers in "
         "PyBullet, the rest metrics in the engines a refined folder's report.json names, else PyBullet alone)"))
-    p.add_argument("--out", type=Path, default=None,
+    p.add_argument("--out", type=Path,
                    help="where to write evaluation.json and report.html (default: a folder beside the asset, ASSET-evaluation; "
                         "never the asset folder itself unless named here)")
     p.add_argument("--no-report", action="store_true", help="do not write report.html")
     p.add_argument("--no-probes", action="store_true", help="skip the passive probes (reported beside the verdict, never deciding it)")
     p.add_argument("--no-clips", action="store_true", help="with the report: skip the clips of each task-relevant joint's sweep (clips/)")
-    p.add_argument("--task", default=None,
+    p.add_argument("--task",
                    help='the manipulation task, e.g. "close the microwave door": the task tier performs it, the probes try its part '
                         'and direction (default for a refined output folder: the task its report.json records)')
     p.add_argument("--seed", type=int, default=0)
@@ -99,11 +99,11 @@ def run(args: argparse.Namespace) -> int:
     out = args.out = args.out or default_out(args.asset)
     engines = tuple(parse_engines(args.engines)) if args.engines else None
     check_out(out, [args.asset], adopt=True)  # never into the input, but into a refined folder (its own files then)
-    req = refined_request(args.asset, args.prompt, getattr(args, "task", None))
+    req = refined_request(args.asset, args.prompt, args.task)
     with output_folder.adopting(out):
         ev = evaluate_asset(args.asset, reference=args.reference, prompt=req.prompt, engines=engines, seed=args.seed,
                             category=args.category, out_dir=out, write_report=not args.no_report, probes=not args.no_probes,
-                            task=req.task, clips=not getattr(args, "no_clips", False))
+                            task=req.task, clips=not args.no_clips)
     ready = readiness(list(ev.metrics))
     table = Table(title=f"{markup(ev.asset_id)} ({markup(ev.category or 'no category')}): {markup(ready.short())}")
     wide = console.width >= WIDE_TABLE  # a narrow terminal gets the table without the thresholds' column

@@ -37,7 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("out", type=Path, help="output folder (mobility.urdf, initial_state.json, overlay.json)")
     parser.add_argument("--format", "-f", choices=FORMATS, default="mjcf", help="export format (default: mjcf)")
     parser.add_argument("--no-visuals", action="store_true", help="collision geometry only (no visual meshes)")
-    parser.add_argument("--parity", metavar="ENGINES", default=None, help=(
+    parser.add_argument("--parity", metavar="ENGINES", help=(
         "also run the physical checks (penetration, rest stability, oscillation) in these engines, e.g. pybullet,physx,mujoco"))
 
 
@@ -57,8 +57,8 @@ def run(args: argparse.Namespace) -> int:
     if args.format == "usd":
         return _run_usd(args, out)
     if "mujoco" not in available_engines():
-        raise CommandError(INVALID_REQUEST, "ENGINE_UNAVAILABLE", None,
-                           "MuJoCo is not installed; install the extra: pip install 'asset2sim[mujoco]'")
+        raise CommandError.invalid("ENGINE_UNAVAILABLE",
+                                   "MuJoCo is not installed; install the extra: pip install 'asset2sim[mujoco]'")
 
     with output_folder.adopting(out):  # the MJCF files become the output folder's own
         path = export_mjcf(asset := RefinedAsset(out), visuals=not args.no_visuals, check=False)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_REQUEST, CommandError
+from asset2sim.commands._status import CommandError
 from asset2sim.flows import catalog_compare, queries
 from asset2sim.flows.catalog import NOTHING_TO_DO, ResultCatalog
 from asset2sim.flows.catalog_config import load_catalog
@@ -31,7 +31,7 @@ MAX_LISTED = 50
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")
-    parser.add_argument("--dataset", default=None, help="dataset (default: the dataset of the latest run)")
+    parser.add_argument("--dataset", help="dataset (default: the dataset of the latest run)")
     parser.add_argument("--run", default="latest", help="run id, or 'latest' (default), or 'all'")
     parser.add_argument("--by", default="category", help="group by these columns, comma-separated (default category)")
     parser.add_argument("--over-time", action="store_true", help="pass rates per run, oldest first")
@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             ch = queries.verdict_changes(df, *args.changes)
         except KeyError as exc:
-            raise CommandError(INVALID_REQUEST, "RUN_UNKNOWN", None, f"--changes: {exc.args[0]}") from exc
+            raise CommandError.invalid("RUN_UNKNOWN", f"--changes: {exc.args[0]}") from exc
         print(f"verdict changes {args.changes[0]} -> {args.changes[1]}: {len(ch)} asset(s)")
         if len(ch):
             print(ch[["asset_id", "category", "change"]].to_string(index=False))
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
         run_id = runs = args.run
         found = [d for d, r in store.runs(args.dataset) if r == run_id]
         if not found:
-            raise CommandError(INVALID_REQUEST, "RUN_UNKNOWN", None, f"--run: no run {run_id!r} in the catalog {cat.catalog_root}")
+            raise CommandError.invalid("RUN_UNKNOWN", f"--run: no run {run_id!r} in the catalog {cat.catalog_root}")
         dataset = args.dataset or found[0]
         scope = f"run {run_id}"
 
@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
 
     if getattr(args, "compare", False):
         if run_id is None or dataset is None:
-            raise CommandError(INVALID_REQUEST, "USAGE_INVALID", None, "--compare needs one run (--run latest or a run id)")
+            raise CommandError.invalid("USAGE_INVALID", "--compare needs one run (--run latest or a run id)")
         cmp = catalog_compare.compare_with_previous(store, dataset, run_id, cat.config.results.regression)
         print("\n".join(catalog_compare.comparison_lines(cmp)))
         return 0
@@ -146,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
         df = store.read_table(dataset, runs, columns=list(dict.fromkeys([*BREAKDOWN_COLUMNS, *[b for b in by if b not in ("dataset", "run")]])))
         table = queries.failure_modes(df, by=by if len(by) > 1 else by[0])
     except KeyError as exc:
-        raise CommandError(INVALID_REQUEST, "COLUMN_UNKNOWN", None, f"--by: {exc.args[0]}") from exc
+        raise CommandError.invalid("COLUMN_UNKNOWN", f"--by: {exc.args[0]}") from exc
     table = table.loc[:, (table != 0).any(axis=0)]
     s = queries.status_counts(df)
     print(f"failure modes of {scope}: {s['assets']} assets, {s['done']} done, {s['skipped']} skipped, {s['failed']} failed; "

@@ -35,26 +35,26 @@ EXITS = {
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")
-    parser.add_argument("--dataset", default=None, help="dataset of the catalog (default: its default_dataset)")
-    parser.add_argument("--workers", type=int, default=None, help="local Dask workers (default: catalog run.workers)")
-    parser.add_argument("--dask-address", "--scheduler", dest="dask_address", default=None, help=(
+    parser.add_argument("--dataset", help="dataset of the catalog (default: its default_dataset)")
+    parser.add_argument("--workers", type=int, help="local Dask workers (default: catalog run.workers)")
+    parser.add_argument("--dask-address", "--scheduler", dest="dask_address", help=(
         "existing Dask scheduler (`dask scheduler`, dask-jobqueue, dask-kubernetes), e.g. tcp://host:8786 "
         "(default: $DASK_ADDRESS, else a local cluster); its workers need PREFECT_API_URL (docs/guide/pipeline.md)"))
-    parser.add_argument("--dask-host", default=None, help=(
+    parser.add_argument("--dask-host", help=(
         "interface the local Dask cluster (scheduler, workers, dashboard) listens on "
         "(default: catalog run.dask_host, 127.0.0.1: this machine only)"))
     parser.add_argument("--no-dashboard", action="store_true",
                         help="no Dask dashboard (nor other HTTP pages) on the local cluster (default: catalog run.dashboard)")
-    parser.add_argument("--out", default=None, help=(
+    parser.add_argument("--out", help=(
         "output store: s3://bucket/prefix or any pyarrow/fsspec URI or path; workers refine locally and upload "
         "(default: catalog output_store, else output_root)"))
-    parser.add_argument("--ids", default=None, help="comma-separated asset ids to run (default: all)")
-    parser.add_argument("--limit", type=int, default=None, help="run at most this many assets")
+    parser.add_argument("--ids", help="comma-separated asset ids to run (default: all)")
+    parser.add_argument("--limit", type=int, help="run at most this many assets")
     parser.add_argument("--force", action="store_true", help="redo assets even when a finished result exists")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar or per-asset lines")
     parser.add_argument("--serve", action="store_true", help="register the nightly deployment and serve it")
-    parser.add_argument("--cron", default=None, help="with --serve: cron expression (default: catalog schedule.cron)")
-    parser.add_argument("--timezone", default=None, help="with --serve: IANA time zone (default: catalog schedule.timezone)")
+    parser.add_argument("--cron", help="with --serve: cron expression (default: catalog schedule.cron)")
+    parser.add_argument("--timezone", help="with --serve: IANA time zone (default: catalog schedule.timezone)")
     parser.add_argument("--register-only", action="store_true", help="with --serve: register the deployment and exit")
 
 

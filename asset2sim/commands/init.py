@@ -20,7 +20,7 @@ EXITS = {0: "catalog.yaml written", 1: "--objects is not a folder of objects", 4
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("folder", type=Path, nargs="?", default=Path("."), help="where to write catalog.yaml (default: here)")
-    parser.add_argument("--objects", type=Path, default=None, help=(
+    parser.add_argument("--objects", type=Path, help=(
         "a folder of your objects, one per sub-folder (a URDF with its meshes, an MJCF or a USD file): the default "
         "dataset; its manifest.csv is used, else one listing every object is written beside catalog.yaml"))
     parser.add_argument("--force", action="store_true", help="replace an existing catalog.yaml (and the manifest written)")

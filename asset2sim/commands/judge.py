@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_REQUEST, CommandError
+from asset2sim.commands._status import CommandError
 from asset2sim.apps.realism.calibration import CALIBRATION_FILE, judge_calibration, write_calibration
 from asset2sim.apps.realism.judge import JUDGEMENTS_FILE, find_pair_set, judge_pairs
 from asset2sim.apps.realism.scores import SCORES_FILE, judge_scores
@@ -52,7 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="server of the --model before it (a local server needs no API key)")
     parser.add_argument("--family", dest="family", action=_JudgeOption, metavar="NAME",
                         help="model family of the --model before it (default: the leading letters of its name)")
-    parser.add_argument("--timeout", type=float, default=None, metavar="S",
+    parser.add_argument("--timeout", type=float, metavar="S",
                         help="deadline of one HTTP attempt in seconds: connecting, sending and the whole reply "
                              "(default: ASSET2SIM_LLM_TIMEOUT_S or 120)")
     parser.add_argument("--jobs", type=int, default=4, metavar="N", help="pairs asked at once per model (default 4)")
@@ -66,16 +66,16 @@ def _pct(x: float | None) -> str:
 def run(args: argparse.Namespace) -> int:
     judges = args.judges
     if not judges:
-        raise CommandError(INVALID_REQUEST, "MODEL_REQUIRED", None, "give at least one judge: --model PROVIDER/NAME")
+        raise CommandError.invalid("MODEL_REQUIRED", "give at least one judge: --model PROVIDER/NAME")
     if args.timeout is not None and not args.timeout > 0:
-        raise CommandError(INVALID_REQUEST, "TIMEOUT_INVALID", None, f"--timeout must be > 0, got {args.timeout}")
+        raise CommandError.invalid("TIMEOUT_INVALID", f"--timeout must be > 0, got {args.timeout}")
     if args.jobs < 1:
-        raise CommandError(INVALID_REQUEST, "JOBS_INVALID", None, f"--jobs must be >= 1, got {args.jobs}")
+        raise CommandError.invalid("JOBS_INVALID", f"--jobs must be >= 1, got {args.jobs}")
     over = {} if args.timeout is None else {"timeout_s": args.timeout}
     try:
         configs = [ClientConfig.from_env(j["model"], j.get("base_url"), **over) for j in judges]
     except ValueError as exc:
-        raise CommandError(INVALID_REQUEST, "MODEL_CONFIG_INVALID", None, str(exc)) from None
+        raise CommandError.invalid("MODEL_CONFIG_INVALID", str(exc)) from None
     folder = find_pair_set(args.folder)
     verdicts = judge_pairs(folder, configs, families=[j.get("family") for j in judges], workers=args.jobs)
     cal = judge_calibration(verdicts)
@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
           + (f"; calibrated models' Bradley-Terry scores in {folder / SCORES_FILE}" if scored else ""))
     silent = _models_without_a_reply(verdicts)
     if silent:
-        raise CommandError(INVALID_REQUEST, "MODEL_CALLS_FAILED", None, "; ".join(silent) + (
+        raise CommandError.invalid("MODEL_CALLS_FAILED", "; ".join(silent) + (
             ": check --model, --base-url and the server (its verdicts are recorded as without an answer)"))
     return 0
 

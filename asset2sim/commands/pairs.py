@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError, check_out
+from asset2sim.commands._status import INVALID_INPUT, CommandError, check_out
 from asset2sim.commands import _output
 from asset2sim.inert import markup
 
@@ -27,7 +27,7 @@ EXITS = {0: "pairs written", 1: "no input folder could be read or no pair could 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("folders", type=Path, nargs="+", metavar="FOLDER",
                    help="a benchmark output folder (asset2sim benchmark --out) or refine output folders")
-    p.add_argument("--out", type=Path, default=None,
+    p.add_argument("--out", type=Path,
                    help="the pair-set folder (default: FOLDER/realism for one benchmark folder; needed otherwise)")
     p.add_argument("--against", default=",".join(("human", "direct", "defaults")),
                    help="methods of a benchmark folder to pair asset2sim with (comma-separated; default human,direct,defaults)")
@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         if len(args.folders) == 1 and (args.folders[0] / "asset2sim").is_dir():
             out = args.folders[0] / "realism"
         else:
-            raise CommandError(INVALID_REQUEST, "OUT_REQUIRED", None, "--out is needed unless FOLDER is one benchmark output folder")
+            raise CommandError.invalid("OUT_REQUIRED", "--out is needed unless FOLDER is one benchmark output folder")
     if args.defects == "all":
         defects = None
     elif args.defects == "none":
@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         defects = tuple(d.strip() for d in args.defects.split(",") if d.strip())
         unknown = sorted(set(defects) - set(DEFECTS))
         if unknown:
-            raise CommandError(INVALID_REQUEST, "DEFECT_UNKNOWN", None, f"unknown defects {unknown}; known: {sorted(DEFECTS)}")
+            raise CommandError.invalid("DEFECT_UNKNOWN", f"unknown defects {unknown}; known: {sorted(DEFECTS)}")
     check_out(out)
     against = tuple(m.strip() for m in args.against.split(",") if m.strip())
     specs, skipped = specs_from_folders(args.folders, out, against=against, defects=defects)

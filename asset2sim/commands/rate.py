@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, OUTPUT_LOCATION, CommandError
+from asset2sim.commands._status import INVALID_INPUT, OUTPUT_LOCATION, CommandError
 from asset2sim.apps.realism.rating_app import serve
 from asset2sim.apps.realism.pair_set import PairSetError, find_pair_set
 from asset2sim.apps.realism.ratings import RATINGS_FILE
@@ -46,7 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scores", action="store_true",
                    help="instead of serving: print the Bradley-Terry scores of the ratings so far, "
                         "write realism_scores.parquet")
-    p.add_argument("--tracking-uri", default=None,
+    p.add_argument("--tracking-uri",
                    help="with --scores: also log the scores to this MLflow tracking store (e.g. sqlite:///mlflow.db)")
 
 
@@ -75,9 +75,9 @@ def _print_scores(scores, folder: Path) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if not 0 < args.port < 65536:
-        raise CommandError(INVALID_REQUEST, "PORT_INVALID", None, f"--port must be 1-65535, got {args.port}")
+        raise CommandError.invalid("PORT_INVALID", f"--port must be 1-65535, got {args.port}")
     if args.tracking_uri and not args.scores:
-        raise CommandError(INVALID_REQUEST, "TRACKING_WITHOUT_SCORES", None, "--tracking-uri goes with --scores")
+        raise CommandError.invalid("TRACKING_WITHOUT_SCORES", "--tracking-uri goes with --scores")
     folder = pair_set_folder(args.folder)
     if args.scores:
         return _scores(folder, args.tracking_uri)

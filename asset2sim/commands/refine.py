@@ -52,41 +52,41 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes), a URDF file, or an MJCF (.xml) or OpenUSD (.usd, .usda, .usdc, .usdz) file")
     parser.add_argument("--prompt", "-p", default="", help='the request, e.g. "I want a slightly open stapler."')
     parser.add_argument("--out", "-o", type=Path, required=True, help="output folder (must not be inside the input)")
-    parser.add_argument("--category", default=None, help="override the asset's category (meta.json model_cat)")
-    parser.add_argument("--task", default=None, help=(
+    parser.add_argument("--category", help="override the asset's category (meta.json model_cat)")
+    parser.add_argument("--task", help=(
         'the manipulation task, e.g. "close the microwave door": the post-check executes it with a force- and '
         "speed-limited gripper (tiers task and force) and friction and damping are kept to what a real operating "
         "force overcomes in its direction (docs/guide/metrics.md)"))
-    parser.add_argument("--estimator", default=None, help=(
+    parser.add_argument("--estimator", help=(
         "overlay estimator: offline (the default, no network); llm (any litellm model, e.g. --model gemini/gemini-2.5-flash, "
         "key from the provider's environment variable); openai (an OpenAI-compatible server: --base-url URL --model M). "
         "See docs/guide/model_backends.md"))
-    parser.add_argument("--model", default=None, help="model for llm/openai: a litellm model string (provider/name) or the server's model name")
-    parser.add_argument("--base-url", default=None, help="base URL of an OpenAI-compatible or local server (vLLM, Ollama, llama.cpp); needs no key")
-    parser.add_argument("--request-parser", choices=("offline", "model"), default=None, help=(
+    parser.add_argument("--model", help="model for llm/openai: a litellm model string (provider/name) or the server's model name")
+    parser.add_argument("--base-url", help="base URL of an OpenAI-compatible or local server (vLLM, Ollama, llama.cpp); needs no key")
+    parser.add_argument("--request-parser", choices=("offline", "model"), help=(
         "who parses the request into its typed intent: offline (the default) or model (the --estimator llm/openai model, "
         "with the intent's JSON schema; the offline parse is kept, with a note, when the model's parse is invalid or the "
         "call fails; docs/guide/requests.md)"))
-    parser.add_argument("--engines", default=None, help=(
+    parser.add_argument("--engines", help=(
         "comma-separated engines the asset must pass in (pybullet,physx,mujoco,newton); missing ones are skipped and "
         "reported (default: pybullet, and physx where SAPIEN is installed)"))
     over = parser.add_argument_group("overrides", "typed values that win over the request's words (strings carry units)")
-    over.add_argument("--mass", default=None, help="total mass, e.g. 12kg or 500g")
-    over.add_argument("--size", default=None, help="largest extent of the closed object, e.g. 0.5m or 30cm")
-    over.add_argument("--scale", type=float, default=None, help="uniform scale of the input (wins over --size)")
+    over.add_argument("--mass", help="total mass, e.g. 12kg or 500g")
+    over.add_argument("--size", help="largest extent of the closed object, e.g. 0.5m or 30cm")
+    over.add_argument("--scale", type=float, help="uniform scale of the input (wins over --size)")
     over.add_argument("--state", action="append", default=[], metavar="NAME=VALUE",
                       help="a joint (by joint name or part label) at an angle (30deg, 0.5rad), a distance (2cm), an opening "
                            "fraction (0.4) or a band (closed, slightly_open, quarter, halfway, mostly, fully); repeatable")
-    over.add_argument("--mount", choices=("fixed", "free"), default=None, help="root fixed where the file puts it, or free on the ground")
-    over.add_argument("--material", default=None, help="material of the whole object (a materials.yaml key, e.g. steel_sheet)")
-    parser.add_argument("--body", default=None, help=(
+    over.add_argument("--mount", choices=("fixed", "free"), help="root fixed where the file puts it, or free on the ground")
+    over.add_argument("--material", help="material of the whole object (a materials.yaml key, e.g. steel_sheet)")
+    parser.add_argument("--body", help=(
         "the body (MJCF) whose subtree is the object, in a scene with several objects with joints (default: the one "
         "subtree under the world body with hinge or slide joints; tables and walls around it are left out)"))
-    parser.add_argument("--mjcf-angle", choices=("radian", "degree"), default=None, help=(
+    parser.add_argument("--mjcf-angle", choices=("radian", "degree"), help=(
         "the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention (default: "
         "as the package compiles it: robosuite, RoboCasa, LIBERO, Meta-World and Franka Kitchen fragments in radians; "
         "docs/guide/inputs.md)"))
-    parser.add_argument("--config", type=Path, default=None,
+    parser.add_argument("--config", type=Path,
                         help="YAML file of refine options (estimator, model, engines, sim, overrides: {mass: 12kg, state: {lid: 30deg}} ...); "
                              "flags given on the command line win over it")
     add_allow_outside(parser)
@@ -377,36 +377,36 @@ def options(args: argparse.Namespace) -> RefineConfig:
     given (CommandError status 2 ``CONFIG_INVALID`` / ``OVERRIDE_INVALID``, or the code of a file refused unread:
     ``INPUT_NOT_REGULAR_FILE``, ``INPUT_TOO_LARGE``, ``YAML_ALIAS_LIMIT`` ...)."""
     try:
-        base = load_config(args.config) if getattr(args, "config", None) else RefineConfig()
+        base = load_config(args.config) if args.config else RefineConfig()
     except (OSError, ValueError) as exc:
         raise CommandError(INVALID_REQUEST, getattr(exc, "code", None) or "CONFIG_INVALID", args.config, str(exc)) from exc
     fields = {k: v for k, v in (("estimator", args.estimator), ("model", args.model), ("base_url", args.base_url),
-                                ("request_parser", getattr(args, "request_parser", None))) if v is not None}
-    if getattr(args, "keep_declared", False):
+                                ("request_parser", args.request_parser)) if v is not None}
+    if args.keep_declared:
         fields["keep_declared"] = True
-    if getattr(args, "no_clips", False):
+    if args.no_clips:
         fields["clips"] = False
-    if getattr(args, "open_containers", False):
+    if args.open_containers:
         fields["open_containers"] = True
-    if getattr(args, "body", None):
+    if args.body:
         fields["body"] = args.body
-    if getattr(args, "mjcf_angle", None):
+    if args.mjcf_angle:
         fields["mjcf"] = base.mjcf.model_copy(update={"angle": args.mjcf_angle})
-    engines = getattr(args, "engines", None)
-    if engines or not getattr(args, "config", None):
+    engines = args.engines
+    if engines or not args.config:
         listed = parse_engines(engines or ",".join(default_engines()))
         fields["engines"] = ["pybullet"] + [e for e in listed if e != "pybullet"]
-    given = {k: v for k in ("mass", "size", "scale", "mount", "material") if (v := getattr(args, k, None)) is not None}
+    given = {k: v for k in ("mass", "size", "scale", "mount", "material") if (v := getattr(args, k)) is not None}
     state = {}
-    for item in getattr(args, "state", None) or []:
+    for item in args.state or []:
         name, eq, value = item.partition("=")
         if not eq or not name.strip() or not value.strip():
-            raise CommandError(INVALID_REQUEST, "OVERRIDE_INVALID", None, f"--state {item!r}: write NAME=VALUE, e.g. lid=30deg")
+            raise CommandError.invalid("OVERRIDE_INVALID", f"--state {item!r}: write NAME=VALUE, e.g. lid=30deg")
         state[name.strip()] = value.strip()
     try:
         overrides = merge_overrides(base.overrides, {**given, **({"state": state} if state else {})})
     except ValueError as exc:
-        raise CommandError(INVALID_REQUEST, "OVERRIDE_INVALID", None, option_error(str(exc), given, state)) from exc
+        raise CommandError.invalid("OVERRIDE_INVALID", option_error(str(exc), given, state)) from exc
     return base.model_copy(update={**fields, "overrides": overrides})
 
 
@@ -433,19 +433,19 @@ def run(args: argparse.Namespace) -> int:
         line = f"[{time.perf_counter() - t0:6.2f}s] {STAGE_WORDS.get(stage, stage.replace('_', ' ')):<12} {message}"
         if message.startswith("WARNING"):  # warnings are printed with --quiet too, on stderr
             print(line, file=sys.stderr, flush=True)
-        elif not (args.quiet or getattr(args, "json", False)):
+        elif not (args.quiet or args.json):
             print(line, flush=True)
 
     config = options(args)
     try:
         with outside_paths(args):
             result = refine_stage.refine_asset(args.asset, args.prompt, args.out, config, category=args.category,
-                                               task=getattr(args, "task", None) or None, progress=progress,
+                                               task=args.task or None, progress=progress,
                                                skip_if_complete=not args.force, extras=not args.no_extras,
-                                               overwrite=getattr(args, "overwrite", False), media=not getattr(args, "defer_media", False))
+                                               overwrite=args.overwrite, media=not args.defer_media)
     except RefineError as exc:
         raise _refine_failure(exc, args) from exc
-    if getattr(args, "json", False):
+    if args.json:
         print(json.dumps(json_summary(result), indent=2))
     else:
         for line in summary_lines(result):

@@ -11,7 +11,7 @@ import argparse
 import time
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_REQUEST, CommandError, check_out
+from asset2sim.commands._status import CommandError, check_out
 from asset2sim import output_folder
 from asset2sim.tasks.geometry.render import VIEWS, SceneRenderer, read_joint_state, render_contact_sheet, resolve_urdf, write_png
 
@@ -24,7 +24,7 @@ EXITS = {0: "every view written", 1: "rendering failed", 2: "bad input", 4: "the
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes) or a URDF file")
-    parser.add_argument("--state", type=Path, default=None,
+    parser.add_argument("--state", type=Path,
                         help='initial_state.json ({"initial_joint_positions": {joint: value}}, rad or m); default: all joints at zero')
     parser.add_argument("--out", "-o", type=Path, required=True, help="output folder for <view>.png")
     parser.add_argument("--views", default="front,back,left,right,perspective",
@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     views = [v.strip() for v in str(args.views).split(",") if v.strip()]
     unknown = [v for v in views if v not in VIEWS]
     if unknown or not views:
-        raise CommandError(INVALID_REQUEST, "VIEW_UNKNOWN", None, f"--views: unknown view(s) {unknown}; known views: {list(VIEWS)}")
+        raise CommandError.invalid("VIEW_UNKNOWN", f"--views: unknown view(s) {unknown}; known views: {list(VIEWS)}")
     check_out(args.out, [args.asset], adopt=True)  # never into the input, but into a refined folder (its own views then)
     urdf = resolve_urdf(args.asset)
     state = read_joint_state(args.state) if args.state is not None else {}

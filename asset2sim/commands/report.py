@@ -23,7 +23,7 @@ EXITS = {0: "the media are made (or were already)", 4: "no complete refine outpu
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("out", type=Path, help="a refined output folder (the --out of refine, or an asset's folder of a flow)")
-    parser.add_argument("--reference", type=Path, default=None,
+    parser.add_argument("--reference", type=Path,
                         help="PartNet-Mobility folder with GenSim2's reference, shown in the report as refine would")
     parser.add_argument("--no-clips", action="store_true", help="skip the clips of each task-relevant joint's sweep (clips/)")
     parser.add_argument("--force", action="store_true", help="make the media again even when report.json says they are done")

@@ -15,11 +15,11 @@ EXITS = {0: "stopped", 2: "the catalog cannot be used"}
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")
-    parser.add_argument("--dataset", default=None, help="dataset to refine nightly (default: catalog schedule.dataset)")
-    parser.add_argument("--workers", type=int, default=None, help="local Dask workers (default: catalog run.workers)")
-    parser.add_argument("--dask-address", default=None, help="existing Dask scheduler (default: $DASK_ADDRESS at run time)")
-    parser.add_argument("--cron", default=None, help="cron expression (default: $ASSET2SIM_CRON, else catalog schedule.cron)")
-    parser.add_argument("--timezone", default=None, help="IANA time zone (default: $ASSET2SIM_TIMEZONE, else catalog schedule.timezone)")
+    parser.add_argument("--dataset", help="dataset to refine nightly (default: catalog schedule.dataset)")
+    parser.add_argument("--workers", type=int, help="local Dask workers (default: catalog run.workers)")
+    parser.add_argument("--dask-address", help="existing Dask scheduler (default: $DASK_ADDRESS at run time)")
+    parser.add_argument("--cron", help="cron expression (default: $ASSET2SIM_CRON, else catalog schedule.cron)")
+    parser.add_argument("--timezone", help="IANA time zone (default: $ASSET2SIM_TIMEZONE, else catalog schedule.timezone)")
     parser.add_argument("--register-only", action="store_true", help="register the deployment and exit")
 
 

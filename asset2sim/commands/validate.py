@@ -9,7 +9,7 @@ import argparse
 import json
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_REQUEST, CommandError, add_allow_outside, outside_paths
+from asset2sim.commands._status import CommandError, add_allow_outside, add_mjcf_reading, outside_paths
 from asset2sim.tasks.ingest.extract import validate_any
 from asset2sim.formats import ReadOptions
 from asset2sim.tasks.ingest.validate_input import CODES, ValidationPolicy, has_errors
@@ -24,9 +24,7 @@ EXITS = {0: "no error", 1: "the asset is refused"}
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes), a URDF file, or an MJCF (.xml) or "
                         "OpenUSD (.usd, .usda, .usdc, .usdz) file (the files it names checked first)")
-    parser.add_argument("--body", default=None, help="the body (MJCF) whose subtree is the object, in a scene with several objects with joints")
-    parser.add_argument("--mjcf-angle", choices=("radian", "degree"), default=None,
-                        help="the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention")
+    add_mjcf_reading(parser)
     parser.add_argument("--json", action="store_true", help="print the findings as a JSON list instead of text")
     parser.add_argument("--strict", action="store_true", help="treat warnings as errors")
     parser.add_argument("--quiet", "-q", action="store_true", help="print errors and warnings only (the default; --verbose adds the infos)")
@@ -40,8 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     unknown = [c for c in args.error + args.allow if c not in CODES]
     if unknown:
-        raise CommandError(INVALID_REQUEST, "CODE_UNKNOWN", None, f"--error/--allow: unknown code(s): {', '.join(unknown)} "
-                           "(docs/guide/validation.md lists the codes)")
+        raise CommandError.invalid("CODE_UNKNOWN", f"--error/--allow: unknown code(s): {', '.join(unknown)} "
+                                   "(docs/guide/validation.md lists the codes)")
     overrides = {c: "error" for c in args.error}
     overrides.update({c: "warning" for c in args.allow})
     policy = ValidationPolicy(overrides=overrides, warnings_as_errors=args.strict, check_mesh_contents=not args.paths_only)

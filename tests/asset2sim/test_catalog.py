@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from asset2sim.flows.catalog import ROW_COLUMNS, ResultCatalog, result_key
-from asset2sim.flows.catalog_config import CatalogError, load_catalog, read_manifest, read_manifest_entries
+from asset2sim.flows.catalog_config import CatalogError, load_catalog, read_manifest_entries
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -95,19 +95,19 @@ def test_a_field_error_is_one_sentence_naming_the_field(tmp_path, capsys):
 def test_manifest_parsing(tmp_path):
     m = tmp_path / "manifest.csv"
     m.write_text("id,category,prompt,reference_scale\n7119,Microwave,A microwave.,0.3\nbox,,A box.,\n")
-    entries = read_manifest(m, tmp_path)
-    assert [e.asset_id for e in entries] == ["7119", "box"]
+    entries, errors = read_manifest_entries(m, tmp_path)
+    assert [e.asset_id for e in entries] == ["7119", "box"] and errors == []
     assert entries[0].reference_scale == 0.3 and entries[0].category == "Microwave"
     assert entries[1].category is None and entries[1].asset_dir == tmp_path / "box"
     m.write_text("id,prompt\na,x\na,y\n")
-    with pytest.raises(CatalogError, match="duplicate"):
-        read_manifest(m, tmp_path)
+    (dup,) = read_manifest_entries(m, tmp_path)[1]
+    assert "duplicate" in dup.message
     m.write_text("id,prompt\n../evil,x\n")
-    with pytest.raises(CatalogError, match="invalid asset id"):
-        read_manifest(m, tmp_path)
+    (bad,) = read_manifest_entries(m, tmp_path)[1]
+    assert "invalid asset id" in bad.message
     m.write_text("id,category\na,b\n")
     with pytest.raises(CatalogError, match="prompt"):
-        read_manifest(m, tmp_path)
+        read_manifest_entries(m, tmp_path)
     # the tolerant reading keeps the good rows and types the bad ones
     m.write_text("id,prompt\na,x\n../evil,y\nb,z\n")
     entries, errors = read_manifest_entries(m, tmp_path)

@@ -91,4 +91,4 @@ def test_prepared_carries_the_extracted_asset_as_json(demo_root, tmp_path):
     """What crosses the isolation boundary (JSON) comes back equal."""
     prepared = prepare_asset(_job(demo_root, tmp_path, extras=False, asset_id="cabinet_2drawer"))
     back = Prepared.model_validate_json(prepared.model_dump_json())
-    assert back == prepared and back.extracted()[0] == prepared.asset
+    assert back == prepared and back.asset == prepared.asset and back.findings == prepared.findings
