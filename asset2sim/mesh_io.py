@@ -13,6 +13,7 @@ re-exported. Format: Wavefront OBJ / MTL (Advanced Visualizer manual, B1/B2).
 
 from __future__ import annotations
 
+import hashlib
 import io
 import os
 import threading
@@ -211,15 +212,31 @@ def _parse_obj_general(data: bytes, where: str) -> MeshData:
 
 
 def read_obj(data: bytes, where: str = "<obj>") -> MeshData:
-    """The triangles of OBJ bytes, polygons fan-triangulated, not validated (as :func:`read_mesh`).
+    """The triangles of OBJ bytes, polygons fan-triangulated, not validated (as :func:`read_mesh`); bytes parsed
+    before without a note come from :data:`_PARSED` (copies: a refine parses the same file as the input check, the
+    geometry, the collision cuts and the MJCF export read it, and a copy of it in the output folder).
 
     Raises:
         MeshReadError: a malformed ``v`` or ``f`` record (names ``where`` and the line).
     """
-    fast = _parse_obj_fast(data)
-    if fast is not None:
-        return MeshData(fast[0], fast[1])
-    return _parse_obj_general(data, where)
+    key = (len(data), hashlib.sha1(data).digest())
+    with _PARSED_LOCK:
+        hit = _PARSED.get(key)
+    if hit is None:
+        fast = _parse_obj_fast(data)
+        hit = MeshData(fast[0], fast[1]) if fast is not None else _parse_obj_general(data, where)
+        if hit.notes:  # they name ``where``
+            return hit
+        with _PARSED_LOCK:
+            _PARSED[key] = MeshData(hit.vertices.copy(), hit.faces.copy())
+        return hit
+    return MeshData(hit.vertices.copy(), hit.faces.copy())
+
+
+#: Meshes :func:`read_obj` parsed in this process, by (length, SHA-1) of their bytes; the least recently used
+#: dropped past 256 MiB of arrays.
+_PARSED: cachetools.LRUCache = cachetools.LRUCache(maxsize=256 << 20, getsizeof=lambda m: m.vertices.nbytes + m.faces.nbytes + 1)
+_PARSED_LOCK = threading.Lock()
 
 
 def load_trimesh(path: Path | str, *, skip_materials: bool = False):

@@ -2,12 +2,14 @@
 cache off, ``ASSET2SIM_CACHE=off``) in a fresh process, with the flow's first phase (verdict and exports, media
 deferred), so that nothing one refine made serves the next.
 
-    nice -n 10 .venv/bin/python benchmarks/bench_cold_cpu.py [--ids 9912,102990] [--work DIR]
+    nice -n 10 .venv/bin/python benchmarks/bench_cold_cpu.py [--ids 9912,102990] [--work DIR] [--warm]
 
 Prints per row the CPU seconds (user + system) of the refine call and of each stage (``timings.json``'s
 ``stage_cpu_seconds``), then the totals; imports and interpreter start-up are outside the figures. Each row's process
 has the environment Dask's nanny gives the flow's workers (:data:`WORKER_ENV`, unless set already): one OpenMP thread
-(CoACD's), one BLAS thread.
+(CoACD's), one BLAS thread. The lazy imports of the refine (SAPIEN, MuJoCo, OpenUSD, SciPy's parts) and its tables
+count unless ``--warm``, which makes them first as the flow's stage servers do before they fork a refine
+(:func:`asset2sim.flows.forkserver.warm_tables` after its modules): what a flow pays per object.
 """
 
 from __future__ import annotations
@@ -28,10 +30,22 @@ DEV = ROOT.parent / "shared" / "datasets" / "partnet_mobility"
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MALLOC_TRIM_THRESHOLD_": "65536"}
 
 
-def _one(row_id: str, prompt: str, out: Path) -> None:
-    """Refine one row cold in this process; print a JSON line: the refine's CPU s and the stages' CPU s."""
+def _one(row_id: str, prompt: str, out: Path, warm: bool = False) -> None:
+    """Refine one row cold in this process (``warm``: its imports made first, as a stage server's); print a JSON
+    line: the refine's CPU s and the stages' CPU s."""
     os.environ["ASSET2SIM_CACHE"] = "off"
     from asset2sim.tasks.refine import refine_asset
+
+    if warm:
+        import contextlib
+        import importlib
+
+        from asset2sim.flows import forkserver
+
+        for mod in (*forkserver.WARM_MODULES, *forkserver.PROJECT_MODULES):
+            with contextlib.suppress(Exception):
+                importlib.import_module(mod)
+        forkserver.warm_tables()
 
     c0 = time.process_time()
     refine_asset(DEV / row_id, prompt, out, skip_if_complete=False, extras=True, media=False)
@@ -45,20 +59,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--manifest", type=Path, default=DEV / "manifest.csv")
     ap.add_argument("--ids", default="", help="comma-separated subset of ids")
     ap.add_argument("--work", type=Path, default=None, help="output folder (default: a temporary one)")
+    ap.add_argument("--warm", action="store_true", help="import what the flow's stage servers import before timing")
     ap.add_argument("--one", nargs=3, help=argparse.SUPPRESS)  # internal: ID PROMPT OUT, one row in this process
     args = ap.parse_args(argv)
     if args.one:
-        _one(args.one[0], args.one[1], Path(args.one[2]))
+        _one(args.one[0], args.one[1], Path(args.one[2]), args.warm)
         return 0
     rows = list(csv.DictReader(args.manifest.open()))
     wanted = [i.strip() for i in args.ids.split(",") if i.strip()]
     rows = [r for r in rows if not wanted or r["id"] in wanted]
     work = args.work or Path(tempfile.mkdtemp(prefix="a2s-cold-cpu-"))
     print(f"load {' '.join(f'{x:.2f}' for x in os.getloadavg())}; CPU s per row, cache off, media deferred, "
-          f"{os.environ.get('OMP_NUM_THREADS', WORKER_ENV['OMP_NUM_THREADS'])} OpenMP thread(s)")
+          f"{os.environ.get('OMP_NUM_THREADS', WORKER_ENV['OMP_NUM_THREADS'])} OpenMP thread(s)" + (", imports warm" if args.warm else ""))
     total: dict[str, float] = {}
     for r in rows:
-        proc = subprocess.run([sys.executable, __file__, "--one", r["id"], r["prompt"], str(work / r["id"])],
+        proc = subprocess.run([sys.executable, __file__, "--one", r["id"], r["prompt"], str(work / r["id"]), *(["--warm"] * args.warm)],
                               capture_output=True, text=True, env={**WORKER_ENV, **os.environ})
         if proc.returncode != 0:
             print(f"{r['id']:>7} failed: {proc.stderr.strip().splitlines()[-1:]}")

@@ -117,6 +117,25 @@ def test_cache_reads_once_and_remembers_failures(tmp_path):
     assert len(cache) == 2
 
 
+def test_the_same_bytes_are_parsed_once_and_handed_out_as_copies(tmp_path, monkeypatch):
+    calls = []
+    fast, general = mesh_io._parse_obj_fast, mesh_io._parse_obj_general
+    monkeypatch.setattr(mesh_io, "_parse_obj_fast", lambda *a, **k: calls.append("fast") or fast(*a, **k))
+    monkeypatch.setattr(mesh_io, "_parse_obj_general", lambda *a, **k: calls.append("general") or general(*a, **k))
+    data = f"# {tmp_path}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n".encode()  # bytes of this test only
+    (tmp_path / "a.obj").write_bytes(data)
+    (tmp_path / "b.obj").write_bytes(data)  # a copy elsewhere: the same bytes
+    first = mesh_io.read_mesh(tmp_path / "a.obj")
+    first.vertices[0, 0] = 7.0  # the caller's own arrays
+    second = mesh_io.read_mesh(tmp_path / "b.obj")
+    assert calls == ["fast"]  # parsed once, for the first reader
+    assert second.vertices[0, 0] == 0.0 and second.faces.tolist() == [[0, 1, 2], [0, 1, 3]] and second.notes == []
+    # a parse with notes names its file: never handed to another
+    bad = f"# {tmp_path}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\nf 1 2 3\n".encode()
+    assert mesh_io.read_obj(bad, "x.obj").notes[0].startswith("x.obj:")
+    assert mesh_io.read_obj(bad, "y.obj").notes[0].startswith("y.obj:")
+
+
 def test_obj_groups_follow_o_and_g_records(tmp_path):
     groups = mesh_io.obj_groups(_write(tmp_path))
     assert [len(g) for g in groups] == [4, 3]
