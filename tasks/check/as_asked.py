@@ -150,12 +150,10 @@ def refine_request_met(spec: RequestSpec, res: StateResolution | None, found: Re
         return not_measured("no request")
     if not spec.understood and not spec.overrides:
         return not_measured("no word of the request was understood", spec.text)
-    unmet: list[dict[str, Any]] = []
-    graded = 0
-    unmet += overridden_items(spec)
+    unmet = overridden_items(spec)
     for phrase, why in (res.unapplied if res is not None else []) + list(properties or []):
         unmet.append(not_applied(phrase, why))
-    graded += len(spec.overridden) + len(properties or []) + (len(res.unapplied) if res is not None else 0)
+    graded = len(spec.overridden) + len(properties or []) + (len(res.unapplied) if res is not None else 0)
     for q in (found.quantities if found is not None else []):
         if q.kind not in GRADED_QUANTITIES or q.asked is None or q.achieved is None:
             continue
@@ -224,10 +222,7 @@ def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, 
     inside its range can work. The word was applied as asked; holding (or operating) the part needed what it rules
     out. ``words``: each word with the joints it applies to; ``strays``: each word with the joints it was applied to
     that its phrase does not name (kind ``not_named``: "the main door has a stiff hinge" made the freezer door stiff).
-    ``metrics`` unchanged without a ``request_met``."""
-    asked = next((m for m in metrics if m.name == "request_met"), None)
-    if asked is None or asked.passed is None:
-        return metrics
+    ``metrics`` unchanged without a ``request_met`` (:func:`with_unmet`)."""
     held, operable = _failing_joints(metrics)
     items = []
     for word, joints in words:

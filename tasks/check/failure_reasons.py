@@ -15,6 +15,11 @@ from asset2sim.tasks.check.verdict import (
 )
 
 
+def _failing(metrics: list[Any], names) -> list[Any]:
+    """The measures of ``metrics`` named in ``names`` that fail (:func:`metric_verdict` False), in order."""
+    return [m for m in metrics if m.name in names and metric_verdict(m) is False]
+
+
 @dataclass(frozen=True)
 class PenetrationFailure:
     """A failing penetration measure (``metric``) and its worst pair: ``kind`` ``self-contact`` (links ``link_a`` and
@@ -33,9 +38,7 @@ def penetration_failures(metrics: list[Any]) -> list[PenetrationFailure]:
     """Every failing penetration measure of ``metrics`` (:data:`PENETRATION_METRICS`) with its worst pair, the one
     the sentences (:func:`penetration_why`) and the report's frames name."""
     out = []
-    for m in metrics:
-        if m.name not in PENETRATION_METRICS or metric_verdict(m) is not False:
-            continue
+    for m in _failing(metrics, PENETRATION_METRICS):
         d = m.details or {}
         if m.name == "penetration":
             pairs = sorted(d.get("pairs") or [], key=lambda p: -float(p.get("max_depth_mm") or 0.0))
@@ -87,9 +90,7 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
     toppled in is said to swing as the object falls. ``skip``: joints the rest tier already found not held
     (:func:`why_it_failed`): their drift is said to be the same motion, with the rest tier's advice."""
     out: list[str] = []
-    for m in metrics:
-        if m.name != "robust_rest" or metric_verdict(m) is not False:
-            continue
+    for m in _failing(metrics, ("robust_rest",)):
         # step 1: per failed trial, the object not at rest, each failing joint's worst drift and the largest topple
         trials = (m.details or {}).get("trials") or {}
         worst: dict[str, tuple[float, float, str]] = {}
@@ -206,9 +207,7 @@ def _rest_why(metrics: list[Any]) -> list[str]:
     """One sentence per failing rest-tier metric: what moved, by how much against its threshold, the advice."""
     out = []
     told: set[tuple[str, str]] = set()  # (joint, engine) a hold measure said: the post-check's and the evaluation's once
-    for m in metrics:
-        if m.name not in TIERS["rest"][0] or metric_verdict(m) is not False:
-            continue
+    for m in _failing(metrics, TIERS["rest"][0]):
         d = m.details or {}
         if m.name == "rest_stability":
             what = ("the rest test diverged" if d.get("diverged") else
@@ -255,9 +254,7 @@ def _failures_why(metrics: list[Any], names: tuple[str, ...], advice: str, what:
     """One sentence per failing metric of ``names`` from its ``details["failures"]`` (each names its joint and the
     measured value), with its threshold and ``advice``; ``what`` says what was done."""
     out = []
-    for m in metrics:
-        if m.name not in names or metric_verdict(m) is not False:
-            continue
+    for m in _failing(metrics, names):
         fails = (m.details or {}).get("failures") or [f"{_num(m.value)} {m.unit}"]
         out.append(f"{what} ({m.engine}): {'; '.join(fails)} (passes when {m.threshold}). {advice}")
     return out
@@ -296,9 +293,7 @@ def _request_why(metrics: list[Any]) -> list[str]:
     """One sentence per unmet item of the request (its text carries the gap against its tolerance), with the advice
     of what failed (:func:`_request_advice`)."""
     out = []
-    for m in metrics:
-        if m.name != "request_met" or metric_verdict(m) is not False:
-            continue
+    for m in _failing(metrics, ("request_met",)):
         for u in (m.details or {}).get("unmet") or []:
             out.append(f"the output is not what was asked: {u.get('text') or u.get('phrase')} (passes when {m.threshold})."
                        + (f" {_request_advice(u)}" if _request_advice(u) else ""))
@@ -347,13 +342,12 @@ def why_it_failed(metrics: list[Any]) -> list[str]:
     """
     metrics = list(metrics)
     asked = asked_weight(metrics)
-    held_not = {j for m in metrics if m.name in HOLD_METRICS and metric_verdict(m) is False
-                for j in (m.details or {}).get("sagging") or []}
+    held_not = {j for m in _failing(metrics, HOLD_METRICS) for j in (m.details or {}).get("sagging") or []}
     explain = {"rest": _rest_why, "penetration": penetration_why, "robust_rest": lambda ms: robust_rest_why(ms, skip=held_not),
                "request": _request_why}
     out: list[str] = []
     for tier, (names, _) in TIERS.items():
-        bad = [m for m in metrics if m.name in names and metric_verdict(m) is False]
+        bad = _failing(metrics, names)
         if not bad:
             continue
         mode = mode_of(tier, bad)

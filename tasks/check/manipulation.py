@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import operability, recorded_runs, robust_rest, sweep
+from asset2sim.tasks.check import metrics, operability, recorded_runs, robust_rest, sweep
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.engines.source import SimObject
 from asset2sim.tasks.interpret.mounting import category_mounting
@@ -39,14 +39,12 @@ def measure_manipulation(engine: str, obj: SimObject, closed: dict[str, tuple[fl
     rr_config = robust_rest.RobustRestConfig(free_joints=tuple(sorted(free_joints)))
     runs["robust_rest"] = recorded_runs.robust_rest_run(engine, obj, rr_config, recorded=recorded)
     rr = robust_rest.robust_rest_metric(runs["robust_rest"], rr_config)
-    rr.details["root"] = "fixed (mounted)" if fixed_base else "free (on the ground)"
+    rr.details["root"] = metrics.root_label(fixed_base)
     rr.details["category_mounting"] = category_mounting(category).kind  # how the category is held in use, for the advice
     why_not = sweep_needed(rr) if sweep_needed is not None else None
     if why_not:
-        sw = MetricResult(name="joint_sweep", value=None, unit=unit("joint_sweep"), passed=None,
-                          details={"not_run": why_not}, engine=engine)
-        op = MetricResult(name="operability", value=None, unit=unit("operability"), passed=None,
-                          details={"not_run": why_not}, engine=engine)
+        sw, op = (MetricResult(name=name, value=None, unit=unit(name), passed=None, details={"not_run": why_not}, engine=engine)
+                  for name in ("joint_sweep", "operability"))
     else:
         runs["joint_sweep"] = recorded_runs.sweep_run(engine, obj, closed, recorded=recorded)
         runs["operability"] = recorded_runs.operability_run(engine, obj, closed, category=category, labels=labels, recorded=recorded)

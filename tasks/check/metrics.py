@@ -41,6 +41,11 @@ class RestTrace:
     """joint -> (lower, upper) rad or m as the engine holds them (infinite for a continuous joint)."""
 
 
+def root_label(fixed: bool) -> str:
+    """How a check held the root: "fixed (mounted)" or "free (on the ground)"."""
+    return "fixed (mounted)" if fixed else "free (on the ground)"
+
+
 def penetration(session: SimSession) -> MetricResult:
     """Phi at the session's current state, mm, with the colliding link pairs (``details.pairs``)."""
     phi, pairs = session.self_penetration()

@@ -50,8 +50,8 @@ def session_metrics(source: SimSource, engine: str, options: SessionOptions) -> 
     with ``details["root"]``; a missing package gives ``details.skipped``, a load or run error
     ``details.error`` and ``passed`` False."""
     results = _session_metrics(source, engine, options)
-    for m in results:  # how the root was held (the post-check's label, postcheck.root_label)
-        m.details["root"] = "fixed (mounted)" if options.fixed_base else "free (on the ground)"
+    for m in results:
+        m.details["root"] = metrics.root_label(options.fixed_base)
     return results
 
 

@@ -70,16 +70,14 @@ def _band_verdict(where: str, quantity: str, unit: str, declared: float | None, 
     f = _factor(declared, estimate)
     below = low is not None and declared < low
     above = high is not None and declared > high
-    if not (below or above):
-        return ValueVerdict(where=where, quantity=quantity, unit=unit, declared=declared, estimate=estimate, low=low, high=high,
-                            factor=f, verdict="plausible",
-                            reason=f"{declared:.4g} {unit} within {_span(low, high, unit)} ({what})")
-    edge = low if below else high
+    reason = f"{declared:.4g} {unit} within {_span(low, high, unit)} ({what})"
+    if below or above:
+        edge = low if below else high
+        reason = (f"{declared:.4g} {unit} is {'below' if below else 'above'} {_span(low, high, unit)}"
+                  + (f", x{declared / edge:.3g} of its {'lower' if below else 'upper'} end" if edge else "")
+                  + (f" (x{f:.3g} the estimate)" if f is not None else "") + f" ({what})")
     return ValueVerdict(where=where, quantity=quantity, unit=unit, declared=declared, estimate=estimate, low=low, high=high,
-                        factor=f, verdict="implausible",
-                        reason=(f"{declared:.4g} {unit} is {'below' if below else 'above'} {_span(low, high, unit)}"
-                                + (f", x{declared / edge:.3g} of its {'lower' if below else 'upper'} end" if edge else "")
-                                + (f" (x{f:.3g} the estimate)" if f is not None else "") + f" ({what})"))
+                        factor=f, verdict="implausible" if below or above else "plausible", reason=reason)
 
 
 def _span(low: float | None, high: float | None, unit: str) -> str:
@@ -133,15 +131,15 @@ def inertia_verdict(where: str, tensor: np.ndarray | None, mass: float | None, p
     eig = np.sort(np.linalg.eigvalsh(t) if written is None else np.asarray(written, float))
     if written is not None:
         trace = float(np.sum(eig))
+    invalid = ""  # why no rigid body has these principal moments
     if eig[0] <= 0:
+        invalid = ": not positive definite"
+    elif eig[0] + eig[1] < eig[2] * (1 - TRIANGLE_SLACK):
+        invalid = (f" violate the triangle inequality ({eig[0]:.4g} + {eig[1]:.4g} < {eig[2]:.4g}): no rigid body has them"
+                   + (" (the simulator changed them on loading)" if written is not None else ""))
+    if invalid:
         return ValueVerdict(where=where, quantity="inertia", unit="kg*m^2", declared=trace, estimate=est, factor=_factor(trace, est),
-                            verdict="implausible", reason=f"principal moments {_moments(eig)} kg*m^2: not positive definite")
-    if eig[0] + eig[1] < eig[2] * (1 - TRIANGLE_SLACK):
-        return ValueVerdict(where=where, quantity="inertia", unit="kg*m^2", declared=trace, estimate=est, factor=_factor(trace, est),
-                            verdict="implausible",
-                            reason=f"principal moments {_moments(eig)} kg*m^2 violate the triangle inequality "
-                                   f"({eig[0]:.4g} + {eig[1]:.4g} < {eig[2]:.4g}): no rigid body has them"
-                                   + (" (the simulator changed them on loading)" if written is not None else ""))
+                            verdict="implausible", reason=f"principal moments {_moments(eig)} kg*m^2{invalid}")
     if not traces:
         return ValueVerdict(where=where, quantity="inertia", unit="kg*m^2", declared=trace, verdict="plausible",
                             reason=f"valid (principal moments {_moments(eig)} kg*m^2); no geometry to compare with")
@@ -165,12 +163,10 @@ def com_verdict(where: str, com: np.ndarray | None, bbox_min: np.ndarray, bbox_m
     outside = np.maximum(np.maximum(lo - margin - c, c - hi - margin), 0.0)
     dist = float(np.linalg.norm(c - np.asarray(geometric, float)))
     out = float(np.linalg.norm(outside))
-    if out > 0:
-        return ValueVerdict(where=where, quantity="center_of_mass", unit="m", declared=dist, estimate=0.0, verdict="implausible",
-                            reason=f"({', '.join(f'{v:.4g}' for v in c)}) m lies {out:.4g} m outside the link's geometry "
-                                   f"(its box grown by {margin:.3g} m); {dist:.4g} m from the geometric center of mass")
-    return ValueVerdict(where=where, quantity="center_of_mass", unit="m", declared=dist, estimate=0.0, verdict="plausible",
-                        reason=f"inside the link's geometry (its box grown by {margin:.3g} m); {dist:.4g} m from the geometric center of mass")
+    place = f"({', '.join(f'{v:.4g}' for v in c)}) m lies {out:.4g} m outside" if out > 0 else "inside"
+    return ValueVerdict(where=where, quantity="center_of_mass", unit="m", declared=dist, estimate=0.0,
+                        verdict="implausible" if out > 0 else "plausible",
+                        reason=f"{place} the link's geometry (its box grown by {margin:.3g} m); {dist:.4g} m from the geometric center of mass")
 
 
 def scale_verdict(largest: float, typical: float | None, category: str) -> ValueVerdict:

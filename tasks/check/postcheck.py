@@ -214,7 +214,7 @@ def run_post_check(obj: SimObject, config: RefineConfig, closed: dict[str, tuple
     div = metrics.divergence(trace, recording.root_series, recording.joint_series, conv.timestep, extent, engine=engine)
     base = [pen, stab, osc, sag_metric, tilt, nested, ground, div]
     for m in base:
-        m.details["root"] = root_label(fixed)
+        m.details["root"] = metrics.root_label(fixed)
     recorded = recorded if recorded is not None else RecordedRuns()
 
     def partial_escalated(rr: MetricResult) -> bool:
@@ -271,8 +271,3 @@ def sweep_not_run(metrics: list[MetricResult]) -> bool:
     """The joint sweep of ``metrics`` was not run (an escalation round:
     :func:`run_post_check`)."""
     return any(m.name == "joint_sweep" and "not_run" in m.details for m in metrics)
-
-
-def root_label(fixed: bool) -> str:
-    """How a check held the root: "fixed (mounted)" or "free (on the ground)"."""
-    return "fixed (mounted)" if fixed else "free (on the ground)"

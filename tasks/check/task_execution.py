@@ -16,6 +16,7 @@ from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_side
 from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits
 from asset2sim.tasks.check.gripper_motion import GripperMove, Motion, TaskConfig
+from asset2sim.tasks.check.metrics import root_label
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET, check_action
 from asset2sim.tasks.check.support import SupportWatch
 from asset2sim.urdf import UrdfError, UrdfModel
@@ -215,7 +216,7 @@ def run_task(engine: str, obj: SimObject, joints: dict[str, tuple[float, float, 
         model = source.model(mode="lenient")
     except (UrdfError, OSError):
         model = None
-    run = TaskRun(engine=engine, root="fixed (mounted)" if fixed_base else "free (on the ground)", task=task, config=cfg)
+    run = TaskRun(engine=engine, root=root_label(fixed_base), task=task, config=cfg)
     opts = obj.options()
     shares = (1.0,) if fixed_base else (1.0, *cfg.retry_speed_shares)  # a mounted object cannot slide or tip
     for name, end in joints.items():

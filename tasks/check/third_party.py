@@ -64,6 +64,17 @@ def _command(name: str) -> str:
     return found
 
 
+def _run(args: list[str], cwd: str) -> subprocess.CompletedProcess:
+    """A checker's command line run in its scratch folder ``cwd``, output captured, within :data:`COMMAND_TIMEOUT`."""
+    return subprocess.run(args, capture_output=True, text=True, timeout=COMMAND_TIMEOUT, cwd=cwd)
+
+
+def _no_report(res: CheckerResult, proc: subprocess.CompletedProcess, what: str = "no report") -> CheckerResult:
+    """``res`` with the error that the command left no report: its exit status and the tail of what it printed."""
+    res.errors.append(f"{what} (exit {proc.returncode}): {(proc.stderr or proc.stdout).strip()[-300:]}")
+    return res
+
+
 def check_urdf_parser_py(urdf: Path) -> CheckerResult:
     """Parse ``urdf`` with ``urdf_parser_py``: errors the exception it raises,
     warnings what its ``on_error`` hook receives.
@@ -99,12 +110,10 @@ def check_urdf_validator(urdf: Path) -> CheckerResult:
     cmd = _command("urdf_validate")
     res = CheckerResult("urdf-validator", str(urdf))
     with tempfile.TemporaryDirectory() as tmp:
-        proc = subprocess.run([cmd, "--output-dir", tmp, str(Path(urdf).resolve())], capture_output=True, text=True,
-                              timeout=COMMAND_TIMEOUT, cwd=tmp)
+        proc = _run([cmd, "--output-dir", tmp, str(Path(urdf).resolve())], tmp)
         reports = list(Path(tmp).glob("*.json"))
         if not reports:
-            res.errors.append(f"no report (exit {proc.returncode}): {(proc.stderr or proc.stdout).strip()[-300:]}")
-            return res
+            return _no_report(res, proc)
         rep = json.loads(reports[0].read_text())
     res.errors += [_text(x) for x in rep.get("critical_issues", [])]
     schema = rep.get("schema") or {}
@@ -125,15 +134,13 @@ def check_mjcf_doctor(xml: Path) -> CheckerResult:
     cmd = _command("mjcf-doctor")
     res = CheckerResult("mjcf-doctor", str(xml))
     with tempfile.TemporaryDirectory() as tmp:  # MuJoCo appends its warnings to MUJOCO_LOG.TXT in the working directory
-        proc = subprocess.run([cmd, "check", "--json", str(Path(xml).resolve())], capture_output=True, text=True,
-                              timeout=COMMAND_TIMEOUT, cwd=tmp)
+        proc = _run([cmd, "check", "--json", str(Path(xml).resolve())], tmp)
     out = proc.stdout
     start = out.find("\n[")
     try:
         reports = json.loads(out[start + 1:] if start >= 0 else out)
     except ValueError:
-        res.errors.append(f"no JSON report (exit {proc.returncode}): {(proc.stderr or out).strip()[-300:]}")
-        return res
+        return _no_report(res, proc, "no JSON report")
     for rep in reports:
         for f in rep.get("findings", []):
             _add(res, f.get("level"), f"{f.get('code')} {f.get('subject')}: {f.get('message')}", "ERROR", "WARN")
@@ -219,12 +226,10 @@ def check_simcheck(urdf: Path) -> CheckerResult:
     root = "--fixed-base" if read_root(Path(urdf).parent).fixed else "--free-base"
     with tempfile.TemporaryDirectory() as tmp:
         report = Path(tmp) / "simcheck.json"
-        proc = subprocess.run([cmd, "check", "--object", root, "--no-config", "--no-cache", "--fail-on", "never", "-q",
-                               "--json", str(report), str(Path(urdf).resolve())], capture_output=True, text=True,
-                              timeout=COMMAND_TIMEOUT, cwd=tmp)
+        proc = _run([cmd, "check", "--object", root, "--no-config", "--no-cache", "--fail-on", "never", "-q",
+                     "--json", str(report), str(Path(urdf).resolve())], tmp)
         if not report.is_file():
-            res.errors.append(f"no report (exit {proc.returncode}): {(proc.stderr or proc.stdout).strip()[-300:]}")
-            return res
+            return _no_report(res, proc)
         asset = json.loads(report.read_text())  # one object per file (a list for several)
     for check in asset.get("results", []):
         for f in check.get("findings", []):
