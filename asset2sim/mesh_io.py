@@ -435,9 +435,14 @@ def hull_obj(points: np.ndarray, num: Callable[[float], str] = repr) -> bytes:
         scipy.spatial.QhullError: fewer than 4 points not in one plane.
         ValueError: ``points`` is not (n, 3).
     """
-    verts, tris = convex_hull_mesh(points)
-    lines = [f"v {num(x)} {num(y)} {num(z)}" for x, y, z in verts.tolist()]
-    lines += [f"f {i} {j} {k}" for i, j, k in tris + 1]
+    return obj_bytes(*convex_hull_mesh(points), num)
+
+
+def obj_bytes(vertices: np.ndarray, faces: np.ndarray, num: Callable[[float], str] = repr) -> bytes:
+    """OBJ bytes of a triangle mesh: ``vertices`` (k, 3), each coordinate written by ``num``, and ``faces`` (m, 3)
+    0-based vertex indices."""
+    lines = [f"v {num(x)} {num(y)} {num(z)}" for x, y, z in np.asarray(vertices, float).tolist()]
+    lines += [f"f {i} {j} {k}" for i, j, k in np.asarray(faces, int) + 1]
     return ("\n".join(lines) + "\n").encode()
 
 

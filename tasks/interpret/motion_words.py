@@ -93,14 +93,13 @@ class MotionWords:
 
 
 def dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[tuple[int, str]],
-                    warnings: list[str], head_starts: list[int], ordinals: dict[int, tuple[int, str]] | None = None) -> MotionWords:
+                    warnings: list[str], head_starts: list[int], ordinals: dict[int, tuple[int, str]]) -> MotionWords:
     """The motion the dynamics words ask (explicit damping phrases win over cues); phrases go to ``matched``,
     contradictions to ``warnings``; ``ordinals`` (part noun end -> (ordinal, order), ``state_words.JointStates``)
     narrow a word to the one part its noun names by its place.
     A mass word ("a heavy box", "a heavy 25 kg door", "a heavy drawer") is a mass, not a stiffness; "heavy" before a
     joint word ("a heavy hinge") is stiff."""
     damping, strong_set, holds, spring, stiff, free = "moderate", False, False, False, False, False
-    places = ordinals or {}
     motions: list[MotionPhrase] = []
     hits = scan(low, _DYN_TABLE)
     for h in hits:
@@ -113,13 +112,13 @@ def dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[t
             matched.append((h.start, ("no " if neg else "") + h.text))
             if not neg:
                 motions.append(MotionPhrase(kind=_motion_kind(kind, val, h.flag), phrase=h.text,
-                                            **_motion_part(low, h.start, h.end, head_starts, places)))
+                                            **_motion_part(low, h.start, h.end, head_starts, ordinals)))
             continue
         matched.append((h.start, ("not " if neg else "") + h.text))
         if neg:
             continue
         motions.append(MotionPhrase(kind=_motion_kind(kind, val, h.flag), phrase=h.text,
-                                    **_motion_part(low, h.start, h.end, head_starts, places)))
+                                    **_motion_part(low, h.start, h.end, head_starts, ordinals)))
         holds |= kind == "hold"
         stiff |= kind in ("stiff", "heavy")
         free |= kind == "free"
@@ -130,7 +129,7 @@ def dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[t
         if negated(low, h.start):
             continue
         matched.append((h.start, h.text))
-        part = _motion_part(low, h.start, h.end, head_starts, places)
+        part = _motion_part(low, h.start, h.end, head_starts, ordinals)
         motions.append(MotionPhrase(kind="slides", mechanism=str(h.value), phrase=h.text, **{**part, "label": part["label"] or "drawer"}))
     motions.sort(key=lambda m: low.find(m.phrase))
     for part in dict.fromkeys((m.label, m.ordinal, m.order) for m in motions):  # "the main door" and "the freezer door" apart

@@ -11,9 +11,10 @@ from importlib import resources
 from typing import get_args
 
 import yaml
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import ValidationError
 
 from asset2sim.engines.base import session_root_options
+from asset2sim.schemas import Frozen
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import MountingKind, RootMount
 from asset2sim.schemas.request import RequestSpec
@@ -40,10 +41,9 @@ class MountingError(ValueError):
     """Bad mounting prior data; the message names the yaml file and key."""
 
 
-class MountingPrior(BaseModel):
+class MountingPrior(Frozen):
     """One category's entry of ``mounting.yaml``."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     kind: MountingKind
     source: str
 

@@ -10,8 +10,9 @@ import functools
 from importlib import resources
 
 import yaml
-from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
+from pydantic import ValidationError, model_validator
 
+from asset2sim.schemas import Frozen
 from asset2sim.tasks.interpret.part_labels import canonical_label
 
 _FILE = "operating_forces.yaml"
@@ -21,11 +22,10 @@ class OperatingForcesError(ValueError):
     """Bad operating-force data; the message names the yaml file and key."""
 
 
-class ForceRange(BaseModel):
+class ForceRange(Frozen):
     """A part's real operating range: ``force_n`` (lo, hi) N and/or ``torque_nm``
     (lo, hi) N m about the axis; ``sources`` keys of the table's ``sources``."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     force_n: tuple[float, float] | None = None
     torque_nm: tuple[float, float] | None = None
     sources: tuple[str, ...]
@@ -45,10 +45,9 @@ class ForceRange(BaseModel):
         return self
 
 
-class OperatingForces(BaseModel):
+class OperatingForces(Frozen):
     """The whole table (``operating_forces.yaml``)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     sources: dict[str, str]
     default: ForceRange
     parts: dict[str, ForceRange]

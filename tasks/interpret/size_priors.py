@@ -149,15 +149,15 @@ class LargestDimension:
     typical: float | None
 
 
-def plausible_largest_dimension(category: str, request: RequestSpec | str | None = None) -> LargestDimension:
-    """The span of plausible largest dimensions of an object of ``category`` as
-    ``request`` sizes it (:func:`target_size`): the typical largest dimension divided and multiplied by
+def plausible_largest_dimension(category: str) -> LargestDimension:
+    """The span of plausible largest dimensions of an object of ``category`` at its
+    typical size (:func:`target_size`): the typical largest dimension divided and multiplied by
     :data:`SCALE_TOLERANCE`; for ``Generic``, :data:`GENERIC_SIZE_M` and no typical one (None). The audit's scale
     verdict and refine's choice to keep a size in real units both read it."""
     if category == GENERIC:
         lo, hi = GENERIC_SIZE_M
         return LargestDimension(lo, hi, None)
-    typical = float(max(target_size(category, request).dims))
+    typical = float(max(target_size(category).dims))
     return LargestDimension(*plausible_span(typical), typical)
 
 

@@ -159,9 +159,9 @@ _END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:are\s+)?(?:both|all|
                        r"(?:\s+(?:is|are|was|were|set|turned|switched|flipped|pushed|pulled|left|stays?|kept))?\s+$")
 
 
-def _state_hits(low: str, numeric: list[rv.Found] | None = None) -> list[Hit]:
+def _state_hits(low: str, numeric: list[rv.Found]) -> list[Hit]:
     """State phrases left to right, not overlapping: the state table's words and the ``numeric`` states."""
-    nums = [Hit(f.start, f.end, f.text, f.value, "number") for f in (numeric or [])]  # left to right, not overlapping
+    nums = [Hit(f.start, f.end, f.text, f.value, "number") for f in numeric]  # left to right, not overlapping
     num_ends = [n.end for n in nums]
 
     def under_number(h: Hit) -> bool:  # the first number ending after h starts overlaps it when it starts before h ends
@@ -303,7 +303,7 @@ class JointStates:
     ordinals: dict[int, tuple[int, str]]
 
 
-def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found] | None = None) -> JointStates:
+def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found]) -> JointStates:
     """The joint-state requests of ``low`` (``numeric``: the states in numbers, :func:`rv.state_quantities`)."""
     # step 1: the state words, the part nouns and the ordinals, left to right
     bands = _state_hits(low, numeric)  # every list here is left to right and not overlapping

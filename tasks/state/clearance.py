@@ -21,7 +21,7 @@ from asset2sim.urdf import UrdfModel
 #: Running clearance (m): the writer's (:func:`asset2sim.tasks.assemble.sliding_clearance.clear_sliding_contact`).
 CLEARANCE = RUNNING_CLEARANCE
 __all__ = ["CLEARANCE", "ClearanceRepair", "clearance_for_blocked", "link_pieces", "sat_gap", "touching_joints",
-           "write_overrides", "write_piece_overrides"]
+           "write_piece_overrides"]
 
 
 @dataclass
@@ -116,11 +116,6 @@ def touching_joints(model: UrdfModel, pairs: list[tuple[str, str]], state: dict[
             if (a in moved) != (b in moved):
                 out[j.name] = float(state[j.name])
     return out
-
-
-def write_overrides(rep: ClearanceRepair, scale: float, out_dir: Path, folder: str) -> dict[str, list[CollisionPiece]]:
-    """:func:`write_piece_overrides` of the repaired pieces (``<link>_clear<i>.obj``)."""
-    return write_piece_overrides(rep.pieces, scale, out_dir, folder, "clear")
 
 
 def write_piece_overrides(pieces: dict[str, list[np.ndarray]], scale: float, out_dir: Path, folder: str,

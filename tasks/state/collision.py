@@ -36,12 +36,6 @@ class CollisionPiece:
     source: GeometryRef
 
 
-def _obj_text(vertices: np.ndarray, faces: np.ndarray) -> str:
-    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in np.asarray(vertices, float)]
-    lines += [f"f {int(a) + 1} {int(b) + 1} {int(c) + 1}" for a, b, c in np.asarray(faces, int)]
-    return "\n".join(lines) + "\n"
-
-
 def convexity_ratio(path: Path, cache=None) -> float:
     """Surface area of the mesh over the area of its convex hull (>= ~1 for
     concave closed surfaces, ~1 for convex ones; open surfaces can be < 1)."""
@@ -248,7 +242,7 @@ def _write_pieces(asset: AssetDescription, changed: dict, out_dir: Path, folder:
                     continue
                 for i, (v, f) in enumerate(changed[(ln, k)]):
                     rel = f"{folder}/{file_names.file_stem(ln)}_{k}_{i}.obj"
-                    mesh_io.write_file(file_names.join_inside(out_dir, rel), _obj_text(v, f).encode())
+                    mesh_io.write_file(file_names.join_inside(out_dir, rel), mesh_io.obj_bytes(v, f))
                     pieces_out.append(CollisionPiece(filename=rel, source=g))
             elif g.kind == "mesh" and g.filename:
                 pieces_out.append(CollisionPiece(filename=g.filename, source=g))

@@ -18,10 +18,10 @@ from asset2sim.tasks.assemble import write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.geometry.limits import subtrees
-from asset2sim.tasks.state.clearance import link_pieces, write_piece_overrides
+from asset2sim.tasks.state.clearance import ClearanceRepair, link_pieces, write_piece_overrides
 from asset2sim.urdf import UrdfModel
 
-__all__ = ["CONTACT_BAND", "FLOOR_GAP", "GROUND_CLEARANCE", "SUPPORT_AREA", "THIN_OBJECT", "GroundClearance", "apply_ground_clearance", "floor_limited_state",
+__all__ = ["CONTACT_BAND", "FLOOR_GAP", "GROUND_CLEARANCE", "SUPPORT_AREA", "THIN_OBJECT", "apply_ground_clearance", "floor_limited_state",
            "floor_stops", "ground_clearance"]
 
 #: Floor clearance (m) of a moving part near the ground: levelling and rubber
@@ -37,15 +37,6 @@ SUPPORT_AREA = 0.5
 SLIDE_ANGLE = math.radians(30.0)
 #: A squeeze never takes more than this fraction of a piece's height.
 MAX_SQUEEZE = 0.5
-
-
-@dataclass
-class GroundClearance:
-    """Pieces with floor clearance for the links that needed it."""
-
-    pieces: dict[str, list[np.ndarray]] = field(default_factory=dict)
-    """link -> every mesh collision piece of the link (k, 3) m in the link frame"""
-    notes: list[str] = field(default_factory=list)
 
 
 def _moving_joint(model: UrdfModel) -> dict[str, object]:
@@ -86,14 +77,14 @@ def _drags(joint, R_parent_joint: np.ndarray) -> bool:
     return False  # continuous: wheels and knobs roll or spin
 
 
-def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]) -> GroundClearance:
+def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]) -> ClearanceRepair:
     """Floor clearance for the moving parts of the written URDF ``model`` (file ``urdf``) at ``state`` (rad or m) that rest
     on the ground (module docstring). Raises OSError: a collision file cannot be read."""
     scene = _FloorScene(model, urdf)
     poses = model.link_poses(state)
     world = scene.posed(poses)
     lows = {ln: min(float(W[:, 2].min()) for W in ws) for ln, ws in world.items()}
-    rep = GroundClearance()
+    rep = ClearanceRepair()
     if not lows:
         return rep
     z_g = min(lows.values())

@@ -17,10 +17,10 @@ from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
 
 
-def requested_bands(ctx: EstimationContext, kin: SimSession, scale: float | None = None) -> tuple[dict[str, str], list[str]]:
-    """(joint -> band, notes with warnings first) from the request at ``scale`` (default :func:`choose_scale`;
-    ``kin``, the input's kinematics session, moved for ordinals and ends)."""
-    res = request_apply.resolve_states(ctx, kin, choose_scale(ctx)[0] if scale is None else scale)
+def requested_bands(ctx: EstimationContext, kin: SimSession) -> tuple[dict[str, str], list[str]]:
+    """(joint -> band, notes with warnings first) from the request at the scale of :func:`choose_scale`
+    (``kin``, the input's kinematics session, moved for ordinals and ends)."""
+    res = request_apply.resolve_states(ctx, kin, choose_scale(ctx)[0])
     return res.bands, res.warnings + res.notes
 
 

@@ -62,7 +62,7 @@ def fuse(estimates: Iterable[tuple[float, float]], *, log_space: bool = False, m
     return Fused(x_hat, s_hat, len(xs), tuple(wi / W for wi in w))
 
 
-def fuse_all(groups: Mapping[str, Iterable[tuple[float, float]]], *, log_space: bool = False, min_std: float = 0.0) -> dict[str, Fused]:
+def fuse_all(groups: Mapping[str, Iterable[tuple[float, float]]]) -> dict[str, Fused]:
     """:func:`fuse` per parameter name; parameters with no estimates are left out.
 
     Raises:
@@ -74,7 +74,7 @@ def fuse_all(groups: Mapping[str, Iterable[tuple[float, float]]], *, log_space: 
         if not est:
             continue
         try:
-            out[name] = fuse(est, log_space=log_space, min_std=min_std)
+            out[name] = fuse(est)
         except ValueError as exc:
             raise ValueError(f"{name}: {exc}") from None
     return out

@@ -119,17 +119,14 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
             f0 = cs.fraction(state[name] / unit)
             fr = np.clip([f0 - 0.05, f0, f0 + 0.05], 0.0, 1.0)
         hold = 0.0
-        for f in fr:
-            st = {**state, name: cs.position(float(f)) * unit}
-            ld = physics.joint_loads(kin, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
-            hold = max(hold, abs(ld[name].gravity_load))
         # a part stays shut once closed: friction also holds a load pushing it open near its closed end
-        for f in CLOSED_HOLD_FRACTIONS:
+        for f, near_closed in [*((f, False) for f in fr), *((f, True) for f in CLOSED_HOLD_FRACTIONS)]:
             st = {**state, name: cs.position(float(f)) * unit}
             ld = physics.joint_loads(kin, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
-            if ld[name].gravity_load * cs.direction > 0:
+            if not near_closed or ld[name].gravity_load * cs.direction > 0:
                 hold = max(hold, abs(ld[name].gravity_load))
-        on_stop = _on_stop(loads[name], cs, state[name], unit, set_down.joint_band(cs.lower * unit, cs.upper * unit, name in prismatic))
+        band = set_down.joint_band(cs.lower * unit, cs.upper * unit, name in prismatic)
+        on_stop = _on_stop(loads[name], cs, state[name], unit, band)
         if ch.free_moving and on_stop:
             hold = 0.0  # asked to move freely and resting on the stop its weight presses it onto: nothing to hold
         spring, balanced = None, False
@@ -164,10 +161,8 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
             # it off (a balanced part's spring carries its weight: only the lean's sideways share is left); each
             # landing's energy is taken within its band, unless it moves the part into a stop
             ld = loads[name]
-            band = set_down.joint_band(cs.lower * unit, cs.upper * unit, name in prismatic)
-            at_stop = _on_stop(ld, cs, state[name], unit, band)
             lean = (set_down.lean_load(ld) - abs(ld.gravity_load) * math.cos(set_down.SET_DOWN_LEAN) if balanced
-                    else set_down.lean_load(ld, on_stop=at_stop))
+                    else set_down.lean_load(ld, on_stop=on_stop))
             hold, static = max(hold, set_down.LEAN_SAFETY / physics.HOLD_SAFETY * lean), max(static, lean)
             impact, landing = set_down.landing_friction(landed[name], band, _stops(cs, state[name] / unit, band / unit),
                                                         0.0 if balanced else ld.gravity_load)

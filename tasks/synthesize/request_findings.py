@@ -25,7 +25,7 @@ if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
     from asset2sim.tasks.synthesize.context import EstimationContext
 
 
-def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResolution | None = None) -> list[str]:
+def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResolution) -> list[str]:
     """One line per departure of an overlay from the request: total mass and sizes (5 %), materials, explicit
     joint parameters, initial positions vs the targets' intervals."""
     out: list[str] = []
@@ -53,7 +53,7 @@ def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResoluti
             v = getattr(jd, d.quantity)
             if abs(v - d.value) > NUMBER_TOLERANCE * max(d.value, 1e-12):
                 out.append(f"joint {n}: {d.quantity} {v:.4g} but the request asks {d.value:g} ('{d.phrase}')")
-    if res is not None and overlay.initial_joint_positions:
+    if overlay.initial_joint_positions:
         for n, t in res.targets.items():
             if n not in overlay.initial_joint_positions or t.interval is None:
                 continue

@@ -89,8 +89,8 @@ class _Body:
 
 def landings(session, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
              subtrees: dict[str, list[str]], hull_points: dict[str, np.ndarray], *,
-             root_rotation: np.ndarray | None = None, joints: list[str] | None = None) -> dict[str, list[Landing]]:
-    """The :class:`Landing` of every joint of ``subtrees`` (or ``joints``) in each of :data:`LANDING_TRIALS`.
+             root_rotation: np.ndarray | None = None) -> dict[str, list[Landing]]:
+    """The :class:`Landing` of every joint of ``subtrees`` in each of :data:`LANDING_TRIALS`.
 
     Args:
         session: a fixed-base session of the unscaled input asset (kinematics; set to ``state`` here and left so).
@@ -119,7 +119,7 @@ def landings(session, links: dict[str, LinkPhysics], state: dict[str, float], sc
         lp = links.get(ln)
         if lp is not None and lp.mass > 0:
             bodies[ln] = _Body(lp.mass, pos + R @ np.asarray(lp.com, float), R @ lp.inertia.matrix() @ R.T)
-    names = [n for n in (joints if joints is not None else subtrees) if n in subtrees and n in session.joint_child]
+    names = [n for n in subtrees if n in session.joint_child]
     out: dict[str, list[Landing]] = {n: [] for n in names}
     if not bodies or not pts:
         return out

@@ -47,15 +47,14 @@ the object into the ground or lifts it rather than sliding it, as the task's gri
 (:attr:`~asset2sim.tasks.check.gripper_motion.TaskConfig.vertical_share`): no ground-friction bound (dimensionless)."""
 
 
-def operating_effort(overlay: Overlay, asset: AssetDescription, joint: str, geometry: dict[str, LinkGeometry],
-                     config: ProbeConfig | None = None) -> float:
+def operating_effort(overlay: Overlay, asset: AssetDescription, joint: str, geometry: dict[str, LinkGeometry]) -> float:
     """Largest effort the probe applies to ``joint``: F_max r (N*m), prismatic
     F_max (N); ``geometry``: link -> boxes at scale 1 in the link frame.
 
     Raises:
         KeyError: ``joint`` is not in ``asset``.
     """
-    cfg = config or ProbeConfig()
+    cfg = ProbeConfig()
     jd = asset.joint(joint)
     total = sum(lp.mass for lp in overlay.links.values())
     f_max = max(cfg.min_force, cfg.force_factor * total * GRAVITY)
@@ -99,8 +98,7 @@ def com_lever(overlay: Overlay, asset: AssetDescription, joint: str) -> float:
     return float(_off_axis(np.asarray(lp.com, float)[None, :], _unit_axis(asset, joint))[0])
 
 
-def friction_caps(overlay: Overlay, before: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry],
-                  config: ProbeConfig | None = None) -> dict[str, float]:
+def friction_caps(overlay: Overlay, before: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry]) -> dict[str, float]:
     """Probe's friction cap (N*m or N) per movable joint of ``overlay``
     (module docstring), at least the friction of ``before`` (before escalation).
 
@@ -109,7 +107,7 @@ def friction_caps(overlay: Overlay, before: Overlay, asset: AssetDescription, ge
     """
     caps: dict[str, float] = {}
     for name, d, sub_mass, lever, floor in _movable(overlay, before, asset):
-        cap = OPERABLE_SHARE * operating_effort(overlay, asset, name, geometry, config) - sub_mass * GRAVITY * lever
+        cap = OPERABLE_SHARE * operating_effort(overlay, asset, name, geometry) - sub_mass * GRAVITY * lever
         if d.inertia_axis:  # above it the engine's friction motor locks the joint (a light handle)
             cap = min(cap, max_stable_friction(d.inertia_axis))
         caps[name] = float(max(cap, floor))

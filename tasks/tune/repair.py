@@ -64,8 +64,8 @@ def clearance_repair(model: UrdfModel, urdf: Path, joints: dict[str, float], sta
     rep = clearance.clearance_for_blocked(model, urdf, joints, state, limits.subtrees(model))
     if not rep.pieces:
         return None
-    return CollisionRepair("running clearance", {**overrides, **clearance.write_overrides(rep, scale, out_dir, folder)},
-                           list(rep.notes))
+    new = clearance.write_piece_overrides(rep.pieces, scale, out_dir, folder, "clear")
+    return CollisionRepair("running clearance", {**overrides, **new}, list(rep.notes))
 
 
 def sweep_repairs(obj: SimObject, asset: AssetDescription, sweep_metric: MetricResult, blocked: dict[str, float],

@@ -51,7 +51,7 @@ def _deepest_stop(session, stall: float, goal: float, joint: str, sub: list[str]
 
 
 def decompose_for_blocked(obj: SimObject, asset: AssetDescription, metric: MetricResult, replaced: set[str],
-                          scale: float, out_dir: Path, folder: str, *, cache=None,
+                          scale: float, out_dir: Path, folder: str, *,
                           max_decompositions: int = 32) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
     """(collision overrides link -> pieces, notes) repairing the joints the
     ``joint_sweep`` ``metric`` found stopped short (module docstring). ``obj``:
@@ -84,7 +84,7 @@ def decompose_for_blocked(obj: SimObject, asset: AssetDescription, metric: Metri
             if pair is None or depth < MIN_DEPTH or set(pair) & (replaced | set(overrides)):
                 continue
             session.set_joint_positions({**state, name: q})
-            new, dnotes = collision.improve_collisions(session, asset, [pair], scale, out_dir, cache=cache,
+            new, dnotes = collision.improve_collisions(session, asset, [pair], scale, out_dir,
                                                        max_decompositions=max_decompositions, folder=folder)
             if new:
                 overrides.update(new)

@@ -84,7 +84,7 @@ def test_a_stop_along_the_motion_and_a_free_channel_are_left_alone(tmp_path):
 def test_overrides_are_written_at_the_input_scale(tmp_path):
     urdf = write_channel(tmp_path, side_gap=0.0)
     _, rep = _repair(urdf)
-    out = clearance.write_overrides(rep, 0.5, tmp_path, "collision_x")
+    out = clearance.write_piece_overrides(rep.pieces, 0.5, tmp_path, "collision_x", "clear")
     (piece,) = out["slider"]
     v = np.array([[float(x) for x in ln.split()[1:4]] for ln in (tmp_path / piece.filename).read_text().splitlines()
                   if ln.startswith("v ")])
