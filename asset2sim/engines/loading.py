@@ -74,14 +74,14 @@ def mesh_hulls(path: Path, scale=(1.0, 1.0, 1.0)) -> list[np.ndarray]:
     return [g * s for g in groups]
 
 
-def hull_is_solid(points: np.ndarray, tol: float = 1e-9) -> bool:
-    """True when the points (k, 3) span a volume (not all on one plane/line)."""
+def hull_is_solid(points: np.ndarray) -> bool:
+    """True when the points (k, 3) span a volume (not all on one plane/line, to 1e-9 of their spread)."""
     p = np.asarray(points, float)
     if len(p) < 4:
         return False
     c = p - p.mean(axis=0)
     sv = np.linalg.svd(c, compute_uv=False)
-    return bool(sv[-1] > tol * max(1.0, sv[0]))
+    return bool(sv[-1] > 1e-9 * max(1.0, sv[0]))
 
 
 #: Thickness (m) of the slab made of a coplanar hull (PyBullet inflates one by its 1 mm margin per side).

@@ -48,10 +48,9 @@ class Camera:
     far: float
 
 
-def fit_camera(points: np.ndarray, direction: np.ndarray, *, up: Sequence[float] = (0.0, 0.0, 1.0), aspect: float = 1.0,
-               fill: float = FILL) -> Camera:
+def fit_camera(points: np.ndarray, direction: np.ndarray, *, up: Sequence[float] = (0.0, 0.0, 1.0), aspect: float = 1.0) -> Camera:
     """The camera looking at ``points`` (N, 3) m from ``direction`` (3,) (object -> camera) with every
-    point inside ``fill`` of the image's half-extent, the projected extent centered; ``aspect`` is
+    point inside :data:`FILL` of the image's half-extent, the projected extent centered; ``aspect`` is
     width / height; the vertical field of view is :data:`FOV_DEG`.
 
     Raises:
@@ -72,7 +71,7 @@ def fit_camera(points: np.ndarray, direction: np.ndarray, *, up: Sequence[float]
     lo, hi = P.min(0), P.max(0)
     extent = max(float(np.linalg.norm(hi - lo)), 1e-6)
     target = (lo + hi) / 2
-    ty = math.tan(math.radians(FOV_DEG) / 2) * fill
+    ty = math.tan(math.radians(FOV_DEG) / 2) * FILL
     tx = ty * aspect
     d = extent
     for _ in range(4):
