@@ -196,10 +196,9 @@ class _JointScan:
     base: np.ndarray | None = None
 
     def free_end(self, q_from: float, q_to: float, stop_depth: float | None = None,
-                 samples: int | None = None) -> tuple[float, str | None]:
+                 samples: int = SCAN_SAMPLES) -> tuple[float, str | None]:
         """:func:`free_end` of the joint from ``q_from`` towards ``q_to``."""
-        return free_end(self.session, self.name, q_from, q_to, self.pairs, self.base,
-                        SCAN_SAMPLES if samples is None else samples, stop_depth)
+        return free_end(self.session, self.name, q_from, q_to, self.pairs, self.base, samples, stop_depth)
 
     def onset(self, q_end: float, q_free: float) -> float:
         """:func:`contact_onset`, at most ``BACK_OFF_FRACTION`` of the range back from ``q_end``."""
