@@ -103,7 +103,7 @@ class FakeSession(SessionDefaults):
         lo, hi = self.joint_limits[name]
         return float(min(max(q, lo), hi))
 
-    def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
+    def set_joint_positions(self, q: dict[str, float]) -> None:
         for name, v in q.items():
             if name in self._anchor:
                 self._anchor[name] = (float(v), self.steps)

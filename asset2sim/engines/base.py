@@ -162,8 +162,8 @@ class SimSession(Protocol):
     """Every link of the URDF, the root first (PyBullet: then in joint index order)."""
 
     # -------------------------------------------------------------- joints
-    def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
-        """Teleport joints (rad or m); unspecified joints keep their value."""
+    def set_joint_positions(self, q: dict[str, float]) -> None:
+        """Teleport joints (rad or m) at zero velocity; unspecified joints keep their value."""
 
     def joint_positions(self) -> dict[str, float]:
         """Current joint positions (rad or m)."""
@@ -337,13 +337,12 @@ class ArrayJoints:
     ``_joint_qd()`` (the arrays, writable: views or copies) and ``_put_joints(q, qd)`` (writes both back and updates
     the link poses)."""
 
-    def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
+    def set_joint_positions(self, q: dict[str, float]) -> None:
         jq, jd = self._joint_q(), self._joint_qd()
         for name, v in q.items():
             if name in self._qadr:
                 jq[self._qadr[name]] = float(v)
-                if zero_velocity:
-                    jd[self._dadr[name]] = 0.0
+                jd[self._dadr[name]] = 0.0
         self._put_joints(jq, jd)
 
     def joint_positions(self) -> dict[str, float]:

@@ -74,14 +74,14 @@ def mesh_hulls(path: Path, scale=(1.0, 1.0, 1.0)) -> list[np.ndarray]:
     return [g * s for g in groups]
 
 
-def hull_is_solid(points: np.ndarray, tol: float = 1e-9) -> bool:
-    """True when the points (k, 3) span a volume (not all on one plane/line)."""
+def hull_is_solid(points: np.ndarray) -> bool:
+    """True when the points (k, 3) span a volume (not all on one plane/line, to 1e-9 of their spread)."""
     p = np.asarray(points, float)
     if len(p) < 4:
         return False
     c = p - p.mean(axis=0)
     sv = np.linalg.svd(c, compute_uv=False)
-    return bool(sv[-1] > tol * max(1.0, sv[0]))
+    return bool(sv[-1] > 1e-9 * max(1.0, sv[0]))
 
 
 #: Thickness (m) of the slab made of a coplanar hull (PyBullet inflates one by its 1 mm margin per side).
@@ -125,9 +125,9 @@ def _thicken(points: np.ndarray, thickness: float) -> np.ndarray | None:
     return np.vstack([p + h * n, p - h * n])
 
 
-def collision_pieces(model: UrdfModel, flat_thickness: float = FLAT_HULL_THICKNESS) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
+def collision_pieces(model: UrdfModel) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
     """Every link's convex collision pieces (one hull per OBJ group) and notes:
-    coplanar groups become slabs ``flat_thickness`` m thick, groups spanning
+    coplanar groups become slabs :data:`FLAT_HULL_THICKNESS` m thick, groups spanning
     no area are dropped (UrdfError: a mesh cannot be read)."""
     out: dict[str, list[CollisionPiece]] = {}
     notes: list[str] = []
@@ -141,11 +141,11 @@ def collision_pieces(model: UrdfModel, flat_thickness: float = FLAT_HULL_THICKNE
             for g, pts in enumerate(groups):
                 thick = False
                 if not hull_is_solid(pts):
-                    slab = _thicken(pts, flat_thickness)
+                    slab = _thicken(pts, FLAT_HULL_THICKNESS)
                     if slab is None:
                         notes.append(f"link {name!r} collision {k} group {g} ({c.filename}) spans no area: dropped")
                         continue
-                    notes.append(f"link {name!r} collision {k} group {g} ({c.filename}) is flat: made a {flat_thickness * 1000:g} mm slab")
+                    notes.append(f"link {name!r} collision {k} group {g} ({c.filename}) is flat: made a {FLAT_HULL_THICKNESS * 1000:g} mm slab")
                     pts, thick = slab, True
                 pieces.append(CollisionPiece(name, k, g, "hull", c.origin, points=pts, source=c.path, scale=np.asarray(c.scale, float),
                                              whole_file=len(groups) == 1 and not thick, thickened=thick))

@@ -93,10 +93,7 @@ class MjxSession(MuJoCoSession):
             self._push()
             self._dx = self._run(self._mx, self._dx, k)
             self._pull()
-            if self._applied:  # efforts and forces act for one step
-                self.d.qfrc_applied[:] = 0.0
-                self.d.xfrc_applied[:] = 0.0
-                self._applied = False
+            self._clear_applied()
             remaining -= k
         self._mj.mj_kinematics(self.m, self.d)
 

@@ -120,8 +120,7 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
 
     def set_root_velocity(self, linear, angular) -> None:
         """World-frame velocities (MuJoCo holds the angular one in the body frame)."""
-        if not self._free:
-            raise EngineUnsupported("mujoco: the root of a fixed-base session cannot be moved")
+        self._free_root()
         w, x, y, z = self.d.qpos[3:7]
         R = np.zeros(9)
         self._mj.mju_quat2Mat(R, np.array([w, x, y, z], float))
@@ -190,13 +189,17 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
 
     def set_root_pose(self, pos, orn_xyzw) -> None:
         """Teleport the root and zero its velocity (EngineUnsupported: fixed base)."""
-        if not self._free:
-            raise EngineUnsupported("mujoco: the root of a fixed-base session cannot be moved")
+        self._free_root()
         x, y, z, w = (float(v) for v in orn_xyzw)
         self.d.qpos[0:3] = np.asarray(pos, float)
         self.d.qpos[3:7] = [w, x, y, z]
         self.d.qvel[0:6] = 0.0
         self._mj.mj_forward(self.m, self.d)
+
+    def _free_root(self) -> None:
+        """Raise EngineUnsupported in a fixed-base session, whose root cannot be moved."""
+        if not self._free:
+            raise EngineUnsupported("mujoco: the root of a fixed-base session cannot be moved")
 
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         d = self.d
@@ -246,10 +249,14 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
             if self._drive:
                 self._apply_drives()
             mj.mj_step(self.m, self.d)
-            if self._applied:  # efforts and forces act for one step
-                self.d.qfrc_applied[:] = 0.0
-                self.d.xfrc_applied[:] = 0.0
-                self._applied = False
+            self._clear_applied()
+
+    def _clear_applied(self) -> None:
+        """Clear the efforts and forces applied (they act for one step)."""
+        if self._applied:
+            self.d.qfrc_applied[:] = 0.0
+            self.d.xfrc_applied[:] = 0.0
+            self._applied = False
 
     def held_physics(self) -> HeldPhysics:
         return held_physics_of_model(self.m, self.d.qpos, list(self.urdf.links), self.joint_names, source="urdf (converted in memory)")

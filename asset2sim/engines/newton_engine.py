@@ -23,7 +23,7 @@ from asset2sim.engines.base import (ArrayJoints, ContactPair, EngineUnsupported,
                                     unsupported)
 from asset2sim.engines.loading import (BOX_CORNERS, BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS,
                                        BULLET_PLANE_FRICTION, CollisionPiece, collision_pieces, read_urdf)
-from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, quat_wxyz_to_xyzw
+from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, quat_wxyz_to_xyzw, translation_matrix
 from asset2sim.mesh_io import convex_hull_mesh
 from asset2sim.engines.step_budget import spend
 
@@ -97,9 +97,7 @@ class NewtonSession(ArrayJoints, SessionDefaults):
             self._points[name] = np.vstack(pts) if pts else np.zeros((0, 3))
         lows = [] if self._fixed else [_apply(poses[n], v)[:, 2].min() for n, v in self._points.items() if len(v)]
         lift = -min(lows) if lows else 0.0
-        root_pose = np.eye(4)
-        root_pose[2, 3] = lift
-        return self.urdf.link_poses(self.options.initial_state, root_pose)
+        return self.urdf.link_poses(self.options.initial_state, translation_matrix([0.0, 0.0, lift]))
 
     def _add_bodies(self, b, pieces: dict[str, list[CollisionPiece]], poses: dict[str, np.ndarray], cfg) -> None:
         """One body per link with the file's inertial and its shapes; sets ``_body`` (link -> index)."""

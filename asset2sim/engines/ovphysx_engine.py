@@ -213,13 +213,12 @@ class OvPhysxSession(SessionDefaults):
         i = self._dof[joint]
         return self._sign[joint] * float(self._read(self._q)[0, i]), self._sign[joint] * float(self._read(self._qd)[0, i])
 
-    def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
+    def set_joint_positions(self, q: dict[str, float]) -> None:
         pos, vel = self._read(self._q), self._read(self._qd)
         for name, value in q.items():
             if name in self._dof:
                 pos[0, self._dof[name]] = self._sign[name] * float(value)
-                if zero_velocity:
-                    vel[0, self._dof[name]] = 0.0
+                vel[0, self._dof[name]] = 0.0
         self._q.write(pos)
         self._qd.write(vel)
 

@@ -21,7 +21,7 @@ from asset2sim.engines.base import (ArrayJoints, ContactPair, EngineUnsupported,
                                     SessionOptions, penetration_sum, register_engine)
 from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
                                        collision_pieces, link_friction, principal_axes, read_urdf)
-from asset2sim.frames import matrix_quat_wxyz
+from asset2sim.frames import matrix_quat_wxyz, rigid_matrix
 from asset2sim.engines.passive_joints import FRICTION_DRIVE_DAMPING, PassiveJoints
 from asset2sim.engines.step_budget import spend
 
@@ -49,10 +49,7 @@ def _axis_frame(axis: np.ndarray) -> np.ndarray:
     ref = np.array([0.0, 0.0, 1.0]) if abs(a[0]) > 0.9 else np.array([1.0, 0.0, 0.0])
     b = np.cross(a, ref)
     b /= np.linalg.norm(b)
-    c = np.cross(a, b)
-    t = np.eye(4)
-    t[:3, 0], t[:3, 1], t[:3, 2] = a, b, c
-    return t
+    return rigid_matrix(np.column_stack([a, b, np.cross(a, b)]))
 
 
 def _hull_vertices(shape, pose: np.ndarray) -> np.ndarray:
@@ -89,10 +86,7 @@ def link_inertia(urdf, name: str, urdf_path: Path, notes: list[str]):
     moments, axes = principal_axes(ine.inertia_in_link_axes())
     if ine.mass <= 0 or moments.min() <= 0:
         raise PhysXError(f"{urdf_path}: link {name!r} has mass {ine.mass} and principal moments {moments}: not positive")
-    t = np.eye(4)
-    t[:3, :3] = axes
-    t[:3, 3] = ine.com()
-    return ine.mass, _pose(t), moments
+    return ine.mass, _pose(rigid_matrix(axes, ine.com())), moments
 
 
 def fill_articulation_builder(builder, urdf, urdf_path: Path, *, fixed_base: bool, notes: list[str]):

@@ -104,14 +104,11 @@ class PyBulletSession(SessionDefaults):
         return p.createMultiBody(0, shape, physicsClientId=self.cid)
 
     # ------------------------------------------------------------------ state
-    def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
-        p = self._p
+    def set_joint_positions(self, q: dict[str, float]) -> None:
         for name, value in q.items():
             j = self._index.get(name)
-            if j is None:
-                continue
-            vel = 0.0 if zero_velocity else p.getJointState(self.body, j, physicsClientId=self.cid)[1]
-            p.resetJointState(self.body, j, float(value), vel, physicsClientId=self.cid)
+            if j is not None:
+                self._p.resetJointState(self.body, j, float(value), 0.0, physicsClientId=self.cid)
 
     def _joint_field(self, k: int) -> dict[str, float]:
         """Field ``k`` (0 position, 1 velocity) of every movable joint's state."""

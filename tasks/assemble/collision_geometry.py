@@ -332,7 +332,7 @@ DENSITY_NOTE = "denser than its material"
 
 
 def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: dict[str, float] | None = None,
-                      *, decompose: bool = True, level: bool = False,
+                      *, level: bool = False,
                       max_density: dict[str, float] | None = None, open_containers: bool = False) -> list[str]:
     """Replace the mesh collisions of every link of ``model`` (in place) by the pieces of :func:`link_pieces`,
     written as ``out_dir/folder/<link>_hull<i>_<digest>.obj`` (link frame, m; an unchanged file is not
@@ -358,7 +358,7 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
     def mesh_path(g: urdf.UrdfGeometry) -> Path:
         return Path(g.path) if g.path is not None else out_dir / str(g.filename)
 
-    pieces, notes = link_pieces(model, mesh_path, state, decompose=decompose, level=level and state is not None,
+    pieces, notes = link_pieces(model, mesh_path, state, level=level and state is not None,
                                 open_containers=open_containers)
     for name, link in model.links.items():
         if not any(c.kind == "mesh" for c in link.collisions):

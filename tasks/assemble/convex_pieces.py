@@ -195,11 +195,11 @@ def depth_inside(points: np.ndarray, piece: Piece) -> float:
     return float(max(0.0, -d.min()))
 
 
-def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = None, neighbours: int = 8,
-                 *, free_only: bool = False) -> list[Piece]:
+def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = None, *,
+                 free_only: bool = False) -> list[Piece]:
     """At most ``limit`` pieces: the pair whose merged hull adds the least
     volume (``vol(hull(A u B)) - vol(A) - vol(B)``, m^3) is merged first,
-    among each piece's ``neighbours`` nearest pieces (by centre). A merge that
+    among each piece's 8 nearest pieces (by centre). A merge that
     would newly contain any of ``others`` (k, 3) m (other links' vertices in
     this link's frame) costs more than any merge that does not; with
     ``free_only`` such merges are never made (merging stops before one).
@@ -266,7 +266,7 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
         if not ids:
             return
         cs = np.array([centre(j) for j in ids])
-        order = np.argsort(np.linalg.norm(cs - centre(i), axis=1))[:neighbours]
+        order = np.argsort(np.linalg.norm(cs - centre(i), axis=1))[:8]
         for o in order:
             j = ids[int(o)]
             key = (min(i, j), max(i, j))

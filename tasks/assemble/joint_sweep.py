@@ -16,9 +16,9 @@ SWEEP_STEP = CONTAINMENT_TOLERANCE
 MAX_SWEEP_SAMPLES = 48
 
 
-def sweep_positions(joint: urdf.UrdfJoint, reach: float, step: float = SWEEP_STEP) -> np.ndarray:
+def sweep_positions(joint: urdf.UrdfJoint, reach: float) -> np.ndarray:
     """Positions (n,) rad or m spread evenly over ``joint``'s whole range
-    (its limits; a continuous joint over a full turn), at most ``step`` m of
+    (its limits; a continuous joint over a full turn), at most :data:`SWEEP_STEP` m of
     motion apart for a point ``reach`` m from a revolute axis (a prismatic
     joint moves every point by the travel), n <= :data:`MAX_SWEEP_SAMPLES`;
     [0] for a fixed joint or an empty range."""
@@ -31,7 +31,7 @@ def sweep_positions(joint: urdf.UrdfJoint, reach: float, step: float = SWEEP_STE
     if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
         return np.array([0.0 if not np.isfinite(lo) else lo])
     travel = (hi - lo) * (1.0 if joint.type == "prismatic" else max(reach, 1e-9))
-    n = int(np.clip(np.ceil(travel / max(step, 1e-9)) + 1, 2, MAX_SWEEP_SAMPLES))
+    n = int(np.clip(np.ceil(travel / SWEEP_STEP) + 1, 2, MAX_SWEEP_SAMPLES))
     return np.linspace(lo, hi, n)
 
 
@@ -95,11 +95,10 @@ def swept_child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], li
 GUARD_SAMPLES = 9
 
 
-def swept_other_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], link: str,
-                       samples: int = GUARD_SAMPLES) -> np.ndarray | None:
+def swept_other_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], link: str) -> np.ndarray | None:
     """Support points (:attr:`Piece.support`) of every other link's pieces in
     ``link``'s frame (k, 3) m, with the joints at :func:`reference_state` and
-    each in turn at ``samples`` positions over its range; None when no other
+    each in turn at :data:`GUARD_SAMPLES` positions over its range; None when no other
     link has pieces."""
     ref = reference_state(model)
     local = {o: np.vstack([p.support for p in pieces[o]]) for o in model.links if o != link and pieces.get(o)}
@@ -108,7 +107,7 @@ def swept_other_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], li
     states = [ref]
     for j in model.movable_joints:
         qs = sweep_positions(j, 1.0)
-        qs = qs[np.unique(np.linspace(0, len(qs) - 1, min(samples, len(qs))).round().astype(int))]
+        qs = qs[np.unique(np.linspace(0, len(qs) - 1, min(GUARD_SAMPLES, len(qs))).round().astype(int))]
         states += [{**ref, j.name: float(q)} for q in qs]
     seen: dict[str, list[np.ndarray]] = {o: [] for o in local}
     out = []

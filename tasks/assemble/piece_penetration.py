@@ -120,14 +120,14 @@ def _transformed(piece: Piece, T: np.ndarray) -> Piece:
     return Piece(piece.points @ R.T + t, eq, piece.volume, piece.sources, piece.support @ R.T + t, _edge_directions(piece) @ R.T)
 
 
-def _boxes_apart(a: Piece, b: Piece, T: np.ndarray, margin: float = 1e-9) -> bool:
+def _boxes_apart(a: Piece, b: Piece, T: np.ndarray) -> bool:
     """Whether ``b`` moved by the (4, 4) transform ``T`` has an axis-aligned
-    bounding box more than ``margin`` m (rounding) clear of ``a``'s: the
+    bounding box more than 1e-9 m (rounding) clear of ``a``'s: the
     first test of :func:`penetration_depth`, without moving ``b``'s planes."""
     moved = b.points @ T[:3, :3].T + T[:3, 3]
     lo = np.maximum(a.points.min(axis=0), moved.min(axis=0))
     hi = np.minimum(a.points.max(axis=0), moved.max(axis=0))
-    return bool(np.any(hi + margin < lo))
+    return bool(np.any(hi + 1e-9 < lo))
 
 
 def _child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], poses: dict[str, np.ndarray], link: str) -> dict[str, np.ndarray]:

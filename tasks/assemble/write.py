@@ -121,8 +121,7 @@ def _set_inertials(model: urdf.UrdfModel, overlay: Overlay) -> None:
 
 def _rotate_root(model: urdf.UrdfModel, root_link: str, rotation: np.ndarray) -> None:
     """Bake the (3, 3) ``rotation`` into the root link's geometry and inertial and the joints hanging from it."""
-    T = np.eye(4)
-    T[:3, :3] = np.asarray(rotation, float)
+    T = frames.rigid_matrix(rotation)
     for joint in model.children(root_link):
         joint.origin = T @ joint.origin
     root = model.links.get(root_link)

@@ -105,17 +105,16 @@ def _disk_key(link: LinkDesc, params: tuple) -> str | None:
     return array_cache.digest(*parts)
 
 
-def analyze_link(link: LinkDesc, *, prefer: Literal["collision", "visual"] = "collision", voxels_per_axis: int = VOXELS_PER_AXIS,
-                 max_voxels: int = MAX_VOXELS, close_gaps: float = CLOSE_GAPS, layer_correction: float = LAYER_CORRECTION,
-                 subvoxel: bool = True, cache: MeshCache | None = None) -> LinkGeometry | None:
+def analyze_link(link: LinkDesc, *, prefer: Literal["collision", "visual"] = "collision",
+                 cache: MeshCache | None = None) -> LinkGeometry | None:
     """Mesh analysis of one link at scale 1 in the link frame.
 
     Args:
         link: its collision geometry is used when it has any, else its visual geometry (``prefer="visual"`` swaps).
-        voxels_per_axis, max_voxels, close_gaps, layer_correction, subvoxel: see :func:`voxel_properties`.
         cache: meshes already read (shared across links by :func:`analyze_asset`).
 
-    Kept on disk (:mod:`asset2sim.array_cache`, kind ``analysis``); ``ASSET2SIM_CACHE=off`` turns it off.
+    A surface that is not watertight is voxelized by :func:`voxel_properties` at its defaults. Kept on disk
+    (:mod:`asset2sim.array_cache`, kind ``analysis``); ``ASSET2SIM_CACHE=off`` turns it off.
 
     Returns:
         ``LinkGeometry`` (m, m^2, m^3, per-kg inertias m^2 about ``com``), or ``None`` without geometry;
@@ -127,7 +126,7 @@ def analyze_link(link: LinkDesc, *, prefer: Literal["collision", "visual"] = "co
     """
     if not link.has_geometry:
         return None
-    params = (prefer, voxels_per_axis, max_voxels, close_gaps, layer_correction, subvoxel)
+    params = (prefer, VOXELS_PER_AXIS, MAX_VOXELS, CLOSE_GAPS, LAYER_CORRECTION, True)  # True: subvoxel
     key = _disk_key(link, params)
     hit = array_cache.load(DISK_KIND, key) if key is not None else None
     if hit is not None and "json" in hit:
@@ -135,7 +134,7 @@ def analyze_link(link: LinkDesc, *, prefer: Literal["collision", "visual"] = "co
             return LinkGeometry.model_validate(array_cache.array_json(hit["json"]))
         except ValueError:  # NaN or infinity in its JSON, UnicodeDecodeError and pydantic's ValidationError included
             pass  # an unreadable entry: computed again and rewritten
-    geo = _analyze_surface(link, prefer, voxels_per_axis, max_voxels, close_gaps, layer_correction, subvoxel, cache)
+    geo = _analyze_surface(link, prefer, cache)
     if geo is not None and key is not None:
         array_cache.store(DISK_KIND, key, {"json": array_cache.text_array(geo.model_dump_json())})
     return geo
@@ -145,8 +144,7 @@ def analyze_link(link: LinkDesc, *, prefer: Literal["collision", "visual"] = "co
 DISK_KIND = "analysis"
 
 
-def _analyze_surface(link: LinkDesc, prefer, voxels_per_axis: int, max_voxels: int, close_gaps: float,
-                     layer_correction: float, subvoxel: bool, cache: MeshCache | None) -> LinkGeometry | None:
+def _analyze_surface(link: LinkDesc, prefer, cache: MeshCache | None) -> LinkGeometry | None:
     """:func:`analyze_link` without the on-disk cache."""
     surf = link_surface(link, prefer=prefer, cache=cache)
     if surf is None:
@@ -160,8 +158,6 @@ def _analyze_surface(link: LinkDesc, prefer, voxels_per_axis: int, max_voxels: i
     where = f"link {link.name!r} ({surf.role}: {', '.join(surf.sources[:3])}{' ...' if len(surf.sources) > 3 else ''})"
     if not (area > 0 and size > 0 and math.isfinite(area)):
         raise MeshAnalysisError(f"{where}: degenerate geometry (surface area {area:g} m^2, size {size:g} m)")
-    vox_kw = dict(voxels_per_axis=voxels_per_axis, max_voxels=max_voxels, close_gaps=close_gaps,
-                  layer_correction=layer_correction, subvoxel=subvoxel)
     watertight = False
     solid: SolidMoments | None = None
     analytic = None
@@ -182,7 +178,7 @@ def _analyze_surface(link: LinkDesc, prefer, voxels_per_axis: int, max_voxels: i
         if solid is not None:
             watertight = True
             if solid.overlap_candidates:
-                union = voxel_properties(v, f, **vox_kw)
+                union = voxel_properties(v, f)
                 # the voxel estimate's error is ~1-3% (docs/design/mesh_analysis.md)
                 if union.volume < 0.95 * solid.volume:
                     notes.append(f"closed parts overlap: sum of part volumes {solid.volume:.4g} m^3, "
@@ -191,9 +187,9 @@ def _analyze_surface(link: LinkDesc, prefer, voxels_per_axis: int, max_voxels: i
                     union.notes = solid.notes + union.notes
                     solid = union
         if solid is None:
-            solid = voxel_properties(v, f, **vox_kw)
+            solid = voxel_properties(v, f)
         notes.extend(solid.notes)
-    pitch = solid.pitch or grid_pitch(bmax - bmin, voxels_per_axis, max_voxels, 3)
+    pitch = solid.pitch or grid_pitch(bmax - bmin, VOXELS_PER_AXIS, MAX_VOXELS, 3)
     method = solid.method
     volume = max(0.0, float(solid.volume))
     if volume < OPEN_SHELL_FRACTION * area * pitch:
@@ -222,17 +218,17 @@ def _analyze_surface(link: LinkDesc, prefer, voxels_per_axis: int, max_voxels: i
                         inertia_shell=_tup33(i_shell), n_meshes=len(surf.sources), n_faces=int(len(f)), notes=notes)
 
 
-def analyze_asset(asset: AssetDescription, **options) -> dict[str, LinkGeometry]:
-    """:func:`analyze_link` (with ``options``) for every link of ``asset`` that has geometry, by link
-    name in asset order; meshes read once per call (shared :class:`MeshCache`).
+def analyze_asset(asset: AssetDescription, cache: MeshCache | None = None) -> dict[str, LinkGeometry]:
+    """:func:`analyze_link` for every link of ``asset`` that has geometry, by link
+    name in asset order; meshes read once per call (shared ``cache``, a new :class:`MeshCache` when None).
 
     Raises:
         MeshAnalysisError: a link with geometry has no usable geometry.
     """
-    options.setdefault("cache", MeshCache())
+    cache = MeshCache() if cache is None else cache
     out: dict[str, LinkGeometry] = {}
     for link in asset.links:
-        geo = analyze_link(link, **options)
+        geo = analyze_link(link, cache=cache)
         if geo is not None:
             out[link.name] = geo
     return out

@@ -68,13 +68,12 @@ class Cavity:
 
 
 def open_cavity(vertices: np.ndarray, faces: np.ndarray, hull_vertices: np.ndarray, hull_faces: np.ndarray, *,
-                voxels_per_axis: int = CAVITY_VOXELS, min_radius: float = MIN_CAVITY_RADIUS,
-                min_share: float = MIN_CAVITY_SHARE, min_volume_share: float = MIN_CAVITY_VOLUME_SHARE) -> Cavity | None:
+                voxels_per_axis: int = CAVITY_VOXELS) -> Cavity | None:
     """The open cavity inside a part's convex hull (``hull_vertices`` (U, 3) m, ``hull_faces`` (G, 3) int, a closed
     triangle mesh) that the surfaces ``vertices`` (V, 3) m, ``faces`` (F, 3) int (the part's and any around it that
     may close it, such as the other parts of its link) leave open to the outside, or None when it holds no ball of
-    radius ``min_radius`` m and ``min_share`` of the hull's largest extent, or fills less than ``min_volume_share``
-    of the hull.
+    radius :data:`MIN_CAVITY_RADIUS` m and :data:`MIN_CAVITY_SHARE` of the hull's largest extent, or fills less
+    than :data:`MIN_CAVITY_VOLUME_SHARE` of the hull.
 
     The surfaces alone and with the hull are voxelized on the same grid (the hull's vertices must lie in the
     surfaces' bounding box): the cavity is the space the hull encloses that the surfaces alone leave open.
@@ -88,7 +87,7 @@ def open_cavity(vertices: np.ndarray, faces: np.ndarray, hull_vertices: np.ndarr
     f = np.asarray(faces, np.int64)
     hv = np.asarray(hull_vertices, float)
     size = float(np.ptp(hv, axis=0).max()) if len(hv) else 0.0
-    need = max(min_radius, min_share * size)
+    need = max(MIN_CAVITY_RADIUS, MIN_CAVITY_SHARE * size)
     part = voxelize(v, f, voxels_per_axis=voxels_per_axis, subvoxel=False)
     both = voxelize(np.vstack([v, hv]), np.vstack([f, np.asarray(hull_faces, np.int64) + len(v)]),
                     voxels_per_axis=voxels_per_axis, subvoxel=False)
@@ -102,7 +101,7 @@ def open_cavity(vertices: np.ndarray, faces: np.ndarray, hull_vertices: np.ndarr
     deepest = float(depth.max())
     radius = deepest * h
     volume, hull_volume = float(cavity.sum()) * h**3, float(both.filled.sum()) * h**3
-    if radius < need or volume < min_volume_share * hull_volume:
+    if radius < need or volume < MIN_CAVITY_VOLUME_SHARE * hull_volume:
         return None
     core_cells = depth >= max(1.0, CORE_DEPTH * deepest)
     core = np.argwhere(core_cells)

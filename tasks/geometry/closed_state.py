@@ -1,5 +1,5 @@
 """The geometric *closed* end of every movable joint, in a fixed-base, gravity-free session: the score
-(``OWN_WEIGHT``), the ties (``tie_tol``, ``PHI_TIE_FRACTION``) and the pick are in
+(``OWN_WEIGHT``), the ties (``TIE_TOL``, ``PHI_TIE_FRACTION``) and the pick are in
 ``docs/design/refine.md``, "Closed state"; the refinement and the joints without a geometric closed end
 in ``docs/design/core.md``. Opening fraction f(q) = direction * (q - q_closed) / open_range.
 """
@@ -19,6 +19,11 @@ from asset2sim.mesh_io import MeshCache
 OWN_WEIGHT = 0.25
 #: Penetration above the ties' least, as a fraction of the object size, that excludes a tie.
 PHI_TIE_FRACTION = 0.05
+#: Relative tolerance within which two closed-state scores tie.
+TIE_TOL = 0.03
+#: Samples over a joint's range (``COARSE``), in the window around the pick (``FINE``); passes over all joints
+#: (later passes hold the others closed).
+COARSE, FINE, PASSES = 41, 21, 2
 
 
 @dataclass
@@ -191,15 +196,12 @@ def _subtree_phi(session, screen: _PairScreen) -> float:
     return total
 
 
-def closed_positions(session, asset: AssetDescription, *, coarse: int = 41, fine: int = 21, tie_tol: float = 0.03,
-                     passes: int = 2, hull_points: dict[str, np.ndarray] | None = None) -> dict[str, ClosedState]:
+def closed_positions(session, asset: AssetDescription, *, hull_points: dict[str, np.ndarray] | None = None) -> dict[str, ClosedState]:
     """Closed end of every movable joint of ``session`` (a fixed-base session of ``asset``).
 
     Args:
         session: a :class:`asset2sim.engines.base.SimSession` answering ``link_frame`` and ``link_distances``.
         asset: the description of the same URDF (for the kinematic tree).
-        coarse, fine, tie_tol: samples over the range and in the refinement window; relative tie tolerance.
-        passes: passes over all joints; later passes hold the others closed.
         hull_points: :func:`link_hull_points` of the asset (computed when None).
 
     Returns joint name -> :class:`ClosedState`; the session is left at the closed state.
@@ -210,7 +212,7 @@ def closed_positions(session, asset: AssetDescription, *, coarse: int = 41, fine
     names = list(session.joint_names)
     # joint -> the other joints' state its result was measured at (a later pass there is skipped)
     measured_at: dict[str, dict[str, float]] = {}
-    for _ in range(max(1, passes)):
+    for _ in range(PASSES):
         for name in names:
             others = {k: v for k, v in state.items() if k != name}
             if name in result and measured_at.get(name) == others:
@@ -225,14 +227,13 @@ def closed_positions(session, asset: AssetDescription, *, coarse: int = 41, fine
                                            upper=np.inf, notes=["continuous joint: no closed end; the modelled pose 0 is used"])
                 state[name] = 0.0
                 continue
-            result[name] = _joint_closed_state(session, asset, jd, state, points, coarse, fine, tie_tol)
+            result[name] = _joint_closed_state(session, asset, jd, state, points)
             state[name] = result[name].q_closed
     session.set_joint_positions(state)
     return result
 
 
-def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, float], points: dict[str, np.ndarray],
-                        coarse: int, fine: int, tie_tol: float) -> ClosedState:
+def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, float], points: dict[str, np.ndarray]) -> ClosedState:
     """The closed end of the bounded joint ``jd``, the others at ``state`` (module docstring)."""
     name = jd.name
     lo, hi = session.joint_limits[name]
@@ -245,26 +246,26 @@ def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, f
         session.set_joint_positions({name: q})
         return _aabb_volume(session, union_links, points), _aabb_volume(session, sub, points), _subtree_phi(session, screen)
 
-    qs = np.linspace(lo, hi, coarse)
+    qs = np.linspace(lo, hi, COARSE)
     vals = np.array([measure(q) for q in qs])
     c = vals[:, 0]
     cmin = c.min()
     ratio = float(c.max() / max(cmin, 1e-12))
     notes = []
-    modelled = _modelled_end(qs, vals, ratio, tie_tol)
+    modelled = _modelled_end(qs, vals, ratio)
     if modelled is not None:
         q_closed = modelled
         notes.append("compactness does not change over the range (a knob, a sash sliding in its frame): "
                      "no geometric closed end; the limit nearest the modelled pose 0 is used")
     else:
         q_open = float(qs[int(np.argmax(c))])
-        best = _pick(qs, vals, tie_tol, q_open)
+        best = _pick(qs, vals, q_open)
         a = qs[max(best - 1, 0)]
-        b = qs[min(best + 1, coarse - 1)]
-        qf = np.linspace(a, b, fine)
+        b = qs[min(best + 1, COARSE - 1)]
+        qf = np.linspace(a, b, FINE)
         vf = np.array([measure(q) for q in qf])
-        q_closed = float(qf[_pick(qf, vf, tie_tol, q_open)])
-        if ratio < 1.0 + tie_tol:
+        q_closed = float(qf[_pick(qf, vf, q_open)])
+        if ratio < 1.0 + TIE_TOL:
             notes.append("compactness does not change over the range; closed end taken at the least-penetrating state")
     up, down = hi - q_closed, q_closed - lo
     direction, rng = (1.0, float(up)) if up >= down else (-1.0, float(down))
@@ -273,23 +274,23 @@ def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, f
                        compactness_ratio=ratio, notes=notes)
 
 
-def _pick(qv: np.ndarray, vals: np.ndarray, tol: float, q_open: float) -> int:
+def _pick(qv: np.ndarray, vals: np.ndarray, q_open: float) -> int:
     """Index of the closed state among samples ``qv`` with ``vals`` (n, 3) (parent+subtree box, subtree
-    box, penetration), ``tol`` the relative tie tolerance (module docstring)."""
+    box, penetration), ties within :data:`TIE_TOL` (module docstring)."""
     score = (vals[:, 0] / vals[:, 0].min()) * (vals[:, 1] / vals[:, 1].min()) ** OWN_WEIGHT
     phi = vals[:, 2]
-    ties = np.flatnonzero(score <= score.min() * (1.0 + tol))
+    ties = np.flatnonzero(score <= score.min() * (1.0 + TIE_TOL))
     size = float(vals[:, 0].min()) ** (1.0 / 3.0)
     ties = ties[phi[ties] <= phi[ties].min() + PHI_TIE_FRACTION * size]
     # rest against the parent: the tie farthest from the open end
     return int(ties[np.argmax(np.abs(qv[ties] - q_open))])
 
 
-def _modelled_end(qs: np.ndarray, vals: np.ndarray, ratio: float, tie_tol: float) -> float | None:
+def _modelled_end(qs: np.ndarray, vals: np.ndarray, ratio: float) -> float | None:
     """The limit nearest the modelled pose 0 when ``ratio`` (largest / smallest parent+subtree box) is
-    below 1 + ``tie_tol`` and the part does not penetrate there by ``PHI_TIE_FRACTION`` of the object's
+    below 1 + :data:`TIE_TOL` and the part does not penetrate there by ``PHI_TIE_FRACTION`` of the object's
     size beyond the least; else None. ``vals`` as for :func:`_pick`."""
-    if not ratio < 1.0 + tie_tol:
+    if not ratio < 1.0 + TIE_TOL:
         return None
     i = 0 if abs(qs[0]) <= abs(qs[-1]) else len(qs) - 1
     size = float(vals[:, 0].min()) ** (1.0 / 3.0)

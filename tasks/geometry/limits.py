@@ -124,7 +124,7 @@ def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed:
         session.set_joint_positions({name: q_close})
         if float((pair_depths(session, pairs) - base).max(initial=0.0)) > EXCESS_TOLERANCE:
             return _ChainEnd(float(far_raw), None, [])  # not free at its closed end even with the chain open: the sweep's finding
-        far, who = free_end(session, name, q_close, far_raw, pairs, base, EXCESS_TOLERANCE, SCAN_SAMPLES, STOP_DEPTH)
+        far, who = free_end(session, name, q_close, far_raw, pairs, base, SCAN_SAMPLES, STOP_DEPTH)
         if who is None or abs(far - q_close) < MIN_FREE_FRACTION * range_:
             return _ChainEnd(float(far_raw), None, [])
         far = contact_onset(session, name, far, q_close, pairs, base, BACK_OFF_FRACTION * range_)
@@ -196,10 +196,9 @@ class _JointScan:
     base: np.ndarray | None = None
 
     def free_end(self, q_from: float, q_to: float, stop_depth: float | None = None,
-                 samples: int | None = None) -> tuple[float, str | None]:
+                 samples: int = SCAN_SAMPLES) -> tuple[float, str | None]:
         """:func:`free_end` of the joint from ``q_from`` towards ``q_to``."""
-        return free_end(self.session, self.name, q_from, q_to, self.pairs, self.base, EXCESS_TOLERANCE,
-                        SCAN_SAMPLES if samples is None else samples, stop_depth)
+        return free_end(self.session, self.name, q_from, q_to, self.pairs, self.base, samples, stop_depth)
 
     def onset(self, q_end: float, q_free: float) -> float:
         """:func:`contact_onset`, at most ``BACK_OFF_FRACTION`` of the range back from ``q_end``."""

@@ -36,11 +36,12 @@ def pair_depths(session, pairs: list[tuple[str, str]]) -> np.ndarray:
 
 
 def free_end(session, joint: str, q_from: float, q_to: float, pairs: list[tuple[str, str]], baseline: np.ndarray,
-             tol: float = EXCESS_TOLERANCE, samples: int = SCAN_SAMPLES, stop_depth: float | None = None) -> tuple[float, str | None]:
+             samples: int = SCAN_SAMPLES, stop_depth: float | None = None) -> tuple[float, str | None]:
     """(free end, the link run into) of ``joint`` from ``q_from`` towards ``q_to``: the first sample whose
-    excess over ``baseline`` ((P,) m) reaches ``stop_depth`` (``tol`` when None) is in a stop; the last
-    sample before it with excess <= ``tol``, refined by bisection, is the free end. (``q_to``, None)
+    excess over ``baseline`` ((P,) m) reaches ``stop_depth`` (:data:`EXCESS_TOLERANCE` when None) is in a stop;
+    the last sample before it with excess <= :data:`EXCESS_TOLERANCE`, refined by bisection, is the free end. (``q_to``, None)
     when no sample reaches ``stop_depth``."""
+    tol = EXCESS_TOLERANCE
     stop = tol if stop_depth is None else max(stop_depth, tol)
     qs = [q_from + (q_to - q_from) * k / samples for k in range(samples + 1)]
     exc_max: list[float] = []
@@ -75,15 +76,15 @@ def free_end(session, joint: str, q_from: float, q_to: float, pairs: list[tuple[
 
 
 def contact_onset(session, joint: str, q_end: float, q_free: float, pairs: list[tuple[str, str]], baseline: np.ndarray,
-                  max_back: float, onset: float = ONSET_TOLERANCE, steps: int = 8) -> float:
-    """Where the contact ending the free range at ``q_end`` begins: the first of ``steps`` positions back
-    towards ``q_free``, at most ``max_back`` away, with excess <= ``onset`` m; else ``q_end`` moved ``max_back`` back."""
+                  max_back: float) -> float:
+    """Where the contact ending the free range at ``q_end`` begins: the first of 8 positions back
+    towards ``q_free``, at most ``max_back`` away, with excess <= :data:`ONSET_TOLERANCE` m; else ``q_end`` moved ``max_back`` back."""
     sgn = 1.0 if q_free > q_end else -1.0
     back = min(max_back, abs(q_free - q_end))
-    for k in range(1, steps + 1):
-        q = q_end + sgn * back * k / steps
+    for k in range(1, 9):
+        q = q_end + sgn * back * k / 8
         session.set_joint_positions({joint: q})
-        if float((pair_depths(session, pairs) - baseline).max(initial=0.0)) <= onset:
+        if float((pair_depths(session, pairs) - baseline).max(initial=0.0)) <= ONSET_TOLERANCE:
             return float(q)
     return float(q_end + sgn * back)
 

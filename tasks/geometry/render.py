@@ -318,8 +318,7 @@ class SceneRenderer:
 
 def render_views(urdf_path: Path | str, joint_positions: Mapping[str, float] | None = None,
                  out_dir: Path | str | None = None, *, views: Iterable[str] = DEFAULT_VIEWS,
-                 size: tuple[int, int] = (256, 256), backend: str = "auto", supersample: int = 2,
-                 shadows: bool = False) -> dict[str, np.ndarray]:
+                 size: tuple[int, int] = (256, 256), backend: str = "auto") -> dict[str, np.ndarray]:
     """Render ``views`` of the object at ``joint_positions``.
 
     Args:
@@ -328,7 +327,7 @@ def render_views(urdf_path: Path | str, joint_positions: Mapping[str, float] | N
         out_dir: when given, each view is also written (atomically) to ``out_dir/<view>.png``.
         views: names from :data:`VIEWS` (default the five of the SPEC).
         size: (width, height) in pixels.
-        backend, supersample, shadows: see :class:`SceneRenderer`.
+        backend: see :class:`SceneRenderer` (at its defaults: supersampled, no shadows).
 
     Returns:
         view name -> RGB image (height, width, 3) uint8, in the order of ``views``.
@@ -343,7 +342,7 @@ def render_views(urdf_path: Path | str, joint_positions: Mapping[str, float] | N
     views = list(views)
     for v in views:
         view_spec(v)
-    with SceneRenderer(urdf_path, size=size, backend=backend, supersample=supersample, shadows=shadows) as r:
+    with SceneRenderer(urdf_path, size=size, backend=backend) as r:
         r.set_joint_positions(joint_positions)
         images = {v: r.render(v) for v in views}
     if out_dir is not None:

@@ -48,11 +48,10 @@ class Camera:
     far: float
 
 
-def fit_camera(points: np.ndarray, direction: np.ndarray, *, up: Sequence[float] = (0.0, 0.0, 1.0), aspect: float = 1.0,
-               fov_deg: float = FOV_DEG, fill: float = FILL) -> Camera:
+def fit_camera(points: np.ndarray, direction: np.ndarray, *, up: Sequence[float] = (0.0, 0.0, 1.0), aspect: float = 1.0) -> Camera:
     """The camera looking at ``points`` (N, 3) m from ``direction`` (3,) (object -> camera) with every
-    point inside ``fill`` of the image's half-extent, the projected extent centered; ``aspect`` is
-    width / height, ``fov_deg`` the vertical field of view.
+    point inside :data:`FILL` of the image's half-extent, the projected extent centered; ``aspect`` is
+    width / height; the vertical field of view is :data:`FOV_DEG`.
 
     Raises:
         ValueError: no points or a non-finite point.
@@ -72,7 +71,7 @@ def fit_camera(points: np.ndarray, direction: np.ndarray, *, up: Sequence[float]
     lo, hi = P.min(0), P.max(0)
     extent = max(float(np.linalg.norm(hi - lo)), 1e-6)
     target = (lo + hi) / 2
-    ty = math.tan(math.radians(fov_deg) / 2) * fill
+    ty = math.tan(math.radians(FOV_DEG) / 2) * FILL
     tx = ty * aspect
     d = extent
     for _ in range(4):
@@ -89,7 +88,7 @@ def fit_camera(points: np.ndarray, direction: np.ndarray, *, up: Sequence[float]
     depth = d - rel @ b
     near = max(float(depth.min()) * 0.5, extent * 1e-4)
     far = float(depth.max()) * 1.5 + extent * 0.1
-    return Camera(target + b * d, target, u, fov_deg, near, far)
+    return Camera(target + b * d, target, u, FOV_DEG, near, far)
 
 
 def view_spec(view: str | ViewSpec) -> ViewSpec:

@@ -28,10 +28,9 @@ def write_png(path: Path | str, image: np.ndarray) -> Path:
     return write_bytes(path, buf.getvalue())
 
 
-def render_contact_sheet(images: Mapping[str, np.ndarray], *, columns: int | None = None,
-                         title: str | None = None) -> np.ndarray:
+def render_contact_sheet(images: Mapping[str, np.ndarray], *, title: str | None = None) -> np.ndarray:
     """One RGB image (H, W, 3) uint8 with every view in a grid, each labelled with its name (and an
-    optional ``title`` line on top); ``columns`` default: n up to 3, else ceil(n / 2). Views of
+    optional ``title`` line on top), in n columns up to 3 views, else ceil(n / 2). Views of
     different sizes are padded to the largest.
 
     Raises:
@@ -48,8 +47,7 @@ def render_contact_sheet(images: Mapping[str, np.ndarray], *, columns: int | Non
             raise ValueError(f"view {name!r}: expected a (H, W, 3) uint8 image, got {a.dtype} {a.shape}")
         arrays[name] = a[:, :, :3]
     n = len(arrays)
-    cols = int(columns) if columns else (n if n <= 3 else math.ceil(n / 2))
-    cols = max(1, min(cols, n))
+    cols = n if n <= 3 else math.ceil(n / 2)
     rows = math.ceil(n / cols)
     tw = max(a.shape[1] for a in arrays.values())
     th = max(a.shape[0] for a in arrays.values())

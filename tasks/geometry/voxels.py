@@ -116,18 +116,17 @@ class VoxelGrid:
 
 
 def voxelize(vertices: np.ndarray, faces: np.ndarray, *, voxels_per_axis: int = VOXELS_PER_AXIS, max_voxels: int = MAX_VOXELS,
-             close_gaps: float = CLOSE_GAPS, sample_spacing: float = SAMPLE_SPACING,
              grid_shift: tuple[float, float, float] = (0.0, 0.0, 0.0), subvoxel: bool = True) -> VoxelGrid:
     """Voxelize a triangle soup and fill what it encloses.
 
     Args:
         vertices: (N, 3) m. faces: (M, 3) int, valid.
         voxels_per_axis: voxels along the length scale (:func:`grid_pitch`, at most ``max_voxels`` cells).
-        close_gaps: gaps up to this fraction of the length scale (:func:`mean_size`) are closed
-            (3x3x3 closing, one iteration per 2 voxels of gap, at least one).
-        sample_spacing: surface sampling distance in pitches (<= 0.5 leaves no 6-connected holes).
         grid_shift: (3,) shift of the grid against the geometry, in pitches, each in [0, 1).
         subvoxel: record per-cell sample statistics (``VoxelGrid.cells``, ``mean``, ``thickness``).
+
+    Gaps up to :data:`CLOSE_GAPS` of the length scale (:func:`mean_size`) are closed (3x3x3 closing, one
+    iteration per 2 voxels of gap, at least one); the surface is sampled every :data:`SAMPLE_SPACING` pitches.
 
     Returns:
         :class:`VoxelGrid`, padded by closing + 2 empty cells, the bounding box's extreme faces on cell centers.
@@ -144,7 +143,7 @@ def voxelize(vertices: np.ndarray, faces: np.ndarray, *, voxels_per_axis: int = 
         raise ValueError("all vertices coincide: nothing to voxelize")
     # pitch first with a provisional pad, then the closing iterations it implies
     h = grid_pitch(ext, voxels_per_axis, max_voxels, 3)
-    iters = max(1, int(math.ceil(close_gaps * mean_size(ext) / (2.0 * h) - 1e-9)))
+    iters = max(1, int(math.ceil(CLOSE_GAPS * mean_size(ext) / (2.0 * h) - 1e-9)))
     pad = iters + 2
     h = grid_pitch(ext, voxels_per_axis, max_voxels, pad)
     # the bounding box's extreme faces on voxel centers: half a voxel of inflation
@@ -162,11 +161,11 @@ def voxelize(vertices: np.ndarray, faces: np.ndarray, *, voxels_per_axis: int = 
             fc = faces[s : s + FACE_BATCH]
             tri = vox[fc]
             edge = np.max(np.abs(tri - tri[:, [1, 2, 0]]).sum(axis=2), axis=1)  # >= longest edge
-            small = edge <= sample_spacing
+            small = edge <= SAMPLE_SPACING
             if small.any():  # triangles smaller than the spacing: their vertices, once each
                 yield vox[np.unique(fc[small])]
             if not small.all():
-                yield from _surface_points(tri[~small], sample_spacing)
+                yield from _surface_points(tri[~small], SAMPLE_SPACING)
 
     for pts in batches():
         # points are convex combinations of vertices, so inside the padded grid
@@ -258,29 +257,28 @@ def _cell_statistics(wanted: np.ndarray, thin: np.ndarray,
 
 
 def voxel_properties(vertices: np.ndarray, faces: np.ndarray, *, voxels_per_axis: int = VOXELS_PER_AXIS,
-                     max_voxels: int = MAX_VOXELS, close_gaps: float = CLOSE_GAPS, layer_correction: float = LAYER_CORRECTION,
-                     sample_spacing: float = SAMPLE_SPACING, grid_shift: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                     max_voxels: int = MAX_VOXELS, grid_shift: tuple[float, float, float] = (0.0, 0.0, 0.0),
                      subvoxel: bool = True) -> SolidMoments:
     """Solid enclosed by a triangle soup (any topology), by voxelization.
 
     Args: as for :func:`voxelize`; ``subvoxel``: weight the surface cells by the mean position of their
-    samples, else each filled cell counts w = 1 - layer_correction * exposed_faces.
+    samples, else each filled cell counts w = 1 - :data:`LAYER_CORRECTION` * exposed_faces.
 
     Returns ``SolidMoments`` (method ``voxel_fill``, ``pitch`` m): volume sum(w) * pitch^3 (w in [0, 1]),
     com and second moment of the weighted cells (uniform cubes); volume 0 when nothing is enclosed.
     Raises ValueError when all vertices coincide.
     """
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    vg = voxelize(vertices, faces, voxels_per_axis=voxels_per_axis, max_voxels=max_voxels, close_gaps=close_gaps,
-                  sample_spacing=sample_spacing, grid_shift=grid_shift, subvoxel=subvoxel)
+    vg = voxelize(vertices, faces, voxels_per_axis=voxels_per_axis, max_voxels=max_voxels, grid_shift=grid_shift,
+                  subvoxel=subvoxel)
     filled, h, origin, iters, dims = vg.filled, vg.pitch, vg.origin, vg.closing, vg.filled.shape
     # weight: 0 outside; inside, 1 minus the part of the cell beyond the surface on each exposed face
     weight = np.ones(filled.shape, np.float32)
     flat_weight = weight.reshape(-1)
     for ax, (up, down) in enumerate(_exposures(filled)):
         if vg.cells is None:
-            weight -= layer_correction * up
-            weight -= layer_correction * down
+            weight -= LAYER_CORRECTION * up
+            weight -= LAYER_CORRECTION * down
             continue
         both = up & down  # one cell thick along ax: the surfaces' separation is inside
         for mask, kind in ((up & ~both, "up"), (down & ~both, "down"), (both, "both")):
