@@ -356,7 +356,8 @@ def lid_support(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPh
         the spring (k N m/rad, q_s rad) and hold load (N m), or None when the part does not need one.
     """
     cs = ctx.closed[name]
-    if not cs.open_range > 0:
+    lever = far_edge(ctx, name, scale)
+    if not cs.open_range > 0 or not lever > 0:
         return None
     rot, sub = ctx.root_rotation, {name: ctx.subtrees[name]}
 
@@ -365,9 +366,8 @@ def lid_support(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPh
         return cs.direction * physics.joint_loads(kin, links, st, scale, sub, root_rotation=rot)[name].gravity_load
 
     tau = np.array([opening_load(f) for f in SUPPORT_FRACTIONS])
-    lever = far_edge(ctx, name, scale)
     top = (operating_range(ctx.category, _label(ctx, name))[0].force_n or (0.0, np.inf))[1]
-    if not lever > 0 or np.abs(tau).max() / lever <= LID_SUPPORT_SHARE * top:
+    if np.abs(tau).max() / lever <= LID_SUPPORT_SHARE * top:
         return None
     f = np.asarray(SUPPORT_FRACTIONS)
     slope = -(tau[-1] - tau[0])
