@@ -3,11 +3,16 @@ that follows the task joint, the task's own success rule, and a few iterations o
 
 from __future__ import annotations
 
+import logging
+import sys
+
 import numpy as np
 import pytest
 
 pytest.importorskip("brax")
+_ROOT_HANDLERS = list(logging.root.handlers)
 
+from absl import logging as absl_logging  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 from brax.training.agents.ppo import train as ppo  # noqa: E402
@@ -15,6 +20,13 @@ from mujoco import mjx  # noqa: E402
 
 from asset2sim.apps.learn.mjx_env import ACTION_DIM, OBS_DIM, TaskMjxEnv, build_scene, evaluate, wrap_for_training  # noqa: E402
 from asset2sim.apps.learn.task import prepare_task  # noqa: E402
+
+# Importing brax's PPO imports absl, whose handler writes to the stderr of the moment (pytest's capture of this
+# collection) and closes that stream when logging's handlers are shut down (uvicorn's logging set-up in the rating app's
+# tests does), and whose first log, before any handler exists, calls logging.basicConfig(). Its handler writes to the
+# process's stderr instead, which it never closes, and the root logger gets back the handlers it had.
+absl_logging.get_absl_handler().python_handler.stream = sys.__stderr__
+logging.root.handlers[:] = _ROOT_HANDLERS
 
 # end to end: JAX compiles the environment's step, PPO's training epoch and the evaluation (minutes on 2 cores)
 pytestmark = pytest.mark.slow
