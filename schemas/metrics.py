@@ -41,10 +41,6 @@ METRIC_INFO: dict[str, MetricInfo] = {
 #: The SPEC's physical-robustness metrics measured in every engine (parity).
 SPEC_METRICS: tuple[str, ...] = ("penetration", "rest_stability", "oscillation")
 
-#: Metrics whose verdict depends only on the rest test and the initial state:
-#: the post-check's measurement of them is the measurement.
-REST_TEST_METRICS: tuple[str, ...] = SPEC_METRICS
-
 
 def unit(name: str) -> str:
     """Unit of metric ``name``'s value (KeyError: not registered)."""
