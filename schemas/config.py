@@ -108,6 +108,10 @@ class MjcfConfig(Frozen):
     (:mod:`asset2sim.formats.mjcf.conventions`, ``docs/guide/inputs.md``)."""
 
 
+#: Fields added after configurations were first hashed, left out of :meth:`RefineConfig.config_hash` at their defaults.
+_ADDED_FIELDS = ("keep_declared", "clips", "open_containers", "request_parser", "body", "mjcf")
+
+
 class RefineConfig(Strict):
     """Knobs of the refine pipeline (units on every field)."""
 
@@ -190,18 +194,10 @@ class RefineConfig(Strict):
     def config_hash(self) -> str:
         """sha256 (hex, 16 chars) of the canonical JSON of this configuration."""
         data = self.model_dump(mode="json")
-        if not data.get("keep_declared"):  # off: the hash of every configuration before the option existed
-            data.pop("keep_declared", None)
-        if data.get("clips", True):  # on (the default): the hash of every configuration before the option existed
-            data.pop("clips", None)
-        if not data.get("open_containers", False):  # off (the default): the hash of every configuration before the option existed
-            data.pop("open_containers", None)
-        if data.get("request_parser", "offline") == "offline":  # the default, likewise
-            data.pop("request_parser", None)
-        if data.get("body") is None:  # the default: the hash of every configuration before the option existed
-            data.pop("body", None)
-        if data.get("mjcf") == MjcfConfig().model_dump(mode="json"):  # the default, likewise
-            data.pop("mjcf", None)
+        default = RefineConfig().model_dump(mode="json")
+        for key in _ADDED_FIELDS:  # at its default: the hash of every configuration before the field existed
+            if data[key] == default[key]:
+                data.pop(key)
         blob = json.dumps(data, sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
 

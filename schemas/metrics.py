@@ -9,7 +9,10 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
+from importlib import resources
 from typing import Any, Iterable, Literal
+
+import yaml
 
 from asset2sim.schemas.report import MetricResult
 
@@ -29,54 +32,14 @@ class MetricInfo:
     columns: dict[str, str] = field(default_factory=dict)
 
 
-#: name -> :class:`MetricInfo`, in evaluation order.
+#: name -> :class:`MetricInfo`, in evaluation order (``metrics.yaml`` beside this module).
 METRIC_INFO: dict[str, MetricInfo] = {
-    m.name: m
-    for m in (
-        MetricInfo("penetration", "mm", "physical", "Phi at the initial state (self-contacts), mm, with link pairs",
-                   {"penetration_mm": "value"}),
-        MetricInfo("ground_penetration", "mm", "physical", "deepest penetration into the ground during the rest test, mm"),
-        MetricInfo("rest_stability", "m", "physical", "rest test (1 s settle, 2 s test): D_pos <= 1e-3 m and D_ori <= 1e-2 rad",
-                   {"rest_stable": "passed", "d_pos_m": "details.D_pos_m", "d_ori_rad": "details.D_ori_rad"}),
-        MetricInfo("oscillation", "joints", "physical", "joint oscillation during the 2 s rest test",
-                   {"oscillation_pass": "passed"}),
-        MetricInfo("divergence", "flag", "physical", "NaN or explosion during the rest test"),
-        MetricInfo("scale_deviation", "%", "semantic", "|s - s_ref| / s_ref vs GenSim2's scale, %",
-                   {"scale_deviation_pct": "value"}),
-        MetricInfo("initial_joint_deviation", "rad", "semantic", "|q - q_ref| of the task-relevant joint"),
-        MetricInfo("total_mass", "kg", "semantic", "total mass and its plausibility for the category and size"),
-        MetricInfo("prompt_alignment", "fraction", "semantic", "0.5 size + 0.5 joint state vs the request",
-                   {"prompt_alignment": "value", "request_warnings": "json:details.warnings"}),
-        MetricInfo("request_met", "unmet phrases", "semantic",
-                   "as asked: every part and state the request names applied, every number asked within its tolerance",
-                   {"request_met": "passed", "request_unmet": "json:details.unmet"}),
-        MetricInfo("probes", "failed probes", "behaviour",
-                   "scripted pusher closes/opens each task-relevant joint (learnability's stand-in; reported, not a verdict tier)"),
-        MetricInfo("joint_sweep", "joints", "behaviour",
-                   "root fixed: each movable joint driven (force-limited) from its closed end to >= 95 % open and back"),
-        MetricInfo("operability", "parts", "behaviour",
-                   "root fixed: every handled part pushed open and closed by a hand, its effort inside the part's real operating range",
-                   {"operable": "passed", "operating_efforts": "json:details.efforts"}),
-        MetricInfo("robust_rest", "trials", "physical",
-                   "dropped 2 cm, tilted 5 deg about each horizontal axis, nudged: back to rest, joints held"),
-        MetricInfo("task_execution", "failed attempts", "behaviour",
-                   "a 70 N, 0.25 m/s gripper performs the task on the free object: target reached and held 1 s, no sliding or tipping"),
-        MetricInfo("operating_force", "N", "behaviour",
-                   "the task's peak operating force (and hinge torque) inside the real operating range of the category and part"),
-        MetricInfo("state_hold", "rad|m", "check",
-                   "undisturbed: every joint at rest within max(0.02 rad, 2 mm) of its initial state after the rest test"),
-        MetricInfo("settle_tilt", "rad", "check", "root rotation while settling (the object fell over)"),
-        MetricInfo("parent_child_penetration", "mm", "check",
-                   "deepest penetration of a child into its parent's collision shapes at the initial state, the pair collided"),
-    )
-}  # fmt: skip
+    name: MetricInfo(name, *entry)
+    for name, entry in yaml.safe_load(resources.files(__package__).joinpath("metrics.yaml").read_text(encoding="utf-8")).items()
+}
 
 #: The SPEC's physical-robustness metrics measured in every engine (parity).
 SPEC_METRICS: tuple[str, ...] = ("penetration", "rest_stability", "oscillation")
-
-#: Metrics whose verdict depends only on the rest test and the initial state:
-#: the post-check's measurement of them is the measurement.
-REST_TEST_METRICS: tuple[str, ...] = SPEC_METRICS
 
 
 def unit(name: str) -> str:

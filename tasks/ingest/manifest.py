@@ -13,30 +13,19 @@ import json
 import math
 import re
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
+
+import yaml
 
 __all__ = ["FILE_ERROR_CODES", "ROW_ERROR_CODES", "ManifestError", "ManifestReading", "ManifestRow", "ManifestRowError",
            "is_valid_id", "read_manifest", "read_manifest_rows"]
 
-#: Codes of a manifest row that cannot be used (:class:`ManifestRowError`).
-ROW_ERROR_CODES = {
-    "MANIFEST_ROW_TOO_LARGE": "a field is longer than the CSV field limit (csv.field_size_limit)",
-    "MANIFEST_ROW_MALFORMED": "the row is not valid CSV",
-    "MANIFEST_MISSING_ID": "the row has no id",
-    "MANIFEST_INVALID_ID": "the id is not a safe folder name (letters, digits, '_.-', not starting with '.')",
-    "MANIFEST_DUPLICATE_ID": "the id was already used by an earlier row",
-    "MANIFEST_MISSING_PROMPT": "the row ends before its prompt column",
-    "MANIFEST_EXTRA_FIELDS": "the row has more fields than the header (an unquoted comma?)",
-    "MANIFEST_INVALID_REFERENCE_SCALE": "reference_scale is not a positive number",
-    "MANIFEST_INVALID_TIME_LIMIT": "time_limit_seconds is not a positive number",
-    "MANIFEST_INVALID_JOINT_RANGE": "reference_joint_range is not [lo, hi]",
-}
-#: Codes of a manifest that cannot be used at all (:class:`ManifestError`).
-FILE_ERROR_CODES = {
-    "MANIFEST_NOT_TEXT": "the file is not UTF-8 text (not a CSV manifest)",
-    "MANIFEST_BAD_HEADER": "the header line is not valid CSV",
-    "MANIFEST_MISSING_COLUMNS": "the header lacks the id or prompt column",
-}
+_MESSAGES = yaml.safe_load(resources.files(__package__).joinpath("messages.yaml").read_text(encoding="utf-8"))
+#: Codes of a manifest row that cannot be used (:class:`ManifestRowError`; ``messages.yaml``) -> what each means.
+ROW_ERROR_CODES: dict[str, str] = _MESSAGES["manifest_row_codes"]
+#: Codes of a manifest that cannot be used at all (:class:`ManifestError`) -> what each means.
+FILE_ERROR_CODES: dict[str, str] = _MESSAGES["manifest_file_codes"]
 #: Characters of a refused row's first line read again to find its id (below the CSV field limit).
 _ID_PREFIX_CHARS = 4096
 

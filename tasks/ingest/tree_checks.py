@@ -6,8 +6,10 @@ cycles, orphans, one root, caps, mimic and unsupported joints), the given inerti
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from importlib import resources
 
 import numpy as np
+import yaml
 
 from asset2sim import file_names
 from asset2sim.tasks.ingest.findings import MAX_NAME_CHARS, MOVABLE_TYPES, Recorder
@@ -43,19 +45,10 @@ def check_inertia(ixx: float, ixy: float, ixz: float, iyy: float, iyz: float, iz
 
 _INERTIA_ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # ixx ixy ixz iyy iyz izz
 
-#: Joint types refine refuses (``JOINT_TYPE_UNSUPPORTED``), with why and what to write instead
-#: (docs/design/validation.md, "Joint types").
-_UNSUPPORTED_JOINT_TYPES: dict[str, str] = {
-    "floating": "a part with 6 free degrees of freedom is not an articulation refine can set or check (it models "
-                "revolute, continuous, prismatic and fixed joints); PyBullet silently loads a floating joint as fixed, "
-                "SAPIEN makes the part a separate free body (on the root link only; it refuses one elsewhere) and MuJoCo "
-                "refuses a free joint below the top level. Write type=\"fixed\" if the part is attached, or make the "
-                "loose part an asset of its own",
-    "planar": "a joint with 3 degrees of freedom (sliding in the plane normal to its axis and turning about it) is "
-              "not an articulation refine can set or check (it models one coordinate per joint: revolute, continuous, "
-              "prismatic, and fixed joints); SAPIEN's URDF loader builds no planar joint, PyBullet and MuJoCo make it "
-              "three coordinates. Write the motion meant as a prismatic or revolute joint, or type=\"fixed\"",
-}
+#: Joint types refine refuses (``JOINT_TYPE_UNSUPPORTED``), with why and what to write instead (``messages.yaml``;
+#: docs/design/validation.md, "Joint types").
+_UNSUPPORTED_JOINT_TYPES: dict[str, str] = yaml.safe_load(
+    resources.files(__package__).joinpath("messages.yaml").read_text(encoding="utf-8"))["unsupported_joint_types"]
 
 
 @dataclass

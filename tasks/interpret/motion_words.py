@@ -12,39 +12,11 @@ from dataclasses import dataclass
 from asset2sim.prior_tables import load_priors
 from asset2sim.schemas.request import MotionPhrase, ordinal_words
 from asset2sim.tasks.interpret import request_values as rv
-from asset2sim.tasks.interpret.phrase_scan import compile_table, negated, scan
+from asset2sim.tasks.interpret.phrase_scan import compile_table, negated, scan, word_table
 
-# (regex, (kind, value), flag) - flag "strong" for explicit damping phrases. Each hit is also a
-# MotionPhrase (:func:`_motion_kind` names its kind) for the part it names.
-_FREE_VERBS = r"(?:moves?|moving|swings?|swinging|spins?|spinning|rotates?|rotating|slides?|sliding|turns?|turning|hangs?|hanging|opens?|closes?|pivots?|pivoting)"
-
-_ON_ITS_OWN = r"(?:on (?:its|their) own|by (?:itself|themselves)|unaided|without (?:support|help|a hand))"
-
-_DYN_TABLE = compile_table(
-    [
-        (r"(?:low|little|light|minimal|minimum|reduced|small|less)[- ]damping|(?:lightly|under)[- ]?damped|(?:no|without) damping|damping[- ]free", ("damping", "low"), "strong"),
-        (r"(?:high|heavy|strong|lots of|more|significant|increased)[- ]damping|(?:well|heavily|highly|strongly|critically|over)[- ]?damped", ("damping", "high"), "strong"),
-        (r"(?:moderate|medium|normal)[- ]damping|moderately damped", ("damping", "moderate"), "strong"),
-        (r"(?:soft|slow|gentle|damped)[- ]?clos(?:e|es|ing|ure)|clos(?:es|ing) (?:slowly|gently|softly)", ("damping", "high"), "soft"),
-        (r"(?:low|little|minimal|no|reduced)[- ](?:joint |hinge |sliding )?friction|frictionless|(?:with(?:out)? (?:no |any )?|no )resistance", ("free", "low"), ""),
-        (_FREE_VERBS + r" (?:freely|loosely|easily|without resistance)", ("free", "low"), ""),
-        (r"free to (?:move|swing|spin|rotate|turn|slide)|free(?:ly)?|free[- ](?:moving|swinging|spinning|rotating|sliding)|loose(?:ly)?|floppy", ("free", "low"), ""),
-        (r"smooth(?:ly)?|easily|effortless(?:ly)?", ("damping", "low"), ""),
-        (r"heavy|heavier", ("heavy", "high"), ""),
-        (r"slow(?:ly)?|sluggish", ("damping", "high"), ""),
-        (r"holds? (?:its|their|the|it'?s) (?:position|state|pose|place|angle|opening)", ("hold", True), ""),
-        (r"holds? (?:position|in place|open|still|steady|itself (?:up|open))", ("hold", True), ""),
-        (r"stays? (?:where (?:it|they|you) (?:is put|are put|was put|were put|is left|are left|puts? (?:it|them)|leaves? (?:it|them)|is|are|was|were)|put|in place|open|up|there|still)(?: " + _ON_ITS_OWN + r")?", ("hold", True), ""),
-        (r"stays? (?:up|open) " + _ON_ITS_OWN + r"|stands? up " + _ON_ITS_OWN, ("hold", True), ""),
-        (r"(?:keeps?|maintains?) (?:its|their) (?:position|state|place|angle|pose)", ("hold", True), ""),
-        (r"remains? (?:where (?:it|they) (?:is|are)|in place|open|up|still)", ("hold", True), ""),
-        (r"(?:does not|doesn't|won't|will not|should not|shouldn't|must not|never) (?:fall|sag|drop|slam|droop|drift|move|swing|close|shut) (?:shut |closed |open |down )?(?:by itself|on its own|under (?:its own )?weight|under gravity)", ("hold", True), ""),
-        (r"self[- ]clos(?:ing|es)|clos(?:es|ing) (?:by )?(?:itself|themselves|on (?:its|their) own|automatically)|auto[- ]?clos(?:ing|e)|snaps? (?:shut|closed)|(?:door )?closer"
-         r"|(?:swings?|pulls?) (?:shut|closed)(?: by (?:itself|themselves)| on (?:its|their) own| automatically)?|shuts? (?:by (?:itself|themselves)|on (?:its|their) own|automatically)", ("spring", True), "close"),
-        (r"spring[- ]loaded|spring[- ]return(?:ed)?|springs? back|springy|springs?|self[- ]returning|returns?(?: to)?|snaps? back|pops? back|bounces? back", ("spring", True), ""),
-        (r"stiff(?:ly|er)?|hard to (?:move|turn|open|push|rotate|pull|close)|(?:high|lots of|some|more) (?:joint |hinge )?friction|with resistance|resists? (?:motion|movement|being moved)", ("stiff", True), ""),
-    ]
-)
+#: The words about motion (``words.yaml`` ``motion``): value (kind, level), flag "strong" for an explicit damping
+#: phrase. Each hit is also a MotionPhrase (:func:`_motion_kind` names its kind) for the part it names.
+_DYN_TABLE = word_table("motion")
 
 
 @functools.lru_cache(maxsize=1)

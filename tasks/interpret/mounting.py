@@ -8,6 +8,7 @@ from __future__ import annotations
 import functools
 import re
 from importlib import resources
+from string import Template
 from typing import get_args
 
 import yaml
@@ -82,26 +83,9 @@ def category_mounting(category: str | None) -> RootMount:
     return RootMount(kind=prior.kind, fixed=prior.kind != FREE, source=f"category prior ({category}): {prior.kind}; {prior.source.strip()}")
 
 
-# Request words; hyphen, space or nothing inside compounds; the last mention wins.
-_ART = r"(?:(?:a|an|the|its|his|her|their|my|our|your)\s+)?"
-_J = r"[-\s]?"
-_PATTERNS: list[tuple[str, str]] = [
-    (rf"\bnot\s+(?:be\s+)?(?:mounted|fixed|bolted|installed|attached|fastened|built{_J}in)\b", FREE),
-    (rf"\b(?:free{_J}standing|stand{_J}alone|unmounted|unfixed|portable)\b", FREE),
-    (rf"\b(?:stands?|standing|resting|rests|sitting|sits|placed)\s+(?:freely\s+)?on\s+{_ART}(?:floor|ground|table|desk|counter|countertop|shelf)\b", FREE),
-    (rf"\bwall{_J}(?:mounted|mount|hung|fixed)\b", "wall-mounted"),
-    (rf"\b(?:mounted|fixed|hung|hanging|bolted|fastened|screwed|attached|installed)\s+(?:on|to|onto|in|into)\s+{_ART}wall\b", "wall-mounted"),
-    (rf"\bon\s+{_ART}wall\b", "wall-mounted"),
-    (rf"\b(?:counter|deck|sink|countertop|under{_J}counter){_J}(?:mounted|mount|fixed)\b", "counter-mounted"),
-    (rf"\b(?:mounted|fixed|bolted|fastened|attached|installed)\s+(?:on|to|onto|in|into|under)\s+{_ART}(?:counter|countertop|sink|deck|cabinet|cabinets)\b", "counter-mounted"),
-    (rf"\b(?:built{_J}in|under{_J}counter)\b", "counter-mounted"),
-    (rf"\bfloor{_J}(?:mounted|mount|fixed|bolted)\b", "floor-mounted"),
-    (rf"\b(?:mounted|fixed|bolted|fastened|anchored|screwed|attached|installed)\s+(?:on|to|onto|in|into)\s+{_ART}(?:floor|ground)\b", "floor-mounted"),
-    (rf"\b(?:in|within)\s+{_ART}(?:door\s+|window\s+)?frame\b", "hangs-in-frame"),
-    (r"\b(?:mounted|bolted|anchored|installed|fastened)\b", "mounted"),
-    (r"\bfixed\s+(?:base|root|in\s+place)\b", "mounted"),
-]
-_COMPILED = [(re.compile(p), kind) for p, kind in _PATTERNS]
+#: The request's words for each mounting (``words.yaml`` ``mounting``), the more specific first; the last mention wins.
+_MOUNTING_WORDS = yaml.safe_load(resources.files(__package__).joinpath("words.yaml").read_text(encoding="utf-8"))["mounting"]
+_COMPILED = [(re.compile(Template(p).substitute(_MOUNTING_WORDS["fragments"])), kind) for p, kind in _MOUNTING_WORDS["patterns"]]
 
 
 def request_mounting(text: str, category: str | None = None) -> RootMount | None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import re
 from bisect import bisect_left
 from dataclasses import dataclass
+from string import Template
 
 from asset2sim.tasks.interpret import request_values as rv
 
@@ -28,6 +29,14 @@ class Hit:
 
 def compile_table(table: list[tuple[str, object, str]]) -> list[tuple[re.Pattern[str], object, str]]:
     return [(re.compile(_L + "(?:" + pat + ")" + _R), val, flag) for pat, val, flag in table]
+
+
+def word_table(name: str) -> list[tuple[re.Pattern[str], object, str]]:
+    """The phrase table ``name`` of ``words.yaml`` compiled (:func:`compile_table`): each ``${FRAGMENT}`` filled in,
+    a list value as a tuple, the flag "" where none is given."""
+    vocabulary = rv.words()
+    return compile_table([(Template(pat).substitute(vocabulary["fragments"]), tuple(val) if isinstance(val, list) else val, flag)
+                          for pat, val, flag in (entry + [""] * (3 - len(entry)) for entry in vocabulary[name])])
 
 
 def scan(text: str, table: list[tuple[re.Pattern[str], object, str]]) -> list[Hit]:

@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
+from importlib import resources
 from typing import Any
 
 from asset2sim.inert import one_line
@@ -42,21 +43,8 @@ it)."""
 #: Estimators whose model may parse the request.
 MODEL_ESTIMATORS = ("llm", "openai")
 
-SYSTEM_PROMPT = """You turn a user's request for a simulated articulated object into its typed intent, as one JSON object
-that follows the JSON schema below exactly (every property present; null or [] or the default when the request does not say).
-- joint_states: one entry per part state asked, in the request's order. selector "label" with label the part's word in the
-  singular lower case (door, lid, drawer, lever, knob, button, seat, ...), or selector "all" for the object as a whole
-  ("half open"); never selector "joint". ordinal: 0-based position counted along order ("the top drawer": 0 vertical;
-  "the bottom drawer": -1 vertical; "the left door": 0 left_right; "the middle drawer": 0 middle), else null.
-  band: closed, slightly_open, quarter, halfway, mostly or fully. target: null for a band in words; kind "fraction" with
-  value 0..1 from the closed end ("40 %": 0.4); "angle" with value in radians ("30 degrees": 0.5236); "distance" with
-  value in metres ("2 cm": 0.02); "end" with end high/low (a lever up/down) or on/off. phrase: the request's words.
-- sizes: numbers only, value in metres (or m^3 for dimension volume: "500 ml" is 0.0005); phrase the words.
-- properties: masses in kg and materials (keys: {materials}) for the whole object (label null), its body or a part.
-- dynamics_values: explicit damping / friction / stiffness numbers in SI units.
-- part_counts: counts of parts the request names ("a two-drawer cabinet": drawer 2).
-- mount: "fixed" for mounted / built-in, "free" for free-standing, else null.
-Answer with the JSON object only."""
+#: The system prompt of the model's parse (``intent_prompt.txt`` beside this module; ``{materials}``: the material keys).
+SYSTEM_PROMPT = resources.files(__package__).joinpath("intent_prompt.txt").read_text(encoding="utf-8").removesuffix("\n")
 
 
 def intent_schema() -> dict[str, Any]:

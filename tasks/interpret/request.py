@@ -18,7 +18,7 @@ from asset2sim.tasks.interpret.mounting import mounting_mentions
 from asset2sim.prior_tables import load_priors
 from asset2sim.tasks.interpret import request_values as rv
 from asset2sim.tasks.interpret.motion_words import dynamics_words
-from asset2sim.tasks.interpret.phrase_scan import CLAUSE_MARK, WORD_RUN, Hit, Tokens, compile_table, negated, scan
+from asset2sim.tasks.interpret.phrase_scan import CLAUSE_MARK, WORD_RUN, Hit, Tokens, negated, scan, word_table
 from asset2sim.tasks.interpret.state_words import ORDINALS, joint_states
 
 
@@ -43,48 +43,14 @@ def check_request_length(text: str) -> None:
         raise RequestTooLong(len(text))
 
 
-#: Hedges before a degree word ("open about halfway"): the degree is what is asked.
-_SZ = r"[- ]?siz(?:ed?|es)"
-
-# (regex, size class, flag) - flag "weak": only counts right before a category word.
-_SIZE_TABLE = compile_table(
-    [
-        (r"tiny|teeny(?:[- ]tiny)?|miniature|minuscule|itsy[- ]bitsy", "tiny", ""),
-        (r"pocket" + _SZ, "tiny", ""),
-        (r"(?:a )?(?:quarter|third) (?:the|its|of the) (?:usual |normal |regular )?size", "tiny", ""),
-        (r"half (?:the|its|of the) (?:usual |normal |regular )?size", "very_small", ""),
-        (r"(?:twice|double|two times) (?:the|its) (?:usual |normal |regular )?size", "very_large", ""),
-        (r"(?:very|really|super|extremely|extra|quite)[- ]small", "very_small", ""),
-        (r"(?:very|really|super)[- ]little", "very_small", "weak"),
-        (r"for (?:a |the |my )?(?:bab(?:y|ies)|toddlers?|infants?|newborns?)", "very_small", ""),
-        (r"for an (?:infant|newborn)", "very_small", ""),
-        (r"bab(?:y|ies)|toddlers?|infants?|toy|doll" + r"(?:[- ]?house)?", "very_small", ""),
-        (r"small(?:er|ish)?|mini|minifridge|compact|petite|personal|carry[- ]?on", "small", ""),
-        (r"(?:cabinet|cupboard|desk|travel|child|kid|apartment)" + _SZ, "small", ""),
-        (r"countertop|counter[- ]top|benchtop|tabletop|table[- ]top|desktop", "small", ""),
-        (r"life[- ]?siz(?:e|ed)|real[- ]siz(?:e|ed)|actual size", "regular", ""),
-        (r"for (?:a |the |my )?(?:child(?:ren)?|kids?)", "small", ""),
-        (r"little", "small", "weak"),
-        (r"regular(?:" + _SZ + r")?", "regular", ""),
-        (r"(?:standard|normal|average|medium|typical|full|mid)" + _SZ, "regular", ""),
-        (r"standard|normal|average|medium|typical|ordinary", "regular", "weak"),
-        (r"(?:very|really|super|extremely|extra)[- ](?:large|big)|huge|giant|enormous|massive|oversized?|xx?l", "very_large", ""),
-        (r"(?:large|big)(?:ger|r)?|jumbo|family" + _SZ + r"|king" + _SZ, "large", ""),
-        (r"(?:large|big)" + _SZ, "large", ""),
-    ]
-)
+#: Size words (``words.yaml`` ``size``): value a size class; flag "weak": only counts right before a category word.
+_SIZE_TABLE = word_table("size")
 
 
 _PART_WORD = re.compile(r"(?:" + rv.PART_WORDS + r")")
 
 
-_POSE_TABLE = compile_table(
-    [
-        (r"(?:lying|laid|lies|lay|placed|resting|rests|set|put) flat|lying down|flat on (?:its|the) (?:back|floor|ground|table|base)|lying on its back", "lying_flat", ""),
-        (r"(?:resting|lying|lies|rests|placed|laid|sitting|sits|standing|set|tipped|turned|put|lay) (?:on (?:its|their|one|a) side|sideways)|on (?:its|their) side", "sideways", ""),
-        (r"(?:standing |placed |set )?upright|standing up|right side up", "upright", ""),
-    ]
-)
+_POSE_TABLE = word_table("pose")
 
 
 @functools.lru_cache(maxsize=1)
@@ -245,13 +211,7 @@ def _merge_properties(props: list[PartProperty], warnings: list[str]) -> list[Pa
 
 
 #: Function words of English requests, never reported as unused.
-_FUNCTION_WORDS = frozenset(
-    "a an the i i'd i'm me my we our you your it its it's their them his her this that these those "
-    "want wants need needs would like please give make made get have has having be is are was were being "
-    "with without and or but of for to in on at by from as into onto so such some any one which who whose "
-    "can could should will shall may might must do does also just very really quite rather more most less "
-    "there here where when while than then every all each both everything pair none neither".split()
-)
+_FUNCTION_WORDS = frozenset(rv.words()["function_words"].split())
 
 
 _SELECTOR_AFTER = re.compile(r"\s+(?:[\w'-]+\s+){0,2}?(?:" + rv.PART_WORDS + r"|ones?)(?![\w-])")

@@ -7,10 +7,14 @@ length of the text.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import re
 from dataclasses import dataclass
+from importlib import resources
+
+import yaml
 
 from asset2sim.schemas.request import BAND_TARGET, DynamicsValue, PartProperty, SizeTarget, StateTarget
 from asset2sim.prior_tables import load_priors
@@ -19,23 +23,21 @@ from asset2sim.tasks.interpret.part_labels import canonical_label
 _L = r"(?<![\w.-])"
 _R = r"(?![\w-])"
 
-#: Part nouns a request may name (singular and plural).
-PART_WORDS = (
-    r"lids?|doors?|drawers?|screens?|displays?|seats?|handles?|switch(?:es)?|levers?|knobs?|"
-    r"buttons?|caps?|trays?|shel(?:f|ves)|racks?|flaps?|covers?|hatch(?:es)?|gates?|panels?|"
-    r"blades?|windows?|sash(?:es)?|pedals?|straps?|spouts?|legs?|wheels?|keys?|toggles?|sliders?|arms?|"
-    r"containers?|carafes?|jugs?|temples?|lens(?:es)?|dials?|bails?|plungers?|triggers?|turntables?"
-)
+
+@functools.cache
+def words() -> dict:
+    """The request parser's vocabulary, ``words.yaml`` beside this module, read once: word lists, ``fragments``
+    (name -> regex) and phrase tables (name -> list of [regex, value] or [regex, value, flag])."""
+    return yaml.safe_load(resources.files(__package__).joinpath("words.yaml").read_text(encoding="utf-8"))
+
+
+#: Part nouns a request may name (singular and plural; ``words.yaml`` ``part_words``).
+PART_WORDS = words()["part_words"]
 PART_RX = re.compile(r"(?<![\w-])(?:" + PART_WORDS + r")(?![\w-])")
 #: Words for the object's fixed body (material per part: "on a plastic body").
-BODY_RX = re.compile(r"(?<![\w-])(?:body|bodies|frame|base|casing|housing|carcass|chassis)(?![\w-])")
+BODY_RX = re.compile(r"(?<![\w-])(?:" + words()["body_words"] + r")(?![\w-])")
 
-_WORD_NUMBERS = {
-    "zero": 0, "one": 1, "two": 2, "three": 3, "four": 4, "five": 5, "six": 6, "seven": 7, "eight": 8,
-    "nine": 9, "ten": 10, "eleven": 11, "twelve": 12, "fifteen": 15, "twenty": 20, "thirty": 30,
-    "forty": 40, "forty-five": 45, "fifty": 50, "sixty": 60, "seventy": 70, "eighty": 80, "ninety": 90,
-    "a hundred": 100, "hundred": 100, "half a": 0.5, "a half": 0.5,
-}
+_WORD_NUMBERS = words()["numbers"]
 NUM = r"(?:\d+(?:\.\d+)?|\.\d+|" + "|".join(sorted((re.escape(w) for w in _WORD_NUMBERS), key=len, reverse=True)) + r")"
 
 
@@ -60,28 +62,8 @@ def number_value(text: str) -> float:
     return float(_WORD_NUMBERS.get(t, t))
 
 
-_ANGLE_UNITS = [(r"°|deg(?:rees?|s)?", math.pi / 180.0), (r"rad(?:ians?|s)?", 1.0)]
-_LENGTH_UNITS = [
-    (r"mm|millimet(?:er|re)s?", 1e-3),
-    (r"cm|centimet(?:er|re)s?", 1e-2),
-    (r"m|met(?:er|re)s?", 1.0),
-    (r"in(?:ch(?:es)?)?|\"|''", 0.0254),
-    (r"ft|foot|feet", 0.3048),
-]
-#: A container's volume (NIST SP 811, Appendix B: litre 1e-3 m^3; US fluid ounce 2.957353e-5 m^3; US gallon 3.785412e-3 m^3).
-_VOLUME_UNITS = [
-    (r"ml|millilit(?:er|re)s?", 1e-6),
-    (r"cl|centilit(?:er|re)s?", 1e-5),
-    (r"l|ltrs?|lit(?:er|re)s?", 1e-3),
-    (r"fl\.? ?oz|fluid ounces?", 2.95735295625e-5),
-    (r"gal(?:lons?)?", 3.785411784e-3),
-]
-_MASS_UNITS = [
-    (r"g|grams?|grammes?", 1e-3),
-    (r"kg|kgs|kilos?|kilograms?|kilogrammes?", 1.0),
-    (r"lbs?|pounds?", 0.45359237),
-    (r"oz|ounces?", 0.028349523125),
-]
+#: Units per quantity (``words.yaml`` ``units``, NIST SP 811, Appendix B): [regex, factor to SI].
+_ANGLE_UNITS, _LENGTH_UNITS, _VOLUME_UNITS, _MASS_UNITS = (words()["units"][q] for q in ("angle", "length", "volume", "mass"))
 
 
 def _unit_rx(units: list[tuple[str, float]]) -> str:
@@ -121,12 +103,7 @@ _STATE_AFTER = re.compile(
 _STATE_WORD_BEFORE = re.compile(r"(?<![\w-])(?:open(?:ed)?|rotated|tilted|swung|raised|lifted|pulled|pushed|slid|extended|lowered)\s+(?:\w+\s+){0,3}$")
 _DIM_AFTER = re.compile(r"^\s*(?P<dim>tall|high|in height|wide|in width|across|in diameter|diameter|deep|in depth|long|in length)" + _R)
 _DIM_BEFORE = re.compile(r"(?P<dim>height|width|depth|length|diameter)\s*(?:of|is|:|=|at)?\s*(?:about |around |roughly |approximately |exactly )?$")
-_DIM_NAMES = {
-    "tall": "height", "high": "height", "in height": "height", "height": "height",
-    "wide": "width", "in width": "width", "across": "width", "width": "width", "in diameter": "width", "diameter": "width",
-    "deep": "depth", "in depth": "depth", "depth": "depth",
-    "long": "length", "in length": "length", "length": "length",
-}
+_DIM_NAMES = words()["dimensions"]
 
 
 @dataclass
@@ -375,29 +352,8 @@ def mass_levels(low: str, mention_starts: list[int]) -> list[Found]:
     return out
 
 
-#: Request words -> ``materials.yaml`` key ("metal": sheet steel, "plastic": ABS).
-MATERIAL_WORDS: dict[str, str] = {
-    r"wood(?:en)?|timber|oak|pine|walnut|maple|beech": "solid_wood",
-    r"plywood": "plywood",
-    r"mdf": "mdf",
-    r"particle ?board|chipboard": "particle_board",
-    r"metal(?:lic)?|steel|sheet[- ]metal|tin": "steel_sheet",
-    r"stainless(?: steel)?": "stainless_steel",
-    r"alumini?um": "aluminium",
-    r"brass": "brass",
-    r"cast iron|iron|solid steel": "steel_solid",
-    r"zinc|die[- ]cast": "cast_zinc",
-    r"glass": "glass",
-    r"plastic|abs": "abs_plastic",
-    r"polypropylene|pp": "pp_plastic",
-    r"polycarbonate": "polycarbonate",
-    r"pvc": "pvc_plastic",
-    r"cardboard|carton|paperboard": "corrugated_cardboard",
-    r"leather": "leather",
-    r"fabric|cloth|canvas|textile|nylon": "textile",
-    r"ceramic|porcelain|china": "vitreous_china",
-    r"rubber": "rubber",
-}
+#: Request words -> ``materials.yaml`` key (``words.yaml`` ``materials``: "metal": sheet steel, "plastic": ABS).
+MATERIAL_WORDS: dict[str, str] = words()["materials"]
 _MATERIAL_RX = [(re.compile(_L + r"(?:made (?:of|from|out of) |in )?(?:solid |real )?(?:" + pat + r")" + _R), key) for pat, key in MATERIAL_WORDS.items()]
 _MADE_OF = re.compile(r"(?:made (?:of|from|out of)|in) ")
 
@@ -461,7 +417,7 @@ def dynamics_values(low: str, mention_starts: list[int] | None = None) -> tuple[
     return leftmost_longest(out), warns
 
 
-_COUNT_WORDS = {"one": 1, "single": 1, "two": 2, "double": 2, "twin": 2, "three": 3, "triple": 3, "four": 4, "five": 5, "six": 6}
+_COUNT_WORDS = words()["counts"]
 _COUNT_RX = re.compile(
     _L + r"(?P<n>one(?=-)|single|two|double|twin|three|triple|four|five|six|[1-9])[- ](?P<part>drawers?|doors?|slots?|slices?|lids?|"
     r"shel(?:f|ves)|compartments?|burners?|buttons?|knobs?|handles?|wheels?)" + _R
@@ -475,9 +431,6 @@ def part_counts(low: str) -> list[Found]:
             for m in _COUNT_RX.finditer(low)]
 
 
-#: Words naming the kind of joint or motion ("sliding joints") or a part left as it is ("the knobs left alone"): understood, no effect.
-DESCRIPTOR_RX = re.compile(
-    _L + r"(?:(?:rotational|rotating|rotary|revolute|hinged|hinge[- ]like|pivoting|swinging|sliding|prismatic|linear|telescopic)"
-    r"(?: (?:joints?|hinges?|motion|movement|behaviou?r|action))?|(?:behaviou?r|operation|motion|movement|action)|(?:drawer )?slides|joints?|opening|closing|pressing|pushing|pulling|"
-    r"left (?:alone|untouched|as (?:it is|they are))|untouched|as (?:it is|they are))" + _R
-)
+#: Words naming the kind of joint or motion ("sliding joints") or a part left as it is ("the knobs left alone"):
+#: understood, no effect (``words.yaml`` ``descriptors``).
+DESCRIPTOR_RX = re.compile(_L + "(?:" + words()["descriptors"] + ")" + _R)

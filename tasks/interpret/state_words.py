@@ -13,96 +13,16 @@ from dataclasses import dataclass
 
 from asset2sim.schemas.request import JointStateRequest, StateTarget
 from asset2sim.tasks.interpret import request_values as rv
-from asset2sim.tasks.interpret.phrase_scan import TOKEN, Hit, Tokens, compile_table, negated, scan, sentences
+from asset2sim.tasks.interpret.phrase_scan import TOKEN, Hit, Tokens, negated, scan, sentences, word_table
 
-_OPEN = r"open(?:ed)?"
-
-_FLAT = r"(?:lying|laid|lies|lay|resting|rests) (?:open )?flat"
-
-#: Verbs of a part's motion a degree word may follow ("pulled out halfway"): the degree is the state.
-_MOVED = (r"(?:(?:pulled|slid|drawn|pushed) (?:out|in)|pulled|slid|extended|retracted|raised|lifted|lowered|swung|tilted|"
-          r"turned|rotated|unfolded|folded|unscrewed|screwed (?:off|open)|loosened)")
-
-_ABOUT = r"(?:(?:about|around|roughly|approximately|approx\.?|some|more or less|close to|nearly|almost|just about) )?"
-
-#: Comparatives around halfway ("a little less than halfway open"): an opening fraction a step below or above it.
-_LESS = r"(?:(?:a (?:little|bit|tad)|slightly|just|somewhat) )?(?:less than|under|short of|below)"
-
-_MORE = r"(?:(?:a (?:little|bit|tad)|slightly|just|somewhat) )?(?:more than|over|past|beyond|above)"
-
-_HALF = r"(?:half[- ]?way|half(?: of the way)?|the halfway (?:point|mark))"
-
-#: Opening fraction of "less than halfway" / "more than halfway": one band step (0.1 of the range) from 0.5.
+#: Opening fraction of "less than halfway" / "more than halfway" (``words.yaml``): one band step (0.1 of the range)
+#: from 0.5.
 LESS_THAN_HALF, MORE_THAN_HALF = 0.4, 0.6
 
-# (regex, band, flag) - flag "bare" for a lone "open".
-_STATE_TABLE = compile_table(
-    [
-        # negations first (longest match wins at a position)
-        (r"(?:not (?:at all |even slightly |yet )?|no longer |never )" + _OPEN + r"(?: at all)?", "closed", ""),
-        (r"no longer (?:closed|shut)", "mostly", ""),
-        (r"(?:is|are|was)n'?t " + _OPEN, "closed", ""),
-        (r"not (?:quite|fully|completely|entirely) (?:closed|shut)", "slightly_open", ""),
-        (r"not (?:closed|shut)", "halfway", ""),
-        (r"not (?:fully|completely|all the way|entirely) " + _OPEN, "mostly", ""),
-        # hedged and compared ("mostly closed": a small opening, not closed; "a little less than halfway open")
-        (r"(?:mostly|largely|almost|nearly|practically|just about|almost fully|nearly fully|not quite fully) (?:closed|shut)", "slightly_open", ""),
-        (r"(?:" + _OPEN + r" |" + _MOVED + r" )?" + _LESS + r" " + _HALF + r"(?:[- ]" + _OPEN + r")?",
-         ("halfway", StateTarget(kind="fraction", value=LESS_THAN_HALF)), ""),
-        (r"(?:" + _OPEN + r" |" + _MOVED + r" )?" + _MORE + r" " + _HALF + r"(?:[- ]" + _OPEN + r")?",
-         ("halfway", StateTarget(kind="fraction", value=MORE_THAN_HALF)), ""),
-        # closed
-        (r"(?:fully |completely |all the way )?(?:closed|shut)(?: all the way| completely| tight)?", "closed", ""),
-        (r"(?:turned|switched|shut) off", "closed", ""),
-        # fully
-        (r"(?:fully|completely|totally|maximally|wide) " + _OPEN, "fully", ""),
-        (r"(?:" + _OPEN + r" )?all the way(?: " + _OPEN + r")?", "fully", ""),
-        (_OPEN + r" (?:fully|completely|wide|to the max(?:imum)?|as far as (?:it|they) (?:can|will) go|to (?:its|their|the) (?:limit|maximum|max))", "fully", ""),
-        (r"(?:turned|switched) (?:fully )?on(?: (?:full|fully|completely|all the way))?|fully (?:extended|raised|pulled out)|pulled all the way out", "fully", ""),
-        (r"(?:" + _OPEN + r"|laid open|lying open|unfolded|folded out|swung open) flat|flat open|(?:" + _OPEN + r"|folded|swung) (?:out )?flat", "fully", ""),
-        (r"(?:folded|bent|pushed|tilted|laid|swung) (?:all the way )?back(?: flat| all the way)?", "fully", ""),
-        # named states: which end they are does not depend on the geometry
-        (r"(?:pulled|slid|drawn) (?:all the way )?out|extended|unfolded|unscrewed|deployed", "fully", ""),
-        (r"(?:(?:pulled|slid|drawn) out|extended|unfolded) (?:all the way|fully|completely)", "fully", ""),
-        (r"retracted|folded(?: up| shut| closed| down)?|screwed (?:on|shut|closed|tight)|tucked in", "closed", ""),
-        (r"(?:pressed|depressed)(?: all the way)?(?: down| in)?|pushed (?:all the way )?in", "pressed", ""),
-        # a part "lying flat" (not the object: a part noun right before it) is opened out flat, or to its limit
-        (_FLAT, "fully", "end"),
-        # physical ends: decided from the geometry after scaling (request_apply)
-        (r"(?:raised|lifted) (?:all the way|fully|completely|to the top)", "end:high", "end"),
-        (r"(?:in|at|to) (?:the|its|their) (?:up|raised|upper|top|highest) position|(?:raised|lifted|propped|popped|sprung|flipped|pulled|pushed|swung|tilted|turned|flicked|moved|set|left)(?: all the way)? up|raised|lifted|(?:all the way |fully )?up|upright", "end:high", "end"),
-        (r"(?:in|at|to) (?:the|its|their) (?:down|lowered|lower|bottom|lowest) position|(?:lowered|flipped|pulled|pushed|swung|tilted|flicked|moved|set|left)(?: all the way)? down|lowered|(?:all the way |fully )?down", "end:low", "end"),
-        (r"(?:in|at|to) (?:the|its) on position|(?:set|flipped|flicked|toggled|left) on|on", "end:on", "end"),
-        (r"(?:in|at|to) (?:the|its) off position|(?:flipped|flicked|toggled|left) off|off", "end:off", "end"),
-        # mostly
-        (r"(?:mostly|largely|almost fully|nearly fully|almost completely|nearly completely|almost all the way|nearly all the way) " + _OPEN, "mostly", ""),
-        (r"(?:almost|nearly) (?:fully|all the way)(?: " + _OPEN + r")?", "mostly", ""),
-        (r"three[- ]quarters?(?: of the way)?(?:[- ]" + _OPEN + r")?", "mostly", ""),
-        (_OPEN + r" (?:most of the way|three[- ]quarters?(?: of the way)?)", "mostly", ""),
-        (_MOVED + r" (?:most of the way|three[- ]quarters?(?: of the way)?)", "mostly", ""),
-        # halfway
-        (_ABOUT + r"(?:half|mid)[- ]?way(?:[- ]" + _OPEN + r"| out)?", "halfway", ""),
-        (_ABOUT + r"half[- ]" + _OPEN + r"|half of the way(?: " + _OPEN + r")?|half[- ](?:closed|shut)", "halfway", ""),
-        (_OPEN + r" " + _ABOUT + r"(?:half[- ]?way|half)", "halfway", ""),
-        (_MOVED + r" " + _ABOUT + r"(?:half[- ]?way|half(?: of the way)?)(?: out)?", "halfway", ""),
-        (r"(?:partially|partly) " + _OPEN, "halfway", ""),
-        # quarter
-        (_ABOUT + r"(?:a |one )?quarter(?:[- ]way| of the way)?[- ]" + _OPEN, "quarter", ""),
-        (_OPEN + r" " + _ABOUT + r"(?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
-        (_MOVED + r" " + _ABOUT + r"(?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
-        (r"(?:a |one )?quarter of the way", "quarter", ""),
-        # slightly open
-        (r"(?:slightly|barely|just|a (?:little |tiny )?bit|a little|a tad|a crack|a touch) " + _OPEN, "slightly_open", ""),
-        (_OPEN + r" (?:slightly|a (?:little |tiny )?bit|a little|a crack|a tad|just a (?:little|bit))", "slightly_open", ""),
-        (_MOVED + r" (?:slightly|a (?:little |tiny )?bit|a little|a tad|just a (?:little|bit))", "slightly_open", ""),
-        (r"(?:slightly |partially )?ajar|cracked(?: " + _OPEN + r")?(?: (?:a (?:little|bit|crack)|slightly))?", "slightly_open", ""),
-        (r"slightly (?:raised|lifted|pulled out|extended|apart|rotated|turned)", "slightly_open", ""),
-        # "open" after a verb that leaves it open ("the lid propped open"): as a lone "open", never the verb "to open"
-        (r"(?:propped|popped|sprung|flipped|swung|thrown|flung|left|kept|held|standing|stands|hanging|hangs|wedged) " + _OPEN, "mostly", "bare"),
-        # a lone "open"
-        (_OPEN, "mostly", "bare"),
-    ]
-)
+#: The state words (``words.yaml`` ``state``): value a band, (band, target) for a fraction; flag "bare" for a lone
+#: "open", "end" for a physical end.
+_STATE_TABLE = [(rx, (val[0], StateTarget(kind="fraction", value=val[1])) if isinstance(val, tuple) else val, flag)
+                for rx, val, flag in word_table("state")]
 
 _VERB_AFTER = re.compile(r"\s+(?:the|a|an|its|their|it|them|up|and close|or close)\b")
 
@@ -114,31 +34,7 @@ _NUM_AFTER = re.compile(
     r"\s*(?:#|no\.?\s*|numbers?\s*)?(\d{1,2}(?:\s*(?:,\s*(?:and\s+)?|and\s+|or\s+|&\s*)\d{1,2})*)\b"
 )
 
-ORDINALS = compile_table(
-    [
-        (r"first|1st", 0, ""),
-        (r"second|2nd", 1, ""),
-        (r"third|3rd", 2, ""),
-        (r"fourth|4th", 3, ""),
-        (r"fifth|5th", 4, ""),
-        (r"top(?:most)?|upper(?:most)?|highest", 0, ""),
-        (r"bottom(?:most)?|lowest|lower|last", -1, ""),
-        (r"every|all|each|both", None, "quant"),
-        # spatial words: the flag is the order they count in (docs/guide/requests.md)
-        (r"left(?:most|[- ]hand)?", 0, "left_right"),
-        (r"right(?:most|[- ]hand)?", 0, "right_left"),
-        (r"front(?:most)?", 0, "front_back"),
-        (r"back(?:most)?|rear(?:most)?", -1, "front_back"),
-        # resolved from the geometry (tasks/interpret/named_parts.py): the middle one of an odd count, along the
-        # direction the parts are spread in; by the size of the moving part's box, smallest first ("the freezer
-        # door": a refrigerator's smaller door; "the main door": its largest)
-        (r"middle(?:most)?|cent(?:er|re)|central", 0, "middle"),
-        (r"freezer|small(?:er|est)|narrow(?:er|est)", 0, "size"),
-        (r"main|large(?:r|st)|bigg(?:er|est)|wid(?:er|est)", -1, "size"),
-        # "one door open and the other shut": one of them (the first, top to bottom), the rest by "the other"
-        (r"one", 0, "vertical"),
-    ]
-)
+ORDINALS = word_table("ordinals")
 
 #: Ordinal flags that only count right before the part noun ("the freezer door", not "a freezer with its door").
 _ADJACENT_ORDERS = frozenset({"middle", "size"})
@@ -153,7 +49,7 @@ _END_TAIL = re.compile(r"\s*(?:$|[,.;:!?)]|and\b|but\b|with\b|while\b|position\b
 #: Labels (:func:`request_values.part_label`'s) pressed from their rest, the closed end: "pressed" is the far end.
 PRESSED_LABELS = frozenset({"button", "lever", "trigger", "plunger", "foot"})
 
-_BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)|upright|" + _FLAT)  # "the handle upright": a part's end
+_BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)|upright|" + rv.words()["fragments"]["FLAT"])  # "the handle upright": a part's end
 
 _END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:are\s+)?(?:both|all|each))?"
                        r"(?:\s+(?:is|are|was|were|set|turned|switched|flipped|pushed|pulled|left|stays?|kept))?\s+$")
