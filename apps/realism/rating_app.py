@@ -36,9 +36,12 @@ import hashlib
 import hmac
 import sqlite3
 from contextlib import asynccontextmanager
+from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 from urllib.parse import parse_qs, quote
+
+import yaml
 
 from asset2sim.apps.realism.pair_set import media_path
 from asset2sim.apps.realism.ratings import RatingError, RatingStore, Showing, check_rater, side
@@ -62,44 +65,22 @@ LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
 #: Addresses that mean "every interface": not a name a request can carry.
 _ANY_ADDRESS = ("", "0.0.0.0", "::", "*")
 
-_STYLE = """
-body { font-family: system-ui, sans-serif; margin: 1.5rem auto; max-width: 1200px; padding: 0 1rem; color: #222; }
-.sides { display: flex; gap: 1.5rem; }
-.side { flex: 1; border: 1px solid #ccc; border-radius: 8px; padding: 0.75rem; }
-.side h2 { margin: 0 0 0.5rem 0; text-align: center; }
-video { width: 100%; background: #000; border-radius: 4px; margin-bottom: 0.5rem; }
-.question { font-size: 1.3rem; font-weight: 600; margin: 1rem 0; text-align: center; }
-.choose { display: flex; gap: 1.5rem; justify-content: center; margin: 1rem 0; }
-.choose button { font-size: 1.2rem; padding: 0.6rem 3rem; cursor: pointer; }
-fieldset { border: 1px solid #ddd; border-radius: 6px; margin: 0.5rem 0; }
-textarea { width: 100%; }
-.error { color: #b00020; }
-.muted { color: #666; }
-"""
+#: The style sheet and the pages' bodies (``str.format`` templates; every field HTML-escaped where it is filled).
+_PAGES: dict[str, str] = yaml.safe_load(resources.files(__package__).joinpath("rating_pages.yaml").read_text(encoding="utf-8"))
 
 
 def _page(title: str, body: str, status: int = 200) -> "HTMLResponse":
     from fastapi.responses import HTMLResponse
 
     doc = (f"<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">{CSP_META}<title>{html_text(title)}</title>"
-           f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><style>{_STYLE}</style></head>"
+           f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><style>{_PAGES['style']}</style></head>"
            f"<body>{body}</body></html>\n")
     return HTMLResponse(doc, status_code=status, headers=_HEADERS)
 
 
 def _start_page(error: str = "", status: int = 200) -> "HTMLResponse":
     message = f"<p class=\"error\" id=\"error\">{html_text(error)}</p>" if error else ""
-    return _page("Realism rating", f"""
-<h1>Realism rating</h1>
-<p>You will see short clips of objects being moved, two versions side by side. They differ only in how the
-object behaves (weight, friction, springs, how parts swing or slide). For each pair, choose the side that
-behaves more like the real object.</p>
-{message}
-<form method="get" action="/rate">
-  <label for="rater">Your rater id (letters, digits, '.', '_' or '-'; at most 32):</label>
-  <input id="rater" name="rater" required maxlength="32" pattern="[A-Za-z0-9][A-Za-z0-9._\\-]{{0,31}}" autofocus>
-  <button type="submit" id="start">Start</button>
-</form>""", status)
+    return _page("Realism rating", _PAGES["start"].format(message=message), status)
 
 
 def form_token(secret: bytes, rater: str) -> str:
@@ -130,29 +111,13 @@ def _rating_page(rater: str, index: int, shown: Showing, done: int, total: int, 
         columns.append(f"<div class=\"side\" id=\"side-{position}\"><h2>{position.capitalize()}</h2>{''.join(videos)}</div>")
     scores = "".join(f"<label><input type=\"radio\" name=\"score\" value=\"{s}\" id=\"score-{s}\"> {s}</label> "
                      for s in range(1, 6))
-    return _page(f"Realism rating: pair {done + 1} of {total}", f"""
-<p class="muted">Rater <b id="rater-id">{html_text(rater)}</b> &middot; pair <span id="progress">{done + 1}</span>
-of {total} &middot; object: {html_text(shown.pair.category)}</p>
-<div class="sides">{''.join(columns)}</div>
-<form method="post" action="/rate/{r}/answer" id="answer">
-  <input type="hidden" name="pair" value="{index}">
-  <input type="hidden" name="token" value="{html_text(token)}">
-  <p class="question">Which behaves more like the real object?</p>
-  <fieldset><legend>How realistic is the side you choose? (optional: 1 not at all, 5 like the real object)</legend>
-    <label><input type="radio" name="score" value="" id="score-none" checked> no score</label> {scores}</fieldset>
-  <label for="comment">Comment (optional)</label>
-  <textarea id="comment" name="comment" rows="2" maxlength="2000"></textarea>
-  <div class="choose">
-    <button type="submit" name="choice" value="left" id="choose-left">Left</button>
-    <button type="submit" name="choice" value="right" id="choose-right">Right</button>
-  </div>
-</form>""")
+    return _page(f"Realism rating: pair {done + 1} of {total}", _PAGES["rating"].format(
+        rater=html_text(rater), number=done + 1, total=total, category=html_text(shown.pair.category), columns="".join(columns),
+        r=r, index=index, token=html_text(token), scores=scores))
 
 
 def _done_page(rater: str, total: int) -> "HTMLResponse":
-    return _page("Realism rating: done", f"""
-<h1 id="done">Thank you</h1>
-<p>Rater <b>{html_text(rater)}</b>: you have rated all {total} pairs. You can close this page.</p>""")
+    return _page("Realism rating: done", _PAGES["done"].format(rater=html_text(rater), total=total))
 
 
 def _error_page(code: str, message: str, rater: str | None = None) -> "HTMLResponse":

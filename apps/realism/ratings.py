@@ -22,6 +22,7 @@ shown to that rater again.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import re
@@ -31,7 +32,7 @@ import stat
 import threading
 import time
 from pathlib import Path
-from typing import Literal, NamedTuple
+from typing import Iterator, Literal, NamedTuple
 
 from asset2sim import atomic, output_folder
 from asset2sim.schemas.catalog import model_arrow_schema, parquet_bytes, parquet_models
@@ -59,6 +60,7 @@ CREATE TABLE IF NOT EXISTS ratings (
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value BLOB NOT NULL);
 """
 _COLUMNS = tuple(Rating.model_fields)
+_INSERT = f"INTO ratings ({', '.join(_COLUMNS)}) VALUES ({', '.join('?' * len(_COLUMNS))})"
 
 
 class RatingsDatabaseError(PairSetError):
@@ -173,17 +175,10 @@ class RatingStore:
     def _load_parquet(self) -> None:
         """Copy the answers of ``ratings.parquet`` (and when each pair was shown) into the empty database."""
         rows = read_ratings(self.parquet)
-        con = self._con()
-        con.execute("BEGIN IMMEDIATE")
-        try:
+        with self._transaction() as con:
             for r in rows:
                 con.execute("INSERT OR IGNORE INTO shown VALUES (?, ?, ?)", (r.rater, r.pair_id, r.shown_at))
-                con.execute(f"INSERT OR IGNORE INTO ratings ({', '.join(_COLUMNS)}) VALUES ({', '.join('?' * len(_COLUMNS))})",
-                            tuple(getattr(r, c) for c in _COLUMNS))
-            con.execute("COMMIT")
-        except BaseException:
-            con.execute("ROLLBACK")
-            raise
+                con.execute(f"INSERT OR IGNORE {_INSERT}", tuple(getattr(r, c) for c in _COLUMNS))
 
     def form_secret(self) -> bytes:
         """The secret of the rating app's form tokens: 32 random bytes made once and kept in the database (so
@@ -194,6 +189,20 @@ class RatingStore:
         return bytes(value)
 
     # connections -------------------------------------------------------------------------------------
+    @contextlib.contextmanager
+    def _transaction(self) -> Iterator[sqlite3.Connection]:
+        """The thread's connection in a ``BEGIN IMMEDIATE`` transaction: committed when the block ends (a ``return``
+        in it included), rolled back when it raises."""
+        con = self._con()
+        con.execute("BEGIN IMMEDIATE")
+        try:
+            yield con
+            con.execute("COMMIT")
+        except BaseException:
+            if con.in_transaction:
+                con.execute("ROLLBACK")
+            raise
+
     def _con(self) -> sqlite3.Connection:
         if self.closed:
             raise RuntimeError(f"the rating store of {self.folder} is closed")
@@ -241,9 +250,7 @@ class RatingStore:
         Raises: RatingError ``RATER_INVALID``.
         """
         check_rater(rater)
-        con = self._con()
-        con.execute("BEGIN IMMEDIATE")
-        try:
+        with self._transaction() as con:
             answered = {r for (r,) in con.execute("SELECT pair_id FROM ratings WHERE rater = ?", (rater,))}
             pending = [p for (p,) in con.execute(
                 "SELECT pair_id FROM shown WHERE rater = ? ORDER BY shown_at, pair_id", (rater,))
@@ -253,15 +260,10 @@ class RatingStore:
             else:
                 todo = [p.pair_id for p in self.pairs if p.pair_id not in answered]
                 if not todo:
-                    con.execute("COMMIT")
                     return None
                 viewers = dict(con.execute("SELECT pair_id, COUNT(*) FROM shown GROUP BY pair_id").fetchall())
                 pair_id = min(todo, key=lambda p: (viewers.get(p, 0), _digest("order", rater, p)))
                 con.execute("INSERT INTO shown VALUES (?, ?, ?)", (rater, pair_id, time.time() if now is None else now))
-            con.execute("COMMIT")
-        except BaseException:
-            con.execute("ROLLBACK")
-            raise
         return self.showing(rater, pair_id)
 
     def progress(self, rater: str) -> tuple[int, int]:
@@ -295,13 +297,10 @@ class RatingStore:
         left, right = side(shown.pair, shown.left).method, side(shown.pair, shown.right).method
         winner, loser = (left, right) if choice == "left" else (right, left)
         answered_at = time.time() if now is None else float(now)
-        con = self._con()
-        con.execute("BEGIN IMMEDIATE")
-        try:
+        with self._transaction() as con:
             old = con.execute(f"SELECT {', '.join(_COLUMNS)} FROM ratings WHERE rater = ? AND pair_id = ?",
                               (rater, pair_id)).fetchone()
             if old is not None:
-                con.execute("COMMIT")
                 stored = Rating(**dict(zip(_COLUMNS, old)))
                 if (stored.choice, stored.score, stored.comment) != (choice, score, comment):
                     raise RatingError("ANSWER_CONFLICT", f"rater {rater} already answered this pair "
@@ -313,13 +312,7 @@ class RatingStore:
             rating = Rating(rater=rater, pair_id=pair_id, object_id=shown.pair.object_id, left=left, right=right,
                             choice=choice, winner=winner, loser=loser, score=score, comment=comment, shown_at=row[0],
                             answered_at=answered_at, seconds=max(0.0, answered_at - row[0]))
-            con.execute(f"INSERT INTO ratings ({', '.join(_COLUMNS)}) VALUES ({', '.join('?' * len(_COLUMNS))})",
-                        tuple(getattr(rating, c) for c in _COLUMNS))
-            con.execute("COMMIT")
-        except BaseException:
-            if con.in_transaction:
-                con.execute("ROLLBACK")
-            raise
+            con.execute(f"INSERT {_INSERT}", tuple(getattr(rating, c) for c in _COLUMNS))
         return Recorded(rating, True)
 
     def ratings(self) -> list[Rating]:
