@@ -13,7 +13,10 @@ import json
 import os
 import re
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
+
+import yaml
 
 from asset2sim import atomic
 from asset2sim.inert import csv_cell
@@ -26,51 +29,9 @@ CATALOG_NAME = "catalog.yaml"
 #: Suffixes of the files an object folder is recognised by (URDF, MJCF, OpenUSD).
 OBJECT_SUFFIXES = (".urdf", ".xml", ".mjcf", ".usd", ".usda", ".usdc", ".usdz")
 
-_HEAD = """\
-# asset2sim pipeline catalog: what `asset2sim flow` and the nightly deployment (`asset2sim serve`) refine.
-# Written by `asset2sim init`; relative paths are relative to this file's folder.
-version: 1
-default_dataset: {default}
-output_root: data/refined          # <output_root>/<dataset>/<run>/<asset id>/
-catalog_root: data/catalog         # Parquet catalog: dataset=<name>/run=<run>/ (a path, or a URI: s3://bucket/prefix)
-
-datasets:
-  demo:
-    description: Articulated objects generated from geometry by asset2sim (no external data).
-    root: data/raw/demo
-    manifest: data/raw/demo/manifest.csv
-    generate: demo                 # built on first use
-"""
-
-_OWN = """\
-  {name}:
-    description: {description}
-    root: {root}
-    manifest: {manifest}          # id, prompt (the request), category and task (optional)
-"""
-
-_TAIL = """
-estimator:
-  name: offline                    # offline, or llm / openai with a model (docs/guide/model_backends.md)
-  model: null
-
-refine: {}                         # refine options, e.g. {engines: [pybullet, physx]} (docs/guide/requests.md)
-
-run:
-  workers: 2                       # local Dask cluster size (ignored with DASK_ADDRESS / --dask-address)
-  time_limit_seconds: 1800         # per asset, all stages
-  extras: true                     # MJCF/USD exports, renders, clips, HTML report per asset
-
-schedule:                          # the nightly deployment (`asset2sim serve`)
-  cron: "0 2 * * *"
-  timezone: UTC
-  dataset: {default}
-
-tracking:
-  enabled: true
-  uri: null                        # null: MLFLOW_TRACKING_URI, else sqlite:///<this folder>/mlflow.db
-  experiment: asset2sim
-"""
+#: The starter catalog's text in three templates (``starter_catalog.yaml`` beside this module): ``head`` and ``tail``
+#: take ``{default}``, ``own`` the user's dataset.
+_TEXT: dict[str, str] = yaml.safe_load(resources.files(__package__).joinpath("starter_catalog.yaml").read_text(encoding="utf-8"))
 
 
 @dataclass(frozen=True)
@@ -108,7 +69,8 @@ def starter_catalog_text(default: str = "demo", own: dict[str, str] | None = Non
     ``root``, ``manifest``: paths relative to the catalog's folder), the user's dataset; ``default`` the default
     dataset's name. Values are written as JSON strings (valid YAML whatever characters a path holds)."""
     quoted = {k: (v if k == "name" else json.dumps(v)) for k, v in (own or {}).items()}
-    return _HEAD.format(default=default) + (_OWN.format(**quoted) if own else "") + _TAIL.replace("{default}", default)
+    return (_TEXT["head"].format(default=default) + (_TEXT["own"].format(**quoted) if own else "") + "\n"
+            + _TEXT["tail"].replace("{default}", default))
 
 
 def write_starter_catalog(folder: Path | str, objects: Path | str | None = None, *, force: bool = False) -> StarterCatalog:

@@ -20,8 +20,11 @@ import base64
 import re
 import threading
 from concurrent.futures import ThreadPoolExecutor, as_completed
+from importlib import resources
 from pathlib import Path
 from typing import Any, Sequence
+
+import yaml
 
 from asset2sim import atomic, output_folder
 from asset2sim.file_names import UnsafePath, join_inside
@@ -39,19 +42,10 @@ from asset2sim.inert import one_line
 #: Version of :data:`RUBRIC` and of the message layout (a new version is a new cache key anyway).
 RUBRIC_VERSION = "1"
 
+#: The judge's words, ``judge_prompts.yaml`` beside this module.
+_PROMPTS = yaml.safe_load(resources.files(__package__).joinpath("judge_prompts.yaml").read_text(encoding="utf-8"))
 #: The fixed instructions every judge gets (the system message).
-RUBRIC = """You judge the physical realism of simulated articulated objects.
-You see stills, in time order, from two videos, Video A and Video B, of the same object seen by the same \
-camera while one part (a door, drawer, lid, knob ...) goes through the same scripted motion. The two videos \
-differ only in the simulated physics: mass, damping, friction, springs, contact and size.
-Judge only how physically plausible the motion and the contacts look for a real object of this kind:
-- the part moves as a real one of its size and material would: not sluggish as if very heavy, not weightless;
-- it slows down and comes to rest plausibly: no endless swinging or bouncing, no slamming as if driven by a \
-strong spring, no stopping dead as if glued;
-- parts do not pass into each other, and the object has a plausible size for what it is.
-Ignore rendering quality, colours, lighting and image artefacts: they are the same in both videos.
-Pick one video even when both look alike.
-Answer with one JSON object and nothing else: {"more_realistic": "A" or "B", "reason": "<one sentence>"}"""
+RUBRIC: str = _PROMPTS["rubric"]
 
 #: The reply format sent as a strict JSON schema (servers that cannot enforce it get the rubric's words only).
 REPLY_SCHEMA: dict[str, Any] = {
@@ -63,11 +57,7 @@ REPLY_SCHEMA: dict[str, Any] = {
 }
 
 #: What each scripted motion shows, in the words the judge reads (``schemas/realism.py`` ``Motion``).
-MOTION_TEXT = {
-    "sweep": "the part is driven from closed to open and back (no gravity)",
-    "push_release": "the part is pushed toward open with a limited force, then let go (gravity on)",
-    "task": "a gripper opens the part",
-}
+MOTION_TEXT: dict[str, str] = _PROMPTS["motion_text"]
 
 #: File names beside ``pairs.json``.
 PAIRS_FILE = pair_set.PAIRS_JSON
