@@ -54,20 +54,16 @@ def failure_modes(df, by: str | Iterable[str] = "category", run: str | None = No
     """
     import numpy as np
     import pandas as pd
+    import pyarrow as pa
 
     keys = [by] if isinstance(by, str) else list(by)
     columns = df.schema.names if _is_table(df) else list(df.columns)
     for k in keys:
         if k not in columns:
             raise KeyError(f"no catalog column {k!r}; columns: {list(columns)}")
-    if _is_table(df):
-        counts = _failure_counts_arrow(df, keys, run)
-    else:
-        if run is not None:
-            df = df[df["run"] == run]
-        d = pd.DataFrame({k: df[k].fillna("(unknown)").to_numpy() for k in keys})
-        d["failure_mode"] = pd.Categorical(df["failure_mode"].fillna(MISSING_FAILURE_MODE).to_numpy(), categories=list(FAILURE_MODES))
-        counts = d.groupby([*keys, "failure_mode"], observed=True, sort=True).size()
+    if not _is_table(df):  # a DataFrame: counted in Arrow too
+        df = pa.Table.from_pandas(df[list(dict.fromkeys([*keys, *(["run"] if run else []), "failure_mode"]))], preserve_index=False)
+    counts = _failure_counts_arrow(df, keys, run)
     if len(counts) == 0:
         return pd.DataFrame(columns=[*keys, *FAILURE_MODES, "total"]).set_index(keys)
     table = counts.unstack("failure_mode", fill_value=0)
