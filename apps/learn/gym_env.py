@@ -12,7 +12,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, SimSession
+from asset2sim.engines.base import SimSession
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
 from asset2sim.tasks.check.contact_points import contact_point_rule, joint_frame_axis
@@ -20,7 +20,6 @@ from asset2sim.tasks.check.gripper import BoundedGrasp
 from asset2sim.tasks.check.support import SupportWatch
 from asset2sim.tasks.check.task_execution import TaskConfig
 from asset2sim.apps.learn.task import LearnConfig, LearnTask
-from asset2sim.engines.base import session_root_options
 from asset2sim.urdf import UrdfModel, read_urdf
 
 OBS_DIM = 13  # observation length (module docstring)
@@ -67,16 +66,10 @@ class TaskEnv(gym.Env):
         return self._session
 
     def _open(self) -> None:
-        t = self.task
-        init = dict(t.initial_state)
-        if t.start == "task":
-            init[t.joint] = t.closed.q_closed + t.closed.direction * t.start_fraction * t.closed.open_range
-        opts = SessionOptions(initial_state=init, springs=dict(t.springs), conventions=t.conventions,
-                              **session_root_options(t.root_fixed))
         with quiet_stdout():
-            s = open_session(self.config.engine, t.urdf, opts)
+            s = open_session(self.config.engine, self.task.urdf, self.task.session_options())
         self._session = s
-        self._model = read_urdf(t.urdf, mode="lenient")
+        self._model = read_urdf(self.task.urdf, mode="lenient")
         self._settle(s)
         self._snapshot = s.save_state()
 

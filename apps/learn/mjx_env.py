@@ -22,7 +22,6 @@ from brax.envs import training as brax_training
 from brax.envs.base import Env, State
 
 from asset2sim.apps.learn.task import LearnConfig, LearnTask
-from asset2sim.engines.base import SessionOptions, session_root_options
 from asset2sim.engines.mjcf import mujoco_messages, urdf_to_mjcf
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
@@ -100,15 +99,10 @@ def build_scene(folder: Path | str, task: LearnTask, config: LearnConfig | None 
     d = mujoco.MjData(m)
     mujoco.mj_resetDataKeyframe(m, d, 0)
     qadr, dadr = int(m.jnt_qposadr[jid]), int(m.jnt_dofadr[jid])
-    init = dict(task.initial_state)
-    if task.start == "task":
-        init[task.joint] = task.closed.q_closed + task.closed.direction * task.start_fraction * task.closed.open_range
-    d.qpos[qadr] = init.get(task.joint, d.qpos[qadr])
+    d.qpos[qadr] = task.start_state().get(task.joint, d.qpos[qadr])
     _settle(m, d, cfg)
-    opts = SessionOptions(initial_state=init, springs=dict(task.springs), conventions=task.conventions,
-                          **session_root_options(task.root_fixed))
     with quiet_stdout():
-        s = open_session(cfg.engine, task.urdf, opts)
+        s = open_session(cfg.engine, task.urdf, task.session_options())
     try:
         link, point, rule = contact_point_rule(s, task.joint, read_urdf(task.urdf, mode="lenient"),
                                                opening_direction=task.closed.direction)

@@ -8,7 +8,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from asset2sim.engines.base import Spring
+from asset2sim.engines.base import SessionOptions, Spring, session_root_options
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.schemas.config import SimConventions
 from asset2sim.tasks.check.gripper import GripperLimits
@@ -93,6 +93,19 @@ class LearnTask:
     def fraction(self, q: float) -> float:
         """Opening fraction of the task joint at ``q`` (rad or m)."""
         return self.closed.fraction(q)
+
+    def start_state(self) -> dict[str, float]:
+        """The joint positions an episode starts from (rad or m): the asset's, the task joint at ``start_fraction``
+        when ``start`` is ``task``."""
+        state = dict(self.initial_state)
+        if self.start == "task":
+            state[self.joint] = self.closed.q_closed + self.closed.direction * self.start_fraction * self.closed.open_range
+        return state
+
+    def session_options(self) -> SessionOptions:
+        """The options of a session on the task's object: :meth:`start_state`, its springs, conventions and root."""
+        return SessionOptions(initial_state=self.start_state(), springs=dict(self.springs), conventions=self.conventions,
+                              **session_root_options(self.root_fixed))
 
 
 def common_start(action: str, joint_type: str, open_range: float) -> float:
