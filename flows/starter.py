@@ -69,7 +69,7 @@ def starter_catalog_text(default: str = "demo", own: dict[str, str] | None = Non
     ``root``, ``manifest``: paths relative to the catalog's folder), the user's dataset; ``default`` the default
     dataset's name. Values are written as JSON strings (valid YAML whatever characters a path holds)."""
     quoted = {k: (v if k == "name" else json.dumps(v)) for k, v in (own or {}).items()}
-    return (_TEXT["head"].format(default=default) + (_TEXT["own"].format(**quoted) if own else "") + "\n"
+    return (_TEXT["head"].format(default=default) + (_TEXT["own"].format(**quoted) if own else "")
             + _TEXT["tail"].replace("{default}", default))
 
 
