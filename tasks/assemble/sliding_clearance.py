@@ -158,9 +158,8 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
     body its lid is hinged to, is the state stage's collision repair) is squeezed back (:func:`clear_sliding_contact`) by the first
     joint in file order that moves it, once per pair of pieces; and likewise
     every contact between two links only fixed joints join (:func:`_fixed_pairs`:
-    nothing moves, so nothing is a stop), the smaller of the two squeezed. A piece too thin to give the whole
-    clearance (:data:`MAX_SQUEEZE`: a small object's sheet-metal arm beside its base's hinge posts) leaves the rest to
-    the other piece's face, as far as its width allows (:func:`squeeze`). Notes
+    nothing moves, so nothing is a stop), the smaller of the two squeezed; what a thin piece cannot give
+    (:data:`MAX_SQUEEZE`) the other piece's face gives. Notes
     name each change; returns the (moving link, other link) pairs given clearance."""
     pairs: set[tuple[str, str]] = set()
     poses = model.link_poses(reference_state(model))

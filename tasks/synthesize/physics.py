@@ -2,9 +2,8 @@
 joint loads from kinematics, joint dynamics from those loads. Formulas (SI):
 
 - mass (SPEC) m = v rho s^3 eta; shell parts eta = min(1, A s^2 t / (v s^3))
-  (thin-shell approximation, Roark's Formulas for Stress and Strain, 8th ed.), A/2 for a board's part (a mesh
-  draws each sheet with both faces; a board is solid through its thickness, so a part drawn thicker than its
-  board at a large scale is one board, not two skins);
+  (thin-shell approximation, Roark's Formulas for Stress and Strain, 8th ed.), A/2 for boards (a solid sheet the
+  mesh draws with both faces);
 - inertia: the geometry's per-kg tensor times m s^2;
 - gravity load: tau_g = ((c - p) x M g) . a (revolute), F_g = M g . a (prismatic);
 - damping c = 2 zeta sqrt(I k) of I qdd + c qd + k q = 0 (Ogata, System
@@ -47,7 +46,7 @@ class MaterialChoice:
     """m, real-world wall thickness for shell parts"""
     source: str = ""
     panel: bool = False
-    """a board (``MaterialPrior.panel``): the shell's area is half the mesh's"""
+    """a board (``MaterialPrior.panel``)"""
 
 
 def material_choice(m) -> MaterialChoice:
