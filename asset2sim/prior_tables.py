@@ -41,7 +41,7 @@ class PriorModel(BaseModel):
 
 class MaterialPrior(PriorModel):
     """One material: ``density`` kg/m^3, ``shell`` (mass = area *
-    wall_thickness * density), ``wall_thickness`` m, ``lateral_friction``
+    wall_thickness * density), ``panel`` (a board: half that area), ``wall_thickness`` m, ``lateral_friction``
     (Coulomb), ``restitution`` 0..1, ``*_source`` the references."""
 
     key: str = ""
@@ -49,6 +49,7 @@ class MaterialPrior(PriorModel):
     density: float = Field(gt=50.0, lt=25000.0)
     density_source: str = Field(min_length=10)
     shell: bool
+    panel: bool = False
     wall_thickness: float = Field(gt=0.0, lt=0.1)
     wall_thickness_source: str = Field(min_length=10)
     lateral_friction: float = Field(ge=0.05, le=1.5)

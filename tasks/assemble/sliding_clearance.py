@@ -158,7 +158,8 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
     body its lid is hinged to, is the state stage's collision repair) is squeezed back (:func:`clear_sliding_contact`) by the first
     joint in file order that moves it, once per pair of pieces; and likewise
     every contact between two links only fixed joints join (:func:`_fixed_pairs`:
-    nothing moves, so nothing is a stop), the smaller of the two squeezed. Notes
+    nothing moves, so nothing is a stop), the smaller of the two squeezed; what a thin piece cannot give
+    (:data:`MAX_SQUEEZE`) the other piece's face gives. Notes
     name each change; returns the (moving link, other link) pairs given clearance."""
     pairs: set[tuple[str, str]] = set()
     poses = model.link_poses(reference_state(model))
@@ -173,10 +174,9 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
             To = inv @ poses[other]
             lineal = not all(tree_path(model.joints, ln, other))  # one link carries the other: an empty side of the path
             deepest = TOUCHING_OVERLAP if joint is not None and lineal else MODELLED_OVERLAP
-            for k, Q in enumerate(pieces[other]):
-                qw = boxes[other][k]
+            for k in range(len(pieces[other])):
                 for i, P in enumerate(pieces[ln]):
-                    pw = boxes[ln][i]
+                    Q, qw, pw = pieces[other][k], boxes[other][k], boxes[ln][i]
                     if (ln, i, other, k) in done:
                         continue
                     if np.any(np.minimum(pw.max(axis=0), qw.max(axis=0)) + RUNNING_CLEARANCE
@@ -196,10 +196,19 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
                     except (QhullError, ValueError):
                         continue
                     boxes[ln][i] = pieces[ln][i].points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
+                    ql = Q.points @ To[:3, :3].T + To[:3, 3]
+                    short, n = sat_gap(pts, ql)
+                    ql, rest = squeeze(ql, -n, RUNNING_CLEARANCE - short) if short < RUNNING_CLEARANCE - 1e-6 else (ql, 0.0)
+                    if rest > 0:  # the rest from the other piece's face, back in its link's frame
+                        try:
+                            pieces[other][k] = Piece.of((ql - To[:3, 3]) @ To[:3, :3], Q.sources)
+                        except (QhullError, ValueError):
+                            rest = 0.0
+                        boxes[other][k] = pieces[other][k].points @ poses[other][:3, :3].T + poses[other][:3, 3]
                     if joint is not None:  # a sliding pair (a fixed one slides along nothing)
                         pairs.add((ln, other))
                     notes.append(f"link {ln!r}: collision piece {i} given {used * 1000:.2g} mm {RUNNING_CLEARANCE_NOTE} against "
-                                 f"{other!r} (gap {g * 1000:.2g} mm, {why})")
+                                 f"{other!r} (gap {g * 1000:.2g} mm, {why})" + (f", {rest * 1000:.2g} mm from its piece {k}" if rest > 0 else ""))
     return pairs
 
 

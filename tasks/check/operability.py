@@ -301,7 +301,9 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
                 t = time_limit
             stop = None
             if t is None and not diverged and need <= effort:  # as far as geometry lets it: a link in the way?
-                stop = blocker(session.joint_positions(), links, own)
+                # the parent's side is not collided with the part's first link only: the links below it meet it
+                q = session.joint_positions()
+                stop = blocker(q, links[:1], own | set(links)) or blocker(q, links[1:], set(links))
             if action == "open":
                 reached_open = reached if np.isfinite(reached) else 0.0
             force = need / lever if lever else need

@@ -14,13 +14,11 @@ from scipy.spatial import QhullError
 
 from asset2sim import file_names, mesh_io
 from asset2sim.schemas.asset import GeometryRef
-from asset2sim.tasks.assemble.sliding_clearance import RUNNING_CLEARANCE, clear_sliding_contact, joint_velocity, sat_gap
+from asset2sim.tasks.assemble.sliding_clearance import clear_sliding_contact, joint_velocity, sat_gap
 from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel
 
-#: Running clearance (m): the writer's (:func:`asset2sim.tasks.assemble.sliding_clearance.clear_sliding_contact`).
-CLEARANCE = RUNNING_CLEARANCE
-__all__ = ["CLEARANCE", "ClearanceRepair", "clearance_for_blocked", "link_pieces", "sat_gap", "touching_joints",
+__all__ = ["ClearanceRepair", "clearance_for_blocked", "link_pieces", "sat_gap", "touching_joints",
            "write_piece_overrides"]
 
 

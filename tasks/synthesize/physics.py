@@ -2,7 +2,8 @@
 joint loads from kinematics, joint dynamics from those loads. Formulas (SI):
 
 - mass (SPEC) m = v rho s^3 eta; shell parts eta = min(1, A s^2 t / (v s^3))
-  (thin-shell approximation, Roark's Formulas for Stress and Strain, 8th ed.);
+  (thin-shell approximation, Roark's Formulas for Stress and Strain, 8th ed.), A/2 for boards (a solid sheet the
+  mesh draws with both faces);
 - inertia: the geometry's per-kg tensor times m s^2;
 - gravity load: tau_g = ((c - p) x M g) . a (revolute), F_g = M g . a (prismatic);
 - damping c = 2 zeta sqrt(I k) of I qdd + c qd + k q = 0 (Ogata, System
@@ -44,22 +45,25 @@ class MaterialChoice:
     wall_thickness: float
     """m, real-world wall thickness for shell parts"""
     source: str = ""
+    panel: bool = False
+    """a board (``MaterialPrior.panel``)"""
 
 
 def material_choice(m) -> MaterialChoice:
     """A prior's material (``MaterialPrior``) as a :class:`MaterialChoice`."""
     return MaterialChoice(name=m.name, density=float(m.density), shell=bool(m.shell), wall_thickness=float(m.wall_thickness),
-                          source=m.source)
+                          source=m.source, panel=bool(m.panel))
 
 
 def hollow_fraction(geom: LinkGeometry, scale: float, material: MaterialChoice) -> float | None:
-    """eta in m = v rho s^3 eta: 1 solid, min(1, A s^2 t / (v s^3)) shell; None for an open shell (m = A s^2 t rho)."""
+    """eta in m = v rho s^3 eta: 1 solid, min(1, A s^2 t / (v s^3)) shell (A/2 for a board); None for an open shell
+    (m = A s^2 t rho)."""
     if "open_shell" in geom.volume_method or geom.volume <= 0.0:  # encloses (almost) nothing: an open bin, a lone plate
         return None
     if not material.shell:
         return 1.0
     v = max(geom.volume * scale**3, 1e-12)
-    shell_volume = geom.area * scale**2 * material.wall_thickness
+    shell_volume = geom.area / (2 if material.panel else 1) * scale**2 * material.wall_thickness
     return float(min(1.0, max(shell_volume / v, 1e-6)))
 
 

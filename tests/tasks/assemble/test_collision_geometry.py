@@ -673,6 +673,26 @@ def test_sliding_contacts_between_parts_are_given_running_clearance(tmp_path):
     assert len(clear) == 1 and "'lower'" in clear[0] and "'slide_lower'" in clear[0]
 
 
+def test_a_thin_piece_leaves_the_rest_of_its_clearance_to_the_other_face(tmp_path):
+    """A thin sheet (3 mm: a small stapler's arm plate) sliding on its neighbour with no gap can give at most
+    MAX_SQUEEZE of its width; the neighbour's face gives the rest, so the pair still reads apart through the
+    engines' margins (gap >= RUNNING_CLEARANCE) where a small object's parts slide past each other."""
+    from tests.tasks.state.test_clearance import W, write_stacked_drawers
+
+    model = urdf.read_urdf(write_stacked_drawers(tmp_path / "drawers"))
+    pieces = {"lower": [cp.Piece.of(_box([-0.03, -W, 0.022], [0.03, W, 0.025])[0])],
+              "upper": [cp.Piece.of(_box([-0.03, -W, 0.025], [0.03, W, 0.045])[0])]}
+    notes: list[str] = []
+    assert sc.running_clearance(model, pieces, notes) == {("lower", "upper")}
+    (lower,), (upper,) = pieces["lower"], pieces["upper"]
+    assert lower.points[:, 2].max() == pytest.approx(0.025 - 0.0015) and lower.points[:, 2].min() == pytest.approx(0.022)
+    assert upper.points[:, 2].min() == pytest.approx(0.025 + sc.RUNNING_CLEARANCE - 0.0015)
+    assert upper.points[:, 2].max() == pytest.approx(0.045)  # its far face kept
+    assert sc.sat_gap(lower.points, upper.points)[0] == pytest.approx(sc.RUNNING_CLEARANCE)
+    (note,) = notes
+    assert "1.5 mm running clearance" in note and "1 mm from its piece 0" in note, note
+
+
 def test_a_stop_along_the_motion_keeps_its_contact(tmp_path):
     """A slider between two walls that touch its sides and against an end wall
     that touches its +x face at q = 0: the sides slide (squeezed in y on both

@@ -219,3 +219,18 @@ def test_a_hung_window_sash_is_operable_on_its_balance_and_not_without_it(tmp_pa
     bare = refine_asset(xml, "A window, slightly open.", tmp_path / "bare", extras=False)
     assert bare.overlay.joints[name].stiffness == 0.0
     assert bare.report.failure_mode == "not_operable"
+
+
+@needs_shared
+def test_a_lid_stopped_by_the_arm_it_carries_meeting_the_base_is_stopped_by_geometry(refine_once):
+    """Dev row 103275, "a heavy metal stapler, closed, with a stiff hinge": the hand opening the lid (joint_1, hinged
+    on the base) stops at 70 % where the arm the lid carries (link_0, its child) meets the base; the engine collides
+    the arm with the base (only a link and its parent are not collided), so the base is what stops it, not a hand
+    too weak (it needs 11 N of the 45 N)."""
+    res = refine_once(SHARED / "103275", "a heavy metal stapler, closed, with a stiff hinge", extras=False)
+    m = res.report.metric("operability")
+    lid = m.details["parts"]["joint_1"]
+    (opening,) = [s for s in lid["strokes"] if s["action"] == "open"]
+    assert opening["reached"] < 0.95 and opening["needed_force_n"] < lid["hand_force_n"]
+    assert opening["stopped_by"] == "link_2" and opening["passed"], opening
+    assert m.passed is True and res.report.failure_mode == "none", m.details["failures"]

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from asset2sim.tasks.assemble.sliding_clearance import RUNNING_CLEARANCE
 from asset2sim.tasks.check.sweep import joint_subtrees
 from asset2sim.tasks.state import clearance
 from asset2sim.urdf import read_urdf
@@ -67,11 +68,11 @@ def test_a_slider_touching_both_walls_gets_running_clearance(tmp_path):
     model, rep = _repair(urdf)
     assert set(rep.pieces) == {"slider"} and len(rep.notes) == 2
     (piece,) = rep.pieces["slider"]
-    assert abs(np.ptp(piece[:, 1]) - (2 * W - 2 * clearance.CLEARANCE)) < 1e-12
+    assert abs(np.ptp(piece[:, 1]) - (2 * W - 2 * RUNNING_CLEARANCE)) < 1e-12
     assert abs(np.ptp(piece[:, 0]) - 0.06) < 1e-12 and abs(np.ptp(piece[:, 2]) - 0.04) < 1e-12  # along and across the motion unchanged
     for wall in clearance.link_pieces(model, tmp_path, "frame"):
         g, _ = clearance.sat_gap(piece, wall)
-        assert g >= clearance.CLEARANCE - 1e-12
+        assert g >= RUNNING_CLEARANCE - 1e-12
 
 
 def test_a_stop_along_the_motion_and_a_free_channel_are_left_alone(tmp_path):
@@ -88,7 +89,7 @@ def test_overrides_are_written_at_the_input_scale(tmp_path):
     (piece,) = out["slider"]
     v = np.array([[float(x) for x in ln.split()[1:4]] for ln in (tmp_path / piece.filename).read_text().splitlines()
                   if ln.startswith("v ")])
-    assert abs(np.ptp(v[:, 1]) * 0.5 - (2 * W - 2 * clearance.CLEARANCE)) < 1e-9
+    assert abs(np.ptp(v[:, 1]) * 0.5 - (2 * W - 2 * RUNNING_CLEARANCE)) < 1e-9
     assert piece.source.filename == piece.filename and piece.source.scale == (1.0, 1.0, 1.0)
 
 
@@ -134,10 +135,10 @@ def test_two_touching_drawers_are_given_clearance_once(tmp_path):
                                           state, joint_subtrees(model))
     assert len(rep.notes) == 1 and set(rep.pieces) == {"lower"}  # the upper drawer then sees the repaired piece: not squeezed again
     (lower,) = rep.pieces["lower"]
-    assert abs(np.ptp(lower[:, 2]) - (0.02 - clearance.CLEARANCE)) < 1e-12 and abs(lower[:, 2].min() - 0.005) < 1e-12
+    assert abs(np.ptp(lower[:, 2]) - (0.02 - RUNNING_CLEARANCE)) < 1e-12 and abs(lower[:, 2].min() - 0.005) < 1e-12
     (upper,) = clearance.link_pieces(model, tmp_path, "upper")
     g, _ = clearance.sat_gap(lower, upper + [0.02, 0.0, 0.0])
-    assert g >= clearance.CLEARANCE - 1e-12
+    assert g >= RUNNING_CLEARANCE - 1e-12
 
 
 @needs_shared

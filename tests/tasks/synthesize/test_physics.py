@@ -10,6 +10,7 @@ import pytest
 
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
+from asset2sim.prior_tables import load_priors
 from asset2sim.schemas.overlay import Inertia, LinkPhysics
 from asset2sim.tasks.synthesize import physics
 from asset2sim.tasks.geometry.analyze import analyze_asset
@@ -114,3 +115,24 @@ def test_mass_from_geometry_solid_and_shell(tmp_path):
         # a shell has a larger per-kg inertia than the same solid (mass further out)
         assert sh.inertia.ixx / sh.mass > lp.inertia.ixx / lp.mass
     np.testing.assert_allclose(lp.com, (0, 0, 0.1 * 0.5), atol=1e-9)
+
+
+def test_board_part_weighs_one_board_at_any_scale(tmp_path, shared_dataset):
+    """A part built of boards (particle board: MaterialPrior.panel) drawn thicker than its board at a large scale
+    is one board of the prior's thickness, not two skins: the mesh draws each sheet with both faces, so its
+    board area is half the mesh's. On dev row 19179's drawer (link_1) at a very large cabinet's scale, and on a
+    generated plate (one board, 10 mm drawn) at four times its size."""
+    board = physics.material_choice(load_priors().materials["particle_board"])
+    assert board.panel and board.shell
+    geom = analyze_asset(extract_asset(shared_dataset / "19179"))["link_1"]
+    for s, drawn_thicker in ((1.114, True), (0.303, False)):  # "a very large cabinet" (walls drawn 47 mm); the dev
+        # row's own scale (13 mm: under a board, the drawn volume)
+        lp = physics.link_physics(geom, s, board)
+        sheet = geom.area / 2 * s**2 * board.wall_thickness * board.density
+        solid = geom.volume * s**3 * board.density
+        assert (sheet < solid) == drawn_thicker
+        assert lp.mass == pytest.approx(min(sheet, solid), rel=1e-9)
+    plate = analyze_asset(extract_asset(write_hinged_plate(tmp_path / "p")))["plate"]  # 0.4 x 0.2 x 0.01 m
+    lp = physics.link_physics(plate, 4.0, board)  # 1.6 x 0.8 m drawn 40 mm thick: one 16 mm board
+    faces = 2 * (0.4 * 0.2 + 0.4 * 0.01 + 0.2 * 0.01)
+    assert lp.mass == pytest.approx(faces / 2 * 16 * board.wall_thickness * board.density, rel=1e-6)
