@@ -7,7 +7,10 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from importlib import resources
 from typing import Any
+
+import yaml
 
 from asset2sim.tasks.interpret.request import parse_request
 from asset2sim.tasks.check.verdict import (
@@ -76,9 +79,11 @@ def penetration_why(metrics: list[Any]) -> list[str]:
     return out
 
 
+#: The words of this module (``failure_words.yaml`` beside it): what a user can do, what a check did, how a trial
+#: disturbed the object.
+_WORDS = yaml.safe_load(resources.files(__package__).joinpath("failure_words.yaml").read_text(encoding="utf-8"))
 #: How each robust-rest trial disturbed the object, for :func:`robust_rest_why`.
-_TRIAL_WORDS = {"drop": "landed after the 2 cm drop", "nudge": "was nudged at 0.05 m/s",
-                **{f"tilt{s}{a}": f"landed after the 5 deg tilt about {s}{a}" for s in "+-" for a in "xy"}}
+_TRIAL_WORDS: dict[str, str] = _WORDS["trial_words"]
 
 
 def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozenset()) -> list[str]:
@@ -177,27 +182,7 @@ def _joint_amount(value: float, unit: str) -> str:
 
 
 #: What a user can do about each tier (the tail of every sentence of :func:`why_it_failed`).
-TIER_ADVICE: dict[str, str] = {
-    "stand": ("Ask for a state that keeps its centre of mass over its footprint (a smaller opening of its heavy parts, "
-              "--state JOINT=closed), or --mount fixed when it stands fixed in use."),
-    "divergence": ("Check the input's masses and inertias (asset2sim audit), or give the object a mass (--mass) or "
-                   "material (--material) so each part's inertia is estimated from its geometry."),
-    "ground": "Check the collision meshes of its lowest links (they must not reach below its feet), or --mount fixed.",
-    "oscillation": ("Ask for the part at an end of its range (--state JOINT=closed or fully), or --mount fixed when it "
-                    "stands fixed in use; check the input's springs and damping (asset2sim audit) when it declares any."),
-    "hold": ("Ask for the part nearer an end of its range (--state JOINT=closed or fully), a lighter part (--mass, "
-             "--material), or --mount fixed when it stands fixed in use."),
-    "sweep": ("Check the joint's axis, origin and limits in the input and the collision meshes where it stops "
-              "(report.html shows the sweep), or ask for a state the part moves from freely (--state JOINT=closed)."),
-    "operability": ("Ask for a lighter part or another material (--mass, --material); a part something blocks needs "
-                    "that collision mesh repaired (report.html shows where it stops)."),
-    "task": ("Check that --task names a part the object has and a state it reaches; --mount fixed when the object "
-             "stands fixed in use, or a lighter part (--mass, --material)."),
-    "force": ("Give the object a real mass or material (--mass, --material) so its parts weigh what real ones do, or "
-              "ask for another task (--task)."),
-    "request": ("Reword the request to name a part the object has (semantics.txt lists them) and a state it reaches, "
-                "or set the state directly (--state JOINT=VALUE)."),
-}
+TIER_ADVICE: dict[str, str] = _WORDS["tier_advice"]
 
 #: The advice of a tier without its own entry in :data:`TIER_ADVICE`.
 _FALLBACK_ADVICE = {"rest": "stand", "penetration": "sweep", "robust_rest": "stand"}
@@ -244,10 +229,7 @@ def _rest_why(metrics: list[Any]) -> list[str]:
 
 
 #: What the check of a tier told by its metrics' ``details["failures"]`` did (:func:`_failures_why`).
-_DONE = {"sweep": "a force-limited drive could not sweep the joint through its range",
-         "operability": "a hand inside the part's real operating force could not work it",
-         "task": "a force- and speed-limited gripper could not do the task",
-         "force": "the task needed a force outside the part's real operating range"}
+_DONE: dict[str, str] = _WORDS["done"]
 
 
 def _failures_why(metrics: list[Any], names: tuple[str, ...], advice: str, what: str) -> list[str]:
@@ -266,18 +248,7 @@ _MISSING_PART = re.compile(r"no such part|names no part|carries that label|no ta
 
 #: What a user can do about an unmet item of the request, by its kind (``as_asked``'s items); a conflict's own text
 #: says it.
-REQUEST_ADVICE: dict[str, str] = {
-    "missing": TIER_ADVICE["request"],
-    "not_applied": "Reword or drop the phrase (another phrase of the request may set the same part), or set the state "
-                   "directly (--state JOINT=VALUE).",
-    "state": "Ask for a state the part reaches from its closed end (its range: report.json's closed_positions), or set "
-             "it directly (--state JOINT=VALUE).",
-    "size": "Ask for sizes that one uniform scale gives this object's proportions, or set the scale (--scale).",
-    "mass": "Ask for a mass the parts' materials can make at this size, or set it directly (--mass).",
-    "not_named": "Check the output's overlay.json: a word about motion applies only to the part its phrase names "
-                 "(refine the asset again).",
-    "conflict": "",
-}
+REQUEST_ADVICE: dict[str, str] = {"missing": TIER_ADVICE["request"], **_WORDS["request_advice"]}
 
 
 def _request_advice(item: dict) -> str:
