@@ -70,10 +70,10 @@ class Trajectory:
     joints: dict[str, np.ndarray]
     root_pos: np.ndarray | None = None
     root_rot: np.ndarray | None = None
+    #: positions of the joints not in ``joints`` (held), rad or m
     others: dict[str, float] = field(default_factory=dict)
-    """positions of the joints not in ``joints`` (held), rad or m"""
+    #: (K, 3) m a point drawn on each frame (the grasp point of a task; NaN: none), or None
     marks: np.ndarray | None = None
-    """(K, 3) m a point drawn on each frame (the grasp point of a task; NaN: none), or None"""
 
     def __post_init__(self) -> None:
         self.t = np.asarray(self.t, float)
