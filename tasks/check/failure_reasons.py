@@ -68,14 +68,11 @@ def penetration_why(metrics: list[Any]) -> list[str]:
             links = f"links '{f.link_a}' and '{f.link_b}' (not parent and child) overlap by up to {f.depth_mm:.1f} mm" \
                 if f.link_a else "links that are not parent and child overlap"
             out.append(f"self-contact penetration {m.value:.1f} mm ({m.engine}) is above {UNRESOLVED_PENETRATION_MM:g} mm: "
-                       f"{links} at the initial state. Ask for another state (--state JOINT=closed or a smaller opening) "
-                       "or give these links collision meshes that do not overlap.")
+                       f"{links} at the initial state. {_ADVICE['self_contact']}")
             continue
         out.append(f"parent-child penetration ({m.engine}): link '{f.link_b or '?'}' is {f.depth_mm:.1f} mm inside its parent "
                    f"'{f.link_a or '?'}' at the initial state, {float((m.details or {}).get('beyond_modelled_mm') or 0.0):.1f} mm "
-                   f"deeper than at its modelled pose (fails above {UNRESOLVED_PENETRATION_MM:g} mm). Ask for a state the part "
-                   "reaches without entering its parent (--state JOINT=closed or a smaller opening), or check the joint's axis, "
-                   "origin and limits in the input.")
+                   f"deeper than at its modelled pose (fails above {UNRESOLVED_PENETRATION_MM:g} mm). {_ADVICE['parent_child']}")
     return out
 
 
@@ -84,6 +81,8 @@ def penetration_why(metrics: list[Any]) -> list[str]:
 _WORDS = yaml.safe_load(resources.files(__package__).joinpath("failure_words.yaml").read_text(encoding="utf-8"))
 #: How each robust-rest trial disturbed the object, for :func:`robust_rest_why`.
 _TRIAL_WORDS: dict[str, str] = _WORDS["trial_words"]
+#: What a user can do about a penetration, a part that swung or an object that did not rest or toppled.
+_ADVICE: dict[str, str] = _WORDS["advice"]
 
 
 def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozenset()) -> list[str]:
@@ -125,8 +124,7 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
                       f"{_joint_amount(tol, unit)}" + (f"; largest excursion {_joint_amount(peak, unit)}" if peak is not None else "") + ")")
             if "toppled" in str((trials.get(name) or {}).get("failure", "")):
                 out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} and toppled "
-                           f"({m.engine}): the part swings as the object falls (the toppling is explained next). "
-                           "--mount fixed when it stands fixed in use; a mounted object is not dropped or tilted.")
+                           f"({m.engine}): the part swings as the object falls (the toppling is explained next). {_ADVICE['swing']}")
                 continue
             if j in skip:
                 out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} ({m.engine}), as "
@@ -139,14 +137,12 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
         for name, what in restless.items():
             rest = re.search(r"at rest \(([^)]*)\)", m.threshold or "")
             out.append(f"the object was {what} when it {_TRIAL_WORDS.get(name, name)} ({m.engine}; at rest means "
-                       f"{rest.group(1) if rest else 'still'} at the end of the trial): it rocks or slides on its support. A "
-                       "wider footprint in this state (a smaller opening of its heavy parts) may settle; --mount fixed "
-                       "when it stands fixed in use.")
+                       f"{rest.group(1) if rest else 'still'} at the end of the trial): it rocks or slides on its support. "
+                       + _ADVICE["restless"])
         # step 4: the toppling
         if toppled is not None:
             out.append(f"the object toppled ({toppled[0]:.2f} rad) when it {_TRIAL_WORDS.get(toppled[1], toppled[1])} "
-                       f"({m.engine}): its centre of mass lies near the edge of its footprint in this state. Ask for a smaller "
-                       "opening of its heavy parts, or --mount fixed when it stands fixed in use.")
+                       f"({m.engine}): its centre of mass lies near the edge of its footprint in this state. {_ADVICE['toppled']}")
     return out
 
 
