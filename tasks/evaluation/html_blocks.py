@@ -12,6 +12,7 @@ from importlib import resources
 from typing import Any, Iterable
 
 import numpy as np
+import yaml
 
 from asset2sim.inert import CSP_META, html_text
 from asset2sim.tasks.evaluation import plots
@@ -19,6 +20,9 @@ from asset2sim.tasks.evaluation import plots
 
 #: The reports' style sheet (``report.css`` beside this module), inlined in every page.
 CSS = resources.files(__package__).joinpath("report.css").read_text(encoding="utf-8")
+#: The fixed paragraphs, captions and column heads of the report and the benchmark pages (``report_texts.yaml`` beside
+#: this module): key -> HTML (or a list of column heads).
+TEXTS = yaml.safe_load(resources.files(__package__).joinpath("report_texts.yaml").read_text(encoding="utf-8"))
 
 
 def page(title: str, body: str) -> str:

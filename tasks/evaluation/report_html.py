@@ -7,11 +7,9 @@
 
 from __future__ import annotations
 
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from asset2sim.atomic import write_text
 from asset2sim.schemas.metrics import METRIC_INFO
@@ -21,14 +19,11 @@ from asset2sim.tasks.check.failure_reasons import why_it_failed
 from asset2sim.tasks.check.verdict import UNRESOLVED_PENETRATION_MM, penetration_measures, readiness
 from asset2sim.tasks.evaluation import plots
 from asset2sim.tasks.evaluation.failure_evidence import evidence_section
-from asset2sim.tasks.evaluation.html_blocks import figure, fmt, page, svg_tag, table, verdict_cell
+from asset2sim.tasks.evaluation.html_blocks import TEXTS, figure, fmt, page, svg_tag, table, verdict_cell
 from asset2sim.tasks.evaluation.parameter_table import parameter_table
 from asset2sim.tasks.evaluation.report_changes import changes_section, esc, from_closed_text, opening_text
 from asset2sim.tasks.geometry.render import render_views
 
-
-#: The report's fixed paragraphs (``report_texts.yaml`` beside this module): key -> HTML.
-TEXTS = yaml.safe_load(resources.files(__package__).joinpath("report_texts.yaml").read_text(encoding="utf-8"))
 
 def _renders(ev, views: dict[str, np.ndarray] | None = None, error: Exception | None = None) -> tuple[str, str]:
     """(HTML of the object views, what they are); ``views``: the renders, None when ``error`` stopped them (then a plot
