@@ -130,13 +130,11 @@ class PartOperability:
 
     def summary(self) -> dict[str, Any]:
         """JSON-able dict."""
-        return {"joint": self.joint, "joint_type": self.joint_type, "link": self.link, "label": self.label, "rule": self.rule,
-                "lever_m": self.lever, "hand_force_n": self.hand_force_n,
-                "force_range_n": list(self.force_range_n) if self.force_range_n else None,
-                "torque_range_nm": list(self.torque_range_nm) if self.torque_range_nm else None,
-                "range_of": self.range_of, "sources": self.sources, "estimate": self.estimate,
-                "peak_force_n": self.peak_force_n, "peak_torque_nm": self.peak_torque_nm, "passed": self.passed,
-                "strokes": [dict(s.__dict__) for s in self.strokes]}
+        out = {("lever_m" if k == "lever" else k): v for k, v in self.__dict__.items() if k != "strokes"}
+        out.update(force_range_n=list(self.force_range_n) if self.force_range_n else None,
+                   torque_range_nm=list(self.torque_range_nm) if self.torque_range_nm else None, peak_force_n=self.peak_force_n,
+                   peak_torque_nm=self.peak_torque_nm, passed=self.passed, strokes=[dict(s.__dict__) for s in self.strokes])
+        return out
 
 
 @dataclass
