@@ -202,15 +202,6 @@ def encode_webm(frames: Sequence[np.ndarray], fps: float = CLIP_FPS) -> bytes:
     return buf.getvalue()
 
 
-def decode_frames(path: Path | str) -> list[np.ndarray]:
-    """The frames (each (H, W, 3) uint8) of a video file. Raises ImportError (no PyAV), OSError / av errors
-    (unreadable file)."""
-    import av
-
-    with av.open(str(path)) as f:
-        return [frame.to_ndarray(format="rgb24") for frame in f.decode(video=0)]
-
-
 def write_clip(folder: Path | str, stem: str, frames: Sequence[np.ndarray], *, joint: str, motion: Motion, view: str,
                fps: float = CLIP_FPS, poster_index: int | None = None, relative_to: Path | str | None = None) -> Clip:
     """Write ``<stem>.webm``, ``<stem>_poster.png`` (frame ``poster_index``, default the middle one) and
