@@ -15,6 +15,7 @@ from asset2sim.atomic import write_text
 from asset2sim.schemas.metrics import METRIC_INFO
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.source import UrdfFile
+from asset2sim.tasks.assemble.joint_sweep import reference_state
 from asset2sim.tasks.check.failure_reasons import why_it_failed
 from asset2sim.tasks.check.verdict import UNRESOLVED_PENETRATION_MM, penetration_measures, readiness
 from asset2sim.tasks.evaluation import plots
@@ -78,12 +79,6 @@ def _verdict_table(ev) -> str:
             f"{verdict_cell(m.passed)}<td class='small'>{esc(m.threshold)}</td><td class='small'>{esc(extra)}</td></tr>"
         )
     return table(("metric", "engine", "value", "unit", "verdict", "threshold", "notes"), rows)
-
-
-def modelled_state(ctx) -> dict[str, float]:
-    """Every movable joint of the evaluated URDF at 0 clipped to its limits (rad or m): the pose the asset was
-    modelled in, which a child inside its parent is graded against."""
-    return {j.name: float(np.clip(0.0, j.lower, j.upper)) for j in ctx.model.movable_joints}
 
 
 def measured_engines(ev) -> list[str]:
@@ -375,7 +370,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         engines_section(ctx.report),
         evidence_section(ev._runs, ctx.urdf, dt, svg_tag, figure, dict(ev.initial_state),
                          getattr(ev.metric("task_execution"), "details", None), ev.closed_positions, list(ev.metrics),
-                         modelled_state(ctx)),
+                         reference_state(ctx.model)),
         "<h2>Operability</h2>",
         operability_section(ev),
         "<h2>Penetration at the initial state</h2>",
