@@ -18,6 +18,15 @@ from asset2sim.tasks.check.verdict import (
 )
 
 
+#: The words of this module (``failure_words.yaml`` beside it): what a user can do, what a check did, how a trial
+#: disturbed the object.
+_WORDS = yaml.safe_load(resources.files(__package__).joinpath("failure_words.yaml").read_text(encoding="utf-8"))
+#: How each robust-rest trial disturbed the object, for :func:`robust_rest_why`.
+_TRIAL_WORDS: dict[str, str] = _WORDS["trial_words"]
+#: What a user can do about a penetration, a part that swung or an object that did not rest or toppled.
+_ADVICE: dict[str, str] = _WORDS["advice"]
+
+
 def _failing(metrics: list[Any], names) -> list[Any]:
     """The measures of ``metrics`` named in ``names`` that fail (:func:`metric_verdict` False), in order."""
     return [m for m in metrics if m.name in names and metric_verdict(m) is False]
@@ -74,15 +83,6 @@ def penetration_why(metrics: list[Any]) -> list[str]:
                    f"'{f.link_a or '?'}' at the initial state, {float((m.details or {}).get('beyond_modelled_mm') or 0.0):.1f} mm "
                    f"deeper than at its modelled pose (fails above {UNRESOLVED_PENETRATION_MM:g} mm). {_ADVICE['parent_child']}")
     return out
-
-
-#: The words of this module (``failure_words.yaml`` beside it): what a user can do, what a check did, how a trial
-#: disturbed the object.
-_WORDS = yaml.safe_load(resources.files(__package__).joinpath("failure_words.yaml").read_text(encoding="utf-8"))
-#: How each robust-rest trial disturbed the object, for :func:`robust_rest_why`.
-_TRIAL_WORDS: dict[str, str] = _WORDS["trial_words"]
-#: What a user can do about a penetration, a part that swung or an object that did not rest or toppled.
-_ADVICE: dict[str, str] = _WORDS["advice"]
 
 
 def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozenset()) -> list[str]:
