@@ -419,3 +419,12 @@ class RefineFactory:
         """:meth:`assert_untouched` for every refine handed out."""
         for shared, _, _ in list(self._done.values()):
             self.assert_untouched(shared)
+
+
+def decode_frames(path: Path | str) -> list[np.ndarray]:
+    """The frames (each (H, W, 3) uint8) of a video file. Raises ImportError (no PyAV), OSError / av errors
+    (unreadable file)."""
+    import av
+
+    with av.open(str(path)) as f:
+        return [frame.to_ndarray(format="rgb24") for frame in f.decode(video=0)]

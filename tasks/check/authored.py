@@ -10,6 +10,7 @@ an engine dropped or rescaled (the importer bugs of IsaacSim issues #841, #842).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -181,36 +182,26 @@ def held_by_engines(out_dir: Path, engines: list[str]) -> list[AuthoredCheck]:
     out_dir = Path(out_dir)
     authored = authored_physics(out_dir)
     opts = output_session_options(out_dir)
-    results: list[AuthoredCheck] = []
-    for engine in dict.fromkeys(engines):
+
+    def compared(engine: str, fmt: str, held: Callable[[], HeldPhysics]) -> AuthoredCheck:
+        """:func:`compare_physics` of what ``held()`` reads back; skipped where the engine or its reader is missing,
+        an error where the file does not load."""
         try:
-            session = open_session(engine, out_dir / URDF_NAME, opts)
-        except (EngineUnavailable, KeyError) as exc:
-            results.append(AuthoredCheck(engine, "urdf", "skipped", reason=str(exc)))
-            continue
+            return compare_physics(held(), authored)
+        except (EngineUnavailable, EngineUnsupported, KeyError) as exc:
+            return AuthoredCheck(engine, fmt, "skipped", reason=str(exc))
         except Exception as exc:  # the file does not load in this engine
-            results.append(AuthoredCheck(engine, "urdf", "error", reason=f"{type(exc).__name__}: {exc}"))
-            continue
-        try:
-            results.append(compare_physics(session.held_physics(), authored))
-        except EngineUnsupported as exc:
-            results.append(AuthoredCheck(engine, "urdf", "skipped", reason=str(exc)))
-        finally:
-            session.close()
+            return AuthoredCheck(engine, fmt, "error", reason=f"{type(exc).__name__}: {exc}")
+
+    def loaded(engine: str) -> HeldPhysics:
+        with open_session(engine, out_dir / URDF_NAME, opts) as session:
+            return session.held_physics()
+
+    results = [compared(engine, "urdf", lambda engine=engine: loaded(engine)) for engine in dict.fromkeys(engines)]
     for engine, fmt, rel in EXPORTED_FILES:
-        if engine not in engines:
-            continue
-        path = out_dir / rel
-        if not path.is_file():
+        if engine in engines and not (out_dir / rel).is_file():
             results.append(AuthoredCheck(engine, fmt, "skipped", reason=f"{rel} not exported"))
-            continue
-        try:
-            held = read_held_physics(engine, fmt, path, list(authored.links), list(authored.joints))
-        except (EngineUnavailable, EngineUnsupported) as exc:
-            results.append(AuthoredCheck(engine, fmt, "skipped", reason=str(exc)))
-            continue
-        except Exception as exc:
-            results.append(AuthoredCheck(engine, fmt, "error", reason=f"{type(exc).__name__}: {exc}"))
-            continue
-        results.append(compare_physics(held, authored))
+        elif engine in engines:
+            results.append(compared(engine, fmt, lambda engine=engine, fmt=fmt, rel=rel: read_held_physics(
+                engine, fmt, out_dir / rel, list(authored.links), list(authored.joints))))
     return results

@@ -59,8 +59,8 @@ class JointBreakaway:
     declared: float
     breakaway: float | None
     direction: int
+    #: N*m or N: :data:`RESOLUTION` of the joint's type
     resolution: float = 0.0
-    """N*m or N: :data:`RESOLUTION` of the joint's type"""
 
     @property
     def ratio(self) -> float | None:

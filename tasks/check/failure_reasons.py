@@ -7,12 +7,24 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from importlib import resources
 from typing import Any
+
+import yaml
 
 from asset2sim.tasks.interpret.request import parse_request
 from asset2sim.tasks.check.verdict import (
     HOLD_METRICS, PENETRATION_METRICS, TIERS, UNRESOLVED_PENETRATION_MM, metric_verdict, mode_of,
 )
+
+
+#: The words of this module (``failure_words.yaml`` beside it): what a user can do, what a check did, how a trial
+#: disturbed the object.
+_WORDS = yaml.safe_load(resources.files(__package__).joinpath("failure_words.yaml").read_text(encoding="utf-8"))
+#: How each robust-rest trial disturbed the object, for :func:`robust_rest_why`.
+_TRIAL_WORDS: dict[str, str] = _WORDS["trial_words"]
+#: What a user can do about a penetration, a part that swung or an object that did not rest or toppled.
+_ADVICE: dict[str, str] = _WORDS["advice"]
 
 
 def _failing(metrics: list[Any], names) -> list[Any]:
@@ -65,20 +77,12 @@ def penetration_why(metrics: list[Any]) -> list[str]:
             links = f"links '{f.link_a}' and '{f.link_b}' (not parent and child) overlap by up to {f.depth_mm:.1f} mm" \
                 if f.link_a else "links that are not parent and child overlap"
             out.append(f"self-contact penetration {m.value:.1f} mm ({m.engine}) is above {UNRESOLVED_PENETRATION_MM:g} mm: "
-                       f"{links} at the initial state. Ask for another state (--state JOINT=closed or a smaller opening) "
-                       "or give these links collision meshes that do not overlap.")
+                       f"{links} at the initial state. {_ADVICE['self_contact']}")
             continue
         out.append(f"parent-child penetration ({m.engine}): link '{f.link_b or '?'}' is {f.depth_mm:.1f} mm inside its parent "
                    f"'{f.link_a or '?'}' at the initial state, {float((m.details or {}).get('beyond_modelled_mm') or 0.0):.1f} mm "
-                   f"deeper than at its modelled pose (fails above {UNRESOLVED_PENETRATION_MM:g} mm). Ask for a state the part "
-                   "reaches without entering its parent (--state JOINT=closed or a smaller opening), or check the joint's axis, "
-                   "origin and limits in the input.")
+                   f"deeper than at its modelled pose (fails above {UNRESOLVED_PENETRATION_MM:g} mm). {_ADVICE['parent_child']}")
     return out
-
-
-#: How each robust-rest trial disturbed the object, for :func:`robust_rest_why`.
-_TRIAL_WORDS = {"drop": "landed after the 2 cm drop", "nudge": "was nudged at 0.05 m/s",
-                **{f"tilt{s}{a}": f"landed after the 5 deg tilt about {s}{a}" for s in "+-" for a in "xy"}}
 
 
 def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozenset()) -> list[str]:
@@ -120,8 +124,7 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
                       f"{_joint_amount(tol, unit)}" + (f"; largest excursion {_joint_amount(peak, unit)}" if peak is not None else "") + ")")
             if "toppled" in str((trials.get(name) or {}).get("failure", "")):
                 out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} and toppled "
-                           f"({m.engine}): the part swings as the object falls (the toppling is explained next). "
-                           "--mount fixed when it stands fixed in use; a mounted object is not dropped or tilted.")
+                           f"({m.engine}): the part swings as the object falls (the toppling is explained next). {_ADVICE['swing']}")
                 continue
             if j in skip:
                 out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} ({m.engine}), as "
@@ -134,14 +137,12 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
         for name, what in restless.items():
             rest = re.search(r"at rest \(([^)]*)\)", m.threshold or "")
             out.append(f"the object was {what} when it {_TRIAL_WORDS.get(name, name)} ({m.engine}; at rest means "
-                       f"{rest.group(1) if rest else 'still'} at the end of the trial): it rocks or slides on its support. A "
-                       "wider footprint in this state (a smaller opening of its heavy parts) may settle; --mount fixed "
-                       "when it stands fixed in use.")
+                       f"{rest.group(1) if rest else 'still'} at the end of the trial): it rocks or slides on its support. "
+                       + _ADVICE["restless"])
         # step 4: the toppling
         if toppled is not None:
             out.append(f"the object toppled ({toppled[0]:.2f} rad) when it {_TRIAL_WORDS.get(toppled[1], toppled[1])} "
-                       f"({m.engine}): its centre of mass lies near the edge of its footprint in this state. Ask for a smaller "
-                       "opening of its heavy parts, or --mount fixed when it stands fixed in use.")
+                       f"({m.engine}): its centre of mass lies near the edge of its footprint in this state. {_ADVICE['toppled']}")
     return out
 
 
@@ -177,27 +178,7 @@ def _joint_amount(value: float, unit: str) -> str:
 
 
 #: What a user can do about each tier (the tail of every sentence of :func:`why_it_failed`).
-TIER_ADVICE: dict[str, str] = {
-    "stand": ("Ask for a state that keeps its centre of mass over its footprint (a smaller opening of its heavy parts, "
-              "--state JOINT=closed), or --mount fixed when it stands fixed in use."),
-    "divergence": ("Check the input's masses and inertias (asset2sim audit), or give the object a mass (--mass) or "
-                   "material (--material) so each part's inertia is estimated from its geometry."),
-    "ground": "Check the collision meshes of its lowest links (they must not reach below its feet), or --mount fixed.",
-    "oscillation": ("Ask for the part at an end of its range (--state JOINT=closed or fully), or --mount fixed when it "
-                    "stands fixed in use; check the input's springs and damping (asset2sim audit) when it declares any."),
-    "hold": ("Ask for the part nearer an end of its range (--state JOINT=closed or fully), a lighter part (--mass, "
-             "--material), or --mount fixed when it stands fixed in use."),
-    "sweep": ("Check the joint's axis, origin and limits in the input and the collision meshes where it stops "
-              "(report.html shows the sweep), or ask for a state the part moves from freely (--state JOINT=closed)."),
-    "operability": ("Ask for a lighter part or another material (--mass, --material); a part something blocks needs "
-                    "that collision mesh repaired (report.html shows where it stops)."),
-    "task": ("Check that --task names a part the object has and a state it reaches; --mount fixed when the object "
-             "stands fixed in use, or a lighter part (--mass, --material)."),
-    "force": ("Give the object a real mass or material (--mass, --material) so its parts weigh what real ones do, or "
-              "ask for another task (--task)."),
-    "request": ("Reword the request to name a part the object has (semantics.txt lists them) and a state it reaches, "
-                "or set the state directly (--state JOINT=VALUE)."),
-}
+TIER_ADVICE: dict[str, str] = _WORDS["tier_advice"]
 
 #: The advice of a tier without its own entry in :data:`TIER_ADVICE`.
 _FALLBACK_ADVICE = {"rest": "stand", "penetration": "sweep", "robust_rest": "stand"}
@@ -244,10 +225,7 @@ def _rest_why(metrics: list[Any]) -> list[str]:
 
 
 #: What the check of a tier told by its metrics' ``details["failures"]`` did (:func:`_failures_why`).
-_DONE = {"sweep": "a force-limited drive could not sweep the joint through its range",
-         "operability": "a hand inside the part's real operating force could not work it",
-         "task": "a force- and speed-limited gripper could not do the task",
-         "force": "the task needed a force outside the part's real operating range"}
+_DONE: dict[str, str] = _WORDS["done"]
 
 
 def _failures_why(metrics: list[Any], names: tuple[str, ...], advice: str, what: str) -> list[str]:
@@ -266,18 +244,7 @@ _MISSING_PART = re.compile(r"no such part|names no part|carries that label|no ta
 
 #: What a user can do about an unmet item of the request, by its kind (``as_asked``'s items); a conflict's own text
 #: says it.
-REQUEST_ADVICE: dict[str, str] = {
-    "missing": TIER_ADVICE["request"],
-    "not_applied": "Reword or drop the phrase (another phrase of the request may set the same part), or set the state "
-                   "directly (--state JOINT=VALUE).",
-    "state": "Ask for a state the part reaches from its closed end (its range: report.json's closed_positions), or set "
-             "it directly (--state JOINT=VALUE).",
-    "size": "Ask for sizes that one uniform scale gives this object's proportions, or set the scale (--scale).",
-    "mass": "Ask for a mass the parts' materials can make at this size, or set it directly (--mass).",
-    "not_named": "Check the output's overlay.json: a word about motion applies only to the part its phrase names "
-                 "(refine the asset again).",
-    "conflict": "",
-}
+REQUEST_ADVICE: dict[str, str] = {"missing": TIER_ADVICE["request"], **_WORDS["request_advice"]}
 
 
 def _request_advice(item: dict) -> str:

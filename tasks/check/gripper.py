@@ -67,13 +67,13 @@ class BoundedGrasp:
         self.limits = limits
         dt = float(session.options.conventions.timestep)
         m_eff = max(float(session.link_masses().get(link, 0.0)) * EFFECTIVE_MASS_SHARE, 1e-4)
+        #: spring constant used, N/m (the limits' value, capped for stable integration)
         self.stiffness = float(min(limits.grasp_stiffness_n_m, m_eff / dt**2))
-        """spring constant used, N/m (the limits' value, capped for stable integration)"""
+        #: damping used, N s/m (capped likewise)
         self.damping = float(min(limits.grasp_damping_n_s_m, m_eff / dt))
-        """damping used, N s/m (capped likewise)"""
         self._p_prev = self.grasp_point_world()
+        #: world position (3,) m of the gripper point
         self.gripper_point = self._p_prev.copy()
-        """world position (3,) m of the gripper point"""
         self._released = False
         self._peak = 0.0
 

@@ -27,30 +27,30 @@ STOPPED_REVOLUTE, STOPPED_PRISMATIC = 0.05, 0.005
 class TaskConfig:
     """Knobs of task execution (units on every field)."""
 
+    #: free settling before the approach, s
     settle_time: float = 0.5
-    """free settling before the approach, s"""
+    #: stand-off the gripper covers before the grasp, m (time only: it has no shapes)
     approach_distance: float = 0.05
-    """stand-off the gripper covers before the grasp, m (time only: it has no shapes)"""
+    #: time to ramp the commanded joint speed up to the gripper's top speed, s
     accel_time: float = 0.2
-    """time to ramp the commanded joint speed up to the gripper's top speed, s"""
+    #: time allowed per unit of travel time at top speed (dimensionless)
     travel_margin: float = 1.5
-    """time allowed per unit of travel time at top speed (dimensionless)"""
+    #: time after the commanded motion ends to reach the target, s
     extra_time: float = 1.0
-    """time after the commanded motion ends to reach the target, s"""
+    #: wait after release, s
     hold_time: float = 1.0
-    """wait after release, s"""
+    #: opening-fraction tolerance on the target's side (dimensionless)
     reach_tol: float = 0.05
-    """opening-fraction tolerance on the target's side (dimensionless)"""
+    #: footprint displacement that counts as sliding, m
     slide_tol: float = 0.005
-    """footprint displacement that counts as sliding, m"""
+    #: root rotation that counts as tipping, rad
     tip_tol: float = 0.05
-    """root rotation that counts as tipping, rad"""
+    #: the gripper presses or lifts vertically while |t_z| >= this share of |t| (0.5: 60 deg)
     vertical_share: float = 0.5
-    """the gripper presses or lifts vertically while |t_z| >= this share of |t| (0.5: 60 deg)"""
+    #: a joint already at the target is first set to the far side; False: it succeeds without motion
     from_far_side: bool = True
-    """a joint already at the target is first set to the far side; False: it succeeds without motion"""
+    #: shares of the top speed at which an attempt under which the object slid or tipped is made again
     retry_speed_shares: tuple[float, ...] = (0.5, 0.25)
-    """shares of the top speed at which an attempt under which the object slid or tipped is made again"""
     limits: GripperLimits = field(default_factory=GripperLimits)
 
 
@@ -69,9 +69,9 @@ class Motion:
     peak_op: float = 0.0
     lever: float | None = None
     force_limited: bool = False
+    #: every :data:`RECORD_EVERY` steps from the grasp on: ``t`` (s), ``joints`` (joint -> rad or m),
+    #: ``root_pos`` (3,) m, ``root_rot`` (3, 3), ``grip`` (3,) m the grasp point (NaN once released); for clips
     trace: dict[str, list] = field(default_factory=dict, repr=False, compare=False)
-    """every :data:`RECORD_EVERY` steps from the grasp on: ``t`` (s), ``joints`` (joint -> rad or m),
-    ``root_pos`` (3,) m, ``root_rot`` (3, 3), ``grip`` (3,) m the grasp point (NaN once released); for clips"""
 
 
 #: Engine steps between recorded samples of a task's motion (4 at 240 Hz: 60 samples per s).

@@ -35,10 +35,10 @@ class RestTrace:
     initial_joints: dict[str, float] = field(default_factory=dict)
     diverged: bool = False
     initial_root_pos: np.ndarray | None = None
+    #: Root pose (3,) m and (4,) xyzw as placed, before settling.
     initial_root_quat: np.ndarray | None = None
-    """Root pose (3,) m and (4,) xyzw as placed, before settling."""
+    #: joint -> (lower, upper) rad or m as the engine holds them (infinite for a continuous joint).
     joint_limits: dict[str, tuple[float, float]] = field(default_factory=dict)
-    """joint -> (lower, upper) rad or m as the engine holds them (infinite for a continuous joint)."""
 
 
 def root_label(fixed: bool) -> str:
@@ -203,14 +203,14 @@ STILL_SHARE = 0.25
 class JointSettling:
     """Where one joint came to rest in a recording, against its initial state q0 (rad or m)."""
 
+    #: |q_end - q0|: where it came to rest (the graded value)
     settled: float
-    """|q_end - q0|: where it came to rest (the graded value)"""
+    #: max |q(t) - q0| over the recording: its largest excursion (reported, not graded)
     peak: float
-    """max |q(t) - q0| over the recording: its largest excursion (reported, not graded)"""
+    #: max - min of q over the last :data:`STILL_WINDOW` s (rad or m)
     still_motion: float
-    """max - min of q over the last :data:`STILL_WINDOW` s (rad or m)"""
+    #: the band it must settle in (:func:`~asset2sim.tasks.synthesize.set_down.rest_band`)
     band: float
-    """the band it must settle in (:func:`~asset2sim.tasks.synthesize.set_down.rest_band`)"""
 
     @property
     def moving(self) -> bool:

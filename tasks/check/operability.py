@@ -59,20 +59,20 @@ RANGED = ("revolute", "prismatic")
 class OperabilityConfig:
     """The hand (units on every field)."""
 
+    #: speed of the hand at the grasp point, m/s (ISO 10218-1:2011 5.6 reduced speed, as the task's gripper)
     hand_speed: float = GripperLimits().max_speed_m_s
-    """speed of the hand at the grasp point, m/s (ISO 10218-1:2011 5.6 reduced speed, as the task's gripper)"""
+    #: shortest time allowed for one stroke, s
     min_time: float = 4.0
-    """shortest time allowed for one stroke, s"""
+    #: a stroke may take this many times the path length / ``hand_speed``, s
     time_factor: float = 2.0
-    """a stroke may take this many times the path length / ``hand_speed``, s"""
+    #: share of the range a stroke must cover (the SPEC sweep's 95 %)
     reach_fraction: float = REACH_FRACTION
-    """share of the range a stroke must cover (the SPEC sweep's 95 %)"""
+    #: time over which the hand's force rises from 0 to its limit, s
     ramp_time: float = 0.25
-    """time over which the hand's force rises from 0 to its limit, s"""
+    #: positions along the range where the needed effort is computed
     samples: int = 11
-    """positions along the range where the needed effort is computed"""
+    #: force limit of the holds of the other joints, N m or N
     hold_force: float = HOLD_FORCE
-    """force limit of the holds of the other joints, N m or N"""
 
 
 @dataclass
@@ -88,8 +88,8 @@ class Stroke:
     needed_force_n: float
     needed_torque_nm: float | None
     at_fraction: float
+    #: the link in the part's way where the hand stopped short (geometry stops it there)
     stopped_by: str | None = None
-    """the link in the part's way where the hand stopped short (geometry stops it there)"""
     diverged: bool = False
     passed: bool = False
     failure: str = ""
@@ -104,10 +104,10 @@ class PartOperability:
     link: str
     label: str | None
     rule: str
+    #: distance (m) of the grasp point from the axis (revolute)
     lever: float | None
-    """distance (m) of the grasp point from the axis (revolute)"""
+    #: the hand's force limit at the grasp point, N
     hand_force_n: float
-    """the hand's force limit at the grasp point, N"""
     force_range_n: tuple[float, float] | None
     torque_range_nm: tuple[float, float] | None
     range_of: str
@@ -130,13 +130,11 @@ class PartOperability:
 
     def summary(self) -> dict[str, Any]:
         """JSON-able dict."""
-        return {"joint": self.joint, "joint_type": self.joint_type, "link": self.link, "label": self.label, "rule": self.rule,
-                "lever_m": self.lever, "hand_force_n": self.hand_force_n,
-                "force_range_n": list(self.force_range_n) if self.force_range_n else None,
-                "torque_range_nm": list(self.torque_range_nm) if self.torque_range_nm else None,
-                "range_of": self.range_of, "sources": self.sources, "estimate": self.estimate,
-                "peak_force_n": self.peak_force_n, "peak_torque_nm": self.peak_torque_nm, "passed": self.passed,
-                "strokes": [dict(s.__dict__) for s in self.strokes]}
+        out = {("lever_m" if k == "lever" else k): v for k, v in self.__dict__.items() if k != "strokes"}
+        out.update(force_range_n=list(self.force_range_n) if self.force_range_n else None,
+                   torque_range_nm=list(self.torque_range_nm) if self.torque_range_nm else None, peak_force_n=self.peak_force_n,
+                   peak_torque_nm=self.peak_torque_nm, passed=self.passed, strokes=[dict(s.__dict__) for s in self.strokes])
+        return out
 
 
 @dataclass

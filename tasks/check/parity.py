@@ -121,19 +121,17 @@ def parity_table(results: dict[str, list[MetricResult]]) -> list[dict[str, Any]]
                 status, reason = "skipped", m.details["skipped"]
             elif m is not None and "error" in m.details:
                 status, reason = "error", m.details["error"]
-        pairs = pen.details.get("pairs", []) if pen is not None else []
+        pen_d, rest_d, osc_d = (m.details if m is not None else {} for m in (pen, rest, osc))
+        pairs = pen_d.get("pairs", [])
         rows.append({
             "engine": engine, "status": status, "reason": reason,
             "penetration_mm": pen.value if pen is not None else None,
             "max_depth_mm": max((p["max_depth_mm"] for p in pairs), default=0.0) if status == "ok" and pen.value is not None else None,
             "penetration_points": sum(p["points"] for p in pairs) if status == "ok" and pen.value is not None else None,
             "rest_stability": rest.passed if rest is not None else None,
-            "D_pos_m": rest.details.get("D_pos_m") if rest is not None else None,
-            "D_ori_rad": rest.details.get("D_ori_rad") if rest is not None else None,
+            "D_pos_m": rest_d.get("D_pos_m"), "D_ori_rad": rest_d.get("D_ori_rad"),
             "oscillation": osc.passed if osc is not None else None,
-            "failing_joints": list(osc.details.get("failing", [])) if osc is not None else [],
-            "joints_held": dict(rest.details.get("joints_held", {})) if rest is not None else {},
-            "breakaway": rest.details.get("breakaway") if rest is not None else None,
-            "engine_notes": list(pen.details.get("engine_notes", [])) if pen is not None else [],
+            "failing_joints": list(osc_d.get("failing", [])), "joints_held": dict(rest_d.get("joints_held", {})),
+            "breakaway": rest_d.get("breakaway"), "engine_notes": list(pen_d.get("engine_notes", [])),
         })
     return rows

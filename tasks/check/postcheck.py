@@ -64,10 +64,10 @@ class RestRecording:
     initial_state: dict[str, float]
     springs: dict[str, Spring]
     conventions: SimConventions
+    #: The root was fixed (a mounted asset, ``tasks.interpret.mounting``).
     fixed_base: bool = False
-    """The root was fixed (a mounted asset, ``tasks.interpret.mounting``)."""
+    #: (3,) m extents of the links with collision geometry at the initial state (the divergence's travel limit).
     extents: np.ndarray | None = None
-    """(3,) m extents of the links with collision geometry at the initial state (the divergence's travel limit)."""
 
 
 def record_rest_test(session: SimSession, obj: SimObject) -> RestRecording:
@@ -101,20 +101,20 @@ class PostCheck:
 
     metrics: list[MetricResult]
     trace: metrics.RestTrace
+    #: joint -> where it came to rest, |q_end - q_initial| (rad or m)
     sag: dict[str, float]
-    """joint -> where it came to rest, |q_end - q_initial| (rad or m)"""
     sagging: list[str] = field(default_factory=list)
+    #: Other engines (``--engines``): engine -> [penetration, rest_stability, oscillation].
     engine_results: dict[str, list[MetricResult]] = field(default_factory=dict)
-    """Other engines (``--engines``): engine -> [penetration, rest_stability, oscillation]."""
     recording: RestRecording | None = None
+    #: The manipulation tiers' runs, reused by the evaluation of the same files.
     recorded: RecordedRuns = field(default_factory=RecordedRuns)
-    """The manipulation tiers' runs, reused by the evaluation of the same files."""
+    #: metric -> the run it was graded from (``robust_rest``, ``joint_sweep``, ``operability``, ``task_execution``): the
+    #: report's evidence and clips.
     runs: dict[str, Any] = field(default_factory=dict)
-    """metric -> the run it was graded from (``robust_rest``, ``joint_sweep``, ``operability``, ``task_execution``): the
-    report's evidence and clips."""
+    #: With other engines (``--engines``), the reference engine's side of their parity rows: ``joints_held`` (joint
+    #: -> came to rest in its band) and ``breakaway`` (:func:`~asset2sim.tasks.check.parity.engine_breakaway`).
     reference_holding: dict = field(default_factory=dict)
-    """With other engines (``--engines``), the reference engine's side of their parity rows: ``joints_held`` (joint
-    -> came to rest in its band) and ``breakaway`` (:func:`~asset2sim.tasks.check.parity.engine_breakaway`)."""
 
     def engine_failures(self) -> tuple[bool, list[str]]:
         """(any other engine unstable, joints oscillating in another engine)."""

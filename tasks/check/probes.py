@@ -47,8 +47,8 @@ class ProbeResult:
     reached: bool
     time_to_reach: float | None
     peak_force: float
+    #: peak generalised force: N*m (revolute, F*|r|) or N (prismatic)
     peak_effort: float
-    """peak generalised force: N*m (revolute, F*|r|) or N (prismatic)"""
     lever_arm: float | None
     max_force: float
     root_displacement: float

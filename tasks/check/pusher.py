@@ -32,51 +32,51 @@ PUSHER_OMEGA_DT = 0.25
 class ProbeConfig:
     """Probe knobs (units on every field)."""
 
+    #: free settling before the push, s
     settle_time: float = 0.25
-    """free settling before the push, s"""
+    #: longest push, s, unless the travel needs longer (:func:`push_budget`)
     push_time: float = 2.0
-    """longest push, s, unless the travel needs longer (:func:`push_budget`)"""
+    #: longest push whatever the travel and the ramp ask, s (:data:`MAX_PUSH_TIME`)
     max_push_time: float = MAX_PUSH_TIME
-    """longest push whatever the travel and the ramp ask, s (:data:`MAX_PUSH_TIME`)"""
+    #: observation after release, s
     release_time: float = 0.75
-    """observation after release, s"""
+    #: desired speed of the push point, m/s
     push_speed: float = 0.25
-    """desired speed of the push point, m/s"""
+    #: time for a stuck pusher to reach F_max, s
     ramp_time: float = 1.0
-    """time for a stuck pusher to reach F_max, s"""
+    #: F_max = force_factor * total weight (dimensionless) ...
     force_factor: float = 2.0
-    """F_max = force_factor * total weight (dimensionless) ..."""
+    #: ... but at least this, N (ADA 2010 section 309.4: 5 lbf)
     min_force: float = 22.2
-    """... but at least this, N (ADA 2010 section 309.4: 5 lbf)"""
+    #: root displacement that counts as the object sliding, m
     slide_tol: float = 0.005
-    """root displacement that counts as the object sliding, m"""
+    #: root rotation that counts as tipping, rad
     tip_tol: float = 0.05
-    """root rotation that counts as tipping, rad"""
+    #: the other hand holds the body: the push's reaction acts on the root, and a body
+    #: weighing at most ``hold_force`` is gripped; False: an external push only
     hold_body: bool = True
-    """the other hand holds the body: the push's reaction acts on the root, and a body
-    weighing at most ``hold_force`` is gripped; False: an external push only"""
+    #: the other hand's force, N: a body weighing at most this is held by a hold of at most this force (ADA 5 lbf)
     hold_force: float = 22.2
-    """the other hand's force, N: a body weighing at most this is held by a hold of at most this force (ADA 5 lbf)"""
+    #: |q_dot| after release that counts as still moving, rad/s
     settle_velocity_revolute: float = 0.05
-    """|q_dot| after release that counts as still moving, rad/s"""
+    #: ... for prismatic joints, m/s
     settle_velocity_prismatic: float = 0.005
-    """... for prismatic joints, m/s"""
 
 
 @dataclass(frozen=True)
 class Pusher:
     """The force law of one probe's hand (``docs/design/metrics.md``, probes, step 3)."""
 
+    #: largest force, N
     f_max: float
-    """largest force, N"""
+    #: k, N/m
     stiffness: float
-    """k, N/m"""
+    #: c, N s/m
     damping: float
-    """c, N s/m"""
+    #: time a stuck part's force takes to reach ``min_force``, at least ``ramp_time``, s
     ramp: float
-    """time a stuck part's force takes to reach ``min_force``, at least ``ramp_time``, s"""
+    #: v_des, m/s
     speed: float
-    """v_des, m/s"""
 
     def step(self, lead: float, v: float, dt: float) -> tuple[float, float]:
         """(lead m, force N) after a step of ``dt`` s with the push point moving at ``v`` m/s."""

@@ -27,27 +27,27 @@ TRIALS: tuple[str, ...] = ("drop", "tilt+x", "tilt-x", "tilt+y", "tilt-y", "nudg
 class RobustRestConfig:
     """Robust-rest knobs (units on every field)."""
 
+    #: lift before the drop, m (SPEC: 2 cm)
     drop_height: float = 0.02
-    """lift before the drop, m (SPEC: 2 cm)"""
+    #: tilt about each horizontal axis, rad (SPEC: 5 deg)
     tilt: float = math.radians(5.0)
-    """tilt about each horizontal axis, rad (SPEC: 5 deg)"""
+    #: horizontal root speed of the nudge, m/s
     nudge_speed: float = 0.05
-    """horizontal root speed of the nudge, m/s"""
+    #: floor of the band a revolute joint must come to rest in around its initial state, rad (SPEC: max(0.02 rad,
+    #: 5 % of its range))
     joint_tol_revolute: float = REST_BAND_FLOORS["revolute"]
-    """floor of the band a revolute joint must come to rest in around its initial state, rad (SPEC: max(0.02 rad,
-    5 % of its range))"""
+    #: ... of a prismatic joint, m (SPEC: max(2 mm, 5 % of its range))
     joint_tol_prismatic: float = REST_BAND_FLOORS["prismatic"]
-    """... of a prismatic joint, m (SPEC: max(2 mm, 5 % of its range))"""
+    #: share of a joint's range the band takes where that is more than the floor (dimensionless, SPEC: 5 %)
     joint_band_share: float = REST_BAND_RANGE_SHARE
-    """share of a joint's range the band takes where that is more than the floor (dimensionless, SPEC: 5 %)"""
+    #: largest change of the body's up direction, rad
     topple_tol: float = 0.05
-    """largest change of the body's up direction, rad"""
+    #: settling allowed after T_set while the disturbed object still moves, s
     recovery_time: float = 3.0
-    """settling allowed after T_set while the disturbed object still moves, s"""
     trials: tuple[str, ...] = TRIALS
+    #: joints the request asks to move freely ("swings freely", "slides easily"): graded for coming to rest, not for
+    #: holding their state under a disturbance (SPEC, robust rest); their undisturbed hold is the rest test's
     free_joints: tuple[str, ...] = ()
-    """joints the request asks to move freely ("swings freely", "slides easily"): graded for coming to rest, not for
-    holding their state under a disturbance (SPEC, robust rest); their undisturbed hold is the rest test's"""
 
 
 @dataclass
@@ -59,27 +59,27 @@ class Trial:
     d_pos: float | None = None
     d_ori: float | None = None
     topple: float | None = None
+    #: joint -> where it came to rest, |q_end - q_initial| (rad or m): the graded value
     joint_drift: dict[str, float] = field(default_factory=dict)
-    """joint -> where it came to rest, |q_end - q_initial| (rad or m): the graded value"""
+    #: joint -> its largest excursion |q(t) - q_initial| while the object landed and settled (reported, not graded)
     joint_peak: dict[str, float] = field(default_factory=dict)
-    """joint -> its largest excursion |q(t) - q_initial| while the object landed and settled (reported, not graded)"""
+    #: joint -> its band (rad or m): max(floor, 5 % of its range)
     joint_tolerance: dict[str, float] = field(default_factory=dict)
-    """joint -> its band (rad or m): max(floor, 5 % of its range)"""
+    #: joint -> ``"rad"`` or ``"m"``
     joint_units: dict[str, str] = field(default_factory=dict)
-    """joint -> ``"rad"`` or ``"m"``"""
+    #: joints still moving at the end of the test (:attr:`~asset2sim.tasks.check.metrics.JointSettling.moving`)
     moving_joints: list[str] = field(default_factory=list)
-    """joints still moving at the end of the test (:attr:`~asset2sim.tasks.check.metrics.JointSettling.moving`)"""
     failing_joints: list[str] = field(default_factory=list)
+    #: joints the object rolls on: their drift is recorded, not graded
     rolling: list[str] = field(default_factory=list)
-    """joints the object rolls on: their drift is recorded, not graded"""
+    #: joints the request asks to move freely: graded for coming to rest, their drift recorded, not graded
     free: list[str] = field(default_factory=list)
-    """joints the request asks to move freely: graded for coming to rest, their drift recorded, not graded"""
     diverged: bool = False
     failure: str = ""
+    #: The rest test that followed the disturbance (for the report's evidence; not in :meth:`summary`).
     trace: metrics.RestTrace | None = field(default=None, repr=False, compare=False)
-    """The rest test that followed the disturbance (for the report's evidence; not in :meth:`summary`)."""
+    #: The root's orientation (4,) xyzw at rest before the disturbance.
     reference_quat: np.ndarray | None = field(default=None, repr=False, compare=False)
-    """The root's orientation (4,) xyzw at rest before the disturbance."""
 
     def summary(self) -> dict[str, Any]:
         """JSON-able dict (the trace left out)."""
@@ -185,8 +185,8 @@ class RobustRestRun:
 
     engine: str
     trials: list[Trial] = field(default_factory=list)
+    #: why the whole metric was skipped (fixed root)
     skipped: str | None = None
-    """why the whole metric was skipped (fixed root)"""
 
 
 def run_robust_rest(engine: str, obj: SimObject, config: RobustRestConfig | None = None) -> RobustRestRun:

@@ -34,22 +34,22 @@ HOLD_FORCE = 1000.0
 class SweepConfig:
     """Sweep knobs (units on every field)."""
 
+    #: nominal time for a full traverse, s: v_max = range / traverse_time
     traverse_time: float = 1.0
-    """nominal time for a full traverse, s: v_max = range / traverse_time"""
+    #: longest drive each way, s
     time_limit: float = 3.0
-    """longest drive each way, s"""
+    #: k_p of the position loop, 1/s
     position_gain: float = 10.0
-    """k_p of the position loop, 1/s"""
+    #: force limit in multiples of the moving part's own weight (torque)
     weight_factor: float = 2.0
-    """force limit in multiples of the moving part's own weight (torque)"""
+    #: deepest self-contact point allowed during the sweep, m
     max_penetration: float = 0.005
-    """deepest self-contact point allowed during the sweep, m"""
+    #: fraction of the range to reach each way
     reach_fraction: float = REACH_FRACTION
-    """fraction of the range to reach each way"""
+    #: hold the other movable joints at the initial state while one is swept
     hold_others: bool = True
-    """hold the other movable joints at the initial state while one is swept"""
+    #: force limit of the hold, N*m or N (beyond the joint's friction)
     hold_force: float = HOLD_FORCE
-    """force limit of the hold, N*m or N (beyond the joint's friction)"""
 
 
 @dataclass
@@ -62,10 +62,10 @@ class JointSweep:
     q_far: float
     open_range: float
     effort_limit: float
+    #: largest opening fraction reached on the way out
     reached_open: float
-    """largest opening fraction reached on the way out"""
+    #: smallest opening fraction reached on the way back
     reached_closed: float
-    """smallest opening fraction reached on the way back"""
     time_open: float | None
     time_close: float | None
     max_penetration: float
@@ -73,11 +73,11 @@ class JointSweep:
     diverged: bool
     passed: bool
     failure: str = ""
+    #: how the range differs from the closed end's (parts held in the way)
     range_note: str = ""
-    """how the range differs from the closed end's (parts held in the way)"""
+    #: per step: ``t`` (s), ``fraction`` (opening fraction), ``phase`` (0 opening, 1 closing); for the report,
+    #: not in :meth:`summary`
     trace: dict[str, list[float]] = field(default_factory=dict, repr=False, compare=False)
-    """per step: ``t`` (s), ``fraction`` (opening fraction), ``phase`` (0 opening, 1 closing); for the report,
-    not in :meth:`summary`"""
 
     def summary(self) -> dict[str, Any]:
         """JSON-able dict (the trace left out)."""
@@ -237,8 +237,8 @@ class SweepRun:
 
     engine: str
     joints: list[JointSweep] = field(default_factory=list)
+    #: joint -> why it was not swept
     skipped: dict[str, str] = field(default_factory=dict)
-    """joint -> why it was not swept"""
 
 
 def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: dict[str, tuple[float, float, float]],

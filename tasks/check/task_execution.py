@@ -33,13 +33,13 @@ class TaskAttempt:
     joint_type: str
     action: str
     link: str
+    #: ``child`` (the part the joint moves) or ``parent`` (the child carries the object)
     side: str
-    """``child`` (the part the joint moves) or ``parent`` (the child carries the object)"""
     contact_rule: str
+    #: grasp point in the link frame, m
     contact_point: list[float]
-    """grasp point in the link frame, m"""
+    #: ``initial state`` or the far side the joint was set to (``TaskConfig.from_far_side``)
     started_from: str
-    """``initial state`` or the far side the joint was set to (``TaskConfig.from_far_side``)"""
     start_fraction: float
     target_fraction: float
     reached: bool
@@ -47,32 +47,32 @@ class TaskAttempt:
     final_fraction: float
     held: bool
     hold_required: bool
+    #: peak |F| the gripper applied (a robot's load), N
     peak_force_n: float
-    """peak |F| the gripper applied (a robot's load), N"""
+    #: peak force along the part's motion, N: |torque about the axis| / lever or |F . a| (prismatic)
     peak_operating_force_n: float
-    """peak force along the part's motion, N: |torque about the axis| / lever or |F . a| (prismatic)"""
+    #: peak |torque about the joint axis| (revolute), N m
     peak_torque_nm: float | None
-    """peak |torque about the joint axis| (revolute), N m"""
+    #: peak |force along the axis| (prismatic), N
     peak_axial_force_n: float | None
-    """peak |force along the axis| (prismatic), N"""
     lever_m: float | None
     root_slide_m: float
     root_tilt_rad: float
     slid: bool
     tipped: bool
+    #: the gripper's force reached its limit
     force_limited: bool
-    """the gripper's force reached its limit"""
+    #: the gripper had to move the joint (False: already at the target)
     moved: bool
-    """the gripper had to move the joint (False: already at the target)"""
     seconds_simulated: float
     success: bool
     failure: str = ""
     notes: list[str] = field(default_factory=list)
+    #: commanded speed as a share of the gripper's top speed (lower on a retry)
     speed_share: float = 1.0
-    """commanded speed as a share of the gripper's top speed (lower on a retry)"""
+    #: the motion from the grasp on (:attr:`asset2sim.tasks.check.gripper_motion.Motion.trace`); for clips, not in
+    #: :meth:`summary`
     trace: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
-    """the motion from the grasp on (:attr:`asset2sim.tasks.check.gripper_motion.Motion.trace`); for clips, not in
-    :meth:`summary`"""
 
     def summary(self) -> dict[str, Any]:
         """JSON-able dict (the trace left out)."""
@@ -84,8 +84,8 @@ class TaskRun:
     """Task execution of an asset in one engine."""
 
     engine: str
+    #: ``free (on the ground)`` or ``fixed (mounted)``
     root: str
-    """``free (on the ground)`` or ``fixed (mounted)``"""
     attempts: list[TaskAttempt] = field(default_factory=list)
     task: str | None = None
     config: TaskConfig = field(default_factory=TaskConfig)

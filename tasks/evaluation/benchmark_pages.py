@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from asset2sim.tasks.evaluation.html_blocks import fmt, page, svg_tag, table
+from asset2sim.tasks.evaluation.html_blocks import TEXTS, fmt, page, svg_tag, table
 from asset2sim.tasks.evaluation.report_changes import esc
 
 
@@ -29,10 +29,7 @@ _PASS_RATES = (("rest_stability_pass", "rest_n"), ("oscillation_pass", "osc_n"),
 def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], research: list[dict[str, str]],
                              meta: dict[str, Any], chart: bytes | None = None) -> str:
     """Thesis-layout tables per subset (``tables``: subset -> method -> row) beside the SPEC's numbers."""
-    cols = ["penetration (mm, toilet+stapler)", "penetration (mm, all)", "rest-stability pass", "oscillation pass",
-            "probes pass", "joint sweep pass", "robust rest pass", "task success", "operating force plausible",
-            "interaction-ready", "scale dev. vs GenSim2", "init. joint dev. (rad)", "prompt alignment", "all checks pass",
-            "median eval. time (s)", "realism (Bradley-Terry)"]
+    cols = TEXTS["benchmark_columns"]
     parts = [f"<h1>asset2sim benchmark</h1><p class='meta'>{esc(meta.get('manifest'))} &middot; methods "
              f"{esc(', '.join(meta.get('methods', [])))} &middot; seed {esc(meta.get('seed'))} &middot; "
              f"{esc(meta.get('rows'))} rows &middot; <a href='index.html'>per-object index</a></p>"]
@@ -51,16 +48,13 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
         research[0], ("<tr>" + "".join(f"<td>{esc(v)}</td>" for v in r.values()) + "</tr>" for r in research)))
     if chart:
         parts.append("<h2>Pass rates</h2>" + svg_tag(chart, "pass rates"))
-    parts.append("<p class='small'>Ours: PyBullet under the conventions of docs/guide/metrics.md; the research measured in "
-                 "Isaac Sim (PhysX). Penetration in mm is the depth summed over self-contact points; pass rates count assets that were "
-                 "produced; (n) is the number of assets with a verdict.</p>")
+    parts.append(TEXTS["benchmark_note"])
     return page("asset2sim benchmark", "\n".join(parts))
 
 
 def render_benchmark_index(records: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     """One colour-coded row per object and method, linking to each ``report.html``."""
-    head = ["object", "category", "method", "all", "penetration (mm)", "rest", "oscillation", "ground", "divergence",
-            "joint hold", "probes", "mass (kg)", "scale dev. (%)", "init. dev.", "prompt", "time (s)", "report"]
+    head = TEXTS["index_columns"]
     rows = []
     for r in records:
         if r.get("error"):

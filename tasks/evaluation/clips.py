@@ -70,10 +70,10 @@ class Trajectory:
     joints: dict[str, np.ndarray]
     root_pos: np.ndarray | None = None
     root_rot: np.ndarray | None = None
+    #: positions of the joints not in ``joints`` (held), rad or m
     others: dict[str, float] = field(default_factory=dict)
-    """positions of the joints not in ``joints`` (held), rad or m"""
+    #: (K, 3) m a point drawn on each frame (the grasp point of a task; NaN: none), or None
     marks: np.ndarray | None = None
-    """(K, 3) m a point drawn on each frame (the grasp point of a task; NaN: none), or None"""
 
     def __post_init__(self) -> None:
         self.t = np.asarray(self.t, float)
@@ -200,15 +200,6 @@ def encode_webm(frames: Sequence[np.ndarray], fps: float = CLIP_FPS) -> bytes:
         for packet in stream.encode():
             out.mux(packet)
     return buf.getvalue()
-
-
-def decode_frames(path: Path | str) -> list[np.ndarray]:
-    """The frames (each (H, W, 3) uint8) of a video file. Raises ImportError (no PyAV), OSError / av errors
-    (unreadable file)."""
-    import av
-
-    with av.open(str(path)) as f:
-        return [frame.to_ndarray(format="rgb24") for frame in f.decode(video=0)]
 
 
 def write_clip(folder: Path | str, stem: str, frames: Sequence[np.ndarray], *, joint: str, motion: Motion, view: str,

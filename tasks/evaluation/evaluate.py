@@ -262,9 +262,9 @@ def evaluate_asset(
         raise EvaluationError(why if str(Path(asset)) in why or str(Path(asset).name) in why else f"{asset}: {why}") from exc
     notes: list[str] = []
     report, raw_report, baseline, overlay = read_records(files, notes)
-    prompt = prompt if prompt is not None else (report.prompt if report is not None else None)
-    task = task if task is not None else (report.task if report is not None else None)
-    cat = category or (report.category if report is not None else None) or (baseline or {}).get("category")
+    prompt = prompt if prompt is not None else getattr(report, "prompt", None)
+    task = task if task is not None else getattr(report, "task", None)
+    cat = category or getattr(report, "category", None) or (baseline or {}).get("category")
     every = engines is not None  # the engines named: the manipulation tiers in each of them
     recorded = sorted({m.engine for m in report.metrics} - {"none", "pybullet"}) if report is not None else []
     engines = list(dict.fromkeys(["pybullet", *(engines if every else recorded)]))
@@ -286,14 +286,14 @@ def evaluate_asset(
         measured = check.metrics + [m for res in check.engine_results.values() for m in res]
         measured += [m for e in engines if every and e != "pybullet" for m in _manipulation(e, obj, ct, ctx, check)]
         asked = as_asked.as_asked_tier(ctx, kin, physics.model_copy(update={"scale": 1.0}), state, closed, measured,
-                                       rounds=report.escalation if report is not None else None)
+                                       rounds=getattr(report, "escalation", None))
         found = _probes(ctx, obj, closed, spec, notes) if probes else None
         ref = Path(reference).resolve() if reference is not None else None
         scale, source = stated_scale(report, overlay, baseline, ctx, ref)
         semantic = semantic_metrics(ctx, model, state, closed, asked.resolution, _masses(overlay, model), scale, source, ref)
         metrics = [*asked.metrics, *semantic, *([probe_tier.probes_metric(found)] if found is not None else [])]
         ev = _evaluation(urdf, ref, closed, metrics, readiness(metrics).failure_mode,
-                         asset_id=(report.asset_id if report is not None else None) or (baseline or {}).get("asset_id") or desc.asset_id,
+                         asset_id=getattr(report, "asset_id", None) or (baseline or {}).get("asset_id") or desc.asset_id,
                          method=method or (baseline or {}).get("method") or ("asset2sim" if overlay is not None else None),
                          prompt=prompt, category=ctx.category, scale=scale, scale_source=source, engines=list(engines),
                          initial_state=state, initial_state_source=state_source, task_joints=task_relevant_joints(ctx), notes=notes,

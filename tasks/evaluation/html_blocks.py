@@ -8,28 +8,21 @@ from __future__ import annotations
 import base64
 import io
 import math
+from importlib import resources
 from typing import Any, Iterable
 
 import numpy as np
+import yaml
 
 from asset2sim.inert import CSP_META, html_text
 from asset2sim.tasks.evaluation import plots
 
 
-CSS = """
-body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:24px;color:#1d2430;max-width:1200px}
-h1{font-size:22px;margin-bottom:4px} h2{font-size:18px;margin-top:28px;border-bottom:1px solid #d0d6de;padding-bottom:4px}
-h3{font-size:15px;margin-bottom:6px}
-table{border-collapse:collapse;margin:8px 0;font-size:13px;max-width:100%}
-th,td{border:1px solid #d0d6de;padding:4px 8px;text-align:left;vertical-align:top;overflow-wrap:anywhere}
-th{background:#f1f4f8} td.num{text-align:right;font-variant-numeric:tabular-nums}
-.pass{background:#d9f2dd} .fail{background:#f9d6d5} .na{background:#eef0f3;color:#5b6574} .warn{background:#fff1cc}
-.badge{display:inline-block;padding:3px 10px;border-radius:12px;font-weight:600}
-.meta{color:#4a5565;font-size:13px} img{max-width:100%;border:1px solid #e2e6ec;margin:6px 0}
-.small{font-size:12px;color:#5b6574} code{background:#f1f4f8;padding:1px 4px;border-radius:3px}
-.views{display:flex;flex-wrap:wrap;gap:8px} .views figure{margin:0} .views img{max-width:280px}
-.clips{display:flex;flex-wrap:wrap;gap:8px} .clips figure{margin:0} .clips video{border:1px solid #e2e6ec;background:#eef0f3}
-"""
+#: The reports' style sheet (``report.css`` beside this module), inlined in every page.
+CSS = resources.files(__package__).joinpath("report.css").read_text(encoding="utf-8")
+#: The fixed paragraphs, captions and column heads of the report and the benchmark pages (``report_texts.yaml`` beside
+#: this module): key -> HTML (or a list of column heads).
+TEXTS = yaml.safe_load(resources.files(__package__).joinpath("report_texts.yaml").read_text(encoding="utf-8"))
 
 
 def page(title: str, body: str) -> str:

@@ -20,6 +20,7 @@ from asset2sim.tasks.check.as_asked import quantity_text
 from asset2sim.tasks.ingest.partnet_mobility import find_urdf
 from asset2sim.tasks.geometry.render import render_views
 from asset2sim.tasks.ingest import declared as declared_mod
+from asset2sim.tasks.synthesize.request_findings import DYNAMICS_UNITS
 from asset2sim.formats import staging
 from asset2sim.inert import html_text, one_line
 from asset2sim.tasks.evaluation.html_blocks import table
@@ -72,14 +73,10 @@ def _row(what: str, before: str, after: str, why: str) -> str:
             f"<td class='small'>{esc(why)}</td></tr>")
 
 
-#: Units of a joint's damping, friction and stiffness, by joint type (revolute and continuous share theirs).
-DYNAMICS_UNITS = {"rotational": {"damping": "N m s/rad", "friction": "N m", "stiffness": "N m/rad"},
-                  "linear": {"damping": "N s/m", "friction": "N", "stiffness": "N/m"}}
-
-
 def dynamics_unit(quantity: str, jtype: str) -> str:
-    """The unit of a joint's ``quantity`` (``damping``, ``friction``, ``stiffness``) for a joint of type ``jtype``."""
-    return DYNAMICS_UNITS["linear" if jtype == "prismatic" else "rotational"][quantity]
+    """The unit of a joint's ``quantity`` (``damping``, ``friction``, ``stiffness``) for a joint of type ``jtype``
+    (:data:`~asset2sim.tasks.synthesize.request_findings.DYNAMICS_UNITS`: revolute and continuous share theirs)."""
+    return DYNAMICS_UNITS[quantity][jtype == "prismatic"]
 
 
 @dataclass

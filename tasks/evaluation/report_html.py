@@ -15,11 +15,12 @@ from asset2sim.atomic import write_text
 from asset2sim.schemas.metrics import METRIC_INFO
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.source import UrdfFile
+from asset2sim.tasks.assemble.joint_sweep import reference_state
 from asset2sim.tasks.check.failure_reasons import why_it_failed
 from asset2sim.tasks.check.verdict import UNRESOLVED_PENETRATION_MM, penetration_measures, readiness
 from asset2sim.tasks.evaluation import plots
 from asset2sim.tasks.evaluation.failure_evidence import evidence_section
-from asset2sim.tasks.evaluation.html_blocks import figure, fmt, page, svg_tag, table, verdict_cell
+from asset2sim.tasks.evaluation.html_blocks import TEXTS, figure, fmt, page, svg_tag, table, verdict_cell
 from asset2sim.tasks.evaluation.parameter_table import parameter_table
 from asset2sim.tasks.evaluation.report_changes import changes_section, esc, from_closed_text, opening_text
 from asset2sim.tasks.geometry.render import render_views
@@ -78,12 +79,6 @@ def _verdict_table(ev) -> str:
             f"{verdict_cell(m.passed)}<td class='small'>{esc(m.threshold)}</td><td class='small'>{esc(extra)}</td></tr>"
         )
     return table(("metric", "engine", "value", "unit", "verdict", "threshold", "notes"), rows)
-
-
-def modelled_state(ctx) -> dict[str, float]:
-    """Every movable joint of the evaluated URDF at 0 clipped to its limits (rad or m): the pose the asset was
-    modelled in, which a child inside its parent is graded against."""
-    return {j.name: float(np.clip(0.0, j.lower, j.upper)) for j in ctx.model.movable_joints}
 
 
 def measured_engines(ev) -> list[str]:
@@ -215,9 +210,7 @@ def operability_section(ev) -> str:
     if not rows:
         return "<p class='small'>operability not measured</p>"
     notes = "".join(f"<li>[{n}] {esc(src)}</li>" for src, n in cited.items())
-    return ("<p class='small'>Root fixed, gravity on, the other joints held: a hand at the grasp point pushes each handled "
-            "part from its closed end to its far end and back; the effort it needs (friction, damping at the hand's "
-            "0.25 m/s, springs, gravity) must lie inside the part's real operating range.</p>"
+    return (TEXTS["operability"]
             + table(("engine", "part", "grasp", "stroke", "effort needed", "range", "hand got it to", "verdict", "range source"), rows)
             + (f"<ul class='small'>{notes}</ul>" if notes else ""))
 
@@ -294,9 +287,7 @@ def engines_section(report: dict | None) -> str:
         parts = [f"{esc(j)} {fmt(r.get('ratio'), 2)} f" for j, r in b.get("joints", {}).items()]
         return f"{verdict_cell(b.get('passed'))} <span class='small'>{', '.join(parts) or 'no joint with friction'}</span>"
 
-    intro = ("<p class='small'>Each engine of <code>--engines</code> on the same files: rest stability, the joints that come "
-             "to rest in their band, and the push at which each joint with friction starts to move (root fixed, gravity off, "
-             "springs accounted), as a multiple of its declared friction f; within 0.8-1.2 f passes.</p>")
+    intro = TEXTS["engines"]
     cells = []
     for r in rows:
         held = r.get("joints_held") or {}
@@ -317,9 +308,7 @@ def clips_section(clip_set) -> str:
     rows: dict[tuple[str, str], list] = {}
     for c in clip_set.clips:
         rows.setdefault((c.joint, c.motion), []).append(c)
-    what = {"sweep": "the joint sweep: driven open and closed again by a force-limited drive (root fixed, other joints held)",
-            "task": "the task: the gripper (red dot: where it holds) moves the part, the object free or mounted as simulated",
-            "push_release": "pushed open by a force-limited drive, then let go"}
+    what = TEXTS["clip_motions"]
     parts = ["<h2>How it moves</h2>", "<p class='small'>Clips played in real time, from two fixed cameras.</p>"]
     for (joint, motion), cs in rows.items():
         parts.append(f"<h3>{esc(joint)}: {esc(what.get(motion, motion))}</h3><div class='clips'>")
@@ -381,7 +370,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         engines_section(ctx.report),
         evidence_section(ev._runs, ctx.urdf, dt, svg_tag, figure, dict(ev.initial_state),
                          getattr(ev.metric("task_execution"), "details", None), ev.closed_positions, list(ev.metrics),
-                         modelled_state(ctx)),
+                         reference_state(ctx.model)),
         "<h2>Operability</h2>",
         operability_section(ev),
         "<h2>Penetration at the initial state</h2>",
@@ -408,9 +397,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
     sections.append("<h2>What the checks mean</h2>" + table(("check", "unit", "what it measures"), (
         f"<tr><td>{esc(i.name)}</td><td>{esc(i.unit)}</td><td class='small'>{esc(i.description)}</td></tr>"
         for i in METRIC_INFO.values() if ev.metric(i.name) is not None)))
-    sections.append("<p class='small'>Simulation: PyBullet DIRECT, dt = 1/240 s, gravity -9.81 m/s^2, ground z = 0, "
-                    "self-collision except parent-child, inertia from file, root free unless the asset is mounted. "
-                    "The user guide (docs/guide/metrics.md in the asset2sim source) gives every threshold and convention.</p>")
+    sections.append(TEXTS["simulation"])
     return page(f"asset2sim {esc(command)} {esc(ev.asset_id)}", "\n".join(sections))
 
 

@@ -19,6 +19,7 @@ from asset2sim.apps.realism import defects, motion, pairs  # noqa: E402
 from asset2sim.apps.realism.pair_set import read_pair_set  # noqa: E402
 from asset2sim.urdf import read_urdf  # noqa: E402
 from tests.conftest import SHARED, needs_shared  # noqa: E402
+from tests.helpers import decode_frames  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -92,7 +93,7 @@ def test_a_pair_holds_the_visuals_fixed_and_only_the_physics_differs(setting, re
     pair = pairs.make_pair(spec, closed, tmp_path / "set", 0)
     assert [c.view for c in pair.a.clips] == list(clips.CLIP_VIEWS) == [c.view for c in pair.b.clips]
     for ca, cb in zip(pair.a.clips, pair.b.clips):
-        va, vb = clips.decode_frames(tmp_path / "set" / ca.video), clips.decode_frames(tmp_path / "set" / cb.video)
+        va, vb = decode_frames(tmp_path / "set" / ca.video), decode_frames(tmp_path / "set" / cb.video)
         assert len(va) == len(vb) == ca.n_frames
         # the same start pose through the same camera: the first frames are the same picture
         assert np.abs(va[0].astype(int) - vb[0].astype(int)).mean() < 1.0
@@ -157,6 +158,6 @@ def test_a_benchmark_folder_gives_asset2sim_against_each_other_method(tmp_path):
     ps = pairs.build_pair_set(specs, bench / "realism")
     assert [p.b.method for p in ps.pairs] == ["human", "defaults"] and ps.skipped == {}
     # the human reference's scale differs from asset2sim's: the same cameras show it (the sides' first frames differ)
-    a0 = clips.decode_frames(bench / "realism" / ps.pairs[0].a.clips[0].video)[0].astype(int)
-    b0 = clips.decode_frames(bench / "realism" / ps.pairs[0].b.clips[0].video)[0].astype(int)
+    a0 = decode_frames(bench / "realism" / ps.pairs[0].a.clips[0].video)[0].astype(int)
+    b0 = decode_frames(bench / "realism" / ps.pairs[0].b.clips[0].video)[0].astype(int)
     assert np.abs(a0 - b0).mean() > 1.0

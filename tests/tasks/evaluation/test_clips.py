@@ -18,6 +18,7 @@ from asset2sim.schemas.realism import ClipSet  # noqa: E402
 from asset2sim.tasks.evaluation import clips  # noqa: E402
 from asset2sim.tasks.refine import refine_asset  # noqa: E402
 from tests.conftest import SHARED, needs_shared  # noqa: E402
+from tests.helpers import decode_frames  # noqa: E402
 from tests.contract_asset import write_contract_asset  # noqa: E402
 
 
@@ -78,7 +79,7 @@ def _check_clip_folder(out, sweeps: int, tasks: int = 0) -> ClipSet:
     assert len(by_motion["sweep"]) == sweeps * len(clips.CLIP_VIEWS) and len(by_motion["task"]) == tasks * len(clips.CLIP_VIEWS)
     assert len(clip_set.clips) == (sweeps + tasks) * len(clips.CLIP_VIEWS)
     for c in clip_set.clips:
-        frames = clips.decode_frames(out / "clips" / c.video)
+        frames = decode_frames(out / "clips" / c.video)
         assert len(frames) == c.n_frames >= (8 if c.motion == "sweep" else 3)
         assert frames[0].shape == (clips.CLIP_SIZE[1], clips.CLIP_SIZE[0], 3)
         assert len(c.frames) == min(clips.STILLS, c.n_frames) and all((out / "clips" / f).is_file() for f in c.frames)
