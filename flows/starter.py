@@ -13,14 +13,12 @@ import json
 import os
 import re
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
-
-import yaml
 
 from asset2sim import atomic
 from asset2sim.inert import csv_cell
 from asset2sim.flows.catalog_config import load_catalog
+from asset2sim.package_data import package_yaml
 
 __all__ = ["CATALOG_NAME", "StarterCatalog", "object_folders", "starter_catalog_text", "write_starter_catalog"]
 
@@ -31,7 +29,7 @@ OBJECT_SUFFIXES = (".urdf", ".xml", ".mjcf", ".usd", ".usda", ".usdc", ".usdz")
 
 #: The starter catalog's text in three templates (``starter_catalog.yaml`` beside this module): ``head`` and ``tail``
 #: take ``{default}``, ``own`` the user's dataset.
-_TEXT: dict[str, str] = yaml.safe_load(resources.files(__package__).joinpath("starter_catalog.yaml").read_text(encoding="utf-8"))
+_TEXT: dict[str, str] = package_yaml(__package__, "starter_catalog.yaml")
 
 
 @dataclass(frozen=True)

@@ -9,12 +9,10 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
-from importlib import resources
 from typing import Any, Iterable, Literal
 
-import yaml
-
 from asset2sim.schemas.report import MetricResult
+from asset2sim.package_data import package_yaml
 
 MetricGroup = Literal["physical", "semantic", "behaviour", "check"]
 
@@ -35,7 +33,7 @@ class MetricInfo:
 #: name -> :class:`MetricInfo`, in evaluation order (``metrics.yaml`` beside this module).
 METRIC_INFO: dict[str, MetricInfo] = {
     name: MetricInfo(name, *entry)
-    for name, entry in yaml.safe_load(resources.files(__package__).joinpath("metrics.yaml").read_text(encoding="utf-8")).items()
+    for name, entry in package_yaml(__package__, "metrics.yaml").items()
 }
 
 #: The SPEC's physical-robustness metrics measured in every engine (parity).

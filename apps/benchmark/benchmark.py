@@ -9,11 +9,8 @@ from __future__ import annotations
 import io
 import math
 import statistics
-from importlib import resources
 from pathlib import Path
 from typing import Any, Callable
-
-import yaml
 
 from asset2sim import output_folder
 from asset2sim.atomic import write_bytes, write_json, write_text
@@ -26,9 +23,10 @@ from asset2sim.tasks.evaluation.evaluate import _jsonable, evaluate_asset
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRow, ManifestRowError, read_manifest_rows
 from asset2sim.tasks.evaluation.plots import plot_method_summary
 from asset2sim.tasks.evaluation.benchmark_pages import render_benchmark_index, render_benchmark_summary
+from asset2sim.package_data import package_yaml
 
 #: The SPEC's "Numbers to beat" (thesis results, 9-object set, Isaac Sim): ``research_numbers.yaml`` beside this module.
-RESEARCH_NUMBERS: list[dict[str, str]] = yaml.safe_load(resources.files(__package__).joinpath("research_numbers.yaml").read_text(encoding="utf-8"))
+RESEARCH_NUMBERS: list[dict[str, str]] = package_yaml(__package__, "research_numbers.yaml")
 
 #: Metrics flattened into one benchmark record (their names are the column prefixes).
 RECORD_METRICS = ("penetration", "ground_penetration", "rest_stability", "oscillation", "divergence", "state_hold",

@@ -20,11 +20,8 @@ import base64
 import re
 import threading
 from concurrent.futures import ThreadPoolExecutor, as_completed
-from importlib import resources
 from pathlib import Path
 from typing import Any, Sequence
-
-import yaml
 
 from asset2sim import atomic, output_folder
 from asset2sim.file_names import UnsafePath, join_inside
@@ -38,12 +35,13 @@ from asset2sim.apps.realism import pair_set
 from asset2sim.apps.realism.judge_reply import Reading, read_reply
 from asset2sim.apps.realism.pair_set import PairSetError, find_pair_set  # noqa: F401  (the judge command's)
 from asset2sim.inert import one_line
+from asset2sim.package_data import package_yaml
 
 #: Version of :data:`RUBRIC` and of the message layout (a new version is a new cache key anyway).
 RUBRIC_VERSION = "1"
 
 #: The judge's words, ``judge_prompts.yaml`` beside this module.
-_PROMPTS = yaml.safe_load(resources.files(__package__).joinpath("judge_prompts.yaml").read_text(encoding="utf-8"))
+_PROMPTS = package_yaml(__package__, "judge_prompts.yaml")
 #: The fixed instructions every judge gets (the system message).
 RUBRIC: str = _PROMPTS["rubric"]
 

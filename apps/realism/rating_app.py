@@ -36,16 +36,14 @@ import hashlib
 import hmac
 import sqlite3
 from contextlib import asynccontextmanager
-from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 from urllib.parse import parse_qs, quote
 
-import yaml
-
 from asset2sim.apps.realism.pair_set import media_path
 from asset2sim.apps.realism.ratings import RatingError, RatingStore, Showing, check_rater, side
 from asset2sim.inert import CONTENT_SECURITY_POLICY, CSP_META, html_text
+from asset2sim.package_data import package_yaml
 
 if TYPE_CHECKING:
     from fastapi import FastAPI, Request
@@ -66,7 +64,7 @@ LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
 _ANY_ADDRESS = ("", "0.0.0.0", "::", "*")
 
 #: The style sheet and the pages' bodies (``str.format`` templates; every field HTML-escaped where it is filled).
-_PAGES: dict[str, str] = yaml.safe_load(resources.files(__package__).joinpath("rating_pages.yaml").read_text(encoding="utf-8"))
+_PAGES: dict[str, str] = package_yaml(__package__, "rating_pages.yaml")
 
 
 def _page(title: str, body: str, status: int = 200) -> "HTMLResponse":

@@ -7,20 +7,18 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from importlib import resources
 from typing import Any
-
-import yaml
 
 from asset2sim.tasks.interpret.request import parse_request
 from asset2sim.tasks.check.verdict import (
     HOLD_METRICS, PENETRATION_METRICS, TIERS, UNRESOLVED_PENETRATION_MM, metric_verdict, mode_of,
 )
+from asset2sim.package_data import package_yaml
 
 
 #: The words of this module (``failure_words.yaml`` beside it): what a user can do, what a check did, how a trial
 #: disturbed the object.
-_WORDS = yaml.safe_load(resources.files(__package__).joinpath("failure_words.yaml").read_text(encoding="utf-8"))
+_WORDS = package_yaml(__package__, "failure_words.yaml")
 #: How each robust-rest trial disturbed the object, for :func:`robust_rest_why`.
 _TRIAL_WORDS: dict[str, str] = _WORDS["trial_words"]
 #: What a user can do about a penetration, a part that swung or an object that did not rest or toppled.

@@ -8,21 +8,20 @@ from __future__ import annotations
 import base64
 import io
 import math
-from importlib import resources
 from typing import Any, Iterable
 
 import numpy as np
-import yaml
 
 from asset2sim.inert import CSP_META, html_text
 from asset2sim.tasks.evaluation import plots
+from asset2sim.package_data import package_text, package_yaml
 
 
 #: The reports' style sheet (``report.css`` beside this module), inlined in every page.
-CSS = resources.files(__package__).joinpath("report.css").read_text(encoding="utf-8")
+CSS = package_text(__package__, "report.css")
 #: The fixed paragraphs, captions and column heads of the report and the benchmark pages (``report_texts.yaml`` beside
 #: this module): key -> HTML (or a list of column heads).
-TEXTS = yaml.safe_load(resources.files(__package__).joinpath("report_texts.yaml").read_text(encoding="utf-8"))
+TEXTS = package_yaml(__package__, "report_texts.yaml")
 
 
 def page(title: str, body: str) -> str:

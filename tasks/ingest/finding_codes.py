@@ -6,10 +6,9 @@ data, ``finding_codes.yaml`` beside this module.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from importlib import resources
 from typing import Literal
 
-import yaml
+from asset2sim.package_data import package_yaml
 
 Severity = Literal["error", "warning", "info"]
 
@@ -27,8 +26,7 @@ class CodeInfo:
 
 def _read_codes() -> dict[str, CodeInfo]:
     """``finding_codes.yaml`` beside this module: code -> [severity, topic, summary], in the order of the guide's table."""
-    text = resources.files(__package__).joinpath("finding_codes.yaml").read_text(encoding="utf-8")
-    return {code: CodeInfo(*entry) for code, entry in yaml.safe_load(text).items()}
+    return {code: CodeInfo(*entry) for code, entry in package_yaml(__package__, "finding_codes.yaml").items()}
 
 
 #: Every code the validator can emit (stable identifiers; never renamed).

@@ -13,15 +13,14 @@ import json
 import math
 import re
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 
-import yaml
+from asset2sim.package_data import package_yaml
 
 __all__ = ["FILE_ERROR_CODES", "ROW_ERROR_CODES", "ManifestError", "ManifestReading", "ManifestRow", "ManifestRowError",
            "is_valid_id", "read_manifest", "read_manifest_rows"]
 
-_MESSAGES = yaml.safe_load(resources.files(__package__).joinpath("messages.yaml").read_text(encoding="utf-8"))
+_MESSAGES = package_yaml(__package__, "messages.yaml")
 #: Codes of a manifest row that cannot be used (:class:`ManifestRowError`; ``messages.yaml``) -> what each means.
 ROW_ERROR_CODES: dict[str, str] = _MESSAGES["manifest_row_codes"]
 #: Codes of a manifest that cannot be used at all (:class:`ManifestError`) -> what each means.

@@ -6,10 +6,8 @@ cycles, orphans, one root, caps, mimic and unsupported joints), the given inerti
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from importlib import resources
 
 import numpy as np
-import yaml
 
 from asset2sim import file_names
 from asset2sim.tasks.ingest.findings import MAX_NAME_CHARS, MOVABLE_TYPES, Recorder
@@ -17,6 +15,7 @@ from asset2sim.tasks.ingest.mesh_checks import zero_pose_bounds
 from asset2sim.tasks.ingest.urdf_checks import joint_name, link_name
 from asset2sim.urdf import UrdfJoint, UrdfLink, UrdfModel
 from asset2sim.inert import shorten
+from asset2sim.package_data import package_yaml
 
 #: A revolute range spanning less than this (rad, one degree) only makes sense in the other unit.
 MIN_REVOLUTE_SPAN = float(np.radians(1.0))
@@ -47,8 +46,7 @@ _INERTIA_ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # ixx ixy i
 
 #: Joint types refine refuses (``JOINT_TYPE_UNSUPPORTED``), with why and what to write instead (``messages.yaml``;
 #: docs/design/validation.md, "Joint types").
-_UNSUPPORTED_JOINT_TYPES: dict[str, str] = yaml.safe_load(
-    resources.files(__package__).joinpath("messages.yaml").read_text(encoding="utf-8"))["unsupported_joint_types"]
+_UNSUPPORTED_JOINT_TYPES: dict[str, str] = package_yaml(__package__, "messages.yaml")["unsupported_joint_types"]
 
 
 @dataclass

@@ -7,11 +7,9 @@ from __future__ import annotations
 
 import functools
 import re
-from importlib import resources
 from string import Template
 from typing import get_args
 
-import yaml
 from pydantic import ValidationError
 
 from asset2sim.engines.base import session_root_options
@@ -21,6 +19,7 @@ from asset2sim.schemas.overlay import MountingKind, RootMount
 from asset2sim.schemas.request import RequestSpec
 from asset2sim.formats import FORMATS, ReadOptions, staging
 from asset2sim.tasks.ingest.declared import read_declared
+from asset2sim.package_data import package_yaml
 
 __all__ = [
     "FREE",
@@ -71,8 +70,7 @@ def load_mounting_priors() -> dict[str, MountingPrior]:
     Raises:
         MountingError: malformed yaml, an unknown kind or a missing source (naming the file and category).
     """
-    text = resources.files("asset2sim.priors").joinpath(_FILE).read_text(encoding="utf-8")
-    return _parse_table(yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader)), _FILE)  # libyaml when built in
+    return _parse_table(package_yaml("asset2sim.priors", _FILE), _FILE)
 
 
 def category_mounting(category: str | None) -> RootMount:
@@ -84,7 +82,7 @@ def category_mounting(category: str | None) -> RootMount:
 
 
 #: The request's words for each mounting (``words.yaml`` ``mounting``), the more specific first; the last mention wins.
-_MOUNTING_WORDS = yaml.safe_load(resources.files(__package__).joinpath("words.yaml").read_text(encoding="utf-8"))["mounting"]
+_MOUNTING_WORDS = package_yaml(__package__, "words.yaml")["mounting"]
 _COMPILED = [(re.compile(Template(p).substitute(_MOUNTING_WORDS["fragments"])), kind) for p, kind in _MOUNTING_WORDS["patterns"]]
 
 

@@ -7,13 +7,12 @@ and the force check of task execution (``tasks/check/force_ranges.py``).
 from __future__ import annotations
 
 import functools
-from importlib import resources
 
-import yaml
 from pydantic import ValidationError, model_validator
 
 from asset2sim.schemas import Frozen
 from asset2sim.tasks.interpret.part_labels import canonical_label
+from asset2sim.package_data import package_yaml
 
 _FILE = "operating_forces.yaml"
 
@@ -84,8 +83,7 @@ def load_operating_forces() -> OperatingForces:
     Raises:
         OperatingForcesError: malformed data.
     """
-    text = resources.files("asset2sim.priors").joinpath(_FILE).read_text(encoding="utf-8")
-    return parse_operating_forces(yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader)), _FILE)  # libyaml when built in
+    return parse_operating_forces(package_yaml("asset2sim.priors", _FILE), _FILE)
 
 
 def operating_range(category: str | None, label: str | None, table: OperatingForces | None = None

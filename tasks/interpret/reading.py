@@ -19,7 +19,6 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from importlib import resources
 from typing import Any
 
 from asset2sim.inert import one_line
@@ -33,6 +32,7 @@ from asset2sim.schemas.request import RequestIntent, RequestOverrides, RequestSp
 from asset2sim.tasks.interpret.categories import recognize_category
 from asset2sim.tasks.interpret.overrides import apply_overrides
 from asset2sim.tasks.interpret.request import parse_request
+from asset2sim.package_data import package_text
 
 INTENT_SCHEMA_NAME = "request_intent"
 
@@ -44,7 +44,7 @@ it)."""
 MODEL_ESTIMATORS = ("llm", "openai")
 
 #: The system prompt of the model's parse (``intent_prompt.txt`` beside this module; ``{materials}``: the material keys).
-SYSTEM_PROMPT = resources.files(__package__).joinpath("intent_prompt.txt").read_text(encoding="utf-8").removesuffix("\n")
+SYSTEM_PROMPT = package_text(__package__, "intent_prompt.txt").removesuffix("\n")
 
 
 def intent_schema() -> dict[str, Any]:

@@ -12,13 +12,11 @@ import itertools
 import math
 import re
 from dataclasses import dataclass
-from importlib import resources
-
-import yaml
 
 from asset2sim.schemas.request import BAND_TARGET, DynamicsValue, PartProperty, SizeTarget, StateTarget
 from asset2sim.prior_tables import load_priors
 from asset2sim.tasks.interpret.part_labels import canonical_label
+from asset2sim.package_data import package_yaml
 
 _L = r"(?<![\w.-])"
 _R = r"(?![\w-])"
@@ -28,7 +26,7 @@ _R = r"(?![\w-])"
 def words() -> dict:
     """The request parser's vocabulary, ``words.yaml`` beside this module, read once: word lists, ``fragments``
     (name -> regex) and phrase tables (name -> list of [regex, value] or [regex, value, flag])."""
-    return yaml.safe_load(resources.files(__package__).joinpath("words.yaml").read_text(encoding="utf-8"))
+    return package_yaml(__package__, "words.yaml")
 
 
 #: Part nouns a request may name (singular and plural; ``words.yaml`` ``part_words``).
