@@ -147,8 +147,7 @@ def _write_body(stage, path, model: UrdfModel, name: str, pose: np.ndarray, note
         mass_api.CreateCenterOfMassAttr(Gf.Vec3f(*map(float, link.inertial.com())))
         moments, axes = principal_axes(link.inertial.inertia_in_link_axes())
         mass_api.CreateDiagonalInertiaAttr(Gf.Vec3f(*map(float, moments)))
-        qw, qx, qy, qz = (float(v) for v in matrix_quat_wxyz(axes))
-        mass_api.CreatePrincipalAxesAttr(Gf.Quatf(qw, qx, qy, qz))
+        mass_api.CreatePrincipalAxesAttr(Gf.Quatf(*matrix_quat_wxyz(axes).tolist()))
     else:
         notes.append(f"link {name!r} has no <inertial>: physics:mass not authored (computed from colliders)")
     if link.lateral_friction is not None:
