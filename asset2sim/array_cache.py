@@ -32,7 +32,7 @@ from asset2sim import atomic
 
 __all__ = [
     "MAX_ENTRY_BYTES", "CacheWarning", "array_json", "array_text", "cache_dir", "content_digest", "digest", "finite_json",
-    "guard", "kept_out", "load", "source_digest", "store", "text_array",
+    "guard", "kept_out", "load", "reject", "source_digest", "store", "text_array",
 ]
 
 _OFF = ("off", "none", "0")
@@ -232,12 +232,17 @@ def load(kind: str, key: str) -> dict[str, np.ndarray] | None:
     except FileNotFoundError:  # deleted since: a miss
         return None
     except _Rejected as exc:
-        warnings.warn(f"asset2sim cache: entry {path} rejected: {exc}; computing it again", CacheWarning, stacklevel=2)
-        try:
-            path.unlink()
-        except OSError:
-            pass  # rewritten (replaced) by the caller's store, or never used again
-        return None
+        return reject(path, f"asset2sim cache: entry {path} rejected: {exc}; computing it again")
+
+
+def reject(path: Path, message: str) -> None:
+    """Delete the cache entry ``path`` that did not prove itself, with a :class:`CacheWarning` ``message`` (at the
+    cache's caller); None, the miss."""
+    warnings.warn(message, CacheWarning, stacklevel=3)
+    try:
+        path.unlink()
+    except OSError:
+        pass  # rewritten (replaced) by the caller's store, or never used again
 
 
 def store(kind: str, key: str, arrays: dict[str, np.ndarray]) -> None:

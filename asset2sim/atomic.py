@@ -12,13 +12,16 @@ destination before anything is created.
 
 from __future__ import annotations
 
+import atexit
 import errno
 import hashlib
 import json
 import math
 import os
 import secrets
+import shutil
 import stat
+import tempfile
 import threading
 from pathlib import Path
 from typing import Any, BinaryIO, Callable, Iterable
@@ -279,6 +282,19 @@ def copy_file(src: Path | str, dst: Path | str) -> Path:
 class NotRegularFileError(OSError):
     """A path that must be a regular file is a FIFO, device, socket or folder
     (``errno`` EINVAL, or EISDIR for a folder)."""
+
+
+def process_folder(prefix: str) -> Path:
+    """A new temporary folder ``<tmp>/<prefix>*`` of this process, removed when it exits (a forked child exiting
+    leaves it)."""
+    folder = Path(tempfile.mkdtemp(prefix=prefix))
+    atexit.register(_remove_if_owner, folder, os.getpid())
+    return folder
+
+
+def _remove_if_owner(folder: Path, pid: int) -> None:
+    if os.getpid() == pid:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def open_regular(path: Path | str) -> BinaryIO:

@@ -29,6 +29,11 @@ def _demo(asset_id: str, category: str, links: list[DemoLink], joints: list[Demo
     return DemoArticulation(asset_id=asset_id, category=category, robot_name=f"demo_{asset_id}", links=links, joints=joints)
 
 
+def _part(name: str, color: tuple[float, float, float], *boxes: tuple[float, ...], pose: Pose | None = None) -> Part:
+    """The part ``name`` of ``color`` made of ``boxes`` (each x0, x1, y0, y1, z0, z1 in object units, :func:`box_xyz`)."""
+    return Part(name, [box_xyz(*b) for b in boxes], color, pose)
+
+
 def _base_joint(name: str, body: str) -> DemoJoint:
     """PartNet-Mobility's fixed joint ``base`` -> ``body`` (y-up object frame to z-up)."""
     return DemoJoint(name, "fixed", "base", body, rpy=_PARTNET_BASE_RPY)
@@ -41,10 +46,10 @@ def _box_with_lid() -> DemoArticulation:
     # the walls, a front lip with a pull tab (one OBJ, two pieces).
     hinge = (0.0, 0.225, -0.35)
     lid = [
-        Part("lid_top-6", [box_xyz(-0.525, 0.525, 0.225, 0.255, -0.35, 0.375)], _WOOD),
-        Part("lid_skirt-7", [box_xyz(-0.525, -0.505, 0.18, 0.225, -0.35, 0.375)], _WOOD),
-        Part("lid_skirt-8", [box_xyz(0.505, 0.525, 0.18, 0.225, -0.35, 0.375)], _WOOD),
-        Part("lid_lip-9", [box_xyz(-0.505, 0.505, 0.18, 0.225, 0.355, 0.375), box_xyz(-0.08, 0.08, 0.19, 0.21, 0.375, 0.405)], _METAL),
+        _part("lid_top-6", _WOOD, (-0.525, 0.525, 0.225, 0.255, -0.35, 0.375)),
+        _part("lid_skirt-7", _WOOD, (-0.525, -0.505, 0.18, 0.225, -0.35, 0.375)),
+        _part("lid_skirt-8", _WOOD, (0.505, 0.525, 0.18, 0.225, -0.35, 0.375)),
+        _part("lid_lip-9", _METAL, (-0.505, 0.505, 0.18, 0.225, 0.355, 0.375), (-0.08, 0.08, 0.19, 0.21, 0.375, 0.405)),
     ]
     return _demo("box_lid", "Box", [DemoLink("link_0", "hinge", "rotation_lid", lid), DemoLink("link_1", "free", "box_body", body)], [
         DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(-1.0, 0.0, 0.0), lower=-0.5, upper=1.9),
@@ -66,19 +71,19 @@ def _drawer(front_y: tuple[float, float], box_y: tuple[float, float], n: int) ->
     y0, y1 = front_y
     by0, by1 = box_y
     t = DRAWER_BOTTOM
-    front = Part(f"drawer_front-{n}", [box_xyz(-0.495, 0.495, y0, y1, 0.405, 0.435)], _WOOD)
+    front = _part(f"drawer_front-{n}", _WOOD, (-0.495, 0.495, y0, y1, 0.405, 0.435))
     box = [
-        Part(f"drawer_bottom-{n + 1}", [box_xyz(-0.46, 0.46, by0, by0 + t, -0.36, 0.405)], _WOOD),
-        Part(f"drawer_side-{n + 2}", [box_xyz(-0.46, -0.44, by0 + t, by1, -0.36, 0.405)], _WOOD),
-        Part(f"drawer_side-{n + 3}", [box_xyz(0.44, 0.46, by0 + t, by1, -0.36, 0.405)], _WOOD),
-        Part(f"drawer_back-{n + 4}", [box_xyz(-0.44, 0.44, by0 + t, by1, -0.36, -0.34)], _WOOD),
+        _part(f"drawer_bottom-{n + 1}", _WOOD, (-0.46, 0.46, by0, by0 + t, -0.36, 0.405)),
+        _part(f"drawer_side-{n + 2}", _WOOD, (-0.46, -0.44, by0 + t, by1, -0.36, 0.405)),
+        _part(f"drawer_side-{n + 3}", _WOOD, (0.44, 0.46, by0 + t, by1, -0.36, 0.405)),
+        _part(f"drawer_back-{n + 4}", _WOOD, (-0.44, 0.44, by0 + t, by1, -0.36, -0.34)),
     ]
     ym = 0.5 * (y0 + y1)
-    handle = Part(f"handle-{n + 5}", [
-        box_xyz(-0.16, -0.13, ym - 0.015, ym + 0.015, 0.435, 0.475),
-        box_xyz(0.13, 0.16, ym - 0.015, ym + 0.015, 0.435, 0.475),
-        box_xyz(-0.165, 0.165, ym - 0.015, ym + 0.015, 0.47, 0.495),
-    ], _METAL)
+    handle = _part(f"handle-{n + 5}", _METAL,
+        (-0.16, -0.13, ym - 0.015, ym + 0.015, 0.435, 0.475),
+        (0.13, 0.16, ym - 0.015, ym + 0.015, 0.435, 0.475),
+        (-0.165, 0.165, ym - 0.015, ym + 0.015, 0.47, 0.495),
+    )
     return [front, *box, handle]
 
 
@@ -87,12 +92,12 @@ def _cabinet_two_drawers() -> DemoArticulation:
     # 0.03 boards, a divider at y = 0.
     t = 0.03
     body = [
-        Part("board-1", [box_xyz(-0.5, -0.5 + t, -0.55, 0.55, -0.4, 0.4)], _WOOD),
-        Part("board-2", [box_xyz(0.5 - t, 0.5, -0.55, 0.55, -0.4, 0.4)], _WOOD),
-        Part("board-3", [box_xyz(-0.5 + t, 0.5 - t, 0.55 - t, 0.55, -0.4, 0.4)], _WOOD),
-        Part("board-4", [box_xyz(-0.5 + t, 0.5 - t, -0.55, -0.55 + t, -0.4, 0.4)], _WOOD),
-        Part("board-5", [box_xyz(-0.5 + t, 0.5 - t, -0.55 + t, 0.55 - t, -0.4, -0.4 + t)], _WOOD),
-        Part("shelf-6", [box_xyz(-0.5 + t, 0.5 - t, -0.015, 0.015, -0.4 + t, 0.4)], _WOOD),
+        _part("board-1", _WOOD, (-0.5, -0.5 + t, -0.55, 0.55, -0.4, 0.4)),
+        _part("board-2", _WOOD, (0.5 - t, 0.5, -0.55, 0.55, -0.4, 0.4)),
+        _part("board-3", _WOOD, (-0.5 + t, 0.5 - t, 0.55 - t, 0.55, -0.4, 0.4)),
+        _part("board-4", _WOOD, (-0.5 + t, 0.5 - t, -0.55, -0.55 + t, -0.4, 0.4)),
+        _part("board-5", _WOOD, (-0.5 + t, 0.5 - t, -0.55 + t, 0.55 - t, -0.4, -0.4 + t)),
+        _part("shelf-6", _WOOD, (-0.5 + t, 0.5 - t, -0.015, 0.015, -0.4 + t, 0.4)),
     ]
     # Drawer boxes clear the divider (|y| <= 0.015), the top board (y >= 0.52)
     # and the bottom board (y <= -0.52) by at least 0.01.
@@ -116,17 +121,17 @@ def _laptop_base() -> list[Part]:
     """The laptop's base: x [-0.55, 0.55], z [-0.38, 0.38], y [-0.056, 0.004]
     with feet, rim, deck, keyboard and touchpad."""
     return [
-        Part("base_bottom-1", [box_xyz(-0.55, 0.55, -0.05, -0.04, -0.38, 0.38)], _GREY),
-        Part("base_rim-2", [box_xyz(-0.55, 0.55, -0.04, -0.01, 0.37, 0.38), box_xyz(-0.55, 0.55, -0.04, -0.01, -0.38, -0.37)], _GREY),
-        Part("base_rim-3", [box_xyz(-0.55, -0.54, -0.04, -0.01, -0.37, 0.37), box_xyz(0.54, 0.55, -0.04, -0.01, -0.37, 0.37)], _GREY),
-        Part("base_deck-4", [box_xyz(-0.55, 0.55, -0.01, 0.0, -0.38, 0.38)], _GREY),
-        Part("keyboard-5", [box_xyz(-0.45, 0.45, 0.0, 0.004, -0.3, 0.02), box_xyz(-0.12, 0.12, 0.0, 0.002, 0.1, 0.3)], _DARK),
-        Part("feet-6", [
-            box_xyz(-0.5, -0.44, -0.056, -0.05, -0.33, -0.27),
-            box_xyz(0.44, 0.5, -0.056, -0.05, -0.33, -0.27),
-            box_xyz(-0.5, -0.44, -0.056, -0.05, 0.27, 0.33),
-            box_xyz(0.44, 0.5, -0.056, -0.05, 0.27, 0.33),
-        ], _DARK),
+        _part("base_bottom-1", _GREY, (-0.55, 0.55, -0.05, -0.04, -0.38, 0.38)),
+        _part("base_rim-2", _GREY, (-0.55, 0.55, -0.04, -0.01, 0.37, 0.38), (-0.55, 0.55, -0.04, -0.01, -0.38, -0.37)),
+        _part("base_rim-3", _GREY, (-0.55, -0.54, -0.04, -0.01, -0.37, 0.37), (0.54, 0.55, -0.04, -0.01, -0.37, 0.37)),
+        _part("base_deck-4", _GREY, (-0.55, 0.55, -0.01, 0.0, -0.38, 0.38)),
+        _part("keyboard-5", _DARK, (-0.45, 0.45, 0.0, 0.004, -0.3, 0.02), (-0.12, 0.12, 0.0, 0.002, 0.1, 0.3)),
+        _part("feet-6", _DARK,
+            (-0.5, -0.44, -0.056, -0.05, -0.33, -0.27),
+            (0.44, 0.5, -0.056, -0.05, -0.33, -0.27),
+            (-0.5, -0.44, -0.056, -0.05, 0.27, 0.33),
+            (0.44, 0.5, -0.056, -0.05, 0.27, 0.33),
+        ),
     ]
 
 
@@ -136,14 +141,15 @@ def _laptop_screen(hinge: tuple[float, float, float]) -> list[Part]:
     line (x axis through ``hinge``) by :data:`LAPTOP_MODEL_OPENING`."""
     pose = Pose(axis=(-1.0, 0.0, 0.0), angle=LAPTOP_MODEL_OPENING, pivot=hinge)
     return [
-        Part("screen_cover-7", [box_xyz(-0.55, 0.55, 0.03, 0.04, -0.38, 0.38)], _GREY, pose),
-        Part("bezel-8", [
-            box_xyz(-0.55, -0.51, 0.01, 0.03, -0.38, 0.38),
-            box_xyz(0.51, 0.55, 0.01, 0.03, -0.38, 0.38),
-            box_xyz(-0.52, 0.52, 0.01, 0.03, 0.34, 0.38),
-            box_xyz(-0.52, 0.52, 0.01, 0.03, -0.38, -0.34),
-        ], _DARK, pose),
-        Part("display-9", [box_xyz(-0.51, 0.51, 0.015, 0.03, -0.34, 0.34)], _GLASS, pose),
+        _part("screen_cover-7", _GREY, (-0.55, 0.55, 0.03, 0.04, -0.38, 0.38), pose=pose),
+        _part("bezel-8", _DARK,
+            (-0.55, -0.51, 0.01, 0.03, -0.38, 0.38),
+            (0.51, 0.55, 0.01, 0.03, -0.38, 0.38),
+            (-0.52, 0.52, 0.01, 0.03, 0.34, 0.38),
+            (-0.52, 0.52, 0.01, 0.03, -0.38, -0.34),
+            pose=pose,
+        ),
+        _part("display-9", _GLASS, (-0.51, 0.51, 0.015, 0.03, -0.34, 0.34), pose=pose),
     ]
 
 
@@ -161,32 +167,31 @@ def _microwave() -> DemoArticulation:
     # (x < 0.25), control panel on the right; open front at z = 0.4.
     t = 0.03
     body = [
-        Part("frame-1", [box_xyz(-0.6, 0.6, -0.35, -0.35 + t, -0.4, 0.4)], _WHITE),
-        Part("frame-2", [box_xyz(-0.6, 0.6, 0.35 - t, 0.35, -0.4, 0.4)], _WHITE),
-        Part("frame-3", [box_xyz(-0.6, -0.6 + t, -0.35 + t, 0.35 - t, -0.4, 0.4)], _WHITE),
-        Part("frame-4", [box_xyz(0.6 - t, 0.6, -0.35 + t, 0.35 - t, -0.4, 0.4)], _WHITE),
-        Part("frame-5", [box_xyz(-0.6 + t, 0.6 - t, -0.35 + t, 0.35 - t, -0.4, -0.4 + t)], _WHITE),
-        Part("frame-6", [box_xyz(0.25, 0.25 + t, -0.35 + t, 0.35 - t, -0.4 + t, 0.4)], _WHITE),
-        Part("control_panel-7", [box_xyz(0.25 + t, 0.6 - t, -0.35 + t, 0.35 - t, 0.37, 0.4), box_xyz(0.36, 0.48, 0.12, 0.2, 0.4, 0.42)],
-             _DARK),
+        _part("frame-1", _WHITE, (-0.6, 0.6, -0.35, -0.35 + t, -0.4, 0.4)),
+        _part("frame-2", _WHITE, (-0.6, 0.6, 0.35 - t, 0.35, -0.4, 0.4)),
+        _part("frame-3", _WHITE, (-0.6, -0.6 + t, -0.35 + t, 0.35 - t, -0.4, 0.4)),
+        _part("frame-4", _WHITE, (0.6 - t, 0.6, -0.35 + t, 0.35 - t, -0.4, 0.4)),
+        _part("frame-5", _WHITE, (-0.6 + t, 0.6 - t, -0.35 + t, 0.35 - t, -0.4, -0.4 + t)),
+        _part("frame-6", _WHITE, (0.25, 0.25 + t, -0.35 + t, 0.35 - t, -0.4 + t, 0.4)),
+        _part("control_panel-7", _DARK, (0.25 + t, 0.6 - t, -0.35 + t, 0.35 - t, 0.37, 0.4), (0.36, 0.48, 0.12, 0.2, 0.4, 0.42)),
     ]
     # Turntable tray: a fixed (static) child link resting inside the cavity.
     tray_center = (-0.16, -0.3, 0.0)
-    tray = [Part("tray-8", [box_xyz(-0.4, 0.08, -0.31, -0.3, -0.24, 0.24), box_xyz(-0.2, -0.12, -0.314, -0.31, -0.04, 0.04)], _GLASS)]
+    tray = [_part("tray-8", _GLASS, (-0.4, 0.08, -0.31, -0.3, -0.24, 0.24), (-0.2, -0.12, -0.314, -0.31, -0.04, 0.04))]
     # Door (closed at 0): frame pieces around a recessed window, handle on the
     # free edge; hinge on the left at the body's front-left edge.
     hinge = (-0.6, 0.0, 0.405)
     door = [
-        Part("door_frame-9", [box_xyz(-0.6, 0.245, -0.35, -0.25, 0.405, 0.445)], _WHITE),
-        Part("door_frame-10", [box_xyz(-0.6, 0.245, 0.25, 0.35, 0.405, 0.445)], _WHITE),
-        Part("door_frame-11", [box_xyz(-0.6, -0.5, -0.25, 0.25, 0.405, 0.445)], _WHITE),
-        Part("door_frame-12", [box_xyz(0.145, 0.245, -0.25, 0.25, 0.405, 0.445)], _WHITE),
-        Part("window-13", [box_xyz(-0.5, 0.145, -0.25, 0.25, 0.415, 0.435)], _GLASS),
-        Part("handle-14", [
-            box_xyz(0.18, 0.22, -0.2, -0.16, 0.445, 0.485),
-            box_xyz(0.18, 0.22, 0.16, 0.2, 0.445, 0.485),
-            box_xyz(0.175, 0.225, -0.205, 0.205, 0.48, 0.505),
-        ], _METAL),
+        _part("door_frame-9", _WHITE, (-0.6, 0.245, -0.35, -0.25, 0.405, 0.445)),
+        _part("door_frame-10", _WHITE, (-0.6, 0.245, 0.25, 0.35, 0.405, 0.445)),
+        _part("door_frame-11", _WHITE, (-0.6, -0.5, -0.25, 0.25, 0.405, 0.445)),
+        _part("door_frame-12", _WHITE, (0.145, 0.245, -0.25, 0.25, 0.405, 0.445)),
+        _part("window-13", _GLASS, (-0.5, 0.145, -0.25, 0.25, 0.415, 0.435)),
+        _part("handle-14", _METAL,
+            (0.18, 0.22, -0.2, -0.16, 0.445, 0.485),
+            (0.18, 0.22, 0.16, 0.2, 0.445, 0.485),
+            (0.175, 0.225, -0.205, 0.205, 0.48, 0.505),
+        ),
     ]
     links = [DemoLink("link_0", "hinge", "door", door), DemoLink("link_1", "static", "tray", tray),
              DemoLink("link_2", "heavy", "microwave_body", body)]
@@ -200,14 +205,14 @@ def _microwave() -> DemoArticulation:
 def _trash_can() -> DemoArticulation:
     # Bin x [-0.35, 0.35], y [-0.6, 0.5], z [-0.35, 0.35], walls 0.025.
     body = open_box(-0.35, 0.35, -0.6, 0.5, -0.35, 0.35, 0.025, "body", _GREEN)
-    body.append(Part("rim-6", [box_xyz(-0.35, 0.35, -0.6, -0.57, 0.35, 0.37)], _GREEN))
+    body.append(_part("rim-6", _GREEN, (-0.35, 0.35, -0.6, -0.57, 0.35, 0.37)))
     # Lid closed at 0; axis +x so opening is a *negative* angle.
     hinge = (0.0, 0.505, -0.35)
     lid = [
-        Part("lid-7", [box_xyz(-0.375, 0.375, 0.505, 0.535, -0.35, 0.37)], _GREEN),
-        Part("lid_skirt-8", [box_xyz(-0.375, -0.355, 0.47, 0.505, -0.35, 0.37)], _GREEN),
-        Part("lid_skirt-9", [box_xyz(0.355, 0.375, 0.47, 0.505, -0.35, 0.37)], _GREEN),
-        Part("lid_lip-10", [box_xyz(-0.355, 0.355, 0.46, 0.505, 0.355, 0.37), box_xyz(-0.06, 0.06, 0.47, 0.49, 0.37, 0.4)], _DARK),
+        _part("lid-7", _GREEN, (-0.375, 0.375, 0.505, 0.535, -0.35, 0.37)),
+        _part("lid_skirt-8", _GREEN, (-0.375, -0.355, 0.47, 0.505, -0.35, 0.37)),
+        _part("lid_skirt-9", _GREEN, (0.355, 0.375, 0.47, 0.505, -0.35, 0.37)),
+        _part("lid_lip-10", _DARK, (-0.355, 0.355, 0.46, 0.505, 0.355, 0.37), (-0.06, 0.06, 0.47, 0.49, 0.37, 0.4)),
     ]
     return _demo("trash_can", "TrashCan", [DemoLink("link_0", "hinge", "lid", lid), DemoLink("link_1", "free", "trashcan_body", body)], [
         DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(1.0, 0.0, 0.0), lower=-1.9, upper=0.0),
@@ -219,21 +224,21 @@ def _door_in_frame() -> DemoArticulation:
     # Frame: two posts x [-0.3, -0.26] and [0.26, 0.3], a header y [0.66, 0.7], all z [-0.035, 0.035]; no threshold
     # (the door stands on the floor at y = -0.7, its panel 0.005 above it).
     frame = [
-        Part("door_frame-1", [box_xyz(-0.3, -0.26, -0.7, 0.7, -0.035, 0.035)], _WOOD),
-        Part("door_frame-2", [box_xyz(0.26, 0.3, -0.7, 0.7, -0.035, 0.035)], _WOOD),
-        Part("door_frame-3", [box_xyz(-0.26, 0.26, 0.66, 0.7, -0.035, 0.035)], _WOOD),
+        _part("door_frame-1", _WOOD, (-0.3, -0.26, -0.7, 0.7, -0.035, 0.035)),
+        _part("door_frame-2", _WOOD, (0.26, 0.3, -0.7, 0.7, -0.035, 0.035)),
+        _part("door_frame-3", _WOOD, (-0.26, 0.26, 0.66, 0.7, -0.035, 0.035)),
     ]
     # Door (closed at 0): stiles and rails around a thinner centre panel, 0.005 inside the frame on every side, its
     # front flush with the frame's; a lever handle near the free edge. The hinge line is the panel's front edge on
     # the left post, so the door swings out (+z) past 90 deg clear of the post.
     hinge = (-0.255, 0.0, 0.035)
     door = [
-        Part("door-4", [box_xyz(-0.255, -0.205, -0.695, 0.655, 0.005, 0.035)], _WHITE),
-        Part("door-5", [box_xyz(0.205, 0.255, -0.695, 0.655, 0.005, 0.035)], _WHITE),
-        Part("door-6", [box_xyz(-0.205, 0.205, 0.605, 0.655, 0.005, 0.035)], _WHITE),
-        Part("door-7", [box_xyz(-0.205, 0.205, -0.695, -0.6, 0.005, 0.035)], _WHITE),
-        Part("panel-8", [box_xyz(-0.205, 0.205, -0.6, 0.605, 0.012, 0.028)], _WHITE),
-        Part("handle-9", [box_xyz(0.17, 0.19, -0.05, -0.02, 0.035, 0.06), box_xyz(0.1, 0.19, -0.05, -0.03, 0.06, 0.075)], _METAL),
+        _part("door-4", _WHITE, (-0.255, -0.205, -0.695, 0.655, 0.005, 0.035)),
+        _part("door-5", _WHITE, (0.205, 0.255, -0.695, 0.655, 0.005, 0.035)),
+        _part("door-6", _WHITE, (-0.205, 0.205, 0.605, 0.655, 0.005, 0.035)),
+        _part("door-7", _WHITE, (-0.205, 0.205, -0.695, -0.6, 0.005, 0.035)),
+        _part("panel-8", _WHITE, (-0.205, 0.205, -0.6, 0.605, 0.012, 0.028)),
+        _part("handle-9", _METAL, (0.17, 0.19, -0.05, -0.02, 0.035, 0.06), (0.1, 0.19, -0.05, -0.03, 0.06, 0.075)),
     ]
     return _demo("door", "Door", [DemoLink("link_0", "hinge", "rotation_door", door), DemoLink("link_1", "static", "door_frame", frame)], [
         DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(0.0, -1.0, 0.0), lower=0.0, upper=1.75),

@@ -6,35 +6,14 @@ never a bare "No module named 'mujoco'".
 from __future__ import annotations
 
 import importlib
+from importlib import resources
 from types import ModuleType
 
-#: Top-level module -> (what it is, the extra of ``pyproject.toml`` that installs it).
-EXTRA_OF_MODULE: dict[str, tuple[str, str]] = {
-    "mujoco": ("MuJoCo", "mujoco"),
-    "mujoco.mjx": ("MJX (mujoco-mjx)", "mjx"),
-    "jax": ("JAX", "mjx"),
-    "pxr": ("OpenUSD (usd-core)", "usd"),
-    "sapien": ("SAPIEN", "physx"),
-    "coacd": ("CoACD", "coacd"),
-    "litellm": ("litellm", "llm"),
-    "prefect": ("Prefect", "pipeline"),
-    "prefect_dask": ("prefect-dask", "pipeline"),
-    "dask": ("Dask", "pipeline"),
-    "distributed": ("Dask distributed", "pipeline"),
-    "mlflow": ("MLflow", "pipeline"),
-    "fastapi": ("FastAPI", "realism"),
-    "uvicorn": ("uvicorn", "realism"),
-    "newton": ("Newton", "newton"),
-    "ovphysx": ("ovphysx (PhysX on OpenUSD)", "ovphysx"),
-    "ovstage": ("ovstage", "ovphysx"),
-    "warp": ("NVIDIA Warp", "newton"),
-    "gymnasium": ("Gymnasium", "gym"),
-    "stable_baselines3": ("Stable-Baselines3", "learn"),
-    "brax": ("brax", "learn-mjx"),
-    "pydrake": ("Drake", "checkers"),
-    "mani_skill": ("ManiSkill 3", "maniskill"),
-    "torch": ("torch", "maniskill"),
-}
+import yaml
+
+#: Top-level module -> (what it is, the extra of ``pyproject.toml`` that installs it): ``extras.yaml`` beside this module.
+_TABLE = yaml.safe_load(resources.files(__package__).joinpath("extras.yaml").read_text(encoding="utf-8"))
+EXTRA_OF_MODULE: dict[str, tuple[str, str]] = {module: tuple(entry) for module, entry in _TABLE.items()}
 
 
 def install_command(extra: str) -> str:

@@ -20,14 +20,11 @@ changes nothing.
 
 from __future__ import annotations
 
-import atexit
 import os
-import shutil
-import tempfile
 import threading
 from pathlib import Path
 
-from asset2sim import array_cache
+from asset2sim import array_cache, atomic
 
 __all__ = ["configure", "matplotlib_dir"]
 
@@ -45,11 +42,6 @@ def _own_matplotlib_config() -> bool:
     return any(p.is_dir() for p in candidates)
 
 
-def _remove_if_owner(folder: Path, pid: int) -> None:
-    if os.getpid() == pid:
-        shutil.rmtree(folder, ignore_errors=True)
-
-
 def matplotlib_dir() -> Path:
     """The folder ``MPLCONFIGDIR`` gets: ``<asset2sim cache>/matplotlib``, or a temporary folder of this process
     (``asset2sim-matplotlib-*`` in the temporary directory, removed at exit) when the cache is off."""
@@ -58,9 +50,7 @@ def matplotlib_dir() -> Path:
         return Path(cache) / "matplotlib"
     with _LOCK:
         if not _TEMP:
-            folder = Path(tempfile.mkdtemp(prefix="asset2sim-matplotlib-"))
-            atexit.register(_remove_if_owner, folder, os.getpid())
-            _TEMP.append(folder)
+            _TEMP.append(atomic.process_folder("asset2sim-matplotlib-"))
         return _TEMP[0]
 
 

@@ -17,29 +17,12 @@ from asset2sim import atomic
 MARKER_NAME = ".asset2sim-complete.json"
 RECORD_NAME = ".asset2sim-owned.json"
 
-#: codes of :class:`OutputError`
-CODES = {
-    "OUTPUT_IS_INPUT": "the output folder is the input folder",
-    "OUTPUT_INSIDE_INPUT": "the output folder lies inside the input folder (also through a symlink)",
-    "OUTPUT_CONTAINS_INPUT": "the output folder contains the input folder",
-    "OUTPUT_NOT_A_FOLDER": "the output path exists and is not a folder",
-    "OUTPUT_NOT_EMPTY": "the output folder holds files asset2sim did not write (use --overwrite)",
-    "OUTPUT_NOT_GENERATED": "a folder the demo generator rebuilds (--asset-out, --dataset) holds files it did not write or that changed since",
-    "OUTPUT_RECORD_NOT_A_FILE": "a bookkeeping file (.asset2sim-complete.json, .asset2sim-owned.json) is not a regular file (FIFO, folder, symlink ...)",
-    "OUTPUT_WRITE_FAILED": "the output folder cannot be created or written (permissions, read-only, full disk)",
-    "OUTPUT_SYMLINK_ESCAPES": "a file would be written through a symlink leading out of the output folder",
-    "OUTPUT_PATH_ESCAPES": "a file would be written outside the output folder through '..' (a name used as a path)",
-    "OUTPUT_HARD_LINK": "a file asset2sim writes in place (the ratings database) is a hard link of another file",
-    "OUTPUT_NAME_CONFLICT": "two different input files would be copied to one output path, or onto a file of the contract",
-    "OUTPUT_INCOMPLETE": "a file the run wrote is missing at the end (no completion marker written)",
-    "OUTPUT_OUTSIDE_INPUT": "a referenced file lies outside the asset folder",
-}
-
 
 class OutputError(ValueError):
     """The output folder cannot be used or written as asked.
 
-    ``code``: one of :data:`CODES` (``OUTPUT_INVALID`` when not given);
+    ``code``: an ``OUTPUT_*`` code (``docs/guide/outputs.md``, "Exit statuses"; ``OUTPUT_INVALID`` when not
+    given);
     ``path``: the file or folder concerned; ``codes``: ``[code]`` (the
     attribute ``refine`` copies into its error)."""
 

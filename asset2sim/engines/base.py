@@ -312,6 +312,20 @@ class SessionDefaults:
     def place_on_ground(self) -> float:
         raise EngineUnsupported(f"{self.engine}: no exact lowest collision point to place on the ground")
 
+    def _movable_root(self) -> None:
+        """Raise :class:`EngineUnsupported` in a fixed-base session, whose root cannot be moved."""
+        if self.options.fixed_base:
+            raise EngineUnsupported(f"{self.engine}: the root of a fixed-base session cannot be moved")
+
+    def _world_bounds(self, link: str, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World bounding box (lo (3,), hi (3,)) m of ``points`` (k, 3) in ``link``'s frame; the link origin when
+        k = 0."""
+        pos, rot = self.link_frame(link)
+        if not len(points):
+            return pos.copy(), pos.copy()
+        w = np.asarray(points, float) @ rot.T + pos
+        return w.min(axis=0), w.max(axis=0)
+
     def _keep_state(self, state) -> int:
         """Keep a snapshot in the session's ``_states`` (handle -> snapshot) of an engine without saved states of its
         own; its handle for :meth:`restore_state`."""

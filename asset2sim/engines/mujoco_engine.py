@@ -10,12 +10,13 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import (ArrayJoints, ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
+from asset2sim.engines.base import (ArrayJoints, ContactPair, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
                                     SessionOptions, penetration_sum, register_engine, register_file_reader)
 from asset2sim.engines.loading import BOX_CORNERS, read_urdf
 from asset2sim.engines.mjcf import GROUND, KEYFRAME, MjcfError, lowest_point, mujoco_messages, urdf_to_mjcf
 from asset2sim.engines.mjcf.base import load_mujoco as _mujoco, mesh_vertices, safe_name
 from asset2sim.engines.step_budget import spend
+from asset2sim.frames import quat_wxyz_to_xyzw, quat_xyzw_to_wxyz
 
 
 def _compile(load, path) -> object:
@@ -61,7 +62,6 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
         self._dadr = {n: int(self.m.jnt_dofadr[j]) for n, j in jids.items()}
         self._ground = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_GEOM, GROUND) if options.ground else -1
         self._root = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_BODY, self.urdf.root)
-        self._free = not options.fixed_base
         kid = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_KEY, KEYFRAME)
         mujoco.mj_resetDataKeyframe(self.m, self.d, kid)
         mujoco.mj_forward(self.m, self.d)
@@ -120,10 +120,9 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
 
     def set_root_velocity(self, linear, angular) -> None:
         """World-frame velocities (MuJoCo holds the angular one in the body frame)."""
-        self._free_root()
-        w, x, y, z = self.d.qpos[3:7]
+        self._movable_root()
         R = np.zeros(9)
-        self._mj.mju_quat2Mat(R, np.array([w, x, y, z], float))
+        self._mj.mju_quat2Mat(R, np.array(self.d.qpos[3:7], float))
         self.d.qvel[0:3] = np.asarray(linear, float)
         self.d.qvel[3:6] = R.reshape(3, 3).T @ np.asarray(angular, float)
         self._mj.mj_forward(self.m, self.d)
@@ -152,12 +151,8 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
 
     def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of the colliding geoms' points; the body origin when it has none."""
-        pos, R = self.link_frame(link)
         pts = [self._geom_points(g) for g in self._geoms[link]]
-        if not pts:
-            return pos.copy(), pos.copy()
-        w = np.concatenate(pts) @ R.T + pos
-        return w.min(axis=0), w.max(axis=0)
+        return self._world_bounds(link, np.concatenate(pts) if pts else np.zeros((0, 3)))
 
     def link_has_collision(self, link: str) -> bool:
         return bool(self._geoms[link])
@@ -189,22 +184,16 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
 
     def set_root_pose(self, pos, orn_xyzw) -> None:
         """Teleport the root and zero its velocity (EngineUnsupported: fixed base)."""
-        self._free_root()
-        x, y, z, w = (float(v) for v in orn_xyzw)
+        self._movable_root()
         self.d.qpos[0:3] = np.asarray(pos, float)
-        self.d.qpos[3:7] = [w, x, y, z]
+        self.d.qpos[3:7] = quat_xyzw_to_wxyz(orn_xyzw)
         self.d.qvel[0:6] = 0.0
         self._mj.mj_forward(self.m, self.d)
 
-    def _free_root(self) -> None:
-        """Raise EngineUnsupported in a fixed-base session, whose root cannot be moved."""
-        if not self._free:
-            raise EngineUnsupported("mujoco: the root of a fixed-base session cannot be moved")
-
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         d = self.d
-        pos, (w, x, y, z) = (d.qpos[0:3], d.qpos[3:7]) if self._free else (d.xpos[self._root], d.xquat[self._root])
-        q = np.array([x, y, z, w], float)
+        pos, wxyz = (d.qpos[0:3], d.qpos[3:7]) if not self.options.fixed_base else (d.xpos[self._root], d.xquat[self._root])
+        q = quat_wxyz_to_xyzw(wxyz)
         n = np.linalg.norm(q)
         return np.array(pos, float), (q / n if n > 0 else q)
 

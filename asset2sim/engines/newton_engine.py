@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import (ArrayJoints, ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
+from asset2sim.engines.base import (ArrayJoints, ContactPair, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
                                     SessionOptions, penetration_sum, principal_moments, register_engine, register_file_reader,
                                     unsupported)
 from asset2sim.engines.loading import (BOX_CORNERS, BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS,
                                        BULLET_PLANE_FRICTION, CollisionPiece, collision_pieces, read_urdf)
-from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, quat_wxyz_to_xyzw, translation_matrix
+from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, quat_wxyz_to_xyzw, quat_xyzw_to_wxyz, translation_matrix
 from asset2sim.mesh_io import convex_hull_mesh
 from asset2sim.engines.step_budget import spend
 
@@ -254,12 +254,7 @@ class NewtonSession(ArrayJoints, SessionDefaults):
         return self._points[link].copy()
 
     def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        pts = self._points[link]
-        p, r = self.link_frame(link)
-        if not len(pts):
-            return p.copy(), p.copy()
-        w = pts @ r.T + p
-        return w.min(axis=0), w.max(axis=0)
+        return self._world_bounds(link, self._points[link])
 
     def link_has_collision(self, link: str) -> bool:
         return len(self._points[link]) > 0
@@ -280,8 +275,7 @@ class NewtonSession(ArrayJoints, SessionDefaults):
 
     def set_root_pose(self, pos, orn_xyzw) -> None:
         """Teleport the root and zero its velocity (EngineUnsupported: fixed root)."""
-        if self._fixed:
-            raise EngineUnsupported("newton: the root of a fixed-base session cannot be moved")
+        self._movable_root()
         jq, jd = self._joint_q(), self._joint_qd()
         jq[0:3] = np.asarray(pos, float)
         jq[3:7] = np.asarray(orn_xyzw, float)
@@ -412,8 +406,7 @@ def _apply(pose: np.ndarray, pts: np.ndarray) -> np.ndarray:
 
 def _body_frame(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Position (3,) m and rotation (3, 3) of a Warp transform (7,) p, x, y, z, w."""
-    x, y, z, w = (float(v) for v in t[3:7])
-    return np.array(t[:3], float), np.array(quat_wxyz_matrix([w, x, y, z]))
+    return np.array(t[:3], float), np.array(quat_wxyz_matrix(quat_xyzw_to_wxyz(t[3:7])))
 
 
 def _body_point(t: np.ndarray, p: np.ndarray) -> np.ndarray:

@@ -21,7 +21,7 @@ from asset2sim.engines.base import (ArrayJoints, ContactPair, EngineUnsupported,
                                     SessionOptions, penetration_sum, register_engine)
 from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
                                        collision_pieces, link_friction, principal_axes, read_urdf)
-from asset2sim.frames import matrix_quat_wxyz, rigid_matrix
+from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_to_xyzw, quat_xyzw_to_wxyz, rigid_matrix
 from asset2sim.engines.passive_joints import FRICTION_DRIVE_DAMPING, PassiveJoints
 from asset2sim.engines.step_budget import spend
 
@@ -272,8 +272,7 @@ class PhysXSession(ArrayJoints, SessionDefaults):
         self._joints[i].set_drive_velocity_target(v)
 
     def set_root_velocity(self, linear, angular) -> None:
-        if self.options.fixed_base:
-            raise EngineUnsupported("physx: the root of a fixed-base session cannot be moved")
+        self._movable_root()
         self.art.set_root_linear_velocity(np.asarray(linear, np.float32))
         self.art.set_root_angular_velocity(np.asarray(angular, np.float32))
 
@@ -322,12 +321,10 @@ class PhysXSession(ArrayJoints, SessionDefaults):
 
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         pose = self.art.get_root_pose()
-        w, x, y, z = (float(v) for v in pose.q)
-        return np.array(pose.p, float), np.array([x, y, z, w], float)
+        return np.array(pose.p, float), quat_wxyz_to_xyzw(pose.q)
 
     def set_root_pose(self, pos, orn_xyzw) -> None:
-        x, y, z, w = (float(v) for v in orn_xyzw)
-        self.art.set_root_pose(sapien.Pose(p=np.asarray(pos, np.float32), q=[w, x, y, z]))
+        self.art.set_root_pose(sapien.Pose(p=np.asarray(pos, np.float32), q=quat_xyzw_to_wxyz(orn_xyzw).astype(np.float32)))
         self.art.set_root_linear_velocity(np.zeros(3, np.float32))
         self.art.set_root_angular_velocity(np.zeros(3, np.float32))
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import (ContactPair, EngineTraits, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults, SessionOptions,
+from asset2sim.engines.base import (ContactPair, EngineTraits, HeldJoint, HeldLink, HeldPhysics, SessionDefaults, SessionOptions,
                                     penetration_sum, register_engine, register_shape_world, register_viewer)
 from asset2sim.engines import pybullet_clients
 from asset2sim.engines.pybullet_worlds import (
@@ -295,8 +295,7 @@ class PyBulletSession(SessionDefaults):
             self._root_hold = None
 
     def set_root_velocity(self, linear, angular) -> None:
-        if self.options.fixed_base:
-            raise EngineUnsupported("pybullet: the root of a fixed-base session cannot be moved")
+        self._movable_root()
         self._p.resetBaseVelocity(self.body, [float(v) for v in linear], [float(v) for v in angular], physicsClientId=self.cid)
 
     def save_state(self) -> int:

@@ -12,7 +12,6 @@ a fresh temporary one (:func:`staging_folder`) or one the caller names.
 
 from __future__ import annotations
 
-import atexit
 import hashlib
 import json
 import math
@@ -20,7 +19,6 @@ import os
 import re
 import threading
 import cachetools
-import shutil
 import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -341,19 +339,11 @@ def _identity(path: str) -> tuple:
 _STAGING_ROOT: list[Path] = []
 
 
-def _remove_if_owner(root: Path, pid: int) -> None:
-    """Remove ``root`` at exit of the process that made it (a forked child exiting normally leaves it)."""
-    if os.getpid() == pid:
-        shutil.rmtree(root, ignore_errors=True)
-
-
 def staging_folder(source: Path | str) -> Path:
     """A new empty folder for staging ``source``, under this process's temporary folder
     (``<tmp>/asset2sim-staged-<random>/<stem>-<digest of the path>``), removed when the process exits."""
     if not _STAGING_ROOT:
-        root = Path(tempfile.mkdtemp(prefix="asset2sim-staged-"))
-        _STAGING_ROOT.append(root)
-        atexit.register(_remove_if_owner, root, os.getpid())
+        _STAGING_ROOT.append(atomic.process_folder("asset2sim-staged-"))
     src = os.path.realpath(source)
     digest = hashlib.sha256(src.encode("utf-8", "surrogatepass")).hexdigest()[:12]
     folder = Path(tempfile.mkdtemp(prefix=f"{file_names.file_stem(Path(src).stem)[:40]}-{digest}-", dir=_STAGING_ROOT[0]))

@@ -13,7 +13,6 @@ import json
 import math
 import threading
 import time
-import warnings
 from pathlib import Path
 from typing import Any, Callable
 
@@ -142,13 +141,7 @@ class LLMClient:
                 why = "its reply does not match its digest (altered)"
         if why is None:
             return rec
-        warnings.warn(f"asset2sim reply cache: record {p} rejected: {why}; asking again",
-                      array_cache.CacheWarning, stacklevel=2)
-        try:
-            p.unlink()
-        except OSError:
-            pass  # replaced when the reply is stored again
-        return None
+        return array_cache.reject(p, f"asset2sim reply cache: record {p} rejected: {why}; asking again")
 
     def cache_put(self, key: str, completion: Completion) -> None:
         """Store a reply atomically (nothing without a cache folder); OSError when it cannot be

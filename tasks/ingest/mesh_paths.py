@@ -1,5 +1,5 @@
-"""Safe resolution of the paths an asset names (``stat`` only: a FIFO cannot block) and reading what
-they name without blocking or following a symlink swapped in after the check.
+"""Safe resolution of the paths an asset names (``stat`` only: a FIFO cannot block); what they name is read by
+:func:`asset2sim.atomic.read_regular` (re-exported), which never blocks on a file swapped for a FIFO.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
+from asset2sim.atomic import read_regular
 from asset2sim.input_files import file_kind as _kind, inside
 from asset2sim.tasks.ingest.findings import MESH_EXTENSIONS
 
@@ -113,23 +114,4 @@ def resolve_mesh_reference(folder: Path | str, filename: str | None, *, base: Pa
     if max_bytes is not None and st.st_size > max_bytes:
         return MeshReference(fname, None, "MESH_TOO_LARGE", f"{fname!r} has {st.st_size} bytes > cap {max_bytes}", st.st_size)
     return MeshReference(fname, Path(real), None, "", st.st_size)
-
-
-def read_regular(path: Path, max_bytes: int) -> bytes:
-    """Read a file checked to be regular, re-checking on the open descriptor (no FIFO, no symlink)."""
-    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
-    fd = os.open(str(path), flags)
-    try:
-        st = os.fstat(fd)
-        if not stat.S_ISREG(st.st_mode):
-            raise OSError(f"{path} is not a regular file")
-        if st.st_size > max_bytes:
-            raise OSError(f"{path} has {st.st_size} bytes > cap {max_bytes}")
-        with os.fdopen(os.dup(fd), "rb") as fh:
-            data = fh.read(max_bytes + 1)
-        if len(data) > max_bytes:
-            raise OSError(f"{path} grew beyond {max_bytes} bytes")
-        return data
-    finally:
-        os.close(fd)
 

@@ -72,24 +72,24 @@ def test_export_reads_back_equal_to_the_folder(contract):
     urdf = read_urdf(contract / "mobility.urdf")
     usd = read_usd(build.path)
     lid = urdf.links["lid"].inertial
-    got = usd.links["lid"]
+    got = usd.model.links["lid"].inertial
     assert got.mass == pytest.approx(lid.mass, rel=1e-6)
-    assert np.allclose(got.com, lid.com(), rtol=1e-6, atol=1e-9)
+    assert np.allclose(got.com(), lid.com(), rtol=1e-6, atol=1e-9)
     want = lid.inertia_in_link_axes()
     assert abs(want[0, 1]) > 1e-5  # the tilt made a full tensor
-    assert np.allclose(got.inertia, want, rtol=0, atol=1e-6 * np.abs(want).max())
-    hinge = usd.joints["lid_hinge"]
+    assert np.allclose(got.inertia_in_link_axes(), want, rtol=0, atol=1e-6 * np.abs(want).max())
+    hinge, spring = usd.model.joint("lid_hinge"), usd.springs["lid_hinge"]
     j = urdf.joint("lid_hinge")
     assert hinge.type == "revolute"
     assert (hinge.lower, hinge.upper) == pytest.approx((j.lower, j.upper), rel=1e-6)
     assert hinge.damping == pytest.approx(j.damping, rel=1e-6)
     assert hinge.friction == pytest.approx(j.friction, rel=1e-6)
-    assert hinge.stiffness == pytest.approx(0.3, rel=1e-6)
-    assert hinge.reference == pytest.approx(0.2, rel=1e-6)
-    assert hinge.position == pytest.approx(0.4, rel=1e-6)
-    slide = usd.joints["post_slide"]
-    assert slide.type == "prismatic" and slide.position == pytest.approx(0.01, rel=1e-6)
-    assert usd.articulation_root and not usd.fixed_root
+    assert spring.stiffness == pytest.approx(0.3, rel=1e-6)
+    assert spring.reference == pytest.approx(0.2, rel=1e-6)
+    assert usd.initial_state["lid_hinge"] == pytest.approx(0.4, rel=1e-6)
+    slide = usd.model.joint("post_slide")
+    assert slide.type == "prismatic" and usd.initial_state["post_slide"] == pytest.approx(0.01, rel=1e-6)
+    assert not usd.root_fixed
     assert check_usd(build.path, contract).max_rel_error < 1e-6
 
 
@@ -159,7 +159,7 @@ def test_fixed_root_gets_a_world_joint(contract):
     state["root"] = {"fixed": True, "mounting": "wall-mounted", "source": "test"}
     (contract / "initial_state.json").write_text(json.dumps(state))
     build = export_usd(contract)
-    assert build.fixed_root and read_usd(build.path).fixed_root
+    assert build.fixed_root and read_usd(build.path).root_fixed
 
 
 def test_check_catches_a_changed_value(contract):
@@ -241,7 +241,7 @@ def test_refined_dev_objects_export(asset_id, prompt, tmp_path, refine_once):
     assert check.links == len(urdf.links) and check.joints == len(urdf.movable_joints)
     assert check.max_rel_error < 1e-6
     usd = read_usd(build.path)
-    assert math.isclose(sum(lk.mass or 0.0 for lk in usd.links.values()), urdf.total_mass(), rel_tol=1e-6)
+    assert math.isclose(sum(lk.inertial.mass for lk in usd.model.links.values() if lk.inertial), urdf.total_mass(), rel_tol=1e-6)
 
 
 # ------------------------------------------------------------ docs snippets

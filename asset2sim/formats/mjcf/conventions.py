@@ -41,9 +41,11 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
-from typing import Mapping
-from typing import Literal
+from typing import Literal, Mapping
+
+import yaml
 
 from asset2sim import safexml
 
@@ -70,29 +72,6 @@ class HostLayout:
     folders: tuple[str, ...]
     angle: AngleUnit | None
     why: str
-
-
-_ROBOSUITE_WORLD = 'robosuite/models/assets/base.xml, whose <compiler angle="radian"> applies'
-
-#: Known host packages, most specific first.
-HOST_LAYOUTS: tuple[HostLayout, ...] = (
-    HostLayout("RoboCasa", ("robocasa", "models", "assets"), "radian",
-               f"RoboCasa builds its kitchens with robosuite, inside {_ROBOSUITE_WORLD}"),
-    HostLayout("LIBERO", ("libero", "libero", "assets"), "radian",
-               f"LIBERO builds its scenes with robosuite, inside {_ROBOSUITE_WORLD}"),
-    HostLayout("robosuite", ("robosuite", "models", "assets"), "radian",
-               f"robosuite compiles its objects, arenas and robots inside {_ROBOSUITE_WORLD}"),
-    HostLayout("Meta-World", ("metaworld", "envs", "assets_v2"), "radian",
-               'Meta-World compiles its objects through their *_dependencies.xml, which state <compiler angle="radian">'),
-    HostLayout("Meta-World", ("metaworld", "assets"), "radian",
-               'Meta-World compiles its objects through their *_dependencies.xml, which state <compiler angle="radian">'),
-    HostLayout("Franka Kitchen (gymnasium-robotics)", ("kitchen_franka",), "radian",
-               'gymnasium-robotics compiles the kitchen\'s items inside kitchen_env_model.xml, whose <compiler angle="radian"> applies'),
-    HostLayout("dm_control", ("dm_control",), None,
-               "dm_control compiles each model file as it is"),
-    HostLayout("MuJoCo Menagerie", ("mujoco_menagerie",), None,
-               "MuJoCo Menagerie compiles each model file as it is"),
-)
 
 
 @dataclass(frozen=True)
@@ -141,17 +120,12 @@ class PhysicsOverride:
     keep: str
 
 
-#: Host code that overrides an object's joint physics at run time. robosuite's Door environment
-#: (``robosuite/environments/manipulation/door.py``) builds ``DoorObject(name="Door", friction=0.0, damping=0.1,
-#: lock=self.use_latch)``; ``DoorObject`` (``robosuite/models/objects/xml_objects.py``) then sets the hinge's
-#: ``frictionloss`` and ``damping`` in the XML from those arguments (``_set_door_friction``, ``_set_door_damping``).
-PHYSICS_OVERRIDES: tuple[PhysicsOverride, ...] = (
-    PhysicsOverride("robosuite", ("door.xml", "door_lock.xml", "door_small.xml"), ("hinge", "door_hinge"),
-                    {"frictionloss": 0.0, "damping": 0.1},
-                    'robosuite\'s Door environment builds DoorObject(name="Door", friction=0.0, damping=0.1, '
-                    "lock=...), which sets the hinge's frictionloss and damping when the task is built",
-                    "DoorObject(name=\"Door\", friction={frictionloss}, damping={damping}, lock=...)"),
-)
+_HOSTS = yaml.safe_load(resources.files(__package__).joinpath("hosts.yaml").read_text(encoding="utf-8"))
+#: Known host packages, most specific first (``hosts.yaml`` beside this module, with the sources).
+HOST_LAYOUTS: tuple[HostLayout, ...] = tuple(HostLayout(h["name"], tuple(h["folders"]), h["angle"], h["why"]) for h in _HOSTS["host_layouts"])
+#: Host code that overrides an object's joint physics at run time (``hosts.yaml``, with the sources).
+PHYSICS_OVERRIDES: tuple[PhysicsOverride, ...] = tuple(
+    PhysicsOverride(**{**o, "files": tuple(o["files"]), "joints": tuple(o["joints"])}) for o in _HOSTS["physics_overrides"])
 
 
 def physics_overrides(path: Path | str, joints: list[str]) -> list[tuple[PhysicsOverride, str]]:
@@ -164,30 +138,33 @@ def physics_overrides(path: Path | str, joints: list[str]) -> list[tuple[Physics
     return [(o, j) for o in PHYSICS_OVERRIDES if o.layout == layout.name and name in o.files for j in joints if j in o.joints]
 
 
-def package_tree(path: Path | str) -> Path | None:
-    """The asset folder of the known host package (:data:`HOST_LAYOUTS`) the MJCF at ``path`` lies in (the folder
-    its layout's last folder name marks: ``.../metaworld/assets``, ``.../robosuite/models/assets``), the tree the
-    files it names may come from (its packages' files include shared scenes and textures beside the object's
-    folder: ``../scene/basic_scene.xml``, ``../textures``); None outside a known package (the file's own folder is
-    the tree). The package's layout bounds it: nothing above that folder is read."""
+def _host_match(path: Path | str) -> tuple[HostLayout, Path] | None:
+    """The first known host package (:data:`HOST_LAYOUTS`) whose folders the file at ``path`` lies in, and its asset
+    folder (the innermost match of the layout's folders), or None."""
     parts = Path(os.path.abspath(path)).parent.parts
     lower = [p.lower() for p in parts]
     for layout in HOST_LAYOUTS:
         n = len(layout.folders)
         for i in range(len(lower) - n, -1, -1):  # the innermost match
             if tuple(lower[i:i + n]) == layout.folders:
-                return Path(*parts[:i + n])
+                return layout, Path(*parts[:i + n])
     return None
+
+
+def package_tree(path: Path | str) -> Path | None:
+    """The asset folder of the known host package (:data:`HOST_LAYOUTS`) the MJCF at ``path`` lies in (the folder
+    its layout's last folder name marks: ``.../metaworld/assets``, ``.../robosuite/models/assets``), the tree the
+    files it names may come from (its packages' files include shared scenes and textures beside the object's
+    folder: ``../scene/basic_scene.xml``, ``../textures``); None outside a known package (the file's own folder is
+    the tree). The package's layout bounds it: nothing above that folder is read."""
+    match = _host_match(path)
+    return None if match is None else match[1]
 
 
 def host_layout(path: Path | str) -> HostLayout | None:
     """The known host package (:data:`HOST_LAYOUTS`) whose folders the file at ``path`` lies in, or None."""
-    parts = [p.lower() for p in Path(os.path.abspath(path)).parent.parts]
-    for layout in HOST_LAYOUTS:
-        n = len(layout.folders)
-        if any(tuple(parts[i:i + n]) == layout.folders for i in range(len(parts) - n + 1)):
-            return layout
-    return None
+    match = _host_match(path)
+    return None if match is None else match[0]
 
 
 def _parsed(path: Path, files: Mapping[str, bytes] | None):

@@ -137,8 +137,7 @@ def _write_body(stage, path, model: UrdfModel, name: str, pose: np.ndarray, note
     link = model.links[name]
     xf = UsdGeom.Xform.Define(stage, path)
     xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, pose[:3, 3])))
-    w, x, y, z = (float(v) for v in matrix_quat_wxyz(pose[:3, :3]))
-    xf.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(w, x, y, z))
+    xf.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(*matrix_quat_wxyz(pose[:3, :3]).tolist()))
     prim = xf.GetPrim()
     prim.CreateAttribute("asset2sim:name", Sdf.ValueTypeNames.String, custom=True).Set(name)
     UsdPhysics.RigidBodyAPI.Apply(prim)
@@ -148,8 +147,7 @@ def _write_body(stage, path, model: UrdfModel, name: str, pose: np.ndarray, note
         mass_api.CreateCenterOfMassAttr(Gf.Vec3f(*map(float, link.inertial.com())))
         moments, axes = principal_axes(link.inertial.inertia_in_link_axes())
         mass_api.CreateDiagonalInertiaAttr(Gf.Vec3f(*map(float, moments)))
-        qw, qx, qy, qz = (float(v) for v in matrix_quat_wxyz(axes))
-        mass_api.CreatePrincipalAxesAttr(Gf.Quatf(qw, qx, qy, qz))
+        mass_api.CreatePrincipalAxesAttr(Gf.Quatf(*matrix_quat_wxyz(axes).tolist()))
     else:
         notes.append(f"link {name!r} has no <inertial>: physics:mass not authored (computed from colliders)")
     if link.lateral_friction is not None:
@@ -270,8 +268,7 @@ def _primitive(stage, path, kind: str, size, radius, length, origin: np.ndarray)
     else:
         return None
     g.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, origin[:3, 3])))
-    w, x, y, z = (float(v) for v in matrix_quat_wxyz(origin[:3, :3]))
-    g.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(w, x, y, z))
+    g.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(*matrix_quat_wxyz(origin[:3, :3]).tolist()))
     if kind == "box":
         g.AddScaleOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, size)))
     return g

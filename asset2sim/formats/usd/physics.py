@@ -186,8 +186,7 @@ def set_body_mass(edit: UsdEdit, ctx: StageReading, body, link_frame: np.ndarray
     edit.set(body, "physics:centerOfMass", Sdf.ValueTypeNames.Point3f, Gf.Vec3f(*(float(v) for v in local)))
     if not same(_authored_tensor(body), tensor):  # the moments and axes together: one tensor has many of them
         edit.set(body, "physics:diagonalInertia", Sdf.ValueTypeNames.Float3, Gf.Vec3f(*(float(v) for v in d)))
-        w, x, y, z = (float(v) for v in matrix_quat_wxyz(q))
-        edit.set(body, "physics:principalAxes", Sdf.ValueTypeNames.Quatf, Gf.Quatf(w, x, y, z))
+        edit.set(body, "physics:principalAxes", Sdf.ValueTypeNames.Quatf, Gf.Quatf(*matrix_quat_wxyz(q).tolist()))
     density = body.GetAttribute("physics:density")
     if density and density.HasAuthoredValue() and density.Get():
         edit.set(body, "physics:density", Sdf.ValueTypeNames.Float, 0.0)  # an explicit mass wins; no density contradicts it
