@@ -297,10 +297,12 @@ def _remove_if_owner(folder: Path, pid: int) -> None:
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def open_regular(path: Path | str) -> BinaryIO:
+def open_regular(path: Path | str, follow_links: bool = True) -> BinaryIO:
     """``path`` opened for binary reading, checked on the descriptor to be a regular file
-    (``O_NONBLOCK``: a FIFO cannot block the open). Raises NotRegularFileError, OSError."""
+    (``O_NONBLOCK``: a FIFO cannot block the open; ``follow_links=False``: ``O_NOFOLLOW``, a path resolved and
+    checked before cannot be swapped for a link). Raises NotRegularFileError, OSError (``ELOOP``: a link)."""
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOCTTY", 0)
+    flags |= 0 if follow_links else getattr(os, "O_NOFOLLOW", 0)
     fd = os.open(str(path), flags)
     try:
         mode = os.fstat(fd).st_mode
@@ -313,14 +315,15 @@ def open_regular(path: Path | str) -> BinaryIO:
     return os.fdopen(fd, "rb")
 
 
-def read_regular(path: Path | str, max_bytes: int | None = None) -> bytes:
-    """The bytes of ``path``, which must be a regular file (checked before reading), at most ``max_bytes``.
+def read_regular(path: Path | str, max_bytes: int | None = None, follow_links: bool = True) -> bytes:
+    """The bytes of ``path``, which must be a regular file (checked before reading), at most ``max_bytes``;
+    ``follow_links=False`` refuses a link (:func:`open_regular`).
 
     Raises:
         NotRegularFileError: not a regular file.
         OSError: unreadable or over ``max_bytes`` (``EFBIG``).
     """
-    with open_regular(path) as fh:
+    with open_regular(path, follow_links) as fh:
         if max_bytes is None:
             return fh.read()
         data = fh.read(max_bytes + 1)

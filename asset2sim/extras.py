@@ -6,13 +6,12 @@ never a bare "No module named 'mujoco'".
 from __future__ import annotations
 
 import importlib
-from importlib import resources
 from types import ModuleType
 
-import yaml
+from asset2sim.package_data import package_yaml
 
 #: Top-level module -> (what it is, the extra of ``pyproject.toml`` that installs it): ``extras.yaml`` beside this module.
-_TABLE = yaml.safe_load(resources.files(__package__).joinpath("extras.yaml").read_text(encoding="utf-8"))
+_TABLE = package_yaml(__package__, "extras.yaml")
 EXTRA_OF_MODULE: dict[str, tuple[str, str]] = {module: tuple(entry) for module, entry in _TABLE.items()}
 
 

@@ -296,7 +296,7 @@ class MeshChecks(Recorder):
                 continue
             assert ref.path is not None
             try:
-                data = read_regular(ref.path, self.policy.max_mesh_bytes)
+                data = read_regular(ref.path, self.policy.max_mesh_bytes, follow_links=False)
             except OSError:
                 continue
             mtl_dir = Path(os.path.dirname(os.path.join(str(lib_dir), name)))

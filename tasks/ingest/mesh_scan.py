@@ -148,7 +148,7 @@ def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: in
         A :class:`MeshScan` (never raises for a bad file); OSError when the file cannot be read.
     """
     path = Path(path)
-    data = read_regular(path, max_bytes)
+    data = read_regular(path, max_bytes, follow_links=False)
     ext = path.suffix.lower()
     if ext not in (".obj", ".stl"):  # trimesh's messages may name the file
         return _scan_data(data, ext, max_faces, max_coordinate, str(path))

@@ -41,13 +41,11 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Literal, Mapping
 
-import yaml
-
 from asset2sim import safexml
+from asset2sim.package_data import package_yaml
 
 AngleUnit = Literal["radian", "degree"]
 #: The angle units MJCF's ``<compiler angle>`` takes.
@@ -120,7 +118,7 @@ class PhysicsOverride:
     keep: str
 
 
-_HOSTS = yaml.safe_load(resources.files(__package__).joinpath("hosts.yaml").read_text(encoding="utf-8"))
+_HOSTS = package_yaml(__package__, "hosts.yaml")
 #: Known host packages, most specific first (``hosts.yaml`` beside this module, with the sources).
 HOST_LAYOUTS: tuple[HostLayout, ...] = tuple(HostLayout(h["name"], tuple(h["folders"]), h["angle"], h["why"]) for h in _HOSTS["host_layouts"])
 #: Host code that overrides an object's joint physics at run time (``hosts.yaml``, with the sources).
