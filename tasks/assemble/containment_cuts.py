@@ -156,8 +156,8 @@ def _split_surface(points: np.ndarray, keep_out: np.ndarray, tolerance: float, b
                 lo, hi = p[p[:, ax] <= cut + spacing], p[p[:, ax] >= cut - spacing]
                 if len(lo) < 4 or len(hi) < 4 or len(lo) == len(p) or len(hi) == len(p):
                     continue
-                # the larger half first (it more often holds a point deeper than the best cut's): max(dl, dh) > the
-                # best's depth, this cut cannot win and the other half is not measured
+                # the larger half first (more often deeper than the best cut): max(dl, dh) > the best's depth,
+                # this cut cannot win and the other half is not measured
                 big, small = (hi, lo) if len(hi) > len(lo) else (lo, hi)
                 d1, v1 = measure(big)
                 if best is not None and d1 > best[0][0]:

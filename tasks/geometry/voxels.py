@@ -222,7 +222,8 @@ def _cell_statistics(wanted: np.ndarray, thin: np.ndarray,
     for flat, frac in samples:
         sel = wanted[flat]
         ids = cell_id[flat[sel]]
-        pos = np.ascontiguousarray(frac[sel].T) / 255.0  # (3, P): a row per axis, as bincount takes its weights
+        # (3, P): a row per axis, as bincount takes its weights
+        pos = np.ascontiguousarray(frac[sel].T) / 255.0
         count += np.bincount(ids, minlength=n)
         for k in range(3):
             first[k] += np.bincount(ids, weights=pos[k], minlength=n)
