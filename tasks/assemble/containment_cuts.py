@@ -156,10 +156,14 @@ def _split_surface(points: np.ndarray, keep_out: np.ndarray, tolerance: float, b
                 lo, hi = p[p[:, ax] <= cut + spacing], p[p[:, ax] >= cut - spacing]
                 if len(lo) < 4 or len(hi) < 4 or len(lo) == len(p) or len(hi) == len(p):
                     continue
-                dl, vl = measure(lo)
-                if best is not None and dl > best[0][0]:  # max(dl, dh) > the best's depth: this cut cannot win
+                # the larger half first (more often deeper than the best cut): max(dl, dh) > the best's depth,
+                # this cut cannot win and the other half is not measured
+                big, small = (hi, lo) if len(hi) > len(lo) else (lo, hi)
+                d1, v1 = measure(big)
+                if best is not None and d1 > best[0][0]:
                     continue
-                dh, vh = measure(hi)
+                d2, v2 = measure(small)
+                (dl, vl), (dh, vh) = ((d2, v2), (d1, v1)) if big is hi else ((d1, v1), (d2, v2))
                 score = (max(dl, dh), vl + vh)
                 if best is None or score < best[0]:
                     best = (score, (dl, lo), (dh, hi))

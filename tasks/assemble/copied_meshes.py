@@ -76,7 +76,7 @@ def _stamps(files: list[Path]) -> tuple:
     folder holding one (a file added, removed or renamed there changes the
     folder's time); None for a path that cannot be read."""
     out = []
-    for p in sorted({str(f) for f in files} | {str(Path(f).parent) for f in files}):
+    for p in sorted({str(f) for f in files} | {os.path.dirname(os.path.abspath(f)) for f in files}):
         try:
             st = os.stat(p)
             out.append((p, st.st_size, st.st_mtime_ns, st.st_ino))

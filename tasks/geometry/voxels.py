@@ -222,15 +222,16 @@ def _cell_statistics(wanted: np.ndarray, thin: np.ndarray,
     for flat, frac in samples:
         sel = wanted[flat]
         ids = cell_id[flat[sel]]
-        pos = frac[sel].astype(np.float64) / 255.0
+        # (3, P): a row per axis, as bincount takes its weights
+        pos = np.ascontiguousarray(frac[sel].T) / 255.0
         count += np.bincount(ids, minlength=n)
         for k in range(3):
-            first[k] += np.bincount(ids, weights=pos[:, k], minlength=n)
+            first[k] += np.bincount(ids, weights=pos[k], minlength=n)
         sel2 = need_cov[flat[sel]]
         if sel2.any():
-            ids2, pos2 = ids[sel2], pos[sel2]
+            ids2, pos2 = ids[sel2], pos[:, sel2]
             for m, (a, b) in enumerate(pairs):
-                second[m] += np.bincount(ids2, weights=pos2[:, a] * pos2[:, b], minlength=n)
+                second[m] += np.bincount(ids2, weights=pos2[a] * pos2[b], minlength=n)
     del cell_id
     count = np.maximum(count, 1.0)
     mean = first / count
