@@ -93,21 +93,9 @@ def write_run_artifacts(df, out_dir: Path | str, title: str = "") -> dict[str, P
     and ``failure_modes.png`` into ``out_dir`` atomically; returns name -> path."""
     out_dir = Path(out_dir)
     paths = {"summary.csv": atomic.write_text(out_dir / "summary.csv", csv_text(summary_table(df)))}
-    paths["summary.json"] = atomic.write_json(out_dir / "summary.json", _jsonable(run_summary(df)))
+    paths["summary.json"] = atomic.write_json(out_dir / "summary.json", atomic.jsonable(run_summary(df)))
     paths["failure_modes.png"] = write_png(out_dir / "failure_modes.png", failure_mode_figure(df, title))
     return paths
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if hasattr(obj, "item"):  # numpy scalars
-        return _jsonable(obj.item())
-    return obj
 
 
 def flow_metrics(summary: dict[str, Any]) -> dict[str, float]:
