@@ -98,43 +98,42 @@ def com_lever(overlay: Overlay, asset: AssetDescription, joint: str) -> float:
     return float(_off_axis(np.asarray(lp.com, float)[None, :], _unit_axis(asset, joint))[0])
 
 
-def friction_caps(overlay: Overlay, before: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry]) -> dict[str, float]:
+def friction_caps(overlay: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry]) -> dict[str, float]:
     """Probe's friction cap (N*m or N) per movable joint of ``overlay``
-    (module docstring), at least the friction of ``before`` (before escalation).
+    (module docstring), at least its friction (before escalation).
 
     Raises:
         KeyError: a joint of ``overlay`` is not in ``asset``.
     """
     caps: dict[str, float] = {}
-    for name, d, sub_mass, lever, floor in _movable(overlay, before, asset):
+    for name, d, sub_mass, lever in _movable(overlay, asset):
         cap = OPERABLE_SHARE * operating_effort(overlay, asset, name, geometry) - sub_mass * GRAVITY * lever
         if d.inertia_axis:  # above it the engine's friction motor locks the joint (a light handle)
             cap = min(cap, max_stable_friction(d.inertia_axis))
-        caps[name] = float(max(cap, floor))
+        caps[name] = float(max(cap, d.friction))
     return caps
 
 
-def tilt_floors(overlay: Overlay, before: Overlay, asset: AssetDescription, tilt: float) -> dict[str, float]:
+def tilt_floors(overlay: Overlay, asset: AssetDescription, tilt: float) -> dict[str, float]:
     """Tilt floor (N*m or N) per movable joint of ``overlay`` for a tilt of
-    ``tilt`` rad (module docstring), from the friction of ``before``.
+    ``tilt`` rad (module docstring), from its friction.
 
     Raises:
         KeyError: a joint of ``overlay`` is not in ``asset``.
     """
-    return {name: float(base + TILT_MARGIN * sub_mass * GRAVITY * lever * np.sin(abs(tilt)))
-            for name, _, sub_mass, lever, base in _movable(overlay, before, asset)}
+    return {name: float(d.friction + TILT_MARGIN * sub_mass * GRAVITY * lever * np.sin(abs(tilt)))
+            for name, d, sub_mass, lever in _movable(overlay, asset)}
 
 
-def _movable(overlay: Overlay, before: Overlay, asset: AssetDescription) -> Iterator[tuple[str, JointDynamics, float, float, float]]:
-    """(joint, dynamics, subtree mass kg, lever to the child's COM m (1 prismatic),
-    friction in ``before``) per movable joint of ``overlay``."""
+def _movable(overlay: Overlay, asset: AssetDescription) -> Iterator[tuple[str, JointDynamics, float, float]]:
+    """(joint, dynamics, subtree mass kg, lever to the child's COM m (1 prismatic)) per movable joint of ``overlay``."""
     for name, d in overlay.joints.items():
         jd = asset.joint(name)
         if jd.type not in ("revolute", "continuous", "prismatic"):
             continue
         sub_mass = sum(overlay.links[ln].mass for ln in subtree_links(asset, jd.child) if ln in overlay.links)
         lever = 1.0 if jd.type == "prismatic" else com_lever(overlay, asset, name)
-        yield name, d, sub_mass, lever, (before.joints[name].friction if name in before.joints else d.friction)
+        yield name, d, sub_mass, lever
 
 
 #: Coulomb friction between a free object and the ground: the SPEC ground friction of task execution.
@@ -452,7 +451,7 @@ def operating_limits(obj: SimObject, overlay: Overlay, asset: AssetDescription, 
                                       actions=task_actions(task), free_moving=free_moving).items():
             if n not in budgets or b.budget < budgets[n].budget:
                 budgets[n] = b
-    caps = friction_caps(overlay, overlay, asset, geometry)
+    caps = friction_caps(overlay, asset, geometry)
     caps.update({n: b.friction_cap for n, b in budgets.items()})
     dcaps = {n: b.damping_cap for n, b in budgets.items()}
     if closed:  # what the joint sweep's drive still moves through the range in time
