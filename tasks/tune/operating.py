@@ -292,7 +292,7 @@ class _Tightest:
 
 def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[float, float, float],
               paths: list[tuple[str, np.ndarray]], grasp: _Grasp, range_of: tuple[ForceRange, str],
-              ground: tuple[float, float] | None, spring: Spring | None = None) -> _Tightest:
+              ground: tuple[float, float] | None, spring: Spring | None) -> _Tightest:
     """The tightest budget over ``paths`` ((action, opening fractions) from :func:`_paths`); Q of
     gravity and of the joint's ``spring``.
     ``range_of``: the part's operating range and where it comes from; ``ground``: (mu, whole mass kg) where the
@@ -343,8 +343,7 @@ class _GraspMotion:
     lever: float | None
 
 
-def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: bool,
-                  model: UrdfModel | None = None) -> _GraspMotion:
+def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: bool, model: UrdfModel) -> _GraspMotion:
     """How the grasp point moves at the session's state."""
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
     lo, Rl = session.link_frame(grasp.link)
@@ -414,12 +413,11 @@ def bound_overlay(overlay: Overlay, budgets: dict[str, OperatingBudget]) -> tupl
 @dataclass
 class OperatingLimits:
     """What escalation keeps to: joint -> friction cap and damping cap (N m
-    or N; N m s/rad or N s/m), the budgets they come from, and notes."""
+    or N; N m s/rad or N s/m) and the budgets they come from."""
 
     friction_caps: dict[str, float]
     damping_caps: dict[str, float]
     budgets: dict[str, OperatingBudget] = field(default_factory=dict)
-    notes: list[str] = field(default_factory=list)
     hand_caps: dict[str, float] = field(default_factory=dict)
     """joint -> the friction (N m or N) a hand inside the part's range still moves both ways over the whole range
     (the operability tier's): no step of the dynamics search goes above it"""
@@ -457,5 +455,4 @@ def operating_limits(obj: SimObject, overlay: Overlay, asset: AssetDescription, 
     if closed:  # what the joint sweep's drive still moves through the range in time
         for name, c in sweep.damping_caps(obj, closed).items():
             dcaps[name] = min(c, dcaps.get(name, c))
-    return OperatingLimits(friction_caps=caps, damping_caps=dcaps, budgets=budgets,
-                           notes=[b.conflict for b in budgets.values() if b.conflict], hand_caps=hand_caps)
+    return OperatingLimits(friction_caps=caps, damping_caps=dcaps, budgets=budgets, hand_caps=hand_caps)
