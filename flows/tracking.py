@@ -140,10 +140,10 @@ def log_flow_run(
     params: dict[str, Any],
     artifacts: dict[str, Path],
     project_root: Path | str,
-    settings=None,
-    tags: dict[str, str] | None = None,
-    started_at: float | None = None,
-    ended_at: float | None = None,
+    settings: TrackingSettings,
+    tags: dict[str, str],
+    started_at: float | str | None,
+    ended_at: float,
 ) -> str:
     """Log one flow run and a nested run per asset row of ``df`` (its own start and end; for an asset refined in
     this run, :func:`asset_artifacts`) to MLflow; returns the MLflow run id.
@@ -151,7 +151,7 @@ def log_flow_run(
     ``summary``: :func:`asset2sim.flows.queries.run_summary` plus timings (s); ``params`` stringified (cut at
     500 characters); ``artifacts``: name -> file; ``project_root``: where the default store lives; ``settings``:
     :class:`asset2sim.flows.catalog_config.TrackingSettings`; ``started_at`` / ``ended_at``: the flow run's start and
-    end (epoch s; default now).
+    end (epoch s; the start may be ISO 8601 text).
 
     Raises:
         ImportError: MLflow is not installed (``pip install asset2sim[pipeline]``).
@@ -161,7 +161,6 @@ def log_flow_run(
     from mlflow.entities import Metric, Param, RunTag
     from mlflow.tracking import MlflowClient
 
-    settings = settings or TrackingSettings()
     project_root = Path(project_root)
     uri = resolve_tracking_uri(project_root, settings.uri)
     client = MlflowClient(tracking_uri=uri)
@@ -177,7 +176,7 @@ def log_flow_run(
     run_name = f"{params.get('dataset', '')}/{params.get('run', '')}".strip("/") or None
     outcome = "nothing_to_do" if not df.empty and bool((df["status"] == "skipped").all()) else "worked"
     parent = client.create_run(exp_id, run_name=run_name, start_time=_ms(started_at) or ts,
-                               tags={"asset2sim.kind": "flow_run", "asset2sim.outcome": outcome, **(tags or {})})
+                               tags={"asset2sim.kind": "flow_run", "asset2sim.outcome": outcome, **tags})
     rid = parent.info.run_id
     try:
         client.log_batch(

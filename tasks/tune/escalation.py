@@ -39,7 +39,7 @@ class Tuned:
 
 
 def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfig, ws: Workspace, log: StageLog,
-                closed: dict[str, tuple[float, float, float]] | None = None) -> Tuned:
+               closed: dict[str, tuple[float, float, float]]) -> Tuned:
     """Stage 7: post-check ``candidate`` at its refined state (``closed``: closed ends at the output scale, for the
     sweep and robust rest) and escalate damping and friction up to ``config.max_escalation_rounds`` times while
     it fails. Returns the final overlay, the last check and the rounds (no overrides or closed ends)."""

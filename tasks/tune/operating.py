@@ -424,8 +424,8 @@ class OperatingLimits:
 
 
 def operating_limits(obj: SimObject, overlay: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry],
-                     closed: dict[str, tuple[float, float, float]] | None, *, category: str | None, task: str | None,
-                     free_moving: bool, joints: list[str] | None = None) -> OperatingLimits:
+                     closed: dict[str, tuple[float, float, float]], *, category: str | None, task: str | None,
+                     free_moving: bool, joints: list[str] | None) -> OperatingLimits:
     """Friction and damping caps of every movable joint of the written asset ``obj`` (its root as mounted): the
     operating budget (:func:`operating_budgets`) of a hand inside the part's real
     range, both ways with the root fixed, for every handled part
@@ -438,12 +438,12 @@ def operating_limits(obj: SimObject, overlay: Overlay, asset: AssetDescription, 
         EngineUnavailable; whatever loading ``obj.source`` raises.
     """
     labels = link_labels(asset)
-    hand = {n: c for n, c in (closed or {}).items() if handled(labels.get(asset.joint(n).child))}
+    hand = {n: c for n, c in closed.items() if handled(labels.get(asset.joint(n).child))}
     # every handled part, both ways, root fixed (the operability tier's hand); a task's joints also as its gripper meets them
     budgets = operating_budgets(dataclasses.replace(obj, fixed_base=True), overlay, hand, category=category,
                                 labels=labels, free_moving=free_moving, whole=True) if hand else {}
     hand_caps = {n: b.friction_cap for n, b in budgets.items()}
-    sel = {n: c for n, c in (closed or {}).items() if joints is None or n in joints}
+    sel = {n: c for n, c in closed.items() if joints is None or n in joints}
     if sel and task:
         for n, b in operating_budgets(obj, overlay, sel, category=category, labels=labels,
                                       actions=task_actions(task), free_moving=free_moving).items():
