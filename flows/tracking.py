@@ -28,7 +28,7 @@ SUMMARY_COLUMNS = (
 )  # fmt: skip
 
 
-def resolve_tracking_uri(project_root: Path | str, configured: str | None = None) -> str:
+def resolve_tracking_uri(project_root: Path | str, configured: str | None) -> str:
     """``MLFLOW_TRACKING_URI`` if set, else ``configured``, else the project's SQLite store."""
     return os.environ.get("MLFLOW_TRACKING_URI") or configured or "sqlite:///" + str((Path(project_root) / "mlflow.db").resolve())
 
