@@ -58,7 +58,7 @@ def write_png(path: Path, fig) -> Path:
     return atomic.write_bytes(path, buf.getvalue())
 
 
-def failure_mode_figure(df, title: str = ""):
+def failure_mode_figure(df, title: str):
     """A matplotlib Figure: stacked bars of failure modes per category (assets; ``none`` green)."""
     table = failure_modes(df, by="category")
     table = table.drop(index="total", errors="ignore")
@@ -81,14 +81,14 @@ def failure_mode_figure(df, title: str = ""):
     ax.set_xticklabels([plot_text(shorten(i, 40)) for i in table.index], rotation=30, ha="right", fontsize=8)  # names: never mathtext
     ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel("assets")
-    ax.set_title(plot_text(title) if title else "failure modes by category")
+    ax.set_title(plot_text(title))
     if modes:
         ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
     return fig
 
 
-def write_run_artifacts(df, out_dir: Path | str, title: str = "") -> dict[str, Path]:
+def write_run_artifacts(df, out_dir: Path | str, title: str) -> dict[str, Path]:
     """Write ``summary.csv``, ``summary.json`` (:func:`asset2sim.flows.queries.run_summary`)
     and ``failure_modes.png`` into ``out_dir`` atomically; returns name -> path."""
     out_dir = Path(out_dir)
