@@ -97,19 +97,6 @@ def _worker_name() -> str:
     return f"{socket.gethostname()}:{os.getpid()}"
 
 
-def job_config_hash(job: AssetJob, refine_hash: str) -> str:
-    """The catalog configuration hash of ``job``'s result (:func:`asset2sim.tasks.publish.contract.flow_config_hash`)."""
-    return flow_config_hash(
-        refine_hash,
-        refine_function=job.refine_function,
-        evaluate=job.evaluate,
-        probes=job.probes,
-        extras=job.extras,
-        reference=bool(job.reference_dir),
-        reference_scale=job.reference_scale,
-    )
-
-
 def finished_in_store(row: dict[str, Any] | None, input_hash: str) -> dict[str, Any] | None:
     """The skip rule (:func:`asset2sim.flows.job_records.finished_result`) for a row whose output is a local
     folder or a folder in an output store (:func:`asset2sim.flows.store.store_complete`)."""
@@ -122,7 +109,9 @@ def reusable(rec: Prepared, job: AssetJob, input_hash: str) -> Prepared:
     """``rec`` made the record of ``job``'s asset read (``ok``) with ``input_hash``: its configuration hashes and
     ``skip``, the earlier finished row to reuse (:func:`finished_in_store` of ``job.finished``; None: none)."""
     rec.ok, rec.input_hash, rec.refine_config_hash = True, input_hash, run_hash(RefineConfig(**job.config), job.prompt, job.category)
-    rec.config_hash = job_config_hash(job, rec.refine_config_hash)
+    rec.config_hash = flow_config_hash(rec.refine_config_hash, refine_function=job.refine_function, evaluate=job.evaluate,
+                                       probes=job.probes, extras=job.extras, reference=bool(job.reference_dir),
+                                       reference_scale=job.reference_scale)
     rec.skip = finished_in_store(job.finished.get(result_key(job.asset_id, input_hash, rec.config_hash)), input_hash)
     return rec
 

@@ -33,12 +33,6 @@ def resolve_tracking_uri(project_root: Path | str, configured: str | None) -> st
     return os.environ.get("MLFLOW_TRACKING_URI") or configured or "sqlite:///" + str((Path(project_root) / "mlflow.db").resolve())
 
 
-def summary_table(df):
-    """The run's summary table (:data:`SUMMARY_COLUMNS`, sorted by asset id)."""
-    cols = [c for c in SUMMARY_COLUMNS if c in df.columns]
-    return df.sort_values("asset_id")[cols].reset_index(drop=True)
-
-
 def new_figure(width: float, height: float):
     """``(fig, ax)``: a matplotlib Figure ``width`` x ``height`` in at 100 dpi (the Agg backend) with one Axes."""
     library_dirs.configure()  # before matplotlib's first import
@@ -89,10 +83,11 @@ def failure_mode_figure(df, title: str):
 
 
 def write_run_artifacts(df, out_dir: Path | str, title: str) -> dict[str, Path]:
-    """Write ``summary.csv``, ``summary.json`` (:func:`asset2sim.flows.queries.run_summary`)
+    """Write ``summary.csv`` (:data:`SUMMARY_COLUMNS` by asset id), ``summary.json`` (:func:`asset2sim.flows.queries.run_summary`)
     and ``failure_modes.png`` into ``out_dir`` atomically; returns name -> path."""
     out_dir = Path(out_dir)
-    paths = {"summary.csv": atomic.write_text(out_dir / "summary.csv", csv_text(summary_table(df)))}
+    table = df.sort_values("asset_id")[[c for c in SUMMARY_COLUMNS if c in df.columns]].reset_index(drop=True)
+    paths = {"summary.csv": atomic.write_text(out_dir / "summary.csv", csv_text(table))}
     paths["summary.json"] = atomic.write_json(out_dir / "summary.json", atomic.jsonable(run_summary(df)))
     paths["failure_modes.png"] = write_png(out_dir / "failure_modes.png", failure_mode_figure(df, title))
     return paths

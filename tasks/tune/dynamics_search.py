@@ -141,12 +141,9 @@ class DynamicsSearch:
         self.joints: dict[str, JointRecord] = {}
         self._last: RoundOutcome | None = None
 
-    def _speed(self, joint: str) -> float:
-        b = self.budgets.get(joint)
-        return float(b.speed) if b is not None and b.speed > 0 else 1.0
-
     def _cost(self, joint: str, s: Setting) -> float:
-        return s.cost(self._speed(joint))
+        b = self.budgets.get(joint)
+        return s.cost(float(b.speed) if b is not None and b.speed > 0 else 1.0)
 
     def record(self, overlay: Overlay, metrics: list[MetricResult]) -> RoundOutcome:
         """Record what a round measured at ``overlay``'s settings; returns the round's outcome."""
