@@ -68,7 +68,7 @@ class DriverPlan:
         return [j for j in self.plan.jobs if j.asset_id not in self.skips]
 
 
-def plan_driver(cat, name: str, *, ids=None, limit=None, force: bool = False, out: str | None = None) -> DriverPlan:
+def plan_driver(cat, name: str, *, ids: list[str] | None, limit: int | None, force: bool, out: str | None) -> DriverPlan:
     """Plan a run of dataset ``name`` and decide which assets are finished already (none when ``force``).
     Raises CatalogError as :func:`asset2sim.flows.run_plan.plan_run`."""
     started = datetime.now(timezone.utc)
