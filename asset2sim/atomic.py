@@ -239,6 +239,20 @@ def non_finite(obj: Any) -> str | None:
     return None
 
 
+def jsonable(obj: Any) -> Any:
+    """``obj`` (dicts, lists, tuples, numbers, numpy scalars) as strict JSON values: non-finite floats as None,
+    numpy scalars as Python numbers, tuples as lists, keys as strings."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if hasattr(obj, "item"):  # numpy scalars
+        return jsonable(obj.item())
+    return obj
+
+
 def write_json(path: Path | str, obj: Any, *, durable: bool = True) -> Path:
     """Write ``obj`` as strict JSON (no NaN/inf; raises ValueError), indented by 2, atomically (``durable`` as in
     :func:`write_bytes`)."""

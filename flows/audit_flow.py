@@ -70,7 +70,7 @@ def audit_summary(rows: list[AuditRow], files: dict[str, Path]) -> dict[str, Any
             "catalog": {k: str(v) for k, v in files.items()}}
 
 
-def log_audit_run(summary: dict[str, Any], files: dict[str, Path], out: Path, tracking_uri: str | None = None) -> str | None:
+def log_audit_run(summary: dict[str, Any], files: dict[str, Path], out: Path, tracking_uri: str | None) -> str | None:
     """One MLflow run in :data:`AUDIT_EXPERIMENT` (the store of ``tracking_uri``, else ``MLFLOW_TRACKING_URI``, else
     ``<out>/mlflow.db``): metrics ``assets``, ``<mode>`` counts and ``implausible_<quantity>``; the catalog files as
     artifacts. Returns the run id."""

@@ -233,7 +233,7 @@ class ResultCatalog:
         """``(dataset, run)`` partitions present, sorted (chronologically within a dataset)."""
         return sorted(self._partitions(dataset))
 
-    def _partitions(self, dataset: str | None = None) -> dict[tuple[str, str], _RunFiles]:
+    def _partitions(self, dataset: str | None) -> dict[tuple[str, str], _RunFiles]:
         """Every run partition (of ``dataset``) and its row files, from one recursive listing."""
         import pyarrow.fs as pafs
 

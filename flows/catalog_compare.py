@@ -263,7 +263,7 @@ def comparison_lines(cmp: RunComparison, max_flips: int = 20) -> list[str]:
     return lines + [f"  ! {r}" for r in cmp.reasons]
 
 
-def pass_rate_figure(history, current_run: str | None = None, title: str = ""):
+def pass_rate_figure(history, current_run: str, title: str):
     """A matplotlib Figure: the pass rates per run (all checks, rest
     stability, oscillation; fractions) in run order, ``current_run`` marked.
     ``history``: :func:`asset2sim.flows.queries.pass_rates_over_time`."""
@@ -273,16 +273,15 @@ def pass_rate_figure(history, current_run: str | None = None, title: str = ""):
                               ("oscillation_pass_rate", "oscillation", "#9c27b0")):
         ys = [None if v is None or v != v else 100 * float(v) for v in history[col]] if len(history) else []
         ax.plot(x, ys, marker="o", markersize=3, label=label, color=color)
-    if current_run is not None and len(history):
-        idx = [i for i, r in enumerate(history["run"]) if r == current_run]
-        for i in idx:
+    for i, r in enumerate(history["run"] if len(history) else []):
+        if r == current_run:
             ax.axvline(i, color="#999999", linestyle="--", linewidth=0.8)
     step = max(1, len(history) // 12)
     ax.set_xticks(x[::step])
     ax.set_xticklabels([plot_text(str(r)[:15]) for r in list(history["run"])[::step]], rotation=30, ha="right", fontsize=7)
     ax.set_ylim(-2, 102)
     ax.set_ylabel("pass rate (%)")
-    ax.set_title(plot_text(title) if title else "pass rate over runs")  # a dataset's name: never mathtext
+    ax.set_title(plot_text(title))  # a dataset's name: never mathtext
     ax.legend(fontsize=7, loc="lower left")
     fig.tight_layout()
     return fig
@@ -301,7 +300,7 @@ def write_comparison_artifacts(cmp: RunComparison, history, out_dir: Path | str)
     paths = {"comparison.json": atomic.write_text(out_dir / "comparison.json", json.dumps(data, indent=2) + "\n")}
     flips = pd.DataFrame([f.model_dump() for f in cmp.flips], columns=list(VerdictFlip.model_fields))
     paths["verdict_flips.csv"] = atomic.write_text(out_dir / "verdict_flips.csv", csv_text(flips))
-    fig = pass_rate_figure(history, cmp.run, title=f"{cmp.dataset}: pass rate over runs")
+    fig = pass_rate_figure(history, cmp.run, f"{cmp.dataset}: pass rate over runs")
     paths["pass_rate_over_runs.png"] = write_png(out_dir / "pass_rate_over_runs.png", fig)
     return paths
 

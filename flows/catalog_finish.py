@@ -27,14 +27,13 @@ class RunFinish:
 
 
 def finish_run(store: ResultCatalog, dataset: str, run: str, out_dir: Path | str,
-               settings: ResultsSettings | None = None) -> RunFinish:
+               settings: ResultsSettings) -> RunFinish:
     """Compact (``settings.compact``), compare with the previous run
     (``settings.regression``) and write the comparison's artifacts into ``out_dir``.
 
     Raises:
         OSError: the catalog cannot be read at all (the comparison needs it).
     """
-    settings = settings or ResultsSettings()
     errors: list[str] = []
     compaction = None
     if settings.compact:

@@ -7,7 +7,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import socket
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass
@@ -18,7 +17,7 @@ from asset2sim.flows import catalog_fs
 from asset2sim.flows.catalog import ResultCatalog
 from asset2sim.tasks.publish.contract import code_hash
 from asset2sim.flows.job_records import Prepared
-from asset2sim.flows.stages import reusable
+from asset2sim.flows.stages import reusable, worker_name
 
 #: The input index of a dataset, beside its run partitions (not a partition:
 #: the catalog's readers list only ``run=`` folders).
@@ -130,7 +129,7 @@ def _decide(job: Any, entry: InputEntry | None, fingerprint: str | None, code: s
         return None
     if entry.job_category != job.category or not job.finished:
         return None
-    rec = reusable(Prepared(worker=f"{socket.gethostname()}:{os.getpid()} (driver)", category=entry.category,
+    rec = reusable(Prepared(worker=f"{worker_name()} (driver)", category=entry.category,
                             links=entry.links, movable_joints=entry.movable_joints), job, entry.input_hash)
     if rec.skip is None:
         return None

@@ -68,7 +68,7 @@ class DriverPlan:
         return [j for j in self.plan.jobs if j.asset_id not in self.skips]
 
 
-def plan_driver(cat, name: str, *, ids=None, limit=None, force: bool = False, out: str | None = None) -> DriverPlan:
+def plan_driver(cat, name: str, *, ids: list[str] | None, limit: int | None, force: bool, out: str | None) -> DriverPlan:
     """Plan a run of dataset ``name`` and decide which assets are finished already (none when ``force``).
     Raises CatalogError as :func:`asset2sim.flows.run_plan.plan_run`."""
     started = datetime.now(timezone.utc)
@@ -325,7 +325,7 @@ def _track(log, run: _Run, summary: dict[str, Any], finish, df, run_out: Path) -
             upload_folder(run_out, summary["output_store"])
         except (OSError, ValueError) as exc:
             log.warning("run artifacts not uploaded to %s: %s: %s", summary["output_store"], type(exc).__name__, exc)
-    mlflow_run_id, tracking_error = _log_to_mlflow(run, df, summary, artifacts, extra_tags=finish.comparison.tags())
+    mlflow_run_id, tracking_error = _log_to_mlflow(run, df, summary, artifacts, finish.comparison.tags())
     if tracking_error:
         log.warning("MLflow tracking failed: %s", tracking_error)
     if run.info["flow_run_id"]:  # in a Prefect flow run
@@ -374,7 +374,7 @@ def _prefect_summary_artifact(summary: dict[str, Any], comparison, mlflow_run_id
         log.warning("Prefect summary artifact not created: %s", exc)
 
 
-def _fan_out(run: _Run, jobs: list[AssetJob], fingerprints: dict[str, str | None] | None = None) -> dict[str, Any]:
+def _fan_out(run: _Run, jobs: list[AssetJob], fingerprints: dict[str, str | None]) -> dict[str, Any]:
     """Run :func:`refine_assets` on a Dask task runner (nothing starts for no jobs); returns its timings (s) and
     ``inputs``, the input index entries of the assets it read."""
     if not jobs:
@@ -391,7 +391,7 @@ def _fan_out(run: _Run, jobs: list[AssetJob], fingerprints: dict[str, str | None
             retry_delay_seconds=cat.config.estimator.retry_delay_seconds,
             batch_size=prepare_batch_size(len(jobs), n_workers if not address else None),
             parent_flow_run_id=run.info["flow_run_id"],
-            fingerprints={j.asset_id: (fingerprints or {}).get(j.asset_id) for j in jobs},
+            fingerprints={j.asset_id: fingerprints.get(j.asset_id) for j in jobs},
         )
     fan_seconds = time.perf_counter() - t_fan
     startup = max(0.0, out["cluster_up"] - t_fan_epoch)
@@ -400,7 +400,7 @@ def _fan_out(run: _Run, jobs: list[AssetJob], fingerprints: dict[str, str | None
             "inputs": out.get("inputs", {})}
 
 
-def _log_to_mlflow(run: _Run, df, summary, artifacts, extra_tags: dict[str, str] | None = None) -> tuple[str | None, str | None]:
+def _log_to_mlflow(run: _Run, df, summary, artifacts, extra_tags: dict[str, str]) -> tuple[str | None, str | None]:
     """Log the run to MLflow when tracking is enabled: (MLflow run id, error text)."""
     cat, info, run_id, address = run.cat, run.info, run.run_id, run.address
     if not cat.config.tracking.enabled:
@@ -423,7 +423,7 @@ def _log_to_mlflow(run: _Run, df, summary, artifacts, extra_tags: dict[str, str]
             artifacts=artifacts,
             project_root=cat.project_root,
             settings=cat.config.tracking,
-            tags={"prefect.flow_run_id": info["flow_run_id"] or "", "asset2sim.run": run_id, **(extra_tags or {})},
+            tags={"prefect.flow_run_id": info["flow_run_id"] or "", "asset2sim.run": run_id, **extra_tags},
             started_at=info.get("requested_at") or info.get("started_at"), ended_at=time.time(),
         )
     except Exception as exc:  # the catalog is the record; tracking must not lose it

@@ -142,7 +142,7 @@ def _manifest_line(item: ManifestEntry | BadManifestRow) -> int:
     return item.error.line if isinstance(item, BadManifestRow) else (item.line or 0)
 
 
-def unrecorded_jobs(cat: Catalog, dataset: str, run_id: str | None = None) -> dict[str, list[dict[str, Any]]]:
+def unrecorded_jobs(cat: Catalog, dataset: str, run_id: str) -> dict[str, list[dict[str, Any]]]:
     """Per asset id, the job records (JobRecord dicts, newest run first) that earlier runs of ``dataset`` (all but
     ``run_id``) left in their work folders without writing the asset's catalog row."""
     store = ResultCatalog(cat.catalog_root)

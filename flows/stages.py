@@ -93,21 +93,9 @@ class AssetJob:
     metrics_uri: str | None = None
 
 
-def _worker_name() -> str:
+def worker_name() -> str:
+    """This worker's name in the records: ``host:pid``."""
     return f"{socket.gethostname()}:{os.getpid()}"
-
-
-def job_config_hash(job: AssetJob, refine_hash: str) -> str:
-    """The catalog configuration hash of ``job``'s result (:func:`asset2sim.tasks.publish.contract.flow_config_hash`)."""
-    return flow_config_hash(
-        refine_hash,
-        refine_function=job.refine_function,
-        evaluate=job.evaluate,
-        probes=job.probes,
-        extras=job.extras,
-        reference=bool(job.reference_dir),
-        reference_scale=job.reference_scale,
-    )
 
 
 def finished_in_store(row: dict[str, Any] | None, input_hash: str) -> dict[str, Any] | None:
@@ -122,7 +110,9 @@ def reusable(rec: Prepared, job: AssetJob, input_hash: str) -> Prepared:
     """``rec`` made the record of ``job``'s asset read (``ok``) with ``input_hash``: its configuration hashes and
     ``skip``, the earlier finished row to reuse (:func:`finished_in_store` of ``job.finished``; None: none)."""
     rec.ok, rec.input_hash, rec.refine_config_hash = True, input_hash, run_hash(RefineConfig(**job.config), job.prompt, job.category)
-    rec.config_hash = job_config_hash(job, rec.refine_config_hash)
+    rec.config_hash = flow_config_hash(rec.refine_config_hash, refine_function=job.refine_function, evaluate=job.evaluate,
+                                       probes=job.probes, extras=job.extras, reference=bool(job.reference_dir),
+                                       reference_scale=job.reference_scale)
     rec.skip = finished_in_store(job.finished.get(result_key(job.asset_id, input_hash, rec.config_hash)), input_hash)
     return rec
 
@@ -145,12 +135,12 @@ def publish_stage(job: AssetJob, refined: StageRecord) -> StageRecord:
     except (OSError, ValueError) as exc:
         return StageRecord(status="error", error=f"upload of {local} to {job.out_uri} failed: {type(exc).__name__}: {exc}",
                            error_type=type(exc).__name__, failure_mode="crash", seconds=time.perf_counter() - t0,
-                           worker=_worker_name())
+                           worker=worker_name())
     output_folder.remove_owned(local)  # the refine's own files; anything else in the folder stays
     for folder in (job.metrics_dir, job.work_dir):  # the flow's bookkeeping folders (under the run's .work and metrics)
         shutil.rmtree(folder, ignore_errors=True)
     return StageRecord(status="ok", value={"out_uri": job.out_uri, "files": up["files"], "bytes": up["bytes"], "clips": clips},
-                       seconds=time.perf_counter() - t0, worker=_worker_name())
+                       seconds=time.perf_counter() - t0, worker=worker_name())
 
 
 def stage_server_modules(job: AssetJob) -> tuple[str, ...]:
@@ -207,7 +197,7 @@ def prepare_asset(job: AssetJob) -> Prepared:
     folder (``resume``) can be reused; else write the job record into ``job.work_dir``. Returns the Prepared
     record (``ok`` False, ``invalid_input``, for an unreadable asset). Raises OSError: record not written."""
     t0, c0 = time.perf_counter(), time.thread_time()
-    rec = Prepared(worker=_worker_name())
+    rec = Prepared(worker=worker_name())
     try:
         config = RefineConfig(**job.config)
         reading = ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle)
@@ -380,8 +370,8 @@ def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
             value = refined_output(out_dir)
         except (OSError, ValueError) as exc:
             return StageRecord(status="error", error=f"{out_dir}: cannot read the finished report: {exc}",
-                               error_type=type(exc).__name__, seconds=0.0, worker=_worker_name())
-        return StageRecord(status="ok", value=value, worker=_worker_name(),
+                               error_type=type(exc).__name__, seconds=0.0, worker=worker_name())
+        return StageRecord(status="ok", value=value, worker=worker_name(),
                            seconds=float(sum(value.report.stage_seconds.values())))
     budget = job.time_limit_seconds - float(prepared.seconds or 0.0)
     rec = _run_stage(
@@ -399,7 +389,7 @@ def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
         },
         budget,
     )
-    rec.worker = _worker_name()
+    rec.worker = worker_name()
     if rec.status == "ok":
         rec.value = RefineOutput.model_validate(rec.value)
     if rec.failure_mode == RETRYABLE_FAILURE and str(job.config.get("estimator", "offline")) != "offline":

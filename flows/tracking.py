@@ -28,15 +28,9 @@ SUMMARY_COLUMNS = (
 )  # fmt: skip
 
 
-def resolve_tracking_uri(project_root: Path | str, configured: str | None = None) -> str:
+def resolve_tracking_uri(project_root: Path | str, configured: str | None) -> str:
     """``MLFLOW_TRACKING_URI`` if set, else ``configured``, else the project's SQLite store."""
     return os.environ.get("MLFLOW_TRACKING_URI") or configured or "sqlite:///" + str((Path(project_root) / "mlflow.db").resolve())
-
-
-def summary_table(df):
-    """The run's summary table (:data:`SUMMARY_COLUMNS`, sorted by asset id)."""
-    cols = [c for c in SUMMARY_COLUMNS if c in df.columns]
-    return df.sort_values("asset_id")[cols].reset_index(drop=True)
 
 
 def new_figure(width: float, height: float):
@@ -58,7 +52,7 @@ def write_png(path: Path, fig) -> Path:
     return atomic.write_bytes(path, buf.getvalue())
 
 
-def failure_mode_figure(df, title: str = ""):
+def failure_mode_figure(df, title: str):
     """A matplotlib Figure: stacked bars of failure modes per category (assets; ``none`` green)."""
     table = failure_modes(df, by="category")
     table = table.drop(index="total", errors="ignore")
@@ -81,33 +75,22 @@ def failure_mode_figure(df, title: str = ""):
     ax.set_xticklabels([plot_text(shorten(i, 40)) for i in table.index], rotation=30, ha="right", fontsize=8)  # names: never mathtext
     ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel("assets")
-    ax.set_title(plot_text(title) if title else "failure modes by category")
+    ax.set_title(plot_text(title))
     if modes:
         ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
     return fig
 
 
-def write_run_artifacts(df, out_dir: Path | str, title: str = "") -> dict[str, Path]:
-    """Write ``summary.csv``, ``summary.json`` (:func:`asset2sim.flows.queries.run_summary`)
+def write_run_artifacts(df, out_dir: Path | str, title: str) -> dict[str, Path]:
+    """Write ``summary.csv`` (:data:`SUMMARY_COLUMNS` by asset id), ``summary.json`` (:func:`asset2sim.flows.queries.run_summary`)
     and ``failure_modes.png`` into ``out_dir`` atomically; returns name -> path."""
     out_dir = Path(out_dir)
-    paths = {"summary.csv": atomic.write_text(out_dir / "summary.csv", csv_text(summary_table(df)))}
-    paths["summary.json"] = atomic.write_json(out_dir / "summary.json", _jsonable(run_summary(df)))
+    table = df.sort_values("asset_id")[[c for c in SUMMARY_COLUMNS if c in df.columns]].reset_index(drop=True)
+    paths = {"summary.csv": atomic.write_text(out_dir / "summary.csv", csv_text(table))}
+    paths["summary.json"] = atomic.write_json(out_dir / "summary.json", atomic.jsonable(run_summary(df)))
     paths["failure_modes.png"] = write_png(out_dir / "failure_modes.png", failure_mode_figure(df, title))
     return paths
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if hasattr(obj, "item"):  # numpy scalars
-        return _jsonable(obj.item())
-    return obj
 
 
 def flow_metrics(summary: dict[str, Any]) -> dict[str, float]:
@@ -152,10 +135,10 @@ def log_flow_run(
     params: dict[str, Any],
     artifacts: dict[str, Path],
     project_root: Path | str,
-    settings=None,
-    tags: dict[str, str] | None = None,
-    started_at: float | None = None,
-    ended_at: float | None = None,
+    settings: TrackingSettings,
+    tags: dict[str, str],
+    started_at: float | str | None,
+    ended_at: float,
 ) -> str:
     """Log one flow run and a nested run per asset row of ``df`` (its own start and end; for an asset refined in
     this run, :func:`asset_artifacts`) to MLflow; returns the MLflow run id.
@@ -163,7 +146,7 @@ def log_flow_run(
     ``summary``: :func:`asset2sim.flows.queries.run_summary` plus timings (s); ``params`` stringified (cut at
     500 characters); ``artifacts``: name -> file; ``project_root``: where the default store lives; ``settings``:
     :class:`asset2sim.flows.catalog_config.TrackingSettings`; ``started_at`` / ``ended_at``: the flow run's start and
-    end (epoch s; default now).
+    end (epoch s; the start may be ISO 8601 text).
 
     Raises:
         ImportError: MLflow is not installed (``pip install asset2sim[pipeline]``).
@@ -173,7 +156,6 @@ def log_flow_run(
     from mlflow.entities import Metric, Param, RunTag
     from mlflow.tracking import MlflowClient
 
-    settings = settings or TrackingSettings()
     project_root = Path(project_root)
     uri = resolve_tracking_uri(project_root, settings.uri)
     client = MlflowClient(tracking_uri=uri)
@@ -189,7 +171,7 @@ def log_flow_run(
     run_name = f"{params.get('dataset', '')}/{params.get('run', '')}".strip("/") or None
     outcome = "nothing_to_do" if not df.empty and bool((df["status"] == "skipped").all()) else "worked"
     parent = client.create_run(exp_id, run_name=run_name, start_time=_ms(started_at) or ts,
-                               tags={"asset2sim.kind": "flow_run", "asset2sim.outcome": outcome, **(tags or {})})
+                               tags={"asset2sim.kind": "flow_run", "asset2sim.outcome": outcome, **tags})
     rid = parent.info.run_id
     try:
         client.log_batch(

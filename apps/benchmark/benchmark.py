@@ -19,7 +19,8 @@ from asset2sim.inert import csv_text
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.apps.benchmark.baselines import available_methods, run_method
-from asset2sim.tasks.evaluation.evaluate import _jsonable, evaluate_asset
+from asset2sim.atomic import jsonable
+from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRow, ManifestRowError, read_manifest_rows
 from asset2sim.tasks.evaluation.plots import plot_method_summary
 from asset2sim.tasks.evaluation.benchmark_pages import render_benchmark_index, render_benchmark_summary
@@ -176,8 +177,8 @@ def write_benchmark_outputs(records: list[dict[str, Any]], methods: list[str], o
     import pandas as pd  # heavy; only the benchmark's tables need it
 
     out_dir = Path(out_dir)
-    records = _jsonable(records)
-    tables = _jsonable(benchmark_tables(records, methods))
+    records = jsonable(records)
+    tables = jsonable(benchmark_tables(records, methods))
     paths = {"results.json": write_json(out_dir / "results.json", {"meta": meta, "records": records}),
              "summary.json": write_json(out_dir / "summary.json", {"meta": meta, "tables": tables, "research": RESEARCH_NUMBERS})}
     df = pd.DataFrame(records)

@@ -25,12 +25,13 @@ from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import SimConventions
 from asset2sim.tasks.check.stroke import run_stroke
-from asset2sim.tasks.check.sweep import SweepConfig, effort_limit, joint_subtrees
+from asset2sim.tasks.check.sweep import SweepConfig, effort_limit
 from asset2sim.tasks.evaluation.clips import Trajectory
 from asset2sim.engines.source import SimObject
 from asset2sim.refined_asset import RefinedAsset
 from asset2sim.tasks.evaluation.folder_reading import EvaluationError, sim_object
 from asset2sim.tasks.geometry.closed_state import ClosedState
+from asset2sim.tasks.geometry.limits import subtrees
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.engines.base import session_root_options
@@ -110,7 +111,7 @@ def drive_limit(side: PhysicsSide, joint: str, open_range: float, conventions: S
     """
     session = _session(side, joint, conventions)
     try:
-        links = joint_subtrees(model_of(side.urdf)).get(joint, [session.joint_child[joint]])
+        links = subtrees(model_of(side.urdf)).get(joint, [session.joint_child[joint]])
         return effort_limit(session, joint, links, open_range, SweepConfig()) + float(session.held_physics().joints[joint].friction)
     finally:
         session.close()

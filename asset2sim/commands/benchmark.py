@@ -15,7 +15,7 @@ from pathlib import Path
 from asset2sim.commands._status import parse_engines
 from asset2sim.apps.benchmark.benchmark import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
 from asset2sim.commands import _output
-from asset2sim.tasks.evaluation.evaluate import _jsonable
+from asset2sim.atomic import jsonable
 from asset2sim.inert import markup
 
 NAME = "benchmark"
@@ -114,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
 
     records = run_benchmark(args.manifest, methods, out, rows=ids, seed=args.seed, engines=engines,
                             reports=not args.no_reports, progress=progress)
-    records = _jsonable(records)  # strict JSON, as results.json holds them (--compare reads that)
+    records = jsonable(records)  # strict JSON, as results.json holds them (--compare reads that)
     tables = benchmark_tables(records, methods)
     realism = _realism(out, methods)
     for summary in tables.values():

@@ -86,10 +86,6 @@ class JointSweep:
         return d
 
 
-#: Movable joint -> the links it moves (its child and everything below).
-joint_subtrees = limits.subtrees
-
-
 def _lever(session: SimSession, joint: str, links: list[str]) -> float:
     """Largest distance (m, >= 1e-3) of ``links``' collision vertices from ``joint``'s axis."""
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
@@ -138,7 +134,7 @@ def damping_caps(obj: SimObject, closed: dict[str, tuple[float, float, float]]) 
     cfg = SweepConfig()
     source, initial_state = obj.source, dict(obj.state)
     model = source.model()
-    subtrees = joint_subtrees(model)
+    subtrees = limits.subtrees(model)
     caps: dict[str, float] = {}
     with source.open("pybullet", fixed_root_options(initial_state, obj.conventions, dict(obj.springs))) as session:
         for name, (qc, _, rng) in closed.items():
@@ -306,7 +302,7 @@ def run_sweep(engine: str, obj: SimObject, closed: dict[str, tuple[float, float,
     cfg = config or SweepConfig()
     source, conv, initial_state = obj.source, obj.conventions, dict(obj.state)
     model = source.model()
-    subtrees = joint_subtrees(model)
+    subtrees = limits.subtrees(model)
     run = SweepRun(engine)
     springs = dict(obj.springs)
     # a held joint's spring load is taken by its hold: one session per set of acting springs

@@ -13,7 +13,6 @@ closed ends its ``report.json`` recorded, so ``asset2sim evaluate OUT`` gives th
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -22,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from asset2sim import output_folder
-from asset2sim.atomic import write_json
+from asset2sim.atomic import jsonable, write_json
 from asset2sim.engines.source import SimObject
 from asset2sim.inert import one_line
 from asset2sim.output_folder import EVALUATION_NAME, REPORT_HTML_NAME
@@ -410,19 +409,8 @@ def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True
     out_dir = Path(out_dir)
     data = ev.model_dump(mode="json", exclude={"seconds"})  # its wall time apart (timings.json): the same files, the same bytes
     data["urdf"] = portable_urdf(ev, out_dir)  # no absolute path: the same refine into two folders writes the same bytes
-    paths = {EVALUATION_NAME: write_json(out_dir / EVALUATION_NAME, _jsonable(data))}
+    paths = {EVALUATION_NAME: write_json(out_dir / EVALUATION_NAME, jsonable(data))}
     output_folder.merge_timings(out_dir, {"evaluation_seconds": ev.seconds})
     if report:
         paths[REPORT_HTML_NAME] = write_report(ev, out_dir / REPORT_HTML_NAME, clips=clips)
     return paths
-
-
-def _jsonable(obj: Any) -> Any:
-    """Replace non-finite floats by None (strict JSON); for ``model_dump(mode="json")`` output and plain records."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    return obj

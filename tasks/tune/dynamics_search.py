@@ -93,7 +93,7 @@ class RoundOutcome:
     """joint -> largest drift from its state (rad or m) over robust rest's trials and the rest test's state hold"""
 
 
-def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.OperatingBudget] | None = None) -> RoundOutcome:
+def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.OperatingBudget]) -> RoundOutcome:
     """The per-joint outcome of a post-check round's ``metrics``; a task counts
     against a joint as relief counts it (:func:`force_excess`)."""
     out = RoundOutcome()
@@ -117,7 +117,7 @@ def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.Oper
                 j = a["joint"]
                 tried[j] = tried.get(j, True) and bool(a.get("success"))
                 out.peak_force[j] = max(out.peak_force.get(j, 0.0), float(a.get("peak_operating_force_n") or 0.0))
-    out.task_bad = set(force_excess(metrics, budgets or {})[0])
+    out.task_bad = set(force_excess(metrics, budgets)[0])
     out.task_ok = {j for j, ok in tried.items() if ok and j not in out.task_bad}
     return out
 
@@ -141,12 +141,9 @@ class DynamicsSearch:
         self.joints: dict[str, JointRecord] = {}
         self._last: RoundOutcome | None = None
 
-    def _speed(self, joint: str) -> float:
-        b = self.budgets.get(joint)
-        return float(b.speed) if b is not None and b.speed > 0 else 1.0
-
     def _cost(self, joint: str, s: Setting) -> float:
-        return s.cost(self._speed(joint))
+        b = self.budgets.get(joint)
+        return s.cost(float(b.speed) if b is not None and b.speed > 0 else 1.0)
 
     def record(self, overlay: Overlay, metrics: list[MetricResult]) -> RoundOutcome:
         """Record what a round measured at ``overlay``'s settings; returns the round's outcome."""

@@ -39,7 +39,7 @@ class Tuned:
 
 
 def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfig, ws: Workspace, log: StageLog,
-                closed: dict[str, tuple[float, float, float]] | None = None) -> Tuned:
+               closed: dict[str, tuple[float, float, float]]) -> Tuned:
     """Stage 7: post-check ``candidate`` at its refined state (``closed``: closed ends at the output scale, for the
     sweep and robust rest) and escalate damping and friction up to ``config.max_escalation_rounds`` times while
     it fails. Returns the final overlay, the last check and the rounds (no overrides or closed ends)."""
@@ -68,7 +68,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         top = joint_dynamics.slide_cap(ctx, name, sum(overlay.links[ln].mass for ln in ctx.subtrees.get(name, []) if ln in overlay.links))
         if top is not None:
             caps[name] = min(caps.get(name, top), top)
-    floors = operating.tilt_floors(overlay, overlay, asset, robust_rest.RobustRestConfig().tilt)
+    floors = operating.tilt_floors(overlay, asset, robust_rest.RobustRestConfig().tilt)
 
     def escalated(chk: postcheck.PostCheck) -> bool:  # this loop escalates ``chk`` (the post-check then skips the sweep)
         return n < config.max_escalation_rounds and bool(escalate(overlay, chk, config.escalation_factor, caps, floors, dcaps).changes)
@@ -198,10 +198,8 @@ def kept_dynamics(clipped: Overlay, kept: Overlay) -> Overlay:
     return clipped.model_copy(update={"joints": joints})
 
 
-def escalate(overlay: Overlay, check: postcheck.PostCheck, factor: float,
-             friction_caps: dict[str, float] | None = None,
-             tilt_floors: dict[str, float] | None = None,
-             damping_caps: dict[str, float] | None = None) -> dynamics_search.Retuning:
+def escalate(overlay: Overlay, check: postcheck.PostCheck, factor: float, friction_caps: dict[str, float],
+             tilt_floors: dict[str, float], damping_caps: dict[str, float]) -> dynamics_search.Retuning:
     """Raise damping and friction of the joints that oscillate, sag or are not
     held by robust rest (all joints when the root is unstable and no joint is
     singled out). ``friction_caps`` (joint -> N*m or N) bound the friction,
@@ -236,17 +234,17 @@ def escalate(overlay: Overlay, check: postcheck.PostCheck, factor: float,
         damping = max(d.damping * f, 1e-4)
         friction = max(d.friction * f, 1e-3)
         note = f"; escalated x{f:.3g}"
-        floor = (tilt_floors or {}).get(name) if name in not_held else None
+        floor = tilt_floors.get(name) if name in not_held else None
         if floor is not None and floor > friction:
             friction = floor
             note += f" (friction raised to {floor:.3g} for robust rest's tilts)"
-        cap = (friction_caps or {}).get(name)
+        cap = friction_caps.get(name)
         if cap is not None and friction > cap:
             friction = max(cap, d.friction)
             note += f" (friction capped at {friction:.3g}: what a real operating force moves and its mechanism allows)"
         if d.inertia_axis:
             damping = min(damping, max(max_stable_damping(d.inertia_axis), d.damping))
-        dcap = (damping_caps or {}).get(name)
+        dcap = damping_caps.get(name)
         if dcap is not None and damping > dcap:
             damping = max(dcap, d.damping)
         if friction == d.friction and damping == d.damping:

@@ -98,43 +98,42 @@ def com_lever(overlay: Overlay, asset: AssetDescription, joint: str) -> float:
     return float(_off_axis(np.asarray(lp.com, float)[None, :], _unit_axis(asset, joint))[0])
 
 
-def friction_caps(overlay: Overlay, before: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry]) -> dict[str, float]:
+def friction_caps(overlay: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry]) -> dict[str, float]:
     """Probe's friction cap (N*m or N) per movable joint of ``overlay``
-    (module docstring), at least the friction of ``before`` (before escalation).
+    (module docstring), at least its friction (before escalation).
 
     Raises:
         KeyError: a joint of ``overlay`` is not in ``asset``.
     """
     caps: dict[str, float] = {}
-    for name, d, sub_mass, lever, floor in _movable(overlay, before, asset):
+    for name, d, sub_mass, lever in _movable(overlay, asset):
         cap = OPERABLE_SHARE * operating_effort(overlay, asset, name, geometry) - sub_mass * GRAVITY * lever
         if d.inertia_axis:  # above it the engine's friction motor locks the joint (a light handle)
             cap = min(cap, max_stable_friction(d.inertia_axis))
-        caps[name] = float(max(cap, floor))
+        caps[name] = float(max(cap, d.friction))
     return caps
 
 
-def tilt_floors(overlay: Overlay, before: Overlay, asset: AssetDescription, tilt: float) -> dict[str, float]:
+def tilt_floors(overlay: Overlay, asset: AssetDescription, tilt: float) -> dict[str, float]:
     """Tilt floor (N*m or N) per movable joint of ``overlay`` for a tilt of
-    ``tilt`` rad (module docstring), from the friction of ``before``.
+    ``tilt`` rad (module docstring), from its friction.
 
     Raises:
         KeyError: a joint of ``overlay`` is not in ``asset``.
     """
-    return {name: float(base + TILT_MARGIN * sub_mass * GRAVITY * lever * np.sin(abs(tilt)))
-            for name, _, sub_mass, lever, base in _movable(overlay, before, asset)}
+    return {name: float(d.friction + TILT_MARGIN * sub_mass * GRAVITY * lever * np.sin(abs(tilt)))
+            for name, d, sub_mass, lever in _movable(overlay, asset)}
 
 
-def _movable(overlay: Overlay, before: Overlay, asset: AssetDescription) -> Iterator[tuple[str, JointDynamics, float, float, float]]:
-    """(joint, dynamics, subtree mass kg, lever to the child's COM m (1 prismatic),
-    friction in ``before``) per movable joint of ``overlay``."""
+def _movable(overlay: Overlay, asset: AssetDescription) -> Iterator[tuple[str, JointDynamics, float, float]]:
+    """(joint, dynamics, subtree mass kg, lever to the child's COM m (1 prismatic)) per movable joint of ``overlay``."""
     for name, d in overlay.joints.items():
         jd = asset.joint(name)
         if jd.type not in ("revolute", "continuous", "prismatic"):
             continue
         sub_mass = sum(overlay.links[ln].mass for ln in subtree_links(asset, jd.child) if ln in overlay.links)
         lever = 1.0 if jd.type == "prismatic" else com_lever(overlay, asset, name)
-        yield name, d, sub_mass, lever, (before.joints[name].friction if name in before.joints else d.friction)
+        yield name, d, sub_mass, lever
 
 
 #: Coulomb friction between a free object and the ground: the SPEC ground friction of task execution.
@@ -293,7 +292,7 @@ class _Tightest:
 
 def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[float, float, float],
               paths: list[tuple[str, np.ndarray]], grasp: _Grasp, range_of: tuple[ForceRange, str],
-              ground: tuple[float, float] | None, spring: Spring | None = None) -> _Tightest:
+              ground: tuple[float, float] | None, spring: Spring | None) -> _Tightest:
     """The tightest budget over ``paths`` ((action, opening fractions) from :func:`_paths`); Q of
     gravity and of the joint's ``spring``.
     ``range_of``: the part's operating range and where it comes from; ``ground``: (mu, whole mass kg) where the
@@ -344,8 +343,7 @@ class _GraspMotion:
     lever: float | None
 
 
-def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: bool,
-                  model: UrdfModel | None = None) -> _GraspMotion:
+def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: bool, model: UrdfModel) -> _GraspMotion:
     """How the grasp point moves at the session's state."""
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
     lo, Rl = session.link_frame(grasp.link)
@@ -415,20 +413,19 @@ def bound_overlay(overlay: Overlay, budgets: dict[str, OperatingBudget]) -> tupl
 @dataclass
 class OperatingLimits:
     """What escalation keeps to: joint -> friction cap and damping cap (N m
-    or N; N m s/rad or N s/m), the budgets they come from, and notes."""
+    or N; N m s/rad or N s/m) and the budgets they come from."""
 
     friction_caps: dict[str, float]
     damping_caps: dict[str, float]
     budgets: dict[str, OperatingBudget] = field(default_factory=dict)
-    notes: list[str] = field(default_factory=list)
     hand_caps: dict[str, float] = field(default_factory=dict)
     """joint -> the friction (N m or N) a hand inside the part's range still moves both ways over the whole range
     (the operability tier's): no step of the dynamics search goes above it"""
 
 
 def operating_limits(obj: SimObject, overlay: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry],
-                     closed: dict[str, tuple[float, float, float]] | None, *, category: str | None, task: str | None,
-                     free_moving: bool, joints: list[str] | None = None) -> OperatingLimits:
+                     closed: dict[str, tuple[float, float, float]], *, category: str | None, task: str | None,
+                     free_moving: bool, joints: list[str] | None) -> OperatingLimits:
     """Friction and damping caps of every movable joint of the written asset ``obj`` (its root as mounted): the
     operating budget (:func:`operating_budgets`) of a hand inside the part's real
     range, both ways with the root fixed, for every handled part
@@ -441,22 +438,21 @@ def operating_limits(obj: SimObject, overlay: Overlay, asset: AssetDescription, 
         EngineUnavailable; whatever loading ``obj.source`` raises.
     """
     labels = link_labels(asset)
-    hand = {n: c for n, c in (closed or {}).items() if handled(labels.get(asset.joint(n).child))}
+    hand = {n: c for n, c in closed.items() if handled(labels.get(asset.joint(n).child))}
     # every handled part, both ways, root fixed (the operability tier's hand); a task's joints also as its gripper meets them
     budgets = operating_budgets(dataclasses.replace(obj, fixed_base=True), overlay, hand, category=category,
                                 labels=labels, free_moving=free_moving, whole=True) if hand else {}
     hand_caps = {n: b.friction_cap for n, b in budgets.items()}
-    sel = {n: c for n, c in (closed or {}).items() if joints is None or n in joints}
+    sel = {n: c for n, c in closed.items() if joints is None or n in joints}
     if sel and task:
         for n, b in operating_budgets(obj, overlay, sel, category=category, labels=labels,
                                       actions=task_actions(task), free_moving=free_moving).items():
             if n not in budgets or b.budget < budgets[n].budget:
                 budgets[n] = b
-    caps = friction_caps(overlay, overlay, asset, geometry)
+    caps = friction_caps(overlay, asset, geometry)
     caps.update({n: b.friction_cap for n, b in budgets.items()})
     dcaps = {n: b.damping_cap for n, b in budgets.items()}
     if closed:  # what the joint sweep's drive still moves through the range in time
         for name, c in sweep.damping_caps(obj, closed).items():
             dcaps[name] = min(c, dcaps.get(name, c))
-    return OperatingLimits(friction_caps=caps, damping_caps=dcaps, budgets=budgets,
-                           notes=[b.conflict for b in budgets.values() if b.conflict], hand_caps=hand_caps)
+    return OperatingLimits(friction_caps=caps, damping_caps=dcaps, budgets=budgets, hand_caps=hand_caps)

@@ -111,7 +111,7 @@ def test_sweep_is_skipped_only_on_a_round_that_is_escalated_whatever_it_says(fau
     cfg = RefineConfig()
     rec = RecordedRuns()
     def escalated(chk):  # as refine's loop: another round whenever escalation changes something
-        return bool(escalate(ov, chk, cfg.escalation_factor).changes)
+        return bool(escalate(ov, chk, cfg.escalation_factor, {}, {}, {}).changes)
 
     obj = postcheck.overlay_object(UrdfFile(out / "mobility.urdf"), state, ov, cfg.sim)
     early = postcheck.run_post_check(obj, cfg, closed=closed, escalated=escalated, recorded=rec)
@@ -125,7 +125,7 @@ def test_sweep_is_skipped_only_on_a_round_that_is_escalated_whatever_it_says(fau
     assert postcheck.sweep_not_run(early.metrics) and not postcheck.sweep_not_run(last.metrics)
     others = [e for e in cfg.engines if e != "pybullet"]
     assert early.engine_results == {} and sorted(last.engine_results) == sorted(others)
-    assert escalate(ov, early, cfg.escalation_factor) == escalate(ov, last, cfg.escalation_factor)
+    assert escalate(ov, early, cfg.escalation_factor, {}, {}, {}) == escalate(ov, last, cfg.escalation_factor, {}, {}, {})
     assert rec.hits == 1  # robust rest of the same files taken from the first check
 
 

@@ -9,7 +9,8 @@ from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import available_engines, open_session
 from tests.contract_asset import write_contract_asset
 from asset2sim.tasks.check.sweep import (DAMPED_SPEED_MARGIN, SweepConfig, blocked_positions, damping_caps, effort_limit,
-                                         joint_subtrees, run_sweep, sweep_joint, sweep_metric, sweep_score)
+                                         run_sweep, sweep_joint, sweep_metric, sweep_score)
+from asset2sim.tasks.geometry.limits import subtrees
 from asset2sim.urdf import read_urdf
 from tests.conftest import SHARED, needs_shared
 
@@ -40,9 +41,9 @@ def test_a_post_in_the_way_keeps_the_lid_from_shutting_until_it_is_lowered(tmp_p
     first, as a hand would, and the lid then shuts; range_note says so."""
     a = write_contract_asset(tmp_path, lid_angle=0.4, post_height=0.03)
     state = {"lid_hinge": 0.4, "post_slide": 0.03}
-    subtrees = joint_subtrees(read_urdf(a.urdf))
+    subs = subtrees(read_urdf(a.urdf))
     with open_session(engine, a.urdf, SessionOptions(initial_state=state, fixed_base=True, gravity=False, ground=False)) as s:
-        held = sweep_joint(s, "lid_hinge", closed=0.0, direction=1.0, open_range=2.0, links=subtrees["lid_hinge"], initial_state=state)
+        held = sweep_joint(s, "lid_hinge", closed=0.0, direction=1.0, open_range=2.0, links=subs["lid_hinge"], initial_state=state)
     assert not held.passed
     assert held.reached_closed > 0.05 or held.max_penetration >= 0.005
     lid = sweep_metric(run_sweep(engine, SimObject(UrdfFile(a.urdf), state), CLOSED)).details["joints"]["lid_hinge"]
@@ -63,7 +64,7 @@ def test_a_joint_limit_beyond_the_geometry_fails(tmp_path):
 
 def test_subtrees_follow_the_kinematic_tree(tmp_path):
     a = write_contract_asset(tmp_path)
-    sub = joint_subtrees(read_urdf(a.urdf))
+    sub = subtrees(read_urdf(a.urdf))
     assert sub == {"lid_hinge": ["lid"], "post_slide": ["post"]}
 
 
@@ -239,7 +240,7 @@ def test_a_lid_stopped_on_its_way_back_by_a_raised_seat_is_swept_with_the_seat_c
     with open_session("pybullet", res.out_dir / "mobility.urdf", SessionOptions(initial_state=state, fixed_base=True, gravity=False, ground=False)) as s:
         held = sweep_joint(s, "joint_2", closed=lid["q_closed"], direction=1.0 if lid["q_far"] > lid["q_closed"] else -1.0,
                            open_range=lid["open_range"],
-                           links=joint_subtrees(read_urdf(res.out_dir / "mobility.urdf"))["joint_2"], initial_state=state)
+                           links=subtrees(read_urdf(res.out_dir / "mobility.urdf"))["joint_2"], initial_state=state)
     assert held.time_open is not None and held.time_close is None and not held.passed
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from asset2sim.tasks.assemble.sliding_clearance import RUNNING_CLEARANCE
-from asset2sim.tasks.check.sweep import joint_subtrees
+from asset2sim.tasks.geometry.limits import subtrees
 from asset2sim.tasks.state import clearance
 from asset2sim.urdf import read_urdf
 from tests.conftest import SHARED, needs_shared
@@ -52,7 +52,7 @@ def write_channel(root: Path, side_gap: float, end_stop: bool = False) -> Path:
 
 def _repair(urdf: Path):
     m = read_urdf(urdf)
-    return m, clearance.clearance_for_blocked(m, urdf, {"slide": 0.0}, {"slide": 0.0}, joint_subtrees(m))
+    return m, clearance.clearance_for_blocked(m, urdf, {"slide": 0.0}, {"slide": 0.0}, subtrees(m))
 
 
 def test_sat_gap_of_two_boxes():
@@ -115,7 +115,7 @@ def write_stacked_drawers(root: Path) -> Path:
 def test_touching_joints_are_the_joints_between_the_pair(tmp_path):
     model = read_urdf(write_stacked_drawers(tmp_path))
     state = {"slide_lower": 0.0, "slide_upper": 0.02}
-    subs = joint_subtrees(model)
+    subs = subtrees(model)
     assert clearance.touching_joints(model, [("lower", "upper")], state, subs) == state
     assert clearance.touching_joints(model, [("upper", "frame")], state, subs) == {"slide_upper": 0.02}
     assert clearance.touching_joints(model, [("frame", "base")], state, subs) == {}  # no movable joint between them
@@ -131,8 +131,8 @@ def test_two_touching_drawers_are_given_clearance_once(tmp_path):
     urdf = write_stacked_drawers(tmp_path)
     model = read_urdf(urdf)
     state = {"slide_lower": 0.0, "slide_upper": 0.02}
-    rep = clearance.clearance_for_blocked(model, urdf, clearance.touching_joints(model, [("lower", "upper")], state, joint_subtrees(model)),
-                                          state, joint_subtrees(model))
+    rep = clearance.clearance_for_blocked(model, urdf, clearance.touching_joints(model, [("lower", "upper")], state, subtrees(model)),
+                                          state, subtrees(model))
     assert len(rep.notes) == 1 and set(rep.pieces) == {"lower"}  # the upper drawer then sees the repaired piece: not squeezed again
     (lower,) = rep.pieces["lower"]
     assert abs(np.ptp(lower[:, 2]) - (0.02 - RUNNING_CLEARANCE)) < 1e-12 and abs(lower[:, 2].min() - 0.005) < 1e-12

@@ -47,11 +47,11 @@ def test_push_lever_is_the_far_corner_and_the_cap_leaves_the_probe_a_margin(lapt
     total = sum(lp.mass for lp in ov.links.values())
     f_max = max(ProbeConfig().min_force, ProbeConfig().force_factor * total * operating.GRAVITY)
     assert operating.operating_effort(ov, asset, name, geometry) == pytest.approx(f_max * far)
-    cap = operating.friction_caps(ov, ov, asset, geometry)[name]
+    cap = operating.friction_caps(ov, asset, geometry)[name]
     load = ov.links[asset.joint(name).child].mass * operating.GRAVITY * operating.com_lever(ov, asset, name)
     assert cap == pytest.approx(max(operating.OPERABLE_SHARE * f_max * far - load, ov.joints[name].friction))
     # the cap never lowers a friction that is already above it
-    assert operating.friction_caps(ov, ov.model_copy(update={"joints": {name: ov.joints[name].model_copy(
+    assert operating.friction_caps(ov.model_copy(update={"joints": {name: ov.joints[name].model_copy(
         update={"friction": 10 * cap})}}), asset, geometry)[name] == pytest.approx(10 * cap)
 
 
@@ -177,13 +177,13 @@ def test_tilt_floor_adds_the_tilts_gravity_load(laptop, tmp_path, refine_once):
     tilt = np.radians(5.0)
     m = ov.links[asset.joint(name).child].mass
     want = ov.joints[name].friction + operating.TILT_MARGIN * m * operating.GRAVITY * operating.com_lever(ov, asset, name) * np.sin(tilt)
-    assert operating.tilt_floors(ov, ov, asset, tilt)[name] == pytest.approx(want)
-    assert operating.tilt_floors(ov, ov, asset, 0.0)[name] == pytest.approx(ov.joints[name].friction)
+    assert operating.tilt_floors(ov, asset, tilt)[name] == pytest.approx(want)
+    assert operating.tilt_floors(ov, asset, 0.0)[name] == pytest.approx(ov.joints[name].friction)
     # a sliding drawer: its weight times sin(tilt), whatever its lever
     cab = demo_assets.build_two_drawer_cabinet(tmp_path / "cab")
     cres = refine_once(cab, "A small two-drawer cabinet with both drawers closed.", extras=False)
     casset = extract_asset(cab)
-    floors = operating.tilt_floors(cres.overlay, cres.overlay, casset, tilt)
+    floors = operating.tilt_floors(cres.overlay, casset, tilt)
     for j in casset.movable_joints():
         assert j.type == "prismatic"
         mass = cres.overlay.links[j.child].mass
