@@ -7,7 +7,6 @@ rad, at scale 1 in the input asset's frames (``docs/design/model_backends.md``).
 from __future__ import annotations
 
 import base64
-import io
 import json
 from typing import Any
 
@@ -18,6 +17,7 @@ from asset2sim.tasks.synthesize import request_apply
 from asset2sim.tasks.interpret.part_priors import material_for
 from asset2sim.tasks.interpret.size_priors import target_size
 from asset2sim.tasks.geometry import render
+from asset2sim.tasks.geometry.render_images import png_bytes
 from asset2sim.tasks.synthesize import estimate
 from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
@@ -145,11 +145,7 @@ How your answer is used and what each field means (SI units, angles in radians):
 
 def png_data_url(image: np.ndarray) -> str:
     """``data:image/png;base64,...`` of an RGB(A) uint8 (H, W, 3|4) image."""
-    from PIL import Image
-
-    buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(image)).save(buf, format="PNG", optimize=False)
-    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+    return "data:image/png;base64," + base64.b64encode(png_bytes(image)).decode("ascii")
 
 
 def render_closed_views(ctx: EstimationContext, views: tuple[str, ...] = VIEWS, size: tuple[int, int] = (384, 384)) -> tuple[dict[str, str], list[str]]:
