@@ -17,7 +17,7 @@ from asset2sim.tasks.geometry.closed_state import subtree_links
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.state.balance import Balance, _com, _link_world, _signed_margin, measure_balance
-from asset2sim.tasks.synthesize import physics
+from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.engines.source import SimSource
 
 __all__ = ["PART_MASS_FRACTION", "design_for_stability", "envelope_masses"]
@@ -226,9 +226,6 @@ def _with_masses(overlay: Overlay, new: dict[str, float], links: list[str]) -> O
     for ln in links:
         lp = ov.links[ln]
         f = new[ln] / lp.mass
-        ov.links[ln] = lp.model_copy(update={
-            "mass": new[ln],
-            "inertia": lp.inertia.model_copy(update={k: getattr(lp.inertia, k) * f for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}),
-            "source": lp.source + f"; mass x{f:.3g} for stability by design",
-        })
+        scaled = request_apply.scaled_link(lp, f, f"; mass x{f:.3g} for stability by design")
+        ov.links[ln] = scaled.model_copy(update={"mass": new[ln]})
     return ov
