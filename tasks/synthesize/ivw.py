@@ -14,12 +14,10 @@ from typing import Iterable, Mapping
 
 @dataclass(frozen=True)
 class Fused:
-    """A fused estimate: ``value``, ``std``, ``n`` estimates and their normalized ``weights`` (input order)."""
+    """A fused estimate: ``value`` and ``std``."""
 
     value: float
     std: float
-    n: int
-    weights: tuple[float, ...]
 
 
 def fuse(estimates: Iterable[tuple[float, float]]) -> Fused:
@@ -41,7 +39,7 @@ def fuse(estimates: Iterable[tuple[float, float]]) -> Fused:
     if not math.isfinite(W) or W <= 0:
         raise ValueError(f"weights sum to {W}; stds too small to weight ({min(s for _, s in pairs)})")
     x_hat = math.fsum(wi * v for wi, (v, _) in zip(w, pairs)) / W
-    return Fused(x_hat, 1.0 / math.sqrt(W), len(pairs), tuple(wi / W for wi in w))
+    return Fused(x_hat, 1.0 / math.sqrt(W))
 
 
 def fuse_all(groups: Mapping[str, Iterable[tuple[float, float]]]) -> dict[str, Fused]:
