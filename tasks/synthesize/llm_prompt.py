@@ -22,6 +22,7 @@ from asset2sim.tasks.synthesize import estimate
 from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.inert import one_line
+from asset2sim.package_data import package_text
 
 DESCRIPTION_MARK = "ASSET DESCRIPTION (JSON):"
 """Line preceding the structured description in the user message."""
@@ -114,33 +115,8 @@ def describe(ctx: EstimationContext, kin: SimSession) -> dict[str, Any]:
     }
 
 
-SYSTEM_PROMPT = """You turn an articulated 3D asset into an interaction-ready simulation asset.
-You get renders of the object in its closed state (views named before each image; the render scale is arbitrary) and a
-structured description (JSON) from mesh analysis at scale 1. Answer with exactly ONE JSON object that follows the JSON
-schema below: every field present, no other fields, no prose, no Markdown.
-
-How your answer is used and what each field means (SI units, angles in radians):
-- scale: the uniform factor s that gives the object the real-world size the request asks for
-  (real dimensions = closed_extents_m * s; typical_dims_m is the usual size of such an object for this request).
-- links: one entry per link that has geometry, names exactly as given. material, density (kg/m^3), shell (true for hollow
-  molded / sheet / panel parts), wall_thickness (m). The mass will be computed from the geometry:
-  solid m = volume_m3 * density * s^3, shell m = area_m2 * s^2 * wall_thickness * density. mass: your own estimate (kg) of
-  that link at the requested size.
-- joints: one entry per movable joint, names exactly as given. band: the state the request asks for (fraction of the
-  opening range from the closed end: closed 0, slightly_open 0.2, quarter 0.25, halfway 0.5, mostly 0.75, fully 1);
-  joints the request does not address stay closed. position: that state's joint value
-  q = closed_position + opening_direction * fraction * opening_range (prismatic: times s, in metres).
-  damping_level low / moderate / high; holds_position (friction must hold the state against gravity); spring (a return
-  spring is intended); stiff; free_moving. damping, friction, stiffness: numbers for the scaled object
-  (revolute N*m*s/rad, N*m, N*m/rad; prismatic N*s/m, N, N/m); stiffness 0 unless a spring is intended.
-- Every number with a std is your estimate and its 1-sigma uncertainty in the same unit (std > 0).
-- lateral_friction and restitution: the object's contact material.
-- notes: size reasoning, material reasoning, mass arithmetic.
-- request_parse also holds what the request asks in numbers; honour it exactly: a joint's requested_opening_fraction
-  (when not null, its position is at that fraction from the closed end), sizes_m (the scale gives these dimensions),
-  masses_and_materials (kg; material keys with their density), joint_parameters (SI values to use as given). Your overlay
-  is checked against them.
-"""
+#: The system prompt of an overlay request (the reply format and how each field is used).
+SYSTEM_PROMPT = package_text(__package__, "overlay_prompt.txt")
 
 
 def png_data_url(image: np.ndarray) -> str:
