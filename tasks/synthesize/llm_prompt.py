@@ -161,13 +161,7 @@ def proposal_messages(ctx: EstimationContext, state: dict[str, float], pairs: li
     m) and the colliding link ``pairs`` (``depth_m`` in m), values rounded to 1e-6."""
     labels = {j.name: ctx.asset.link(j.child).semantic_label for j in ctx.asset.movable_joints()}
     types = {j.name: j.type for j in ctx.asset.movable_joints()}
-    text = (
-        "The physics simulator could not remove all self-penetration of this articulated object "
-        "by searching joint positions near the requested state. Propose up to 4 alternative "
-        "initial states (joint positions; radians for revolute, metres for prismatic; each inside "
-        "its allowed interval) that might separate the colliding parts. Reply with JSON only, "
-        "following this schema:\n" + json.dumps(schema)
-    )
+    text = package_text(__package__, "proposal_prompt.txt") + json.dumps(schema)
     info = {
         "category": ctx.category,
         "request": ctx.request.text,
