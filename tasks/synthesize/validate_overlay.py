@@ -35,18 +35,19 @@ _SCALE_TEXT = ", ".join(f"{x:.0e}".replace("e+0", "e").replace("e-0", "e-").repl
 
 
 class OverlayInvalid(ValueError):
-    """The overlay has issues the policy treats as fatal; ``issues`` lists all."""
+    """The overlay has unfixed errors (``errors``: one line each); ``issues`` lists all."""
 
     def __init__(self, issues: list[ValidationIssue]):
         self.issues = issues
-        fatal = [i for i in issues if i.severity == "error" and not i.fixed]
-        super().__init__("invalid overlay: " + "; ".join(f"{i.code} at {i.where}: {i.message}" for i in fatal))
+        self.errors = [f"{i.code} at {i.where}: {i.message}" for i in issues if i.severity == "error" and not i.fixed]
+        super().__init__("invalid overlay: " + "; ".join(self.errors))
 
 
 def _raise_fatal(issues: list[ValidationIssue]) -> None:
     """Raise :class:`OverlayInvalid` when any issue is an unfixed error."""
-    if any(i.severity == "error" and not i.fixed for i in issues):
-        raise OverlayInvalid(issues)
+    invalid = OverlayInvalid(issues)
+    if invalid.errors:
+        raise invalid
 
 
 #: Lightest a link may be, as a fraction of the object's total mass: iterative contact solvers converge slowly
