@@ -115,7 +115,7 @@ def make_direct(row: ManifestRow, out_dir: Path | str, *, seed: int = 0, estimat
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
     try:
-        with build_context(row.folder, row.prompt, category=row.category or None, asset_id=row.id, settings={"seed": seed}) as (ctx, kin):
+        with build_context(row.folder, row.prompt, category=row.category or None, asset_id=row.id) as (ctx, kin):
             result = backends.get_estimator(estimator).estimate(ctx, kin)
         overlay = result.overlay
         prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}

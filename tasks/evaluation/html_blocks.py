@@ -6,7 +6,6 @@ render (H, W, 3)) and colour-coded verdict cells; text HTML-escaped.
 from __future__ import annotations
 
 import base64
-import io
 import math
 from typing import Any, Iterable
 
@@ -15,6 +14,7 @@ import numpy as np
 from asset2sim.inert import CSP_META, html_text
 from asset2sim.tasks.evaluation import plots
 from asset2sim.package_data import package_text, package_yaml
+from asset2sim.tasks.geometry.render_images import png_bytes
 
 
 #: The reports' style sheet (``report.css`` beside this module), inlined in every page.
@@ -69,17 +69,6 @@ def verdict_cell(passed: bool | None) -> str:
     return '<td class="pass">pass</td>' if passed else '<td class="fail">FAIL</td>'
 
 
-def array_png(arr: np.ndarray) -> bytes:
-    from PIL import Image
-
-    a = np.asarray(arr)
-    if a.dtype != np.uint8:
-        a = np.clip(a * (255.0 if a.max() <= 1.0 else 1.0), 0, 255).astype(np.uint8)
-    buf = io.BytesIO()
-    Image.fromarray(a).save(buf, format="PNG")
-    return buf.getvalue()
-
-
 def figure(image: np.ndarray, caption: str) -> str:
     """A rendered view (H, W, 3) uint8 with its caption."""
-    return f"<figure>{img_tag(array_png(image), caption)}<figcaption class='small'>{html_text(caption)}</figcaption></figure>"
+    return f"<figure>{img_tag(png_bytes(image), caption)}<figcaption class='small'>{html_text(caption)}</figcaption></figure>"

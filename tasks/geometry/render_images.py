@@ -15,17 +15,22 @@ from asset2sim.atomic import write_bytes
 BACKGROUND: tuple[int, int, int] = (236, 238, 242)
 
 
+def png_bytes(image: np.ndarray) -> bytes:
+    """PNG file bytes of an RGB(A) uint8 image (H, W, 3|4)."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(image)).save(buf, format="PNG", optimize=False)
+    return buf.getvalue()
+
+
 def write_png(path: Path | str, image: np.ndarray) -> Path:
     """Write an RGB(A) uint8 image (H, W, 3|4) as PNG, atomically. Returns the path.
 
     Raises:
         OSError: the file cannot be written.
     """
-    from PIL import Image
-
-    buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(image)).save(buf, format="PNG", optimize=False)
-    return write_bytes(path, buf.getvalue())
+    return write_bytes(path, png_bytes(image))
 
 
 def render_contact_sheet(images: Mapping[str, np.ndarray], *, title: str | None = None) -> np.ndarray:

@@ -11,13 +11,14 @@ from functools import partial
 
 import numpy as np
 
+from asset2sim.package_data import package_yaml
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.geometry.closed_state import subtree_links
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.state.balance import Balance, _com, _link_world, _signed_margin, measure_balance
-from asset2sim.tasks.synthesize import physics
+from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.engines.source import SimSource
 
 __all__ = ["PART_MASS_FRACTION", "design_for_stability", "envelope_masses"]
@@ -32,27 +33,10 @@ class PartFraction:
     source: str
 
 
-#: (category, canonical part label) -> the mass fraction of that part.
+#: (category, canonical part label) -> the mass fraction of that part (``part_mass_fractions.yaml``, with sources).
 PART_MASS_FRACTION: dict[tuple[str, str], PartFraction] = {
-    ("Laptop", "screen"): PartFraction(
-        0.25, 0.40,
-        "laptop lids (display panel, cover, hinges, antennas) weigh about 0.3-0.6 kg of 1.2-2.0 kg 13-15 in laptops, "
-        "the base carrying the battery (a 50-70 Wh Li-ion pack alone is ~0.2-0.35 kg), keyboard, mainboard and "
-        "cooling (teardown part weights, e.g. iFixit teardowns of the MacBook Air 13 and Dell XPS 13; replacement "
-        "display-assembly listings); Apple MacBook Air 13 (M1) 1.29 kg total",
-    ),
-    ("Laptop", "lid"): PartFraction(0.25, 0.40, "as the laptop screen (the lid is the display half)"),
-    ("Microwave", "door"): PartFraction(
-        0.08, 0.20,
-        "countertop microwave doors (glass, metal screen, frame) are ~1-2.5 kg of 10-18 kg ovens (manufacturer "
-        "replacement door assemblies and spec sheets, e.g. Panasonic NN-SN, Whirlpool WMC)",
-    ),
-    ("Oven", "door"): PartFraction(
-        0.10, 0.25,
-        "oven doors (triple glazing, frame) are ~5-12 kg of 35-70 kg wall ovens and ranges (manufacturer "
-        "replacement door assemblies and spec sheets)",
-    ),
-    ("Toaster", "lever"): PartFraction(0.01, 0.05, "toaster carriage levers are a few tens of grams of a 1-2 kg toaster (spec sheets)"),
+    (category, label): PartFraction(**share)
+    for category, parts in package_yaml(__package__, "part_mass_fractions.yaml").items() for label, share in parts.items()
 }
 
 
@@ -226,9 +210,6 @@ def _with_masses(overlay: Overlay, new: dict[str, float], links: list[str]) -> O
     for ln in links:
         lp = ov.links[ln]
         f = new[ln] / lp.mass
-        ov.links[ln] = lp.model_copy(update={
-            "mass": new[ln],
-            "inertia": lp.inertia.model_copy(update={k: getattr(lp.inertia, k) * f for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}),
-            "source": lp.source + f"; mass x{f:.3g} for stability by design",
-        })
+        scaled = request_apply.scaled_link(lp, f, f"; mass x{f:.3g} for stability by design")
+        ov.links[ln] = scaled.model_copy(update={"mass": new[ln]})
     return ov

@@ -54,8 +54,6 @@ class EstimationContext:
     asks a volume ("a 500 ml bottle"), else None."""
     root_rotation: Any = None
     """(3, 3) resting-pose rotation the output will carry (``tasks.state.pose``), or None."""
-    settings: dict[str, Any] = field(default_factory=dict)
-    """Knobs for the estimator (e.g. ``seed``); read-only for estimators."""
     task: str | None = None
     """The manipulation task refine was given ("close the microwave door"): the post-check executes it."""
     mounting: RootMount | None = None
@@ -75,8 +73,8 @@ class EstimationContext:
 
 @contextlib.contextmanager
 def build_context(source: AssetDescription | Path | str, prompt: str, config: RefineConfig | None = None, *, category: str | None = None,
-                  asset_id: str | None = None, geometry: dict[str, LinkGeometry] | None = None, cache: analyze.MeshCache | None = None,
-                  settings: dict[str, Any] | None = None) -> Iterator[tuple[EstimationContext, SimSession]]:
+                  asset_id: str | None = None, geometry: dict[str, LinkGeometry] | None = None,
+                  cache: analyze.MeshCache | None = None) -> Iterator[tuple[EstimationContext, SimSession]]:
     """The estimation context of an asset for ``prompt`` and the input's kinematics session, as a context
     manager (``with build_context(...) as (ctx, kin)``): ``kin`` is closed when the ``with`` block ends, also on
     errors.
@@ -87,7 +85,6 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
         config: ``config.sim`` and ``config.overrides`` are used (default :class:`RefineConfig`).
         category: overrides the asset's own category.
         geometry, cache: the analysis result and mesh cache when the caller has them.
-        settings: estimator knobs stored in ``ctx.settings``.
 
     Yields:
         (:class:`EstimationContext` (lengths at scale 1, in the input's units), the fixed-base, gravity-free
@@ -118,5 +115,5 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
         ctx = EstimationContext(asset=asset, geometry=geometry, request=meaning.request, category=meaning.category,
                                 category_reason=meaning.category_reason, closed=closed, closed_extents=extents,
                                 subtrees=subtrees, joint_boxes=boxes, hull_points=hull, closed_volume=volume,
-                                settings=dict(settings or {}), mounting=mount)
+                                mounting=mount)
         yield ctx, kin

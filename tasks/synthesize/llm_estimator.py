@@ -38,10 +38,9 @@ class LLMEstimator:
     #: Replies remembered per asset and request: a second ``estimate`` (another resting pose) makes no call.
     MEMO_SIZE = 16
 
-    def __init__(self, model: str | None = None, base_url: str | None = None, *, client: LLMClient | None = None, max_reasks: int = 2, **settings):
+    def __init__(self, model: str | None = None, base_url: str | None = None, *, client: LLMClient | None = None, max_reasks: int = 2):
         self.client = client or make_client(self.name, model, base_url)
         self.max_reasks = max_reasks
-        self.settings = settings
         self._memo: dict[tuple, tuple[ModelReply, Usage, list[list[str]], list[str]]] = {}
 
     @staticmethod

@@ -84,7 +84,7 @@ def overlay_from_reply(ctx: EstimationContext, kin: SimSession, reply: ModelRepl
     try:
         validate_overlay.validate_overlay(overlay, ctx.asset, ctx.geometry)
     except validate_overlay.OverlayInvalid as exc:
-        raise ReplyInvalid([f"{i.code} at {i.where}: {i.message}" for i in exc.issues if i.severity == "error" and not i.fixed]) from None
+        raise ReplyInvalid(exc.errors) from None
     return Estimate(overlay, bands, notes)
 
 

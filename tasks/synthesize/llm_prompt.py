@@ -7,7 +7,6 @@ rad, at scale 1 in the input asset's frames (``docs/design/model_backends.md``).
 from __future__ import annotations
 
 import base64
-import io
 import json
 from typing import Any
 
@@ -18,10 +17,12 @@ from asset2sim.tasks.synthesize import request_apply
 from asset2sim.tasks.interpret.part_priors import material_for
 from asset2sim.tasks.interpret.size_priors import target_size
 from asset2sim.tasks.geometry import render
+from asset2sim.tasks.geometry.render_images import png_bytes
 from asset2sim.tasks.synthesize import estimate
 from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.inert import one_line
+from asset2sim.package_data import package_text
 
 DESCRIPTION_MARK = "ASSET DESCRIPTION (JSON):"
 """Line preceding the structured description in the user message."""
@@ -114,42 +115,13 @@ def describe(ctx: EstimationContext, kin: SimSession) -> dict[str, Any]:
     }
 
 
-SYSTEM_PROMPT = """You turn an articulated 3D asset into an interaction-ready simulation asset.
-You get renders of the object in its closed state (views named before each image; the render scale is arbitrary) and a
-structured description (JSON) from mesh analysis at scale 1. Answer with exactly ONE JSON object that follows the JSON
-schema below: every field present, no other fields, no prose, no Markdown.
-
-How your answer is used and what each field means (SI units, angles in radians):
-- scale: the uniform factor s that gives the object the real-world size the request asks for
-  (real dimensions = closed_extents_m * s; typical_dims_m is the usual size of such an object for this request).
-- links: one entry per link that has geometry, names exactly as given. material, density (kg/m^3), shell (true for hollow
-  molded / sheet / panel parts), wall_thickness (m). The mass will be computed from the geometry:
-  solid m = volume_m3 * density * s^3, shell m = area_m2 * s^2 * wall_thickness * density. mass: your own estimate (kg) of
-  that link at the requested size.
-- joints: one entry per movable joint, names exactly as given. band: the state the request asks for (fraction of the
-  opening range from the closed end: closed 0, slightly_open 0.2, quarter 0.25, halfway 0.5, mostly 0.75, fully 1);
-  joints the request does not address stay closed. position: that state's joint value
-  q = closed_position + opening_direction * fraction * opening_range (prismatic: times s, in metres).
-  damping_level low / moderate / high; holds_position (friction must hold the state against gravity); spring (a return
-  spring is intended); stiff; free_moving. damping, friction, stiffness: numbers for the scaled object
-  (revolute N*m*s/rad, N*m, N*m/rad; prismatic N*s/m, N, N/m); stiffness 0 unless a spring is intended.
-- Every number with a std is your estimate and its 1-sigma uncertainty in the same unit (std > 0).
-- lateral_friction and restitution: the object's contact material.
-- notes: size reasoning, material reasoning, mass arithmetic.
-- request_parse also holds what the request asks in numbers; honour it exactly: a joint's requested_opening_fraction
-  (when not null, its position is at that fraction from the closed end), sizes_m (the scale gives these dimensions),
-  masses_and_materials (kg; material keys with their density), joint_parameters (SI values to use as given). Your overlay
-  is checked against them.
-"""
+#: The system prompt of an overlay request (the reply format and how each field is used).
+SYSTEM_PROMPT = package_text(__package__, "overlay_prompt.txt")
 
 
 def png_data_url(image: np.ndarray) -> str:
     """``data:image/png;base64,...`` of an RGB(A) uint8 (H, W, 3|4) image."""
-    from PIL import Image
-
-    buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(image)).save(buf, format="PNG", optimize=False)
-    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+    return "data:image/png;base64," + base64.b64encode(png_bytes(image)).decode("ascii")
 
 
 def render_closed_views(ctx: EstimationContext, views: tuple[str, ...] = VIEWS, size: tuple[int, int] = (384, 384)) -> tuple[dict[str, str], list[str]]:
@@ -189,13 +161,7 @@ def proposal_messages(ctx: EstimationContext, state: dict[str, float], pairs: li
     m) and the colliding link ``pairs`` (``depth_m`` in m), values rounded to 1e-6."""
     labels = {j.name: ctx.asset.link(j.child).semantic_label for j in ctx.asset.movable_joints()}
     types = {j.name: j.type for j in ctx.asset.movable_joints()}
-    text = (
-        "The physics simulator could not remove all self-penetration of this articulated object "
-        "by searching joint positions near the requested state. Propose up to 4 alternative "
-        "initial states (joint positions; radians for revolute, metres for prismatic; each inside "
-        "its allowed interval) that might separate the colliding parts. Reply with JSON only, "
-        "following this schema:\n" + json.dumps(schema)
-    )
+    text = package_text(__package__, "proposal_prompt.txt") + json.dumps(schema)
     info = {
         "category": ctx.category,
         "request": ctx.request.text,

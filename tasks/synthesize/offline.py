@@ -22,7 +22,7 @@ class OfflineEstimator:
     name = "offline"
 
     def __init__(self, **settings):
-        self.settings = settings
+        """``settings`` (a ``model``, a ``base_url``) are accepted and unused: no model is asked."""
 
     def estimate(self, ctx: EstimationContext, kin: SimSession) -> Estimate:
         """The overlay from priors, geometry and kinematics (``kin``: the input's kinematics session, posed

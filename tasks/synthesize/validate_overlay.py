@@ -1,6 +1,5 @@
 """Mechanical validation of an overlay (SPEC stage 2, whatever produced it):
-:func:`validate_overlay` returns a corrected copy and the named issues; a
-:class:`ValidationPolicy` decides which are fatal. Codes (fixed ones are warnings):
+:func:`validate_overlay` returns a corrected copy and the named issues; an unfixed error is fatal. Codes (fixed ones are warnings):
 
 - ``OVL_SCALE_INVALID``: scale not finite or outside [1e-4, 1e4] (error).
 - ``OVL_UNKNOWN_LINK`` / ``OVL_UNKNOWN_JOINT``: names not in the asset (dropped).
@@ -22,7 +21,6 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -37,27 +35,19 @@ _SCALE_TEXT = ", ".join(f"{x:.0e}".replace("e+0", "e").replace("e-0", "e-").repl
 
 
 class OverlayInvalid(ValueError):
-    """The overlay has issues the policy treats as fatal; ``issues`` lists all."""
+    """The overlay has unfixed errors (``errors``: one line each); ``issues`` lists all."""
 
     def __init__(self, issues: list[ValidationIssue]):
         self.issues = issues
-        fatal = [i for i in issues if i.severity == "error" and not i.fixed]
-        super().__init__("invalid overlay: " + "; ".join(f"{i.code} at {i.where}: {i.message}" for i in fatal))
+        self.errors = [f"{i.code} at {i.where}: {i.message}" for i in issues if i.severity == "error" and not i.fixed]
+        super().__init__("invalid overlay: " + "; ".join(self.errors))
 
 
-@dataclass
-class ValidationPolicy:
-    """Fatal: any unfixed issue whose severity is in ``fatal_severities``."""
-
-    fatal_severities: set[str] = field(default_factory=lambda: {"error"})
-
-    def is_fatal(self, issue: ValidationIssue) -> bool:
-        return not issue.fixed and issue.severity in self.fatal_severities
-
-    def check(self, issues: list[ValidationIssue]) -> None:
-        """Raise :class:`OverlayInvalid` when any issue is fatal."""
-        if any(self.is_fatal(i) for i in issues):
-            raise OverlayInvalid(issues)
+def _raise_fatal(issues: list[ValidationIssue]) -> None:
+    """Raise :class:`OverlayInvalid` when any issue is an unfixed error."""
+    invalid = OverlayInvalid(issues)
+    if invalid.errors:
+        raise invalid
 
 
 #: Lightest a link may be, as a fraction of the object's total mass: iterative contact solvers converge slowly
@@ -206,16 +196,14 @@ def scaled_limits(asset: AssetDescription, scale: float) -> dict[str, tuple[floa
     return out
 
 
-def validate_overlay(overlay: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry] | None = None, *,
-                     policy: ValidationPolicy | None = None) -> tuple[Overlay, list[ValidationIssue]]:
+def validate_overlay(overlay: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry] | None = None) -> tuple[Overlay, list[ValidationIssue]]:
     """(corrected copy of ``overlay``, issues) by the SPEC rules for ``asset``; ``geometry`` (link -> scale-1
-    geometry) enables fills and fixes; ``policy`` (default: errors fatal).
+    geometry) enables fills and fixes.
 
     Raises:
-        OverlayInvalid: when the policy finds a fatal issue.
+        OverlayInvalid: when an issue is an unfixed error.
     """
     geometry = geometry or {}
-    policy = policy or ValidationPolicy()
     issues: list[ValidationIssue] = []
     ov = overlay.model_copy(deep=True)
 
@@ -225,7 +213,7 @@ def validate_overlay(overlay: Overlay, asset: AssetDescription, geometry: dict[s
     s = ov.scale
     if not (math.isfinite(s) and SCALE_RANGE[0] <= s <= SCALE_RANGE[1]):
         add("OVL_SCALE_INVALID", "error", "global", f"scale {s!r} is not a finite value in [{_SCALE_TEXT}]")
-        policy.check(issues)
+        _raise_fatal(issues)
         return ov, issues
 
     movable = {j.name: j for j in asset.movable_joints()}
@@ -243,7 +231,7 @@ def validate_overlay(overlay: Overlay, asset: AssetDescription, geometry: dict[s
         _check_joint(ov, name, jd.type, limits[name], add)
     if ov.initial_joint_positions is not None:
         ov.initial_joint_positions = _checked_state(ov.initial_joint_positions, movable, limits, add)
-    policy.check(issues)
+    _raise_fatal(issues)
     return ov, issues
 
 

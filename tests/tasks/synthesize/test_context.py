@@ -62,9 +62,8 @@ def test_given_asset_and_geometry_are_reused_and_give_the_same_context():
     asset = extract.extract_asset(src, category="Stapler")
     cache = analyze.MeshCache()
     geometry = analyze.analyze_asset(asset, cache=cache)
-    with build_context(asset, STAPLER_PROMPT, category="Stapler", geometry=geometry, cache=cache, settings={"seed": 3}) as (given, kin):
+    with build_context(asset, STAPLER_PROMPT, category="Stapler", geometry=geometry, cache=cache) as (given, kin):
         assert given.asset is asset and given.geometry is geometry
-        assert given.settings == {"seed": 3}
     assert {n: c.q_closed for n, c in given.closed.items()} == {n: c.q_closed for n, c in by_path.closed.items()}
     np.testing.assert_array_equal(given.closed_extents, by_path.closed_extents)
     assert given.joint_heights == by_path.joint_heights

@@ -11,7 +11,6 @@ from asset2sim.tasks.geometry.analyze import analyze_asset
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.synthesize.validate_overlay import (
     OverlayInvalid,
-    ValidationPolicy,
     inertia_problems,
     validate_overlay,
 )
@@ -155,15 +154,13 @@ def test_a_preloaded_spring_may_refer_beyond_the_travel_and_a_far_one_is_pulled_
     assert lo <= fixed.joints[j.name].spring_reference <= hi
 
 
-def test_unknown_link_is_an_error_and_policy_decides(box):
+def test_unknown_link_is_an_error(box):
     asset, geometry = box
     ov = _good(asset, geometry)
     ov.links["ghost"] = LinkPhysics(mass=1.0, inertia=Inertia(ixx=1, iyy=1, izz=1), com=(0, 0, 0))
     with pytest.raises(OverlayInvalid, match="OVL_UNKNOWN_LINK"):
         validate_overlay(ov, asset, geometry)
-    lenient = ValidationPolicy(fatal_severities=set())
-    fixed, issues = validate_overlay(ov, asset, geometry, policy=lenient)
-    assert "ghost" not in fixed.links and "OVL_UNKNOWN_LINK" in codes(issues)
+    assert "ghost" in ov.links  # the input is not modified
 
 
 def test_non_finite_values_rejected_by_schema():
