@@ -25,6 +25,7 @@ from asset2sim.engines.loading import (BOX_CORNERS, BULLET_DEFAULT_FRICTION, BUL
                                        BULLET_PLANE_FRICTION, CollisionPiece, collision_pieces, read_urdf)
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, quat_wxyz_to_xyzw, quat_xyzw_to_wxyz, translation_matrix
 from asset2sim.mesh_io import convex_hull_mesh
+from asset2sim.urdf import MOVABLE
 from asset2sim.engines.step_budget import spend
 
 #: Contact friction on every shape and the ground (PyBullet's 0.5 x 0.5).
@@ -126,7 +127,7 @@ class NewtonSession(ArrayJoints, SessionDefaults):
         for j in self.urdf.joints:
             kw = dict(parent_xform=_wp_transform(wp, j.origin), label=j.name)
             parent, child = self._body[j.parent], self._body[j.child]
-            if j.type in ("revolute", "continuous", "prismatic"):
+            if j.type in MOVABLE:
                 spring = self.options.springs.get(j.name)
                 lo, hi = j.lower, j.upper
                 add = b.add_joint_prismatic if j.type == "prismatic" else b.add_joint_revolute
@@ -153,14 +154,13 @@ class NewtonSession(ArrayJoints, SessionDefaults):
         if not self._fixed:
             return {}
         welded = {self.urdf.root}
-        fixed = [j for j in self.urdf.joints if j.type not in ("revolute", "continuous", "prismatic")]
         for name in self.link_names:  # the tree order: a parent before its children
             pj = self.urdf.parent_joint(name)
-            if pj is not None and pj.type not in ("revolute", "continuous", "prismatic") and pj.parent in welded:
+            if pj is not None and pj.type not in MOVABLE and pj.parent in welded:
                 welded.add(name)
         if len(welded) == len(self.link_names):
             return {}
-        keep = [self._joint_ids[j.name] for j in fixed if j.child not in welded]
+        keep = [self._joint_ids[j.name] for j in self.urdf.joints if j.type not in MOVABLE and j.child not in welded]
         info = b.collapse_fixed_joints(joints_to_keep=keep)
         self._body = {n: info["body_remap"][i] for n, i in self._body.items() if n not in welded}
         self._joint_index = {n: info["joint_remap"][i] for n, i in self._joint_index.items()}

@@ -17,8 +17,8 @@ with startup_quiet():
     import sapien
     from sapien import physx
 
-from asset2sim.engines.base import (ArrayJoints, ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
-                                    SessionOptions, penetration_sum, register_engine)
+from asset2sim.engines.base import (ArrayJoints, ContactPair, HeldJoint, HeldLink, HeldPhysics, SessionDefaults, SessionOptions,
+                                    penetration_sum, register_engine, unsupported)
 from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
                                        collision_pieces, link_friction, principal_axes, read_urdf)
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_to_xyzw, quat_xyzw_to_wxyz, rigid_matrix
@@ -312,9 +312,7 @@ class PhysXSession(ArrayJoints, SessionDefaults):
     def link_masses(self) -> dict[str, float]:
         return {name: float(comp.get_mass()) for name, comp in self.links.items()}
 
-    def link_distances(self, link_a: str, link_b: str, max_distance: float = 0.0) -> list[float]:
-        """SAPIEN has no closest-point query between an articulation's shapes."""
-        raise EngineUnsupported("physx: no closest-point query between links (use pybullet or mujoco)")
+    link_distances = unsupported("physx: no closest-point query between links (use pybullet or mujoco)")
 
     def apply_link_force(self, link: str, force, point) -> None:
         self.links[link].add_force_at_point(np.asarray(force, np.float32), np.asarray(point, np.float32))

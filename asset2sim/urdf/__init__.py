@@ -20,7 +20,7 @@ the COM in the ``<inertial><origin>`` frame, damping N*m*s/rad or N*s/m,
 friction N*m or N. Poses are (4, 4) matrices, ``rpy`` as in :mod:`asset2sim.frames`.
 """
 
-from asset2sim.urdf.edits import LIMITED_TYPES, PASSIVE_EFFORT, PASSIVE_VELOCITY, conform_limits, scale_model
+from asset2sim.urdf.edits import PASSIVE_EFFORT, PASSIVE_VELOCITY, conform_limits, scale_model
 from asset2sim.urdf.model import (
     GEOMETRY_KINDS, JOINT_TYPES, MOVABLE, SIMULATED_JOINT_TYPES, Problem, UrdfDynamics, UrdfError, UrdfGeometry,
     UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfMaterial, UrdfMimic, UrdfModel, UrdfSource, clone_model,
@@ -30,7 +30,7 @@ from asset2sim.urdf.reader import MAX_NAME_CHARS, Mode, model_of, parse_urdf_byt
 from asset2sim.urdf.writer import DEFAULT_STYLE, PARTNET_STYLE, UrdfStyle, write_urdf
 
 __all__ = [
-    "DEFAULT_STYLE", "GEOMETRY_KINDS", "JOINT_TYPES", "LIMITED_TYPES", "MAX_NAME_CHARS", "MOVABLE", "Mode",
+    "DEFAULT_STYLE", "GEOMETRY_KINDS", "JOINT_TYPES", "MAX_NAME_CHARS", "MOVABLE", "Mode",
     "NumberError", "PARTNET_STYLE", "Problem", "SIMULATED_JOINT_TYPES", "UrdfDynamics", "UrdfError", "UrdfGeometry",
     "UrdfInertial", "UrdfJoint", "UrdfLimit", "UrdfLink", "UrdfMaterial", "UrdfMimic", "UrdfModel", "UrdfSource",
     "PASSIVE_EFFORT", "PASSIVE_VELOCITY", "UrdfStyle", "clone_model", "conform_limits", "model_of", "parse_number_list",

@@ -8,18 +8,13 @@ import math
 
 import numpy as np
 
-from asset2sim.urdf.model import UrdfLimit, UrdfModel
+from asset2sim.urdf.model import MOVABLE, UrdfLimit, UrdfModel
 
 def _scale_translation(m: np.ndarray, s: float) -> np.ndarray:
     out = np.array(m, float)
     out[:3, 3] *= s
     return out
 
-
-#: Joint types whose ``<limit>`` means something (ROS URDF specification,
-#: wiki.ros.org/urdf/XML/joint: ``<limit>`` is required for revolute and
-#: prismatic joints; continuous joints use its effort and velocity).
-LIMITED_TYPES = ("revolute", "prismatic", "continuous")
 
 #: ``effort`` (N*m or N) of a passive joint's ``<limit>``, which the URDF format requires (urdfdom and urdf_parser_py refuse
 #: a revolute or prismatic limit without it): nothing drives the joint. Drake adds an actuator only for a non-zero effort
@@ -43,7 +38,9 @@ def conform_limits(model: UrdfModel, effort: float | None = None, velocity: floa
     readers that need both, such as ROS's urdfdom, then need them added). Returns a note per dropped limit."""
     notes: list[str] = []
     for j in model.joints:
-        if j.type not in LIMITED_TYPES:
+        # a <limit> means something on these (ROS URDF specification, wiki.ros.org/urdf/XML/joint: required for
+        # revolute and prismatic joints; continuous joints use its effort and velocity)
+        if j.type not in MOVABLE:
             if j.limit is not None:
                 notes.append(f"joint {j.name!r} ({j.type}): <limit> dropped (a {j.type} joint has none)")
                 j.limit = None

@@ -273,11 +273,9 @@ class _Reader:
         return j
 
     def _parse_limit(self, lim, jtype: str | None, name: str | None) -> UrdfLimit:
-        out = UrdfLimit(line=_line(lim))
-        for k in ("lower", "upper", "effort", "velocity"):
-            setattr(out, k, self.num(lim, k, joint=name))
-        out.unreadable = frozenset(k for k in ("lower", "upper", "effort", "velocity")
-                                   if lim.get(k) is not None and getattr(out, k) is None)
+        keys = ("lower", "upper", "effort", "velocity")
+        out = UrdfLimit(line=_line(lim), **{k: self.num(lim, k, joint=name) for k in keys})
+        out.unreadable = frozenset(k for k in keys if lim.get(k) is not None and getattr(out, k) is None)
         if jtype in ("revolute", "prismatic"):
             if lim.get("lower") is None or lim.get("upper") is None:
                 miss = [k for k in ("lower", "upper") if lim.get(k) is None]
@@ -290,10 +288,10 @@ class _Reader:
                 elif lo_v == hi_v:
                     self.problem("JOINT_LIMIT_EQUAL", f"lower == upper == {lo_v!r}: the joint cannot move", line=_line(lim),
                                  joint=name, lower=lo_v, upper=hi_v)
-        if out.effort is not None and out.effort < 0:
-            self.problem("JOINT_EFFORT_NEGATIVE", f"effort {out.effort!r} < 0", line=_line(lim), joint=name, effort=out.effort)
-        if out.velocity is not None and out.velocity < 0:
-            self.problem("JOINT_VELOCITY_NEGATIVE", f"velocity {out.velocity!r} < 0", line=_line(lim), joint=name, velocity=out.velocity)
+        for k, code in (("effort", "JOINT_EFFORT_NEGATIVE"), ("velocity", "JOINT_VELOCITY_NEGATIVE")):
+            v = getattr(out, k)
+            if v is not None and v < 0:
+                self.problem(code, f"{k} {v!r} < 0", line=_line(lim), joint=name, **{k: v})
         return out
 
     def _parse_robot(self, root) -> UrdfModel:
@@ -369,9 +367,7 @@ def _line(el) -> int | None:
 def resolve_mesh_path(filename: str, base: Path) -> Path:
     """Absolute path of a mesh reference relative to ``base`` (``package://``
     and ``file://`` stripped; unchecked)."""
-    rel = filename[len("package://"):] if filename.startswith("package://") else filename
-    rel = rel[len("file://"):] if rel.startswith("file://") else rel
-    return (Path(base) / rel).resolve()
+    return (Path(base) / filename.removeprefix("package://").removeprefix("file://")).resolve()
 
 
 def parse_urdf_bytes(data: bytes, *, source: str = "<bytes>", base: Path | str | None = None, mode: Mode = "strict",
@@ -473,5 +469,5 @@ def path_of(source: UrdfSource) -> Path:
 
 
 #: Models read by :func:`read_urdf`, by (absolute path, mode, joint types).
-_READ_MEMO: file_memo.FileMemo[UrdfModel] = file_memo.FileMemo(lambda m: clone_model(m), max_entries=32)
+_READ_MEMO: file_memo.FileMemo[UrdfModel] = file_memo.FileMemo(clone_model, max_entries=32)
 

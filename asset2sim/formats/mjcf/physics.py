@@ -145,7 +145,8 @@ def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: 
             offset = np.asarray(original.jnt_pos[jids[0]], float)  # the link frame sits on the joint
         carries = int(original.body_geomnum[b]) > 0 or explicit.get(original.body(b).name, False)
         if carries and link.inertial is not None and link.inertial.mass:
-            _set_inertial(spec.bodies[b], link.inertial, offset)
+            inertial = link.inertial
+            set_body_inertial(spec.bodies[b], float(inertial.mass), inertial.com(), inertial.inertia_in_link_axes(), offset)
             bodies.append(name)
         for j in jids:
             jname = original.joint(j).name or f"{name}_joint"  # the reader's name for an unnamed joint
@@ -287,14 +288,6 @@ def _copy_physics(host, body, joints: list[dict[str, str]]) -> None:
     for target, given in zip([j for j in body.findall("joint") if j.get("type") not in ("free", "ball")], joints):
         for key, value in given.items():
             target.set(key, value)
-
-
-def _set_inertial(body, inertial, offset: np.ndarray) -> None:
-    """:func:`set_body_inertial` of the refined link's ``inertial`` (a ``UrdfInertial``) on ``body``."""
-    origin = np.asarray(inertial.origin if inertial.origin is not None else np.eye(4), float)
-    rot = origin[:3, :3]
-    tensor = rot @ np.asarray(inertial.inertia if inertial.inertia is not None else np.zeros((3, 3)), float) @ rot.T
-    set_body_inertial(body, float(inertial.mass), origin[:3, 3], tensor, offset)
 
 
 def set_body_inertial(body, mass: float, com, tensor: np.ndarray, offset: np.ndarray) -> None:

@@ -152,7 +152,7 @@ def _principal(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     off = tensor - np.diag(np.diag(tensor))
     if np.abs(off).max() <= 1e-12 * max(np.abs(tensor).max(), 1e-300):
         return np.diag(tensor).copy(), np.eye(3)
-    d, q = np.linalg.eigh(0.5 * (tensor + tensor.T))
+    d, q = np.linalg.eigh(tensor)
     if np.linalg.det(q) < 0:
         q[:, 0] = -q[:, 0]
     return d, q
@@ -258,9 +258,8 @@ def _write_host_usd(out_dir: Path, source: Path) -> HostUsdExport:
         if name not in read.prims:
             raise HostUsdError(f"{source}: link {name!r} of the refined {URDF_NAME} has no rigid body in the stage")
         body = stage.GetPrimAtPath(read.prims[name])
-        origin = np.asarray(link.inertial.origin if link.inertial.origin is not None else np.eye(4), float)
-        tensor = origin[:3, :3] @ np.asarray(link.inertial.inertia, float) @ origin[:3, :3].T
-        set_body_mass(edit, ctx, body, read.frames[name], ctx.world(body), float(link.inertial.mass), origin[:3, 3], tensor)
+        set_body_mass(edit, ctx, body, read.frames[name], ctx.world(body), float(link.inertial.mass), link.inertial.com(),
+                      link.inertial.inertia_in_link_axes())
     for j in model.movable_joints:
         if j.name not in read.prims:
             raise HostUsdError(f"{source}: joint {j.name!r} of the refined {URDF_NAME} has no joint prim in the stage")
