@@ -157,13 +157,6 @@ def overlay_springs(overlay: Overlay, initial_state: dict[str, float] | None = N
     """Joint springs of ``overlay``: every joint with stiffness > 0 (N*m/rad or N/m), about ``spring_reference``
     (rad or m), else about ``initial_state`` (else 0)."""
     state = initial_state or {}
-    return {name: joint_spring(dyn, state.get(name, 0.0)) for name, dyn in overlay.joints.items()
-            if dyn.stiffness > 0}
-
-
-def joint_spring(dyn, q_initial: float = 0.0) -> Spring:
-    """The :class:`Spring` of one joint's dynamics (``JointDynamics`` or its JSON dict): stiffness (N*m/rad or N/m)
-    about ``spring_reference``, else about ``q_initial`` (rad or m)."""
-    get = dyn.get if isinstance(dyn, dict) else (lambda k, default=None: getattr(dyn, k, default))
-    ref = get("spring_reference")
-    return Spring(stiffness=float(get("stiffness", 0.0) or 0.0), reference=float(q_initial if ref is None else ref))
+    return {name: Spring(stiffness=float(dyn.stiffness),
+                         reference=float(state.get(name, 0.0) if dyn.spring_reference is None else dyn.spring_reference))
+            for name, dyn in overlay.joints.items() if dyn.stiffness > 0}

@@ -98,10 +98,6 @@ def _refuse(code: str, message: str) -> StagingError:
     return StagingError(message, code=code)
 
 
-def _from_input_error(exc: InputFileError) -> StagingError:
-    return _refuse(exc.code, str(exc))
-
-
 def _resolve(value: str, base: str, tree: str, source: Path, what: str) -> str:
     """``value`` (as written) joined to the absolute folder ``base`` as MuJoCo joins it (an absolute ``value`` stays
     itself), normalized: an absolute path inside ``tree`` or a folder the user allowed
@@ -149,7 +145,7 @@ class _Gather:
         try:
             data = read_file(key, tree=self.tree, what=f"{self.path.name}: {what}")
         except InputFileError as exc:
-            raise _from_input_error(exc) from None
+            raise _refuse(exc.code, str(exc)) from None
         self.total += len(data)
         if self.total > MAX_TOTAL_BYTES:
             raise _refuse("INPUT_TOO_LARGE", f"{self.path}: the files it names exceed {MAX_TOTAL_BYTES} bytes together; not read")
@@ -226,11 +222,7 @@ def mesh_faces(data: bytes, name: str) -> int:
             return int.from_bytes(data[80:84], "little")
         return data.count(b"facet")
     if suffix == ".obj":
-        total = 0
-        for line in data.splitlines():
-            if line.startswith((b"f ", b"f\t")):
-                total += max(0, len(line.split()) - 3)
-        return total
+        return sum(max(0, len(line.split()) - 3) for line in data.splitlines() if line.startswith((b"f ", b"f\t")))
     if suffix == ".msh" and len(data) >= 16:
         return int.from_bytes(data[12:16], "little", signed=True)
     return len(data) // 50
