@@ -199,17 +199,15 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
 
     # ---------------------------------------------------------------- contact
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
-        return penetration_sum(self._self_contacts())
-
-    def _self_contacts(self):
-        """(link, link, ``dist`` m) of each penetrating contact between two links (the ground's left out)."""
+        """Phi of each penetrating contact's ``dist`` (m) between two links (the ground's left out)."""
         self._mj.mj_forward(self.m, self.d)
+        points = []
         for c in (self.d.contact[i] for i in range(self.d.ncon)):
             if c.geom1 == self._ground or c.geom2 == self._ground or c.dist >= 0.0:
                 continue
-            a = self._mj.mj_id2name(self.m, self._mj.mjtObj.mjOBJ_BODY, int(self.m.geom_bodyid[c.geom1]))
-            b = self._mj.mj_id2name(self.m, self._mj.mjtObj.mjOBJ_BODY, int(self.m.geom_bodyid[c.geom2]))
-            yield a, b, float(c.dist)
+            a, b = (self.link_names[int(self.m.geom_bodyid[g]) - 1] for g in (c.geom1, c.geom2))
+            points.append((a, b, float(c.dist)))
+        return penetration_sum(points)
 
     def ground_penetration(self) -> float:
         """Deepest point (m) of the collision geoms below z = 0, from the geometry."""

@@ -228,8 +228,6 @@ class PhysXSession(ArrayJoints, SessionDefaults):
         self._joints = list(self.art.active_joints)
         self._passive = PassiveJoints.from_urdf(self.urdf, self.options.springs, active)
         self._passive.configure(self._joints)
-        p = self._passive
-        self._friction, self._damping, self._stiffness, self._reference = p.friction, p.damping, p.stiffness, p.reference
         self._drive: dict[int, tuple[float, float]] = {}  # joint index -> (target velocity, force limit beyond friction)
 
     # ------------------------------------------------------------------ state
@@ -268,7 +266,8 @@ class PhysXSession(ArrayJoints, SessionDefaults):
 
     def _set_drive(self, i: int, qd_abs: float) -> None:
         v, extra = self._drive.get(i, (0.0, 0.0))
-        self._joints[i].set_drive_properties(0.0, FRICTION_DRIVE_DAMPING, float(self._friction[i] + self._damping[i] * qd_abs + extra), "force")
+        p = self._passive
+        self._joints[i].set_drive_properties(0.0, FRICTION_DRIVE_DAMPING, float(p.friction[i] + p.damping[i] * qd_abs + extra), "force")
         self._joints[i].set_drive_velocity_target(v)
 
     def set_root_velocity(self, linear, angular) -> None:
@@ -363,15 +362,13 @@ class PhysXSession(ArrayJoints, SessionDefaults):
         return next((name for name, c in self.links.items() if c is comp), None)
 
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
-        return penetration_sum(self._contact_separations())
-
-    def _contact_separations(self):
+        points = []
         for c in self._probe_contacts():
             a, b = self._link_name(c.bodies[0]), self._link_name(c.bodies[1])
             if a is None or b is None:
                 continue  # the ground or another object
-            for pt in c.points:
-                yield a, b, float(pt.separation)
+            points.extend((a, b, float(pt.separation)) for pt in c.points)
+        return penetration_sum(points)
 
     def ground_penetration(self) -> float:
         """Deepest point (m) of the cooked shapes below z = 0, from the geometry (no step)."""
@@ -420,10 +417,10 @@ class PhysXSession(ArrayJoints, SessionDefaults):
     def apply_passive_forces(self) -> None:
         """For the next ``scene.step()``: each drive's force limit (friction +
         damping * |qdot|) and the springs' joint forces ``-k (q - q_ref)``."""
-        if bool(np.any(self._damping)) or self._drive:
+        if self._passive.damped or self._drive:
             qd = np.abs(np.asarray(self.art.get_qvel(), float))
-            for i, _joint in enumerate(self._joints):
-                if self._damping[i] > 0 or i in self._drive:
+            for i in range(len(self._joints)):
+                if self._passive.damping[i] > 0 or i in self._drive:
                     self._set_drive(i, float(qd[i]))
         if self._passive.sprung:
             self.art.set_qf(self._passive.joint_forces(np.asarray(self.art.get_qpos(), float)).astype(np.float32))
@@ -443,9 +440,10 @@ class PhysXSession(ArrayJoints, SessionDefaults):
             lo, hi = (float(lim[0, 0]), float(lim[0, 1])) if len(lim) else (-np.inf, np.inf)
             if self.joint_types[name] == "continuous":
                 lo, hi = -np.inf, np.inf
-            ref = float(self._reference[i]) if name in self.options.springs else None
-            joints[name] = HeldJoint(lower=lo, upper=hi, damping=float(self._damping[i]), friction=float(joint.get_force_limit()),
-                                     stiffness=float(self._stiffness[i]), reference=ref, position=float(q[i]))
+            p = self._passive
+            ref = float(p.reference[i]) if name in self.options.springs else None
+            joints[name] = HeldJoint(lower=lo, upper=hi, damping=float(p.damping[i]), friction=float(joint.get_force_limit()),
+                                     stiffness=float(p.stiffness[i]), reference=ref, position=float(q[i]))
             coeff.append(float(joint.get_friction()))
         how = {"mass, com, inertia": "get_mass, get_cmass_local_pose().p, get_inertia",
                "limits": "PhysxArticulationJoint.get_limits", "friction": "drive force limit at rest (get_force_limit)",
