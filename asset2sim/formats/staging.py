@@ -346,8 +346,7 @@ def staging_folder(source: Path | str) -> Path:
         _STAGING_ROOT.append(atomic.process_folder("asset2sim-staged-"))
     src = os.path.realpath(source)
     digest = hashlib.sha256(src.encode("utf-8", "surrogatepass")).hexdigest()[:12]
-    folder = Path(tempfile.mkdtemp(prefix=f"{file_names.file_stem(Path(src).stem)[:40]}-{digest}-", dir=_STAGING_ROOT[0]))
-    return folder
+    return Path(tempfile.mkdtemp(prefix=f"{file_names.file_stem(Path(src).stem)[:40]}-{digest}-", dir=_STAGING_ROOT[0]))
 
 
 def copy_named(src: Path, base: Path, folder: Path, data: bytes | None = None) -> str:

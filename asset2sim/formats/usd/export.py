@@ -40,6 +40,14 @@ def _transform(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
     return np.asarray(points, float) @ pose[:3, :3].T + pose[:3, 3]
 
 
+def _placed(xformable, pose: np.ndarray):
+    """``xformable`` (a UsdGeom.Xformable) given a translate and an orient op (double precision) of ``pose`` (4, 4)."""
+    Gf, _, _, _, UsdGeom, _ = _pxr()
+    xformable.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, pose[:3, 3])))
+    xformable.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(*matrix_quat_wxyz(pose[:3, :3]).tolist()))
+    return xformable
+
+
 def _names(names: list[str], make_valid) -> dict[str, str]:
     """URDF name -> a unique valid USD prim name."""
     used: set[str] = set()
@@ -135,10 +143,7 @@ def _write_body(stage, path, model: UrdfModel, name: str, pose: np.ndarray, note
     material when the URDF gives a lateral friction."""
     Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
     link = model.links[name]
-    xf = UsdGeom.Xform.Define(stage, path)
-    xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, pose[:3, 3])))
-    xf.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(*matrix_quat_wxyz(pose[:3, :3]).tolist()))
-    prim = xf.GetPrim()
+    prim = _placed(UsdGeom.Xform.Define(stage, path), pose).GetPrim()
     prim.CreateAttribute("asset2sim:name", Sdf.ValueTypeNames.String, custom=True).Set(name)
     UsdPhysics.RigidBodyAPI.Apply(prim)
     mass_api = UsdPhysics.MassAPI.Apply(prim)
@@ -267,8 +272,7 @@ def _primitive(stage, path, kind: str, size, radius, length, origin: np.ndarray)
         g.CreateAxisAttr(UsdGeom.Tokens.z)
     else:
         return None
-    g.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, origin[:3, 3])))
-    g.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(*matrix_quat_wxyz(origin[:3, :3]).tolist()))
+    _placed(g, origin)
     if kind == "box":
         g.AddScaleOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, size)))
     return g
