@@ -167,16 +167,15 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
         ValueError: an unknown ``missing_inertial`` policy, or an initial state naming an unknown joint.
     """
     opts = options or SessionOptions()
-    initial_state, springs, conventions = opts.initial_state, opts.springs, opts.conventions
     fixed_base, ground, gravity = opts.fixed_base, opts.ground, opts.gravity
     mujoco = load_mujoco()
     if missing_inertial not in ("massless", "bullet"):
         raise ValueError(f"missing_inertial must be 'massless' or 'bullet', not {missing_inertial!r}")
-    conv = conventions or SimConventions()
+    conv = opts.conventions or SimConventions()
     urdf_path = Path(urdf_path)
     model = read_urdf(urdf_path)
-    initial_state = dict(initial_state or {})
-    springs = dict(springs or {})
+    initial_state = dict(opts.initial_state or {})
+    springs = dict(opts.springs or {})
     movable = {j.name: j for j in model.movable_joints}
     unknown = sorted(set(initial_state) - set(movable))
     if unknown:

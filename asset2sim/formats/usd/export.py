@@ -335,18 +335,19 @@ def _write_joint(stage, path, j: UrdfJoint, link_paths: dict[str, str], initial:
         drive.CreateStiffnessAttr(float(k / unit))
         drive.CreateTargetPositionAttr(float(ref * unit))
         drive.CreateTargetVelocityAttr(0.0)
+    position, Float = float(initial.get(j.name, 0.0) * unit), Sdf.ValueTypeNames.Float
     prim.AddAppliedSchema(f"PhysicsJointStateAPI:{dof}")
-    prim.CreateAttribute(f"state:{dof}:physics:position", Sdf.ValueTypeNames.Float).Set(float(initial.get(j.name, 0.0) * unit))
-    prim.CreateAttribute(f"state:{dof}:physics:velocity", Sdf.ValueTypeNames.Float).Set(0.0)
+    prim.CreateAttribute(f"state:{dof}:physics:position", Float).Set(position)
+    prim.CreateAttribute(f"state:{dof}:physics:velocity", Float).Set(0.0)
     # Newton's importer reads its own namespace by default (newton:<dof>:position, degrees for angular)
-    prim.CreateAttribute(f"newton:{dof}:position", Sdf.ValueTypeNames.Float).Set(float(initial.get(j.name, 0.0) * unit))
+    prim.CreateAttribute(f"newton:{dof}:position", Float).Set(position)
     prim.AddAppliedSchema("NewtonJointAPI")
-    prim.CreateAttribute("newton:friction", Sdf.ValueTypeNames.Float).Set(float(j.friction))
+    prim.CreateAttribute("newton:friction", Float).Set(float(j.friction))
     # PhysX (Isaac Sim 5, ovphysx) reads Coulomb joint friction as an effort (N*m or N) from PhysxJointAxisAPI:<dof>
     # (ovphysx also takes newton:friction); physxJoint:jointFriction, PhysX's unitless coefficient on the constraint
     # force, is left at its default 0
     prim.AddAppliedSchema(f"PhysxJointAxisAPI:{dof}")
     for effort in ("staticFrictionEffort", "dynamicFrictionEffort"):
-        prim.CreateAttribute(f"physxJointAxis:{dof}:{effort}", Sdf.ValueTypeNames.Float).Set(float(j.friction))
+        prim.CreateAttribute(f"physxJointAxis:{dof}:{effort}", Float).Set(float(j.friction))
     for attr, value in (("damping", j.damping), ("friction", j.friction), ("stiffness", k), ("springReference", ref)):
         prim.CreateAttribute(f"asset2sim:{attr}", Sdf.ValueTypeNames.Double, custom=True).Set(float(value))

@@ -85,14 +85,16 @@ class UsdEdit:
     changes: list[tuple[str, str, object, object]] = field(default_factory=list)
     schemas: list[tuple[str, str]] = field(default_factory=list)
 
-    def set(self, prim, name: str, type_name, value) -> None:
-        """Author ``name`` (of Sdf type ``type_name``, used when the attribute does not exist) on ``prim``."""
+    def set(self, prim, name: str, value, type_name=None) -> None:
+        """Author ``name`` (of Sdf type ``type_name``, used when the attribute does not exist; None: ``Float``) on
+        ``prim``."""
         attr = prim.GetAttribute(name)
         old = attr.Get() if attr and attr.HasValue() else None
         if old is not None and same(old, value):
             return  # the stage holds it already (to the attribute's binary32 precision)
         if not attr:
-            attr = prim.CreateAttribute(name, type_name, custom=name.startswith(("asset2sim:",)))
+            sdf_type = type_name or pxr_modules()[1].ValueTypeNames.Float
+            attr = prim.CreateAttribute(name, sdf_type, custom=name.startswith("asset2sim:"))
         attr.Set(value)
         self.changes.append((str(prim.GetPath()), name, old, attr.Get()))
 
@@ -182,14 +184,14 @@ def set_body_mass(edit: UsdEdit, ctx: StageReading, body, link_frame: np.ndarray
     d, q = _principal(tensor)
     local = (np.linalg.inv(to_link) @ np.append(np.asarray(com, float), 1.0))[:3]
     edit.apply(body, "PhysicsMassAPI")
-    edit.set(body, "physics:mass", Sdf.ValueTypeNames.Float, float(mass / ctx.kg))
-    edit.set(body, "physics:centerOfMass", Sdf.ValueTypeNames.Point3f, Gf.Vec3f(*(float(v) for v in local)))
+    edit.set(body, "physics:mass", float(mass / ctx.kg))
+    edit.set(body, "physics:centerOfMass", Gf.Vec3f(*(float(v) for v in local)), Sdf.ValueTypeNames.Point3f)
     if not same(_authored_tensor(body), tensor):  # the moments and axes together: one tensor has many of them
-        edit.set(body, "physics:diagonalInertia", Sdf.ValueTypeNames.Float3, Gf.Vec3f(*(float(v) for v in d)))
-        edit.set(body, "physics:principalAxes", Sdf.ValueTypeNames.Quatf, Gf.Quatf(*matrix_quat_wxyz(q).tolist()))
+        edit.set(body, "physics:diagonalInertia", Gf.Vec3f(*(float(v) for v in d)), Sdf.ValueTypeNames.Float3)
+        edit.set(body, "physics:principalAxes", Gf.Quatf(*matrix_quat_wxyz(q).tolist()), Sdf.ValueTypeNames.Quatf)
     density = body.GetAttribute("physics:density")
     if density and density.HasAuthoredValue() and density.Get():
-        edit.set(body, "physics:density", Sdf.ValueTypeNames.Float, 0.0)  # an explicit mass wins; no density contradicts it
+        edit.set(body, "physics:density", 0.0)  # an explicit mass wins; no density contradicts it
 
 
 def set_joint_dynamics(edit: UsdEdit, ctx: StageReading, prim, damping: float, friction: float,
@@ -199,7 +201,7 @@ def set_joint_dynamics(edit: UsdEdit, ctx: StageReading, prim, damping: float, f
     others where authored), in stage units (angular gains per degree); with ``stiffness`` (N*m/rad or N/m) the
     drive's stiffness and its ``targetPosition`` ``reference`` (rad or m). A drive of stiffness 0 is added where
     the joint had none."""
-    _, Sdf, _, _, _, UsdPhysics = pxr_modules()
+    UsdPhysics = pxr_modules()[5]
     rot = prim.IsA(UsdPhysics.RevoluteJoint)
     dof = "angular" if rot else "linear"
     gain = ctx.kg * ctx.m ** 2 * DEG if rot else ctx.kg  # the reader's: stage gain -> SI
@@ -208,16 +210,15 @@ def set_joint_dynamics(edit: UsdEdit, ctx: StageReading, prim, damping: float, f
     edit.apply(prim, f"PhysicsDriveAPI:{dof}")
     drive = f"drive:{dof}:physics:"
     if not had_drive:
-        edit.set(prim, drive + "stiffness", Sdf.ValueTypeNames.Float, 0.0)
-    edit.set(prim, drive + "damping", Sdf.ValueTypeNames.Float, float(damping / gain))
+        edit.set(prim, drive + "stiffness", 0.0)
+    edit.set(prim, drive + "damping", float(damping / gain))
     if stiffness is not None:
-        edit.set(prim, drive + "stiffness", Sdf.ValueTypeNames.Float, float(stiffness / gain))
+        edit.set(prim, drive + "stiffness", float(stiffness / gain))
         if stiffness > 0 and reference is not None:
-            edit.set(prim, drive + "targetPosition", Sdf.ValueTypeNames.Float,
-                     float(reference * (DEG if rot else 1.0 / ctx.m)))
+            edit.set(prim, drive + "targetPosition", float(reference * (DEG if rot else 1.0 / ctx.m)))
     for i, name in enumerate(FRICTION_ATTRS):
         if i == 0 or prim.GetAttribute(name).HasAuthoredValue():
-            edit.set(prim, name, Sdf.ValueTypeNames.Float, float(friction / force))
+            edit.set(prim, name, float(friction / force))
 
 
 def write_host_usd(out_dir: Path | str, source: Path | str) -> HostUsdExport:
@@ -242,7 +243,7 @@ def write_host_usd(out_dir: Path | str, source: Path | str) -> HostUsdExport:
 
 
 def _write_host_usd(out_dir: Path, source: Path) -> HostUsdExport:
-    _, Sdf, _, Usd, _, UsdPhysics = pxr_modules()
+    _, _, _, Usd, _, UsdPhysics = pxr_modules()
     asset = RefinedAsset(out_dir)
     overlay = host_overlay(asset, source, "stage", HostUsdError)
     model, state = asset.model, asset.initial_state
@@ -271,14 +272,14 @@ def _write_host_usd(out_dir: Path, source: Path) -> HostUsdExport:
                            float(j.dynamics.friction or 0.0) if j.dynamics else 0.0,
                            None if dyn is None else float(dyn.stiffness), None if dyn is None else dyn.spring_reference)
         if j.type != "continuous" and j.limit is not None and j.limit.lower is not None and j.limit.upper is not None:
-            edit.set(prim, "physics:lowerLimit", Sdf.ValueTypeNames.Float, float(j.limit.lower * unit))
-            edit.set(prim, "physics:upperLimit", Sdf.ValueTypeNames.Float, float(j.limit.upper * unit))
+            edit.set(prim, "physics:lowerLimit", float(j.limit.lower * unit))
+            edit.set(prim, "physics:upperLimit", float(j.limit.upper * unit))
         dof = "angular" if rot else "linear"
         position = float(state.get(j.name, 0.0) * unit)
         edit.apply(prim, f"PhysicsJointStateAPI:{dof}")
-        edit.set(prim, f"state:{dof}:physics:position", Sdf.ValueTypeNames.Float, position)
-        edit.set(prim, f"state:{dof}:physics:velocity", Sdf.ValueTypeNames.Float, 0.0)
-        edit.set(prim, f"newton:{dof}:position", Sdf.ValueTypeNames.Float, position)
+        edit.set(prim, f"state:{dof}:physics:position", position)
+        edit.set(prim, f"state:{dof}:physics:velocity", 0.0)
+        edit.set(prim, f"newton:{dof}:position", position)
     folder = out_dir / USD_DIR / HOST_DIR
     stem = file_names.file_stem(source.stem)
     name = f"{stem}.usd" if source.suffix.lower() == ".usdz" else file_names.file_stem(source.name)
