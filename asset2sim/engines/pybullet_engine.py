@@ -36,10 +36,7 @@ class PyBulletSession(SessionDefaults):
         conv = options.conventions
         # step 1: a physics client (taken from the pool, or the caller's)
         self._owns_client = client is None
-        if client is None:
-            self.cid = pybullet_clients.take(p, options.files_key)
-        else:
-            self.cid = int(client)
+        self.cid = pybullet_clients.take(p, options.files_key) if client is None else int(client)
         self.body = None
         # step 2: time step, gravity, the ground plane; load the URDF without its visual shapes
         try:

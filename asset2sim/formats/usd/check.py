@@ -129,8 +129,8 @@ def check_usd(path: Path, out_dir: Path | RefinedAsset) -> UsdCheck:
             cmp(f"joint {j.name!r} limits", [got.lower, got.upper], [j.lower, j.upper], max(abs(j.lower), abs(j.upper), 1e-3))
         elif got.type != "continuous":
             raise UsdExportError(f"{path}: continuous joint {j.name!r} has limits in the USD")
-        cmp(f"joint {j.name!r} damping", got.damping, j.damping, abs(j.damping))
-        cmp(f"joint {j.name!r} friction", got.friction, j.friction, abs(j.friction))
+        for q in ("damping", "friction"):
+            cmp(f"joint {j.name!r} {q}", getattr(got, q), getattr(j, q), abs(getattr(j, q)))
         s, held = springs.get(j.name), usd.springs.get(j.name)
         cmp(f"joint {j.name!r} stiffness", held.stiffness if held else 0.0, s.stiffness if s else 0.0, abs(s.stiffness) if s else 0.0)
         if s is not None:
