@@ -400,10 +400,8 @@ def write_patched_mjcf(source: Path, read: ReadAsset | None, children: dict[str,
         spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_AUTO
     bodies = {(model.body(b).name or f"body_{b}"): b for b in range(1, model.nbody)}
     for name, lp in links.items():
-        b = bodies[name]
-        body = spec.bodies[b]
-        offset = _joint_offset(model, b)  # the link frame is the body frame moved to its joint's pos
-        set_body_inertial(body, lp.mass, lp.com, lp.inertia.matrix(), offset)
+        b = bodies[name]  # the link frame is the body frame moved to its joint's pos
+        set_body_inertial(spec.bodies[b], lp.mass, lp.com, lp.inertia.matrix(), _joint_offset(model, b))
     for name, jd in joints.items():
         joint = next(j for j in spec.bodies[bodies[children[name]]].joints if j.type != mujoco.mjtJoint.mjJNT_FREE)
         set_joint_friction(joint, jd.damping, jd.friction)
