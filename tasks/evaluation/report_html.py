@@ -59,7 +59,7 @@ def point_cloud(urdf: Path, state: dict[str, float]) -> dict[str, np.ndarray]:
 def _verdict_table(ev) -> str:
     rows = []
     for m in ev.metrics:
-        skipped = m.details.get("skipped") if isinstance(m.details, dict) else None
+        skipped = m.details.get("skipped")
         val = "-" if m.value is None else fmt(m.value)
         extra = ""
         if m.name == "rest_stability" and "D_ori_rad" in m.details:
