@@ -269,7 +269,7 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
     table = load_operating_forces()
     r_, where = operating_range(category, label, table)
     session.set_joint_positions({**state, joint: qc + d * 0.5 * rng})
-    link, point, rule = contact_point_rule(session, joint, model, opening_direction=d, side="child")
+    link, point, rule = contact_point_rule(session, joint, model, opening_direction=d)
     lever = None if prismatic else grasp_lever(session, joint, link, point, model)
     hand_f, effort = hand_limits(r_, lever)
     speed = cfg.hand_speed / lever if lever else cfg.hand_speed
