@@ -140,7 +140,7 @@ def joint_frame_axis(session, joint: str, link: str) -> tuple[np.ndarray, np.nda
 
 def side_links(session, joint: str, model: UrdfModel | None, side: str) -> list[str]:
     """Links of the session rigid with one ``side`` of ``joint`` (``child`` /
-    ``parent``, the latter without the child's side); without a model the child link alone.
+    ``parent``; the joint is movable, so no fixed joint joins the two sides); without a model the child link alone.
 
     Raises:
         ValueError: ``side`` is not child / parent, or ``parent`` without a model.
@@ -152,7 +152,7 @@ def side_links(session, joint: str, model: UrdfModel | None, side: str) -> list[
         if side == "parent":
             raise ValueError(f"joint {joint!r}: the parent side needs the URDF model")
         return [child]
-    start = child if side == "child" else model.joint(joint).parent  # a movable joint: no fixed path joins the two sides
+    start = child if side == "child" else model.joint(joint).parent
     return [ln for ln in rigid_group(model, start) if ln in session.link_names]
 
 

@@ -133,7 +133,7 @@ def operability_run(engine: str, obj: SimObject, closed: dict[str, tuple[float, 
                     recorded: RecordedRuns | None = None) -> operability.OperabilityRun:
     """:func:`asset2sim.tasks.check.operability.run_operability` (same arguments), recorded as :func:`sweep_run`."""
     cfg = operability.OperabilityConfig()
-    inputs = (cfg, category, tuple(sorted((str(k), str(v)) for k, v in (labels or {}).items() if v)))  # what the digest reads
+    inputs = (cfg, category, tuple(sorted((str(k), str(v)) for k, v in (labels or {}).items() if v)))
     return _recorded(recorded, lambda: operability.run_operability(engine, obj, closed, category=category, labels=labels,
                                                                    config=cfg),
                      "operability", engine, _swept(obj), inputs, closed)
