@@ -65,9 +65,9 @@ def _factor(declared: float | None, estimate: float | None) -> float | None:
 def _band_verdict(where: str, quantity: str, unit: str, declared: float | None, estimate: float, low: float | None,
                   high: float | None, what: str) -> ValueVerdict:
     """``declared`` inside [low, high] (None: unbounded) is plausible; outside, implausible with the factor."""
+    result = functools.partial(ValueVerdict, where=where, quantity=quantity, unit=unit, estimate=estimate, low=low, high=high)
     if declared is None:
-        return ValueVerdict(where=where, quantity=quantity, unit=unit, declared=None, estimate=estimate, low=low, high=high,
-                            verdict="not_declared", reason=f"not declared; the product estimates {estimate:.4g} {unit} ({what})")
+        return result(declared=None, verdict="not_declared", reason=f"not declared; the product estimates {estimate:.4g} {unit} ({what})")
     f = _factor(declared, estimate)
     below = low is not None and declared < low
     above = high is not None and declared > high
@@ -77,8 +77,7 @@ def _band_verdict(where: str, quantity: str, unit: str, declared: float | None, 
         reason = (f"{declared:.4g} {unit} is {'below' if below else 'above'} {_span(low, high, unit)}"
                   + (f", x{declared / edge:.3g} of its {'lower' if below else 'upper'} end" if edge else "")
                   + (f" (x{f:.3g} the estimate)" if f is not None else "") + f" ({what})")
-    return ValueVerdict(where=where, quantity=quantity, unit=unit, declared=declared, estimate=estimate, low=low, high=high,
-                        factor=f, verdict="implausible" if below or above else "plausible", reason=reason)
+    return result(declared=declared, factor=f, verdict="implausible" if below or above else "plausible", reason=reason)
 
 
 def _span(low: float | None, high: float | None, unit: str) -> str:
