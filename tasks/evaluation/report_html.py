@@ -59,21 +59,21 @@ def point_cloud(urdf: Path, state: dict[str, float]) -> dict[str, np.ndarray]:
 def _verdict_table(ev) -> str:
     rows = []
     for m in ev.metrics:
-        skipped = m.details.get("skipped")
+        d = m.details
         val = "-" if m.value is None else fmt(m.value)
         extra = ""
-        if m.name == "rest_stability" and "D_ori_rad" in m.details:
-            extra = f"D_pos {fmt(m.details['D_pos_m'])} m, D_ori {fmt(m.details['D_ori_rad'])} rad"
-        elif skipped:
-            extra = f"skipped: {skipped}"
-        elif m.details.get("reason"):
-            extra = str(m.details["reason"])
-        elif m.details.get("failures"):
-            extra = "; ".join(m.details["failures"])
-        elif m.details.get("failing"):
-            extra = "failing: " + ", ".join(m.details["failing"])
-        elif m.details.get("reasons"):
-            extra = "; ".join(m.details["reasons"])
+        if m.name == "rest_stability" and "D_ori_rad" in d:
+            extra = f"D_pos {fmt(d['D_pos_m'])} m, D_ori {fmt(d['D_ori_rad'])} rad"
+        elif d.get("skipped"):
+            extra = f"skipped: {d['skipped']}"
+        elif d.get("reason"):
+            extra = str(d["reason"])
+        elif d.get("failures"):
+            extra = "; ".join(d["failures"])
+        elif d.get("failing"):
+            extra = "failing: " + ", ".join(d["failing"])
+        elif d.get("reasons"):
+            extra = "; ".join(d["reasons"])
         rows.append(
             f"<tr><td>{esc(m.name)}</td><td>{esc(m.engine)}</td><td class='num'>{val}</td><td>{esc(m.unit)}</td>"
             f"{verdict_cell(m.passed)}<td class='small'>{esc(m.threshold)}</td><td class='small'>{esc(extra)}</td></tr>"
