@@ -74,13 +74,13 @@ def subtree(model: UrdfModel, link: str) -> list[str]:
     return out
 
 
-def rigid_group(model: UrdfModel, link: str, exclude: str | None = None) -> list[str]:
-    """``link`` and every link joined to it by fixed joints (up and down the
-    tree), never entering ``exclude`` (a link whose subtree is left out)."""
+def rigid_group(model: UrdfModel, link: str) -> list[str]:
+    """``link`` and every link joined to it by fixed joints (up and down the tree), in the order a depth-first walk
+    meets them (the set of :func:`asset2sim.tasks.geometry.limits.rigid_group`, ordered: the first handle found wins)."""
     out, stack = [], [link]
     while stack:
         name = stack.pop()
-        if name in out or name == exclude:
+        if name in out:
             continue
         out.append(name)
         stack.extend(j.child for j in model.children(name) if j.type == "fixed")
@@ -116,8 +116,11 @@ def handle_points(model: UrdfModel, link: str) -> np.ndarray:
     return np.concatenate(pts) if pts else np.zeros((0, 3))
 
 
-def _session_points(session, link: str) -> np.ndarray:
-    """The engine's collision vertices (k, 3) of ``link``, else its AABB corners, in the link frame."""
+def _grasp_points(session, model: UrdfModel | None, link: str) -> np.ndarray:
+    """Points (k, 3) of ``link`` in its frame: the URDF's collision geometry with ``model`` (:func:`link_points`), else
+    the engine's collision vertices, else its AABB corners."""
+    if model is not None:
+        return link_points(model, link)
     v = np.asarray(session.link_collision_vertices(link), float).reshape(-1, 3)
     if len(v):
         return v
@@ -137,7 +140,7 @@ def joint_frame_axis(session, joint: str, link: str) -> tuple[np.ndarray, np.nda
 
 def side_links(session, joint: str, model: UrdfModel | None, side: str) -> list[str]:
     """Links of the session rigid with one ``side`` of ``joint`` (``child`` /
-    ``parent``, the latter without the child's side); without a model the child link alone.
+    ``parent``; the joint is movable, so no fixed joint joins the two sides); without a model the child link alone.
 
     Raises:
         ValueError: ``side`` is not child / parent, or ``parent`` without a model.
@@ -149,10 +152,8 @@ def side_links(session, joint: str, model: UrdfModel | None, side: str) -> list[
         if side == "parent":
             raise ValueError(f"joint {joint!r}: the parent side needs the URDF model")
         return [child]
-    if side == "child":
-        return [ln for ln in rigid_group(model, child) if ln in session.link_names]
-    parent = model.joint(joint).parent
-    return [ln for ln in rigid_group(model, parent, exclude=child) if ln in session.link_names]
+    start = child if side == "child" else model.joint(joint).parent
+    return [ln for ln in rigid_group(model, start) if ln in session.link_names]
 
 
 def contact_point_rule(session, joint: str, model: UrdfModel | None = None, *, opening_direction: float = 1.0,
@@ -185,7 +186,7 @@ def contact_point_rule(session, joint: str, model: UrdfModel | None = None, *, o
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
     best: tuple[float, str, np.ndarray, np.ndarray] | None = None  # (reach, link, local points, world points)
     for ln in links:
-        v = link_points(model, ln) if model is not None else _session_points(session, ln)
+        v = _grasp_points(session, model, ln)
         if not len(v):
             continue
         lo, R = session.link_frame(ln)
@@ -232,7 +233,7 @@ def grasp_lever(session, joint: str, link: str, point: np.ndarray, model: UrdfMo
         return np.linalg.norm(w - np.outer(w @ a, a), axis=1)
 
     d = float(off_axis(np.asarray(point, float).reshape(1, 3))[0])
-    pts = link_points(model, link) if model is not None else _session_points(session, link)
+    pts = _grasp_points(session, model, link)
     rim = float(off_axis(pts).max()) if len(pts) else 0.0
     return max(rim if d < TWIST_SHARE * rim else d, 1e-3)
 

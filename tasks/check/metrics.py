@@ -157,11 +157,8 @@ def settle_tilt(trace: RestTrace, engine: str = "pybullet") -> MetricResult:
 
 def count_sign_changes(q: np.ndarray) -> int:
     """Sign changes of the step-to-step motion of q (N,), exact zeros skipped."""
-    d = np.diff(np.asarray(q, float))
-    s = np.sign(d)
+    s = np.sign(np.diff(np.asarray(q, float)))
     s = s[s != 0]
-    if len(s) < 2:
-        return 0
     return int(np.count_nonzero(s[1:] != s[:-1]))
 
 

@@ -41,8 +41,8 @@ from asset2sim.engines.source import SimObject
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import Blocker
-from asset2sim.tasks.check.contact_points import (contact_point_rule, grasp_lever, joint_frame_axis,
-                                                  rigid_group, subtree)
+from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, joint_frame_axis, subtree
+from asset2sim.tasks.geometry.limits import rigid_group
 from asset2sim.tasks.interpret.operating_forces import ForceRange, load_operating_forces, operating_range
 from asset2sim.tasks.check.gripper import GripperLimits
 from asset2sim.tasks.check.stroke import Reach, reach_stroke
@@ -269,7 +269,7 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
     table = load_operating_forces()
     r_, where = operating_range(category, label, table)
     session.set_joint_positions({**state, joint: qc + d * 0.5 * rng})
-    link, point, rule = contact_point_rule(session, joint, model, opening_direction=d, side="child")
+    link, point, rule = contact_point_rule(session, joint, model, opening_direction=d)
     lever = None if prismatic else grasp_lever(session, joint, link, point, model)
     hand_f, effort = hand_limits(r_, lever)
     speed = cfg.hand_speed / lever if lever else cfg.hand_speed
@@ -277,7 +277,7 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
     jm = model.joint(joint)
     links = [ln for ln in subtree(model, session.joint_child[joint]) if ln in session.link_names]
     held = [o for o in session.joint_types if o != joint]
-    own = set(rigid_group(model, jm.parent))  # the parent's side: never collided with the part
+    own = rigid_group(model, jm.parent)  # the parent's side: never collided with the part
     part = PartOperability(joint=joint, joint_type=jt, link=link, label=label, rule=rule, lever=lever, hand_force_n=hand_f,
                            force_range_n=r_.force_n, torque_range_nm=r_.torque_nm, range_of=where,
                            sources=[table.sources[s] for s in r_.sources], estimate=r_.estimate)

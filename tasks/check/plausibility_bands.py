@@ -7,6 +7,7 @@ friction N*m, stiffness N*m/rad; prismatic N*s/m, N, N/m).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -64,9 +65,9 @@ def _factor(declared: float | None, estimate: float | None) -> float | None:
 def _band_verdict(where: str, quantity: str, unit: str, declared: float | None, estimate: float, low: float | None,
                   high: float | None, what: str) -> ValueVerdict:
     """``declared`` inside [low, high] (None: unbounded) is plausible; outside, implausible with the factor."""
+    result = functools.partial(ValueVerdict, where=where, quantity=quantity, unit=unit, estimate=estimate, low=low, high=high)
     if declared is None:
-        return ValueVerdict(where=where, quantity=quantity, unit=unit, declared=None, estimate=estimate, low=low, high=high,
-                            verdict="not_declared", reason=f"not declared; the product estimates {estimate:.4g} {unit} ({what})")
+        return result(declared=None, verdict="not_declared", reason=f"not declared; the product estimates {estimate:.4g} {unit} ({what})")
     f = _factor(declared, estimate)
     below = low is not None and declared < low
     above = high is not None and declared > high
@@ -76,8 +77,7 @@ def _band_verdict(where: str, quantity: str, unit: str, declared: float | None, 
         reason = (f"{declared:.4g} {unit} is {'below' if below else 'above'} {_span(low, high, unit)}"
                   + (f", x{declared / edge:.3g} of its {'lower' if below else 'upper'} end" if edge else "")
                   + (f" (x{f:.3g} the estimate)" if f is not None else "") + f" ({what})")
-    return ValueVerdict(where=where, quantity=quantity, unit=unit, declared=declared, estimate=estimate, low=low, high=high,
-                        factor=f, verdict="implausible" if below or above else "plausible", reason=reason)
+    return result(declared=declared, factor=f, verdict="implausible" if below or above else "plausible", reason=reason)
 
 
 def _span(low: float | None, high: float | None, unit: str) -> str:
@@ -118,16 +118,16 @@ def inertia_verdict(where: str, tensor: np.ndarray | None, mass: float | None, p
     :data:`INERTIA_TOLERANCE` outside the traces of the geometry's tensors ``per_kg`` ((3, 3) kg*m^2 per kg,
     thin shell and solid) at ``mass``. ``declared`` is the trace. ``written`` (3,): the principal moments as the
     file writes them, where the simulator changed them on loading (judged instead of the loaded tensor's)."""
+    result = functools.partial(ValueVerdict, where=where, quantity="inertia", unit="kg*m^2")
     if tensor is None or mass is None:
-        return ValueVerdict(where=where, quantity="inertia", unit="kg*m^2", declared=None, verdict="not_declared",
-                            reason="no inertia tensor declared")
+        return result(declared=None, verdict="not_declared", reason="no inertia tensor declared")
     t = np.asarray(tensor, float)
     trace = float(np.trace(t))
     traces = [float(np.trace(p)) * mass for p in per_kg if np.isfinite(p).all()]
     est = traces[-1] if traces else None
     if not np.isfinite(t).all() or not np.allclose(t, t.T, rtol=1e-6, atol=1e-12):
-        return ValueVerdict(where=where, quantity="inertia", unit="kg*m^2", declared=trace if math.isfinite(trace) else None,
-                            estimate=est, verdict="implausible", reason="the tensor is not symmetric (or not finite)")
+        return result(declared=trace if math.isfinite(trace) else None, estimate=est, verdict="implausible",
+                      reason="the tensor is not symmetric (or not finite)")
     eig = np.sort(np.linalg.eigvalsh(t) if written is None else np.asarray(written, float))
     if written is not None:
         trace = float(np.sum(eig))
@@ -138,11 +138,11 @@ def inertia_verdict(where: str, tensor: np.ndarray | None, mass: float | None, p
         invalid = (f" violate the triangle inequality ({eig[0]:.4g} + {eig[1]:.4g} < {eig[2]:.4g}): no rigid body has them"
                    + (" (the simulator changed them on loading)" if written is not None else ""))
     if invalid:
-        return ValueVerdict(where=where, quantity="inertia", unit="kg*m^2", declared=trace, estimate=est, factor=_factor(trace, est),
-                            verdict="implausible", reason=f"principal moments {_moments(eig)} kg*m^2{invalid}")
+        return result(declared=trace, estimate=est, factor=_factor(trace, est), verdict="implausible",
+                      reason=f"principal moments {_moments(eig)} kg*m^2{invalid}")
     if not traces:
-        return ValueVerdict(where=where, quantity="inertia", unit="kg*m^2", declared=trace, verdict="plausible",
-                            reason=f"valid (principal moments {_moments(eig)} kg*m^2); no geometry to compare with")
+        return result(declared=trace, verdict="plausible",
+                      reason=f"valid (principal moments {_moments(eig)} kg*m^2); no geometry to compare with")
     return _band_verdict(where, "inertia", "kg*m^2", trace, est, min(traces) / INERTIA_TOLERANCE, max(traces) * INERTIA_TOLERANCE,
                          f"trace; the geometry's thin-shell to solid tensors at the declared {mass:.4g} kg")
 
@@ -251,19 +251,19 @@ def limits_verdict(where: str, kind: str, lower: float | None, upper: float | No
     or a prismatic travel over :data:`MAX_TRAVEL_FACTOR` x the object's ``largest`` dimension (m) or under a
     millimetre (the unit rule of validation's ``JOINT_RANGE_WRONG_UNIT``). ``declared`` is the range."""
     unit = "m" if kind == "prismatic" else "rad"
+    result = functools.partial(ValueVerdict, where=where, quantity="limits", unit=unit)
     if lower is None or upper is None:
-        return ValueVerdict(where=where, quantity="limits", unit=unit, declared=None, verdict="not_declared",
-                            reason="no limits (continuous)" if kind == "continuous" else "no limits declared")
+        return result(declared=None, verdict="not_declared",
+                      reason="no limits (continuous)" if kind == "continuous" else "no limits declared")
     rng = float(upper - lower)
     if rng < 0:
-        return ValueVerdict(where=where, quantity="limits", unit=unit, declared=rng, verdict="implausible",
-                            reason=f"lower {lower:.4g} > upper {upper:.4g}")
+        return result(declared=rng, verdict="implausible", reason=f"lower {lower:.4g} > upper {upper:.4g}")
     small = MIN_PRISMATIC_SPAN if kind == "prismatic" else MIN_REVOLUTE_SPAN
     if 0 < rng < small:  # validation's JOINT_RANGE_WRONG_UNIT: the same rule
         what = "a millimetre (millimetres read as metres?)" if kind == "prismatic" else "a degree (radians read as degrees?)"
-        return ValueVerdict(where=where, quantity="limits", unit=unit, declared=rng, verdict="implausible",
-                            reason=f"range {lower:.4g} to {upper:.4g} spans less than {what}: it only makes sense in the "
-                                   "other unit (JOINT_RANGE_WRONG_UNIT)")
+        return result(declared=rng, verdict="implausible",
+                      reason=f"range {lower:.4g} to {upper:.4g} spans less than {what}: it only makes sense in the "
+                             "other unit (JOINT_RANGE_WRONG_UNIT)")
     high = 2 * math.pi if kind != "prismatic" else MAX_TRAVEL_FACTOR * largest
     what = "a full turn" if kind != "prismatic" else f"{MAX_TRAVEL_FACTOR:g} x the object's largest dimension"
     return _band_verdict(where, "limits", unit, rng, rng, 0.0, high, f"range {lower:.4g} to {upper:.4g}; at most {what}")

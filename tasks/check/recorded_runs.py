@@ -53,9 +53,8 @@ def input_digest(tier: str, engine: str, obj: SimObject, config: Any,
                  closed: dict[str, tuple[float, float, float]] | None = None) -> str:
     """SHA-256 (hex) of everything a manipulation tier (``tier``) reads: the
     engine, the URDF of ``obj.source`` (its model as written) and its meshes' identities, ``obj``'s initial state
-    and springs (order-free), its conventions and root, the tier's dataclass
-    ``config`` and the sweep's ``closed`` ends in order. Floats enter by
-    ``repr`` (exact).
+    and springs (order-free), its conventions and root, the tier's ``config`` (a dataclass, or a tuple of one and the
+    tier's other arguments) and the sweep's ``closed`` ends in order. Floats enter by ``repr`` (exact).
 
     Raises:
         UrdfError: the source's URDF cannot be read.
@@ -69,7 +68,7 @@ def input_digest(tier: str, engine: str, obj: SimObject, config: Any,
     h.update(repr(sorted((str(k), float(v)) for k, v in initial_state.items())).encode())
     h.update(repr(sorted((str(k), float(s.stiffness), float(s.reference)) for k, s in (springs or {}).items())).encode())
     h.update(conventions.model_dump_json().encode())
-    h.update(repr(dataclasses.asdict(config)).encode())
+    h.update(repr(config).encode())
     if closed is not None:
         h.update(repr([(str(n), tuple(float(x) for x in c)) for n, c in closed.items()]).encode())
     return h.hexdigest()
@@ -129,38 +128,15 @@ def robust_rest_run(engine: str, obj: SimObject, config: robust_rest.RobustRestC
     return _recorded(recorded, lambda: robust_rest.run_robust_rest(engine, obj, cfg), "robust_rest", engine, obj, cfg)
 
 
-@dataclass(frozen=True)
-class _OperabilityInputs:
-    """What :func:`operability_run` hands :func:`~asset2sim.tasks.check.operability.run_operability` besides the
-    files and the session options (part of its :func:`input_digest`)."""
-
-    config: operability.OperabilityConfig
-    category: str | None
-    labels: tuple[tuple[str, str | None], ...]
-
-
 def operability_run(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]], *,
                     category: str | None = None, labels: dict[str, str | None] | None = None,
                     recorded: RecordedRuns | None = None) -> operability.OperabilityRun:
     """:func:`asset2sim.tasks.check.operability.run_operability` (same arguments), recorded as :func:`sweep_run`."""
     cfg = operability.OperabilityConfig()
-    inputs = _OperabilityInputs(cfg, category, tuple(sorted((str(k), str(v)) for k, v in (labels or {}).items() if v)))
+    inputs = (cfg, category, tuple(sorted((str(k), str(v)) for k, v in (labels or {}).items() if v)))
     return _recorded(recorded, lambda: operability.run_operability(engine, obj, closed, category=category, labels=labels,
                                                                    config=cfg),
                      "operability", engine, _swept(obj), inputs, closed)
-
-
-@dataclass(frozen=True)
-class _TaskInputs:
-    """What :func:`task_run` hands :func:`~asset2sim.tasks.check.task_execution.run_task` besides the files and the
-    session options (part of its :func:`input_digest`)."""
-
-    config: TaskConfig
-    joints: tuple[tuple[str, tuple[float, float, float]], ...]
-    actions: tuple[str, ...]
-    targets: tuple[tuple[str, float], ...]
-    hold_required: tuple[tuple[str, bool], ...]
-    task: str | None
 
 
 def task_run(engine: str, obj: SimObject, joints: dict[str, tuple[float, float, float]], *,
@@ -170,9 +146,9 @@ def task_run(engine: str, obj: SimObject, joints: dict[str, tuple[float, float, 
     """:func:`asset2sim.tasks.check.task_execution.run_task` (same arguments), recorded as :func:`sweep_run`: the
     post-check's attempt is the evaluation's when every input is the same (the joints' closed ends to the bit)."""
     cfg = config or TaskConfig()
-    inputs = _TaskInputs(cfg, tuple((str(n), tuple(float(x) for x in c)) for n, c in joints.items()), tuple(actions),
-                         tuple(sorted((str(k), float(v)) for k, v in (targets or {}).items())),
-                         tuple(sorted((str(k), bool(v)) for k, v in (hold_required or {}).items())), task)
+    inputs = (cfg, tuple((str(n), tuple(float(x) for x in c)) for n, c in joints.items()), tuple(actions),
+              tuple(sorted((str(k), float(v)) for k, v in (targets or {}).items())),
+              tuple(sorted((str(k), bool(v)) for k, v in (hold_required or {}).items())), task)
     return _recorded(recorded, lambda: task_execution.run_task(
         engine, obj, joints, actions=actions, targets=targets, config=cfg, hold_required=hold_required, task=task),
         "task_execution", engine, obj, inputs)

@@ -5,6 +5,7 @@ clearing re-sweep :func:`_sweep_clearing`): ``docs/design/metrics.md``, "joint_s
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -244,8 +245,8 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
     stops it, swept again with the joints between moved (:func:`_clearing_ends`).
     Returns the first retry that passes (``range_note`` says what moved), else the first sweep."""
     qc, d, rng = closed[name]
-    first = sweep_joint(session, name, closed=qc, direction=d, open_range=rng, links=links,
-                        initial_state=initial_state, config=cfg)
+    sweep = functools.partial(sweep_joint, session, name, closed=qc, direction=d, open_range=rng, links=links, config=cfg)
+    first = sweep(initial_state=initial_state)
     opened = first.time_open is not None
     if first.passed or first.diverged or not np.isfinite(first.reached_open):
         return first
@@ -271,8 +272,7 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
         if not moved or all(abs(moved[k] - initial_state.get(k, closed[k][0])) < 1e-9 for k in moved):
             continue
         session.restore_state(saved)
-        second = sweep_joint(session, name, closed=qc, direction=d, open_range=rng, links=links,
-                             initial_state={**initial_state, **moved}, config=cfg)
+        second = sweep(initial_state={**initial_state, **moved})
         if second.passed:
             where = (f"of closing at the initial state ({'pushed into it' if pushed else f'stalled at {stall:.0%}'} on the way back)"
                      if opened else f"at the initial state (stalled at {stall:.0%})")

@@ -57,9 +57,9 @@ def render_benchmark_index(records: list[dict[str, Any]], meta: dict[str, Any]) 
     head = TEXTS["index_columns"]
     rows = []
     for r in records:
+        lead = f"<tr><td>{esc(r['id'])}</td><td>{esc(r.get('category'))}</td><td>{esc(r['method'])}</td>"
         if r.get("error"):
-            rows.append(f"<tr><td>{esc(r['id'])}</td><td>{esc(r.get('category'))}</td><td>{esc(r['method'])}</td>"
-                        f"<td class='fail' colspan='{len(head) - 3}'>{esc(r['error'])}</td></tr>")
+            rows.append(f"{lead}<td class='fail' colspan='{len(head) - 3}'>{esc(r['error'])}</td></tr>")
             continue
 
         def v(name: str) -> str:
@@ -70,10 +70,9 @@ def render_benchmark_index(records: list[dict[str, Any]], meta: dict[str, Any]) 
         link = f"<a href='{esc(r['report'])}'>report</a>" if r.get("report") else "-"
         allcls = "pass" if r.get("all_pass") else "fail"
         rows.append(
-            f"<tr><td>{esc(r['id'])}</td><td>{esc(r.get('category'))}</td><td>{esc(r['method'])}</td>"
-            f"<td class='{allcls}'>{'pass' if r.get('all_pass') else 'FAIL'}</td>"
-            + v("penetration") + v("rest_stability") + v("oscillation") + v("ground_penetration") + v("divergence")
-            + v("state_hold") + v("probes") + v("total_mass")
+            f"{lead}<td class='{allcls}'>{'pass' if r.get('all_pass') else 'FAIL'}</td>"
+            + "".join(map(v, ("penetration", "rest_stability", "oscillation", "ground_penetration", "divergence", "state_hold",
+                              "probes", "total_mass")))
             + f"<td class='num'>{fmt(r.get('scale_deviation'))}</td><td class='num'>{fmt(r.get('initial_joint_deviation'))}</td>"
             f"<td class='num'>{fmt(r.get('prompt_alignment'))}</td><td class='num'>{fmt(r.get('seconds'), 3)}</td><td>{link}</td></tr>"
         )

@@ -236,8 +236,7 @@ def sweep_clips(urdf: Path | str, sweep: SweepRun, joints: Sequence[str], others
         RenderError / FileNotFoundError: the URDF cannot be drawn.
         OSError: the folder cannot be written.
     """
-    views, size, fps, max_joints = CLIP_VIEWS, CLIP_SIZE, CLIP_FPS, MAX_CLIP_JOINTS
-    folder = Path(out_dir) / CLIPS_DIR
+    folder, max_joints = Path(out_dir) / CLIPS_DIR, MAX_CLIP_JOINTS
     by_joint = {js.joint: js for js in sweep.joints}
     clips: list[Clip] = []
     skipped: dict[str, str] = {}
@@ -255,16 +254,14 @@ def sweep_clips(urdf: Path | str, sweep: SweepRun, joints: Sequence[str], others
         except ValueError as exc:
             skipped[name] = str(exc)
     with contextlib.ExitStack() as stack:  # one renderer for every clip of the asset
-        r = stack.enter_context(SceneRenderer(urdf, size=size, supersample=1)) if todo or task_run is not None else None
+        r = stack.enter_context(SceneRenderer(urdf, size=CLIP_SIZE, supersample=1)) if todo or task_run is not None else None
         for n, (js, traj) in enumerate(todo):
-            idx = traj.sampled(fps)
             far = int(np.argmax(np.abs(traj.joints[js.joint] - js.q_closed)))
-            cams = fit_cameras(pose_points(r, fit_poses(traj, fps, [far])), views, size)
-            frames = draw_frames(r, traj, cams, fps)
-            poster = int(np.argmin(np.abs(np.asarray(idx) - far)))
-            for v in views:
+            frames = draw_frames(r, traj, fit_cameras(pose_points(r, fit_poses(traj, extra=[far])), CLIP_VIEWS))
+            poster = int(np.argmin(np.abs(np.asarray(traj.sampled(CLIP_FPS)) - far)))
+            for v in CLIP_VIEWS:
                 clips.append(write_clip(folder, f"sweep_{n:02d}_{v}", frames[view_spec(v).name], joint=js.joint, motion="sweep",
-                                        view=v, fps=fps, poster_index=poster))
+                                        view=v, poster_index=poster))
         if task_run is not None:
             more, why = task_clips(task_run, out_dir, r)
             clips += more
@@ -332,25 +329,23 @@ def task_clips(task_run, out_dir: Path | str, r: SceneRenderer) -> tuple[list[Cl
     (root free or mounted as simulated), the grasp point drawn as a red dot while held, written into
     ``out_dir/clips/task_<n>_<view>.*`` by the renderer ``r`` of the object at :data:`CLIP_SIZE`. Returns (clips, skipped:
     ``<joint> <action>`` -> why). Raises as :func:`sweep_clips`."""
-    views, size, fps, max_attempts = CLIP_VIEWS, CLIP_SIZE, CLIP_FPS, MAX_CLIP_JOINTS
     folder = Path(out_dir) / CLIPS_DIR
     out: list[Clip] = []
     skipped: dict[str, str] = {}
     todo = []
-    for att in list(task_run.attempts)[:max_attempts]:
+    for att in list(task_run.attempts)[:MAX_CLIP_JOINTS]:
         try:
             todo.append((att, task_trajectory(att)))
         except ValueError as exc:
             skipped[f"{att.joint} {att.action}"] = str(exc)
     for n, (att, traj) in enumerate(todo):
-        cams = fit_cameras(pose_points(r, fit_poses(traj, fps)), views, size)
-        idx = traj.sampled(fps)
-        frames = draw_frames(r, traj, cams, fps)
-        for v in views:
+        cams = fit_cameras(pose_points(r, fit_poses(traj)), CLIP_VIEWS)
+        frames = draw_frames(r, traj, cams)
+        for v in CLIP_VIEWS:
             name = view_spec(v).name
-            marked = [draw_mark(img, project(cams[name], traj.marks[i][None], size)[0]) for img, i in zip(frames[name], idx)]
-            out.append(write_clip(folder, f"task_{n:02d}_{v}", marked, joint=att.joint, motion="task", view=v, fps=fps,
-                                  poster_index=len(marked) // 2))
+            marked = [draw_mark(img, project(cams[name], traj.marks[i][None], CLIP_SIZE)[0])
+                      for img, i in zip(frames[name], traj.sampled(CLIP_FPS))]
+            out.append(write_clip(folder, f"task_{n:02d}_{v}", marked, joint=att.joint, motion="task", view=v))
     return out, skipped
 
 

@@ -132,8 +132,7 @@ def task_poses(attempt: dict, closed: dict, others: dict[str, float]) -> list[Po
     root as at rest (its slide and tilt are in the table); ``closed``: joint -> {q_closed, direction,
     open_range} (rad or m)."""
     c = closed[attempt["joint"]]
-    return [(f"{what} ({100 * attempt[key]:.0f} % open)",
-             {**others, attempt["joint"]: c["q_closed"] + c["direction"] * float(attempt[key]) * c["open_range"]}, np.eye(3))
+    return [(f"{what} ({100 * attempt[key]:.0f} % open)", {**others, attempt["joint"]: _opened(c, attempt[key])}, np.eye(3))
             for what, key in (("taken at", "start_fraction"), ("asked for", "target_fraction"), ("left at", "final_fraction"))
             if attempt.get(key) is not None and math.isfinite(attempt[key])]
 
@@ -176,8 +175,13 @@ def operability_poses(part: dict, stroke: dict, closed: dict, others: dict[str, 
              f"the hand stopped ({100 * float(stroke.get('reached') or 0.0):.0f} % open)": stroke.get("reached")}
     if stroke.get("at_fraction") is not None:
         shown[f"it needed the most here ({100 * float(stroke['at_fraction']):.0f} % open)"] = stroke["at_fraction"]
-    return [(caption, {**others, part["joint"]: c["q_closed"] + c["direction"] * float(f) * c["open_range"]}, np.eye(3))
+    return [(caption, {**others, part["joint"]: _opened(c, f)}, np.eye(3))
             for caption, f in shown.items() if f is not None and math.isfinite(float(f))]
+
+
+def _opened(closed: dict, fraction: float) -> float:
+    """The joint position (rad or m) at opening ``fraction`` of its ``closed`` end ({q_closed, direction, open_range})."""
+    return closed["q_closed"] + closed["direction"] * float(fraction) * closed["open_range"]
 
 
 def _stroke_table(part: dict, stroke: dict) -> str:

@@ -25,6 +25,7 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
     # step 1: the joint parameters each check round changed
     ov, rep = ctx.overlay, ctx.report
     joints = {j.name: j for j in ctx.model.joints}
+    types = {j.name: j.type for j in ctx.model.joints}
     escal: dict[tuple[str, str], int] = {}
     for rnd in (rep or {}).get("escalation", []) or []:
         for j, ch in (rnd.get("changes") or {}).items():
@@ -32,9 +33,10 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
                 escal[(j, k)] = rnd.get("round", 0)
     # step 2: masses, inertias and joint dynamics from the overlay (the URDF's value where escalation changed it)
     est = ((ov or {}).get("estimator") or {}).get("name")
+    by_estimator = f"estimator {est}" if est else "overlay"
     if ov:
         for ln, lp in (ov.get("links") or {}).items():
-            src = lp.get("source") or (f"estimator {est}" if est else "overlay")
+            src = lp.get("source") or by_estimator
             rows.append(_param("mass", f"link {ln}", lp.get("mass"), "kg", src))
             if lp.get("density") is not None:
                 rows.append(_param("density", f"link {ln}", lp["density"], "kg/m^3", src))
@@ -45,9 +47,8 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
             if lp.get("material"):
                 rows.append(_param("material", f"link {ln}", lp["material"], "-", src))
         for jn, jd in (ov.get("joints") or {}).items():
-            jt = joints[jn].type if jn in joints else "revolute"
             for k in ("damping", "friction", "stiffness"):
-                src = jd.get("source") or (f"estimator {est}" if est else "overlay")
+                src = jd.get("source") or by_estimator
                 if (jn, k) in escal:
                     src = f"changed after check round {escal[(jn, k)]} (the checks failed; see What asset2sim changed)"
                 val = jd.get(k)
@@ -56,7 +57,7 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
                     fv = getattr(joints[jn], k)
                     if val is not None and abs(fv - val) > 1e-12:
                         val, src = fv, src + " (URDF value differs from overlay; URDF shown)"
-                rows.append(_param(k, f"joint {jn}", val, joint_unit(jt, k), src))
+                rows.append(_param(k, f"joint {jn}", val, joint_unit(types.get(jn, "revolute"), k), src))
     # step 3: without an overlay, the URDF's values and the engine defaults
     else:
         for ln, li in ctx.model.links.items():
@@ -76,12 +77,11 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
     if rep and rep.get("state"):
         state_src = f"refinement ({rep['state'].get('method', '')})"
     elif ov and ov.get("initial_joint_positions"):
-        state_src = f"estimator {est}" if est else "overlay"
+        state_src = by_estimator
     elif ctx.baseline and ctx.baseline.get("initial_state_rule"):
         state_src = f"baseline rule: {ctx.baseline['initial_state_rule']}"
     for jn, q in ev.initial_state.items():
-        jt = joints[jn].type if jn in joints else "revolute"
-        rows.append(_param("initial position", f"joint {jn}", q, joint_unit(jt, "position"), state_src))
+        rows.append(_param("initial position", f"joint {jn}", q, joint_unit(types.get(jn, "revolute"), "position"), state_src))
     for jd in ctx.model.joints:
         if jd.type in ("revolute", "prismatic"):
             clipped = ((ov or {}).get("joints") or {}).get(jd.name, {}).get("limit_source") or ""

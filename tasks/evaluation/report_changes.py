@@ -172,11 +172,12 @@ def state_moves(report: dict[str, Any]) -> dict[str, str]:
     (``state``: asked vs found). Joints nothing moved are not
     listed. ``report``: ``report.json`` as a dict."""
     out: dict[str, str] = {}
+    positions = report.get("initial_joint_positions") or {}
     for note in report.get("design_changes") or []:
         if not str(note).startswith("stability by design"):
             continue
         head, _, rest = str(note).partition("; ")
-        for name in (report.get("initial_joint_positions") or {}):
+        for name in positions:
             m = re.search(rf"(?<![\w-]){re.escape(name)} opened to (\d+(?:\.\d+)?) of its range(?: \(allowed [^)]*\))?", rest)
             if m:
                 where = rest.split(", where the object stands steadiest", 1)[1].split(" (asked")[0] if "stands steadiest" in rest else ""
@@ -186,10 +187,10 @@ def state_moves(report: dict[str, Any]) -> dict[str, str]:
                              + ("; the least opening its band allows" if "the least its band allows" in note else ""))
     for note in report.get("design_changes") or []:  # the floor stopped the opening (tasks.state.ground_clearance)
         name, _, rest = str(note).partition(": opening limited by the floor, ")
-        if rest and name in (report.get("initial_joint_positions") or {}):
+        if rest and name in positions:
             out.setdefault(name, "stopped by the floor, where a real one stops")
     state = report.get("state") or {}
-    for name, q in (report.get("initial_joint_positions") or {}).items():
+    for name, q in positions.items():
         asked = (state.get("requested") or {}).get(name)
         if name not in out and asked is not None and abs(float(asked) - float(q)) > 1e-9:
             out[name] = f"moved by the state search to remove self-penetration ({state.get('method', '')})"

@@ -59,21 +59,21 @@ def point_cloud(urdf: Path, state: dict[str, float]) -> dict[str, np.ndarray]:
 def _verdict_table(ev) -> str:
     rows = []
     for m in ev.metrics:
-        skipped = m.details.get("skipped") if isinstance(m.details, dict) else None
+        d = m.details
         val = "-" if m.value is None else fmt(m.value)
         extra = ""
-        if m.name == "rest_stability" and "D_ori_rad" in m.details:
-            extra = f"D_pos {fmt(m.details['D_pos_m'])} m, D_ori {fmt(m.details['D_ori_rad'])} rad"
-        elif skipped:
-            extra = f"skipped: {skipped}"
-        elif m.details.get("reason"):
-            extra = str(m.details["reason"])
-        elif m.details.get("failures"):
-            extra = "; ".join(m.details["failures"])
-        elif m.details.get("failing"):
-            extra = "failing: " + ", ".join(m.details["failing"])
-        elif m.details.get("reasons"):
-            extra = "; ".join(m.details["reasons"])
+        if m.name == "rest_stability" and "D_ori_rad" in d:
+            extra = f"D_pos {fmt(d['D_pos_m'])} m, D_ori {fmt(d['D_ori_rad'])} rad"
+        elif d.get("skipped"):
+            extra = f"skipped: {d['skipped']}"
+        elif d.get("reason"):
+            extra = str(d["reason"])
+        elif d.get("failures"):
+            extra = "; ".join(d["failures"])
+        elif d.get("failing"):
+            extra = "failing: " + ", ".join(d["failing"])
+        elif d.get("reasons"):
+            extra = "; ".join(d["reasons"])
         rows.append(
             f"<tr><td>{esc(m.name)}</td><td>{esc(m.engine)}</td><td class='num'>{val}</td><td>{esc(m.unit)}</td>"
             f"{verdict_cell(m.passed)}<td class='small'>{esc(m.threshold)}</td><td class='small'>{esc(extra)}</td></tr>"
@@ -165,8 +165,7 @@ def _probe_details(ev) -> str:
         return "<p class='small'>no probes run" + (f": {esc(m.details.get('skipped'))}" if m and m.details.get("skipped") else "") + "</p>"
     rows = []
     for p in m.details["probes"]:
-        unit = "m" if p["joint_type"] == "prismatic" else "rad"
-        eff_unit = "N" if p["joint_type"] == "prismatic" else "N*m"
+        unit, eff_unit = ("m", "N") if p["joint_type"] == "prismatic" else ("rad", "N*m")
         cls = "pass" if p["success"] else "fail"
         rows.append(
             f"<tr><td>{esc(p['joint'])}</td><td>{esc(p['action'])}</td><td class='num'>{fmt(p['start'])} {unit}</td>"
@@ -287,7 +286,6 @@ def engines_section(report: dict | None) -> str:
         parts = [f"{esc(j)} {fmt(r.get('ratio'), 2)} f" for j, r in b.get("joints", {}).items()]
         return f"{verdict_cell(b.get('passed'))} <span class='small'>{', '.join(parts) or 'no joint with friction'}</span>"
 
-    intro = TEXTS["engines"]
     cells = []
     for r in rows:
         held = r.get("joints_held") or {}
@@ -295,7 +293,7 @@ def engines_section(report: dict | None) -> str:
         cells.append(f"\n<tr><td>{esc(r.get('engine'))}</td><td>{esc(r.get('status'))} <span class='small'>{esc(r.get('reason') or '')}</span>"
                      f"</td><td>{verdict_cell(r.get('rest_stability'))}</td><td class='small'>{held_text}</td>"
                      f"<td>{breakaway_cell(r.get('breakaway'))}</td></tr>")
-    return f"<h2>What holds in each engine</h2>\n{intro}\n" + table(("engine", "status", "rest stability", "joints held", "breakaway"),
+    return f"<h2>What holds in each engine</h2>\n{TEXTS['engines']}\n" + table(("engine", "status", "rest stability", "joints held", "breakaway"),
                                                                       [*cells, "\n"])
 
 
