@@ -271,15 +271,12 @@ def verdict_changes(df, run_a: str, run_b: str):
     change[m["_merge"] == "left_only"] = "only in " + run_a
     change[m["_merge"] == "right_only"] = "only in " + run_b
     both = m["_merge"] == "both"
-    parts = []
+    differs = {}
     for f in ("failure_mode", "rest_stable", "oscillation_pass"):
         xa, xb = m[f"{f}_a"], m[f"{f}_b"]
-        differ = both & ~((xa.isna() & xb.isna()) | (xa.astype(object) == xb.astype(object)).fillna(False).astype(bool))
-        parts.append((f, differ))
-    any_diff = parts[0][1] | parts[1][1] | parts[2][1]
-    for idx in m.index[any_diff]:
-        diffs = [f"{f}: {m.at[idx, f + '_a']} -> {m.at[idx, f + '_b']}" for f, differ in parts if differ[idx]]
-        change[idx] = ", ".join(diffs)
+        differs[f] = both & ~((xa.isna() & xb.isna()) | (xa.astype(object) == xb.astype(object)).fillna(False).astype(bool))
+    for idx in m.index[differs["failure_mode"] | differs["rest_stable"] | differs["oscillation_pass"]]:
+        change[idx] = ", ".join(f"{f}: {m.at[idx, f + '_a']} -> {m.at[idx, f + '_b']}" for f, differ in differs.items() if differ[idx])
     m["change"] = change
     m = m[m["change"] != ""]
     out = m[cols].sort_values("asset_id").reset_index(drop=True)

@@ -245,18 +245,15 @@ def stage_refine(
     def say(stage: str, message: str) -> None:
         progress.append([stage, message, round(time.perf_counter() - t0, 3)])
 
-    kwargs: dict[str, Any] = {"category": category, "progress": say}
+    optional = {
+        "asset_id": asset_id, "extras": extras,
+        "media": None if media else False,  # False: the media phase deferred to the end of the run
+        "extracted": None if extracted is None else (AssetDescription.model_validate(extracted["asset"]),
+                                                     [Finding.model_validate(f) for f in extracted["findings"]]),
+        "reference": None if reference_dir is None else Path(reference_dir),
+    }
     params = inspect.signature(fn).parameters
-    kwargs.update({k: v for k, v in (("asset_id", asset_id), ("extras", extras)) if k in params})
-    if not media and "media" in params:  # the media phase deferred to the end of the run
-        kwargs["media"] = False
-    if extracted is not None and "extracted" in params:
-        kwargs["extracted"] = (
-            AssetDescription.model_validate(extracted["asset"]),
-            [Finding.model_validate(f) for f in extracted["findings"]],
-        )
-    if reference_dir is not None and "reference" in params:
-        kwargs["reference"] = Path(reference_dir)
+    kwargs = {"category": category, "progress": say, **{k: v for k, v in optional.items() if v is not None and k in params}}
     with output_folder.guarding(Path(out_dir).parent):  # the run's folder: no asset's output through a symlink out of it
         result = fn(Path(asset_dir), prompt, Path(out_dir), RefineConfig(**config), **kwargs)
     report = RefineReport.model_validate(result.report.model_dump(mode="json"))
