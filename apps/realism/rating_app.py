@@ -134,8 +134,8 @@ def _media_table(store: RatingStore) -> dict[tuple[int, str, int, str], Path]:
     for i, pair in enumerate(store.pairs):
         for slot in ("a", "b"):
             for v, clip in enumerate(side(pair, slot).clips):
-                table[(i, slot, v, "video")] = media_path(store.folder, clip.video)
-                table[(i, slot, v, "poster")] = media_path(store.folder, clip.poster)
+                for kind in _KINDS:  # video, poster
+                    table[(i, slot, v, kind)] = media_path(store.folder, getattr(clip, kind))
     return table
 
 
