@@ -338,9 +338,10 @@ def stage_metrics(
     return _measurement(ev, float(ev.seconds)).model_dump(mode="json")
 
 
-def _run_stage(job: AssetJob, name: str, target: str, kwargs: dict[str, Any], timeout: float) -> StageRecord:
-    """Run a stage function per the job's isolation; a uniform record (``value``: the JSON it returned)."""
-    t0 = time.perf_counter()
+def _run_stage(job: AssetJob, name: str, kwargs: dict[str, Any], timeout: float) -> StageRecord:
+    """Run the stage function ``stage_<name>`` per the job's isolation; a uniform record (``value``: the JSON it
+    returned)."""
+    t0, target = time.perf_counter(), f"{__name__}:stage_{name}"
     if timeout <= 0:
         return StageRecord(status="timeout", error=f"no time left for stage {name}", failure_mode="timeout", seconds=0.0)
     if job.isolation == "process":  # a child forked from this worker's pre-imported stage server
@@ -374,7 +375,6 @@ def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
     rec = _run_stage(
         job,
         "refine",
-        "asset2sim.flows.stages:stage_refine",
         {
             **{k: getattr(job, k) for k in ("asset_dir", "prompt", "out_dir", "config", "category", "asset_id",
                                             "refine_function", "extras", "media")},
@@ -401,22 +401,19 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
         return StageRecord(status="skipped", seconds=0.0)
     value: RefineOutput = refined.value
     category = value.report.category or job.category
-    metrics_dir = job.metrics_dir
+    metrics_dir, reused = job.metrics_dir, None
     if prepared.resume is not None:  # the earlier run's measurement, when it made one
         metrics_dir = prepared.resume["job"]["metrics_dir"]
         ev = refined_evaluation(metrics_dir, job.prompt, category, job.reference_dir)
-        if ev is not None:
-            earlier = _measurement(ev, float(ev.seconds))
-            return StageRecord(status="ok", value=earlier, seconds=earlier.seconds)
-    reused = None if job.probes else measurement_from_refine(value.out_dir or job.out_dir, job.prompt, category, job.reference_dir,
-                                                             metrics_dir)
+        reused = None if ev is None else _measurement(ev, float(ev.seconds))
+    if reused is None and not job.probes:
+        reused = measurement_from_refine(value.out_dir or job.out_dir, job.prompt, category, job.reference_dir, metrics_dir)
     if reused is not None:  # nothing to simulate: no child process needed
         return StageRecord(status="ok", value=reused, seconds=reused.seconds)
     budget = job.time_limit_seconds - float(prepared.seconds or 0.0) - float(refined.seconds or 0.0)
     rec = _run_stage(
         job,
         "metrics",
-        "asset2sim.flows.stages:stage_metrics",
         {
             "out_dir": value.out_dir or job.out_dir,
             "prompt": job.prompt,
