@@ -10,6 +10,7 @@ import json
 import math
 import os
 import time
+from datetime import datetime
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -241,22 +242,11 @@ def _asset_start(row: dict[str, Any]) -> int | None:
 
 def _ms(when: Any) -> int | None:
     """Epoch milliseconds of ``when`` (epoch s, a datetime, an ISO text or a pandas Timestamp); None when unknown."""
-    if when is None:
+    try:  # None, a text that is no time, NaT: unknown
+        when = datetime.fromisoformat(when) if isinstance(when, str) else when
+        v = float(when.timestamp()) if hasattr(when, "timestamp") else float(when)
+    except (TypeError, ValueError, OverflowError):
         return None
-    if isinstance(when, str):
-        from datetime import datetime
-
-        try:
-            when = datetime.fromisoformat(when)
-        except ValueError:
-            return None
-    if hasattr(when, "timestamp"):
-        try:
-            v = float(when.timestamp())
-        except (TypeError, ValueError, OverflowError):  # NaT
-            return None
-    else:
-        v = float(when)
     return int(round(v * 1000)) if math.isfinite(v) else None
 
 
