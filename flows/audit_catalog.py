@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from asset2sim import atomic
-from asset2sim.schemas.audit import AuditReport, AuditRow
+from asset2sim.schemas.audit import AuditReport, AuditRow, ValueVerdict
 from asset2sim.schemas.catalog import parquet_bytes
 from asset2sim.apps.audit.audit import AUDIT_JSON
 
@@ -36,9 +36,7 @@ def values_frame(rows: list[AuditRow]):
             continue
         report = AuditReport.model_validate_json(atomic.read_regular(Path(row.out_dir) / AUDIT_JSON))
         records += [{"asset_id": row.asset_id, "category": report.category, **v.model_dump(mode="json")} for v in report.values]
-    columns = ["asset_id", "category", "where", "quantity", "unit", "declared", "estimate", "low", "high", "factor", "verdict",
-               "reason", "patched"]
-    return pd.DataFrame.from_records(records, columns=columns)
+    return pd.DataFrame.from_records(records, columns=["asset_id", "category", *ValueVerdict.model_fields])
 
 
 def write_audit_catalog(out_root: Path | str, rows: list[AuditRow]) -> dict[str, Path]:

@@ -14,6 +14,7 @@ when any limit is exceeded. :func:`comparison_lines` gives the text.
 from __future__ import annotations
 
 import json
+from collections import Counter
 from pathlib import Path
 from typing import Any, Literal
 
@@ -186,9 +187,8 @@ def compare_runs(previous, current, *, dataset: str, run: str, previous_run_id: 
             cat = rec["category_b"] if isinstance(rec["category_b"], str) else rec["category_a"]
             out.flips.append(VerdictFlip(asset_id=str(aid), category=cat if isinstance(cat, str) else None,
                                          before=before, after=after, direction=direction))
-        out.regressed = sum(f.direction == "regressed" for f in out.flips)
-        out.improved = sum(f.direction == "improved" for f in out.flips)
-        out.changed = sum(f.direction == "changed" for f in out.flips)
+        directions = Counter(f.direction for f in out.flips)
+        out.regressed, out.improved, out.changed = directions["regressed"], directions["improved"], directions["changed"]
         reused = (both["status_a"] == "skipped") | (both["status_b"] == "skipped")
         for col, (unit, higher_better) in COMPARED_METRICS.items():
             va, vb = _as_float(both[f"{col}_a"]), _as_float(both[f"{col}_b"])
@@ -307,13 +307,5 @@ def write_comparison_artifacts(cmp: RunComparison, history, out_dir: Path | str)
 
 def comparison_summary(cmp: RunComparison) -> dict[str, Any]:
     """The comparison as the flow's summary holds it (plain JSON values)."""
-    return {
-        "status": cmp.status,
-        "exceeded": cmp.exceeded,
-        "previous_run": cmp.previous_run,
-        "regressed": cmp.regressed,
-        "improved": cmp.improved,
-        "pass_rate_drift": cmp.pass_rate_drift,
-        "reasons": list(cmp.reasons),
-        "lines": comparison_lines(cmp),
-    }
+    return {**{k: getattr(cmp, k) for k in ("status", "exceeded", "previous_run", "regressed", "improved", "pass_rate_drift")},
+            "reasons": list(cmp.reasons), "lines": comparison_lines(cmp)}

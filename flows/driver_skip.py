@@ -63,11 +63,7 @@ def input_fingerprint(asset_dir: Path | str) -> str | None:
                 items.append(f"{os.path.realpath(p)}\0{st.st_size}\0{st.st_mtime_ns}")
     except OSError:
         return None
-    h = hashlib.sha256(str(root.resolve()).encode())
-    for it in sorted(items):
-        h.update(b"\n")
-        h.update(it.encode())
-    return h.hexdigest()
+    return hashlib.sha256((str(root.resolve()) + "".join("\n" + it for it in sorted(items))).encode()).hexdigest()
 
 
 def _index_path(store: ResultCatalog, dataset: str) -> str:

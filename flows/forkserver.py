@@ -13,13 +13,13 @@ import functools
 import gc
 import json
 import os
-import queue
 import select
 import signal
 import subprocess
 import sys
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -242,37 +242,18 @@ def _kill_group(pid: int) -> None:
         os.killpg(pid, signal.SIGKILL)
 
 
-_OWNER: dict[int, tuple[threading.Thread, queue.Queue]] = {}
+_OWNER: dict[int, ThreadPoolExecutor] = {}
 _OWNER_LOCK = threading.Lock()
 
 
 def _popen_from_owner_thread(args: list[str], **kwargs) -> subprocess.Popen:
     """``subprocess.Popen(args, **kwargs)`` run by one thread living as long as
-    this process (``PR_SET_PDEATHSIG`` fires when the forking *thread* ends)."""
+    this process (``PR_SET_PDEATHSIG`` fires when the forking *thread* ends): a one-thread executor's."""
     with _OWNER_LOCK:
         owner = _OWNER.get(os.getpid())
-        if owner is None or not owner[0].is_alive():
-            requests: queue.Queue = queue.Queue()
-
-            def serve() -> None:
-                while True:
-                    a, kw, box, done = requests.get()
-                    try:
-                        box.append(subprocess.Popen(a, **kw))
-                    except BaseException as exc:  # noqa: BLE001 - handed to the caller
-                        box.append(exc)
-                    done.set()
-
-            thread = threading.Thread(target=serve, name="asset2sim-stage-server-owner", daemon=True)
-            thread.start()
-            owner = _OWNER[os.getpid()] = (thread, requests)
-    box: list = []
-    done = threading.Event()
-    owner[1].put((args, kwargs, box, done))
-    done.wait()
-    if isinstance(box[0], BaseException):
-        raise box[0]
-    return box[0]
+        if owner is None:
+            owner = _OWNER[os.getpid()] = ThreadPoolExecutor(1, thread_name_prefix="asset2sim-stage-server-owner")
+    return owner.submit(subprocess.Popen, args, **kwargs).result()
 
 
 _SERVERS: dict[int, StageServer] = {}

@@ -196,11 +196,7 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
     """
     prepared = prepared or Prepared(worker=None)
     row = _row_head(job, prepared, refined, flow_run_id, started_at, finished_at)
-    stages: dict[str, float] = {}
-    if prepared.seconds is not None:
-        stages["prepare"] = _s(prepared.seconds)
-    if prepared.cpu_seconds is not None:
-        stages["cpu.prepare"] = _s(prepared.cpu_seconds)
+    stages = {k: _s(v) for k, v in (("prepare", prepared.seconds), ("cpu.prepare", prepared.cpu_seconds)) if v is not None}
     if prepared.skip is not None:  # reuse an earlier finished result
         return _reused_row(row, prepared.skip, stages)
     errors: list[str] = []
@@ -270,8 +266,7 @@ def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages:
         row.clips = json.dumps(clip_videos(row.out_dir)) if row.out_dir else None
         row.media = report.media
         stages["refine"] = _s(refined.seconds)
-        for k, v in report.stage_seconds.items():
-            stages[f"refine.{k}"] = _s(v)
+        stages.update({f"refine.{k}": _s(v) for k, v in report.stage_seconds.items()})
         row.scale = report.scale
         row.total_mass_kg = report.total_mass
         row.initial_state = json.dumps(report.initial_joint_positions or {}, sort_keys=True)
@@ -280,9 +275,8 @@ def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages:
         row.extra_rounds = json.dumps(extra_rounds(report)) if report.escalation else None
         row.refine_config_hash = report.config_hash or row.refine_config_hash
         row.tokens = value.tokens
-        row.estimator = report.estimator or row.estimator
-        row.model = report.model or row.model
-        row.category = report.category or row.category
+        for col in ("estimator", "model", "category"):  # the report's when it names one
+            setattr(row, col, getattr(report, col) or getattr(row, col))
         post = column_values(report.metrics, engine=None, names=("penetration", "rest_stability", "oscillation", "request_met"))
         row.penetration_mm = post.get("penetration_mm")
         for col in ("rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "request_met", "request_unmet"):

@@ -132,19 +132,21 @@ def run_summary(df) -> dict[str, Any]:
     out.update(failure_modes=counts["failure_modes"], pass_rate_all=counts["pass_rate_all"])
     out["stability_pass_rate"] = _rate(df["rest_stable"])
     out["oscillation_pass_rate"] = _rate(df["oscillation_pass"])
-    pen = df["penetration_mm"].dropna().astype(float)
-    out["penetration_mm_mean"] = float(pen.mean()) if len(pen) else None
-    out["penetration_mm_std"] = float(pen.std(ddof=0)) if len(pen) else None
-    pa = df["prompt_alignment"].dropna().astype(float)
-    out["prompt_alignment_mean"] = float(pa.mean()) if len(pa) else None
+    pen, wall = df["penetration_mm"].dropna().astype(float), df["wall_seconds"].dropna().astype(float)
+    out["penetration_mm_mean"] = _stat(pen, "mean")
+    out["penetration_mm_std"] = _stat(pen, "std", ddof=0)
+    out["prompt_alignment_mean"] = _stat(df["prompt_alignment"].dropna().astype(float), "mean")
     worked = df[df["status"] == "done"]
     out["queries_per_asset"] = float(worked["model_queries"].fillna(0).mean()) if len(worked) else 0.0
     out["tokens_total"] = int(df["tokens"].fillna(0).sum())
-    wall = df["wall_seconds"].dropna().astype(float)
     out["asset_seconds_total"] = float(wall.sum())
-    out["asset_seconds_mean"] = float(wall.mean()) if len(wall) else None
-    out["asset_seconds_max"] = float(wall.max()) if len(wall) else None
+    out["asset_seconds_mean"], out["asset_seconds_max"] = _stat(wall, "mean"), _stat(wall, "max")
     return out
+
+
+def _stat(values, how: str, **kwargs) -> float | None:
+    """``values.<how>(**kwargs)`` (a float Series' mean, std, max) as a float; None when there are no values."""
+    return float(getattr(values, how)(**kwargs)) if len(values) else None
 
 
 #: Columns :func:`pass_rates_over_time` reads.
@@ -179,9 +181,8 @@ def pass_rates_over_time(df, dataset: str | None = None):
     out = pd.DataFrame({
         "dataset": agg["dataset"], "run": agg["run"], "started_at": agg["started_at_min"],
         "assets": agg["pass_count"].astype(int), "pass_rate_all": agg["pass_mean"],
-        "stability_pass_rate": agg["stable_mean"].astype(object).where(agg["stable_mean"].notna(), None),
-        "oscillation_pass_rate": agg["osc_mean"].astype(object).where(agg["osc_mean"].notna(), None),
-        "penetration_mm_mean": agg["pen_mean"].astype(object).where(agg["pen_mean"].notna(), None),
+        **{col: agg[f"{key}_mean"].astype(object).where(agg[f"{key}_mean"].notna(), None)
+           for col, key in (("stability_pass_rate", "stable"), ("oscillation_pass_rate", "osc"), ("penetration_mm_mean", "pen"))},
         "failed": agg["failed_sum"].astype(int),
     })  # fmt: skip
     return out.sort_values(["dataset", "run"]).reset_index(drop=True)[cols]
@@ -270,15 +271,12 @@ def verdict_changes(df, run_a: str, run_b: str):
     change[m["_merge"] == "left_only"] = "only in " + run_a
     change[m["_merge"] == "right_only"] = "only in " + run_b
     both = m["_merge"] == "both"
-    parts = []
+    differs = {}
     for f in ("failure_mode", "rest_stable", "oscillation_pass"):
         xa, xb = m[f"{f}_a"], m[f"{f}_b"]
-        differ = both & ~((xa.isna() & xb.isna()) | (xa.astype(object) == xb.astype(object)).fillna(False).astype(bool))
-        parts.append((f, differ))
-    any_diff = parts[0][1] | parts[1][1] | parts[2][1]
-    for idx in m.index[any_diff]:
-        diffs = [f"{f}: {m.at[idx, f + '_a']} -> {m.at[idx, f + '_b']}" for f, differ in parts if differ[idx]]
-        change[idx] = ", ".join(diffs)
+        differs[f] = both & ~((xa.isna() & xb.isna()) | (xa.astype(object) == xb.astype(object)).fillna(False).astype(bool))
+    for idx in m.index[differs["failure_mode"] | differs["rest_stable"] | differs["oscillation_pass"]]:
+        change[idx] = ", ".join(f"{f}: {m.at[idx, f + '_a']} -> {m.at[idx, f + '_b']}" for f, differ in differs.items() if differ[idx])
     m["change"] = change
     m = m[m["change"] != ""]
     out = m[cols].sort_values("asset_id").reset_index(drop=True)

@@ -66,11 +66,10 @@ def log_realism_scores(scores: list[MethodScore], *, tracking_uri: str, experime
     sources = sorted({s.source for s in scores})
     with client_run(client, experiment, _artifact_location(tracking_uri, experiment), run_name or f"realism-{'-'.join(sources)}",
                     tags={"asset2sim.kind": "realism"}) as run_id:
-        client.log_param(run_id, "sources", ",".join(sources))
-        client.log_param(run_id, "methods", ",".join(sorted({s.method for s in scores})))
-        client.log_param(run_id, "model", "Bradley-Terry (MAP, virtual games prior)")
-        client.log_param(run_id, "prior_games", PRIOR_GAMES)
-        client.log_param(run_id, "interval", "95% Wald, observed information, sum-to-zero")
+        for key, value in {"sources": ",".join(sources), "methods": ",".join(sorted({s.method for s in scores})),
+                           "model": "Bradley-Terry (MAP, virtual games prior)", "prior_games": PRIOR_GAMES,
+                           "interval": "95% Wald, observed information, sum-to-zero"}.items():
+            client.log_param(run_id, key, value)
         for s in scores:
             for field in SCORE_METRICS:
                 client.log_metric(run_id, metric_key(s.source, s.method, field), float(getattr(s, field)))

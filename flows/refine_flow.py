@@ -191,14 +191,12 @@ def _start_run(log, cat, name: str, planned: DriverPlan, workers, dask_address, 
 def _record_without_workers(log, run: _Run, planned: DriverPlan) -> None:
     """The rows of the manifest's bad rows (failed, ``invalid_manifest_row``) and of the assets the driver skips,
     before any worker starts."""
-    bad_rows = planned.plan.bad_rows
     config = run.cat.refine_config().model_dump(mode="json")
-    for bad in bad_rows:
+    for bad in planned.plan.bad_rows:
         row = build_manifest_row(bad.error, asset_id=bad.asset_id, run_id=run.run_id, config=config,
                                  code_version=run.info["code_version"], flow_run_id=run.info["flow_run_id"])
         run.store.append_row(run.name, run.run_id, row)
         emit_finished(run.name, run.run_id, row)
-    for bad in bad_rows:
         log.warning("%s: manifest row refused (%s): %s", bad.asset_id, bad.error.code, bad.error.message[:300])
     _record_driver_skips(run.store, planned.plan.jobs, planned.skips, run.info["flow_run_id"])
 

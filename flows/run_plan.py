@@ -90,7 +90,7 @@ def plan_run(
     ordered: list[ManifestEntry | BadManifestRow] = sorted([*entries, *bad], key=_manifest_line)  # file order
     # step 2: only the ids asked for, at most ``limit`` rows
     if ids:
-        known = {e.asset_id for e in entries} | {b.asset_id for b in bad} | {b.error.id for b in bad if b.error.id}
+        known = {it.asset_id for it in ordered} | {b.error.id for b in bad if b.error.id}
         unknown = [i for i in ids if i not in known]
         if unknown:
             raise CatalogError(f"{cat.manifest_path(name)}: unknown id(s) {unknown}")

@@ -16,7 +16,6 @@ from typing import Any
 
 from asset2sim import __version__, array_cache, atomic, output_folder
 from asset2sim.flows.catalog import result_key
-from asset2sim.flows import server
 from asset2sim.flows import store as store_mod
 from asset2sim.flows.forkserver import run_forked, start_soon
 from asset2sim.flows.isolation import call_target, import_target, run_isolated
@@ -245,18 +244,15 @@ def stage_refine(
     def say(stage: str, message: str) -> None:
         progress.append([stage, message, round(time.perf_counter() - t0, 3)])
 
-    kwargs: dict[str, Any] = {"category": category, "progress": say}
+    optional = {
+        "asset_id": asset_id, "extras": extras,
+        "media": None if media else False,  # False: the media phase deferred to the end of the run
+        "extracted": None if extracted is None else (AssetDescription.model_validate(extracted["asset"]),
+                                                     [Finding.model_validate(f) for f in extracted["findings"]]),
+        "reference": None if reference_dir is None else Path(reference_dir),
+    }
     params = inspect.signature(fn).parameters
-    kwargs.update({k: v for k, v in (("asset_id", asset_id), ("extras", extras)) if k in params})
-    if not media and "media" in params:  # the media phase deferred to the end of the run
-        kwargs["media"] = False
-    if extracted is not None and "extracted" in params:
-        kwargs["extracted"] = (
-            AssetDescription.model_validate(extracted["asset"]),
-            [Finding.model_validate(f) for f in extracted["findings"]],
-        )
-    if reference_dir is not None and "reference" in params:
-        kwargs["reference"] = Path(reference_dir)
+    kwargs = {"category": category, "progress": say, **{k: v for k, v in optional.items() if v is not None and k in params}}
     with output_folder.guarding(Path(out_dir).parent):  # the run's folder: no asset's output through a symlink out of it
         result = fn(Path(asset_dir), prompt, Path(out_dir), RefineConfig(**config), **kwargs)
     report = RefineReport.model_validate(result.report.model_dump(mode="json"))
@@ -341,9 +337,10 @@ def stage_metrics(
     return _measurement(ev, float(ev.seconds)).model_dump(mode="json")
 
 
-def _run_stage(job: AssetJob, name: str, target: str, kwargs: dict[str, Any], timeout: float) -> StageRecord:
-    """Run a stage function per the job's isolation; a uniform record (``value``: the JSON it returned)."""
-    t0 = time.perf_counter()
+def _run_stage(job: AssetJob, name: str, kwargs: dict[str, Any], timeout: float) -> StageRecord:
+    """Run the stage function ``stage_<name>`` per the job's isolation; a uniform record (``value``: the JSON it
+    returned)."""
+    t0, target = time.perf_counter(), f"{__name__}:stage_{name}"
     if timeout <= 0:
         return StageRecord(status="timeout", error=f"no time left for stage {name}", failure_mode="timeout", seconds=0.0)
     if job.isolation == "process":  # a child forked from this worker's pre-imported stage server
@@ -377,7 +374,6 @@ def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
     rec = _run_stage(
         job,
         "refine",
-        "asset2sim.flows.stages:stage_refine",
         {
             **{k: getattr(job, k) for k in ("asset_dir", "prompt", "out_dir", "config", "category", "asset_id",
                                             "refine_function", "extras", "media")},
@@ -404,22 +400,19 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
         return StageRecord(status="skipped", seconds=0.0)
     value: RefineOutput = refined.value
     category = value.report.category or job.category
-    metrics_dir = job.metrics_dir
+    metrics_dir, reused = job.metrics_dir, None
     if prepared.resume is not None:  # the earlier run's measurement, when it made one
         metrics_dir = prepared.resume["job"]["metrics_dir"]
         ev = refined_evaluation(metrics_dir, job.prompt, category, job.reference_dir)
-        if ev is not None:
-            earlier = _measurement(ev, float(ev.seconds))
-            return StageRecord(status="ok", value=earlier, seconds=earlier.seconds)
-    reused = None if job.probes else measurement_from_refine(value.out_dir or job.out_dir, job.prompt, category, job.reference_dir,
-                                                             metrics_dir)
+        reused = None if ev is None else _measurement(ev, float(ev.seconds))
+    if reused is None and not job.probes:
+        reused = measurement_from_refine(value.out_dir or job.out_dir, job.prompt, category, job.reference_dir, metrics_dir)
     if reused is not None:  # nothing to simulate: no child process needed
         return StageRecord(status="ok", value=reused, seconds=reused.seconds)
     budget = job.time_limit_seconds - float(prepared.seconds or 0.0) - float(refined.seconds or 0.0)
     rec = _run_stage(
         job,
         "metrics",
-        "asset2sim.flows.stages:stage_metrics",
         {
             "out_dir": value.out_dir or job.out_dir,
             "prompt": job.prompt,
@@ -434,17 +427,3 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
         rec.value = Measurement.model_validate(rec.value)
     return rec
 
-
-def prepare_prefect_environment(project_root: Path | str) -> dict[str, str]:
-    """Set Prefect's environment defaults (home under the project, analytics off, a longer start-up timeout) where
-    unset, before Prefect is imported; returns what was set."""
-    defaults = {
-        "PREFECT_HOME": str(Path(project_root) / ".prefect"),
-        "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
-        "DO_NOT_TRACK": "1",
-        "MLFLOW_DISABLE_TELEMETRY": "true",  # no ~/.config/mlflow/telemetry.json, no usage sent
-        "PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS": f"{server.STARTUP_TIMEOUT:g}",  # a fresh database's first start
-    }
-    set_now = {k: v for k, v in defaults.items() if k not in os.environ}
-    os.environ.update(set_now)
-    return set_now

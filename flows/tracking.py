@@ -10,6 +10,7 @@ import json
 import math
 import os
 import time
+from datetime import datetime
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -112,13 +113,9 @@ def _asset_metrics(row: dict[str, Any]) -> dict[str, float]:
     out = {}
     for k in ("scale", "total_mass_kg", "penetration_mm", "d_pos_m", "d_ori_rad", "prompt_alignment",
               "scale_deviation_pct", "model_queries", "tokens", "wall_seconds"):  # fmt: skip
-        v = row.get(k)
-        try:
-            f = float(v)
-        except (TypeError, ValueError):
-            continue
-        if math.isfinite(f):
-            out[k] = f
+        with contextlib.suppress(TypeError, ValueError):
+            if math.isfinite(f := float(row.get(k))):
+                out[k] = f
     for k in ("rest_stable", "oscillation_pass"):
         v = row.get(k)
         if v is None or (isinstance(v, float) and math.isnan(v)):
@@ -187,24 +184,13 @@ def log_flow_run(
                 exp_id,
                 run_name=str(row["asset_id"]),
                 start_time=_asset_start(row) or ts,
-                tags={
-                    "mlflow.parentRunId": rid,
-                    "asset2sim.kind": "asset",
-                    "asset_id": str(row["asset_id"]),
-                    "category": str(row.get("category") or ""),
-                    "status": str(row.get("status") or ""),
-                    "failure_mode": str(row.get("failure_mode") or ""),
-                },
+                tags={"mlflow.parentRunId": rid, "asset2sim.kind": "asset", "asset_id": str(row["asset_id"]),
+                      **{k: str(row.get(k) or "") for k in ("category", "status", "failure_mode")}},
             )
             client.log_batch(
                 child.info.run_id,
                 metrics=[Metric(k, v, ts, 0) for k, v in _asset_metrics(row).items()],
-                params=[
-                    Param("prompt", str(row.get("prompt") or "")[:500]),
-                    Param("estimator", str(row.get("estimator") or "")),
-                    Param("input_hash", str(row.get("input_hash") or "")),
-                    Param("config_hash", str(row.get("config_hash") or "")),
-                ],
+                params=[Param(k, str(row.get(k) or "")[:500]) for k in ("prompt", "estimator", "input_hash", "config_hash")],
             )
             if row.get("status") != "skipped":  # a reused asset's files belong to the run that made them
                 for path in asset_artifacts(row.get("out_dir")):
@@ -256,22 +242,11 @@ def _asset_start(row: dict[str, Any]) -> int | None:
 
 def _ms(when: Any) -> int | None:
     """Epoch milliseconds of ``when`` (epoch s, a datetime, an ISO text or a pandas Timestamp); None when unknown."""
-    if when is None:
+    try:  # None, a text that is no time, NaT: unknown
+        when = datetime.fromisoformat(when) if isinstance(when, str) else when
+        v = float(when.timestamp()) if hasattr(when, "timestamp") else float(when)
+    except (TypeError, ValueError, OverflowError):
         return None
-    if isinstance(when, str):
-        from datetime import datetime
-
-        try:
-            when = datetime.fromisoformat(when)
-        except ValueError:
-            return None
-    if hasattr(when, "timestamp"):
-        try:
-            v = float(when.timestamp())
-        except (TypeError, ValueError, OverflowError):  # NaT
-            return None
-    else:
-        v = float(when)
     return int(round(v * 1000)) if math.isfinite(v) else None
 
 

@@ -67,10 +67,8 @@ def _write_urdf(asset: AssetDescription, source: Path, links: dict[str, LinkPhys
             for g in (*link.visuals, *link.collisions):
                 if g.kind == "mesh" and g.path is not None:
                     g.filename = copy_named(g.path, source.parent, folder)
-        out = folder / file_names.file_stem(source.name)
-        atomic.write_bytes(out, write_urdf(model, comment=f"patched by asset2sim audit from {source.name}"))
-        return out
-    copied_meshes.copy_meshes(asset, folder)
+    else:
+        copied_meshes.copy_meshes(asset, folder)
     out = folder / file_names.file_stem(source.name)
     atomic.write_bytes(out, write_urdf(model, comment=f"patched by asset2sim audit from {source.name}"))
     return out

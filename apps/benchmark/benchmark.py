@@ -84,14 +84,12 @@ def summarize(records: list[dict[str, Any]], methods: list[str]) -> dict[str, di
         row["scale_mean"], row["scale_sd"] = _mean_sd([r["scale_deviation"] for r in ok])
         row["init_mean"], row["init_sd"] = _mean_sd([r["initial_joint_deviation"] for r in ok])
         row["prompt_mean"], _ = _mean_sd([r["prompt_alignment"] for r in ok])
-        row["rest_stability_pass"], row["rest_n"] = _rate([r["rest_stability_pass"] for r in ok])
-        row["oscillation_pass"], row["osc_n"] = _rate([r["oscillation_pass"] for r in ok])
-        row["probes_pass"], row["probes_n"] = _rate([r["probes_pass"] for r in ok])
-        row["sweep_pass"], row["sweep_n"] = _rate([r.get("joint_sweep_pass") for r in ok])
-        row["robust_rest_pass"], row["robust_n"] = _rate([r.get("robust_rest_pass") for r in ok])
-        row["task_pass"], row["task_n"] = _rate([r.get("task_execution_pass") for r in ok])
-        row["force_pass"], row["force_n"] = _rate([r.get("operating_force_pass") for r in ok])
-        row["ready"], row["ready_n"] = _rate([r.get("ready") for r in ok])
+        for key, n_key, column in (
+                ("rest_stability_pass", "rest_n", "rest_stability_pass"), ("oscillation_pass", "osc_n", "oscillation_pass"),
+                ("probes_pass", "probes_n", "probes_pass"), ("sweep_pass", "sweep_n", "joint_sweep_pass"),
+                ("robust_rest_pass", "robust_n", "robust_rest_pass"), ("task_pass", "task_n", "task_execution_pass"),
+                ("force_pass", "force_n", "operating_force_pass"), ("ready", "ready_n", "ready")):
+            row[key], row[n_key] = _rate([r.get(column) for r in ok])
         row["all_pass"], _ = _rate([r["all_pass"] for r in ok])
         secs = [r["seconds"] for r in ok if r.get("seconds") is not None]
         row["median_seconds"] = statistics.median(secs) if secs else None
@@ -136,24 +134,19 @@ def run_benchmark(manifest: Path | str, methods: list[str], out_dir: Path | str,
                     continue
                 folder = out_dir / method / row.id
                 base: dict[str, Any] = {"id": row.id, "category": row.category, "method": method, "thesis_set": row.id in thesis}
+                res = None
                 try:
                     res = run_method(method, row, folder / "asset", seed=seed)
-                except Exception as exc:
-                    raise_refusal(exc)
-                    rec = dict(base, error=f"{type(exc).__name__}: {exc}")
-                    records.append(rec)
-                    say(method, row.id, f"method failed: {rec['error']}")
-                    continue
-                try:
                     # ev.seconds is measured before evaluation.json / report.html are written
                     ev = evaluate_asset(folder / "asset", reference=row.folder, prompt=row.prompt, engines=engines,
                                         seed=seed, category=row.category or None, method=method,
                                         out_dir=folder, write_report=reports, task=row.task or None, probes=True)
                 except Exception as exc:
                     raise_refusal(exc)
-                    rec = dict(base, error=f"evaluation failed: {type(exc).__name__}: {exc}")
+                    error = f"{type(exc).__name__}: {exc}"
+                    rec = dict(base, error=error if res is None else f"evaluation failed: {error}")
                     records.append(rec)
-                    say(method, row.id, rec["error"])
+                    say(method, row.id, f"method failed: {error}" if res is None else rec["error"])
                     continue
                 rec = evaluation_record(ev, row, method)
                 rec.update(base, method_seconds=res.seconds, model_queries=res.model_queries,

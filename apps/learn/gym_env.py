@@ -184,13 +184,11 @@ class TaskEnv(gym.Env):
         stretch = float(np.linalg.norm(self.grasp.gripper_point - self.grasp.grasp_point_world()))
         reward -= cfg.stretch_weight * stretch * self.grasp.stiffness / cfg.limits.max_force_n
         self._f_prev = f
-        moved = self._moved()
-        if not np.isfinite(f) or moved or t.reached(f):
+        failure = "diverged" if not np.isfinite(f) else self._moved()
+        if failure or t.reached(f):
             self.episodes += 1
-        if not np.isfinite(f):
-            return self._obs(), float(reward - cfg.moved_penalty), True, False, self._info(False, "diverged")
-        if moved:
-            return self._obs(), float(reward - cfg.moved_penalty), True, False, self._info(False, moved)
+        if failure:
+            return self._obs(), float(reward - cfg.moved_penalty), True, False, self._info(False, failure)
         if t.reached(f):
             ok, why = self._hold()
             if ok:

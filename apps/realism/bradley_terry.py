@@ -82,9 +82,7 @@ def _objective(s: np.ndarray, wins: np.ndarray, prior: float) -> tuple[float, np
 
 def _centred_basis(n: int) -> np.ndarray:
     """An orthonormal basis (n, n-1) of the vectors whose entries sum to 0."""
-    q, _ = np.linalg.qr(np.eye(n) - 1.0 / n)
-    basis = q[:, : n - 1]
-    return basis
+    return np.linalg.qr(np.eye(n) - 1.0 / n)[0][:, : n - 1]
 
 
 def _newton(objective, basis: np.ndarray, tol: float, max_iter: int = 200) -> tuple[np.ndarray, np.ndarray]:
@@ -146,8 +144,6 @@ def fit_bradley_terry(comparisons: Any, *, source: str, prior_games: float = PRI
     if not pairs:
         raise ValueError("no comparisons: Bradley-Terry scores need at least one (winner, loser) pair")
     methods = sorted({m for pair in pairs for m in pair})
-    if len(methods) < 2:  # unreachable with winner != loser, kept for clarity
-        raise ValueError(f"only one method ({methods[0]}): Bradley-Terry scores compare two or more")
     index = {m: i for i, m in enumerate(methods)}
     n = len(methods)
     wins = np.zeros((n, n))

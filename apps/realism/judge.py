@@ -162,7 +162,7 @@ def judge_pair(client: LLMClient, folder: Path | str, pair: ClipPair, *, family:
         JudgeInputError: the pair's frames (see :func:`side_frames`).
     """
     fa, fb = side_frames(folder, pair, "a"), side_frames(folder, pair, "b")
-    method = {"a": pair.a.method, "b": pair.b.method}
+    method = {"a": pair.a.method, "b": pair.b.method, None: None}
     picks: list[str | None] = []
     readings: list[Reading] = []
     usage = Usage()
@@ -183,8 +183,7 @@ def judge_pair(client: LLMClient, folder: Path | str, pair: ClipPair, *, family:
     return JudgeVerdict(
         model=client.config.model, family=family or family_of(client.config.model), pair_id=pair.pair_id,
         object_id=pair.object_id, method_a=pair.a.method, method_b=pair.b.method, defect=pair.defect,
-        first=None if picks[0] is None else method[picks[0]], second=None if picks[1] is None else method[picks[1]],
-        kept=kept, winner=method[picks[0]] if kept else None, reason=reason, calls=usage.calls,
+        first=method[picks[0]], second=method[picks[1]], kept=kept, winner=method[picks[0]] if kept else None, reason=reason, calls=usage.calls,
         prompt_tokens=usage.prompt_tokens, completion_tokens=usage.completion_tokens, cost_usd=usage.cost_usd or 0.0,
         failed_calls=failed)
 

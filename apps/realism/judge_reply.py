@@ -35,8 +35,7 @@ _UPPER = r"(?-i:([AB]))\b"
 _FOR = [re.compile(p, re.I) for p in (
     rf"\b{_VIDEO}\s+{_VERB}\s+{_ADVERB}more\s+{_REAL}",
     rf"\b{_VIDEO}\s+is\s+(?:the\s+)?(?:more|most)\s+{_REAL}",
-    rf"\bmore\s+{_REAL}(?:\s+(?:one|video|clip))?\s*(?:is|:|is\s*:)\s*\**\s*(?:(?:video|clip)\s*([ab])\b|{_UPPER})",
-    rf"\bmost\s+{_REAL}(?:\s+(?:one|video|clip))?\s*(?:is|:|is\s*:)\s*\**\s*(?:(?:video|clip)\s*([ab])\b|{_UPPER})",
+    rf"\b(?:more|most)\s+{_REAL}(?:\s+(?:one|video|clip))?\s*(?:is|:|is\s*:)\s*\**\s*(?:(?:video|clip)\s*([ab])\b|{_UPPER})",
     rf"\b(?:i\s+)?(?:prefer|choose|pick|select)\s+(?:the\s+)?{_VIDEO}",
     rf"\b(?:answer|verdict|choice|winner)\s*(?:is)?\s*[:=]?\s*\**\s*(?:(?:video|clip)\s*([ab])\b|{_UPPER})",
 )]

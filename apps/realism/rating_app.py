@@ -32,6 +32,7 @@ Protections, as a web app on a shared machine needs them (``docs/guide/realism.m
 """
 
 # no `from __future__ import annotations`: FastAPI reads the endpoints' annotations (Request) in create_app's scope
+import contextlib
 import hashlib
 import hmac
 import sqlite3
@@ -133,8 +134,8 @@ def _media_table(store: RatingStore) -> dict[tuple[int, str, int, str], Path]:
     for i, pair in enumerate(store.pairs):
         for slot in ("a", "b"):
             for v, clip in enumerate(side(pair, slot).clips):
-                table[(i, slot, v, "video")] = media_path(store.folder, clip.video)
-                table[(i, slot, v, "poster")] = media_path(store.folder, clip.poster)
+                for kind in _KINDS:  # video, poster
+                    table[(i, slot, v, kind)] = media_path(store.folder, getattr(clip, kind))
     return table
 
 
@@ -145,22 +146,22 @@ async def _answer(store: RatingStore, secret: bytes, rater: str, request: "Reque
 
     origin = request.headers.get("origin")
     if origin is not None and origin.lower() != f"{request.url.scheme}://{request.headers.get('host', '')}".lower():
-        return _error_page("ORIGIN_REFUSED", "refused: the answer was sent from another site", None)
+        return _error_page("ORIGIN_REFUSED", "refused: the answer was sent from another site")
     length = request.headers.get("content-length")
     if length is not None and (not length.strip().isdigit() or int(length) > MAX_FORM_BYTES):
-        return _error_page("ANSWER_TOO_LARGE", f"the answer is larger than {MAX_FORM_BYTES} bytes", None)
+        return _error_page("ANSWER_TOO_LARGE", f"the answer is larger than {MAX_FORM_BYTES} bytes")
     body = bytearray()
     async for chunk in request.stream():  # a chunked body: read only up to the cap
         body += chunk
         if len(body) > MAX_FORM_BYTES:
-            return _error_page("ANSWER_TOO_LARGE", f"the answer is larger than {MAX_FORM_BYTES} bytes", None)
+            return _error_page("ANSWER_TOO_LARGE", f"the answer is larger than {MAX_FORM_BYTES} bytes")
     try:
         form = {k: v[0] for k, v in parse_qs(body.decode("utf-8"), keep_blank_values=True).items()}
     except UnicodeDecodeError:
-        return _error_page("ANSWER_INVALID", "the answer is not UTF-8 text", None)
+        return _error_page("ANSWER_INVALID", "the answer is not UTF-8 text")
     if not hmac.compare_digest(form.get("token", "").encode(), form_token(secret, rater).encode()):
         return _error_page("TOKEN_INVALID", "refused: the form is not one this app sent (reload the page and "
-                                            "answer again)", None)
+                                            "answer again)")
     try:
         check_rater(rater)
         index = int(form.get("pair", ""))
@@ -176,7 +177,7 @@ async def _answer(store: RatingStore, secret: bytes, rater: str, request: "Reque
         return _error_page(code, message, rater if code != "RATER_INVALID" else None)
     except sqlite3.Error as exc:  # the database failed under the app: the rater is told, nothing is pretended
         return _error_page("STORE_FAILED", f"the answer could not be stored ({exc}); tell the person running "
-                                           "the study", None)
+                                           "the study")
     store.sync_parquet()
     return RedirectResponse(f"/rate/{quote(rater, safe='')}", status_code=303, headers=_HEADERS)
 
@@ -185,13 +186,11 @@ def _clip_response(store: RatingStore, media: dict, rater: str, index: int, posi
     """The clip or poster shown to ``rater`` at ``position`` of pair ``index`` (404 for anything else)."""
     from fastapi.responses import FileResponse, Response
 
-    if kind not in _KINDS or position not in ("left", "right") or not 0 <= index < len(store.pairs):
-        return Response("not found", status_code=404, media_type="text/plain")
-    try:
-        shown = store.showing(rater, store.pairs[index].pair_id)
-    except RatingError:
-        return Response("not found", status_code=404, media_type="text/plain")
-    path = media.get((index, shown.left if position == "left" else shown.right, view, kind))
+    path = None
+    if kind in _KINDS and position in ("left", "right") and 0 <= index < len(store.pairs):
+        with contextlib.suppress(RatingError):
+            shown = store.showing(rater, store.pairs[index].pair_id)
+            path = media.get((index, shown.left if position == "left" else shown.right, view, kind))
     if path is None:
         return Response("not found", status_code=404, media_type="text/plain")
     return FileResponse(path, media_type=_KINDS[kind], headers={"Cache-Control": "private, max-age=3600",
