@@ -8,6 +8,8 @@ the optional ``progress`` callback (the library never prints).
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -113,11 +115,13 @@ def refine_asset(
     """
     config = config or RefineConfig()
     out_dir = Path(out_dir)
-    _check_prompt(prompt)
+    with _invalid_input(request.RequestTooLong):  # a request over the length cap: refused before any work
+        request.check_request_length(prompt)
     est = _open_estimator(config)  # first: a model backend without its key fails before any work
     log = StageLog(progress)
     asset, findings = _extract(asset_dir, out_dir, asset_id, category, extracted, config)
-    _check_overrides(asset, config)
+    with _invalid_input(overrides.OverrideError):  # OVERRIDE_*: ``config.overrides`` do not fit the asset
+        overrides.apply_overrides(RequestSpec(), config.overrides, asset)
     if config.keep_declared:
         est = _keep_declared(est, asset_dir, asset)
     chash = run_hash(config, prompt + (f"\ntask: {task}" if task else ""), category)
@@ -127,7 +131,8 @@ def refine_asset(
             made = media_phase.make_media(out_dir, reference=reference, clips=config.clips)
             log.say("media", f"{out_dir}: " + ", ".join(sorted(made)) + " made (the deferred media phase)")
         return _completed_result(out_dir, log)
-    owner = _start_output(asset, out_dir, overwrite)
+    with _invalid_input(output_folder.OutputError):  # the output folder claimed, or refused with its OUTPUT_* code
+        owner = output_folder.start(asset.source_dir, out_dir, overwrite=overwrite)
     if owner.replaced:  # an earlier output of another request or configuration: said before it goes
         tops = sorted({r.split("/")[0] + ("/" if "/" in r else "") for r in owner.replaced})
         log.say("output", f"WARNING: {out_dir} holds an earlier output, which this run replaces: its {len(owner.replaced)} files "
@@ -172,13 +177,14 @@ def refine_asset(
 
 
 # ---------------------------------------------------------- 1-3: extract .. interpret
-def _check_prompt(prompt: str) -> None:
-    """A request over the length cap is refused before any work:
-    RefineError("invalid_input", ["REQUEST_TOO_LONG"]) from ``RequestTooLong``."""
+@contextmanager
+def _invalid_input(*errors: type[Exception]) -> Iterator[None]:
+    """Any of ``errors`` raised inside becomes RefineError("invalid_input") with its codes (``codes``, else ``code``)."""
     try:
-        request.check_request_length(prompt)
-    except request.RequestTooLong as exc:
-        raise RefineError(str(exc), "invalid_input", exc.codes) from exc
+        yield
+    except errors as exc:
+        codes = getattr(exc, "codes", None) or ([exc.code] if hasattr(exc, "code") else None)
+        raise RefineError(str(exc), "invalid_input", codes) from exc
 
 
 def _open_estimator(config: RefineConfig) -> estimator.Estimator:
@@ -199,7 +205,7 @@ def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, categor
     already read; an MJCF input read as ``config.body`` and ``config.mjcf`` say); the output folder checked against
     it. RefineError("invalid_input") with the codes, also for a joint range that only makes sense in the other
     unit (``JOINT_RANGE_WRONG_UNIT``: never part of an interaction-ready output)."""
-    try:
+    with _invalid_input(extract.AssetError, output_folder.OutputError):
         if extracted is None:
             reading = ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle)
             asset, findings = extract.extract_asset_checked(asset_dir, asset_id=asset_id, category=category, reading=reading)
@@ -208,8 +214,6 @@ def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, categor
         output_folder.check_location(asset.source_dir, out_dir)
         if asset.staged_from is not None:  # never into the folder the MJCF or USD file lies in
             output_folder.check_location(asset.staged_from.parent, out_dir)
-    except (extract.AssetError, output_folder.OutputError) as exc:
-        raise RefineError(str(exc), "invalid_input", getattr(exc, "codes", None)) from exc
     wrong = [f for f in findings if f.code == "JOINT_RANGE_WRONG_UNIT"]
     if wrong:
         lines = "\n  ".join(f.describe() for f in wrong)
@@ -227,14 +231,6 @@ def _keep_declared(est: estimator.Estimator, asset_dir: Path | str, asset: Asset
     except Exception as exc:
         raise RefineError(f"{asset.urdf_path}: the declared physics cannot be read: {exc}", "invalid_input") from exc
     return keep.KeepDeclared(est, declared)
-
-
-def _check_overrides(asset: AssetDescription, config: RefineConfig) -> None:
-    """RefineError("invalid_input", [OVERRIDE_*]) unless ``config.overrides`` fit the asset."""
-    try:
-        overrides.apply_overrides(RequestSpec(), config.overrides, asset)
-    except overrides.OverrideError as exc:
-        raise RefineError(str(exc), "invalid_input", [exc.code]) from exc
 
 
 def _completed_result(out_dir: Path, log: StageLog) -> RefineResult:
@@ -435,16 +431,3 @@ def _write(ctx: EstimationContext, syn: placement.Synthesis, ws: Workspace, log:
         log.say("write", line)
     log.lap("write")
     return clear
-
-
-# ---------------------------------------------------------- 8: report, extras, marker
-
-
-def _start_output(asset: AssetDescription, out_dir: Path, overwrite: bool) -> output_folder.OwnedFolder:
-    """The output folder claimed (:func:`asset2sim.output_folder.start`); RefineError("invalid_input") with
-    the ``OUTPUT_*`` code when refused."""
-    try:
-        return output_folder.start(asset.source_dir, out_dir, overwrite=overwrite)
-    except output_folder.OutputError as exc:
-        raise RefineError(str(exc), "invalid_input", exc.codes) from exc
-

@@ -20,18 +20,7 @@ from asset2sim.schemas.asset import AssetDescription
 def _inside(path: Path, root: Path, *, resolved: bool = False) -> bool:
     """True when ``path`` lies inside ``root`` after resolving symlinks
     (``resolved``: both are resolved already)."""
-    try:
-        (path if resolved else path.resolve()).relative_to(root if resolved else root.resolve())
-        return True
-    except ValueError:
-        return False
-
-
-def mesh_dependencies(mesh_path: Path, asset_root: Path) -> list[Path]:
-    """Files an OBJ mesh needs besides itself (MTL libraries and their texture
-    maps), as absolute paths inside ``asset_root``; missing or outside files are
-    skipped (visual only). Parsing: :func:`asset2sim.mesh_io.obj_material_files`."""
-    return mesh_io.obj_material_files(mesh_path, keep=lambda p: _inside(p, asset_root))
+    return (path if resolved else path.resolve()).is_relative_to(root if resolved else root.resolve())
 
 
 #: output paths a copied input file may not take (the contract's own files)
@@ -140,7 +129,8 @@ def _mesh_copies(asset: AssetDescription) -> dict[str, Path]:
         add(rel, src)
         lexical = base / rel
         lookup = os.path.realpath(lexical.parent)
-        deps = [(dep, lookup) for dep in mesh_dependencies(lexical, root)]
+        # the MTL libraries and texture maps the OBJ names, inside the asset folder (missing ones skipped: visual only)
+        deps = [(dep, lookup) for dep in mesh_io.obj_material_files(lexical, keep=lambda p: _inside(p, root))]
         if str(src.parent) != lookup:  # a symlink into another folder
             deps += [(dep, str(src.parent)) for dep in beside_link_target(lexical, src, root)]
         for dep, folder in deps:

@@ -18,17 +18,13 @@ def _edge_directions(piece: Piece) -> np.ndarray:
     """Unit directions (e, 3) of the edges of the hull of ``piece``'s support
     points, one per direction up to sign (diagonals of facets included: extra
     axes never make :func:`penetration_depth` wrong); kept on the piece."""
-    if piece._edges is None:
-        piece._edges = _hull_edge_directions(piece.support)
-    return piece._edges
-
-
-def _hull_edge_directions(pts: np.ndarray) -> np.ndarray:
-    """See :func:`_edge_directions`; ``pts`` (k, 3)."""
+    if piece._edges is not None:
+        return piece._edges
     try:
-        verts, tris = mesh_io.convex_hull_mesh(pts)
+        verts, tris = mesh_io.convex_hull_mesh(piece.support)
     except (QhullError, ValueError):
-        return np.zeros((0, 3))
+        piece._edges = np.zeros((0, 3))
+        return piece._edges
     e = np.concatenate([verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 1]],
                         verts[tris[:, 0]] - verts[tris[:, 2]]])
     n = np.linalg.norm(e, axis=1)
@@ -39,6 +35,7 @@ def _hull_edge_directions(pts: np.ndarray) -> np.ndarray:
     e = e[np.sort(keep)]
     if len(e) > MAX_EDGE_DIRECTIONS:  # an even subsample: fewer axes only bound the depth from above
         e = e[np.linspace(0, len(e) - 1, MAX_EDGE_DIRECTIONS).round().astype(int)]
+    piece._edges = e
     return e
 
 

@@ -220,11 +220,6 @@ MAX_RADIAL_SHRINK = 0.25
 SWEPT_TRIGGER = 0.002
 
 
-def _turn(points: np.ndarray, origin: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
-    """``points`` (k, 3) m turned by ``angle`` rad about the unit ``axis`` (3,) through ``origin`` (3,)."""
-    return (points - origin) @ axis_angle_matrix(axis, angle)[:3, :3].T + origin
-
-
 def _shrink(points: np.ndarray, origin: np.ndarray, axis: np.ndarray, f: float) -> np.ndarray:
     """``points`` (k, 3) m with their distance from the line (``origin`` (3,), unit ``axis`` (3,)) times ``f``: an
     affine map, so a convex piece stays convex."""
@@ -295,7 +290,7 @@ def _clear_turning_piece(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis:
     least = g
     if g >= SWEPT_TRIGGER or g <= -TOUCHING_OVERLAP:
         return None
-    turned = _turn(p, origin, axis, a)
+    turned = (p - origin) @ axis_angle_matrix(axis, a)[:3, :3].T + origin  # p turned by a about the line
     s = turned @ n
     face = turned[s >= s.max() - 1e-3].mean(axis=0)
     t = np.cross(axis, face - origin)

@@ -14,6 +14,7 @@ from asset2sim.schemas.asset import AssetDescription
 
 from asset2sim.frames import rpy_matrix
 from asset2sim.mesh_io import MeshCache
+from asset2sim.urdf import UrdfModel
 
 #: Exponent of the moving subtree's own-box ratio in the closed-state score.
 OWN_WEIGHT = 0.25
@@ -51,8 +52,8 @@ class ClosedState:
         return float(np.clip(q, self.lower, self.upper))
 
 
-def subtree_links(asset: AssetDescription, link: str) -> list[str]:
-    """``link`` and every link below it in the kinematic tree."""
+def subtree_links(asset: AssetDescription | UrdfModel, link: str) -> list[str]:
+    """``link`` and every link below it in the kinematic tree of ``asset`` (depth first, children in joint order)."""
     children: dict[str, list[str]] = {}
     for j in asset.joints:
         children.setdefault(j.parent, []).append(j.child)

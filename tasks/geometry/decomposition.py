@@ -153,7 +153,9 @@ def refit_pieces(vertices: np.ndarray, pieces: list[tuple[np.ndarray, np.ndarray
         pts = v[owner == i]
         try:
             hull = ConvexHull(pts)
-            out.append((pts[hull.vertices], _reindex(hull.simplices, hull.vertices)))
+            index = np.empty(len(pts), dtype=int)  # a hull vertex's point index -> its index among the vertices
+            index[hull.vertices] = np.arange(len(hull.vertices))
+            out.append((pts[hull.vertices], index[hull.simplices]))
         except (QhullError, ValueError):
             out.append((pv, pf))
     return out
@@ -174,8 +176,3 @@ def _max_plane_distance(points: np.ndarray, equations: np.ndarray) -> np.ndarray
         block += d
         block.max(axis=1, out=out[s:s + _BLOCK])
     return out
-
-
-def _reindex(simplices: np.ndarray, keep: np.ndarray) -> np.ndarray:
-    remap = {int(old): new for new, old in enumerate(keep)}
-    return np.array([[remap[int(a)] for a in tri] for tri in simplices], dtype=int)

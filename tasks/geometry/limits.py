@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from asset2sim.schemas.overlay import Overlay
+from asset2sim.tasks.geometry.closed_state import subtree_links
 from asset2sim.tasks.geometry.penetration_scan import (EXCESS_TOLERANCE, SCAN_SAMPLES, collision_pairs, contact_onset, depth_scan,
                                                        free_end, pair_depths)
 from asset2sim.urdf import UrdfModel
@@ -48,16 +49,8 @@ class LimitClip:
 
 
 def subtrees(model: UrdfModel) -> dict[str, list[str]]:
-    """Movable joint -> the links it moves (its child and every link below)."""
-    out = {}
-    for j in model.movable_joints:
-        links, stack = [], [j.child]
-        while stack:
-            ln = stack.pop()
-            links.append(ln)
-            stack.extend(c.child for c in model.children(ln))
-        out[j.name] = links
-    return out
+    """Movable joint -> the links it moves (its child and every link below, :func:`subtree_links`)."""
+    return {j.name: subtree_links(model, j.child) for j in model.movable_joints}
 
 
 def rigid_group(model: UrdfModel, link: str) -> set[str]:

@@ -44,7 +44,10 @@ def closed_session(source: SimSource, *, model: UrdfModel | None = None) -> Iter
     Raises:
         asset2sim.tasks.ingest.extract.AssetError: ``source`` cannot be read; and whatever the engine raises.
     """
-    desc = _described(source, model)
+    if isinstance(source, UrdfFile) and not isinstance(source.source, UrdfModel):
+        desc = extract_asset(source.path)
+    else:
+        desc = describe_model(model if model is not None else source.model())
     s = source.open("pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False))
     try:
         try:
@@ -63,13 +66,6 @@ class ClosedMeasurement:
 
     closed: dict[str, ClosedState]  # joint -> closed end (rad or m), every movable joint
     extents: np.ndarray  # (3,) m, the object's box with every joint at its closed end (geometry_extents)
-
-
-def _described(source: SimSource, model: UrdfModel | None = None) -> AssetDescription:
-    """The description :func:`closed_session` measures ``source`` (whose model is ``model`` when given) with."""
-    if isinstance(source, UrdfFile) and not isinstance(source.source, UrdfModel):
-        return extract_asset(source.path)
-    return describe_model(model if model is not None else source.model())
 
 
 def measure_closed_ends(source: SimSource) -> ClosedMeasurement:

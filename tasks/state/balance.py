@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.source import SimSource
@@ -54,25 +55,16 @@ class Balance:
 
 
 def _hull2d(points: np.ndarray) -> np.ndarray:
-    """Convex hull (K, 2) counter-clockwise of points (N, 2) (Andrew's monotone chain, Comp. Geom. Theory Appl. 1979)."""
-    pts = np.unique(np.round(np.asarray(points, float), 9), axis=0)
+    """Convex hull (K, 2) counter-clockwise of points (N, 2) rounded to 1 nm, from the lowest x (then y); the two
+    extreme points of collinear ones (Qhull: Barber, Dobkin & Huhdanpaa, ACM TOMS 1996)."""
+    pts = np.unique(np.round(np.asarray(points, float), 9), axis=0)  # sorted by x, then y
     if len(pts) < 3:
         return pts
-    pts = pts[np.lexsort((pts[:, 1], pts[:, 0]))]
-
-    def cross(o, a, b):
-        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-
-    lower, upper = [], []
-    for p in pts:
-        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
-            lower.pop()
-        lower.append(p)
-    for p in pts[::-1]:
-        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
-            upper.pop()
-        upper.append(p)
-    return np.array(lower[:-1] + upper[:-1])
+    try:
+        vertices = ConvexHull(pts).vertices  # counter-clockwise in 2-D
+    except QhullError:
+        return pts[[0, -1]]
+    return pts[np.roll(vertices, -int(np.argmin(vertices)))]
 
 
 def _signed_margin(poly: np.ndarray, p: np.ndarray) -> float:
@@ -80,12 +72,9 @@ def _signed_margin(poly: np.ndarray, p: np.ndarray) -> float:
     ``poly`` (K, 2), positive inside; K < 3: minus the distance to its points."""
     if len(poly) < 3:
         return -float(np.min(np.linalg.norm(poly - p, axis=1))) if len(poly) else -np.inf
-    d = np.inf
-    for a, b in zip(poly, np.roll(poly, -1, axis=0)):
-        e = b - a
-        n = np.array([-e[1], e[0]]) / max(np.linalg.norm(e), 1e-12)  # inward normal of a CCW polygon
-        d = min(d, float(np.dot(p - a, n)))
-    return d
+    edges = np.roll(poly, -1, axis=0) - poly
+    inward = np.c_[-edges[:, 1], edges[:, 0]] / np.maximum(np.linalg.norm(edges, axis=1), 1e-12)[:, None]
+    return float(np.min(((p - poly) * inward).sum(axis=1)))
 
 
 #: Largest angle (rad) between a bottom hull face and the ground for the object
@@ -100,8 +89,6 @@ def support_polygon(points: np.ndarray, tol: float, com: np.ndarray | None = Non
     pts = np.asarray(points, float)
     if not len(pts):
         return np.zeros((0, 2))
-    from scipy.spatial import ConvexHull, QhullError
-
     try:
         hull = ConvexHull(pts)
     except (QhullError, ValueError):

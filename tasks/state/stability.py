@@ -17,7 +17,7 @@ from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.geometry.closed_state import subtree_links
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.prior_tables import MaterialPrior, load_priors
-from asset2sim.tasks.state.balance import Balance, _com, _link_world, _signed_margin, measure_balance
+from asset2sim.tasks.state.balance import Balance, _balance, _com, _link_world, _signed_margin
 from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.engines.source import SimSource
 
@@ -85,19 +85,19 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
     """
     if overlay.mounting is not None and overlay.mounting.fixed:
         return overlay, []
-    bal = measure_balance(source, overlay, state)
+    frames, points = _link_world(source, state)  # measured once: the balance, the transfer and the envelope masses
+    bal = _balance(overlay, frames, points)
     if bal.stable or len(bal.support) < 3:
         return overlay, []
     moved, parts = _opened_links(asset, category)
     body = [ln for ln in overlay.links if ln not in moved]
     m_body = sum(overlay.links[ln].mass for ln in body)
-    least = _mass_floors(overlay, parts, moved, source, state, geometry)
+    least = _mass_floors(overlay, parts, moved, points, geometry)
     floors, reasons, pf = least.floors, least.reasons, least.fraction
     light = [ln for ln in floors if floors[ln] < overlay.links[ln].mass * (1 - 1e-9)]
     kept = _why_kept(overlay, bal, category, floors, light, m_body, pf)
     if kept is not None:
         return overlay, kept
-    frames, _ = _link_world(source, state)
     span = sum(overlay.links[ln].mass - floors[ln] for ln in light)
     masses_for = partial(_masses, overlay, light, body, floors, m_body, span)
     t = _smallest_transfer(lambda x: _signed_margin(bal.support, _com(overlay, frames, masses_for(x))[:2]), bal.required)
@@ -141,9 +141,9 @@ class _MassFloors:
     fraction: PartFraction | None
 
 
-def _mass_floors(overlay: Overlay, parts: dict[str, PartFraction], moved: set[str], source: SimSource, state: dict[str, float],
+def _mass_floors(overlay: Overlay, parts: dict[str, PartFraction], moved: set[str], points: dict[str, np.ndarray],
                  geometry: dict[str, LinkGeometry] | None) -> _MassFloors:
-    """The least mass of each opened link and why."""
+    """The least mass of each opened link and why (``points``: link -> world collision hull points (N, 3) m)."""
     total = overlay.total_mass()
     floors: dict[str, float] = {}
     reasons: list[str] = []
@@ -154,7 +154,7 @@ def _mass_floors(overlay: Overlay, parts: dict[str, PartFraction], moved: set[st
         share = min(1.0, pf.lo * total / max(m_table, 1e-12))
         floors.update({ln: overlay.links[ln].mass * share for ln in table})
         reasons.append(f"sourced range {pf.lo:.0%}-{pf.hi:.0%}: {pf.source}")
-    env = envelope_masses(overlay, _link_world(source, state)[1], geometry) if geometry else {}
+    env = envelope_masses(overlay, points, geometry) if geometry else {}
     env_links = [ln for ln in overlay.links if ln in moved and ln not in parts and ln in env
                  and env[ln] < overlay.links[ln].mass * (1 - 1e-9)]
     if env_links:

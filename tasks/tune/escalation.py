@@ -212,13 +212,8 @@ def escalate(overlay: Overlay, check: postcheck.PostCheck, factor: float, fricti
     osc = list(dict.fromkeys(list(check.metric("oscillation").details.get("failing", [])) + other_osc))
     not_held = joints_not_held(check.metrics)
     targets = list(dict.fromkeys(list(osc) + list(check.sagging) + not_held))
-    reason = []
-    if osc:
-        reason.append(f"oscillating: {', '.join(osc)}")
-    if check.sagging:
-        reason.append(f"sagging: {', '.join(check.sagging)}")
-    if not_held:
-        reason.append(f"not held under robust rest: {', '.join(not_held)}")
+    reason = [f"{why}: {', '.join(joints)}" for why, joints in
+              (("oscillating", osc), ("sagging", check.sagging), ("not held under robust rest", not_held)) if joints]
     if not targets and not check.stable:
         targets = list(overlay.joints)
         reason.append("root unstable: damping all joints")

@@ -188,15 +188,6 @@ def ground_friction(model: UrdfModel) -> float:
     return float(min(vals)) if vals else GROUND_FRICTION
 
 
-def _task_path(f_state: float, action: str) -> np.ndarray:
-    """Opening fractions a task moves the joint through (from the far side when already at the target)."""
-    if action == "close":
-        start = f_state if f_state > CLOSE_TARGET + 0.05 else OPEN_TARGET
-        return np.linspace(start, CLOSE_TARGET, PATH_SAMPLES)
-    start = f_state if f_state < OPEN_TARGET - 0.05 else 0.0
-    return np.linspace(start, OPEN_TARGET, PATH_SAMPLES)
-
-
 def operating_budgets(obj: SimObject, overlay: Overlay, closed: dict[str, tuple[float, float, float]], *,
                       category: str | None, labels: dict[str, str | None], actions: tuple[str, ...] = ("close", "open"),
                       ground: bool = True, free_moving: bool = False, whole: bool = False) -> dict[str, OperatingBudget]:
@@ -274,9 +265,18 @@ def _spring_force(spring: Spring | None, q: float) -> float:
 
 def _paths(f_state: float, actions: tuple[str, ...], whole: bool) -> list[tuple[str, np.ndarray]]:
     """(action, opening fractions it moves the joint through) of each of ``actions`` from the opening fraction
-    ``f_state``: the task's paths (:func:`_task_path`), or with ``whole`` the whole range each way."""
-    return [(action, np.linspace(0.0, 1.0, 2 * PATH_SAMPLES + 1) if whole else _task_path(f_state, action))
-            for action in actions]
+    ``f_state``: the task's paths (from the far side when already at the target), or with ``whole`` the whole range
+    each way."""
+    paths = []
+    for action in actions:
+        if whole:
+            fractions = np.linspace(0.0, 1.0, 2 * PATH_SAMPLES + 1)
+        elif action == "close":
+            fractions = np.linspace(f_state if f_state > CLOSE_TARGET + 0.05 else OPEN_TARGET, CLOSE_TARGET, PATH_SAMPLES)
+        else:
+            fractions = np.linspace(f_state if f_state < OPEN_TARGET - 0.05 else 0.0, OPEN_TARGET, PATH_SAMPLES)
+        paths.append((action, fractions))
+    return paths
 
 
 @dataclass(frozen=True, slots=True)
@@ -310,8 +310,8 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
         s_motion = (-d if action == "close" else d) * side
         for f in fractions:
             session.set_joint_positions({**state, joint: qc + d * f * rng})
-            motion = _grasp_motion(session, joint, grasp, prismatic, model)
-            t, nt, lever = motion.direction, motion.norm, motion.lever
+            t, lever = _grasp_motion(session, joint, grasp, prismatic, model)
+            nt = max(float(np.linalg.norm(t)), 1e-12)
             force, bound = range_force(rng_, where, lever)
             hand = BUDGET_SHARE * force * (lever if lever is not None else 1.0)
             fg = _ground_force(t, nt, s_motion, *ground) if ground is not None else None
@@ -332,26 +332,16 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
     return _Tightest(best, lever, q_state)
 
 
-@dataclass(frozen=True, slots=True)
-class _GraspMotion:
-    """How the grasp point moves as q grows (:func:`_grasp_motion`): ``direction`` t (3,) (m/rad or m/m),
-    ``norm`` |t| >= 1e-12 and ``lever`` >= 1e-3 m (:func:`~asset2sim.tasks.check.contact_points.grasp_lever`;
-    None for a prismatic joint)."""
-
-    direction: np.ndarray
-    norm: float
-    lever: float | None
-
-
-def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: bool, model: UrdfModel) -> _GraspMotion:
-    """How the grasp point moves at the session's state."""
+def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: bool,
+                  model: UrdfModel) -> tuple[np.ndarray, float | None]:
+    """How the grasp point moves as q grows at the session's state: (direction t (3,) m/rad or m/m, lever >= 1e-3 m
+    (:func:`~asset2sim.tasks.check.contact_points.grasp_lever`; None for a prismatic joint))."""
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
     lo, Rl = session.link_frame(grasp.link)
     p = np.asarray(lo, float) + np.asarray(Rl, float) @ np.asarray(grasp.point, float)
     if prismatic:
-        return _GraspMotion(a, max(float(np.linalg.norm(a)), 1e-12), None)
-    t = np.cross(a, p - o)
-    return _GraspMotion(t, max(float(np.linalg.norm(t)), 1e-12), grasp_lever(session, joint, grasp.link, grasp.point, model))
+        return a, None
+    return np.cross(a, p - o), grasp_lever(session, joint, grasp.link, grasp.point, model)
 
 
 def _ground_force(t: np.ndarray, nt: float, s_motion: float, mu: float, total: float) -> float | None:
