@@ -287,10 +287,15 @@ class _ArticulationTaskEnv(BaseEnv):
             objs = self.env_objects
             self.task_index = torch.tensor(self._task_index, dtype=torch.long)
             self.grasp_point_local = torch.tensor(np.array([o.grasp_point for o in objs]), dtype=torch.float32)
-            for name in ("q_closed", "direction", "open_range", "start_fraction", "target_fraction", "reach_fraction", "base_z"):
-                setattr(self, name, torch.tensor([getattr(o, name) for o in objs], dtype=torch.float32))
+            self.q_closed = torch.tensor([o.q_closed for o in objs], dtype=torch.float32)
+            self.direction = torch.tensor([o.direction for o in objs], dtype=torch.float32)
+            self.open_range = torch.tensor([o.open_range for o in objs], dtype=torch.float32)
+            self.start_fraction = torch.tensor([o.start_fraction for o in objs], dtype=torch.float32)
+            self.target_fraction = torch.tensor([o.target_fraction for o in objs], dtype=torch.float32)
+            self.reach_fraction = torch.tensor([o.reach_fraction for o in objs], dtype=torch.float32)
             self.opens = torch.tensor([o.action == "open" for o in objs], dtype=torch.bool)
             self.rest_speed = torch.tensor([REST_SPEED.get(o.joint_type, 1.0) for o in objs], dtype=torch.float32)
+            self.base_z = torch.tensor([o.base_z for o in objs], dtype=torch.float32)
             dof = self.object.max_dof
             start = np.zeros((len(objs), dof))
             for i, o in enumerate(objs):
