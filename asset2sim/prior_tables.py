@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import functools
 import re
-from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from asset2sim.package_data import package_text
 from asset2sim.schemas.request import SizeClass
 
 #: Largest object width (m) a parallel gripper is assumed to close on (Franka
@@ -210,10 +210,7 @@ class Priors(PriorModel):
 
 def _read_yaml(directory: Path | None, fname: str) -> Any:
     try:
-        if directory is None:
-            text = resources.files("asset2sim.priors").joinpath(fname).read_text(encoding="utf-8")
-        else:
-            text = (Path(directory) / fname).read_text(encoding="utf-8")
+        text = package_text("asset2sim.priors", fname) if directory is None else (Path(directory) / fname).read_text(encoding="utf-8")
     except FileNotFoundError as exc:
         raise PriorsError(f"{fname}: file not found ({exc})") from exc
     try:

@@ -16,7 +16,7 @@ from typing import Callable, Iterable
 
 from asset2sim.engines.registry import known_engines
 from asset2sim.extras import EXTRA_OF_MODULE, install_hint, missing_module
-from asset2sim.input_files import allow_outside
+from asset2sim.input_files import allow_outside, inside
 from asset2sim.output_folder import OutputError, product_folder_as_named
 from asset2sim.output_paths import check_location
 
@@ -119,13 +119,7 @@ def errno_name(exc: OSError) -> str:
 
 def _inside(path: str | os.PathLike | None, folder: Path | str) -> bool:
     """True when ``path`` is ``folder`` or lies in it, as written or with symlinks resolved."""
-    if path is None:
-        return False
-    p = os.fsdecode(path)
-    for a, b in ((os.path.abspath(p), os.path.abspath(folder)), (os.path.realpath(p), os.path.realpath(folder))):
-        if a == b or a.startswith(b.rstrip(os.sep) + os.sep):
-            return True
-    return False
+    return path is not None and any(inside(how(os.fsdecode(path)), how(folder)) for how in (os.path.abspath, os.path.realpath))
 
 
 def output_failure(exc: OutputError, outs: list[Path], _inp=None, _reading=None) -> CommandError:

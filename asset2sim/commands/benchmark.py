@@ -13,6 +13,7 @@ import statistics
 from pathlib import Path
 
 from asset2sim.commands._status import parse_engines
+from asset2sim.tasks.evaluation.benchmark_pages import _PASS_RATES as PASS_RATES
 from asset2sim.apps.benchmark.benchmark import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
 from asset2sim.commands import _output
 from asset2sim.atomic import jsonable
@@ -77,11 +78,7 @@ def _print_table(console, title: str, summary: dict) -> None:
 
     for method, r in summary.items():
         t.add_row(markup(method), pm(r["pen_ts_mean"], r["pen_ts_sd"]), pm(r["pen_mean"], r["pen_sd"]),
-                  f"{pct(r['rest_stability_pass'])} ({r['rest_n']})", f"{pct(r['oscillation_pass'])} ({r['osc_n']})",
-                  f"{pct(r['probes_pass'])} ({r['probes_n']})",
-                  f"{pct(r.get('sweep_pass'))} ({r.get('sweep_n', 0)})", f"{pct(r.get('robust_rest_pass'))} ({r.get('robust_n', 0)})",
-                  f"{pct(r.get('task_pass'))} ({r.get('task_n', 0)})", f"{pct(r.get('force_pass'))} ({r.get('force_n', 0)})",
-                  f"{pct(r.get('ready'))} ({r.get('ready_n', 0)})",
+                  *(f"{pct(r.get(rate))} ({r.get(n, 0)})" for rate, n in PASS_RATES),
                   pm(r["scale_mean"], r["scale_sd"]), pm(r["init_mean"], r["init_sd"]),
                   pct(r["prompt_mean"]), pct(r["all_pass"]), "-" if r["median_seconds"] is None else f"{r['median_seconds']:.2f}",
                   markup(r.get("realism", "not rated")), str(r["errors"]))
