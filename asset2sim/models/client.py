@@ -47,11 +47,14 @@ def _root_cause(exc: BaseException) -> BaseException:
     return exc
 
 
+def _json_sha256(obj: Any) -> str:
+    """sha256 (hex) of ``obj`` as canonical JSON (keys sorted, no spaces)."""
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
 def record_digest(key: str, model: Any, content: Any, finish_reason: Any) -> str:
     """sha256 (hex) of a reply record's key, model, content and finish reason as canonical JSON."""
-    record = {"key": key, "model": model, "content": content, "finish_reason": finish_reason}
-    blob = json.dumps(record, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(blob.encode()).hexdigest()
+    return _json_sha256({"key": key, "model": model, "content": content, "finish_reason": finish_reason})
 
 
 class LLMClient:
@@ -94,11 +97,9 @@ class LLMClient:
                   temperature: float | None, schema_name: str = "reply") -> str:
         """sha256 (hex) of everything that decides a reply: the model, the server (base URL), the
         messages, the schema and its name, and the sampling parameters (never the API key)."""
-        blob = json.dumps({"format": CACHE_FORMAT, "model": self.config.model, "base_url": self.config.base_url,
-                           "messages": messages, "schema": schema, "schema_name": schema_name,
-                           "temperature": temperature, "max_tokens": self.config.max_tokens},
-                          sort_keys=True, separators=(",", ":")).encode()
-        return hashlib.sha256(blob).hexdigest()
+        return _json_sha256({"format": CACHE_FORMAT, "model": self.config.model, "base_url": self.config.base_url,
+                             "messages": messages, "schema": schema, "schema_name": schema_name,
+                             "temperature": temperature, "max_tokens": self.config.max_tokens})
 
     def _cache_path(self, key: str) -> Path | None:
         """The record's path; None without a cache folder, or when it lies inside an input or output
@@ -294,10 +295,8 @@ class LLMClient:
         if refusal is None and isinstance(psf, dict):
             refusal = psf.get("refusal")
         usage = getattr(resp, "usage", None)
-        if usage is not None:
-            u.prompt_tokens += int(getattr(usage, "prompt_tokens", 0) or 0)
-            u.completion_tokens += int(getattr(usage, "completion_tokens", 0) or 0)
-            u.total_tokens += int(getattr(usage, "total_tokens", 0) or 0)
+        for k in ("prompt_tokens", "completion_tokens", "total_tokens"):
+            setattr(u, k, getattr(u, k) + int(getattr(usage, k, 0) or 0))
         try:
             cost = float(litellm.completion_cost(completion_response=resp))
             u.cost_usd = cost if math.isfinite(cost) else None
