@@ -72,13 +72,8 @@ class CommandError(Exception):
         """``asset2sim COMMAND: CODE: PATH: message`` on one line (a message
         that starts or ends with the path does not repeat it)."""
         msg = " | ".join(part.strip() for part in self.message.splitlines() if part.strip())
-        if self.path:
-            for prefix in (f"{self.path}: ", f"{os.path.abspath(self.path)}: "):
-                if msg.startswith(prefix):
-                    msg = msg[len(prefix):]
-                    break
-            for suffix in (f": {self.path}", f": {os.path.abspath(self.path)}"):
-                msg = msg.removesuffix(suffix)
+        for name in dict.fromkeys((self.path, os.path.abspath(self.path))) if self.path else ():
+            msg = msg.removeprefix(f"{name}: ").removesuffix(f": {name}")
         where = f"{self.path}: " if self.path and not msg.startswith(self.path) else ""
         prog = f"asset2sim {command}" if command else "asset2sim"
         return f"{prog}: {self.code}: {where}{msg}"
@@ -254,11 +249,16 @@ def join_codes(codes: Iterable[str]) -> str:
     return ",".join(dict.fromkeys(c for c in codes if c))
 
 
+def listed(text: str | None) -> list[str]:
+    """The items of a comma-separated option value, stripped, empty ones dropped."""
+    return [item.strip() for item in (text or "").split(",") if item.strip()]
+
+
 def parse_engines(text: str | None, option: str = "--engines") -> list[str]:
     """The engine names of a comma-separated option value (order kept,
     duplicates dropped, uninstalled ones kept; CommandError status 2
     ``ENGINE_UNKNOWN``: an unknown name)."""
-    names = list(dict.fromkeys(e.strip() for e in (text or "").split(",") if e.strip()))
+    names = list(dict.fromkeys(listed(text)))
     known = known_engines()
     unknown = [n for n in names if n not in known]
     if unknown:

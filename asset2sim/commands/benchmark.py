@@ -12,7 +12,7 @@ import math
 import statistics
 from pathlib import Path
 
-from asset2sim.commands._status import parse_engines
+from asset2sim.commands._status import listed, parse_engines
 from asset2sim.tasks.evaluation.benchmark_pages import _PASS_RATES as PASS_RATES
 from asset2sim.apps.benchmark.benchmark import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
 from asset2sim.commands import _output
@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     console = _output.console(width=180)
-    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    methods = listed(args.methods)
     ids = [i.strip() for i in args.ids.split(",")] if args.ids else None
     engines = tuple(parse_engines(args.engines))
     out = args.out

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from asset2sim.commands._status import CommandError
+from asset2sim.commands._status import CommandError, listed
 from asset2sim.flows import catalog_compare, queries
 from asset2sim.flows.catalog import NOTHING_TO_DO, ResultCatalog
 from asset2sim.flows.catalog_config import load_catalog
@@ -140,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
         print("\n".join(catalog_compare.comparison_lines(cmp)))
         return 0
 
-    by = [b.strip() for b in args.by.split(",") if b.strip()]
+    by = listed(args.by)
     try:
         # an Arrow table: the queries aggregate it in Arrow (fast on 10^6 rows)
         df = store.read_table(dataset, runs, columns=list(dict.fromkeys([*BREAKDOWN_COLUMNS, *[b for b in by if b not in ("dataset", "run")]])))
