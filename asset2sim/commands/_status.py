@@ -293,9 +293,13 @@ def add_allow_outside(parser) -> None:
 
 def add_mjcf_reading(parser) -> None:
     """``--body`` and ``--mjcf-angle``: how a command reads an MJCF input (:class:`asset2sim.formats.ReadOptions`)."""
-    parser.add_argument("--body", help="the body (MJCF) whose subtree is the object, in a scene with several objects with joints")
-    parser.add_argument("--mjcf-angle", choices=("radian", "degree"),
-                        help="the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention")
+    parser.add_argument("--body", help=(
+        "the body (MJCF) whose subtree is the object, in a scene with several objects with joints (default: the one "
+        "subtree under the world body with hinge or slide joints; tables and walls around it are left out)"))
+    parser.add_argument("--mjcf-angle", choices=("radian", "degree"), help=(
+        "the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention (default: "
+        "as the package compiles it: robosuite, RoboCasa, LIBERO, Meta-World and Franka Kitchen fragments in radians; "
+        "docs/guide/inputs.md)"))
 
 
 @contextlib.contextmanager

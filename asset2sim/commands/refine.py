@@ -16,8 +16,8 @@ import sys
 import time
 from pathlib import Path
 
-from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, add_allow_outside, failure,
-                                        join_codes, outside_paths, parse_engines)
+from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, add_allow_outside,
+                                        add_mjcf_reading, failure, join_codes, outside_paths, parse_engines)
 from asset2sim.api import load_config, merge_overrides
 from asset2sim.schemas.config import RefineConfig, default_engines
 from asset2sim.tasks import refine as refine_stage
@@ -80,13 +80,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                            "fraction (0.4) or a band (closed, slightly_open, quarter, halfway, mostly, fully); repeatable")
     over.add_argument("--mount", choices=("fixed", "free"), help="root fixed where the file puts it, or free on the ground")
     over.add_argument("--material", help="material of the whole object (a materials.yaml key, e.g. steel_sheet)")
-    parser.add_argument("--body", help=(
-        "the body (MJCF) whose subtree is the object, in a scene with several objects with joints (default: the one "
-        "subtree under the world body with hinge or slide joints; tables and walls around it are left out)"))
-    parser.add_argument("--mjcf-angle", choices=("radian", "degree"), help=(
-        "the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention (default: "
-        "as the package compiles it: robosuite, RoboCasa, LIBERO, Meta-World and Franka Kitchen fragments in radians; "
-        "docs/guide/inputs.md)"))
+    add_mjcf_reading(parser)
     parser.add_argument("--config", type=Path,
                         help="YAML file of refine options (estimator, model, engines, sim, overrides: {mass: 12kg, state: {lid: 30deg}} ...); "
                              "flags given on the command line win over it")
