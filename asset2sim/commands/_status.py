@@ -18,7 +18,7 @@ from asset2sim.engines.registry import known_engines
 from asset2sim.extras import EXTRA_OF_MODULE, install_hint, missing_module
 from asset2sim.input_files import allow_outside, inside
 from asset2sim.output_folder import OutputError, product_folder_as_named
-from asset2sim.output_paths import check_location
+from asset2sim.output_paths import check_location, exception_chain
 
 INVALID_INPUT = 1
 INVALID_REQUEST = 2
@@ -98,15 +98,6 @@ UNWRITABLE_ERRNOS = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT",
 _HINTS = {"OUTPUT_NOT_EMPTY": "pass --overwrite to do so"}
 
 
-def _chain(exc: BaseException) -> list[BaseException]:
-    """``exc`` and its causes and contexts, each once."""
-    out: list[BaseException] = []
-    while exc is not None and all(exc is not e for e in out):
-        out.append(exc)
-        exc = exc.__cause__ or exc.__context__
-    return out
-
-
 def errno_name(exc: OSError) -> str:
     """``EROFS``, ``ENOSPC`` ... of an OSError (``OSERROR`` when unknown)."""
     return errno.errorcode.get(exc.errno or 0, "OSERROR")
@@ -130,7 +121,7 @@ def os_failure(exc: OSError, outs: list[Path], inp, reading: Reading | None) -> 
     """An OSError: under an output folder of the command, or a full / read-only disk anywhere in its chain ->
     status 4 ``OUTPUT_WRITE_FAILED [ERRNO]``; else the command's reading of an unreadable input (default status 1
     ``INPUT_READ_FAILED [ERRNO]``)."""
-    full = next((c for c in _chain(exc) if isinstance(c, OSError) and c.errno in UNWRITABLE_ERRNOS), None)
+    full = next((c for c in exception_chain(exc) if isinstance(c, OSError) and c.errno in UNWRITABLE_ERRNOS), None)
     if full is not None or any(_inside(p, out) for p in (exc.filename, exc.filename2) for out in outs):
         exc = full or exc
         return CommandError(OUTPUT_LOCATION, f"OUTPUT_WRITE_FAILED [{errno_name(exc)}]", exc.filename or (outs[0] if outs else None),

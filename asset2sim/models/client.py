@@ -18,6 +18,7 @@ from typing import Any, Callable
 
 from asset2sim import array_cache, atomic
 from asset2sim.inert import one_line
+from asset2sim.output_paths import exception_chain
 from asset2sim.models.config import ClientConfig
 from asset2sim.models.errors import (ConnectionRefused, DeadlineExceeded, MissingCredentials,
                                      ModelCallError, ReplyError, ReplyInvalid, ReplyTooLarge,
@@ -36,15 +37,6 @@ def _code(message: str) -> str | None:
     """The ``MODEL_*`` code a failure message starts with, or None."""
     head = message.split(":", 1)[0]
     return head if head.startswith("MODEL_") and head.replace("_", "").isalpha() else None
-
-
-def _root_cause(exc: BaseException) -> BaseException:
-    """The first exception of ``exc``'s chain (what the network said, under the libraries' wrappers)."""
-    seen = {id(exc)}
-    while (nxt := exc.__cause__ or exc.__context__) is not None and id(nxt) not in seen:
-        seen.add(id(nxt))
-        exc = nxt
-    return exc
 
 
 def _json_sha256(obj: Any) -> str:
@@ -244,8 +236,8 @@ class LLMClient:
                     elif bounds.failure and bounds.failure[0] == "MODEL_CONNECTION_REFUSED":
                         cls, retryable, detail = ConnectionRefused, True, ""
                         kind = f"MODEL_CONNECTION_REFUSED: {bounds.failure[1]}"
-                    elif bounds.requests and bounds.status is None:  # no HTTP status arrived: not an HTTP error
-                        retryable, status, detail = True, None, one_line(_root_cause(exc), 200)
+                    elif bounds.requests and bounds.status is None:  # no HTTP status arrived: what the network said
+                        retryable, status, detail = True, None, one_line(exception_chain(exc)[-1], 200)
                         kind = ("MODEL_CONNECTION_FAILED: the connection to the server ended before an HTTP "
                                 "status arrived")
                     elif bounds.status is not None and 200 <= bounds.status < 300:
