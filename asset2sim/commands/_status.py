@@ -275,6 +275,17 @@ def check_out(out: Path | str, inputs: Iterable[Path | str] = (), *, adopt: bool
         check_location(given if os.path.isdir(given) else os.path.dirname(os.path.abspath(given)), out)
 
 
+def check_jobs(jobs: int) -> None:
+    """CommandError status 2 ``JOBS_INVALID``: ``--jobs`` below 1."""
+    if jobs < 1:
+        raise CommandError.invalid("JOBS_INVALID", f"--jobs must be >= 1, got {jobs}")
+
+
+def add_catalog(parser) -> None:
+    """``--catalog PATH`` (default ``catalog.yaml``) on a command that reads the pipeline's catalog."""
+    parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")
+
+
 def add_allow_outside(parser) -> None:
     """``--allow-outside-paths DIR`` (repeatable) on a command that reads MJCF or USD inputs."""
     parser.add_argument("--allow-outside-paths", action="append", default=[], type=Path, metavar="DIR",

@@ -10,10 +10,9 @@ import contextlib
 import os
 import sys
 import time
-from pathlib import Path
 
 from asset2sim.commands._progress import FlowProgress
-from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, REGRESSION, CommandError, listed
+from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, REGRESSION, CommandError, add_catalog, listed
 from asset2sim.flow_progress import listening
 from asset2sim.commands import _output
 
@@ -34,7 +33,7 @@ EXITS = {
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")
+    add_catalog(parser)
     parser.add_argument("--dataset", help="dataset of the catalog (default: its default_dataset)")
     parser.add_argument("--workers", type=int, help="local Dask workers (default: catalog run.workers)")
     parser.add_argument("--dask-address", "--scheduler", dest="dask_address", help=(
