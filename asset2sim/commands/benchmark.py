@@ -53,10 +53,8 @@ def compare_records(a: list[dict], b: list[dict], rel: float = 1e-9) -> list[str
             if f in TIMING_FIELDS:
                 continue
             x, y = ia[k].get(f), ib[k].get(f)
-            if isinstance(x, float) and isinstance(y, float):
-                if not math.isclose(x, y, rel_tol=rel, abs_tol=1e-12):
-                    diffs.append(f"{k} {f}: {x!r} vs {y!r}")
-            elif x != y:
+            floats = isinstance(x, float) and isinstance(y, float)
+            if not (math.isclose(x, y, rel_tol=rel, abs_tol=1e-12) if floats else x == y):
                 diffs.append(f"{k} {f}: {x!r} vs {y!r}")
     return diffs
 
