@@ -116,12 +116,11 @@ class LLMClient:
             return None
         try:  # NaN anywhere: rejected, asked again
             rec = array_cache.finite_json(atomic.read_regular(p, self.cache_record_cap()))
-            why = None
         except FileNotFoundError:  # deleted since: a miss
             return None
         except (OSError, ValueError, RecursionError) as exc:  # too large, not a file, nor JSON ...
-            rec, why = None, f"unreadable ({type(exc).__name__}: {exc})"
-        if why is None:
+            why = f"unreadable ({type(exc).__name__}: {exc})"
+        else:
             if not (isinstance(rec, dict) and rec.get("format") == CACHE_FORMAT
                     and isinstance(rec.get("content"), str)):
                 why = "not a reply record of this version"
@@ -132,8 +131,8 @@ class LLMClient:
             elif rec.get("sha256") != record_digest(key, rec.get("model"), rec["content"],
                                                     rec.get("finish_reason")):
                 why = "its reply does not match its digest (altered)"
-        if why is None:
-            return rec
+            else:
+                return rec
         return array_cache.reject(p, f"asset2sim reply cache: record {p} rejected: {why}; asking again")
 
     def cache_put(self, key: str, completion: Completion) -> None:
