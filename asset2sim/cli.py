@@ -228,11 +228,11 @@ def _main(argv: list[str] | None = None) -> int:
         closed_pipe()
         return 0
     except Exception as exc:  # the one place that turns a failure into a status: _status.ERRORS, else a bug
-        err = _status.failure(exc, command, args)
-        if err is None:
-            return internal_error(command, exc, debug)
         if debug:
             traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
+        err = _status.failure(exc, command, args)
+        if err is None:
+            return internal_error(command, exc)
         print("\n".join(err.lines(command)), file=sys.stderr, flush=True)
         return err.status
     finally:
@@ -267,10 +267,8 @@ def closed_pipe() -> None:
         os.close(devnull)
 
 
-def internal_error(command: str | None, exc: BaseException, debug: bool) -> int:
-    """One line naming a log of ``exc``'s traceback (printed too with ``debug``); returns :data:`INTERNAL_ERROR`."""
-    if debug:
-        traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
+def internal_error(command: str | None, exc: BaseException) -> int:
+    """One line naming a log of ``exc``'s traceback; returns :data:`INTERNAL_ERROR`."""
     try:
         where = f"traceback in {write_error_log(command, exc)}"
     except OSError as log_exc:

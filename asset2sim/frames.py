@@ -43,22 +43,19 @@ def matrix_rpy(r: np.ndarray) -> np.ndarray:
     ``euler_from_matrix(r, "sxyz")`` (Gohlke, after Shoemake, Graphics Gems IV)."""
     m = np.asarray(r, dtype=np.float64)[:3, :3]
     cy = np.sqrt(m[0, 0] * m[0, 0] + m[1, 0] * m[1, 0])
+    ay = np.arctan2(-m[2, 0], cy)
     if cy > _GIMBAL_EPS:
         ax = np.arctan2(m[2, 1], m[2, 2])
-        ay = np.arctan2(-m[2, 0], cy)
         az = np.arctan2(m[1, 0], m[0, 0])
     else:
         ax = np.arctan2(-m[1, 2], m[1, 1])
-        ay = np.arctan2(-m[2, 0], cy)
         az = 0.0
     return np.array([float(ax), float(ay), float(az)])
 
 
 def translation_matrix(xyz: Iterable[float]) -> np.ndarray:
     """Homogeneous transform (4, 4): identity rotation, translation ``xyz`` (3,)."""
-    t = np.eye(4)
-    t[:3, 3] = np.asarray(xyz, float)
-    return t
+    return rigid_matrix(np.eye(3), xyz)
 
 
 def rigid_matrix(rotation: np.ndarray, translation: Iterable[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
@@ -87,10 +84,7 @@ def rigid_part(m: np.ndarray) -> np.ndarray:
 def pose_matrix(xyz: Iterable[float] = (0.0, 0.0, 0.0), rpy: Iterable[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
     """Homogeneous transform (4, 4) of a URDF ``<origin xyz rpy>``: translation
     ``xyz`` (3,) m, rotation :func:`rpy_matrix` of ``rpy`` (3,) rad."""
-    t = np.eye(4)
-    t[:3, :3] = rpy_matrix(rpy)
-    t[:3, 3] = np.asarray(xyz, float)
-    return t
+    return rigid_matrix(rpy_matrix(rpy), xyz)
 
 
 def axis_angle_matrix(axis: Iterable[float], angle: float) -> np.ndarray:

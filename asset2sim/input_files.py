@@ -178,18 +178,12 @@ def read_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: in
             raise InputFileError("INPUT_NOT_REGULAR_FILE", path, f"{what} {name}: a {file_kind(st.st_mode)}, not a regular file")
         if (st.st_dev, st.st_ino) != (checked.st_dev, checked.st_ino):  # swapped between the check and the open
             raise InputFileError("INPUT_UNREADABLE", path, f"{what} {name}: replaced by another file while it was opened")
-        chunks, left = [], max_bytes + 1
-        while left > 0:
-            chunk = os.read(fd, min(left, 1 << 20))
-            if not chunk:
-                break
-            chunks.append(chunk)
-            left -= len(chunk)
+        with open(fd, "rb", closefd=False) as fh:
+            data = fh.read(max_bytes + 1)
     except OSError as exc:
         raise InputFileError("INPUT_UNREADABLE", path, f"{what} {name}: {exc.strerror or exc}") from None
     finally:
         os.close(fd)
-    data = b"".join(chunks)
     if len(data) > max_bytes:
         raise InputFileError("INPUT_TOO_LARGE", path, f"{what} {name}: grew above the cap of {max_bytes} bytes while read")
     return data

@@ -26,7 +26,7 @@ from typing import Any, Iterable, Iterator
 from asset2sim import atomic
 from asset2sim.output_paths import (MARKER_NAME, RECORD_NAME, OutputError, _entries, _prune_empty, _remove_with_temps, _safe_rel,
                                     _within, check_location, write_inside)
-from asset2sim.output_staging import is_staging_folder, remove_stale, staging_folder, try_lock
+from asset2sim.output_staging import _BOOKKEEPING, is_staging_folder, remove_stale, staging_folder, try_lock
 
 #: The files and folders of an output folder (the SPEC's contract and the extras).
 URDF_NAME = "mobility.urdf"
@@ -43,7 +43,6 @@ TIMINGS_NAME = "timings.json"
 #: Files an output owns whose bytes differ from run to run (wall times): listed in the completion marker under
 #: ``unhashed``, never hashed, so two runs of the same input and code write byte-identical hashed files and markers.
 VOLATILE = frozenset({TIMINGS_NAME})
-_BOOKKEEPING = frozenset({MARKER_NAME, RECORD_NAME})
 _MAX_LISTED = 5
 #: A bookkeeping file larger than this (bytes) is not one asset2sim wrote (a marker lists at most a few thousand files).
 MAX_RECORD_BYTES = 64 * 1024 * 1024

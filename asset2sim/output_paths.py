@@ -83,13 +83,18 @@ ESCAPE_CODES = frozenset({"OUTPUT_SYMLINK_ESCAPES", "OUTPUT_PATH_ESCAPES"})
 def raise_refusal(exc: BaseException) -> None:
     """Raise the output guard's refusal (an :class:`OutputError` with a code of :data:`ESCAPE_CODES`) when ``exc`` is
     one or holds one in its chain; return otherwise. A writer that turns its failures into notes calls this first."""
-    seen: set[int] = set()
-    cur: BaseException | None = exc
-    while cur is not None and id(cur) not in seen:
-        seen.add(id(cur))
-        if isinstance(cur, OutputError) and cur.code in ESCAPE_CODES:
-            raise cur
-        cur = cur.__cause__ or cur.__context__
+    refusal = next((c for c in exception_chain(exc) if isinstance(c, OutputError) and c.code in ESCAPE_CODES), None)
+    if refusal is not None:
+        raise refusal
+
+
+def exception_chain(exc: BaseException) -> list[BaseException]:
+    """``exc`` and its causes (else contexts), each once, outermost first (the last: what the libraries wrapped)."""
+    out: list[BaseException] = []
+    while exc is not None and all(exc is not e for e in out):
+        out.append(exc)
+        exc = exc.__cause__ or exc.__context__
+    return out
 
 
 def check_location(source_dir: Path | str, out_dir: Path | str) -> Path:

@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import functools
 import re
-from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from asset2sim.package_data import package_text
 from asset2sim.schemas.request import SizeClass
 
 #: Largest object width (m) a parallel gripper is assumed to close on (Franka
@@ -210,10 +210,7 @@ class Priors(PriorModel):
 
 def _read_yaml(directory: Path | None, fname: str) -> Any:
     try:
-        if directory is None:
-            text = resources.files("asset2sim.priors").joinpath(fname).read_text(encoding="utf-8")
-        else:
-            text = (Path(directory) / fname).read_text(encoding="utf-8")
+        text = package_text("asset2sim.priors", fname) if directory is None else (Path(directory) / fname).read_text(encoding="utf-8")
     except FileNotFoundError as exc:
         raise PriorsError(f"{fname}: file not found ({exc})") from exc
     try:
@@ -225,25 +222,25 @@ def _read_yaml(directory: Path | None, fname: str) -> Any:
     return data
 
 
-def _fmt_validation(fname: str, prefix: str, exc: ValidationError) -> str:
-    return "; ".join(f"{fname}: " + ".".join(str(p) for p in (prefix, *err["loc"]) if str(p) != "") + f": {err['msg']}"
-                     for err in exc.errors())
-
-
 def _validate_entry(model: type[BaseModel], fname: str, where: str, data: Any, **extra: Any) -> Any:
     if not isinstance(data, dict):
         raise PriorsError(f"{fname}: {where}: entry must be a mapping, got {type(data).__name__}")
     try:
         return model.model_validate({**data, **extra})
     except ValidationError as exc:
-        raise PriorsError(_fmt_validation(fname, where, exc)) from exc
+        raise PriorsError("; ".join(f"{fname}: " + ".".join(str(p) for p in (where, *err["loc"]) if str(p) != "") + f": {err['msg']}"
+                                    for err in exc.errors())) from exc
+
+
+def _table(directory: Path | None, model: type[BaseModel], fname: str, name_field: str | None = None) -> dict[str, Any]:
+    """Every entry of the mapping ``fname`` validated as ``model`` (its key given as ``name_field`` too)."""
+    return {k: _validate_entry(model, fname, k, v, **({name_field: k} if name_field else {}))
+            for k, v in _read_yaml(directory, fname).items()}
 
 
 def _build(directory: Path | None) -> Priors:
-    raw_mat = _read_yaml(directory, "materials.yaml")
-    materials = {k: _validate_entry(MaterialPrior, "materials.yaml", k, v, key=k) for k, v in raw_mat.items()}
-    raw_sc = _read_yaml(directory, "size_classes.yaml")
-    size_classes = {k: _validate_entry(SizeClassPrior, "size_classes.yaml", k, v) for k, v in raw_sc.items()}
+    materials = _table(directory, MaterialPrior, "materials.yaml", "key")
+    size_classes = _table(directory, SizeClassPrior, "size_classes.yaml")
     if set(size_classes) != set(SIZE_CLASSES):
         raise PriorsError(f"size_classes.yaml: keys must be exactly {list(SIZE_CLASSES)}, got {sorted(size_classes)}")
     facs = [size_classes[c].factor for c in SIZE_CLASSES]
@@ -261,8 +258,7 @@ def _build(directory: Path | None) -> Priors:
             if target not in labels.labels:
                 raise PriorsError(f"labels.yaml: words.{word}: {target!r} is not a label")
 
-    raw_cat = _read_yaml(directory, "categories.yaml")
-    categories = {k: _validate_entry(CategoryPrior, "categories.yaml", k, v, name=k) for k, v in raw_cat.items()}
+    categories = _table(directory, CategoryPrior, "categories.yaml", "name")
     if GENERIC not in categories:
         raise PriorsError(f"categories.yaml: the fallback category {GENERIC!r} is missing")
     seen_syn: dict[str, str] = {}
@@ -277,9 +273,7 @@ def _build(directory: Path | None) -> Priors:
             if mat not in materials:
                 raise PriorsError(f"{where}.{key}: unknown material {mat!r} (not in materials.yaml)")
         label_refs = [(f"part_materials.{k}", k) for k in cat.part_materials]
-        label_refs += [("spring_labels", k) for k in cat.spring_labels]
-        label_refs += [("task_relevant", k) for k in cat.task_relevant]
-        label_refs += [("accessories", k) for k in cat.accessories]
+        label_refs += [(key, k) for key in ("spring_labels", "task_relevant", "accessories") for k in getattr(cat, key)]
         label_refs += [(f"label_synonyms.{k}", v) for k, vs in cat.label_synonyms.items() for v in vs]
         label_refs += [(f"part_evidence.{k}", k) for k in cat.part_evidence]
         for i, var in enumerate(cat.variants):
@@ -294,7 +288,7 @@ def _build(directory: Path | None) -> Priors:
             if s in seen_syn and seen_syn[s] != name:
                 raise PriorsError(f"{where}.synonyms: {s!r} is also a synonym of {seen_syn[s]} (ambiguous)")
             seen_syn[s] = name
-    slides = {k: _validate_entry(SlidePrior, "slides.yaml", k, v, key=k) for k, v in _read_yaml(directory, "slides.yaml").items()}
+    slides = _table(directory, SlidePrior, "slides.yaml", "key")
     return Priors(size_classes=size_classes, materials=materials, labels=labels, categories=categories, slides=slides)
 
 

@@ -16,9 +16,9 @@ from typing import Callable, Iterable
 
 from asset2sim.engines.registry import known_engines
 from asset2sim.extras import EXTRA_OF_MODULE, install_hint, missing_module
-from asset2sim.input_files import allow_outside
+from asset2sim.input_files import allow_outside, inside
 from asset2sim.output_folder import OutputError, product_folder_as_named
-from asset2sim.output_paths import check_location
+from asset2sim.output_paths import check_location, exception_chain
 
 INVALID_INPUT = 1
 INVALID_REQUEST = 2
@@ -72,13 +72,8 @@ class CommandError(Exception):
         """``asset2sim COMMAND: CODE: PATH: message`` on one line (a message
         that starts or ends with the path does not repeat it)."""
         msg = " | ".join(part.strip() for part in self.message.splitlines() if part.strip())
-        if self.path:
-            for prefix in (f"{self.path}: ", f"{os.path.abspath(self.path)}: "):
-                if msg.startswith(prefix):
-                    msg = msg[len(prefix):]
-                    break
-            for suffix in (f": {self.path}", f": {os.path.abspath(self.path)}"):
-                msg = msg.removesuffix(suffix)
+        for name in dict.fromkeys((self.path, os.path.abspath(self.path))) if self.path else ():
+            msg = msg.removeprefix(f"{name}: ").removesuffix(f": {name}")
         where = f"{self.path}: " if self.path and not msg.startswith(self.path) else ""
         prog = f"asset2sim {command}" if command else "asset2sim"
         return f"{prog}: {self.code}: {where}{msg}"
@@ -103,15 +98,6 @@ UNWRITABLE_ERRNOS = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT",
 _HINTS = {"OUTPUT_NOT_EMPTY": "pass --overwrite to do so"}
 
 
-def _chain(exc: BaseException) -> list[BaseException]:
-    """``exc`` and its causes and contexts, each once."""
-    out: list[BaseException] = []
-    while exc is not None and all(exc is not e for e in out):
-        out.append(exc)
-        exc = exc.__cause__ or exc.__context__
-    return out
-
-
 def errno_name(exc: OSError) -> str:
     """``EROFS``, ``ENOSPC`` ... of an OSError (``OSERROR`` when unknown)."""
     return errno.errorcode.get(exc.errno or 0, "OSERROR")
@@ -119,13 +105,7 @@ def errno_name(exc: OSError) -> str:
 
 def _inside(path: str | os.PathLike | None, folder: Path | str) -> bool:
     """True when ``path`` is ``folder`` or lies in it, as written or with symlinks resolved."""
-    if path is None:
-        return False
-    p = os.fsdecode(path)
-    for a, b in ((os.path.abspath(p), os.path.abspath(folder)), (os.path.realpath(p), os.path.realpath(folder))):
-        if a == b or a.startswith(b.rstrip(os.sep) + os.sep):
-            return True
-    return False
+    return path is not None and any(inside(how(os.fsdecode(path)), how(folder)) for how in (os.path.abspath, os.path.realpath))
 
 
 def output_failure(exc: OutputError, outs: list[Path], _inp=None, _reading=None) -> CommandError:
@@ -141,7 +121,7 @@ def os_failure(exc: OSError, outs: list[Path], inp, reading: Reading | None) -> 
     """An OSError: under an output folder of the command, or a full / read-only disk anywhere in its chain ->
     status 4 ``OUTPUT_WRITE_FAILED [ERRNO]``; else the command's reading of an unreadable input (default status 1
     ``INPUT_READ_FAILED [ERRNO]``)."""
-    full = next((c for c in _chain(exc) if isinstance(c, OSError) and c.errno in UNWRITABLE_ERRNOS), None)
+    full = next((c for c in exception_chain(exc) if isinstance(c, OSError) and c.errno in UNWRITABLE_ERRNOS), None)
     if full is not None or any(_inside(p, out) for p in (exc.filename, exc.filename2) for out in outs):
         exc = full or exc
         return CommandError(OUTPUT_LOCATION, f"OUTPUT_WRITE_FAILED [{errno_name(exc)}]", exc.filename or (outs[0] if outs else None),
@@ -260,11 +240,16 @@ def join_codes(codes: Iterable[str]) -> str:
     return ",".join(dict.fromkeys(c for c in codes if c))
 
 
+def listed(text: str | None) -> list[str]:
+    """The items of a comma-separated option value, stripped, empty ones dropped."""
+    return [item.strip() for item in (text or "").split(",") if item.strip()]
+
+
 def parse_engines(text: str | None, option: str = "--engines") -> list[str]:
     """The engine names of a comma-separated option value (order kept,
     duplicates dropped, uninstalled ones kept; CommandError status 2
     ``ENGINE_UNKNOWN``: an unknown name)."""
-    names = list(dict.fromkeys(e.strip() for e in (text or "").split(",") if e.strip()))
+    names = list(dict.fromkeys(listed(text)))
     known = known_engines()
     unknown = [n for n in names if n not in known]
     if unknown:
@@ -290,6 +275,17 @@ def check_out(out: Path | str, inputs: Iterable[Path | str] = (), *, adopt: bool
         check_location(given if os.path.isdir(given) else os.path.dirname(os.path.abspath(given)), out)
 
 
+def check_jobs(jobs: int) -> None:
+    """CommandError status 2 ``JOBS_INVALID``: ``--jobs`` below 1."""
+    if jobs < 1:
+        raise CommandError.invalid("JOBS_INVALID", f"--jobs must be >= 1, got {jobs}")
+
+
+def add_catalog(parser) -> None:
+    """``--catalog PATH`` (default ``catalog.yaml``) on a command that reads the pipeline's catalog."""
+    parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")
+
+
 def add_allow_outside(parser) -> None:
     """``--allow-outside-paths DIR`` (repeatable) on a command that reads MJCF or USD inputs."""
     parser.add_argument("--allow-outside-paths", action="append", default=[], type=Path, metavar="DIR",
@@ -299,9 +295,13 @@ def add_allow_outside(parser) -> None:
 
 def add_mjcf_reading(parser) -> None:
     """``--body`` and ``--mjcf-angle``: how a command reads an MJCF input (:class:`asset2sim.formats.ReadOptions`)."""
-    parser.add_argument("--body", help="the body (MJCF) whose subtree is the object, in a scene with several objects with joints")
-    parser.add_argument("--mjcf-angle", choices=("radian", "degree"),
-                        help="the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention")
+    parser.add_argument("--body", help=(
+        "the body (MJCF) whose subtree is the object, in a scene with several objects with joints (default: the one "
+        "subtree under the world body with hinge or slide joints; tables and walls around it are left out)"))
+    parser.add_argument("--mjcf-angle", choices=("radian", "degree"), help=(
+        "the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention (default: "
+        "as the package compiles it: robosuite, RoboCasa, LIBERO, Meta-World and Franka Kitchen fragments in radians; "
+        "docs/guide/inputs.md)"))
 
 
 @contextlib.contextmanager

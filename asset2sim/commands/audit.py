@@ -14,7 +14,7 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from asset2sim.commands._status import (INVALID_INPUT, NOT_READY, CommandError, add_allow_outside, add_mjcf_reading,
+from asset2sim.commands._status import (INVALID_INPUT, NOT_READY, CommandError, add_allow_outside, add_mjcf_reading, check_jobs,
                                         check_out, outside_paths)
 from asset2sim.input_files import allowed_folders, set_allowed_outside
 from asset2sim.flows import audit_catalog
@@ -66,8 +66,7 @@ def _run_all(targets: list[AuditTarget], out: Path | None, category: str | None,
 def run(args: argparse.Namespace) -> int:
     from rich.table import Table
 
-    if args.jobs < 1:
-        raise CommandError.invalid("JOBS_INVALID", f"--jobs must be >= 1, got {args.jobs}")
+    check_jobs(args.jobs)
     targets = find_assets(args.paths)
     if not targets:
         raise CommandError(INVALID_INPUT, "AUDIT_NO_ASSETS", None, f"no URDF, MJCF or USD asset in {', '.join(map(str, args.paths))}")

@@ -12,7 +12,8 @@ import math
 import statistics
 from pathlib import Path
 
-from asset2sim.commands._status import parse_engines
+from asset2sim.commands._status import listed, parse_engines
+from asset2sim.tasks.evaluation.benchmark_pages import _PASS_RATES as PASS_RATES
 from asset2sim.apps.benchmark.benchmark import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
 from asset2sim.commands import _output
 from asset2sim.atomic import jsonable
@@ -52,10 +53,8 @@ def compare_records(a: list[dict], b: list[dict], rel: float = 1e-9) -> list[str
             if f in TIMING_FIELDS:
                 continue
             x, y = ia[k].get(f), ib[k].get(f)
-            if isinstance(x, float) and isinstance(y, float):
-                if not math.isclose(x, y, rel_tol=rel, abs_tol=1e-12):
-                    diffs.append(f"{k} {f}: {x!r} vs {y!r}")
-            elif x != y:
+            floats = isinstance(x, float) and isinstance(y, float)
+            if not (math.isclose(x, y, rel_tol=rel, abs_tol=1e-12) if floats else x == y):
                 diffs.append(f"{k} {f}: {x!r} vs {y!r}")
     return diffs
 
@@ -77,11 +76,7 @@ def _print_table(console, title: str, summary: dict) -> None:
 
     for method, r in summary.items():
         t.add_row(markup(method), pm(r["pen_ts_mean"], r["pen_ts_sd"]), pm(r["pen_mean"], r["pen_sd"]),
-                  f"{pct(r['rest_stability_pass'])} ({r['rest_n']})", f"{pct(r['oscillation_pass'])} ({r['osc_n']})",
-                  f"{pct(r['probes_pass'])} ({r['probes_n']})",
-                  f"{pct(r.get('sweep_pass'))} ({r.get('sweep_n', 0)})", f"{pct(r.get('robust_rest_pass'))} ({r.get('robust_n', 0)})",
-                  f"{pct(r.get('task_pass'))} ({r.get('task_n', 0)})", f"{pct(r.get('force_pass'))} ({r.get('force_n', 0)})",
-                  f"{pct(r.get('ready'))} ({r.get('ready_n', 0)})",
+                  *(f"{pct(r.get(rate))} ({r.get(n, 0)})" for rate, n in PASS_RATES),
                   pm(r["scale_mean"], r["scale_sd"]), pm(r["init_mean"], r["init_sd"]),
                   pct(r["prompt_mean"]), pct(r["all_pass"]), "-" if r["median_seconds"] is None else f"{r['median_seconds']:.2f}",
                   markup(r.get("realism", "not rated")), str(r["errors"]))
@@ -104,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     console = _output.console(width=180)
-    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    methods = listed(args.methods)
     ids = [i.strip() for i in args.ids.split(",")] if args.ids else None
     engines = tuple(parse_engines(args.engines))
     out = args.out

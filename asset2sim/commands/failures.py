@@ -8,9 +8,8 @@ run or column (one line, ``asset2sim failures: CODE: ...``).
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from asset2sim.commands._status import CommandError
+from asset2sim.commands._status import CommandError, add_catalog, listed
 from asset2sim.flows import catalog_compare, queries
 from asset2sim.flows.catalog import NOTHING_TO_DO, ResultCatalog
 from asset2sim.flows.catalog_config import load_catalog
@@ -30,7 +29,7 @@ MAX_LISTED = 50
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")
+    add_catalog(parser)
     parser.add_argument("--dataset", help="dataset (default: the dataset of the latest run)")
     parser.add_argument("--run", default="latest", help="run id, or 'latest' (default), or 'all'")
     parser.add_argument("--by", default="category", help="group by these columns, comma-separated (default category)")
@@ -140,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
         print("\n".join(catalog_compare.comparison_lines(cmp)))
         return 0
 
-    by = [b.strip() for b in args.by.split(",") if b.strip()]
+    by = listed(args.by)
     try:
         # an Arrow table: the queries aggregate it in Arrow (fast on 10^6 rows)
         df = store.read_table(dataset, runs, columns=list(dict.fromkeys([*BREAKDOWN_COLUMNS, *[b for b in by if b not in ("dataset", "run")]])))

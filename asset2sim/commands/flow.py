@@ -10,10 +10,9 @@ import contextlib
 import os
 import sys
 import time
-from pathlib import Path
 
 from asset2sim.commands._progress import FlowProgress
-from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, REGRESSION, CommandError
+from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, REGRESSION, CommandError, add_catalog, listed
 from asset2sim.flow_progress import listening
 from asset2sim.commands import _output
 
@@ -34,7 +33,7 @@ EXITS = {
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")
+    add_catalog(parser)
     parser.add_argument("--dataset", help="dataset of the catalog (default: its default_dataset)")
     parser.add_argument("--workers", type=int, help="local Dask workers (default: catalog run.workers)")
     parser.add_argument("--dask-address", "--scheduler", dest="dask_address", help=(
@@ -78,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
         os.environ.setdefault("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", "WARNING")
     from asset2sim.flows.refine_flow import NOTHING_TO_DO, run_outcome, run_refine_flow  # imports Prefect: after its environment is set
 
-    ids = [i.strip() for i in args.ids.split(",") if i.strip()] if args.ids else None
+    ids = listed(args.ids) if args.ids else None
     progress = FlowProgress(live=live)
     with contextlib.ExitStack() as stack:  # a full disk: status 4 naming the file (finished assets are kept)
         if not getattr(args, "no_progress", False):

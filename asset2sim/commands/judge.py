@@ -9,9 +9,10 @@ folder cannot be written."""
 from __future__ import annotations
 
 import argparse
+from collections import Counter
 from pathlib import Path
 
-from asset2sim.commands._status import CommandError
+from asset2sim.commands._status import CommandError, check_jobs
 from asset2sim.apps.realism.calibration import CALIBRATION_FILE, judge_calibration, write_calibration
 from asset2sim.apps.realism.judge import JUDGEMENTS_FILE, find_pair_set, judge_pairs
 from asset2sim.apps.realism.scores import SCORES_FILE, judge_scores
@@ -69,8 +70,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError.invalid("MODEL_REQUIRED", "give at least one judge: --model PROVIDER/NAME")
     if args.timeout is not None and not args.timeout > 0:
         raise CommandError.invalid("TIMEOUT_INVALID", f"--timeout must be > 0, got {args.timeout}")
-    if args.jobs < 1:
-        raise CommandError.invalid("JOBS_INVALID", f"--jobs must be >= 1, got {args.jobs}")
+    check_jobs(args.jobs)
     over = {} if args.timeout is None else {"timeout_s": args.timeout}
     try:
         configs = [ClientConfig.from_env(j["model"], j.get("base_url"), **over) for j in judges]
@@ -108,12 +108,12 @@ def run(args: argparse.Namespace) -> int:
 
 def _models_without_a_reply(verdicts) -> list[str]:
     """One line per model every one of whose questions failed (no reply from the server nor the cache)."""
-    asked: dict[str, int] = {}
-    failed: dict[str, int] = {}
+    asked: Counter[str] = Counter()
+    failed: Counter[str] = Counter()
     why: dict[str, str] = {}
     for v in verdicts:
-        asked[v.model] = asked.get(v.model, 0) + 2  # both orders
-        failed[v.model] = failed.get(v.model, 0) + v.failed_calls
+        asked[v.model] += 2  # both orders
+        failed[v.model] += v.failed_calls
         if v.failed_calls:
             first = v.reason.split(" | B/A: ")[0].removeprefix("A/B: ")  # what the first order's call got
             why.setdefault(v.model, first if len(first) <= 240 else first[:237] + "...")

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_INPUT, CommandError, check_out
+from asset2sim.commands._status import INVALID_INPUT, CommandError, check_out, listed
 from asset2sim.commands import _output
 from asset2sim.inert import markup
 
@@ -52,12 +52,12 @@ def run(args: argparse.Namespace) -> int:
     elif args.defects == "none":
         defects = ()
     else:
-        defects = tuple(d.strip() for d in args.defects.split(",") if d.strip())
+        defects = tuple(listed(args.defects))
         unknown = sorted(set(defects) - set(DEFECTS))
         if unknown:
             raise CommandError.invalid("DEFECT_UNKNOWN", f"unknown defects {unknown}; known: {sorted(DEFECTS)}")
     check_out(out)
-    against = tuple(m.strip() for m in args.against.split(",") if m.strip())
+    against = tuple(listed(args.against))
     specs, skipped = specs_from_folders(args.folders, out, against=against, defects=defects)
     pair_set = build_pair_set(specs, out, skipped=skipped, progress=lambda text: console.print(markup(text)))
     for key, why in pair_set.skipped.items():

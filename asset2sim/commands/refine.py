@@ -8,6 +8,7 @@ interaction-ready or not as asked (``request_not_met``), 4 output location probl
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -15,8 +16,8 @@ import sys
 import time
 from pathlib import Path
 
-from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, add_allow_outside, failure,
-                                        join_codes, outside_paths, parse_engines)
+from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, add_allow_outside,
+                                        add_mjcf_reading, failure, join_codes, outside_paths, parse_engines)
 from asset2sim.api import load_config, merge_overrides
 from asset2sim.schemas.config import RefineConfig, default_engines
 from asset2sim.tasks import refine as refine_stage
@@ -79,13 +80,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                            "fraction (0.4) or a band (closed, slightly_open, quarter, halfway, mostly, fully); repeatable")
     over.add_argument("--mount", choices=("fixed", "free"), help="root fixed where the file puts it, or free on the ground")
     over.add_argument("--material", help="material of the whole object (a materials.yaml key, e.g. steel_sheet)")
-    parser.add_argument("--body", help=(
-        "the body (MJCF) whose subtree is the object, in a scene with several objects with joints (default: the one "
-        "subtree under the world body with hinge or slide joints; tables and walls around it are left out)"))
-    parser.add_argument("--mjcf-angle", choices=("radian", "degree"), help=(
-        "the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention (default: "
-        "as the package compiles it: robosuite, RoboCasa, LIBERO, Meta-World and Franka Kitchen fragments in radians; "
-        "docs/guide/inputs.md)"))
+    add_mjcf_reading(parser)
     parser.add_argument("--config", type=Path,
                         help="YAML file of refine options (estimator, model, engines, sim, overrides: {mass: 12kg, state: {lid: 30deg}} ...); "
                              "flags given on the command line win over it")
@@ -111,21 +106,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "each tier, why it failed, the files written); warnings still go to stderr"))
 
 
-def _joint_types(out_dir) -> dict[str, str]:
-    """Joint name -> type of the output's URDF ({} when it cannot be read)."""
-    try:
-        return {j.name: j.type for j in RefinedAsset(Path(out_dir)).model.joints}
-    except Exception:
-        return {}
-
-
-def _joint_labels(out_dir) -> dict[str, str]:
-    """Joint name -> its moving part's label in the output's ``semantics.txt`` ({} when either cannot be read)."""
-    try:
+def _joint_words(out_dir) -> tuple[dict[str, str], dict[str, str]]:
+    """Joint name -> type of the output's URDF ({} when it cannot be read), and joint name -> its moving part's label
+    in the output's ``semantics.txt`` ({} when either cannot be read)."""
+    types, labels = {}, {}
+    with contextlib.suppress(Exception):
+        joints = RefinedAsset(Path(out_dir)).model.joints
+        types = {j.name: j.type for j in joints}
         sem = read_semantics(Path(out_dir))
-        return {j.name: sem[j.child].label for j in RefinedAsset(Path(out_dir)).model.joints if j.child in sem}
-    except Exception:
-        return {}
+        labels = {j.name: sem[j.child].label for j in joints if j.child in sem}
+    return types, labels
 
 
 def _state_text(name: str, q: float, report, types: dict[str, str], labels: dict[str, str], moves: dict[str, str] | None = None) -> str:
@@ -151,8 +141,7 @@ def summary_lines(result) -> list[str]:
     """Human-readable summary of a RefineResult."""
     r = result.report
     osc = r.metric("oscillation")
-    types = _joint_types(result.out_dir)
-    labels = _joint_labels(result.out_dir)
+    types, labels = _joint_words(result.out_dir)
     moves = state_moves(r.model_dump(mode="json"))
     state = ", ".join(_state_text(k, v, r, types, labels, moves) for k, v in r.initial_joint_positions.items()) or "(no movable joints)"
     lines = [
@@ -297,8 +286,7 @@ def _manipulation_line(report) -> str:
         if m is None:
             continue
         verdict = "n/a" if m.passed is None else ("PASS" if m.passed else "FAIL")
-        fails = m.details.get("failures") or []
-        parts.append(f"{label} {verdict}" + (f" ({'; '.join(fails[:3])})" if fails else ""))
+        parts.append(f"{label} {verdict}{_failures_text(m)}")
     return "manipulation " + (", ".join(parts) if parts else "n/a")
 
 
@@ -314,9 +302,13 @@ def _operability_line(report) -> str:
         torque = "" if e.get("peak_torque_nm") is None else f", {e['peak_torque_nm']:.2f} N m"
         parts.append(f"{joint} ({e.get('label') or 'unlabelled'}) {e['peak_force_n']:.1f} N{torque}"
                      + (f" of {top:g} N" if top is not None else ""))
-    fails = m.details.get("failures") or []
-    return (f"operability  {'PASS' if m.passed else 'FAIL'}: " + ", ".join(parts)
-            + (f" ({'; '.join(fails[:3])})" if fails else ""))
+    return f"operability  {'PASS' if m.passed else 'FAIL'}: " + ", ".join(parts) + _failures_text(m)
+
+
+def _failures_text(metric) -> str:
+    """`` (F1; F2; F3)``: the first three failures a metric's details name ("" when none)."""
+    fails = metric.details.get("failures") or []
+    return f" ({'; '.join(fails[:3])})" if fails else ""
 
 
 def _refine_failure(exc: RefineError, args: argparse.Namespace) -> CommandError:
@@ -381,15 +373,9 @@ def options(args: argparse.Namespace) -> RefineConfig:
     except (OSError, ValueError) as exc:
         raise CommandError(INVALID_REQUEST, getattr(exc, "code", None) or "CONFIG_INVALID", args.config, str(exc)) from exc
     fields = {k: v for k, v in (("estimator", args.estimator), ("model", args.model), ("base_url", args.base_url),
-                                ("request_parser", args.request_parser)) if v is not None}
-    if args.keep_declared:
-        fields["keep_declared"] = True
-    if args.no_clips:
-        fields["clips"] = False
-    if args.open_containers:
-        fields["open_containers"] = True
-    if args.body:
-        fields["body"] = args.body
+                                ("request_parser", args.request_parser), ("keep_declared", args.keep_declared or None),
+                                ("clips", False if args.no_clips else None), ("open_containers", args.open_containers or None),
+                                ("body", args.body or None)) if v is not None}
     if args.mjcf_angle:
         fields["mjcf"] = base.mjcf.model_copy(update={"angle": args.mjcf_angle})
     engines = args.engines

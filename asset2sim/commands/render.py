@@ -11,7 +11,7 @@ import argparse
 import time
 from pathlib import Path
 
-from asset2sim.commands._status import CommandError, check_out
+from asset2sim.commands._status import CommandError, check_out, listed
 from asset2sim import output_folder
 from asset2sim.tasks.geometry.render import VIEWS, SceneRenderer, read_joint_state, render_contact_sheet, resolve_urdf, write_png
 
@@ -37,7 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    views = [v.strip() for v in str(args.views).split(",") if v.strip()]
+    views = listed(args.views)
     unknown = [v for v in views if v not in VIEWS]
     if unknown or not views:
         raise CommandError.invalid("VIEW_UNKNOWN", f"--views: unknown view(s) {unknown}; known views: {list(VIEWS)}")

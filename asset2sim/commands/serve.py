@@ -4,7 +4,7 @@ serve it (``make serve``); same as ``asset2sim flow --serve``."""
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
+from asset2sim.commands._status import add_catalog
 
 NAME = "serve"
 HELP = "Register the nightly deployment (cron schedule from catalog.yaml) with Prefect and serve it until interrupted."
@@ -14,7 +14,7 @@ EXITS = {0: "stopped", 2: "the catalog cannot be used"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")
+    add_catalog(parser)
     parser.add_argument("--dataset", help="dataset to refine nightly (default: catalog schedule.dataset)")
     parser.add_argument("--workers", type=int, help="local Dask workers (default: catalog run.workers)")
     parser.add_argument("--dask-address", help="existing Dask scheduler (default: $DASK_ADDRESS at run time)")

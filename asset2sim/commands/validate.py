@@ -6,6 +6,7 @@ refused, 2 usage errors.
 from __future__ import annotations
 
 import argparse
+from collections import Counter
 import json
 from pathlib import Path
 
@@ -58,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
             continue
         loc = f"{f.file}:{f.line}" if f.line else f.file
         print(f"{f.severity:<7} {f.code:<32} {loc}  {f.where}: {f.message}")
-    n = {s: sum(1 for f in findings if f.severity == s) for s in ("error", "warning", "info")}
+    n = Counter(f.severity for f in findings)
     n["info"] += len(notes)  # every info line counted, printed or not
     verdict = "REFUSED" if has_errors(findings) else "OK"
     hidden = "" if infos or not n["info"] else ", shown with --verbose"

@@ -18,6 +18,7 @@ from typing import Any, Callable
 
 from asset2sim import array_cache, atomic
 from asset2sim.inert import one_line
+from asset2sim.output_paths import exception_chain
 from asset2sim.models.config import ClientConfig
 from asset2sim.models.errors import (ConnectionRefused, DeadlineExceeded, MissingCredentials,
                                      ModelCallError, ReplyError, ReplyInvalid, ReplyTooLarge,
@@ -38,20 +39,14 @@ def _code(message: str) -> str | None:
     return head if head.startswith("MODEL_") and head.replace("_", "").isalpha() else None
 
 
-def _root_cause(exc: BaseException) -> BaseException:
-    """The first exception of ``exc``'s chain (what the network said, under the libraries' wrappers)."""
-    seen = {id(exc)}
-    while (nxt := exc.__cause__ or exc.__context__) is not None and id(nxt) not in seen:
-        seen.add(id(nxt))
-        exc = nxt
-    return exc
+def _json_sha256(obj: Any) -> str:
+    """sha256 (hex) of ``obj`` as canonical JSON (keys sorted, no spaces)."""
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
 
 def record_digest(key: str, model: Any, content: Any, finish_reason: Any) -> str:
     """sha256 (hex) of a reply record's key, model, content and finish reason as canonical JSON."""
-    record = {"key": key, "model": model, "content": content, "finish_reason": finish_reason}
-    blob = json.dumps(record, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(blob.encode()).hexdigest()
+    return _json_sha256({"key": key, "model": model, "content": content, "finish_reason": finish_reason})
 
 
 class LLMClient:
@@ -94,11 +89,9 @@ class LLMClient:
                   temperature: float | None, schema_name: str = "reply") -> str:
         """sha256 (hex) of everything that decides a reply: the model, the server (base URL), the
         messages, the schema and its name, and the sampling parameters (never the API key)."""
-        blob = json.dumps({"format": CACHE_FORMAT, "model": self.config.model, "base_url": self.config.base_url,
-                           "messages": messages, "schema": schema, "schema_name": schema_name,
-                           "temperature": temperature, "max_tokens": self.config.max_tokens},
-                          sort_keys=True, separators=(",", ":")).encode()
-        return hashlib.sha256(blob).hexdigest()
+        return _json_sha256({"format": CACHE_FORMAT, "model": self.config.model, "base_url": self.config.base_url,
+                             "messages": messages, "schema": schema, "schema_name": schema_name,
+                             "temperature": temperature, "max_tokens": self.config.max_tokens})
 
     def _cache_path(self, key: str) -> Path | None:
         """The record's path; None without a cache folder, or when it lies inside an input or output
@@ -123,12 +116,11 @@ class LLMClient:
             return None
         try:  # NaN anywhere: rejected, asked again
             rec = array_cache.finite_json(atomic.read_regular(p, self.cache_record_cap()))
-            why = None
         except FileNotFoundError:  # deleted since: a miss
             return None
         except (OSError, ValueError, RecursionError) as exc:  # too large, not a file, nor JSON ...
-            rec, why = None, f"unreadable ({type(exc).__name__}: {exc})"
-        if why is None:
+            why = f"unreadable ({type(exc).__name__}: {exc})"
+        else:
             if not (isinstance(rec, dict) and rec.get("format") == CACHE_FORMAT
                     and isinstance(rec.get("content"), str)):
                 why = "not a reply record of this version"
@@ -139,8 +131,8 @@ class LLMClient:
             elif rec.get("sha256") != record_digest(key, rec.get("model"), rec["content"],
                                                     rec.get("finish_reason")):
                 why = "its reply does not match its digest (altered)"
-        if why is None:
-            return rec
+            else:
+                return rec
         return array_cache.reject(p, f"asset2sim reply cache: record {p} rejected: {why}; asking again")
 
     def cache_put(self, key: str, completion: Completion) -> None:
@@ -243,8 +235,8 @@ class LLMClient:
                     elif bounds.failure and bounds.failure[0] == "MODEL_CONNECTION_REFUSED":
                         cls, retryable, detail = ConnectionRefused, True, ""
                         kind = f"MODEL_CONNECTION_REFUSED: {bounds.failure[1]}"
-                    elif bounds.requests and bounds.status is None:  # no HTTP status arrived: not an HTTP error
-                        retryable, status, detail = True, None, one_line(_root_cause(exc), 200)
+                    elif bounds.requests and bounds.status is None:  # no HTTP status arrived: what the network said
+                        retryable, status, detail = True, None, one_line(exception_chain(exc)[-1], 200)
                         kind = ("MODEL_CONNECTION_FAILED: the connection to the server ended before an HTTP "
                                 "status arrived")
                     elif bounds.status is not None and 200 <= bounds.status < 300:
@@ -294,10 +286,8 @@ class LLMClient:
         if refusal is None and isinstance(psf, dict):
             refusal = psf.get("refusal")
         usage = getattr(resp, "usage", None)
-        if usage is not None:
-            u.prompt_tokens += int(getattr(usage, "prompt_tokens", 0) or 0)
-            u.completion_tokens += int(getattr(usage, "completion_tokens", 0) or 0)
-            u.total_tokens += int(getattr(usage, "total_tokens", 0) or 0)
+        for k in ("prompt_tokens", "completion_tokens", "total_tokens"):
+            setattr(u, k, getattr(u, k) + int(getattr(usage, k, 0) or 0))
         try:
             cost = float(litellm.completion_cost(completion_response=resp))
             u.cost_usd = cost if math.isfinite(cost) else None

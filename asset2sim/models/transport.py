@@ -116,6 +116,18 @@ def _bounded_time(timeout: float | None, bounds: CallBounds, error) -> float:
     return left if timeout is None else min(timeout, left)
 
 
+def _within_deadline(bounds: CallBounds, timeout: float | None, timeout_error: type[Exception], call):
+    """``call(t)`` with ``t`` the time it may take (:func:`_bounded_time`); its ``timeout_error`` after the attempt's
+    deadline, not httpx's per-operation time-out, records the attempt as ``deadline``."""
+    t = _bounded_time(timeout, bounds, timeout_error)
+    try:
+        return call(t)
+    except timeout_error:
+        if timeout is None or t < timeout:
+            bounds.tripped = bounds.tripped or "deadline"
+        raise
+
+
 def _bounder():
     """A function that makes an httpx transport's connections obey :func:`call_bounds` (module
     docstring)."""
@@ -134,14 +146,8 @@ def _bounder():
             bounds = getattr(_BOUNDS, "current", None)
             if bounds is None:
                 return self._inner.read(max_bytes, timeout)
-            t = _bounded_time(timeout, bounds, httpcore.ReadTimeout)
-            try:
-                room = max(1, bounds.max_bytes - bounds.received + 1)
-                data = self._inner.read(min(max_bytes, room), t)
-            except httpcore.ReadTimeout:
-                if timeout is None or t < timeout:  # the deadline, not httpx's per-read time-out
-                    bounds.tripped = bounds.tripped or "deadline"
-                raise
+            room = max(1, bounds.max_bytes - bounds.received + 1)
+            data = _within_deadline(bounds, timeout, httpcore.ReadTimeout, lambda t: self._inner.read(min(max_bytes, room), t))
             bounds.received += len(data)
             if bounds.received > bounds.max_bytes:
                 bounds.tripped = "size"
@@ -152,13 +158,7 @@ def _bounder():
             bounds = getattr(_BOUNDS, "current", None)
             if bounds is None:
                 return self._inner.write(buffer, timeout)
-            t = _bounded_time(timeout, bounds, httpcore.WriteTimeout)
-            try:
-                return self._inner.write(buffer, t)
-            except httpcore.WriteTimeout:
-                if timeout is None or t < timeout:
-                    bounds.tripped = bounds.tripped or "deadline"
-                raise
+            return _within_deadline(bounds, timeout, httpcore.WriteTimeout, lambda t: self._inner.write(buffer, t))
 
         def close(self) -> None:
             self._inner.close()
