@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from asset2sim.schemas.overlay import JointDynamics, LinkPhysics
-from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, JointStateRequest, RequestSpec
+from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, JointStateRequest, PartProperty, RequestSpec
 from asset2sim.tasks.interpret import priors
 from asset2sim.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.interpret.named_parts import (count_warnings, joints_named, joints_of, link_named, moving_parts, part_boxes, stand_ins,
@@ -287,6 +287,12 @@ class AskedMasses:
     total_asked: bool
 
 
+def whole_masses(spec: RequestSpec) -> tuple[PartProperty | None, PartProperty | None]:
+    """The first mass and the first range of masses (kg) ``spec`` asks for the whole object, None where it asks none."""
+    whole = [p for p in spec.properties if p.label is None]
+    return next((p for p in whole if p.mass is not None), None), next((p for p in whole if p.mass_range is not None), None)
+
+
 def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausible: tuple[float, float]) -> AskedMasses:
     """Masses in numbers and words on the links (inertia scaled alike): per-part masses first, then the total
     (other links scaled), else "heavy" / "light" at 0.9 x the upper / 1.1 x the lower plausible end."""
@@ -306,9 +312,9 @@ def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausi
             out[n] = scaled_link(out[n], f, f"; x{f:.4g} to the requested {want:g} kg of the {p.label} ('{p.phrase}')")
         fixed.update(names)
         notes.append(f"'{p.phrase}': {p.label} links {names} {m:.4g} -> {want:.4g} kg")
-    total_req = next((p.mass for p in ctx.request.properties if p.mass is not None and p.label is None), None)
+    total, rng = whole_masses(ctx.request)
+    total_req = None if total is None else total.mass
     why = None
-    rng = next((p for p in ctx.request.properties if p.mass_range is not None and p.label is None), None)
     if total_req is None and rng is not None:
         now = sum(lp.mass for lp in out.values())
         total_req = range_target(now, rng.mass_range)
