@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from asset2sim import __version__
 from asset2sim.schemas.overlay import ContactMaterial, EstimatorInfo, LinkPhysics, Overlay, ValidationNotes
-from asset2sim.tasks.interpret import priors
+from asset2sim.tasks.interpret.part_priors import material_for
 from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
@@ -63,7 +63,7 @@ class OfflineEstimator:
         joints = joint_dynamics_for(ctx, kin, links, state, s, choices, source="offline physics")
         joints, dyn_notes = request_apply.apply_dynamics_values(ctx, joints, request_apply.task_relevant_joints(ctx), state)
         band_notes += dyn_notes
-        body_prior = priors.material_for(ctx.category, None, request_variant(ctx))
+        body_prior = material_for(ctx.category, None, request_variant(ctx))
         body_mat = link_material(ctx, None)
         asked_state = bool(ctx.request.joint_states)
         overlay = Overlay(

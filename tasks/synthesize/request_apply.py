@@ -15,7 +15,7 @@ import numpy as np
 
 from asset2sim.schemas.overlay import JointDynamics, LinkPhysics
 from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, JointStateRequest, PartProperty, RequestSpec
-from asset2sim.tasks.interpret import priors
+from asset2sim.tasks.interpret import part_priors
 from asset2sim.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.interpret.named_parts import (count_warnings, joints_named, joints_of, link_named, moving_parts, part_boxes, stand_ins,
                                                   state_targets, unit_fits)
@@ -67,9 +67,9 @@ class StateResolution:
 
 
 def task_relevant_joints(ctx: "EstimationContext") -> list[str]:
-    """Movable joints whose moving part tasks manipulate, by the category's priority (``priors.task_relevant_joints``)."""
+    """Movable joints whose moving part tasks manipulate, by the category's priority (``part_priors.task_relevant_joints``)."""
     labelled = [(j.name, ctx.asset.link(j.child).semantic_label) for j in ctx.asset.movable_joints()]
-    return priors.task_relevant_joints(ctx.category, labelled)[0]
+    return part_priors.task_relevant_joints(ctx.category, labelled)[0]
 
 
 def band_of(f: float) -> str:

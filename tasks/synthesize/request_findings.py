@@ -14,7 +14,7 @@ import numpy as np
 
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.request import QuantityOutcome, RequestFindings, RequestSpec
-from asset2sim.tasks.interpret import priors
+from asset2sim.tasks.interpret.part_priors import request_label_matches
 from asset2sim.tasks.interpret.named_parts import joints_of, unit_fits
 from asset2sim.tasks.synthesize.request_apply import (END_TOLERANCE, NUMBER_TOLERANCE, JointTarget, StateResolution,
                                                       requested_material, resolve_states, size_residuals,
@@ -46,7 +46,7 @@ def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResoluti
     for d in ctx.request.dynamics_values:
         for n, jd in overlay.joints.items():
             linear = ctx.asset.joint(n).type == "prismatic" if n in {j.name for j in ctx.asset.joints} else False
-            if not unit_fits(d, linear) or (n not in task_relevant_joints(ctx) if d.label is None else not priors.request_label_matches(
+            if not unit_fits(d, linear) or (n not in task_relevant_joints(ctx) if d.label is None else not request_label_matches(
                     ctx.category, d.label, ctx.asset.link(ctx.asset.joint(n).child).semantic_label)):
                 continue
             v = getattr(jd, d.quantity)
