@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from asset2sim.schemas.overlay import JointDynamics, LinkPhysics
+from asset2sim.schemas.overlay import Inertia, JointDynamics, LinkPhysics
 from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, JointStateRequest, PartProperty, RequestSpec
 from asset2sim.tasks.interpret import part_priors
 from asset2sim.prior_tables import MaterialPrior, load_priors
@@ -88,7 +88,7 @@ def resolve_states(ctx: "EstimationContext", kin: "SimSession", scale: float) ->
     ordinals and ends and left at the closed state."""
     res = StateResolution(bands={})
     relevant = task_relevant_joints(ctx)
-    closed_state = {n: c.q_closed for n, c in ctx.closed.items()}
+    closed_state = ctx.closed_state()
     centers, sizes = part_boxes(ctx)
     named: list[tuple[JointStateRequest, list[str]]] = []
     cannot: list[tuple[JointStateRequest, str, str]] = []
@@ -263,11 +263,7 @@ def unapplied_properties(ctx: "EstimationContext") -> list[tuple[str, str]]:
 
 def scaled_link(lp: LinkPhysics, f: float, note: str) -> LinkPhysics:
     """``lp`` with mass and inertia tensor times ``f`` (center of mass unchanged), ``note`` added to its source."""
-    return lp.model_copy(update={
-        "mass": lp.mass * f,
-        "inertia": lp.inertia.model_copy(update={k: getattr(lp.inertia, k) * f for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}),
-        "source": lp.source + note,
-    })
+    return lp.model_copy(update={"mass": lp.mass * f, "inertia": Inertia.from_matrix(lp.inertia.matrix() * f), "source": lp.source + note})
 
 
 def range_target(mass: float, mass_range: tuple[float, float]) -> float:
