@@ -287,8 +287,6 @@ def test_material_for_variants() -> None:
     assert part_priors.material_for("Toilet", "toilet_body", variant="child potty").key == "pp_plastic"
     assert part_priors.material_for("Door", "rotation_door", variant="cabinet door").key == "mdf"
     assert part_priors.material_for("Door", "rotation_door").key == "solid_wood"
-    with pytest.raises(KeyError):
-        part_priors.material("unobtainium")
 
 
 def test_roles_and_springs() -> None:
