@@ -163,15 +163,14 @@ def state_quantities(low: str, mention_starts: list[int]) -> StateQuantities:
         v = number_value(m.group("num")) * _factor(_ANGLE_UNITS, m.group("unit")) if "num" in m.re.groupindex else math.pi / 2
         s, e = widen(m)
         states.append(Found(s, e, low[s:e].strip(), ("halfway", StateTarget(kind="angle", value=v))))
-    for m in _PERCENT_RX.finditer(low):
-        f = number_value(m.group("num")) / 100.0
+    for m in [*_PERCENT_RX.finditer(low), *_THIRDS_RX.finditer(low)]:
         s, e = widen(m)
-        states.append(Found(s, e, low[s:e].strip(), (_band_of_fraction(f), StateTarget(kind="fraction", value=f))))
-    for m in _THIRDS_RX.finditer(low):
-        s, e = widen(m)
-        if s == m.start() and e == m.end():
+        if m.re is _PERCENT_RX:
+            f = number_value(m.group("num")) / 100.0
+        elif s == m.start() and e == m.end():
             continue  # "a third" without open/out next to it is not a state
-        f = int(m.group("n")) / int(m.group("d")) if m.group("n") else (2 / 3 if m.group("frac").startswith(("two", "2")) else 1 / 3)
+        else:
+            f = int(m.group("n")) / int(m.group("d")) if m.group("n") else (2 / 3 if m.group("frac").startswith(("two", "2")) else 1 / 3)
         states.append(Found(s, e, low[s:e].strip(), (_band_of_fraction(f), StateTarget(kind="fraction", value=f))))
     for m in _LENGTH_RX.finditer(low):
         v = number_value(m.group("num")) * _factor(_LENGTH_UNITS, m.group("unit"))

@@ -78,6 +78,14 @@ def band_of(f: float) -> str:
     return min(inside or list(BAND_TARGET), key=lambda b: abs(BAND_TARGET[b] - f))
 
 
+def _target(joint: str, f: float, kind: str, asked: float | None, phrase: str, note: str) -> JointTarget:
+    """The target of opening fraction ``f``: its band and acceptance interval, +-:data:`END_TOLERANCE` for an end,
+    else +-5 % of ``f`` (at least :data:`MIN_TOLERANCE`), within [0, 1]."""
+    tol = END_TOLERANCE if kind == "end" else max(NUMBER_TOLERANCE * f, MIN_TOLERANCE)
+    return JointTarget(joint=joint, band=band_of(f), fraction=f, interval=(max(0.0, f - tol), min(1.0, f + tol)), kind=kind,
+                       asked=asked, phrase=phrase, note=note)
+
+
 def resolve_states(ctx: "EstimationContext", kin: "SimSession", scale: float) -> StateResolution:
     """Band per movable joint and the targets of numbers and ends at the overlay's ``scale``; joints not
     addressed are closed; a request naming a part (or a joint) overrides one that names none ("half open"),
@@ -120,12 +128,8 @@ def resolve_states(ctx: "EstimationContext", kin: "SimSession", scale: float) ->
                 res.warnings.append(f"WARNING: {t} ({label}): '{jr.phrase}' is beyond the joint's limit ({why}, fraction {f:.3g}); set to the "
                                     + ("limit" if f > 1 else "closed end"))
                 f = float(np.clip(f, 0.0, 1.0))
-            tol = END_TOLERANCE if jr.target.kind == "end" else max(NUMBER_TOLERANCE * f, MIN_TOLERANCE)
-            interval = (max(0.0, f - tol), min(1.0, f + tol))
-            band = band_of(f)
-            res.bands[t] = band
-            res.targets[t] = JointTarget(joint=t, band=band, fraction=f, interval=interval, kind=jr.target.kind,
-                                         asked=jr.target.value, phrase=jr.phrase, note=why)
+            res.targets[t] = _target(t, f, jr.target.kind, jr.target.value, jr.phrase, why)
+            res.bands[t] = res.targets[t].band
             res.notes.append(f"{t} ({label}): '{jr.phrase}' -> opening fraction {f:.4g} ({why})")
     for j in ctx.asset.movable_joints():
         res.bands.setdefault(j.name, "closed")
@@ -170,10 +174,8 @@ def retarget(targets: dict[str, JointTarget], old: dict, new: dict) -> dict[str,
         if abs(a.q_closed - b.q_closed) <= 1e-12 and abs(a.open_range - b.open_range) <= 1e-12 and a.direction == b.direction:
             continue
         f = float(np.clip(t.fraction * a.open_range / b.open_range, 0.0, 1.0))
-        tol = max(NUMBER_TOLERANCE * f, MIN_TOLERANCE)
-        note = f"{t.note}; the output's closed end or range moved: the same opening placed from its closed end ({f:.3g} of its range)"
-        out[n] = JointTarget(joint=t.joint, band=band_of(f), fraction=f, interval=(max(0.0, f - tol), min(1.0, f + tol)), kind=t.kind,
-                             asked=t.asked, phrase=t.phrase, note=note)
+        out[n] = _target(t.joint, f, t.kind, t.asked, t.phrase, f"{t.note}; the output's closed end or range moved: the same "
+                         f"opening placed from its closed end ({f:.3g} of its range)")
     return out
 
 
