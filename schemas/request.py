@@ -281,12 +281,6 @@ class PartCount(Strict):
     count: int = Field(ge=1, le=64)
 
 
-#: The fields of :class:`RequestSpec` that say what is asked (the typed intent); the others are the parse's account
-#: of the text (the words used and unused, warnings, phrases replaced) and the overrides.
-INTENT_FIELDS = ("category_hint", "size_class", "joint_states", "sizes", "pose_hint", "mass_level", "properties", "dynamics_values",
-                 "damping", "holds_position", "spring", "stiff", "free_moving", "motions", "part_counts", "mount")
-
-
 # The docstring below is this schema's description, sent to models verbatim with every request parse: it
 # stays word for word (the module it names is now tasks/interpret/reading.py), or every request changes and
 # every cached parse is asked again.
@@ -332,6 +326,11 @@ class RequestIntent(Strict):
         out = {k: [x.model_copy(deep=True) for x in v] if isinstance(v, list) else v for k, v in out.items()}
         out["part_counts"] = {c.label: c.count for c in self.part_counts}
         return out
+
+
+#: The fields of :class:`RequestSpec` that say what is asked (the typed intent); the others are the parse's account
+#: of the text (the words used and unused, warnings, phrases replaced) and the overrides.
+INTENT_FIELDS = tuple(RequestIntent.model_fields)
 
 
 class QuantityOutcome(Strict):

@@ -115,10 +115,7 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
     links = [_link(ln, result.mesh_paths, result.semantics, result.replace_inertials, urdf) for ln in robot.links.values()]
     held = partnet_mobility.held_bodies(robot.joints, {ln.name: ln.semantic_joint for ln in links})  # the part kinds as meant
     joints = [_joint(jt, held=jt.name in held) for jt in robot.joints]
-    children = {j.child for j in joints}
-    roots = [ln.name for ln in links if ln.name not in children]
-    if len(roots) != 1:  # validation refuses this; defensive
-        raise AssetError(f"{urdf}: expected exactly one root link, found {roots or 'none'}")
+    root = _root(urdf, links, joints)  # validation refuses none or several; defensive
     files = _input_files(urdf, links, result)
     if staged_asset is not None:  # the file read and what it names, then the staged URDF and meshes made of them
         files = [*staged_asset.read.files, *files]
@@ -130,7 +127,7 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
         default_id = folder.name if urdf.name in URDF_NAMES else urdf.stem
     desc = AssetDescription(
         asset_id=asset_id or default_id, source_dir=folder, urdf_path=urdf,
-        robot_name=robot.name or urdf.stem, links=links, joints=joints, root_link=roots[0],
+        robot_name=robot.name or urdf.stem, links=links, joints=joints, root_link=root,
         category=category or result.category,
         input_hash=sha256_files(files, known=_digests_read(staged_asset), named=_staged_names(staged_asset, folder)),
         staged_from=None if staged_asset is None else Path(os.path.realpath(staged_asset.read.source)),
@@ -254,12 +251,21 @@ def describe_model(model: UrdfModel) -> AssetDescription:
     meshes = {str(g.filename): Path(g.path) for ln in model.links.values() for g in (*ln.visuals, *ln.collisions)
               if g.kind == "mesh" and g.path is not None}
     links = [_link(ln, meshes, {}, set(), urdf) for ln in model.links.values()]
-    children = {j.child for j in model.joints}
+    return AssetDescription(asset_id=urdf.parent.name, source_dir=urdf.parent, urdf_path=urdf, robot_name=model.name or urdf.stem,
+                            links=links, joints=[_joint(j) for j in model.joints], root_link=_root(urdf, links, model.joints))
+
+
+def _root(urdf: Path, links: list[LinkDesc], joints: list) -> str:
+    """The one link of ``links`` no joint of ``joints`` moves.
+
+    Raises:
+        AssetError: none or several (naming ``urdf``).
+    """
+    children = {j.child for j in joints}
     roots = [ln.name for ln in links if ln.name not in children]
     if len(roots) != 1:
         raise AssetError(f"{urdf}: expected exactly one root link, found {roots or 'none'}")
-    return AssetDescription(asset_id=urdf.parent.name, source_dir=urdf.parent, urdf_path=urdf, robot_name=model.name or urdf.stem,
-                            links=links, joints=[_joint(j) for j in model.joints], root_link=roots[0])
+    return roots[0]
 
 
 def _float_or_none(obj, attr: str) -> float | None:

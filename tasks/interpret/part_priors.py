@@ -11,14 +11,6 @@ from asset2sim.tasks.interpret.part_labels import BODY_LABELS, canonical_label
 from asset2sim.prior_tables import MaterialPrior, PartRole, load_priors
 
 
-def material(key: str) -> MaterialPrior:
-    """The material ``key`` of materials.yaml. Raises ``KeyError`` if unknown."""
-    mats = load_priors().materials
-    if key not in mats:
-        raise KeyError(f"unknown material {key!r} (not in materials.yaml)")
-    return mats[key]
-
-
 def material_for(
     category: str, semantic_label: str | None, variant: str | None = None
 ) -> MaterialPrior:
@@ -38,7 +30,7 @@ def material_for(
     else:
         lp = load_priors().labels.labels.get(canon)
         key = lp.material if lp is not None else body
-    return material(key)
+    return load_priors().materials[key]  # every key is checked when the tables load
 
 
 

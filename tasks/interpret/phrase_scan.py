@@ -34,9 +34,8 @@ def compile_table(table: list[tuple[str, object, str]]) -> list[tuple[re.Pattern
 def word_table(name: str) -> list[tuple[re.Pattern[str], object, str]]:
     """The phrase table ``name`` of ``words.yaml`` compiled (:func:`compile_table`): each ``${FRAGMENT}`` filled in,
     a list value as a tuple, the flag "" where none is given."""
-    vocabulary = rv.words()
-    return compile_table([(Template(pat).substitute(vocabulary["fragments"]), tuple(val) if isinstance(val, list) else val, flag)
-                          for pat, val, flag in (entry + [""] * (3 - len(entry)) for entry in vocabulary[name])])
+    return compile_table([(Template(pat).substitute(rv.WORDS["fragments"]), tuple(val) if isinstance(val, list) else val, flag)
+                          for pat, val, flag in (entry + [""] * (3 - len(entry)) for entry in rv.WORDS[name])])
 
 
 def scan(text: str, table: list[tuple[re.Pattern[str], object, str]]) -> list[Hit]:

@@ -32,6 +32,7 @@ from asset2sim.schemas.request import RequestIntent, RequestOverrides, RequestSp
 from asset2sim.tasks.interpret.categories import recognize_category
 from asset2sim.tasks.interpret.overrides import apply_overrides
 from asset2sim.tasks.interpret.request import parse_request
+from asset2sim.tasks.interpret.size_priors import size_factor
 from asset2sim.package_data import package_text
 
 INTENT_SCHEMA_NAME = "request_intent"
@@ -119,8 +120,7 @@ def with_intent(offline: RequestSpec, intent: RequestIntent, note: str) -> Reque
     (``RequestSpec.understood``)."""
     fields = intent.fields()
     if intent.size_class != offline.size_class:
-        factors = {k: v.factor for k, v in load_priors().size_classes.items()}
-        fields["size_factor"] = factors.get(intent.size_class, 1.0) if intent.size_class else 1.0
+        fields["size_factor"] = size_factor(intent.size_class)
         fields["size_phrase"] = ""
     if not offline.matched:  # nothing recognised offline: the model's phrases were understood
         phrases = ([js.phrase for js in intent.joint_states] + [s.phrase for s in intent.sizes]

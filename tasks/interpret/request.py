@@ -211,7 +211,7 @@ def _merge_properties(props: list[PartProperty], warnings: list[str]) -> list[Pa
 
 
 #: Function words of English requests, never reported as unused.
-_FUNCTION_WORDS = frozenset(rv.words()["function_words"].split())
+_FUNCTION_WORDS = frozenset(rv.WORDS["function_words"].split())
 
 
 _SELECTOR_AFTER = re.compile(r"\s+(?:[\w'-]+\s+){0,2}?(?:" + rv.PART_WORDS + r"|ones?)(?![\w-])")

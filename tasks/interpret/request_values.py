@@ -7,7 +7,6 @@ length of the text.
 
 from __future__ import annotations
 
-import functools
 import itertools
 import math
 import re
@@ -22,20 +21,18 @@ _L = r"(?<![\w.-])"
 _R = r"(?![\w-])"
 
 
-@functools.cache
-def words() -> dict:
-    """The request parser's vocabulary, ``words.yaml`` beside this module, read once: word lists, ``fragments``
-    (name -> regex) and phrase tables (name -> list of [regex, value] or [regex, value, flag])."""
-    return package_yaml(__package__, "words.yaml")
+#: The request parser's vocabulary, ``words.yaml`` beside this module: word lists, ``fragments`` (name -> regex) and
+#: phrase tables (name -> list of [regex, value] or [regex, value, flag]).
+WORDS: dict = package_yaml(__package__, "words.yaml")
 
 
 #: Part nouns a request may name (singular and plural; ``words.yaml`` ``part_words``).
-PART_WORDS = words()["part_words"]
+PART_WORDS = WORDS["part_words"]
 PART_RX = re.compile(r"(?<![\w-])(?:" + PART_WORDS + r")(?![\w-])")
 #: Words for the object's fixed body (material per part: "on a plastic body").
-BODY_RX = re.compile(r"(?<![\w-])(?:" + words()["body_words"] + r")(?![\w-])")
+BODY_RX = re.compile(r"(?<![\w-])(?:" + WORDS["body_words"] + r")(?![\w-])")
 
-_WORD_NUMBERS = words()["numbers"]
+_WORD_NUMBERS = WORDS["numbers"]
 NUM = r"(?:\d+(?:\.\d+)?|\.\d+|" + "|".join(sorted((re.escape(w) for w in _WORD_NUMBERS), key=len, reverse=True)) + r")"
 
 
@@ -61,7 +58,7 @@ def number_value(text: str) -> float:
 
 
 #: Units per quantity (``words.yaml`` ``units``, NIST SP 811, Appendix B): [regex, factor to SI].
-_ANGLE_UNITS, _LENGTH_UNITS, _VOLUME_UNITS, _MASS_UNITS = (words()["units"][q] for q in ("angle", "length", "volume", "mass"))
+_ANGLE_UNITS, _LENGTH_UNITS, _VOLUME_UNITS, _MASS_UNITS = (WORDS["units"][q] for q in ("angle", "length", "volume", "mass"))
 
 
 def _unit_rx(units: list[tuple[str, float]]) -> str:
@@ -101,7 +98,7 @@ _STATE_AFTER = re.compile(
 _STATE_WORD_BEFORE = re.compile(r"(?<![\w-])(?:open(?:ed)?|rotated|tilted|swung|raised|lifted|pulled|pushed|slid|extended|lowered)\s+(?:\w+\s+){0,3}$")
 _DIM_AFTER = re.compile(r"^\s*(?P<dim>tall|high|in height|wide|in width|across|in diameter|diameter|deep|in depth|long|in length)" + _R)
 _DIM_BEFORE = re.compile(r"(?P<dim>height|width|depth|length|diameter)\s*(?:of|is|:|=|at)?\s*(?:about |around |roughly |approximately |exactly )?$")
-_DIM_NAMES = words()["dimensions"]
+_DIM_NAMES = WORDS["dimensions"]
 
 
 @dataclass
@@ -166,15 +163,14 @@ def state_quantities(low: str, mention_starts: list[int]) -> StateQuantities:
         v = number_value(m.group("num")) * _factor(_ANGLE_UNITS, m.group("unit")) if "num" in m.re.groupindex else math.pi / 2
         s, e = widen(m)
         states.append(Found(s, e, low[s:e].strip(), ("halfway", StateTarget(kind="angle", value=v))))
-    for m in _PERCENT_RX.finditer(low):
-        f = number_value(m.group("num")) / 100.0
+    for m in [*_PERCENT_RX.finditer(low), *_THIRDS_RX.finditer(low)]:
         s, e = widen(m)
-        states.append(Found(s, e, low[s:e].strip(), (_band_of_fraction(f), StateTarget(kind="fraction", value=f))))
-    for m in _THIRDS_RX.finditer(low):
-        s, e = widen(m)
-        if s == m.start() and e == m.end():
+        if m.re is _PERCENT_RX:
+            f = number_value(m.group("num")) / 100.0
+        elif s == m.start() and e == m.end():
             continue  # "a third" without open/out next to it is not a state
-        f = int(m.group("n")) / int(m.group("d")) if m.group("n") else (2 / 3 if m.group("frac").startswith(("two", "2")) else 1 / 3)
+        else:
+            f = int(m.group("n")) / int(m.group("d")) if m.group("n") else (2 / 3 if m.group("frac").startswith(("two", "2")) else 1 / 3)
         states.append(Found(s, e, low[s:e].strip(), (_band_of_fraction(f), StateTarget(kind="fraction", value=f))))
     for m in _LENGTH_RX.finditer(low):
         v = number_value(m.group("num")) * _factor(_LENGTH_UNITS, m.group("unit"))
@@ -351,7 +347,7 @@ def mass_levels(low: str, mention_starts: list[int]) -> list[Found]:
 
 
 #: Request words -> ``materials.yaml`` key (``words.yaml`` ``materials``: "metal": sheet steel, "plastic": ABS).
-MATERIAL_WORDS: dict[str, str] = words()["materials"]
+MATERIAL_WORDS: dict[str, str] = WORDS["materials"]
 _MATERIAL_RX = [(re.compile(_L + r"(?:made (?:of|from|out of) |in )?(?:solid |real )?(?:" + pat + r")" + _R), key) for pat, key in MATERIAL_WORDS.items()]
 _MADE_OF = re.compile(r"(?:made (?:of|from|out of)|in) ")
 
@@ -415,7 +411,7 @@ def dynamics_values(low: str, mention_starts: list[int] | None = None) -> tuple[
     return leftmost_longest(out), warns
 
 
-_COUNT_WORDS = words()["counts"]
+_COUNT_WORDS = WORDS["counts"]
 _COUNT_RX = re.compile(
     _L + r"(?P<n>one(?=-)|single|two|double|twin|three|triple|four|five|six|[1-9])[- ](?P<part>drawers?|doors?|slots?|slices?|lids?|"
     r"shel(?:f|ves)|compartments?|burners?|buttons?|knobs?|handles?|wheels?)" + _R
@@ -431,4 +427,4 @@ def part_counts(low: str) -> list[Found]:
 
 #: Words naming the kind of joint or motion ("sliding joints") or a part left as it is ("the knobs left alone"):
 #: understood, no effect (``words.yaml`` ``descriptors``).
-DESCRIPTOR_RX = re.compile(_L + "(?:" + words()["descriptors"] + ")" + _R)
+DESCRIPTOR_RX = re.compile(_L + "(?:" + WORDS["descriptors"] + ")" + _R)

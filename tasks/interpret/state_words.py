@@ -49,7 +49,7 @@ _END_TAIL = re.compile(r"\s*(?:$|[,.;:!?)]|and\b|but\b|with\b|while\b|position\b
 #: Labels (:func:`request_values.part_label`'s) pressed from their rest, the closed end: "pressed" is the far end.
 PRESSED_LABELS = frozenset({"button", "lever", "trigger", "plunger", "foot"})
 
-_BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)|upright|" + rv.words()["fragments"]["FLAT"])  # "the handle upright": a part's end
+_BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)|upright|" + rv.WORDS["fragments"]["FLAT"])  # "the handle upright": a part's end
 
 _END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:are\s+)?(?:both|all|each))?"
                        r"(?:\s+(?:is|are|was|were|set|turned|switched|flipped|pushed|pulled|left|stays?|kept))?\s+$")

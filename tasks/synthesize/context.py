@@ -107,10 +107,11 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
     with open_session("pybullet", asset.urdf_path, kin_options) as kin:  # the input asset, kinematics only
         hull = link_hull_points(asset, cache=cache)
         closed = closed_positions(kin, asset, hull_points=hull)
-        extents = object_extents(kin, {n: c.q_closed for n, c in closed.items()}, asset, hull)
+        closed_q = {n: c.q_closed for n, c in closed.items()}
+        extents = object_extents(kin, closed_q, asset, hull)
         subtrees = {j.name: subtree_links(asset, j.child) for j in asset.movable_joints()}
         boxes = {n: np.array(box) for n, box in ((n, links_aabb(kin, links, hull)) for n, links in subtrees.items()) if box is not None}
-        volume = (object_hull_volume(kin, {n: c.q_closed for n, c in closed.items()}, asset, hull)
+        volume = (object_hull_volume(kin, closed_q, asset, hull)
                   if any(sz.dimension == "volume" for sz in meaning.request.sizes) else None)
         ctx = EstimationContext(asset=asset, geometry=geometry, request=meaning.request, category=meaning.category,
                                 category_reason=meaning.category_reason, closed=closed, closed_extents=extents,

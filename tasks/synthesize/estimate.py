@@ -12,7 +12,10 @@ from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.declared import real_units
-from asset2sim.tasks.interpret import priors
+from asset2sim.prior_tables import GRASPABLE_WIDTH_M
+from asset2sim.tasks.interpret.categories import category_prior, find_variant
+from asset2sim.tasks.interpret.part_priors import material_for
+from asset2sim.tasks.interpret.size_priors import plausible_largest_dimension, scale_mass_range, target_size
 from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
 
@@ -35,8 +38,8 @@ def state_from_bands(closed: dict[str, ClosedState], bands: dict[str, str], scal
 
 def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
     """(uniform scale s, note): sizes in numbers decide alone; else s is the geometric mean of the ratios
-    of the two largest sorted target dimensions (``priors.target_size``) to the closed extents, capped for
-    handheld categories so two dimensions fit ``priors.GRASPABLE_WIDTH_M``."""
+    of the two largest sorted target dimensions (``target_size``) to the closed extents, capped for
+    handheld categories so two dimensions fit ``GRASPABLE_WIDTH_M``."""
     sized = request_apply.scale_from_sizes(ctx)
     if sized is not None:
         return sized
@@ -44,7 +47,7 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
     kept, why_not = _real_size(ctx, real)
     if kept is not None:
         return 1.0, kept
-    target = priors.target_size(ctx.category, ctx.request)
+    target = target_size(ctx.category, ctx.request)
     dims = np.sort(np.asarray(target.dims, float))[::-1]
     ext = np.maximum(np.sort(np.asarray(ctx.closed_extents, float))[::-1], 1e-9)
     ratios = dims[:2] / ext[:2]
@@ -54,9 +57,9 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
         f" -> s = geometric mean of the two largest ratios = {s:.4g}"
     )
     if target.handheld:
-        cap = priors.GRASPABLE_WIDTH_M / ext[1]
+        cap = GRASPABLE_WIDTH_M / ext[1]
         if s > cap:
-            note += f"; handheld: capped to {cap:.4g} so two dimensions fit a {priors.GRASPABLE_WIDTH_M} m gripper"
+            note += f"; handheld: capped to {cap:.4g} so two dimensions fit a {GRASPABLE_WIDTH_M} m gripper"
             s = cap
     note += f"; {why_not}" if why_not else ""
     return s, note + ('' if partnet_mobility.size_normalized(ctx.asset.staged_from or ctx.asset.urdf_path) else unit_warning(s))
@@ -70,7 +73,7 @@ def _real_size(ctx: EstimationContext, real: str | None) -> tuple[str | None, st
     if real is None:
         return None, None
     largest = float(np.max(ctx.closed_extents))
-    span = priors.plausible_largest_dimension(ctx.category)
+    span = plausible_largest_dimension(ctx.category)
     lo, hi, typical = span.low, span.high, span.typical
     what = f"a typical {ctx.category} is {typical:.3g} m" if typical is not None else "a household object"
     if ctx.request.size_class is not None:
@@ -102,27 +105,27 @@ def unit_warning(scale: float) -> str:
 
 
 def plausible_mass_range(ctx: EstimationContext, scale: float) -> tuple[float, float]:
-    """Plausible total mass (kg) as sized: the regular mass range scaled (``priors.scale_mass_range``) by f,
+    """Plausible total mass (kg) as sized: the regular mass range scaled (``scale_mass_range``) by f,
     the geometric mean of scaled closed extents / regular dims over the two largest dimensions."""
-    target = priors.target_size(ctx.category, ctx.request)
-    cat = priors.category_prior(ctx.category)
+    target = target_size(ctx.category, ctx.request)
+    cat = category_prior(ctx.category)
     var = cat.variant(target.variant) if target.variant else None
     base_lo, base_hi = var.mass_range if var is not None else cat.mass_range
     base = np.sort(np.asarray(target.base_dims, float))[::-1]
     actual = np.sort(np.asarray(ctx.closed_extents, float) * scale)[::-1]
     f = float(np.exp(np.mean(np.log(np.maximum(actual[:2], 1e-9) / base[:2]))))
-    return priors.scale_mass_range(base_lo, base_hi, f)
+    return scale_mass_range(base_lo, base_hi, f)
 
 
 def request_variant(ctx: EstimationContext) -> str | None:
     """The category variant the request names ("office cabinet"), or None."""
-    v = priors.find_variant(ctx.category, ctx.request.text) if ctx.request.text else None
+    v = find_variant(ctx.category, ctx.request.text) if ctx.request.text else None
     return v.name if v is not None else None
 
 
 def link_material(ctx: EstimationContext, label: str | None, link: str | None = None) -> physics.MaterialChoice:
     """The material the request names for ``link``, else the category's prior for ``label``."""
-    m = (request_apply.requested_material(ctx, link) if link is not None else None) or priors.material_for(ctx.category, label, request_variant(ctx))
+    m = (request_apply.requested_material(ctx, link) if link is not None else None) or material_for(ctx.category, label, request_variant(ctx))
     return physics.material_choice(m)
 
 

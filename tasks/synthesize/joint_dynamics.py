@@ -17,7 +17,9 @@ from asset2sim.engines.base import SimSession
 from asset2sim.schemas.overlay import Holding, JointDynamics, LinkPhysics
 from asset2sim.schemas.request import MotionPhrase
 from asset2sim.tasks.geometry.closed_state import ClosedState
-from asset2sim.tasks.interpret import priors
+from asset2sim.prior_tables import load_priors
+from asset2sim.tasks.interpret.part_labels import canonical_label
+from asset2sim.tasks.interpret.part_priors import spring_expected
 from asset2sim.tasks.interpret.named_parts import joints_of, moving_parts
 from asset2sim.tasks.interpret.operating_forces import operating_range
 from asset2sim.tasks.synthesize import physics, request_apply, set_down
@@ -78,7 +80,7 @@ def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tu
         label = ctx.asset.link(j.child).semantic_label
         out[j.name] = JointChoice(
             damping_level=levels[-1] if levels else ("high" if closing else "moderate"), holds_position="hold" in kinds,
-            spring=bool(kinds & {"spring", "self_closing"}) or (j.name in relevant and priors.spring_expected(ctx.category, label)),
+            spring=bool(kinds & {"spring", "self_closing"}) or (j.name in relevant and spring_expected(ctx.category, label)),
             stiff="stiff" in kinds, free_moving="free" in kinds, self_closing=closing, words=tuple(words))
     return out, missing
 
@@ -248,7 +250,7 @@ def slide_for(friction: float, weight: float, requested: str | None = None) -> S
     the ``requested`` kind, else the first whose upper coefficient carries the ``friction`` (N) holding needs; the
     friction moved into that kind's range, mu_lo to mu_hi of the drawer's ``weight`` (N, its normal load on a
     horizontal slide). Where no kind carries it, the stiffest at its upper end: the check then says what remains."""
-    table = priors.load_priors().slides
+    table = load_priors().slides
     kinds = list(table.items())
     key, sp = next(((k, v) for k, v in kinds if k == requested), None) or next(
         ((k, v) for k, v in kinds if v.friction_coefficient[1] * weight >= friction), kinds[-1])
@@ -267,7 +269,7 @@ def slide_cap(ctx: EstimationContext, joint: str, mass: float) -> float | None:
     if ctx.asset.joint(joint).type != "prismatic" or _label(ctx, joint) not in SLIDE_LABELS:
         return None
     choices, _ = motion_choices(ctx, request_apply.task_relevant_joints(ctx))
-    table = priors.load_priors().slides
+    table = load_priors().slides
     key = requested_slide(choices[joint].words) if joint in choices else None
     sp = table[key] if key in table else list(table.values())[-1]
     return float(sp.friction_coefficient[1] * mass * physics.G)
@@ -292,7 +294,7 @@ def free_standing(ctx: EstimationContext) -> bool:
 
 def _label(ctx: EstimationContext, joint: str) -> str | None:
     """Canonical part label of ``joint``'s child link, None when unlabelled."""
-    return priors.canonical_label(ctx.asset.link(ctx.asset.joint(joint).child).semantic_label)
+    return canonical_label(ctx.asset.link(ctx.asset.joint(joint).child).semantic_label)
 
 
 #: Opening fractions at which gravity must push a part open for it to count as opening downward (:func:`counterbalance`).

@@ -120,7 +120,7 @@ def _link_physics(ctx: EstimationContext, by_link: dict, s: float) -> _ReplyLink
         except ValueError as exc:
             errors.append(f"links: {exc}")
             continue
-        mat_notes.append(f"{ln.name}: {mat.name}, {mat.density:g} kg/m^3, {'shell t=' + format(mat.wall_thickness, 'g') + ' m' if mat.shell else 'solid'}")
+        mat_notes.append(f"{ln.name}: {mat.describe()}")
     if errors:
         raise ReplyInvalid(errors)
     return _ReplyLinks(links, mat_notes, missing)

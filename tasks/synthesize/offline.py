@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from asset2sim import __version__
 from asset2sim.schemas.overlay import ContactMaterial, EstimatorInfo, LinkPhysics, Overlay, ValidationNotes
-from asset2sim.tasks.interpret import priors
+from asset2sim.tasks.interpret.part_priors import material_for
 from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.engines.base import SimSession
 from asset2sim.tasks.synthesize.context import EstimationContext
@@ -37,7 +37,7 @@ class OfflineEstimator:
                 continue
             mat = link_material(ctx, ln.semantic_label, ln.name)
             links[ln.name] = physics.link_physics(geom, s, mat, source=f"geometry + {mat.name} prior")
-            mat_notes.append(f"{ln.name} ({ln.semantic_label or 'unlabelled'}): {mat.name}, {mat.density:g} kg/m^3, {'shell t=' + format(mat.wall_thickness, 'g') + ' m' if mat.shell else 'solid'}")
+            mat_notes.append(f"{ln.name} ({ln.semantic_label or 'unlabelled'}): {mat.describe()}")
         total = sum(lp.mass for lp in links.values())
         mass_note = " + ".join(f"{lp.mass:.4g}" for lp in links.values()) + f" = {total:.4g} kg"
         lo, hi = plausible_mass_range(ctx, s)
@@ -59,11 +59,12 @@ class OfflineEstimator:
         bands, band_notes = resolved.bands, resolved.warnings + resolved.notes + request_apply.unmatched_properties(ctx)
         state = request_apply.state_with_targets(ctx, state_from_bands(ctx.closed, bands, s, prismatic), resolved, s)
         # ---- dynamics
-        choices, _ = motion_choices(ctx, request_apply.task_relevant_joints(ctx))
+        relevant = request_apply.task_relevant_joints(ctx)
+        choices, _ = motion_choices(ctx, relevant)
         joints = joint_dynamics_for(ctx, kin, links, state, s, choices, source="offline physics")
-        joints, dyn_notes = request_apply.apply_dynamics_values(ctx, joints, request_apply.task_relevant_joints(ctx), state)
+        joints, dyn_notes = request_apply.apply_dynamics_values(ctx, joints, relevant, state)
         band_notes += dyn_notes
-        body_prior = priors.material_for(ctx.category, None, request_variant(ctx))
+        body_prior = material_for(ctx.category, None, request_variant(ctx))
         body_mat = link_material(ctx, None)
         asked_state = bool(ctx.request.joint_states)
         overlay = Overlay(

@@ -48,6 +48,10 @@ class MaterialChoice:
     panel: bool = False
     """a board (``MaterialPrior.panel``)"""
 
+    def describe(self) -> str:
+        """``ABS plastic, 1050 kg/m^3, shell t=0.002 m`` (or ``solid``), for the overlay's material notes."""
+        return f"{self.name}, {self.density:g} kg/m^3, " + (f"shell t={self.wall_thickness:g} m" if self.shell else "solid")
+
 
 def material_choice(m) -> MaterialChoice:
     """A prior's material (``MaterialPrior``) as a :class:`MaterialChoice`."""

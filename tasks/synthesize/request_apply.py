@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from asset2sim.schemas.overlay import JointDynamics, LinkPhysics
-from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, JointStateRequest, RequestSpec
-from asset2sim.tasks.interpret import priors
+from asset2sim.schemas.overlay import Inertia, JointDynamics, LinkPhysics
+from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, JointStateRequest, PartProperty, RequestSpec
+from asset2sim.tasks.interpret import part_priors
 from asset2sim.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.interpret.named_parts import (count_warnings, joints_named, joints_of, link_named, moving_parts, part_boxes, stand_ins,
                                                   state_targets, unit_fits)
@@ -67,15 +67,23 @@ class StateResolution:
 
 
 def task_relevant_joints(ctx: "EstimationContext") -> list[str]:
-    """Movable joints whose moving part tasks manipulate, by the category's priority (``priors.task_relevant_joints``)."""
+    """Movable joints whose moving part tasks manipulate, by the category's priority (``part_priors.task_relevant_joints``)."""
     labelled = [(j.name, ctx.asset.link(j.child).semantic_label) for j in ctx.asset.movable_joints()]
-    return priors.task_relevant_joints(ctx.category, labelled)[0]
+    return part_priors.task_relevant_joints(ctx.category, labelled)[0]
 
 
 def band_of(f: float) -> str:
     """The band of opening fraction ``f``: of those whose interval holds it (else all), the nearest target."""
     inside = [b for b, (lo, hi) in BAND_INTERVAL.items() if lo <= f <= hi]
     return min(inside or list(BAND_TARGET), key=lambda b: abs(BAND_TARGET[b] - f))
+
+
+def _target(joint: str, f: float, kind: str, asked: float | None, phrase: str, note: str) -> JointTarget:
+    """The target of opening fraction ``f``: its band and acceptance interval, +-:data:`END_TOLERANCE` for an end,
+    else +-5 % of ``f`` (at least :data:`MIN_TOLERANCE`), within [0, 1]."""
+    tol = END_TOLERANCE if kind == "end" else max(NUMBER_TOLERANCE * f, MIN_TOLERANCE)
+    return JointTarget(joint=joint, band=band_of(f), fraction=f, interval=(max(0.0, f - tol), min(1.0, f + tol)), kind=kind,
+                       asked=asked, phrase=phrase, note=note)
 
 
 def resolve_states(ctx: "EstimationContext", kin: "SimSession", scale: float) -> StateResolution:
@@ -88,7 +96,7 @@ def resolve_states(ctx: "EstimationContext", kin: "SimSession", scale: float) ->
     ordinals and ends and left at the closed state."""
     res = StateResolution(bands={})
     relevant = task_relevant_joints(ctx)
-    closed_state = {n: c.q_closed for n, c in ctx.closed.items()}
+    closed_state = ctx.closed_state()
     centers, sizes = part_boxes(ctx)
     named: list[tuple[JointStateRequest, list[str]]] = []
     cannot: list[tuple[JointStateRequest, str, str]] = []
@@ -120,12 +128,8 @@ def resolve_states(ctx: "EstimationContext", kin: "SimSession", scale: float) ->
                 res.warnings.append(f"WARNING: {t} ({label}): '{jr.phrase}' is beyond the joint's limit ({why}, fraction {f:.3g}); set to the "
                                     + ("limit" if f > 1 else "closed end"))
                 f = float(np.clip(f, 0.0, 1.0))
-            tol = END_TOLERANCE if jr.target.kind == "end" else max(NUMBER_TOLERANCE * f, MIN_TOLERANCE)
-            interval = (max(0.0, f - tol), min(1.0, f + tol))
-            band = band_of(f)
-            res.bands[t] = band
-            res.targets[t] = JointTarget(joint=t, band=band, fraction=f, interval=interval, kind=jr.target.kind,
-                                         asked=jr.target.value, phrase=jr.phrase, note=why)
+            res.targets[t] = _target(t, f, jr.target.kind, jr.target.value, jr.phrase, why)
+            res.bands[t] = res.targets[t].band
             res.notes.append(f"{t} ({label}): '{jr.phrase}' -> opening fraction {f:.4g} ({why})")
     for j in ctx.asset.movable_joints():
         res.bands.setdefault(j.name, "closed")
@@ -170,10 +174,8 @@ def retarget(targets: dict[str, JointTarget], old: dict, new: dict) -> dict[str,
         if abs(a.q_closed - b.q_closed) <= 1e-12 and abs(a.open_range - b.open_range) <= 1e-12 and a.direction == b.direction:
             continue
         f = float(np.clip(t.fraction * a.open_range / b.open_range, 0.0, 1.0))
-        tol = max(NUMBER_TOLERANCE * f, MIN_TOLERANCE)
-        note = f"{t.note}; the output's closed end or range moved: the same opening placed from its closed end ({f:.3g} of its range)"
-        out[n] = JointTarget(joint=t.joint, band=band_of(f), fraction=f, interval=(max(0.0, f - tol), min(1.0, f + tol)), kind=t.kind,
-                             asked=t.asked, phrase=t.phrase, note=note)
+        out[n] = _target(t.joint, f, t.kind, t.asked, t.phrase, f"{t.note}; the output's closed end or range moved: the same "
+                         f"opening placed from its closed end ({f:.3g} of its range)")
     return out
 
 
@@ -263,11 +265,7 @@ def unapplied_properties(ctx: "EstimationContext") -> list[tuple[str, str]]:
 
 def scaled_link(lp: LinkPhysics, f: float, note: str) -> LinkPhysics:
     """``lp`` with mass and inertia tensor times ``f`` (center of mass unchanged), ``note`` added to its source."""
-    return lp.model_copy(update={
-        "mass": lp.mass * f,
-        "inertia": lp.inertia.model_copy(update={k: getattr(lp.inertia, k) * f for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}),
-        "source": lp.source + note,
-    })
+    return lp.model_copy(update={"mass": lp.mass * f, "inertia": Inertia.from_matrix(lp.inertia.matrix() * f), "source": lp.source + note})
 
 
 def range_target(mass: float, mass_range: tuple[float, float]) -> float:
@@ -285,6 +283,12 @@ class AskedMasses:
     links: dict[str, LinkPhysics]
     notes: list[str]
     total_asked: bool
+
+
+def whole_masses(spec: RequestSpec) -> tuple[PartProperty | None, PartProperty | None]:
+    """The first mass and the first range of masses (kg) ``spec`` asks for the whole object, None where it asks none."""
+    whole = [p for p in spec.properties if p.label is None]
+    return next((p for p in whole if p.mass is not None), None), next((p for p in whole if p.mass_range is not None), None)
 
 
 def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausible: tuple[float, float]) -> AskedMasses:
@@ -306,9 +310,9 @@ def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausi
             out[n] = scaled_link(out[n], f, f"; x{f:.4g} to the requested {want:g} kg of the {p.label} ('{p.phrase}')")
         fixed.update(names)
         notes.append(f"'{p.phrase}': {p.label} links {names} {m:.4g} -> {want:.4g} kg")
-    total_req = next((p.mass for p in ctx.request.properties if p.mass is not None and p.label is None), None)
+    total, rng = whole_masses(ctx.request)
+    total_req = None if total is None else total.mass
     why = None
-    rng = next((p for p in ctx.request.properties if p.mass_range is not None and p.label is None), None)
     if total_req is None and rng is not None:
         now = sum(lp.mass for lp in out.values())
         total_req = range_target(now, rng.mass_range)

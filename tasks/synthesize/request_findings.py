@@ -14,11 +14,11 @@ import numpy as np
 
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.request import QuantityOutcome, RequestFindings, RequestSpec
-from asset2sim.tasks.interpret import priors
+from asset2sim.tasks.interpret.part_priors import request_label_matches
 from asset2sim.tasks.interpret.named_parts import joints_of, unit_fits
 from asset2sim.tasks.synthesize.request_apply import (END_TOLERANCE, NUMBER_TOLERANCE, JointTarget, StateResolution,
                                                       requested_material, resolve_states, size_residuals,
-                                                      task_relevant_joints)
+                                                      task_relevant_joints, whole_masses)
 
 if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
     from asset2sim.engines.base import SimSession
@@ -29,13 +29,12 @@ def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResoluti
     """One line per departure of an overlay from the request: total mass and sizes (5 %), materials, explicit
     joint parameters, initial positions vs the targets' intervals."""
     out: list[str] = []
-    total_req = next((p.mass for p in ctx.request.properties if p.mass is not None and p.label is None), None)
+    total_req, rng = whole_masses(ctx.request)
     total = overlay.total_mass()
-    if total_req is not None and abs(total - total_req) > NUMBER_TOLERANCE * total_req:
-        out.append(f"total mass {total:.4g} kg but the request asks {total_req:.4g} kg")
-    rng = next((p.mass_range for p in ctx.request.properties if p.mass_range is not None and p.label is None), None)
-    if rng is not None and not rng[0] * (1 - NUMBER_TOLERANCE) <= total <= rng[1] * (1 + NUMBER_TOLERANCE):
-        out.append(f"total mass {total:.4g} kg but the request asks {rng[0]:g}-{rng[1]:g} kg")
+    if total_req is not None and abs(total - total_req.mass) > NUMBER_TOLERANCE * total_req.mass:
+        out.append(f"total mass {total:.4g} kg but the request asks {total_req.mass:.4g} kg")
+    if rng is not None and not rng.mass_range[0] * (1 - NUMBER_TOLERANCE) <= total <= rng.mass_range[1] * (1 + NUMBER_TOLERANCE):
+        out.append(f"total mass {total:.4g} kg but the request asks {rng.mass_range[0]:g}-{rng.mass_range[1]:g} kg")
     for sz, (phrase, asked, got) in zip(ctx.request.sizes, size_residuals(ctx, overlay.scale)):
         unit = "m^3" if sz.dimension == "volume" else "m"
         if abs(got - asked) > NUMBER_TOLERANCE * asked:
@@ -47,7 +46,7 @@ def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResoluti
     for d in ctx.request.dynamics_values:
         for n, jd in overlay.joints.items():
             linear = ctx.asset.joint(n).type == "prismatic" if n in {j.name for j in ctx.asset.joints} else False
-            if not unit_fits(d, linear) or (n not in task_relevant_joints(ctx) if d.label is None else not priors.request_label_matches(
+            if not unit_fits(d, linear) or (n not in task_relevant_joints(ctx) if d.label is None else not request_label_matches(
                     ctx.category, d.label, ctx.asset.link(ctx.asset.joint(n).child).semantic_label)):
                 continue
             v = getattr(jd, d.quantity)
@@ -101,16 +100,21 @@ def phrase_lines(ctx: "EstimationContext", res: StateResolution, closed_out: dic
         asked = jr.short().split("=", 1)[1]
         got = []
         for n in joints:
-            label = ctx.asset.link(ctx.asset.joint(n).child).semantic_label
             cs, q = closed_out.get(n), state.get(n)
             if cs is None or q is None:
-                got.append(f"{n}" + (f" ({label})" if label else ""))
+                got.append(_named(ctx, n))
                 continue
             d = abs(q - cs.q_closed)
             amount = f"{1000.0 * d:.4g} mm" if ctx.asset.joint(n).type == "prismatic" else f"{np.degrees(d):.1f} deg"
-            got.append(f"{n}" + (f" ({label})" if label else "") + f" {amount} from closed, {100.0 * abs(cs.fraction(q)):.0f} % open")
+            got.append(_named(ctx, n) + f" {amount} from closed, {100.0 * abs(cs.fraction(q)):.0f} % open")
         out.append(f"'{jr.phrase}': " + "; ".join(got) + f" (asked {asked})")
     return out
+
+
+def _named(ctx: "EstimationContext", joint: str) -> str:
+    """``joint_2 (lid)``: a joint with its moving part's label, or its name alone."""
+    label = ctx.asset.link(ctx.asset.joint(joint).child).semantic_label
+    return joint + (f" ({label})" if label else "")
 
 
 #: Units of a joint's damping, friction and stiffness (revolute, prismatic), for the report's lines.
@@ -134,10 +138,9 @@ def motion_lines(ctx: "EstimationContext", overlay: Overlay, words: dict[str, li
             d = overlay.joints.get(n)
             if d is None:
                 continue
-            k = 1 if ctx.asset.joint(n).type == "prismatic" else 0
-            label = ctx.asset.link(ctx.asset.joint(n).child).semantic_label
-            got.append(f"{n}" + (f" ({label})" if label else "") + ": " + ", ".join(
-                f"{p} {getattr(d, p):.3g} {DYNAMICS_UNITS[p][k]}" for p in ("friction", "damping", "stiffness")))
+            linear = ctx.asset.joint(n).type == "prismatic"
+            got.append(_named(ctx, n) + ": " + ", ".join(
+                f"{p} {getattr(d, p):.3g} {DYNAMICS_UNITS[p][linear]}" for p in ("friction", "damping", "stiffness")))
         line = f"{word.short()} on " + "; ".join(got)
         held = [x for x in kept if f"'{word.phrase}'" in x]
         out.append(line + (f" (kept through the post-check: {'; '.join(dict.fromkeys(held))})" if held else ""))
@@ -187,12 +190,11 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
         q.append(QuantityOutcome(what="volume" if sz.dimension == "volume" else "size", phrase=phrase, asked=asked, achieved=got,
                                  unit="m^3" if sz.dimension == "volume" else "m", within_tolerance=ok,
                                  why="" if ok else "one uniform scale cannot meet every size asked", kind="size"))
-    total_req = next((p for p in ctx.request.properties if p.mass is not None and p.label is None), None)
+    total_req, rng = whole_masses(ctx.request)
     if total_req is not None:
         ok = abs(total_mass - total_req.mass) <= NUMBER_TOLERANCE * total_req.mass
         q.append(QuantityOutcome(what="total mass", phrase=total_req.phrase, asked=total_req.mass, achieved=total_mass, unit="kg",
                                  within_tolerance=ok, why="" if ok else "the parts' requested masses exceed it", kind="mass"))
-    rng = next((p for p in ctx.request.properties if p.mass_range is not None and p.label is None), None)
     if rng is not None:
         lo, hi = rng.mass_range
         ok = lo * (1 - NUMBER_TOLERANCE) <= total_mass <= hi * (1 + NUMBER_TOLERANCE)
@@ -222,9 +224,8 @@ def _dynamics_outcomes(ctx: "EstimationContext", overlay: Overlay, escalation: l
                 rounds = [r for r in escalation if n in (getattr(r, "changes", None) or {}) and d.quantity in r.changes[n]]
                 why = (f"raised by the post-check's escalation ({len(rounds)} rounds; round {rounds[-1].round}: {rounds[-1].reason})"
                        if rounds else "changed by the overlay validation (stability bound of the simulator)")
-            unit = {"damping": "N*m*s/rad" if not linear else "N*s/m", "friction": "N*m" if not linear else "N",
-                    "stiffness": "N*m/rad" if not linear else "N/m"}[d.quantity]
-            out.append(QuantityOutcome(what=f"{n} {d.quantity}", phrase=d.phrase, asked=d.value, achieved=got, unit=unit,
+            out.append(QuantityOutcome(what=f"{n} {d.quantity}", phrase=d.phrase, asked=d.value, achieved=got,
+                                       unit=DYNAMICS_UNITS[d.quantity][linear].replace(" ", "*"),
                                        within_tolerance=ok, why=why, kind="dynamics"))
     return out
 

@@ -53,11 +53,11 @@ def test_an_unreadable_reference_is_an_evaluation_error(demo_root, tmp_path):
 def test_without_reference_the_task_joints_are_refines_own():
     """A stapler folder evaluated without its reference: the category's task-relevant part (the lid) by its
     semantics.txt label, the joint refine's post-check operates; with no labels, every movable joint."""
-    from asset2sim.tasks.interpret import priors
+    from asset2sim.tasks.interpret.part_priors import task_relevant_joints
 
     asset = extract_asset(SHARED / "103275")
     tj, rule = task_joints(asset, "Stapler")
-    assert (tj, rule) == priors.task_relevant_joints("Stapler", [(j.name, asset.link(j.child).semantic_label)
+    assert (tj, rule) == task_relevant_joints("Stapler", [(j.name, asset.link(j.child).semantic_label)
                                                                  for j in asset.movable_joints()])
     assert tj == ["joint_1"] and asset.link(asset.joint("joint_1").child).semantic_label == "lid" and "category prior" in rule
     bare = asset.model_copy(update={"links": [ln.model_copy(update={"semantic_label": None}) for ln in asset.links]})

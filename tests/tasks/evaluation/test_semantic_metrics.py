@@ -104,7 +104,7 @@ def _lidded_box(folder: Path, q0: float, *, scale: float = 1.0, body_mass: float
     """A box 0.2625 x 0.1875 x 0.1 m (a 'small' Box in the priors) with a lid
     hinged at the back top edge, closed at q = 0, opening to 1.5 rad."""
     pytest.importorskip("asset2sim.tasks.interpret.request")
-    pytest.importorskip("asset2sim.tasks.interpret.priors")
+    pytest.importorskip("asset2sim.tasks.interpret.size_priors")
     folder.mkdir(parents=True, exist_ok=True)
     L, W, H = 0.2625 * scale, 0.1875 * scale, 0.1 * scale
     t = 0.01 * scale

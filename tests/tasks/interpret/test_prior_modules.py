@@ -1,6 +1,5 @@
 """The prior modules of ``tasks/interpret/`` split by concern (tables, part
-labels, categories, part priors, sizes): the ``priors`` module gathers their
-public names, and the request parser depends on them without a cycle."""
+labels, categories, part priors, sizes): the request parser depends on them without a cycle."""
 
 from __future__ import annotations
 
@@ -10,19 +9,12 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.tasks.interpret import categories, part_labels, part_priors, priors, size_priors
+from asset2sim.tasks.interpret import categories, part_labels, part_priors, size_priors
 from asset2sim import prior_tables
 from asset2sim.tasks.interpret.request import parse_request
 
 ROOT = Path(__file__).resolve().parents[3]
 HOMES = (prior_tables, part_labels, categories, part_priors, size_priors)
-
-
-def test_priors_gathers_every_public_name_of_the_homes() -> None:
-    for name in priors.__all__:
-        obj = getattr(priors, name)
-        homes = [m for m in HOMES if getattr(m, name, None) is obj and name in vars(m)]
-        assert homes, f"priors.{name} is not defined in one of the prior modules"
 
 
 def _own_imports(module: str) -> set[str]:

@@ -1,4 +1,4 @@
-"""Tests of the physical priors (asset2sim.tasks.interpret.priors and asset2sim/priors/*.yaml)."""
+"""Tests of the physical priors (the prior modules of asset2sim.tasks.interpret and asset2sim/priors/*.yaml)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,8 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from asset2sim.tasks.interpret import priors as P
+from asset2sim import prior_tables
+from asset2sim.tasks.interpret import categories, part_labels, part_priors, size_priors
 from asset2sim.tasks.interpret.request import parse_request
 from tests.conftest import NO_SHARED, SHARED as DATASET
 
@@ -29,23 +30,23 @@ PARTNET_MOBILITY = [
     "StorageFurniture", "Suitcase", "Switch", "Table", "Toaster", "Toilet", "TrashCan", "USB",
     "WashingMachine", "Window",
 ]
-SIZES = list(P.SIZE_CLASSES)
+SIZES = list(prior_tables.SIZE_CLASSES)
 
 
 # ----------------------------------------------------------------- the data itself
 
 
 def test_load_is_cached_and_complete() -> None:
-    pri = P.load_priors()
-    assert P.load_priors() is pri
-    assert P.GENERIC in pri.categories
+    pri = prior_tables.load_priors()
+    assert prior_tables.load_priors() is pri
+    assert prior_tables.GENERIC in pri.categories
     for mc in PARTNET_MOBILITY:
-        assert P.resolve_category(mc) == mc, mc
+        assert categories.resolve_category(mc) == mc, mc
     assert "Bag" in pri.categories
 
 
 def test_every_entry_has_sources() -> None:
-    pri = P.load_priors()
+    pri = prior_tables.load_priors()
     for key, m in pri.materials.items():
         for src in (m.density_source, m.wall_thickness_source, m.friction_source):
             assert len(src) > 20, key
@@ -64,7 +65,7 @@ def test_every_entry_has_sources() -> None:
 
 
 def test_densities_are_physically_sane() -> None:
-    mats = P.load_priors().materials
+    mats = prior_tables.load_priors().materials
     expected = {  # kg/m^3, handbook values (Engineering ToolBox / MatWeb)
         "steel_sheet": 7850, "stainless_steel": 8000, "aluminium": 2700, "cast_zinc": 6600,
         "brass": 8500, "glass": 2500, "abs_plastic": 1050, "pp_plastic": 905, "polycarbonate": 1200,
@@ -87,27 +88,27 @@ def test_densities_are_physically_sane() -> None:
 
 
 def test_category_table_is_consistent() -> None:
-    pri = P.load_priors()
+    pri = prior_tables.load_priors()
     for name, c in pri.categories.items():
         assert c.name == name
         assert c.dims[0] >= c.dims[1] >= c.dims[2] > 0
         assert 0 < c.mass_range[0] < c.mass_range[1]
         assert c.body_material in pri.materials
         if c.handheld:
-            assert P.fits_gripper(c.dims), name
+            assert size_priors.fits_gripper(c.dims), name
         # regular-size mass is compatible with the size: density between 20 and 8000 kg/m^3 of the box
         box = c.dims[0] * c.dims[1] * c.dims[2]
         assert c.mass_range[1] / box > 20 and c.mass_range[0] / box < 8000, name
 
 
 def test_gripper_constant() -> None:
-    assert P.GRASPABLE_WIDTH_M == pytest.approx(0.075)
-    assert P.GRASPABLE_WIDTH_M < 0.080  # Franka Hand stroke
-    assert P.fits_gripper((0.18, 0.07, 0.045))
-    assert not P.fits_gripper((0.33, 0.23, 0.02))
-    assert P.gripper_limit_factor((0.3, 0.15, 0.05)) == pytest.approx(0.5)
+    assert prior_tables.GRASPABLE_WIDTH_M == pytest.approx(0.075)
+    assert prior_tables.GRASPABLE_WIDTH_M < 0.080  # Franka Hand stroke
+    assert size_priors.fits_gripper((0.18, 0.07, 0.045))
+    assert not size_priors.fits_gripper((0.33, 0.23, 0.02))
+    assert size_priors.gripper_limit_factor((0.3, 0.15, 0.05)) == pytest.approx(0.5)
     with pytest.raises(ValueError):
-        P.gripper_limit_factor((0.1, 0.2))
+        size_priors.gripper_limit_factor((0.1, 0.2))
 
 
 @pytest.mark.parametrize(
@@ -123,9 +124,9 @@ def test_gripper_constant() -> None:
     ],
 )
 def test_regular_sizes_match_real_products(cat: str, longest: tuple[float, float], mass: tuple[float, float]) -> None:
-    c = P.category_prior(cat)
+    c = categories.category_prior(cat)
     assert longest[0] <= c.dims[0] <= longest[1]
-    lo, hi = P.mass_range(cat, "regular")
+    lo, hi = size_priors.mass_range(cat, "regular")
     assert lo <= mass[1] and hi >= mass[0]
 
 
@@ -148,7 +149,7 @@ def test_regular_sizes_match_real_products(cat: str, longest: tuple[float, float
     ],
 )
 def test_target_size_of_requests(cat: str, request_text: str, longest: tuple[float, float], variant: str | None) -> None:
-    t = P.target_size(cat, request_text)
+    t = size_priors.target_size(cat, request_text)
     assert t.variant == variant
     assert longest[0] <= t.dims[0] <= longest[1], t
     assert t.mass_range[0] < t.mass_range[1]
@@ -158,56 +159,56 @@ def test_target_size_of_requests(cat: str, request_text: str, longest: tuple[flo
 
 def test_target_size_variant_size_words() -> None:
     # "mini" is already implied by "mini fridge": no double shrinking
-    assert P.target_size("Refrigerator", "a mini fridge").factor == pytest.approx(1.0)
+    assert size_priors.target_size("Refrigerator", "a mini fridge").factor == pytest.approx(1.0)
     # a smaller word than the variant's own class shrinks it relative to the variant
-    assert P.target_size("Box", "a very small jewelry box").factor == pytest.approx(0.5 / 0.75)
+    assert size_priors.target_size("Box", "a very small jewelry box").factor == pytest.approx(0.5 / 0.75)
     # a regular / small word never enlarges a variant that is smaller than regular
-    assert P.target_size("Toilet", "a small potty").factor == pytest.approx(1.0)
-    assert P.target_size("Refrigerator", "a standard-size mini fridge").factor == pytest.approx(1.0)
+    assert size_priors.target_size("Toilet", "a small potty").factor == pytest.approx(1.0)
+    assert size_priors.target_size("Refrigerator", "a standard-size mini fridge").factor == pytest.approx(1.0)
     # no request: the category's regular size
-    t = P.target_size("Laptop", None)
-    assert t.factor == 1.0 and t.dims == P.category_prior("Laptop").dims
+    t = size_priors.target_size("Laptop", None)
+    assert t.factor == 1.0 and t.dims == categories.category_prior("Laptop").dims
     # a parsed RequestSpec works the same as text
     spec = parse_request("a large suitcase")
-    assert P.target_size("Suitcase", spec) == P.target_size("Suitcase", "a large suitcase")
+    assert size_priors.target_size("Suitcase", spec) == size_priors.target_size("Suitcase", "a large suitcase")
 
 
 def test_target_size_warns_when_handheld_gets_too_big() -> None:
-    t = P.target_size("Stapler", "a huge stapler")
+    t = size_priors.target_size("Stapler", "a huge stapler")
     assert t.handheld and t.gripper_limit_factor is not None and t.gripper_limit_factor < 1.0
     assert "gripper" in t.note
-    assert P.target_size("Stapler", "a stapler").gripper_limit_factor >= 1.0  # type: ignore[operator]
+    assert size_priors.target_size("Stapler", "a stapler").gripper_limit_factor >= 1.0  # type: ignore[operator]
 
 
 # ----------------------------------------------------------------- masses
 
 
-@pytest.mark.parametrize("cat", sorted(P.load_priors().categories))
+@pytest.mark.parametrize("cat", sorted(prior_tables.load_priors().categories))
 def test_mass_ranges_are_monotone_in_size_class(cat: str) -> None:
-    ranges = [P.mass_range(cat, s) for s in SIZES]
+    ranges = [size_priors.mass_range(cat, s) for s in SIZES]
     for lo, hi in ranges:
         assert 0 < lo < hi
     for (lo0, hi0), (lo1, hi1) in zip(ranges, ranges[1:]):
         assert lo1 >= lo0 and hi1 >= hi0
-        assert lo1 > lo0 or lo0 == P.MASS_FLOOR_KG
-    assert P.mass_range(cat, None) == P.mass_range(cat, "regular") == pytest.approx(
-        P.category_prior(cat).mass_range
+        assert lo1 > lo0 or lo0 == size_priors.MASS_FLOOR_KG
+    assert size_priors.mass_range(cat, None) == size_priors.mass_range(cat, "regular") == pytest.approx(
+        categories.category_prior(cat).mass_range
     )
-    for v in P.category_prior(cat).variants:
-        vr = [P.mass_range(cat, s, variant=v.name) for s in SIZES]
+    for v in categories.category_prior(cat).variants:
+        vr = [size_priors.mass_range(cat, s, variant=v.name) for s in SIZES]
         for (lo0, hi0), (lo1, hi1) in zip(vr, vr[1:]):
             assert lo1 >= lo0 and hi1 >= hi0
-        assert P.mass_range(cat, v.size_class, variant=v.name) == pytest.approx(v.mass_range)
+        assert size_priors.mass_range(cat, v.size_class, variant=v.name) == pytest.approx(v.mass_range)
 
 
 def test_mass_range_scaling_rule() -> None:
-    lo, hi = P.mass_range("Microwave", "very_small")
+    lo, hi = size_priors.mass_range("Microwave", "very_small")
     assert lo == pytest.approx(8.0 * 0.5**3) and hi == pytest.approx(20.0 * 0.5**2)
-    lo, hi = P.mass_range("Microwave", "large")
+    lo, hi = size_priors.mass_range("Microwave", "large")
     assert lo == pytest.approx(8.0 * 1.3**2) and hi == pytest.approx(20.0 * 1.3**3)
     with pytest.raises(KeyError):
-        P.mass_range("Microwave", "gigantic")
-    assert P.mass_range("NoSuchThing", "small") == P.mass_range(P.GENERIC, "small")
+        size_priors.mass_range("Microwave", "gigantic")
+    assert size_priors.mass_range("NoSuchThing", "small") == size_priors.mass_range(prior_tables.GENERIC, "small")
 
 
 @settings(max_examples=200, deadline=None)
@@ -219,18 +220,18 @@ def test_mass_range_scaling_rule() -> None:
 )
 def test_scale_mass_range_properties(lo: float, ratio: float, f1: float, f2: float) -> None:
     hi = lo * ratio
-    a = P.scale_mass_range(lo, hi, min(f1, f2))
-    b = P.scale_mass_range(lo, hi, max(f1, f2))
+    a = size_priors.scale_mass_range(lo, hi, min(f1, f2))
+    b = size_priors.scale_mass_range(lo, hi, max(f1, f2))
     for r in (a, b):
-        assert P.MASS_FLOOR_KG <= r[0] < r[1]
+        assert size_priors.MASS_FLOOR_KG <= r[0] < r[1]
     assert b[0] >= a[0] and b[1] >= a[1]
-    assert P.scale_mass_range(lo, hi, 1.0) == pytest.approx((max(lo, P.MASS_FLOOR_KG), max(hi, 1.05 * max(lo, P.MASS_FLOOR_KG))))
+    assert size_priors.scale_mass_range(lo, hi, 1.0) == pytest.approx((max(lo, size_priors.MASS_FLOOR_KG), max(hi, 1.05 * max(lo, size_priors.MASS_FLOOR_KG))))
 
 
 def test_scale_mass_range_rejects_bad_factor() -> None:
     for f in (0.0, -1.0, float("nan"), float("inf")):
         with pytest.raises(ValueError):
-            P.scale_mass_range(1.0, 2.0, f)
+            size_priors.scale_mass_range(1.0, 2.0, f)
 
 
 # ----------------------------------------------------------------- labels, materials, roles
@@ -249,7 +250,7 @@ def test_scale_mass_range_rejects_bad_factor() -> None:
     ],
 )
 def test_canonical_label(raw: str | None, canon: str | None) -> None:
-    assert P.canonical_label(raw) == canon
+    assert part_labels.canonical_label(raw) == canon
 
 
 @pytest.mark.parametrize(
@@ -276,52 +277,50 @@ def test_canonical_label(raw: str | None, canon: str | None) -> None:
     ],
 )
 def test_material_for(cat: str, label: str | None, key: str) -> None:
-    m = P.material_for(cat, label)
+    m = part_priors.material_for(cat, label)
     assert m.key == key
     assert m.density > 0 and m.wall_thickness > 0 and m.name
     assert "density" in m.source
 
 
 def test_material_for_variants() -> None:
-    assert P.material_for("Toilet", "toilet_body", variant="child potty").key == "pp_plastic"
-    assert P.material_for("Door", "rotation_door", variant="cabinet door").key == "mdf"
-    assert P.material_for("Door", "rotation_door").key == "solid_wood"
-    with pytest.raises(KeyError):
-        P.material("unobtainium")
+    assert part_priors.material_for("Toilet", "toilet_body", variant="child potty").key == "pp_plastic"
+    assert part_priors.material_for("Door", "rotation_door", variant="cabinet door").key == "mdf"
+    assert part_priors.material_for("Door", "rotation_door").key == "solid_wood"
 
 
 def test_roles_and_springs() -> None:
-    assert P.part_role("Microwave", "door") == "task"
-    assert P.part_role("Microwave", "rotation_tray") == "accessory"
-    assert P.part_role("Microwave", "microwave_body") == "body"
-    assert P.part_role("TrashCan", "wheel") == "accessory"
-    assert P.part_role("Suitcase", "button") == "accessory"
-    assert P.part_role("Faucet", "switch") == "task"
-    assert P.part_role("Bag", "rotation_handle") == "task"
-    assert P.part_role("Generic", "lid") == "task"
-    assert P.part_role("Generic", "knob") == "accessory"
-    assert P.part_role("Toilet", "pump_lid") == "accessory"
-    assert P.part_role("Microwave", None) == "other"
-    assert P.task_relevant_rank("Suitcase", "lid") == 0
-    assert P.task_relevant_rank("Suitcase", "rotation_handle") == 1
-    assert P.task_relevant_rank("Suitcase", "button") is None
-    assert P.task_relevant_rank("Spaceship", "rotation_door") == 0
-    assert P.spring_expected("Stapler", "lid")
-    assert P.spring_expected("Toaster", "slider")
-    assert P.spring_expected("Remote", "button")
-    assert P.spring_expected("Remote", "push_button")
-    assert not P.spring_expected("Switch", "toggle_button")  # a toggle stays where it is flipped
-    assert not P.spring_expected("Microwave", "door")
-    assert not P.spring_expected("Stapler", "stapler_base")
+    assert part_priors.part_role("Microwave", "door") == "task"
+    assert part_priors.part_role("Microwave", "rotation_tray") == "accessory"
+    assert part_priors.part_role("Microwave", "microwave_body") == "body"
+    assert part_priors.part_role("TrashCan", "wheel") == "accessory"
+    assert part_priors.part_role("Suitcase", "button") == "accessory"
+    assert part_priors.part_role("Faucet", "switch") == "task"
+    assert part_priors.part_role("Bag", "rotation_handle") == "task"
+    assert part_priors.part_role("Generic", "lid") == "task"
+    assert part_priors.part_role("Generic", "knob") == "accessory"
+    assert part_priors.part_role("Toilet", "pump_lid") == "accessory"
+    assert part_priors.part_role("Microwave", None) == "other"
+    assert part_priors.task_relevant_rank("Suitcase", "lid") == 0
+    assert part_priors.task_relevant_rank("Suitcase", "rotation_handle") == 1
+    assert part_priors.task_relevant_rank("Suitcase", "button") is None
+    assert part_priors.task_relevant_rank("Spaceship", "rotation_door") == 0
+    assert part_priors.spring_expected("Stapler", "lid")
+    assert part_priors.spring_expected("Toaster", "slider")
+    assert part_priors.spring_expected("Remote", "button")
+    assert part_priors.spring_expected("Remote", "push_button")
+    assert not part_priors.spring_expected("Switch", "toggle_button")  # a toggle stays where it is flipped
+    assert not part_priors.spring_expected("Microwave", "door")
+    assert not part_priors.spring_expected("Stapler", "stapler_base")
 
 
 def test_request_label_matches() -> None:
-    assert P.request_label_matches("Faucet", "handle", "switch")
-    assert P.request_label_matches("Laptop", "lid", "screen")
-    assert P.request_label_matches("Microwave", "door", "rotation_door")
-    assert P.request_label_matches("StorageFurniture", "drawers", "drawer")
-    assert not P.request_label_matches("Microwave", "door", "rotation_tray")
-    assert not P.request_label_matches("Microwave", None, "door")
+    assert part_priors.request_label_matches("Faucet", "handle", "switch")
+    assert part_priors.request_label_matches("Laptop", "lid", "screen")
+    assert part_priors.request_label_matches("Microwave", "door", "rotation_door")
+    assert part_priors.request_label_matches("StorageFurniture", "drawers", "drawer")
+    assert not part_priors.request_label_matches("Microwave", "door", "rotation_tray")
+    assert not part_priors.request_label_matches("Microwave", None, "door")
 
 
 # ----------------------------------------------------------------- recognition
@@ -346,7 +345,7 @@ def test_recognize_all_manifest_rows() -> None:
     assert len(rows) == 21
     for row in rows:
         mc, labels = _asset(row)
-        m = P.recognize_category(mc, labels, row["prompt"])
+        m = categories.recognize_category(mc, labels, row["prompt"])
         assert m.name == row["category"], (row["id"], m.reason)
         assert 0.3 <= m.confidence <= 1.0, (row["id"], m.confidence)
         assert m.prior.name == m.name and m.reason
@@ -358,55 +357,55 @@ def test_recognize_dataset_quirks() -> None:
     for aid in ("19179", "20279"):
         mc, labels = _asset(rows[aid])
         assert mc == "Table"
-        assert P.recognize_category(mc, labels, rows[aid]["prompt"]).name == "StorageFurniture"
-        assert P.recognize_category(mc, labels, "").name == "Table"
+        assert categories.recognize_category(mc, labels, rows[aid]["prompt"]).name == "StorageFurniture"
+        assert categories.recognize_category(mc, labels, "").name == "Table"
     # a Suitcase asset requested as a purse: Bag, with reduced confidence
     mc, labels = _asset(rows["101673"])
-    m = P.recognize_category(mc, labels, rows["101673"]["prompt"])
+    m = categories.recognize_category(mc, labels, rows["101673"]["prompt"])
     assert m.name == "Bag" and m.confidence < 0.8 and "Suitcase" in m.reason
-    assert P.recognize_category(mc, labels, "").name == "Suitcase"
+    assert categories.recognize_category(mc, labels, "").name == "Suitcase"
 
 
 def test_recognize_variants() -> None:
-    m = P.recognize_category("Refrigerator", ["door", "refrigerator_body"], "A mini fridge for a dorm room")
+    m = categories.recognize_category("Refrigerator", ["door", "refrigerator_body"], "A mini fridge for a dorm room")
     assert m.variant is not None and m.variant.name == "mini fridge"
-    assert P.recognize_category("Refrigerator", ["door"], "").variant is None
+    assert categories.recognize_category("Refrigerator", ["door"], "").variant is None
 
 
 def test_recognize_without_model_cat_or_request() -> None:
-    assert P.recognize_category(None, ["drawer", "drawer", "furniture_body"]).name == "StorageFurniture"
-    assert P.recognize_category(None, ["lid", "toilet_body", "seat"]).name == "Toilet"
-    assert P.recognize_category("trash can", []).name == "TrashCan"  # synonym as model_cat
-    m = P.recognize_category("Spaceship", ["hull", "rotation_hatch"], "")
-    assert m.name == P.GENERIC and m.confidence == 0.0 and "Spaceship" in m.reason
-    m = P.recognize_category(None, [], "")
-    assert m.name == P.GENERIC
-    m = P.recognize_category("Spaceship", [None, "hull"], "a shiny thing")  # type: ignore[list-item]
-    assert m.name == P.GENERIC
+    assert categories.recognize_category(None, ["drawer", "drawer", "furniture_body"]).name == "StorageFurniture"
+    assert categories.recognize_category(None, ["lid", "toilet_body", "seat"]).name == "Toilet"
+    assert categories.recognize_category("trash can", []).name == "TrashCan"  # synonym as model_cat
+    m = categories.recognize_category("Spaceship", ["hull", "rotation_hatch"], "")
+    assert m.name == prior_tables.GENERIC and m.confidence == 0.0 and "Spaceship" in m.reason
+    m = categories.recognize_category(None, [], "")
+    assert m.name == prior_tables.GENERIC
+    m = categories.recognize_category("Spaceship", [None, "hull"], "a shiny thing")  # type: ignore[list-item]
+    assert m.name == prior_tables.GENERIC
 
 
 def test_recognize_conflict_lowers_confidence() -> None:
-    agree = P.recognize_category("Microwave", ["door", "microwave_body"], "a microwave")
-    clash = P.recognize_category("Microwave", ["door", "microwave_body"], "a stapler")
+    agree = categories.recognize_category("Microwave", ["door", "microwave_body"], "a microwave")
+    clash = categories.recognize_category("Microwave", ["door", "microwave_body"], "a stapler")
     assert agree.confidence >= 0.95
     assert clash.name == "Stapler" and clash.confidence < 0.6
 
 
 def test_possessive_parts_are_not_the_object() -> None:
-    m = P.recognize_category(None, [], "I want a microwave with its door halfway open")
+    m = categories.recognize_category(None, [], "I want a microwave with its door halfway open")
     assert m.name == "Microwave" and "Door" not in m.scores
-    assert P.request_category("open the door of a microwave")[0] == "Microwave"
-    assert P.request_category("a desk lamp")[0] == "Lamp"
-    assert P.request_category("a two-drawer under-desk cabinet")[0] == "StorageFurniture"
-    assert P.request_category("nothing here") == (None, None)
+    assert categories.request_category("open the door of a microwave")[0] == "Microwave"
+    assert categories.request_category("a desk lamp")[0] == "Lamp"
+    assert categories.request_category("a two-drawer under-desk cabinet")[0] == "StorageFurniture"
+    assert categories.request_category("nothing here") == (None, None)
 
 
 def test_category_prior_lookup() -> None:
-    assert P.category_prior("fridge").name == "Refrigerator"
-    assert P.category_prior("Trash Can").name == "TrashCan"
-    assert P.category_prior("unknown-thing").name == P.GENERIC
+    assert categories.category_prior("fridge").name == "Refrigerator"
+    assert categories.category_prior("Trash Can").name == "TrashCan"
+    assert categories.category_prior("unknown-thing").name == prior_tables.GENERIC
     with pytest.raises(KeyError, match="unknown-thing"):
-        P.category_prior("unknown-thing", strict=True)
+        categories.category_prior("unknown-thing", strict=True)
 
 
 # ----------------------------------------------------------------- bad data
@@ -427,8 +426,8 @@ def _edit(d: Path, fname: str, fn) -> None:  # type: ignore[no-untyped-def]
 
 
 def test_copy_of_the_packaged_tables_loads(tmp_path: Path) -> None:
-    pri = P.load_priors_from(_copy(tmp_path))
-    assert pri == P.load_priors()
+    pri = prior_tables.load_priors_from(_copy(tmp_path))
+    assert pri == prior_tables.load_priors()
 
 
 @pytest.mark.parametrize(
@@ -455,31 +454,31 @@ def test_copy_of_the_packaged_tables_loads(tmp_path: Path) -> None:
 def test_bad_data_names_file_and_key(tmp_path: Path, fname: str, edit, needle: str) -> None:  # type: ignore[no-untyped-def]
     d = _copy(tmp_path)
     _edit(d, fname, edit)
-    with pytest.raises(P.PriorsError) as exc:
-        P.load_priors_from(d)
+    with pytest.raises(prior_tables.PriorsError) as exc:
+        prior_tables.load_priors_from(d)
     assert needle in str(exc.value)
 
 
 def test_missing_and_malformed_files(tmp_path: Path) -> None:
     d = _copy(tmp_path)
     (d / "materials.yaml").unlink()
-    with pytest.raises(P.PriorsError, match="materials.yaml"):
-        P.load_priors_from(d)
+    with pytest.raises(prior_tables.PriorsError, match="materials.yaml"):
+        prior_tables.load_priors_from(d)
     d = _copy(tmp_path / "b")
     (d / "labels.yaml").write_text("- just\n- a list\n")
-    with pytest.raises(P.PriorsError, match="labels.yaml: top level"):
-        P.load_priors_from(d)
+    with pytest.raises(prior_tables.PriorsError, match="labels.yaml: top level"):
+        prior_tables.load_priors_from(d)
     d = _copy(tmp_path / "c")
     (d / "categories.yaml").write_text("Stapler: [unclosed\n")
-    with pytest.raises(P.PriorsError, match="categories.yaml: not valid YAML"):
-        P.load_priors_from(d)
+    with pytest.raises(prior_tables.PriorsError, match="categories.yaml: not valid YAML"):
+        prior_tables.load_priors_from(d)
 
 
 def test_docs_list_every_category() -> None:
     doc = (ROOT / "docs" / "design" / "priors.md").read_text()
-    for name in P.load_priors().categories:
+    for name in prior_tables.load_priors().categories:
         assert f"| {name} " in doc, name
-    for key in P.load_priors().materials:
+    for key in prior_tables.load_priors().materials:
         assert key in doc, key
 
 
@@ -505,9 +504,9 @@ def test_docs_mass_table_equals_mass_range() -> None:
         if line.startswith("| ") and not line.startswith("| category")
         for cells in [[c.strip() for c in line.strip("|").split("|")]]
     }
-    assert set(rows) == set(P.load_priors().categories)
+    assert set(rows) == set(prior_tables.load_priors().categories)
     for name, cells in rows.items():
         expected = [
-            f"{_fmt_mass(lo)}-{_fmt_mass(hi)}" for lo, hi in (P.mass_range(name, s) for s in SIZES)
+            f"{_fmt_mass(lo)}-{_fmt_mass(hi)}" for lo, hi in (size_priors.mass_range(name, s) for s in SIZES)
         ]
         assert cells == expected, name

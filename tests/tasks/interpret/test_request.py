@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from asset2sim.schemas.request import BAND_TARGET, RequestSpec
-from asset2sim.tasks.interpret.priors import size_factor
+from asset2sim.tasks.interpret.size_priors import size_factor
 from asset2sim.tasks.interpret.request import parse_request
 from tests.conftest import NO_SHARED, SHARED as DATASET
 
