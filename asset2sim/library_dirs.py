@@ -3,8 +3,8 @@ output as a side effect.
 
 matplotlib (the report's figures) creates ``~/.config/matplotlib`` and ``~/.cache/matplotlib`` (its font list) the
 first time it is imported on a fresh machine; MLflow (the flow's tracking, ``rate --tracking-uri``) writes
-``~/.config/mlflow/telemetry.json`` and reports usage over the network; Prefect's home is set by the flow's own
-server (:func:`asset2sim.flows.server.start_local_server`: ``<project>/.prefect``). :func:`configure` sets, where
+``~/.config/mlflow/telemetry.json`` and reports usage over the network; Prefect's home is set by the flow
+(:func:`asset2sim.flows.stages.prepare_prefect_environment`: ``<project>/.prefect``). :func:`configure` sets, where
 the user has not:
 
 - ``MPLCONFIGDIR`` to ``matplotlib/`` in asset2sim's own cache (:func:`asset2sim.array_cache.cache_dir`,

@@ -16,6 +16,7 @@ from typing import Any
 
 from asset2sim import __version__, array_cache, atomic, output_folder
 from asset2sim.flows.catalog import result_key
+from asset2sim.flows import server
 from asset2sim.flows import store as store_mod
 from asset2sim.flows.forkserver import run_forked, start_soon
 from asset2sim.flows.isolation import call_target, import_target, run_isolated
@@ -427,3 +428,17 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
         rec.value = Measurement.model_validate(rec.value)
     return rec
 
+
+def prepare_prefect_environment(project_root: Path | str) -> dict[str, str]:
+    """Set Prefect's environment defaults (home under the project, analytics off, a longer start-up timeout) where
+    unset, before Prefect is imported; returns what was set."""
+    defaults = {
+        "PREFECT_HOME": str(Path(project_root) / ".prefect"),
+        "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
+        "DO_NOT_TRACK": "1",
+        "MLFLOW_DISABLE_TELEMETRY": "true",  # no ~/.config/mlflow/telemetry.json, no usage sent
+        "PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS": f"{server.STARTUP_TIMEOUT:g}",  # a fresh database's first start
+    }
+    set_now = {k: v for k, v in defaults.items() if k not in os.environ}
+    os.environ.update(set_now)
+    return set_now
