@@ -188,6 +188,7 @@ def depth_inside(points: np.ndarray, piece: Piece) -> float:
     if len(points) == 0:
         return 0.0
     lo, hi = piece.points.min(axis=0), piece.points.max(axis=0)
+    points = points[(points[:, 0] > lo[0]) & (points[:, 0] < hi[0])]  # the box's x band first: the same rows, cheaper
     points = points[np.all((points > lo) & (points < hi), axis=1)]  # only points in the box can be inside
     if len(points) == 0:
         return 0.0

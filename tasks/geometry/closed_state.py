@@ -146,9 +146,9 @@ def links_aabb(session, names: list[str], points: dict[str, np.ndarray]) -> tupl
         if v is None:
             continue
         pos, R = session.link_frame(name)
-        w = v @ R.T + pos
-        lo = np.minimum(lo, w.min(axis=0))
-        hi = np.maximum(hi, w.max(axis=0))
+        w = np.ascontiguousarray((v @ R.T + pos).T)  # (3, k): numpy reduces a contiguous row ~10x faster than a column
+        lo = np.minimum(lo, w.min(axis=1))
+        hi = np.maximum(hi, w.max(axis=1))
     if not np.all(np.isfinite(lo)):
         return None
     return lo, hi
