@@ -184,11 +184,13 @@ def piece_obj(piece: Piece) -> bytes:
 
 def depth_inside(points: np.ndarray, piece: Piece) -> float:
     """Largest depth (m, >= 0) of any of ``points`` (k, 3) inside ``piece``
-    (distance to the nearest face plane of a point inside the hull)."""
+    (distance to the nearest face plane of a point inside the hull); only points in the hull's box can be inside,
+    those of its x band are taken first (the same rows, cheaper)."""
     if len(points) == 0:
         return 0.0
     lo, hi = piece.points.min(axis=0), piece.points.max(axis=0)
-    points = points[np.all((points > lo) & (points < hi), axis=1)]  # only points in the box can be inside
+    points = points[(points[:, 0] > lo[0]) & (points[:, 0] < hi[0])]
+    points = points[np.all((points > lo) & (points < hi), axis=1)]
     if len(points) == 0:
         return 0.0
     d = np.max(points @ piece.equations[:, :3].T + piece.equations[:, 3], axis=1)

@@ -139,7 +139,8 @@ def link_hull_points(asset: AssetDescription, cache=None) -> dict[str, np.ndarra
 
 def links_aabb(session, names: list[str], points: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
     """World axis-aligned box (lo (3,), hi (3,)), m, of the links ``names`` at the current state, from
-    ``points`` (link -> hull points (k, 3) in the link frame); None when no link has points."""
+    ``points`` (link -> hull points (k, 3) in the link frame); None when no link has points. Each link's points are
+    reduced as a contiguous (3, k) copy: numpy reduces a row ~10x faster than a column of a (k, 3) array."""
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     for name in names:
@@ -147,9 +148,9 @@ def links_aabb(session, names: list[str], points: dict[str, np.ndarray]) -> tupl
         if v is None:
             continue
         pos, R = session.link_frame(name)
-        w = v @ R.T + pos
-        lo = np.minimum(lo, w.min(axis=0))
-        hi = np.maximum(hi, w.max(axis=0))
+        w = np.ascontiguousarray((v @ R.T + pos).T)
+        lo = np.minimum(lo, w.min(axis=1))
+        hi = np.maximum(hi, w.max(axis=1))
     if not np.all(np.isfinite(lo)):
         return None
     return lo, hi

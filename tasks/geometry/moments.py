@@ -48,9 +48,19 @@ def single_sided(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     (PartNet-Mobility draws every open surface twice, once facing each way)."""
     if not len(faces):
         return faces
-    _, point = np.unique(np.round(vertices * 1e9).astype(np.int64), axis=0, return_inverse=True)
-    _, first = np.unique(np.sort(point.ravel()[faces], axis=1), axis=0, return_index=True)
+    point = _row_labels(np.round(vertices * 1e9).astype(np.int64))
+    _, first = np.unique(_row_labels(np.sort(point[faces], axis=1)), return_index=True)
     return faces[np.sort(first)]
+
+
+def _row_labels(rows: np.ndarray) -> np.ndarray:
+    """Each row's rank (k,) among the distinct rows of ``rows`` (k, c) int in lexicographic order: the inverse of
+    ``np.unique(rows, axis=0)``, from a lexicographic sort (numpy's row-unique sorts a structured view, ~10x slower)."""
+    order = np.lexsort(rows.T[::-1])
+    s = rows[order]
+    labels = np.empty(len(s), np.int64)
+    labels[order] = np.cumsum(np.r_[0, np.any(s[1:] != s[:-1], axis=1)])
+    return labels
 
 
 def surface_properties(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
@@ -83,8 +93,7 @@ def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, tol: float) -> tupl
     """Faces (M, 3) re-indexed onto vertices merged on a grid of size tol."""
     lo = vertices.min(axis=0)
     key = np.round((vertices - lo) / tol).astype(np.int64)
-    _, inverse = np.unique(key, axis=0, return_inverse=True)
-    inverse = inverse.ravel()
+    inverse = _row_labels(key)
     return inverse[faces], int(inverse.max()) + 1
 
 

@@ -57,7 +57,9 @@ class _Triangles:
     mtllibs: list[str] = field(default_factory=list)
 
 
-_OBJ_NOT_RECORD = re.compile(rb"^[ \t]*([^A-Za-z#\s][^\r\n]{0,39})", re.M)
+#: A line (after its newline: a search for a literal first byte is several times faster than for a line start) whose
+#: first byte after blanks begins no OBJ record.
+_OBJ_NOT_RECORD = re.compile(rb"\n[ \t]*([^A-Za-z#\s][^\r\n]{0,39})")
 
 
 def _scan_obj(data: bytes, max_faces: int) -> _Triangles:
@@ -68,10 +70,10 @@ def _scan_obj(data: bytes, max_faces: int) -> _Triangles:
     if approx_faces > max_faces:
         raise _TooManyFaces(approx_faces, max_faces, "face records")
     mtllibs = [m for m in mesh_materials.mtl_libraries(data) if m.strip()]
-    bad_rec = _OBJ_NOT_RECORD.search(data)
+    bad_rec = _OBJ_NOT_RECORD.search(b"\n" + data)
     if bad_rec is not None:
         # every OBJ record starts with a keyword (v, f, vt, vn, o, g, s, usemtl, l, ...)
-        lineno = data.count(b"\n", 0, bad_rec.start()) + 1
+        lineno = bad_rec.string.count(b"\n", 0, bad_rec.start(1))
         defects["MESH_MALFORMED"] = f"line {lineno}: not an OBJ record: {bad_rec.group(1)!r}"
     try:
         mesh = mesh_io.read_obj(data, "OBJ")

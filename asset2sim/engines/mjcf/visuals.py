@@ -44,7 +44,8 @@ MIN_MESH_VERTICES = 4
 
 
 def visual_mesh_problem(path: Path, meshes: mesh_io.MeshCache) -> str:
-    """Why MuJoCo would refuse ``path`` (read through ``meshes``) as a visual mesh ("" when it takes it)."""
+    """Why MuJoCo would refuse ``path`` (read through ``meshes``) as a visual mesh ("" when it takes it); the
+    distinct vertices are counted over all rows only when the first 64 hold fewer than enough."""
     if path.suffix.lower() not in (".obj", ".stl", ".msh"):
         return f"is a {path.suffix} file (MuJoCo reads OBJ, STL and MSH)"
     try:
@@ -56,7 +57,7 @@ def visual_mesh_problem(path: Path, meshes: mesh_io.MeshCache) -> str:
     v = v[np.all(np.isfinite(v), axis=1)]
     if len(f) == 0:
         return "has no faces"
-    if len(np.unique(v, axis=0)) < MIN_MESH_VERTICES:
+    if len(np.unique(v[:64], axis=0)) < MIN_MESH_VERTICES and len(np.unique(v, axis=0)) < MIN_MESH_VERTICES:
         return f"has fewer than {MIN_MESH_VERTICES} distinct vertices"
     return ""
 

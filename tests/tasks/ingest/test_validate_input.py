@@ -319,6 +319,15 @@ def test_demo_assets_validate_without_errors(demo_root):
 # ----------------------------------------------------------------------------- other formats, textures
 
 
+def test_a_line_that_begins_no_obj_record_is_named_by_number(tmp_path):
+    """The first line whose first non-blank byte begins no OBJ record is named with its number and text, the
+    file's first line as any other (CR line ends and blank or comment lines are records' company, not defects)."""
+    for text, want in ((cb.CUBE_V + "f 1 2 3\r\n\n# note\n \t-1 2 3\n7 8\n", "line 12: not an OBJ record: b'-1 2 3'"),
+                       ("0.5 0 0\n" + cb.CUBE_V + "f 1 2 3\n", "line 1: not an OBJ record: b'0.5 0 0'")):
+        (tmp_path / "m.obj").write_text(text, newline="")
+        assert vi.scan_mesh_file(tmp_path / "m.obj").defects.get("MESH_MALFORMED") == want
+
+
 def test_scan_other_formats(tmp_path):
     import trimesh
 
