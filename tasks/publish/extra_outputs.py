@@ -11,7 +11,7 @@ from asset2sim import output_folder
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.extras import install_hint
 from asset2sim.inert import one_line
-from asset2sim.output_paths import raise_refusal
+from asset2sim.output_paths import exception_chain, raise_refusal
 from asset2sim.output_folder import CLIPS_DIR, VIEWS_DIR
 from asset2sim.refined_asset import RefinedAsset
 from asset2sim.schemas.asset import AssetDescription
@@ -39,16 +39,12 @@ def raise_if_unwritable(exc: BaseException, out_dir: Path) -> None:
     """Raise ``OUTPUT_WRITE_FAILED`` (an :class:`~asset2sim.output_folder.OutputError`) when ``exc`` or an
     exception in its chain is an OSError whose errno is in :data:`UNWRITABLE`, and the output guard's own
     refusal (``OUTPUT_SYMLINK_ESCAPES``, ``OUTPUT_PATH_ESCAPES``) as it is; return otherwise."""
-    seen: set[int] = set()
-    cur: BaseException | None = exc
-    while cur is not None and id(cur) not in seen:
-        seen.add(id(cur))
-        raise_refusal(cur)
+    raise_refusal(exc)
+    for cur in exception_chain(exc):
         if isinstance(cur, OSError) and cur.errno in UNWRITABLE:
             where = cur.filename or out_dir
             raise output_folder.OutputError(f"output folder {out_dir} cannot be written: {where}: {cur.strerror or cur}",
                                             "OUTPUT_WRITE_FAILED", where) from cur
-        cur = cur.__cause__ or cur.__context__
 
 
 def host_files(out_dir: Path, asset: AssetDescription, config: RefineConfig, report: RefineReport) -> dict[str, str]:
