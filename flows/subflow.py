@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import queue
 import time
 import uuid
 from typing import Any
@@ -15,7 +16,6 @@ from typing import Any
 from prefect import flow, get_run_logger, task
 from prefect.cache_policies import NO_CACHE
 from prefect.context import FlowRunContext
-from prefect.futures import as_completed
 
 from asset2sim import flow_progress
 from asset2sim.flow_progress import ProgressEvent
@@ -136,9 +136,7 @@ def refine_assets(
     all_jobs = job_order.start_order([AssetJob(**j) for j in jobs])  # copies of one folder apart, largest first
     servers_seconds = _ready_stage_servers(all_jobs, log)
     body_started = time.time()  # the stage servers' start-up is not the assets'
-    prep_futures = _submit_prepares(all_jobs, batch_size, rec.starts)
-    chains = _submit_chains(prep_futures, chain_task, rec, fingerprints or {})
-    _record_chains(chains, rec)
+    _run_assets(_submit_prepares(all_jobs, batch_size, rec.starts), chain_task, rec, fingerprints or {})
     return {"rows": rec.rows, "inputs": rec.inputs, "body_started": body_started, "body_seconds": time.time() - body_started,
             "cluster_up": cluster_up, "servers_seconds": servers_seconds}
 
@@ -200,41 +198,59 @@ def _submit_prepares(jobs: list[AssetJob], batch_size: int, starts: dict[str, fl
     return prep_futures
 
 
-def _submit_chains(prep_futures: dict, chain_task, rec: _AssetRecorder, fingerprints: dict[str, str | None]) -> dict:
-    """As each prepare batch ends: record its input index entries, the row of each asset that ends there (failed,
-    skipped, invalid) and submit the ``refine-metrics`` chain of the others; returns future -> (job, prepared)."""
+def _run_assets(prep_futures: dict, chain_task, rec: _AssetRecorder, fingerprints: dict[str, str | None]) -> None:
+    """Record every asset's row as soon as what ends it has ended, prepares and chains alike, in the order they
+    finish (one queue fed by the futures' done callbacks: ``PrefectFuture.add_done_callback``): as a prepare batch
+    ends, its input index entries and the rows of the assets that end there (failed, skipped, invalid), and the
+    ``refine-metrics`` chain of each other one submitted; as a chain ends, its asset's row. No row waits for the
+    prepares of other assets (its ``finished_at``, its progress event and its log line come when its chain ends)."""
     # the time limit of a non-isolated stage is Prefect's (process isolation has its own)
-    chains = {}
-    for fut in as_completed(list(prep_futures)):
-        batch = prep_futures[fut]
-        results, exc_b = _outcome(fut)
-        for k, job in enumerate(batch):
-            prepared = None if exc_b is not None else results[k]
-            exc = exc_b if exc_b is not None else (prepared if isinstance(prepared, BaseException) else None)
-            if exc is not None:
-                prepared = None
-            else:
-                entry = driver_skip.entry_for(job, prepared, fingerprints.get(job.asset_id))
-                if entry is not None:
-                    rec.inputs[job.asset_id] = entry
-            if exc is not None or prepared is None or prepared.skip is not None or not prepared.ok:
-                rec.record(job, prepared, None, None, exc)
-                continue
-            # a killed run's complete folder (prepared.resume): refine reads its report, metrics its evaluation
-            limit = {} if job.isolation in ("process", "spawn") else {"timeout_seconds": job.time_limit_seconds}
-            chains[chain_task.with_options(**limit).submit(Sealed(job), Sealed(prepared))] = (job, prepared)
-    return chains
+    finished: queue.SimpleQueue = queue.SimpleQueue()
+    chains: dict = {}
+    for fut in prep_futures:
+        fut.add_done_callback(finished.put)
+    while prep_futures or chains:  # a chain joins the queue as it is submitted
+        fut = finished.get()
+        if fut in chains:
+            _record_chain(fut, chains.pop(fut), rec)
+            continue
+        for cf, job_prepared in _submit_batch(prep_futures.pop(fut), fut, chain_task, rec, fingerprints):
+            chains[cf] = job_prepared
+            cf.add_done_callback(finished.put)
 
 
-def _record_chains(chains: dict, rec: _AssetRecorder) -> None:
-    """Record each asset's row as its chain ends."""
-    for cf in as_completed(list(chains)):
-        job, prepared = chains[cf]
-        res, exc = _outcome(cf)
+def _submit_batch(batch: list[AssetJob], fut, chain_task, rec: _AssetRecorder, fingerprints: dict[str, str | None]) -> list:
+    """The ended prepare ``fut`` of ``batch``: record its input index entries and the row of each asset that ends
+    there (failed, skipped, invalid); submit the ``refine-metrics`` chain of the others. Returns [(chain future,
+    (job, prepared))]."""
+    results, exc_b = _outcome(fut)
+    out = []
+    for k, job in enumerate(batch):
+        prepared = None if exc_b is not None else results[k]
+        exc = exc_b if exc_b is not None else (prepared if isinstance(prepared, BaseException) else None)
         if exc is not None:
-            rec.record(job, prepared, None, None, exc)
+            prepared = None
         else:
-            rec.record(job, prepared, res.refined, res.measured, res.error, res.published)
+            entry = driver_skip.entry_for(job, prepared, fingerprints.get(job.asset_id))
+            if entry is not None:
+                rec.inputs[job.asset_id] = entry
+        if exc is not None or prepared is None or prepared.skip is not None or not prepared.ok:
+            rec.record(job, prepared, None, None, exc)
+            continue
+        # a killed run's complete folder (prepared.resume): refine reads its report, metrics its evaluation
+        limit = {} if job.isolation in ("process", "spawn") else {"timeout_seconds": job.time_limit_seconds}
+        out.append((chain_task.with_options(**limit).submit(Sealed(job), Sealed(prepared)), (job, prepared)))
+    return out
+
+
+def _record_chain(cf, job_prepared: tuple, rec: _AssetRecorder) -> None:
+    """Record the row of the asset whose chain ``cf`` ended."""
+    job, prepared = job_prepared
+    res, exc = _outcome(cf)
+    if exc is not None:
+        rec.record(job, prepared, None, None, exc)
+    else:
+        rec.record(job, prepared, res.refined, res.measured, res.error, res.published)
 
 
 def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
