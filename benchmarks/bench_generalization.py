@@ -41,10 +41,11 @@ the floor stops, a steadier opening; else ``state_out_of_band``) and, with
 ``--evaluate``, the evaluation (the interaction tier: probes included) lists
 no failures. Cases run in ``--jobs`` worker processes (default 1); ``--limit``
 keeps the first N cases (in a deterministic, category-interleaved order so a
-small limit still spans categories). ``--one-mesh-per-link`` refines the
-generated assets with each link's meshes merged into one OBJ of one group
-(``tests.unseen_assets.one_mesh_per_link``), as PartNet-Mobility's files
-are, so that no convex piece comes for free from the generator's boxes.
+small limit still spans categories). ``--one-mesh-per-link`` refines every
+object, dev rows and generated, from a copy with each link's meshes merged
+into one OBJ of one group (``tests.unseen_assets.one_mesh_per_link``), so
+that no convex piece comes for free from a part's own files or the
+generator's boxes.
 ``--open-containers`` refines with ``RefineConfig(open_containers=True)``
 and prints the cases whose container was kept open.
 Writes DIR/cases.json.
@@ -117,9 +118,10 @@ def requests_for(category: str, src: Path, kinds: tuple[str, ...] = KINDS) -> li
 
 
 def build_corpus(manifest: Path, gen_root: Path | None, kinds: tuple[str, ...], ids: set[str],
-                 one_mesh: bool = False) -> list[dict]:
-    """Every case: {"case", "source", "asset", "category", "kind", "prompt", "generated"}; with ``one_mesh``, each
-    generated asset as :func:`tests.unseen_assets.one_mesh_per_link` rewrites a copy of it (under ``gen_root/one_mesh``)."""
+                 one_mesh_root: Path | None = None) -> list[dict]:
+    """Every case: {"case", "source", "asset", "category", "kind", "prompt", "generated"}; with ``one_mesh_root``,
+    each object (dev row or generated) as :func:`tests.unseen_assets.one_mesh_per_link` rewrites a copy of it (under
+    ``one_mesh_root``; the dev rows' folders are never changed)."""
     per_object: list[list[dict]] = []
     rows = list(csv.DictReader(manifest.open())) if manifest.is_file() else []
     objects = [(r["id"], manifest.parent / r["id"], r["category"], False) for r in rows]
@@ -144,9 +146,12 @@ def build_corpus(manifest: Path, gen_root: Path | None, kinds: tuple[str, ...], 
             if not (folder / "mobility.urdf").is_file():
                 build(folder)
             objects.append((f"gen:{name}", folder, cat, True))
-        if one_mesh:
-            objects = [(oid, _one_mesh_copy(src, gen_root / "one_mesh" / oid[4:], unseen_assets) if gen else src, cat, gen)
-                       for oid, src, cat, gen in objects]
+    if one_mesh_root is not None:
+        sys.path.insert(0, str(ROOT))
+        from tests import unseen_assets
+
+        objects = [(oid, _one_mesh_copy(src, one_mesh_root / oid.replace(":", "_"), unseen_assets), cat, gen)
+                   for oid, src, cat, gen in objects if not ids or oid in ids]
     for oid, src, cat, gen in objects:
         if ids and oid not in ids:
             continue
@@ -164,7 +169,7 @@ def build_corpus(manifest: Path, gen_root: Path | None, kinds: tuple[str, ...], 
 
 
 def _one_mesh_copy(src: Path, dst: Path, unseen_assets) -> Path:
-    """``dst``: a copy of the generated asset ``src`` with one OBJ of one group per link (made once)."""
+    """``dst``: a copy of the object ``src`` with one OBJ of one group per link (made once)."""
     import shutil
 
     if not (dst / "mobility.urdf").is_file():
@@ -325,7 +330,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--open-containers", action="store_true",
                     help="refine with RefineConfig(open_containers=True): containers of one mesh group decomposed, inside open")
     ap.add_argument("--one-mesh-per-link", action="store_true",
-                    help="generated assets with each link's meshes merged into one OBJ of one group, as PartNet-Mobility's files are")
+                    help="every object (dev rows and generated) with each link's meshes merged into one OBJ of one group")
     args = ap.parse_args(argv)
     kinds = tuple(k for k in args.kinds.split(",") if k)
     unknown = set(kinds) - set(KINDS)
@@ -333,7 +338,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"unknown kinds {sorted(unknown)}; known: {', '.join(KINDS)}")
     args.out.mkdir(parents=True, exist_ok=True)
     cases = build_corpus(args.manifest, None if args.no_generated else args.out / "generated", kinds,
-                         set(filter(None, args.ids.split(","))), one_mesh=args.one_mesh_per_link)
+                         set(filter(None, args.ids.split(","))),
+                         one_mesh_root=args.out / "one_mesh" if args.one_mesh_per_link else None)
     if args.limit:
         cases = cases[: args.limit]
     print(f"{len(cases)} cases, {args.jobs} job(s)", flush=True)
