@@ -12,8 +12,9 @@
 2. Runs the flow (``run_refine_flow``, what ``make flow`` runs) over it with ``--workers`` workers, every check on
    (the metrics stage included) and, by default, ``run.extras: deferred``: every asset's verdict and exports first,
    then the media phase (renders, clips, HTML report) of every output in children at lower CPU priority.
-3. Prints the load average before and after, assets per hour of the first phase (over the flow's assets phase)
-   and of the media phase, per-stage seconds per asset from the catalog's ``stage_seconds`` (the stage children
+3. Prints the load average before and after, assets per hour of the first phase (over the flow's assets phase),
+   from the run's request to its last verdict (:func:`to_last_verdict`: the start-up included, as a person running
+   the flow meets it) and of the media phase, per-stage seconds per asset from the catalog's ``stage_seconds`` (the stage children
    are single-threaded: wall s of a stage = its core-seconds on an idle core) as median / p90 / p99, each asset's
    first-phase wall time median / p90 / p99 with p99 / median and max / median (and the same of its CPU time: the
    figure to compare on a loaded machine), the failure modes, and the tail: every asset above
@@ -155,6 +156,30 @@ def tail(df, factor: float = TAIL_FACTOR) -> dict:
     return out
 
 
+def to_last_verdict(df, run_info: dict, summary: dict) -> dict | None:
+    """Objects per hour as a person running the flow meets them: from the run's request (``_run.json``'s
+    ``requested_at``, before the Prefect server starts) to the last row's ``finished_at`` (each row is recorded as its
+    asset's chain ends), and the start-up before the first asset (the Prefect server and the flow run: from the
+    request to the flow body's start, ``flow_started_epoch``; the Dask cluster and the stage servers: the run's
+    ``dask_startup_seconds`` and ``stage_servers_seconds``). None without those records."""
+    import pandas as pd
+
+    requested, started = run_info.get("requested_at"), summary.get("flow_started_epoch")
+    if requested is None or started is None or not len(df):
+        return None
+    seconds = float(pd.to_datetime(df["finished_at"]).max().timestamp()) - float(requested)
+    return {"assets": len(df), "seconds": seconds, "assets_per_hour": len(df) / seconds * 3600 if seconds > 0 else None,
+            "prefect_s": float(started) - float(requested), "dask_s": float(summary.get("dask_startup_seconds") or 0.0),
+            "stage_servers_s": float(summary.get("stage_servers_seconds") or 0.0)}
+
+
+def print_to_last(t: dict) -> None:
+    """Print :func:`to_last_verdict`'s figures."""
+    print(f"  from the request to the last verdict: {t['assets']} assets in {t['seconds']:.1f} s = "
+          f"{t['assets_per_hour'] or 0:.0f} assets/hour; before the first asset: the Prefect server and the flow run "
+          f"{t['prefect_s']:.1f} s, the Dask cluster {t['dask_s']:.1f} s, the stage servers {t['stage_servers_s']:.1f} s")
+
+
 def order_check(df, raw: Path, workers: int, phase_s: float) -> dict:
     """How well the flow's start order (:mod:`asset2sim.flows.job_order`, largest geometry first) fits the run: the
     Spearman rank correlation of each object's geometry bytes (``folder_listing`` of its folder under ``raw``) and the
@@ -251,8 +276,8 @@ def print_rounds(r: dict) -> None:
 
 
 def report_only(work: Path) -> int:
-    """``--report-only``: :func:`print_tail` of the latest run recorded under ``work`` (a kept ``--work``), and
-    :func:`print_order` where its ``summary.json`` is kept too."""
+    """``--report-only``: :func:`print_to_last` and :func:`print_tail` of the latest run recorded under ``work`` (a
+    kept ``--work``), and :func:`print_order` where its ``summary.json`` is kept too."""
     from asset2sim.flows.catalog import ResultCatalog
     from asset2sim.flows.catalog_config import load_catalog
 
@@ -263,6 +288,10 @@ def report_only(work: Path) -> int:
         return 1
     df = cat.read("dev", runs[-1])
     print(f"run {runs[-1]}: {len(df)} assets")
+    info = cat.run_info("dev", runs[-1]) or {}
+    to_last = to_last_verdict(df, info, info.get("summary") or {})
+    if to_last:
+        print_to_last(to_last)
     t = tail(df)
     print_tail(t)
     print_rounds(rounds(df))
@@ -325,7 +354,9 @@ def main(argv: list[str] | None = None) -> int:
         with FlowCpu() as cpu, flow_progress.listening(_phase_marks(cpu)):
             summary = run_refine_flow(catalog, workers=args.workers)
         wall = time.perf_counter() - t0
-        df = ResultCatalog(load_catalog(catalog).catalog_root).read("dev", summary["run"])
+        store = ResultCatalog(load_catalog(catalog).catalog_root)
+        df = store.read("dev", summary["run"])
+        to_last = to_last_verdict(df, store.run_info("dev", summary["run"]) or {}, summary)
         worked = int(summary["done"]) + int(summary["failed"])
         assets_s = float(summary["assets_seconds"])
         media_s, made = float(summary.get("media_seconds") or 0.0), int(summary.get("media_made") or 0)
@@ -344,12 +375,14 @@ def main(argv: list[str] | None = None) -> int:
                "stages_s": {k: dict(zip(("median", "p90", "p99"), quantiles(v))) for k, v in sorted(stages.items())},
                "failure_modes": df["failure_mode"].fillna("none").value_counts().to_dict(), "tail": tail(df),
                "workers": args.workers, "media": args.media, "cache": os.environ["ASSET2SIM_CACHE"], "load_after": _load(),
-               "order": order_check(df, work / "raw", args.workers, assets_s), "rounds": rounds(df),
+               "order": order_check(df, work / "raw", args.workers, assets_s), "rounds": rounds(df), "to_last_verdict": to_last,
                "cpu": {k: cpu.report(a, "last row") for k, a in (("first_phase", "start"), ("assets", "first row"))
                        if a in cpu.snapshots and "last row" in cpu.snapshots}}
         print(f"flow: {worked} assets refined in {wall:.1f} s wall (assets phase {assets_s:.1f} s); load after: {_load()}")
         print(f"  first phase (verdict, evaluation, exports): {out['first_phase_assets_per_hour'] or 0:.0f} assets/hour "
               f"(goal >= 2000)")
+        if to_last:
+            print_to_last(to_last)
         if args.media == "deferred":
             print(f"  media phase (renders, clips, report.html): {made} outputs in {media_s:.1f} s = "
                   f"{out['media_assets_per_hour'] or 0:.0f} assets/hour")
