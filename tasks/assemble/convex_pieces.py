@@ -209,9 +209,9 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
     Which merges hold one of ``others`` is measured lazily: a pair enters the queue at its volume cost, a lower
     bound of its cost, and is measured when it comes first (re-queued with the penalty when it holds a point), so a
     pair a merge retires before it comes first is never measured. The merges made are the same as when every pair
-    is measured on entry (the queue's order over the measured costs is the same). A piece's planes are measured on
-    each of ``others`` once, when a box first asks for it: a row of a matrix product of two rows or more reads the
-    same, bit for bit, in any such product holding it (a lone row, a matrix-vector product, is measured as such)."""
+    is measured on entry (the queue's order over the measured costs is the same): a pair is measured by the same
+    products of the same rows of ``others`` (those in the merged hull's box) either way, so no BLAS kernel's choice
+    of how it blocks the rows can tell the two apart."""
     pieces = list(pieces)
     if len(pieces) <= limit:
         return pieces
@@ -229,19 +229,9 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
             return float("inf"), None
         return m.volume - a.volume - b.volume, m
 
-    tops: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # piece -> (largest plane value of each of others, measured)
-
-    def top(i: int, rows: np.ndarray) -> np.ndarray:  # of others[rows] in alive piece i
+    def top(i: int, rows: np.ndarray) -> np.ndarray:  # largest plane value of each of others[rows] in alive piece i
         q = alive[i]
-        if len(rows) < 2:
-            return np.max(others[rows] @ q.equations[:, :3].T + q.equations[:, 3], axis=1)
-        value, done = tops.setdefault(i, (np.zeros(len(others)), np.zeros(len(others), bool)))
-        todo = rows[~done[rows]]
-        if len(todo):
-            todo = np.union1d(todo, rows[:2])
-            value[todo] = np.max(others[todo] @ q.equations[:, :3].T + q.equations[:, 3], axis=1)
-            done[todo] = True
-        return value[rows]
+        return np.max(others[rows] @ q.equations[:, :3].T + q.equations[:, 3], axis=1)
 
     def holds_other(m: Piece, i: int, j: int) -> bool:  # whether merging alive pieces i and j into m newly holds one of others
         lo, hi = m.points.min(axis=0), m.points.max(axis=0)

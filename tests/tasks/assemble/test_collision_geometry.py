@@ -974,18 +974,6 @@ def test_the_quick_outside_test_never_contradicts_the_full_one():
     assert not cp._surely_outside(np.zeros((0, 3)), box, tol)
 
 
-def test_a_row_of_a_plane_product_reads_the_same_in_any_product_holding_it():
-    """merge_pieces measures a piece's planes on all points of another link once and reads the rows a box holds
-    from it: each row of a matrix product of two rows or more equals that row in a product of fewer rows."""
-    rng = np.random.default_rng(3)
-    for _ in range(200):
-        points, planes = rng.normal(size=(int(rng.integers(2, 3000)), 3)), rng.normal(size=(int(rng.integers(4, 400)), 4))
-        full = points @ planes[:, :3].T + planes[:, 3]
-        rows = np.flatnonzero(rng.random(len(points)) < rng.random())
-        if len(rows) >= 2:
-            assert np.array_equal(points[rows] @ planes[:, :3].T + planes[:, 3], full[rows])
-
-
 @pytest.mark.slow  # end to end: a real object's whole decomposition
 @needs_shared
 def test_drop_slivers_on_a_real_object_equals_the_full_plane_test():
