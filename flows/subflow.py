@@ -204,7 +204,6 @@ def _run_assets(prep_futures: dict, chain_task, rec: _AssetRecorder, fingerprint
     ends, its input index entries and the rows of the assets that end there (failed, skipped, invalid), and the
     ``refine-metrics`` chain of each other one submitted; as a chain ends, its asset's row. No row waits for the
     prepares of other assets (its ``finished_at``, its progress event and its log line come when its chain ends)."""
-    # the time limit of a non-isolated stage is Prefect's (process isolation has its own)
     finished: queue.SimpleQueue = queue.SimpleQueue()
     chains: dict = {}
     for fut in prep_futures:
@@ -237,7 +236,8 @@ def _submit_batch(batch: list[AssetJob], fut, chain_task, rec: _AssetRecorder, f
         if exc is not None or prepared is None or prepared.skip is not None or not prepared.ok:
             rec.record(job, prepared, None, None, exc)
             continue
-        # a killed run's complete folder (prepared.resume): refine reads its report, metrics its evaluation
+        # a killed run's complete folder (prepared.resume): refine reads its report, metrics its evaluation; the time
+        # limit of a non-isolated stage is Prefect's (process isolation has its own)
         limit = {} if job.isolation in ("process", "spawn") else {"timeout_seconds": job.time_limit_seconds}
         out.append((chain_task.with_options(**limit).submit(Sealed(job), Sealed(prepared)), (job, prepared)))
     return out
