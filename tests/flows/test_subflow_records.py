@@ -42,11 +42,12 @@ class _Future:
 
 
 class _ChainTask:
-    """``chain_task.with_options(...).submit(job, prepared)``: a new future per asset, kept by asset id."""
+    """``chain_task.with_options(...).submit(job, prepared)``: a new future per asset, kept by asset id, with an event
+    per asset of ``ids`` set when its chain is submitted."""
 
-    def __init__(self):
+    def __init__(self, ids: list[str]):
         self.submitted: dict[str, _Future] = {}
-        self.any_submitted = threading.Event()
+        self.was_submitted = {a: threading.Event() for a in ids}
 
     def with_options(self, **_options) -> "_ChainTask":
         return self
@@ -54,7 +55,7 @@ class _ChainTask:
     def submit(self, job, prepared) -> _Future:
         fut = _Future(job.value.asset_id)
         self.submitted[job.value.asset_id] = fut
-        self.any_submitted.set()
+        self.was_submitted[job.value.asset_id].set()
         return fut
 
 
@@ -89,18 +90,15 @@ def _chain_result() -> SimpleNamespace:
 def test_an_assets_row_is_recorded_when_its_chain_ends_while_another_prepare_still_runs():
     a, b = _job("a"), _job("b")
     prep_a, prep_b = _Future("prepare a"), _Future("prepare b")
-    chains, rec = _ChainTask(), _Recorder(["a", "b"])
+    chains, rec = _ChainTask(["a", "b"]), _Recorder(["a", "b"])
     worker = _run({prep_a: [a], prep_b: [b]}, chains, rec)
     prep_a.end([Prepared(ok=True)])
-    assert chains.any_submitted.wait(WAIT_S), "a's chain was not submitted when its prepare ended"
+    assert chains.was_submitted["a"].wait(WAIT_S), "a's chain was not submitted when its prepare ended"
     chains.submitted["a"].end(_chain_result())
     assert rec.recorded["a"].wait(WAIT_S), "a's row waited for b's prepare"
     assert not rec.recorded["b"].is_set()
     prep_b.end([Prepared(ok=True)])
-    for _ in range(int(WAIT_S * 100)):
-        if "b" in chains.submitted:
-            break
-        threading.Event().wait(0.01)
+    assert chains.was_submitted["b"].wait(WAIT_S)
     chains.submitted["b"].end(_chain_result())
     worker.join(WAIT_S)
     assert not worker.is_alive()
@@ -110,11 +108,11 @@ def test_an_assets_row_is_recorded_when_its_chain_ends_while_another_prepare_sti
 def test_a_failed_prepare_and_a_failed_chain_are_recorded_with_their_errors_in_the_order_they_end():
     a, b, c = _job("a"), _job("b"), _job("c")
     prep_ab, prep_c = _Future("prepare a, b"), _Future("prepare c")
-    chains, rec = _ChainTask(), _Recorder(["a", "b", "c"])
+    chains, rec = _ChainTask(["a", "b", "c"]), _Recorder(["a", "b", "c"])
     worker = _run({prep_ab: [a, b], prep_c: [c]}, chains, rec)
     prep_ab.end([Prepared(ok=True), Prepared(ok=False, failure_mode="invalid_input", error="unreadable")])
     assert rec.recorded["b"].wait(WAIT_S), "b's row (its input stage ended it) waited"
-    assert chains.any_submitted.wait(WAIT_S)
+    assert chains.was_submitted["a"].wait(WAIT_S)
     prep_c.end(OSError("worker lost"))
     assert rec.recorded["c"].wait(WAIT_S)
     chains.submitted["a"].end(RuntimeError("refine crashed"))
