@@ -73,7 +73,7 @@ def path_joints(asset: AssetDescription, link_a: str, link_b: str) -> list[str]:
 
 def refine_initial_state(session, asset: AssetDescription, closed: dict[str, ClosedState], requested: dict[str, float],
                          fractions: dict[str, tuple[float, float]], config: RefineConfig | None = None, *,
-                         proposer=None) -> StateRefinement:
+                         proposer=None, opened: frozenset[str] = frozenset()) -> StateRefinement:
     """Lowest-objective state near ``requested`` (module docstring) as a
     :class:`~asset2sim.schemas.report.StateRefinement` (Phi in m).
 
@@ -87,6 +87,10 @@ def refine_initial_state(session, asset: AssetDescription, closed: dict[str, Clo
         proposer: optional ``proposer(state, worst_pairs, intervals) -> (list of
             {joint: value}, queries)``, asked once when the search stalls above
             the tolerance; proposals are clipped and kept only if they improve.
+        opened: joints the request opens (a band other than closed). Their line searches come first in each round,
+            so that a part left closed leaves its closed end (where its stop holds it) only where the opened parts
+            cannot clear alone: a suitcase's handle folded fully open comes to rest on the closed lid rather than
+            lifting the lid 3 degrees off its stop, where only friction would hold it.
     """
     cfg = config or RefineConfig()
     tolerance, lam, max_evaluations, seed = cfg.penetration_tolerance, cfg.state_lambda, cfg.max_state_evaluations, cfg.seed
@@ -96,7 +100,7 @@ def refine_initial_state(session, asset: AssetDescription, closed: dict[str, Clo
     box = allowed_intervals({n: closed[n] for n in names}, fractions)
     q_req = {n: box[n].clip(requested.get(n, closed[n].q_closed)) for n in names}
     scale = {n: max(closed[n].open_range, 1e-9) for n in names}
-    s = _Search(session, asset, names, box, q_req, scale, lam, tolerance, max_evaluations)
+    s = _Search(session, asset, names, box, q_req, scale, lam, tolerance, max_evaluations, opened)
     phi_req = s.best_phi
     worst = [{"link_a": c.link_a, "link_b": c.link_b, "depth_m": c.depth, "max_depth_m": c.max_depth, "points": c.points}
              for c in s.pairs_at_best()[:5]]
@@ -116,8 +120,10 @@ class _Search:
     m), evaluations made, phases that improved (``method``)."""
 
     def __init__(self, session, asset: AssetDescription, names: list[str], box: dict[str, Interval],
-                 q_req: dict[str, float], scale: dict[str, float], lam: float, tolerance: float, max_evaluations: int):
+                 q_req: dict[str, float], scale: dict[str, float], lam: float, tolerance: float, max_evaluations: int,
+                 opened: frozenset[str] = frozenset()):
         self.session, self.names, self.box, self.q_req, self.scale = session, names, box, q_req, scale
+        self.opened = opened
         self.lam, self.tolerance, self.max_evaluations = lam, tolerance, max_evaluations
         self.asset = asset
         self.evals = 0
@@ -155,13 +161,14 @@ class _Search:
         return self.penetration(self.best_q)[1]
 
     def focus_joints(self) -> list[str]:
-        """Movable joints on the paths between the links of the 3 worst pairs at the best state."""
+        """Movable joints on the paths between the links of the 3 worst pairs at the best state, the opened ones
+        first (each group in path order)."""
         out: list[str] = []
         for c in self.pairs_at_best()[:3]:
             for j in path_joints(self.asset, c.link_a, c.link_b):
                 if j in self.box and self.box[j].width > 0 and j not in out:
                     out.append(j)
-        return out
+        return sorted(out, key=lambda j: j not in self.opened)
 
     def movable(self) -> list[str]:
         return [n for n in self.names if self.box[n].width > 0]

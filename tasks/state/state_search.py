@@ -65,7 +65,8 @@ def _refine(candidate: Candidate, closed_out, bands, config, ws: Workspace, say,
 
     def search(on: Candidate, start: dict[str, float]):
         with ws.session(on, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=config.sim)) as sess:
-            return refine_state.refine_initial_state(sess, asset, closed_out, start, fractions, config, proposer=proposer)
+            return refine_state.refine_initial_state(sess, asset, closed_out, start, fractions, config, proposer=proposer,
+                                                     opened=frozenset(j for j, b in bands.items() if b != "closed"))
 
     st = search(candidate, requested)
     in_the_way = [] if addressed is None or not st.phi_result > config.penetration_tolerance else \
