@@ -16,7 +16,7 @@ from asset2sim.frames import rpy_matrix
 from asset2sim.engines.registry import open_shape_world
 from asset2sim.mesh_io import MeshCache
 from asset2sim.schemas.asset import AssetDescription, GeometryRef
-from asset2sim.tasks.geometry.decomposition import decompose_mesh
+from asset2sim.tasks.geometry.decomposition import COACD_SETTINGS, decompose_mesh
 
 #: A collision piece below this fraction of its link's collision surface that
 #: overlaps another link is hinge hardware and loses its collision.
@@ -140,18 +140,19 @@ class _PieceWorld:
 
 
 def improve_collisions(session, asset: AssetDescription, pairs: list[tuple[str, str]], scale: float, out_dir: Path, *,
-                       cache=None, max_decompositions: int = 32,
-                       folder: str = "collision") -> tuple[dict[str, list[CollisionPiece]], list[str]]:
+                       cache=None, max_decompositions: int = 32, folder: str = "collision",
+                       threshold: float = COACD_SETTINGS["threshold"]) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
     """Greedy, piece by piece, for link pairs whose hulls keep penetrating: a small piece (< :data:`PIN_AREA_FRACTION` of
     its link's surface) that overlaps the other link loses its collision; a concave one (:func:`convexity_ratio` >= 1.05) is
-    replaced by its CoACD decomposition (at most ``max_decompositions`` calls). Each change is kept only if it lowers the
-    pair's piece-wise penetration (:func:`overlap_depths`). ``session``: PyBullet session of the scaled output at the
+    replaced by its CoACD decomposition at concavity ``threshold`` (a fraction of the mesh's size; at most
+    ``max_decompositions`` calls). Each change is kept only if it lowers the pair's piece-wise penetration
+    (:func:`overlap_depths`). ``session``: PyBullet session of the scaled output at the
     refined state. Pieces go to ``out_dir/<folder>/``. Returns (collision overrides, notes)."""
     cache = cache or MeshCache()
     links = sorted({ln for pair in pairs for ln in pair})
     world = _PieceWorld(session, asset, links, scale, cache)
     try:
-        rep = _Repair(world, cache, links, max_decompositions)
+        rep = _Repair(world, cache, links, max_decompositions, threshold)
         for _pass in range(2):  # a second pass: a change on one side can make another one useful
             tried: set[tuple[str, int]] = set()
             for a, b in pairs:
@@ -165,8 +166,8 @@ class _Repair:
     """The greedy repair's state: ``changed`` ((link, collision index) -> convex
     pieces, None when removed), ``notes``, CoACD calls made."""
 
-    def __init__(self, world: _PieceWorld, cache, links: list[str], max_decompositions: int):
-        self.world, self.cache, self.max_decompositions = world, cache, max_decompositions
+    def __init__(self, world: _PieceWorld, cache, links: list[str], max_decompositions: int, threshold: float):
+        self.world, self.cache, self.max_decompositions, self.threshold = world, cache, max_decompositions, threshold
         self.area = {}  # (link, k) -> surface area of the piece (input units, mesh scale applied)
         for (ln, k), g in world.refs.items():
             mesh = cache.get(g.path)
@@ -213,7 +214,7 @@ class _Repair:
                 self.notes.append(f"decomposition budget of {self.max_decompositions} CoACD calls spent; {g.filename} of {ln} kept as its hull")
                 continue
             self.decompositions += 1
-            pieces = decompose_mesh(g.path)
+            pieces = decompose_mesh(g.path, self.threshold)
             after = self._try(key, [pv for pv, _ in pieces], pieces, a, b, before)
             if after is not None:
                 self.notes.append(f"{ln}: {g.filename} replaced by {len(pieces)} convex pieces (CoACD): overlap with {other} {before * 1000:.3g} -> {after * 1000:.3g} mm")

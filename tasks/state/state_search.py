@@ -11,7 +11,7 @@ from asset2sim.engines.base import SessionOptions
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.assemble import write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
-from asset2sim.tasks.geometry.decomposition import DecompositionUnavailable
+from asset2sim.tasks.geometry.decomposition import COACD_THRESHOLDS, DecompositionUnavailable
 from asset2sim.tasks.state import collision, refine_state
 from asset2sim.tasks.synthesize import estimate
 
@@ -84,41 +84,64 @@ def _refine(candidate: Candidate, closed_out, bands, config, ws: Workspace, say,
             st = room
         else:
             fractions = held
-    base = candidate.collision_overrides
     if not (st.phi_result > config.penetration_tolerance and config.convex_decomposition):
         return st, candidate
-    deep = [(p_["link_a"], p_["link_b"]) for p_ in st.worst_pairs if p_["depth_m"] > config.penetration_tolerance]
+    first, kept = st, candidate
+    st, decomposed = _decomposed_search(candidate, first, COACD_THRESHOLDS[0], config, ws, say, search, requested)
+    kept = decomposed or candidate
+    for threshold in COACD_THRESHOLDS[1:]:  # finer, only where the coarser pieces still leave an overlap
+        if not st.phi_result > config.penetration_tolerance:
+            break
+        finer, decomposed = _decomposed_search(candidate, first, threshold, config, ws, say, search, requested)
+        other = finer  # the attempt not kept: its evaluations and model queries are added to the one kept
+        if decomposed is not None and finer.phi_result < st.phi_result:
+            finer.collision_changes = [f"CoACD at concavity {threshold:g}, where its pieces at the coarser concavity left "
+                                       f"{st.phi_result * 1000:.3g} mm:"] + list(finer.collision_changes)
+            other, st, kept = st, finer, decomposed
+        else:
+            st.collision_changes = list(st.collision_changes) + [
+                f"CoACD at concavity {threshold:g} left {finer.phi_result * 1000:.3g} mm; not kept"]
+        st.evaluations += other.evaluations - first.evaluations
+        st.model_queries += other.model_queries - first.model_queries
+    return st, kept
+
+
+def _decomposed_search(candidate: Candidate, before, threshold: float, config: RefineConfig, ws: Workspace, say, search,
+                       requested: dict[str, float]):
+    """The deep pairs' collision pieces of ``candidate`` at ``before.result`` repaired with CoACD at concavity
+    ``threshold`` (:func:`collision.improve_collisions`), then the state searched again from ``requested``. Returns (the
+    search, with ``before``'s evaluations added, its notes in ``collision_changes``; the candidate with those pieces,
+    or None when no change was kept: then ``before`` itself with the notes). Pieces at a finer concavity than the
+    first of :data:`COACD_THRESHOLDS` go to a folder of their own, so that the coarser ones stay as they were written."""
+    base, folder = candidate.collision_overrides, write.collision_folder(candidate.asset)
+    if threshold != COACD_THRESHOLDS[0]:  # beside the coarser pieces, which may be the ones kept
+        folder = f"{folder}/concavity_{threshold:g}"
+    deep = [(p_["link_a"], p_["link_b"]) for p_ in before.worst_pairs if p_["depth_m"] > config.penetration_tolerance]
     links = sorted({ln for pair in deep for ln in pair})
-    sess = ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=st.result))
+    sess = ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False,
+                                                           initial_state=before.result))
     try:
-        overrides, dnotes = collision.improve_collisions(sess, asset, deep, s, ws.root, cache=ws.mesh_cache,
-                                                         max_decompositions=config.max_decompositions,
-                                                         folder=write.collision_folder(asset))
+        overrides, dnotes = collision.improve_collisions(sess, candidate.asset, deep, candidate.overlay.scale, ws.root,
+                                                         cache=ws.mesh_cache, max_decompositions=config.max_decompositions,
+                                                         folder=folder, threshold=threshold)
     except (DecompositionUnavailable, ValueError) as exc:
         say("refine_state", f"collision improvement skipped: {exc}")
-        st.collision_changes = [f"collision improvement skipped: {exc}"]
-        return st, candidate
+        return before.model_copy(update={"collision_changes": [f"collision improvement skipped: {exc}"]}), None
     finally:
         sess.close()
     if not overrides:
-        st.collision_changes = dnotes or [f"no collision piece change lowered the overlap of {', '.join(links)}"]
-        return st, candidate
-    overrides = {**base, **overrides}
-    before = st
-    decomposed = replace(candidate, collision_overrides=overrides)
+        return before.model_copy(update={"collision_changes": dnotes or [
+            f"no collision piece change lowered the overlap of {', '.join(links)}"]}), None
+    decomposed = replace(candidate, collision_overrides={**base, **overrides})
     st = search(decomposed, requested)
     st.evaluations += before.evaluations
     st.model_queries += before.model_queries
     st.phi_requested = before.phi_requested
     if st.phi_result >= before.phi_result:
         # the decomposition did not help (pieces of neighbours can bulge): keep the original hulls
-        before.evaluations = st.evaluations
-        before.model_queries = st.model_queries
-        before.collision_changes = [
+        return before.model_copy(update={"evaluations": st.evaluations, "model_queries": st.model_queries, "collision_changes": [
             f"collision pieces changed for {', '.join(links)} but self-penetration went {before.phi_result * 1000:.3g} -> "
-            f"{st.phi_result * 1000:.3g} mm; original collision meshes kept"
-        ] + dnotes
-        return before, candidate
+            f"{st.phi_result * 1000:.3g} mm; original collision meshes kept"] + dnotes}), None
     st.collision_changes = dnotes
     st.method = before.method + " | collision pieces improved -> " + st.method
     return st, decomposed
