@@ -60,8 +60,7 @@ def _left_note(candidate: Candidate, st, closed_out, bands, intervals, config: R
 def _refine(candidate: Candidate, closed_out, bands, config, ws: Workspace, say, proposer, intervals, addressed):
     """:func:`refine_state_with_decomposition` without its closing note."""
     fractions = estimate.band_intervals(bands, intervals)
-    asset, overlay, requested = candidate.asset, candidate.overlay, dict(candidate.state)
-    s = overlay.scale
+    asset, requested = candidate.asset, dict(candidate.state)
 
     def search(on: Candidate, start: dict[str, float]):
         with ws.session(on, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=config.sim)) as sess:
@@ -86,7 +85,7 @@ def _refine(candidate: Candidate, closed_out, bands, config, ws: Workspace, say,
             fractions = held
     if not (st.phi_result > config.penetration_tolerance and config.convex_decomposition):
         return st, candidate
-    first, kept = st, candidate
+    first = st
     st, decomposed = _decomposed_search(candidate, first, COACD_THRESHOLDS[0], config, ws, say, search, requested)
     kept = decomposed or candidate
     for threshold in COACD_THRESHOLDS[1:]:  # finer, only where the coarser pieces still leave an overlap
