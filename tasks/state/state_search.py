@@ -7,6 +7,8 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Callable
 
+import numpy as np
+
 from asset2sim.engines.base import SessionOptions
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.assemble import write
@@ -88,8 +90,8 @@ def _refine(candidate: Candidate, closed_out, bands, config, ws: Workspace, say,
     first = st
     st, decomposed = _decomposed_search(candidate, first, COACD_THRESHOLDS[0], config, ws, say, search, requested)
     kept = decomposed or candidate
-    for threshold in COACD_THRESHOLDS[1:]:  # finer, only where the coarser pieces still leave an overlap
-        if not st.phi_result > config.penetration_tolerance:
+    for threshold in COACD_THRESHOLDS[1:]:  # finer, only where the coarser pieces still leave an overlap they explain
+        if not config.penetration_tolerance < st.phi_result <= coarse_bulge(candidate, st.worst_pairs, ws):
             break
         finer, decomposed = _decomposed_search(candidate, first, threshold, config, ws, say, search, requested)
         other = finer  # the attempt not kept: its evaluations and model queries are added to the one kept
@@ -103,6 +105,24 @@ def _refine(candidate: Candidate, closed_out, bands, config, ws: Workspace, say,
         st.evaluations += other.evaluations - first.evaluations
         st.model_queries += other.model_queries - first.model_queries
     return st, kept
+
+
+def coarse_bulge(candidate: Candidate, pairs: list[dict], ws: Workspace) -> float:
+    """The most (m) CoACD's pieces at the first of :data:`COACD_THRESHOLDS` may stand out of the collision meshes of
+    the links of ``pairs`` (``StateRefinement.worst_pairs``): that concavity threshold times each mesh's bounding-box
+    diagonal at the overlay's scale (CoACD measures concavity on the mesh normalised to its bounding box: Wei et al.,
+    "Approximate convex decomposition for 3D meshes with collision-aware concavity and tree search", SIGGRAPH 2022).
+    An overlap deeper than this is not the pieces' bulge, and finer pieces would not clear it (a 6 cm stapler's
+    parts, 5.5 mm into each other where its meshes' bulge is at most 3.5 mm). 0 without mesh collisions."""
+    links = {ln for p_ in pairs for ln in (p_["link_a"], p_["link_b"])}
+    diag = 0.0
+    for ln in sorted(links):
+        for g in candidate.asset.link(ln).collisions:
+            if g.kind == "mesh" and g.path is not None:
+                v = np.asarray(ws.mesh_cache.get(g.path).vertices, float) * np.asarray(g.scale, float)
+                if len(v):
+                    diag = max(diag, float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))))
+    return COACD_THRESHOLDS[0] * diag * candidate.overlay.scale
 
 
 def _decomposed_search(candidate: Candidate, before, threshold: float, config: RefineConfig, ws: Workspace, say, search,

@@ -183,3 +183,22 @@ def test_a_stapler_of_one_mesh_per_link_shuts_on_pieces_of_the_finer_concavity(t
     assert r.state.phi_result <= tol
     assert r.opening_fractions["joint_1"] <= 0.01  # on its stop, not at the closed band's edge
     assert r.failure_mode == "none", r.readiness
+
+
+@needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own, CoACD counted
+def test_an_overlap_deeper_than_the_pieces_can_bulge_gets_no_finer_decomposition(tmp_path, monkeypatch):
+    """Stapler 102990 asked "tiny" (6 cm): its magazine stays 5.5 mm inside its base on the pieces at CoACD's default
+    concavity, more than those pieces can stand out of its meshes (the concavity threshold times a mesh's diagonal,
+    :func:`~asset2sim.tasks.state.state_search.coarse_bulge`). Finer pieces would not clear it (at 0.025 they left
+    7.1 mm, for 20 s of CoACD), so none is made and the overlap is reported as it is."""
+    from asset2sim.tasks.geometry.decomposition import COACD_THRESHOLDS
+    from asset2sim.tasks.state import collision
+
+    thresholds: list[float] = []
+    real = collision.decompose_mesh
+    monkeypatch.setattr(collision, "decompose_mesh", lambda path, t: thresholds.append(t) or real(path, t))
+    r = refine_asset(SHARED / "102990", "A tiny stapler.", tmp_path / "out", extras=False).report
+    assert thresholds and set(thresholds) == {COACD_THRESHOLDS[0]}
+    assert r.state.phi_result > 0.004
+    assert r.state.collision_changes[-1].startswith(f"self-penetration {r.state.phi_result * 1000:.3g} mm left")
