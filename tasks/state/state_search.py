@@ -90,8 +90,8 @@ def _refine(candidate: Candidate, closed_out, bands, config, ws: Workspace, say,
     first = st
     st, decomposed = _decomposed_search(candidate, first, COACD_THRESHOLDS[0], config, ws, say, search, requested)
     kept = decomposed or candidate
-    for threshold in COACD_THRESHOLDS[1:]:  # finer, only where the coarser pieces still leave an overlap they explain
-        if not config.penetration_tolerance < st.phi_result <= coarse_bulge(candidate, st.worst_pairs, ws):
+    for threshold in COACD_THRESHOLDS[1:]:  # finer, only where the coarser pieces helped but leave an overlap they explain
+        if kept is candidate or not config.penetration_tolerance < st.phi_result <= coarse_bulge(candidate, st.worst_pairs, ws):
             break
         finer, decomposed = _decomposed_search(candidate, first, threshold, config, ws, say, search, requested)
         other = finer  # the attempt not kept: its evaluations and model queries are added to the one kept
