@@ -40,9 +40,9 @@ COACD_SETTINGS = {
 #: CoACD concavity thresholds the state repair tries in turn (:func:`asset2sim.tasks.state.state_search.
 #: refine_state_with_decomposition`): the default, then a finer one only where the default's pieces lowered the overlap
 #: but leave the parts overlapping at every state of their bands, by no more than those pieces can bulge
-#: (:func:`asset2sim.tasks.state.state_search.coarse_bulge`). A concave part whose pieces bulge up to the threshold's share of its
-#: size (5 %: 7 mm on a 15 cm stapler base made of one mesh) can keep a closed part off its stop; at 2.5 % CoACD
-#: follows the surface twice as closely for about twice its time (2.4 -> 5.0 s and 5.0 -> 11.5 s on that stapler's
+#: (:func:`asset2sim.tasks.state.state_search.coarse_bulge`). A concave part whose pieces bulge up to the threshold's
+#: share of its size (5 %: 7 mm on a 15 cm stapler base made of one mesh) can keep a closed part off its stop; at 2.5 %
+#: CoACD follows the surface twice as closely for about twice its time (2.4 -> 5.0 s and 5.0 -> 11.5 s on that stapler's
 #: base and magazine).
 COACD_THRESHOLDS = (0.05, 0.025)
 
