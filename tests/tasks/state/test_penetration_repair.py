@@ -202,3 +202,36 @@ def test_an_overlap_deeper_than_the_pieces_can_bulge_gets_no_finer_decomposition
     assert thresholds and set(thresholds) == {COACD_THRESHOLDS[0]}
     assert r.state.phi_result > 0.004
     assert r.state.collision_changes[-1].startswith(f"self-penetration {r.state.phi_result * 1000:.3g} mm left")
+
+
+def test_the_bulge_of_coarse_pieces_is_the_threshold_times_each_meshs_diagonal_at_scale(tmp_path):
+    """:func:`coarse_bulge` reads the collision meshes of the pairs' links (their URDF mesh scale, then the overlay's
+    scale) and takes the largest bounding-box diagonal times the first concavity threshold; a link of primitives
+    adds nothing."""
+    from types import SimpleNamespace
+
+    import numpy as np
+    import trimesh
+
+    from asset2sim.mesh_io import MeshCache
+    from asset2sim.tasks.geometry.decomposition import COACD_THRESHOLDS
+    from asset2sim.tasks.ingest.extract import extract_asset
+    from asset2sim.tasks.state.state_search import coarse_bulge
+
+    folder = tmp_path / "two_meshes"
+    folder.mkdir()
+    trimesh.creation.box(extents=(0.2, 0.1, 0.05)).export(folder / "slab.obj")
+    (folder / "mobility.urdf").write_text("""<?xml version="1.0"?>
+<robot name="two_meshes">
+  <link name="base"><collision><geometry><box size="1 1 1"/></geometry></collision></link>
+  <link name="slab"><collision><geometry><mesh filename="slab.obj" scale="2 2 2"/></geometry></collision></link>
+  <joint name="hinge" type="revolute"><parent link="base"/><child link="slab"/><axis xyz="0 0 1"/>
+    <limit lower="0" upper="1" effort="1" velocity="1"/></joint>
+</robot>
+""")
+    candidate = SimpleNamespace(asset=extract_asset(folder), overlay=SimpleNamespace(scale=0.5))
+    ws = SimpleNamespace(mesh_cache=MeshCache())
+    pair = [{"link_a": "base", "link_b": "slab", "depth_m": 0.01}]
+    diagonal = float(np.linalg.norm([0.2, 0.1, 0.05])) * 2 * 0.5
+    assert coarse_bulge(candidate, pair, ws) == pytest.approx(COACD_THRESHOLDS[0] * diagonal)
+    assert coarse_bulge(candidate, [{**pair[0], "link_b": "base"}], ws) == 0.0

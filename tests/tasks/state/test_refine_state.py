@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from asset2sim.engines.base import SessionOptions
@@ -61,6 +63,47 @@ def test_path_joints_between_links(arm):
     assert path_joints(asset, "arm", "post") == ["hinge"]
     assert path_joints(asset, "body", "post") == []
 
+
+def _write_cover_and_handle(folder):
+    """A cover closed on its stop at q = 0 and a handle hinged beside it whose upper limit folds it 4 mm into the
+    cover; the cover's closed band (3 % of its range) or the handle's fully band (85-100 %) can clear it."""
+    folder.mkdir(parents=True, exist_ok=True)
+    hinge = '<axis xyz="0 0 -1"/><limit lower="0" upper="{}" effort="10" velocity="10"/>'
+    (folder / "mobility.urdf").write_text(f"""<?xml version="1.0"?>
+<robot name="cover_handle">
+  <link name="base"/>
+  <link name="body"><collision><origin xyz="0 0 0.1"/><geometry><box size="0.2 0.2 0.2"/></geometry></collision></link>
+  <joint name="fix" type="fixed"><parent link="base"/><child link="body"/></joint>
+  <link name="cover"><collision><origin xyz="0.2 0 0"/><geometry><box size="0.4 0.04 0.04"/></geometry></collision></link>
+  <joint name="cover_hinge" type="revolute"><parent link="body"/><child link="cover"/><origin xyz="0 0 0.25"/>{hinge.format(1.5)}</joint>
+  <link name="handle"><collision><origin xyz="0.112 0 0"/><geometry><box size="0.224 0.01 0.04"/></geometry></collision></link>
+  <joint name="handle_hinge" type="revolute"><parent link="body"/><child link="handle"/><origin xyz="0.2 0.24 0.25"/>{hinge.format(math.pi / 2)}</joint>
+</robot>
+""")
+    return folder
+
+
+def test_a_part_left_closed_stays_on_its_stop_when_the_opened_part_can_clear_alone(tmp_path):
+    """The handle asked fully open lies 4 mm into the closed cover. Searched in path order the cover's line search
+    comes first and lifts it off its stop (where friction alone would hold it); with the opened joints first, the
+    handle comes back inside its band and the cover stays closed."""
+    asset = extract_asset(_write_cover_and_handle(tmp_path / "cover_handle"))
+    session = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
+    try:
+        closed = {"cover_hinge": ClosedState(joint="cover_hinge", q_closed=0.0, direction=1.0, open_range=1.5, lower=0.0, upper=1.5),
+                  "handle_hinge": ClosedState(joint="handle_hinge", q_closed=0.0, direction=1.0, open_range=math.pi / 2,
+                                              lower=0.0, upper=math.pi / 2)}
+        bands = {"cover_hinge": BAND_INTERVAL["closed"], "handle_hinge": BAND_INTERVAL["fully"]}
+        requested = {"cover_hinge": 0.0, "handle_hinge": math.pi / 2}
+        in_path_order = refine_initial_state(session, asset, closed, requested, bands)
+        opened_first = refine_initial_state(session, asset, closed, requested, bands, opened=frozenset({"handle_hinge"}))
+    finally:
+        session.close()
+    tol = RefineConfig().penetration_tolerance
+    assert in_path_order.phi_requested > 1e-3 and in_path_order.worst_pairs[0]["link_a"] == "cover"
+    assert in_path_order.phi_result <= tol and in_path_order.result["cover_hinge"] > 0.01  # lifted off its stop
+    assert opened_first.phi_result <= tol and opened_first.result["cover_hinge"] == 0.0
+    assert BAND_INTERVAL["fully"][0] <= opened_first.result["handle_hinge"] / (math.pi / 2) < 0.95
 
 @needs_shared
 def test_parts_in_the_way_are_the_unaddressed_closed_ones_a_requested_opening_runs_through():
