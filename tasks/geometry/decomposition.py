@@ -44,7 +44,7 @@ COACD_SETTINGS = {
 #: share of its size (5 %: 7 mm on a 15 cm stapler base made of one mesh) can keep a closed part off its stop; at 2.5 %
 #: CoACD follows the surface twice as closely for about twice its time (2.4 -> 5.0 s and 5.0 -> 11.5 s on that stapler's
 #: base and magazine).
-COACD_THRESHOLDS = (0.05, 0.025)
+COACD_THRESHOLDS = (COACD_SETTINGS["threshold"], COACD_SETTINGS["threshold"] / 2)
 
 
 class DecompositionUnavailable(RuntimeError):
