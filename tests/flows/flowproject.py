@@ -5,15 +5,19 @@ their ``conftest.py`` under one name (``flowproject``), so its state exists once
 
 from __future__ import annotations
 
+import atexit
 import csv
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
 import yaml
 
-# Prefect reads its settings when first imported: keep its state out of ~/.prefect.
+# Prefect reads its settings when first imported: keep its state out of ~/.prefect, in a folder removed when the
+# process that made it exits (a child process importing this module makes and removes its own, unused one).
 _PREFECT_HOME = tempfile.mkdtemp(prefix="a2s-test-prefect-")
+atexit.register(shutil.rmtree, _PREFECT_HOME, True)
 os.environ.setdefault("PREFECT_HOME", _PREFECT_HOME)
 os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
 os.environ.setdefault("DO_NOT_TRACK", "1")
