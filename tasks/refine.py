@@ -312,7 +312,8 @@ class RefineRun:
 
 def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str) -> tuple[Attempt, str]:
     """Stages 4-7 once; when unstable or toppled as modelled, a named pose put down where it rests (:func:`settled_attempt`);
-    else a steadier opening, then its stablest face (kept only if better). Returns (attempt, pose note)."""
+    else a steadier opening, then its stablest face (kept only if better), then, when unstable and still failing, the
+    modelled pose put down where it rests (kept only if every check passes there). Returns (attempt, pose note)."""
     att = _attempt(ctx, run)
     if ctx.request.pose_hint is not None:  # the pose asked is kept: put down where it rests when it leans as it settles
         return settled_attempt(att, pose_note, lambda rotation: _attempt(replace(ctx, root_rotation=rotation), run))
@@ -328,15 +329,22 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
     state_in = estimate.state_from_bands(ctx.closed, att.bands, 1.0, att.prismatic)
     R, note = pose.most_stable_rotation(run.kin, ctx.asset, att.overlay.links, state_in, att.overlay.scale, ctx.hull_points,
                                         _moving_links(ctx), exclude_modelled=True)
-    if R is None:
-        return att, pose_note
-    why = "unstable as modelled" if not att.check.stable else "toppled by a robust-rest disturbance as modelled"
-    run.log.say("post_check", f"{why}; {note}")
-    second = _attempt(replace(ctx, root_rotation=R), run)
-    if second.check.stable and (second.check.passed or not att.check.passed) and not (
-            second.check.topples and not att.check.topples):
-        return second, f"{why}; {note}"
-    return att, f"{note}; not better in simulation, kept as modelled"
+    chosen = (att, pose_note)
+    if R is not None:
+        why = "unstable as modelled" if not att.check.stable else "toppled by a robust-rest disturbance as modelled"
+        run.log.say("post_check", f"{why}; {note}")
+        second = _attempt(replace(ctx, root_rotation=R), run)
+        chosen = (second, f"{why}; {note}") if second.check.stable and (second.check.passed or not att.check.passed) and not (
+            second.check.topples and not att.check.topples) else (att, f"{note}; not better in simulation, kept as modelled")
+    if (chosen[0].check.passed and not chosen[0].off_band) or att.check.stable:
+        return chosen
+    # no face passes: where it leans onto its supports as it settles as modelled (a swivel USB stick on its cover's
+    # plate), it is put down there, kept when every check passes there
+    leaned, lean_note = settled_attempt(att, pose_note, lambda rotation: _attempt(replace(ctx, root_rotation=rotation), run))
+    if leaned is att or not leaned.check.passed or leaned.check.topples or leaned.off_band:
+        return chosen
+    run.log.say("post_check", f"unstable as modelled; {lean_note}")
+    return leaned, f"unstable as modelled; {lean_note}"
 
 
 def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float] | None = None) -> Attempt:

@@ -11,12 +11,13 @@ import numpy as np
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, StateRefinement
+from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.inert import one_line
 from asset2sim.stage_log import StageLog
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.state import balance, pose
 from asset2sim.tasks.synthesize import estimate
-from asset2sim.tasks.check import postcheck
+from asset2sim.tasks.check import as_asked, postcheck
 from asset2sim.tasks.geometry.closed_state import ClosedState
 
 
@@ -43,6 +44,13 @@ class Attempt:
     @property
     def candidate(self) -> Candidate:
         return Candidate(self.asset, self.overlay, self.state, self.overrides, self.root_rotation)
+
+    @property
+    def off_band(self) -> list[str]:
+        """Joints a band set (:attr:`bands`) whose opening fraction at :attr:`state` lies outside that band, by more
+        than the request tier's slack (:func:`~asset2sim.tasks.check.as_asked.band_missed`)."""
+        return [n for n, b in self.bands.items() if b in BAND_INTERVAL and n in self.closed_out and n in self.state
+                and as_asked.band_missed(n, n, b, abs(self.closed_out[n].fraction(self.state[n]))) is not None]
 
 
 def least_openings(att: Attempt, intervals: dict[str, tuple[float, float]]) -> dict[str, float]:
