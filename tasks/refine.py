@@ -336,20 +336,34 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
         second = _attempt(replace(ctx, root_rotation=R), run)
         chosen = (second, f"{why}; {note}") if second.check.stable and (second.check.passed or not att.check.passed) and not (
             second.check.topples and not att.check.topples) else (att, f"{note}; not better in simulation, kept as modelled")
-    if (chosen[0].check.passed and not chosen[0].off_band) or att.check.stable:
+    if _settles(chosen[0]):
+        return chosen
+    if att.check.topples and any(d.startswith(stability.TRANSFER_NOTE) for d in att.design):
+        # toppled with the least mass moved off its opened parts: the most the sources allow (a lighter lid)
+        heavier = _attempt(ctx, run, most=True)
+        if _settles(heavier):
+            return heavier, pose_note
+        run.log.say("stability", "the whole transfer did not pass every check: the least transfer kept")
+    if att.check.stable:
         return chosen
     # no face passes: where it leans onto its supports as it settles as modelled (a swivel USB stick on its cover's
     # plate), it is put down there, kept when every check passes there
     leaned, lean_note = settled_attempt(att, pose_note, lambda rotation: _attempt(replace(ctx, root_rotation=rotation), run))
-    if leaned is att or not leaned.check.passed or leaned.check.topples or leaned.off_band:
+    if leaned is att or not _settles(leaned):
         return chosen
     run.log.say("post_check", f"unstable as modelled; {lean_note}")
     return leaned, f"unstable as modelled; {lean_note}"
 
 
-def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float] | None = None) -> Attempt:
+def _settles(att: Attempt) -> bool:
+    """Whether ``att`` passes every check, no disturbance topples it and every band is met."""
+    return att.check.passed and not att.check.topples and not att.off_band
+
+
+def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float] | None = None, most: bool = False) -> Attempt:
     """Stages 4-7 for the current ``ctx.root_rotation``; ``fractions`` (joint -> opening fraction)
-    replace the requested state of those joints."""
+    replace the requested state of those joints; ``most``: stability by design moves all the mass it may
+    (:func:`~asset2sim.tasks.state.stability.design_for_stability`)."""
     config, ws, log = run.config, run.ws, run.log
     syn = _synthesize(ctx, run)
     if fractions:
@@ -386,7 +400,8 @@ def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float]
         syn, state, moved = again.synthesis, again.state, again.notes
         refined, measured = replace(refined, state=state), replace(measured, state=state)
         st.result = {n: state.get(n, q) for n, q in st.result.items()}
-    balanced, design = stability.design_for_stability(ws.source(measured), ctx.asset, syn.overlay, state, ctx.category, ctx.geometry)
+    balanced, design = stability.design_for_stability(ws.source(measured), ctx.asset, syn.overlay, state, ctx.category, ctx.geometry,
+                                                       most=most)
     closed_out, ended = ground_clearance.ends_at_the_floor(syn.closed_out, lifted.stops, syn.bands)  # "fully": as far as it goes
     design = floored + ended + moved + design
     for line in design:

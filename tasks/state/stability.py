@@ -21,7 +21,7 @@ from asset2sim.tasks.state.balance import Balance, _balance, _com, _link_world, 
 from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.engines.source import SimSource
 
-__all__ = ["PART_MASS_FRACTION", "design_for_stability", "envelope_masses"]
+__all__ = ["PART_MASS_FRACTION", "TRANSFER_NOTE", "design_for_stability", "envelope_masses"]
 
 
 @dataclass(frozen=True)
@@ -38,6 +38,10 @@ PART_MASS_FRACTION: dict[tuple[str, str], PartFraction] = {
     (category, label): PartFraction(**share)
     for category, parts in package_yaml(__package__, "part_mass_fractions.yaml").items() for label, share in parts.items()
 }
+
+
+#: How the design note of a mass transfer begins (:func:`design_for_stability`).
+TRANSFER_NOTE = "stability by design: at the requested state"
 
 
 def envelope_masses(overlay: Overlay, points: dict[str, np.ndarray],
@@ -70,7 +74,8 @@ def envelope_masses(overlay: Overlay, points: dict[str, np.ndarray],
 
 
 def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Overlay, state: dict[str, float],
-                         category: str | None, geometry: dict[str, LinkGeometry] | None = None) -> tuple[Overlay, list[str]]:
+                         category: str | None, geometry: dict[str, LinkGeometry] | None = None, *,
+                         most: bool = False) -> tuple[Overlay, list[str]]:
     """Make a free-standing object balance at ``state`` by its part masses: the
     smallest transfer from the opened parts (each linearly towards its floor:
     the sourced lower fraction, else the envelope shell mass) to the body
@@ -80,7 +85,9 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
     ``source``: the written URDF (scale baked in, pose applied) of ``overlay``;
     ``state``: joint -> rad or m; ``category``: key of :data:`PART_MASS_FRACTION`;
     ``geometry``: link -> :class:`LinkGeometry` (scale 1) for the envelope shell
-    masses (None: only the sourced fractions). Returns (overlay, changes): the
+    masses (None: only the sourced fractions); ``most``: the whole transfer, every
+    opened part at its floor (the lightest its sources allow), for an object that a
+    disturbance toppled at the smallest one. Returns (overlay, changes): the
     same overlay and no changes when nothing changed.
     """
     if overlay.mounting is not None and overlay.mounting.fixed:
@@ -104,15 +111,17 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
     if t is None:
         return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge; even with the opened parts at "
                          "the lower end of their range (" + "; ".join(reasons) + ") it stays outside: masses kept"]
+    t = 1.0 if most else t
     new = masses_for(t)
     ov = _with_masses(overlay, new, light + body)
     after = _signed_margin(bal.support, _com(ov, frames)[:2])
     total = overlay.total_mass()
     m_part, m_after = sum(overlay.links[ln].mass for ln in floors), sum(new[ln] for ln in floors)
-    return ov, [f"stability by design: at the requested state the centre of mass was {bal.margin * 1000:.3g} mm from the support's "
+    return ov, [f"{TRANSFER_NOTE} the centre of mass was {bal.margin * 1000:.3g} mm from the support's "
                 f"edge (needs >= {bal.required * 1000:.3g} mm inside); moved {t * span:.3g} kg from {', '.join(light)} to "
                 f"{', '.join(body)} (opened parts {m_part / total:.0%} -> {m_after / total:.0%} of {total:.3g} kg, "
-                + "; ".join(reasons) + f"); margin now {after * 1000:.3g} mm; total mass, scale and state unchanged"]
+                + "; ".join(reasons) + f"); margin now {after * 1000:.3g} mm; total mass, scale and state unchanged"
+                + ("; the whole transfer: a disturbance toppled it at the least" if most else "")]
 
 
 def _opened_links(asset: AssetDescription, category: str | None) -> tuple[set[str], dict[str, PartFraction]]:
