@@ -338,8 +338,7 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
             second.check.topples and not att.check.topples) else (att, f"{note}; not better in simulation, kept as modelled")
     if _settles(chosen[0]):
         return chosen
-    if att.check.topples and any(d.startswith(stability.TRANSFER_NOTE) for d in att.design):
-        # toppled with the least mass moved off its opened parts: the most the sources allow (a lighter lid)
+    if att.check.topples:  # toppled with less mass moved off its opened parts: the most the sources allow (a lighter lid)
         heavier = _attempt(ctx, run, most=True)
         if _settles(heavier):
             return heavier, pose_note

@@ -87,14 +87,14 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
     ``geometry``: link -> :class:`LinkGeometry` (scale 1) for the envelope shell
     masses (None: only the sourced fractions); ``most``: the whole transfer, every
     opened part at its floor (the lightest its sources allow), for an object that a
-    disturbance toppled at the smallest one. Returns (overlay, changes): the
+    disturbance toppled with less moved (or none, where it balanced statically). Returns (overlay, changes): the
     same overlay and no changes when nothing changed.
     """
     if overlay.mounting is not None and overlay.mounting.fixed:
         return overlay, []
     frames, points = _link_world(source, state)  # measured once: the balance, the transfer and the envelope masses
     bal = _balance(overlay, frames, points)
-    if bal.stable or len(bal.support) < 3:
+    if (bal.stable and not most) or len(bal.support) < 3:
         return overlay, []
     moved, parts = _opened_links(asset, category)
     body = [ln for ln in overlay.links if ln not in moved]
@@ -121,7 +121,7 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
                 f"edge (needs >= {bal.required * 1000:.3g} mm inside); moved {t * span:.3g} kg from {', '.join(light)} to "
                 f"{', '.join(body)} (opened parts {m_part / total:.0%} -> {m_after / total:.0%} of {total:.3g} kg, "
                 + "; ".join(reasons) + f"); margin now {after * 1000:.3g} mm; total mass, scale and state unchanged"
-                + ("; the whole transfer: a disturbance toppled it at the least" if most else "")]
+                + ("; the whole transfer: a drop or tilt toppled it with less moved" if most else "")]
 
 
 def _opened_links(asset: AssetDescription, category: str | None) -> tuple[set[str], dict[str, PartFraction]]:
