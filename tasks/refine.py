@@ -338,7 +338,7 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
             second.check.topples and not att.check.topples) else (att, f"{note}; not better in simulation, kept as modelled")
     if _settles(chosen[0]):
         return chosen
-    if att.check.topples:  # toppled with less mass moved off its opened parts: the most the sources allow (a lighter lid)
+    if att.check.topples and _more_to_move(ctx, run, att):  # toppled: its opened parts as light as their sources allow
         heavier = _attempt(ctx, run, most=True)
         if _settles(heavier):
             return heavier, pose_note
@@ -352,6 +352,14 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
         return chosen
     run.log.say("post_check", f"unstable as modelled; {lean_note}")
     return leaned, f"unstable as modelled; {lean_note}"
+
+
+def _more_to_move(ctx: EstimationContext, run: RefineRun, att: Attempt) -> bool:
+    """Whether stability by design's whole transfer would move mass on ``att``'s written candidate: an opened part
+    heavier than its floor (:func:`~asset2sim.tasks.state.stability.design_for_stability`, ``most``)."""
+    whole, _ = stability.design_for_stability(run.ws.source(att.candidate), ctx.asset, att.overlay, att.state, ctx.category,
+                                              ctx.geometry, most=True)
+    return whole is not att.overlay
 
 
 def _settles(att: Attempt) -> bool:
