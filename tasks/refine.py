@@ -338,7 +338,7 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
             second.check.topples and not att.check.topples) else (att, f"{note}; not better in simulation, kept as modelled")
     if _settles(chosen[0]):
         return chosen
-    if att.check.topples and _more_to_move(ctx, run, att):  # toppled: its opened parts as light as their sources allow
+    if att.check.only_topples and _more_to_move(ctx, run, att):  # toppled: opened parts as light as their sources allow
         heavier = _attempt(ctx, run, most=True)
         if _settles(heavier):
             return heavier, pose_note

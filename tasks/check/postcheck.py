@@ -141,6 +141,11 @@ class PostCheck:
         return any(robust_rest.toppled(m) for m in self.metrics if m.name == "robust_rest")
 
     @property
+    def only_topples(self) -> bool:
+        """A robust-rest trial toppled the object, and no other metric fails."""
+        return self.topples and {m.name for m in self.metrics if m.passed is False} <= {"robust_rest"}
+
+    @property
     def passed(self) -> bool:
         return bool(self.stable and self.metric("oscillation").passed and not self.sagging and not self.engine_failures()[1]
                     and not manipulation.failing(self.metrics))

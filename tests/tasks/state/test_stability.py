@@ -12,6 +12,7 @@ import pytest
 from asset2sim.engines.source import UrdfFile
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay, RootMount
+from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.assemble import write
@@ -259,3 +260,20 @@ def test_a_wheelie_bin_steady_on_paper_but_rocked_over_by_the_tilt_gets_the_ligh
     assert change.endswith("the whole transfer: a drop or tilt toppled it with less moved")
     ov = Overlay.model_validate_json((res.out_dir / "overlay.json").read_text())
     assert ov.links["link_2"].mass / ov.total_mass() == pytest.approx(0.10, rel=1e-6)
+
+
+def test_the_whole_transfer_is_tried_only_where_a_topple_is_all_that_fails():
+    """A lighter lid mends a topple, not an overlap or a joint that drifts: the refine tries the whole transfer only on
+    a check whose one failing metric is robust rest with a trial that toppled (``PostCheck.only_topples``); the tiny
+    stapler, whose parts overlap and which also toppled, paid a third attempt of 25 s for nothing before."""
+    def metric(name: str, passed: bool, topple: float | None = None) -> MetricResult:
+        details = {"trials": {"tilt-y": {"topple": topple}}} if name == "robust_rest" else {}
+        return MetricResult(name=name, value=0.0, unit="", passed=passed, details=details)
+
+    def check(*ms: MetricResult) -> postcheck.PostCheck:
+        return postcheck.PostCheck(metrics=list(ms), trace=None, sag={})
+
+    assert check(metric("rest_stability", True), metric("robust_rest", False, 1.3)).only_topples
+    assert not check(metric("penetration", False), metric("robust_rest", False, 1.3)).only_topples
+    assert not check(metric("robust_rest", False, 0.01)).only_topples  # a joint out of its band, the object upright
+    assert not check(metric("robust_rest", True, 0.01)).only_topples
