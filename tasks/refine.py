@@ -312,8 +312,9 @@ class RefineRun:
 
 def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str) -> tuple[Attempt, str]:
     """Stages 4-7 once; when unstable or toppled as modelled, a named pose put down where it rests (:func:`settled_attempt`);
-    else a steadier opening, then its stablest face (kept only if better), then, when unstable and still failing, the
-    modelled pose put down where it rests (kept only if every check passes there). Returns (attempt, pose note)."""
+    else a steadier opening, then its stablest face (kept only if better); when none of these settles it, the whole mass
+    transfer where a topple is all that fails, then, when unstable, the modelled pose put down where it rests (each kept
+    only if every check passes and every band is met). Returns (attempt, pose note)."""
     att = _attempt(ctx, run)
     if ctx.request.pose_hint is not None:  # the pose asked is kept: put down where it rests when it leans as it settles
         return settled_attempt(att, pose_note, lambda rotation: _attempt(replace(ctx, root_rotation=rotation), run))
