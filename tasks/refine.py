@@ -339,10 +339,11 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
             second.check.topples and not att.check.topples) else (att, f"{note}; not better in simulation, kept as modelled")
     if _settles(chosen[0]):
         return chosen
-    if att.check.only_topples and _more_to_move(ctx, run, att):  # toppled: opened parts as light as their sources allow
-        heavier = _attempt(ctx, run, most=True)
+    best, best_note = chosen
+    if best.check.only_topples and _more_to_move(ctx, run, best):  # toppled: opened parts as light as their sources allow
+        heavier = _attempt(replace(ctx, root_rotation=best.root_rotation), run, most=True)
         if _settles(heavier):
-            return heavier, pose_note
+            return heavier, best_note
         run.log.say("stability", "the whole transfer did not pass every check: the least transfer kept")
     if att.check.stable:
         return chosen

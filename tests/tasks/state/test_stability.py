@@ -277,3 +277,23 @@ def test_the_whole_transfer_is_tried_only_where_a_topple_is_all_that_fails():
     assert not check(metric("penetration", False), metric("robust_rest", False, 1.3)).only_topples
     assert not check(metric("robust_rest", False, 0.01)).only_topples  # a joint out of its band, the object upright
     assert not check(metric("robust_rest", True, 0.01)).only_topples
+
+
+@needs_shared
+def test_a_suitcase_laid_on_its_back_and_toppled_by_the_tilt_stands_with_the_whole_transfer(tmp_path):
+    """Suitcase 101668 "mostly open" with each link's meshes merged into one (as PartNet-Mobility's files often are):
+    unstable as modelled, it is laid on its back, where it fails only by toppling on a tilt, its lid at 35 % of it.
+    The whole transfer is made on that face: the lid at its envelope shell mass (30 %), and it stands, still laid on
+    its back, its lid at the band's target."""
+    import shutil
+
+    from tests.unseen_assets import one_mesh_per_link
+
+    shutil.copytree(SHARED / "101668", tmp_path / "suitcase")
+    res = refine_asset(one_mesh_per_link(tmp_path / "suitcase"), "A suitcase, mostly open.", tmp_path / "out", extras=False)
+    r = res.report
+    assert r.failure_mode == "none", r.failure_mode
+    assert any("unstable as modelled; rests pitched" in n for n in r.notes), r.notes
+    (change,) = [d for d in r.design_changes if d.startswith(stability.TRANSFER_NOTE)]
+    assert "envelope shell mass" in change and change.endswith("the whole transfer: a drop or tilt toppled it with less moved")
+    assert r.opening_fractions["joint_2"] == pytest.approx(0.75, abs=0.02)
