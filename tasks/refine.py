@@ -316,8 +316,12 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
     transfer where a topple is all that fails, then, when unstable, the modelled pose put down where it rests (each kept
     only if every check passes and every band is met). Returns (attempt, pose note)."""
     att = _attempt(ctx, run)
+
+    def posed(rotation) -> Attempt:  # stages 4-7 once more on the root rotation (3, 3) where it came to rest
+        return _attempt(replace(ctx, root_rotation=rotation), run)
+
     if ctx.request.pose_hint is not None:  # the pose asked is kept: put down where it rests when it leans as it settles
-        return settled_attempt(att, pose_note, lambda rotation: _attempt(replace(ctx, root_rotation=rotation), run))
+        return settled_attempt(att, pose_note, posed)
     if att.check.stable and not att.check.topples:
         return att, pose_note
     opening = steadier_opening(run.ws, att, run.log)
@@ -334,7 +338,7 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
     if R is not None:
         why = "unstable as modelled" if not att.check.stable else "toppled by a robust-rest disturbance as modelled"
         run.log.say("post_check", f"{why}; {note}")
-        second = _attempt(replace(ctx, root_rotation=R), run)
+        second = posed(R)
         chosen = (second, f"{why}; {note}") if second.check.stable and (second.check.passed or not att.check.passed) and not (
             second.check.topples and not att.check.topples) else (att, f"{note}; not better in simulation, kept as modelled")
     if _settles(chosen[0]):
@@ -349,7 +353,7 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
         return chosen
     # no face passes: where it leans onto its supports as it settles as modelled (a swivel USB stick on its cover's
     # plate), it is put down there, kept when every check passes there
-    leaned, lean_note = settled_attempt(att, pose_note, lambda rotation: _attempt(replace(ctx, root_rotation=rotation), run))
+    leaned, lean_note = settled_attempt(att, pose_note, posed)
     if leaned is att or not _settles(leaned):
         return chosen
     run.log.say("post_check", f"unstable as modelled; {lean_note}")
