@@ -165,6 +165,34 @@ def _carcass(b: _Builder, label: str, w: float, h: float, d: float, t: float, co
             b.part(label, box_xyz(-w + t, w - t, -h + t, h - t, -d, -d + t), color)]
 
 
+def _drawer(b: _Builder, x0: float, x1: float, y0: float, y1: float, back: float, front: float, t: float) -> Part:
+    """A drawer box of boards ``t`` thick: its front flush at z = ``front``, its bottom just above y0."""
+    return b.part("drawer", [box_xyz(x0, x1, y0, y1, front - t, front),
+                             box_xyz(x0 + t, x1 - t, y0 + 0.01, y0 + 0.01 + t, back, front - t),
+                             box_xyz(x0 + t, x0 + 2 * t, y0 + 0.01 + t, y1 - 0.03, back, front - t),
+                             box_xyz(x1 - 2 * t, x1 - t, y0 + 0.01 + t, y1 - 0.03, back, front - t),
+                             box_xyz(x0 + 2 * t, x1 - 2 * t, y0 + 0.01 + t, y1 - 0.03, back, back + t)], _GREY)
+
+
+def build_wardrobe(folder: Path) -> Path:
+    """A wardrobe (1.0 x 2.0 x 0.6 units, open-front carcass of 0.02 boards and a shelf) with two doors over the
+    upper three quarters (``door``, revolute 0-1.57 rad about vertical axes at the outer edges, meeting at the
+    middle with no gap) and two drawers below (``drawer``, prismatic 0-0.45 units), as PartNet-Mobility's
+    wardrobes are modelled."""
+    b = _Builder("u_wardrobe", "StorageFurniture")
+    w, h, d, t = 0.5, 1.0, 0.3, 0.02
+    b.body("link_4", "furniture_body", _carcass(b, "furniture_body", w, h, d, t, _WHITE)
+           + [b.part("shelf", box_xyz(-w + t, w - t, -0.5, -0.5 + t, -d + t, d), _WHITE)])
+    b.moving("link_0", "hinge", "door", [b.part("door", box_xyz(-w, 0.0, -0.5 + t, h, d, d + t), _GREY)],
+             "revolute", "link_4", (-w, 0.0, d), (0.0, -1.0, 0.0), 0.0, 1.57)
+    b.moving("link_1", "hinge", "door", [b.part("door", box_xyz(0.0, w, -0.5 + t, h, d, d + t), _GREY)],
+             "revolute", "link_4", (w, 0.0, d), (0.0, 1.0, 0.0), 0.0, 1.57)
+    for i, (y0, y1) in enumerate([(-h + t, -0.75), (-0.75, -0.5)]):
+        b.moving(f"link_{i + 2}", "slider", "drawer", [_drawer(b, -w + t, w - t, y0, y1, -d + t + 0.01, d + t, t)],
+                 "prismatic", "link_4", (0.0, y0, d), (0.0, 0.0, 1.0), 0.0, 0.45)
+    return b.write(folder)
+
+
 def build_safe(folder: Path) -> Path:
     """A home safe: a thick-walled steel box (0.8 x 0.9 x 0.8 units) whose
     door (``door``, revolute 0-1.75 rad about the vertical axis at its left
@@ -467,6 +495,7 @@ UNSEEN_BUILDERS = (
     ("u_window_slide", build_sliding_window, "Window"),
     ("u_pliers", build_pliers, "Pliers"),
     ("u_double_door", build_double_door_cabinet, "StorageFurniture"),
+    ("u_wardrobe", build_wardrobe, "StorageFurniture"),
     ("u_safe", build_safe, "Safe"),
     ("u_toaster", build_toaster, "Toaster"),
     ("u_bottle", build_bottle, "Bottle"),

@@ -58,6 +58,8 @@ class PyBulletSession(SessionDefaults):
         self.base_link = p.getBodyInfo(self.body, physicsClientId=self.cid)[0].decode()
         self._link_by_index: dict[int, str] = {-1: self.base_link}
         self._has_collision: dict[int, bool] = {}
+        self._colliders: list[int] | None = None  # link indices with collision shapes (:meth:`_forget_contacts`)
+        self._teleported = False
         self._index: dict[str, int] = {}
         self._friction: dict[str, float] = {}
         self.joint_names: list[str] = []
@@ -106,6 +108,28 @@ class PyBulletSession(SessionDefaults):
             j = self._index.get(name)
             if j is not None:
                 self._p.resetJointState(self.body, j, float(value), 0.0, physicsClientId=self.cid)
+        self._teleported = True
+
+    def _forget_contacts(self) -> None:
+        """Drop the contacts Bullet cached before a teleport (:meth:`set_joint_positions`, :meth:`set_root_pose`,
+        :meth:`restore_state`), so that the next detection finds them anew.
+
+        Bullet keeps a link pair's contact manifold across a teleport (``restoreState`` too keeps the manifolds its
+        snapshot lacks) and refreshes the cached points at the new poses (``btPersistentManifold::
+        refreshContactPoints``): a point cached where two links touched, one of them since turned along the
+        contact normal, reads as a penetration no closest-point query finds (11.8 mm between a wardrobe's closed
+        doors after one door's sweep), and the solver pushes the links apart on it. Re-adding a link's collider
+        with the filter Bullet's URDF import gave it (``setCollisionFilterGroupMask``: a fixed base static, group 2
+        and every mask bit but static; every other link group 1, mask all) removes its broadphase pairs and their
+        manifolds.
+        """
+        p = self._p
+        if self._colliders is None:
+            self._colliders = [i for i in self._link_by_index if p.getCollisionShapeData(self.body, i, physicsClientId=self.cid)]
+        for i in self._colliders:
+            static = i == -1 and self.options.fixed_base
+            p.setCollisionFilterGroupMask(self.body, i, 2 if static else 1, -1 ^ 2 if static else -1, physicsClientId=self.cid)
+        self._teleported = False
 
     def _joint_field(self, k: int) -> dict[str, float]:
         """Field ``k`` (0 position, 1 velocity) of every movable joint's state."""
@@ -180,6 +204,7 @@ class PyBulletSession(SessionDefaults):
     def set_root_pose(self, pos, orn) -> None:
         self._p.resetBasePositionAndOrientation(self.body, list(pos), list(orn), physicsClientId=self.cid)
         self._p.resetBaseVelocity(self.body, [0, 0, 0], [0, 0, 0], physicsClientId=self.cid)
+        self._teleported = True
 
     def place_on_ground(self) -> float:
         """Translate the root so the lowest collision point touches z = 0;
@@ -204,6 +229,8 @@ class PyBulletSession(SessionDefaults):
     # ---------------------------------------------------------------- contact
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
         p = self._p
+        if self._teleported:
+            self._forget_contacts()
         p.performCollisionDetection(physicsClientId=self.cid)
         return self._penetration_of(p.getContactPoints(self.body, self.body, physicsClientId=self.cid))
 
@@ -232,6 +259,8 @@ class PyBulletSession(SessionDefaults):
         if self.plane is None:
             return 0.0
         if detect:
+            if self._teleported:
+                self._forget_contacts()
             self._p.performCollisionDetection(physicsClientId=self.cid)
         pts = self._p.getContactPoints(self.body, self.plane, physicsClientId=self.cid)
         return float(max([0.0] + [-pt[8] for pt in pts]))
@@ -243,6 +272,8 @@ class PyBulletSession(SessionDefaults):
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:
         spend(n)  # the refine's one budget of steps (asset2sim.engines.step_budget)
+        if self._teleported:
+            self._forget_contacts()
         for _ in range(n):
             self.apply_passive_forces()
             self._p.stepSimulation(physicsClientId=self.cid)
@@ -300,6 +331,7 @@ class PyBulletSession(SessionDefaults):
 
     def restore_state(self, handle: int) -> None:
         self._p.restoreState(stateId=handle, physicsClientId=self.cid)
+        self._teleported = True
 
     def discard_state(self, handle: int) -> None:
         self._p.removeState(handle, physicsClientId=self.cid)
