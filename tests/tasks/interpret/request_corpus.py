@@ -6,7 +6,7 @@ output against the expected outcome. Used by
 
 Entry format (YAML list)::
 
-    - object: "7119" | "demo:<id>" | "gen:toaster" | "gen:chest" | "unseen:toaster" | "unseen:bottle"
+    - object: "7119" | "demo:<id>" | "gen:toaster" | "gen:chest" | "unseen:toaster" | "unseen:bottle" | "unseen:dispenser"
       text: the request
       phenomena: [synonym, ordinal, ...]   # hand-written entries (PHENOMENA); rates per phenomenon in the benchmark
       parse:            # every field has a default; all are compared
@@ -184,7 +184,8 @@ def asset_folder(obj: str, scratch: Path) -> Path:
     if obj.startswith("demo:"):
         return ensure_demo_dataset(scratch / "demo") / obj[5:]
     builders = {"gen:toaster": build_toaster, "gen:chest": build_three_drawer_cabinet,
-                "unseen:toaster": unseen_assets.build_toaster, "unseen:bottle": unseen_assets.build_bottle}
+                "unseen:toaster": unseen_assets.build_toaster, "unseen:bottle": unseen_assets.build_bottle,
+                "unseen:dispenser": unseen_assets.build_dispenser}
     if obj in builders:
         folder = scratch / obj.replace(":", "_")
         if not (folder / "mobility.urdf").exists():

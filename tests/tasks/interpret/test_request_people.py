@@ -20,14 +20,14 @@ from asset2sim.tasks.synthesize import estimate, request_apply, request_findings
 from asset2sim.tasks.synthesize.context import build_context
 from tests.conftest import SHARED, needs_shared
 from tests.tasks.interpret.request_assets import build_three_drawer_cabinet
-from tests.unseen_assets import build_bottle, build_double_door_cabinet, build_toaster
+from tests.unseen_assets import build_bottle, build_dispenser, build_double_door_cabinet, build_toaster
 
 
 @pytest.fixture(scope="module")
 def generated(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("people")
     return {"toaster": build_toaster(root / "toaster"), "bottle": build_bottle(root / "bottle"),
-            "chest": build_three_drawer_cabinet(root / "chest")}
+            "chest": build_three_drawer_cabinet(root / "chest"), "dispenser": build_dispenser(root / "dispenser")}
 
 
 def resolve(folder: Path, text: str):
@@ -68,6 +68,22 @@ def test_a_pressed_lever_is_at_its_far_end_and_a_part_lying_flat_is_opened_flat(
     res, labels, *_ = resolve(SHARED / "9748", spec.text)
     assert res.unapplied == [] and [res.bands[j] for j in res.addressed] == ["fully"]
     assert parse_request("A suitcase lying flat with its lid closed.").pose_hint == "lying_flat"
+
+
+def test_a_pump_pressed_part_of_the_way_is_that_far_from_its_rest(generated):
+    """A pump dispenser's pump (PartNet-Mobility's ``pump_lid``) pressed halfway is half its travel; pressed a little,
+    a little from its rest. "pressed" and "halfway" used to be two states of every part, in contradiction, and the
+    pump was no part word: the request was not met. A stapler's arm rests open: pressed a little, it is mostly open."""
+    (pump,) = joint_of(resolve(generated["dispenser"], "A soap dispenser.")[1], "pump_lid")
+    for text, band in [("A soap dispenser with its pump pressed halfway.", "halfway"),
+                       ("A lotion dispenser with the pump slightly pressed.", "slightly_open"),
+                       ("A soap dispenser with its pump pressed.", "fully"), ("A soap dispenser, halfway pressed.", "halfway")]:
+        res, *_ = resolve(generated["dispenser"], text)
+        assert res.unapplied == [] and res.bands[pump] == band, (text, res.bands, res.unapplied)
+        assert not parse_request(text).warnings, text
+    assert [(j.label, j.band) for j in parse_request("A stapler with its arm slightly pressed.").joint_states] == [("arm", "mostly")]
+    assert [(j.label, j.band) for j in parse_request("A printer with its button pressed a little.").joint_states] == [
+        ("button", "slightly_open")]
 
 
 @needs_shared
