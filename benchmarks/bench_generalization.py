@@ -28,8 +28,9 @@ assets of ``tests/unseen_assets.py`` in categories the dev set lacks: a wall
 switch, a cart on wheels, a sliding window, pliers, a safe with a dial, a
 toaster with a lever and a dial, a capped bottle, a desk with a drawer, a
 range oven with a drop-down door, a pot with a lid, a front-loading washing
-machine, folding glasses, a swivel USB stick, a kettle, and a double-door
-cabinet; reported as
+machine, folding glasses, a swivel USB stick, a kettle, a double-door
+cabinet, a wardrobe with two doors over two drawers, a bucket and a pump
+dispenser; reported as
 "(generated, unseen)" per category). <noun> is
 the category's first request synonym (``asset2sim/priors/categories.yaml``).
 

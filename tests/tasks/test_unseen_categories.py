@@ -2,7 +2,7 @@
 a safe with a dial on its door, a toaster with a lever and a dial, a capped
 bottle, a desk with a drawer, a range oven with a drop-down door, a pot with
 a lid, a front-loading washing machine, a kettle, folding glasses, a bucket
-with a bail handle. Each is
+with a bail handle, a wardrobe with two doors over two drawers. Each is
 refined for a short request of the hidden set's kind and must be
 interaction-ready on every tier, recognised as its
 category, mounted as the category's prior says, with the requested joint in
