@@ -48,9 +48,13 @@ def test_door_flush_with_the_floor_is_raised_and_opens_without_the_body_sliding(
     assert p["root_displacement"] < 0.002
 
 
-def test_without_ground_clearance_the_door_drags_and_the_body_slides(tmp_path, monkeypatch):
-    """The failure the repair removes: the same refine with the repair off
-    leaves the door on the floor, and opening it pulls the body along."""
+def test_a_door_flush_with_the_floor_is_not_pressed_into_it_by_a_contact_cached_before_placement(tmp_path, monkeypatch):
+    """The same refine with the repair off leaves the door's piece flush with the floor. Put on the ground, the
+    object is first lifted by its bounding boxes, then lowered by the closest points' distance: Bullet kept the
+    contacts of the first pose and read them, shifted by the second, as a penetration of the door into the floor,
+    and opening the door pulled the body 5 mm along (the probe failed). Contacts are found anew after a teleport:
+    the flush door opens and the body stays; the repair still lifts the door as real appliance doors clear the
+    floor (the test above)."""
     monkeypatch.setattr(ground_clearance, "apply_ground_clearance",
                         lambda candidate, ws, closed: ground_clearance.GroundLifted(dict(candidate.state), candidate.collision_overrides, [], []))
     src = build_microwave(tmp_path / "src")
@@ -58,7 +62,8 @@ def test_without_ground_clearance_the_door_drags_and_the_body_slides(tmp_path, m
     low = _lowest(tmp_path / "out" / "mobility.urdf", res.report.initial_joint_positions)
     assert abs(low["link_0"] - min(low.values())) < 1e-3  # flush with the body's bottom
     p = _open_probe(tmp_path / "out")
-    assert not p["success"] and p["slid"]
+    assert p["success"] and not p["slid"], p["failure"]
+    assert p["root_displacement"] < 0.002
 
 
 def _box_obj(path, lo, hi):
