@@ -264,12 +264,14 @@ def build_barred_safe(folder: Path) -> Path:
 
 
 def build_dispenser(folder: Path) -> Path:
-    """A pump soap dispenser (0.3 x 1.06 x 0.3 units): a bottle with a neck, and a pump head on a stem
-    (``pump_lid``, PartNet-Mobility's label of pressed pump heads; prismatic 0-0.05 units down into the neck) with
-    a spout."""
+    """A pump soap dispenser (0.3 x 1.06 x 0.3 units): a bottle with a hollow neck (a square tube), and a pump head
+    on a stem (``pump_lid``, PartNet-Mobility's label of pressed pump heads; prismatic 0-0.05 units down into the
+    neck) with a spout."""
     b = _Builder("u_dispenser", "Dispenser")
+    neck = [box_xyz(-0.05, -0.035, 0.3, 0.4, -0.05, 0.05), box_xyz(0.035, 0.05, 0.3, 0.4, -0.05, 0.05),
+            box_xyz(-0.035, 0.035, 0.3, 0.4, -0.05, -0.035), box_xyz(-0.035, 0.035, 0.3, 0.4, 0.035, 0.05)]
     b.body("link_1", "dispenser_body", [b.part("bottle", box_xyz(-0.15, 0.15, -0.5, 0.3, -0.15, 0.15), _WHITE),
-                                        b.part("neck", box_xyz(-0.04, 0.04, 0.3, 0.4, -0.04, 0.04), _WHITE)])
+                                        b.part("neck", neck, _WHITE)])
     b.moving("link_0", "slider", "pump_lid", [b.part("pump_lid", [box_xyz(-0.03, 0.03, 0.4, 0.5, -0.03, 0.03),
                                                                   box_xyz(-0.06, 0.06, 0.5, 0.56, -0.06, 0.2)], _GREY)],
              "prismatic", "link_1", (0.0, 0.5, 0.0), (0.0, -1.0, 0.0), 0.0, 0.05)
