@@ -287,7 +287,7 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found]) -> JointStat
     for js in result:
         key = (js.selector, js.label, js.ordinal, js.order)
         old = dedup.pop(key, None)
-        if old is not None and old.band != "closed" and lone & {id(js), id(old)}:
+        if old is not None and "closed" not in (old.band, js.band) and lone & {id(js), id(old)}:
             js, old = (old if id(js) in lone else js), None  # a lone "open" and a more exact opening of one part: the exact one
         elif old is not None and _MORE_EXACTLY.fullmatch(js.phrase.removeprefix(old.phrase)) and js.phrase.startswith(old.phrase):
             old = None  # "the handle turned on halfway": the later phrase is the earlier one said more exactly
