@@ -91,6 +91,18 @@ def test_a_pump_pressed_part_of_the_way_is_that_far_from_its_rest(generated):
         assert end.q_closed == pytest.approx(end.upper) and end.direction == -1.0
 
 
+def test_open_then_closed_for_one_part_is_a_contradiction_in_either_order():
+    """A lone "open" gives way quietly only to a more exact opening of the same part ("its door open, halfway");
+    followed by "closed" it is a contradiction, warned as "closed" then "open" was. It used to be dropped unwarned."""
+    for text, band in [("A microwave with its door open, the door closed.", "closed"),
+                       ("A microwave with its door closed, the door open.", "mostly")]:
+        spec = parse_request(text)
+        assert [(j.label, j.band) for j in spec.joint_states] == [("door", band)]
+        assert len(spec.warnings) == 1 and spec.warnings[0].startswith("contradiction"), spec.warnings
+    spec = parse_request("A microwave with its door open, halfway.")
+    assert [(j.label, j.band) for j in spec.joint_states] == [("door", "halfway")] and not spec.warnings
+
+
 @needs_shared
 def test_a_state_asked_of_a_part_on_a_fixed_joint_says_it_does_not_move():
     """Trash can 102155's wheels are in semantics.txt but on fixed joints: "its wheel fully open" is not applied
