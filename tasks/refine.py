@@ -317,8 +317,8 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
     only if every check passes and every band is met). Returns (attempt, pose note)."""
     att = _attempt(ctx, run)
 
-    def posed(rotation) -> Attempt:  # stages 4-7 once more on the root rotation (3, 3) where it came to rest
-        return _attempt(replace(ctx, root_rotation=rotation), run)
+    def posed(rotation, most: bool = False) -> Attempt:  # stages 4-7 once more on the root rotation (3, 3)
+        return _attempt(replace(ctx, root_rotation=rotation), run, most=most)
 
     if ctx.request.pose_hint is not None:  # the pose asked is kept: put down where it rests when it leans as it settles
         return settled_attempt(att, pose_note, posed)
@@ -345,7 +345,7 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
         return chosen
     best, best_note = chosen
     if best.check.only_topples and _more_to_move(ctx, run, best):  # toppled: opened parts as light as their sources allow
-        heavier = _attempt(replace(ctx, root_rotation=best.root_rotation), run, most=True)
+        heavier = posed(best.root_rotation, most=True)
         if _settles(heavier):
             return heavier, best_note
         run.log.say("stability", "the whole transfer did not pass every check: the least transfer kept")

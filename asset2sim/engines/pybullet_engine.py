@@ -58,8 +58,7 @@ class PyBulletSession(SessionDefaults):
         self.base_link = p.getBodyInfo(self.body, physicsClientId=self.cid)[0].decode()
         self._link_by_index: dict[int, str] = {-1: self.base_link}
         self._has_collision: dict[int, bool] = {}
-        self._colliders: list[int] | None = None  # link indices with collision shapes (:meth:`_forget_contacts`)
-        self._teleported = False
+        self._teleported = False  # a teleport since the last contact detection (:meth:`_forget_contacts`)
         self._index: dict[str, int] = {}
         self._friction: dict[str, float] = {}
         self.joint_names: list[str] = []
@@ -121,14 +120,14 @@ class PyBulletSession(SessionDefaults):
         doors after one door's sweep), and the solver pushes the links apart on it. Re-adding a link's collider
         with the filter Bullet's URDF import gave it (``setCollisionFilterGroupMask``: a fixed base static, group 2
         and every mask bit but static; every other link group 1, mask all) removes its broadphase pairs and their
-        manifolds.
+        manifolds. Nothing to do when there was no teleport since the last call.
         """
-        p = self._p
-        if self._colliders is None:
-            self._colliders = [i for i in self._link_by_index if p.getCollisionShapeData(self.body, i, physicsClientId=self.cid)]
-        for i in self._colliders:
-            static = i == -1 and self.options.fixed_base
-            p.setCollisionFilterGroupMask(self.body, i, 2 if static else 1, -1 ^ 2 if static else -1, physicsClientId=self.cid)
+        if not self._teleported:
+            return
+        for i, link in self._link_by_index.items():
+            if self.link_has_collision(link):
+                static = i == -1 and self.options.fixed_base
+                self._p.setCollisionFilterGroupMask(self.body, i, 2 if static else 1, -1 ^ 2 if static else -1, physicsClientId=self.cid)
         self._teleported = False
 
     def _joint_field(self, k: int) -> dict[str, float]:
@@ -229,8 +228,7 @@ class PyBulletSession(SessionDefaults):
     # ---------------------------------------------------------------- contact
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
         p = self._p
-        if self._teleported:
-            self._forget_contacts()
+        self._forget_contacts()
         p.performCollisionDetection(physicsClientId=self.cid)
         return self._penetration_of(p.getContactPoints(self.body, self.body, physicsClientId=self.cid))
 
@@ -259,8 +257,7 @@ class PyBulletSession(SessionDefaults):
         if self.plane is None:
             return 0.0
         if detect:
-            if self._teleported:
-                self._forget_contacts()
+            self._forget_contacts()
             self._p.performCollisionDetection(physicsClientId=self.cid)
         pts = self._p.getContactPoints(self.body, self.plane, physicsClientId=self.cid)
         return float(max([0.0] + [-pt[8] for pt in pts]))
@@ -272,8 +269,7 @@ class PyBulletSession(SessionDefaults):
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:
         spend(n)  # the refine's one budget of steps (asset2sim.engines.step_budget)
-        if self._teleported:
-            self._forget_contacts()
+        self._forget_contacts()
         for _ in range(n):
             self.apply_passive_forces()
             self._p.stepSimulation(physicsClientId=self.cid)
