@@ -2,7 +2,7 @@
 cache off, ``ASSET2SIM_CACHE=off``) in a fresh process, with the flow's first phase (verdict and exports, media
 deferred), so that nothing one refine made serves the next.
 
-    nice -n 10 .venv/bin/python benchmarks/bench_cold_cpu.py [--ids 9912,102990] [--work DIR] [--warm]
+    nice -n 10 .venv/bin/python benchmarks/bench_cold_cpu.py [--ids 9912,102990] [--work DIR] [--warm] [--subdivide N]
 
 Prints per row the CPU seconds (user + system) of the refine call and of each stage (``timings.json``'s
 ``stage_cpu_seconds``), then the totals; imports and interpreter start-up are outside the figures. Each row's process
@@ -10,6 +10,10 @@ has the environment Dask's nanny gives the flow's workers (:data:`WORKER_ENV`, u
 (CoACD's), one BLAS thread. The lazy imports of the refine (SAPIEN, MuJoCo, OpenUSD, SciPy's parts) and its tables
 count unless ``--warm``, which makes them first as the flow's stage servers do before they fork a refine
 (:func:`asset2sim.flows.forkserver.warm_tables` after its modules): what a flow pays per object.
+
+``--subdivide N`` refines copies of the rows whose every OBJ has each triangle split into four, N times (the same
+shapes in 4^N times the faces; normals, texture coordinates and materials dropped): unseen PartNet-Mobility objects
+often carry denser meshes than the dev rows, and the copies show which costs grow with the faces.
 """
 
 from __future__ import annotations
@@ -30,9 +34,29 @@ DEV = ROOT.parent / "shared" / "datasets" / "partnet_mobility"
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MALLOC_TRIM_THRESHOLD_": "65536"}
 
 
-def _one(row_id: str, prompt: str, out: Path, warm: bool = False) -> None:
-    """Refine one row cold in this process (``warm``: its imports made first, as a stage server's); print a JSON
-    line: the refine's CPU s and the stages' CPU s."""
+def _subdivided(folder: Path, dest: Path, times: int) -> Path:
+    """A copy of the asset ``folder`` at ``dest`` whose every ``textured_objs/*.obj`` has each triangle split into
+    four ``times`` times (``trimesh.remesh.subdivide``; vertices and faces only). Returns ``dest``."""
+    import shutil
+
+    import numpy as np
+    import trimesh
+
+    shutil.rmtree(dest, ignore_errors=True)
+    shutil.copytree(folder, dest)
+    for obj in sorted((dest / "textured_objs").glob("*.obj")):
+        mesh = trimesh.load(obj, force="mesh", process=False)
+        v, f = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, int)
+        for _ in range(times):
+            v, f = trimesh.remesh.subdivide(v, f)
+        obj.write_text("".join(f"v {a:.6f} {b:.6f} {c:.6f}\n" for a, b, c in v)
+                       + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in f))
+    return dest
+
+
+def _one(folder: Path, prompt: str, out: Path, warm: bool = False) -> None:
+    """Refine the row at ``folder`` cold in this process (``warm``: its imports made first, as a stage server's);
+    print a JSON line: the refine's CPU s and the stages' CPU s."""
     os.environ["ASSET2SIM_CACHE"] = "off"
     from asset2sim.tasks.refine import refine_asset
 
@@ -48,7 +72,7 @@ def _one(row_id: str, prompt: str, out: Path, warm: bool = False) -> None:
         forkserver.warm_tables()
 
     c0 = time.process_time()
-    refine_asset(DEV / row_id, prompt, out, skip_if_complete=False, extras=True, media=False)
+    refine_asset(folder, prompt, out, skip_if_complete=False, extras=True, media=False)
     cpu = time.process_time() - c0
     stages = json.loads((out / "timings.json").read_text())["stage_cpu_seconds"]
     print(json.dumps({"cpu": cpu, "stages": stages}))
@@ -60,20 +84,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ids", default="", help="comma-separated subset of ids")
     ap.add_argument("--work", type=Path, default=None, help="output folder (default: a temporary one)")
     ap.add_argument("--warm", action="store_true", help="import what the flow's stage servers import before timing")
-    ap.add_argument("--one", nargs=3, help=argparse.SUPPRESS)  # internal: ID PROMPT OUT, one row in this process
+    ap.add_argument("--subdivide", type=int, default=0, metavar="N", help="refine copies with every triangle split in four N times")
+    ap.add_argument("--one", nargs=3, help=argparse.SUPPRESS)  # internal: FOLDER PROMPT OUT, one row in this process
     args = ap.parse_args(argv)
     if args.one:
-        _one(args.one[0], args.one[1], Path(args.one[2]), args.warm)
+        _one(Path(args.one[0]), args.one[1], Path(args.one[2]), args.warm)
         return 0
     rows = list(csv.DictReader(args.manifest.open()))
     wanted = [i.strip() for i in args.ids.split(",") if i.strip()]
     rows = [r for r in rows if not wanted or r["id"] in wanted]
     work = args.work or Path(tempfile.mkdtemp(prefix="a2s-cold-cpu-"))
     print(f"load {' '.join(f'{x:.2f}' for x in os.getloadavg())}; CPU s per row, cache off, media deferred, "
-          f"{os.environ.get('OMP_NUM_THREADS', WORKER_ENV['OMP_NUM_THREADS'])} OpenMP thread(s)" + (", imports warm" if args.warm else ""))
+          f"{os.environ.get('OMP_NUM_THREADS', WORKER_ENV['OMP_NUM_THREADS'])} OpenMP thread(s)" + (", imports warm" if args.warm else "")
+          + (f", meshes subdivided {args.subdivide}x (4^{args.subdivide} x the faces)" if args.subdivide else ""))
     total: dict[str, float] = {}
     for r in rows:
-        proc = subprocess.run([sys.executable, __file__, "--one", r["id"], r["prompt"], str(work / r["id"]), *(["--warm"] * args.warm)],
+        folder = _subdivided(DEV / r["id"], work / "inputs" / r["id"], args.subdivide) if args.subdivide else DEV / r["id"]
+        proc = subprocess.run([sys.executable, __file__, "--one", str(folder), r["prompt"], str(work / r["id"]), *(["--warm"] * args.warm)],
                               capture_output=True, text=True, env={**WORKER_ENV, **os.environ})
         if proc.returncode != 0:
             print(f"{r['id']:>7} failed: {proc.stderr.strip().splitlines()[-1:]}")

@@ -185,7 +185,12 @@ def piece_obj(piece: Piece) -> bytes:
 def depth_inside(points: np.ndarray, piece: Piece) -> float:
     """Largest depth (m, >= 0) of any of ``points`` (k, 3) inside ``piece``
     (distance to the nearest face plane of a point inside the hull); only points in the hull's box can be inside,
-    those of its x band are taken first (the same rows, cheaper)."""
+    those of its x band are taken first (the same rows, cheaper).
+
+    On a hull of many faces the deepest point is found by bounds: a point's distance to a few of the face planes
+    (:data:`_BOUND_PLANES`, every k-th) bounds its depth from above; points are measured against every plane in
+    the order of their bounds, :data:`_BOUND_BLOCK` at a time, until no bound left exceeds the deepest found. The
+    depth is the same as when every point is measured against every plane."""
     if len(points) == 0:
         return 0.0
     lo, hi = piece.points.min(axis=0), piece.points.max(axis=0)
@@ -193,8 +198,26 @@ def depth_inside(points: np.ndarray, piece: Piece) -> float:
     points = points[np.all((points > lo) & (points < hi), axis=1)]
     if len(points) == 0:
         return 0.0
-    d = np.max(points @ piece.equations[:, :3].T + piece.equations[:, 3], axis=1)
-    return float(max(0.0, -d.min()))
+    eq = piece.equations
+    if len(eq) <= 2 * _BOUND_PLANES or len(points) <= _BOUND_BLOCK:
+        d = np.max(points @ eq[:, :3].T + eq[:, 3], axis=1)
+        return float(max(0.0, -d.min()))
+    few = eq[:: len(eq) // _BOUND_PLANES]
+    bound = -np.max(points @ few[:, :3].T + few[:, 3], axis=1)  # >= the depth of each point
+    order = np.argsort(-bound, kind="stable")
+    order = order[bound[order] > 0.0]  # a point outside a face plane is outside the hull
+    best = 0.0
+    for s in range(0, len(order), _BOUND_BLOCK):
+        rows = order[s:s + _BOUND_BLOCK]
+        if bound[rows[0]] <= best:
+            break
+        best = max(best, float(-np.max(points[rows] @ eq[:, :3].T + eq[:, 3], axis=1).min()))
+    return best
+
+
+#: Face planes whose distances bound a point's depth in :func:`depth_inside`, and points measured at a time.
+_BOUND_PLANES = 24
+_BOUND_BLOCK = 64
 
 
 def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = None, *,
@@ -229,9 +252,17 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
             return float("inf"), None
         return m.volume - a.volume - b.volume, m
 
-    def top(i: int, rows: np.ndarray) -> np.ndarray:  # largest plane value of each of others[rows] in alive piece i
+    def outside(i: int, rows: np.ndarray, threshold: float) -> np.ndarray:  # each of others[rows] not inside alive piece i
         q = alive[i]
-        return np.max(others[rows] @ q.equations[:, :3].T + q.equations[:, 3], axis=1)
+        pts = others[rows]
+        out = np.ones(len(rows), bool)  # a point off the piece's box is outside it by far more than the threshold
+        near = np.flatnonzero(np.all((pts >= q.points.min(axis=0)) & (pts <= q.points.max(axis=0)), axis=1))
+        eq = q.equations
+        if len(eq) > 2 * _BOUND_PLANES:  # outside a few of the face planes is outside: the rest measured on them all
+            few = eq[:: len(eq) // _BOUND_PLANES]
+            near = near[np.max(pts[near] @ few[:, :3].T + few[:, 3], axis=1) < threshold]
+        out[near] = np.max(pts[near] @ eq[:, :3].T + eq[:, 3], axis=1) >= threshold
+        return out
 
     def holds_other(m: Piece, i: int, j: int) -> bool:  # whether merging alive pieces i and j into m newly holds one of others
         lo, hi = m.points.min(axis=0), m.points.max(axis=0)
@@ -239,8 +270,9 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
         band = others[start:np.searchsorted(xs, hi[0], "right")]
         rows = start + np.flatnonzero(np.all((band[:, 1:] >= lo[1:]) & (band[:, 1:] <= hi[1:]), axis=1))
         threshold = -_INSIDE_EPS * float(np.ptp(m.points, axis=0).max())
-        inside = np.max(others[rows] @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < threshold
-        return bool(inside.any() and (inside & (top(i, rows) >= threshold) & (top(j, rows) >= threshold)).any())
+        rows = rows[np.max(others[rows] @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < threshold]  # inside m
+        rows = rows[outside(i, rows, threshold)] if len(rows) else rows  # and outside i: each row's test is its own
+        return bool(len(rows) and outside(j, rows, threshold).any())
 
     centres: dict[int, np.ndarray] = {}
 

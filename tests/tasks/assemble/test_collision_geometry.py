@@ -245,6 +245,50 @@ def test_merge_measures_lazily_the_same_merges(seed):
     assert len(cp.merge_pieces(blocks, 1, others, free_only=True)) > 1  # the guard acts: the test can fail
 
 
+def _round_pieces(rng, n: int, faces_at_least: int) -> list:
+    """``n`` hulls of 80 points each on small spheres scattered over a 0.1 m cube, every one with more than
+    ``faces_at_least`` faces (the hulls of curved surface samples whose many planes the bounds skip)."""
+    out = []
+    for c in rng.uniform(0.0, 0.1, (n, 3)):
+        d = rng.normal(size=(80, 3))
+        out.append(cp.Piece.of(c + rng.uniform(0.006, 0.015) * d / np.linalg.norm(d, axis=1)[:, None]))
+    assert min(len(q.equations) for q in out) > faces_at_least
+    return out
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_merge_of_many_faced_pieces_makes_the_merges_measured_on_every_plane(seed):
+    """Round pieces of more faces than a few planes bound (``convex_pieces._BOUND_PLANES``): merge_pieces, which
+    tests a point against a piece's box and a few of its planes before all of them, merges as the reference that
+    tests every point against every plane, bit for bit."""
+    rng = np.random.default_rng(100 + seed)
+    pieces = _round_pieces(rng, 20, 2 * cp._BOUND_PLANES)
+    others = rng.uniform(0.0, 0.11, (400, 3))
+    for free_only, limit in ((True, 1), (True, 5), (False, 3)):
+        got = cp.merge_pieces(pieces, limit, others, free_only=free_only)
+        want = _merge_measuring_every_pair(pieces, limit, others, free_only)
+        assert len(got) == len(want) and len(got) >= limit
+        assert all(np.array_equal(g.points, w.points) for g, w in zip(got, want))
+    assert len(cp.merge_pieces(pieces, 1, others, free_only=True)) > 1  # the guard acts: the test can fail
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_depth_found_by_bounds_is_the_depth_over_every_plane(seed):
+    """depth_inside on a hull of many faces (bounded by a few planes, the points measured deepest bound first)
+    equals the largest depth over every point and plane, bit for bit; points all outside read 0."""
+    rng = np.random.default_rng(200 + seed)
+    d = rng.normal(size=(600, 3))
+    hull = cp.Piece.of(0.05 * d / np.linalg.norm(d, axis=1)[:, None] * rng.uniform(0.9, 1.0, (600, 1)))
+    assert len(hull.equations) > 4 * cp._BOUND_PLANES
+    shell = rng.normal(size=(3000, 3))
+    shell *= rng.uniform(0.042, 0.05, (3000, 1)) / np.linalg.norm(shell, axis=1)[:, None]  # bounds far above depths
+    for pts in (rng.uniform(-0.06, 0.06, (3000, 3)), rng.uniform(-0.02, 0.02, (500, 3)) + [0.04, 0.0, 0.0], shell):
+        full = np.max(pts @ hull.equations[:, :3].T + hull.equations[:, 3], axis=1)
+        assert cp.depth_inside(pts, hull) == max(0.0, float(-full.min())) > 0.0
+    outside = rng.uniform(0.051, 0.06, (300, 3)) * rng.choice([-1.0, 1.0], (300, 3))
+    assert cp.depth_inside(outside, hull) == 0.0
+
+
 def test_written_collisions_are_few_closed_convex_pieces_mujoco_loads(tmp_path):
     """A body of 40 small blocks plus a flat plate, a lid of one block: the
     output has at most MAX_PIECES_PER_LINK closed, outward, non-flat pieces
