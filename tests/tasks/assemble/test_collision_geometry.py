@@ -229,22 +229,6 @@ def _merge_measuring_every_pair(pieces, limit, others, free_only, neighbours=8):
     return list(alive.values())
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_merge_measures_lazily_the_same_merges(seed):
-    """Blocks scattered with another link's points among them: merge_pieces, measuring a pair's hold on those
-    points only when the pair comes first, makes the same pieces, bit for bit, as measuring every pair on entry."""
-    rng = np.random.default_rng(seed)
-    lo = rng.uniform(0.0, 0.1, (24, 3))
-    blocks = [cp.Piece.of(_box(a, a + rng.uniform(0.005, 0.02, 3))[0]) for a in lo]
-    others = rng.uniform(0.0, 0.12, (40, 3))
-    for free_only, limit in ((True, 1), (True, 6), (False, 3)):
-        got = cp.merge_pieces(blocks, limit, others, free_only=free_only)
-        want = _merge_measuring_every_pair(blocks, limit, others, free_only)
-        assert len(got) == len(want) and len(got) >= limit
-        assert all(np.array_equal(g.points, w.points) for g, w in zip(got, want))
-    assert len(cp.merge_pieces(blocks, 1, others, free_only=True)) > 1  # the guard acts: the test can fail
-
-
 def _round_pieces(rng, n: int, faces_at_least: int) -> list:
     """``n`` hulls of 80 points each on small spheres scattered over a 0.1 m cube, every one with more than
     ``faces_at_least`` faces (the hulls of curved surface samples whose many planes the bounds skip)."""
@@ -256,14 +240,20 @@ def _round_pieces(rng, n: int, faces_at_least: int) -> list:
     return out
 
 
-@pytest.mark.parametrize("seed", range(4))
-def test_merge_of_many_faced_pieces_makes_the_merges_measured_on_every_plane(seed):
-    """Round pieces of more faces than a few planes bound (``convex_pieces._BOUND_PLANES``): merge_pieces, which
-    tests a point against a piece's box and a few of its planes before all of them, merges as the reference that
-    tests every point against every plane, bit for bit."""
-    rng = np.random.default_rng(100 + seed)
-    pieces = _round_pieces(rng, 20, 2 * cp._BOUND_PLANES)
-    others = rng.uniform(0.0, 0.11, (400, 3))
+@pytest.mark.parametrize("kind, seed", [("blocks", s) for s in range(6)] + [("round", s) for s in range(4)])
+def test_merge_measures_lazily_and_by_bounds_the_same_merges(kind, seed):
+    """Pieces scattered with another link's points among them: merge_pieces, measuring a pair's hold on those
+    points only when the pair comes first, and on a piece of many faces (``round``: more than a few planes bound,
+    ``convex_pieces._BOUND_PLANES``) testing a point against its box and a few of its planes before all of them,
+    makes the same pieces, bit for bit, as measuring every pair on entry against every plane."""
+    if kind == "blocks":
+        rng = np.random.default_rng(seed)
+        pieces = [cp.Piece.of(_box(a, a + rng.uniform(0.005, 0.02, 3))[0]) for a in rng.uniform(0.0, 0.1, (24, 3))]
+        others = rng.uniform(0.0, 0.12, (40, 3))
+    else:
+        rng = np.random.default_rng(100 + seed)
+        pieces = _round_pieces(rng, 20, 2 * cp._BOUND_PLANES)
+        others = rng.uniform(0.0, 0.11, (400, 3))
     for free_only, limit in ((True, 1), (True, 5), (False, 3)):
         got = cp.merge_pieces(pieces, limit, others, free_only=free_only)
         want = _merge_measuring_every_pair(pieces, limit, others, free_only)
