@@ -36,21 +36,22 @@ WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THRE
 
 def _subdivided(folder: Path, dest: Path, times: int) -> Path:
     """A copy of the asset ``folder`` at ``dest`` whose every ``textured_objs/*.obj`` has each triangle split into
-    four ``times`` times (``trimesh.remesh.subdivide``; vertices and faces only). Returns ``dest``."""
+    four ``times`` times (``trimesh.remesh.subdivide``; read and written by :mod:`asset2sim.mesh_io`, vertices and
+    faces only). Returns ``dest``."""
     import shutil
 
-    import numpy as np
     import trimesh
+
+    from asset2sim import mesh_io
 
     shutil.rmtree(dest, ignore_errors=True)
     shutil.copytree(folder, dest)
     for obj in sorted((dest / "textured_objs").glob("*.obj")):
-        mesh = trimesh.load(obj, force="mesh", process=False)
-        v, f = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, int)
+        mesh = mesh_io.read_mesh(obj)
+        v, f = mesh.vertices, mesh.faces
         for _ in range(times):
             v, f = trimesh.remesh.subdivide(v, f)
-        obj.write_text("".join(f"v {a:.6f} {b:.6f} {c:.6f}\n" for a, b, c in v)
-                       + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in f))
+        obj.write_bytes(mesh_io.obj_bytes(v, f))
     return dest
 
 

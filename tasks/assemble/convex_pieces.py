@@ -199,10 +199,10 @@ def depth_inside(points: np.ndarray, piece: Piece) -> float:
     if len(points) == 0:
         return 0.0
     eq = piece.equations
-    if len(eq) <= 2 * _BOUND_PLANES or len(points) <= _BOUND_BLOCK:
+    few = _bounding_planes(eq)
+    if few is None or len(points) <= _BOUND_BLOCK:
         d = np.max(points @ eq[:, :3].T + eq[:, 3], axis=1)
         return float(max(0.0, -d.min()))
-    few = eq[:: len(eq) // _BOUND_PLANES]
     bound = -np.max(points @ few[:, :3].T + few[:, 3], axis=1)  # >= the depth of each point
     order = np.argsort(-bound, kind="stable")
     order = order[bound[order] > 0.0]  # a point outside a face plane is outside the hull
@@ -218,6 +218,13 @@ def depth_inside(points: np.ndarray, piece: Piece) -> float:
 #: Face planes whose distances bound a point's depth in :func:`depth_inside`, and points measured at a time.
 _BOUND_PLANES = 24
 _BOUND_BLOCK = 64
+
+
+def _bounding_planes(equations: np.ndarray) -> np.ndarray | None:
+    """Every k-th of a hull's face planes ``equations`` (f, 4), about :data:`_BOUND_PLANES` of them: a point beyond
+    any of them is outside the hull, its distance to them bounds its depth; None when the hull has too few faces
+    for them to save work."""
+    return equations[:: len(equations) // _BOUND_PLANES] if len(equations) > 2 * _BOUND_PLANES else None
 
 
 def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = None, *,
@@ -264,8 +271,8 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
         out = np.ones(len(rows), bool)  # a point off the piece's box is outside it by far more than the threshold
         near = np.flatnonzero(np.all((pts >= q.points.min(axis=0)) & (pts <= q.points.max(axis=0)), axis=1))
         eq = q.equations
-        if len(eq) > 2 * _BOUND_PLANES:  # outside a few of the face planes is outside: the rest measured on them all
-            few = eq[:: len(eq) // _BOUND_PLANES]
+        few = _bounding_planes(eq)
+        if few is not None:  # outside a few of the face planes is outside: the rest measured on them all
             near = near[np.max(pts[near] @ few[:, :3].T + few[:, 3], axis=1) < threshold]
         out[near] = np.max(pts[near] @ eq[:, :3].T + eq[:, 3], axis=1) >= threshold
         return out
