@@ -247,7 +247,7 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
     points the merged hull holds, and a point off a piece's box or beyond any of a few of its planes
     (:data:`_BOUND_PLANES`) is outside it without the rest. Each point's test is its own (three products and a sum
     per plane); tests measuring every point on every plane find the same merges, and the dev rows' outputs are
-    byte-identical (``benchmarks/bench_cold_cpu.py``)."""
+    byte-identical (``benchmarks/bench_determinism.py --against`` outputs kept before the bounds)."""
     pieces = list(pieces)
     if len(pieces) <= limit:
         return pieces
@@ -284,7 +284,7 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
         rows = start + np.flatnonzero(np.all((band[:, 1:] >= lo[1:]) & (band[:, 1:] <= hi[1:]), axis=1))
         threshold = -_INSIDE_EPS * float(np.ptp(m.points, axis=0).max())
         rows = rows[np.max(others[rows] @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < threshold]  # inside m
-        rows = rows[outside(i, rows, threshold)] if len(rows) else rows  # and outside i: each row's test is its own
+        rows = rows[outside(i, rows, threshold)]  # and outside i: each row's test is its own
         return bool(len(rows) and outside(j, rows, threshold).any())
 
     centres: dict[int, np.ndarray] = {}
