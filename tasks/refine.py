@@ -388,6 +388,7 @@ def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float]
     clipped = placement.clip_synthesis(ctx, syn, config, ws, log, shut, fractions)
     if clipped is not syn:  # clipped limits change the pieces and the range the closed end is found in: measured once more
         clipped = placement.closed_on_output(ctx, clipped, ws, log, shut)
+        closed_raw = placement.ends_over_raw_limits(closed_raw, clipped.closed_out)  # the state's closed end, kept by a re-clip
     syn = clipped
     searched = syn.candidate(ctx, shut)
     st, kept = placement.search_state(ctx, run.kin, run.est, syn, searched, config, ws, log)

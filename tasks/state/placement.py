@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from asset2sim.engines.base import SessionOptions, SimSession
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay
@@ -179,6 +181,23 @@ class Reclipped:
     synthesis: Synthesis
     state: dict[str, float]
     notes: list[str]
+
+
+def ends_over_raw_limits(raw: dict[str, ClosedState], measured: dict[str, ClosedState]) -> dict[str, ClosedState]:
+    """``raw`` (joint -> the closed end over the raw limits, which the limits are clipped from again when a repair
+    changes the collision pieces: :func:`clip_limits`) with the closed end and opening direction of ``measured``
+    (:func:`closed_on_output` on the pieces of the clipped limits, which the state was placed from): a later clip
+    keeps the closed end the state and the report read, not the one measured before the clip. The opening range is
+    the raw range's from that end (rad or m); a joint without finite raw limits keeps its own."""
+    out = dict(raw)
+    for n, m in measured.items():
+        r = raw.get(n)
+        if r is None or (m.q_closed == r.q_closed and m.direction == r.direction):
+            continue
+        far = r.upper if m.direction > 0 else r.lower
+        span = abs(float(far) - m.q_closed) if far is not None and np.isfinite(far) else r.open_range
+        out[n] = replace(r, q_closed=m.q_closed, direction=m.direction, open_range=span)
+    return out
 
 
 def reclipped(syn: Synthesis, overlay: Overlay, closed_after: dict[str, ClosedState],
