@@ -29,8 +29,8 @@ switch, a cart on wheels, a sliding window, pliers, a safe with a dial, a
 toaster with a lever and a dial, a capped bottle, a desk with a drawer, a
 range oven with a drop-down door, a pot with a lid, a front-loading washing
 machine, folding glasses, a swivel USB stick, a kettle, a double-door
-cabinet, a wardrobe with two doors over two drawers, a bucket and a pump
-dispenser; reported as
+cabinet, a wardrobe with two doors over two drawers, a bucket, a pump
+dispenser, a desk lamp, a desk fan and a printer with a paper tray; reported as
 "(generated, unseen)" per category). <noun> is
 the category's first request synonym (``asset2sim/priors/categories.yaml``).
 

@@ -456,6 +456,50 @@ def build_kettle(folder: Path) -> Path:
     return b.write(folder)
 
 
+def build_desk_lamp(folder: Path) -> Path:
+    """A desk lamp (1.0 units tall): a base plate, a lower and an upper arm (``leg``, revolute about the
+    horizontal x axis, +-0.6 and +-1.2 rad) and a shade (``head``, revolute +-0.8 rad) at the upper arm's end, held
+    out in front of it: the arms carry the shade's weight."""
+    b = _Builder("u_lamp", "Lamp")
+    b.body("link_3", "lamp_base", [b.part("lamp_base", box_xyz(-0.3, 0.3, -0.5, -0.44, -0.25, 0.25), _DARK)])
+    b.moving("link_0", "hinge", "leg", [b.part("leg", box_xyz(-0.03, 0.03, -0.42, 0.08, -0.03, 0.03), _GREY)],
+             "revolute", "link_3", (0.0, -0.44, 0.0), (1.0, 0.0, 0.0), -0.6, 0.6)
+    b.moving("link_1", "hinge", "leg", [b.part("leg", box_xyz(-0.03, 0.03, 0.12, 0.48, -0.03, 0.03), _GREY)],
+             "revolute", "link_0", (0.0, 0.1, 0.0), (1.0, 0.0, 0.0), -1.2, 1.2)
+    b.moving("link_2", "hinge", "head", [b.part("head", box_xyz(-0.1, 0.1, 0.36, 0.5, 0.04, 0.3), _WHITE)],
+             "revolute", "link_1", (0.0, 0.5, 0.0), (1.0, 0.0, 0.0), -0.8, 0.8)
+    return b.write(folder)
+
+
+def build_desk_fan(folder: Path) -> Path:
+    """A desk fan (1.0 units tall): a base and a post, a head (``head``) tilting +-0.3 rad about the horizontal
+    x axis on top of the post, and three blades (``rotor``, continuous about the head's forward z axis) in front of
+    the head, clear of the post at every tilt."""
+    b = _Builder("u_fan", "Fan")
+    b.body("link_2", "fan_body", [b.part("fan_body", box_xyz(-0.3, 0.3, -0.5, -0.44, -0.25, 0.25), _WHITE),
+                                  b.part("fan_body", box_xyz(-0.04, 0.04, -0.44, 0.0, -0.04, 0.04), _WHITE)])
+    b.moving("link_0", "hinge", "head", [b.part("head", box_xyz(-0.1, 0.1, 0.0, 0.2, -0.15, 0.12), _WHITE)],
+             "revolute", "link_2", (0.0, 0.02, 0.0), (1.0, 0.0, 0.0), -0.3, 0.3)
+    blades = [b.part("rotor", box_xyz(-0.3, 0.3, 0.07, 0.13, 0.14, 0.16), _GREY,
+                     Pose(axis=(0.0, 0.0, 1.0), angle=math.pi * k / 3, pivot=(0.0, 0.1, 0.15))) for k in range(3)]
+    b.moving("link_1", "hinge", "rotor", blades, "continuous", "link_0", (0.0, 0.1, 0.15), (0.0, 0.0, 1.0))
+    return b.write(folder)
+
+
+def build_printer(folder: Path) -> Path:
+    """An inkjet printer (1.0 x 0.4 x 0.8 units, open at the top) with a lid (``lid``, revolute 0-1.3 rad about
+    its rear edge) and a paper tray (``drawer``, prismatic 0-0.35 units out of the front) low inside it."""
+    b = _Builder("u_printer", "Printer")
+    w, h, d = 0.5, 0.2, 0.4
+    b.body("link_2", "printer_body", _open_box(b, "printer_body", w, h, d, 0.03, _GREY))
+    b.moving("link_0", "hinge", "lid", [b.part("lid", box_xyz(-w, w, h, h + 0.03, -d, d), _GREY)],
+             "revolute", "link_2", (0.0, h + 0.015, -d), (-1.0, 0.0, 0.0), 0.0, 1.3)
+    b.moving("link_1", "slider", "drawer", [b.part("drawer", [box_xyz(-0.35, 0.35, -0.15, -0.13, -0.3, d + 0.02),
+                                                            box_xyz(-0.35, 0.35, -0.15, -0.08, d + 0.02, d + 0.04)], _DARK)],
+             "prismatic", "link_2", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.0, 0.35)
+    return b.write(folder)
+
+
 def one_mesh_per_link(folder: Path) -> Path:
     """Rewrite the generated asset in ``folder`` in place so that each link draws and collides with one OBJ of one
     group holding all its parts (``textured_objs/merged-<link>.obj``), as PartNet-Mobility's files are: one group per
@@ -523,4 +567,7 @@ UNSEEN_BUILDERS = (
     ("u_kettle", build_kettle, "Kettle"),
     ("u_bucket", build_bucket, "Bucket"),
     ("u_dispenser", build_dispenser, "Dispenser"),
+    ("u_lamp", build_desk_lamp, "Lamp"),
+    ("u_fan", build_desk_fan, "Fan"),
+    ("u_printer", build_printer, "Printer"),
 )

@@ -16,18 +16,20 @@ from asset2sim.schemas.overlay import EstimatorInfo, Overlay
 from asset2sim.tasks.interpret.named_parts import part_boxes
 from asset2sim.tasks.interpret.request import parse_request
 from asset2sim.tasks.interpret.state_words import LESS_THAN_HALF
-from asset2sim.tasks.synthesize import estimate, request_apply, request_findings
+from asset2sim.tasks.synthesize import estimate, joint_dynamics, request_apply, request_findings
 from asset2sim.tasks.synthesize.context import build_context
 from tests.conftest import SHARED, needs_shared
 from tests.tasks.interpret.request_assets import build_three_drawer_cabinet
-from tests.unseen_assets import build_bottle, build_dispenser, build_double_door_cabinet, build_toaster
+from tests.unseen_assets import (build_bottle, build_desk_fan, build_desk_lamp, build_dispenser, build_double_door_cabinet,
+                                 build_printer, build_toaster)
 
 
 @pytest.fixture(scope="module")
 def generated(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("people")
     return {"toaster": build_toaster(root / "toaster"), "bottle": build_bottle(root / "bottle"),
-            "chest": build_three_drawer_cabinet(root / "chest"), "dispenser": build_dispenser(root / "dispenser")}
+            "chest": build_three_drawer_cabinet(root / "chest"), "dispenser": build_dispenser(root / "dispenser"),
+            "lamp": build_desk_lamp(root / "lamp"), "fan": build_desk_fan(root / "fan"), "printer": build_printer(root / "printer")}
 
 
 def resolve(folder: Path, text: str):
@@ -52,6 +54,30 @@ def test_a_toasters_lever_is_its_slider(generated):
     (slider,) = joint_of(labels, "slider")
     assert res.unapplied == [] and slider in res.targets and res.targets[slider].kind == "end"
     assert any("synonym" in n and "'lever' = the 'slider'" in n and slider in n for n in res.notes)
+
+
+@pytest.mark.parametrize("obj, text, label", [
+    ("printer", "A laser printer with its paper tray open.", "drawer"),
+    ("lamp", "A desk lamp with its arm raised all the way.", "leg"),
+])
+def test_a_part_word_names_the_label_its_category_gives_the_part(generated, obj, text, label):
+    """A printer's paper tray is the part PartNet-Mobility labels ``drawer`` and a desk lamp's arm its ``leg``
+    (``label_synonyms`` of the category): the state reaches that part. Before, each phrase was "no part of this
+    Printer / Lamp carries that label" and the request was not met."""
+    res, labels, *_ = resolve(generated[obj], text)
+    named = joint_of(labels, label)
+    assert named and res.unapplied == [] and set(named) & set(res.addressed), (res.unapplied, res.addressed)
+    assert any("synonym" in n and f"'{label}'" in n for n in res.notes), res.notes
+
+
+def test_a_fans_blades_are_its_rotor(generated):
+    """"its blades spinning freely" on a fan whose blades are labelled ``rotor``: the motion word reaches the rotor
+    (it used to name "a 'blade' but this Fan has no such moving part")."""
+    text = "A large pedestal fan with its blades spinning freely."
+    with build_context(generated["fan"], text) as (ctx, _):
+        (rotor,) = [j.name for j in ctx.asset.movable_joints() if ctx.asset.link(j.child).semantic_label == "rotor"]
+        choices, missing = joint_dynamics.motion_choices(ctx, [])
+    assert missing == [] and choices[rotor].free_moving
 
 
 @needs_shared
