@@ -471,18 +471,18 @@ def build_desk_lamp(folder: Path) -> Path:
     return b.write(folder)
 
 
-def build_desk_fan(folder: Path) -> Path:
+def build_desk_fan(folder: Path, front: float = 0.15) -> Path:
     """A desk fan (1.0 units tall): a base and a post, a head (``head``) tilting +-0.3 rad about the horizontal
-    x axis on top of the post, and three blades (``rotor``, continuous about the head's forward z axis) in front of
-    the head, clear of the post at every tilt."""
+    x axis on top of the post, and three blades (``rotor``, continuous about the head's forward z axis) turning
+    ``front`` units in front of the post's axis: clear of the post at every tilt at the default, grazing it at 0.07."""
     b = _Builder("u_fan", "Fan")
     b.body("link_2", "fan_body", [b.part("fan_body", box_xyz(-0.3, 0.3, -0.5, -0.44, -0.25, 0.25), _WHITE),
                                   b.part("fan_body", box_xyz(-0.04, 0.04, -0.44, 0.0, -0.04, 0.04), _WHITE)])
-    b.moving("link_0", "hinge", "head", [b.part("head", box_xyz(-0.1, 0.1, 0.0, 0.2, -0.15, 0.12), _WHITE)],
+    b.moving("link_0", "hinge", "head", [b.part("head", box_xyz(-0.1, 0.1, 0.0, 0.2, -0.15, front - 0.02), _WHITE)],
              "revolute", "link_2", (0.0, 0.02, 0.0), (1.0, 0.0, 0.0), -0.3, 0.3)
-    blades = [b.part("rotor", box_xyz(-0.3, 0.3, 0.07, 0.13, 0.14, 0.16), _GREY,
-                     Pose(axis=(0.0, 0.0, 1.0), angle=math.pi * k / 3, pivot=(0.0, 0.1, 0.15))) for k in range(3)]
-    b.moving("link_1", "hinge", "rotor", blades, "continuous", "link_0", (0.0, 0.1, 0.15), (0.0, 0.0, 1.0))
+    blades = [b.part("rotor", box_xyz(-0.3, 0.3, 0.07, 0.13, front - 0.01, front + 0.01), _GREY,
+                     Pose(axis=(0.0, 0.0, 1.0), angle=math.pi * k / 3, pivot=(0.0, 0.1, front))) for k in range(3)]
+    b.moving("link_1", "hinge", "rotor", blades, "continuous", "link_0", (0.0, 0.1, front), (0.0, 0.0, 1.0))
     return b.write(folder)
 
 

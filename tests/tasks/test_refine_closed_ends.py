@@ -4,7 +4,6 @@ measures on the output (:mod:`asset2sim.tasks.geometry.urdf_closed`)."""
 from __future__ import annotations
 
 import csv
-import math
 from pathlib import Path
 
 import pytest
@@ -14,9 +13,8 @@ from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.geometry.urdf_closed import measure_closed, measure_closed_ends, replace_positions
 from asset2sim.tasks.refine import refine_asset
 from asset2sim.engines.source import UrdfFile
-from asset2sim.demo_geometry import Pose, box_xyz
 from tests.conftest import SHARED, needs_shared
-from tests.unseen_assets import _GREY, _WHITE, _Builder
+from tests.unseen_assets import build_desk_fan
 
 
 def _box_obj(boxes: list[tuple[tuple[float, float, float], tuple[float, float, float]]]) -> str:
@@ -106,27 +104,12 @@ def test_faucet_148_handle_off_is_closed_by_the_evaluations_measure(refine_once)
     assert lo - 1e-9 <= ev.fraction(r.initial_joint_positions[joint]) <= hi + 1e-9
 
 
-def _fan_grazing_its_post(folder: Path) -> Path:
-    """A desk fan whose blades (``rotor``) turn close in front of its post and whose head (``head``) tilts into
-    the post: the head's lower limit is clipped, the closed end found again on the clipped pieces moves, and the
-    blades' running clearance is repaired after the post-check (the limits clipped once more)."""
-    b = _Builder("u_fan_grazing", "Fan")
-    b.body("link_2", "fan_body", [b.part("fan_body", box_xyz(-0.3, 0.3, -0.5, -0.44, -0.25, 0.25), _WHITE),
-                                  b.part("fan_body", box_xyz(-0.04, 0.04, -0.44, 0.0, -0.04, 0.04), _WHITE)])
-    b.moving("link_0", "hinge", "head", [b.part("head", box_xyz(-0.1, 0.1, 0.0, 0.2, -0.15, 0.05), _WHITE)],
-             "revolute", "link_2", (0.0, 0.02, 0.0), (1.0, 0.0, 0.0), -0.3, 0.3)
-    blades = [b.part("rotor", box_xyz(-0.3, 0.3, 0.07, 0.13, 0.06, 0.08), _GREY,
-                     Pose(axis=(0.0, 0.0, 1.0), angle=math.pi * k / 3, pivot=(0.0, 0.1, 0.07))) for k in range(3)]
-    b.moving("link_1", "hinge", "rotor", blades, "continuous", "link_0", (0.0, 0.1, 0.07), (0.0, 0.0, 1.0))
-    return b.write(folder)
-
-
 def test_a_re_clip_keeps_the_closed_end_the_state_was_placed_from(tmp_path):
     """The head's state is placed from the closed end measured on the clipped limits' pieces; the limits clipped
     again after a repair start from that closed end, so ``closed_positions`` and the request's grading read the one
     the state was placed from. They used to start from the closed end measured before the clip: the report said
     0.12 rad, the state stood at 0.125 from the other, and "head tilted down" missed by 4 % of the range."""
-    src = _fan_grazing_its_post(tmp_path / "src")
+    src = build_desk_fan(tmp_path / "src", front=0.07)  # the blades graze the post: a repair after the post-check
     res = refine_asset(src, "A desk fan, head tilted down fully.", tmp_path / "out", extras=False)
     r = res.report
     assert r.initial_joint_positions["joint_0"] == pytest.approx(r.closed_positions["joint_0"], abs=1e-9)
