@@ -13,7 +13,8 @@ closed end and pushed open, then pushed closed, by a hand:
   (a handle's centre, a door's far edge, a drawer's front), lever r its distance from the axis
   (a knob's rim where it is grasped on its axis: :func:`~asset2sim.tasks.check.contact_points.grasp_lever`);
 - **how hard**: at most the top of the part's operating range F (N; a torque range T N m bounds
-  F r too), rising from 0 over ``ramp_time`` and easing off as the part nears the hand's speed;
+  F r too), rising from 0 over ``ramp_time``, easing off as the part nears the hand's speed, and changing
+  at most at the rise's rate;
 - **how fast**: the hand's speed v at the grasp point (0.25 m/s, ISO 10218-1 reduced speed,
   :class:`~asset2sim.tasks.check.gripper.GripperLimits`).
 
