@@ -2,7 +2,8 @@
 a safe with a dial on its door, a toaster with a lever and a dial, a capped
 bottle, a desk with a drawer, a range oven with a drop-down door, a pot with
 a lid, a front-loading washing machine, a kettle, folding glasses, a bucket
-with a bail handle, a wardrobe with two doors over two drawers. Each is
+with a bail handle, a wardrobe with two doors over two drawers, a printer, a
+desk lamp and a desk fan. Each is
 refined for a short request of the hidden set's kind and must be
 interaction-ready on every tier, recognised as its
 category, mounted as the category's prior says, with the requested joint in
@@ -26,10 +27,13 @@ from tests.unseen_assets import (
     build_barred_safe,
     build_bottle,
     build_bucket,
+    build_desk_fan,
+    build_desk_lamp,
     build_eyeglasses,
     build_kettle,
     build_kitchen_pot,
     build_oven,
+    build_printer,
     build_safe,
     build_table_with_drawer,
     build_toaster,
@@ -50,6 +54,9 @@ CASES = [
     (build_kettle, "Kettle", "A kettle, halfway open.", "joint_0", "halfway"),
     (build_eyeglasses, "Eyeglasses", "Eyeglasses, fully open.", "joint_1", "fully"),
     (build_bucket, "Bucket", "A bucket with its handle closed.", "joint_0", "closed"),
+    (build_printer, "Printer", "A printer with its lid halfway open.", "joint_0", "halfway"),
+    (build_desk_lamp, "Lamp", "A desk lamp, closed.", "joint_2", "closed"),
+    (build_desk_fan, "Fan", "A desk fan with its head closed.", "joint_0", "closed"),
 ]
 
 
