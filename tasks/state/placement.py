@@ -195,7 +195,7 @@ def ends_over_raw_limits(raw: dict[str, ClosedState], measured: dict[str, Closed
         if r is None or (m.q_closed == r.q_closed and m.direction == r.direction):
             continue
         far = r.upper if m.direction > 0 else r.lower
-        span = abs(float(far) - m.q_closed) if far is not None and np.isfinite(far) else r.open_range
+        span = abs(far - m.q_closed) if np.isfinite(far) else r.open_range
         out[n] = replace(r, q_closed=m.q_closed, direction=m.direction, open_range=span)
     return out
 
