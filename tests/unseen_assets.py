@@ -486,6 +486,21 @@ def build_desk_fan(folder: Path, front: float = 0.15) -> Path:
     return b.write(folder)
 
 
+def build_keyboard(folder: Path, rows: int = 3, cols: int = 8) -> Path:
+    """A keyboard (1.0 x 0.05 x 0.34 units): a base and ``rows`` x ``cols`` keys (``key``, PartNet-Mobility's word for
+    a keyboard's buttons), each on its own slider pressed 0.009 units down into the base's top, a fifth of the pitch
+    apart."""
+    b = _Builder("u_keyboard", "Keyboard")
+    body = f"link_{rows * cols}"
+    b.body(body, "keyboard_base", [b.part("keyboard_base", box_xyz(-0.5, 0.5, -0.05, 0.0, -0.17, 0.17), _DARK)])
+    px, pz = 1.0 / cols, 0.32 / rows
+    for k in range(rows * cols):
+        x, z = -0.5 + px * (k % cols + 0.5), -0.16 + pz * (k // cols + 0.5)
+        b.moving(f"link_{k}", "slider", "key", [b.part("key", box_xyz(x - 0.4 * px, x + 0.4 * px, 0.001, 0.025, z - 0.4 * pz, z + 0.4 * pz), _GREY)],
+                 "prismatic", body, (x, 0.001, z), (0.0, -1.0, 0.0), 0.0, 0.009)
+    return b.write(folder)
+
+
 def build_printer(folder: Path) -> Path:
     """An inkjet printer (1.0 x 0.4 x 0.8 units, open at the top) with a lid (``lid``, revolute 0-1.3 rad about
     its rear edge) and a paper tray (``drawer``, prismatic 0-0.35 units out of the front) low inside it."""
@@ -570,4 +585,5 @@ UNSEEN_BUILDERS = (
     ("u_lamp", build_desk_lamp, "Lamp"),
     ("u_fan", build_desk_fan, "Fan"),
     ("u_printer", build_printer, "Printer"),
+    ("u_keyboard", build_keyboard, "Keyboard"),
 )

@@ -103,10 +103,15 @@ class PyBulletSession(SessionDefaults):
 
     # ------------------------------------------------------------------ state
     def set_joint_positions(self, q: dict[str, float]) -> None:
-        for name, value in q.items():
-            j = self._index.get(name)
-            if j is not None:
-                self._p.resetJointState(self.body, j, float(value), 0.0, physicsClientId=self.cid)
+        """Each joint of ``q`` (rad or m) at rest there. A joint already there at rest is left as it is: Bullet's
+        ``resetJointState`` moves every link of the body each call, so a whole state set again costs a call per joint
+        for nothing (a keyboard's 108 keys: 108 passes over 109 links)."""
+        p = self._p
+        named = [(self._index[n], float(v)) for n, v in q.items() if n in self._index]
+        now = p.getJointStates(self.body, [j for j, _ in named], physicsClientId=self.cid) if len(named) > 1 else None
+        for k, (j, value) in enumerate(named):
+            if now is None or now[k][0] != value or now[k][1] != 0.0:
+                p.resetJointState(self.body, j, value, 0.0, physicsClientId=self.cid)
         self._teleported = True
 
     def _forget_contacts(self) -> None:
@@ -281,12 +286,10 @@ class PyBulletSession(SessionDefaults):
         if not springs:
             return
         q = self.joint_positions()
-        for name, spring in springs.items():
-            j = self._index.get(name)
-            if j is None:
-                continue
-            tau = spring.force(q[name])
-            p.setJointMotorControl2(self.body, j, p.TORQUE_CONTROL, force=tau, physicsClientId=self.cid)
+        sprung = [(self._index[name], spring.force(q[name])) for name, spring in springs.items() if name in self._index]
+        if sprung:  # one call for every spring (a keyboard's 108 keys: 108 calls a step otherwise)
+            p.setJointMotorControlArray(self.body, [j for j, _ in sprung], p.TORQUE_CONTROL, forces=[tau for _, tau in sprung],
+                                        physicsClientId=self.cid)
 
     def apply_joint_effort(self, name: str, effort: float) -> None:
         self._p.setJointMotorControl2(self.body, self._index[name], self._p.TORQUE_CONTROL, force=float(effort), physicsClientId=self.cid)

@@ -24,8 +24,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from asset2sim.engines.base import SimSession
+from asset2sim.engines.base import EngineUnsupported, SimSession
+from asset2sim.tasks.check import joint_batches
 from asset2sim.tasks.check.stroke import run_stroke
+from asset2sim.tasks.check.sweep import HOLD_FORCE
+from asset2sim.tasks.geometry import limits
+from asset2sim.urdf import UrdfModel
 
 #: The push ramps from this share of the declared friction ...
 RAMP_FROM = 0.5
@@ -125,18 +129,81 @@ def joint_breakaway(session: SimSession, joint: str, friction: float, damping: f
         session.discard_state(saved)
 
 
-def measure_breakaway(session: SimSession, frictions: dict[str, float],
-                      dampings: dict[str, float] | None = None) -> dict[str, JointBreakaway]:
+def measure_breakaway(session: SimSession, frictions: dict[str, float], dampings: dict[str, float] | None = None,
+                      model: UrdfModel | None = None) -> dict[str, JointBreakaway]:
     """:func:`joint_breakaway` of every movable joint of ``session`` with friction > 0 in ``frictions`` (joint ->
     N*m or N, the files' ``<dynamics friction>``; ``dampings`` their ``<dynamics damping>``), one after the other
-    from the session's state.
+    from the session's state; with the session's ``model``, the root's branches whose parts are apart are pushed in
+    batches first (:func:`push_together`), and a joint that does not pass there is pushed alone.
 
     Raises:
         EngineUnsupported: as :func:`joint_breakaway`.
     """
     dampings = dampings or {}
-    return {j: joint_breakaway(session, j, float(frictions[j]), float(dampings.get(j, 0.0)))
-            for j in session.joint_names if float(frictions.get(j, 0.0)) > 0.0}
+    pushed = [j for j in session.joint_names if float(frictions.get(j, 0.0)) > 0.0]
+    found: dict[str, JointBreakaway] = {}
+    branches = joint_batches.root_branches(model, pushed) if model is not None else []
+    if len(branches) > 1:
+        moved = limits.subtrees(model)
+        try:  # an engine that reads no link boxes or has no drive (ovphysx) pushes each part alone
+            boxes = {j: joint_batches.links_box(session, [ln for ln in moved[j] if ln in session.link_names]) for j in branches}
+            for batch in joint_batches.batches(boxes):
+                if len(batch) > 1:
+                    found.update({j: b for j, b in push_together(session, batch, frictions, dampings).items() if b.passed})
+        except EngineUnsupported:
+            found = {}
+    return {j: found[j] if j in found else joint_breakaway(session, j, float(frictions[j]), float(dampings.get(j, 0.0)))
+            for j in pushed}
+
+
+def push_together(session: SimSession, joints: list[str], frictions: dict[str, float],
+                  dampings: dict[str, float]) -> dict[str, JointBreakaway]:
+    """:func:`joint_breakaway` of each of ``joints`` at once, each on its own ramp from the session's state: for parts
+    that cannot act on one another (:mod:`~asset2sim.tasks.check.joint_batches`), so each part's push and motion are
+    the ones it has alone. A part that started to move is held still (its push ended, as alone) while the others'
+    ramps go on; the state is restored afterwards.
+
+    Raises:
+        EngineUnsupported: the engine cannot apply a joint effort, drive a joint or save its state.
+    """
+    dt = session.options.conventions.timestep
+    n = max(2, round(RAMP_TIME / dt))
+    q0 = session.joint_positions()
+    saved = session.save_state()
+    pushes = {}
+    for j in joints:
+        lower, upper = session.joint_limits.get(j, (-np.inf, np.inf))
+        jtype = session.joint_types.get(j, "revolute")
+        pushes[j] = (push_direction(q0[j], lower, upper), session.options.springs.get(j), START_SPEED.get(jtype, 1e-3),
+                     RESOLUTION.get(jtype, 0.0), float(frictions[j]) * np.linspace(RAMP_FROM, RAMP_TO, n + 1), [])
+    read = {j: session.joint_state(j) for j in joints}
+    found: dict[str, JointBreakaway] = {}
+    try:
+        for k in range(n + 1):
+            for j in read:  # the push, the spring's pull k (q - q_s) met
+                direction, spring, _, _, ramp, _ = pushes[j]
+                hold = spring.stiffness * (read[j][0] - spring.reference) if spring is not None and spring.stiffness > 0 else 0.0
+                session.apply_joint_effort(j, direction * ramp[k] + hold)
+            session.step(1)
+            for j in list(read):
+                direction, _, speed, resolution, ramp, speeds = pushes[j]
+                read[j] = session.joint_state(j)
+                speeds.append(direction * read[j][1])
+                if k + 1 >= START_STEPS and min(speeds[-START_STEPS:]) > speed:
+                    brk = max(float(ramp[k]) - float(dampings.get(j, 0.0)) * speeds[-1], 0.0)
+                    found[j] = JointBreakaway(j, float(frictions[j]), brk, direction, resolution)
+                    del read[j]
+                    session.drive_joint(j, 0.0, HOLD_FORCE)
+            if not read:
+                break
+        for j in read:
+            found[j] = JointBreakaway(j, float(frictions[j]), None, pushes[j][0], pushes[j][3])
+    finally:
+        for j in joints:
+            session.release_joint(j)
+        session.restore_state(saved)
+        session.discard_state(saved)
+    return found
 
 
 def breakaway_summary(results: dict[str, JointBreakaway] | None, reason: str = "") -> dict:

@@ -99,7 +99,7 @@ def engine_breakaway(source: SimSource, engine: str, options: SessionOptions) ->
     except EngineUnavailable as exc:
         return breakaway.breakaway_summary(None, str(exc))
     try:
-        return breakaway.breakaway_summary(breakaway.measure_breakaway(session, frictions, dampings))
+        return breakaway.breakaway_summary(breakaway.measure_breakaway(session, frictions, dampings, source.model()))
     except EngineUnsupported as exc:
         return breakaway.breakaway_summary(None, f"{engine} cannot push a joint: {exc}")
     finally:

@@ -11,10 +11,11 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.engines.base import SimSession
+from asset2sim.engines.base import EngineUnsupported, SimSession
 from asset2sim.engines.source import SimObject
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check import joint_batches
 from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root_options, joints_between
 from asset2sim.tasks.check.contact_points import joint_frame_axis
 from asset2sim.tasks.ingest.mesh_checks import box_corners
@@ -117,37 +118,6 @@ def effort_limit(session: SimSession, joint: str, links: list[str], open_range: 
     return float(cfg.weight_factor * m_sub * G * lever + k * open_range)
 
 
-#: Speed margin of :func:`damping_caps`: the damped speed E / c covers the range this many times in the time limit.
-DAMPED_SPEED_MARGIN = 2.0
-
-
-def damping_caps(obj: SimObject, closed: dict[str, tuple[float, float, float]]) -> dict[str, float]:
-    """Joint -> the largest viscous damping (N m s/rad or N s/m) with which
-    the sweep's drive still traverses the range in time: c_max = E T /
-    (``DAMPED_SPEED_MARGIN`` R), E :func:`effort_limit` at the closed end, T
-    :attr:`SweepConfig.time_limit`, R the range of ``closed`` (joint ->
-    (q_closed, direction, R), rad or m). Measured in a fixed-root,
-    gravity-free PyBullet session of ``obj``; joints with no range are left out.
-
-    Raises:
-        EngineUnavailable: PyBullet is not installed; whatever loading ``obj.source`` raises.
-    """
-    cfg = SweepConfig()
-    source, initial_state = obj.source, dict(obj.state)
-    model = source.model()
-    subtrees = limits.subtrees(model)
-    caps: dict[str, float] = {}
-    with source.open("pybullet", fixed_root_options(initial_state, obj.conventions, dict(obj.springs))) as session:
-        for name, (qc, _, rng) in closed.items():
-            if name not in session.joint_types or not rng > 0:
-                continue
-            session.set_joint_positions({**initial_state, name: qc})
-            links = subtrees.get(name, [session.joint_child[name]])
-            e = effort_limit(session, name, links, rng, cfg)
-            caps[name] = e * cfg.time_limit / (DAMPED_SPEED_MARGIN * rng)
-    return caps
-
-
 def _deepest(session: SimSession) -> tuple[float, tuple[str, str] | None]:
     _, pairs = session.self_penetration()
     if not pairs:
@@ -211,7 +181,15 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     finally:
         for o in [joint, *held]:
             session.release_joint(o)
-    diverged = out.diverged or back.diverged
+    return _joint_sweep(joint, jtype, (closed, direction, open_range), limit, out, back, (max_pen, worst), trace, dt, cfg)
+
+
+def _joint_sweep(joint: str, jtype: str, closed: tuple[float, float, float], limit: float, out: Reach, back: Reach,
+                 deepest: tuple[float, tuple[str, str] | None], trace: dict[str, list[float]], dt: float,
+                 cfg: SweepConfig) -> JointSweep:
+    """The sweep of ``joint`` from its two strokes (out, back) and its deepest self-contact (m, pair)."""
+    qc, d, rng = closed
+    (max_pen, worst), diverged = deepest, out.diverged or back.diverged
     t_out, t_back = (None if r.steps is None else r.steps * dt for r in (out, back))
     failure = ["diverged"] if diverged else []
     if t_out is None and not diverged:
@@ -221,11 +199,145 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     if max_pen >= cfg.max_penetration:
         failure.append(f"self-penetration {max_pen * 1000:.1f} mm" + (f" ({worst[0]} / {worst[1]})" if worst else ""))
     return JointSweep(
-        joint=joint, joint_type=jtype, q_closed=float(closed), q_far=float(q_far), open_range=float(open_range),
+        joint=joint, joint_type=jtype, q_closed=float(qc), q_far=float(qc + d * rng), open_range=float(rng),
         effort_limit=limit, reached_open=float(out.far), reached_closed=float(back.far),
         time_open=t_out, time_close=t_back,
         max_penetration=max_pen, worst_pair=worst, diverged=diverged, passed=not failure, failure="; ".join(failure),
         trace=trace)
+
+
+@dataclass
+class _Swept:
+    """One joint's sweep in a batch (:func:`sweep_together`): its ends, drive and the stroke under way."""
+
+    joint: str
+    closed: tuple[float, float, float]
+    effort: float
+    links: frozenset[str]
+    v_max: float
+    max_speed: float
+    deepest: tuple[float, tuple[str, str] | None] = (0.0, None)
+    strokes: list[Reach] = field(default_factory=list)
+    trace: dict[str, list[float]] = field(default_factory=lambda: {"t": [], "fraction": [], "phase": []})
+    k: int = 0
+
+    @property
+    def sign(self) -> float:
+        return 1.0 if len(self.strokes) == 1 else -1.0
+
+
+def sweep_together(session: SimSession, joints: list[str], closed: dict[str, tuple[float, float, float]],
+                   subtrees: dict[str, list[str]], initial_state: dict[str, float],
+                   config: SweepConfig | None = None) -> dict[str, JointSweep]:
+    """:func:`sweep_joint` of each of ``joints`` at once in one fixed-root, gravity-free session: each joint's strokes,
+    drive law, hold and pass rule as alone, the other joints held at ``initial_state`` (rad or m). For parts that
+    cannot act on one another (:mod:`~asset2sim.tasks.check.joint_batches`: separate branches of the root, swept
+    boxes apart), so each part's motion is the one it has alone. A part's deepest self-contact counts the pairs it
+    is in and those of the links no part of the batch moves, as they are now, and the other parts' pairs as they are
+    at ``initial_state`` (where they stay while it is swept alone). ``closed``: joint -> (q_closed, direction, open
+    range > 0); ``subtrees``: joint -> the links it moves.
+
+    Raises:
+        KeyError: a joint of ``joints`` is not one of the session's.
+    """
+    cfg = config or SweepConfig()
+    dt = session.options.conventions.timestep
+    limit = int(round(cfg.time_limit / dt))
+    moved = {j: frozenset(subtrees.get(j, [session.joint_child[j]])) for j in joints}
+    session.set_joint_positions(dict(initial_state))
+    at_rest = session.self_penetration()[1]  # each part's pairs where it stays while another is swept alone
+    session.set_joint_positions({**initial_state, **{j: closed[j][0] for j in joints}})
+    runs = []
+    for j in joints:
+        qc, _, rng = closed[j]
+        speed = EXPLOSION_JOINT_SPEED_PRISMATIC if session.joint_types[j] == "prismatic" else EXPLOSION_JOINT_SPEED_REVOLUTE
+        runs.append(_Swept(j, closed[j], effort_limit(session, j, list(moved[j]), rng, cfg), moved[j], rng / cfg.traverse_time,
+                           speed, strokes=[Reach(limit)]))
+    others = {r.joint: [c for c in at_rest if not ({c.link_a, c.link_b} & r.links)
+                        and any({c.link_a, c.link_b} & o.links for o in runs if o is not r)] for r in runs}
+    batch_links = frozenset().union(*moved.values())
+
+    def deepest(r: _Swept, pairs) -> None:
+        mine = [c for c in pairs if {c.link_a, c.link_b} & r.links or not {c.link_a, c.link_b} & batch_links] + others[r.joint]
+        if mine:
+            worst = max(mine, key=lambda c: c.max_depth)
+            if worst.max_depth > r.deepest[0] or r.deepest[1] is None and r.k == 0:
+                r.deepest = (float(worst.max_depth), (worst.link_a, worst.link_b))
+
+    pairs = session.self_penetration()[1]
+    for r in runs:
+        deepest(r, pairs)
+    hold = cfg.hold_others and not (any(sp.stiffness > 0 for sp in session.options.springs.values())
+                                     and session.traits.springs_by_torque)
+    if hold:
+        for o in session.joint_types:
+            if o not in moved:
+                session.drive_joint(o, 0.0, cfg.hold_force)
+    active = list(runs)
+    try:
+        while active:
+            for r in list(active):
+                q, qd = session.joint_state(r.joint)
+                while _stroke_ended(session, r, q, qd, cfg):
+                    if not _next_stroke(r, dt):
+                        active.remove(r)
+                        if hold:
+                            session.drive_joint(r.joint, 0.0, cfg.hold_force)
+                        break
+            if not active:
+                break
+            session.step(1)
+            pairs = session.self_penetration()[1]
+            for r in active:
+                r.k += 1
+                deepest(r, pairs)
+    finally:
+        for o in session.joint_types:
+            session.release_joint(o)
+    return {r.joint: _joint_sweep(r.joint, session.joint_types[r.joint], r.closed, r.effort, r.strokes[0], r.strokes[1],
+                                  r.deepest, r.trace, dt, cfg) for r in runs}
+
+
+def _stroke_ended(session: SimSession, r: _Swept, q: float, qd: float, cfg: SweepConfig) -> bool:
+    """:func:`reach_stroke`'s reading of ``r``'s stroke under way at (q, qd), its drive set when it goes on; True when
+    the stroke ended (reached, diverged, or out of time)."""
+    reach, (qc, d, rng) = r.strokes[-1], r.closed
+    target = cfg.reach_fraction if r.sign > 0 else 1.0 - cfg.reach_fraction
+
+    def passed(q):
+        f = float(d * (q - qc) / rng)
+        reach.far = f if np.isnan(reach.far) else (max if r.sign > 0 else min)(reach.far, f)
+        return (f - target) * r.sign >= 0
+
+    if r.k >= reach.limit:  # out of time: the last reading may still be at the target
+        if np.isfinite(q) and passed(q):
+            reach.steps = r.k
+        return True
+    reach.fractions.append(float(d * (q - qc) / rng))
+    if not (np.isfinite(q) and np.isfinite(qd)) or abs(qd) > r.max_speed:
+        reach.diverged = True
+        return True
+    if passed(q):
+        reach.steps = r.k
+        return True
+    goal = qc + d * rng if r.sign > 0 else qc
+    session.drive_joint(r.joint, float(np.clip(cfg.position_gain * (goal - q), -r.v_max, r.v_max)), r.effort)
+    return False
+
+
+def _next_stroke(r: _Swept, dt: float) -> bool:
+    """The ended stroke's readings into ``r``'s trace; the closing stroke begun after the opening one (True), or the
+    sweep over (False)."""
+    reach = r.strokes[-1]
+    t0 = r.trace["t"][-1] + dt if r.trace["t"] else 0.0
+    r.trace["t"] += [t0 + k * dt for k in range(len(reach.fractions))]
+    r.trace["fraction"] += reach.fractions
+    r.trace["phase"] += [float(r.sign < 0)] * len(reach.fractions)
+    if len(r.strokes) == 2:
+        return False
+    r.strokes.append(Reach(0) if reach.diverged else Reach(reach.limit))
+    r.k = 0
+    return not reach.diverged
 
 
 @dataclass
@@ -305,9 +417,11 @@ def run_sweep(engine: str, obj: SimObject, closed: dict[str, tuple[float, float,
     subtrees = limits.subtrees(model)
     run = SweepRun(engine)
     springs = dict(obj.springs)
+    passed = _passed_together(engine, obj, closed, model, subtrees, cfg) if cfg.hold_others else {}
+    run.joints.extend(passed.values())
     # a held joint's spring load is taken by its hold: one session per set of acting springs
     groups: dict[tuple[str, ...], list[str]] = {}
-    for name in closed:
+    for name in (n for n in closed if n not in passed):
         key = ((name,) if name in springs else ()) if cfg.hold_others else tuple(sorted(springs))
         groups.setdefault(key, []).append(name)
     for key, names in groups.items():
@@ -339,6 +453,37 @@ def run_sweep(engine: str, obj: SimObject, closed: dict[str, tuple[float, float,
     return run
 
 
+def _passed_together(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]], model: UrdfModel,
+                     subtrees: dict[str, list[str]], cfg: SweepConfig) -> dict[str, JointSweep]:
+    """The sweeps that pass when the root's branches are swept in batches (:func:`sweep_together`, by
+    :func:`~asset2sim.tasks.check.joint_batches.batches` of their swept boxes over the closed end, the open end and
+    the initial state; parts with a spring and parts without apart, each batch with its parts' springs, as a part
+    alone has its own). A batch where a part diverged gives none (the engine's state is not trusted for the others);
+    the rest are swept alone."""
+    state, conv, springs = dict(obj.state), obj.conventions, dict(obj.springs)
+    candidates = [n for n in joint_batches.root_branches(model, list(closed)) if closed[n][2] > 0]
+    if len(candidates) < 2:
+        return {}
+    with obj.source.open(engine, fixed_root_options(state, conv)) as session:
+        candidates = [n for n in candidates if n in session.joint_types]
+        try:
+            boxes = {n: joint_batches.swept_box(session, n, subtrees.get(n, [session.joint_child[n]]), state,
+                                                [closed[n][0], closed[n][0] + closed[n][1] * closed[n][2], state.get(n, closed[n][0])])
+                     for n in candidates}
+        except EngineUnsupported:  # an engine that reads no link boxes: each part swept alone
+            return {}
+    passed: dict[str, JointSweep] = {}
+    for sprung in (False, True):
+        for batch in joint_batches.batches({n: boxes[n] for n in candidates if (n in springs) is sprung}):
+            if len(batch) < 2:
+                continue
+            with obj.source.open(engine, fixed_root_options(state, conv, {n: springs[n] for n in batch if n in springs})) as session:
+                swept = sweep_together(session, batch, closed, subtrees, state, cfg)
+            if not any(j.diverged for j in swept.values()):
+                passed.update({n: j for n, j in swept.items() if j.passed})
+    return passed
+
+
 def sweep_metric(run: SweepRun) -> MetricResult:
     """The ``joint_sweep`` metric: value = failing joints; passes iff none fails (None when none was swept)."""
     cfg = SweepConfig()
@@ -351,42 +496,3 @@ def sweep_metric(run: SweepRun) -> MetricResult:
         details={"joints": {j.joint: j.summary() for j in run.joints}, "failing": failing,
                  "failures": [f"{j.joint}: {j.failure}" for j in run.joints if not j.passed], "skipped": run.skipped},
         engine=run.engine)
-
-
-def blocked_stops(metric: MetricResult) -> dict[str, tuple[float, float]]:
-    """Joint -> (position where the ``joint_sweep`` ``metric`` stalled, position
-    it was driven to), rad or m: on the way out when the far end was not
-    reached, else on the way back. Joints that passed, diverged or only
-    penetrated are left out."""
-    out = {}
-    for name, j in (metric.details.get("joints") or {}).items():
-        if j["passed"] or j["diverged"]:
-            continue
-        if j["time_open"] is None:
-            f, goal = j["reached_open"], j["q_far"]
-        elif j["time_close"] is None:
-            f, goal = j["reached_closed"], j["q_closed"]
-        else:
-            continue
-        if np.isfinite(f):
-            out[name] = (float(j["q_closed"] + (j["q_far"] - j["q_closed"]) * f), float(goal))
-    return out
-
-
-def blocked_positions(metric: MetricResult) -> dict[str, float]:
-    """Joint -> the position (rad or m) where the sweep stopped short (:func:`blocked_stops`)."""
-    return {name: stall for name, (stall, _goal) in blocked_stops(metric).items()}
-
-
-def sweep_score(metric: MetricResult) -> tuple[float, float]:
-    """Sort key of ``joint_sweep`` results, lower is better: (failing joints,
-    summed shortfall of the failing joints, each way >= 0, non-finite = 1,
-    rounded to 0.01)."""
-    short = 0.0
-    for j in (metric.details.get("joints") or {}).values():
-        if j["passed"]:
-            continue
-        out, back = j["reached_open"], j["reached_closed"]
-        short += max(0.0, REACH_FRACTION - out) if np.isfinite(out) else 1.0
-        short += max(0.0, back - (1.0 - REACH_FRACTION)) if np.isfinite(back) else 1.0
-    return float(metric.value), round(short, 2)

@@ -173,16 +173,20 @@ class _PairScreen:
         self.sub = [n for n in session.link_names if n in subset and session.link_has_collision(n)]
         self.rest = [n for n in session.link_names if n not in subset and session.link_has_collision(n)]
         self.screen = session.traits.conservative_aabb
+        self._rest_boxes: tuple[np.ndarray, np.ndarray] | None = None
 
     def pairs(self) -> list[tuple[str, str]]:
-        """Pairs (sub link, other link) in subtree-major order, m."""
+        """Pairs (sub link, other link) in subtree-major order, m. The other links' boxes are read at the first call:
+        only the joint whose subtree this is moves between calls."""
         if not self.screen or not self.sub or not self.rest:
             return [(a, b) for a in self.sub for b in self.rest]
-        boxes = {n: self.session.link_aabb(n) for n in self.sub + self.rest}
+        boxes = {n: self.session.link_aabb(n) for n in self.sub}
         lo_s = np.array([boxes[n][0] for n in self.sub])
         hi_s = np.array([boxes[n][1] for n in self.sub])
-        lo_r = np.array([boxes[n][0] for n in self.rest])
-        hi_r = np.array([boxes[n][1] for n in self.rest])
+        if self._rest_boxes is None:
+            rest = [self.session.link_aabb(n) for n in self.rest]
+            self._rest_boxes = np.array([b[0] for b in rest]), np.array([b[1] for b in rest])
+        lo_r, hi_r = self._rest_boxes
         # (S, R): boxes overlap (touching counts) on every axis
         overlap = np.all((lo_s[:, None, :] <= hi_r[None, :, :]) & (lo_r[None, :, :] <= hi_s[:, None, :]), axis=2)
         return [(self.sub[i], self.rest[k]) for i, k in zip(*np.nonzero(overlap))]

@@ -14,7 +14,7 @@ from asset2sim.schemas.report import EscalationRound, MetricResult, StateRefinem
 from asset2sim.stage_log import StageLog
 from asset2sim.tasks.assemble import write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
-from asset2sim.tasks.check import postcheck, robust_rest, sweep, task_tier
+from asset2sim.tasks.check import postcheck, robust_rest, sweep_stalls, task_tier
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_tuples
 from asset2sim.tasks.state import clearance, placement
@@ -143,7 +143,7 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
     closed ends, returned unchanged or replaced; notes go to ``st.collision_changes``."""
     overlay, check, rounds, overrides = result.overlay, result.check, result.rounds, result.overrides
     sw = next((m for m in check.metrics if m.name == "joint_sweep"), None)
-    blocked = {} if sw is None or sw.passed is not False else sweep.blocked_positions(sw)
+    blocked = {} if sw is None or sw.passed is not False else sweep_stalls.blocked_positions(sw)
     pairs = [] if blocked else repair.held_together_pairs(check.metrics)
     if not blocked and not pairs:
         return result  # the common case: nothing read, nothing simulated
@@ -156,7 +156,7 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
                                        blocked, overrides, unclipped.scale, ws.root, folder, config)
 
         def better(chk2) -> bool:
-            return sweep.sweep_score(next(m for m in chk2.metrics if m.name == "joint_sweep")) < sweep.sweep_score(sw)
+            return sweep_stalls.sweep_score(next(m for m in chk2.metrics if m.name == "joint_sweep")) < sweep_stalls.sweep_score(sw)
     else:
         label = "parts held together"
         touching = clearance.touching_joints(model, pairs, state, limits.subtrees(model))

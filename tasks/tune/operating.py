@@ -33,6 +33,7 @@ from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.check.pusher import ProbeConfig
 from asset2sim.tasks.interpret.task_words import task_actions
 from asset2sim.tasks.check.task_tier import link_labels
+from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.geometry.closed_state import subtree_links
 from asset2sim.tasks.synthesize.physics import G as GRAVITY, max_stable_friction
 from asset2sim.urdf import UrdfModel
@@ -400,6 +401,37 @@ def bound_overlay(overlay: Overlay, budgets: dict[str, OperatingBudget]) -> tupl
     return ov, notes
 
 
+#: Speed margin of :func:`damping_caps`: the damped speed E / c covers the range this many times in the time limit.
+DAMPED_SPEED_MARGIN = 2.0
+
+
+def damping_caps(obj: SimObject, closed: dict[str, tuple[float, float, float]]) -> dict[str, float]:
+    """Joint -> the largest viscous damping (N m s/rad or N s/m) with which
+    the sweep's drive still traverses the range in time: c_max = E T /
+    (``DAMPED_SPEED_MARGIN`` R), E :func:`effort_limit` at the closed end, T
+    :attr:`SweepConfig.time_limit`, R the range of ``closed`` (joint ->
+    (q_closed, direction, R), rad or m). Measured in a fixed-root,
+    gravity-free PyBullet session of ``obj``; joints with no range are left out.
+
+    Raises:
+        EngineUnavailable: PyBullet is not installed; whatever loading ``obj.source`` raises.
+    """
+    cfg = sweep.SweepConfig()
+    source, initial_state = obj.source, dict(obj.state)
+    model = source.model()
+    subtrees = limits.subtrees(model)
+    caps: dict[str, float] = {}
+    with source.open("pybullet", fixed_root_options(initial_state, obj.conventions, dict(obj.springs))) as session:
+        for name, (qc, _, rng) in closed.items():
+            if name not in session.joint_types or not rng > 0:
+                continue
+            session.set_joint_positions({**initial_state, name: qc})
+            links = subtrees.get(name, [session.joint_child[name]])
+            e = sweep.effort_limit(session, name, links, rng, cfg)
+            caps[name] = e * cfg.time_limit / (DAMPED_SPEED_MARGIN * rng)
+    return caps
+
+
 @dataclass
 class OperatingLimits:
     """What escalation keeps to: joint -> friction cap and damping cap (N m
@@ -422,7 +454,7 @@ def operating_limits(obj: SimObject, overlay: Overlay, asset: AssetDescription, 
     (:func:`~asset2sim.tasks.interpret.part_priors.handled`) where the closed ends are known, the tighter of it and
     the task gripper's for the task's ``joints``; else the probe's cap
     (:func:`friction_caps`); damping at most what the joint sweep's drive still
-    moves (:func:`~asset2sim.tasks.check.sweep.damping_caps`).
+    moves (:func:`damping_caps`).
 
     Raises:
         EngineUnavailable; whatever loading ``obj.source`` raises.
@@ -443,6 +475,6 @@ def operating_limits(obj: SimObject, overlay: Overlay, asset: AssetDescription, 
     caps.update({n: b.friction_cap for n, b in budgets.items()})
     dcaps = {n: b.damping_cap for n, b in budgets.items()}
     if closed:  # what the joint sweep's drive still moves through the range in time
-        for name, c in sweep.damping_caps(obj, closed).items():
+        for name, c in damping_caps(obj, closed).items():
             dcaps[name] = min(c, dcaps.get(name, c))
     return OperatingLimits(friction_caps=caps, damping_caps=dcaps, budgets=budgets, hand_caps=hand_caps)

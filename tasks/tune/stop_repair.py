@@ -12,7 +12,7 @@ from pathlib import Path
 from asset2sim.engines.source import SimObject
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check.sweep import blocked_stops
+from asset2sim.tasks.check.sweep_stalls import blocked_stops
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.state import collision
 from asset2sim.tasks.state.collision import CollisionPiece

@@ -162,7 +162,7 @@ def test_escalation_for_robust_rest_keeps_the_drawers_sweepable(tmp_path):
     With the sweep's damping cap the sweep passes; the drawers (17 and 39 kg)
     keep what a hand moves, with their catches, and where a 5 degree tilt
     still slides the heavier one out the verdict says so."""
-    from asset2sim.tasks.check.sweep import damping_caps
+    from asset2sim.tasks.tune.operating import damping_caps
     from asset2sim.urdf import read_urdf
 
     res = refine_asset(SHARED / "19179", "A large cabinet.", tmp_path / "o", extras=False)

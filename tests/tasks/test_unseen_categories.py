@@ -31,6 +31,7 @@ from tests.unseen_assets import (
     build_desk_lamp,
     build_eyeglasses,
     build_kettle,
+    build_keyboard,
     build_kitchen_pot,
     build_oven,
     build_printer,
@@ -57,6 +58,7 @@ CASES = [
     (build_printer, "Printer", "A printer with its lid halfway open.", "joint_0", "halfway"),
     (build_desk_lamp, "Lamp", "A desk lamp, closed.", "joint_2", "closed"),
     (build_desk_fan, "Fan", "A desk fan with its head closed.", "joint_0", "closed"),
+    (build_keyboard, "Keyboard", "A computer keyboard.", "joint_0", "closed"),
 ]
 
 

@@ -8,8 +8,9 @@ from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import available_engines, open_session
 from tests.contract_asset import write_contract_asset
-from asset2sim.tasks.check.sweep import (DAMPED_SPEED_MARGIN, SweepConfig, blocked_positions, damping_caps, effort_limit,
-                                         run_sweep, sweep_joint, sweep_metric, sweep_score)
+from asset2sim.tasks.check.sweep import SweepConfig, effort_limit, run_sweep, sweep_joint, sweep_metric
+from asset2sim.tasks.check.sweep_stalls import blocked_positions, sweep_score
+from asset2sim.tasks.tune.operating import DAMPED_SPEED_MARGIN, damping_caps
 from asset2sim.tasks.geometry.limits import subtrees
 from asset2sim.urdf import read_urdf
 from tests.conftest import SHARED, needs_shared
@@ -245,7 +246,7 @@ def test_a_lid_stopped_on_its_way_back_by_a_raised_seat_is_swept_with_the_seat_c
 
 
 def test_damping_above_the_cap_fails_the_sweep_and_below_it_passes(tmp_path):
-    """sweep.damping_caps: c_max = E T / (2 R). The free post (lid held open,
+    """operating.damping_caps: c_max = E T / (2 R). The free post (lid held open,
     out of its way) is swept through its 5 cm at half its cap; at four times
     its cap the damped drive (speed E / c) covers only part of the range in
     the time limit, as a blocked part would."""

@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 from asset2sim.engines.source import SimObject, UrdfFile
-from asset2sim.tasks.check.sweep import blocked_positions, blocked_stops, run_sweep, sweep_metric
+from asset2sim.tasks.check.sweep import run_sweep, sweep_metric
+from asset2sim.tasks.check.sweep_stalls import blocked_positions, blocked_stops
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.tune import stop_repair
 
