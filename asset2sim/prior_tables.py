@@ -157,12 +157,18 @@ class CategoryPrior(PriorModel):
     """A request's part word (a label or any word, "arm") -> the labels it also names on this category."""
     part_evidence: dict[str, float] = Field(default_factory=dict)
     variants: list[VariantPrior] = Field(default_factory=list)
+    levelling_feet_m: float | None = Field(default=None, gt=0.0, le=0.05)
+    """The height (m) the category's adjustable levelling feet take up so that the body stands level on every foot;
+    None: no such feet (the footprint is levelled by a contact margin only)."""
+    levelling_feet_source: str = ""
     notes: str = ""
 
     @model_validator(mode="after")
     def _consistency(self) -> "CategoryPrior":
         if self.spring_labels and len(self.spring_source) < 10:
             raise ValueError("spring_labels given without a spring_source")
+        if self.levelling_feet_m is not None and len(self.levelling_feet_source) < 10:
+            raise ValueError("levelling_feet_m given without a levelling_feet_source")
         if self.handheld and self.dims[1] > GRASPABLE_WIDTH_M + 1e-9:
             raise ValueError(f"handheld but the middle dimension {self.dims[1]} m exceeds the "
                              f"gripper limit GRASPABLE_WIDTH_M = {GRASPABLE_WIDTH_M} m")

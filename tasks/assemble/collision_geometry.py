@@ -113,7 +113,8 @@ def _sliding_neighbours(model: urdf.UrdfModel, hulls: dict[str, list[tuple[int, 
 
 def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None = None, *,
                 limit: int = MAX_PIECES_PER_LINK, decompose: bool = True,
-                level: bool = False, open_containers: bool = False) -> tuple[dict[str, list[Piece]], list[str]]:
+                level: bool = False, feet: float | None = None,
+                open_containers: bool = False) -> tuple[dict[str, list[Piece]], list[str]]:
     """The convex pieces of every link's mesh collisions (link frame, m), cached in this process and on disk.
 
     The pieces depend on the joint limits (the ranges swept); only what ``state`` puts a child into its
@@ -128,6 +129,7 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
         open_containers: with ``decompose``, decompose a part that holds an open cavity (:func:`container_pieces.open_pieces`;
             else its hull, solid inside).
         level: the object is free-standing: its footprint at ``state`` is made planar.
+        feet: the height (m) the object's levelling feet take up (:func:`~asset2sim.tasks.assemble.footprint.level_footprint`).
 
     Returns:
         (link -> pieces, notes).
@@ -139,8 +141,8 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
     key, disk_key = _piece_keys(model, mesh_path, limit, decompose, opening)
     done = _cached_pieces(key, disk_key, model, mesh_path, limit, decompose, opening)
     if state is not None:
-        skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())), bool(level))
-        done = _recalled(_STATE_CACHE, skey) or _remember(_STATE_CACHE, skey, _state_pieces(model, done, state, decompose, level))
+        skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())), bool(level), feet)
+        done = _recalled(_STATE_CACHE, skey) or _remember(_STATE_CACHE, skey, _state_pieces(model, done, state, decompose, level, feet))
     return {k: list(v) for k, v in done[0].items()}, list(done[1])
 
 
@@ -220,7 +222,7 @@ def _merge_link(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], name: str
 
 
 def _state_pieces(model: urdf.UrdfModel, hit: tuple[dict[str, list[Piece]], list[str]], state: dict[str, float],
-                  decompose: bool, level: bool) -> tuple[dict[str, list[Piece]], list[str]]:
+                  decompose: bool, level: bool, feet: float | None = None) -> tuple[dict[str, list[Piece]], list[str]]:
     """(link -> pieces, notes) of ``hit`` at the initial ``state``."""
     pieces, notes = {k: list(v) for k, v in hit[0].items()}, list(hit[1])
     if decompose:
@@ -228,7 +230,7 @@ def _state_pieces(model: urdf.UrdfModel, hit: tuple[dict[str, list[Piece]], list
         for name in model.links:
             pieces[name] = drop_slivers(pieces[name])
     if level:
-        level_footprint(model, pieces, state, notes)
+        level_footprint(model, pieces, state, notes, feet)
     if state:
         for (parent, child), d in parent_child_depths(model, pieces, state).items():
             if d > CONTAINMENT_TOLERANCE:
@@ -332,7 +334,7 @@ DENSITY_NOTE = "denser than its material"
 
 
 def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: dict[str, float] | None = None,
-                      *, level: bool = False,
+                      *, level: bool = False, feet: float | None = None,
                       max_density: dict[str, float] | None = None, open_containers: bool = False) -> list[str]:
     """Replace the mesh collisions of every link of ``model`` (in place) by the pieces of :func:`link_pieces`,
     written as ``out_dir/folder/<link>_hull<i>_<digest>.obj`` (link frame, m; an unchanged file is not
@@ -343,6 +345,7 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
         folder: folder (relative to ``out_dir``) of the pieces.
         state: the initial state (joint -> rad or m).
         level: the object is free-standing: its footprint at ``state`` is made planar.
+        feet: see :func:`link_pieces`.
         max_density: link -> the densest its material may be (kg/m^3): a link whose inertial mass over its
             pieces' volume exceeds it is noted.
         open_containers: see :func:`link_pieces`.
@@ -358,7 +361,7 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
     def mesh_path(g: urdf.UrdfGeometry) -> Path:
         return Path(g.path) if g.path is not None else out_dir / str(g.filename)
 
-    pieces, notes = link_pieces(model, mesh_path, state, level=level and state is not None,
+    pieces, notes = link_pieces(model, mesh_path, state, level=level and state is not None, feet=feet,
                                 open_containers=open_containers)
     for name, link in model.links.items():
         if not any(c.kind == "mesh" for c in link.collisions):

@@ -22,6 +22,7 @@ from asset2sim.tasks.assemble import collision_geometry
 from asset2sim.tasks.assemble.copied_meshes import copy_meshes, taken_paths
 from asset2sim.tasks.synthesize.validate_overlay import max_density
 from asset2sim.output_folder import OVERLAY_NAME, STATE_NAME, URDF_NAME, OutputError, check_location
+from asset2sim.prior_tables import load_priors
 from asset2sim.refined_asset import ROOT_KEY, read_root  # noqa: F401  read_root: the measuring stages read it from here
 
 
@@ -63,7 +64,7 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
     rotation baked into the root link's geometry and the joints hanging from it. ``collision_out``:
     (output folder, initial state): the mesh collisions become the convex pieces of
     :func:`asset2sim.tasks.assemble.collision_geometry.convex_collisions`, written into the folder (a
-    free-standing object's footprint levelled; with ``open_containers`` a container decomposed so that its
+    free-standing object's footprint levelled, on its category's levelling feet where it has them; with ``open_containers`` a container decomposed so that its
     inside stays open); their notes are appended to ``collision_notes`` when given.
 
     Raises:
@@ -86,9 +87,10 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
     if collision_out is not None:
         free = overlay.mounting is None or not overlay.mounting.fixed  # a mounted root does not stand on its footprint
         densest = {name: max_density(lp) for name, lp in overlay.links.items()}
+        prior = load_priors().categories.get(overlay.category or "")
         notes = collision_geometry.convex_collisions(model, collision_out[0], collision_folder(asset), collision_out[1], level=free,
-                                                     open_containers=open_containers,
-                                                     max_density=densest)
+                                                     feet=prior.levelling_feet_m if prior is not None else None,
+                                                     open_containers=open_containers, max_density=densest)
         if collision_notes is not None:
             collision_notes.extend(notes)
     return urdf.write_urdf(model, comment=_urdf_comment(s, overlay))

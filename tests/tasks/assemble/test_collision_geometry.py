@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from asset2sim.engines.source import UrdfFile
+from asset2sim.prior_tables import load_priors
 from asset2sim import mesh_io, urdf
 from asset2sim.mesh_io import read_mesh
 from asset2sim.schemas.overlay import EstimatorInfo, JointDynamics, Overlay
@@ -912,6 +913,26 @@ def test_a_foot_far_off_the_ground_is_not_levelled(tmp_path):
     level, notes = cg.link_pieces(model, lambda g: folder / str(g.filename), {"hinge": 0.0}, level=True)
     assert _foot_bottoms(level["body"]) == pytest.approx([0.003, 0.0, 0.0, 0.0], abs=1e-9)
     assert not [n for n in notes if fp.LEVEL_NOTE in n]
+
+
+def test_an_appliance_stands_on_its_levelling_feet(tmp_path):
+    """The same 3 mm short foot on an object whose category has levelling feet is set down onto the others' plane by
+    its bottom face (its height kept), and the note says the feet were set; on feet that take up 8 mm, a foot 9 mm
+    short stays as modelled; the slab 10 mm up stays on its feet under 5 mm feet."""
+    folder = _wobbly(tmp_path, 0.003)
+    model = urdf.read_urdf(folder / "mobility.urdf")
+    level, notes = cg.link_pieces(model, lambda g: folder / str(g.filename), {"hinge": 0.0}, level=True, feet=0.005)
+    assert _foot_bottoms(level["body"]) == pytest.approx([0.0, 0.0, 0.0, 0.0], abs=1e-9)
+    short = min((p for p in level["body"] if p.points[:, 2].max() <= 0.01 + 1e-9), key=lambda p: (p.points[:, 0].min(), p.points[:, 1].min()))
+    assert float(short.points[:, 2].max()) == pytest.approx(0.01)  # the foot reaches the slab still
+    assert min(float(p.points[:, 2].min()) for p in level["body"] if p.points[:, 2].max() > 0.01 + 1e-9) == pytest.approx(0.01)
+    (line,) = [n for n in notes if fp.LEVEL_NOTE in n]
+    assert "3 mm" in line and "its levelling feet set" in line
+    assert load_priors().categories["Refrigerator"].levelling_feet_m == 0.012
+    deep = _wobbly(tmp_path / "deep", 0.009)  # 9 mm short of a 1 cm foot
+    kept, _ = cg.link_pieces(urdf.read_urdf(deep / "mobility.urdf"), lambda g: deep / str(g.filename), {"hinge": 0.0},
+                             level=True, feet=0.008)
+    assert _foot_bottoms(kept["body"]) == pytest.approx([0.009, 0.0, 0.0, 0.0], abs=1e-9)
 
 
 def _feet_on_the_ground(urdf_path: Path) -> int:
