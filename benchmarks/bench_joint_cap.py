@@ -15,7 +15,9 @@ asset with the stage times of its ``report.json``. Shapes:
   every pair of lids overlaps: the worst case for a flat tree);
 - ``chain-apart`` / ``star-apart``: the same trees with the links spaced so
   that no two links touch (a realistic keyboard-like or drawer-bank asset:
-  the cost is the bookkeeping, not the contacts).
+  the cost is the bookkeeping, not the contacts);
+- ``keyboard``: the generated keyboard of ``tests/unseen_assets.py`` (PartNet-Mobility's layout, a base and keys on
+  sliders a fifth of their pitch apart) with N keys in 6 rows (3 below 12), refined as "A keyboard.".
 
 A least-squares fit of log(seconds) on log(N) per shape gives the growth
 exponent and the N at which one asset would reach the flow's per-asset time
@@ -45,6 +47,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.unseen_assets, for the keyboard
 
 #: flow's per-asset limit (``catalog.yaml`` ``run.time_limit_seconds``), s
 TIME_LIMIT_S = 1800.0
@@ -90,9 +94,14 @@ def build(folder: Path, shape: str, n: int) -> Path:
     """Write a ``shape`` asset with ``n`` revolute joints under ``folder``
     (``mobility.urdf`` + one box mesh); returns ``folder``.
 
-    ``shape``: chain, star, chain-apart or star-apart (module docstring).
+    ``shape``: chain, star, chain-apart, star-apart or keyboard (module docstring).
     Lengths in metres, limits +-0.5 rad.
     """
+    if shape == "keyboard":
+        from tests.unseen_assets import build_keyboard
+
+        rows = 6 if n >= 12 else 3
+        return build_keyboard(folder, rows=rows, cols=max(1, n // rows))
     apart = shape.endswith("-apart")
     parts = ['<?xml version="1.0"?>', '<robot name="bench">']
     star = shape.startswith("star")
@@ -116,11 +125,11 @@ def build(folder: Path, shape: str, n: int) -> Path:
     return folder
 
 
-def run_one(asset: Path, out: Path, extras: bool, timeout: float) -> dict:
+def run_one(asset: Path, out: Path, extras: bool, timeout: float, prompt: str = "slightly open") -> dict:
     """Refine ``asset`` in a child process; returns wall s, peak RSS MiB,
     exit status (None on timeout) and the report's stage seconds."""
     cmd = [sys.executable, "-m", "asset2sim", "refine", str(asset), "--out", str(out), "-q",
-           "-p", "slightly open", "--force"]
+           "-p", prompt, "--force"]
     if not extras:
         cmd.append("--no-extras")
     t = time.perf_counter()
@@ -170,7 +179,8 @@ def main(argv: list[str] | None = None) -> int:
             done: list[tuple[int, float]] = []
             for n in sorted(args.joints):
                 asset = build(Path(tmp) / f"{shape}{n}", shape, n)
-                r = run_one(asset, Path(tmp) / f"out_{shape}{n}", args.extras, args.timeout)
+                r = run_one(asset, Path(tmp) / f"out_{shape}{n}", args.extras, args.timeout,
+                            "A keyboard." if shape == "keyboard" else "slightly open")
                 st = " ".join(f"{r['stages'].get(s, float('nan')):>12.1f}" for s in stage_names)
                 wall = f"{r['wall']:>8.1f}" if r["rc"] is not None else f">{args.timeout:>7.0f}"
                 print(f"{shape:>12} {n:>6} {wall} {r['mib']:>9.0f} {str(r['rc']):>4}  {st}", flush=True)

@@ -20,6 +20,7 @@ from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
 from asset2sim.schemas.request import BAND_INTERVAL, MOTION_GUARDS, JointStateRequest, MotionPhrase, RequestFindings, RequestSpec
 from asset2sim.tasks.geometry.closed_state import ClosedState
+from asset2sim.tasks.interpret.part_priors import task_relevant_rank
 from asset2sim.tasks.synthesize import joint_dynamics, request_apply, request_findings
 from asset2sim.tasks.synthesize.request_apply import END_TOLERANCE, MIN_TOLERANCE, NUMBER_TOLERANCE, JointTarget, StateResolution
 
@@ -138,14 +139,15 @@ def asked_anything(spec: RequestSpec | None) -> bool:
 
 def refine_request_met(spec: RequestSpec, res: StateResolution | None, found: RequestFindings | None,
                        closed_out: dict[str, ClosedState], state: dict[str, float],
-                       properties: list[tuple[str, str]] | None = None) -> MetricResult:
+                       properties: list[tuple[str, str]] | None = None, ranks: dict[str, int | None] | None = None) -> MetricResult:
     """Refine's ``request_met`` of its output: the state phrases ``res`` (refine's resolution of the request,
     ``request_apply.resolve_states``) applied to no joint, the phrases the parser replaced by a later one for the
     same part (``spec.overridden``), ``properties`` ((phrase, why) of masses, materials and joint parameters
     naming a part the object lacks, ``request_apply.unapplied_properties``), every number of ``found`` (its
     findings, ``request_findings.findings``) of a graded kind missed beyond its tolerance, and every joint a band
     set whose opening fraction at ``state`` (rad / m, output units; ``closed_out`` the output's closed ends) lies
-    outside the band. Not measured when nothing was asked or no word of it was understood."""
+    outside the band (a phrase naming no part graded on the main part it set: ``ranks``, :func:`object_states`). Not
+    measured when nothing was asked or no word of it was understood."""
     if not asked_anything(spec):
         return not_measured("no request")
     if not spec.understood and not spec.overrides:
@@ -169,25 +171,39 @@ def refine_request_met(spec: RequestSpec, res: StateResolution | None, found: Re
         if jr.target is not None or joint not in closed_out or joint not in state:
             continue  # a number or an end: graded through the findings
         bands.append((jr, joint, band_missed(jr.phrase or jr.band, joint, jr.band, abs(closed_out[joint].fraction(state[joint])))))
-    missed_bands, not_graded = object_states(bands)
+    missed_bands, not_graded = object_states(bands, ranks)
     graded += len(bands) - len(not_graded)
     return request_met_metric(unmet + missed_bands, request=spec.text, graded=graded, not_graded=not_graded,
                               source="refine (its resolution of the request)")
 
 
-def object_states(bands: list[tuple[JointStateRequest, str, dict[str, Any] | None]]) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+def object_states(bands: list[tuple[JointStateRequest, str, dict[str, Any] | None]],
+                  ranks: dict[str, int | None] | None = None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """(unmet items, not graded) of the band states asked: ``bands`` (the phrase, a joint it set, its
     :func:`band_missed` item or None). A phrase naming a part must put each of its joints in the band; one naming
-    no part ("a door, slightly open") asks it of the object, met when one of its joints is in the band: a joint it
-    also set that the state does not suit (a latch that stays shut) is reported, not graded."""
+    no part ("a door, slightly open") asks it of the object's main part, met when one joint of the part it sets that
+    ranks first among the category's task-relevant parts (``ranks``: joint -> its part's rank, 0 first,
+    :func:`~asset2sim.tasks.interpret.part_priors.task_relevant_rank`; None or absent: no rank) is in the band: "a
+    suitcase, mostly open" is its lid's state, not its carrying handle's. A joint it also set that the state does not
+    suit (a latch that stays shut, a handle) is reported, not graded."""
+    ranks = ranks or {}
+    first: dict[int, int] = {}  # phrase -> the best rank among the joints it set
+    for jr, joint, _ in bands:
+        r = ranks.get(joint)
+        if r is not None:
+            first[id(jr)] = min(first.get(id(jr), r), r)
+
+    def main(jr: JointStateRequest, joint: str) -> bool:
+        return id(jr) not in first or ranks.get(joint) == first[id(jr)]
+
     unmet, not_graded = [], []
-    met = {id(jr) for jr, _, item in bands if item is None}
+    met = {id(jr) for jr, joint, item in bands if item is None and main(jr, joint)}
     for jr, joint, item in bands:
         if item is None:
             continue
-        if not jr.names_part and id(jr) in met:
-            not_graded.append({"phrase": jr.phrase, "joint": joint, "reason": f"the phrase names no part and another part it "
-                                                                             f"set is in the band ({item['text']})"})
+        if not jr.names_part and (id(jr) in met or not main(jr, joint)):
+            why = "another part it set is in the band" if id(jr) in met else "the object's main part it set is graded"
+            not_graded.append({"phrase": jr.phrase, "joint": joint, "reason": f"the phrase names no part and {why} ({item['text']})"})
             continue
         unmet.append(item)
     return unmet, not_graded
@@ -287,7 +303,9 @@ def as_asked_tier(ctx: "EstimationContext", kin: "SimSession", overlay: Overlay,
     choices, missing = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
     found = request_findings.findings(ctx, resolution.targets if targets is None else targets, closed, state, overlay,
                                       rounds or [], resolution, motion_words={n: list(c.words) for n, c in choices.items()})
-    asked = refine_request_met(ctx.request, resolution, found, closed, state, request_apply.unapplied_properties(ctx) + missing)
+    ranks = {j.name: task_relevant_rank(ctx.category, ctx.asset.link(j.child).semantic_label) for j in ctx.asset.movable_joints()}
+    asked = refine_request_met(ctx.request, resolution, found, closed, state, request_apply.unapplied_properties(ctx) + missing,
+                               ranks)
     words = [(w, [n for n, c in choices.items() if w in c.words]) for w in ctx.request.motions]
     sources = {n: d.source for n, d in overlay.joints.items()}
     strays = [(w, [n for n, src in sources.items() if f"request '{w.phrase}'" in src and n not in named])  # applied elsewhere

@@ -75,3 +75,16 @@ def test_a_dev_box_whose_body_slides_is_refined_as_the_box_it_is(tmp_path):
     assert read_urdf(res.out_dir / "mobility.urdf").joint("joint_1").type == "fixed"
     assert res.report.failure_mode == plain.report.failure_mode
     assert res.report.initial_joint_positions == pytest.approx(plain.report.initial_joint_positions)
+
+
+@needs_shared
+def test_a_suitcase_asked_open_is_graded_on_its_lid_not_its_handle(refine_once):
+    """Suitcase 101668 stands upright and its lid opens into the floor, which stops it at 3 %. "A suitcase, mostly
+    open." used to pass on its carrying handle, set to 75 % by the same phrase; the phrase asks the suitcase's main
+    part (its lid), so the output is honestly not what was asked, whatever the handle's opening."""
+    res = refine_once(SHARED / "101668", "A suitcase, mostly open.", extras=False)
+    m = res.report.metric("request_met")
+    assert res.report.failure_mode == "request_not_met" and m.passed is False
+    assert [u["joint"] for u in m.details["unmet"]] == ["joint_2"]  # the lid
+    assert res.report.opening_fractions["joint_3"] == pytest.approx(0.75, abs=0.1)  # the handle, in the band
+

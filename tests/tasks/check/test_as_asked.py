@@ -81,6 +81,23 @@ def test_a_band_missed_by_more_than_the_slack_fails_and_one_inside_passes():
     assert as_asked.refine_request_met(_spec("the door half open", half), res, RequestFindings(), closed, {"j": edge}).passed
 
 
+def test_a_state_naming_no_part_is_the_main_parts_state():
+    """"A suitcase, mostly open" sets the lid (the first of a suitcase's task-relevant parts) and the carrying handle:
+    the lid at 3 % fails it, whatever the handle's opening; the handle is reported, not graded. Without ranks (no
+    part of the category's list) one joint in the band still meets it."""
+    closed = {j: ClosedState(j, q_closed=0.0, direction=1.0, open_range=1.0, lower=0.0, upper=1.0) for j in ("lid", "handle")}
+    mostly = JointStateRequest(selector="all", band="mostly", phrase="mostly open")
+    res = StateResolution(bands={"lid": "mostly", "handle": "mostly"}, requests={"lid": mostly, "handle": mostly})
+    spec = _spec("A suitcase, mostly open.", mostly)
+    state = {"lid": 0.03, "handle": 0.75}
+    m = as_asked.refine_request_met(spec, res, RequestFindings(), closed, state, ranks={"lid": 0, "handle": 1})
+    (item,) = m.details["unmet"]
+    assert m.passed is False and item["joint"] == "lid" and item["achieved"] == pytest.approx(0.03)
+    m = as_asked.refine_request_met(spec, res, RequestFindings(), closed, {"lid": 0.75, "handle": 0.03}, ranks={"lid": 0, "handle": 1})
+    assert m.passed is True and [n["joint"] for n in m.details["not_graded"]] == ["handle"]
+    assert as_asked.refine_request_met(spec, res, RequestFindings(), closed, state).passed is True
+
+
 def test_words_the_parser_did_not_use_and_reported_joint_parameters_do_not_fail():
     spec = _spec("a box made of wood, smells nice", ignored=["smells nice"])
     damping = QuantityOutcome(what="joint_0 damping", phrase="damping 0.5", asked=0.5, achieved=2.0, unit="N*m*s/rad",
