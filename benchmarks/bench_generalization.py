@@ -3,7 +3,7 @@ category, plus generated assets; prints the pass rate per category and per
 request kind, and the failures by mode.
 
     python benchmarks/bench_generalization.py [--manifest PATH] [--out DIR]
-        [--limit N] [--jobs J] [--ids 148,9748] [--kinds plain,state,size,hinge,closed,mount]
+        [--limit N] [--jobs J] [--ids 148,9748] [--kinds plain,state,size,hinge,closed,mount,motion]
         [--no-generated] [--evaluate] [--one-mesh-per-link] [--open-containers]
 
 Corpus: for every manifest object (its category from the
@@ -19,6 +19,10 @@ manifest), the requests
 - ``closed``: "A <noun> with everything closed.";
 - ``mount``:  "A free-standing <noun>." / "A <noun> mounted on the wall."
   (the mounting override);
+- ``motion``: words about how the first task part moves, as people write them: "A <noun> whose <part> swings
+  (slides) freely.", "A <noun> with a stiff <part>.", "A <noun> with its <part> half open; the <part> is stiff.",
+  "A <noun> whose <part> closes slowly and softly.", "A <noun> with a loose <part>, mostly open." (a loose part
+  where its weight turns it: a conflict the as-asked tier names);
 
 and the same kinds on the generated assets (the demo objects of
 ``asset2sim.demo_assets`` and the failure-mode assets of
@@ -72,7 +76,7 @@ DEFAULT_MANIFEST = ROOT.parent / "shared" / "datasets" / "partnet_mobility" / "m
 
 STATE_WORDS = ["closed", "slightly open", "a quarter open", "halfway open", "mostly open", "fully open"]
 SIZE_WORDS = ["tiny", "very small", "small", "large", "very large"]
-KINDS = ("plain", "state", "size", "hinge", "closed", "mount")
+KINDS = ("plain", "state", "size", "hinge", "closed", "mount", "motion")
 
 
 def _noun(category: str) -> str:
@@ -99,6 +103,19 @@ def _part_words(src: Path) -> list[str]:
     return words
 
 
+def _task_part(category: str, src: Path) -> tuple[str, str] | None:
+    """(word, "hinge" or "slider") of the first movable part of semantics.txt whose label has the ``task`` role in
+    ``category`` (a lid, a door, a drawer; not a handle, a button or a wheel), or None."""
+    from asset2sim.tasks.interpret.part_priors import part_role
+
+    p = src / "semantics.txt"
+    for line in (p.read_text().splitlines() if p.is_file() else []):
+        f = line.split()
+        if len(f) >= 3 and f[1] in ("hinge", "slider") and part_role(category, f[2]) == "task":
+            return f[2].replace("rotation_", "").replace("translation_", "").replace("_", " "), f[1]
+    return None
+
+
 def requests_for(category: str, src: Path, kinds: tuple[str, ...] = KINDS) -> list[tuple[str, str]]:
     """(request kind, request text) for one object."""
     n = _noun(category)
@@ -115,6 +132,13 @@ def requests_for(category: str, src: Path, kinds: tuple[str, ...] = KINDS) -> li
         out.append(("everything closed", f"A {n} with everything closed."))
     if "mount" in kinds:
         out += [("mount:free-standing", f"A free-standing {n}."), ("mount:wall", f"A {n} mounted on the wall.")]
+    part = _task_part(category, src) if "motion" in kinds else None
+    if part is not None:  # words about how the part moves, as people write them
+        w, move = part[0], "swings" if part[1] == "hinge" else "slides"
+        out += [("motion:free", f"A {n} whose {w} {move} freely."), ("motion:stiff", f"A {n} with a stiff {w}."),
+                ("motion:stiff state", f"A {n} with its {w} half open; the {w} is stiff."),
+                ("motion:soft close", f"A {n} whose {w} closes slowly and softly."),
+                ("motion:loose state", f"A {n} with a loose {w}, mostly open.")]
     return out
 
 

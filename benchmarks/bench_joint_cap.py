@@ -146,9 +146,9 @@ def run_one(asset: Path, out: Path, extras: bool, timeout: float, prompt: str = 
     # ru_maxrss of RUSAGE_CHILDREN is the largest child so far: run sizes ascending
     peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
     stages = {}
-    rep = out / "report.json"
-    if rc is not None and rep.is_file():
-        stages = json.loads(rep.read_text()).get("stage_seconds", {})
+    timings = out / "timings.json"  # the stage seconds a refine writes beside report.json
+    if rc is not None and timings.is_file():
+        stages = json.loads(timings.read_text()).get("stage_seconds", {})
     if rc not in (0, 3, None):
         sys.stderr.write(err[-2000:])
     return {"wall": wall, "mib": peak, "rc": rc, "stages": stages}
