@@ -26,7 +26,6 @@ import numpy as np
 
 from asset2sim.engines.base import EngineUnsupported, SimSession
 from asset2sim.tasks.check import joint_batches
-from asset2sim.tasks.check.stroke import run_stroke
 from asset2sim.tasks.check.sweep import HOLD_FORCE
 from asset2sim.tasks.geometry import limits
 from asset2sim.urdf import UrdfModel
@@ -99,34 +98,7 @@ def joint_breakaway(session: SimSession, joint: str, friction: float, damping: f
     Raises:
         EngineUnsupported: the engine cannot apply a joint effort or save its state.
     """
-    q0 = session.joint_positions()[joint]
-    lower, upper = session.joint_limits.get(joint, (-np.inf, np.inf))
-    direction = push_direction(q0, lower, upper)
-    spring = session.options.springs.get(joint)
-    dt = session.options.conventions.timestep
-    n = max(2, round(RAMP_TIME / dt))
-    jtype = session.joint_types.get(joint, "revolute")
-    speed = START_SPEED.get(jtype, 1e-3)
-    resolution = RESOLUTION.get(jtype, 0.0)
-    saved = session.save_state()
-    ramp = friction * np.linspace(RAMP_FROM, RAMP_TO, n + 1)  # the push at each step
-    speeds: list[float] = []  # the joint's speed along the push after each step
-
-    def law(k, q, qd):  # the push, the spring's pull k (q - q_s) met
-        hold = spring.stiffness * (q - spring.reference) if spring is not None and spring.stiffness > 0 else 0.0
-        session.apply_joint_effort(joint, direction * ramp[k] + hold)
-
-    def started(k, q, qd):
-        speeds.append(direction * qd)
-        return k >= START_STEPS and min(speeds[-START_STEPS:]) > speed
-
-    try:
-        end = run_stroke(session, joint, n + 1, law, started)
-        brk = max(float(ramp[end.steps - 1]) - damping * speeds[-1], 0.0) if end.stopped else None
-        return JointBreakaway(joint, friction, brk, direction, resolution)
-    finally:
-        session.restore_state(saved)
-        session.discard_state(saved)
+    return push_together(session, [joint], {joint: friction}, {joint: damping})[joint]
 
 
 def measure_breakaway(session: SimSession, frictions: dict[str, float], dampings: dict[str, float] | None = None,
@@ -161,10 +133,11 @@ def push_together(session: SimSession, joints: list[str], frictions: dict[str, f
     """:func:`joint_breakaway` of each of ``joints`` at once, each on its own ramp from the session's state: for parts
     that cannot act on one another (:mod:`~asset2sim.tasks.check.joint_batches`), so each part's push and motion are
     the ones it has alone. A part that started to move is held still (its push ended, as alone) while the others'
-    ramps go on; the state is restored afterwards.
+    ramps go on (a drive: one part alone needs none); the state is restored afterwards.
 
     Raises:
-        EngineUnsupported: the engine cannot apply a joint effort, drive a joint or save its state.
+        EngineUnsupported: the engine cannot apply a joint effort or save its state, or, with more than one part, drive
+            a joint.
     """
     dt = session.options.conventions.timestep
     n = max(2, round(RAMP_TIME / dt))
@@ -178,6 +151,7 @@ def push_together(session: SimSession, joints: list[str], frictions: dict[str, f
                      RESOLUTION.get(jtype, 0.0), float(frictions[j]) * np.linspace(RAMP_FROM, RAMP_TO, n + 1), [])
     read = {j: session.joint_state(j) for j in joints}
     found: dict[str, JointBreakaway] = {}
+    held: list[str] = []
     try:
         for k in range(n + 1):
             for j in read:  # the push, the spring's pull k (q - q_s) met
@@ -193,13 +167,15 @@ def push_together(session: SimSession, joints: list[str], frictions: dict[str, f
                     brk = max(float(ramp[k]) - float(dampings.get(j, 0.0)) * speeds[-1], 0.0)
                     found[j] = JointBreakaway(j, float(frictions[j]), brk, direction, resolution)
                     del read[j]
-                    session.drive_joint(j, 0.0, HOLD_FORCE)
+                    if read:  # still moving while the others' ramps go on: held
+                        session.drive_joint(j, 0.0, HOLD_FORCE)
+                        held.append(j)
             if not read:
                 break
         for j in read:
             found[j] = JointBreakaway(j, float(frictions[j]), None, pushes[j][0], pushes[j][3])
     finally:
-        for j in joints:
+        for j in held:
             session.release_joint(j)
         session.restore_state(saved)
         session.discard_state(saved)

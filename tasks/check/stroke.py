@@ -4,9 +4,10 @@ and pass rule (``docs/design/metrics.md``): the joint sweep's force-limited driv
 operability's hand, each to an opening fraction (:func:`reach_stroke`;
 :mod:`~asset2sim.tasks.check.sweep`, :mod:`~asset2sim.tasks.check.operability`), the probes'
 pusher (:mod:`~asset2sim.tasks.check.probes`), the task's gripper
-(:mod:`~asset2sim.tasks.check.gripper_motion`), the breakaway's ramp
-(:mod:`~asset2sim.tasks.check.breakaway`) and a realism pair's push and release
-(:mod:`asset2sim.apps.realism.motion`).
+(:mod:`~asset2sim.tasks.check.gripper_motion`) and a realism pair's push and release
+(:mod:`asset2sim.apps.realism.motion`). Strokes of several parts at once read each part as
+:class:`Reach` does (the sweep's batches, :func:`~asset2sim.tasks.check.sweep.sweep_together`); the
+breakaway's ramps push one part or a batch (:func:`~asset2sim.tasks.check.breakaway.push_together`).
 """
 
 from __future__ import annotations
@@ -67,6 +68,34 @@ class Reach:
     diverged: bool = False
     fractions: list[float] = field(default_factory=list)
 
+    def passed(self, closed: tuple[float, float, float], target: float, sign: float, q: float) -> bool:
+        """Whether ``q`` (rad or m) is at ``target`` or past it along ``sign`` (``closed``: q_closed, direction,
+        open range); the farthest fraction kept."""
+        qc, d, rng = closed
+        f = float(d * (q - qc) / rng)
+        self.far = f if np.isnan(self.far) else (max if sign > 0 else min)(self.far, f)
+        return (f - target) * sign >= 0
+
+    def read(self, closed: tuple[float, float, float], target: float, sign: float, max_speed: float, k: int,
+             q: float, qd: float) -> bool:
+        """The reading (q, qd) before step ``k``: its fraction kept; True when the stroke ends there, diverged (not
+        finite, or faster than ``max_speed``, rad/s or m/s) or at the target (``steps`` = k)."""
+        qc, d, rng = closed
+        self.fractions.append(float(d * (q - qc) / rng))
+        if not (np.isfinite(q) and np.isfinite(qd)) or abs(qd) > max_speed:
+            self.diverged = True
+            return True
+        if self.passed(closed, target, sign, q):
+            self.steps = k
+            return True
+        return False
+
+    def last(self, closed: tuple[float, float, float], target: float, sign: float, steps: int, q: float) -> None:
+        """The reading ``q`` after the last of ``steps`` steps of a stroke that ran out of time: at the target there,
+        it was reached at the time limit."""
+        if not (self.diverged or self.steps is not None) and np.isfinite(q) and self.passed(closed, target, sign, q):
+            self.steps = steps
+
 
 def reach_stroke(session: SimSession, joint: str, closed: tuple[float, float, float],
                  target: float, sign: float, time_limit: float, drive: Callable, *,
@@ -74,29 +103,15 @@ def reach_stroke(session: SimSession, joint: str, closed: tuple[float, float, fl
                  max_speed: float = float("inf"), record: Callable | None = None) -> Reach:
     """:func:`run_stroke` of ``joint`` for at most ``time_limit`` s until its opening fraction
     passes ``target`` (at least it with ``sign`` +1, at most it with -1), read before each step
-    and after the last; ``closed``: (q_closed rad or m, direction +-1, open range > 0).
-    ``drive(k, q, qd)`` applies the force law; ``held``, ``hold_force`` and ``record`` as
-    :func:`run_stroke`; a reading that is not finite or faster than ``max_speed`` (rad/s or
-    m/s) ends the stroke as diverged."""
-    qc, d, rng = closed
+    and after the last (:meth:`Reach.read`, :meth:`Reach.last`); ``closed``: (q_closed rad or m,
+    direction +-1, open range > 0). ``drive(k, q, qd)`` applies the force law; ``held``,
+    ``hold_force`` and ``record`` as :func:`run_stroke`; a reading that is not finite or faster
+    than ``max_speed`` (rad/s or m/s) ends the stroke as diverged."""
     out = Reach(int(round(time_limit / session.options.conventions.timestep)))
 
-    def passed(q):  # the opening fraction of q past the target (the farthest one kept)
-        f = float(d * (q - qc) / rng)
-        out.far = f if np.isnan(out.far) else (max if sign > 0 else min)(out.far, f)
-        return (f - target) * sign >= 0
-
     def law(k, q, qd):
-        out.fractions.append(float(d * (q - qc) / rng))
-        if not (np.isfinite(q) and np.isfinite(qd)) or abs(qd) > max_speed:
-            out.diverged = True
-            return True
-        if passed(q):
-            out.steps = k
-            return True
-        return drive(k, q, qd)
+        return True if out.read(closed, target, sign, max_speed, k, q, qd) else drive(k, q, qd)
 
     end = run_stroke(session, joint, out.limit, law, record, held, hold_force)
-    if not (out.diverged or out.steps is not None) and np.isfinite(end.q) and passed(end.q):
-        out.steps = end.steps  # at the target at the last reading
+    out.last(closed, target, sign, end.steps, end.q)
     return out

@@ -303,22 +303,10 @@ def _stroke_ended(session: SimSession, r: _Swept, q: float, qd: float, cfg: Swee
     the stroke ended (reached, diverged, or out of time)."""
     reach, (qc, d, rng) = r.strokes[-1], r.closed
     target = cfg.reach_fraction if r.sign > 0 else 1.0 - cfg.reach_fraction
-
-    def passed(q):
-        f = float(d * (q - qc) / rng)
-        reach.far = f if np.isnan(reach.far) else (max if r.sign > 0 else min)(reach.far, f)
-        return (f - target) * r.sign >= 0
-
     if r.k >= reach.limit:  # out of time: the last reading may still be at the target
-        if np.isfinite(q) and passed(q):
-            reach.steps = r.k
+        reach.last(r.closed, target, r.sign, r.k, q)
         return True
-    reach.fractions.append(float(d * (q - qc) / rng))
-    if not (np.isfinite(q) and np.isfinite(qd)) or abs(qd) > r.max_speed:
-        reach.diverged = True
-        return True
-    if passed(q):
-        reach.steps = r.k
+    if reach.read(r.closed, target, r.sign, r.max_speed, r.k, q, qd):
         return True
     goal = qc + d * rng if r.sign > 0 else qc
     session.drive_joint(r.joint, float(np.clip(cfg.position_gain * (goal - q), -r.v_max, r.v_max)), r.effort)
