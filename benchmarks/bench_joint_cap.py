@@ -1,7 +1,7 @@
 """Refine time and peak memory against the number of movable joints (the joint cap).
 
 Generates many-joint assets, runs ``asset2sim refine`` on each in a child
-process (the offline estimator, ``--no-extras`` unless ``--extras``) under
+process, cold (``ASSET2SIM_CACHE=off``; the offline estimator, ``--no-extras`` unless ``--extras``) under
 ``/usr/bin/time``-like accounting (wall time, peak resident memory of the
 child from ``ru_maxrss``) and a per-run timeout, and prints one row per
 asset with the stage times of its ``report.json``. Shapes:
@@ -134,7 +134,7 @@ def run_one(asset: Path, out: Path, extras: bool, timeout: float, prompt: str = 
         cmd.append("--no-extras")
     t = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "MPLBACKEND": "Agg"})
+                            env={**os.environ, "MPLBACKEND": "Agg", "ASSET2SIM_CACHE": "off"})  # cold, as an unseen object
     try:
         _, err = proc.communicate(timeout=timeout)
         rc = proc.returncode
