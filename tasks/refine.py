@@ -40,11 +40,11 @@ from asset2sim.stage_log import Progress, StageLog
 from asset2sim.tasks.publish.contract import (MARKER_NAME, REPORT_NAME, is_complete, read_report_json, run_hash, write_completion_marker,
                                               write_report_json)
 from asset2sim.tasks.state import ground_clearance, pose, stability
-from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
+from asset2sim.tasks.synthesize import backends, estimate, estimator, joint_dynamics, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 from asset2sim.tasks.tune import escalation
 from asset2sim.tasks.tune import keep_declared as keep
-from asset2sim.tasks.tune.attempt import Attempt, settled_attempt, steadier_opening
+from asset2sim.tasks.tune.attempt import Attempt, hanging_fractions, settled_attempt, steadier_opening
 from asset2sim.inert import one_line
 from asset2sim.engines.base import SimSession
 from asset2sim.engines.step_budget import StepBudgetExceeded, step_budget
@@ -374,13 +374,41 @@ def _settles(att: Attempt) -> bool:
 
 
 def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float] | None = None, most: bool = False) -> Attempt:
-    """Stages 4-7 for the current ``ctx.root_rotation``; ``fractions`` (joint -> opening fraction)
-    replace the requested state of those joints; ``most``: stability by design moves all the mass it may
-    (:func:`~asset2sim.tasks.state.stability.design_for_stability`)."""
+    """Stages 4-7 for the current ``ctx.root_rotation`` (:func:`_stages`); where a part the request asks to move
+    freely, and gives no state, left its closed end under its own weight and came to rest, once more with it where it
+    rested (:func:`~asset2sim.tasks.tune.attempt.hanging_fractions`), kept when it holds there and passes at least
+    as much. ``fractions`` (joint -> opening fraction) replace the requested state of those joints; ``most``:
+    stability by design moves all the mass it may (:func:`~asset2sim.tasks.state.stability.design_for_stability`)."""
+    att = _stages(ctx, run, fractions, most)
+    choices, _ = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
+    free = {n for n, c in choices.items() if c.free_moving}
+    hung = hanging_fractions(att, free, request_apply.resolve_states(ctx, run.kin, att.overlay.scale).addressed) if free else {}
+    if not hung:
+        return att
+    second = _stages(ctx, run, {**(fractions or {}), **hung}, most, hung=hung)
+    if set(hung) & set(second.check.sagging) or not (second.check.passed or not att.check.passed):
+        run.log.say("post_check", "where the freely moving parts came to rest they do not hold: the closed state kept")
+        return att
+    return second
+
+
+def _stages(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float] | None = None, most: bool = False,
+            hung: dict[str, float] | None = None) -> Attempt:
+    """Stages 4-7 once for the current ``ctx.root_rotation``; ``fractions`` (joint -> opening fraction) replace the
+    requested state of those joints; ``hung`` (joint -> opening fraction, of ``fractions``): parts left where their
+    weight took them, their bands set there; ``most`` as :func:`_attempt`."""
     config, ws, log = run.config, run.ws, run.log
     syn = _synthesize(ctx, run)
     if fractions:
         syn = replace(syn, requested={**syn.requested, **placement.at_fractions(syn.closed_out, fractions)})
+    rests = [f"{j} ({ctx.asset.link(ctx.asset.joint(j).child).semantic_label or 'part'}) starts at {abs(f):.2f} of its range"
+             + (" past its closed end" if f < 0 else "") + ", where its weight took it in the rest test: the request asks it to "
+             "move freely and gives it no state" for j, f in (hung or {}).items()]
+    if hung:
+        syn = replace(syn, bands={**syn.bands, **{j: request_apply.band_of(abs(f)) for j, f in hung.items()}},
+                      rests={j: (f - request_apply.END_TOLERANCE, f + request_apply.END_TOLERANCE) for j, f in hung.items()})
+        for line in rests:
+            log.say("refine_state", line)
     first_clear = _write(ctx, syn, ws, log)
     shut, shut_notes = placement.shut_repair(ctx, syn, config, ws, log)
     syn = placement.closed_on_output(ctx, syn, ws, log, shut)
@@ -400,7 +428,9 @@ def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float]
         syn = replace(syn, bands={**syn.bands, **{j: request_apply.band_of(f) for j, f in st.room_made.items()}})
         for line in room:
             log.say("refine_state", line)
-    lifted = ground_clearance.apply_ground_clearance(replace(kept, state=state), ws, closed_tuples(syn.closed_out))
+    # a part left where its weight took it may lie on the floor, as it came to rest there
+    lifted = ground_clearance.apply_ground_clearance(replace(kept, state=state), ws,
+                                                     closed_tuples({n: c for n, c in syn.closed_out.items() if n not in syn.rests}))
     state, overrides, floored = lifted.state, lifted.overrides, lifted.state_notes
     st.collision_changes = list(st.collision_changes) + lifted.collision_notes
     refined = Candidate(ctx.asset, syn.overlay, state, overrides, ctx.root_rotation)
@@ -420,7 +450,7 @@ def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float]
     design = floored + ended + moved + design
     for line in design:
         log.say("stability", line)
-    design = room + design
+    design = rests + room + design
     tuned = escalation.post_check(ctx, replace(refined, overlay=balanced), config, ws, log, closed=closed_tuples(closed_out))
     tuned = escalation.repair_sweep(ctx, limits.strip_clips(balanced), closed_raw, replace(tuned, overrides=overrides, closed=closed_out),
                                     st, state, config, ws, log)

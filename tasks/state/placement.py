@@ -47,6 +47,9 @@ class Synthesis:
     closed_out: dict[str, ClosedState]  # at the overlay's scale
     requested: dict[str, float]  # joint positions, output units
     targets: dict[str, request_apply.JointTarget] = field(default_factory=dict)  # numbers / ends the request asked
+    #: joint -> the opening fractions (lo, hi; < 0 past its closed end) around where its weight left a part the request
+    #: asks to move freely and gives no state (:func:`~asset2sim.tasks.tune.attempt.hanging_fractions`)
+    rests: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     def candidate(self, ctx: EstimationContext, overrides=None) -> Candidate:
         """The candidate of this synthesis: its overlay at the requested state, with the collision ``overrides``."""
@@ -62,7 +65,11 @@ class Synthesis:
 
     def fractions(self) -> dict[str, tuple[float, float]]:
         """joint -> the opening fractions its band allows, a number or end asked winning (:func:`estimate.band_intervals`)."""
-        return estimate.band_intervals(self.bands, {n: t.interval for n, t in self.targets.items() if t.interval is not None})
+        return estimate.band_intervals(self.bands, self.intervals())
+
+    def intervals(self) -> dict[str, tuple[float, float]]:
+        """joint -> the opening fractions a number or end asked, or a part's rest (:attr:`rests`), allows."""
+        return {**{n: t.interval for n, t in self.targets.items() if t.interval is not None}, **self.rests}
 
 
 def scaled_closed(closed: dict[str, ClosedState], scale: float, prismatic: set[str]) -> dict[str, ClosedState]:
@@ -150,8 +157,7 @@ def search_state(ctx: EstimationContext, kin: SimSession, est, syn: Synthesis, b
     proposer = est.joint_proposer(ctx) if hasattr(est, "joint_proposer") else None
     st, kept = state_search.refine_state_with_decomposition(
         base, syn.closed_out, syn.bands, config, ws, log.say, proposer=proposer,
-        intervals={n: t.interval for n, t in syn.targets.items() if t.interval is not None},
-        addressed=lambda: request_apply.resolve_states(ctx, kin, syn.overlay.scale).addressed)
+        intervals=syn.intervals(), addressed=lambda: request_apply.resolve_states(ctx, kin, syn.overlay.scale).addressed)
     log.say("refine_state", f"self-penetration {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
     log.lap("refine_state")
     return st, kept

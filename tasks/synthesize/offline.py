@@ -78,7 +78,8 @@ class OfflineEstimator:
                 + [w.strip() for w in size_note.split(";") if w.strip().startswith("WARNING:")]
                 + ["requested bands: " + ", ".join(f"{k}={v}" for k, v in bands.items())]
                 + band_notes
-                + ([] if asked_state else ["the request asks for no state: every joint starts at its geometric closed end"]),
+                + ([] if asked_state else ["the request asks for no state: every joint starts at its geometric closed end"
+                                       + (", a part asked to move freely where its weight leaves it" if ctx.request.free_moving else "")]),
             ),
         )
         return Estimate(overlay=overlay, bands=bands, notes=band_notes, targets=resolved.targets)

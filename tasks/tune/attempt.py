@@ -110,3 +110,22 @@ def settled_attempt(att: Attempt, pose_note: str, redo: Callable[[np.ndarray], A
         return att, pose_note
     leaned = f"put down leaning {np.degrees(angle):.1f} deg, where it came to rest on its supports as it settled"
     return second, "; ".join(filter(None, (pose_note, leaned)))
+
+
+def hanging_fractions(att: Attempt, free: set[str], addressed: set[str]) -> dict[str, float]:
+    """Joint -> the opening fraction where its own weight left it in ``att``'s undisturbed rest test, for the parts
+    the request asks to move freely (``free``) and gives no state (not in ``addressed``) that left their state there
+    (``state_hold``) and came to rest (not ``moving``): a freely swinging handle hangs where it falls, as a person
+    who sets the object down finds it. Empty when there is none, or the rest test diverged."""
+    hold = next((m for m in att.check.metrics if m.name == "state_hold"), None)
+    trace = att.check.trace
+    if hold is None or hold.passed is not False or trace.diverged:
+        return {}
+    moving = set(hold.details.get("moving", ()))
+    out = {}
+    for n in hold.details.get("sagging", ()):
+        cs, q = att.closed_out.get(n), trace.joints.get(n)
+        f = cs.fraction(float(q[-1])) if cs is not None and q is not None and len(q) else None
+        if n in free and n not in addressed and n not in moving and f is not None and abs(f) <= 1.01:
+            out[n] = float(np.clip(f, -1.0, 1.0))  # < 0: fallen to the other side of a closed end inside its limits
+    return out

@@ -189,6 +189,22 @@ def test_a_free_door_of_a_levelled_refrigerator_stays_where_it_is_put(refine_onc
     assert sorted(free) == ["joint_0", "joint_1"]
 
 
+@needs_shared
+def test_a_free_handle_given_no_state_starts_where_its_weight_leaves_it(refine_once):
+    """Suitcase 103755 rests on its back; its carrying handle stands up at its closed end, mid-range. Asked to swing
+    freely and given no state, it was left standing and fell 0.80 rad onto the floor in the rest test
+    (joint_not_held, a conflict named with a state nobody asked for). It starts where it fell now, past its closed
+    end, and holds there; the report says why it is not closed."""
+    res = refine_once(SHARED / "103755", "A suitcase whose handle swings freely.", extras=False)
+    r = res.report
+    assert r.failure_mode == "none", r.readiness
+    closed = r.closed_ends["joint_0"]
+    fraction = closed["direction"] * (r.initial_joint_positions["joint_0"] - closed["q_closed"]) / closed["open_range"]
+    assert fraction < -0.3, (fraction, r.initial_joint_positions)
+    assert any(n.startswith("joint_0 (rotation_handle) starts at") and "where its weight took it" in n for n in r.design_changes)
+    assert r.metric("state_hold").details["drift"]["joint_0"] <= 0.02
+
+
 def test_the_as_asked_tier_notices_a_word_on_a_part_it_does_not_name(cabinet, refine_once, tmp_path):
     """An output whose overlay applied "the left door has a stiff hinge" to both doors (as refine did before a word
     applied to the part it names): the evaluation's as-asked tier fails, naming the door the phrase does not name."""
