@@ -161,6 +161,10 @@ class CategoryPrior(PriorModel):
     """The height (m) the category's adjustable levelling feet take up so that the body stands level on every foot;
     None: no such feet (the footprint is levelled by a contact margin only)."""
     levelling_feet_source: str = ""
+    opened_lying: bool = False
+    """Whether the object is laid on its back to be opened (a suitcase: upright, its lid opens into the floor); a
+    request for an opening and no pose is then met lying down where standing it is not."""
+    opened_lying_source: str = ""
     notes: str = ""
 
     @model_validator(mode="after")
@@ -169,6 +173,8 @@ class CategoryPrior(PriorModel):
             raise ValueError("spring_labels given without a spring_source")
         if self.levelling_feet_m is not None and len(self.levelling_feet_source) < 10:
             raise ValueError("levelling_feet_m given without a levelling_feet_source")
+        if self.opened_lying and len(self.opened_lying_source) < 10:
+            raise ValueError("opened_lying given without an opened_lying_source")
         if self.handheld and self.dims[1] > GRASPABLE_WIDTH_M + 1e-9:
             raise ValueError(f"handheld but the middle dimension {self.dims[1]} m exceeds the "
                              f"gripper limit GRASPABLE_WIDTH_M = {GRASPABLE_WIDTH_M} m")

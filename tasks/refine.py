@@ -13,6 +13,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import numpy as np
 from threadpoolctl import threadpool_limits
 
 from asset2sim import array_cache, atomic, output_folder
@@ -27,6 +28,7 @@ from asset2sim.tasks.geometry import analyze, limits
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import overrides, request
+from asset2sim.tasks.interpret.categories import category_prior
 from asset2sim.tasks.synthesize import request_apply, request_findings
 from asset2sim.tasks.check import as_asked
 from asset2sim.tasks.assemble import write
@@ -323,7 +325,7 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
     if ctx.request.pose_hint is not None:  # the pose asked is kept: put down where it rests when it leans as it settles
         return settled_attempt(att, pose_note, posed)
     if att.check.stable and not att.check.topples:
-        return att, pose_note
+        return _opened_lying(ctx, run, att, posed) or (att, pose_note)
     opening = steadier_opening(run.ws, att, run.log)
     if opening is not None:  # stages 4-7 once more at the steadier opening
         fractions, design = opening
@@ -358,6 +360,26 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
         return chosen
     run.log.say("post_check", f"unstable as modelled; {lean_note}")
     return leaned, f"unstable as modelled; {lean_note}"
+
+
+def _opened_lying(ctx: EstimationContext, run: RefineRun, att: Attempt, posed) -> tuple[Attempt, str] | None:
+    """For an object its category opens lying on its back (``categories.yaml`` ``opened_lying``: a suitcase), asked for
+    an opening and no pose, whose modelled pose ``att`` leaves a band unmet (upright, the floor stops its lid): the
+    attempt ``posed`` (stages 4-7 on a root rotation (3, 3)) makes laid on its largest face, moving parts up
+    (:func:`~asset2sim.tasks.state.pose.resting_rotation`), with the pose note, when it settles there with every band
+    met; else None."""
+    if ctx.request.pose_hint is not None or not att.off_band or not category_prior(ctx.category).opened_lying:
+        return None
+    rotation, note = pose.resting_rotation(run.kin, ctx.asset, ctx.closed_state(), ctx.hull_points, _moving_links(ctx))
+    if np.allclose(rotation, np.eye(3)):
+        return None
+    second = posed(rotation)
+    if not _settles(second):
+        run.log.say("post_check", f"{', '.join(att.off_band)} short of the band asked as modelled; laid down to open, not every check passes: kept as modelled")
+        return None
+    why = f"opened lying on its back, as a {ctx.category.lower()} is ({', '.join(att.off_band)} short of the band asked as modelled); {note}"
+    run.log.say("post_check", why)
+    return second, why
 
 
 def _more_to_move(ctx: EstimationContext, run: RefineRun, att: Attempt) -> bool:

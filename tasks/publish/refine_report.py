@@ -68,7 +68,7 @@ def build_report(ctx: EstimationContext, prompt: str, chash: str, att: Attempt, 
         readiness=verdict.tiers,
         stage_seconds=times,
         notes=staging_notes(asset) + request_notes(ctx.request) + list(overlay.notes.other)
-        + ([f"resting pose ({ctx.request.pose_hint or 'stability'}): {pose_note}"] if pose_note else [])
+        + ([f"resting pose ({ctx.request.pose_hint or 'as it is put down'}): {pose_note}"] if pose_note else [])
         + [mounting_note(overlay)] + att.design,
         mounting=overlay.mounting,
         design_changes=att.design,
