@@ -39,6 +39,9 @@ class JointChoice:
     """a spring that returns the part to its closed end (a door closer, a self-closing slide)"""
     words: tuple[MotionPhrase, ...] = ()
     """the request's words about this part's motion that made these choices"""
+    state_asked: bool = True
+    """whether the request asks a state of this part: one asked to move freely and given none has no friction that
+    holds it against its weight (it starts where its weight leaves it: ``tasks/refine.py``, ``_attempt``)"""
 
 
 #: The holding mechanism of a part asked to move freely at a state its own weight moves it from (the load there above
@@ -129,11 +132,12 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
                 hold = max(hold, abs(ld[name].gravity_load))
         band = set_down.joint_band(cs.lower * unit, cs.upper * unit, name in prismatic)
         on_stop = _on_stop(loads[name], cs, state[name], unit, band)
-        if ch.free_moving and on_stop:
-            hold = 0.0  # asked to move freely and resting on the stop its weight presses it onto: nothing to hold
+        if ch.free_moving and (on_stop or not ch.state_asked):
+            hold = 0.0  # asked to move freely, and resting on the stop its weight presses it onto or given no state
         spring, balanced = None, False
         mechanism = "moves freely (asked)" if ch.free_moving else ("friction slide" if name in prismatic else "friction hinge")
-        if ch.free_moving and not on_stop and abs(loads[name].gravity_load) > physics.friction_floor(loads[name], name in prismatic, True):
+        if ch.free_moving and ch.state_asked and not on_stop and abs(loads[name].gravity_load) > physics.friction_floor(
+                loads[name], name in prismatic, True):
             mechanism = HELD_AGAINST_FREE
         note = source + "".join(f"; request '{w.phrase}': {w.kind.replace('_', ' ')}" for w in ch.words)
         if ch.self_closing:

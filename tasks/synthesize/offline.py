@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from asset2sim import __version__
 from asset2sim.schemas.overlay import ContactMaterial, EstimatorInfo, LinkPhysics, Overlay, ValidationNotes
 from asset2sim.tasks.interpret.part_priors import material_for
@@ -61,6 +63,7 @@ class OfflineEstimator:
         # ---- dynamics
         relevant = request_apply.task_relevant_joints(ctx)
         choices, _ = motion_choices(ctx, relevant)
+        choices = {n: replace(c, state_asked=n in resolved.addressed) if c.free_moving else c for n, c in choices.items()}
         joints = joint_dynamics_for(ctx, kin, links, state, s, choices, source="offline physics")
         joints, dyn_notes = request_apply.apply_dynamics_values(ctx, joints, relevant, state)
         band_notes += dyn_notes

@@ -205,6 +205,19 @@ def test_a_free_handle_given_no_state_starts_where_its_weight_leaves_it(refine_o
     assert r.metric("state_hold").details["drift"]["joint_0"] <= 0.02
 
 
+@needs_shared
+def test_a_free_pedal_given_no_state_is_not_held_against_its_weight(refine_once):
+    """Trash can 102181's foot pad, asked to swing freely and given no state: its weight turns it from its closed end,
+    and it was held there by friction (`HELD_AGAINST_FREE`), so the as-asked tier named a conflict between the word and
+    a state nobody asked for (request_not_met). No friction holds it now; it starts where its weight leaves it."""
+    res = refine_once(SHARED / "102181", "A trash can whose foot pad swings freely.", extras=False)
+    r = res.report
+    assert r.failure_mode == "none", r.readiness
+    holding = json.loads((res.out / "overlay.json").read_text())["joints"]["joint_0"]["holding"]
+    assert holding["mechanism"] == "moves freely (asked)", holding
+    assert r.opening_fractions["joint_0"] > 0.5 and any(n.startswith("joint_0 (foot_pad) starts at") for n in r.design_changes)
+
+
 def test_the_as_asked_tier_notices_a_word_on_a_part_it_does_not_name(cabinet, refine_once, tmp_path):
     """An output whose overlay applied "the left door has a stiff hinge" to both doors (as refine did before a word
     applied to the part it names): the evaluation's as-asked tier fails, naming the door the phrase does not name."""
