@@ -23,9 +23,13 @@ from asset2sim.tasks.check.sweep import HOLD_FORCE
 #: state its deepest contact may sink where geometry stops it first (m).
 BOUND = {"revolute": math.radians(1.0), "prismatic": 2e-3}
 SINK = 2e-3
-#: The hand has reached the stop within this share of the range (or when twice the time at its speed is up: geometry
-#: stopped it first).
+#: The hand has reached the stop within this share of the range; or geometry stopped it first: twice the time at its
+#: speed is up and the part moves toward the stop at less than :data:`STALLED` of the hand's speed (a part the hand's
+#: force moves slower, against its spring, is carried on to the stop, at most :data:`APPROACH_CAP` times that long, not
+#: let go for its spring to slam it there).
 REACHED = 0.005
+STALLED = 0.05
+APPROACH_CAP = 8
 #: A part faster than this many times the hand's speed has left the hand: the engine diverged.
 DIVERGED = 50.0
 #: How long the hand presses on once the part no longer moves toward the stop (s), and the time its force takes to
@@ -70,13 +74,15 @@ def press_joint(session: SimSession, joint: str, limit: float, effort: float, sp
     q0 = session.joint_state(joint)[0]
     dt = session.options.conventions.timestep
     approach = int(round(2.0 * abs(limit - q0) / speed / dt))  # steps the hand has to reach the stop
-    steps = approach + int(round((RAMP_TIME + HOLD_TIME) / dt)) + 1
+    pressed = int(round((RAMP_TIME + HOLD_TIME) / dt))
+    steps = APPROACH_CAP * approach + pressed + 1
     pressing: list[int] = []  # the step the hand began to press
     far = [-np.inf, False, None]  # the farthest past the limit, diverged, the hand's force then
     force = [None]  # the hand's force of the current step (None: still driven at its speed)
 
     def law(k, q, qd):  # at the hand's speed to the stop, then its force rising over RAMP_TIME
-        if not pressing and (s * (q - limit) >= -REACHED * (upper - lower) or k >= approach):
+        if not pressing and (s * (q - limit) >= -REACHED * (upper - lower) or k >= approach and s * qd < STALLED * speed
+                             or k >= APPROACH_CAP * approach):
             session.release_joint(joint)
             pressing.append(k)
         if pressing:
@@ -91,7 +97,7 @@ def press_joint(session: SimSession, joint: str, limit: float, effort: float, sp
             return True
         if s * (q - limit) > far[0]:
             far[0], far[2] = s * (q - limit), force[0]
-        return False
+        return bool(pressing) and k - pressing[0] >= pressed  # pressed for its ramp and hold: done
 
     held = [o for o in session.joint_types if o != joint]  # the other parts held where they are (operability's)
     def deepest() -> float:
