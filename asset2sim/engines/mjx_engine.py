@@ -63,9 +63,11 @@ class MjxSession(MuJoCoSession):
         self.notes = [*self.notes, note]
 
     def _push(self) -> None:
-        """The host data's state and what is applied into the MJX data (before a step)."""
+        """The host data's state (its integration state, warm start included: :meth:`restore_state` restores what the
+        next step starts from) and what is applied into the MJX data (before a step)."""
         jnp, d = self._jnp, self.d
         self._dx = self._dx.replace(qpos=jnp.asarray(d.qpos), qvel=jnp.asarray(d.qvel), act=jnp.asarray(d.act),
+                                    qacc_warmstart=jnp.asarray(d.qacc_warmstart, dtype=self._dx.qacc_warmstart.dtype),
                                     qfrc_applied=jnp.asarray(d.qfrc_applied), xfrc_applied=jnp.asarray(d.xfrc_applied),
                                     time=jnp.asarray(d.time, dtype=self._dx.time.dtype))
 
@@ -74,6 +76,7 @@ class MjxSession(MuJoCoSession):
         dx, d = self._dx, self.d
         d.qpos[:] = np.asarray(dx.qpos)
         d.qvel[:] = np.asarray(dx.qvel)
+        d.qacc_warmstart[:] = np.asarray(dx.qacc_warmstart)  # the solver's warm start: a restored state restores it too
         if self.m.na:
             d.act[:] = np.asarray(dx.act)
         d.time = float(dx.time)
