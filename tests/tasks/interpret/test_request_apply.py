@@ -163,3 +163,18 @@ def test_a_range_of_masses_is_read_as_a_range(demo_root, refine_once):
     assert above.report.failure_mode == "none" and above.report.metric("request_met").passed
     lines = "\n".join(summary_lines(above.result))
     assert f"total mass: asked {2 * hi:.4g} kg to {3 * hi:.4g} kg" in lines and "not understood" not in lines, lines
+
+
+@pytest.mark.parametrize("prompt, stiff", [("A switch with a stiff toggle button.", True), ("A switch whose rocker is stiff.", True),
+                                           ("A switch with a loose toggle button, mostly open.", False)])
+def test_a_toggle_or_rocker_names_the_switch_it_throws(tmp_path, prompt, stiff):
+    """The parser reads "a stiff toggle button" as the part 'toggle' (the compound's first noun), and 'toggle' was no
+    label of this switch (PartNet's `toggle_button` is a `switch`): the word was not applied (request_not_met, "names a
+    'toggle' but this Switch has no such moving part"). A toggle and a rocker are the switch now (`labels.yaml`)."""
+    from asset2sim.tasks.synthesize import joint_dynamics
+    from tests.unseen_assets import build_toggle_switch
+
+    with build_context(build_toggle_switch(tmp_path / "switch"), prompt) as (ctx, _kin):
+        choices, missing = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
+    assert not missing, missing
+    assert [c.stiff if stiff else c.free_moving for c in choices.values()] == [True]
