@@ -133,7 +133,8 @@ def _last_words(rev: str, pos: int, n: int = 2) -> list[str]:
 
 def find_category_mentions(text: str) -> list[CategoryMention]:
     """Every category synonym in ``text``, left to right, longest first; ``possessive`` after its/their/his/her
-    within two words ("with its door") or before "of a <category>" ("the door of a microwave")."""
+    within two words ("with its door"), before "of a <category>" ("the door of a microwave") or after "<category> with a"
+    and at most two words ("a safe with a stiff door")."""
     low = text.lower()
     rx, phrase_to = _mention_regex()
     out: list[CategoryMention] = []
@@ -153,6 +154,10 @@ def find_category_mentions(text: str) -> list[CategoryMention]:
     for i, (m, nxt) in enumerate(zip(out, out[1:])):
         if re.fullmatch(r"\s+of\s+(?:(?:a|an|the|this|that|my|your|our|its)\s+)?(?:[\w-]+\s+){0,2}", low[m.end: nxt.start]):
             out[i] = CategoryMention(m.start, m.end, m.phrase, m.category, m.weak, True)
+        # "a safe with a stiff door": a mention after "with <det>" and at most two words, right after another
+        # mention, names a part of that object
+        elif re.fullmatch(r"\s+with\s+(?:(?:a|an|the|its|one|two|three|four)\s+)?(?:[\w-]+\s+){0,2}", low[m.end: nxt.start]):
+            out[i + 1] = CategoryMention(nxt.start, nxt.end, nxt.phrase, nxt.category, nxt.weak, True)
     return out
 
 

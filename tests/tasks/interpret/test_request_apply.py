@@ -178,3 +178,19 @@ def test_a_toggle_or_rocker_names_the_switch_it_throws(tmp_path, prompt, stiff):
         choices, missing = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
     assert not missing, missing
     assert [c.stiff if stiff else c.free_moving for c in choices.values()] == [True]
+
+
+@pytest.mark.parametrize("prompt", ["A safe with a stiff door.", "A safe with a loose door, mostly open."])
+def test_a_part_named_after_with_is_a_part_of_the_object_named_before(tmp_path, prompt):
+    """"safe" is a weak category word (an adjective too), "door" a strong one: "A safe with a stiff door." was read as
+    a request for a door, so "stiff" named the object itself and went to every task part, the safe's dial too (which,
+    asked loose, kept spinning after robust rest's tilts). A category word after "<object> with a" names a part of it."""
+    from asset2sim.tasks.interpret.request import parse_request
+    from asset2sim.tasks.synthesize import joint_dynamics
+    from tests.unseen_assets import build_safe
+
+    spec = parse_request(prompt)
+    assert spec.category_hint == "Safe" and [m.label for m in spec.motions] == ["door"]
+    with build_context(build_safe(tmp_path / "safe"), prompt) as (ctx, _kin):
+        choices, _ = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
+    assert [n for n, c in choices.items() if c.words] == ["joint_0"]  # the door; the dial (joint_1) is not named
