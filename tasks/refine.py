@@ -402,8 +402,10 @@ def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float]
     as much. ``fractions`` (joint -> opening fraction) replace the requested state of those joints; ``most``:
     stability by design moves all the mass it may (:func:`~asset2sim.tasks.state.stability.design_for_stability`)."""
     att = _stages(ctx, run, fractions, most)
+    if not att.check.sagging:
+        return att
     choices, _ = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
-    free = {n for n, c in choices.items() if c.free_moving}
+    free = {n for n, c in choices.items() if c.free_moving and n in att.check.sagging}
     hung = hanging_fractions(att, free, request_apply.resolve_states(ctx, run.kin, att.overlay.scale).addressed) if free else {}
     if not hung:
         return att
