@@ -13,7 +13,6 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-import numpy as np
 from threadpoolctl import threadpool_limits
 
 from asset2sim import array_cache, atomic, output_folder
@@ -28,7 +27,6 @@ from asset2sim.tasks.geometry import analyze, limits
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import overrides, request
-from asset2sim.tasks.interpret.categories import category_prior
 from asset2sim.tasks.synthesize import request_apply, request_findings
 from asset2sim.tasks.check import as_asked
 from asset2sim.tasks.assemble import write
@@ -42,11 +40,11 @@ from asset2sim.stage_log import Progress, StageLog
 from asset2sim.tasks.publish.contract import (MARKER_NAME, REPORT_NAME, is_complete, read_report_json, run_hash, write_completion_marker,
                                               write_report_json)
 from asset2sim.tasks.state import ground_clearance, pose, stability
-from asset2sim.tasks.synthesize import backends, estimate, estimator, joint_dynamics, validate_overlay
+from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 from asset2sim.tasks.tune import escalation
 from asset2sim.tasks.tune import keep_declared as keep
-from asset2sim.tasks.tune.attempt import Attempt, hanging_fractions, settled_attempt, steadier_opening
+from asset2sim.tasks.tune.attempt import Attempt, opened_lying, rested_attempt, settled_attempt, steadier_opening
 from asset2sim.inert import one_line
 from asset2sim.engines.base import SimSession
 from asset2sim.engines.step_budget import StepBudgetExceeded, step_budget
@@ -325,7 +323,7 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
     if ctx.request.pose_hint is not None:  # the pose asked is kept: put down where it rests when it leans as it settles
         return settled_attempt(att, pose_note, posed)
     if att.check.stable and not att.check.topples:
-        return _opened_lying(ctx, run, att, posed) or (att, pose_note)
+        return opened_lying(ctx, run.kin, att, _moving_links(ctx), posed, run.log) or (att, pose_note)
     opening = steadier_opening(run.ws, att, run.log)
     if opening is not None:  # stages 4-7 once more at the steadier opening
         fractions, design = opening
@@ -343,12 +341,12 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
         second = posed(R)
         chosen = (second, f"{why}; {note}") if second.check.stable and (second.check.passed or not att.check.passed) and not (
             second.check.topples and not att.check.topples) else (att, f"{note}; not better in simulation, kept as modelled")
-    if _settles(chosen[0]):
+    if chosen[0].settles:
         return chosen
     best, best_note = chosen
     if best.check.only_topples and _more_to_move(ctx, run, best):  # toppled: opened parts as light as their sources allow
         heavier = posed(best.root_rotation, most=True)
-        if _settles(heavier):
+        if heavier.settles:
             return heavier, best_note
         run.log.say("stability", "the whole transfer did not pass every check: the least transfer kept")
     if att.check.stable:
@@ -356,30 +354,10 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
     # no face passes: where it leans onto its supports as it settles as modelled (a swivel USB stick on its cover's
     # plate), it is put down there, kept when every check passes there
     leaned, lean_note = settled_attempt(att, pose_note, posed)
-    if leaned is att or not _settles(leaned):
+    if leaned is att or not leaned.settles:
         return chosen
     run.log.say("post_check", f"unstable as modelled; {lean_note}")
     return leaned, f"unstable as modelled; {lean_note}"
-
-
-def _opened_lying(ctx: EstimationContext, run: RefineRun, att: Attempt, posed) -> tuple[Attempt, str] | None:
-    """For an object its category opens lying on its back (``categories.yaml`` ``opened_lying``: a suitcase), asked for
-    an opening and no pose, whose modelled pose ``att`` leaves a band unmet (upright, the floor stops its lid): the
-    attempt ``posed`` (stages 4-7 on a root rotation (3, 3)) makes laid on its largest face, moving parts up
-    (:func:`~asset2sim.tasks.state.pose.resting_rotation`), with the pose note, when it settles there with every band
-    met; else None."""
-    if ctx.request.pose_hint is not None or not att.off_band or not category_prior(ctx.category).opened_lying:
-        return None
-    rotation, note = pose.resting_rotation(run.kin, ctx.asset, ctx.closed_state(), ctx.hull_points, _moving_links(ctx))
-    if np.allclose(rotation, np.eye(3)):
-        return None
-    second = posed(rotation)
-    if not _settles(second):
-        run.log.say("post_check", f"{', '.join(att.off_band)} short of the band asked as modelled; laid down to open, not every check passes: kept as modelled")
-        return None
-    why = f"opened lying on its back, as a {ctx.category.lower()} is ({', '.join(att.off_band)} short of the band asked as modelled); {note}"
-    run.log.say("post_check", why)
-    return second, why
 
 
 def _more_to_move(ctx: EstimationContext, run: RefineRun, att: Attempt) -> bool:
@@ -390,30 +368,13 @@ def _more_to_move(ctx: EstimationContext, run: RefineRun, att: Attempt) -> bool:
     return whole is not att.overlay
 
 
-def _settles(att: Attempt) -> bool:
-    """Whether ``att`` passes every check, no disturbance topples it and every band is met."""
-    return att.check.passed and not att.check.topples and not att.off_band
-
-
 def _attempt(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float] | None = None, most: bool = False) -> Attempt:
-    """Stages 4-7 for the current ``ctx.root_rotation`` (:func:`_stages`); where a part the request asks to move
-    freely, and gives no state, left its closed end under its own weight and came to rest, once more with it where it
-    rested (:func:`~asset2sim.tasks.tune.attempt.hanging_fractions`), kept when it holds there and passes at least
-    as much. ``fractions`` (joint -> opening fraction) replace the requested state of those joints; ``most``:
-    stability by design moves all the mass it may (:func:`~asset2sim.tasks.state.stability.design_for_stability`)."""
+    """Stages 4-7 for the current ``ctx.root_rotation`` (:func:`_stages`), once more where a part asked to move freely
+    and given no state came to rest off its closed end (:func:`~asset2sim.tasks.tune.attempt.rested_attempt`).
+    ``fractions`` (joint -> opening fraction) replace the requested state of those joints; ``most``: stability by
+    design moves all the mass it may (:func:`~asset2sim.tasks.state.stability.design_for_stability`)."""
     att = _stages(ctx, run, fractions, most)
-    if not att.check.sagging:
-        return att
-    choices, _ = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
-    free = {n for n, c in choices.items() if c.free_moving and n in att.check.sagging}
-    hung = hanging_fractions(att, free, request_apply.resolve_states(ctx, run.kin, att.overlay.scale).addressed) if free else {}
-    if not hung:
-        return att
-    second = _stages(ctx, run, {**(fractions or {}), **hung}, most, hung=hung)
-    if set(hung) & set(second.check.sagging) or not (second.check.passed or not att.check.passed):
-        run.log.say("post_check", "where the freely moving parts came to rest they do not hold: the closed state kept")
-        return att
-    return second
+    return rested_attempt(ctx, run.kin, att, lambda hung: _stages(ctx, run, {**(fractions or {}), **hung}, most, hung=hung), run.log)
 
 
 def _stages(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float] | None = None, most: bool = False,

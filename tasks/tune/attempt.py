@@ -16,7 +16,9 @@ from asset2sim.inert import one_line
 from asset2sim.stage_log import StageLog
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.state import balance, pose
-from asset2sim.tasks.synthesize import estimate
+from asset2sim.tasks.interpret.categories import category_prior
+from asset2sim.tasks.synthesize import estimate, joint_dynamics, request_apply
+from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.check import as_asked, postcheck
 from asset2sim.tasks.geometry.closed_state import ClosedState
 
@@ -51,6 +53,11 @@ class Attempt:
         than the request tier's slack (:func:`~asset2sim.tasks.check.as_asked.band_missed`)."""
         return [n for n, b in self.bands.items() if b in BAND_INTERVAL and n in self.closed_out and n in self.state
                 and as_asked.band_missed(n, n, b, abs(self.closed_out[n].fraction(self.state[n]))) is not None]
+
+    @property
+    def settles(self) -> bool:
+        """Whether it passes every check, no disturbance topples it and every band is met."""
+        return self.check.passed and not self.check.topples and not self.off_band
 
 
 def least_openings(att: Attempt, intervals: dict[str, tuple[float, float]]) -> dict[str, float]:
@@ -129,3 +136,44 @@ def hanging_fractions(att: Attempt, free: set[str], addressed: set[str]) -> dict
         if n in free and n not in addressed and n not in moving and f is not None and abs(f) <= 1.01:
             out[n] = float(np.clip(f, -1.0, 1.0))  # < 0: fallen to the other side of a closed end inside its limits
     return out
+
+
+def rested_attempt(ctx: EstimationContext, kin, att: Attempt, redo: Callable[[dict[str, float]], Attempt], log: StageLog) -> Attempt:
+    """``att`` made once more by ``redo`` (stages 4-7 with joint -> opening fraction of the parts left where their
+    weight took them) where the request asks a part to move freely, gives it no state, and the rest test found it
+    leaving its state and coming to rest (:func:`hanging_fractions`); kept when those parts hold there and it passes
+    at least as much, else ``att``. ``kin``: the input's kinematics session (what the request addressed)."""
+    if not att.check.sagging:
+        return att
+    choices, _ = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
+    free = {n for n, c in choices.items() if c.free_moving and n in att.check.sagging}
+    hung = hanging_fractions(att, free, request_apply.resolve_states(ctx, kin, att.overlay.scale).addressed) if free else {}
+    if not hung:
+        return att
+    second = redo(hung)
+    if set(hung) & set(second.check.sagging) or not (second.check.passed or not att.check.passed):
+        log.say("post_check", "where the freely moving parts came to rest they do not hold: the closed state kept")
+        return att
+    return second
+
+
+def opened_lying(ctx: EstimationContext, kin, att: Attempt, moving_links: list[str], posed: Callable[[np.ndarray], Attempt],
+                 log: StageLog) -> tuple[Attempt, str] | None:
+    """For an object its category opens lying on its back (``categories.yaml`` ``opened_lying``: a suitcase), asked for
+    an opening and no pose, whose modelled pose ``att`` leaves a band unmet (upright, the floor stops its lid): the
+    attempt ``posed`` (stages 4-7 on a root rotation (3, 3)) makes laid on its largest face, moving parts up
+    (:func:`~asset2sim.tasks.state.pose.resting_rotation` with ``kin``, the input's kinematics session, and
+    ``moving_links``, the task parts' links), with the pose note, when it settles there; else None."""
+    if ctx.request.pose_hint is not None or not att.off_band or not category_prior(ctx.category).opened_lying:
+        return None
+    rotation, note = pose.resting_rotation(kin, ctx.asset, ctx.closed_state(), ctx.hull_points, moving_links)
+    if np.allclose(rotation, np.eye(3)):
+        return None
+    second = posed(rotation)
+    short = ", ".join(att.off_band)
+    if not second.settles:
+        log.say("post_check", f"{short} short of the band asked as modelled; laid down to open, not every check passes: kept as modelled")
+        return None
+    why = f"opened lying on its back, as a {ctx.category.lower()} is ({short} short of the band asked as modelled); {note}"
+    log.say("post_check", why)
+    return second, why
