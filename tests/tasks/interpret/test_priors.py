@@ -264,14 +264,14 @@ def test_canonical_label(raw: str | None, canon: str | None) -> None:
         ("Microwave", "microwave_body", "steel_sheet"),
         ("Microwave", "rotation_tray", "glass"),
         ("StorageFurniture", "furniture_body", "particle_board"),
-        ("StorageFurniture", "drawer", "particle_board"),
+        ("StorageFurniture", "drawer", "drawer_box"),  # a drawer box: thinner sides and bottom than the carcass
         ("Bag", "suitcase_body", "leather"),
         ("Faucet", "switch", "brass"),
         ("Laptop", "screen", "electronics_assembly"),
         ("Suitcase", "suitcase_body", "polycarbonate"),
         ("TrashCan", "wheel", "rubber"),
         ("Spaceship", "hull", "abs_plastic"),  # unknown category and label -> generic body material
-        ("Spaceship", "drawer", "particle_board"),  # unknown category, known label -> label default
+        ("Spaceship", "drawer", "drawer_box"),  # unknown category, known label -> label default
         ("Microwave", "mystery_part", "steel_sheet"),  # unknown label -> category body material
         ("Microwave", None, "steel_sheet"),
     ],

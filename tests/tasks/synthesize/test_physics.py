@@ -12,6 +12,7 @@ from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
 from asset2sim.prior_tables import load_priors
 from asset2sim.schemas.overlay import Inertia, LinkPhysics
+from asset2sim.tasks.interpret import part_priors
 from asset2sim.tasks.synthesize import physics
 from asset2sim.tasks.geometry.analyze import analyze_asset
 from asset2sim.tasks.geometry.closed_state import subtree_links
@@ -136,3 +137,25 @@ def test_board_part_weighs_one_board_at_any_scale(tmp_path, shared_dataset):
     lp = physics.link_physics(plate, 4.0, board)  # 1.6 x 0.8 m drawn 40 mm thick: one 16 mm board
     faces = 2 * (0.4 * 0.2 + 0.4 * 0.01 + 0.2 * 0.01)
     assert lp.mass == pytest.approx(faces / 2 * 16 * board.wall_thickness * board.density, rel=1e-6)
+
+
+def test_drawer_weighs_a_drawer_box(shared_dataset):
+    """A drawer is a box of thinner boards than its cabinet (``materials.yaml`` ``drawer_box``: a 19 mm front,
+    12.7-15.9 mm sides and back, a 6.4 mm bottom, 12.7 mm in larger drawers): dev row 19179's two drawers at a
+    regular cabinet's scale (0.655: 0.74 m wide and deep, 0.32 m high) weigh no more than a particle-board box of their
+    size built of the thickest of those boards, and less than the carcass's 16 mm boards would make them (a drawer of
+    carcass boards weighed 19.3 kg, above that box's 15.8 kg)."""
+    pri = load_priors().materials
+    drawer = physics.material_choice(part_priors.material_for("StorageFurniture", "drawer"))
+    carcass = physics.material_choice(pri["particle_board"])
+    assert drawer.panel and drawer.density == carcass.density and drawer.wall_thickness < carcass.wall_thickness
+    geoms = analyze_asset(extract_asset(shared_dataset / "19179"))
+    s = 0.655
+    for link in ("link_0", "link_1"):  # slider drawer (semantics.txt)
+        geom = geoms[link]
+        w, d, h = sorted((e * s for e in geom.extents), reverse=True)  # m: as wide as deep, less high
+        box = drawer.density * (w * h * 0.019 + (w * h + 2 * d * h) * 0.0159 + w * d * 0.0127)  # kg
+        mass = physics.link_physics(geom, s, drawer).mass
+        assert mass <= box, (link, mass, box)
+        assert mass < physics.link_physics(geom, s, carcass).mass
+    assert physics.link_physics(geoms["link_1"], s, carcass).mass > box  # the carcass's boards: heavier than any such box
