@@ -159,9 +159,9 @@ def test_escalation_for_robust_rest_keeps_the_drawers_sweepable(tmp_path):
     """A large cabinet (19179, scale ~0.85): robust rest's tilts slide its
     closed drawers, and escalation raised their damping 63-fold (3,900 N s/m)
     until the sweep's drive crawled 74 % of the 0.85 m range in its 3 s.
-    With the sweep's damping cap the sweep passes; the drawers (17 and 39 kg)
-    keep what a hand moves, with their catches, and where a 5 degree tilt
-    still slides the heavier one out the verdict says so."""
+    With the sweep's damping cap the sweep passes; the drawers (15 and 28 kg
+    drawer boxes) keep what a hand moves, and where a 5 degree tilt still
+    slides the heavier one out the verdict says so."""
     from asset2sim.tasks.tune.operating import damping_caps
     from asset2sim.urdf import read_urdf
 
