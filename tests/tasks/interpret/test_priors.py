@@ -262,7 +262,7 @@ def test_canonical_label(raw: str | None, canon: str | None) -> None:
         ("Stapler", "stapler_base", "cast_zinc"),
         ("Stapler", "lid", "steel_sheet"),
         ("Microwave", "microwave_body", "steel_sheet"),
-        ("Microwave", "rotation_tray", "glass"),
+        ("Microwave", "rotation_tray", "glass_pane"),  # a pane drawn with both faces
         ("StorageFurniture", "furniture_body", "particle_board"),
         ("StorageFurniture", "drawer", "drawer_box"),  # a drawer box: thinner sides and bottom than the carcass
         ("Bag", "suitcase_body", "leather"),

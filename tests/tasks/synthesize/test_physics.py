@@ -159,3 +159,27 @@ def test_drawer_weighs_a_drawer_box(shared_dataset):
         assert mass <= box, (link, mass, box)
         assert mass < physics.link_physics(geom, s, carcass).mass
     assert physics.link_physics(geoms["link_1"], s, carcass).mass > box  # the carcass's boards: heavier than any such box
+
+
+def test_glazing_weighs_its_panes(tmp_path):
+    """A window's sash is a double-glazed unit (``materials.yaml`` ``insulating_glass``: two 4 mm panes however thick
+    the unit is drawn) and a turntable or shelf a 4 mm pane (``glass_pane``), each drawn with its two faces: the
+    generated sliding window's sash (0.77 x 0.56 m drawn 30 mm thick) weighs 8 mm of glass over its area at the
+    window's own size and at 1.7x (a very large window): 9.3 and 27 kg, not a 30 mm (51 mm) slab of solid glass (32
+    and 157 kg); a sash drawn thinner than its glass keeps its drawn volume."""
+    from tests.unseen_assets import build_sliding_window
+
+    pri = load_priors().materials
+    sash_glass = physics.material_choice(part_priors.material_for("Window", "window"))
+    assert sash_glass.panel and sash_glass.wall_thickness == pytest.approx(0.008)
+    assert part_priors.material_for("Microwave", "rotation_tray").key == "glass_pane"
+    geom = analyze_asset(extract_asset(build_sliding_window(tmp_path / "w")))["link_0"]  # one sash (semantics: window)
+    w, h, d = sorted(geom.extents, reverse=True)
+    assert d == pytest.approx(0.03, abs=1e-6)
+    for s in (1.0, 1.7):
+        lp = physics.link_physics(geom, s, sash_glass)
+        faces = 2 * (w * h + w * d + h * d) * s**2
+        assert lp.mass == pytest.approx(faces / 2 * 0.008 * 2500.0, rel=1e-6)
+        assert lp.mass < 0.3 * physics.link_physics(geom, s, physics.material_choice(pri["glass"])).mass
+    tiny = physics.link_physics(geom, 0.2, sash_glass)  # drawn 6 mm thick: under its 8 mm of glass, its drawn volume
+    assert tiny.mass == pytest.approx(w * h * d * 0.2**3 * 2500.0, rel=1e-6)
