@@ -1,8 +1,9 @@
 """Write the generated objects of categories the dev set lacks (``tests/unseen_assets.py``: a wall switch, a cart, a
 sliding window, pliers, a double-door cabinet, a wardrobe with two doors over two drawers, a safe, a toaster, a
 bottle, a desk with a drawer, an oven, a pot, a washing machine, glasses, a swivel USB stick, a kettle, a bucket, a
-pump dispenser), each link's meshes merged into one OBJ as PartNet-Mobility's files are, beside a ``manifest.csv`` in
-the dev set's columns (request: "A <noun>." with the category's first request word), so that the benchmarks that read
+pump dispenser, a desk lamp, a desk fan, a printer, a keyboard, an office chair, a desk globe, scissors), each link's
+meshes merged into one OBJ as PartNet-Mobility's files are, beside a ``manifest.csv`` in the dev set's columns
+(request: "A <noun>." with the category's first request word), so that the benchmarks that read
 a manifest run on them:
 
     python benchmarks/generated_objects.py --out DIR

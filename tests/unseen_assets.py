@@ -515,6 +515,57 @@ def build_printer(folder: Path) -> Path:
     return b.write(folder)
 
 
+
+def build_office_chair(folder: Path) -> Path:
+    """An office chair (1.2 units tall): a three-armed base on a gas column, a casters' wheel (``wheel``, continuous
+    about its horizontal axle, the three turned alike) under each arm standing on the ground, a seat with its backrest (``seat``, continuous
+    about the column's vertical axis) and a height lever under the seat (``lever``, revolute 0-0.3 rad on the seat)."""
+    b = _Builder("u_chair", "Chair")
+    arms = [b.part("chair_base", box_xyz(-0.03, 0.03, -0.50, -0.45, 0.0, 0.36), _DARK,
+                   Pose(axis=(0.0, 1.0, 0.0), angle=2 * math.pi * k / 3, pivot=(0.0, 0.0, 0.0))) for k in range(3)]
+    b.body("link_5", "chair_base", [*arms, b.part("chair_base", box_xyz(-0.04, 0.04, -0.45, -0.02, -0.04, 0.04), _GREY)])
+    for k in range(3):
+        a = 2 * math.pi * k / 3
+        x, z = 0.32 * math.sin(a), 0.32 * math.cos(a)
+        b.moving(f"link_{k}", "hinge", "wheel", _wheel(b, x, -0.54, z, 0.04, 0.012), "continuous", "link_5", (x, -0.54, z),
+                 (1.0, 0.0, 0.0))  # the casters turned alike, their axles along x
+    b.moving("link_3", "hinge", "seat", [b.part("seat", box_xyz(-0.3, 0.3, 0.0, 0.08, -0.3, 0.3), _DARK),
+                                         b.part("seat", box_xyz(-0.28, 0.28, 0.08, 0.66, -0.3, -0.24), _DARK)],
+             "continuous", "link_5", (0.0, 0.0, 0.0), (0.0, 1.0, 0.0))
+    b.moving("link_4", "hinge", "lever", [b.part("lever", box_xyz(0.2, 0.38, -0.03, -0.01, 0.1, 0.13), _GREY)],
+             "revolute", "link_3", (0.2, -0.02, 0.115), (0.0, 0.0, 1.0), 0.0, 0.3)
+    return b.write(folder)
+
+
+def build_desk_globe(folder: Path) -> Path:
+    """A desk globe (1.0 units tall): a round foot, a post and a half meridian over the top, and a sphere (``sphere``,
+    continuous about its vertical axis) of radius 0.3 held between the post's top and the meridian, 1 cm clear of
+    each."""
+    b = _Builder("u_globe", "Globe")
+    stand = [b.part("globe_base", box_xyz(-0.2, 0.2, -0.5, -0.46, -0.2, 0.2), _DARK),
+             b.part("globe_base", box_xyz(-0.02, 0.02, -0.46, -0.26, -0.02, 0.02), _GREY),
+             b.part("globe_base", box_xyz(-0.02, 0.02, -0.3, 0.42, -0.37, -0.33), _GREY),
+             b.part("globe_base", box_xyz(-0.02, 0.02, 0.38, 0.42, -0.33, 0.02), _GREY)]
+    b.body("link_1", "globe_base", stand)
+    ball = [b.part("sphere", box_xyz(-0.3, 0.3, -0.2, 0.3, -0.3, 0.3), _GLASS,
+                   Pose(axis=(0.0, 1.0, 0.0), angle=math.pi * k / 6, pivot=(0.0, 0.05, 0.0))) for k in range(3)]
+    ball.append(b.part("sphere", box_xyz(-0.2, 0.2, -0.25, 0.37, -0.2, 0.2), _GLASS))
+    b.moving("link_0", "hinge", "sphere", ball, "continuous", "link_1", (0.0, 0.05, 0.0), (0.0, 1.0, 0.0))
+    return b.write(folder)
+
+
+def build_scissors(folder: Path) -> Path:
+    """Office scissors lying flat (0.9 units long): a blade with its handle loop (``blade``) and the other blade
+    (``leg``) above it, turning 0-0.8 rad about the vertical screw at the pivot (closed: the blades over each
+    other)."""
+    b = _Builder("u_scissors", "Scissors")
+    b.body("link_1", "blade", [b.part("blade", box_xyz(0.0, 0.5, 0.0, 0.01, -0.03, 0.0), _STEEL),
+                               b.part("blade", box_xyz(-0.4, 0.0, 0.0, 0.01, -0.12, -0.02), _DARK)])
+    b.moving("link_0", "hinge", "leg", [b.part("leg", box_xyz(0.0, 0.5, 0.01, 0.02, 0.0, 0.03), _STEEL),
+                                        b.part("leg", box_xyz(-0.4, 0.0, 0.01, 0.02, 0.02, 0.12), _DARK)],
+             "revolute", "link_1", (0.0, 0.01, 0.0), (0.0, 1.0, 0.0), 0.0, 0.8)
+    return b.write(folder)
+
 def one_mesh_per_link(folder: Path) -> Path:
     """Rewrite the generated asset in ``folder`` in place so that each link draws and collides with one OBJ of one
     group holding all its parts (``textured_objs/merged-<link>.obj``), as PartNet-Mobility's files are: one group per
@@ -586,4 +637,7 @@ UNSEEN_BUILDERS = (
     ("u_fan", build_desk_fan, "Fan"),
     ("u_printer", build_printer, "Printer"),
     ("u_keyboard", build_keyboard, "Keyboard"),
+    ("u_chair", build_office_chair, "Chair"),
+    ("u_globe", build_desk_globe, "Globe"),
+    ("u_scissors", build_scissors, "Scissors"),
 )
