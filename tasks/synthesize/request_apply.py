@@ -107,8 +107,12 @@ def resolve_states(ctx: "EstimationContext", kin: "SimSession", scale: float) ->
         if not joints and not jr.names_part and jr.band == "closed" and jr.target is None:
             res.notes.append(f"'{jr.phrase}': this {ctx.category} has no part that opens: it is closed as it is")
         elif not joints:
+            endless = [f"{ctx.asset.link(ctx.asset.joint(n).child).semantic_label or 'part'} ({n})" for n in relevant
+                       if ctx.asset.joint(n).type == "continuous"]
             why = res.warnings[-1].removeprefix("WARNING: ") if len(res.warnings) > before else (
                 f"names joint {jr.joint}, not a movable joint of this object" if jr.selector == "joint"
+                else f"this {ctx.category}'s {' and '.join(endless)} turn{'s' if len(endless) == 1 else ''} without end (a "
+                     f"continuous joint): no closed or open end to be '{jr.phrase}' at" if endless
                 else f"this {ctx.category} has no task-relevant movable part")
             res.unapplied.append((jr.phrase, why))
         for t in joints:

@@ -194,3 +194,19 @@ def test_a_part_named_after_with_is_a_part_of_the_object_named_before(tmp_path, 
     with build_context(build_safe(tmp_path / "safe"), prompt) as (ctx, _kin):
         choices, _ = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
     assert [n for n, c in choices.items() if c.words] == ["joint_0"]  # the door; the dial (joint_1) is not named
+
+
+@pytest.mark.parametrize("build, prompt, part", [("build_desk_globe", "A globe, halfway open.", "sphere (joint_0)"),
+                                                 ("build_desk_globe", "A globe with its sphere fully open.", "sphere (joint_0)"),
+                                                 ("build_office_chair", "A chair, halfway open.", "seat (joint_3)")])
+def test_an_opening_asked_of_a_part_that_turns_without_end_says_so(tmp_path, build, prompt, part):
+    """A globe's sphere and an office chair's swivel seat are their task parts and turn without end (continuous
+    joints): an opening asked of the object has no end to be measured from. The request was unapplied "this Globe has
+    no task-relevant movable part", which it has; it says the part and why now."""
+    from tests import unseen_assets
+
+    with build_context(getattr(unseen_assets, build)(tmp_path / "o"), prompt) as (ctx, kin):
+        res = request_apply.resolve_states(ctx, kin, 1.0)
+    assert not res.bands.values() or set(res.bands.values()) == {"closed"}
+    (phrase, why), = res.unapplied
+    assert f"'s {part} turns without end (a continuous joint)" in why and phrase in prompt
