@@ -111,7 +111,7 @@ def test_the_model_prompt_carries_the_numbers_and_a_departing_overlay_is_flagged
         d = llm_prompt.describe(ctx, kin)
         rp = d["request_parse"]
         assert rp["sizes_m"][0]["dimension"] == "height" and rp["joint_parameters"][0]["value"] == 0.05
-        assert {p["label"]: p["material"] for p in rp["masses_and_materials"]}["lid"] == "glass"
+        assert {p["label"]: p["material"] for p in rp["masses_and_materials"]}["lid"] == "glass_pane"
         (j,) = d["joints"]
         assert abs(j["requested_opening_fraction"] * ctx.closed[j["name"]].open_range - np.radians(40)) < 1e-4
         est = backends.get_estimator("offline").estimate(ctx, kin)
