@@ -515,11 +515,11 @@ def build_printer(folder: Path) -> Path:
     return b.write(folder)
 
 
-
 def build_office_chair(folder: Path) -> Path:
-    """An office chair (1.2 units tall): a three-armed base on a gas column, a casters' wheel (``wheel``, continuous
-    about its horizontal axle, the three turned alike) under each arm standing on the ground, a seat with its backrest (``seat``, continuous
-    about the column's vertical axis) and a height lever under the seat (``lever``, revolute 0-0.3 rad on the seat)."""
+    """An office chair (1.2 units tall): a three-armed base on a gas column, a caster's wheel (``wheel``, continuous
+    about its horizontal axle, the three turned alike) under each arm standing on the ground, a seat with its backrest
+    (``seat``, continuous about the column's vertical axis) and a height lever under the seat (``lever``, revolute 0-0.3
+    rad on the seat)."""
     b = _Builder("u_chair", "Chair")
     arms = [b.part("chair_base", box_xyz(-0.03, 0.03, -0.50, -0.45, 0.0, 0.36), _DARK,
                    Pose(axis=(0.0, 1.0, 0.0), angle=2 * math.pi * k / 3, pivot=(0.0, 0.0, 0.0))) for k in range(3)]
@@ -565,6 +565,7 @@ def build_scissors(folder: Path) -> Path:
                                         b.part("leg", box_xyz(-0.4, 0.0, 0.01, 0.02, 0.02, 0.12), _DARK)],
              "revolute", "link_1", (0.0, 0.01, 0.0), (0.0, 1.0, 0.0), 0.0, 0.8)
     return b.write(folder)
+
 
 def one_mesh_per_link(folder: Path) -> Path:
     """Rewrite the generated asset in ``folder`` in place so that each link draws and collides with one OBJ of one
