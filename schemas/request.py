@@ -121,7 +121,9 @@ MOTION_GUARDS: dict[str, dict[str, str]] = {
     "high_damping": {"damping": "min"},
     "soft_close": {"damping": "min"},
     "spring": {"stiffness": "min"},
-    "self_closing": {"stiffness": "min"},
+    # a closer shuts its part against friction of at most a share of its preload (joint_dynamics.closer): friction
+    # raised past that to hold the part open would keep it from shutting, the one thing the word asks
+    "self_closing": {"stiffness": "min", "friction": "max"},
     "moderate_damping": {},
     "slides": {},  # the slide's own friction range bounds it (``asset2sim/priors/slides.yaml``)
 }

@@ -233,8 +233,8 @@ def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, 
                    strays: list[tuple[MotionPhrase, list[str]]] = ()) -> list[MetricResult]:
     """``metrics`` with the words about motion that the output's physical verdict contradicts added to
     ``request_met`` as unmet items (kind ``conflict``): a word that keeps a joint free or lightly damped
-    (``MOTION_GUARDS`` "max": "swings freely", "low damping") on a joint robust rest or the rest test finds not held,
-    or one that keeps it stiff or held ("min": "stiff", "stays where it is put", "soft-close") on a joint no hand
+    (``MOTION_GUARDS`` "max": "swings freely", "low damping", a closer's friction) on a joint robust rest or the rest
+    test finds not held (a self-closing part asked open: its closer shuts it), or one that keeps it stiff or held ("min": "stiff", "stays where it is put", "soft-close") on a joint no hand
     inside its range can work. The word was applied as asked; holding (or operating) the part needed what it rules
     out. ``words``: each word with the joints it applies to; ``strays``: each word with the joints it was applied to
     that its phrase does not name (kind ``not_named``: "the main door has a stiff hinge" made the freezer door stiff).
@@ -244,11 +244,15 @@ def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, 
     for word, joints in words:
         ways = set(MOTION_GUARDS.get(word.kind, {}).values())
         for j in joints:
-            why = (held.get(j) if "max" in ways else None) or (operable.get(j) if "min" in ways else None)
+            not_held = held.get(j) if "max" in ways else None
+            why = not_held or (operable.get(j) if "min" in ways else None)
             if why is None:
                 continue
             head = f"'{word.phrase}': applied to {j} as asked, and {why}: "
-            if "max" in ways or word.kind == "hold":  # holding the part against its weight is what the word rules out
+            if word.kind == "self_closing" and not_held:  # its closer shuts it: the state asked away from shut cannot hold
+                text = ("its closer shuts it from where it was asked, and holding it there needs more friction than lets "
+                        "the closer shut it. Drop the word or ask for the part closed")
+            elif not_held or word.kind == "hold":  # holding the part against its weight is what the word rules out
                 need = ("needs more friction or damping than the word allows" if "max" in ways else
                         "needs more friction than a hand inside that range moves")
                 text = (f"holding the part where it was asked {need}. "

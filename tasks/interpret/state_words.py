@@ -73,7 +73,13 @@ def _state_hits(low: str, numeric: list[rv.Found]) -> list[Hit]:
         elif not under_number(h):
             words.append(h)
     hits = words + nums
-    return rv.leftmost_longest([h for h in hits if _is_state(low, h)])
+    closing = [(h.start, h.end) for h in scan(low, _CLOSING_TABLE)]  # "swings shut on its own": a closer, not a state
+    return rv.leftmost_longest([h for h in hits if _is_state(low, h) and not any(a <= h.start and h.end <= b for a, b in closing)])
+
+
+#: The words about motion that say a part closes by itself (``words.yaml`` ``motion``, flag "close": "swings shut on its
+#: own", "snaps shut", "pulls closed"): the end word inside one names the closer, not the state the part is at.
+_CLOSING_TABLE = [row for row in word_table("motion") if row[2] == "close"]
 
 
 def _is_state(low: str, h: Hit) -> bool:
