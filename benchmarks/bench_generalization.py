@@ -22,7 +22,9 @@ manifest), the requests
 - ``motion``: words about how the first task part moves, as people write them: "A <noun> whose <part> swings
   (slides) freely.", "A <noun> with a stiff <part>.", "A <noun> with its <part> half open; the <part> is stiff.",
   "A <noun> whose <part> closes slowly and softly.", "A <noun> with a loose <part>, mostly open." (a loose part
-  where its weight turns it: a conflict the as-asked tier names);
+  where its weight turns it: a conflict the as-asked tier names), "A <noun> whose <part> swings (slides) shut on its
+  own." and "A <noun> with its <part> half open; the <part> closes by itself." (a closer that shuts the part from the
+  state asked: a conflict the as-asked tier names);
 
 and the same kinds on the generated assets (the demo objects of
 ``asset2sim.demo_assets`` and the failure-mode assets of
@@ -138,7 +140,9 @@ def requests_for(category: str, src: Path, kinds: tuple[str, ...] = KINDS) -> li
         out += [("motion:free", f"A {n} whose {w} {move} freely."), ("motion:stiff", f"A {n} with a stiff {w}."),
                 ("motion:stiff state", f"A {n} with its {w} half open; the {w} is stiff."),
                 ("motion:soft close", f"A {n} whose {w} closes slowly and softly."),
-                ("motion:loose state", f"A {n} with a loose {w}, mostly open.")]
+                ("motion:loose state", f"A {n} with a loose {w}, mostly open."),
+                ("motion:self-closing", f"A {n} whose {w} {'swings' if part[1] == 'hinge' else 'slides'} shut on its own."),
+                ("motion:self-closing state", f"A {n} with its {w} half open; the {w} closes by itself.")]
     return out
 
 

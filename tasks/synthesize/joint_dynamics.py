@@ -123,11 +123,13 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
         else:
             f0 = cs.fraction(state[name] / unit)
             fr = np.clip([f0 - 0.05, f0, f0 + 0.05], 0.0, 1.0)
-        hold = 0.0
+        hold, at_closed = 0.0, 0.0
         # a part stays shut once closed: friction also holds a load pushing it open near its closed end
         for f, near_closed in [*((f, False) for f in fr), *((f, True) for f in CLOSED_HOLD_FRACTIONS)]:
             st = {**state, name: cs.position(float(f)) * unit}
             ld = physics.joint_loads(kin, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
+            if near_closed and f == 0.0:
+                at_closed = ld[name].gravity_load
             if not near_closed or ld[name].gravity_load * cs.direction > 0:
                 hold = max(hold, abs(ld[name].gravity_load))
         band = set_down.joint_band(cs.lower * unit, cs.upper * unit, name in prismatic)
@@ -141,7 +143,7 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
             mechanism = HELD_AGAINST_FREE
         note = source + "".join(f"; request '{w.phrase}': {w.kind.replace('_', ' ')}" for w in ch.words)
         if ch.self_closing:
-            held = closer(ctx, loads[name], cs, unit, hold)
+            held = closer(ctx, loads[name], cs, unit, hold, at_closed, stopped_shut(ctx, kin, state, scale, name))
             spring, hold = held.spring, held.hold
             note, mechanism = f"{note}; {held.note}", "closer"
         elif ch.spring:
@@ -209,9 +211,12 @@ class SlideChoice:
 
 #: Share of a closer's preload that friction may take, so that it still returns the part to its closed end.
 CLOSER_FRICTION_SHARE = 0.2
+#: Share of its range within which a part's closed end counts as on the limit a closer presses it onto.
+CLOSER_STOP_SHARE = 0.01
 
 
-def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, unit: float, hold: float) -> SpringHold:
+def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, unit: float, hold: float,
+           closed_load: float = 0.0, stopped: bool = True) -> SpringHold:
     """The spring of a self-closing part (a door closer, a self-closing lid or slide): it presses the part into its
     closed end with a preload F0 = max(``physics.HOLD_SAFETY`` x ``hold``, ``set_down.LEAN_SAFETY`` x the set-down
     lean's load) and pulls twice that at its far end: rate k = F0 / R about a reference one range R beyond the
@@ -219,16 +224,66 @@ def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, uni
     EN 1154), so that the part returns shut from anywhere in its range against friction of at most
     :data:`CLOSER_FRICTION_SHARE` x F0.
 
+    A part with no stop at its closed end (``stopped`` False: neither its limit there nor another part, as a lid rests
+    on its box's rim, :func:`stopped_shut`; a handle or lever that turns on past it, a joint without limits: nothing
+    for a preload to press it onto) gets a return spring centred on its closed end instead, as spring-return handles
+    and levers have: it pulls twice F0 at the far end, stiffer where that lets the set-down lean move it more than half
+    its robust-rest band, against friction of :data:`CLOSER_FRICTION_SHARE` x its pull at the band's edge, so that it
+    comes back within its band; its reference q_s = q_closed - ``closed_load`` / k carries the part's weight there
+    (``closed_load``: the gravity load at the closed end, N m or N, as :func:`physics.joint_loads` signs it).
+
     Returns:
         the spring and the friction's hold load.
     """
     rng = max(cs.open_range * unit, 1e-9)
-    preload = max(physics.HOLD_SAFETY * hold, set_down.LEAN_SAFETY * set_down.lean_load(load), 1e-6)
-    k = preload / rng
-    ref = float(cs.position(0.0) * unit - cs.direction * rng)
-    why = (f"self-closing: a closer spring presses it shut with {preload:.3g} {'N' if ctx.asset.joint(load.joint).type == 'prismatic' else 'N m'} "
-           f"(k = {k:.4g} about {ref:.4g}, twice that fully open)")
-    return SpringHold((float(k), ref), CLOSER_FRICTION_SHARE * preload / physics.HOLD_SAFETY, why)
+    lean = set_down.lean_load(load)
+    preload = max(physics.HOLD_SAFETY * hold, set_down.LEAN_SAFETY * lean, 1e-6)
+    prismatic = ctx.asset.joint(load.joint).type == "prismatic"
+    closed_at = cs.position(0.0) * unit
+    if stopped:
+        k = preload / rng
+        ref = float(closed_at - cs.direction * rng)
+        why = (f"self-closing: a closer spring presses it shut with {preload:.3g} {'N' if prismatic else 'N m'} "
+               f"(k = {k:.4g} about {ref:.4g}, twice that fully open)")
+        return SpringHold((float(k), ref), CLOSER_FRICTION_SHARE * preload / physics.HOLD_SAFETY, why)
+    band = set_down.joint_band(cs.lower * unit, cs.upper * unit, prismatic)
+    k = max(2.0 * preload / rng, set_down.LEAN_SAFETY * lean / (0.5 * band))
+    why = (f"self-closing: its closed end {closed_at:.4g} is no stop (it {'slides' if prismatic else 'turns'} on past it), so a "
+           f"return spring centred there, k = {k:.4g} {'N/m' if prismatic else 'N m/rad'}, returns it within its band")
+    return SpringHold((float(k), float(closed_at - closed_load / k)), CLOSER_FRICTION_SHARE * k * band / physics.HOLD_SAFETY,
+                      why)
+
+
+def stopped_shut(ctx: EstimationContext, kin: SimSession, state: dict[str, float], scale: float, name: str) -> bool:
+    """Whether something stops joint ``name``'s part at its closed end (``ctx.closed``): the end is on its limit
+    (within :data:`CLOSER_STOP_SHARE` of its range), or, posed that share of its range past it in ``kin`` (the input's
+    kinematics session; the other joints at ``state``, output units at ``scale``), the part's links sit deeper in
+    another link of the object (parent included: a lid on its box's rim) than at the closed end, by more than
+    :data:`STOP_DEPTH_SHARE` of the travel of its far edge (a hinge) or of the part (a slide). The session is left
+    at ``state``."""
+    cs = ctx.closed[name]
+    limit = cs.lower if cs.direction > 0 else cs.upper
+    step = CLOSER_STOP_SHARE * cs.open_range
+    if not np.isfinite(limit) or abs(cs.q_closed - limit) <= step:
+        return bool(np.isfinite(limit))
+    kinds = {j.name: j.type for j in ctx.asset.movable_joints()}
+    base = {j: (q / scale if kinds.get(j) == "prismatic" else q) for j, q in state.items() if j in kinds}
+    mine = [ln for ln in ctx.subtrees[name] if kin.link_has_collision(ln)]
+    others = [ln.name for ln in ctx.asset.links if ln.name not in ctx.subtrees[name] and kin.link_has_collision(ln.name)]
+
+    def depth(q: float) -> float:
+        kin.set_joint_positions({**base, name: q})
+        return max((-min(kin.link_distances(a, b, 0.0), default=0.0) for a in mine for b in others), default=0.0)
+
+    travel = step * (1.0 if kinds[name] == "prismatic" else far_edge(ctx, name, 1.0))
+    sinks = depth(cs.q_closed - cs.direction * step) - depth(cs.q_closed)
+    kin.set_joint_positions(base)
+    return sinks > STOP_DEPTH_SHARE * travel
+
+
+#: Share of a part's travel past its closed end that it must sink further into another link for that end to count as
+#: a stop (:func:`stopped_shut`): a lid turned past its box's rim sinks into it by nearly all of its far edge's travel.
+STOP_DEPTH_SHARE = 0.25
 
 
 def _on_stop(load: physics.JointLoad, cs: ClosedState, q: float, unit: float, drift: float) -> bool:

@@ -262,3 +262,35 @@ def test_a_door_asked_half_open_that_swings_shut_keeps_its_closer_and_names_the_
     assert r.metric("operability").passed is True and r.metric("state_hold").passed is False
     (item,) = [u for u in r.metric("request_met").details["unmet"] if u["kind"] == "conflict"]
     assert item["joint"] == "joint_1" and "its closer shuts it" in item["text"] and "ask for the part closed" in item["text"]
+
+
+@needs_shared
+def test_a_handle_that_turns_past_its_closed_end_returns_there_on_a_spring(refine_once):
+    """Suitcase 103755's carrying handle lies flat at its closed end, mid-range: it turns on past it to its limit. A
+    closer's preloaded spring presses a part onto the stop at its closed end; here it pressed the handle past that end
+    to the limit, 0.80 rad from its state (joint_not_held). With no stop there, the handle gets a return spring centred
+    on its closed end, as a spring-return handle has, and stays where it lies."""
+    res = refine_once(SHARED / "103755", "A suitcase whose handle swings shut on its own.", extras=False)
+    r = res.report
+    assert r.failure_mode == "none", r.readiness
+    handle = json.loads((res.out / "overlay.json").read_text())["joints"]["joint_0"]
+    assert handle["holding"]["mechanism"] == "closer" and "return spring centred there" in handle["source"]
+    closed = r.closed_ends["joint_0"]
+    assert abs(handle["spring_reference"] - closed["q_closed"]) < 0.05 * closed["open_range"]
+
+
+@needs_shared
+def test_a_closed_end_is_a_stop_where_the_part_would_sink_past_it(tmp_path):
+    """``joint_dynamics.stopped_shut``: a lid closed on its box's rim (the generated box's lid may turn 0.49 rad past
+    it by its limits) and a door on its frame are stopped there; suitcase 103755's carrying handle, lying at its closed
+    end mid-range, turns on past it, and so does a chair's swivel, which has no limits."""
+    from tests.unseen_assets import build_office_chair
+
+    cases = [(build_object("box_lid", tmp_path / "box_lid"), "A box.", "joint_0", True),
+             (SHARED / "8877", "A door.", "joint_1", True),
+             (SHARED / "103755", "A suitcase.", "joint_0", False),
+             (build_office_chair(tmp_path / "chair"), "A chair.", "joint_3", False)]
+    for folder, prompt, joint, stopped in cases:
+        with build_context(folder, prompt) as (ctx, kin):
+            state = {j.name: ctx.closed[j.name].q_closed for j in ctx.asset.movable_joints()}
+            assert joint_dynamics.stopped_shut(ctx, kin, state, 1.0, joint) is stopped, (folder.name, joint)
