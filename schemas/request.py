@@ -121,7 +121,7 @@ MOTION_GUARDS: dict[str, dict[str, str]] = {
     "high_damping": {"damping": "min"},
     "soft_close": {"damping": "min"},
     "spring": {"stiffness": "min"},
-    # a closer shuts its part against friction of at most a share of its preload (joint_dynamics.closer): friction
+    # a closer shuts its part against friction of at most a share of its preload (spring_holds.closer): friction
     # raised past that to hold the part open would keep it from shutting, the one thing the word asks
     "self_closing": {"stiffness": "min", "friction": "max"},
     "moderate_damping": {},

@@ -64,7 +64,7 @@ MAX_DENSITY_FACTOR = 1.25
 MAX_DENSITY = 8500.0 * MAX_DENSITY_FACTOR
 
 #: Farthest a spring's reference may lie outside its joint's limits, in ranges of the joint (dimensionless): a
-#: preloaded balance (a window's constant-force sash balance, ``joint_dynamics.balance``) refers to a position about
+#: preloaded balance (a window's constant-force sash balance, ``spring_holds.balance``) refers to a position about
 #: 1 / (2 x 0.06) = 8.3 ranges from mid-travel; a reference farther out is a unit or sign error.
 SPRING_REFERENCE_REACH = 10.0
 

@@ -10,7 +10,7 @@ import pytest
 from asset2sim.demo_assets import build_object
 from asset2sim.tasks.tune import word_guard
 from asset2sim.tasks.interpret.request import parse_request
-from asset2sim.tasks.synthesize import joint_dynamics
+from asset2sim.tasks.synthesize import joint_dynamics, spring_holds
 from asset2sim.tasks.synthesize.context import build_context
 from asset2sim.tasks.synthesize.offline import OfflineEstimator
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
@@ -143,7 +143,7 @@ def _stiff_edge_forces(folder, prompt: str) -> dict[str, float]:
     """Joint -> its friction over its far edge's lever (N) under ``prompt``."""
     with build_context(folder, prompt) as (ctx, kin):
         overlay = OfflineEstimator().estimate(ctx, kin).overlay
-        return {n: jd.friction / joint_dynamics.far_edge(ctx, n, overlay.scale) for n, jd in overlay.joints.items()}
+        return {n: jd.friction / spring_holds.far_edge(ctx, n, overlay.scale) for n, jd in overlay.joints.items()}
 
 
 def test_a_stiff_door_its_weight_does_not_load_is_felt_at_its_edge(cabinet):
@@ -281,7 +281,7 @@ def test_a_handle_that_turns_past_its_closed_end_returns_there_on_a_spring(refin
 
 @needs_shared
 def test_a_closed_end_is_a_stop_where_the_part_would_sink_past_it(tmp_path):
-    """``joint_dynamics.stopped_shut``: a lid closed on its box's rim (the generated box's lid may turn 0.49 rad past
+    """``spring_holds.stopped_shut``: a lid closed on its box's rim (the generated box's lid may turn 0.49 rad past
     it by its limits) and a door on its frame are stopped there; suitcase 103755's carrying handle, lying at its closed
     end mid-range, turns on past it, and so does a chair's swivel, which has no limits."""
     from tests.unseen_assets import build_office_chair
@@ -293,4 +293,4 @@ def test_a_closed_end_is_a_stop_where_the_part_would_sink_past_it(tmp_path):
     for folder, prompt, joint, stopped in cases:
         with build_context(folder, prompt) as (ctx, kin):
             state = {j.name: ctx.closed[j.name].q_closed for j in ctx.asset.movable_joints()}
-            assert joint_dynamics.stopped_shut(ctx, kin, state, 1.0, joint) is stopped, (folder.name, joint)
+            assert spring_holds.stopped_shut(ctx, kin, state, 1.0, joint) is stopped, (folder.name, joint)
