@@ -234,8 +234,8 @@ def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, 
     """``metrics`` with the words about motion that the output's physical verdict contradicts added to
     ``request_met`` as unmet items (kind ``conflict``): a word that keeps a joint free or lightly damped
     (``MOTION_GUARDS`` "max": "swings freely", "low damping", a closer's friction) on a joint robust rest or the rest
-    test finds not held (a self-closing part asked open: its closer shuts it), or one that keeps it stiff or held ("min": "stiff", "stays where it is put", "soft-close") on a joint no hand
-    inside its range can work. The word was applied as asked; holding (or operating) the part needed what it rules
+    test finds not held (a self-closing part asked open: its closer shuts it), or one that keeps it stiff or held
+    ("min": "stiff", "stays where it is put", "soft-close") on a joint no hand inside its range can work. The word was applied as asked; holding (or operating) the part needed what it rules
     out. ``words``: each word with the joints it applies to; ``strays``: each word with the joints it was applied to
     that its phrase does not name (kind ``not_named``: "the main door has a stiff hinge" made the freezer door stiff).
     ``metrics`` unchanged without a ``request_met`` (:func:`with_unmet`)."""
