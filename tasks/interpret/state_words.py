@@ -77,9 +77,10 @@ def _state_hits(low: str, numeric: list[rv.Found]) -> list[Hit]:
     return rv.leftmost_longest([h for h in hits if _is_state(low, h) and not any(a <= h.start and h.end <= b for a, b in closing)])
 
 
-#: The words about motion that say a part closes by itself (``words.yaml`` ``motion``, flag "close": "swings shut on its
-#: own", "snaps shut", "pulls closed"): the end word inside one names the closer, not the state the part is at.
-_CLOSING_TABLE = [row for row in word_table("motion") if row[2] == "close"]
+#: The words about motion that say how a part closes (``words.yaml`` ``motion``, flags "close" and "soft": "swings shut
+#: on its own", "snaps shut", "pulls closed", "never slams shut"): the end word inside one names the closing, not the
+#: state the part is at.
+_CLOSING_TABLE = [row for row in word_table("motion") if row[2] in ("close", "soft")]
 
 
 def _is_state(low: str, h: Hit) -> bool:

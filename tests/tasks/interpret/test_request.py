@@ -578,3 +578,14 @@ def test_swings_shut_on_its_own_is_self_closing(text: str, state) -> None:
     spec = parse_request(text)
     assert [m.kind for m in spec.motions] == ["self_closing"] and spec.ignored == [] and spec.overridden == []
     assert [(js.label, js.band) for js in spec.joint_states] == ([state] if state else [])
+
+
+@pytest.mark.parametrize("text, state", [("A door that never slams shut.", None),
+                                         ("A door half open that never slams shut.", ("door", "halfway")),
+                                         ("A cabinet door that closes without slamming.", None)])
+def test_a_door_that_never_slams_shut_closes_softly(text: str, state) -> None:
+    """"never slams shut" is how the part closes (a soft close: high damping), not a state: it was read as the door
+    asked shut, with "never slams" left as ignored words."""
+    spec = parse_request(text)
+    assert [m.kind for m in spec.motions] == ["soft_close"] and spec.ignored == [] and spec.overridden == []
+    assert [(js.label, js.band) for js in spec.joint_states] == ([state] if state else [])
