@@ -33,6 +33,13 @@ from tests.unseen_assets import build_double_door_cabinet
     ("a trash can; the hinge has low damping", "low_damping", None),
     ("a door with a heavy, well-damped hinge", "high_damping", None),
     ("a cabinet whose drawers run on ball-bearing slides", "slides", "drawer"),
+    ("a laptop whose screen holds any angle", "hold", "screen"),
+    ("a box whose lid is held up by a gas spring", "hold", "lid"),
+    ("a cabinet whose door has a damper", "high_damping", "door"),
+    ("a box with a gently closing lid", "soft_close", "lid"),
+    ("a cabinet whose door never slams shut", "soft_close", "door"),
+    ("a cabinet whose drawer sticks", "stiff", "drawer"),
+    ("a microwave whose door opens with little force", "low_damping", "door"),
 ])
 def test_each_word_about_motion_is_read_with_the_part_it_names(text, kind, label):
     spec = parse_request(text)
