@@ -73,14 +73,14 @@ def _state_hits(low: str, numeric: list[rv.Found]) -> list[Hit]:
         elif not under_number(h):
             words.append(h)
     hits = words + nums
-    closing = [(h.start, h.end) for h in scan(low, _CLOSING_TABLE)]  # "swings shut on its own": a closer, not a state
-    return rv.leftmost_longest([h for h in hits if _is_state(low, h) and not any(a <= h.start and h.end <= b for a, b in closing)])
+    moving = [(h.start, h.end) for h in scan(low, _MOVING_TABLE)]  # "swings shut on its own": a closer, not a state
+    return rv.leftmost_longest([h for h in hits if _is_state(low, h) and not any(a <= h.start and h.end <= b for a, b in moving)])
 
 
-#: The words about motion that say how a part closes (``words.yaml`` ``motion``, flags "close" and "soft": "swings shut
-#: on its own", "snaps shut", "pulls closed", "never slams shut"): the end word inside one names the closing, not the
-#: state the part is at.
-_CLOSING_TABLE = [row for row in word_table("motion") if row[2] in ("close", "soft")]
+#: The words about motion that say how a part moves or closes (``words.yaml`` ``motion``: flags "close" and "soft",
+#: kind "free": "swings shut on its own", "snaps shut", "never slams shut", "swings open freely"): the end word inside
+#: one names the motion, not the state the part is at.
+_MOVING_TABLE = [row for row in word_table("motion") if row[2] in ("close", "soft") or row[1][0] == "free"]
 
 
 def _is_state(low: str, h: Hit) -> bool:

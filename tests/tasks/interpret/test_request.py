@@ -589,3 +589,14 @@ def test_a_door_that_never_slams_shut_closes_softly(text: str, state) -> None:
     spec = parse_request(text)
     assert [m.kind for m in spec.motions] == ["soft_close"] and spec.ignored == [] and spec.overridden == []
     assert [(js.label, js.band) for js in spec.joint_states] == ([state] if state else [])
+
+
+@pytest.mark.parametrize("text, state", [("A microwave with a door that swings open easily.", None),
+                                         ("A box whose lid flips open freely, closed.", ("lid", "closed")),
+                                         ("A cabinet whose doors swing wide open freely.", ("door", "fully"))])
+def test_a_part_that_swings_open_easily_is_not_asked_open(text: str, state) -> None:
+    """"swings open easily" says how the part moves (freely), not that it is open: it set the door 'mostly' open, and
+    "a lid that flips open freely, closed" read two states in contradiction. A state said apart ("wide open") stays."""
+    spec = parse_request(text)
+    assert [m.kind for m in spec.motions] == ["free"] and spec.overridden == []
+    assert [(js.label, js.band) for js in spec.joint_states] == ([state] if state else [])
