@@ -257,7 +257,10 @@ def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, 
                         "needs more friction than a hand inside that range moves")
                 text = (f"holding the part where it was asked {need}. "
                         "Drop the word, ask for the part at an end of its range, or --mount fixed where the object is mounted in use")
-            elif word.kind in ("spring", "self_closing"):  # the friction that holds the state against the spring
+            elif word.kind == "self_closing":  # the closer itself: it outpulls the part's weight everywhere to shut it
+                text = ("its closer, which must shut it from anywhere in its range against its weight, pulls so hard that "
+                        "a hand inside that range cannot open it against that pull. Drop the word")
+            elif word.kind == "spring":  # the friction that holds the state against the spring
                 text = ("holding the part where it was asked against its spring needs more friction than a hand inside "
                         "that range moves. Drop the word or ask for the part where its spring rests")
             else:  # "stiff", "soft-close": the word itself makes the part too hard to work
@@ -315,7 +318,29 @@ def as_asked_tier(ctx: "EstimationContext", kin: "SimSession", overlay: Overlay,
     strays = [(w, [n for n, src in sources.items() if f"request '{w.phrase}'" in src and n not in named])  # applied elsewhere
               for w, named in words if w.ordinal is not None]  # a word naming one part by its place ("the main door")
     free = free_motion_conflicts(overlay, words, resolution, {j.name: j.type == "prismatic" for j in ctx.asset.movable_joints()})
-    return AsAsked(with_unmet(word_conflicts([*metrics, asked], words, strays), free), found, resolution)
+    unmet = free + not_shut(metrics, words)
+    return AsAsked(with_unmet(word_conflicts([*metrics, asked], words, strays), unmet), found, resolution)
+
+
+def not_shut(metrics: list[MetricResult], words: list[tuple[MotionPhrase, list[str]]]) -> list[dict[str, Any]]:
+    """The unmet items (kind ``not_shut``) of each self-closing word (``words``: each with the joints it applies to)
+    whose part the metric ``shuts_on_its_own`` of ``metrics`` (:mod:`~asset2sim.tasks.check.closer_release`) found
+    short of shut after it was released fully open: where it stopped, as a fraction of its range from shut."""
+    rows = {}
+    for m in metrics:
+        if m.name == "shuts_on_its_own":
+            d = m.details or {}
+            rows.update({j: (r, m.engine, d.get("seconds")) for j, r in (d.get("joints") or {}).items()})
+    items = []
+    for word, joints in words:
+        for j in joints:
+            if word.kind != "self_closing" or j not in rows or rows[j][0].get("shut", True):
+                continue
+            r, engine, secs = rows[j]
+            why = (f"released fully open, it stopped {100.0 * r['ended_at']:.1f} % open after {secs:g} s ({engine}; "
+                   f"shut is within {100.0 * r['band']:.1f} %)")
+            items.append(_unmet(word.phrase, "not_shut", j, why, f"'{word.phrase}': applied to {j}, and {why}"))
+    return items
 
 
 def free_motion_conflicts(overlay: Overlay, words: list[tuple[MotionPhrase, list[str]]],

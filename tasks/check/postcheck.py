@@ -19,7 +19,7 @@ from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import manipulation, metrics, parent_child, parity, robust_rest, task_tier
+from asset2sim.tasks.check import closer_release, manipulation, metrics, parent_child, parity, robust_rest, task_tier
 from asset2sim.tasks.check.task_spec import TaskSpec
 from asset2sim.tasks.synthesize import joint_dynamics, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
@@ -253,7 +253,8 @@ def check_object(ctx: EstimationContext, obj: SimObject, config: RefineConfig,
     ranges from ``ctx``'s category and part labels; the parts its request asks to move freely, robust rest grades for
     coming to rest only), then, with ``task`` (a parsed task on ``obj``'s joints) and
     ``closed``, the task tier (:func:`~asset2sim.tasks.check.task_tier.run_task_tier`: the request's free motion and
-    springs say which targets must hold). Other arguments as :func:`run_post_check`.
+    springs say which targets must hold); and where the request asks a part to shut on its own and ``closed`` is
+    given, :func:`~asset2sim.tasks.check.closer_release.shuts_on_its_own`. Other arguments as :func:`run_post_check`.
 
     Raises:
         EngineUnavailable: an engine is not installed; whatever loading ``obj.source`` raises.
@@ -261,6 +262,9 @@ def check_object(ctx: EstimationContext, obj: SimObject, config: RefineConfig,
     choices, _ = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
     check = run_post_check(obj, config, closed, escalated=escalated, recorded=recorded, category=ctx.category,
                            labels=task_tier.link_labels(ctx.asset), free_joints=tuple(n for n, c in choices.items() if c.free_moving))
+    closing = [n for n, c in choices.items() if c.self_closing]
+    if closing and closed:  # the request's self-closing word, measured: the as-asked tier grades it
+        check.metrics = [*check.metrics, closer_release.shuts_on_its_own("pybullet", obj, closed, closing)]
     if task is not None and closed:
         check.metrics = [*check.metrics, *task_tier.run_task_tier(
             "pybullet", obj, closed, task, ctx.asset, ctx.category, free_moving=ctx.request.free_moving,

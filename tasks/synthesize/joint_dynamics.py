@@ -25,8 +25,8 @@ from asset2sim.tasks.interpret.operating_forces import operating_range
 from asset2sim.tasks.synthesize import physics, request_apply, set_down
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.spring_holds import (BALANCE_LABELS, CLOSED_HOLD_FRACTIONS, COUNTERBALANCE_LABELS, balance,
-                                                     closer, counterbalance, far_edge, lid_support, part_label,
-                                                     stopped_shut)
+                                                     closer, counterbalance, far_edge, lid_support, opening_loads,
+                                                     part_label, stopped_shut)
 
 
 @dataclass
@@ -146,7 +146,11 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
             mechanism = HELD_AGAINST_FREE
         note = source + "".join(f"; request '{w.phrase}': {w.kind.replace('_', ' ')}" for w in ch.words)
         if ch.self_closing:
-            held = closer(ctx, loads[name], cs, unit, hold, at_closed, stopped_shut(ctx, kin, state, scale, name))
+            pushed = opening_loads(kin, links, state, scale, cs, name, ctx.subtrees[name], unit, rot)
+            held = closer(ctx, loads[name], cs, unit, hold, pushed, at_closed, stopped_shut(ctx, kin, state, scale, name),
+                          hand=hand_top(ctx, name, scale, name in prismatic), free=free_standing(ctx),
+                          floor=0.0 if name in prismatic and part_label(ctx, name) in SLIDE_LABELS else
+                          physics.friction_floor(loads[name], name in prismatic))
             spring, hold = held.spring, held.hold
             note, mechanism = f"{note}; {held.note}", "closer"
         elif ch.spring:
@@ -271,10 +275,16 @@ STIFF_EFFORT_SHARE = 0.25
 
 
 def stiff_least(ctx: EstimationContext, name: str, scale: float, prismatic: bool) -> float:
-    """Least friction of stiff joint ``name`` (N m, or N for a prismatic joint): :data:`STIFF_EFFORT_SHARE` of the top
-    of its operating range (``operating_forces.yaml``): its force range's top at :func:`far_edge` for a hinge (or its
-    torque range's top), its force range's top for a slide; 0 where neither is known."""
+    """Least friction of stiff joint ``name`` (N m, or N for a prismatic joint): :data:`STIFF_EFFORT_SHARE` of
+    :func:`hand_top`; 0 where no range is known."""
+    return STIFF_EFFORT_SHARE * hand_top(ctx, name, scale, prismatic)
+
+
+def hand_top(ctx: EstimationContext, name: str, scale: float, prismatic: bool) -> float:
+    """The top of joint ``name``'s part's operating range (``operating_forces.yaml``) where a hand works it: its force
+    range's top at :func:`far_edge` (m, at ``scale``) for a hinge, N m (or its torque range's top), its force range's
+    top for a slide, N; 0 where neither is known."""
     rng = operating_range(ctx.category, part_label(ctx, name))[0]
     if rng.torque_nm is not None and not prismatic:
-        return STIFF_EFFORT_SHARE * rng.torque_nm[1]
-    return STIFF_EFFORT_SHARE * (rng.force_n or (0.0, 0.0))[1] * (1.0 if prismatic else far_edge(ctx, name, scale))
+        return float(rng.torque_nm[1])
+    return float((rng.force_n or (0.0, 0.0))[1] * (1.0 if prismatic else far_edge(ctx, name, scale)))

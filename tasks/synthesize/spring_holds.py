@@ -41,43 +41,110 @@ CLOSER_FRICTION_SHARE = 0.2
 CLOSER_STOP_SHARE = 0.01
 
 
-def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, unit: float, hold: float,
-           closed_load: float = 0.0, stopped: bool = True) -> SpringHold:
+def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, unit: float, hold: float, pushes: np.ndarray,
+           closed_load: float = 0.0, stopped: bool = True, *, hand: float = 0.0, free: bool = True,
+           floor: float = 0.0) -> SpringHold:
     """The spring of a self-closing part (a door closer, a self-closing lid or slide): it presses the part into its
-    closed end with a preload F0 = max(``physics.HOLD_SAFETY`` x ``hold``, ``set_down.LEAN_SAFETY`` x the set-down
-    lean's load) and pulls twice that at its far end: rate k = F0 / R about a reference one range R beyond the
-    closed end (a preloaded closer spring; door closers are adjustable in size 1-6 by the door's width and weight,
-    EN 1154), so that the part returns shut from anywhere in its range against friction of at most
-    :data:`CLOSER_FRICTION_SHARE` x F0.
+    closed end with a preload F0 and pulls F1 at its far end, rate k = (F1 - F0) / R about a reference F0 / k beyond
+    the closed end (R: the range), so that the part returns shut from anywhere in its range against friction of at
+    most :data:`CLOSER_FRICTION_SHARE` x F0 on top of the joint's least friction ``floor`` (N m or N:
+    :func:`~asset2sim.tasks.synthesize.physics.friction_floor`, which the joint gets unless its slide sets its own), F0
+    at least :data:`CLOSER_FLOOR_MARGIN` x that floor.
+
+    - F1 = 2 F0 (a preloaded coil spring compressed over twice its preload travel), flattened where that passes
+      :data:`CLOSER_EFFORT_SHARE` x ``hand`` down to :data:`CLOSER_PROGRESSION` x F0 (a gas spring's flat curve), so
+      that the hand that opens it keeps the rest of its range for the part's weight, its friction and its damping;
+      past that, the operability check judges the part (and says what remains).
+    - F0 is sized to the part's weight, as door closers are (sizes 1-7 by the door's width and weight, EN 1154):
+      ``set_down.LEAN_SAFETY`` x the load of the part's weight at the set-down's lean
+      (:func:`~asset2sim.tasks.synthesize.set_down.lean_load`), no more than lets F1 stay within the hand's share
+      (F0 <= the share / :data:`CLOSER_PROGRESSION`); on a free-standing object (``free``: the only kind the SPEC's
+      robust rest sets down) at least what that lean needs (a part its weight presses shut: only a lean that lifts it
+      off, ``lean_load(on_stop=True)``). And the pull at every opening fraction f of ``pushes`` outpulls
+      ``physics.HOLD_SAFETY`` x the load pushing the part open there: F0 (1 + (F1/F0 - 1) f) (a drop-down door that
+      shuts itself from fully open needs a spring a hand may not open: the check says so).
+
+    ``pushes``: the loads (N m or N, >= 0) pushing the part open at :data:`OPENING_LOAD_FRACTIONS`
+    (:func:`opening_loads`); ``hold``: the largest load (N m or N) either way near the state, and pushing it open near
+    its closed end; ``hand``: the top of the part's operating range at its grasp (N m at :func:`far_edge` for a hinge,
+    N for a slide; 0: unknown, no cap).
 
     A part with no stop at its closed end (``stopped`` False: neither its limit there nor another part, as a lid rests
     on its box's rim, :func:`stopped_shut`; a handle or lever that turns on past it, a joint without limits: nothing
     for a preload to press it onto) gets a return spring centred on its closed end instead, as spring-return handles
-    and levers have: it pulls twice F0 at the far end, stiffer where that lets the set-down lean move it more than half
-    its robust-rest band, against friction of :data:`CLOSER_FRICTION_SHARE` x its pull at the band's edge, so that it
-    comes back within its band; its reference q_s = q_closed - ``closed_load`` / k carries the part's weight there
-    (``closed_load``: the gravity load at the closed end, N m or N, as :func:`physics.joint_loads` signs it).
+    and levers have. With F0 = max(``physics.HOLD_SAFETY`` x ``hold``, the weight-sized preload above) it pulls twice
+    F0 at the far end, stiffer where the set-down lean would move it more than half its robust-rest band or where its
+    pull at the band's edge would be less than :data:`CLOSER_FLOOR_MARGIN` x ``floor``, against friction of
+    :data:`CLOSER_FRICTION_SHARE` x that pull, so that it comes back within its band. Its reference q_s = q_closed -
+    ``closed_load`` / k carries the part's weight there (``closed_load``: the gravity load at the closed end, N m or N,
+    as :func:`physics.joint_loads` signs it).
 
     Returns:
         the spring and the friction's hold load.
     """
     rng = max(cs.open_range * unit, 1e-9)
-    lean = set_down.lean_load(load)
-    preload = max(physics.HOLD_SAFETY * hold, set_down.LEAN_SAFETY * lean, 1e-6)
+    pushes = np.maximum(np.asarray(pushes, float), 0.0)
+    frac = np.asarray(OPENING_LOAD_FRACTIONS[: len(pushes)], float)
+    lean = max(set_down.lean_load(load, on_stop=stopped and load.gravity_load * cs.direction < 0), 0.0) if free else 0.0
+    cap = CLOSER_EFFORT_SHARE * hand if hand > 0 else np.inf
+    sized = max(set_down.LEAN_SAFETY * lean, min(set_down.LEAN_SAFETY * set_down.lean_load(load), cap / CLOSER_PROGRESSION))
+
     prismatic = ctx.asset.joint(load.joint).type == "prismatic"
+    floor = CLOSER_FLOOR_MARGIN * floor  # the least friction the joint gets, overcome
+
+    def least(ratio: float) -> float:  # the preload whose pull outpulls the opening loads everywhere, at F1 / F0 = ratio
+        need = physics.HOLD_SAFETY * pushes / (1.0 + (ratio - 1.0) * frac)
+        return float(max(sized, float(need.max(initial=0.0)), floor, 1e-6))
+
     closed_at = cs.position(0.0) * unit
+    u = "N" if prismatic else "N m"
     if stopped:
-        k = preload / rng
-        ref = float(closed_at - cs.direction * rng)
-        why = (f"self-closing: a closer spring presses it shut with {preload:.3g} {'N' if prismatic else 'N m'} "
-               f"(k = {k:.4g} about {ref:.4g}, twice that fully open)")
+        preload = least(2.0)
+        far = 2.0 * preload
+        if far > cap:  # flattened: the preload that holds with the flattest curve, its pull as near the cap as it goes
+            preload = least(CLOSER_PROGRESSION)
+            far = max(CLOSER_PROGRESSION * preload, min(cap, 2.0 * preload))
+        k = (far - preload) / rng
+        ref = float(closed_at - cs.direction * preload / k)
+        why = (f"self-closing: a closer spring presses it shut with {preload:.3g} {u} and pulls {far:.3g} {u} fully open "
+               f"(k = {k:.4g} about {ref:.4g}" + (f"; a hand works it with up to {hand:.3g} {u}" if hand > 0 else "") + ")")
         return SpringHold((float(k), ref), CLOSER_FRICTION_SHARE * preload / physics.HOLD_SAFETY, why)
+    preload = max(sized, physics.HOLD_SAFETY * hold, 1e-6)
     band = set_down.joint_band(cs.lower * unit, cs.upper * unit, prismatic)
-    k = max(2.0 * preload / rng, set_down.LEAN_SAFETY * lean / (0.5 * band))
+    k = max(2.0 * preload / rng, set_down.LEAN_SAFETY * lean / (0.5 * band), floor / band)
     why = (f"self-closing: its closed end {closed_at:.4g} is no stop (it {'slides' if prismatic else 'turns'} on past it), so a "
            f"return spring centred there, k = {k:.4g} {'N/m' if prismatic else 'N m/rad'}, returns it within its band")
     return SpringHold((float(k), float(closed_at - closed_load / k)), CLOSER_FRICTION_SHARE * k * band / physics.HOLD_SAFETY,
                       why)
+
+
+#: Least ratio of a closer's pull where it must move its part (its preload; a centred spring's pull at its band's edge)
+#: to the joint's least friction (:func:`~asset2sim.tasks.synthesize.physics.friction_floor`), which its closer
+#: overcomes on top of its own share: released there, the part moves against both.
+CLOSER_FLOOR_MARGIN = 2.0
+#: Most of the top of a part's operating range that its closer may pull at its far end: half, the hand keeping the
+#: other half for the part's weight, its friction and its damping (the stiff word's share is a quarter,
+#: :data:`~asset2sim.tasks.synthesize.joint_dynamics.STIFF_EFFORT_SHARE`).
+CLOSER_EFFORT_SHARE = 0.5
+#: Least ratio of a closer's far-end pull to its preload: a gas spring's progression (its force fully compressed over
+#: fully extended), 1.2-1.4 for the springs of furniture and lids (Stabilus, "Lift-O-Mat: design and selection"); a
+#: constant-force (negator) spring's is about 1.
+CLOSER_PROGRESSION = 1.25
+
+
+def opening_loads(kin: SimSession, links: dict[str, LinkPhysics], state: dict[str, float], scale: float, cs: ClosedState,
+                  name: str, subtree: list[str], unit: float, root_rotation: np.ndarray | None = None) -> np.ndarray:
+    """Gravity loads (N m, or N for a slide; 0 where none) that push joint ``name``'s part open at
+    :data:`OPENING_LOAD_FRACTIONS` of its range (shape (11,)), the other joints at ``state`` (output units; ``kin``,
+    the input's kinematics session, posed for the loads; ``subtree``: the part's links). A closer returns the part
+    from wherever it is left, so it must outpull them (:func:`closer`)."""
+    return np.array([max(0.0, physics.joint_loads(kin, links, {**state, name: cs.position(f) * unit}, scale, {name: subtree},
+                                                  root_rotation=root_rotation)[name].gravity_load * cs.direction)
+                     for f in OPENING_LOAD_FRACTIONS])
+
+
+#: Opening fractions at which :func:`opening_load` weighs a self-closing part.
+OPENING_LOAD_FRACTIONS = tuple(float(f) for f in np.linspace(0.0, 1.0, 11))
 
 
 def stopped_shut(ctx: EstimationContext, kin: SimSession, state: dict[str, float], scale: float, name: str) -> bool:

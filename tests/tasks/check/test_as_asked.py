@@ -135,11 +135,13 @@ def test_quantities_read_for_people():
 
 @pytest.mark.parametrize("kind, phrase, advice", [("stiff", "stiff", "Drop the word"),
                                                   ("hold", "holds its position", "at an end of its range"),
-                                                  ("self_closing", "swings shut on its own", "where its spring rests")])
+                                                  ("spring", "spring-loaded", "where its spring rests"),
+                                                  ("self_closing", "swings shut on its own", "cannot open it against that pull")])
 def test_a_word_that_makes_a_part_too_hard_to_work_gets_advice_that_fits_it(kind: str, phrase: str, advice: str) -> None:
     """A part no hand inside its range can work: "stiff" made it so (drop the word; its state does not matter), "holds
     its position" needs friction to hold it where asked (an end of its range needs less), a spring needs friction to
-    hold the part away from where the spring rests."""
+    hold the part away from where the spring rests, and a closer, whose friction the word keeps low, pulls past a hand
+    itself where it must outpull the part's weight everywhere to shut it."""
     operability = MetricResult(name="operability", value=1.0, unit="parts", passed=False, engine="pybullet",
                                details={"failing": ["joint_1"]})
     asked = MetricResult(name="request_met", value=0.0, unit="unmet phrases", passed=True, engine="none", details={})
