@@ -567,6 +567,154 @@ def build_scissors(folder: Path) -> Path:
     return b.write(folder)
 
 
+def build_wall_clock(folder: Path) -> Path:
+    """A desk clock (0.8 x 0.8 x 0.2 units) standing on its edge, its face toward +z, with an hour and a minute
+    hand (``hand``, continuous about the face's normal at its centre) in front of the face, 1 cm apart."""
+    b = _Builder("u_clock", "Clock")
+    b.body("link_2", "clock_body", [b.part("clock_body", box_xyz(-0.4, 0.4, -0.4, 0.4, -0.1, 0.1), _WHITE),
+                                    b.part("clock_body", box_xyz(-0.03, 0.03, -0.03, 0.03, 0.1, 0.14), _DARK)])
+    b.moving("link_0", "hinge", "hand", [b.part("hand", box_xyz(-0.02, 0.02, -0.03, 0.22, 0.105, 0.115), _DARK)],
+             "continuous", "link_2", (0.0, 0.0, 0.11), (0.0, 0.0, 1.0))
+    b.moving("link_1", "hinge", "hand", [b.part("hand", box_xyz(-0.015, 0.015, -0.04, 0.33, 0.125, 0.135), _DARK)],
+             "continuous", "link_2", (0.0, 0.0, 0.13), (0.0, 0.0, 1.0))
+    return b.write(folder)
+
+
+def build_coffee_machine(folder: Path) -> Path:
+    """A drip coffee machine (0.6 x 1.0 x 0.7 units, its water tank open at the top) with a lid over the tank
+    (``lid``, revolute 0-1.6 rad about its rear edge), a power button on the front (``button``, prismatic 0-0.02 units
+    in) and a carafe on the hot plate (``container``, prismatic 0-0.35 units out of the front)."""
+    b = _Builder("u_coffee", "CoffeeMachine")
+    w, h, d = 0.3, 0.5, 0.35
+    body = [b.part("coffee_machine_body", box_xyz(-w, w, -h, -h + 0.08, -d, d), _DARK),
+            b.part("coffee_machine_body", box_xyz(-w, w, -h + 0.08, h, -d, -0.05), _DARK),
+            b.part("coffee_machine_body", box_xyz(-w, w, 0.15, h, -0.05, d), _DARK)]
+    b.body("link_3", "coffee_machine_body", body)
+    b.moving("link_0", "hinge", "lid", [b.part("lid", box_xyz(-w, w, h, h + 0.03, -d, d), _DARK)],
+             "revolute", "link_3", (0.0, h + 0.015, -d), (-1.0, 0.0, 0.0), 0.0, 1.6)
+    b.moving("link_1", "slider", "button", [b.part("button", box_xyz(-0.05, 0.05, 0.25, 0.3, d, d + 0.03), _RED)],
+             "prismatic", "link_3", (0.0, 0.27, d), (0.0, 0.0, -1.0), 0.0, 0.02)
+    b.moving("link_2", "slider", "container", [b.part("container", box_xyz(-0.2, 0.2, -h + 0.085, 0.1, -0.02, 0.3), _GLASS)],
+             "prismatic", "link_3", (0.0, -h + 0.085, 0.0), (0.0, 0.0, 1.0), 0.0, 0.35)
+    return b.write(folder)
+
+
+def build_monitor(folder: Path) -> Path:
+    """A computer display (0.9 units wide): a base plate and a post (``display_base``) and a screen (``screen``,
+    revolute -0.1-0.35 rad about the horizontal axis at the post's top, tilting back) held in front of the post:
+    its weight leans it forward, the tilt hinge's friction holds it."""
+    b = _Builder("u_display", "Display")
+    b.body("link_1", "display_base", [b.part("display_base", box_xyz(-0.2, 0.2, -0.5, -0.47, -0.15, 0.15), _DARK),
+                                      b.part("display_base", box_xyz(-0.04, 0.04, -0.47, 0.05, -0.06, -0.02), _DARK)])
+    b.moving("link_0", "hinge", "screen", [b.part("screen", box_xyz(-0.45, 0.45, -0.22, 0.32, -0.015, 0.03), _DARK)],
+             "revolute", "link_1", (0.0, 0.05, -0.02), (-1.0, 0.0, 0.0), -0.1, 0.35)
+    return b.write(folder)
+
+
+def build_folding_chair(folder: Path) -> Path:
+    """A folding chair (0.9 units tall): four legs and a backrest (``chair_frame``) and a seat (``seat``, revolute
+    0-1.5 rad about the horizontal axis at its rear edge, folding up against the backrest)."""
+    b = _Builder("u_folding_chair", "FoldingChair")
+    legs = [b.part("chair_frame", box_xyz(x - 0.02, x + 0.02, -0.45, -0.02, z - 0.02, z + 0.02), _STEEL) for x in (-0.2, 0.2)
+            for z in (-0.2, 0.2)]
+    legs += [b.part("chair_frame", box_xyz(-0.22, 0.22, -0.02, 0.45, -0.24, -0.2), _STEEL)]
+    b.body("link_1", "chair_frame", legs)
+    b.moving("link_0", "hinge", "seat", [b.part("seat", box_xyz(-0.18, 0.18, -0.02, 0.01, -0.19, 0.2), _DARK)],
+             "revolute", "link_1", (0.0, 0.0, -0.19), (1.0, 0.0, 0.0), 0.0, 1.5)
+    return b.write(folder)
+
+
+def build_folding_knife(folder: Path) -> Path:
+    """A folding pocket knife lying flat (0.5 units long closed): a handle of two scales with a slot between them
+    (``knife_body``) and a blade (``blade``, revolute 0-3.1 rad about the vertical pivot at the handle's end) folded
+    into the slot."""
+    b = _Builder("u_knife", "Knife")
+    b.body("link_1", "knife_body", [b.part("knife_body", box_xyz(-0.25, 0.25, 0.0, 0.015, -0.04, 0.04), _DARK),
+                                    b.part("knife_body", box_xyz(-0.25, 0.25, 0.035, 0.05, -0.04, 0.04), _DARK),
+                                    b.part("knife_body", box_xyz(-0.25, -0.2, 0.015, 0.035, -0.04, 0.04), _DARK)])
+    b.moving("link_0", "hinge", "blade", [b.part("blade", box_xyz(-0.19, 0.23, 0.018, 0.032, -0.03, 0.025), _STEEL)],
+             "revolute", "link_1", (0.22, 0.025, 0.0), (0.0, 1.0, 0.0), 0.0, 3.1)
+    return b.write(folder)
+
+
+def build_pocket_lighter(folder: Path) -> Path:
+    """A windproof lighter (0.4 x 0.6 x 0.15 units): a case (``lighter_body``) with a flint wheel on top (``wheel``,
+    continuous about its horizontal axle) under a lid open at the bottom (``lid``, revolute 0-1.9 rad about the hinge on
+    one side)."""
+    b = _Builder("u_lighter", "Lighter")
+    b.body("link_2", "lighter_body", [b.part("lighter_body", box_xyz(-0.2, 0.2, -0.3, 0.1, -0.075, 0.075), _STEEL),
+                                      b.part("lighter_body", box_xyz(-0.1, 0.1, 0.1, 0.12, -0.05, 0.05), _STEEL)])
+    b.moving("link_0", "hinge", "wheel", _wheel(b, 0.0, 0.17, 0.0, 0.04, 0.02, 4), "continuous", "link_2", (0.0, 0.17, 0.0),
+             (1.0, 0.0, 0.0))
+    lid = [box_xyz(-0.2, 0.2, 0.29, 0.3, -0.075, 0.075), box_xyz(-0.2, -0.19, 0.105, 0.29, -0.075, 0.075),
+           box_xyz(0.19, 0.2, 0.105, 0.29, -0.075, 0.075), box_xyz(-0.19, 0.19, 0.105, 0.29, -0.075, -0.065),
+           box_xyz(-0.19, 0.19, 0.105, 0.29, 0.065, 0.075)]
+    b.moving("link_1", "hinge", "lid", [b.part("lid", lid, _STEEL)], "revolute", "link_2", (0.2, 0.1, 0.0), (0.0, 0.0, -1.0),
+             0.0, 1.9)
+    return b.write(folder)
+
+
+def build_computer_mouse(folder: Path) -> Path:
+    """A computer mouse (0.6 x 0.35 units, 0.12 tall): a body, a left and a right button (``button``, revolute
+    0-0.04 rad about the horizontal axis at their rear, pressed down) and a scroll wheel between them (``wheel``,
+    continuous)."""
+    b = _Builder("u_mouse", "Mouse")
+    b.body("link_3", "mouse_body", [b.part("mouse_body", box_xyz(-0.17, 0.17, 0.0, 0.09, -0.3, 0.3), _DARK)])
+    for i, (x0, x1) in enumerate(((-0.17, -0.025), (0.025, 0.17))):
+        b.moving(f"link_{i}", "hinge", "button", [b.part("button", box_xyz(x0, x1, 0.092, 0.12, 0.0, 0.3), _GREY)],
+                 "revolute", "link_3", (0.0, 0.092, 0.0), (1.0, 0.0, 0.0), 0.0, 0.04)
+    b.moving("link_2", "hinge", "wheel", _wheel(b, 0.0, 0.1, 0.15, 0.03, 0.012, 4), "continuous", "link_3", (0.0, 0.1, 0.15),
+             (1.0, 0.0, 0.0))
+    return b.write(folder)
+
+
+def build_click_pen(folder: Path) -> Path:
+    """A click pen lying on the table (1.0 units long): a barrel (``pen_body``) and a button at its end (``button``,
+    prismatic 0-0.06 units into the barrel along its length)."""
+    b = _Builder("u_pen", "Pen")
+    b.body("link_1", "pen_body", [b.part("pen_body", box_xyz(-0.45, 0.42, 0.0, 0.07, -0.035, 0.035), _WHITE),
+                                  b.part("pen_body", box_xyz(-0.5, -0.45, 0.02, 0.05, -0.015, 0.015), _DARK)])
+    b.moving("link_0", "slider", "button", [b.part("button", box_xyz(0.422, 0.5, 0.015, 0.055, -0.02, 0.02), _DARK)],
+             "prismatic", "link_1", (0.422, 0.035, 0.0), (-1.0, 0.0, 0.0), 0.0, 0.06)
+    return b.write(folder)
+
+
+def build_remote(folder: Path) -> Path:
+    """A TV remote lying flat (0.2 x 0.03 x 0.8 units) with four buttons (``button``, prismatic 0-0.008 units
+    down into its top)."""
+    b = _Builder("u_remote", "Remote")
+    b.body("link_4", "remote_base", [b.part("remote_base", box_xyz(-0.1, 0.1, 0.0, 0.03, -0.4, 0.4), _DARK)])
+    for i, (x, z) in enumerate(((-0.05, 0.25), (0.05, 0.25), (-0.05, 0.1), (0.05, 0.1))):
+        b.moving(f"link_{i}", "slider", "button", [b.part("button", box_xyz(x - 0.03, x + 0.03, 0.031, 0.045, z - 0.03, z + 0.03), _GREY)],
+                 "prismatic", "link_4", (x, 0.031, z), (0.0, -1.0, 0.0), 0.0, 0.008)
+    return b.write(folder)
+
+
+def build_compact_camera(folder: Path) -> Path:
+    """A compact camera (0.8 x 0.5 x 0.3 units): a body, a lens (``lens``, prismatic 0-0.15 units out of the front),
+    a shutter button on top (``button``, prismatic 0-0.015 units down) and a mode dial (``knob``, revolute 0-4.7 rad
+    about the vertical)."""
+    b = _Builder("u_camera", "Camera")
+    b.body("link_3", "camera_body", [b.part("camera_body", box_xyz(-0.4, 0.4, -0.25, 0.25, -0.15, 0.15), _DARK)])
+    b.moving("link_0", "slider", "lens", [b.part("lens", box_xyz(-0.12, 0.12, -0.15, 0.09, 0.15, 0.22), _GREY)],
+             "prismatic", "link_3", (0.0, -0.03, 0.15), (0.0, 0.0, 1.0), 0.0, 0.15)
+    b.moving("link_1", "slider", "button", [b.part("button", box_xyz(0.22, 0.3, 0.251, 0.28, -0.04, 0.04), _GREY)],
+             "prismatic", "link_3", (0.26, 0.251, 0.0), (0.0, -1.0, 0.0), 0.0, 0.015)
+    b.moving("link_2", "hinge", "knob", [b.part("knob", box_xyz(-0.3, -0.16, 0.251, 0.3, -0.07, 0.07), _GREY)],
+             "revolute", "link_3", (-0.23, 0.251, 0.0), (0.0, 1.0, 0.0), 0.0, 4.7)
+    return b.write(folder)
+
+
+def build_flip_phone(folder: Path) -> Path:
+    """A flip phone lying on its back (0.5 x 1.0 units closed): a keypad half (``phone_base``) and a screen half
+    (``screen``, revolute 0-2.8 rad about the horizontal hinge at their shared end) folded over it."""
+    b = _Builder("u_phone", "Phone")
+    b.body("link_1", "phone_base", [b.part("phone_base", box_xyz(-0.25, 0.25, 0.0, 0.08, -0.5, 0.5), _DARK)])
+    b.moving("link_0", "hinge", "screen", [b.part("screen", box_xyz(-0.25, 0.25, 0.085, 0.15, -0.5, 0.5), _GREY)],
+             "revolute", "link_1", (0.0, 0.085, -0.5), (-1.0, 0.0, 0.0), 0.0, 2.8)
+    return b.write(folder)
+
+
 def one_mesh_per_link(folder: Path) -> Path:
     """Rewrite the generated asset in ``folder`` in place so that each link draws and collides with one OBJ of one
     group holding all its parts (``textured_objs/merged-<link>.obj``), as PartNet-Mobility's files are: one group per
@@ -641,4 +789,15 @@ UNSEEN_BUILDERS = (
     ("u_chair", build_office_chair, "Chair"),
     ("u_globe", build_desk_globe, "Globe"),
     ("u_scissors", build_scissors, "Scissors"),
+    ("u_clock", build_wall_clock, "Clock"),
+    ("u_coffee", build_coffee_machine, "CoffeeMachine"),
+    ("u_display", build_monitor, "Display"),
+    ("u_folding_chair", build_folding_chair, "FoldingChair"),
+    ("u_knife", build_folding_knife, "Knife"),
+    ("u_lighter", build_pocket_lighter, "Lighter"),
+    ("u_mouse", build_computer_mouse, "Mouse"),
+    ("u_pen", build_click_pen, "Pen"),
+    ("u_remote", build_remote, "Remote"),
+    ("u_camera", build_compact_camera, "Camera"),
+    ("u_phone", build_flip_phone, "Phone"),
 )
