@@ -625,15 +625,15 @@ def build_folding_chair(folder: Path) -> Path:
 
 
 def build_folding_knife(folder: Path) -> Path:
-    """A folding pocket knife lying flat (0.5 units long closed): a handle of two scales with a slot between them
-    (``knife_body``) and a blade (``blade``, revolute 0-3.1 rad about the vertical pivot at the handle's end) folded
+    """A folding pocket knife lying flat (0.5 units long closed, 0.03 thick): a handle of two scales with a slot between
+    them (``knife_body``) and a blade a fifth of the handle's thickness (``blade``, revolute 0-3.1 rad about the vertical pivot at the handle's end) folded
     into the slot."""
     b = _Builder("u_knife", "Knife")
-    b.body("link_1", "knife_body", [b.part("knife_body", box_xyz(-0.25, 0.25, 0.0, 0.015, -0.04, 0.04), _DARK),
-                                    b.part("knife_body", box_xyz(-0.25, 0.25, 0.035, 0.05, -0.04, 0.04), _DARK),
-                                    b.part("knife_body", box_xyz(-0.25, -0.2, 0.015, 0.035, -0.04, 0.04), _DARK)])
-    b.moving("link_0", "hinge", "blade", [b.part("blade", box_xyz(-0.19, 0.23, 0.018, 0.032, -0.03, 0.025), _STEEL)],
-             "revolute", "link_1", (0.22, 0.025, 0.0), (0.0, 1.0, 0.0), 0.0, 3.1)
+    b.body("link_1", "knife_body", [b.part("knife_body", box_xyz(-0.25, 0.25, 0.0, 0.01, -0.04, 0.04), _DARK),
+                                    b.part("knife_body", box_xyz(-0.25, 0.25, 0.02, 0.03, -0.04, 0.04), _DARK),
+                                    b.part("knife_body", box_xyz(-0.25, -0.2, 0.01, 0.02, -0.04, 0.04), _DARK)])
+    b.moving("link_0", "hinge", "blade", [b.part("blade", box_xyz(-0.19, 0.23, 0.012, 0.018, -0.03, 0.025), _STEEL)],
+             "revolute", "link_1", (0.22, 0.015, 0.0), (0.0, 1.0, 0.0), 0.0, 3.1)
     return b.write(folder)
 
 
