@@ -56,7 +56,8 @@ def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]],
     smallest share of its link's volume; a link's last piece is never
     removed (such an overlap is kept and noted); at ``state``, an overlap
     deeper than :data:`STATE_CUT_DEPTH` (or :data:`STATE_CUT_FRACTION`) is a stop the state lies past, kept
-    and noted, unless the pair overlaps at the modelled pose too or the joint
+    and noted, unless the pair overlaps at the modelled pose too, the child is
+    pressed into its parent from that pose on (:func:`_is_stop`) or the joint
     is at a limit."""
     for joint in model.joints:
         P, C = pieces.get(joint.parent), pieces.get(joint.child)
@@ -68,7 +69,7 @@ def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint
                     C: list[Piece | None], tolerance: float, state: dict[str, float] | None, notes: list[str]) -> None:
     """Cut, in place, the pieces ``P`` of ``joint``'s parent and ``C`` of its child apart (:func:`separate_parent_child`),
     pair by pair; a note when they overlapped."""
-    deepest_cut, T_ref = np.inf, None
+    deepest_cut, T_ref, T_near = np.inf, None, None
     if state is None:
         transforms, ref = _joint_transforms(model, pieces, joint)
     else:
@@ -76,6 +77,7 @@ def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint
         q = float(state.get(joint.name, q_ref))
         size = float(np.ptp(np.vstack([c.points for c in C if c is not None]), axis=0).max())
         transforms, ref, T_ref = [_joint_motion(joint, q)], 0, _joint_motion(joint, q_ref)
+        T_near = _toward(joint, q_ref, q)
         deepest_cut = np.inf if _at_limit(joint, q) else max(STATE_CUT_DEPTH, STATE_CUT_FRACTION * size)
     sizes = {"p": sum(p.volume for p in P), "c": sum(c.volume for c in C)}
     before = after = past = 0.0
@@ -85,7 +87,7 @@ def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint
         k = 0
         while k < len(C) and P[i] is not None:
             overlap = None if C[k] is None else _pair_cuts(P[i], C[k], transforms, ref, tolerance)
-            if overlap is not None and overlap[0] > deepest_cut and _depth_at(P[i], C[k], T_ref, tolerance)[0] <= tolerance:
+            if overlap is not None and overlap[0] > deepest_cut and _is_stop(P[i], C[k], T_ref, T_near, tolerance):
                 past = max(past, overlap[0])  # met only after moving clear of the modelled pose: a stop
                 overlap = None
             if overlap is not None:
@@ -117,6 +119,34 @@ def _depth_at(a: Piece, b: Piece, T: np.ndarray, tolerance: float) -> tuple[floa
     """(depth m, separating direction (3,)) of parent piece ``a`` and child piece ``b`` at the child pose ``T`` (4, 4)
     (:func:`penetration_depth`; (0, 0) when their boxes are apart)."""
     return (0.0, np.zeros(3)) if _boxes_apart(a, b, T) else penetration_depth(a, _transformed(b, T), tolerance)
+
+
+def _is_stop(a: Piece, b: Piece, T_ref: np.ndarray, T_near: np.ndarray | None, tolerance: float) -> bool:
+    """Whether parent piece ``a`` and child piece ``b``, overlapping at the state, meet at a stop: clear at the modelled
+    pose ``T_ref`` (4, 4) (within ``tolerance`` m), and not touching there and pressed deeper a step toward the state
+    (``T_near``, :func:`_toward`). A part in contact with its parent at its modelled pose and driven into it from there
+    on (a button pressed into a body drawn solid behind it, its recess not modelled) meets no stop: the limit scan keeps
+    its limit (``limits.MIN_FREE_FRACTION``), and its pieces are cut at the state as at a limit. A part clear of its
+    parent at its modelled pose that runs into it (a door into a bar of its body 2 cm in front of it) meets a stop."""
+    at_ref = _depth_at(a, b, T_ref, tolerance)[0]
+    if at_ref > tolerance:
+        return False
+    return T_near is None or at_ref <= PRESSED_GROWTH or _depth_at(a, b, T_near, tolerance)[0] <= at_ref + PRESSED_GROWTH
+
+
+def _toward(joint: urdf.UrdfJoint, q_ref: float, q: float) -> np.ndarray | None:
+    """The child's pose (4, 4) :data:`limits.MIN_FREE_FRACTION` of ``joint``'s range from ``q_ref`` toward ``q`` (rad or
+    m); None without finite limits or when ``q`` is nearer than that."""
+    lo, hi = (np.nan if v is None else float(v) for v in (joint.lower, joint.upper))
+    step = limits.MIN_FREE_FRACTION * (hi - lo)
+    if not (np.isfinite(step) and step > 0) or abs(q - q_ref) <= step:
+        return None
+    return _joint_motion(joint, q_ref + np.sign(q - q_ref) * step)
+
+
+#: Growth of a pair's depth (m) a step toward the state past which the child is pressed into its parent from its modelled
+#: pose on (:func:`_is_stop`).
+PRESSED_GROWTH = 1e-4
 
 
 def _at_limit(joint: urdf.UrdfJoint, q: float) -> bool:

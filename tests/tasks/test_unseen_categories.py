@@ -25,6 +25,7 @@ from asset2sim.urdf import read_urdf
 from tests.helpers import assert_ready_or_honestly_not_robust
 from tests.unseen_assets import (
     build_barred_safe,
+    build_coffee_machine,
     build_bottle,
     build_bucket,
     build_desk_fan,
@@ -124,6 +125,20 @@ def test_a_door_barred_by_its_own_body_is_not_reported_ready(tmp_path, refine_on
     nested = next(m for m in r.metrics if m.name == "parent_child_penetration")
     assert nested.details["beyond_modelled_mm"] > 20.0  # mm: the door's edge well inside the bar, clear when closed
     assert any("past a stop" in n for n in r.state.collision_changes + r.notes), r.state.collision_changes
+
+
+def test_a_button_pressed_into_a_body_drawn_solid_behind_it_meets_no_stop(tmp_path, refine_once):
+    """A coffee machine's power button presses 7 mm into the front of a body drawn solid behind it (its recess not
+    modelled). The limit scan keeps its limit (it is blocked from its modelled pose on, not stopped after moving
+    clear), and asked mostly open, the button lay 6.2 mm inside the body: the separation called that a stop the state
+    lay past and kept the pieces (``unresolved_penetration``). A part pressed into its parent from its modelled pose
+    on now has its pieces cut at the state as at a limit; a door meeting a bar of its body after moving clear (the
+    barred safe above) is still a stop."""
+    src = build_coffee_machine(tmp_path / "src")
+    r = refine_once(src, "A coffee machine, mostly open.", media=False).report
+    assert r.failure_mode == "none", (r.failure_mode, r.readiness)
+    assert not any("past a stop" in n for n in r.state.collision_changes), r.state.collision_changes
+    assert r.opening_fractions["joint_1"] > 0.5
 
 
 @pytest.mark.parametrize("prompt", ["A tiny oven.", "A very small oven."])
