@@ -117,16 +117,16 @@ def _closers_moved(overlay: Overlay, before: dict[str, ClosedState], after: dict
     (``before`` -> ``after``, output units, the same opening direction): its preload and centre were set from the closed
     end the synthesis knew, so a closer set from a closed end 0.15 rad off the output's (a faucet's lever) pressed or
     centred the part there, not where the output shuts."""
-    joints = dict(overlay.joints)
+    joints = {}
     for n in moved:
-        d = joints.get(n)
+        d = overlay.joints.get(n)
         if (d is None or d.holding is None or d.holding.mechanism != "closer" or d.spring_reference is None
                 or after[n].direction != before[n].direction):
             continue
         shift = after[n].q_closed - before[n].q_closed
         joints[n] = d.model_copy(update={"spring_reference": float(d.spring_reference + shift)})
         log.say("closed_state", f"joint {n}: its closer's spring reference moved {shift:+.4g} with its closed end")
-    return overlay.model_copy(update={"joints": joints}) if joints != dict(overlay.joints) else overlay
+    return overlay.model_copy(update={"joints": {**overlay.joints, **joints}}) if joints else overlay
 
 
 def clip_synthesis(ctx: EstimationContext, syn: Synthesis, config: RefineConfig, ws: Workspace, log: StageLog,

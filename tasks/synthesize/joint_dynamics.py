@@ -145,12 +145,12 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
                 loads[name], name in prismatic, True):
             mechanism = HELD_AGAINST_FREE
         note = source + "".join(f"; request '{w.phrase}': {w.kind.replace('_', ' ')}" for w in ch.words)
+        on_slide = name in prismatic and part_label(ctx, name) in SLIDE_LABELS  # its slide sets its least friction
         if ch.self_closing:
             pushed = opening_loads(kin, links, state, scale, cs, name, ctx.subtrees[name], unit, rot)
             held = closer(ctx, loads[name], cs, unit, hold, pushed, at_closed, stopped_shut(ctx, kin, state, scale, name),
                           hand=hand_top(ctx, name, scale, name in prismatic), free=free_standing(ctx),
-                          floor=0.0 if name in prismatic and part_label(ctx, name) in SLIDE_LABELS else
-                          physics.friction_floor(loads[name], name in prismatic))
+                          floor=0.0 if on_slide else physics.friction_floor(loads[name], name in prismatic))
             spring, hold = held.spring, held.hold
             note, mechanism = f"{note}; {held.note}", "closer"
         elif ch.spring:
@@ -181,7 +181,7 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
             hold, static = max(hold, set_down.LEAN_SAFETY / physics.HOLD_SAFETY * lean), max(static, lean)
             impact, landing = set_down.landing_friction(landed[name], band, _stops(cs, state[name] / unit, band / unit),
                                                         0.0 if balanced else ld.gravity_load)
-        slide = name in prismatic and part_label(ctx, name) in SLIDE_LABELS and not ch.free_moving
+        slide = on_slide and not ch.free_moving
         dyn = physics.joint_dynamics(loads[name], hold, prismatic=name in prismatic, damping_level=ch.damping_level, stiff=ch.stiff,
                                      free_moving=ch.free_moving, spring=spring, source=note, impact=impact, floor=not slide,
                                      stiff_least=stiff_least(ctx, name, scale, name in prismatic) if ch.stiff and spring is None else 0.0)

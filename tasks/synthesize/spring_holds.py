@@ -90,11 +90,11 @@ def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, uni
     sized = max(set_down.LEAN_SAFETY * lean, min(set_down.LEAN_SAFETY * set_down.lean_load(load), cap / CLOSER_PROGRESSION))
 
     prismatic = ctx.asset.joint(load.joint).type == "prismatic"
-    floor = CLOSER_FLOOR_MARGIN * floor  # the least friction the joint gets, overcome
+    least_pull = CLOSER_FLOOR_MARGIN * floor  # the least friction the joint gets, overcome
 
     def least(ratio: float) -> float:  # the preload whose pull outpulls the opening loads everywhere, at F1 / F0 = ratio
         need = physics.HOLD_SAFETY * pushes / (1.0 + (ratio - 1.0) * frac)
-        return float(max(sized, float(need.max(initial=0.0)), floor, 1e-6))
+        return float(max(sized, float(need.max(initial=0.0)), least_pull, 1e-6))
 
     closed_at = cs.position(0.0) * unit
     u = "N" if prismatic else "N m"
@@ -111,7 +111,7 @@ def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, uni
         return SpringHold((float(k), ref), CLOSER_FRICTION_SHARE * preload / physics.HOLD_SAFETY, why)
     preload = max(sized, physics.HOLD_SAFETY * hold, 1e-6)
     band = set_down.joint_band(cs.lower * unit, cs.upper * unit, prismatic)
-    k = max(2.0 * preload / rng, set_down.LEAN_SAFETY * lean / (0.5 * band), floor / band)
+    k = max(2.0 * preload / rng, set_down.LEAN_SAFETY * lean / (0.5 * band), least_pull / band)
     why = (f"self-closing: its closed end {closed_at:.4g} is no stop (it {'slides' if prismatic else 'turns'} on past it), so a "
            f"return spring centred there, k = {k:.4g} {'N/m' if prismatic else 'N m/rad'}, returns it within its band")
     return SpringHold((float(k), float(closed_at - closed_load / k)), CLOSER_FRICTION_SHARE * k * band / physics.HOLD_SAFETY,
