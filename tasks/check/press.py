@@ -1,6 +1,8 @@
-"""A hand's press against a stop: a handled part moved from its state into each end of its range by a hand at its grasp point at the hand's speed (0.25 m/s at the grasp point, operability's hand: a force-limited
-velocity drive of the engine), then pressed there with a force rising over :data:`RAMP_TIME` to a given top (the top
-of its operating range, or 20 N) and held for :data:`HOLD_TIME`, on the stroke runner.
+"""A hand's press against a stop: a handled part moved from its state into each end of its range by a hand at its grasp
+point (operability's hand: a force-limited velocity drive of the engine) at most at the hand's speed (0.25 m/s at the
+grasp point), slowing as it nears the stop as a reach does, then pressed there with a force rising over
+:data:`RAMP_TIME` to a given top (the top of its operating range, or 20 N) and held for :data:`HOLD_TIME`, on the
+stroke runner.
 
 It passes when the engine stays stable (every reading finite, the part never faster than :data:`DIVERGED` times the
 hand's speed), the part goes at most :data:`BOUND` past the limit it is pressed into (1 degree, 2 mm) and, where
@@ -23,13 +25,20 @@ from asset2sim.tasks.check.sweep import HOLD_FORCE
 #: state its deepest contact may sink where geometry stops it first (m).
 BOUND = {"revolute": math.radians(1.0), "prismatic": 2e-3}
 SINK = 2e-3
-#: The hand has reached the stop within this share of the range; or geometry stopped it first: twice the time at its
-#: speed is up and the part moves toward the stop at less than :data:`STALLED` of the hand's speed (a part the hand's
-#: force moves slower, against its spring, is carried on to the stop, at most :data:`APPROACH_CAP` times that long, not
-#: let go for its spring to slam it there).
-REACHED = 0.005
+#: The hand presses once the part is at its stop; or once geometry stopped it first: the time of the approach is up
+#: and the part moves toward the stop at under :data:`STALLED` of the hand's speed (a part the hand's force moves
+#: slower, against its spring, is carried on to the stop, at most :data:`APPROACH_CAP` times that long, not let go for
+#: its spring to slam it there).
 STALLED = 0.05
 APPROACH_CAP = 8
+#: The approach slows in proportion to the distance left, v = d / APPROACH_TAU (s), down to :data:`CREEP` x the
+#: hand's speed: a reach ends at rest (Flash & Hogan 1985, J. Neurosci. 5(7), the minimum-jerk profile), and 0.1 s
+#: slows a hand at 0.25 m/s at 2.5 m/s^2, the peak deceleration of a minimum-jerk reach of about 4 cm at that speed
+#: (5.77 D / T^2 with T = 1.875 D / v). At CREEP (twice :data:`STALLED`) the part meets the stop moving 0.1 mm a step
+#: at the grasp point, where at full speed it went a whole step (1 mm, several degrees on a short lever) past it
+#: before the engine's limit acted.
+APPROACH_TAU = 0.1
+CREEP = 0.1
 #: A part faster than this many times the hand's speed has left the hand: the engine diverged.
 DIVERGED = 50.0
 #: How long the hand presses on once the part no longer moves toward the stop (s), and the time its force takes to
@@ -62,7 +71,7 @@ class Press:
 
 
 def press_joint(session: SimSession, joint: str, limit: float, effort: float, speed: float) -> Press:
-    """Move ``joint`` of an open session from its current state to ``limit`` (rad or m, one end of its range) at ``speed`` (rad/s or m/s) with at most ``effort`` (N*m or N), then press it there with ``effort``
+    """Move ``joint`` of an open session from its current state to ``limit`` (rad or m, one end of its range) at most at ``speed`` (rad/s or m/s), slowing near it, with at most ``effort`` (N*m or N), then press it there with ``effort``
     (module docstring), the other joints held still (``HOLD_FORCE`` beyond their friction); the state is restored
     afterwards.
 
@@ -73,15 +82,16 @@ def press_joint(session: SimSession, joint: str, limit: float, effort: float, sp
     s = 1.0 if abs(limit - upper) < abs(limit - lower) else -1.0
     q0 = session.joint_state(joint)[0]
     dt = session.options.conventions.timestep
-    approach = int(round(2.0 * abs(limit - q0) / speed / dt))  # steps the hand has to reach the stop
+    tail = APPROACH_TAU * math.log(1.0 / CREEP)  # the slowing's time from full speed to CREEP (s)
+    approach = int(round((2.0 * abs(limit - q0) / speed + tail) / dt))  # steps the hand has to reach the stop
     pressed = int(round((RAMP_TIME + HOLD_TIME) / dt))
     steps = APPROACH_CAP * approach + pressed + 1
     pressing: list[int] = []  # the step the hand began to press
     far = [-np.inf, False, None]  # the farthest past the limit, diverged, the hand's force then
     force = [None]  # the hand's force of the current step (None: still driven at its speed)
 
-    def law(k, q, qd):  # at the hand's speed to the stop, then its force rising over RAMP_TIME
-        if not pressing and (s * (q - limit) >= -REACHED * (upper - lower) or k >= approach and s * qd < STALLED * speed
+    def law(k, q, qd):  # toward the stop, slowing as it nears it, then the hand's force rising over RAMP_TIME
+        if not pressing and (s * (q - limit) >= 0.0 or k >= approach and s * qd < STALLED * speed
                              or k >= APPROACH_CAP * approach):
             session.release_joint(joint)
             pressing.append(k)
@@ -89,7 +99,7 @@ def press_joint(session: SimSession, joint: str, limit: float, effort: float, sp
             force[0] = effort * min(1.0, (k - pressing[0] + 1) * dt / RAMP_TIME)
             session.apply_joint_effort(joint, s * force[0])
         else:
-            session.drive_joint(joint, s * speed, effort)
+            session.drive_joint(joint, s * min(speed, max(CREEP * speed, s * (limit - q) / APPROACH_TAU)), effort)
 
     def record(k, q, qd):
         if not (np.isfinite(q) and np.isfinite(qd)) or abs(qd) > DIVERGED * speed:
