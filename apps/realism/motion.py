@@ -101,8 +101,8 @@ def _session(side: PhysicsSide, joint: str, conventions: SimConventions | None):
     return session
 
 
-def drive_limit(side: PhysicsSide, joint: str, open_range: float, conventions: SimConventions | None = None) -> float:
-    """The force limit (N*m or N) of the pair's drive: the joint sweep's rule
+def drive_limit(side: PhysicsSide, joint: str, closed: ClosedState, conventions: SimConventions | None = None) -> float:
+    """The force limit (N*m or N) of the pair's drive over ``closed``'s range: the joint sweep's rule
     (:func:`asset2sim.tasks.check.sweep.effort_limit`) on ``side``'s physics plus the joint's own friction,
     so the drive moves that side's part as the sweep does (its friction is a load within the limit).
 
@@ -112,7 +112,8 @@ def drive_limit(side: PhysicsSide, joint: str, open_range: float, conventions: S
     session = _session(side, joint, conventions)
     try:
         links = subtrees(model_of(side.urdf)).get(joint, [session.joint_child[joint]])
-        return effort_limit(session, joint, links, open_range, SweepConfig()) + float(session.held_physics().joints[joint].friction)
+        return (effort_limit(session, joint, links, closed.open_range, SweepConfig(), closed.q_closed, closed.direction)
+                + float(session.held_physics().joints[joint].friction))
     finally:
         session.close()
 

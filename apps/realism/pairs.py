@@ -102,7 +102,7 @@ def subject_of(folder: Path | str, object_id: str, conventions: SimConventions |
     files, desc = _read(folder)
     side = side_of(sim_object(files)[0], "asset2sim")
     report = files.record("report.json") or {}
-    return Subject(side=side, joint=joint, closed=closed, force_limit=drive_limit(side, joint, closed.open_range, conventions),
+    return Subject(side=side, joint=joint, closed=closed, force_limit=drive_limit(side, joint, closed, conventions),
                    object_id=object_id, category=report.get("category") or desc.category or "", request=str(report.get("prompt") or ""))
 
 
@@ -132,7 +132,7 @@ def make_pair(spec: PairSpec, closed: ClosedState, pair_set: Path | str, index: 
     """
     base = Path(pair_set)
     folder = base / PAIR_CLIPS_DIR / f"{index:04d}"
-    force = spec.force_limit if spec.force_limit is not None else drive_limit(spec.a, spec.joint, closed.open_range, conventions)
+    force = spec.force_limit if spec.force_limit is not None else drive_limit(spec.a, spec.joint, closed, conventions)
     trajs = [push_release(s, spec.joint, closed, force, config=config, conventions=conventions) for s in (spec.a, spec.b)]
     with SceneRenderer(spec.a.urdf, size=CLIP_SIZE, supersample=1) as ra, SceneRenderer(spec.b.urdf, size=CLIP_SIZE, supersample=1) as rb:
         cloud = np.concatenate([pose_points(r, fit_poses(traj)) for r, traj in ((ra, trajs[0]), (rb, trajs[1]))])

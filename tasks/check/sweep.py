@@ -106,16 +106,22 @@ def _lever(session: SimSession, joint: str, links: list[str]) -> float:
     return best
 
 
-def effort_limit(session: SimSession, joint: str, links: list[str], open_range: float, cfg: SweepConfig) -> float:
-    """Drive force limit E = f_w m_sub g L + k R (N*m or N): m_sub the engine's
-    masses of ``links``, L their largest distance from the axis (1 for
-    prismatic), k the session's spring stiffness, R = ``open_range`` (rad or m)."""
+def effort_limit(session: SimSession, joint: str, links: list[str], open_range: float, cfg: SweepConfig,
+                 closed: float | None = None, direction: float = 1.0) -> float:
+    """Drive force limit E = f_w m_sub g L + P (N*m or N): m_sub the engine's masses of ``links``, L their largest
+    distance from the axis (1 for prismatic), P the largest pull of the session's joint spring (stiffness k, reference
+    q_s) over the swept range, k max(|q_c - q_s|, |q_c + d R - q_s|) from the closed end q_c = ``closed`` opening along
+    ``direction`` d over R = ``open_range`` (rad or m): k R for a spring centred on its closed end, more for a closer
+    preloaded shut (its reference beyond the closed end); k R when ``closed`` is None."""
     masses = session.link_masses()
     m_sub = float(sum(masses.get(ln, 0.0) for ln in links))
     lever = 1.0 if session.joint_types[joint] == "prismatic" else _lever(session, joint, links)
     spring = session.options.springs.get(joint)
-    k = spring.stiffness if spring is not None else 0.0
-    return float(cfg.weight_factor * m_sub * G * lever + k * open_range)
+    pull = 0.0
+    if spring is not None:
+        pull = spring.stiffness * (open_range if closed is None else
+                                   max(abs(closed - spring.reference), abs(closed + direction * open_range - spring.reference)))
+    return float(cfg.weight_factor * m_sub * G * lever + pull)
 
 
 def _deepest(session: SimSession) -> tuple[float, tuple[str, str] | None]:
@@ -143,7 +149,7 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     jtype = session.joint_types[joint]
     q_far = closed + direction * open_range
     v_max = open_range / cfg.traverse_time
-    limit = effort_limit(session, joint, links, open_range, cfg)
+    limit = effort_limit(session, joint, links, open_range, cfg, closed, direction)
     session.set_joint_positions({**initial_state, joint: closed})
     vdiv = EXPLOSION_JOINT_SPEED_PRISMATIC if jtype == "prismatic" else EXPLOSION_JOINT_SPEED_REVOLUTE  # the divergence metric's
     max_pen, worst = _deepest(session)
@@ -249,9 +255,9 @@ def sweep_together(session: SimSession, joints: list[str], closed: dict[str, tup
     session.set_joint_positions({**initial_state, **{j: closed[j][0] for j in joints}})
     runs = []
     for j in joints:
-        qc, _, rng = closed[j]
+        qc, d, rng = closed[j]
         speed = EXPLOSION_JOINT_SPEED_PRISMATIC if session.joint_types[j] == "prismatic" else EXPLOSION_JOINT_SPEED_REVOLUTE
-        runs.append(_Swept(j, closed[j], effort_limit(session, j, list(moved[j]), rng, cfg), moved[j], rng / cfg.traverse_time,
+        runs.append(_Swept(j, closed[j], effort_limit(session, j, list(moved[j]), rng, cfg, qc, d), moved[j], rng / cfg.traverse_time,
                            speed, strokes=[Reach(limit)]))
     others = {r.joint: [c for c in at_rest if not ({c.link_a, c.link_b} & r.links)
                         and any({c.link_a, c.link_b} & o.links for o in runs if o is not r)] for r in runs}

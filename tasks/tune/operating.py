@@ -422,12 +422,12 @@ def damping_caps(obj: SimObject, closed: dict[str, tuple[float, float, float]]) 
     subtrees = limits.subtrees(model)
     caps: dict[str, float] = {}
     with source.open("pybullet", fixed_root_options(initial_state, obj.conventions, dict(obj.springs))) as session:
-        for name, (qc, _, rng) in closed.items():
+        for name, (qc, d, rng) in closed.items():
             if name not in session.joint_types or not rng > 0:
                 continue
             session.set_joint_positions({**initial_state, name: qc})
             links = subtrees.get(name, [session.joint_child[name]])
-            e = sweep.effort_limit(session, name, links, rng, cfg)
+            e = sweep.effort_limit(session, name, links, rng, cfg, qc, d)
             caps[name] = e * cfg.time_limit / (DAMPED_SPEED_MARGIN * rng)
     return caps
 

@@ -35,7 +35,7 @@ def refined(demo_root, refine_factory):
 def setting(refined):
     a = motion.side_from_folder(refined, "asset2sim")
     [(joint, closed)] = pairs.pushed_joints(refined)
-    force = motion.drive_limit(a, joint, closed.open_range)
+    force = motion.drive_limit(a, joint, closed)
     return a, joint, closed, force
 
 

@@ -263,3 +263,24 @@ def test_damping_above_the_cap_fails_the_sweep_and_below_it_passes(tmp_path):
     crawled = run_sweep("pybullet", SimObject(UrdfFile(slow.urdf), state), post).joints[0]
     assert passed.passed, passed.failure
     assert not crawled.passed and 0.0 < crawled.reached_open < 0.95
+
+
+def test_the_sweeps_drive_outpulls_a_closer_preloaded_shut(tmp_path):
+    """A closer presses its part shut with a preload F0 and pulls F1 = 1.25 F0 fully open (flattened, as
+    ``spring_holds.closer`` makes it near a hand's cap): the post's closer, F0 = 3 N (k = 15 N/m about -0.2 m), pulls
+    3.75 N at the far end, where k R is 0.75 N. The drive's limit counts the spring's largest pull over the range, so
+    the sweep carries the 50 g post through its range; counted as k R, the drive (2.7 N with the post's weight term)
+    stalls against it."""
+    from asset2sim.engines.base import Spring
+
+    a = write_contract_asset(tmp_path, lid_angle=1.0, post_friction=0.0, post_damping=0.05)
+    closer = {"post_slide": Spring(15.0, -0.2)}
+    obj = SimObject(UrdfFile(a.urdf), {"lid_hinge": 1.0, "post_slide": 0.0}, springs=closer)
+    with open_session("pybullet", a.urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, springs=closer)) as s:
+        plain = effort_limit(s, "post_slide", ["post"], 0.05, SweepConfig())
+        counted = effort_limit(s, "post_slide", ["post"], 0.05, SweepConfig(), 0.0, 1.0)
+    assert counted - plain == pytest.approx(15.0 * 0.25 - 15.0 * 0.05)
+    assert plain < 15.0 * 0.25 < counted
+    swept = run_sweep("pybullet", obj, {"post_slide": CLOSED["post_slide"]}).joints[0]
+    assert swept.passed, swept.failure
+    assert swept.effort_limit == pytest.approx(counted)
