@@ -1,7 +1,7 @@
 """A hand's press into each stop of every handled part (``asset2sim.tasks.check.press``) of refined output folders,
 in several engines: root fixed (the other hand holds it), gravity on, no ground, the files' springs; the part pressed
 from its initial state into each end of its range at its grasp point (``report.json``'s operability hand: grasp
-lever, the top of its operating range) with 20 N and with that top, at most at the hand's speed (0.25 m/s at the
+lever, the top of its operating range) with 20 N and with that top, at most at the hand's speed, slowing near the stop (0.25 m/s at the
 grasp point). Prints per part, engine and force how far past the limit it went (deg or mm, and mm at the grasp
 point: at 1/240 s a hand at 0.25 m/s moves the grasp point 1 mm a step, several degrees on a 3 cm lever), how much
 deeper its deepest self-contact sank (mm), whether the engine diverged and the share of the force the hand pressed
