@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import threading
+from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -114,7 +115,7 @@ def _sliding_neighbours(model: urdf.UrdfModel, hulls: dict[str, list[tuple[int, 
 def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None = None, *,
                 limit: int = MAX_PIECES_PER_LINK, decompose: bool = True,
                 level: bool = False, feet: float | None = None,
-                open_containers: bool = False) -> tuple[dict[str, list[Piece]], list[str]]:
+                open_containers: bool = False, pushed: Collection[str] = ()) -> tuple[dict[str, list[Piece]], list[str]]:
     """The convex pieces of every link's mesh collisions (link frame, m), cached in this process and on disk.
 
     The pieces depend on the joint limits (the ranges swept); only what ``state`` puts a child into its
@@ -130,6 +131,9 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
             else its hull, solid inside).
         level: the object is free-standing: its footprint at ``state`` is made planar.
         feet: the height (m) the object's levelling feet take up (:func:`~asset2sim.tasks.assemble.footprint.level_footprint`).
+        pushed: joints of parts a press moves into their body (push buttons and keys,
+            :func:`~asset2sim.tasks.interpret.part_priors.push_buttons`): with ``state`` and ``decompose``, the parent and
+            the part are also cut apart at each end of the joint's range, the recess a real body has for its button.
 
     Returns:
         (link -> pieces, notes).
@@ -141,8 +145,9 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
     key, disk_key = _piece_keys(model, mesh_path, limit, decompose, opening)
     done = _cached_pieces(key, disk_key, model, mesh_path, limit, decompose, opening)
     if state is not None:
-        skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())), bool(level), feet)
-        done = _recalled(_STATE_CACHE, skey) or _remember(_STATE_CACHE, skey, _state_pieces(model, done, state, decompose, level, feet))
+        skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())), bool(level), feet, tuple(sorted(pushed)))
+        done = _recalled(_STATE_CACHE, skey) or _remember(_STATE_CACHE, skey, _state_pieces(model, done, state, decompose, level, feet,
+                                                                                             pushed))
     return {k: list(v) for k, v in done[0].items()}, list(done[1])
 
 
@@ -222,11 +227,18 @@ def _merge_link(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], name: str
 
 
 def _state_pieces(model: urdf.UrdfModel, hit: tuple[dict[str, list[Piece]], list[str]], state: dict[str, float],
-                  decompose: bool, level: bool, feet: float | None = None) -> tuple[dict[str, list[Piece]], list[str]]:
-    """(link -> pieces, notes) of ``hit`` at the initial ``state``."""
+                  decompose: bool, level: bool, feet: float | None = None,
+                  pushed: Collection[str] = ()) -> tuple[dict[str, list[Piece]], list[str]]:
+    """(link -> pieces, notes) of ``hit`` at the initial ``state``, each ``pushed`` joint's part and parent also cut
+    apart at both ends of its range (:func:`link_pieces`)."""
     pieces, notes = {k: list(v) for k, v in hit[0].items()}, list(hit[1])
     if decompose:
         separate_parent_child(model, pieces, notes, state=state)
+        for name in sorted(pushed):
+            j = next((x for x in model.joints if x.name == name), None)  # a pushed joint the model lacks: none
+            if j is not None and j.type == "prismatic" and np.isfinite(j.lower) and np.isfinite(j.upper):
+                for end in (j.lower, j.upper):
+                    separate_parent_child(model, pieces, notes, state={**state, name: float(end)}, joints={name})
         for name in model.links:
             pieces[name] = drop_slivers(pieces[name])
     if level:
@@ -335,7 +347,8 @@ DENSITY_NOTE = "denser than its material"
 
 def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: dict[str, float] | None = None,
                       *, level: bool = False, feet: float | None = None,
-                      max_density: dict[str, float] | None = None, open_containers: bool = False) -> list[str]:
+                      max_density: dict[str, float] | None = None, open_containers: bool = False,
+                      pushed: Collection[str] = ()) -> list[str]:
     """Replace the mesh collisions of every link of ``model`` (in place) by the pieces of :func:`link_pieces`,
     written as ``out_dir/folder/<link>_hull<i>_<digest>.obj`` (link frame, m; an unchanged file is not
     rewritten). Primitive collisions stay.
@@ -348,7 +361,7 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
         feet: see :func:`link_pieces`.
         max_density: link -> the densest its material may be (kg/m^3): a link whose inertial mass over its
             pieces' volume exceeds it is noted.
-        open_containers: see :func:`link_pieces`.
+        open_containers, pushed: see :func:`link_pieces`.
 
     Returns:
         notes (what changed).
@@ -362,7 +375,7 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
         return Path(g.path) if g.path is not None else out_dir / str(g.filename)
 
     pieces, notes = link_pieces(model, mesh_path, state, level=level and state is not None, feet=feet,
-                                open_containers=open_containers)
+                                open_containers=open_containers, pushed=pushed)
     for name, link in model.links.items():
         if not any(c.kind == "mesh" for c in link.collisions):
             continue

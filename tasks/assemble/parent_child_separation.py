@@ -4,7 +4,7 @@ carries it, cut off one of the two pieces (:func:`separate_parent_child`)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 
 import numpy as np
 
@@ -41,7 +41,8 @@ def _carried(depth: Callable[[int], float], n: int, ref: int, tolerance: float) 
 
 
 def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes: list[str],
-                          tolerance: float = CONTAINMENT_TOLERANCE, state: dict[str, float] | None = None) -> None:
+                          tolerance: float = CONTAINMENT_TOLERANCE, state: dict[str, float] | None = None,
+                          joints: Collection[str] | None = None) -> None:
     """Clip, in place, the pieces of every parent and child link so that no
     child piece penetrates a parent piece deeper than ``tolerance`` m
     (:func:`penetration_depth`) at the joint's reference position
@@ -58,8 +59,10 @@ def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]],
     deeper than :data:`STATE_CUT_DEPTH` (or :data:`STATE_CUT_FRACTION`) is a stop the state lies past, kept
     and noted, unless the pair overlaps at the modelled pose too, the child is
     pressed into its parent from that pose on (:func:`_is_stop`) or the joint
-    is at a limit."""
+    is at a limit. ``joints``: only these joints' pairs (None: every joint)."""
     for joint in model.joints:
+        if joints is not None and joint.name not in joints:
+            continue
         P, C = pieces.get(joint.parent), pieces.get(joint.child)
         if P and C:
             _separate_joint(model, pieces, joint, P, C, tolerance, state, notes)

@@ -20,6 +20,7 @@ from asset2sim.schemas.overlay import Overlay, RootMount
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.assemble import collision_geometry
 from asset2sim.tasks.assemble.copied_meshes import copy_meshes, taken_paths
+from asset2sim.tasks.interpret.part_priors import push_buttons
 from asset2sim.tasks.synthesize.validate_overlay import max_density
 from asset2sim.output_folder import OVERLAY_NAME, STATE_NAME, URDF_NAME, OutputError, check_location
 from asset2sim.prior_tables import load_priors
@@ -90,7 +91,8 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
         prior = load_priors().categories.get(overlay.category or "")
         notes = collision_geometry.convex_collisions(model, collision_out[0], collision_folder(asset), collision_out[1], level=free,
                                                      feet=prior.levelling_feet_m if prior is not None else None,
-                                                     open_containers=open_containers, max_density=densest)
+                                                     open_containers=open_containers, max_density=densest,
+                                                     pushed=push_buttons(asset, overlay.category))
         if collision_notes is not None:
             collision_notes.extend(notes)
     return urdf.write_urdf(model, comment=_urdf_comment(s, overlay))

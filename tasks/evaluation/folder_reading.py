@@ -23,6 +23,9 @@ from asset2sim.schemas.report import RefineReport
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.geometry.urdf_closed import measure_closed_ends
 from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest.extract import extract_asset
+from asset2sim.tasks.interpret.part_labels import labels_from_names
+from asset2sim.tasks.interpret.part_priors import push_buttons
 from asset2sim.tasks.interpret.part_priors import task_relevant_joints as part_task_joints
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.urdf import UrdfError, UrdfModel, read_urdf
@@ -97,8 +100,9 @@ def closed_ends(files: RefinedAsset, joints: list[str] | None = None) -> tuple[d
             return default if v is None else float(v)
         return {n: ClosedState(n, float(rec[n]["q_closed"]), float(rec[n]["direction"]), float(rec[n]["open_range"]),
                                bound(rec[n].get("lower"), -math.inf), bound(rec[n].get("upper"), math.inf)) for n in names}, "report.json"
-    try:
-        measured = measure_closed_ends(UrdfFile(files.urdf_path)).closed
+    try:  # push buttons closed where they rest, as the refine measured them (part_priors.push_buttons)
+        pushed = push_buttons(labels_from_names(extract_asset(files.urdf_path)), report.category if report is not None else None)
+        measured = measure_closed_ends(UrdfFile(files.urdf_path), pushed).closed
     except Exception:  # the geometry cannot be measured: every joint closed at its limit nearest 0
         measured = {}
     out = {}

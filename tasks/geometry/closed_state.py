@@ -6,7 +6,7 @@ in ``docs/design/core.md``. Opening fraction f(q) = direction * (q - q_closed) /
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -202,13 +202,17 @@ def _subtree_phi(session, screen: _PairScreen) -> float:
     return total
 
 
-def closed_positions(session, asset: AssetDescription, *, hull_points: dict[str, np.ndarray] | None = None) -> dict[str, ClosedState]:
+def closed_positions(session, asset: AssetDescription, *, hull_points: dict[str, np.ndarray] | None = None,
+                     pushed: Collection[str] = ()) -> dict[str, ClosedState]:
     """Closed end of every movable joint of ``session`` (a fixed-base session of ``asset``).
 
     Args:
         session: a :class:`asset2sim.engines.base.SimSession` answering ``link_frame`` and ``link_distances``.
         asset: the description of the same URDF (for the kinematic tree).
         hull_points: :func:`link_hull_points` of the asset (computed when None).
+        pushed: joints of parts a press moves into their body and a spring returns (push buttons, keys, a pump's
+            head: :func:`~asset2sim.tasks.interpret.part_priors.push_buttons`), closed where they rest
+            (:func:`_joint_closed_state`).
 
     Returns joint name -> :class:`ClosedState`; the session is left at the closed state.
     """
@@ -233,14 +237,18 @@ def closed_positions(session, asset: AssetDescription, *, hull_points: dict[str,
                                            upper=np.inf, notes=["continuous joint: no closed end; the modelled pose 0 is used"])
                 state[name] = 0.0
                 continue
-            result[name] = _joint_closed_state(session, asset, jd, state, points)
+            result[name] = _joint_closed_state(session, asset, jd, state, points, pushed=name in pushed)
             state[name] = result[name].q_closed
     session.set_joint_positions(state)
     return result
 
 
-def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, float], points: dict[str, np.ndarray]) -> ClosedState:
-    """The closed end of the bounded joint ``jd``, the others at ``state`` (module docstring)."""
+def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, float], points: dict[str, np.ndarray],
+                        pushed: bool = False) -> ClosedState:
+    """The closed end of the bounded joint ``jd``, the others at ``state`` (module docstring). A ``pushed`` part (a push
+    button, a key) rests where its spring returns it, standing out of its body, and a press moves it in: where
+    compactness changes over its range, its closed end is the end of the range where the box of its parent and its
+    subtree is largest (the most compact end is where it is pressed in: a keyboard's keys all pressed down)."""
     name = jd.name
     lo, hi = session.joint_limits[name]
     sub = subtree_links(asset, jd.child)
@@ -259,7 +267,11 @@ def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, f
     ratio = float(c.max() / max(cmin, 1e-12))
     notes = []
     modelled = _modelled_end(qs, vals, ratio)
-    if modelled is not None:
+    if pushed and ratio >= 1.0 + TIE_TOL:
+        q_closed = float(qs[0] if c[0] >= c[-1] else qs[-1])
+        notes.append("a part a press moves into its body and a spring returns: closed where it rests, standing out of "
+                     "its body (the end of its range where the object's box is largest)")
+    elif modelled is not None:
         q_closed = modelled
         notes.append("compactness does not change over the range (a knob, a sash sliding in its frame): "
                      "no geometric closed end; the limit nearest the modelled pose 0 is used")

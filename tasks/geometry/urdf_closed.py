@@ -9,6 +9,7 @@ closed ends to another.
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Iterator
@@ -34,8 +35,9 @@ class UrdfClosed:
 
 
 @contextmanager
-def closed_session(source: SimSource, *, model: UrdfModel | None = None) -> Iterator[UrdfClosed]:
-    """Closed ends of every movable joint of ``source`` (:func:`closed_positions` with its defaults) in a
+def closed_session(source: SimSource, *, model: UrdfModel | None = None, pushed: Collection[str] = ()) -> Iterator[UrdfClosed]:
+    """Closed ends of every movable joint of ``source`` (:func:`closed_positions` with its defaults, the joints
+    ``pushed`` closed where a press's return spring rests them) in a
     fresh fixed-base, gravity-free PyBullet session without ground, open inside the ``with`` block. A file
     (:class:`~asset2sim.engines.source.UrdfFile` of a path) is described with its folder's part labels
     (:func:`~asset2sim.tasks.ingest.extract.extract_asset`), any other source from its model
@@ -54,7 +56,7 @@ def closed_session(source: SimSource, *, model: UrdfModel | None = None) -> Iter
             hull = link_hull_points(desc)
         except Exception:
             hull = None
-        cs = closed_positions(s, desc, **({"hull_points": hull} if hull is not None else {}))
+        cs = closed_positions(s, desc, pushed=pushed, **({"hull_points": hull} if hull is not None else {}))
         yield UrdfClosed(session=s, asset=desc, hull=hull, closed=cs)
     finally:
         s.close()
@@ -68,9 +70,9 @@ class ClosedMeasurement:
     extents: np.ndarray  # (3,) m, the object's box with every joint at its closed end (geometry_extents)
 
 
-def measure_closed_ends(source: SimSource) -> ClosedMeasurement:
-    """The closed ends of ``source`` (:func:`closed_session`) and the object's extents there (the measurement is
-    kinematic: joint dynamics do not change it).
+def measure_closed_ends(source: SimSource, pushed: Collection[str] = ()) -> ClosedMeasurement:
+    """The closed ends of ``source`` (:func:`closed_session`, the joints ``pushed`` as there) and the object's extents
+    there (the measurement is kinematic: joint dynamics do not change it).
 
     Raises:
         as :func:`closed_session`.
@@ -79,18 +81,19 @@ def measure_closed_ends(source: SimSource) -> ClosedMeasurement:
         model = source.model()
     except (UrdfError, OSError):
         model = None
-    with closed_session(source, model=model) as m:
+    with closed_session(source, model=model, pushed=pushed) as m:
         return ClosedMeasurement(closed=m.closed, extents=geometry_extents(
             m.session, m.asset, {n: c.q_closed for n, c in m.closed.items()}, m.hull))
 
 
-def measure_closed(source: SimSource) -> dict[str, ClosedState]:
-    """joint -> closed end of ``source`` (:func:`measure_closed_ends`), the joints with an opening range > 0.
+def measure_closed(source: SimSource, pushed: Collection[str] = ()) -> dict[str, ClosedState]:
+    """joint -> closed end of ``source`` (:func:`measure_closed_ends`, the joints ``pushed`` as there), the joints with
+    an opening range > 0.
 
     Raises:
         as :func:`closed_session`.
     """
-    return {n: c for n, c in measure_closed_ends(source).closed.items() if c.open_range > 0}
+    return {n: c for n, c in measure_closed_ends(source, pushed).closed.items() if c.open_range > 0}
 
 
 def aabb_extents(session) -> np.ndarray:

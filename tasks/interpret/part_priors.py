@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from asset2sim.tasks.interpret.categories import category_prior
 from asset2sim.tasks.interpret.part_labels import BODY_LABELS, canonical_label
 from asset2sim.prior_tables import MaterialPrior, PartRole, load_priors
+from asset2sim.schemas.asset import AssetDescription
 
 
 def material_for(
@@ -102,6 +103,16 @@ def spring_expected(category: str, semantic_label: str | None) -> bool:
         return True
     lp = load_priors().labels.labels.get(canon)
     return bool(lp and lp.spring)
+
+
+def push_buttons(asset: AssetDescription, category: str | None) -> frozenset[str]:
+    """Prismatic joints of ``asset`` (a :class:`~asset2sim.schemas.asset.AssetDescription` of a ``category`` object,
+    None: none known) whose part a press moves into the body and a return spring brings back (:func:`spring_expected`:
+    push buttons and keys in any category, a category's spring-returned slides such as a pump's head or a toaster's
+    carriage lever): such a part rests where it stands out of its body, its closed end
+    (:func:`~asset2sim.tasks.geometry.closed_state.closed_positions` ``pushed``)."""
+    return frozenset(j.name for j in asset.movable_joints()
+                     if j.type == "prismatic" and spring_expected(category or "", asset.link(j.child).semantic_label))
 
 
 def request_label_matches(category: str, request_label: str | None, semantic_label: str | None) -> bool:

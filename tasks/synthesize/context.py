@@ -24,6 +24,7 @@ from asset2sim.tasks.ingest import extract
 from asset2sim.formats import ReadOptions
 from asset2sim.tasks.interpret.mounting import root_mounting
 from asset2sim.tasks.interpret.part_labels import labels_from_names
+from asset2sim.tasks.interpret.part_priors import push_buttons
 from asset2sim.tasks.interpret.reading import interpret
 
 from asset2sim.engines.base import SessionOptions, SimSession
@@ -106,7 +107,7 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
     kin_options = SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=cfg.sim)
     with open_session("pybullet", asset.urdf_path, kin_options) as kin:  # the input asset, kinematics only
         hull = link_hull_points(asset, cache=cache)
-        closed = closed_positions(kin, asset, hull_points=hull)
+        closed = closed_positions(kin, asset, hull_points=hull, pushed=push_buttons(asset, meaning.category))
         closed_q = {n: c.q_closed for n, c in closed.items()}
         extents = object_extents(kin, closed_q, asset, hull)
         subtrees = {j.name: subtree_links(asset, j.child) for j in asset.movable_joints()}

@@ -28,8 +28,10 @@ from tests.unseen_assets import (
     build_coffee_machine,
     build_bottle,
     build_bucket,
+    build_click_pen,
     build_desk_fan,
     build_desk_lamp,
+    build_dispenser,
     build_eyeglasses,
     build_kettle,
     build_keyboard,
@@ -277,3 +279,20 @@ def test_a_wardrobes_drawers_sweep_after_its_doors_without_a_stale_contact_betwe
             assert cached == pytest.approx(fresh, abs=1e-4), (joint, cached, fresh)
     finally:
         s.close()
+
+
+@pytest.mark.parametrize("build, prompt, travel", [(build_click_pen, "A pen.", 0.06), (build_dispenser, "A dispenser.", None)])
+def test_a_push_button_rests_out_of_its_body_and_is_pressed_its_whole_travel(tmp_path, build, prompt, travel, refine_once):
+    """A click pen's button (its travel 0.06 units into a barrel drawn solid) and a pump dispenser's head rest where
+    their springs return them, standing out of the body: closed at the unpressed end, opened by a press. Compactness
+    alone closed them pressed in; and from the unpressed end the pen's button met its solid barrel 2 mm into its
+    travel (the limit was clipped from 9.3 to 0.19 mm) until the barrel's pieces were cut at the pressed end too, the
+    recess a real barrel has."""
+    res = refine_once(build(tmp_path / "src"), prompt, extras=False)
+    r = res.report
+    assert r.failure_mode == "none", (r.failure_mode, r.readiness)
+    (joint, end), = r.closed_ends.items() if len(r.closed_ends) == 1 else [(j, e) for j, e in r.closed_ends.items() if j == "joint_0"]
+    assert end["q_closed"] == 0.0 and end["direction"] == 1.0, end  # modelled unpressed at 0, pressed toward its upper limit
+    assert r.opening_fractions[joint] == pytest.approx(0.0, abs=1e-6)
+    if travel is not None:
+        assert end["open_range"] == pytest.approx(travel * r.scale, rel=0.05), end  # the whole travel, not clipped

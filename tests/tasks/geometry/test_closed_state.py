@@ -161,3 +161,27 @@ def test_a_model_in_memory_is_described_and_closed_as_its_file(tmp_path):
     nameless.path = None
     with pytest.raises(urdf_mod.UrdfError, match="no file an engine could load"):
         urdf_mod.path_of(nameless)
+
+
+def test_push_buttons_close_where_they_rest_out_of_their_body(tmp_path):
+    """A remote's four buttons (prismatic 0-8 mm down into its top, its own height 2.8 cm) are a sixth of the object's
+    height: pressed in, the object's box is smallest, so compactness alone closed every button pressed in (a keyboard
+    had every key down). A push button rests where its spring returns it, standing out of its body
+    (``part_priors.push_buttons``): its closed end is the unpressed 0, and it opens (is pressed) toward 8 mm; a part of
+    the same geometry that no spring returns keeps the compact end."""
+    from asset2sim.tasks.geometry.urdf_closed import closed_session
+    from asset2sim.tasks.interpret.part_priors import push_buttons
+    from tests.unseen_assets import build_remote
+
+    src = build_remote(tmp_path / "remote")
+    asset = extract_asset(src)
+    urdf = asset.urdf_path
+    pushed = push_buttons(asset, "Remote")
+    assert pushed == {j.name for j in asset.movable_joints()} and len(pushed) == 4
+    with closed_session(UrdfFile(urdf), pushed=pushed) as m:
+        rest = dict(m.closed)
+    with closed_session(UrdfFile(urdf)) as m:
+        compact = dict(m.closed)
+    for j in pushed:
+        assert rest[j].q_closed == rest[j].lower == 0.0 and rest[j].direction == 1.0 and "rests" in rest[j].notes[0]
+        assert compact[j].q_closed == pytest.approx(compact[j].upper)  # the most compact end: pressed in
