@@ -2,7 +2,9 @@
 in several engines: root fixed (the other hand holds it), gravity on, no ground, the files' springs; the part pressed
 from its initial state into each end of its range at its grasp point (``report.json``'s operability hand: grasp
 lever, the top of its operating range) with 20 N and with that top, at most at the hand's speed, slowing near the stop (0.25 m/s at the
-grasp point). Prints per part, engine and force how far past the limit it went (deg or mm, and mm at the grasp
+grasp point). A push button or key (``part_priors.push_buttons``) is pressed only into the end it is pressed toward,
+away from its closed end, where it rests out of its body: a hand pushes a button in and never pulls it out. Prints per
+part, engine and force how far past the limit it went (deg or mm, and mm at the grasp
 point: at 1/240 s a hand at 0.25 m/s moves the grasp point 1 mm a step, several degrees on a 3 cm lever), how much
 deeper its deepest self-contact sank (mm), whether the engine diverged and the share of the force the hand pressed
 with at the farthest step (none: the hand still moved it at its speed; a small share: the one step a part resting at
@@ -40,6 +42,9 @@ def main(argv: list[str] | None = None) -> int:
     from asset2sim.tasks.check.gripper import GripperLimits
     from asset2sim.tasks.check.press import press_joint
     from asset2sim.tasks.check.sweep import HOLD_FORCE
+    from asset2sim.tasks.ingest.extract import extract_asset
+    from asset2sim.tasks.interpret.part_labels import labels_from_names
+    from asset2sim.tasks.interpret.part_priors import push_buttons
 
     speed = GripperLimits().max_speed_m_s
     folders = sorted(p.parent for p in args.root.glob("*/mobility.urdf"))
@@ -53,6 +58,8 @@ def main(argv: list[str] | None = None) -> int:
         if not parts:
             print(f"{f.name:>7}  no handled part", flush=True)
             continue
+        pushed = push_buttons(labels_from_names(extract_asset(f)), asset.report.category)
+        ends = asset.report.closed_ends
         options = asset.session_options()
         fixed = args.root_hold == "fixed"
         options = type(options)(**{**options.__dict__, "fixed_base": fixed, "gravity": True, "ground": False})
@@ -71,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
                     lo, hi = session.joint_limits[j]
                     for force in args.forces.split(","):
                         newton = float(p["hand_force_n"]) if force == "top" else float(force)
-                        for limit in (lo, hi):
+                        pressed_in = j in pushed and j in ends  # only into the end away from where it rests
+                        for limit in ((hi,) if ends[j]["direction"] > 0 else (lo,)) if pressed_in else (lo, hi):
                             r = press_joint(session, j, limit, newton * (lever or 1.0), speed / lever if lever else speed)
                             unit, k = ("deg", math.degrees(1)) if lever else ("mm", 1e3)
                             at_grasp = r.past * (lever or 1.0)  # m the grasp point went past the stop
