@@ -47,8 +47,9 @@ _THE_BEFORE = re.compile(r"(?<![\w-])(?:the|its|their)\s+$")
 _END_TAIL = re.compile(r"\s*(?:$|[,.;:!?)]|and\b|but\b|with\b|while\b|position\b)")
 
 #: Labels (:func:`request_values.part_label`'s) pressed from their rest, the closed end: "pressed" is the far end. A
-#: pump dispenser's pump is not one: its head on top is closed pressed down, where the object is most compact.
-PRESSED_LABELS = frozenset({"button", "lever", "trigger", "plunger", "foot"})
+#: pump dispenser's pump and its head rest up, their closed end, as push buttons do (``part_priors.push_buttons``,
+#: ``docs/design/refine.md`` "Closed state"); a stapler's arm is not one: it is closed pressed down.
+PRESSED_LABELS = frozenset({"button", "lever", "trigger", "plunger", "foot", "pump", "head", "nozzle"})
 
 _BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)|upright|" + rv.WORDS["fragments"]["FLAT"])  # "the handle upright": a part's end
 
@@ -101,8 +102,8 @@ def _band_and_target(value: object, label: str | None = None) -> tuple[str, Stat
     v = str(value)
     if v == "pressed":  # a stapler's arm pressed down is closed
         return ("fully" if label in PRESSED_LABELS else "closed"), None
-    if v == "pressed_slightly":  # a button pressed a little is a little from its rest; a stapler's arm or a pump's
-        return ("slightly_open" if label in PRESSED_LABELS else "mostly"), None  # head, from its open rest
+    if v == "pressed_slightly":  # a button or a pump's head pressed a little is a little from its rest; a stapler's arm
+        return ("slightly_open" if label in PRESSED_LABELS else "mostly"), None  # from its open rest
     if v.startswith("end:"):
         end = v[4:]
         return ("fully" if end in ("high", "on") else "closed"), StateTarget(kind="end", end=end)  # type: ignore[arg-type]

@@ -38,8 +38,9 @@ def _lever_z(out_dir, q: float) -> float:
 
 def test_toaster_lever_up_is_its_top_found_from_the_geometry(toaster, refine_once):
     """A toaster "with its lever up": the lever lands at the top of its slot. In this
-    asset the top is the joint's LOWER limit and the geometric closed end is
-    the bottom, so neither "closed" nor "upper limit" would pass."""
+    asset the top is the joint's LOWER limit; the lever rests up, where its
+    spring returns it (``part_priors.push_buttons``: the most compact end is the
+    bottom), so "up" is the closed end and "down" the far end."""
     res = refine_once(toaster, TOASTER, category="Toaster", extras=False)
     r = res.report
     q = r.initial_joint_positions["lever_slide"]
@@ -47,7 +48,7 @@ def test_toaster_lever_up_is_its_top_found_from_the_geometry(toaster, refine_onc
     z_top, z_at, z_bottom = _lever_z(res.out_dir, 0.0), _lever_z(res.out_dir, q), _lever_z(res.out_dir, travel)
     assert z_top > z_bottom
     assert z_at >= z_top - 0.02 * (z_top - z_bottom), (q, z_at, z_top, z_bottom)
-    assert abs(r.closed_positions["lever_slide"] - travel) < 1e-6 * max(travel, 1.0)  # closed end is the bottom
+    assert abs(r.closed_positions["lever_slide"]) < 1e-6 * max(travel, 1.0)  # the closed end is the top, its rest
     assert r.request is not None and r.request.ignored == []
     (end,) = [x for x in r.request.quantities if x.what == "lever_slide end"]
     assert end.within_tolerance and end.phrase == "lever up"

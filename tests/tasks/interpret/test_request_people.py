@@ -97,14 +97,14 @@ def test_a_pressed_lever_is_at_its_far_end_and_a_part_lying_flat_is_opened_flat(
 
 
 def test_a_pump_pressed_part_of_the_way_is_that_far_from_its_rest(generated):
-    """A pump dispenser's pump (PartNet-Mobility's ``pump_lid``) is closed pressed down, where the object is most
-    compact: pressed, it is at its closed end; pressed halfway, half its travel; pressed a little, a little from its
-    rest (mostly open). "pressed" and "halfway" used to be two states of every part, in contradiction, and the pump
-    was no part word: the request was not met. A stapler's arm rests open too; a button rests at its closed end."""
+    """A pump dispenser's pump (PartNet-Mobility's ``pump_lid``) rests up, its closed end, as a push button does
+    (``part_priors.push_buttons``): pressed, it is at its far end; pressed halfway, half its travel; pressed a little,
+    a little from its rest. "pressed" and "halfway" used to be two states of every part, in contradiction, and the
+    pump was no part word: the request was not met. A stapler's arm rests open: pressed, it is closed."""
     (pump,) = joint_of(resolve(generated["dispenser"], "A soap dispenser.")[1], "pump_lid")
     for text, band in [("A soap dispenser with its pump pressed halfway.", "halfway"),
-                       ("A lotion dispenser with the pump slightly pressed.", "mostly"),
-                       ("A soap dispenser with its pump pressed.", "closed"), ("A soap dispenser, halfway pressed.", "halfway")]:
+                       ("A lotion dispenser with the pump slightly pressed.", "slightly_open"),
+                       ("A soap dispenser with its pump pressed.", "fully"), ("A soap dispenser, halfway pressed.", "halfway")]:
         res, *_ = resolve(generated["dispenser"], text)
         assert res.unapplied == [] and res.bands[pump] == band, (text, res.bands, res.unapplied)
         assert not parse_request(text).warnings, text
@@ -113,8 +113,8 @@ def test_a_pump_pressed_part_of_the_way_is_that_far_from_its_rest(generated):
         ("button", "slightly_open")]
     assert [(j.label, j.band) for j in parse_request("A box with its lid pushed half closed.").joint_states] == [("lid", "halfway")]
     with build_context(generated["dispenser"], "A soap dispenser.") as (ctx, _):
-        end = ctx.closed[pump]  # the builder's slide points down: pressed is its upper limit, the closed end
-        assert end.q_closed == pytest.approx(end.upper) and end.direction == -1.0
+        end = ctx.closed[pump]  # the builder's slide points down: pressed is its upper limit, the rest its lower
+        assert end.q_closed == pytest.approx(end.lower) and end.direction == 1.0
 
 
 def test_open_then_closed_for_one_part_is_a_contradiction_in_either_order():
