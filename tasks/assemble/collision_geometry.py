@@ -234,8 +234,9 @@ def _state_pieces(model: urdf.UrdfModel, hit: tuple[dict[str, list[Piece]], list
     pieces, notes = {k: list(v) for k, v in hit[0].items()}, list(hit[1])
     if decompose:
         separate_parent_child(model, pieces, notes, state=state)
+        joints = {x.name: x for x in model.joints}
         for name in sorted(pushed):
-            j = next((x for x in model.joints if x.name == name), None)  # a pushed joint the model lacks: none
+            j = joints.get(name)
             if j is not None and j.type == "prismatic" and np.isfinite(j.lower) and np.isfinite(j.upper):
                 for end in (j.lower, j.upper):
                     separate_parent_child(model, pieces, notes, state={**state, name: float(end)}, joints={name})
