@@ -36,8 +36,12 @@ HOLD_FORCE = 1000.0
 class SweepConfig:
     """Sweep knobs (units on every field)."""
 
-    #: nominal time for a full traverse, s: v_max = range / traverse_time
+    #: nominal time for a full traverse, s: v_max = range / traverse_time, at least :attr:`least_speed`
     traverse_time: float = 1.0
+    #: least traverse speed at the part's far edge, m/s (:func:`traverse_speed`): a twenty-fifth of the hand's 0.25 m/s
+    #: (``gripper.GripperLimits``). A 2 mm button traversed in 1 s moves 2 mm/s, and at that pace Bullet's velocity
+    #: motor does not lift a part of a gram off the stop its closer presses it onto (``docs/design/simulators.md``).
+    least_speed: float = 0.01
     #: longest drive each way, s
     time_limit: float = 3.0
     #: k_p of the position loop, 1/s
@@ -124,6 +128,13 @@ def effort_limit(session: SimSession, joint: str, links: list[str], open_range: 
     return float(cfg.weight_factor * m_sub * G * lever + pull)
 
 
+def traverse_speed(session: SimSession, joint: str, links: list[str], open_range: float, cfg: SweepConfig) -> float:
+    """The drive's top speed (rad/s or m/s): ``open_range`` (rad or m) over ``cfg.traverse_time``, at least
+    ``cfg.least_speed`` (m/s) at the far edge of ``links`` (over their largest distance from the axis for a hinge)."""
+    lever = 1.0 if session.joint_types[joint] == "prismatic" else max(_lever(session, joint, links), 1e-3)
+    return max(open_range / cfg.traverse_time, cfg.least_speed / lever)
+
+
 def _deepest(session: SimSession) -> tuple[float, tuple[str, str] | None]:
     _, pairs = session.self_penetration()
     if not pairs:
@@ -148,7 +159,7 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     dt = session.options.conventions.timestep
     jtype = session.joint_types[joint]
     q_far = closed + direction * open_range
-    v_max = open_range / cfg.traverse_time
+    v_max = traverse_speed(session, joint, links, open_range, cfg)
     limit = effort_limit(session, joint, links, open_range, cfg, closed, direction)
     session.set_joint_positions({**initial_state, joint: closed})
     vdiv = EXPLOSION_JOINT_SPEED_PRISMATIC if jtype == "prismatic" else EXPLOSION_JOINT_SPEED_REVOLUTE  # the divergence metric's
@@ -257,7 +268,8 @@ def sweep_together(session: SimSession, joints: list[str], closed: dict[str, tup
     for j in joints:
         qc, d, rng = closed[j]
         speed = EXPLOSION_JOINT_SPEED_PRISMATIC if session.joint_types[j] == "prismatic" else EXPLOSION_JOINT_SPEED_REVOLUTE
-        runs.append(_Swept(j, closed[j], effort_limit(session, j, list(moved[j]), rng, cfg, qc, d), moved[j], rng / cfg.traverse_time,
+        runs.append(_Swept(j, closed[j], effort_limit(session, j, list(moved[j]), rng, cfg, qc, d), moved[j],
+                           traverse_speed(session, j, list(moved[j]), rng, cfg),
                            speed, strokes=[Reach(limit)]))
     others = {r.joint: [c for c in at_rest if not ({c.link_a, c.link_b} & r.links)
                         and any({c.link_a, c.link_b} & o.links for o in runs if o is not r)] for r in runs}

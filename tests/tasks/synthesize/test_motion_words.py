@@ -333,6 +333,22 @@ def test_a_closer_shuts_its_part_and_a_hand_still_opens_it(refine_once, tmp_path
     assert shut["shut"] is True and shut["seconds"] <= 10.0
 
 
+def test_a_button_of_a_gram_on_its_closer_is_swept_at_a_hands_pace(refine_once, tmp_path):
+    """A remote's 0.8 g buttons, asked to spring shut on their own, rest out of its top pressed onto their stop by
+    their closers. Swept over their 1.9 mm travel in a second (1.9 mm/s), Bullet's velocity motor did not lift them off
+    that stop with any force (``blocked_joint``); at the sweep's least speed, 1 cm/s at the far edge, it does, and the
+    buttons, released pressed in, spring back."""
+    from tests.unseen_assets import build_remote
+
+    res = refine_once(build_remote(tmp_path / "remote"), "A remote whose buttons slide shut on their own.", extras=False)
+    r = res.report
+    assert r.failure_mode == "none", r.readiness
+    sweep = r.metric("joint_sweep").details["joints"]
+    assert sweep and all(j["passed"] and j["reached_open"] >= 0.95 for j in sweep.values()), sweep
+    assert all(res.overlay.joints[j].holding.mechanism == "closer" for j in sweep)
+    assert all(v["shut"] for v in r.metric("shuts_on_its_own").details["joints"].values())
+
+
 def test_a_drop_down_door_that_shuts_itself_outpulls_its_weight_and_a_hand_cannot_open_it(refine_once, tmp_path):
     """An oven's drop-down door: its weight opens it further the further it opens. Its closer was sized to the load
     near the closed end, and released fully open the door stayed there, while the output was called ready. The closer
