@@ -38,9 +38,8 @@ class SweepConfig:
 
     #: nominal time for a full traverse, s: v_max = range / traverse_time, at least :attr:`least_speed`
     traverse_time: float = 1.0
-    #: least traverse speed at the part's far edge, m/s (:func:`traverse_speed`): a twenty-fifth of the hand's 0.25 m/s
-    #: (``gripper.GripperLimits``). A 2 mm button traversed in 1 s moves 2 mm/s, and at that pace Bullet's velocity
-    #: motor does not lift a part of a gram off the stop its closer presses it onto (``docs/design/simulators.md``).
+    #: least traverse speed at the part's far edge, m/s (:func:`traverse_speed`), a 25th of the hand's 0.25 m/s: at 2 mm/s
+    #: Bullet's motor does not lift a button of a gram off the stop its closer presses it onto (``docs/design/simulators.md``)
     least_speed: float = 0.01
     #: longest drive each way, s
     time_limit: float = 3.0
@@ -114,18 +113,15 @@ def effort_limit(session: SimSession, joint: str, links: list[str], open_range: 
                  closed: float | None = None, direction: float = 1.0) -> float:
     """Drive force limit E = f_w m_sub g L + P (N*m or N): m_sub the engine's masses of ``links``, L their largest
     distance from the axis (1 for prismatic), P the largest pull of the session's joint spring (stiffness k, reference
-    q_s) over the swept range, k max(|q_c - q_s|, |q_c + d R - q_s|) from the closed end q_c = ``closed`` opening along
-    ``direction`` d over R = ``open_range`` (rad or m): k R for a spring centred on its closed end, more for a closer
-    preloaded shut (its reference beyond the closed end); k R when ``closed`` is None."""
+    q_s) over the range R = ``open_range`` (rad or m) from the closed end q_c = ``closed`` along ``direction`` d,
+    k max(|q_c - q_s|, |q_c + d R - q_s|): k R centred on its closed end, more for a closer preloaded shut (k R without q_c)."""
     masses = session.link_masses()
     m_sub = float(sum(masses.get(ln, 0.0) for ln in links))
     lever = 1.0 if session.joint_types[joint] == "prismatic" else _lever(session, joint, links)
     spring = session.options.springs.get(joint)
-    pull = 0.0
-    if spring is not None:
-        pull = spring.stiffness * (open_range if closed is None else
-                                   max(abs(closed - spring.reference), abs(closed + direction * open_range - spring.reference)))
-    return float(cfg.weight_factor * m_sub * G * lever + pull)
+    far = open_range if spring is None or closed is None else max(abs(closed - spring.reference),
+                                                                  abs(closed + direction * open_range - spring.reference))
+    return float(cfg.weight_factor * m_sub * G * lever + (spring.stiffness * far if spring is not None else 0.0))
 
 
 def traverse_speed(session: SimSession, joint: str, links: list[str], open_range: float, cfg: SweepConfig) -> float:
