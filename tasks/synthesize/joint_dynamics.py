@@ -19,13 +19,13 @@ from asset2sim.schemas.overlay import Holding, JointDynamics, LinkPhysics
 from asset2sim.schemas.request import MotionPhrase
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.prior_tables import load_priors
-from asset2sim.tasks.interpret.part_priors import spring_expected
+from asset2sim.tasks.interpret.part_priors import push_buttons, spring_expected
 from asset2sim.tasks.interpret.named_parts import joints_of, moving_parts
 from asset2sim.tasks.interpret.operating_forces import operating_range
 from asset2sim.tasks.synthesize import physics, request_apply, set_down
 from asset2sim.tasks.synthesize.context import EstimationContext
-from asset2sim.tasks.synthesize.spring_holds import (BALANCE_LABELS, CLOSED_HOLD_FRACTIONS, COUNTERBALANCE_LABELS, balance,
-                                                     closer, counterbalance, far_edge, lid_support, opening_loads,
+from asset2sim.tasks.synthesize.spring_holds import (BALANCE_LABELS, CLOSED_HOLD_FRACTIONS, COUNTERBALANCE_LABELS,
+                                                     balance, closer, counterbalance, far_edge, lid_support, opening_loads,
                                                      part_label, stopped_shut)
 
 
@@ -42,6 +42,9 @@ class JointChoice:
     """a spring that returns the part to its closed end (a door closer, a self-closing slide)"""
     words: tuple[MotionPhrase, ...] = ()
     """the request's words about this part's motion that made these choices"""
+    push_button: bool = False
+    """a push button or key (:func:`~asset2sim.tasks.interpret.part_priors.push_buttons`): resting out of its body,
+    its return spring is preloaded onto that stop (:func:`~asset2sim.tasks.synthesize.spring_holds.closer`)"""
     state_asked: bool = True
     """whether the request asks a state of this part: one asked to move freely and given none has no friction that
     holds it against its weight (it starts where its weight leaves it: ``tasks/refine.py``, ``_attempt``)"""
@@ -63,9 +66,11 @@ def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tu
     its ordinal names ("the main door": :func:`~asset2sim.tasks.interpret.named_parts.joints_of`), one naming none to
     the ``relevant`` joints (the
     task's parts). A relevant joint's category may expect a return spring (a stapler's arm; ``categories.yaml``
-    ``spring_labels``); a self-closing part gets high damping unless a word says otherwise (a door closer is a spring
+    ``spring_labels``), and every push button or key has one (:func:`~asset2sim.tasks.interpret.part_priors.push_buttons`:
+    a keyboard's keys spring back whichever key the task presses); a self-closing part gets high damping unless a word says otherwise (a door closer is a spring
     and a hydraulic damper)."""
     relevant = list(relevant)
+    buttons = push_buttons(ctx.asset, ctx.category)  # a push button or key springs back whichever part the task moves
     applied: dict[str, list[MotionPhrase]] = {j.name: [] for j in ctx.asset.movable_joints()}
     missing = []
     for word in ctx.request.motions:
@@ -86,8 +91,9 @@ def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tu
         label = ctx.asset.link(j.child).semantic_label
         out[j.name] = JointChoice(
             damping_level=levels[-1] if levels else ("high" if closing else "moderate"), holds_position="hold" in kinds,
-            spring=bool(kinds & {"spring", "self_closing"}) or (j.name in relevant and spring_expected(ctx.category, label)),
-            stiff="stiff" in kinds, free_moving="free" in kinds, self_closing=closing, words=tuple(words))
+            spring=bool(kinds & {"spring", "self_closing"}) or ((j.name in relevant or j.name in buttons) and spring_expected(ctx.category, label)),
+            stiff="stiff" in kinds, free_moving="free" in kinds, self_closing=closing, words=tuple(words),
+            push_button=j.name in buttons)
     return out, missing
 
 
@@ -146,13 +152,15 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
             mechanism = HELD_AGAINST_FREE
         note = source + "".join(f"; request '{w.phrase}': {w.kind.replace('_', ' ')}" for w in ch.words)
         on_slide = name in prismatic and part_label(ctx, name) in SLIDE_LABELS  # its slide sets its least friction
-        if ch.self_closing:
+        button = ch.push_button and ch.spring and not ch.free_moving  # resting out of its body: pressed onto that stop
+        if ch.self_closing or (button and abs(state[name] - cs.position(0.0) * unit) <= band):
             pushed = opening_loads(kin, links, state, scale, cs, name, ctx.subtrees[name], unit, rot)
             held = closer(ctx, loads[name], cs, unit, hold, pushed, at_closed, stopped_shut(ctx, kin, state, scale, name),
                           hand=hand_top(ctx, name, scale, name in prismatic), free=free_standing(ctx),
-                          floor=0.0 if on_slide else physics.friction_floor(loads[name], name in prismatic))
+                          floor=0.0 if on_slide else physics.friction_floor(loads[name], name in prismatic),
+                          what="self-closing: a closer spring" if ch.self_closing else "a push button's return spring")
             spring, hold = held.spring, held.hold
-            note, mechanism = f"{note}; {held.note}", "closer"
+            note, mechanism = f"{note}; {held.note}", "closer" if ch.self_closing else "return spring"
         elif ch.spring:
             load = loads[name]
             k = max(3.0 * physics.HOLD_SAFETY * max(hold, 1e-6) / max(cs.open_range * unit, 1e-6), load.gravity_stiffness * 2.0)

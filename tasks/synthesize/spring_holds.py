@@ -43,7 +43,7 @@ CLOSER_STOP_SHARE = 0.01
 
 def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, unit: float, hold: float, pushes: np.ndarray,
            closed_load: float = 0.0, stopped: bool = True, *, hand: float = 0.0, free: bool = True,
-           floor: float = 0.0) -> SpringHold:
+           floor: float = 0.0, what: str = "self-closing: a closer spring") -> SpringHold:
     """The spring of a self-closing part (a door closer, a self-closing lid or slide): it presses the part into its
     closed end with a preload F0 and pulls F1 at its far end, rate k = (F1 - F0) / R about a reference F0 / k beyond
     the closed end (R: the range), so that the part returns shut from anywhere in its range against friction of at
@@ -65,7 +65,7 @@ def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, uni
       shuts itself from fully open needs a spring a hand may not open: the check says so).
 
     ``pushes``: the loads (N m or N, >= 0) pushing the part open at :data:`OPENING_LOAD_FRACTIONS`
-    (:func:`opening_loads`); ``hold``: the largest load (N m or N) either way near the state, and pushing it open near
+    (:func:`opening_loads`); ``what``: the spring as its note names it (a push button's return spring is such a closer); ``hold``: the largest load (N m or N) either way near the state, and pushing it open near
     its closed end; ``hand``: the top of the part's operating range at its grasp (N m at :func:`far_edge` for a hinge,
     N for a slide; 0: unknown, no cap).
 
@@ -106,7 +106,7 @@ def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, uni
             far = max(CLOSER_PROGRESSION * preload, min(cap, 2.0 * preload))
         k = (far - preload) / rng
         ref = float(closed_at - cs.direction * preload / k)
-        why = (f"self-closing: a closer spring presses it shut with {preload:.3g} {u} and pulls {far:.3g} {u} fully open "
+        why = (f"{what} presses it shut with {preload:.3g} {u} and pulls {far:.3g} {u} fully open "
                f"(k = {k:.4g} about {ref:.4g}" + (f"; a hand works it with up to {hand:.3g} {u}" if hand > 0 else "") + ")")
         return SpringHold((float(k), ref), CLOSER_FRICTION_SHARE * preload / physics.HOLD_SAFETY, why)
     preload = max(sized, physics.HOLD_SAFETY * hold, 1e-6)
