@@ -40,6 +40,11 @@ from tests.unseen_assets import build_double_door_cabinet, build_oven
     ("a cabinet whose door never slams shut", "soft_close", "door"),
     ("a cabinet whose drawer sticks", "stiff", "drawer"),
     ("a microwave whose door opens with little force", "low_damping", "door"),
+    ("a cabinet whose drawer slides out with little resistance", "free", "drawer"),
+    ("a box with a lid that flops open", "free", "lid"),
+    ("a laptop with a wobbly screen", "free", "screen"),
+    ("a bag whose handle dangles", "free", "handle"),
+    ("a cabinet whose drawers are sticky", "stiff", "drawer"),
 ])
 def test_each_word_about_motion_is_read_with_the_part_it_names(text, kind, label):
     spec = parse_request(text)
