@@ -20,7 +20,6 @@ from asset2sim.tasks.assemble import (collision_geometry, container_pieces, foot
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.geometry import limits, urdf_closed
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_tuples
-from asset2sim.tasks.interpret.part_priors import push_buttons
 from asset2sim.tasks.state import refine_state, state_search
 from asset2sim.tasks.synthesize import estimate, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
@@ -89,7 +88,7 @@ def closed_on_output(ctx: EstimationContext, syn: Synthesis, ws: Workspace, log:
     :mod:`asset2sim.tasks.geometry.urdf_closed`), the requested state and the overlay's initial positions
     moved onto them. Unchanged when the measurement fails."""
     try:
-        measured = urdf_closed.measure_closed(ws.source(syn.candidate(ctx, overrides)), push_buttons(ctx.asset, ctx.category))
+        measured = urdf_closed.measure_closed(ws.source(syn.candidate(ctx, overrides)), ctx.push_buttons)
     except Exception as exc:
         log.say("closed_state", f"closed ends not measured on the output ({type(exc).__name__}: {exc}); the input's are used")
         return syn

@@ -57,6 +57,9 @@ class EstimationContext:
     """(3, 3) resting-pose rotation the output will carry (``tasks.state.pose``), or None."""
     task: str | None = None
     """The manipulation task refine was given ("close the microwave door"): the post-check executes it."""
+    push_buttons: frozenset[str] = frozenset()
+    """Joints of push buttons and keys (:func:`~asset2sim.tasks.interpret.part_priors.push_buttons`): closed where
+    they rest out of their body, each returned there by its spring."""
     mounting: RootMount | None = None
     """How the root is held (:func:`asset2sim.tasks.interpret.mounting.root_mounting`, resolved by :func:`build_context`);
     None: free-standing."""
@@ -107,7 +110,8 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
     kin_options = SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=cfg.sim)
     with open_session("pybullet", asset.urdf_path, kin_options) as kin:  # the input asset, kinematics only
         hull = link_hull_points(asset, cache=cache)
-        closed = closed_positions(kin, asset, hull_points=hull, pushed=push_buttons(asset, meaning.category))
+        buttons = push_buttons(asset, meaning.category)
+        closed = closed_positions(kin, asset, hull_points=hull, pushed=buttons)
         closed_q = {n: c.q_closed for n, c in closed.items()}
         extents = object_extents(kin, closed_q, asset, hull)
         subtrees = {j.name: subtree_links(asset, j.child) for j in asset.movable_joints()}
@@ -117,5 +121,5 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
         ctx = EstimationContext(asset=asset, geometry=geometry, request=meaning.request, category=meaning.category,
                                 category_reason=meaning.category_reason, closed=closed, closed_extents=extents,
                                 subtrees=subtrees, joint_boxes=boxes, hull_points=hull, closed_volume=volume,
-                                mounting=mount)
+                                push_buttons=buttons, mounting=mount)
         yield ctx, kin

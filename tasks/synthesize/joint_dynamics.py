@@ -19,7 +19,7 @@ from asset2sim.schemas.overlay import Holding, JointDynamics, LinkPhysics
 from asset2sim.schemas.request import MotionPhrase
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.prior_tables import load_priors
-from asset2sim.tasks.interpret.part_priors import push_buttons, spring_expected
+from asset2sim.tasks.interpret.part_priors import spring_expected
 from asset2sim.tasks.interpret.named_parts import joints_of, moving_parts
 from asset2sim.tasks.interpret.operating_forces import operating_range
 from asset2sim.tasks.synthesize import physics, request_apply, set_down
@@ -70,7 +70,6 @@ def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tu
     a keyboard's keys spring back whichever key the task presses); a self-closing part gets high damping unless a word says otherwise (a door closer is a spring
     and a hydraulic damper)."""
     relevant = list(relevant)
-    buttons = push_buttons(ctx.asset, ctx.category)  # a push button or key springs back whichever part the task moves
     applied: dict[str, list[MotionPhrase]] = {j.name: [] for j in ctx.asset.movable_joints()}
     missing = []
     for word in ctx.request.motions:
@@ -91,9 +90,9 @@ def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tu
         label = ctx.asset.link(j.child).semantic_label
         out[j.name] = JointChoice(
             damping_level=levels[-1] if levels else ("high" if closing else "moderate"), holds_position="hold" in kinds,
-            spring=bool(kinds & {"spring", "self_closing"}) or ((j.name in relevant or j.name in buttons) and spring_expected(ctx.category, label)),
+            spring=bool(kinds & {"spring", "self_closing"}) or ((j.name in relevant or j.name in ctx.push_buttons) and spring_expected(ctx.category, label)),
             stiff="stiff" in kinds, free_moving="free" in kinds, self_closing=closing, words=tuple(words),
-            push_button=j.name in buttons)
+            push_button=j.name in ctx.push_buttons)
     return out, missing
 
 
