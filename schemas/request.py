@@ -172,6 +172,9 @@ class JointStateRequest(Strict):
     """How ``ordinal`` counts, seen facing the object's front."""
     phrase: str = ""
     """The words of the request this came from."""
+    bare: bool = False
+    """A lone "open" that says no more than open (``mostly``): how far is the part's own, and a part its weight
+    carries open, a drop-down door, is open resting on its open stop (``request_apply``)."""
 
     def short(self) -> str:
         """The request in a few symbols, for tests and logs (:meth:`words` says it for people): who (label, joint or

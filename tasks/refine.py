@@ -330,6 +330,10 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
         second = _attempt(ctx, run, fractions=fractions)
         if second.check.passed and not second.check.topples:
             return replace(second, design=[design, *second.design]), pose_note
+        if second.check.only_topples and _more_to_move(ctx, run, second):  # and opened parts as light as their sources allow
+            lighter = _attempt(ctx, run, fractions=fractions, most=True)
+            if lighter.settles:
+                return replace(lighter, design=[design, *lighter.design]), pose_note
         run.log.say("stability", "the steadier opening did not pass every check: the bands' targets kept")
     state_in = estimate.state_from_bands(ctx.closed, att.bands, 1.0, att.prismatic)
     R, note = pose.most_stable_rotation(run.kin, ctx.asset, att.overlay.links, state_in, att.overlay.scale, ctx.hull_points,

@@ -170,7 +170,8 @@ def refine_request_met(spec: RequestSpec, res: StateResolution | None, found: Re
     for joint, jr in (res.requests.items() if res is not None else []):
         if jr.target is not None or joint not in closed_out or joint not in state:
             continue  # a number or an end: graded through the findings
-        bands.append((jr, joint, band_missed(jr.phrase or jr.band, joint, jr.band, abs(closed_out[joint].fraction(state[joint])))))
+        band = res.bands.get(joint, jr.band)  # as resolved for this part: a drop-down door's lone "open" is fully open
+        bands.append((jr, joint, band_missed(jr.phrase or band, joint, band, abs(closed_out[joint].fraction(state[joint])))))
     missed_bands, not_graded = object_states(bands, ranks)
     graded += len(bands) - len(not_graded)
     return request_met_metric(unmet + missed_bands, request=spec.text, graded=graded, not_graded=not_graded,

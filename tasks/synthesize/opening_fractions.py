@@ -2,7 +2,8 @@
 geometry. Numbers count from the geometric closed end (a revolute joint's
 distance is the gap at the farthest point from the axis, angle = d / r). "up" /
 "down" are the highest / lowest box center in world z over the travel (the travel end when
-it is within :data:`END_SNAP` of the part's rise of it); "on" /
+it is within :data:`END_SNAP` of the part's rise of it); a lone "open" of a part its weight carries open (a
+drop-down door: :func:`falls_open`) is its open end; "on" /
 "off" of a toggle switch its high / low end (NFPA 70 NEC 404.7), of a lid or cap closed / fully open
 (put on, taken off), of other parts fully open / closed. A part whose height changes less than :data:`FLAT_TRAVEL`
 of the object's size has no up or down.
@@ -28,6 +29,9 @@ FLAT_TRAVEL = 0.02
 TOGGLE_LABELS = frozenset({"switch", "toggle", "rocker"})
 #: Labels whose "on" is in place (closed) and "off" taken off (fully open): "the cap off", "the lid on".
 COVER_LABELS = frozenset({"lid", "cap"})
+#: Opening fractions at which a part's weight must turn it open for it to fall open (:func:`falls_open`; the
+#: counterbalance's ``spring_holds.DOWNWARD_FRACTIONS``).
+FALL_FRACTIONS = (0.25, 0.5, 0.75, 1.0)
 #: Samples of the travel searched for the highest / lowest end.
 END_SAMPLES = 41
 #: A travel end within this share of the part's rise (max - min height over its travel) of the highest (lowest)
@@ -85,6 +89,26 @@ def _end_fraction(ctx: "EstimationContext", kin: "SimSession", joint: str, end: 
         return float(fr[e]), (f"the travel end at opening fraction {fr[e]:.3g}, within {END_SNAP:g} of the part's rise of its {word} "
                               f"position in world z (at {fr[i]:.3g})")
     return float(fr[i]), f"{word} position in world z at opening fraction {fr[i]:.3g}"
+
+
+def falls_open(ctx: "EstimationContext", kin: "SimSession", joint: str, closed_state: dict[str, float]) -> bool:
+    """Whether a hinged part's own weight carries it open to its open end: the moment of gravity (world -z, the
+    resting pose applied) at its moving subtree's box center about its axis turns it open at each of
+    :data:`FALL_FRACTIONS` of its range (an oven's or a dishwasher's drop-down door, a drop-front lid: the parts
+    :func:`~asset2sim.tasks.synthesize.spring_holds.counterbalance` balances). ``closed_state`` in input units;
+    ``kin`` (the input's kinematics session) is moved."""
+    cs = ctx.closed[joint]
+    if ctx.asset.joint(joint).type != "revolute" or not cs.open_range > 0:
+        return False
+    R = np.asarray(ctx.root_rotation, float) if ctx.root_rotation is not None else np.eye(3)
+    for f in FALL_FRACTIONS:
+        kin.set_joint_positions({**closed_state, joint: cs.position(f)})
+        p0, Rc = kin.link_frame(kin.joint_child[joint])
+        axis = R @ Rc @ np.asarray(kin.joint_axis(joint), float)
+        moment = float(axis @ np.cross(box_center(ctx, kin, joint) - R @ p0, [0.0, 0.0, -1.0]))
+        if not moment * cs.direction > 0.0:
+            return False
+    return True
 
 
 def fraction_for(ctx: "EstimationContext", kin: "SimSession", joint: str, target: StateTarget, scale: float, label: str,

@@ -20,7 +20,7 @@ from asset2sim.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.interpret.named_parts import (count_warnings, joints_named, joints_of, link_named, moving_parts, part_boxes, stand_ins,
                                                   state_targets, unit_fits)
 from asset2sim.tasks.interpret.state_words import OTHERS
-from asset2sim.tasks.synthesize.opening_fractions import fraction_for
+from asset2sim.tasks.synthesize.opening_fractions import falls_open, fraction_for
 
 if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
     from asset2sim.engines.base import SimSession
@@ -121,6 +121,11 @@ def resolve_states(ctx: "EstimationContext", kin: "SimSession", scale: float) ->
             res.requests[t] = jr
             res.targets.pop(t, None)
             if jr.target is None:
+                if jr.bare and falls_open(ctx, kin, t, closed_state):  # a drop-down door open rests on its open stop
+                    res.bands[t] = "fully"
+                    res.notes.append(f"{t} ({ctx.asset.link(ctx.asset.joint(t).child).semantic_label or 'part'}): "
+                                     f"'{jr.phrase}': its weight carries it open (a door opening downward), so it is open "
+                                     f"resting on its open stop: fully open")
                 continue
             label = ctx.asset.link(ctx.asset.joint(t).child).semantic_label or ""
             f, why = fraction_for(ctx, kin, t, jr.target, scale, label, closed_state)

@@ -177,6 +177,20 @@ def test_a_chest_that_topples_at_the_bands_target_stands_at_the_steadiest_openin
 
 
 @needs_shared
+def test_a_small_chest_toppled_at_its_steadiest_opening_stands_there_with_its_lid_made_lighter(tmp_path, refine_once):
+    """The same chest asked as a jewelry box (0.18 of its modelled size where the box above is 0.29): its plywood
+    walls, as thick at any size, weigh its open lid further back, 7.3 mm from the support's edge at the target.
+    At the steadiest opening the band allows (0.6) it is statically steady (22 mm against 16 asked) yet a tilt
+    still toppled it, and the stablest face was no better: ``not_robust_at_rest``. The steadiest opening is now
+    tried with the opened parts as light as their sources allow too, and the chest stands there."""
+    r = refine_once(SHARED / "100221", "A jewelry box, mostly open.", extras=False).report
+    assert r.failure_mode == "none", (r.failure_mode, r.readiness)
+    assert r.opening_fractions["joint_0"] == pytest.approx(0.6, abs=1e-3) and r.requested_bands["joint_0"] == "mostly"
+    assert any("where the object stands steadiest" in d for d in r.design_changes), r.design_changes
+    assert any(d.startswith(stability.TRANSFER_NOTE) and "moved" in d for d in r.design_changes), r.design_changes
+
+
+@needs_shared
 @pytest.mark.slow  # end to end: a dev object refined on its own
 def test_a_fully_open_stapler_stands_in_its_band(tmp_path):
     """Stapler 102990 "fully open" (band 0.85-1.0 of the top arm's range,
