@@ -3,7 +3,7 @@ category, plus generated assets; prints the pass rate per category and per
 request kind, and the failures by mode.
 
     python benchmarks/bench_generalization.py [--manifest PATH] [--out DIR]
-        [--limit N] [--jobs J] [--ids 148,9748] [--kinds plain,state,size,hinge,closed,mount,motion]
+        [--limit N] [--jobs J] [--ids 148,9748] [--kinds plain,state,size,hinge,closed,open,mount,motion]
         [--no-generated] [--evaluate] [--one-mesh-per-link] [--open-containers]
 
 Corpus: for every manifest object (its category from the
@@ -17,6 +17,8 @@ manifest), the requests
 - ``hinge``:  "A <noun> with its <part> fully open." for every movable joint's
   part label (``semantics.txt``), once per distinct label;
 - ``closed``: "A <noun> with everything closed.";
+- ``open``:   "A <noun>, open." (a lone "open": ``mostly``, or resting on its open stop where the part's weight
+  carries it open, a drop-down door);
 - ``mount``:  "A free-standing <noun>." / "A <noun> mounted on the wall."
   (the mounting override);
 - ``motion``: words about how the first task part moves, as people write them: "A <noun> whose <part> swings
@@ -78,7 +80,7 @@ DEFAULT_MANIFEST = ROOT.parent / "shared" / "datasets" / "partnet_mobility" / "m
 
 STATE_WORDS = ["closed", "slightly open", "a quarter open", "halfway open", "mostly open", "fully open"]
 SIZE_WORDS = ["tiny", "very small", "small", "large", "very large"]
-KINDS = ("plain", "state", "size", "hinge", "closed", "mount", "motion")
+KINDS = ("plain", "state", "size", "hinge", "closed", "open", "mount", "motion")
 
 
 def _noun(category: str) -> str:
@@ -132,6 +134,8 @@ def requests_for(category: str, src: Path, kinds: tuple[str, ...] = KINDS) -> li
         out += [("hinge:fully open", f"A {n} with its {w} fully open.") for w in _part_words(src)]
     if "closed" in kinds:
         out.append(("everything closed", f"A {n} with everything closed."))
+    if "open" in kinds:
+        out.append(("open", f"A {n}, open."))
     if "mount" in kinds:
         out += [("mount:free-standing", f"A free-standing {n}."), ("mount:wall", f"A {n} mounted on the wall.")]
     part = _task_part(category, src) if "motion" in kinds else None
