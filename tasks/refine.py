@@ -313,8 +313,9 @@ class RefineRun:
 def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str) -> tuple[Attempt, str]:
     """Stages 4-7 once; when unstable or toppled as modelled, a named pose put down where it rests (:func:`settled_attempt`);
     else a steadier opening, then its stablest face (kept only if better); when none of these settles it, the whole mass
-    transfer where a topple is all that fails, then, when unstable, the modelled pose put down where it rests (each kept
-    only if every check passes and every band is met). Returns (attempt, pose note)."""
+    transfer where a topple is all that fails, at the bands' targets and then at the steadier opening, then, when
+    unstable, the modelled pose put down where it rests (each kept only if every check passes and every band is met).
+    Returns (attempt, pose note)."""
     att = _attempt(ctx, run)
 
     def posed(rotation, most: bool = False) -> Attempt:  # stages 4-7 once more on the root rotation (3, 3)
@@ -324,16 +325,12 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
         return settled_attempt(att, pose_note, posed)
     if att.check.stable and not att.check.topples:
         return opened_lying(ctx, run.kin, att, _moving_links(ctx), posed, run.log) or (att, pose_note)
-    opening = steadier_opening(run.ws, att, run.log)
+    opening, steadier = steadier_opening(run.ws, att, run.log), None
     if opening is not None:  # stages 4-7 once more at the steadier opening
         fractions, design = opening
-        second = _attempt(ctx, run, fractions=fractions)
-        if second.check.passed and not second.check.topples:
-            return replace(second, design=[design, *second.design]), pose_note
-        if second.check.only_topples and _more_to_move(ctx, run, second):  # and opened parts as light as their sources allow
-            lighter = _attempt(ctx, run, fractions=fractions, most=True)
-            if lighter.settles:
-                return replace(lighter, design=[design, *lighter.design]), pose_note
+        steadier = _attempt(ctx, run, fractions=fractions)
+        if steadier.check.passed and not steadier.check.topples:
+            return replace(steadier, design=[design, *steadier.design]), pose_note
         run.log.say("stability", "the steadier opening did not pass every check: the bands' targets kept")
     state_in = estimate.state_from_bands(ctx.closed, att.bands, 1.0, att.prismatic)
     R, note = pose.most_stable_rotation(run.kin, ctx.asset, att.overlay.links, state_in, att.overlay.scale, ctx.hull_points,
@@ -353,6 +350,10 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
         if heavier.settles:
             return heavier, best_note
         run.log.say("stability", "the whole transfer did not pass every check: the least transfer kept")
+    if steadier is not None and steadier.check.only_topples and _more_to_move(ctx, run, steadier):
+        lighter = _attempt(ctx, run, fractions=opening[0], most=True)  # the steadier opening with the whole transfer
+        if lighter.settles:
+            return replace(lighter, design=[opening[1], *lighter.design]), pose_note
     if att.check.stable:
         return chosen
     # no face passes: where it leans onto its supports as it settles as modelled (a swivel USB stick on its cover's

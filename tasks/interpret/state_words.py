@@ -236,7 +236,8 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found]) -> JointStat
         if none:  # "none of the drawers open": closed; "none of the doors closed": open
             band, target = ("mostly" if band == "closed" else "closed"), None
         js = JointStateRequest(selector=selector, label=label, ordinal=ordinal, order=order,  # type: ignore[arg-type]
-                               band=band, target=target, phrase=phrase, bare=b.flag == "bare" and not none)  # type: ignore[arg-type]
+                               band=band, target=target, phrase=phrase,  # type: ignore[arg-type]
+                               bare=b.flag == "bare" and not none)
         if b.flag == "bare" and not none:
             lone.add(id(js))
         return js

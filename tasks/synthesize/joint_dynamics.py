@@ -66,9 +66,9 @@ def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tu
     its ordinal names ("the main door": :func:`~asset2sim.tasks.interpret.named_parts.joints_of`), one naming none to
     the ``relevant`` joints (the
     task's parts). A relevant joint's category may expect a return spring (a stapler's arm; ``categories.yaml``
-    ``spring_labels``), and every push button or key has one (:func:`~asset2sim.tasks.interpret.part_priors.push_buttons`:
-    a keyboard's keys spring back whichever key the task presses); a self-closing part gets high damping unless a word says otherwise (a door closer is a spring
-    and a hydraulic damper)."""
+    ``spring_labels``), and every push button or key has one (``ctx.push_buttons``: a keyboard's keys spring back
+    whichever key the task presses); a self-closing part gets high damping unless a word says otherwise (a door
+    closer is a spring and a hydraulic damper)."""
     relevant = list(relevant)
     applied: dict[str, list[MotionPhrase]] = {j.name: [] for j in ctx.asset.movable_joints()}
     missing = []
@@ -90,7 +90,8 @@ def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tu
         label = ctx.asset.link(j.child).semantic_label
         out[j.name] = JointChoice(
             damping_level=levels[-1] if levels else ("high" if closing else "moderate"), holds_position="hold" in kinds,
-            spring=bool(kinds & {"spring", "self_closing"}) or ((j.name in relevant or j.name in ctx.push_buttons) and spring_expected(ctx.category, label)),
+            spring=bool(kinds & {"spring", "self_closing"})
+            or ((j.name in relevant or j.name in ctx.push_buttons) and spring_expected(ctx.category, label)),
             stiff="stiff" in kinds, free_moving="free" in kinds, self_closing=closing, words=tuple(words),
             push_button=j.name in ctx.push_buttons)
     return out, missing

@@ -124,8 +124,8 @@ def resolve_states(ctx: "EstimationContext", kin: "SimSession", scale: float) ->
                 if jr.bare and falls_open(ctx, kin, t, closed_state):  # a drop-down door open rests on its open stop
                     res.bands[t] = "fully"
                     res.notes.append(f"{t} ({ctx.asset.link(ctx.asset.joint(t).child).semantic_label or 'part'}): "
-                                     f"'{jr.phrase}': its weight carries it open (a door opening downward), so it is open "
-                                     f"resting on its open stop: fully open")
+                                     f"'{jr.phrase}': its weight carries it open (it opens downward, a drop-down door), "
+                                     f"so it is open resting on its open stop: fully open")
                 continue
             label = ctx.asset.link(ctx.asset.joint(t).child).semantic_label or ""
             f, why = fraction_for(ctx, kin, t, jr.target, scale, label, closed_state)

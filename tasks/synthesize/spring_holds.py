@@ -65,9 +65,10 @@ def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, uni
       shuts itself from fully open needs a spring a hand may not open: the check says so).
 
     ``pushes``: the loads (N m or N, >= 0) pushing the part open at :data:`OPENING_LOAD_FRACTIONS`
-    (:func:`opening_loads`); ``what``: the spring as its note names it (a push button's return spring is such a closer); ``hold``: the largest load (N m or N) either way near the state, and pushing it open near
-    its closed end; ``hand``: the top of the part's operating range at its grasp (N m at :func:`far_edge` for a hinge,
-    N for a slide; 0: unknown, no cap).
+    (:func:`opening_loads`); ``what``: the spring as its note names it (a push button's return spring is such a
+    closer); ``hold``: the largest load (N m or N) either way near the state, and pushing it open near its closed end;
+    ``hand``: the top of the part's operating range at its grasp (N m at :func:`far_edge` for a hinge, N for a slide;
+    0: unknown, no cap).
 
     A part with no stop at its closed end (``stopped`` False: neither its limit there nor another part, as a lid rests
     on its box's rim, :func:`stopped_shut`; a handle or lever that turns on past it, a joint without limits: nothing
