@@ -42,9 +42,6 @@ class JointChoice:
     """a spring that returns the part to its closed end (a door closer, a self-closing slide)"""
     words: tuple[MotionPhrase, ...] = ()
     """the request's words about this part's motion that made these choices"""
-    push_button: bool = False
-    """a push button or key (:func:`~asset2sim.tasks.interpret.part_priors.push_buttons`): resting out of its body,
-    its return spring is preloaded onto that stop (:func:`~asset2sim.tasks.synthesize.spring_holds.closer`)"""
     state_asked: bool = True
     """whether the request asks a state of this part: one asked to move freely and given none has no friction that
     holds it against its weight (it starts where its weight leaves it: ``tasks/refine.py``, ``_attempt``)"""
@@ -92,8 +89,7 @@ def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tu
             damping_level=levels[-1] if levels else ("high" if closing else "moderate"), holds_position="hold" in kinds,
             spring=bool(kinds & {"spring", "self_closing"})
             or ((j.name in relevant or j.name in ctx.push_buttons) and spring_expected(ctx.category, label)),
-            stiff="stiff" in kinds, free_moving="free" in kinds, self_closing=closing, words=tuple(words),
-            push_button=j.name in ctx.push_buttons)
+            stiff="stiff" in kinds, free_moving="free" in kinds, self_closing=closing, words=tuple(words))
     return out, missing
 
 
@@ -152,7 +148,8 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
             mechanism = HELD_AGAINST_FREE
         note = source + "".join(f"; request '{w.phrase}': {w.kind.replace('_', ' ')}" for w in ch.words)
         on_slide = name in prismatic and part_label(ctx, name) in SLIDE_LABELS  # its slide sets its least friction
-        button = ch.push_button and ch.spring and not ch.free_moving  # resting out of its body: pressed onto that stop
+        # a push button or key resting out of its body: its return spring is preloaded onto that stop
+        button = name in ctx.push_buttons and ch.spring and not ch.free_moving
         if ch.self_closing or (button and abs(state[name] - cs.position(0.0) * unit) <= band):
             pushed = opening_loads(kin, links, state, scale, cs, name, ctx.subtrees[name], unit, rot)
             held = closer(ctx, loads[name], cs, unit, hold, pushed, at_closed, stopped_shut(ctx, kin, state, scale, name),
