@@ -44,7 +44,7 @@ from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_o
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 from asset2sim.tasks.tune import escalation
 from asset2sim.tasks.tune import keep_declared as keep
-from asset2sim.tasks.tune.attempt import Attempt, opened_lying, rested_attempt, settled_attempt, steadier_opening
+from asset2sim.tasks.tune.attempt import Attempt, balanced_attempt, opened_lying, rested_attempt, settled_attempt, steadier_opening
 from asset2sim.inert import one_line
 from asset2sim.engines.base import SimSession
 from asset2sim.engines.step_budget import StepBudgetExceeded, step_budget
@@ -318,13 +318,14 @@ def _synthesize_and_check(ctx: EstimationContext, run: RefineRun, pose_note: str
     Returns (attempt, pose note)."""
     att = _attempt(ctx, run)
 
-    def posed(rotation, most: bool = False) -> Attempt:  # stages 4-7 once more on the root rotation (3, 3)
-        return _attempt(replace(ctx, root_rotation=rotation), run, most=most)
+    def posed(rotation, most: bool = False, fractions: dict[str, float] | None = None) -> Attempt:  # on the root rotation (3, 3)
+        return _attempt(replace(ctx, root_rotation=rotation), run, fractions=fractions, most=most)
 
     if ctx.request.pose_hint is not None:  # the pose asked is kept: put down where it rests when it leans as it settles
         return settled_attempt(att, pose_note, posed)
-    if att.check.stable and not att.check.topples:
-        return opened_lying(ctx, run.kin, att, _moving_links(ctx), posed, run.log) or (att, pose_note)
+    if att.check.stable and not att.check.topples:  # laid down to open, or the opening where the weight turns a part least
+        return opened_lying(ctx, run.kin, att, _moving_links(ctx), posed, run.log) or (
+            balanced_attempt(ctx, run.kin, att, lambda fractions: _attempt(ctx, run, fractions=fractions), run.log), pose_note)
     opening, steadier = steadier_opening(run.ws, att, run.log), None
     if opening is not None:  # stages 4-7 once more at the steadier opening
         fractions, design = opening

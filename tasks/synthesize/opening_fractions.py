@@ -91,24 +91,27 @@ def _end_fraction(ctx: "EstimationContext", kin: "SimSession", joint: str, end: 
     return float(fr[i]), f"{word} position in world z at opening fraction {fr[i]:.3g}"
 
 
+def weight_moment(ctx: "EstimationContext", kin: "SimSession", joint: str, state: dict[str, float]) -> float:
+    """Moment of gravity (world -z, the resting pose ``ctx.root_rotation`` applied) about a hinge's axis per unit of
+    its part's weight, m (> 0: it turns the part open), taken at its moving subtree's box center with ``kin`` (the
+    input's kinematics session) moved to ``state`` (joint -> rad or m, input units). Source: the moment of a force
+    about an axis, M = a . (r x F) (Meriam & Kraige, Engineering Mechanics: Statics, sec. 2/5)."""
+    kin.set_joint_positions(state)
+    R = np.asarray(ctx.root_rotation, float) if ctx.root_rotation is not None else np.eye(3)
+    p0, Rc = kin.link_frame(kin.joint_child[joint])
+    axis = R @ Rc @ np.asarray(kin.joint_axis(joint), float)
+    return float(axis @ np.cross(box_center(ctx, kin, joint) - R @ p0, [0.0, 0.0, -1.0])) * float(ctx.closed[joint].direction)
+
+
 def falls_open(ctx: "EstimationContext", kin: "SimSession", joint: str, closed_state: dict[str, float]) -> bool:
-    """Whether a hinged part's own weight carries it open to its open end: the moment of gravity (world -z, the
-    resting pose applied) at its moving subtree's box center about its axis turns it open at each of
-    :data:`FALL_FRACTIONS` of its range (an oven's or a dishwasher's drop-down door, a drop-front lid: the parts
-    :func:`~asset2sim.tasks.synthesize.spring_holds.counterbalance` balances). ``closed_state`` in input units;
+    """Whether a hinged part's own weight carries it open to its open end: its :func:`weight_moment` turns it open
+    at each of :data:`FALL_FRACTIONS` of its range (an oven's or a dishwasher's drop-down door, a drop-front lid: the
+    parts :func:`~asset2sim.tasks.synthesize.spring_holds.counterbalance` balances). ``closed_state`` in input units;
     ``kin`` (the input's kinematics session) is moved."""
     cs = ctx.closed[joint]
     if ctx.asset.joint(joint).type != "revolute" or not cs.open_range > 0:
         return False
-    R = np.asarray(ctx.root_rotation, float) if ctx.root_rotation is not None else np.eye(3)
-    for f in FALL_FRACTIONS:
-        kin.set_joint_positions({**closed_state, joint: cs.position(f)})
-        p0, Rc = kin.link_frame(kin.joint_child[joint])
-        axis = R @ Rc @ np.asarray(kin.joint_axis(joint), float)
-        moment = float(axis @ np.cross(box_center(ctx, kin, joint) - R @ p0, [0.0, 0.0, -1.0]))
-        if not moment * cs.direction > 0.0:
-            return False
-    return True
+    return all(weight_moment(ctx, kin, joint, {**closed_state, joint: cs.position(f)}) > 0.0 for f in FALL_FRACTIONS)
 
 
 def fraction_for(ctx: "EstimationContext", kin: "SimSession", joint: str, target: StateTarget, scale: float, label: str,

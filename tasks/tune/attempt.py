@@ -4,7 +4,7 @@ the report and the extras read (:class:`Attempt`)."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -19,6 +19,7 @@ from asset2sim.tasks.state import balance, pose
 from asset2sim.tasks.interpret.categories import category_prior
 from asset2sim.tasks.synthesize import estimate, joint_dynamics, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
+from asset2sim.tasks.synthesize.opening_fractions import weight_moment
 from asset2sim.tasks.check import as_asked, postcheck
 from asset2sim.tasks.geometry.closed_state import ClosedState
 
@@ -157,19 +158,81 @@ def rested_attempt(ctx: EstimationContext, kin, att: Attempt, redo: Callable[[di
     return second
 
 
-def opened_lying(ctx: EstimationContext, kin, att: Attempt, moving_links: list[str], posed: Callable[[np.ndarray], Attempt],
+#: Openings sampled across a band for the one where the part's weight turns it least (:func:`balanced_openings`).
+BALANCE_SAMPLES = 13
+#: Tried there only where the weight's moment is at most this share of its moment at the attempt's state.
+BALANCE_GAIN = 0.75
+
+
+def _unheld(att: Attempt) -> set[str]:
+    """Joints the attempt's undisturbed hold (``sagging``) or robust rest (a trial's ``failing_joints``) found
+    leaving their state."""
+    out = set(att.check.sagging)
+    for m in att.check.metrics:
+        if m.name == "robust_rest" and m.passed is False:
+            for trial in (m.details or {}).get("trials", {}).values():
+                out.update(trial.get("failing_joints", ()))
+    return out
+
+
+def balanced_openings(ctx: EstimationContext, kin, att: Attempt) -> dict[str, float]:
+    """Joint -> the opening fraction, within its band, at which its hinged part's weight turns it least
+    (:func:`~asset2sim.tasks.synthesize.opening_fractions.weight_moment` at :data:`BALANCE_SAMPLES` openings across the
+    band of the written range), for the banded revolute joints ``att`` left unheld whose weight turns them there at
+    most :data:`BALANCE_GAIN` of what it does at ``att``'s state: a suitcase's lid laid back past upright, asked open,
+    set where it stands nearly balanced, as a person leaves one open. ``ctx`` carries the attempt's resting pose;
+    ``kin``: the input's kinematics session (moved). Empty when there is none."""
+    intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
+    closed = ctx.closed_state()
+    out = {}
+    for n in sorted(_unheld(att) & set(intervals)):
+        cs = att.closed_out.get(n)
+        if cs is None or n not in att.state or ctx.asset.joint(n).type != "revolute":
+            continue
+        now = abs(weight_moment(ctx, kin, n, {**closed, n: att.state[n]}))
+        fractions = np.linspace(*intervals[n], BALANCE_SAMPLES)
+        moments = [abs(weight_moment(ctx, kin, n, {**closed, n: cs.position(float(f))})) for f in fractions]
+        i = int(np.argmin(moments))
+        if moments[i] <= BALANCE_GAIN * now and abs(fractions[i] - abs(cs.fraction(att.state[n]))) > 0.01:
+            out[n] = float(fractions[i])
+    return out
+
+
+def balanced_attempt(ctx: EstimationContext, kin, att: Attempt, redo: Callable[[dict[str, float]], Attempt],
+                     log: StageLog) -> Attempt:
+    """Stability by design through the opening where a part's weight turns it off its state: ``att`` made once more by
+    ``redo`` (stages 4-7 with joint -> opening fraction) at :func:`balanced_openings`, with the design note, when
+    ``att`` does not settle and that one does; else ``att``. ``ctx``: with the attempt's resting pose; ``kin``: the
+    input's kinematics session."""
+    balanced = {} if att.settles else balanced_openings(ctx, kin, att)
+    if not balanced:
+        return att
+    why = (f"stability by design: its weight turns {', '.join(balanced)} off the bands' targets; "
+           + ", ".join(f"{n} opened to {f:.2f} of its range" for n, f in balanced.items()) + ", where it turns it least within its band")
+    log.say("stability", why)
+    second = redo(balanced)
+    if not second.settles:
+        log.say("stability", "not every check passes there: the bands' targets kept")
+        return att
+    return replace(second, design=[why, *second.design])
+
+
+def opened_lying(ctx: EstimationContext, kin, att: Attempt, moving_links: list[str], posed: Callable[..., Attempt],
                  log: StageLog) -> tuple[Attempt, str] | None:
     """For an object its category opens lying on its back (``categories.yaml`` ``opened_lying``: a suitcase), asked for
     an opening and no pose, whose modelled pose ``att`` leaves a band unmet (upright, the floor stops its lid): the
-    attempt ``posed`` (stages 4-7 on a root rotation (3, 3)) makes laid on its largest face, moving parts up
-    (:func:`~asset2sim.tasks.state.pose.resting_rotation` with ``kin``, the input's kinematics session, and
-    ``moving_links``, the task parts' links), with the pose note, when it settles there; else None."""
+    attempt ``posed`` (stages 4-7 on a root rotation (3, 3), ``fractions``: joint -> opening fraction) makes laid on its
+    largest face, moving parts up (:func:`~asset2sim.tasks.state.pose.resting_rotation` with ``kin``, the input's
+    kinematics session, and ``moving_links``, the task parts' links), with the pose note, when it settles there, at the
+    bands' targets or, where a part's weight turns it off them, at the opening its band allows where the weight turns
+    it least (:func:`balanced_attempt`); else None."""
     if ctx.request.pose_hint is not None or not att.off_band or not category_prior(ctx.category).opened_lying:
         return None
     rotation, note = pose.resting_rotation(kin, ctx.asset, ctx.closed_state(), ctx.hull_points, moving_links)
     if np.allclose(rotation, np.eye(3)):
         return None
-    second = posed(rotation)
+    second = balanced_attempt(replace(ctx, root_rotation=rotation), kin, posed(rotation),
+                              lambda fractions: posed(rotation, fractions=fractions), log)
     short = ", ".join(att.off_band)
     if not second.settles:
         log.say("post_check", f"{short} short of the band asked as modelled; laid down to open, not every check passes: kept as modelled")
