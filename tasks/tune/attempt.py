@@ -220,23 +220,26 @@ def balanced_attempt(ctx: EstimationContext, kin, att: Attempt, redo: Callable[[
 def opened_lying(ctx: EstimationContext, kin, att: Attempt, moving_links: list[str], posed: Callable[..., Attempt],
                  log: StageLog) -> tuple[Attempt, str] | None:
     """For an object its category opens lying on its back (``categories.yaml`` ``opened_lying``: a suitcase), asked for
-    an opening and no pose, whose modelled pose ``att`` leaves a band unmet (upright, the floor stops its lid): the
-    attempt ``posed`` (stages 4-7 on a root rotation (3, 3), ``fractions``: joint -> opening fraction) makes laid on its
-    largest face, moving parts up (:func:`~asset2sim.tasks.state.pose.resting_rotation` with ``kin``, the input's
-    kinematics session, and ``moving_links``, the task parts' links), with the pose note, when it settles there, at the
-    bands' targets or, where a part's weight turns it off them, at the opening its band allows where the weight turns
-    it least (:func:`balanced_attempt`); else None."""
-    if ctx.request.pose_hint is not None or not att.off_band or not category_prior(ctx.category).opened_lying:
+    an opening and no pose, whose modelled pose ``att`` does not settle (upright, the floor stops its lid, or a large
+    case's lid swings out sideways too heavy for a hand): the attempt ``posed`` (stages 4-7 on a root rotation (3, 3),
+    ``fractions``: joint -> opening fraction) makes laid on its largest face, moving parts up
+    (:func:`~asset2sim.tasks.state.pose.resting_rotation` with ``kin``, the input's kinematics session, and
+    ``moving_links``, the task parts' links), with the pose note, when it settles there, at the bands' targets or, where
+    a part's weight turns it off them, at the opening its band allows where the weight turns it least
+    (:func:`balanced_attempt`); else None."""
+    opening = any(b != "closed" for b in att.bands.values())
+    if ctx.request.pose_hint is not None or att.settles or not opening or not category_prior(ctx.category).opened_lying:
         return None
     rotation, note = pose.resting_rotation(kin, ctx.asset, ctx.closed_state(), ctx.hull_points, moving_links)
     if np.allclose(rotation, np.eye(3)):
         return None
     second = balanced_attempt(replace(ctx, root_rotation=rotation), kin, posed(rotation),
                               lambda fractions: posed(rotation, fractions=fractions), log)
-    short = ", ".join(att.off_band)
+    failed = [m.name for m in att.check.metrics if m.passed is False]
+    short = (f"{', '.join(att.off_band)} short of the band asked" if att.off_band else f"{', '.join(failed) or 'a check'} failed") + " as modelled"
     if not second.settles:
-        log.say("post_check", f"{short} short of the band asked as modelled; laid down to open, not every check passes: kept as modelled")
+        log.say("post_check", f"{short}; laid down to open, not every check passes: kept as modelled")
         return None
-    why = f"opened lying on its back, as a {ctx.category.lower()} is ({short} short of the band asked as modelled); {note}"
+    why = f"opened lying on its back, as a {ctx.category.lower()} is ({short}); {note}"
     log.say("post_check", why)
     return second, why
