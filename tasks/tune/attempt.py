@@ -207,8 +207,9 @@ def balanced_attempt(ctx: EstimationContext, kin, att: Attempt, redo: Callable[[
     balanced = {} if att.settles else balanced_openings(ctx, kin, att)
     if not balanced:
         return att
-    why = (f"stability by design: its weight turns {', '.join(balanced)} off the bands' targets; "
-           + ", ".join(f"{n} opened to {f:.2f} of its range" for n, f in balanced.items()) + ", where it turns it least within its band")
+    opened = ", ".join(f"{n} opened to {f:.2f} of its range" for n, f in balanced.items())
+    why = (f"stability by design: its weight turns {', '.join(balanced)} off the bands' targets; {opened}, where it turns it "
+           "least within its band")
     log.say("stability", why)
     second = redo(balanced)
     if not second.settles:
@@ -236,7 +237,8 @@ def opened_lying(ctx: EstimationContext, kin, att: Attempt, moving_links: list[s
     second = balanced_attempt(replace(ctx, root_rotation=rotation), kin, posed(rotation),
                               lambda fractions: posed(rotation, fractions=fractions), log)
     failed = [m.name for m in att.check.metrics if m.passed is False]
-    short = (f"{', '.join(att.off_band)} short of the band asked" if att.off_band else f"{', '.join(failed) or 'a check'} failed") + " as modelled"
+    short = f"{', '.join(att.off_band)} short of the band asked" if att.off_band else f"{', '.join(failed) or 'a check'} failed"
+    short += " as modelled"
     if not second.settles:
         log.say("post_check", f"{short}; laid down to open, not every check passes: kept as modelled")
         return None
