@@ -3,7 +3,7 @@ category, plus generated assets; prints the pass rate per category and per
 request kind, and the failures by mode.
 
     python benchmarks/bench_generalization.py [--manifest PATH] [--out DIR]
-        [--limit N] [--jobs J] [--ids 148,9748] [--kinds plain,state,size,hinge,closed,open,mount,motion]
+        [--limit N] [--jobs J] [--ids 148,9748] [--kinds plain,state,size,sized,hinge,closed,open,mount,motion]
         [--no-generated] [--evaluate] [--one-mesh-per-link] [--open-containers]
 
 Corpus: for every manifest object (its category from the
@@ -14,6 +14,8 @@ manifest), the requests
   a quarter open, halfway open, mostly open, fully open);
 - ``size``:   "A <size> <noun>." for each size word (tiny, very small, small,
   large, very large);
+- ``sized``:  a size and a state together, as the manifest's requests ask them: "A <size> <noun>, <state>." for
+  very small and large, slightly and halfway open;
 - ``hinge``:  "A <noun> with its <part> fully open." for every movable joint's
   part label (``semantics.txt``), once per distinct label;
 - ``closed``: "A <noun> with everything closed.";
@@ -80,7 +82,7 @@ DEFAULT_MANIFEST = ROOT.parent / "shared" / "datasets" / "partnet_mobility" / "m
 
 STATE_WORDS = ["closed", "slightly open", "a quarter open", "halfway open", "mostly open", "fully open"]
 SIZE_WORDS = ["tiny", "very small", "small", "large", "very large"]
-KINDS = ("plain", "state", "size", "hinge", "closed", "open", "mount", "motion")
+KINDS = ("plain", "state", "size", "sized", "hinge", "closed", "open", "mount", "motion")
 
 
 def _noun(category: str) -> str:
@@ -130,6 +132,8 @@ def requests_for(category: str, src: Path, kinds: tuple[str, ...] = KINDS) -> li
         out += [(f"state:{w}", f"A {n}, {w}.") for w in STATE_WORDS]
     if "size" in kinds:
         out += [(f"size:{w}", f"A {w} {n}.") for w in SIZE_WORDS]
+    if "sized" in kinds:
+        out += [(f"sized:{z}, {w}", f"A {z} {n}, {w}.") for w in ("slightly open", "halfway open") for z in ("very small", "large")]
     if "hinge" in kinds:
         out += [("hinge:fully open", f"A {n} with its {w} fully open.") for w in _part_words(src)]
     if "closed" in kinds:
