@@ -31,6 +31,12 @@ BULLET_LINK_DAMPING = 0.04
 ENABLE_TGS = False
 #: Solver iterations (position, velocity): ManiSkill 3's default ``SceneConfig``.
 SOLVER_ITERATIONS = (15, 1)
+#: Contact offset (m) of every link's shapes while the contacts are probed (:meth:`PhysXSession.self_penetration`): a
+#: penetration is a negative separation, which PhysX finds at any offset, while at SAPIEN's default 0.01 m, larger
+#: than the shapes, its contacts between a generated lighter's 4 mm flint-wheel pieces and its lid's 1 mm walls read
+#: -15 mm that PyBullet and the geometry do not have (``docs/design/simulators.md``); PhysX asks only that the
+#: contact offset exceed the rest offset (0 here; PhysX 5 guide, "Advanced Collision Detection").
+PROBE_CONTACT_OFFSET = 0.001
 
 
 class PhysXError(RuntimeError):
@@ -350,12 +356,21 @@ class PhysXSession(ArrayJoints, SessionDefaults):
 
     # ---------------------------------------------------------------- contact
     def _probe_contacts(self):
-        """Contacts at the current state (PhysX makes them only in a step): one step, then the state restored."""
+        """Contacts at the current state (PhysX makes them only in a step): one step with every link's shapes at
+        :data:`PROBE_CONTACT_OFFSET`, then the state and the offsets restored."""
         state = self._state()
-        self.art.set_qf(np.zeros(len(state[3]), np.float32))
-        self.scene.step()
-        contacts = self.system.get_contacts()
-        self._set_state(state)
+        shapes = [sh for comp in self.links.values() for sh in comp.collision_shapes]
+        offsets = [sh.get_contact_offset() for sh in shapes]
+        for sh in shapes:
+            sh.set_contact_offset(PROBE_CONTACT_OFFSET)
+        try:
+            self.art.set_qf(np.zeros(len(state[3]), np.float32))
+            self.scene.step()
+            contacts = self.system.get_contacts()
+        finally:
+            for sh, offset in zip(shapes, offsets):
+                sh.set_contact_offset(offset)
+            self._set_state(state)
         return contacts
 
     def _link_name(self, comp) -> str | None:

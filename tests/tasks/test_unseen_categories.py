@@ -37,6 +37,7 @@ from tests.unseen_assets import (
     build_keyboard,
     build_kitchen_pot,
     build_oven,
+    build_pocket_lighter,
     build_printer,
     build_safe,
     build_table_with_drawer,
@@ -340,3 +341,22 @@ def test_an_ovens_door_asked_open_is_lowered_onto_its_open_stop(tmp_path, refine
     assert r.failure_mode == "none", (r.failure_mode, r.readiness)
     assert r.requested_bands["joint_0"] == "fully" and r.opening_fractions["joint_0"] > 0.85
     assert any("its weight carries it open" in n for n in r.notes), r.notes
+
+
+@pytest.mark.physx
+def test_a_lighters_lid_a_quarter_open_has_no_penetration_only_physx_read(refine_once):
+    """A generated lighter's lid a quarter open (0.475 rad) clears its 4 mm flint wheel (PyBullet and the state search
+    read 0 mm), yet PhysX, probed with SAPIEN's default contact offset of 0.01 m, larger than the wheel's collision
+    pieces, reported contacts 15 mm deep between the wheel and the lid's 1 mm walls: `unresolved_penetration`. The
+    probe now steps with every shape at a 1 mm contact offset (a penetration is found at any offset), restored after
+    it: the lid a quarter open reads 0 mm in PhysX too and the lighter is ready."""
+    pytest.importorskip("sapien")
+    from asset2sim.engines.source import SimObject, UrdfFile
+
+    res = refine_once(build_pocket_lighter, "A lighter, a quarter open.", extras=False)
+    assert res.report.failure_mode == "none", res.report.readiness
+    obj = SimObject(UrdfFile(res.out_dir / "mobility.urdf"), res.report.initial_joint_positions)
+    with obj.open("physx") as s:
+        offsets = [sh.get_contact_offset() for comp in s.links.values() for sh in comp.collision_shapes]
+        assert s.self_penetration() == (0.0, [])
+        assert [sh.get_contact_offset() for comp in s.links.values() for sh in comp.collision_shapes] == offsets
