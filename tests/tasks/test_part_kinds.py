@@ -79,10 +79,11 @@ def test_a_dev_box_whose_body_slides_is_refined_as_the_box_it_is(tmp_path):
 
 @needs_shared
 def test_a_suitcase_asked_open_is_graded_on_its_lid_not_its_handle(refine_once):
-    """Suitcase 101668 stands upright and its lid opens into the floor, which stops it at 3 %. "A suitcase, mostly
-    open." used to pass on its carrying handle, set to 75 % by the same phrase; the phrase asks the suitcase's main
-    part (its lid), so the output is honestly not what was asked, whatever the handle's opening."""
-    res = refine_once(SHARED / "101668", "A suitcase, mostly open.", extras=False)
+    """Suitcase 101668 asked to stand upright keeps that pose, and there its lid opens into the floor, which stops it
+    at 3 %. "A suitcase standing upright, mostly open." would pass on its carrying handle, set to 75 % by the same
+    phrase; the phrase asks the suitcase's main part (its lid), so the output is honestly not what was asked, whatever
+    the handle's opening. (With no pose asked, it is opened lying on its back: `test_ground_clearance.py`.)"""
+    res = refine_once(SHARED / "101668", "A suitcase standing upright, mostly open.", extras=False)
     m = res.report.metric("request_met")
     assert res.report.failure_mode == "request_not_met" and m.passed is False
     assert [u["joint"] for u in m.details["unmet"]] == ["joint_2"]  # the lid
