@@ -210,7 +210,7 @@ def object_states(bands: list[tuple[JointStateRequest, str, dict[str, Any] | Non
     return unmet, not_graded
 
 
-def _failing_joints(metrics: list[MetricResult]) -> tuple[dict[str, str], dict[str, str]]:
+def failing_joints(metrics: list[MetricResult]) -> tuple[dict[str, str], dict[str, str]]:
     """(joint -> why it is not held: a robust-rest trial or the rest test found it out of its band; joint -> why it is
     not operable) from ``metrics`` (any engines)."""
     held: dict[str, str] = {}
@@ -240,7 +240,7 @@ def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, 
     out. ``words``: each word with the joints it applies to; ``strays``: each word with the joints it was applied to
     that its phrase does not name (kind ``not_named``: "the main door has a stiff hinge" made the freezer door stiff).
     ``metrics`` unchanged without a ``request_met`` (:func:`with_unmet`)."""
-    held, operable = _failing_joints(metrics)
+    held, operable = failing_joints(metrics)
     items = []
     for word, joints in words:
         ways = set(MOTION_GUARDS.get(word.kind, {}).values())

@@ -56,6 +56,12 @@ class Attempt:
                 and as_asked.band_missed(n, n, b, abs(self.closed_out[n].fraction(self.state[n]))) is not None]
 
     @property
+    def intervals(self) -> dict[str, tuple[float, float]]:
+        """Joint -> the opening-fraction interval it may take: its band's, or the one of a number or end the request
+        asked (:func:`~asset2sim.tasks.synthesize.estimate.band_intervals`)."""
+        return estimate.band_intervals(self.bands, {n: t.interval for n, t in self.targets.items() if t.interval is not None})
+
+    @property
     def settles(self) -> bool:
         """Whether it passes every check, no disturbance topples it and every band is met."""
         return self.check.passed and not self.check.topples and not self.off_band
@@ -75,7 +81,7 @@ def steadier_opening(ws: Workspace, att: Attempt, log: StageLog) -> tuple[dict[s
     Returns (joint -> opening fraction, the design note, logged), or None when the opening alone cannot make it
     steady or the measurement fails (noted). ``ws``: the workspace the attempt's candidate is loaded from; ``log``: the
     refine's stage log."""
-    intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
+    intervals = att.intervals
     try:
         steadiest = balance.steadiest_fractions(ws.source(att.candidate), att.overlay, att.state, att.closed_out, intervals)
     except Exception as exc:  # a measurement that fails leaves the attempt as it was
@@ -164,17 +170,6 @@ BALANCE_SAMPLES = 13
 BALANCE_GAIN = 0.75
 
 
-def _unheld(att: Attempt) -> set[str]:
-    """Joints the attempt's undisturbed hold (``sagging``) or robust rest (a trial's ``failing_joints``) found
-    leaving their state."""
-    out = set(att.check.sagging)
-    for m in att.check.metrics:
-        if m.name == "robust_rest" and m.passed is False:
-            for trial in (m.details or {}).get("trials", {}).values():
-                out.update(trial.get("failing_joints", ()))
-    return out
-
-
 def balanced_openings(ctx: EstimationContext, kin, att: Attempt) -> dict[str, float]:
     """Joint -> the opening fraction, within its band, at which its hinged part's weight turns it least
     (:func:`~asset2sim.tasks.synthesize.opening_fractions.weight_moment` at :data:`BALANCE_SAMPLES` openings across the
@@ -182,10 +177,11 @@ def balanced_openings(ctx: EstimationContext, kin, att: Attempt) -> dict[str, fl
     most :data:`BALANCE_GAIN` of what it does at ``att``'s state: a suitcase's lid laid back past upright, asked open,
     set where it stands nearly balanced, as a person leaves one open. ``ctx`` carries the attempt's resting pose;
     ``kin``: the input's kinematics session (moved). Empty when there is none."""
-    intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
+    intervals = att.intervals
     closed = ctx.closed_state()
     out = {}
-    for n in sorted(_unheld(att) & set(intervals)):
+    unheld = as_asked.failing_joints(att.check.metrics)[0]  # robust rest's or the rest test's
+    for n in sorted(set(unheld) & set(intervals)):
         cs = att.closed_out.get(n)
         if cs is None or n not in att.state or ctx.asset.joint(n).type != "revolute":
             continue
