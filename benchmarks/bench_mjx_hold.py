@@ -1,6 +1,6 @@
 """Does the MJCF export hold its initial state as MJX and host scenes run it (no no-slip pass)?
 
-    python benchmarks/bench_mjx_hold.py [--root out/bench_refine] [--ids 100221,148] [--no-mjx] [--x64]
+    python benchmarks/bench_mjx_hold.py [--root out/bench_refine] [--ids 100221,148] [--no-mjx] [--x64] [--contacts ground]
     python benchmarks/bench_mjx_hold.py --root DIR --rollouts ROLLOUTS   # MJX column from mjx_rollout.py (a GPU's)
 
 For every output folder under ROOT (as written by ``benchmarks/bench_refine.py``) the MJCF is exported
@@ -14,6 +14,13 @@ no other change, in three ways (``--export-only`` writes the exports and stops):
 - ``mjx``: ``mujoco.mjx.step`` (JAX, on this machine's CPU) in one compiled loop, the file as written; JAX's
   default float32, or float64 with ``--x64``; or, with ``--rollouts``, the positions ``benchmarks/mjx_rollout.py``
   saved for the same files on another machine (a GPU's MJX, as learners run it; writes ROOT/mjx_hold_rollouts.json).
+
+``--contacts ground`` runs every column with the object's own geoms colliding with the world's (the ground) only
+(:func:`ground_contacts_only`): MJX compiles one collision function per pair of distinct meshes, and an object of many
+convex pieces (a stapler's 80) does not finish compiling on a CPU. It first steps the file as written and with its
+self-contacts off in host MuJoCo and prints the largest difference of any position over the whole run (the
+``self-contacts`` column): where it is 0, the object's parts touched nothing of their own and the MJX column measures
+the same motion as the file would make.
 
 It also steps on to :data:`CREEP_TIME` s after the settle: every joint with friction must move at most 1 degree
 (2 mm) there (the creep column, the largest per object in degrees or mm). A run holds when every joint with limits comes to rest inside its robust-rest band around the keyframe (max(0.02 rad
@@ -84,28 +91,65 @@ def step_host(m, d, n: int) -> np.ndarray:
     return out
 
 
-def hold(xml: Path, how: str, rollout: Path | None = None) -> dict:
-    """One run of the file ``xml`` (``how``: defaults, mujoco, mjx) -> {"holds", "worst", "d_pos", "d_ori", "wall_s"};
-    ``rollout``: with ``mjx``, the positions of an ``mjx_rollout.py`` run of the same file instead of a run here."""
-    import mujoco
+def ground_contacts_only(m) -> None:
+    """Let the geoms of model ``m``'s bodies collide with the world body's geoms (the ground) and nothing else: each
+    colliding object geom gets contype 2 and conaffinity 0, each colliding world geom contype 1 and conaffinity 2
+    (MuJoCo collides two geoms where contype of one and conaffinity of the other share a bit). In place."""
+    for i in range(m.ngeom):
+        if m.geom_contype[i] or m.geom_conaffinity[i]:
+            m.geom_contype[i], m.geom_conaffinity[i] = (1, 2) if m.geom_bodyid[i] == 0 else (2, 0)
 
-    from asset2sim.engines.mjcf.base import mujoco_messages
+
+def window_steps() -> tuple[int, int, int]:
+    """(steps of the robust-rest window, of the settle, of a run: the settle and :data:`CREEP_TIME`) at the SPEC's
+    time step."""
     from asset2sim.schemas.config import SimConventions
-    from asset2sim.tasks.check import metrics
 
-    with mujoco_messages():
-        m = mujoco.MjModel.from_xml_path(str(xml))
-    if how == "defaults":
-        m.dof_solref[:] = MUJOCO_DEFAULT_SOLREF
-        m.dof_solimp[:] = MUJOCO_DEFAULT_SOLIMP
-    d = mujoco.MjData(m)
-    mujoco.mj_resetDataKeyframe(m, d, mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "initial"))
-    mujoco.mj_forward(m, d)
-    q0 = d.qpos.copy()
     conv = SimConventions()
     n_rest = round((conv.settle_time + conv.test_time) / conv.timestep)
     n_set = round(conv.settle_time / conv.timestep)
-    n = max(n_rest, n_set + round(CREEP_TIME / conv.timestep))
+    return n_rest, n_set, max(n_rest, n_set + round(CREEP_TIME / conv.timestep))
+
+
+def load(xml: Path, ground_only: bool = False):
+    """(model, data at the keyframe ``initial``) of the file ``xml``, with :func:`ground_contacts_only` when asked."""
+    import mujoco
+
+    from asset2sim.engines.mjcf.base import mujoco_messages
+
+    with mujoco_messages():
+        m = mujoco.MjModel.from_xml_path(str(xml))
+    if ground_only:
+        ground_contacts_only(m)
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "initial"))
+    mujoco.mj_forward(m, d)
+    return m, d
+
+
+def self_contact_effect(xml: Path) -> float:
+    """Largest difference of any position (rad or m) between host MuJoCo runs of ``xml`` as written and with
+    :func:`ground_contacts_only`, over a whole run (:func:`window_steps`)."""
+    n = window_steps()[2]
+    return float(np.abs(step_host(*load(xml), n) - step_host(*load(xml, True), n)).max())
+
+
+def hold(xml: Path, how: str, rollout: Path | None = None, ground_only: bool = False) -> dict:
+    """One run of the file ``xml`` (``how``: defaults, mujoco, mjx) -> {"holds", "worst", "d_pos", "d_ori", "wall_s"};
+    ``rollout``: with ``mjx``, the positions of an ``mjx_rollout.py`` run of the same file instead of a run here;
+    ``ground_only``: the object's geoms collide with the ground only (:func:`ground_contacts_only`)."""
+    import mujoco
+
+    from asset2sim.schemas.config import SimConventions
+    from asset2sim.tasks.check import metrics
+
+    m, d = load(xml, ground_only)
+    if how == "defaults":
+        m.dof_solref[:] = MUJOCO_DEFAULT_SOLREF
+        m.dof_solimp[:] = MUJOCO_DEFAULT_SOLIMP
+    q0 = d.qpos.copy()
+    conv = SimConventions()
+    n_rest, n_set, n = window_steps()
     t0 = time.perf_counter()
     device = "host"
     if how == "mjx" and rollout is not None:
@@ -150,6 +194,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rollouts", type=Path, default=None,
                     help="grade the MJX column from ROLLOUTS/<id>.npz (benchmarks/mjx_rollout.py, e.g. on a GPU machine)")
     ap.add_argument("--export-only", action="store_true", help="write each folder's mjcf/ export and stop")
+    ap.add_argument("--contacts", choices=("all", "ground"), default="all",
+                    help="ground: the object's geoms collide with the ground only (the module docstring)")
     args = ap.parse_args(argv)
     if args.x64:
         import jax
@@ -174,7 +220,10 @@ def main(argv: list[str] | None = None) -> int:
         if saved is not None and not saved.is_file():
             print(f"{folder.name} | no rollout in {args.rollouts}", flush=True)
             continue
-        row = {how: hold(xml, how, saved) for how in hows}
+        ground = args.contacts == "ground"
+        row = {how: hold(xml, how, saved, ground) for how in hows}
+        if ground:
+            row["self_contacts"] = self_contact_effect(xml)
         rows[folder.name] = row
         last = row[hows[-1]]
         w = last["worst"]
@@ -182,13 +231,15 @@ def main(argv: list[str] | None = None) -> int:
         wall = f"{row['mjx']['wall_s']:.1f}" if "mjx" in row else "-"
         creep = " | ".join(f"{max((v for v, _ in row[h]['creep'].values()), default=0.0):.3f}" + ("" if row[h]["creep_ok"] else " CREEPS")
                            for h in hows)
-        print(f"{folder.name} | " + " | ".join("holds" if row[h]["holds"] else "MOVES" for h in hows) + f" | {worst} | {wall} | creep {creep}",
-              flush=True)
+        effect = f" | self-contacts {row['self_contacts']:.3g}" if ground else ""
+        print(f"{folder.name} | " + " | ".join("holds" if row[h]["holds"] else "MOVES" for h in hows) + f" | {worst} | {wall} | creep {creep}"
+              + effect, flush=True)
     counts = {h: sum(r[h]["holds"] for r in rows.values()) for h in hows}
     print("holding: " + ", ".join(f"{h} {c}/{len(rows)}" for h, c in counts.items()))
     print(f"creep within 1 deg / 2 mm in {CREEP_TIME:g} s: "
           + ", ".join(f"{h} {sum(r[h]['creep_ok'] for r in rows.values())}/{len(rows)}" for h in hows))
     name = "mjx_hold_rollouts.json" if args.rollouts else "mjx_hold_x64.json" if args.x64 else "mjx_hold.json"
+    name = name.replace(".json", "_ground.json") if args.contacts == "ground" else name
     (args.root / name).write_text(json.dumps({"rows": rows, "counts": counts}, indent=1, default=float))
     return 0
 
