@@ -197,6 +197,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--contacts", choices=("all", "ground"), default="all",
                     help="ground: the object's geoms collide with the ground only (the module docstring)")
     args = ap.parse_args(argv)
+    if args.rollouts and args.contacts == "ground":
+        ap.error("--rollouts grades runs of the files as written (mjx_rollout.py): not with --contacts ground")
     if args.x64:
         import jax
 
