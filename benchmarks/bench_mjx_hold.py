@@ -44,12 +44,12 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from mjx_rollout import step_mjx
 
+from asset2sim.engines.mjcf.aids import DEFAULT_SOLIMP, DEFAULT_SOLREF
+
 #: Creep: every joint with friction moves at most CREEP_BOUND degrees (hinge) or mm (slide) over CREEP_TIME s after
 #: the settle.
 CREEP_TIME = 10.0
 CREEP_BOUND = {"hinge": 1.0, "slide": 2.0}
-MUJOCO_DEFAULT_SOLREF = (0.02, 1.0)
-MUJOCO_DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
 
 
 def trace_of(m, qpos: np.ndarray, q0: np.ndarray):
@@ -127,17 +127,17 @@ def load(xml: Path, ground_only: bool = False):
     return m, d
 
 
-def self_contact_effect(xml: Path) -> float:
-    """Largest difference of any position (rad or m) between host MuJoCo runs of ``xml`` as written and with
-    :func:`ground_contacts_only`, over a whole run (:func:`window_steps`)."""
-    n = window_steps()[2]
-    return float(np.abs(step_host(*load(xml), n) - step_host(*load(xml, True), n)).max())
+def self_contact_effect(xml: Path, ground_only: np.ndarray) -> float:
+    """Largest difference of any position (rad or m) between a host MuJoCo run of ``xml`` as written and
+    ``ground_only``, the positions (n, nq) of the same run with :func:`ground_contacts_only` (:func:`window_steps`)."""
+    return float(np.abs(step_host(*load(xml), len(ground_only)) - ground_only).max())
 
 
-def hold(xml: Path, how: str, rollout: Path | None = None, ground_only: bool = False) -> dict:
+def hold(xml: Path, how: str, rollout: Path | None = None, ground_only: bool = False, positions: bool = False) -> dict:
     """One run of the file ``xml`` (``how``: defaults, mujoco, mjx) -> {"holds", "worst", "d_pos", "d_ori", "wall_s"};
     ``rollout``: with ``mjx``, the positions of an ``mjx_rollout.py`` run of the same file instead of a run here;
-    ``ground_only``: the object's geoms collide with the ground only (:func:`ground_contacts_only`)."""
+    ``ground_only``: the object's geoms collide with the ground only (:func:`ground_contacts_only`); ``positions``: the
+    run's positions (n, nq) under "qpos" too."""
     import mujoco
 
     from asset2sim.schemas.config import SimConventions
@@ -145,8 +145,8 @@ def hold(xml: Path, how: str, rollout: Path | None = None, ground_only: bool = F
 
     m, d = load(xml, ground_only)
     if how == "defaults":
-        m.dof_solref[:] = MUJOCO_DEFAULT_SOLREF
-        m.dof_solimp[:] = MUJOCO_DEFAULT_SOLIMP
+        m.dof_solref[:] = DEFAULT_SOLREF
+        m.dof_solimp[:] = DEFAULT_SOLIMP
     q0 = d.qpos.copy()
     conv = SimConventions()
     n_rest, n_set, n = window_steps()
@@ -169,20 +169,23 @@ def hold(xml: Path, how: str, rollout: Path | None = None, ground_only: bool = F
             hinge = kind == int(mujoco.mjtJoint.mjJNT_HINGE)
             creep[mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j)] = (float(np.degrees(moved)) if hinge else 1e3 * moved,
                                                                           CREEP_BOUND["hinge" if hinge else "slide"])
-    qpos = qpos[:n_rest]
+    whole, qpos = qpos, qpos[:n_rest]
     trace = trace_of(m, qpos, q0)
     settling = metrics.joint_settling(trace)
     joints_held = all(s.held for s in settling.values())
     free = bool(m.njnt) and int(m.jnt_type[0]) == int(mujoco.mjtJoint.mjJNT_FREE)
     rest = metrics.rest_stability(trace, conv) if free else None
     worst = max(settling.items(), key=lambda kv: kv[1].settled / kv[1].band, default=None)
-    return {"holds": bool(joints_held and (rest is None or rest.passed)),
-            "worst": None if worst is None else {"joint": worst[0], "settled": worst[1].settled, "band": worst[1].band,
-                                                 "held": worst[1].held},
-            "d_pos": None if rest is None else rest.details.get("D_pos_m"), "d_ori": None if rest is None else rest.details.get("D_ori_rad"),
-            "creep": creep, "creep_ok": all(v <= b for v, b in creep.values()),
-            "options": {"noslip_iterations": int(m.opt.noslip_iterations), "cone": int(m.opt.cone)}, "wall_s": wall,
-            "device": device}
+    out = {"holds": bool(joints_held and (rest is None or rest.passed)),
+           "worst": None if worst is None else {"joint": worst[0], "settled": worst[1].settled, "band": worst[1].band,
+                                                "held": worst[1].held},
+           "d_pos": None if rest is None else rest.details.get("D_pos_m"), "d_ori": None if rest is None else rest.details.get("D_ori_rad"),
+           "creep": creep, "creep_ok": all(v <= b for v, b in creep.values()),
+           "options": {"noslip_iterations": int(m.opt.noslip_iterations), "cone": int(m.opt.cone)}, "wall_s": wall,
+           "device": device}
+    if positions:
+        out["qpos"] = whole
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -223,9 +226,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{folder.name} | no rollout in {args.rollouts}", flush=True)
             continue
         ground = args.contacts == "ground"
-        row = {how: hold(xml, how, saved, ground) for how in hows}
-        if ground:
-            row["self_contacts"] = self_contact_effect(xml)
+        row = {how: hold(xml, how, saved, ground, positions=ground and how == "mujoco") for how in hows}
+        if ground:  # the host run with the ground's contacts only against the file as written
+            row["self_contacts"] = self_contact_effect(xml, row["mujoco"].pop("qpos"))
         rows[folder.name] = row
         last = row[hows[-1]]
         w = last["worst"]
