@@ -161,15 +161,16 @@ class RefinedAsset:
                         initial_state: dict[str, float] | None = None) -> SessionOptions:
         """The :class:`~asset2sim.engines.base.SessionOptions` every check and the public loaders open the folder
         with: ``initial_state`` (rad or m; default :attr:`initial_state`), the overlay's springs about it, the hand's
-        :attr:`press_efforts`,
-        ``conventions`` (default :class:`SimConventions`) and the root as declared.
+        :attr:`press_efforts`, ``conventions`` (default :class:`SimConventions`) and the root as declared (the session's
+        and the one its MJCF's solver aids are judged on).
 
         Raises:
             ValueError: ``initial_state.json`` or ``overlay.json`` is invalid; OutputError: the root declaration is.
         """
         state = self.initial_state if initial_state is None else dict(initial_state)
         return SessionOptions(initial_state=state, springs=self.springs_about(state), conventions=conventions or SimConventions(),
-                              press_efforts=self.press_efforts, **session_root_options(self.root.fixed))
+                              press_efforts=self.press_efforts, object_root_fixed=self.root.fixed,
+                              **session_root_options(self.root.fixed))
 
     @cached_property
     def press_efforts(self) -> dict[str, float]:

@@ -1,7 +1,7 @@
 """Does the MJCF export hold its initial state as MJX and host scenes run it (no no-slip pass)?
 
     python benchmarks/bench_mjx_hold.py [--root out/bench_refine] [--ids 100221,148] [--no-mjx] [--x64] [--contacts ground]
-    python benchmarks/bench_mjx_hold.py --root DIR --rollouts ROLLOUTS   # MJX column from mjx_rollout.py (a GPU's)
+    python benchmarks/bench_mjx_hold.py --root DIR --rollouts ROLLOUTS [--contacts ground]  # MJX column: mjx_rollout.py's
 
 For every output folder under ROOT (as written by ``benchmarks/bench_refine.py``) the MJCF is exported
 (``export_mjcf``) and the written file is loaded with ``mujoco.MjModel.from_xml_path``, reset to its keyframe
@@ -13,7 +13,8 @@ no other change, in three ways (``--export-only`` writes the exports and stops):
 - ``mujoco``: host MuJoCo, the file as written;
 - ``mjx``: ``mujoco.mjx.step`` (JAX, on this machine's CPU) in one compiled loop, the file as written; JAX's
   default float32, or float64 with ``--x64``; or, with ``--rollouts``, the positions ``benchmarks/mjx_rollout.py``
-  saved for the same files on another machine (a GPU's MJX, as learners run it; writes ROOT/mjx_hold_rollouts.json).
+  saved for the same files on another machine (a GPU's MJX, as learners run it; writes ROOT/mjx_hold_rollouts.json;
+  each saved run names its contacts, which must be the ones asked here, and its matmul precision).
 
 ``--contacts ground`` runs every column with the object's own geoms colliding with the world's (the ground) only
 (:func:`ground_contacts_only`): MJX compiles one collision function per pair of distinct meshes, and an object of many
@@ -42,7 +43,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from mjx_rollout import step_mjx
+from mjx_rollout import ground_contacts_only, step_mjx
 
 from asset2sim.engines.mjcf.aids import DEFAULT_SOLIMP, DEFAULT_SOLREF
 
@@ -89,15 +90,6 @@ def step_host(m, d, n: int) -> np.ndarray:
         mujoco.mj_step(m, d)
         out[i] = d.qpos
     return out
-
-
-def ground_contacts_only(m) -> None:
-    """Let the geoms of model ``m``'s bodies collide with the world body's geoms (the ground) and nothing else: each
-    colliding object geom gets contype 2 and conaffinity 0, each colliding world geom contype 1 and conaffinity 2
-    (MuJoCo collides two geoms where contype of one and conaffinity of the other share a bit). In place."""
-    for i in range(m.ngeom):
-        if m.geom_contype[i] or m.geom_conaffinity[i]:
-            m.geom_contype[i], m.geom_conaffinity[i] = (1, 2) if m.geom_bodyid[i] == 0 else (2, 0)
 
 
 def window_steps() -> tuple[int, int, int]:
@@ -155,8 +147,11 @@ def hold(xml: Path, how: str, rollout: Path | None = None, ground_only: bool = F
     if how == "mjx" and rollout is not None:
         saved = np.load(rollout)
         qpos, wall, device = saved["qpos"], float(saved["wall_s"]), f"{saved['device']} {saved['dtype']}"
-        if len(qpos) != n or not np.allclose(saved["q0"], q0):
-            raise ValueError(f"{rollout}: not {n} steps of {xml} from its keyframe")
+        contacts = str(saved["contacts"]) if "contacts" in saved else "all"
+        if len(qpos) != n or not np.allclose(saved["q0"], q0) or contacts != ("ground" if ground_only else "all"):
+            raise ValueError(f"{rollout}: not {n} steps of {xml} from its keyframe with these contacts ({contacts})")
+        if "precision" in saved:
+            device += f" matmul {saved['precision']}"
     else:
         qpos = step_mjx(m, d, n) if how == "mjx" else step_host(m, d, n)
         wall = time.perf_counter() - t0
@@ -200,8 +195,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--contacts", choices=("all", "ground"), default="all",
                     help="ground: the object's geoms collide with the ground only (the module docstring)")
     args = ap.parse_args(argv)
-    if args.rollouts and args.contacts == "ground":
-        ap.error("--rollouts grades runs of the files as written (mjx_rollout.py): not with --contacts ground")
     if args.x64:
         import jax
 
@@ -230,6 +223,8 @@ def main(argv: list[str] | None = None) -> int:
         if ground:  # the host run with the ground's contacts only against the file as written
             row["self_contacts"] = self_contact_effect(xml, row["mujoco"].pop("qpos"))
         rows[folder.name] = row
+        if saved is not None:
+            print(f"{folder.name} | mjx rollout: {row['mjx']['device']}", flush=True)
         last = row[hows[-1]]
         w = last["worst"]
         worst = "-" if w is None else f"{w['joint']} {w['settled']:.4f}/{w['band']:.3f}"

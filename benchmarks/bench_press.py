@@ -9,13 +9,12 @@ point: at 1/240 s a hand at 0.25 m/s moves the grasp point 1 mm a step, several 
 deeper its deepest self-contact sank (mm), whether the engine diverged and the share of the force the hand pressed
 with at the farthest step (none: the hand still moved it at its speed; a small share: the one step a part resting at
 its stop moves freely, ``asset2sim.tasks.check.press.Press``); then the counts. ``--root-hold constraint``: the root loaded free and
-held by the engine's bounded fixed constraint (``hold_root``, 1000 N) instead of a fixed base. ``--aids export``: a
-MuJoCo or MJX session's joints get the solver aids ``report.json`` lists for the exported file, judged on the file's
-own root (a free-standing object's free root carries more inertia, so its light parts may get armature the fixed-root
-session judges they need not), as a user loading the file and fixing its root has them.
+held by the engine's bounded fixed constraint (``hold_root``, 1000 N) instead of a fixed base. A MuJoCo or MJX session
+judges its solver aids on the object as its export writes it (``SessionOptions.object_root_fixed``): each session's
+joint aids are compared with those ``report.json`` lists for the exported file, and a difference is printed.
 
     python benchmarks/bench_press.py --root DIR [--ids 102990,103275] [--engines pybullet,mujoco,mjx] [--forces 20,top]
-        [--root-hold fixed|constraint] [--aids session|export]
+        [--root-hold fixed|constraint]
 """
 
 from __future__ import annotations
@@ -36,9 +35,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--engines", default="pybullet,mujoco,mjx")
     ap.add_argument("--forces", default="20,top", help="N at the grasp point, 'top' the top of the operating range")
     ap.add_argument("--root-hold", choices=("fixed", "constraint"), default="fixed")
-    ap.add_argument("--aids", choices=("session", "export"), default="session",
-                    help="MuJoCo and MJX: the solver aids the session judges on its own root (session) or those "
-                         "report.json lists for the exported file (export; a user's file with its root fixed)")
     args = ap.parse_args(argv)
 
     from asset2sim.engines.base import EngineUnsupported
@@ -74,8 +70,8 @@ def main(argv: list[str] | None = None) -> int:
             with quiet_stdout():
                 session = UrdfFile(asset.urdf_path).open(engine, options)
             try:
-                if args.aids == "export" and engine in ("mujoco", "mjx"):
-                    export_aids(session, asset.report.solver_aids)
+                if engine in ("mujoco", "mjx") and joint_aids(session.build.aids) != joint_aids(asset.report.solver_aids):
+                    print(f"{f.name:>7} {engine:<8} solver aids differ from report.json's: {joint_aids(session.build.aids)}", flush=True)
                 try:
                     session.hold_root(HOLD_FORCE)
                 except EngineUnsupported as exc:
@@ -110,34 +106,9 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def export_aids(session, aids) -> None:
-    """Give a MuJoCo or MJX ``session``'s hinges and slides the joint solver aids ``aids`` (``report.json``'s
-    ``solver_aids``, judged on the exported file's own root: free on the ground, or mounted) in place of those its
-    MJCF judged on the session's root, and MuJoCo's defaults where the export writes none."""
-    from mujoco import mj_name2id, mj_setConst, mjtJoint, mjtObj
-
-    from asset2sim.engines.mjcf.aids import DEFAULT_SOLIMP, DEFAULT_SOLREF
-
-    m = session.m
-    for j in range(m.njnt):
-        if int(m.jnt_type[j]) in (int(mjtJoint.mjJNT_HINGE), int(mjtJoint.mjJNT_SLIDE)):
-            dof = int(m.jnt_dofadr[j])
-            m.dof_armature[dof], m.dof_solref[dof], m.dof_solimp[dof] = 0.0, DEFAULT_SOLREF, DEFAULT_SOLIMP
-            m.jnt_solref[j], m.jnt_solimp[j] = DEFAULT_SOLREF, DEFAULT_SOLIMP
-    fields = {"armature": "dof_armature", "solreffriction": "dof_solref", "solimpfriction": "dof_solimp",
-              "solreflimit": "jnt_solref", "solimplimit": "jnt_solimp"}
-    for aid in aids:
-        j = mj_name2id(m, mjtObj.mjOBJ_JOINT, aid.element)
-        for key, text in aid.written.items():
-            if j >= 0 and key in fields:
-                index = int(m.jnt_dofadr[j]) if fields[key].startswith("dof") else j
-                values = [float(x) for x in text.split()]
-                getattr(m, fields[key])[index] = values if len(values) > 1 else values[0]
-    mj_setConst(m, session.d)  # the constraints' regularisation reads each dof's inertia at qpos0, armature included
-    if session.engine == "mjx":  # the MJX model is put from the host model once, at the session's start
-        from mujoco import mjx
-
-        session._mx = mjx.put_model(m)
+def joint_aids(aids) -> list[tuple]:
+    """(kind, element, written) of every solver aid in ``aids`` but the ground's (the press has no ground), sorted."""
+    return sorted((a.kind, a.element, sorted(a.written.items())) for a in aids if a.kind != "ground_contact_impedance")
 
 
 if __name__ == "__main__":

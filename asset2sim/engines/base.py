@@ -58,6 +58,11 @@ class SessionOptions:
     press_efforts: dict[str, float] = field(default_factory=dict)
     """joint -> the most effort (N*m or N) a hand presses it with, the top of its operating range (an output folder's
     ``report.json``): what the MJCF's limit aid is judged on (:mod:`asset2sim.engines.mjcf.aids`)."""
+    object_root_fixed: bool | None = None
+    """The object's own root as its files declare it (True: mounted; False: it stands free), whatever ``fixed_base``
+    the session asks: the MJCF's solver aids are judged on the object as its export writes it, this root with gravity
+    on, so that a session that holds a free object's root carries the exported file's aids. None: judged on the
+    session's own model."""
 
 
 def session_root_options(fixed: bool) -> dict[str, bool]:

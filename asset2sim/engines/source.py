@@ -87,8 +87,8 @@ class SimObject:
     def options(self, **changes) -> SessionOptions:
         """The :class:`asset2sim.engines.base.SessionOptions` of the object as it is (state, springs, conventions; a
         mounted root fixed with no ground), with ``changes`` (SessionOptions fields) applied over them."""
-        return SessionOptions(**{"initial_state": dict(self.state), "springs": dict(self.springs),
-                                 "conventions": self.conventions, **session_root_options(self.fixed_base), **changes})
+        return SessionOptions(**{"initial_state": dict(self.state), "springs": dict(self.springs), "conventions": self.conventions,
+                                 "object_root_fixed": self.fixed_base, **session_root_options(self.fixed_base), **changes})
 
     def open(self, engine: str, **changes) -> SimSession:
         """A session of the source in ``engine`` under :meth:`options` (``changes`` as there; the caller closes it).

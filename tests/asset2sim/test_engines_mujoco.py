@@ -207,6 +207,31 @@ def test_armature_only_on_a_light_part_held_by_the_stiff_friction_and_contacts_a
     assert not {("armature", "lid_hinge"), ("friction_solver", "lid_hinge")} & {(x.kind, x.element) for x in b.aids}
 
 
+def _joint_aids(build) -> list[tuple]:
+    """(kind, element, written) of every aid of ``build`` but the ground's (a session without a ground has none)."""
+    return sorted((a.kind, a.element, tuple(sorted(a.written.items()))) for a in build.aids if a.kind != "ground_contact_impedance")
+
+
+def test_a_session_that_holds_a_free_objects_root_carries_the_files_solver_aids(tmp_path):
+    """One reading of an object: the 2 g lid of a free-standing box gets armature in the file (judged with the free
+    root, the model's mean inertia the whole box's). A session that fixes the root (a hand holds the box), with gravity
+    on or off, judges its aids on the object as declared and carries the same ones; judged on its own fixed-root model
+    (no declared root given) the lid gets none. A mounted object opened free keeps the mounted file's aids."""
+    a = write_contract_asset(tmp_path / "light", lid_mass=0.002, lid_friction=0.01)
+    file_aids = _joint_aids(urdf_to_mjcf(a.urdf))
+    assert ("armature", "lid_hinge") in {(k, e) for k, e, _ in file_aids}
+    for gravity in (True, False):
+        held = urdf_to_mjcf(a.urdf, SessionOptions(fixed_base=True, ground=False, gravity=gravity, object_root_fixed=False))
+        assert _joint_aids(held) == file_aids
+        m = _compile(held)
+        assert m.njnt == 2 and m.dof_armature[m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "lid_hinge")]] > 0
+    own = urdf_to_mjcf(a.urdf, SessionOptions(fixed_base=True, ground=False))
+    assert "armature" not in {k for k, _, _ in _joint_aids(own)}
+    mounted = _joint_aids(urdf_to_mjcf(a.urdf, SessionOptions(fixed_base=True, ground=False)))
+    opened_free = urdf_to_mjcf(a.urdf, SessionOptions(object_root_fixed=True))
+    assert _joint_aids(opened_free) == mounted and _compile(opened_free).njnt == 3
+
+
 def test_the_joints_hold_in_a_host_scene_with_its_own_options_and_defaults(tmp_path):
     """A host scene that includes the object brings its own ``<option>`` (elliptic cones, a 2 ms step) and
     ``<default>`` joint (MuJoCo's own friction solver parameters, under which this lid creeps 0.2 rad in 3 s): the

@@ -12,12 +12,13 @@ import pytest
 
 from asset2sim.engines.loading import read_urdf
 from asset2sim.refined_asset import read_initial_state
+from tests.conftest import SHARED, needs_shared
 from tests.contract_asset import write_contract_asset
 
 pytestmark = pytest.mark.mujoco
 mujoco = pytest.importorskip("mujoco")
 
-from asset2sim.formats.mjcf.export import ExportError, check_mjcf, export_mjcf
+from asset2sim.formats.mjcf.export import ExportError, check_mjcf, export_mjcf, solver_aids
 
 from asset2sim.refined_asset import springs_from_overlay
 
@@ -259,13 +260,35 @@ def test_real_outputs_export(out_dir, tmp_path):
     assert check.keyframe == pytest.approx({k: check.initial_state.get(k, 0.0) for k in check.keyframe}, abs=1e-12)
 
 
+@needs_shared
+def test_a_held_root_session_of_a_real_object_carries_the_aids_of_its_exported_file(refine_once, tmp_path):
+    """Trash can 102181 stands free; its 4e-6 kg*m^2 pedal gets armature in the exported MJCF (judged with the free
+    root: the model's mean inertia is the whole can's). The press's session (root held by the other hand, no ground)
+    and the breakaway's (root held, gravity off) open the folder as every check does
+    (``RefinedAsset.session_options``) and carry the file's joint aids, the pedal's armature included."""
+    from asset2sim.engines.registry import open_session
+    from asset2sim.refined_asset import RefinedAsset
+
+    res = refine_once(SHARED / "102181", "A very small personal trash can with its lid slightly open. The hinge has low damping "
+                      "and holds its position.", extras=False)
+    folder = res.copy_to(tmp_path / "can")
+    listed = sorted((a.kind, a.element, a.written) for a in solver_aids(export_mjcf(folder, visuals=False))
+                    if a.kind != "ground_contact_impedance")
+    assert "armature" in {k for k, _, _ in listed}
+    asset = RefinedAsset(folder)
+    assert not asset.root.fixed
+    for gravity in (True, False):
+        opts = dataclasses.replace(asset.session_options(), fixed_base=True, ground=False, gravity=gravity)
+        with open_session("mujoco", asset.urdf_path, opts) as s:
+            assert sorted((a.kind, a.element, a.written) for a in s.build.aids) == listed
+
+
 def test_report_json_lists_the_solver_aids_the_mjcf_carries_and_reading_it_back_names_them(refine_once, tmp_path):
     """A refine's MJCF export names each solver aid on its joint or geom with its criterion; ``report.json`` lists
     the same aids, read back from the file, and the MJCF reader notes each one as not carried. The refine's export
     reads the hand's press from the verdict it holds: the same file as exporting the finished folder again, the lid's
     limit aid included (a 20 N press at its far edge rests past MuJoCo's default limit)."""
     from asset2sim.formats import read_asset_file
-    from asset2sim.formats.mjcf.export import solver_aids
 
     res = refine_once("box_lid", "a small box with its lid closed", extras=True, media=False)
     xml = res.out / "mjcf" / "mobility.xml"

@@ -4,6 +4,7 @@ convex pieces' mesh assets, the URDF handed to MuJoCo's importer, then the rewri
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from copy import deepcopy
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -202,7 +203,8 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     prisms = cylinder_prisms(worldbody, asset_el)
 
     compiled, qpos, height = place_on_ground(root, root_body, final_assets, initial_state, fixed_base, urdf_path, notes)
-    aids = [prism_aid(g) for g in prisms] + add_solver_aids(worldbody, compiled, qpos, opts.press_efforts, conv.timestep)
+    judged, judged_qpos = object_model(root, root_body.get("name"), final_assets, opts, urdf_path) or (compiled, qpos)
+    aids = [prism_aid(g) for g in prisms] + add_solver_aids(worldbody, judged, judged_qpos, opts.press_efforts, conv.timestep)
     if ground and not fixed_base:
         aids.append(ground_aid(worldbody.find(f"geom[@name='{GROUND}']")))
     write_aids(root, aids)
@@ -220,6 +222,28 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     order = [mujoco.mj_id2name(compiled, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(compiled.njnt)]
     return MjcfBuild(xml=xml, derived_meshes=meshes.derived, mesh_files=meshes.files, initial_qpos=qpos,
                      joint_names=[n for n in order if n in movable], notes=notes, root_height=height, aids=aids)
+
+
+def object_model(root, root_name: str, assets: dict[str, bytes], opts: SessionOptions, urdf_path: Path):
+    """(``MjModel``, keyframe qpos (nq,)) of the object as its export writes it, the model the solver aids are judged
+    on (:attr:`SessionOptions.object_root_fixed`): a copy of the MJCF ``root`` with the object's declared root (the
+    free joint added or removed) and gravity on, placed on the ground as the export places it; None where that is the
+    session's own model (no declared root given, or the same root with gravity on). Raises MjcfError: the copy does
+    not compile."""
+    own = opts.object_root_fixed
+    if own is None or (own == opts.fixed_base and opts.gravity):
+        return None
+    copy = deepcopy(root)
+    body = next(b for b in copy.find("worldbody").iter("body") if b.get("name") == root_name)
+    free = body.find("freejoint")
+    if own and free is not None:
+        body.remove(free)
+    elif not own and free is None:
+        add_root_and_ground(body, copy.find("worldbody"), fixed_base=False, ground=False)
+    conv = opts.conventions or SimConventions()
+    copy.find("option").set("gravity", f"0 0 {num_text(conv.gravity)}")
+    model, qpos, _ = place_on_ground(copy, body, assets, opts.initial_state or {}, own, urdf_path, [])
+    return model, qpos
 
 
 def _rewrite_bodies(worldbody, model: UrdfModel, spec, pieces: dict[str, list[CollisionPiece]], geom_mesh: dict[tuple, str],
