@@ -151,7 +151,8 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
             or m) in the keyframe ``initial`` (other joints at 0); ``springs`` (joint -> :class:`Spring`)
             written as joint ``stiffness`` and ``springref``; ``fixed_base``: no free joint, the root stays at
             the world origin; ``ground`` / ``gravity``: the ground plane / gravity -9.81 m/s^2 along z;
-            ``conventions``: the time step and solver settings.
+            ``conventions``: the time step and solver settings; ``press_efforts`` and ``object_root_fixed``: what
+            the solver aids are judged on (:mod:`.aids`, :func:`object_model`).
         missing_inertial: a link without ``<inertial>`` is ``"massless"`` (the
             file's truth) or gets PyBullet's 1 kg and unit inertia (``"bullet"``).
         mesh_root: folder the MJCF's ``meshdir`` points at (default: the URDF's folder).
