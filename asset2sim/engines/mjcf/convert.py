@@ -204,7 +204,8 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     prisms = cylinder_prisms(worldbody, asset_el)
 
     compiled, qpos, height = place_on_ground(root, root_body, final_assets, initial_state, fixed_base, urdf_path, notes)
-    judged, judged_qpos = object_model(root, root_body.get("name"), final_assets, opts, urdf_path) or (compiled, qpos)
+    judged = object_model(root, root_body.get("name"), final_assets, initial_state, conv, opts, urdf_path)
+    judged, judged_qpos = judged or (compiled, qpos)
     aids = [prism_aid(g) for g in prisms] + add_solver_aids(worldbody, judged, judged_qpos, opts.press_efforts, conv.timestep)
     if ground and not fixed_base:
         aids.append(ground_aid(worldbody.find(f"geom[@name='{GROUND}']")))
@@ -225,12 +226,13 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
                      joint_names=[n for n in order if n in movable], notes=notes, root_height=height, aids=aids)
 
 
-def object_model(root, root_name: str, assets: dict[str, bytes], opts: SessionOptions, urdf_path: Path):
+def object_model(root, root_name: str, assets: dict[str, bytes], initial_state: dict[str, float], conv: SimConventions,
+                 opts: SessionOptions, urdf_path: Path):
     """(``MjModel``, keyframe qpos (nq,)) of the object as its export writes it, the model the solver aids are judged
     on (:attr:`SessionOptions.object_root_fixed`): a copy of the MJCF ``root`` with the object's declared root (the
-    free joint added or removed) and gravity on, placed on the ground as the export places it; None where that is the
-    session's own model (no declared root given, or the same root with gravity on). Raises MjcfError: the copy does
-    not compile."""
+    free joint added or removed) and gravity on (``conv.gravity``, m/s^2), at ``initial_state`` (joint -> rad or m),
+    placed on the ground as the export places it; None where that is the session's own model (no declared root given,
+    or the same root with gravity on). Raises MjcfError: the copy does not compile."""
     own = opts.object_root_fixed
     if own is None or (own == opts.fixed_base and opts.gravity):
         return None
@@ -241,9 +243,8 @@ def object_model(root, root_name: str, assets: dict[str, bytes], opts: SessionOp
         body.remove(free)
     elif not own and free is None:
         add_root_and_ground(body, copy.find("worldbody"), fixed_base=False, ground=False)
-    conv = opts.conventions or SimConventions()
     copy.find("option").set("gravity", f"0 0 {num_text(conv.gravity)}")
-    model, qpos, _ = place_on_ground(copy, body, assets, opts.initial_state or {}, own, urdf_path, [])
+    model, qpos, _ = place_on_ground(copy, body, assets, initial_state, own, urdf_path, [])
     return model, qpos
 
 
