@@ -101,17 +101,14 @@ def run_rest_test(session: SimSession, conventions: SimConventions | None = None
     pos = np.empty((n_test + 1, 3))
     quat = np.empty((n_test + 1, 4))
     joints = {n: np.empty(n_test + 1) for n in names}
-    pos[0], quat[0] = p0, q0
-    q = session.joint_positions()
-    for n in names:
-        joints[n][0] = q[n]
-    for i in range(1, n_test + 1):
-        session.step(1)
+    for i in range(n_test + 1):
+        if i:
+            session.step(1)
         pos[i], quat[i] = session.root_pose()
         q = session.joint_positions()
         for n in names:
             joints[n][i] = q[n]
-        if not all(map(math.isfinite, (*pos[i], *quat[i]))):  # as np.isfinite over both rows, without its per-call cost
+        if i and not all(map(math.isfinite, (*pos[i], *quat[i]))):  # as np.isfinite over both rows, without its per-call cost
             diverged = True
             pos, quat = pos[: i + 1], quat[: i + 1]
             joints = {n: v[: i + 1] for n, v in joints.items()}
@@ -265,6 +262,11 @@ EXPLOSION_TRAVEL_MIN = 1.0
 EXPLOSION_TRAVEL_FACTOR = 5.0
 
 
+def explosion_speed(joint_type: str | None) -> float:
+    """The joint speed that counts as an explosion: m/s for a prismatic joint, else rad/s."""
+    return EXPLOSION_JOINT_SPEED_PRISMATIC if joint_type == "prismatic" else EXPLOSION_JOINT_SPEED_REVOLUTE
+
+
 def ground_penetration(ground: np.ndarray, timestep: float, engine: str = "pybullet") -> MetricResult:
     """``ground_penetration`` (mm): the deepest ground penetration ``ground`` (K,) m over every step of the rest test
     (settling and test), against :data:`GROUND_PENETRATION_TOL`; a non-finite step fails; ``timestep`` s."""
@@ -300,7 +302,7 @@ def divergence_check(root: np.ndarray, joints: dict[str, np.ndarray], joint_type
         q = q[np.isfinite(q)]
         v = float(np.max(np.abs(np.diff(q))) / dt) if len(q) > 1 else 0.0
         peak[n] = v
-        lim = EXPLOSION_JOINT_SPEED_PRISMATIC if joint_types.get(n) == "prismatic" else EXPLOSION_JOINT_SPEED_REVOLUTE
+        lim = explosion_speed(joint_types.get(n))
         if v > lim:
             reasons.append(f"joint {n} speed {v:.3g} > {lim}")
     return {"diverged": bool(reasons), "nan": bool(nan), "reasons": reasons, "peak_root_speed": speed, "root_travel": travel,

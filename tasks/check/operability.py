@@ -295,10 +295,7 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
     try:
         for action, sign, target in (("open", 1.0, cfg.reach_fraction), ("close", -1.0, 1.0 - cfg.reach_fraction)):
             need, at = _needed(session, model, joint, links, closed, sign, fractions, hand)
-            if action == "open":
-                session.set_joint_positions({**state, joint: qc})
-            else:
-                session.set_joint_positions({**state, joint: qc + d * reached_open * rng})
+            session.set_joint_positions({**state, joint: qc + d * reached_open * rng})
             push = _push(session, joint, closed, sign, target, hand, held, cfg)
             reached, diverged, dt = push.far, push.diverged, session.options.conventions.timestep
             t = None if push.steps is None else push.steps * dt
@@ -311,12 +308,9 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
                 stop = blocker(q, links[:1], own | set(links)) or blocker(q, links[1:], set(links))
             if action == "open":
                 reached_open = reached if np.isfinite(reached) else 0.0
-            force = need / lever if lever else need
-            torque = need if lever else None
-            why = []
-            if diverged:
-                why.append("diverged")
-            elif t is None and stop is None:
+            force, torque = (need / lever, need) if lever else (need, None)
+            why = ["diverged"] if diverged else []
+            if t is None and stop is None and not diverged:
                 why.append(f"a {hand_f:.3g} N hand at the {rule} got it only to {reached:.0%} open")
             if r_.force_n is not None and force > r_.force_n[1]:
                 why.append(f"needs {force:.3g} N at the {rule} (range {r_.force_n[0]:g}-{r_.force_n[1]:g} N, {where})")

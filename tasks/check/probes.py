@@ -105,7 +105,7 @@ def probe_joint(session, joint: str, closed: tuple[float, float, float], *, acti
     # Sliding is measured where the object stands (the footprint point, carried with the root).
     watch = SupportWatch(session, session.link_names[0])
     lever0 = push_geometry(session, joint).lever
-    travel = abs(q_target - q0) * (lever0 if lever0 is not None else 1.0)
+    travel = abs(q_target - q0) * (lever0 or 1.0)
     push_s, asked_s = push_budget(cfg, hand.ramp, travel)
     n_push = int(round(push_s / dt))
     run = _Run(reached=reached_if(f0))
@@ -122,7 +122,7 @@ def probe_joint(session, joint: str, closed: tuple[float, float, float], *, acti
     f_end = frac(q_end)
     if not run.reached and push_s < asked_s and run.steps >= n_push:
         notes.append(f"push stopped at the {push_s:.0f} s cap (ProbeConfig.max_push_time): the travel ({travel:.3g} m at the "
-                     f"push point, lever {lever0 if lever0 is not None else 0.0:.3g} m) and the force ramp ({hand.ramp:.3g} s) asked "
+                     f"push point, lever {lever0 or 0.0:.3g} m) and the force ramp ({hand.ramp:.3g} s) asked "
                      f"{asked_s:.0f} s")
     verdict = _judge(session.joint_types[joint] == "prismatic", action, open_range, cfg, run, holds_position, returns, notes)
     return ProbeResult(
@@ -230,7 +230,7 @@ def _push(session, stroke: _Stroke, hand: Pusher, cfg: ProbeConfig, watch: Suppo
         push = push_geometry(session, joint)
         c, lever = push.point, push.lever
         d = sign * push.direction
-        v = sign * qd * (lever if lever is not None else 1.0)  # speed of the push point along d
+        v = sign * qd * (lever or 1.0)  # speed of the push point along d
         lead, force = hand.step(lead, v, dt)
         session.apply_link_force(link, force * d, c)
         if react and link != root:
@@ -239,7 +239,7 @@ def _push(session, stroke: _Stroke, hand: Pusher, cfg: ProbeConfig, watch: Suppo
     def record(k, q, qd):
         run.steps += 1
         run.peak_force = max(run.peak_force, force)
-        eff = force * (lever if lever is not None else 1.0)
+        eff = force * (lever or 1.0)
         if eff >= run.peak_effort:
             run.peak_effort, run.lever = eff, lever
         xy, rot = watch.current()
@@ -288,15 +288,9 @@ def _judge(prismatic: bool, action: str, open_range: float, cfg: ProbeConfig, ru
     q_end, qd_end = run.q_end, run.qd_end
     # "towards the start": for close the start is more open (larger f).
     tol = max(REBOUND_FRACTION, (REBOUND_FLOOR_PRISMATIC if prismatic else REBOUND_FLOOR_REVOLUTE) / open_range)
-    if action == "close":
-        rebound = run.f_high - run.f_rel > tol
-        kept = run.f_rel - run.f_low > tol
-    else:
-        rebound = run.f_rel - run.f_low > tol
-        kept = run.f_high - run.f_rel > tol
-    vlim = cfg.settle_velocity_prismatic if prismatic else cfg.settle_velocity_revolute
-    if abs(qd_end) > vlim:
-        kept = True
+    opened, closed = run.f_high - run.f_rel > tol, run.f_rel - run.f_low > tol
+    rebound, kept = (opened, closed) if action == "close" else (closed, opened)
+    kept = kept or abs(qd_end) > (cfg.settle_velocity_prismatic if prismatic else cfg.settle_velocity_revolute)
     slid = run.max_disp > cfg.slide_tol
     tipped = run.max_rot > cfg.tip_tol
     failure = ""
@@ -418,8 +412,7 @@ def _probe_cleared(session, first: ProbeResult, joints: dict[str, tuple[float, f
         session.restore_state(sid)
         session.set_joint_positions(opened)
         for k in opened:
-            lever = push_geometry(session, k).lever
-            session.drive_joint(k, 0.0, f_max * (lever if lever is not None else 1.0))
+            session.drive_joint(k, 0.0, f_max * (push_geometry(session, k).lever or 1.0))
         try:
             retry = probe_joint(session, name, joints[name], **kw)
         finally:

@@ -19,7 +19,7 @@ from asset2sim.tasks.check import joint_batches
 from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root_options, joints_between
 from asset2sim.tasks.check.contact_points import joint_frame_axis
 from asset2sim.tasks.ingest.mesh_checks import box_corners
-from asset2sim.tasks.check.metrics import EXPLOSION_JOINT_SPEED_PRISMATIC, EXPLOSION_JOINT_SPEED_REVOLUTE
+from asset2sim.tasks.check.metrics import explosion_speed
 from asset2sim.tasks.check.stroke import Reach, reach_stroke
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.synthesize.physics import G
@@ -109,6 +109,11 @@ def _lever(session: SimSession, joint: str, links: list[str]) -> float:
     return best
 
 
+def _arm(session: SimSession, joint: str, links: list[str]) -> float:
+    """The lever of a force on ``links`` about ``joint``: :func:`_lever` (m) for a hinge, 1 for a slide."""
+    return 1.0 if session.joint_types[joint] == "prismatic" else _lever(session, joint, links)
+
+
 def effort_limit(session: SimSession, joint: str, links: list[str], open_range: float, cfg: SweepConfig,
                  closed: float | None = None, direction: float = 1.0) -> float:
     """Drive force limit E = f_w m_sub g L + P (N*m or N): m_sub the engine's masses of ``links``, L their largest
@@ -117,7 +122,7 @@ def effort_limit(session: SimSession, joint: str, links: list[str], open_range: 
     k max(|q_c - q_s|, |q_c + d R - q_s|): k R centred on its closed end, more for a closer preloaded shut (k R without q_c)."""
     masses = session.link_masses()
     m_sub = float(sum(masses.get(ln, 0.0) for ln in links))
-    lever = 1.0 if session.joint_types[joint] == "prismatic" else _lever(session, joint, links)
+    lever = _arm(session, joint, links)
     spring = session.options.springs.get(joint)
     far = open_range if spring is None or closed is None else max(abs(closed - spring.reference),
                                                                   abs(closed + direction * open_range - spring.reference))
@@ -127,8 +132,7 @@ def effort_limit(session: SimSession, joint: str, links: list[str], open_range: 
 def traverse_speed(session: SimSession, joint: str, links: list[str], open_range: float, cfg: SweepConfig) -> float:
     """The drive's top speed (rad/s or m/s): ``open_range`` (rad or m) over ``cfg.traverse_time``, at least
     ``cfg.least_speed`` (m/s) at the far edge of ``links`` (over their largest distance from the axis for a hinge)."""
-    lever = 1.0 if session.joint_types[joint] == "prismatic" else max(_lever(session, joint, links), 1e-3)
-    return max(open_range / cfg.traverse_time, cfg.least_speed / lever)
+    return max(open_range / cfg.traverse_time, cfg.least_speed / _arm(session, joint, links))
 
 
 def _deepest(session: SimSession) -> tuple[float, tuple[str, str] | None]:
@@ -137,6 +141,21 @@ def _deepest(session: SimSession) -> tuple[float, tuple[str, str] | None]:
         return 0.0, None
     worst = max(pairs, key=lambda c: c.max_depth)
     return float(worst.max_depth), (worst.link_a, worst.link_b)
+
+
+def _holds(session: SimSession, cfg: SweepConfig) -> bool:
+    """Whether the joints not swept are held: as ``cfg`` asks, but where the engine applies springs by torque control
+    (PyBullet), which makes the holds drift: there the others stay passive."""
+    return cfg.hold_others and not (any(sp.stiffness > 0 for sp in session.options.springs.values())
+                                    and session.traits.springs_by_torque)
+
+
+def _extend_trace(trace: dict[str, list[float]], fractions: list[float], closing: bool, dt: float) -> None:
+    """A stroke's readings (``fractions``, one a step of ``dt`` s) appended to ``trace``; ``closing``: its phase."""
+    t0 = trace["t"][-1] + dt if trace["t"] else 0.0
+    trace["t"] += [t0 + k * dt for k in range(len(fractions))]
+    trace["fraction"] += fractions
+    trace["phase"] += [float(closing)] * len(fractions)
 
 
 def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: float, open_range: float,
@@ -158,7 +177,7 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     v_max = traverse_speed(session, joint, links, open_range, cfg)
     limit = effort_limit(session, joint, links, open_range, cfg, closed, direction)
     session.set_joint_positions({**initial_state, joint: closed})
-    vdiv = EXPLOSION_JOINT_SPEED_PRISMATIC if jtype == "prismatic" else EXPLOSION_JOINT_SPEED_REVOLUTE  # the divergence metric's
+    vdiv = explosion_speed(jtype)  # the divergence metric's
     max_pen, worst = _deepest(session)
     trace: dict[str, list[float]] = {"t": [], "fraction": [], "phase": []}
 
@@ -178,16 +197,10 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
         r = reach_stroke(session, joint, (closed, direction, open_range), target, sign,
                          cfg.time_limit, law, held=held, hold_force=cfg.hold_force, max_speed=vdiv,
                          record=penetration)
-        t0 = trace["t"][-1] + dt if trace["t"] else 0.0
-        trace["t"] += [t0 + k * dt for k in range(len(r.fractions))]
-        trace["fraction"] += r.fractions
-        trace["phase"] += [float(sign < 0)] * len(r.fractions)
+        _extend_trace(trace, r.fractions, sign < 0, dt)
         return r
 
-    # PyBullet applies springs by torque control, which makes the holds drift: the others stay passive
-    hold = cfg.hold_others and not (any(sp.stiffness > 0 for sp in session.options.springs.values())
-                                     and session.traits.springs_by_torque)
-    held = [o for o in session.joint_types if o != joint] if hold else []
+    held = [o for o in session.joint_types if o != joint] if _holds(session, cfg) else []
     try:
         out = drive(q_far)
         back = Reach(0) if out.diverged else drive(closed)
@@ -263,10 +276,9 @@ def sweep_together(session: SimSession, joints: list[str], closed: dict[str, tup
     runs = []
     for j in joints:
         qc, d, rng = closed[j]
-        speed = EXPLOSION_JOINT_SPEED_PRISMATIC if session.joint_types[j] == "prismatic" else EXPLOSION_JOINT_SPEED_REVOLUTE
         runs.append(_Swept(j, closed[j], effort_limit(session, j, list(moved[j]), rng, cfg, qc, d), moved[j],
                            traverse_speed(session, j, list(moved[j]), rng, cfg),
-                           speed, strokes=[Reach(limit)]))
+                           explosion_speed(session.joint_types[j]), strokes=[Reach(limit)]))
     others = {r.joint: [c for c in at_rest if not ({c.link_a, c.link_b} & r.links)
                         and any({c.link_a, c.link_b} & o.links for o in runs if o is not r)] for r in runs}
     batch_links = frozenset().union(*moved.values())
@@ -281,8 +293,7 @@ def sweep_together(session: SimSession, joints: list[str], closed: dict[str, tup
     pairs = session.self_penetration()[1]
     for r in runs:
         deepest(r, pairs)
-    hold = cfg.hold_others and not (any(sp.stiffness > 0 for sp in session.options.springs.values())
-                                     and session.traits.springs_by_torque)
+    hold = _holds(session, cfg)
     if hold:
         for o in session.joint_types:
             if o not in moved:
@@ -331,10 +342,7 @@ def _next_stroke(r: _Swept, dt: float) -> bool:
     """The ended stroke's readings into ``r``'s trace; the closing stroke begun after the opening one (True), or the
     sweep over (False)."""
     reach = r.strokes[-1]
-    t0 = r.trace["t"][-1] + dt if r.trace["t"] else 0.0
-    r.trace["t"] += [t0 + k * dt for k in range(len(reach.fractions))]
-    r.trace["fraction"] += reach.fractions
-    r.trace["phase"] += [float(r.sign < 0)] * len(reach.fractions)
+    _extend_trace(r.trace, reach.fractions, r.sign < 0, dt)
     if len(r.strokes) == 2:
         return False
     r.strokes.append(Reach(0) if reach.diverged else Reach(reach.limit))
