@@ -125,11 +125,9 @@ def not_measured(reason: str, request: str = "") -> MetricResult:
 def overridden_items(spec: RequestSpec) -> list[dict[str, Any]]:
     """The unmet items of the phrases the parser replaced by a later one for the same part (``spec.overridden``),
     each with the parser's contradiction as its reason."""
-    out = []
-    for phrase in spec.overridden:
-        why = next((w for w in spec.warnings if w.startswith(f"contradiction: '{phrase}' and ")), "")
-        out.append(not_applied(phrase, why.removeprefix("contradiction: ") or "a later phrase of the request sets the same part"))
-    return out
+    return [not_applied(phrase, next((w for w in spec.warnings if w.startswith(f"contradiction: '{phrase}' and ")), "")
+                        .removeprefix("contradiction: ") or "a later phrase of the request sets the same part")
+            for phrase in spec.overridden]
 
 
 def asked_anything(spec: RequestSpec | None) -> bool:
@@ -152,10 +150,9 @@ def refine_request_met(spec: RequestSpec, res: StateResolution | None, found: Re
         return not_measured("no request")
     if not spec.understood and not spec.overrides:
         return not_measured("no word of the request was understood", spec.text)
-    unmet = overridden_items(spec)
-    for phrase, why in (res.unapplied if res is not None else []) + list(properties or []):
-        unmet.append(not_applied(phrase, why))
-    graded = len(spec.overridden) + len(properties or []) + (len(res.unapplied) if res is not None else 0)
+    unapplied = (res.unapplied if res is not None else []) + list(properties or [])
+    unmet = overridden_items(spec) + [not_applied(phrase, why) for phrase, why in unapplied]
+    graded = len(spec.overridden) + len(unapplied)
     for q in (found.quantities if found is not None else []):
         if q.kind not in GRADED_QUANTITIES or q.asked is None or q.achieved is None:
             continue
@@ -268,10 +265,9 @@ def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, 
                 text = "working it needs less friction or damping than the word sets. Drop the word"
             items.append(_unmet(word.phrase, "conflict", j, why, head + text))
             break
-    for word, joints in strays:
-        for j in joints:
-            items.append(_unmet(word.phrase, "not_named", j, "the phrase does not name this part",
-                                f"'{word.phrase}': applied to {j}, a part the phrase does not name ({word.short()})"))
+    items += [_unmet(word.phrase, "not_named", j, "the phrase does not name this part",
+                     f"'{word.phrase}': applied to {j}, a part the phrase does not name ({word.short()})")
+              for word, joints in strays for j in joints]
     return with_unmet(metrics, items)
 
 

@@ -54,7 +54,7 @@ def geometry_points(g: UrdfGeometry) -> np.ndarray:
         v = _mesh_vertices(str(g.path)) * g.scale
     elif g.kind == "box" and g.size is not None:
         h = 0.5 * np.asarray(g.size, float)
-        v = np.array([[x, y, z] for x in (-h[0], h[0]) for y in (-h[1], h[1]) for z in (-h[2], h[2])])
+        v = box_corners(-h, h)
     elif g.kind in ("sphere", "cylinder") and g.radius is not None:
         v = np.zeros((1, 3))
     else:
@@ -62,32 +62,30 @@ def geometry_points(g: UrdfGeometry) -> np.ndarray:
     return v @ g.origin[:3, :3].T + g.origin[:3, 3]
 
 
-def subtree(model: UrdfModel, link: str) -> list[str]:
-    """``link`` and every link below it in ``model``, depth first (each once)."""
+def _walk(link: str, nexts) -> list[str]:
+    """``link`` and every link ``nexts(name)`` reaches from it, in the order a depth-first walk meets them (each once)."""
     out, stack = [], [link]
     while stack:
-        n = stack.pop()
-        if n in out:
-            continue
-        out.append(n)
-        stack.extend(j.child for j in model.children(n))
+        name = stack.pop()
+        if name not in out:
+            out.append(name)
+            stack.extend(nexts(name))
     return out
+
+
+def subtree(model: UrdfModel, link: str) -> list[str]:
+    """``link`` and every link below it in ``model``, depth first (each once)."""
+    return _walk(link, lambda n: [j.child for j in model.children(n)])
 
 
 def rigid_group(model: UrdfModel, link: str) -> list[str]:
     """``link`` and every link joined to it by fixed joints (up and down the tree), in the order a depth-first walk
     meets them (the set of :func:`asset2sim.tasks.geometry.limits.rigid_group`, ordered: the first handle found wins)."""
-    out, stack = [], [link]
-    while stack:
-        name = stack.pop()
-        if name in out:
-            continue
-        out.append(name)
-        stack.extend(j.child for j in model.children(name) if j.type == "fixed")
+    def fixed(name: str) -> list[str]:
         pj = model.parent_joint(name)
-        if pj is not None and pj.type == "fixed":
-            stack.append(pj.parent)
-    return out
+        up = [pj.parent] if pj is not None and pj.type == "fixed" else []
+        return [j.child for j in model.children(name) if j.type == "fixed"] + up
+    return _walk(link, fixed)
 
 
 def link_points(model: UrdfModel, link: str) -> np.ndarray:
@@ -95,8 +93,12 @@ def link_points(model: UrdfModel, link: str) -> np.ndarray:
     ln = model.links.get(link)
     if ln is None:
         return np.zeros((0, 3))
-    pts = [geometry_points(g) for g in (ln.collisions or ln.visuals)]
-    pts = [p for p in pts if len(p)]
+    return _points(ln.collisions or ln.visuals)
+
+
+def _points(geometries) -> np.ndarray:
+    """:func:`geometry_points` (k, 3) m of every element of ``geometries``, stacked."""
+    pts = [p for p in map(geometry_points, geometries) if len(p)]
     return np.concatenate(pts) if pts else np.zeros((0, 3))
 
 
@@ -110,10 +112,8 @@ def handle_points(model: UrdfModel, link: str) -> np.ndarray:
     if link not in model.links:
         raise KeyError(f"link {link!r} is not in the URDF {model.path or model.name!r}")
     ln = model.links[link]
-    els = [g for g in ln.collisions if element_label(g.name) in HANDLE_LABELS] or \
-          [g for g in ln.visuals if element_label(g.name) in HANDLE_LABELS]
-    pts = [p for p in (geometry_points(g) for g in els) if len(p)]
-    return np.concatenate(pts) if pts else np.zeros((0, 3))
+    return _points([g for g in ln.collisions if element_label(g.name) in HANDLE_LABELS] or
+                   [g for g in ln.visuals if element_label(g.name) in HANDLE_LABELS])
 
 
 def _grasp_points(session, model: UrdfModel | None, link: str) -> np.ndarray:
@@ -184,7 +184,8 @@ def contact_point_rule(session, joint: str, model: UrdfModel | None = None, *, o
                 if len(h):
                     return ln, 0.5 * (h.min(axis=0) + h.max(axis=0)), "handle"
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
-    best: tuple[float, str, np.ndarray, np.ndarray] | None = None  # (reach, link, local points, world points)
+    sgn = 1.0 if opening_direction >= 0 else -1.0
+    best: tuple[float, str, np.ndarray] | None = None  # (reach, link, local points)
     for ln in links:
         v = _grasp_points(session, model, ln)
         if not len(v):
@@ -192,20 +193,19 @@ def contact_point_rule(session, joint: str, model: UrdfModel | None = None, *, o
         lo, R = session.link_frame(ln)
         w = v @ np.asarray(R, float).T + np.asarray(lo, float)
         if session.joint_types[joint] == "prismatic":
-            reach = float(np.max((w - o) @ a * (1.0 if opening_direction >= 0 else -1.0)))
+            reach = float(np.max((w - o) @ a * sgn))
         else:
             rel = w - o
             reach = float(np.max(np.linalg.norm(rel - np.outer(rel @ a, a), axis=1)))
         if best is None or reach > best[0]:
-            best = (reach, ln, v, w)
+            best = (reach, ln, v)
     if best is None:
         raise ValueError(f"joint {joint!r}: links {links} have no collision geometry to grasp")
-    _, link, v, w = best
-    _, R = session.link_frame(link)
+    _, link, v = best
+    p, R = session.link_frame(link)
     a_l = np.asarray(R, float).T @ a  # the axis in the grasped link's frame
-    o_l = np.asarray(R, float).T @ (o - np.asarray(session.link_frame(link)[0], float))
+    o_l = np.asarray(R, float).T @ (o - np.asarray(p, float))
     if session.joint_types[joint] == "prismatic":
-        sgn = 1.0 if opening_direction >= 0 else -1.0
         c = 0.5 * (v.min(axis=0) + v.max(axis=0))
         c = c + a_l * sgn * (float((v @ a_l * sgn).max()) - sgn * float(c @ a_l))
         return link, c, "front"

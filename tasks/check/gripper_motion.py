@@ -115,19 +115,14 @@ class GripperMove:
         session, joint, grasp, cfg, frac, reached, watch = (self.session, self.joint, self.grasp, self.cfg, self.frac,
                                                             self.reached, self.watch)
         dt = float(session.options.conventions.timestep)
-        prismatic = session.joint_types[joint] == "prismatic"
         m = Motion(moved=True)
         o, a = joint_frame_axis(session, joint, grasp.link)
         p = grasp.grasp_point_world()
         v_cmd = cfg.limits.max_speed_m_s * speed_share
-        if not prismatic:
-            r_vec = (p - o) - float((p - o) @ a) * a
-            m.lever = max(float(np.linalg.norm(r_vec)), 1e-3)
-            qdot_max = v_cmd / m.lever
-        else:
-            qdot_max = v_cmd
+        m.lever = None if session.joint_types[joint] == "prismatic" else _lever(o, a, p)
+        qdot_max = v_cmd / (m.lever or 1.0)
         record_sample(session, m, p)
-        travel = abs(q_target - q0) * (m.lever if m.lever is not None else 1.0)
+        travel = abs(q_target - q0) * (m.lever or 1.0)
         n_move = int(round((cfg.accel_time + cfg.travel_margin * travel / v_cmd + cfg.extra_time) / dt))
         done, pushed_steps = self._lead(q0, q_target, qdot_max, n_move, m)
         m.peak_force = grasp.peak_force_n
@@ -223,5 +218,9 @@ def _record_peaks(m: Motion, F: np.ndarray, o: np.ndarray, a: np.ndarray, p: np.
     else:
         tau = abs(float(a @ np.cross(p - o, F)))
         m.peak_tau = max(m.peak_tau, tau)
-        r_now = float(np.linalg.norm((p - o) - float((p - o) @ a) * a))
-        m.peak_op = max(m.peak_op, tau / max(r_now, 1e-3))
+        m.peak_op = max(m.peak_op, tau / _lever(o, a, p))
+
+
+def _lever(o: np.ndarray, a: np.ndarray, p: np.ndarray) -> float:
+    """Distance (m, >= 1e-3) of ``p`` (3,) from the axis ``a`` through ``o``."""
+    return max(float(np.linalg.norm((p - o) - float((p - o) @ a) * a)), 1e-3)

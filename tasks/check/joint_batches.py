@@ -15,6 +15,7 @@ import numpy as np
 from asset2sim.engines.base import SimSession
 from asset2sim.tasks.check.contact_points import joint_frame_axis
 from asset2sim.tasks.geometry.limits import rigid_group
+from asset2sim.tasks.ingest.mesh_checks import box_corners
 from asset2sim.urdf import UrdfModel
 
 #: Clearance (m) added to every side of a swept box beyond the engine's own box (which already holds its contact
@@ -53,7 +54,7 @@ def swept_box(session: SimSession, joint: str, links: list[str], state: dict[str
             lo, hi = np.minimum(lo, lo2), np.maximum(hi, hi2)
     else:
         o, a = joint_frame_axis(session, joint, session.joint_child[joint])
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]) - o
+        corners = box_corners(lo, hi) - o
         along = corners @ a
         radius = float(np.max(np.linalg.norm(corners - np.outer(along, a), axis=1)))
         ends = np.array([o + along.min() * a, o + along.max() * a])
