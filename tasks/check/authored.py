@@ -130,6 +130,10 @@ def compare_physics(held: HeldPhysics, authored: HeldPhysics, tol: Tolerances | 
         if err > 1.0:
             out.mismatches.append(Mismatch(item, quantity, held_value, authored_value))
 
+    def off(hv: float, av: float) -> float:
+        """|held - authored| of a length or angle in units of its tolerance."""
+        return abs(hv - av) / (tol.length + tol.rel * abs(av))
+
     for name, a in authored.links.items():
         h = held.links.get(name)
         if h is None:
@@ -153,19 +157,15 @@ def compare_physics(held: HeldPhysics, authored: HeldPhysics, tol: Tolerances | 
             continue
         for q in ("lower", "upper"):
             hv, av = getattr(h, q), getattr(a, q)
-            if math.isinf(av) or math.isinf(hv):
-                e = 0.0 if hv == av else math.inf
-            else:
-                e = abs(hv - av) / (tol.length + tol.rel * abs(av))
+            e = (0.0 if hv == av else math.inf) if math.isinf(av) or math.isinf(hv) else off(hv, av)
             note("limits", e, f"joint {name}", f"{q} limit", hv, av)
         for q in ("damping", "friction", "stiffness"):
             hv, av = getattr(h, q), getattr(a, q)
             note(q, abs(hv - av) / (tol.floor + tol.rel * abs(av)), f"joint {name}", q, hv, av)
         if a.reference is not None and a.stiffness != 0.0:
-            e = math.inf if h.reference is None else abs(h.reference - a.reference) / (tol.length + tol.rel * abs(a.reference))
+            e = math.inf if h.reference is None else off(h.reference, a.reference)
             note("position", e, f"joint {name}", "spring reference", h.reference, a.reference)
-        e = abs(h.position - a.position) / (tol.length + tol.rel * abs(a.position))
-        note("position", e, f"joint {name}", "initial position", h.position, a.position)
+        note("position", off(h.position, a.position), f"joint {name}", "initial position", h.position, a.position)
     out.max_error = worst
     return out
 

@@ -114,21 +114,21 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
                 toppled = (float(t.get("topple") or 0.0), name)
         # step 2: one sentence per joint that moved: swung in a topple, moving at rest too, or carried by its momentum
         for j, (drift, tol, name) in sorted(worst.items()):
-            t = trials.get(name) or {}
+            t, how = trials.get(name) or {}, _TRIAL_WORDS.get(name, name)
             unit = (t.get("joint_units") or {}).get(j, "rad")
             peak = (t.get("joint_peak") or {}).get(j)
             moving = j in (t.get("moving_joints") or [])
             amount = (f"{_joint_amount(drift, unit)} from its state{' and was still moving' if moving else ''} (band "
                       f"{_joint_amount(tol, unit)}" + (f"; largest excursion {_joint_amount(peak, unit)}" if peak is not None else "") + ")")
-            if "toppled" in str((trials.get(name) or {}).get("failure", "")):
-                out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} and toppled "
+            if "toppled" in str(t.get("failure", "")):
+                out.append(f"joint '{j}' moved {amount} when the object {how} and toppled "
                            f"({m.engine}): the part swings as the object falls (the toppling is explained next). {_ADVICE['swing']}")
                 continue
             if j in skip:
-                out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} ({m.engine}), as "
+                out.append(f"joint '{j}' moved {amount} when the object {how} ({m.engine}), as "
                            "it moves at rest with no disturbance (the rest tier). " + advice("hold", asked_weight(metrics)))
                 continue
-            out.append(f"joint '{j}' came to rest {amount} when the object {_TRIAL_WORDS.get(name, name)} ({m.engine}); its "
+            out.append(f"joint '{j}' came to rest {amount} when the object {how} ({m.engine}); its "
                        "friction and damping stay within what a hand may use on it, and at that the part's momentum carries it "
                        "out of its band. " + _holding_choices(m, metrics, j, unit == "m"))
         # step 3: the trials the object did not come to rest in

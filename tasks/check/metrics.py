@@ -163,12 +163,10 @@ def oscillation(trace: RestTrace, conventions: SimConventions | None = None, eng
     """Joint oscillation during T_test; value = number of failing joints."""
     conv = conventions or SimConventions()
     per_joint = {}
-    failing = []
     for name, q in trace.joints.items():
         q = np.asarray(q, float)
         if not np.all(np.isfinite(q)):
             per_joint[name] = {"sign_changes": None, "amplitude": None, "failed": True, "diverged": True}
-            failing.append(name)
             continue
         changes = count_sign_changes(q)
         amp = float(np.max(q) - np.min(q)) if len(q) else 0.0
@@ -177,8 +175,7 @@ def oscillation(trace: RestTrace, conventions: SimConventions | None = None, eng
         failed = changes >= conv.oscillation_sign_changes and amp > limit
         per_joint[name] = {"sign_changes": changes, "amplitude": amp, "unit": "m" if prismatic else "rad",
                            "amplitude_limit": limit, "failed": failed}
-        if failed:
-            failing.append(name)
+    failing = [n for n, j in per_joint.items() if j["failed"]]
     return MetricResult(
         name="oscillation", value=float(len(failing)), unit=unit("oscillation"), passed=not failing and not trace.diverged,
         threshold=(f"no joint with >= {conv.oscillation_sign_changes} sign changes and peak-to-peak amplitude > "

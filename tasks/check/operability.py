@@ -221,12 +221,10 @@ def _needed(session: SimSession, model: UrdfModel, joint: str, links: list[str],
     friction, damping, speed = jm.friction, jm.damping, hand.speed
     best, at = 0.0, float(fractions[0])
     for fr in fractions:
-        q = qc + d * fr * rng
-        session.set_joint_positions({**state, joint: q})
-        s = sign * d  # the stroke's direction in q
-        load = max(0.0, -s * generalized_load(session, model, joint, links, springs))
-        if friction + damping * speed + load > best:
-            best, at = friction + damping * speed + load, float(fr)
+        session.set_joint_positions({**state, joint: qc + d * fr * rng})
+        need = friction + damping * speed + max(0.0, -sign * d * generalized_load(session, model, joint, links, springs))
+        if need > best:
+            best, at = need, float(fr)
     session.set_joint_positions(dict(state))
     return float(best), at
 
@@ -272,12 +270,11 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
     if not rng > 0:
         raise ValueError(f"joint {joint!r}: open range must be > 0, got {rng}")
     jt = session.joint_types[joint]
-    prismatic = jt == "prismatic"
     table = load_operating_forces()
     r_, where = operating_range(category, label, table)
     session.set_joint_positions({**state, joint: qc + d * 0.5 * rng})
     link, point, rule = contact_point_rule(session, joint, model, opening_direction=d)
-    lever = None if prismatic else grasp_lever(session, joint, link, point, model)
+    lever = None if jt == "prismatic" else grasp_lever(session, joint, link, point, model)
     hand_f, effort = hand_limits(r_, lever)
     speed = cfg.hand_speed / lever if lever else cfg.hand_speed
     time_limit = max(cfg.min_time, cfg.time_factor * rng * (lever or 1.0) / cfg.hand_speed)
@@ -376,17 +373,16 @@ def operability_metric(run: OperabilityRun) -> MetricResult:
     pushed); ``details["efforts"]`` joint -> the peak force (N) and torque (N m) and their range."""
     failing = [p.joint for p in run.parts if not p.passed]
     failures = [f"{p.joint} ({p.label or 'unlabelled'}) {s.action}: {s.failure}" for p in run.parts for s in p.strokes if not s.passed]
-    efforts = {p.joint: {"label": p.label, "peak_force_n": round(p.peak_force_n, 4),
-                         "peak_torque_nm": None if p.peak_torque_nm is None else round(p.peak_torque_nm, 4),
-                         "force_range_n": list(p.force_range_n) if p.force_range_n else None,
-                         "torque_range_nm": list(p.torque_range_nm) if p.torque_range_nm else None,
-                         "range_of": p.range_of, "passed": p.passed} for p in run.parts}
+    parts = {p.joint: p.summary() for p in run.parts}
+    efforts = {j: {"label": s["label"], "peak_force_n": round(s["peak_force_n"], 4),
+                   "peak_torque_nm": None if s["peak_torque_nm"] is None else round(s["peak_torque_nm"], 4),
+                   **{k: s[k] for k in ("force_range_n", "torque_range_nm", "range_of", "passed")}} for j, s in parts.items()}
     return MetricResult(
         name="operability", value=float(len(failing)), unit=unit("operability"), passed=(not failing) if run.parts else None,
         threshold=("root fixed, gravity on, the other joints held: every handled part pushed by a hand from its closed end "
                    f"to >= {REACH_FRACTION:.0%} open and back (or as far as geometry lets it), the effort it needs "
                    "(friction, damping at the hand's speed, springs, gravity) inside its real operating range "
                    "(asset2sim/priors/operating_forces.yaml)"),
-        details={"parts": {p.joint: p.summary() for p in run.parts}, "failing": failing, "failures": failures,
+        details={"parts": parts, "failing": failing, "failures": failures,
                  "efforts": efforts, "skipped": run.skipped},
         engine=run.engine)

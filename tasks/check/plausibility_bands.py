@@ -155,18 +155,17 @@ def com_verdict(where: str, com: np.ndarray | None, bbox_min: np.ndarray, bbox_m
     """A center of mass (3,) m in the link frame: implausible outside the geometry's bounding box
     (``bbox_min``, ``bbox_max`` (3,) m) grown by :data:`COM_MARGIN` of its diagonal. ``declared`` is its distance
     from the geometric center of mass ``geometric`` (3,), ``high`` the distance to the grown box's far corner."""
+    result = functools.partial(ValueVerdict, where=where, quantity="center_of_mass", unit="m")
     if com is None:
-        return ValueVerdict(where=where, quantity="center_of_mass", unit="m", declared=None, verdict="not_declared",
-                            reason="no center of mass declared")
+        return result(declared=None, verdict="not_declared", reason="no center of mass declared")
     c, lo, hi = (np.asarray(v, float) for v in (com, bbox_min, bbox_max))
     margin = COM_MARGIN * float(np.linalg.norm(hi - lo))
     outside = np.maximum(np.maximum(lo - margin - c, c - hi - margin), 0.0)
     dist = float(np.linalg.norm(c - np.asarray(geometric, float)))
     out = float(np.linalg.norm(outside))
     place = f"({', '.join(f'{v:.4g}' for v in c)}) m lies {out:.4g} m outside" if out > 0 else "inside"
-    return ValueVerdict(where=where, quantity="center_of_mass", unit="m", declared=dist, estimate=0.0,
-                        verdict="implausible" if out > 0 else "plausible",
-                        reason=f"{place} the link's geometry (its box grown by {margin:.3g} m); {dist:.4g} m from the geometric center of mass")
+    return result(declared=dist, estimate=0.0, verdict="implausible" if out > 0 else "plausible",
+                  reason=f"{place} the link's geometry (its box grown by {margin:.3g} m); {dist:.4g} m from the geometric center of mass")
 
 
 def scale_verdict(largest: float, typical: float | None, category: str) -> ValueVerdict:

@@ -118,14 +118,9 @@ class PostCheck:
 
     def engine_failures(self) -> tuple[bool, list[str]]:
         """(any other engine unstable, joints oscillating in another engine)."""
-        unstable, joints = False, []
-        for res in self.engine_results.values():
-            for m in res:
-                if m.name == "rest_stability" and m.passed is False:
-                    unstable = True
-                if m.name == "oscillation" and m.passed is False:
-                    joints.extend(m.details.get("failing", []))
-        return unstable, list(dict.fromkeys(joints))
+        bad = [m for res in self.engine_results.values() for m in res if m.passed is False]
+        return (any(m.name == "rest_stability" for m in bad),
+                list(dict.fromkeys(j for m in bad if m.name == "oscillation" for j in m.details.get("failing", []))))
 
     def metric(self, name: str) -> MetricResult:
         return next(m for m in self.metrics if m.name == name)

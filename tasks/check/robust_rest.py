@@ -124,9 +124,7 @@ def _disturb(session: SimSession, name: str, cfg: RobustRestConfig) -> None:
     if name == "drop":
         session.set_root_pose(pos + np.array([0.0, 0.0, cfg.drop_height]), quat)
     elif name.startswith("tilt"):
-        axis = np.array([1.0, 0.0, 0.0]) if name.endswith("x") else np.array([0.0, 1.0, 0.0])
-        sign = 1.0 if name[4] == "+" else -1.0
-        p, q = tilt_pose(session, axis, sign * cfg.tilt)
+        p, q = tilt_pose(session, np.eye(3)[0 if name.endswith("x") else 1], (1.0 if name[4] == "+" else -1.0) * cfg.tilt)
         session.set_root_pose(p, q)
         try:  # exact: the lowest collision point of the tilted object on z = 0
             session.place_on_ground()

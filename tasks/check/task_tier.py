@@ -28,11 +28,8 @@ def hold_required_by_label(joint_labels: dict[str, str | None], springs: dict[st
     ``joint_labels`` (joint -> its child link's semantic label): not where the
     parts move freely, nor for a joint with a spring the request or the
     category's part prior (:func:`~asset2sim.tasks.interpret.part_priors.spring_expected`) asks for."""
-    out = {}
-    for n, label in joint_labels.items():
-        sprung = n in springs and (spring_requested or spring_expected(category or "", label))
-        out[n] = not (free_moving or sprung)
-    return out
+    return {n: not (free_moving or n in springs and (spring_requested or spring_expected(category or "", label)))
+            for n, label in joint_labels.items()}
 
 
 def hold_required(asset: AssetDescription, joints: list[str], springs: dict[str, Spring], category: str | None,
