@@ -311,8 +311,7 @@ def as_asked_tier(ctx: "EstimationContext", kin: "SimSession", overlay: Overlay,
     asked = refine_request_met(ctx.request, resolution, found, closed, state, request_apply.unapplied_properties(ctx) + missing,
                                ranks)
     words = [(w, [n for n, c in choices.items() if w in c.words]) for w in ctx.request.motions]
-    sources = {n: d.source for n, d in overlay.joints.items()}
-    strays = [(w, [n for n, src in sources.items() if f"request '{w.phrase}'" in src and n not in named])  # applied elsewhere
+    strays = [(w, [n for n, d in overlay.joints.items() if f"request '{w.phrase}'" in d.source and n not in named])  # elsewhere
               for w, named in words if w.ordinal is not None]  # a word naming one part by its place ("the main door")
     free = free_motion_conflicts(overlay, words, resolution, {j.name: j.type == "prismatic" for j in ctx.asset.movable_joints()})
     unmet = free + not_shut(metrics, words)

@@ -112,8 +112,7 @@ class GripperMove:
     def move(self, q0: float, q_target: float, speed_share: float, notes: list[str]) -> Motion:
         """Lead the joint from ``q0`` to ``q_target`` (rad or m) at ``speed_share`` of the gripper's top speed,
         release and wait ``hold_time``; what happened is said in ``notes``."""
-        session, joint, grasp, cfg, frac, reached, watch = (self.session, self.joint, self.grasp, self.cfg, self.frac,
-                                                            self.reached, self.watch)
+        session, joint, grasp, cfg = self.session, self.joint, self.grasp, self.cfg
         dt = float(session.options.conventions.timestep)
         m = Motion(moved=True)
         o, a = joint_frame_axis(session, joint, grasp.link)
@@ -130,26 +129,25 @@ class GripperMove:
         if pushed_steps:
             notes.append(f"vertical press/lift for {pushed_steps * dt:.2f} s of the motion")
         q_rel, _ = session.joint_state(joint)
-        m.f_rel = frac(q_rel)
-        if not done and reached(m.f_rel):
+        m.f_rel = self.frac(q_rel)
+        if not done and self.reached(m.f_rel):
             notes.append("target reached but the joint was still moving at the time limit")
 
         def wait(k, q, qd):
             m.steps += 1
-            watch.update()
+            self.watch.update()
             if m.steps % RECORD_EVERY == 0:
                 record_sample(session, m, None)
 
-        m.f_end = frac(run_stroke(session, joint, int(round(cfg.hold_time / dt)), record=wait).q)
-        m.held_ok = reached(m.f_end) if np.isfinite(m.f_end) else False
+        m.f_end = self.frac(run_stroke(session, joint, int(round(cfg.hold_time / dt)), record=wait).q)
+        m.held_ok = self.reached(m.f_end) if np.isfinite(m.f_end) else False
         return m
 
     def _lead(self, q0: float, q_target: float, qdot_max: float, n_move: int, m: Motion) -> tuple[bool, int]:
         """Lead the gripper for at most ``n_move`` steps, q_des from ``q0`` to ``q_target``
         at up to ``qdot_max`` (rad/s or m/s), recording the peaks into ``m``.
         Returns (the joint reached the target and stopped, steps pressed or lifted vertically)."""
-        session, joint, grasp, cfg, frac, reached, watch = (self.session, self.joint, self.grasp, self.cfg, self.frac,
-                                                            self.reached, self.watch)
+        session, joint, grasp, cfg = self.session, self.joint, self.grasp, self.cfg
         dt = float(session.options.conventions.timestep)
         prismatic = session.joint_types[joint] == "prismatic"
         stopped = STOPPED_PRISMATIC if prismatic else STOPPED_REVOLUTE
@@ -181,10 +179,10 @@ class GripperMove:
             m.steps += 1
             if m.steps % RECORD_EVERY == 0:
                 record_sample(session, m, grasp.grasp_point_world())
-            slide, tilt = watch.update()
+            slide, tilt = self.watch.update()
             if not np.isfinite(q) or slide > cfg.slide_tol or tilt > cfg.tip_tol:
                 return True  # the object moves instead of the joint: the gripper stops
-            done = q_des == q_target and reached(frac(q)) and abs(qd) < stopped
+            done = q_des == q_target and self.reached(self.frac(q)) and abs(qd) < stopped
             return done
 
         run_stroke(session, joint, n_move, law=law, record=record)

@@ -263,6 +263,6 @@ def limits_verdict(where: str, kind: str, lower: float | None, upper: float | No
         return result(declared=rng, verdict="implausible",
                       reason=f"range {lower:.4g} to {upper:.4g} spans less than {what}: it only makes sense in the "
                              "other unit (JOINT_RANGE_WRONG_UNIT)")
-    high = 2 * math.pi if kind != "prismatic" else MAX_TRAVEL_FACTOR * largest
-    what = "a full turn" if kind != "prismatic" else f"{MAX_TRAVEL_FACTOR:g} x the object's largest dimension"
+    high, what = ((MAX_TRAVEL_FACTOR * largest, f"{MAX_TRAVEL_FACTOR:g} x the object's largest dimension") if kind == "prismatic"
+                  else (2 * math.pi, "a full turn"))
     return _band_verdict(where, "limits", unit, rng, rng, 0.0, high, f"range {lower:.4g} to {upper:.4g}; at most {what}")

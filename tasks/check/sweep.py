@@ -364,13 +364,13 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
                     links: list[str], initial_state: dict[str, float], cfg: SweepConfig, saved: int,
                     blocker: Blocker) -> JointSweep:
     """:func:`sweep_joint` of ``name``; when a link another movable joint places
-    stops it, swept again with the joints between moved (:func:`_clearing_ends`).
+    stops it (and ``cfg.hold_others``), swept again with the joints between moved (:func:`_clearing_ends`).
     Returns the first retry that passes (``range_note`` says what moved), else the first sweep."""
     qc, d, rng = closed[name]
     sweep = functools.partial(sweep_joint, session, name, closed=qc, direction=d, open_range=rng, links=links, config=cfg)
     first = sweep(initial_state=initial_state)
     opened = first.time_open is not None
-    if first.passed or first.diverged or not np.isfinite(first.reached_open):
+    if not cfg.hold_others or first.passed or first.diverged or not np.isfinite(first.reached_open):
         return first
     jd = model.joint(name)
     own = limits.rigid_group(model, jd.parent)
@@ -440,20 +440,15 @@ def run_sweep(engine: str, obj: SimObject, closed: dict[str, tuple[float, float,
         try:
             saved = session.save_state()
             for name in names:
-                qc, d, rng = closed[name]
                 if name not in session.joint_types:
                     run.skipped[name] = "not a movable joint in this engine"
                     continue
-                if not rng > 0:
+                if not closed[name][2] > 0:
                     run.skipped[name] = "no opening range"
                     continue
                 session.restore_state(saved)
                 links = subtrees.get(name, [session.joint_child[name]])
-                if cfg.hold_others:
-                    run.joints.append(_sweep_clearing(session, model, name, closed, links, initial_state, cfg, saved, blocker))
-                else:
-                    run.joints.append(sweep_joint(session, name, closed=qc, direction=d, open_range=rng,
-                                                  links=links, initial_state=initial_state, config=cfg))
+                run.joints.append(_sweep_clearing(session, model, name, closed, links, initial_state, cfg, saved, blocker))
             session.discard_state(saved)
         finally:
             blocker.close()
