@@ -138,6 +138,12 @@ def joint_frame_axis(session, joint: str, link: str) -> tuple[np.ndarray, np.nda
     return np.asarray(o, float), a / max(float(np.linalg.norm(a)), 1e-12)
 
 
+def off_axis(points: np.ndarray, o: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Distances (k,) m of ``points`` (k, 3) m from the axis along unit ``a`` (3,) through ``o`` (3,) m."""
+    rel = points - o
+    return np.linalg.norm(rel - np.outer(rel @ a, a), axis=1)
+
+
 def side_links(session, joint: str, model: UrdfModel | None, side: str) -> list[str]:
     """Links of the session rigid with one ``side`` of ``joint`` (``child`` /
     ``parent``; the joint is movable, so no fixed joint joins the two sides); without a model the child link alone.
@@ -195,8 +201,7 @@ def contact_point_rule(session, joint: str, model: UrdfModel | None = None, *, o
         if session.joint_types[joint] == "prismatic":
             reach = float(np.max((w - o) @ a * sgn))
         else:
-            rel = w - o
-            reach = float(np.max(np.linalg.norm(rel - np.outer(rel @ a, a), axis=1)))
+            reach = float(np.max(off_axis(w, o, a)))
         if best is None or reach > best[0]:
             best = (reach, ln, v)
     if best is None:
@@ -209,8 +214,7 @@ def contact_point_rule(session, joint: str, model: UrdfModel | None = None, *, o
         c = 0.5 * (v.min(axis=0) + v.max(axis=0))
         c = c + a_l * sgn * (float((v @ a_l * sgn).max()) - sgn * float(c @ a_l))
         return link, c, "front"
-    rel = v - o_l
-    r = np.linalg.norm(rel - np.outer(rel @ a_l, a_l), axis=1)
+    r = off_axis(v, o_l, a_l)
     far = v[r >= FAR_EDGE_SHARE * float(r.max())]
     return link, far.mean(axis=0), "far edge"
 
@@ -226,15 +230,13 @@ def grasp_lever(session, joint: str, link: str, point: np.ndarray, model: UrdfMo
     rim. Points from the URDF's collision geometry with ``model``, else from the engine."""
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
     p, R = session.link_frame(link)
-    R = np.asarray(R, float)
 
-    def off_axis(v: np.ndarray) -> np.ndarray:
-        w = v @ R.T + np.asarray(p, float) - o
-        return np.linalg.norm(w - np.outer(w @ a, a), axis=1)
+    def radius(v: np.ndarray) -> np.ndarray:
+        return off_axis(v @ np.asarray(R, float).T + np.asarray(p, float), o, a)
 
-    d = float(off_axis(np.asarray(point, float).reshape(1, 3))[0])
+    d = float(radius(np.asarray(point, float).reshape(1, 3))[0])
     pts = _grasp_points(session, model, link)
-    rim = float(off_axis(pts).max()) if len(pts) else 0.0
+    rim = float(radius(pts).max()) if len(pts) else 0.0
     return max(rim if d < TWIST_SHARE * rim else d, 1e-3)
 
 

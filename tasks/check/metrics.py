@@ -4,6 +4,7 @@ definitions, in any engine; each metric's definition: ``docs/design/metrics.md``
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -124,15 +125,14 @@ def run_rest_test(session: SimSession, conventions: SimConventions | None = None
 def rest_stability(trace: RestTrace, conventions: SimConventions | None = None, engine: str = "pybullet") -> MetricResult:
     """D_pos (m) and D_ori (rad) of a :class:`RestTrace`; value is D_pos in m."""
     conv = conventions or SimConventions()
-    threshold = f"D_pos <= {conv.stability_pos_tol} m and D_ori <= {conv.stability_ori_tol} rad"
+    result = functools.partial(MetricResult, name="rest_stability", unit=unit("rest_stability"), engine=engine,
+                               threshold=f"D_pos <= {conv.stability_pos_tol} m and D_ori <= {conv.stability_ori_tol} rad")
     if trace.diverged:
-        return MetricResult(name="rest_stability", value=None, unit=unit("rest_stability"), passed=False,
-                            threshold=threshold, details={"diverged": True}, engine=engine)
+        return result(value=None, passed=False, details={"diverged": True})
     d_pos = float(np.max(np.linalg.norm(trace.root_pos - trace.p0, axis=1)))
     d_ori = float(max(quat_angle(trace.q0, q) for q in trace.root_quat))
-    passed = d_pos <= conv.stability_pos_tol and d_ori <= conv.stability_ori_tol
-    return MetricResult(name="rest_stability", value=d_pos, unit=unit("rest_stability"), passed=passed, threshold=threshold,
-                        details={"D_pos_m": d_pos, "D_ori_rad": d_ori, "diverged": False}, engine=engine)
+    return result(value=d_pos, passed=d_pos <= conv.stability_pos_tol and d_ori <= conv.stability_ori_tol,
+                  details={"D_pos_m": d_pos, "D_ori_rad": d_ori, "diverged": False})
 
 
 #: Largest root rotation during settling, rad, before the object counts as fallen over (not a SPEC metric).
@@ -142,14 +142,14 @@ SETTLE_TILT_LIMIT = 0.05
 def settle_tilt(trace: RestTrace, engine: str = "pybullet") -> MetricResult:
     """Root rotation (rad) between placement and the end of settling; fails
     above :data:`SETTLE_TILT_LIMIT` (the object fell over while settling)."""
+    result = functools.partial(MetricResult, name="settle_tilt", unit=unit("settle_tilt"), engine=engine)
     if trace.initial_root_quat is None or trace.diverged:
-        return MetricResult(name="settle_tilt", value=None, unit=unit("settle_tilt"), passed=not trace.diverged, engine=engine,
-                            threshold=f"<= {SETTLE_TILT_LIMIT} rad", details={"diverged": trace.diverged})
+        return result(value=None, passed=not trace.diverged, threshold=f"<= {SETTLE_TILT_LIMIT} rad",
+                      details={"diverged": trace.diverged})
     tilt = quat_angle(trace.initial_root_quat, trace.q0)
-    drop = float(np.linalg.norm(trace.p0 - trace.initial_root_pos))
-    return MetricResult(name="settle_tilt", value=tilt, unit=unit("settle_tilt"), passed=tilt <= SETTLE_TILT_LIMIT,
-                        threshold=f"root rotation while settling <= {SETTLE_TILT_LIMIT} rad (the object does not fall over as it settles)",
-                        details={"tilt_rad": tilt, "displacement_m": drop}, engine=engine)
+    return result(value=tilt, passed=tilt <= SETTLE_TILT_LIMIT,
+                  threshold=f"root rotation while settling <= {SETTLE_TILT_LIMIT} rad (the object does not fall over as it settles)",
+                  details={"tilt_rad": tilt, "displacement_m": float(np.linalg.norm(trace.p0 - trace.initial_root_pos))})
 
 
 def count_sign_changes(q: np.ndarray) -> int:

@@ -122,12 +122,12 @@ def parity_table(results: dict[str, list[MetricResult]]) -> list[dict[str, Any]]
             elif m is not None and "error" in m.details:
                 status, reason = "error", m.details["error"]
         pen_d, rest_d, osc_d = (m.details if m is not None else {} for m in (pen, rest, osc))
-        pairs = pen_d.get("pairs", [])
+        pairs, measured = pen_d.get("pairs", []), status == "ok" and pen.value is not None
         rows.append({
             "engine": engine, "status": status, "reason": reason,
             "penetration_mm": pen.value if pen is not None else None,
-            "max_depth_mm": max((p["max_depth_mm"] for p in pairs), default=0.0) if status == "ok" and pen.value is not None else None,
-            "penetration_points": sum(p["points"] for p in pairs) if status == "ok" and pen.value is not None else None,
+            "max_depth_mm": max((p["max_depth_mm"] for p in pairs), default=0.0) if measured else None,
+            "penetration_points": sum(p["points"] for p in pairs) if measured else None,
             "rest_stability": rest.passed if rest is not None else None,
             "D_pos_m": rest_d.get("D_pos_m"), "D_ori_rad": rest_d.get("D_ori_rad"),
             "oscillation": osc.passed if osc is not None else None,

@@ -18,6 +18,7 @@ from asset2sim.engines.base import SimSession
 from asset2sim.schemas.audit import ValueVerdict
 from asset2sim.schemas.overlay import EstimatorInfo, Inertia, JointDynamics, LinkPhysics, Overlay, RootMount
 from asset2sim.tasks.check import plausibility_bands as bands
+from asset2sim.tasks.check.contact_points import off_axis
 from asset2sim.tasks.ingest.mesh_checks import box_corners
 from asset2sim.tasks.interpret import operating_forces
 from asset2sim.tasks.ingest.declared import DeclaredJoint, DeclaredLink, DeclaredPhysics
@@ -111,10 +112,7 @@ def _lever(ctx: EstimationContext, j: DeclaredJoint) -> float:
         return 0.0
     axis = np.asarray(ctx.asset.joint(j.name).axis, float)
     axis = axis / max(np.linalg.norm(axis), 1e-12)
-    lo, hi = np.asarray(geom.bbox_min, float), np.asarray(geom.bbox_max, float)
-    corners = box_corners(lo, hi)
-    radial = corners - np.outer(corners @ axis, axis)
-    return float(np.linalg.norm(radial, axis=1).max())
+    return float(off_axis(box_corners(np.asarray(geom.bbox_min, float), np.asarray(geom.bbox_max, float)), 0.0, axis).max())
 
 
 def _operable(ctx: EstimationContext, j: DeclaredJoint, label: str | None) -> float | None:

@@ -107,8 +107,7 @@ def tilt_pose(session: SimSession, axis: np.ndarray, angle: float) -> tuple[np.n
     new_pos = pivot + Rt @ (pos - pivot)
     new_quat = quat_wxyz_to_xyzw(matrix_quat_wxyz(Rt @ R0))
     low = float(np.min(((pts - pivot) @ Rt.T)[:, 2] + pivot[2]))  # lowest vertex after the turn
-    new_pos = new_pos - np.array([0.0, 0.0, low])
-    return new_pos, new_quat
+    return new_pos - np.array([0.0, 0.0, low]), new_quat
 
 
 def up_change(q_ref: np.ndarray, q_now: np.ndarray) -> float:

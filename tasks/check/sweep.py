@@ -17,7 +17,7 @@ from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import joint_batches
 from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root_options, joints_between
-from asset2sim.tasks.check.contact_points import joint_frame_axis
+from asset2sim.tasks.check.contact_points import joint_frame_axis, off_axis
 from asset2sim.tasks.ingest.mesh_checks import box_corners
 from asset2sim.tasks.check.metrics import explosion_speed
 from asset2sim.tasks.check.stroke import Reach, reach_stroke
@@ -103,9 +103,7 @@ def _lever(session: SimSession, joint: str, links: list[str]) -> float:
         else:
             p, Rl = session.link_frame(ln)
             v_w = v @ Rl.T + p
-        r = v_w - o
-        r = r - np.outer(r @ a, a)
-        best = max(best, float(np.max(np.linalg.norm(r, axis=1))))
+        best = max(best, float(np.max(off_axis(v_w, o, a))))
     return best
 
 
