@@ -73,9 +73,7 @@ class JointBreakaway:
     def passed(self) -> bool:
         """Started to move within :data:`TOLERANCE` of the declared friction, or within :data:`RESOLUTION` of it."""
         r = self.ratio
-        if r is None:
-            return False
-        return abs(r - 1.0) <= TOLERANCE + 1e-9 or abs(self.breakaway - self.declared) <= self.resolution
+        return r is not None and (abs(r - 1.0) <= TOLERANCE + 1e-9 or abs(self.breakaway - self.declared) <= self.resolution)
 
     def as_dict(self) -> dict:
         return {"declared": self.declared, "breakaway": self.breakaway, "ratio": self.ratio, "direction": self.direction,
@@ -84,9 +82,7 @@ class JointBreakaway:
 
 def push_direction(q0: float, lower: float, upper: float) -> int:
     """+1 or -1: toward the farther limit from ``q0`` (+1 without finite limits)."""
-    if not (np.isfinite(lower) and np.isfinite(upper)):
-        return 1
-    return 1 if upper - q0 >= q0 - lower else -1
+    return 1 if not (np.isfinite(lower) and np.isfinite(upper)) or upper - q0 >= q0 - lower else -1
 
 
 def joint_breakaway(session: SimSession, joint: str, friction: float, damping: float = 0.0) -> JointBreakaway:

@@ -148,7 +148,8 @@ def settle_tilt(trace: RestTrace, engine: str = "pybullet") -> MetricResult:
                       details={"diverged": trace.diverged})
     tilt = quat_angle(trace.initial_root_quat, trace.q0)
     return result(value=tilt, passed=tilt <= SETTLE_TILT_LIMIT,
-                  threshold=f"root rotation while settling <= {SETTLE_TILT_LIMIT} rad (the object does not fall over as it settles)",
+                  threshold=f"root rotation while settling <= {SETTLE_TILT_LIMIT} rad (the object does not fall over as it "
+                            "settles)",
                   details={"tilt_rad": tilt, "displacement_m": float(np.linalg.norm(trace.p0 - trace.initial_root_pos))})
 
 

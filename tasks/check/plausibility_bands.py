@@ -165,7 +165,8 @@ def com_verdict(where: str, com: np.ndarray | None, bbox_min: np.ndarray, bbox_m
     out = float(np.linalg.norm(outside))
     place = f"({', '.join(f'{v:.4g}' for v in c)}) m lies {out:.4g} m outside" if out > 0 else "inside"
     return result(declared=dist, estimate=0.0, verdict="implausible" if out > 0 else "plausible",
-                  reason=f"{place} the link's geometry (its box grown by {margin:.3g} m); {dist:.4g} m from the geometric center of mass")
+                  reason=f"{place} the link's geometry (its box grown by {margin:.3g} m); {dist:.4g} m from the geometric "
+                         "center of mass")
 
 
 def scale_verdict(largest: float, typical: float | None, category: str) -> ValueVerdict:

@@ -175,7 +175,6 @@ def run_post_check(obj: SimObject, config: RefineConfig, closed: dict[str, tuple
     engine = "pybullet"
     conv, source = config.sim, obj.source
     obj = replace(obj, conventions=conv)
-    fixed = obj.fixed_base
     pen, recording = measure_rest_test(engine, obj)
     trace = recording.trace
     stab = metrics.rest_stability(trace, conv, engine=engine)
@@ -214,7 +213,7 @@ def run_post_check(obj: SimObject, config: RefineConfig, closed: dict[str, tuple
     div = metrics.divergence(trace, recording.root_series, recording.joint_series, conv.timestep, extent, engine=engine)
     base = [pen, stab, osc, sag_metric, tilt, nested, ground, div]
     for m in base:
-        m.details["root"] = metrics.root_label(fixed)
+        m.details["root"] = metrics.root_label(obj.fixed_base)
     recorded = recorded if recorded is not None else RecordedRuns()
 
     def partial_escalated(rr: MetricResult) -> bool:

@@ -59,15 +59,14 @@ def input_digest(tier: str, engine: str, obj: SimObject, config: Any,
     Raises:
         UrdfError: the source's URDF cannot be read.
     """
-    initial_state, springs, conventions, fixed_base = obj.state, obj.springs, obj.conventions, obj.fixed_base
     model = obj.source.model(mode="lenient")
     h = hashlib.sha256()
-    h.update(repr((tier, engine, bool(fixed_base))).encode())
+    h.update(repr((tier, engine, bool(obj.fixed_base))).encode())
     h.update(write_urdf(model))
     h.update(repr(_mesh_identities(model)).encode())
-    h.update(repr(sorted((str(k), float(v)) for k, v in initial_state.items())).encode())
-    h.update(repr(sorted((str(k), float(s.stiffness), float(s.reference)) for k, s in (springs or {}).items())).encode())
-    h.update(conventions.model_dump_json().encode())
+    h.update(repr(sorted((str(k), float(v)) for k, v in obj.state.items())).encode())
+    h.update(repr(sorted((str(k), float(s.stiffness), float(s.reference)) for k, s in (obj.springs or {}).items())).encode())
+    h.update(obj.conventions.model_dump_json().encode())
     h.update(repr(config).encode())
     if closed is not None:
         h.update(repr([(str(n), tuple(float(x) for x in c)) for n, c in closed.items()]).encode())

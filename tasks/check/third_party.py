@@ -188,29 +188,23 @@ def check_drake(urdf: Path) -> CheckerResult:
         (res.errors if "PhysicallyValid" in m else res.warnings).append(" ".join(m.split()))
     model = read_urdf(urdf)
     context = plant.CreateDefaultContext()
-    bodies = 0
-    for i in range(plant.num_bodies()):
-        body = plant.get_body(BodyIndex(i))
-        if body.index() == plant.world_body().index():
-            continue
-        bodies += 1
+    world = plant.world_body().index()
+    bodies = [b for b in (plant.get_body(BodyIndex(i)) for i in range(plant.num_bodies())) if b.index() != world]
+    for body in bodies:
         si = body.CalcSpatialInertiaInBodyFrame(context)
         about_com = si.Shift(si.get_com()).CalcRotationalInertia()
         if not si.IsPhysicallyValid() or not about_com.CouldBePhysicallyValid():
             res.errors.append(f"link {body.name()!r}: spatial inertia not physically valid (mass {si.get_mass()}, "
                               f"principal moments about the COM {sorted(about_com.CalcPrincipalMomentsOfInertia())})")
-    joints = 0
-    for i in range(plant.num_joints()):
-        joint = plant.get_joint(JointIndex(i))
-        if joint.name() not in {j.name for j in model.movable_joints}:
-            continue
-        joints += 1
+    movable = {j.name for j in model.movable_joints}
+    joints = [j for j in (plant.get_joint(JointIndex(i)) for i in range(plant.num_joints())) if j.name() in movable]
+    for joint in joints:
         want = float(model.joint(joint.name()).damping)
         got = [float(x) for x in joint.default_damping_vector()]
         if any(abs(g - want) > 1e-9 * max(abs(want), 1e-12) for g in got):
             res.errors.append(f"joint {joint.name()!r}: Drake holds damping {got}, the URDF says {want}")
-    ignored = [j.name for j in model.movable_joints if j.friction]
-    res.details = {"bodies": bodies, "joints": joints, "friction_ignored": ignored}
+    res.details = {"bodies": len(bodies), "joints": len(joints),
+                   "friction_ignored": [j.name for j in model.movable_joints if j.friction]}
     return res
 
 
