@@ -212,16 +212,16 @@ def failing_joints(metrics: list[MetricResult]) -> tuple[dict[str, str], dict[st
     not operable) from ``metrics`` (any engines)."""
     held: dict[str, str] = {}
     operable: dict[str, str] = {}
-    for m in metrics:
+    for m in (m for m in metrics if m.passed is False):
         d = m.details or {}
-        if m.name == "robust_rest" and m.passed is False:
+        if m.name == "robust_rest":
             for trial, t in (d.get("trials") or {}).items():
                 for j in (t or {}).get("failing_joints") or []:
                     held.setdefault(j, f"robust rest ({m.engine}, {trial}) finds it out of its band")
-        elif m.name == "state_hold" and m.passed is False:
+        elif m.name == "state_hold":
             for j in d.get("sagging") or []:
                 held.setdefault(j, f"the rest test ({m.engine}) finds it leaving its state")
-        elif m.name == "operability" and m.passed is False:
+        elif m.name == "operability":
             for j in d.get("failing") or []:
                 operable.setdefault(j, f"a hand inside its operating range cannot work it ({m.engine})")
     return held, operable

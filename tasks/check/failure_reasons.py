@@ -257,12 +257,9 @@ def _request_advice(item: dict) -> str:
 def _request_why(metrics: list[Any]) -> list[str]:
     """One sentence per unmet item of the request (its text carries the gap against its tolerance), with the advice
     of what failed (:func:`_request_advice`)."""
-    out = []
-    for m in _failing(metrics, ("request_met",)):
-        for u in (m.details or {}).get("unmet") or []:
-            out.append(f"the output is not what was asked: {u.get('text') or u.get('phrase')} (passes when {m.threshold})."
-                       + (f" {_request_advice(u)}" if _request_advice(u) else ""))
-    return out
+    return [f"the output is not what was asked: {u.get('text') or u.get('phrase')} (passes when {m.threshold})."
+            + (f" {_request_advice(u)}" if _request_advice(u) else "")
+            for m in _failing(metrics, ("request_met",)) for u in (m.details or {}).get("unmet") or []]
 
 
 def asked_weight(metrics: list[Any]) -> str | None:

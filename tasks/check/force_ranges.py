@@ -34,12 +34,11 @@ def force_metric(run: TaskRun, category: str | None, link_labels: dict[str, str 
         tau = a.peak_torque_nm
         t_ok = _inside(tau, r.torque_nm)
         ok = f_ok is not False and t_ok is not False
-        row = {"joint": a.joint, "action": a.action, "peak_operating_force_n": a.peak_operating_force_n,
+        rows.append({"joint": a.joint, "action": a.action, "peak_operating_force_n": a.peak_operating_force_n,
                "peak_gripper_force_n": a.peak_force_n, "peak_torque_nm": tau,
                "force_range_n": list(r.force_n) if r.force_n else None,
                "torque_range_nm": list(r.torque_nm) if r.torque_nm else None,
-               "range_of": where, "sources": [t.sources[s] for s in r.sources], "estimate": r.estimate, "passed": ok}
-        rows.append(row)
+               "range_of": where, "sources": [t.sources[s] for s in r.sources], "estimate": r.estimate, "passed": ok})
         if not ok:
             what = []
             if f_ok is False:

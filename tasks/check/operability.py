@@ -126,8 +126,7 @@ class PartOperability:
 
     @property
     def peak_torque_nm(self) -> float | None:
-        ts = [s.needed_torque_nm for s in self.strokes if s.needed_torque_nm is not None]
-        return max(ts) if ts else None
+        return max((s.needed_torque_nm for s in self.strokes if s.needed_torque_nm is not None), default=None)
 
     def summary(self) -> dict[str, Any]:
         """JSON-able dict."""

@@ -83,11 +83,10 @@ def _judge_link(ctx: EstimationContext, dl: DeclaredLink, label: str | None, out
     out.append(com_v)
     keep_mass = mass_v.verdict == "plausible" and density_ok
     mass = dl.mass if keep_mass else est.mass
-    hollow = (est.hollow_fraction or 0.0) < 0.999
     if inertia_v.verdict == "plausible" and dl.inertia is not None and dl.mass:
         inertia = np.asarray(dl.inertia, float) * (mass / dl.mass)
     else:
-        inertia = geometry_inertia(geom, mass, 1.0, hollow)
+        inertia = geometry_inertia(geom, mass, 1.0, (est.hollow_fraction or 0.0) < 0.999)
     com = np.asarray(dl.com, float) if com_v.verdict == "plausible" and dl.com is not None else np.asarray(est.com, float)
     if not keep_mass:
         mass_v.patched = float(mass)
@@ -202,10 +201,8 @@ def judge(ctx: EstimationContext, kin: SimSession, dp: DeclaredPhysics, mounting
     masses = [dl.mass for n, dl in dp.links.items() if n in declared_links]
     lo, hi = plausible_mass_range(ctx, 1.0)
     values.insert(1, bands.total_mass_verdict(float(sum(masses)) if masses and None not in masses else None, lo, hi, ctx.category))
-    notes = []
-    if values[0].verdict == "implausible":
-        notes.append("the object's size is implausible for its category: every value is judged at the size the file "
-                     "declares, and the patch keeps that size (asset2sim refine rescales)")
+    notes = (["the object's size is implausible for its category: every value is judged at the size the file declares, and "
+              "the patch keeps that size (asset2sim refine rescales)"] if values[0].verdict == "implausible" else [])
     declared_joints, patched_joints = _judge_joints(ctx, kin, dp, labels, patched_links, values)
     info = EstimatorInfo(name="audit")
 

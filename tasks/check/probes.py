@@ -328,12 +328,12 @@ def run_probes(session, joints: dict[str, tuple[float, float, float]], *, action
     sid = session.save_state()
     out = []
     try:
-        for name, (closed, direction, rng) in joints.items():
+        for name, end in joints.items():
             for action in actions:
                 session.restore_state(sid)
                 kw = dict(action=action, holds_position=holds_position, model=model,
                           returns=name in returns, floor_stop=(floor_stops or {}).get(name))
-                r = probe_joint(session, name, (closed, direction, rng), **kw)
+                r = probe_joint(session, name, end, **kw)
                 if model is not None and _shut_in(r):
                     r = _probe_cleared(session, r, joints, model, sid, kw) or r
                 out.append(r)

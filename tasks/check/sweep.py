@@ -133,8 +133,8 @@ def traverse_speed(session: SimSession, joint: str, links: list[str], open_range
     return max(open_range / cfg.traverse_time, cfg.least_speed / _arm(session, joint, links))
 
 
-def _deepest(session: SimSession) -> tuple[float, tuple[str, str] | None]:
-    _, pairs = session.self_penetration()
+def _deepest(pairs: list) -> tuple[float, tuple[str, str] | None]:
+    """The deepest of the self-contact ``pairs``: (its depth m, its links); (0, None) without a pair."""
     if not pairs:
         return 0.0, None
     worst = max(pairs, key=lambda c: c.max_depth)
@@ -176,12 +176,12 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     limit = effort_limit(session, joint, links, open_range, cfg, closed, direction)
     session.set_joint_positions({**initial_state, joint: closed})
     vdiv = explosion_speed(jtype)  # the divergence metric's
-    max_pen, worst = _deepest(session)
+    max_pen, worst = _deepest(session.self_penetration()[1])
     trace: dict[str, list[float]] = {"t": [], "fraction": [], "phase": []}
 
     def penetration(k, q, qd):
         nonlocal max_pen, worst
-        d, pair = _deepest(session)
+        d, pair = _deepest(session.self_penetration()[1])
         if d > max_pen:
             max_pen, worst = d, pair
 
@@ -282,11 +282,10 @@ def sweep_together(session: SimSession, joints: list[str], closed: dict[str, tup
     batch_links = frozenset().union(*moved.values())
 
     def deepest(r: _Swept, pairs) -> None:
-        mine = [c for c in pairs if {c.link_a, c.link_b} & r.links or not {c.link_a, c.link_b} & batch_links] + others[r.joint]
-        if mine:
-            worst = max(mine, key=lambda c: c.max_depth)
-            if worst.max_depth > r.deepest[0] or r.deepest[1] is None and r.k == 0:
-                r.deepest = (float(worst.max_depth), (worst.link_a, worst.link_b))
+        d, pair = _deepest([c for c in pairs if {c.link_a, c.link_b} & r.links or not {c.link_a, c.link_b} & batch_links]
+                           + others[r.joint])
+        if pair is not None and (d > r.deepest[0] or r.deepest[1] is None and r.k == 0):
+            r.deepest = (d, pair)
 
     pairs = session.self_penetration()[1]
     for r in runs:

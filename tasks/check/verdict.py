@@ -102,7 +102,7 @@ def readiness(metrics: list[Any]) -> Readiness:
     tiers: dict[str, bool | None] = {}
     failures: list[str] = []
     mode = "none"
-    for tier, (names, tier_mode) in TIERS.items():
+    for tier, (names, _) in TIERS.items():
         ms = [m for m in metrics if m.name in names and metric_verdict(m) is not None]
         bad = [m for m in ms if metric_verdict(m) is False]
         tiers[tier] = None if not ms else not bad
