@@ -277,10 +277,9 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
     hand_f, effort = hand_limits(r_, lever)
     speed = cfg.hand_speed / lever if lever else cfg.hand_speed
     time_limit = max(cfg.min_time, cfg.time_factor * rng * (lever or 1.0) / cfg.hand_speed)
-    jm = model.joint(joint)
     links = [ln for ln in subtree(model, session.joint_child[joint]) if ln in session.link_names]
     held = [o for o in session.joint_types if o != joint]
-    own = rigid_group(model, jm.parent)  # the parent's side: never collided with the part
+    own = rigid_group(model, model.joint(joint).parent)  # the parent's side: never collided with the part
     part = PartOperability(joint=joint, joint_type=jt, link=link, label=label, rule=rule, lever=lever, hand_force_n=hand_f,
                            force_range_n=r_.force_n, torque_range_nm=r_.torque_nm, range_of=where,
                            sources=[table.sources[s] for s in r_.sources], estimate=r_.estimate)
@@ -291,7 +290,7 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
     try:
         for action, sign, target in (("open", 1.0, cfg.reach_fraction), ("close", -1.0, 1.0 - cfg.reach_fraction)):
             need, at = _needed(session, model, joint, links, closed, sign, fractions, hand)
-            session.set_joint_positions({**state, joint: qc + d * reached_open * rng})
+            session.set_joint_positions({**state, joint: qc if action == "open" else qc + d * reached_open * rng})
             push = _push(session, joint, closed, sign, target, hand, held, cfg)
             reached, diverged, dt = push.far, push.diverged, session.options.conventions.timestep
             t = None if push.steps is None else push.steps * dt
