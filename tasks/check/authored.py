@@ -19,7 +19,7 @@ import numpy as np
 from asset2sim.engines.base import EngineUnavailable, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, principal_moments
 from asset2sim.engines.registry import open_session, read_held_physics
 from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, read_urdf
-from asset2sim.refined_asset import output_session_options, read_initial_state, springs_from_overlay
+from asset2sim.refined_asset import RefinedAsset, output_session_options
 from asset2sim.output_folder import URDF_NAME
 
 #: The exported files each engine's own importer reads back: (engine, format, path in the output folder).
@@ -93,13 +93,9 @@ def authored_physics(out_dir: Path) -> HeldPhysics:
         FileNotFoundError: no ``mobility.urdf``.
         ValueError: invalid ``initial_state.json`` or ``overlay.json``.
     """
-    out_dir = Path(out_dir)
-    urdf_path = out_dir / URDF_NAME
-    if not urdf_path.is_file():
-        raise FileNotFoundError(f"{urdf_path} does not exist (not an output folder?)")
-    urdf = read_urdf(urdf_path)
-    state = read_initial_state(out_dir)
-    springs = springs_from_overlay(out_dir, state)
+    asset = RefinedAsset.existing(out_dir)
+    urdf = read_urdf(asset.urdf_path)
+    state, springs = asset.initial_state, asset.springs
     links = {}
     for name, link in urdf.links.items():
         ine = link.inertial
@@ -113,7 +109,7 @@ def authored_physics(out_dir: Path) -> HeldPhysics:
         joints[j.name] = HeldJoint(lower=float(j.lower), upper=float(j.upper), damping=float(j.damping), friction=float(j.friction),
                                    stiffness=s.stiffness if s else 0.0, reference=s.reference if s else None,
                                    position=float(state.get(j.name, 0.0)))
-    return HeldPhysics(engine="files", source=str(out_dir), links=links, joints=joints)
+    return HeldPhysics(engine="files", source=str(asset.folder), links=links, joints=joints)
 
 
 def compare_physics(held: HeldPhysics, authored: HeldPhysics, tol: Tolerances | None = None) -> AuthoredCheck:

@@ -14,11 +14,10 @@ from typing import Any
 from asset2sim.schemas.metrics import SPEC_METRICS, unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import breakaway, metrics
-from asset2sim.refined_asset import output_session_options
+from asset2sim.refined_asset import RefinedAsset
 
 from asset2sim.engines.base import EngineUnavailable, EngineUnsupported, SessionOptions
 from asset2sim.engines.source import SimSource, UrdfFile
-from asset2sim.output_folder import URDF_NAME
 
 #: The metrics compared across engines (the registry's SPEC metrics).
 METRICS = SPEC_METRICS
@@ -38,11 +37,9 @@ def evaluate_engines(urdf_dir: Path, engines: list[str], *, initial_state: dict[
         FileNotFoundError: no ``mobility.urdf`` in ``urdf_dir``.
         ValueError: invalid ``initial_state.json`` or ``overlay.json``.
     """
-    urdf = Path(urdf_dir) / URDF_NAME
-    if not urdf.is_file():
-        raise FileNotFoundError(f"{urdf} does not exist (not an output folder?)")
-    options = output_session_options(urdf_dir, initial_state)
-    return {e: session_metrics(UrdfFile(urdf), e, options) for e in dict.fromkeys(engines)}
+    asset = RefinedAsset.existing(urdf_dir)
+    options = asset.session_options(None, initial_state)
+    return {e: session_metrics(UrdfFile(asset.urdf_path), e, options) for e in dict.fromkeys(engines)}
 
 
 def session_metrics(source: SimSource, engine: str, options: SessionOptions) -> list[MetricResult]:
