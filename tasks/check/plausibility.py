@@ -139,7 +139,7 @@ def _judge_joints(ctx: EstimationContext, kin: SimSession, dp: DeclaredPhysics, 
             continue
         where, ld, e = f"joint {name}", loads[name], est[name]
         k = float(j.stiffness or 0.0)
-        du, fu = joint_unit(j.type, "damping"), joint_unit(j.type, "friction")
+        du = joint_unit(j.type, "damping")
         operable = _operable(ctx, j, labels.get(j.child))
         travel = (j.upper - j.lower) if j.lower is not None and j.upper is not None else 2 * math.pi
         c_op = bands.operating_damping(operable, travel)
@@ -151,7 +151,7 @@ def _judge_joints(ctx: EstimationContext, kin: SimSession, dp: DeclaredPhysics, 
         else:
             k_eff = max(ld.gravity_stiffness, ld.inertia_axis * w0 * w0)
             damp_v = bands.damping_verdict(where, damping, ld.inertia_axis, k_eff, e.damping, friction, du, c_op)
-        fric_v = bands.friction_verdict(where, friction, e.friction, operable, fu)
+        fric_v = bands.friction_verdict(where, friction, e.friction, operable, joint_unit(j.type, "friction"))
         for v, given in ((damp_v, j.damping), (fric_v, j.friction)):
             if given is None:
                 v.reason = "not declared (simulators take 0); " + v.reason
@@ -172,7 +172,7 @@ def _judge_joints(ctx: EstimationContext, kin: SimSession, dp: DeclaredPhysics, 
             damp_v.patched = float(c)
         if fric_v.verdict != "plausible":
             fric_v.patched = float(f)
-        spring = {"stiffness": k, "spring_reference": float(j.reference or 0.0)} if k > 0 else {}
+        spring = {"stiffness": k, "spring_reference": ref} if k > 0 else {}
         declared[name] = JointDynamics(damping=float(damping), friction=float(friction), inertia_axis=ld.inertia_axis,
                                        source="declared", **spring)
         patched[name] = JointDynamics(damping=float(c), friction=float(f), inertia_axis=ld.inertia_axis, source="audit", **spring)
