@@ -141,9 +141,8 @@ def push_together(session: SimSession, joints: list[str], frictions: dict[str, f
     saved = session.save_state()
     pushes = {}
     for j in joints:
-        lower, upper = session.joint_limits.get(j, (-np.inf, np.inf))
         jtype = session.joint_types.get(j, "revolute")
-        pushes[j] = (push_direction(q0[j], lower, upper), session.options.springs.get(j), START_SPEED.get(jtype, 1e-3),
+        pushes[j] = (push_direction(q0[j], *session.joint_limits.get(j, (-np.inf, np.inf))), session.options.springs.get(j), START_SPEED.get(jtype, 1e-3),
                      RESOLUTION.get(jtype, 0.0), float(frictions[j]) * np.linspace(RAMP_FROM, RAMP_TO, n + 1), [])
     read = {j: session.joint_state(j) for j in joints}
     found: dict[str, JointBreakaway] = {}

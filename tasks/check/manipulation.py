@@ -39,8 +39,8 @@ def measure_manipulation(engine: str, obj: SimObject, closed: dict[str, tuple[fl
     rr_config = robust_rest.RobustRestConfig(free_joints=tuple(sorted(free_joints)))
     runs["robust_rest"] = recorded_runs.robust_rest_run(engine, obj, rr_config, recorded=recorded)
     rr = robust_rest.robust_rest_metric(runs["robust_rest"], rr_config)
-    rr.details["root"] = metrics.root_label(fixed_base)
-    rr.details["category_mounting"] = category_mounting(category).kind  # how the category is held in use, for the advice
+    # how the category is held in use, for the advice
+    rr.details.update(root=metrics.root_label(fixed_base), category_mounting=category_mounting(category).kind)
     why_not = sweep_needed(rr) if sweep_needed is not None else None
     if why_not:
         sw, op = (MetricResult(name=name, value=None, unit=unit(name), passed=None, details={"not_run": why_not}, engine=engine)

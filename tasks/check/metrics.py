@@ -298,8 +298,7 @@ def divergence_check(root: np.ndarray, joints: dict[str, np.ndarray], joint_type
     peak = {}
     for n, q in joints.items():
         q = q[np.isfinite(q)]
-        v = float(np.max(np.abs(np.diff(q))) / dt) if len(q) > 1 else 0.0
-        peak[n] = v
+        peak[n] = v = float(np.max(np.abs(np.diff(q))) / dt) if len(q) > 1 else 0.0
         lim = explosion_speed(joint_types.get(n))
         if v > lim:
             reasons.append(f"joint {n} speed {v:.3g} > {lim}")

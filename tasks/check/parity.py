@@ -74,9 +74,8 @@ def _session_metrics(source: SimSource, engine: str, options: SessionOptions) ->
         rest = metrics.rest_stability(trace, conv, engine=engine)
         osc = metrics.oscillation(trace, conv, engine=engine)
         settling = metrics.joint_settling(trace, timestep=conv.timestep)
-        rest.details["joint_drift"] = {n: j.settled for n, j in settling.items()}
-        rest.details["joints_held"] = {n: j.held for n, j in settling.items()}
-        rest.details["breakaway"] = engine_breakaway(source, engine, options)
+        rest.details.update(joint_drift={n: j.settled for n, j in settling.items()},
+                            joints_held={n: j.held for n, j in settling.items()}, breakaway=engine_breakaway(source, engine, options))
         return [pen, rest, osc]
     except Exception as exc:  # an engine error mid-run fails the asset in that engine
         return _not_run(engine, "error", f"{type(exc).__name__}: {exc}", False)

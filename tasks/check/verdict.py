@@ -169,11 +169,9 @@ def asset_failure_mode(*, manifest_error: str | None = None, input_failure: str 
     verdict ``report.json`` records, decided once), the metrics stage's status, a chain error's mode): the first
     failure in stage order; a metrics stage that failed to run or a chain error only when nothing failed before (the
     metrics stage presents the record and never decides the verdict again); ``crash`` when nothing was recorded."""
-    mode: str | None = None
     if manifest_error is not None:
         return AssetVerdict(INVALID_MANIFEST_ROW, [f"manifest: {manifest_error}"])
-    if input_failure is not None:
-        mode = input_failure
+    mode = input_failure
     if refine_status == "ok":
         mode = refine_mode or "none"
     elif refine_status in FAILED_STATUSES:
