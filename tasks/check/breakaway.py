@@ -142,8 +142,9 @@ def push_together(session: SimSession, joints: list[str], frictions: dict[str, f
     pushes = {}
     for j in joints:
         jtype = session.joint_types.get(j, "revolute")
-        pushes[j] = (push_direction(q0[j], *session.joint_limits.get(j, (-np.inf, np.inf))), session.options.springs.get(j), START_SPEED.get(jtype, 1e-3),
-                     RESOLUTION.get(jtype, 0.0), float(frictions[j]) * np.linspace(RAMP_FROM, RAMP_TO, n + 1), [])
+        pushes[j] = (push_direction(q0[j], *session.joint_limits.get(j, (-np.inf, np.inf))), session.options.springs.get(j),
+                     START_SPEED.get(jtype, 1e-3), RESOLUTION.get(jtype, 0.0),
+                     float(frictions[j]) * np.linspace(RAMP_FROM, RAMP_TO, n + 1), [])
     read = {j: session.joint_state(j) for j in joints}
     found: dict[str, JointBreakaway] = {}
     held: list[str] = []

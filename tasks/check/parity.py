@@ -75,7 +75,8 @@ def _session_metrics(source: SimSource, engine: str, options: SessionOptions) ->
         osc = metrics.oscillation(trace, conv, engine=engine)
         settling = metrics.joint_settling(trace, timestep=conv.timestep)
         rest.details.update(joint_drift={n: j.settled for n, j in settling.items()},
-                            joints_held={n: j.held for n, j in settling.items()}, breakaway=engine_breakaway(source, engine, options))
+                            joints_held={n: j.held for n, j in settling.items()},
+                            breakaway=engine_breakaway(source, engine, options))
         return [pen, rest, osc]
     except Exception as exc:  # an engine error mid-run fails the asset in that engine
         return _not_run(engine, "error", f"{type(exc).__name__}: {exc}", False)
