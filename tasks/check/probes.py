@@ -96,8 +96,14 @@ def probe_joint(session, joint: str, closed: tuple[float, float, float], *, acti
         session.step(1)
     q0, _ = session.joint_state(joint)
     f0 = frac(q0)
-    aim = _target(action, f0, open_range, floor_stop)
-    f_target, reached_if, notes = aim.fraction, aim.reached, aim.notes
+    # the target: its opening fraction, and whether an opening fraction has reached it
+    f_target = CLOSE_TARGET if action == "close" else (OPEN_TARGET if f0 < OPEN_REACHED else OPEN_FAR_TARGET)
+    notes: list[str] = []
+    if action == "open" and floor_stop is not None and floor_stop / open_range < f_target:
+        f_target = max(floor_stop / open_range, 0.0)  # the floor stops the part before the target
+        notes.append(f"the floor stops it {f_target:.0%} open (the object resting as it is): the open probe's target")
+    at = reached_fraction(action, f_target)
+    reached_if = (lambda f: f <= at) if action == "close" else (lambda f: f >= at)
     q_target = closed + direction * f_target * open_range
     sign = 1.0 if q_target >= q0 else -1.0  # +1 when the target needs q to increase
     weight = float(sum(session.link_masses().values())) * abs(session.options.conventions.gravity)  # the engine's masses
@@ -114,7 +120,7 @@ def probe_joint(session, joint: str, closed: tuple[float, float, float], *, acti
     gripped = cfg.hold_body and weight <= cfg.hold_force
     with root_held(session, cfg.hold_force if gripped else None, notes) as held:
         # a gripped body takes the push's reaction through the hold; a steadied one as a force on its root
-        _push(session, _Stroke(joint, sign, n_push, reached_if, frac), hand, cfg, watch, run,
+        _push(session, joint, sign, n_push, reached_if, frac, hand, cfg, watch, run,
               react=cfg.hold_body and not held)
         _release(session, joint, int(round(cfg.release_time / dt)), frac, watch, run)
     q_end, qd_end = session.joint_state(joint)
@@ -124,15 +130,15 @@ def probe_joint(session, joint: str, closed: tuple[float, float, float], *, acti
         notes.append(f"push stopped at the {push_s:.0f} s cap (ProbeConfig.max_push_time): the travel ({travel:.3g} m at the "
                      f"push point, lever {lever0 or 0.0:.3g} m) and the force ramp ({hand.ramp:.3g} s) asked "
                      f"{asked_s:.0f} s")
-    verdict = _judge(session.joint_types[joint] == "prismatic", action, open_range, cfg, run, holds_position, returns, notes)
+    rebound, kept, failure = _judge(session.joint_types[joint] == "prismatic", action, open_range, cfg, run, holds_position, returns, notes)
     return ProbeResult(
         joint=joint, joint_type=session.joint_types[joint], action=action, start=q0, target=float(q_target), start_fraction=f0,
         target_fraction=f_target, reached=bool(run.reached), time_to_reach=run.t_reach, peak_force=float(run.peak_force),
         peak_effort=float(run.peak_effort), lever_arm=run.lever, max_force=float(hand.f_max),
         root_displacement=float(run.max_disp), root_rotation=float(run.max_rot), slid=bool(run.max_disp > cfg.slide_tol),
         tipped=bool(run.max_rot > cfg.tip_tol), release_fraction=float(run.f_rel),
-        final_fraction=float(f_end) if np.isfinite(f_end) else float("nan"), rebound=bool(verdict.rebound), kept_moving=bool(verdict.kept),
-        success=not verdict.failure, failure=verdict.failure, notes=notes, trace=run.trace)
+        final_fraction=float(f_end) if np.isfinite(f_end) else float("nan"), rebound=bool(rebound), kept_moving=bool(kept),
+        success=not failure, failure=failure, notes=notes, trace=run.trace)
 
 
 def check_action(session, joint: str, action: str, open_range: float, what: str = "probe", unknown: str | None = None) -> None:
@@ -155,27 +161,6 @@ def reached_fraction(action: str, target_fraction: float) -> float:
     if target_fraction == OPEN_FAR_TARGET:
         return OPEN_FAR_REACHED
     return target_fraction * OPEN_REACHED / OPEN_TARGET  # a target the floor set
-
-
-@dataclass(frozen=True, slots=True)
-class _Aim:
-    """A probe's target (:func:`_target`): its opening ``fraction``, ``reached`` (whether an opening fraction has
-    reached it) and ``notes``."""
-
-    fraction: float
-    reached: Callable[[float], bool]
-    notes: list[str]
-
-
-def _target(action: str, f0: float, open_range: float, floor_stop: float | None) -> _Aim:
-    """The target of a probe starting at opening fraction ``f0``."""
-    f_target = CLOSE_TARGET if action == "close" else (OPEN_TARGET if f0 < OPEN_REACHED else OPEN_FAR_TARGET)
-    notes: list[str] = []
-    if action == "open" and floor_stop is not None and floor_stop / open_range < f_target:
-        f_target = max(floor_stop / open_range, 0.0)  # the floor stops the part before the target
-        notes.append(f"the floor stops it {f_target:.0%} open (the object resting as it is): the open probe's target")
-    at = reached_fraction(action, f_target)
-    return _Aim(f_target, (lambda f: f <= at) if action == "close" else (lambda f: f >= at), notes)
 
 
 @dataclass
@@ -203,23 +188,11 @@ class _Run:
             self.trace[key].append(x)
 
 
-@dataclass(frozen=True)
-class _Stroke:
-    """Where a probe pushes: ``joint`` towards its target (``sign`` +1: q increases) for at most ``n_push`` steps;
-    ``frac(q)``: the opening fraction of q (rad or m); ``reached_if(f)``: f has reached the target."""
-
-    joint: str
-    sign: float
-    n_push: int
-    reached_if: Callable[[float], bool]
-    frac: Callable[[float], float]
-
-
-def _push(session, stroke: _Stroke, hand: Pusher, cfg: ProbeConfig, watch: SupportWatch, run: _Run,
-          react: bool) -> None:
-    """Push the ``stroke``'s part towards its target with ``hand``, until reached, the steps run out or the object
-    slid or tipped; ``react``: the push's reaction acts on the root, equal and opposite at the push point."""
-    joint, sign = stroke.joint, stroke.sign
+def _push(session, joint: str, sign: float, n_push: int, reached_if: Callable[[float], bool], frac: Callable[[float], float],
+          hand: Pusher, cfg: ProbeConfig, watch: SupportWatch, run: _Run, react: bool) -> None:
+    """Push ``joint``'s part towards its target (``sign`` +1: q increases) with ``hand`` for at most ``n_push`` steps,
+    until reached (``reached_if(frac(q))``, ``frac(q)`` the opening fraction of q, rad or m), or the object slid or
+    tipped; ``react``: the push's reaction acts on the root, equal and opposite at the push point."""
     link, root = session.joint_child[joint], session.link_names[0]
     dt = session.options.conventions.timestep
     lead = force = 0.0  # how far the hand runs ahead of the push point, m; its force, N
@@ -248,14 +221,14 @@ def _push(session, stroke: _Stroke, hand: Pusher, cfg: ProbeConfig, watch: Suppo
         run.record(run.steps * dt, q, force, disp, 0.0)
         if not np.isfinite(q):
             return True
-        if stroke.reached_if(stroke.frac(q)):
+        if reached_if(frac(q)):
             run.reached, run.t_reach = True, run.steps * dt
             return True
         # the object moves instead of the joint: the pusher stops
         return run.max_disp > cfg.slide_tol or run.max_rot > cfg.tip_tol
 
     if not run.reached:
-        run_stroke(session, joint, stroke.n_push, law=law, record=record)
+        run_stroke(session, joint, n_push, law=law, record=record)
 
 
 def _release(session, joint: str, n_rel: int, frac: Callable[[float], float], watch: SupportWatch, run: _Run) -> None:
@@ -272,19 +245,10 @@ def _release(session, joint: str, n_rel: int, frac: Callable[[float], float], wa
     run_stroke(session, joint, n_rel, record=record)
 
 
-@dataclass(frozen=True, slots=True)
-class _Verdict:
-    """How a probe ended (:func:`_judge`): ``rebound`` (moved back towards its start after release), ``kept``
-    (kept moving after release) and ``failure`` ("" on success)."""
-
-    rebound: bool
-    kept: bool
-    failure: str
-
-
 def _judge(prismatic: bool, action: str, open_range: float, cfg: ProbeConfig, run: _Run, holds_position: bool,
-           returns: bool, notes: list[str]) -> _Verdict:
-    """How a probe ended; notes what is allowed."""
+           returns: bool, notes: list[str]) -> tuple[bool, bool, str]:
+    """How a probe ended: (rebound: moved back towards its start after release, kept: kept moving after release,
+    failure: "" on success); notes what is allowed."""
     q_end, qd_end = run.q_end, run.qd_end
     # "towards the start": for close the start is more open (larger f).
     tol = max(REBOUND_FRACTION, (REBOUND_FLOOR_PRISMATIC if prismatic else REBOUND_FLOOR_REVOLUTE) / open_range)
@@ -310,7 +274,7 @@ def _judge(prismatic: bool, action: str, open_range: float, cfg: ProbeConfig, ru
         notes.append("springs back after release (allowed: a spring its part prior or the request expects returns it)")
     if kept:
         notes.append("keeps moving after release")
-    return _Verdict(rebound, kept, failure)
+    return rebound, kept, failure
 
 
 def run_probes(session, joints: dict[str, tuple[float, float, float]], *, actions: tuple[str, ...] = ("close", "open"),
