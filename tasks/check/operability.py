@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.engines.base import SimSession, Spring
+from asset2sim.engines.base import SimSession
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.source import SimObject
 from asset2sim.schemas.metrics import unit
@@ -173,55 +173,23 @@ def gravity_force(session: SimSession, model: UrdfModel, joint: str, links: list
     return q
 
 
-def hand_limits(rng: ForceRange, lever: float | None) -> tuple[float, float]:
-    """(force limit at the grasp point N, effort limit N m or N) of a hand inside ``rng`` at ``lever`` m
-    (None: prismatic): :func:`range_force`, the force range's top lowered
-    where the torque range's top bounds F r.
-
-    Raises:
-        ValueError: the range bounds neither the force nor, for a revolute part, the torque.
-    """
-    f, _ = range_force(rng, "", lever)
-    if not np.isfinite(f):
-        raise ValueError("a part needs a force range" + ("" if lever is None else " or a torque range"))
-    return float(f), float(f * lever) if lever is not None else float(f)
-
-
-def generalized_load(session: SimSession, model: UrdfModel, joint: str, links: list[str],
-                     springs: dict[str, Spring]) -> float:
-    """Generalised force Q (N m or N; > 0 pushes q up) on ``joint`` at the session's state: gravity on ``links``
-    (:func:`gravity_force`) plus the joint's spring
-    (:meth:`~asset2sim.engines.base.Spring.force`)."""
-    q = gravity_force(session, model, joint, links)
-    s = springs.get(joint)
-    if s is not None:
-        q += s.force(session.joint_state(joint)[0])
-    return q
-
-
-@dataclass(frozen=True)
-class _Hand:
-    """The hand pushing a part: at most ``effort`` (N m or N), easing off near ``speed`` (rad/s or m/s), for
-    ``time_limit`` s."""
-
-    effort: float
-    speed: float
-    time_limit: float
-
-
 def _needed(session: SimSession, model: UrdfModel, joint: str, links: list[str], closed: tuple[float, float, float],
-            sign: float, fractions: np.ndarray, hand: _Hand) -> tuple[float, float]:
+            sign: float, fractions: np.ndarray, speed: float) -> tuple[float, float]:
     """(peak effort N m or N, the opening fraction where it peaks) a stroke in direction ``sign`` (+1 opening)
     needs over ``fractions`` from the session's initial state, its springs acting: f + c w + max(0, -s Q), f and c
-    the joint's friction and damping, w the joint speed at the ``hand``'s speed."""
+    the joint's friction and damping, w the joint ``speed`` of the hand (rad/s or m/s), Q the generalised force
+    (N m or N; > 0 pushes q up) of gravity on ``links`` (:func:`gravity_force`) plus the joint's spring
+    (:meth:`~asset2sim.engines.base.Spring.force`)."""
     qc, d, rng = closed
-    state, springs = session.options.initial_state, session.options.springs
+    state, spring = session.options.initial_state, session.options.springs.get(joint)
     jm = model.joint(joint)
-    friction, damping, speed = jm.friction, jm.damping, hand.speed
     best, at = 0.0, float(fractions[0])
     for fr in fractions:
         session.set_joint_positions({**state, joint: qc + d * fr * rng})
-        need = friction + damping * speed + max(0.0, -sign * d * generalized_load(session, model, joint, links, springs))
+        load = gravity_force(session, model, joint, links)
+        if spring is not None:
+            load += spring.force(session.joint_state(joint)[0])
+        need = jm.friction + jm.damping * speed + max(0.0, -sign * d * load)
         if need > best:
             best, at = need, float(fr)
     session.set_joint_positions(dict(state))
@@ -229,9 +197,10 @@ def _needed(session: SimSession, model: UrdfModel, joint: str, links: list[str],
 
 
 def _push(session: SimSession, joint: str, closed: tuple[float, float, float], sign: float, target: float,
-          hand: _Hand, held: list[str], cfg: OperabilityConfig) -> Reach:
+          effort: float, speed: float, time_limit: float, held: list[str], cfg: OperabilityConfig) -> Reach:
     """Push ``joint`` in direction ``sign`` (+1 opening) until the opening fraction passes
-    ``target`` with ``hand``, the ``held`` joints driven still. The hand's force eases off near its
+    ``target`` with a hand of at most ``effort`` (N m or N), easing off near ``speed`` (rad/s or m/s), for
+    ``time_limit`` s, the ``held`` joints driven still. The hand's force eases off near its
     speed and changes at most at the rate that raises it from 0 to its limit over ``ramp_time`` (a
     hand's force builds and relaxes over time): on a light part a force that follows the speed step by
     step would switch between full and none every step, and in PyBullet that chatter against the
@@ -239,15 +208,15 @@ def _push(session: SimSession, joint: str, closed: tuple[float, float, float], s
     against 0.63 N m of friction)."""
     dt = session.options.conventions.timestep
     s = sign * closed[1]
-    rate = hand.effort * dt / cfg.ramp_time  # the most the hand's force changes in one step, N m or N
+    rate = effort * dt / cfg.ramp_time  # the most the hand's force changes in one step, N m or N
     force = [0.0]
 
     def law(k, q, qd):
-        ease = float(np.clip((hand.speed - s * qd) / (0.5 * hand.speed), 0.0, 1.0))
-        force[0] = float(np.clip(hand.effort * ease, force[0] - rate, force[0] + rate))
+        ease = float(np.clip((speed - s * qd) / (0.5 * speed), 0.0, 1.0))
+        force[0] = float(np.clip(effort * ease, force[0] - rate, force[0] + rate))
         session.apply_joint_effort(joint, s * force[0])
 
-    return reach_stroke(session, joint, closed, target, sign, hand.time_limit, law, held=held,
+    return reach_stroke(session, joint, closed, target, sign, time_limit, law, held=held,
                         hold_force=cfg.hold_force)
 
 
@@ -261,7 +230,8 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
 
     Raises:
         KeyError: ``joint`` is not a movable joint of the session.
-        ValueError: R <= 0; the part has no geometry to grasp.
+        ValueError: R <= 0; the part has no geometry to grasp; its operating range bounds neither the force nor, for a
+            revolute part, the torque.
     """
     cfg = config or OperabilityConfig()
     state = session.options.initial_state
@@ -274,7 +244,11 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
     session.set_joint_positions({**state, joint: qc + d * 0.5 * rng})
     link, point, rule = contact_point_rule(session, joint, model, opening_direction=d)
     lever = None if jt == "prismatic" else grasp_lever(session, joint, link, point, model)
-    hand_f, effort = hand_limits(r_, lever)
+    hand_f, _ = range_force(r_, "", lever)  # the force range's top, lowered where the torque range's top bounds F r
+    if not np.isfinite(hand_f):
+        raise ValueError("a part needs a force range" + ("" if lever is None else " or a torque range"))
+    hand_f = float(hand_f)
+    effort = hand_f * lever if lever is not None else hand_f
     speed = cfg.hand_speed / lever if lever else cfg.hand_speed
     time_limit = max(cfg.min_time, cfg.time_factor * rng * (lever or 1.0) / cfg.hand_speed)
     links = [ln for ln in subtree(model, session.joint_child[joint]) if ln in session.link_names]
@@ -284,14 +258,13 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
                            force_range_n=r_.force_n, torque_range_nm=r_.torque_nm, range_of=where,
                            sources=[table.sources[s] for s in r_.sources], estimate=r_.estimate)
     fractions = np.linspace(0.0, 1.0, max(2, cfg.samples))
-    hand = _Hand(effort, speed, time_limit)
     saved = session.save_state()
     reached_open = 0.0  # where the opening stroke left the part: the closing stroke starts there
     try:
         for action, sign, target in (("open", 1.0, cfg.reach_fraction), ("close", -1.0, 1.0 - cfg.reach_fraction)):
-            need, at = _needed(session, model, joint, links, closed, sign, fractions, hand)
+            need, at = _needed(session, model, joint, links, closed, sign, fractions, speed)
             session.set_joint_positions({**state, joint: qc if action == "open" else qc + d * reached_open * rng})
-            push = _push(session, joint, closed, sign, target, hand, held, cfg)
+            push = _push(session, joint, closed, sign, target, effort, speed, time_limit, held, cfg)
             reached, diverged, dt = push.far, push.diverged, session.options.conventions.timestep
             t = None if push.steps is None else push.steps * dt
             if push.steps == push.limit:  # reached at the last reading: the time limit itself
