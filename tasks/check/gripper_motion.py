@@ -170,7 +170,13 @@ class GripperMove:
             target, push = _gripper_target(o, a, p, self.side_sign * (q_des - q), prismatic, cfg.vertical_share)
             F = grasp.step_towards(target, dt, direction=_UP if push else None)
             pushed_steps += int(push)
-            _record_peaks(m, F, o, a, p, prismatic)
+            if prismatic:  # the peaks of the gripper's force F (3,) N at the grasp point p
+                m.peak_ax = max(m.peak_ax, abs(float(F @ a)))
+                m.peak_op = m.peak_ax
+            else:
+                tau = abs(float(a @ np.cross(p - o, F)))
+                m.peak_tau = max(m.peak_tau, tau)
+                m.peak_op = max(m.peak_op, tau / _lever(o, a, p))
             if float(np.linalg.norm(F)) >= cfg.limits.max_force_n * (1 - 1e-9):
                 m.force_limited = True
 
@@ -206,17 +212,6 @@ def _gripper_target(o: np.ndarray, a: np.ndarray, p: np.ndarray, dq: float, pris
         t_hat = t_dir / nt
         target = p + _UP * (float((target - p) @ t_hat) / float(t_hat[2]))
     return target, push
-
-
-def _record_peaks(m: Motion, F: np.ndarray, o: np.ndarray, a: np.ndarray, p: np.ndarray, prismatic: bool) -> None:
-    """Raise ``m``'s peaks with the gripper's force ``F`` (3,) N at the grasp point ``p``."""
-    if prismatic:
-        m.peak_ax = max(m.peak_ax, abs(float(F @ a)))
-        m.peak_op = m.peak_ax
-    else:
-        tau = abs(float(a @ np.cross(p - o, F)))
-        m.peak_tau = max(m.peak_tau, tau)
-        m.peak_op = max(m.peak_op, tau / _lever(o, a, p))
 
 
 def _lever(o: np.ndarray, a: np.ndarray, p: np.ndarray) -> float:

@@ -103,15 +103,11 @@ def engine_breakaway(source: SimSource, engine: str, options: SessionOptions) ->
         session.close()
 
 
-def _get(results: list[MetricResult], name: str) -> MetricResult | None:
-    return next((m for m in results if m.name == name), None)
-
-
 def parity_table(results: dict[str, list[MetricResult]]) -> list[dict[str, Any]]:
     """One row per engine for reports and the catalog (``status`` ``ok``, ``skipped`` or ``error``)."""
     rows = []
     for engine, res in results.items():
-        pen, rest, osc = _get(res, "penetration"), _get(res, "rest_stability"), _get(res, "oscillation")
+        pen, rest, osc = (next((m for m in res if m.name == n), None) for n in ("penetration", "rest_stability", "oscillation"))
         status, reason = "ok", ""
         for m in (pen, rest, osc):
             if m is not None and "skipped" in m.details:

@@ -70,29 +70,24 @@ class RestRecording:
     extents: np.ndarray | None = None
 
 
-def record_rest_test(session: SimSession, obj: SimObject) -> RestRecording:
-    """Run the SPEC rest test on ``session`` in place, recording every step; ``obj``: what it was opened on."""
-    extents = aabb_extents(session)
-    rec = _StepRecorder(session)
-    trace = metrics.run_rest_test(rec, obj.conventions)
-    return RestRecording(
-        trace=trace, root_series=np.array(rec.root) if rec.root else np.zeros((0, 3)), ground_series=np.array(rec.ground),
-        joint_series={n: np.concatenate([trace.settle_joints.get(n, np.empty(0)), trace.joints[n][1:]]) for n in trace.joints},
-        engine=session.engine, urdf=obj.source.path.resolve(), initial_state=dict(obj.state), springs=dict(obj.springs),
-        conventions=obj.conventions, fixed_base=bool(session.options.fixed_base), extents=extents)
-
-
 def measure_rest_test(engine: str, obj: SimObject) -> tuple[MetricResult, RestRecording]:
     """(penetration in mm, :class:`RestRecording`) of ``obj`` in a fresh session
-    of ``engine`` (the root fixed where ``obj.fixed_base``).
+    of ``engine`` (the root fixed where ``obj.fixed_base``): the SPEC rest test run in place, every step recorded.
 
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading the URDF raises.
     """
     with obj.open(engine) as session:
         pen = metrics.penetration(session)
-        recording = record_rest_test(session, obj)
-    return pen, recording
+        extents = aabb_extents(session)
+        rec = _StepRecorder(session)
+        trace = metrics.run_rest_test(rec, obj.conventions)
+        return pen, RestRecording(
+            trace=trace, root_series=np.array(rec.root) if rec.root else np.zeros((0, 3)), ground_series=np.array(rec.ground),
+            joint_series={n: np.concatenate([trace.settle_joints.get(n, np.empty(0)), trace.joints[n][1:]])
+                          for n in trace.joints},
+            engine=session.engine, urdf=obj.source.path.resolve(), initial_state=dict(obj.state), springs=dict(obj.springs),
+            conventions=obj.conventions, fixed_base=bool(session.options.fixed_base), extents=extents)
 
 
 @dataclass

@@ -130,7 +130,8 @@ def probe_joint(session, joint: str, closed: tuple[float, float, float], *, acti
         notes.append(f"push stopped at the {push_s:.0f} s cap (ProbeConfig.max_push_time): the travel ({travel:.3g} m at the "
                      f"push point, lever {lever0 or 0.0:.3g} m) and the force ramp ({hand.ramp:.3g} s) asked "
                      f"{asked_s:.0f} s")
-    rebound, kept, failure = _judge(session.joint_types[joint] == "prismatic", action, open_range, cfg, run, holds_position, returns, notes)
+    rebound, kept, failure = _judge(session.joint_types[joint] == "prismatic", action, open_range, cfg, run, holds_position,
+                                    returns, notes)
     return ProbeResult(
         joint=joint, joint_type=session.joint_types[joint], action=action, start=q0, target=float(q_target), start_fraction=f0,
         target_fraction=f_target, reached=bool(run.reached), time_to_reach=run.t_reach, peak_force=float(run.peak_force),

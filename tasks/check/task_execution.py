@@ -120,8 +120,8 @@ def execute_task(session, joint: str, closed: tuple[float, float, float], *, act
         return f <= target_fraction + cfg.reach_tol if action == "close" else f >= target_fraction - cfg.reach_tol
 
     notes: list[str] = []
-    start = _settle(session, joint, action, (closed, direction, open_range), cfg, frac, reached, notes)
-    q0, f0, started_from = start.position, start.fraction, start.where
+    q0, started_from = _settle(session, joint, action, (closed, direction, open_range), cfg, frac, reached, notes)
+    f0 = frac(q0)
     side = grasp_side(session, joint, model, root_fixed=bool(session.options.fixed_base))
     link, point, rule = contact_point_rule(session, joint, model, opening_direction=direction, side=side)
     watch = SupportWatch(session, session.link_names[0] if side == "child" else session.joint_child[joint])
@@ -150,34 +150,25 @@ def execute_task(session, joint: str, closed: tuple[float, float, float], *, act
         failure=failure, notes=notes, speed_share=float(speed_share), trace=m.trace)
 
 
-@dataclass(frozen=True, slots=True)
-class _Start:
-    """Where a task attempt starts (:func:`_settle`): the joint's ``position`` q0 (rad or m), its opening
-    ``fraction`` and ``where`` it started (one line)."""
-
-    position: float
-    fraction: float
-    where: str
-
-
 def _settle(session, joint: str, action: str, closed: tuple[float, float, float], cfg: TaskConfig,
-            frac: Callable[[float], float], reached: Callable[[float], bool], notes: list[str]) -> _Start:
+            frac: Callable[[float], float], reached: Callable[[float], bool], notes: list[str]) -> tuple[float, str]:
     """Settle and approach, from the far side where the joint is already at
-    the target (``TaskConfig.from_far_side``); ``closed``: (q_c, direction, open range)."""
+    the target (``TaskConfig.from_far_side``); ``closed``: (q_c, direction, open range). Returns where the task
+    attempt starts: the joint's position q0 (rad or m) and where it started (one line)."""
     closed, direction, open_range = closed
     dt = float(session.options.conventions.timestep)
     n_settle = int(round((cfg.settle_time + cfg.approach_distance / cfg.limits.max_speed_m_s) / dt))
     session.step(n_settle)
     q0, _ = session.joint_state(joint)
     if not (reached(frac(q0)) and cfg.from_far_side):
-        return _Start(q0, frac(q0), "initial state")
+        return q0, "initial state"
     f_from = FAR_SIDE_OPEN if action == "close" else 0.0
     session.set_joint_positions({joint: closed + direction * f_from * open_range})
     session.step(n_settle)
     q0, _ = session.joint_state(joint)
     started_from = f"far side (opening fraction {f_from:g}): the initial state was already at the target"
     notes.append(started_from)
-    return _Start(q0, frac(q0), started_from)
+    return q0, started_from
 
 
 def _task_failure(m: Motion, slid: bool, tipped: bool, ok_reached: bool, lim: GripperLimits, hold_required: bool,
