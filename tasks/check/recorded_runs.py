@@ -111,12 +111,13 @@ def _swept(obj: SimObject) -> SimObject:
 
 def _recorded(recorded: RecordedRuns | None, simulate, *key_args) -> Any:
     """The run of ``recorded`` under ``input_digest(*key_args)``, else ``simulate()`` recorded there."""
-    key = input_digest(*key_args) if recorded is not None else ""
-    run = recorded.take(key) if recorded is not None else None
+    if recorded is None:
+        return simulate()
+    key = input_digest(*key_args)
+    run = recorded.take(key)
     if run is None:
         run = simulate()
-        if recorded is not None:
-            recorded.put(key, run)
+        recorded.put(key, run)
     return run
 
 

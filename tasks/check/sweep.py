@@ -361,7 +361,8 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
                     links: list[str], initial_state: dict[str, float], cfg: SweepConfig, saved: int,
                     blocker: Blocker) -> JointSweep:
     """:func:`sweep_joint` of ``name``; when a link another movable joint places
-    stops it (and ``cfg.hold_others``), swept again with the joints between moved (:func:`_clearing_ends`).
+    stops it (and ``cfg.hold_others``), swept again with the joints between moved (closed where it opened; where it did
+    not, closed then open when it stalled short of ``SHUT_IN_FRACTION``, else open).
     Returns the first retry that passes (``range_note`` says what moved), else the first sweep."""
     qc, d, rng = closed[name]
     sweep = functools.partial(sweep_joint, session, name, closed=qc, direction=d, open_range=rng, links=links, config=cfg)
@@ -386,7 +387,10 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
         return first
     between = [k for k in joints_between(model, jd.child, who)
                if k != name and k in closed and k in session.joint_types and closed[k][2] > 0]
-    for end, word in _clearing_ends(first):
+    # (share of the way to the open end, its name) of each retry, in turn
+    ends = ((0.0, "closed"),) if opened else (((0.0, "closed"), (1.0, "open")) if first.reached_open < SHUT_IN_FRACTION
+                                              else ((1.0, "open"),))
+    for end, word in ends:
         moved = {k: closed[k][0] + end * closed[k][1] * closed[k][2] for k in between}
         if not moved or all(abs(moved[k] - initial_state.get(k, closed[k][0])) < 1e-9 for k in moved):
             continue
@@ -398,15 +402,6 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
             second.range_note = f"{who} is in the way {where}; swept with {', '.join(sorted(moved))} {word}"
             return second
     return first
-
-
-def _clearing_ends(first: JointSweep) -> tuple[tuple[float, str], ...]:
-    """(share of the way to the open end, its name) of each retry of ``first``, in turn."""
-    if first.time_open is not None:
-        return ((0.0, "closed"),)
-    if first.reached_open < SHUT_IN_FRACTION:
-        return ((0.0, "closed"), (1.0, "open"))
-    return ((1.0, "open"),)
 
 
 def run_sweep(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]],
