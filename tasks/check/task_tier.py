@@ -35,14 +35,9 @@ def hold_required_by_label(joint_labels: dict[str, str | None], springs: dict[st
 def hold_required(asset: AssetDescription, joints: list[str], springs: dict[str, Spring], category: str | None,
                   *, free_moving: bool, spring_requested: bool) -> dict[str, bool]:
     """:func:`hold_required_by_label` for ``joints`` of ``asset``."""
-    labels = link_labels(asset)
-    named = {}
-    for n in joints:
-        try:
-            named[n] = labels.get(asset.joint(n).child)
-        except KeyError:
-            named[n] = None
-    return hold_required_by_label(named, springs, category, free_moving=free_moving, spring_requested=spring_requested)
+    labels, child = link_labels(asset), {j.name: j.child for j in reversed(asset.joints)}  # the first of a name, as asset.joint
+    return hold_required_by_label({n: labels.get(child.get(n)) for n in joints}, springs, category, free_moving=free_moving,
+                                  spring_requested=spring_requested)
 
 
 def task_spec_for(text: str, asset: AssetDescription, category: str | None, task_joints: list[str],
