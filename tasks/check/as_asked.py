@@ -322,11 +322,8 @@ def not_shut(metrics: list[MetricResult], words: list[tuple[MotionPhrase, list[s
     """The unmet items (kind ``not_shut``) of each self-closing word (``words``: each with the joints it applies to)
     whose part the metric ``shuts_on_its_own`` of ``metrics`` (:mod:`~asset2sim.tasks.check.closer_release`) found
     short of shut after it was released fully open: where it stopped, as a fraction of its range from shut."""
-    rows = {}
-    for m in metrics:
-        if m.name == "shuts_on_its_own":
-            d = m.details or {}
-            rows.update({j: (r, m.engine, d.get("seconds")) for j, r in (d.get("joints") or {}).items()})
+    rows = {j: (r, m.engine, (m.details or {}).get("seconds")) for m in metrics if m.name == "shuts_on_its_own"
+            for j, r in ((m.details or {}).get("joints") or {}).items()}
     items = []
     for word, joints in words:
         for j in joints:

@@ -299,7 +299,9 @@ def run_probes(session, joints: dict[str, tuple[float, float, float]], *, action
                 kw = dict(action=action, holds_position=holds_position, model=model,
                           returns=name in returns, floor_stop=(floor_stops or {}).get(name))
                 r = probe_joint(session, name, end, **kw)
-                if model is not None and _shut_in(r):
+                # an open probe that stalled near the closed end with the object still: its part shut in by another
+                if (model is not None and r.action == "open" and not r.success and not r.reached and not (r.slid or r.tipped)
+                        and np.isfinite(r.release_fraction) and r.release_fraction < SHUT_IN_FRACTION):
                     r = _probe_cleared(session, r, joints, model, sid, kw) or r
                 out.append(r)
         session.restore_state(sid)
@@ -333,12 +335,6 @@ def probe_object(obj: SimObject, closed: dict[str, tuple[float, float, float]], 
                   "as it is): an open probe's target ends there" for n, s in stops.items()]
         return run_probes(session, targets, actions=actions, holds_position=holds_position, model=model, returns=returns,
                           floor_stops=stops), notes
-
-
-def _shut_in(r: ProbeResult) -> bool:
-    """An open probe that stalled near the closed end with the object still."""
-    return (r.action == "open" and not r.success and not r.reached and not (r.slid or r.tipped)
-            and np.isfinite(r.release_fraction) and r.release_fraction < SHUT_IN_FRACTION)
 
 
 def _probe_cleared(session, first: ProbeResult, joints: dict[str, tuple[float, float, float]], model: UrdfModel, sid: int,
