@@ -46,42 +46,39 @@ def session_metrics(source: SimSource, engine: str, options: SessionOptions) -> 
     """[penetration (mm), rest stability, oscillation] of ``source`` opened in ``engine`` with ``options``, each
     with ``details["root"]``; a missing package gives ``details.skipped``, a load or run error
     ``details.error`` and ``passed`` False."""
-    results = _session_metrics(source, engine, options)
-    for m in results:
-        m.details["root"] = metrics.root_label(options.fixed_base)
-    return results
-
-
-def _session_metrics(source: SimSource, engine: str, options: SessionOptions) -> list[MetricResult]:
     conv = options.conventions
     try:
         session = source.open(engine, options)
     except EngineUnavailable as exc:
-        return _not_run(engine, "skipped", str(exc), None)
+        results = _not_run(engine, "skipped", str(exc), None)
     except KeyError as exc:
-        return _not_run(engine, "skipped", f"unknown engine: {exc}", None)
+        results = _not_run(engine, "skipped", f"unknown engine: {exc}", None)
     except Exception as exc:  # the asset does not load in this engine: a failure
-        return _not_run(engine, "error", f"could not load: {type(exc).__name__}: {exc}", False)
-    try:
+        results = _not_run(engine, "error", f"could not load: {type(exc).__name__}: {exc}", False)
+    else:
         try:
-            pen = metrics.penetration(session)
-            pen.details["ground_penetration_mm"] = float(session.ground_penetration()) * 1000.0
-        except EngineUnsupported as exc:  # an engine that reads no contacts (ovphysx): not measured, not failed
-            pen = MetricResult(name="penetration", value=None, unit=unit("penetration"), passed=None,
-                               details={"unsupported": str(exc)}, engine=engine)
-        pen.details["engine_notes"] = list(session.notes)
-        trace = metrics.run_rest_test(session, conv)
-        rest = metrics.rest_stability(trace, conv, engine=engine)
-        osc = metrics.oscillation(trace, conv, engine=engine)
-        settling = metrics.joint_settling(trace, timestep=conv.timestep)
-        rest.details.update(joint_drift={n: j.settled for n, j in settling.items()},
-                            joints_held={n: j.held for n, j in settling.items()},
-                            breakaway=engine_breakaway(source, engine, options))
-        return [pen, rest, osc]
-    except Exception as exc:  # an engine error mid-run fails the asset in that engine
-        return _not_run(engine, "error", f"{type(exc).__name__}: {exc}", False)
-    finally:
-        session.close()
+            try:
+                pen = metrics.penetration(session)
+                pen.details["ground_penetration_mm"] = float(session.ground_penetration()) * 1000.0
+            except EngineUnsupported as exc:  # an engine that reads no contacts (ovphysx): not measured, not failed
+                pen = MetricResult(name="penetration", value=None, unit=unit("penetration"), passed=None,
+                                   details={"unsupported": str(exc)}, engine=engine)
+            pen.details["engine_notes"] = list(session.notes)
+            trace = metrics.run_rest_test(session, conv)
+            rest = metrics.rest_stability(trace, conv, engine=engine)
+            osc = metrics.oscillation(trace, conv, engine=engine)
+            settling = metrics.joint_settling(trace, timestep=conv.timestep)
+            rest.details.update(joint_drift={n: j.settled for n, j in settling.items()},
+                                joints_held={n: j.held for n, j in settling.items()},
+                                breakaway=engine_breakaway(source, engine, options))
+            results = [pen, rest, osc]
+        except Exception as exc:  # an engine error mid-run fails the asset in that engine
+            results = _not_run(engine, "error", f"{type(exc).__name__}: {exc}", False)
+        finally:
+            session.close()
+    for m in results:
+        m.details["root"] = metrics.root_label(options.fixed_base)
+    return results
 
 
 def engine_breakaway(source: SimSource, engine: str, options: SessionOptions) -> dict:
