@@ -122,7 +122,15 @@ def probe_joint(session, joint: str, closed: tuple[float, float, float], *, acti
         # a gripped body takes the push's reaction through the hold; a steadied one as a force on its root
         _push(session, joint, sign, n_push, reached_if, frac, hand, cfg, watch, run,
               react=cfg.hold_body and not held)
-        _release(session, joint, int(round(cfg.release_time / dt)), frac, watch, run)
+        # the release observed with no force: the opening fraction at release and its extremes after
+        run.f_rel = run.f_low = run.f_high = frac(session.joint_state(joint)[0])
+
+        def released(k, q, qd):
+            f = frac(q)
+            run.f_low, run.f_high = min(run.f_low, f), max(run.f_high, f)
+            run.record((run.steps + k) * dt, q, 0.0, float(np.linalg.norm(watch.current()[0])), 1.0)
+
+        run_stroke(session, joint, int(round(cfg.release_time / dt)), record=released)
     q_end, qd_end = session.joint_state(joint)
     run.q_end, run.qd_end = q_end, qd_end
     f_end = frac(q_end)
@@ -230,20 +238,6 @@ def _push(session, joint: str, sign: float, n_push: int, reached_if: Callable[[f
 
     if not run.reached:
         run_stroke(session, joint, n_push, law=law, record=record)
-
-
-def _release(session, joint: str, n_rel: int, frac: Callable[[float], float], watch: SupportWatch, run: _Run) -> None:
-    """Observe ``n_rel`` steps with no force: the opening fraction at release and its extremes after."""
-    dt = session.options.conventions.timestep
-    q_rel, _ = session.joint_state(joint)
-    run.f_rel = run.f_low = run.f_high = frac(q_rel)
-
-    def record(k, q, qd):
-        f = frac(q)
-        run.f_low, run.f_high = min(run.f_low, f), max(run.f_high, f)
-        run.record((run.steps + k) * dt, q, 0.0, float(np.linalg.norm(watch.current()[0])), 1.0)
-
-    run_stroke(session, joint, n_rel, record=record)
 
 
 def _judge(prismatic: bool, action: str, open_range: float, cfg: ProbeConfig, run: _Run, holds_position: bool,
