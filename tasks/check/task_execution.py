@@ -14,7 +14,7 @@ from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.source import SimObject
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_side
-from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits
+from asset2sim.tasks.check.gripper import BoundedGrasp
 from asset2sim.tasks.check.gripper_motion import GripperMove, Motion, TaskConfig
 from asset2sim.tasks.check.metrics import root_label
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET, check_action
@@ -136,7 +136,17 @@ def execute_task(session, joint: str, closed: tuple[float, float, float], *, act
     slid = watch.slide > cfg.slide_tol
     tipped = watch.tilt > cfg.tip_tol
     ok_reached = reached(m.f_rel) if np.isfinite(m.f_rel) else False
-    failure = _task_failure(m, slid, tipped, ok_reached, cfg.limits, hold_required, notes)
+    failure = ""  # why the attempt failed; a target not held that need not be is noted
+    if not np.isfinite(m.f_end):
+        failure = "diverged"
+    elif slid or tipped:
+        failure = "the object " + ("slid" if slid else "tipped") + (" before the target was reached" if not ok_reached else "")
+    elif not ok_reached:
+        failure = "target not reached" + (f" (gripper at its {cfg.limits.max_force_n:g} N limit)" if m.force_limited else "")
+    elif not m.held_ok and hold_required:
+        failure = "target not held 1 s after release"
+    if not m.held_ok and not hold_required and not failure:
+        notes.append("does not hold the target after release (allowed: the joint moves freely or returns by its spring by design)")
     return TaskAttempt(
         joint=joint, joint_type=session.joint_types[joint], action=action, link=link, side=side, contact_rule=rule,
         contact_point=[float(x) for x in point], started_from=started_from, start_fraction=f0, target_fraction=float(target_fraction),
@@ -169,23 +179,6 @@ def _settle(session, joint: str, action: str, closed: tuple[float, float, float]
     started_from = f"far side (opening fraction {f_from:g}): the initial state was already at the target"
     notes.append(started_from)
     return q0, started_from
-
-
-def _task_failure(m: Motion, slid: bool, tipped: bool, ok_reached: bool, lim: GripperLimits, hold_required: bool,
-                  notes: list[str]) -> str:
-    """Why the attempt failed ("" on success); notes a target not held that need not be."""
-    failure = ""
-    if not np.isfinite(m.f_end):
-        failure = "diverged"
-    elif slid or tipped:
-        failure = "the object " + ("slid" if slid else "tipped") + (" before the target was reached" if not ok_reached else "")
-    elif not ok_reached:
-        failure = "target not reached" + (f" (gripper at its {lim.max_force_n:g} N limit)" if m.force_limited else "")
-    elif not m.held_ok and hold_required:
-        failure = "target not held 1 s after release"
-    if not m.held_ok and not hold_required and not failure:
-        notes.append("does not hold the target after release (allowed: the joint moves freely or returns by its spring by design)")
-    return failure
 
 
 def run_task(engine: str, obj: SimObject, joints: dict[str, tuple[float, float, float]], *,
