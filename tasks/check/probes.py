@@ -132,20 +132,42 @@ def probe_joint(session, joint: str, closed: tuple[float, float, float], *, acti
 
         run_stroke(session, joint, int(round(cfg.release_time / dt)), record=released)
     q_end, qd_end = session.joint_state(joint)
-    run.q_end, run.qd_end = q_end, qd_end
     f_end = frac(q_end)
     if not run.reached and push_s < asked_s and run.steps >= n_push:
         notes.append(f"push stopped at the {push_s:.0f} s cap (ProbeConfig.max_push_time): the travel ({travel:.3g} m at the "
                      f"push point, lever {lever0 or 0.0:.3g} m) and the force ramp ({hand.ramp:.3g} s) asked "
                      f"{asked_s:.0f} s")
-    rebound, kept, failure = _judge(session.joint_types[joint] == "prismatic", action, open_range, cfg, run, holds_position,
-                                    returns, notes)
+    # how it ended: a rebound (back towards its start after release: for close the start is more open, larger f), kept
+    # moving after release, why it failed ("" on success); what is allowed noted
+    prismatic = session.joint_types[joint] == "prismatic"
+    tol = max(REBOUND_FRACTION, (REBOUND_FLOOR_PRISMATIC if prismatic else REBOUND_FLOOR_REVOLUTE) / open_range)
+    went_open, went_shut = run.f_high - run.f_rel > tol, run.f_rel - run.f_low > tol
+    rebound, kept = (went_open, went_shut) if action == "close" else (went_shut, went_open)
+    kept = kept or abs(qd_end) > (cfg.settle_velocity_prismatic if prismatic else cfg.settle_velocity_revolute)
+    slid, tipped = run.max_disp > cfg.slide_tol, run.max_rot > cfg.tip_tol
+    failure = ""
+    if not np.isfinite(q_end):
+        failure = "diverged"
+    elif not run.reached:
+        failure = "target not reached" + (" (the object moved instead)" if slid or tipped else "")
+    elif slid or tipped:
+        failure = "the object " + ("slid" if slid else "tipped") + " instead of the joint moving"
+    elif action == "close" and rebound and not returns:
+        failure = "springs back after release"
+    elif action == "open" and rebound and holds_position:
+        failure = "does not hold the open position after release"
+    if action == "open" and rebound and not holds_position:
+        notes.append("falls back after release (allowed: the request does not ask it to hold)")
+    if action == "close" and rebound and returns:
+        notes.append("springs back after release (allowed: a spring its part prior or the request expects returns it)")
+    if kept:
+        notes.append("keeps moving after release")
     return ProbeResult(
         joint=joint, joint_type=session.joint_types[joint], action=action, start=q0, target=float(q_target), start_fraction=f0,
         target_fraction=f_target, reached=bool(run.reached), time_to_reach=run.t_reach, peak_force=float(run.peak_force),
         peak_effort=float(run.peak_effort), lever_arm=run.lever, max_force=float(hand.f_max),
-        root_displacement=float(run.max_disp), root_rotation=float(run.max_rot), slid=bool(run.max_disp > cfg.slide_tol),
-        tipped=bool(run.max_rot > cfg.tip_tol), release_fraction=float(run.f_rel),
+        root_displacement=float(run.max_disp), root_rotation=float(run.max_rot), slid=bool(slid),
+        tipped=bool(tipped), release_fraction=float(run.f_rel),
         final_fraction=float(f_end) if np.isfinite(f_end) else float("nan"), rebound=bool(rebound), kept_moving=bool(kept),
         success=not failure, failure=failure, notes=notes, trace=run.trace)
 
@@ -187,8 +209,6 @@ class _Run:
     f_rel: float = 0.0  # opening fraction at release, and its smallest and largest after
     f_low: float = 0.0
     f_high: float = 0.0
-    q_end: float = 0.0  # the joint's position (rad or m) and speed (rad/s or m/s) at the end of the release
-    qd_end: float = 0.0
     trace: dict[str, list[float]] = field(default_factory=lambda: {"t": [], "q": [], "force": [], "root_disp": [], "phase": []})
 
     def record(self, t: float, q: float, force: float, disp: float, phase: float) -> None:
@@ -238,38 +258,6 @@ def _push(session, joint: str, sign: float, n_push: int, reached_if: Callable[[f
 
     if not run.reached:
         run_stroke(session, joint, n_push, law=law, record=record)
-
-
-def _judge(prismatic: bool, action: str, open_range: float, cfg: ProbeConfig, run: _Run, holds_position: bool,
-           returns: bool, notes: list[str]) -> tuple[bool, bool, str]:
-    """How a probe ended: (rebound: moved back towards its start after release, kept: kept moving after release,
-    failure: "" on success); notes what is allowed."""
-    q_end, qd_end = run.q_end, run.qd_end
-    # "towards the start": for close the start is more open (larger f).
-    tol = max(REBOUND_FRACTION, (REBOUND_FLOOR_PRISMATIC if prismatic else REBOUND_FLOOR_REVOLUTE) / open_range)
-    opened, closed = run.f_high - run.f_rel > tol, run.f_rel - run.f_low > tol
-    rebound, kept = (opened, closed) if action == "close" else (closed, opened)
-    kept = kept or abs(qd_end) > (cfg.settle_velocity_prismatic if prismatic else cfg.settle_velocity_revolute)
-    slid = run.max_disp > cfg.slide_tol
-    tipped = run.max_rot > cfg.tip_tol
-    failure = ""
-    if not np.isfinite(q_end):
-        failure = "diverged"
-    elif not run.reached:
-        failure = "target not reached" + (" (the object moved instead)" if slid or tipped else "")
-    elif slid or tipped:
-        failure = "the object " + ("slid" if slid else "tipped") + " instead of the joint moving"
-    elif action == "close" and rebound and not returns:
-        failure = "springs back after release"
-    elif action == "open" and rebound and holds_position:
-        failure = "does not hold the open position after release"
-    if action == "open" and rebound and not holds_position:
-        notes.append("falls back after release (allowed: the request does not ask it to hold)")
-    if action == "close" and rebound and returns:
-        notes.append("springs back after release (allowed: a spring its part prior or the request expects returns it)")
-    if kept:
-        notes.append("keeps moving after release")
-    return rebound, kept, failure
 
 
 def run_probes(session, joints: dict[str, tuple[float, float, float]], *, actions: tuple[str, ...] = ("close", "open"),
