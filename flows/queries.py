@@ -24,6 +24,13 @@ def _is_table(obj) -> bool:
     return hasattr(obj, "schema") and hasattr(obj, "num_rows") and not hasattr(obj, "iloc")
 
 
+def _frame(df, run: str | None):
+    """``df`` (a DataFrame or an Arrow table) as a DataFrame, only the rows of ``run`` when given."""
+    if _is_table(df):
+        df = plain_strings(df).to_pandas()
+    return df if run is None else df[df["run"] == run]
+
+
 def _value_counts(arr) -> dict[Any, int]:
     import pyarrow.compute as pc
 
@@ -197,10 +204,7 @@ def slowest_assets(df, n: int = 10, run: str | None = None):
     Skipped rows (no work done) are left out."""
     import pandas as pd
 
-    if _is_table(df):
-        df = plain_strings(df).to_pandas()
-    if run is not None:
-        df = df[df["run"] == run]
+    df = _frame(df, run)
     df = df[df["status"] != "skipped"]
     cols = ["dataset", "run", "asset_id", "category", "status", "failure_mode", "wall_seconds", "slowest_stage", "slowest_stage_seconds"]
     if df.empty:
@@ -261,8 +265,7 @@ def verdict_changes(df, run_a: str, run_b: str):
             raise KeyError(f"run {r!r} is not in the catalog")
     fields = ["failure_mode", "rest_stable", "oscillation_pass", "status"]
     cols = ["asset_id", "category", *[f"{f}_{s}" for f in fields for s in ("a", "b")], "change"]
-    a = df[df["run"] == run_a][["asset_id", "category", *fields]].drop_duplicates("asset_id", keep="last")
-    b = df[df["run"] == run_b][["asset_id", "category", *fields]].drop_duplicates("asset_id", keep="last")
+    a, b = (df[df["run"] == r][["asset_id", "category", *fields]].drop_duplicates("asset_id", keep="last") for r in (run_a, run_b))
     m = a.merge(b, on="asset_id", how="outer", suffixes=("_a", "_b"), indicator=True)
     if m.empty:
         return pd.DataFrame(columns=cols)
@@ -288,10 +291,7 @@ def failed_assets(df, run: str | None = None, limit: int | None = None):
     given), with their error (first line)."""
     import pandas as pd
 
-    if _is_table(df):
-        df = plain_strings(df).to_pandas()
-    if run is not None:
-        df = df[df["run"] == run]
+    df = _frame(df, run)
     d = df[df["failure_mode"].fillna(MISSING_FAILURE_MODE) != "none"]
     cols = ["asset_id", "category", "status", "failure_mode", "error"]
     if d.empty:
