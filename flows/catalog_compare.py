@@ -137,8 +137,9 @@ def previous_run(store: ResultCatalog, dataset: str, run: str) -> str | None:
     return next((r for r in reversed(earlier) if did_work(store, dataset, r)), None)
 
 
-def _passes(df):
-    return df["failure_mode"].fillna(MISSING_FAILURE_MODE) == "none"
+def _pass_rate(df) -> float | None:
+    """The share of ``df``'s rows that pass all checks; None for no rows."""
+    return float((df["failure_mode"].fillna(MISSING_FAILURE_MODE) == "none").mean()) if len(df) else None
 
 
 def _as_float(series):
@@ -161,24 +162,16 @@ def compare_runs(previous, current, *, dataset: str, run: str, previous_run_id: 
     """
     settings = settings or RegressionSettings()
     out = RunComparison(dataset=dataset, run=run, previous_run=previous_run_id, assets=int(len(current)))
-    if len(current):
-        out.pass_rate = float(_passes(current).mean())
+    out.pass_rate = _pass_rate(current)
     if previous is None or previous_run_id is None:
         return out
-    out.previous_assets = int(len(previous))
-    if len(previous):
-        out.previous_pass_rate = float(_passes(previous).mean())
-    cols = list(COMPARE_COLUMNS)
-    a = previous[cols].drop_duplicates("asset_id", keep="last").set_index("asset_id")
-    b = current[cols].drop_duplicates("asset_id", keep="last").set_index("asset_id")
+    out.previous_assets, out.previous_pass_rate = int(len(previous)), _pass_rate(previous)
+    a, b = (df[list(COMPARE_COLUMNS)].drop_duplicates("asset_id", keep="last").set_index("asset_id") for df in (previous, current))
     both = a.join(b, how="inner", lsuffix="_a", rsuffix="_b")
     out.common_assets = int(len(both))
     if len(both):
-        ma = both["failure_mode_a"].fillna(MISSING_FAILURE_MODE)
-        mb = both["failure_mode_b"].fillna(MISSING_FAILURE_MODE)
-        pa_, pb_ = ma == "none", mb == "none"
-        out.previous_common_pass_rate = float(pa_.mean())
-        out.common_pass_rate = float(pb_.mean())
+        ma, mb = (both[f"failure_mode_{s}"].fillna(MISSING_FAILURE_MODE) for s in "ab")
+        out.previous_common_pass_rate, out.common_pass_rate = float((ma == "none").mean()), float((mb == "none").mean())
         out.pass_rate_drift = out.common_pass_rate - out.previous_common_pass_rate
         flipped = both[ma != mb]
         for aid, rec in flipped.sort_index().iterrows():
