@@ -68,7 +68,7 @@ def resumable_output(candidates: list[dict[str, Any]], input_hash: str, config_h
             rec = JobRecord.model_validate(cand)
         except ValueError:
             continue
-        if rec.input_hash != input_hash or rec.config_hash != config_hash or rec.refine_config_hash != refine_config_hash:
+        if (rec.input_hash, rec.config_hash, rec.refine_config_hash) != (input_hash, config_hash, refine_config_hash):
             continue
         out = rec.job.get("out_dir")
         if out and Path(out).is_dir() and is_complete(Path(out), input_hash, refine_config_hash):
@@ -250,8 +250,7 @@ def _reused_row(row: CatalogRow, prev: dict[str, Any], stages: dict[str, float])
         setattr(row, col, prev.get(col))
     row.status = "skipped"
     row.source_run = prev.get("source_run") or prev.get("run")
-    row.model_queries = 0
-    row.tokens = 0
+    row.model_queries = row.tokens = 0
     row.stage_seconds = json.dumps(stages)
     row.wall_seconds = sum(v for k, v in stages.items() if "." not in k)
     return row

@@ -123,7 +123,7 @@ def publish_stage(job: AssetJob, refined: StageRecord) -> StageRecord:
     :func:`asset2sim.tasks.evaluation.clips.clip_videos`, read before the local copy goes); a refused upload is status
     ``error``."""
     if job.out_uri is None or refined is None or refined.status != "ok":
-        return StageRecord(status="skipped", seconds=0.0)
+        return StageRecord(status="skipped")
     t0 = time.perf_counter()
     value: RefineOutput = refined.value
     local = value.out_dir or job.out_dir
@@ -344,12 +344,11 @@ def _run_stage(job: AssetJob, name: str, kwargs: dict[str, Any], timeout: float)
     t0, target = time.perf_counter(), f"{__name__}:stage_{name}"
     if timeout <= 0:
         return StageRecord(status="timeout", error=f"no time left for stage {name}", failure_mode="timeout", seconds=0.0)
+    limits = {"timeout": timeout, "workdir": Path(job.work_dir) / name, "memory_limit_mb": job.memory_limit_mb}
     if job.isolation == "process":  # a child forked from this worker's pre-imported stage server
-        rec = asdict(run_forked(target, kwargs, timeout=timeout, workdir=Path(job.work_dir) / name,
-                                memory_limit_mb=job.memory_limit_mb, preload=stage_server_modules(job)))
+        rec = asdict(run_forked(target, kwargs, **limits, preload=stage_server_modules(job)))
     elif job.isolation == "spawn":  # a fresh interpreter per call (imports paid every time)
-        rec = asdict(run_isolated(target, kwargs, timeout=timeout, workdir=Path(job.work_dir) / name,
-                                  memory_limit_mb=job.memory_limit_mb))
+        rec = asdict(run_isolated(target, kwargs, **limits))
     else:
         out = call_target(target, kwargs)
         rec = {"status": "ok" if out["ok"] else "error", **out}
@@ -361,7 +360,7 @@ def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
     """Refine stage within the asset's time limit (for ``prepared.resume``, the earlier ``report.json``); ``value`` a
     RefineOutput. Raises ModelCallFailure: a model-backed estimator failed (Prefect retries it)."""
     if not prepared.ok or prepared.skip is not None:
-        return StageRecord(status="skipped", seconds=0.0)
+        return StageRecord(status="skipped")
     if prepared.resume is not None:
         out_dir = prepared.resume["job"]["out_dir"]
         try:
@@ -398,7 +397,7 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
     """Metrics stage (:func:`stage_metrics`) within what is left of the time limit; for ``prepared.resume`` the
     earlier run's measurement when it made one."""
     if refined.status != "ok" or not job.evaluate:
-        return StageRecord(status="skipped", seconds=0.0)
+        return StageRecord(status="skipped")
     value: RefineOutput = refined.value
     category = value.report.category or job.category
     metrics_dir, reused = job.metrics_dir, None
