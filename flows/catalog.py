@@ -180,10 +180,8 @@ class ResultCatalog:
         """Remove the row of ``asset_id`` from the run (its row file, and from
         the compacted file, rewritten atomically without it). False when the
         run held no such row."""
-        files = self._run_files(dataset, run)
-        removed = False
-        if asset_id in files.loose:
-            removed = catalog_fs.delete_file(self.location, files.loose[asset_id].path)
+        loose = self._run_files(dataset, run).loose
+        removed = asset_id in loose and catalog_fs.delete_file(self.location, loose[asset_id].path)
         return self._drop_compacted_row(dataset, run, asset_id) or removed
 
     def compact(self, dataset: str, run: str) -> Compaction:
@@ -206,8 +204,7 @@ class ResultCatalog:
             return Compaction(dataset, run, rows, 0, size, time.perf_counter() - t0)
         new = self._read_files([info.path for info in loose.values()]) if loose else None
         if files.compacted is not None:
-            old = self._read_files([files.compacted.path])
-            old = _without(old, loose)
+            old = _without(self._read_files([files.compacted.path]), loose)
             new = old if new is None else pa.concat_tables([old, new])
         new = new.sort_by("asset_id")
         data = _parquet_bytes(new)
@@ -347,8 +344,7 @@ class ResultCatalog:
         with_ids = None if cols is None else list(dict.fromkeys([*cols, "asset_id"]))
         for compacted, loose in overlaid:
             # the compacted rows of the assets that have a row file (which wins)
-            old = scan([compacted.path], with_ids)
-            old = _without(old, loose)
+            old = _without(scan([compacted.path], with_ids), loose)
             tables += [old if cols is None else old.select(cols), scan([i.path for _, i in sorted(loose.items())])]
         # step 5: one table, at most ``limit`` rows
         if not tables:
