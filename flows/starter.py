@@ -47,11 +47,8 @@ class StarterCatalog:
 def object_folders(root: Path) -> list[Path]:
     """The sub-folders of ``root`` that hold an object (a file ending in one of :data:`OBJECT_SUFFIXES`), sorted by
     name; hidden folders are left out."""
-    out = []
-    for d in sorted(p for p in Path(root).iterdir() if p.is_dir() and not p.name.startswith(".")):
-        if any(f.is_file() and f.suffix.lower() in OBJECT_SUFFIXES for f in d.iterdir()):
-            out.append(d)
-    return out
+    return [d for d in sorted(p for p in Path(root).iterdir() if p.is_dir() and not p.name.startswith("."))
+            if any(f.is_file() and f.suffix.lower() in OBJECT_SUFFIXES for f in d.iterdir())]
 
 
 def _relative(path: Path, base: Path) -> str:
