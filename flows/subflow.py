@@ -192,8 +192,7 @@ def _submit_prepares(jobs: list[AssetJob], batch_size: int, starts: dict[str, fl
     size = max(1, int(batch_size))
     for i in range(0, len(jobs), size):
         batch = jobs[i:i + size]
-        for job in batch:
-            starts[job.asset_id] = time.time()
+        starts.update({job.asset_id: time.time() for job in batch})
         prep_futures[prepare_many.submit(Sealed(batch))] = batch
     return prep_futures
 
@@ -259,8 +258,7 @@ def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
     from prefect_dask import DaskTaskRunner
 
     mods = tuple(dict.fromkeys(m for j in jobs for m in stages.stage_server_modules(j)))
-    ctx = FlowRunContext.get()
-    runner = getattr(ctx, "task_runner", None)
+    runner = getattr(FlowRunContext.get(), "task_runner", None)
     if not mods or not isinstance(runner, DaskTaskRunner):
         return 0.0
     t0 = time.perf_counter()
@@ -283,9 +281,7 @@ def _add_isolation_times(row, refined, measured) -> None:
         if extra.get("server_start_seconds") is not None:
             add["isolation.server_start"] = round(add.get("isolation.server_start", 0.0) + float(extra["server_start_seconds"]), 4)
     if add:
-        stages_s = json.loads(row.stage_seconds or "{}")
-        stages_s.update(add)
-        row.stage_seconds = json.dumps(stages_s, sort_keys=True)
+        row.stage_seconds = json.dumps({**json.loads(row.stage_seconds or "{}"), **add}, sort_keys=True)
 
 
 def _record_resumed(store: ResultCatalog, prepared: Prepared, refined, measured,
@@ -301,6 +297,4 @@ def _record_resumed(store: ResultCatalog, prepared: Prepared, refined, measured,
         return None
     if not store.has_row(earlier.dataset, earlier.run_id, earlier.asset_id):  # row files and the compacted file
         store.append_row(earlier.dataset, earlier.run_id, old)
-    prev = old.model_dump(mode="json")
-    prev["run"] = earlier.run_id
-    return prepared.model_copy(update={"skip": prev})
+    return prepared.model_copy(update={"skip": {**old.model_dump(mode="json"), "run": earlier.run_id}})
