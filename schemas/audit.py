@@ -121,10 +121,10 @@ class AuditRow(Strict):
     def of(cls, report: AuditReport, out_dir: str | None, seconds: float) -> "AuditRow":
         """The row of a finished audit."""
         checks = {c.physics: c for c in report.checks}
+        declared, patched = checks.get("declared"), checks.get("patched")
         return cls(asset_id=report.asset_id, source=report.source, format=report.format, category=report.category,
                    failure_mode=report.failure_mode, values=len(report.values), implausible_count=len(report.implausible),
                    implausible=[f"{v.where}: {v.quantity}" for v in report.implausible],
-                   declared_passed=checks["declared"].passed if "declared" in checks else None,
-                   declared_failures=checks["declared"].failures if "declared" in checks else [],
-                   patched_passed=checks["patched"].passed if "patched" in checks else None,
+                   declared_passed=declared and declared.passed, declared_failures=declared.failures if declared else [],
+                   patched_passed=patched and patched.passed,
                    patch=report.patch, out_dir=out_dir, seconds=seconds)

@@ -197,16 +197,14 @@ class JointStateRequest(Strict):
     def _what(self) -> str:
         t = self.target
         if t is None:
-            what = self.band
-        elif t.kind == "end":
-            what = {"high": "up", "low": "down"}.get(str(t.end), str(t.end))
-        elif t.kind == "angle":
-            what = f"{math.degrees(float(t.value or 0.0)):.4g} deg from closed"
-        elif t.kind == "distance":
-            what = f"{1000.0 * float(t.value or 0.0):.4g} mm from closed"
-        else:
-            what = f"{100.0 * float(t.value or 0.0):.4g} %"
-        return what
+            return self.band
+        if t.kind == "end":
+            return {"high": "up", "low": "down"}.get(str(t.end), str(t.end))
+        if t.kind == "angle":
+            return f"{math.degrees(float(t.value or 0.0)):.4g} deg from closed"
+        if t.kind == "distance":
+            return f"{1000.0 * float(t.value or 0.0):.4g} mm from closed"
+        return f"{100.0 * float(t.value or 0.0):.4g} %"
 
     @property
     def names_part(self) -> bool:
