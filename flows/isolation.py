@@ -7,6 +7,7 @@ asset2sim.flows.isolation spec.json`` in a new session; the child, killed when t
 from __future__ import annotations
 
 import contextlib
+import functools
 import importlib
 import json
 import os
@@ -159,19 +160,17 @@ def _timed_out(timeout: float, rc: int | None, seconds: float, log: Path) -> Iso
 
 def _read_result(result_path: Path, rc: int | None, seconds: float, log: Path, extra: dict[str, Any] | None = None) -> IsolatedResult:
     """The record of a child that ended with ``rc`` after ``seconds`` s, from its result file (``crash`` without one)."""
-    extra = {} if extra is None else extra
+    ended = functools.partial(IsolatedResult, returncode=rc, seconds=seconds, extra={} if extra is None else extra)
     try:
         data = json.loads(result_path.read_text())
     except (OSError, ValueError):
         sig = -rc if rc is not None and rc < 0 else None
         what = f"killed by signal {sig} ({signal.Signals(sig).name})" if sig else f"exited with code {rc}"
-        return IsolatedResult(status="crash", error=f"child process {what} without a result", failure_mode="crash",
-                              returncode=rc, seconds=seconds, log_tail=_tail(log), extra=extra)
+        return ended(status="crash", error=f"child process {what} without a result", failure_mode="crash", log_tail=_tail(log))
     if data.get("ok"):
-        return IsolatedResult(status="ok", value=data.get("value"), returncode=rc, seconds=seconds, extra=extra)
-    return IsolatedResult(status="error", error=data.get("error", ""), error_type=data.get("error_type", ""),
-                          failure_mode=data.get("failure_mode"), traceback=data.get("traceback", ""),
-                          returncode=rc, seconds=seconds, log_tail=_tail(log), extra=extra)
+        return ended(status="ok", value=data.get("value"))
+    return ended(status="error", error=data.get("error", ""), error_type=data.get("error_type", ""),
+                 failure_mode=data.get("failure_mode"), traceback=data.get("traceback", ""), log_tail=_tail(log))
 
 
 def _kill_group(proc: subprocess.Popen) -> None:
