@@ -67,7 +67,6 @@ PROJECT_MODULES = (
 def warm_tables() -> list[str]:
     """Call every argument-less ``lru_cache(maxsize=1)`` function of the loaded ``asset2sim.tasks`` modules and
     :mod:`asset2sim.prior_tables` (one that raises is skipped); returns the names called."""
-    import functools
     import inspect
 
     done = []
@@ -112,7 +111,6 @@ class StageServer:
             [sys.executable, "-m", "asset2sim.flows.forkserver", str(os.getpid()), *self.preload],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
-            stderr=None,
             env=env,
             start_new_session=True,
             **({"preexec_fn": functools.partial(os.nice, self.niceness)} if self.niceness else {}),
