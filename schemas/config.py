@@ -193,13 +193,10 @@ class RefineConfig(Strict):
 
     def config_hash(self) -> str:
         """sha256 (hex, 16 chars) of the canonical JSON of this configuration."""
-        data = self.model_dump(mode="json")
         default = RefineConfig().model_dump(mode="json")
-        for key in _ADDED_FIELDS:  # at its default: the hash of every configuration before the field existed
-            if data[key] == default[key]:
-                data.pop(key)
-        blob = json.dumps(data, sort_keys=True).encode()
-        return hashlib.sha256(blob).hexdigest()[:16]
+        # an added field at its default: the hash of every configuration before the field existed
+        data = {k: v for k, v in self.model_dump(mode="json").items() if k not in _ADDED_FIELDS or v != default[k]}
+        return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
 
 
 def minimum_refine_steps(config: RefineConfig) -> float:
