@@ -211,7 +211,7 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
     verdict = asset_failure_mode(input_failure=input_failure, refine_status=refine_status, refine_mode=refine_mode,
                                  measured_status=measured_status, chain_error_mode=(failure_mode or "crash") if error else None)
     errors += verdict.errors
-    if measured is not None and measured.status in FAILED_STATUSES:
+    if measured_status in FAILED_STATUSES:
         stages["metrics"] = _s(measured.seconds)
         errors.append(f"metrics: {measured.error_type} {measured.error}".strip())
     if error:
