@@ -50,8 +50,8 @@ def nightly_schedule(
     try:
         from prefect.schedules import Cron
     except ImportError:  # without Prefect only the shape is checked
-        Cron = None
-    if Cron is not None:
+        pass
+    else:
         try:
             Cron(cron, timezone=tz)
         except Exception as exc:
