@@ -291,15 +291,14 @@ def _finish_partition(log, run: _Run) -> tuple[Any, Path]:
 
 def _run_summary(run: _Run, finish, run_out: Path, out: str | None, timing: dict[str, Any]) -> tuple[dict[str, Any], Any]:
     """The run summary (counts, pass rates, paths, timings, comparison) and the run's catalog rows (DataFrame)."""
-    cat, name, run_id = run.cat, run.name, run.run_id
-    df = run.store.read(name, run_id)
+    df = run.store.read(run.name, run.run_id)
     summary = queries.run_summary(df)
-    summary.update(dataset=name, run=run_id, catalog_root=str(cat.catalog_root), output_dir=str(run_out), **timing)
-    out_store = out or cat.output_store
-    summary["output_store"] = join_uri(out_store, name, run_id) if out_store else None
-    summary.update(finish.comparison.metrics_for_tracking())
-    summary["regression"] = catalog_compare.comparison_summary(finish.comparison)
-    summary["compaction"] = None if finish.compaction is None else dataclasses.asdict(finish.compaction)
+    out_store = out or run.cat.output_store
+    summary.update(dataset=run.name, run=run.run_id, catalog_root=str(run.cat.catalog_root), output_dir=str(run_out), **timing,
+                   output_store=join_uri(out_store, run.name, run.run_id) if out_store else None,
+                   **finish.comparison.metrics_for_tracking(),
+                   regression=catalog_compare.comparison_summary(finish.comparison),
+                   compaction=None if finish.compaction is None else dataclasses.asdict(finish.compaction))
     return summary, df
 
 
