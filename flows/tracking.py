@@ -102,9 +102,7 @@ def flow_metrics(summary: dict[str, Any]) -> dict[str, float]:
         if k == "failure_modes" and isinstance(v, dict):
             for m, c in v.items():
                 out[f"failures_{m}"] = float(c)
-        elif isinstance(v, bool):
-            out[k] = float(v)
-        elif isinstance(v, (int, float)) and math.isfinite(float(v)):
+        elif isinstance(v, (int, float)) and math.isfinite(float(v)):  # booleans as 1.0 / 0.0
             out[k] = float(v)
     return out
 
@@ -157,11 +155,8 @@ def log_flow_run(
     uri = resolve_tracking_uri(project_root, settings.uri)
     client = MlflowClient(tracking_uri=uri)
     exp = client.get_experiment_by_name(settings.experiment)
-    if exp is None:
-        art = (project_root / settings.artifact_root / settings.experiment.replace("/", "_")).resolve()
-        exp_id = client.create_experiment(settings.experiment, artifact_location=art.as_uri())
-    else:
-        exp_id = exp.experiment_id
+    art = project_root / settings.artifact_root / settings.experiment.replace("/", "_")
+    exp_id = exp.experiment_id if exp else client.create_experiment(settings.experiment, artifact_location=art.resolve().as_uri())
     if exp is None or EXPERIMENT_KIND_TAG not in (exp.tags or {}):  # MLflow 3 opens other kinds on a GenAI overview
         client.set_experiment_tag(exp_id, EXPERIMENT_KIND_TAG, EXPERIMENT_KIND)
     ts = int(time.time() * 1000)
