@@ -41,11 +41,11 @@ def finish_run(store: ResultCatalog, dataset: str, run: str, out_dir: Path | str
             compaction = store.compact(dataset, run)
         except OSError as exc:  # the row files stay and read as before
             errors.append(f"compaction of {dataset}/{run} failed: {type(exc).__name__}: {exc}")
-    cmp = compare_with_previous(store, dataset, run, settings.regression)
-    artifacts: dict[str, Path] = {}
+    finish = RunFinish(compaction=compaction, comparison=compare_with_previous(store, dataset, run, settings.regression),
+                       errors=errors)
     try:
         history = queries.pass_rates_over_time(store.read(dataset, columns=list(queries.PASS_RATE_COLUMNS)), dataset)
-        artifacts = write_comparison_artifacts(cmp, history, out_dir)
+        finish.artifacts = write_comparison_artifacts(finish.comparison, history, out_dir)
     except OSError as exc:
         errors.append(f"comparison artifacts not written: {type(exc).__name__}: {exc}")
-    return RunFinish(compaction=compaction, comparison=cmp, artifacts=artifacts, errors=errors)
+    return finish

@@ -162,5 +162,5 @@ def fingerprints(jobs: list[Any]) -> dict[str, str | None]:
     """:func:`input_fingerprint` of every job's asset folder (asset id -> fingerprint)."""
     if not jobs:
         return {}
-    with ThreadPoolExecutor(max_workers=max(1, min(8, len(jobs)))) as pool:
+    with ThreadPoolExecutor(max_workers=min(8, len(jobs))) as pool:
         return dict(zip((j.asset_id for j in jobs), pool.map(lambda j: input_fingerprint(j.asset_dir), jobs)))

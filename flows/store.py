@@ -54,13 +54,11 @@ def upload_folder(local_dir: Path | str, uri: str) -> dict[str, float | int]:
     if not local_dir.is_dir():
         raise FileNotFoundError(f"{local_dir}: no folder to upload")
     loc = open_location(uri)
-    base = loc.base
     files = sorted(p for p in local_dir.rglob("*") if p.is_file() and not p.name.endswith(".tmp"))
     files.sort(key=lambda p: p.name == MARKER_NAME and p.parent == local_dir)  # the marker last
     total = 0
     for p in files:
-        rel = p.relative_to(local_dir).as_posix()
-        dest = f"{base}/{rel}"
+        dest = f"{loc.base}/{p.relative_to(local_dir).as_posix()}"
         if loc.local:
             Path(dest).parent.mkdir(parents=True, exist_ok=True)
             tmp = Path(dest + ".tmp")
