@@ -136,18 +136,22 @@ def run_summary(df) -> dict[str, Any]:
     if not len(df):
         out.update(pass_rate_all=None, stability_pass_rate=None, oscillation_pass_rate=None, failure_modes=counts["failure_modes"])
         return out
-    out.update(failure_modes=counts["failure_modes"], pass_rate_all=counts["pass_rate_all"])
-    out["stability_pass_rate"] = _rate(df["rest_stable"])
-    out["oscillation_pass_rate"] = _rate(df["oscillation_pass"])
     pen, wall = df["penetration_mm"].dropna().astype(float), df["wall_seconds"].dropna().astype(float)
-    out["penetration_mm_mean"] = _stat(pen, "mean")
-    out["penetration_mm_std"] = _stat(pen, "std", ddof=0)
-    out["prompt_alignment_mean"] = _stat(df["prompt_alignment"].dropna().astype(float), "mean")
     worked = df[df["status"] == "done"]
-    out["queries_per_asset"] = float(worked["model_queries"].fillna(0).mean()) if len(worked) else 0.0
-    out["tokens_total"] = int(df["tokens"].fillna(0).sum())
-    out["asset_seconds_total"] = float(wall.sum())
-    out["asset_seconds_mean"], out["asset_seconds_max"] = _stat(wall, "mean"), _stat(wall, "max")
+    out.update(
+        failure_modes=counts["failure_modes"],
+        pass_rate_all=counts["pass_rate_all"],
+        stability_pass_rate=_rate(df["rest_stable"]),
+        oscillation_pass_rate=_rate(df["oscillation_pass"]),
+        penetration_mm_mean=_stat(pen, "mean"),
+        penetration_mm_std=_stat(pen, "std", ddof=0),
+        prompt_alignment_mean=_stat(df["prompt_alignment"].dropna().astype(float), "mean"),
+        queries_per_asset=float(worked["model_queries"].fillna(0).mean()) if len(worked) else 0.0,
+        tokens_total=int(df["tokens"].fillna(0).sum()),
+        asset_seconds_total=float(wall.sum()),
+        asset_seconds_mean=_stat(wall, "mean"),
+        asset_seconds_max=_stat(wall, "max"),
+    )
     return out
 
 
