@@ -181,7 +181,7 @@ def compare_runs(previous, current, *, dataset: str, run: str, previous_run_id: 
             out.flips.append(VerdictFlip(asset_id=str(aid), category=cat if isinstance(cat, str) else None,
                                          before=before, after=after, direction=direction))
         directions = Counter(f.direction for f in out.flips)
-        out.regressed, out.improved, out.changed = directions["regressed"], directions["improved"], directions["changed"]
+        out.regressed, out.improved, out.changed = (directions[d] for d in ("regressed", "improved", "changed"))
         reused = (both["status_a"] == "skipped") | (both["status_b"] == "skipped")
         for col, (unit, higher_better) in COMPARED_METRICS.items():
             va, vb = _as_float(both[f"{col}_a"]), _as_float(both[f"{col}_b"])

@@ -194,7 +194,7 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
     Verdict columns come from the metrics stage when it ran, else from the refine post-check; the failure
     mode is :func:`asset2sim.tasks.check.verdict.asset_failure_mode`'s.
     """
-    prepared = prepared or Prepared(worker=None)
+    prepared = prepared or Prepared()
     row = _row_head(job, prepared, refined, flow_run_id, started_at, finished_at)
     stages = {k: _s(v) for k, v in (("prepare", prepared.seconds), ("cpu.prepare", prepared.cpu_seconds)) if v is not None}
     if prepared.skip is not None:  # reuse an earlier finished result

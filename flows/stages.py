@@ -257,14 +257,13 @@ def stage_refine(
     with output_folder.guarding(Path(out_dir).parent):  # the run's folder: no asset's output through a symlink out of it
         result = fn(Path(asset_dir), prompt, Path(out_dir), RefineConfig(**config), **kwargs)
     report = RefineReport.model_validate(result.report.model_dump(mode="json"))
-    out = RefineOutput(
+    return RefineOutput(
         report=report,
         out_dir=str(result.out_dir),
         skipped=bool(getattr(result, "skipped", False)),
         progress=progress,
         tokens=report_tokens(report, Path(result.out_dir)),
-    )
-    return out.model_dump(mode="json")
+    ).model_dump(mode="json")
 
 
 def refined_evaluation(out_dir: str | Path, prompt: str, category: str | None, reference_dir: str | None) -> Evaluation | None:
