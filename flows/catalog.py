@@ -243,7 +243,7 @@ class ResultCatalog:
             if len(bits) < 2 or not bits[0].startswith("dataset=") or not bits[1].startswith("run="):
                 continue
             key = (bits[0].split("=", 1)[1], bits[1].split("=", 1)[1])
-            if not (_PART_RE.match(key[0]) and _PART_RE.match(key[1])):
+            if not all(map(_PART_RE.match, key)):
                 continue
             if len(bits) == 2:
                 if info.type == pafs.FileType.Directory:
@@ -371,15 +371,13 @@ class ResultCatalog:
             return pd.DataFrame({n: pd.Series(dtype="object") for n in table.schema.names})
         table = plain_strings(table)
         if (table.schema.metadata or {}).get(b"asset2sim.sorted") != b"1":  # files scanned in order: sorted already
-            keys = [k for k in ("dataset", "run", "asset_id") if k in table.schema.names]
-            table = table.sort_by([(k, "ascending") for k in keys])
+            table = table.sort_by([(k, "ascending") for k in ("dataset", "run", "asset_id") if k in table.schema.names])
         return table.to_pandas()
 
     def finished(self, dataset: str, code_hash: str | None = None) -> dict[str, dict[str, Any]]:
         """Latest finished result per ``asset_id|input_hash|config_hash`` key of
         ``dataset``: the row (dict) of the latest run in which the asset was
         done or skipped; ``code_hash``: only rows made by this code (None: any)."""
-        import pyarrow as pa
         import pyarrow.dataset as pads
 
         expr = pads.field("status").isin(["done", "skipped"])
@@ -389,14 +387,12 @@ class ResultCatalog:
         keys = self.read_table(dataset, columns=["asset_id", "input_hash", "config_hash"], filter=expr)
         if keys.num_rows == 0:
             return {}
-        keys = keys.set_column(keys.schema.get_field_index("run"), "run", keys["run"].cast(pa.string()))
-        kdf = keys.select(["asset_id", "input_hash", "config_hash", "run"]).to_pandas()
+        kdf = plain_strings(keys, ("run",)).select(["asset_id", "input_hash", "config_hash", "run"]).to_pandas()
         kdf["_key"] = _keys(kdf)
         latest = kdf.sort_values("run", kind="stable").drop_duplicates("_key", keep="last")
         # pass 2: whole rows, only of the runs that hold a latest result
         rows = self.read(dataset, sorted(latest["run"].unique()), filter=expr)
-        rows = rows.assign(_key=_keys(rows))
-        rows = rows.merge(latest[["_key", "run"]], on=["_key", "run"], how="inner").drop(columns="_key")
+        rows = rows.assign(_key=_keys(rows)).merge(latest[["_key", "run"]], on=["_key", "run"], how="inner").drop(columns="_key")
         recs = [{k: plain_value(v) for k, v in rec.items()} for rec in rows.to_dict("records")]
         return {result_key(r["asset_id"], r["input_hash"], r["config_hash"]): r for r in recs}
 
