@@ -162,9 +162,8 @@ def log_flow_run(
     ts = int(time.time() * 1000)
     run_name = f"{params.get('dataset', '')}/{params.get('run', '')}".strip("/") or None
     outcome = "nothing_to_do" if not df.empty and bool((df["status"] == "skipped").all()) else "worked"
-    parent = client.create_run(exp_id, run_name=run_name, start_time=_ms(started_at) or ts,
-                               tags={"asset2sim.kind": "flow_run", "asset2sim.outcome": outcome, **tags})
-    rid = parent.info.run_id
+    rid = client.create_run(exp_id, run_name=run_name, start_time=_ms(started_at) or ts,
+                            tags={"asset2sim.kind": "flow_run", "asset2sim.outcome": outcome, **tags}).info.run_id
     try:
         client.log_batch(
             rid,
@@ -181,16 +180,16 @@ def log_flow_run(
                 start_time=_asset_start(row) or ts,
                 tags={"mlflow.parentRunId": rid, "asset2sim.kind": "asset", "asset_id": str(row["asset_id"]),
                       **{k: str(row.get(k) or "") for k in ("category", "status", "failure_mode")}},
-            )
+            ).info.run_id
             client.log_batch(
-                child.info.run_id,
+                child,
                 metrics=[Metric(k, v, ts, 0) for k, v in _asset_metrics(row).items()],
                 params=[Param(k, str(row.get(k) or "")[:500]) for k in ("prompt", "estimator", "input_hash", "config_hash")],
             )
             if row.get("status") != "skipped":  # a reused asset's files belong to the run that made them
                 for path in asset_artifacts(row.get("out_dir")):
-                    client.log_artifact(child.info.run_id, str(path), artifact_path=_artifact_dir(path, row["out_dir"]))
-            client.set_terminated(child.info.run_id, "FINISHED", end_time=_ms(row.get("finished_at")) or ts)
+                    client.log_artifact(child, str(path), artifact_path=_artifact_dir(path, row["out_dir"]))
+            client.set_terminated(child, "FINISHED", end_time=_ms(row.get("finished_at")) or ts)
     except BaseException:
         client.set_terminated(rid, "FAILED", end_time=int(time.time() * 1000))
         raise
