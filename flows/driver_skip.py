@@ -121,9 +121,8 @@ def entry_for(job: Any, prepared: Prepared, fingerprint: str | None) -> InputEnt
 
 def _decide(job: Any, entry: InputEntry | None, fingerprint: str | None, code: str) -> Prepared | None:
     t0 = time.perf_counter()
-    if entry is None or fingerprint is None or entry.fingerprint != fingerprint or entry.code_hash != code:
-        return None
-    if entry.job_category != job.category or not job.finished:
+    if (entry is None or fingerprint is None or entry.fingerprint != fingerprint or entry.code_hash != code
+            or entry.job_category != job.category or not job.finished):
         return None
     rec = reusable(Prepared(worker=f"{worker_name()} (driver)", category=entry.category,
                             links=entry.links, movable_joints=entry.movable_joints), job, entry.input_hash)

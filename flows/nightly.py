@@ -68,8 +68,7 @@ def nightly_parameters(
     """Parameters of the nightly deployment: exactly what ``make flow`` passes
     (:func:`~asset2sim.flows.refine_flow.flow_parameters`), with the dataset
     defaulting to ``schedule.dataset`` of the catalog."""
-    dataset = dataset or nightly_schedule(catalog).dataset
-    return flow_parameters(catalog, dataset, workers, dask_address)
+    return flow_parameters(catalog, dataset or nightly_schedule(catalog).dataset, workers, dask_address)
 
 
 def build_nightly_deployment(
