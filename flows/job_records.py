@@ -318,9 +318,8 @@ def _add_measured(row: CatalogRow, measured: StageRecord | None, stages: dict[st
     """Add the metrics stage's columns and seconds (nothing when it did not run)."""
     if measured is None or measured.status != "ok":
         return
-    m: Measurement = measured.value
     stages["metrics"] = _s(measured.seconds)
-    for col, v in m.columns.items():
+    for col, v in measured.value.columns.items():
         if v is not None:
             setattr(row, col, v)
 

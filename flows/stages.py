@@ -125,8 +125,7 @@ def publish_stage(job: AssetJob, refined: StageRecord) -> StageRecord:
     if job.out_uri is None or refined is None or refined.status != "ok":
         return StageRecord(status="skipped")
     t0 = time.perf_counter()
-    value: RefineOutput = refined.value
-    local = value.out_dir or job.out_dir
+    local = refined.value.out_dir or job.out_dir
     clips = clip_videos(local)
     try:
         up = store_mod.upload_folder(local, job.out_uri)
