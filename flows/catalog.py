@@ -114,8 +114,7 @@ class ResultCatalog:
         aid = _check_part("asset", row.asset_id)
         import pyarrow as pa
 
-        values = {name: [v] for name, v in row.model_dump().items()}
-        table = pa.Table.from_pydict(values, schema=arrow_schema(with_version=True))
+        table = pa.Table.from_pydict({name: [v] for name, v in row.model_dump().items()}, schema=arrow_schema(with_version=True))
         path = f"{self._run_path(dataset, run)}/{aid}.parquet"
         catalog_fs.write_bytes(self.location, path, _parquet_bytes(table))
         self._drop_compacted_row(dataset, run, aid)  # the row file holds it now: each row in one file
@@ -266,8 +265,7 @@ class ResultCatalog:
         """Parquet files of the catalog as one table of the current schema (missing columns null)."""
         import pyarrow.dataset as pads
 
-        dset = pads.dataset(paths, schema=arrow_schema(), format="parquet", filesystem=self.location.fs)
-        return dset.to_table(columns=columns)
+        return pads.dataset(paths, schema=arrow_schema(), format="parquet", filesystem=self.location.fs).to_table(columns=columns)
 
     def recorded_assets(self, dataset: str, run: str) -> set[str]:
         """Ids of the assets the run has a row for (row files and compacted file)."""

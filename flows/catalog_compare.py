@@ -127,8 +127,7 @@ class RunComparison(BaseModel):
 
 def did_work(store: ResultCatalog, dataset: str, run: str) -> bool:
     """Whether ``run`` refined or failed at least one asset (a rerun that reused every earlier result did not)."""
-    status = store.read_table(dataset, run, columns=["status"])["status"].to_pylist()
-    return any(s != "skipped" for s in status)
+    return any(s != "skipped" for s in store.read_table(dataset, run, columns=["status"])["status"].to_pylist())
 
 
 def previous_run(store: ResultCatalog, dataset: str, run: str) -> str | None:
@@ -166,15 +165,15 @@ def compare_runs(previous, current, *, dataset: str, run: str, previous_run_id: 
     if previous is None or previous_run_id is None:
         return out
     out.previous_assets, out.previous_pass_rate = int(len(previous)), _pass_rate(previous)
-    a, b = (df[list(COMPARE_COLUMNS)].drop_duplicates("asset_id", keep="last").set_index("asset_id") for df in (previous, current))
+    a, b = (df[list(COMPARE_COLUMNS)].drop_duplicates("asset_id", keep="last").set_index("asset_id")
+            for df in (previous, current))
     both = a.join(b, how="inner", lsuffix="_a", rsuffix="_b")
     out.common_assets = int(len(both))
     if len(both):
         ma, mb = (both[f"failure_mode_{s}"].fillna(MISSING_FAILURE_MODE) for s in "ab")
         out.previous_common_pass_rate, out.common_pass_rate = float((ma == "none").mean()), float((mb == "none").mean())
         out.pass_rate_drift = out.common_pass_rate - out.previous_common_pass_rate
-        flipped = both[ma != mb]
-        for aid, rec in flipped.sort_index().iterrows():
+        for aid, rec in both[ma != mb].sort_index().iterrows():
             before, after = ma[aid], mb[aid]
             direction = "regressed" if before == "none" else ("improved" if after == "none" else "changed")
             cat = rec["category_b"] if isinstance(rec["category_b"], str) else rec["category_a"]

@@ -99,8 +99,7 @@ def read_bytes(loc: Location, path: str) -> bytes | None:
     """The contents of file ``path``; None when it does not exist."""
     import pyarrow.fs as pafs
 
-    info = loc.fs.get_file_info(path)
-    if info.type != pafs.FileType.File:
+    if loc.fs.get_file_info(path).type != pafs.FileType.File:
         return None
     try:
         with loc.fs.open_input_stream(path) as fh:

@@ -36,16 +36,14 @@ def nightly_schedule(
     """
     from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
-    cat = load_catalog(catalog)
-    sched = cat.config.schedule
+    sched = load_catalog(catalog).config.schedule
     cron = cron or os.environ.get("ASSET2SIM_CRON") or sched.cron
     tz = timezone or os.environ.get("ASSET2SIM_TIMEZONE") or sched.timezone
     try:
         ZoneInfo(tz)
     except (ZoneInfoNotFoundError, ValueError) as exc:
         raise ValueError(f"unknown time zone {tz!r} (use an IANA name such as UTC or Europe/Berlin)") from exc
-    fields = cron.split()
-    if len(fields) != 5:
+    if len(cron.split()) != 5:
         raise ValueError(f"cron expression {cron!r} must have 5 fields (minute hour day month weekday)")
     try:
         from prefect.schedules import Cron

@@ -213,8 +213,7 @@ def slowest_assets(df, n: int = 10, run: str | None = None):
     cols = ["dataset", "run", "asset_id", "category", "status", "failure_mode", "wall_seconds", "slowest_stage", "slowest_stage_seconds"]
     if df.empty:
         return pd.DataFrame(columns=cols)
-    wall = pd.to_numeric(df["wall_seconds"], errors="coerce")
-    d = df.loc[wall.nlargest(int(n)).index].copy()
+    d = df.loc[pd.to_numeric(df["wall_seconds"], errors="coerce").nlargest(int(n)).index].copy()
 
     def slowest(js: str | None) -> tuple[str | None, float | None]:
         try:
@@ -269,7 +268,8 @@ def verdict_changes(df, run_a: str, run_b: str):
             raise KeyError(f"run {r!r} is not in the catalog")
     fields = ["failure_mode", "rest_stable", "oscillation_pass", "status"]
     cols = ["asset_id", "category", *[f"{f}_{s}" for f in fields for s in ("a", "b")], "change"]
-    a, b = (df[df["run"] == r][["asset_id", "category", *fields]].drop_duplicates("asset_id", keep="last") for r in (run_a, run_b))
+    a, b = (df[df["run"] == r][["asset_id", "category", *fields]].drop_duplicates("asset_id", keep="last")
+            for r in (run_a, run_b))
     m = a.merge(b, on="asset_id", how="outer", suffixes=("_a", "_b"), indicator=True)
     if m.empty:
         return pd.DataFrame(columns=cols)
