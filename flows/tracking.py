@@ -152,8 +152,7 @@ def log_flow_run(
     from mlflow.tracking import MlflowClient
 
     project_root = Path(project_root)
-    uri = resolve_tracking_uri(project_root, settings.uri)
-    client = MlflowClient(tracking_uri=uri)
+    client = MlflowClient(tracking_uri=resolve_tracking_uri(project_root, settings.uri))
     exp = client.get_experiment_by_name(settings.experiment)
     art = project_root / settings.artifact_root / settings.experiment.replace("/", "_")
     exp_id = exp.experiment_id if exp else client.create_experiment(settings.experiment, artifact_location=art.resolve().as_uri())
