@@ -202,20 +202,19 @@ def prepare_asset(job: AssetJob) -> Prepared:
         reading = ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle)
         asset, findings = extract_asset_checked(Path(job.asset_dir), asset_id=job.asset_id, category=job.category, reading=reading)
     except Exception as exc:  # any reading problem is the input's
-        rec.failure_mode, rec.error, rec.seconds = "invalid_input", f"{type(exc).__name__}: {exc}", time.perf_counter() - t0
-        rec.cpu_seconds = time.thread_time() - c0
-        return rec
-    chash, rhash = reusable(rec, job, asset.input_hash).config_hash, rec.refine_config_hash
-    rec.category = job.category or asset.category
-    rec.links, rec.movable_joints = len(asset.links), len(asset.movable_joints())
-    if rec.skip is None:
-        found = resumable_output(job.resumable, asset.input_hash, chash, rhash)
-        rec.resume = None if found is None else found.model_dump(mode="json")
-    if rec.skip is None and rec.resume is None:
-        rec.asset, rec.findings = asset, list(findings)
-        job_fields = {k: v for k, v in asdict(job).items() if k not in ("finished", "resumable")}
-        write_job_record(job.work_dir, JobRecord(job=job_fields, input_hash=asset.input_hash, config_hash=chash,
-                                                 refine_config_hash=rhash))
+        rec.failure_mode, rec.error = "invalid_input", f"{type(exc).__name__}: {exc}"
+    else:
+        chash, rhash = reusable(rec, job, asset.input_hash).config_hash, rec.refine_config_hash
+        rec.category = job.category or asset.category
+        rec.links, rec.movable_joints = len(asset.links), len(asset.movable_joints())
+        if rec.skip is None:
+            found = resumable_output(job.resumable, asset.input_hash, chash, rhash)
+            rec.resume = None if found is None else found.model_dump(mode="json")
+        if rec.skip is None and rec.resume is None:
+            rec.asset, rec.findings = asset, list(findings)
+            job_fields = {k: v for k, v in asdict(job).items() if k not in ("finished", "resumable")}
+            write_job_record(job.work_dir, JobRecord(job=job_fields, input_hash=asset.input_hash, config_hash=chash,
+                                                     refine_config_hash=rhash))
     rec.seconds, rec.cpu_seconds = time.perf_counter() - t0, time.thread_time() - c0
     return rec
 
