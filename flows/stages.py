@@ -340,7 +340,7 @@ def _run_stage(job: AssetJob, name: str, kwargs: dict[str, Any], timeout: float)
     returned)."""
     t0, target = time.perf_counter(), f"{__name__}:stage_{name}"
     if timeout <= 0:
-        return StageRecord(status="timeout", error=f"no time left for stage {name}", failure_mode="timeout", seconds=0.0)
+        return StageRecord(status="timeout", error=f"no time left for stage {name}", failure_mode="timeout")
     limits = {"timeout": timeout, "workdir": Path(job.work_dir) / name, "memory_limit_mb": job.memory_limit_mb}
     if job.isolation == "process":  # a child forked from this worker's pre-imported stage server
         rec = asdict(run_forked(target, kwargs, **limits, preload=stage_server_modules(job)))
@@ -364,7 +364,7 @@ def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
             value = refined_output(out_dir)
         except (OSError, ValueError) as exc:
             return StageRecord(status="error", error=f"{out_dir}: cannot read the finished report: {exc}",
-                               error_type=type(exc).__name__, seconds=0.0, worker=worker_name())
+                               error_type=type(exc).__name__, worker=worker_name())
         return StageRecord(status="ok", value=value, worker=worker_name(),
                            seconds=float(sum(value.report.stage_seconds.values())))
     budget = job.time_limit_seconds - float(prepared.seconds or 0.0)
