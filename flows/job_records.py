@@ -35,12 +35,8 @@ JOB_RECORD_NAME = "job.json"
 def finished_result(row: dict[str, Any] | None, input_hash: str) -> dict[str, Any] | None:
     """The skip rule: ``row`` (an earlier catalog row for the same asset, input and flow configuration, or
     None) when its output folder is still complete for ``input_hash``, else None."""
-    if row is None:
-        return None
-    out = row.get("out_dir")
-    if not out or not Path(out).is_dir():
-        return None
-    return row if is_complete(Path(out), input_hash, row.get("refine_config_hash") or "") else None
+    out = None if row is None else row.get("out_dir")
+    return row if out and is_complete(out, input_hash, row.get("refine_config_hash") or "") else None
 
 
 class JobRecord(BaseModel):
@@ -71,7 +67,7 @@ def resumable_output(candidates: list[dict[str, Any]], input_hash: str, config_h
         if (rec.input_hash, rec.config_hash, rec.refine_config_hash) != (input_hash, config_hash, refine_config_hash):
             continue
         out = rec.job.get("out_dir")
-        if out and Path(out).is_dir() and is_complete(Path(out), input_hash, refine_config_hash):
+        if out and is_complete(out, input_hash, refine_config_hash):
             return rec
     return None
 
