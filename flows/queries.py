@@ -46,9 +46,7 @@ def latest_run(df, dataset: str | None = None) -> str | None:
     """Id of the most recent run (of ``dataset`` when given), None when empty."""
     if dataset is not None:
         df = df[df["dataset"] == dataset]
-    if df.empty:
-        return None
-    return str(sorted(df["run"].unique())[-1])
+    return None if df.empty else str(max(df["run"].unique()))
 
 
 def failure_modes(df, by: str | Iterable[str] = "category", run: str | None = None):

@@ -452,8 +452,7 @@ def run_refine_flow(
     if not PREFECT_API_URL.value():
         # no Prefect server to talk to: plan here first; a run with nothing to
         # dispatch (every asset finished) starts neither a server nor Dask
-        name, _ = cat.dataset(dataset)
-        planned = plan_driver(cat, name, ids=ids, limit=limit, force=force, out=params.get("out"))
+        planned = plan_driver(cat, cat.dataset(dataset)[0], ids=ids, limit=limit, force=force, out=params.get("out"))
         if not planned.pending:
             try:
                 return run_dataset(logging.getLogger("asset2sim.flow"), **params, ids=ids, limit=limit, force=force,
