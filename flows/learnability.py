@@ -80,9 +80,10 @@ def learnability_flags(records: Iterable[dict], method: str = "asset2sim") -> di
     budget: dict[str, Any] = {}
     for r in records:
         rid = str(r.get("id") or "")
-        if r.get("kind") in POLICY_KINDS and rid and r.get("success_rate") is not None:
+        rated = rid and r.get("success_rate") is not None
+        if r.get("kind") in POLICY_KINDS and rated:
             seeds.setdefault(rid, {})[int(r.get("seed") or 0)] = float(r["success_rate"])
-        elif r.get("kind") == "passive" and rid and r.get("success_rate") is not None:
+        elif r.get("kind") == "passive" and rated:
             passive[rid] = float(r["success_rate"])
         if r.get("kind") in ("ppo", "ppo_train") and r.get("env_steps") is not None:
             budget = {"env_steps": int(r["env_steps"]), "n_envs": r.get("n_envs"), "device": r.get("device"),
