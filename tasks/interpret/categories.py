@@ -8,7 +8,7 @@ from __future__ import annotations
 import functools
 import re
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from pydantic import Field
 
@@ -59,9 +59,7 @@ def _lookup_tables() -> tuple[dict[str, str], dict[str, str]]:
 
 def resolve_category(name: str | None) -> str | None:
     """Canonical category for a name, model_cat or synonym (case and punctuation ignored), else None."""
-    if not name:
-        return None
-    return _lookup_tables()[0].get(_simple(name))
+    return _lookup_tables()[0].get(_simple(name)) if name else None
 
 
 def category_prior(name: str, strict: bool = False) -> CategoryPrior:
@@ -153,11 +151,11 @@ def find_category_mentions(text: str) -> list[CategoryMention]:
     # mention within three words names a part of that other object
     for i, (m, nxt) in enumerate(zip(out, out[1:])):
         if re.fullmatch(r"\s+of\s+(?:(?:a|an|the|this|that|my|your|our|its)\s+)?(?:[\w-]+\s+){0,2}", low[m.end: nxt.start]):
-            out[i] = CategoryMention(m.start, m.end, m.phrase, m.category, m.weak, True)
+            out[i] = replace(m, possessive=True)
         # "a safe with a stiff door": a mention after "with <det>" and at most two words, right after another
         # mention, names a part of that object
         elif re.fullmatch(r"\s+with\s+(?:(?:a|an|the|its|one|two|three|four)\s+)?(?:[\w-]+\s+){0,2}", low[m.end: nxt.start]):
-            out[i + 1] = CategoryMention(nxt.start, nxt.end, nxt.phrase, nxt.category, nxt.weak, True)
+            out[i + 1] = replace(nxt, possessive=True)
     return out
 
 
@@ -170,8 +168,7 @@ def request_category(text: str) -> tuple[str | None, CategoryMention | None]:
 
 def find_variant(category: str, text: str) -> VariantPrior | None:
     """The variant of ``category`` named earliest in ``text``, or None."""
-    found = variant_mention(category, text)
-    return found[2] if found else None
+    return (variant_mention(category, text) or (None, None, None))[2]
 
 
 def variant_mention(category: str, text: str) -> tuple[int, int, VariantPrior] | None:

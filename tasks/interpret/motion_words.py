@@ -79,14 +79,9 @@ def dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[t
         if any(a <= h.start < b for a, b in level_spans) or (kind == "heavy" and not rv.joint_word_soon(low, h.end)):
             continue  # "a heavy box", "a heavy 25 kg door", "a heavy drawer": a mass; "a heavy hinge": stiff
         neg = negated(low, h.start)
+        matched.append((h.start, (("no " if kind == "spring" else "not ") if neg else "") + h.text))
         if kind == "spring":
             spring = not neg
-            matched.append((h.start, ("no " if neg else "") + h.text))
-            if not neg:
-                motions.append(MotionPhrase(kind=_motion_kind(kind, val, h.flag), phrase=h.text,
-                                            **_motion_part(low, h.start, h.end, head_starts, ordinals)))
-            continue
-        matched.append((h.start, ("not " if neg else "") + h.text))
         if neg:
             continue
         motions.append(MotionPhrase(kind=_motion_kind(kind, val, h.flag), phrase=h.text,

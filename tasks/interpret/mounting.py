@@ -133,8 +133,7 @@ def declared_mounting(category: str | None, root_fixed: bool | None, what: str) 
     if root_fixed is None:
         return None
     held = "welds the root to the world" if root_fixed else "leaves the root free"
-    mount = resolve_mounting(category, "", "fixed" if root_fixed else "free")
-    return mount.model_copy(update={"source": f"{what} {held}"})
+    return resolve_mounting(category, "", "fixed" if root_fixed else "free").model_copy(update={"source": f"{what} {held}"})
 
 
 

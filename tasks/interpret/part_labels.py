@@ -46,20 +46,14 @@ def canonical_label(label: str | None) -> str | None:
             if stripped.startswith(p) and len(stripped) > len(p):
                 stripped = stripped[len(p):]
                 changed = True
-    for cand in [s, stripped, *reversed([t for t in stripped.split("_") if t])]:  # whole, prefixes stripped, last token first
-        hit = look(cand)
-        if hit:
-            return hit
-    return stripped
+    # whole, prefixes stripped, last token first
+    return next((hit for cand in [s, stripped, *reversed([t for t in stripped.split("_") if t])] if (hit := look(cand))), stripped)
 
 
 def body_label_tokens(label: str) -> list[str]:
     """Prefix words of a body-like label (``suitcase_body`` -> [``suitcase``])."""
-    s = _norm_token(label)
-    toks = [t for t in s.split("_") if t]
-    if len(toks) >= 2 and canonical_label(toks[-1]) in BODY_LABELS:
-        return toks[:-1]
-    return []
+    toks = [t for t in _norm_token(label).split("_") if t]
+    return toks[:-1] if len(toks) >= 2 and canonical_label(toks[-1]) in BODY_LABELS else []
 
 
 def label_from_name(name: str | None) -> str | None:
@@ -68,9 +62,7 @@ def label_from_name(name: str | None) -> str | None:
     known label (``labels.yaml``)."""
     if not name:
         return None
-    words = re.sub(r"([a-z])([A-Z])", r"\1_\2", name)  # camelCase -> camel_Case
-    words = re.sub(r"[^A-Za-z]+", "_", words)
-    hit = canonical_label(words)
+    hit = canonical_label(re.sub(r"[^A-Za-z]+", "_", re.sub(r"([a-z])([A-Z])", r"\1_\2", name)))  # camelCase -> camel_Case
     return hit if hit in load_priors().labels.labels else None
 
 

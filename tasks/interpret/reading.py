@@ -140,13 +140,11 @@ def parse_request_model(text: str, client: LLMClient,
     """
     offline = offline if offline is not None else parse_request(text)
     if not text.strip():
-        note = "request parse: offline (the request is empty; no model call)"
-        return offline.model_copy(update={"parse_note": note})
+        return offline.model_copy(update={"parse_note": "request parse: offline (the request is empty; no model call)"})
     schema = intent_schema()
 
     def accept(intent: RequestIntent) -> RequestIntent:
-        problems = intent_problems(intent)
-        if problems:
+        if problems := intent_problems(intent):
             raise ReplyInvalid(problems)
         return normalised(intent)
 
@@ -154,8 +152,7 @@ def parse_request_model(text: str, client: LLMClient,
         answer = client.ask(intent_messages(text, schema), RequestIntent, schema=schema,
                             schema_name=INTENT_SCHEMA_NAME, accept=accept, max_reasks=0)
     except LLMError as exc:  # the call failed, or the reply did not validate (ReplyError lists why)
-        note = f"request parse: offline (the model's parse was not used: {one_line(exc, 400)})"
-        return offline.model_copy(update={"parse_note": note})
+        return offline.model_copy(update={"parse_note": f"request parse: offline (the model's parse was not used: {one_line(exc, 400)})"})
     # the same note from the cache: same output
     states = ", ".join(js.words() for js in answer.value.joint_states) or "no states"
     return with_intent(offline, answer.value, f"request parse: model {client.config.model}, "
@@ -187,8 +184,7 @@ def parse_request_for(text: str, config: RefineConfig | None = None,
         try:
             client = make_client(config.estimator, config.model, config.base_url)
         except (LLMError, ValueError) as exc:
-            note = f"request parse: offline (no model backend: {one_line(exc)})"
-            return offline.model_copy(update={"parse_note": note})
+            return offline.model_copy(update={"parse_note": f"request parse: offline (no model backend: {one_line(exc)})"})
     return parse_request_model(text, client, offline)
 
 

@@ -280,10 +280,11 @@ def request_notes(spec: RequestSpec) -> list[str]:
     """The report's and the terminal's lines on the request's unused words: a warning when none was
     understood (the category's defaults are used), else the unused words; empty when every word was used. A note
     on which parse was used and why comes first when the model was asked to parse (``--request-parser model``)."""
+    parse = [spec.parse_note] if spec.parse_note else []
     if not spec.understood:
-        return ([spec.parse_note] if spec.parse_note else []) + [f"WARNING: request not understood (English words only; none recognised): {spec.text[:120]!r}; "
+        return parse + [f"WARNING: request not understood (English words only; none recognised): {spec.text[:120]!r}; "
                 "refined with the category's defaults (typical size, closed, moderate damping)"]
-    out = [f"WARNING: {w}" for w in spec.warnings] + ([spec.parse_note] if spec.parse_note else [])
+    out = [f"WARNING: {w}" for w in spec.warnings] + parse
     if spec.ignored:
         out.append("request words not used: " + "; ".join(f"'{g}'" for g in spec.ignored[:30]) + (" ..." if len(spec.ignored) > 30 else ""))
     return out

@@ -72,14 +72,17 @@ def _factor(units: list[tuple[str, float]], text: str) -> float:
     raise ValueError(f"unknown unit {text!r}")
 
 
+def _quantity(m: re.Match, units: list[tuple[str, float]]) -> float:
+    """The SI value of a number-and-unit match (groups ``num`` and ``unit``) in ``units``."""
+    return number_value(m.group("num")) * _factor(units, m.group("unit"))
+
+
 #: A unit right after a number ("drawer 10 cm" is a distance, not drawer number 10).
 UNIT_AHEAD = re.compile(r"\s*-?\s*(?:%|percent|" + _unit_rx(_ANGLE_UNITS + _LENGTH_UNITS + _MASS_UNITS + _VOLUME_UNITS) + r")(?![\w])")
 
 _QTY = r"(?P<num>" + NUM + r")\s*-?\s*(?P<unit>{units})(?![\w])"
-_ANGLE_RX = re.compile(_L + _QTY.format(units=_unit_rx(_ANGLE_UNITS)))
-_LENGTH_RX = re.compile(_L + _QTY.format(units=_unit_rx(_LENGTH_UNITS)))
-_MASS_RX = re.compile(_L + _QTY.format(units=_unit_rx(_MASS_UNITS)))
-_VOLUME_RX = re.compile(_L + _QTY.format(units=_unit_rx(_VOLUME_UNITS)))
+_ANGLE_RX, _LENGTH_RX, _MASS_RX, _VOLUME_RX = (re.compile(_L + _QTY.format(units=_unit_rx(u)))
+                                               for u in (_ANGLE_UNITS, _LENGTH_UNITS, _MASS_UNITS, _VOLUME_UNITS))
 #: "at a right angle", "open at right angles", "perpendicular": 90 degrees.
 _RIGHT_ANGLE_RX = re.compile(_L + r"(?:(?:a )?right[- ]angles?|perpendicular)" + _R)
 _PERCENT_RX = re.compile(_L + r"(?P<num>" + NUM + r")\s*(?:%|percent|per cent)(?![\w])")
@@ -109,11 +112,6 @@ class Found:
     end: int
     text: str
     value: object
-
-
-def _band_of_fraction(f: float) -> str:
-    """Nearest band (by target fraction) of an opening fraction."""
-    return min(BAND_TARGET, key=lambda b: abs(BAND_TARGET[b] - f))
 
 
 def _next_words(low: str, end: int, n: int) -> list[tuple[int, int, str]]:
@@ -160,7 +158,7 @@ def state_quantities(low: str, mention_starts: list[int]) -> StateQuantities:
         return start, end
 
     for m in [*_ANGLE_RX.finditer(low), *_RIGHT_ANGLE_RX.finditer(low)]:
-        v = number_value(m.group("num")) * _factor(_ANGLE_UNITS, m.group("unit")) if "num" in m.re.groupindex else math.pi / 2
+        v = _quantity(m, _ANGLE_UNITS) if "num" in m.re.groupindex else math.pi / 2
         s, e = widen(m)
         states.append(Found(s, e, low[s:e].strip(), ("halfway", StateTarget(kind="angle", value=v))))
     for m in [*_PERCENT_RX.finditer(low), *_THIRDS_RX.finditer(low)]:
@@ -171,9 +169,10 @@ def state_quantities(low: str, mention_starts: list[int]) -> StateQuantities:
             continue  # "a third" without open/out next to it is not a state
         else:
             f = int(m.group("n")) / int(m.group("d")) if m.group("n") else (2 / 3 if m.group("frac").startswith(("two", "2")) else 1 / 3)
-        states.append(Found(s, e, low[s:e].strip(), (_band_of_fraction(f), StateTarget(kind="fraction", value=f))))
+        band = min(BAND_TARGET, key=lambda b: abs(BAND_TARGET[b] - f))  # the nearest band (by target fraction)
+        states.append(Found(s, e, low[s:e].strip(), (band, StateTarget(kind="fraction", value=f))))
     for m in _LENGTH_RX.finditer(low):
-        v = number_value(m.group("num")) * _factor(_LENGTH_UNITS, m.group("unit"))
+        v = _quantity(m, _LENGTH_UNITS)
         if v <= 0:
             continue
         if m.group("unit") == "in" and (not m.group("num")[0].isdigit() or re.match(r"\s*\d", low[m.end():])):
@@ -209,7 +208,7 @@ def volumes(low: str) -> list[Found]:
     for m in _VOLUME_RX.finditer(low):
         if m.group("unit") == "l" and not m.group("num")[0].isdigit():
             continue  # "a l": not a number
-        v = number_value(m.group("num")) * _factor(_VOLUME_UNITS, m.group("unit"))
+        v = _quantity(m, _VOLUME_UNITS)
         if v > 0:
             out.append(Found(m.start(), m.end(), m.group(0), SizeTarget(dimension="volume", value=v, phrase=m.group(0))))
     return out
@@ -266,12 +265,7 @@ _MASS_RANGE_RX = re.compile(
 def mass_ranges(low: str) -> list[re.Match]:
     """Ranges of masses in numbers: "between 20 and 30 kg", "from 2 kg to 3 kg", "20-30 kg", "20 to 30 kg" (the first
     number in the second's unit unless it has its own; "and" only after "between")."""
-    out = []
-    for m in _MASS_RANGE_RX.finditer(low):
-        if (m.group("sep") == "and") != (m.group("lead") == "between"):
-            continue
-        out.append(m)
-    return out
+    return [m for m in _MASS_RANGE_RX.finditer(low) if (m.group("sep") == "and") == (m.group("lead") == "between")]
 
 
 def _mass_found(low: str, m: re.Match, mention_starts: list[int] | None, **values: object) -> Found:
@@ -295,7 +289,7 @@ def masses(low: str, mention_starts: list[int] | None = None) -> list[Found]:
     out: list[Found] = []
     ranges = mass_ranges(low)
     for m in ranges:
-        hi = number_value(m.group("num")) * _factor(_MASS_UNITS, m.group("unit"))
+        hi = _quantity(m, _MASS_UNITS)
         lo = number_value(m.group("lo")) * _factor(_MASS_UNITS, m.group("lo_unit") or m.group("unit"))
         if lo <= 0 or hi <= 0:
             continue
@@ -303,7 +297,7 @@ def masses(low: str, mention_starts: list[int] | None = None) -> list[Found]:
     for m in _MASS_RX.finditer(low):
         if any(r.start() <= m.start() < r.end() for r in ranges):
             continue
-        v = number_value(m.group("num")) * _factor(_MASS_UNITS, m.group("unit"))
+        v = _quantity(m, _MASS_UNITS)
         if v <= 0:
             continue
         out.append(_mass_found(low, m, mention_starts, mass=v))
@@ -323,10 +317,7 @@ JOINT_WORD_RX = re.compile(r"(?:hinges?|joints?|action|feel|slides?|runners?|piv
 def joint_word_soon(low: str, end: int, max_words: int = 3) -> bool:
     """Whether a joint word (:data:`JOINT_WORD_RX`) is among the next ``max_words`` words after ``end``, before any
     ("a heavy, well-damped hinge": yes; "a heavy 25 kg door": no)."""
-    for _, _, w in _next_words(low, end, max_words):
-        if JOINT_WORD_RX.fullmatch(w):
-            return True
-    return False
+    return any(JOINT_WORD_RX.fullmatch(w) for _, _, w in _next_words(low, end, max_words))
 
 
 def mass_levels(low: str, mention_starts: list[int]) -> list[Found]:

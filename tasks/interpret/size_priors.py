@@ -59,13 +59,9 @@ def scale_mass_range(lo: float, hi: float, factor: float) -> tuple[float, float]
     and thin-walled (f^2) scaling, floored at ``MASS_FLOOR_KG``; ``ValueError`` for a non-positive factor."""
     if not (factor > 0.0 and math.isfinite(factor)):
         raise ValueError(f"size factor must be positive and finite, got {factor}")
-    if factor <= 1.0:
-        a, b = lo * factor**3, hi * factor**2
-    else:
-        a, b = lo * factor**2, hi * factor**3
+    a, b = (lo * factor**3, hi * factor**2) if factor <= 1.0 else (lo * factor**2, hi * factor**3)
     a = max(a, MASS_FLOOR_KG)
-    b = max(b, 1.05 * a)
-    return (a, b)
+    return a, max(b, 1.05 * a)
 
 
 def mass_range(category: str, size_class: str | None = None, variant: str | None = None) -> tuple[float, float]:
@@ -104,8 +100,7 @@ def target_size(category: str, request: RequestSpec | str | None = None) -> Size
         request = parse_request(request)
     cat = category_prior(category)
     size_class = request.size_class if request is not None else None
-    text = request.text if request is not None else ""
-    var = find_variant(cat.name, text) if text else None
+    var = find_variant(cat.name, request.text) if request is not None and request.text else None
     notes: list[str] = []
     if var is not None:
         base = var.dims
@@ -127,7 +122,6 @@ def target_size(category: str, request: RequestSpec | str | None = None) -> Size
             f"{cat.name} regular dims {list(base)} m; size class {size_class or 'regular'} -> factor {f:.3g}"
         )
     dims = tuple(x * f for x in base)
-    mr = scale_mass_range(lo, hi, f)
     glf = None
     if cat.handheld:
         glf = gripper_limit_factor(dims)
@@ -135,7 +129,7 @@ def target_size(category: str, request: RequestSpec | str | None = None) -> Size
             notes.append(f"handheld but the middle dimension {sorted(dims)[1]:.3f} m exceeds the gripper "
                          f"limit {GRASPABLE_WIDTH_M} m (largest graspable factor {glf:.3g})")
     return SizeTarget(category=cat.name, variant=var.name if var else None, size_class=size_class, base_dims=base, factor=f,
-                      dims=dims, mass_range=mr, body_material=body, handheld=cat.handheld,  # type: ignore[arg-type]
+                      dims=dims, mass_range=scale_mass_range(lo, hi, f), body_material=body, handheld=cat.handheld,  # type: ignore[arg-type]
                       gripper_limit_factor=glf, note="; ".join(notes))
 
 
@@ -155,8 +149,7 @@ def plausible_largest_dimension(category: str) -> LargestDimension:
     :data:`SCALE_TOLERANCE`; for ``Generic``, :data:`GENERIC_SIZE_M` and no typical one (None). The audit's scale
     verdict and refine's choice to keep a size in real units both read it."""
     if category == GENERIC:
-        lo, hi = GENERIC_SIZE_M
-        return LargestDimension(lo, hi, None)
+        return LargestDimension(*GENERIC_SIZE_M, None)
     typical = float(max(target_size(category).dims))
     return LargestDimension(*plausible_span(typical), typical)
 

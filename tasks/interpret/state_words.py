@@ -176,7 +176,7 @@ def _parts(low: str, tokens: Tokens) -> list[_Part]:
     return out
 
 
-_FWD_STOP = {"and", "with", "but", "or", "while", "its", "the", "a", "an", "their", "his", "her", "in", "of", "for", "to", ","}
+_FWD_STOP = {"and", "with", "but", "or", "while", "its", "the", "a", "an", "their", "his", "her", "in", "of", "for", "to", ",", ";", ":"}
 
 
 def _forward_part(low: str, end: int, limit: int, part_at: dict[int, _Part]) -> _Part | None:
@@ -185,7 +185,7 @@ def _forward_part(low: str, end: int, limit: int, part_at: dict[int, _Part]) -> 
         p = part_at.get(t.start())
         if p is not None:
             return p
-        if t.group(0) in _FWD_STOP or t.group(0) in {",", ";", ":"}:
+        if t.group(0) in _FWD_STOP:
             return None
     return None
 
@@ -251,10 +251,9 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found]) -> JointStat
             fwd = _forward_part(low, b.end, seg1, part_at)
             # parts before the state, but not one an earlier state went forward to ("a fully open door and the cap ajar")
             back = [p for p in parts[bisect_left(part_starts, seg0): bisect_right(part_ends, b.start)] if p.start not in claimed]
-            if fwd is not None:
-                claimed.add(fwd.start)
             subjects: list[_Part] = []
             if fwd is not None:
+                claimed.add(fwd.start)
                 subjects = [fwd]
             elif not back and i > 0 and prev_subjects and _ELIDED.fullmatch(low, seg0, b.start):
                 subjects = list(prev_subjects)  # "the lid fully open and closed": the same lid
