@@ -29,11 +29,8 @@ def requested_bands(ctx: EstimationContext, kin: SimSession) -> tuple[dict[str, 
 
 def state_from_bands(closed: dict[str, ClosedState], bands: dict[str, str], scale: float, prismatic: set[str]) -> dict[str, float]:
     """Joint positions (output units) at each band's target opening fraction."""
-    out = {}
-    for name, cs in closed.items():
-        q = cs.position(BAND_TARGET[bands.get(name, "closed")])
-        out[name] = q * scale if name in prismatic else q
-    return out
+    return {name: cs.position(BAND_TARGET[bands.get(name, "closed")]) * (scale if name in prismatic else 1.0)
+            for name, cs in closed.items()}
 
 
 def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
@@ -43,8 +40,7 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
     sized = request_apply.scale_from_sizes(ctx)
     if sized is not None:
         return sized
-    real = real_units(ctx.asset)
-    kept, why_not = _real_size(ctx, real)
+    kept, why_not = _real_size(ctx, real_units(ctx.asset))
     if kept is not None:
         return 1.0, kept
     target = target_size(ctx.category, ctx.request)
@@ -74,8 +70,8 @@ def _real_size(ctx: EstimationContext, real: str | None) -> tuple[str | None, st
         return None, None
     largest = float(np.max(ctx.closed_extents))
     span = plausible_largest_dimension(ctx.category)
-    lo, hi, typical = span.low, span.high, span.typical
-    what = f"a typical {ctx.category} is {typical:.3g} m" if typical is not None else "a household object"
+    lo, hi = span.low, span.high
+    what = f"a typical {ctx.category} is {span.typical:.3g} m" if span.typical is not None else "a household object"
     if ctx.request.size_class is not None:
         return None, f"{real}, rescaled as asked ({ctx.request.size_class})"
     if lo <= largest <= hi:
@@ -100,8 +96,8 @@ def unit_warning(scale: float) -> str:
     unit, per = min(((name, m) for m, name in UNIT_MISTAKES.items()), key=lambda u: abs(np.log(scale / u[1])))
     if abs(np.log(scale / per)) >= np.log(1.5):
         return ""
-    guess = f"its lengths look like {unit} read as metres"
-    return f"; WARNING: the input is {1.0 / scale:.3g}x its category's typical size ({guess}); rescaled by {scale:.4g}"
+    return (f"; WARNING: the input is {1.0 / scale:.3g}x its category's typical size (its lengths look like {unit} read as "
+            f"metres); rescaled by {scale:.4g}")
 
 
 def plausible_mass_range(ctx: EstimationContext, scale: float) -> tuple[float, float]:
@@ -131,6 +127,4 @@ def link_material(ctx: EstimationContext, label: str | None, link: str | None = 
 
 def band_intervals(bands: dict[str, str], intervals: dict[str, tuple[float, float]] | None = None) -> dict[str, tuple[float, float]]:
     """Allowed opening-fraction interval per joint for its band; ``intervals`` (asked numbers or ends) win."""
-    out = {name: BAND_INTERVAL[b] for name, b in bands.items()}
-    out.update(intervals or {})
-    return out
+    return {**{name: BAND_INTERVAL[b] for name, b in bands.items()}, **(intervals or {})}

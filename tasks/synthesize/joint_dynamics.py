@@ -25,8 +25,8 @@ from asset2sim.tasks.interpret.operating_forces import operating_range
 from asset2sim.tasks.synthesize import physics, request_apply, set_down
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.spring_holds import (BALANCE_LABELS, CLOSED_HOLD_FRACTIONS, COUNTERBALANCE_LABELS,
-                                                     balance, closer, counterbalance, far_edge, lid_support, opening_loads,
-                                                     part_label, stopped_shut)
+                                                     balance, closer, counterbalance, far_edge, gravity_at, lid_support,
+                                                     opening_loads, part_label, stopped_shut)
 
 
 @dataclass
@@ -112,17 +112,16 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
     freely is left free of the friction that holds it: a word about friction or damping ("slides easily") never
     removes the counterbalance or sash balance that holds a part against gravity.
     """
-    prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
     rot = ctx.root_rotation
     loads = physics.joint_loads(kin, links, state, scale, ctx.subtrees, root_rotation=rot)
     landed = (set_down.landings(kin, links, state, scale, ctx.subtrees, ctx.hull_points, root_rotation=rot)
               if free_standing(ctx) else {})
     out: dict[str, JointDynamics] = {}
     for j in ctx.asset.movable_joints():
-        name = j.name
+        name, linear, load = j.name, j.type == "prismatic", loads[j.name]
         ch = choices.get(name, JointChoice())
         cs = ctx.closed[name]
-        unit = scale if name in prismatic else 1.0
+        unit = scale if linear else 1.0
         if ch.holds_position:
             fr = np.linspace(0.0, 1.0, 11)
         else:
@@ -131,46 +130,44 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
         hold, at_closed = 0.0, 0.0
         # a part stays shut once closed: friction also holds a load pushing it open near its closed end
         for f, near_closed in [*((f, False) for f in fr), *((f, True) for f in CLOSED_HOLD_FRACTIONS)]:
-            st = {**state, name: cs.position(float(f)) * unit}
-            ld = physics.joint_loads(kin, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
+            g = gravity_at(ctx, kin, links, state, scale, name, f, unit)
             if near_closed and f == 0.0:
-                at_closed = ld[name].gravity_load
-            if not near_closed or ld[name].gravity_load * cs.direction > 0:
-                hold = max(hold, abs(ld[name].gravity_load))
-        band = set_down.joint_band(cs.lower * unit, cs.upper * unit, name in prismatic)
-        on_stop = _on_stop(loads[name], cs, state[name], unit, band)
+                at_closed = g
+            if not near_closed or g * cs.direction > 0:
+                hold = max(hold, abs(g))
+        band = set_down.joint_band(cs.lower * unit, cs.upper * unit, linear)
+        on_stop = _on_stop(load, cs, state[name], unit, band)
         if ch.free_moving and (on_stop or not ch.state_asked):
             hold = 0.0  # asked to move freely, and resting on the stop its weight presses it onto or given no state
         spring, balanced = None, False
-        mechanism = "moves freely (asked)" if ch.free_moving else ("friction slide" if name in prismatic else "friction hinge")
-        if ch.free_moving and ch.state_asked and not on_stop and abs(loads[name].gravity_load) > physics.friction_floor(
-                loads[name], name in prismatic, True):
+        mechanism = "moves freely (asked)" if ch.free_moving else ("friction slide" if linear else "friction hinge")
+        if ch.free_moving and ch.state_asked and not on_stop and abs(load.gravity_load) > physics.friction_floor(
+                load, linear, True):
             mechanism = HELD_AGAINST_FREE
         note = source + "".join(f"; request '{w.phrase}': {w.kind.replace('_', ' ')}" for w in ch.words)
-        on_slide = name in prismatic and part_label(ctx, name) in SLIDE_LABELS  # its slide sets its least friction
+        on_slide = linear and part_label(ctx, name) in SLIDE_LABELS  # its slide sets its least friction
         # a push button or key resting out of its body: its return spring is preloaded onto that stop
         button = name in ctx.push_buttons and ch.spring and not ch.free_moving
         if ch.self_closing or (button and abs(state[name] - cs.position(0.0) * unit) <= band):
             pushed = opening_loads(kin, links, state, scale, cs, name, ctx.subtrees[name], unit, rot)
-            held = closer(ctx, loads[name], cs, unit, hold, pushed, at_closed, stopped_shut(ctx, kin, state, scale, name),
-                          hand=hand_top(ctx, name, scale, name in prismatic), free=free_standing(ctx),
-                          floor=0.0 if on_slide else physics.friction_floor(loads[name], name in prismatic),
+            held = closer(ctx, load, cs, unit, hold, pushed, at_closed, stopped_shut(ctx, kin, state, scale, name),
+                          hand=hand_top(ctx, name, scale, linear), free=free_standing(ctx),
+                          floor=0.0 if on_slide else physics.friction_floor(load, linear),
                           what="self-closing: a closer spring" if ch.self_closing else "a push button's return spring")
             spring, hold = held.spring, held.hold
             note, mechanism = f"{note}; {held.note}", "closer" if ch.self_closing else "return spring"
         elif ch.spring:
-            load = loads[name]
             k = max(3.0 * physics.HOLD_SAFETY * max(hold, 1e-6) / max(cs.open_range * unit, 1e-6), load.gravity_stiffness * 2.0)
             ref = float(np.clip(state[name] - load.gravity_load / k, cs.lower * unit, cs.upper * unit))
             spring, mechanism = (k, ref), "return spring"
             hold = 0.1 * hold  # the spring carries the load; friction only adds feel
-        elif name not in prismatic and part_label(ctx, name) in COUNTERBALANCE_LABELS:  # a word about friction keeps it
+        elif not linear and part_label(ctx, name) in COUNTERBALANCE_LABELS:  # a word about friction keeps it
             counter = counterbalance(ctx, kin, links, state, scale, name, fr) or lid_support(ctx, kin, links, state, scale, name, fr)
             if counter is not None:
                 spring, hold = counter.spring, counter.hold
                 note, balanced, mechanism = f"{note}; {counter.note}", True, counter.note.split(" (")[0]
-        elif name in prismatic and part_label(ctx, name) in BALANCE_LABELS:  # "slides easily" is friction, not the balance
-            bal = balance(loads[name], cs, unit)
+        elif linear and part_label(ctx, name) in BALANCE_LABELS:  # "slides easily" is friction, not the balance
+            bal = balance(load, cs, unit)
             if bal is not None:
                 spring, hold = bal.spring, bal.hold
                 note, balanced, mechanism = f"{note}; {bal.note}", True, "balance"
@@ -180,18 +177,17 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
             # down; one its weight presses onto a stop is held by the stop, friction only against a lean that lifts
             # it off (a balanced part's spring carries its weight: only the lean's sideways share is left); each
             # landing's energy is taken within its band, unless it moves the part into a stop
-            ld = loads[name]
-            lean = (set_down.lean_load(ld) - abs(ld.gravity_load) * math.cos(set_down.SET_DOWN_LEAN) if balanced
-                    else set_down.lean_load(ld, on_stop=on_stop))
+            lean = (set_down.lean_load(load) - abs(load.gravity_load) * math.cos(set_down.SET_DOWN_LEAN) if balanced
+                    else set_down.lean_load(load, on_stop=on_stop))
             hold, static = max(hold, set_down.LEAN_SAFETY / physics.HOLD_SAFETY * lean), max(static, lean)
             impact, landing = set_down.landing_friction(landed[name], band, _stops(cs, state[name] / unit, band / unit),
-                                                        0.0 if balanced else ld.gravity_load)
+                                                        0.0 if balanced else load.gravity_load)
         slide = on_slide and not ch.free_moving
-        dyn = physics.joint_dynamics(loads[name], hold, prismatic=name in prismatic, damping_level=ch.damping_level, stiff=ch.stiff,
+        dyn = physics.joint_dynamics(load, hold, prismatic=linear, damping_level=ch.damping_level, stiff=ch.stiff,
                                      free_moving=ch.free_moving, spring=spring, source=note, impact=impact, floor=not slide,
-                                     stiff_least=stiff_least(ctx, name, scale, name in prismatic) if ch.stiff and spring is None else 0.0)
+                                     stiff_least=stiff_least(ctx, name, scale, linear) if ch.stiff and spring is None else 0.0)
         if slide:
-            rides = slide_for(dyn.friction, loads[name].mass * physics.G, requested_slide(ch.words))
+            rides = slide_for(dyn.friction, load.mass * physics.G, requested_slide(ch.words))
             dyn = dyn.model_copy(update={"friction": rides.friction, "source": f"{dyn.source}; {rides.note}"})
             mechanism = f"{rides.kind.replace('_', ' ')} slides"
         elif mechanism == "friction hinge" and not static > 0:

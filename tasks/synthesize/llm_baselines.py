@@ -34,12 +34,10 @@ def _numeric_overlay(ctx: EstimationContext, name: str, model: str, usage: Usage
         inertia = Inertia.from_matrix(validate_overlay.geometry_inertia(g, float(mass), scale, shell))
         links[ln] = LinkPhysics(mass=float(mass), inertia=inertia, com=tuple(float(c) * scale for c in g.com),
                                 source=f"{name}: model mass, geometry inertia")
-    joints = {}
-    state = {}
-    for jn, v in joint_values.items():
-        joints[jn] = JointDynamics(damping=float(v["damping"]), friction=float(v["friction"]), stiffness=float(v["stiffness"]),
-                                   spring_reference=float(v["position"]) if v["stiffness"] > 0 else None, source=f"{name}: model values")
-        state[jn] = float(v["position"])
+    joints = {jn: JointDynamics(damping=float(v["damping"]), friction=float(v["friction"]), stiffness=float(v["stiffness"]),
+                                spring_reference=float(v["position"]) if v["stiffness"] > 0 else None, source=f"{name}: model values")
+              for jn, v in joint_values.items()}
+    state = {jn: float(v["position"]) for jn, v in joint_values.items()}
     return Overlay(
         estimator=estimator_info(name, model, usage), scale=float(scale), category=ctx.category,
         contact_material=ContactMaterial(lateral_friction=max(0.0, contact[0]), restitution=min(1.0, max(0.0, contact[1])), note=f"model ({name})"),
@@ -120,10 +118,9 @@ def ivw_overlay(ctx: EstimationContext, kin: SimSession, client: LLMClient, n_vi
             for k in ("damping", "friction", "stiffness", "position"):
                 e = getattr(jr, k)
                 d.setdefault(k, []).append((e.value, e.std))
-    joint_values = {jn: {k: f.value for k, f in ivw.fuse_all(d).items()} for jn, d in jvals.items()}
-    for jn, d in joint_values.items():  # IVW of non-negative values stays non-negative; keep it explicit
-        for k in ("damping", "friction", "stiffness"):
-            d[k] = max(0.0, d[k])
+    # IVW of non-negative values stays non-negative; keep it explicit (all but the position)
+    joint_values = {jn: {k: f.value if k == "position" else max(0.0, f.value) for k, f in ivw.fuse_all(d).items()}
+                    for jn, d in jvals.items()}
     contact = (float(np.mean([r.lateral_friction for r in replies])), float(np.mean([r.restitution for r in replies])))
     return _numeric_overlay(
         ctx, "ivw", cfg.model, usage, scale.value, {ln: (f.value, sum(shells[ln]) * 2 > len(shells[ln])) for ln, f in fused_mass.items()},

@@ -120,14 +120,13 @@ def resolve_states(ctx: "EstimationContext", kin: "SimSession", scale: float) ->
             res.addressed.add(t)
             res.requests[t] = jr
             res.targets.pop(t, None)
+            label = ctx.asset.link(ctx.asset.joint(t).child).semantic_label or ""
             if jr.target is None:
                 if jr.bare and falls_open(ctx, kin, t, closed_state):  # a drop-down door open rests on its open stop
                     res.bands[t] = "fully"
-                    res.notes.append(f"{t} ({ctx.asset.link(ctx.asset.joint(t).child).semantic_label or 'part'}): "
-                                     f"'{jr.phrase}': its weight carries it open (it opens downward, a drop-down door), "
-                                     f"so it is open resting on its open stop: fully open")
+                    res.notes.append(f"{t} ({label or 'part'}): '{jr.phrase}': its weight carries it open (it opens downward, "
+                                     f"a drop-down door), so it is open resting on its open stop: fully open")
                 continue
-            label = ctx.asset.link(ctx.asset.joint(t).child).semantic_label or ""
             f, why = fraction_for(ctx, kin, t, jr.target, scale, label, closed_state)
             if f is None:
                 res.warnings.append(f"WARNING: {t} ({label}): '{jr.phrase}' cannot be applied: {why}; the nominal band '{jr.band}' is used")
@@ -190,13 +189,8 @@ def retarget(targets: dict[str, JointTarget], old: dict, new: dict) -> dict[str,
 
 def state_with_targets(ctx: "EstimationContext", state: dict[str, float], res: StateResolution, scale: float) -> dict[str, float]:
     """``state`` (output units) with every resolved target's position."""
-    out = dict(state)
-    for n, t in res.targets.items():
-        if t.fraction is None:
-            continue
-        q = ctx.closed[n].position(t.fraction)
-        out[n] = q * scale if ctx.asset.joint(n).type == "prismatic" else q
-    return out
+    return {**state, **{n: ctx.closed[n].position(t.fraction) * (scale if ctx.asset.joint(n).type == "prismatic" else 1.0)
+                        for n, t in res.targets.items() if t.fraction is not None}}
 
 
 def scale_from_sizes(ctx: "EstimationContext") -> tuple[float, str] | None:

@@ -45,7 +45,7 @@ def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResoluti
             out.append(f"link {name}: density {lp.density:g} kg/m^3 but the request names {mat.name} ({mat.density:g})")
     for d in ctx.request.dynamics_values:
         for n, jd in overlay.joints.items():
-            linear = ctx.asset.joint(n).type == "prismatic" if n in {j.name for j in ctx.asset.joints} else False
+            linear = n in {j.name for j in ctx.asset.joints} and ctx.asset.joint(n).type == "prismatic"
             if not unit_fits(d, linear) or (n not in task_relevant_joints(ctx) if d.label is None else not request_label_matches(
                     ctx.category, d.label, ctx.asset.link(ctx.asset.joint(n).child).semantic_label)):
                 continue
@@ -166,19 +166,17 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
             continue
         f = cs.fraction(state[n])
         if t.kind == "end":
-            ok = abs(f - t.fraction) <= END_TOLERANCE + 1e-9
-            q.append(QuantityOutcome(what=f"{n} end", phrase=t.phrase, asked=t.fraction, achieved=f, unit="opening fraction",
-                                     within_tolerance=ok, why=t.note, kind="state"))
-            continue
-        if t.kind == "angle" or t.kind == "distance" and ctx.asset.joint(n).type == "prismatic":
+            asked, got, unit = t.fraction, f, "opening fraction"
+        elif t.kind == "angle" or t.kind == "distance" and ctx.asset.joint(n).type == "prismatic":
             asked, got, unit = t.asked, f * cs.open_range, "rad" if t.kind == "angle" else "m"
         elif t.kind == "distance":
             asked, got, unit = t.asked, (t.asked or 0.0) * f / max(t.fraction, 1e-12), "m"
         else:
             asked, got, unit = t.asked, f, "opening fraction"
-        ok = asked is not None and abs(got - asked) <= NUMBER_TOLERANCE * abs(asked) + 1e-9
+        ok = (abs(f - t.fraction) <= END_TOLERANCE + 1e-9 if t.kind == "end"
+              else asked is not None and abs(got - asked) <= NUMBER_TOLERANCE * abs(asked) + 1e-9)
         why = t.note
-        if not ok:
+        if not ok and t.kind != "end":
             if t.interval is not None and (t.interval[1] >= 1.0 - 1e-9 and f >= 1.0 - 1e-6 or t.fraction >= 1.0 - 1e-9):
                 why += "; the joint's limit is below the number"
             else:

@@ -126,9 +126,10 @@ def landings(session, links: dict[str, LinkPhysics], state: dict[str, float], sc
     points = np.concatenate(pts)
     total = sum(b.mass for b in bodies.values())
     com = sum(b.mass * b.com for b in bodies.values()) / total
-    fields = {"drop": _drop_field(bodies)}
-    for trial in LANDING_TRIALS[1:]:
-        fields[trial] = _tilt_field(trial, bodies, points, com, total)
+    # as the dropped object reaches the ground: every link at sqrt(2 g h) down, not turning
+    drop = np.array([0.0, 0.0, -math.sqrt(2.0 * G * SET_DOWN_DROP)])
+    fields = {"drop": {ln: (drop, np.zeros(3)) for ln in bodies},
+              **{trial: _tilt_field(trial, bodies, points, com, total) for trial in LANDING_TRIALS[1:]}}
     for name in names:
         child = session.joint_child[name]
         o, R = frames[child]
@@ -154,12 +155,6 @@ def landings(session, links: dict[str, LinkPhysics], state: dict[str, float], sc
             if inertia > 0:
                 out[name].append(Landing(trial, float(p), float(inertia)))
     return out
-
-
-def _drop_field(bodies: dict[str, _Body]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """link -> (velocity (3,) m/s of its COM, angular velocity (3,) rad/s) as the dropped object reaches the ground."""
-    v = np.array([0.0, 0.0, -math.sqrt(2.0 * G * SET_DOWN_DROP)])
-    return {ln: (v, np.zeros(3)) for ln in bodies}
 
 
 def _tilt_field(trial: str, bodies: dict[str, _Body], points: np.ndarray, com: np.ndarray,

@@ -204,12 +204,9 @@ def counterbalance(ctx: EstimationContext, kin: SimSession, links: dict[str, Lin
         the spring (k N m/rad, q_s rad) and hold load (N m), or None when the part does not open downward.
     """
     cs = ctx.closed[name]
-    rot = ctx.root_rotation
-    sub = {name: ctx.subtrees[name]}
 
     def load(f: float) -> float:
-        st = {**state, name: cs.position(float(f))}
-        return physics.joint_loads(kin, links, st, scale, sub, root_rotation=rot)[name].gravity_load
+        return gravity_at(ctx, kin, links, state, scale, name, f)
 
     open_loads = [load(f) * cs.direction for f in DOWNWARD_FRACTIONS]
     if not all(t > 0 for t in open_loads) or not cs.open_range > 0:
@@ -249,11 +246,9 @@ def lid_support(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPh
     lever = far_edge(ctx, name, scale)
     if not cs.open_range > 0 or not lever > 0:
         return None
-    rot, sub = ctx.root_rotation, {name: ctx.subtrees[name]}
 
     def opening_load(f: float) -> float:
-        st = {**state, name: cs.position(float(f))}
-        return cs.direction * physics.joint_loads(kin, links, st, scale, sub, root_rotation=rot)[name].gravity_load
+        return cs.direction * gravity_at(ctx, kin, links, state, scale, name, f)
 
     tau = np.array([opening_load(f) for f in SUPPORT_FRACTIONS])
     top = (operating_range(ctx.category, part_label(ctx, name))[0].force_n or (0.0, np.inf))[1]
@@ -273,6 +268,15 @@ def lid_support(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPh
            f"{q_s:.4g} rad carries the weight moment (up to {np.abs(tau).max():.3g} N m, {np.abs(tau).max() / lever:.3g} N at its "
            f"far edge against a hand's {top:g} N) to within {remainder.max():.3g} N m over its range")
     return SpringHold((float(k), q_s), float(hold), why)
+
+
+def gravity_at(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
+               name: str, f: float, unit: float = 1.0) -> float:
+    """The gravity load on joint ``name`` (N m, or N for a slide; as :func:`physics.joint_loads` signs it) with its part
+    at opening fraction ``f`` of its range (``ctx.closed``; ``unit``: the scale of a slide's positions), the other
+    joints at ``state`` (output units; ``kin``, the input's kinematics session, posed for the load)."""
+    st = {**state, name: ctx.closed[name].position(float(f)) * unit}
+    return physics.joint_loads(kin, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=ctx.root_rotation)[name].gravity_load
 
 
 def far_edge(ctx: EstimationContext, name: str, scale: float) -> float:

@@ -45,8 +45,7 @@ class OverlayInvalid(ValueError):
 
 def _raise_fatal(issues: list[ValidationIssue]) -> None:
     """Raise :class:`OverlayInvalid` when any issue is an unfixed error."""
-    invalid = OverlayInvalid(issues)
-    if invalid.errors:
+    if (invalid := OverlayInvalid(issues)).errors:
         raise invalid
 
 
@@ -178,22 +177,14 @@ def _fill_mass(geom: LinkGeometry, s: float) -> float:
 
 def conservative_dynamics(joint_type: str) -> JointDynamics:
     """Dynamics for a joint the overlay misses: moderate damping and a small friction."""
-    if joint_type == "prismatic":
-        return JointDynamics(damping=1.0, friction=0.5, stiffness=0.0, source="conservative default")
-    return JointDynamics(damping=0.05, friction=0.02, stiffness=0.0, source="conservative default")
+    slide = joint_type == "prismatic"
+    return JointDynamics(damping=1.0 if slide else 0.05, friction=0.5 if slide else 0.02, stiffness=0.0, source="conservative default")
 
 
 def scaled_limits(asset: AssetDescription, scale: float) -> dict[str, tuple[float, float]]:
     """Limits of movable joints in output units (prismatic x scale); continuous joints (-inf, inf)."""
-    out = {}
-    for j in asset.movable_joints():
-        if j.type == "continuous" or j.lower is None or j.upper is None:
-            out[j.name] = (-math.inf, math.inf)
-        elif j.type == "prismatic":
-            out[j.name] = (j.lower * scale, j.upper * scale)
-        else:
-            out[j.name] = (j.lower, j.upper)
-    return out
+    return {j.name: (-math.inf, math.inf) if j.type == "continuous" or j.lower is None or j.upper is None
+            else (j.lower * scale, j.upper * scale) if j.type == "prismatic" else (j.lower, j.upper) for j in asset.movable_joints()}
 
 
 def validate_overlay(overlay: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry] | None = None) -> tuple[Overlay, list[ValidationIssue]]:
