@@ -225,10 +225,8 @@ def _request_evidence(ev: _Evidence, text: str) -> None:
         w = _W_REQUEST_OTHER if (head.weak or head.possessive) else _W_REQUEST_HEAD
         ev.add(head_cat, w, f"request names {head.phrase!r}")
     for m in find_category_mentions(text):
-        if m.category == head_cat or m.possessive:
+        if m.category == head_cat or m.possessive or any("request" in r for r in ev.why.get(m.category, [])):
             continue  # "with its door" names a part, not the object
-        if m.category in ev.why and any("request" in r for r in ev.why[m.category]):
-            continue
         ev.add(m.category, _W_REQUEST_OTHER, f"request also mentions {m.phrase!r}")
 
 
@@ -273,9 +271,8 @@ def _best_match(ev: _Evidence, text: str) -> CategoryMatch:
     scores, why = ev.scores, ev.why
 
     def rank(name: str) -> tuple[float, bool, bool, str]:
-        has_req = any("request" in r for r in why.get(name, []))
-        has_mc = any(r.startswith("model_cat") for r in why.get(name, []))
-        return (round(scores[name], 6), has_req, has_mc, name)
+        reasons = why.get(name, [])
+        return round(scores[name], 6), any("request" in r for r in reasons), any(r.startswith("model_cat") for r in reasons), name
 
     best = max(scores, key=rank)
     total = sum(scores.values())

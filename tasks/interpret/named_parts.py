@@ -24,8 +24,6 @@ from asset2sim.tasks.interpret.request_values import PART_RX
 #: Relative difference of box volume below which two parts are the same size ("the smaller door"
 #: names neither).
 SAME_SIZE = 0.05
-#: Words for the orders resolved from the geometry, in the report ("the highest of 2 drawers").
-_FIRST_WORDS = ORDER_ENDS
 
 
 class PartsContext(Protocol):
@@ -69,10 +67,8 @@ def _order_key(order: str, c: np.ndarray) -> float:
 def _spread_order(targets: list[str], centers: dict[str, np.ndarray]) -> str:
     """The order along which ``targets``' box centers spread most: ``vertical`` (world z, also
     without targets) or ``left_right`` (y)."""
-    if not targets:
-        return "vertical"
     c = np.array([centers.get(n, np.zeros(3)) for n in targets])
-    return "vertical" if np.ptp(c[:, 2]) >= np.ptp(c[:, 1]) else "left_right"
+    return "vertical" if not targets or np.ptp(c[:, 2]) >= np.ptp(c[:, 1]) else "left_right"
 
 
 def pick(jr: JointStateRequest | MotionPhrase, targets: list[str], centers: dict[str, np.ndarray],
@@ -125,7 +121,7 @@ def pick(jr: JointStateRequest | MotionPhrase, targets: list[str], centers: dict
                         f"{ordinal_words(jr.ordinal, jr.order, jr.label)} but only {n} exist; ignored")
         return []
     chosen = targets[jr.ordinal]
-    first_word, last_word = _FIRST_WORDS.get(order, ("first", "last"))
+    first_word, last_word = ORDER_ENDS.get(order, ("first", "last"))  # the words of the report ("the highest of 2 drawers")
     rank = (f"the {first_word}" if jr.ordinal == 0
             else f"the {last_word}" if jr.ordinal == -1 or jr.ordinal == n - 1
             else f"number {jr.ordinal + 1} ({first_word} first)")

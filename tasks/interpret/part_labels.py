@@ -47,7 +47,8 @@ def canonical_label(label: str | None) -> str | None:
                 stripped = stripped[len(p):]
                 changed = True
     # whole, prefixes stripped, last token first
-    return next((hit for cand in [s, stripped, *reversed([t for t in stripped.split("_") if t])] if (hit := look(cand))), stripped)
+    cands = [s, stripped, *reversed([t for t in stripped.split("_") if t])]
+    return next((hit for cand in cands if (hit := look(cand))), stripped)
 
 
 def body_label_tokens(label: str) -> list[str]:

@@ -22,9 +22,9 @@ def material_for(
     canon = canonical_label(semantic_label)
     body = (var.body_material if var and var.body_material else None) or cat.body_material
     key: str
-    if canon is not None and var is not None and canon in var.part_materials:
+    if var is not None and canon in var.part_materials:
         key = var.part_materials[canon]
-    elif canon is not None and canon in cat.part_materials:
+    elif canon in cat.part_materials:
         key = cat.part_materials[canon]
     elif canon is None or canon in BODY_LABELS:
         key = body
@@ -98,11 +98,8 @@ def spring_expected(category: str, semantic_label: str | None) -> bool:
     canon = canonical_label(semantic_label)
     if canon is None:
         return False
-    cat = category_prior(category)
-    if canon in cat.spring_labels:
-        return True
     lp = load_priors().labels.labels.get(canon)
-    return bool(lp and lp.spring)
+    return canon in category_prior(category).spring_labels or bool(lp and lp.spring)
 
 
 def push_buttons(asset: AssetDescription, category: str | None) -> frozenset[str]:

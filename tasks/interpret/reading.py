@@ -152,7 +152,8 @@ def parse_request_model(text: str, client: LLMClient,
         answer = client.ask(intent_messages(text, schema), RequestIntent, schema=schema,
                             schema_name=INTENT_SCHEMA_NAME, accept=accept, max_reasks=0)
     except LLMError as exc:  # the call failed, or the reply did not validate (ReplyError lists why)
-        return offline.model_copy(update={"parse_note": f"request parse: offline (the model's parse was not used: {one_line(exc, 400)})"})
+        why = f"the model's parse was not used: {one_line(exc, 400)}"
+        return offline.model_copy(update={"parse_note": f"request parse: offline ({why})"})
     # the same note from the cache: same output
     states = ", ".join(js.words() for js in answer.value.joint_states) or "no states"
     return with_intent(offline, answer.value, f"request parse: model {client.config.model}, "

@@ -195,17 +195,16 @@ def _merge_properties(props: list[PartProperty], warnings: list[str]) -> list[Pa
             new, prev = getattr(p, field), getattr(old, field)
             if new is None:
                 continue
-            if field == "mass_range" and old.mass is not None or field == "mass" and old.mass_range is not None:
-                prev = old.mass if field == "mass_range" else old.mass_range
+            other = {"mass": "mass_range", "mass_range": "mass"}.get(field)  # a mass and a range of masses exclude each other
+            if other and getattr(old, other) is not None:
+                prev = getattr(old, other)
             if prev is not None and prev != new:
                 what = "materials" if field == "material" else "masses"
                 warnings.append(f"contradiction: '{old.phrase}' and '{p.phrase}' give the {p.label or 'object'} two {what}; "
                                 f"'{p.phrase}' is used")
             upd[field] = new
-            if field == "mass":
-                upd["mass_range"] = None
-            elif field == "mass_range":
-                upd["mass"] = None
+            if other:
+                upd[other] = None
         out[p.label] = old.model_copy(update={**upd, "phrase": f"{old.phrase}; {p.phrase}"})
     return list(out.values())
 

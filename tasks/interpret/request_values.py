@@ -123,10 +123,8 @@ def _next_words(low: str, end: int, n: int) -> list[tuple[int, int, str]]:
 def _near_category(low: str, end: int, mention_starts: list[int], max_words: int = 2) -> bool:
     """A category mention starts within ``max_words`` words after ``end``."""
     for s, _e, w in _next_words(low, end, max_words + 1):
-        if s in mention_starts:
-            return True
-        if w in {",", ";", ":", ".", "!", "?"}:
-            return False
+        if s in mention_starts or w in {",", ";", ":", ".", "!", "?"}:
+            return s in mention_starts
     return False
 
 
@@ -350,10 +348,9 @@ def materials(low: str, mention_starts: list[int], head_starts: list[int] | None
     out: list[Found] = []
     for h in leftmost_longest(hits):
         made_of = _MADE_OF.match(h.text) is not None
-        label, end = (None, h.end) if made_of else part_after(low, h.end, mention_starts=head_starts)
-        if made_of:
-            label = part_before(low, h.start, 3, head_starts)[0]
-        elif label is None:
+        label, end = ((part_before(low, h.start, 3, head_starts)[0], h.end) if made_of
+                      else part_after(low, h.end, mention_starts=head_starts))
+        if not made_of and label is None:
             nxt = _next_words(low, h.end, 1)
             if not (_near_category(low, h.end, mention_starts, 2) or not nxt or nxt[0][2] in {",", ".", ";", "!", "and", "with", "but"}):
                 continue  # "a rubber duck": not the object's material

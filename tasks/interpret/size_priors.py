@@ -129,7 +129,8 @@ def target_size(category: str, request: RequestSpec | str | None = None) -> Size
             notes.append(f"handheld but the middle dimension {sorted(dims)[1]:.3f} m exceeds the gripper "
                          f"limit {GRASPABLE_WIDTH_M} m (largest graspable factor {glf:.3g})")
     return SizeTarget(category=cat.name, variant=var.name if var else None, size_class=size_class, base_dims=base, factor=f,
-                      dims=dims, mass_range=scale_mass_range(lo, hi, f), body_material=body, handheld=cat.handheld,  # type: ignore[arg-type]
+                      dims=dims, mass_range=scale_mass_range(lo, hi, f), body_material=body,  # type: ignore[arg-type]
+                      handheld=cat.handheld,
                       gripper_limit_factor=glf, note="; ".join(notes))
 
 

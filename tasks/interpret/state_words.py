@@ -176,17 +176,15 @@ def _parts(low: str, tokens: Tokens) -> list[_Part]:
     return out
 
 
-_FWD_STOP = {"and", "with", "but", "or", "while", "its", "the", "a", "an", "their", "his", "her", "in", "of", "for", "to", ",", ";", ":"}
+_FWD_STOP = {"and", "with", "but", "or", "while", "its", "the", "a", "an", "their", "his", "her", "in", "of", "for", "to",
+             ",", ";", ":"}
 
 
 def _forward_part(low: str, end: int, limit: int, part_at: dict[int, _Part]) -> _Part | None:
     """A part noun (``part_at``: by start) right after a state, at most one modifier word between."""
     for t in itertools.islice(TOKEN.finditer(low, end, limit), 2):
-        p = part_at.get(t.start())
-        if p is not None:
+        if (p := part_at.get(t.start())) is not None or t.group(0) in _FWD_STOP:
             return p
-        if t.group(0) in _FWD_STOP:
-            return None
     return None
 
 
@@ -238,7 +236,7 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found]) -> JointStat
         js = JointStateRequest(selector=selector, label=label, ordinal=ordinal, order=order,  # type: ignore[arg-type]
                                band=band, target=target, phrase=phrase,  # type: ignore[arg-type]
                                bare=b.flag == "bare" and not none)
-        if b.flag == "bare" and not none:
+        if js.bare:
             lone.add(id(js))
         return js
 

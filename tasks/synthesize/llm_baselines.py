@@ -35,8 +35,8 @@ def _numeric_overlay(ctx: EstimationContext, name: str, model: str, usage: Usage
         links[ln] = LinkPhysics(mass=float(mass), inertia=inertia, com=tuple(float(c) * scale for c in g.com),
                                 source=f"{name}: model mass, geometry inertia")
     joints = {jn: JointDynamics(damping=float(v["damping"]), friction=float(v["friction"]), stiffness=float(v["stiffness"]),
-                                spring_reference=float(v["position"]) if v["stiffness"] > 0 else None, source=f"{name}: model values")
-              for jn, v in joint_values.items()}
+                                spring_reference=float(v["position"]) if v["stiffness"] > 0 else None,
+                                source=f"{name}: model values") for jn, v in joint_values.items()}
     state = {jn: float(v["position"]) for jn, v in joint_values.items()}
     return Overlay(
         estimator=estimator_info(name, model, usage), scale=float(scale), category=ctx.category,
@@ -106,18 +106,17 @@ def ivw_overlay(ctx: EstimationContext, kin: SimSession, client: LLMClient, n_vi
     scale = ivw.fuse([(r.scale.value, r.scale.std) for r in replies])
     masses: dict[str, list[tuple[float, float]]] = {}
     shells: dict[str, list[bool]] = {}
+    jvals: dict[str, dict[str, list[tuple[float, float]]]] = {}
     for r in replies:
         for lr in r.links:
             masses.setdefault(lr.link, []).append((lr.mass.value, lr.mass.std))
             shells.setdefault(lr.link, []).append(lr.shell)
-    fused_mass = ivw.fuse_all(masses)
-    jvals: dict[str, dict[str, list[tuple[float, float]]]] = {}
-    for r in replies:
         for jr in r.joints:
             d = jvals.setdefault(jr.joint, {})
             for k in ("damping", "friction", "stiffness", "position"):
                 e = getattr(jr, k)
                 d.setdefault(k, []).append((e.value, e.std))
+    fused_mass = ivw.fuse_all(masses)
     # IVW of non-negative values stays non-negative; keep it explicit (all but the position)
     joint_values = {jn: {k: f.value if k == "position" else max(0.0, f.value) for k, f in ivw.fuse_all(d).items()}
                     for jn, d in jvals.items()}

@@ -87,9 +87,9 @@ class LLMEstimator:
         memo = self._memo.get(key)
         if memo is None:
             schema = reply_json_schema()
-            desc = describe(ctx, kin)
             images, render_notes = render_closed_views(ctx, VIEWS, cfg.render_size)
-            answer = self.client.ask(build_messages(desc, images, schema), ModelReply, schema=schema, schema_name=REPLY_SCHEMA_NAME,
+            answer = self.client.ask(build_messages(describe(ctx, kin), images, schema), ModelReply, schema=schema,
+                                     schema_name=REPLY_SCHEMA_NAME,
                                      accept=lambda r: overlay_from_reply(ctx, kin, r, name=self.name, model=cfg.model),
                                      max_reasks=self.max_reasks)
             est = answer.value
@@ -99,12 +99,10 @@ class LLMEstimator:
             self._memo[key] = memo
         else:
             est = overlay_from_reply(ctx, kin, memo[0], name=self.name, model=cfg.model)
-        reply, usage, history, render_notes = memo
+        _, usage, history, render_notes = memo
         overlay = est.overlay
-        other = list(overlay.notes.other) + render_notes
-        other.append(f"model {cfg.model}: {usage.summary()}")
-        for i, errs in enumerate(history):
-            other.append(f"model reply {i + 1} rejected and re-asked: " + "; ".join(errs[:5]))
+        other = [*overlay.notes.other, *render_notes, f"model {cfg.model}: {usage.summary()}",
+                 *(f"model reply {i + 1} rejected and re-asked: " + "; ".join(errs[:5]) for i, errs in enumerate(history))]
         overlay = overlay.model_copy(update={"estimator": estimator_info(self.name, cfg.model, usage), "notes": overlay.notes.model_copy(update={"other": other})})
         return estimator.Estimate(overlay=overlay, bands=dict(est.bands), notes=list(est.notes))
 

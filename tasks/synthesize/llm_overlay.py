@@ -152,12 +152,12 @@ def _bands(ctx: EstimationContext, kin: SimSession, reply: ModelReply) -> tuple[
     bands: dict[str, str] = {}
     notes = []
     for j in ctx.asset.movable_joints():
-        jr = by_joint.get(j.name)
-        bands[j.name] = jr.band if jr is not None else parsed.get(j.name, "closed")
+        jr, read = by_joint.get(j.name), parsed.get(j.name, "closed")
+        bands[j.name] = jr.band if jr is not None else read
         if jr is None:
-            notes.append(f"{j.name}: no model entry; the request parser's band {bands[j.name]!r} and dynamics words used")
-        elif jr.band != parsed.get(j.name, "closed"):
-            notes.append(f"{j.name}: the model chose band {jr.band!r}, the request parser read {parsed.get(j.name, 'closed')!r}; the model's band used")
+            notes.append(f"{j.name}: no model entry; the request parser's band {read!r} and dynamics words used")
+        elif jr.band != read:
+            notes.append(f"{j.name}: the model chose band {jr.band!r}, the request parser read {read!r}; the model's band used")
     return bands, notes
 
 

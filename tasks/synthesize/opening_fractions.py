@@ -50,19 +50,14 @@ def box_center(ctx: "EstimationContext", kin: "SimSession", joint: str) -> np.nd
 def _radius(ctx: "EstimationContext", kin: "SimSession", joint: str, state: dict[str, float]) -> float:
     """Largest distance (m, scale 1) of the joint's moving hull points from its axis at ``state`` (``kin`` moved there)."""
     kin.set_joint_positions(state)
-    child = kin.joint_child[joint]
-    p0, Rc = kin.link_frame(child)
+    p0, Rc = kin.link_frame(kin.joint_child[joint])
     a = Rc @ np.asarray(kin.joint_axis(joint), float)
     a = a / max(np.linalg.norm(a), 1e-12)
     r = 0.0
-    for ln in ctx.subtrees[joint]:
-        v = ctx.hull_points.get(ln)
-        if v is None:
-            continue
+    for ln in (ln for ln in ctx.subtrees[joint] if ctx.hull_points.get(ln) is not None):
         pos, R = kin.link_frame(ln)
-        w = v @ R.T + pos - p0
-        perp = w - np.outer(w @ a, a)
-        r = max(r, float(np.linalg.norm(perp, axis=1).max()))
+        w = ctx.hull_points[ln] @ R.T + pos - p0
+        r = max(r, float(np.linalg.norm(w - np.outer(w @ a, a), axis=1).max()))
     return r
 
 
@@ -80,9 +75,9 @@ def _end_fraction(ctx: "EstimationContext", kin: "SimSession", joint: str, end: 
     size = float(np.max(ctx.closed_extents)) if len(ctx.closed_extents) else 1.0
     if zs.max() - zs.min() < FLAT_TRAVEL * size:
         return None, f"its height changes by {zs.max() - zs.min():.3g} (< {FLAT_TRAVEL:g} of the object's size) over the travel"
-    i = int(np.argmax(zs) if end == "high" else np.argmin(zs))
+    up = 1.0 if end == "high" else -1.0
     word = "highest" if end == "high" else "lowest"
-    e = (0 if zs[0] >= zs[-1] else len(zs) - 1) if end == "high" else (0 if zs[0] <= zs[-1] else len(zs) - 1)
+    i, e = int(np.argmax(up * zs)), (0 if up * zs[0] >= up * zs[-1] else len(zs) - 1)
     if i != e and abs(zs[e] - zs[i]) <= END_SNAP * (zs.max() - zs.min()):
         # a seat or lid raised past upright: "up" is where it rests at the end of its travel, within a tenth of
         # its rise of the very highest point

@@ -139,14 +139,9 @@ def joint_loads(session, links: dict[str, LinkPhysics], state: dict[str, float],
         child_pos = child_pos * scale
         axis = child_R @ axis_local
         axis = axis / max(np.linalg.norm(axis), 1e-12)
-        M = 0.0
-        mc = np.zeros(3)
-        I_axis = 0.0
-        for ln in subtrees[name]:
-            lp = links.get(ln)
-            if lp is None:
-                continue
-            pos, R = session.link_frame(ln)
+        M, mc, I_axis = 0.0, np.zeros(3), 0.0
+        for ln in (ln for ln in subtrees[name] if ln in links):
+            lp, (pos, R) = links[ln], session.link_frame(ln)
             c = pos * scale + R @ np.asarray(lp.com, float)
             M += lp.mass
             mc += lp.mass * c
@@ -173,12 +168,7 @@ def joint_loads(session, links: dict[str, LinkPhysics], state: dict[str, float],
         M, inertia, load, lateral = load_at(name, state)
         qa = max(q0 - step, lo) if np.isfinite(lo) else q0 - step
         qb = min(q0 + step, hi) if np.isfinite(hi) else q0 + step
-        if qb - qa > 0:
-            la = load_at(name, {**state, name: qa})[2]
-            lb = load_at(name, {**state, name: qb})[2]
-            k = abs(lb - la) / (qb - qa)
-        else:
-            k = 0.0
+        k = abs(load_at(name, {**state, name: qa})[2] - load_at(name, {**state, name: qb})[2]) / (qb - qa) if qb - qa > 0 else 0.0
         out[name] = JointLoad(joint=name, mass=M, inertia_axis=inertia, gravity_load=load, gravity_stiffness=k, lateral_moment=lateral)
     session.set_joint_positions(to_input(state))
     return out
@@ -221,8 +211,7 @@ def friction_floor(load: JointLoad, prismatic: bool, free_moving: bool = False) 
     """The least friction of a joint carrying ``load`` (N or N*m): Coulomb coefficient 0.05 on the moving weight
     (prismatic, N; lubricated drawer slides, Engineering ToolBox), that force at a 1 cm pin radius (revolute, N*m); a
     fifth of it for a part asked to move freely."""
-    weight = load.mass * G
-    floor = 0.05 * weight if prismatic else 0.05 * weight * 0.01
+    floor = 0.05 * (load.mass * G) * (1.0 if prismatic else 0.01)
     return floor * 0.2 if free_moving else floor
 
 

@@ -319,9 +319,8 @@ def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausi
     if total_req is None and rng is not None:
         now = sum(lp.mass for lp in out.values())
         total_req = range_target(now, rng.mass_range)
-        why = (f"'{rng.phrase}': the estimate {now:.4g} kg lies in the {rng.mass_range[0]:g}-{rng.mass_range[1]:g} kg asked"
-               if total_req == now else
-               f"'{rng.phrase}': the estimate {now:.4g} kg brought to the nearer end of the {rng.mass_range[0]:g}-{rng.mass_range[1]:g} kg asked")
+        where = "lies in" if total_req == now else "brought to the nearer end of"
+        why = f"'{rng.phrase}': the estimate {now:.4g} kg {where} the {rng.mass_range[0]:g}-{rng.mass_range[1]:g} kg asked"
         if total_req == now:
             notes.append(why + "; kept")
             return AskedMasses(out, notes, True)

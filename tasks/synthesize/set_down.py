@@ -140,11 +140,8 @@ def landings(session, links: dict[str, LinkPhysics], state: dict[str, float], sc
             if field is None:
                 continue
             p = inertia = 0.0
-            for ln in subtrees[name]:
-                b = bodies.get(ln)
-                if b is None:
-                    continue
-                v, w = field[ln]
+            for ln in (ln for ln in subtrees[name] if ln in bodies):
+                b, (v, w) = bodies[ln], field[ln]
                 if prismatic:
                     p += b.mass * float(v @ a)
                     inertia += b.mass

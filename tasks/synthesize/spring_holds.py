@@ -276,7 +276,8 @@ def gravity_at(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPhy
     at opening fraction ``f`` of its range (``ctx.closed``; ``unit``: the scale of a slide's positions), the other
     joints at ``state`` (output units; ``kin``, the input's kinematics session, posed for the load)."""
     st = {**state, name: ctx.closed[name].position(float(f)) * unit}
-    return physics.joint_loads(kin, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=ctx.root_rotation)[name].gravity_load
+    loads = physics.joint_loads(kin, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=ctx.root_rotation)
+    return loads[name].gravity_load
 
 
 def far_edge(ctx: EstimationContext, name: str, scale: float) -> float:

@@ -178,13 +178,15 @@ def _fill_mass(geom: LinkGeometry, s: float) -> float:
 def conservative_dynamics(joint_type: str) -> JointDynamics:
     """Dynamics for a joint the overlay misses: moderate damping and a small friction."""
     slide = joint_type == "prismatic"
-    return JointDynamics(damping=1.0 if slide else 0.05, friction=0.5 if slide else 0.02, stiffness=0.0, source="conservative default")
+    return JointDynamics(damping=1.0 if slide else 0.05, friction=0.5 if slide else 0.02, stiffness=0.0,
+                         source="conservative default")
 
 
 def scaled_limits(asset: AssetDescription, scale: float) -> dict[str, tuple[float, float]]:
     """Limits of movable joints in output units (prismatic x scale); continuous joints (-inf, inf)."""
     return {j.name: (-math.inf, math.inf) if j.type == "continuous" or j.lower is None or j.upper is None
-            else (j.lower * scale, j.upper * scale) if j.type == "prismatic" else (j.lower, j.upper) for j in asset.movable_joints()}
+            else (j.lower * scale, j.upper * scale) if j.type == "prismatic" else (j.lower, j.upper)
+            for j in asset.movable_joints()}
 
 
 def validate_overlay(overlay: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry] | None = None) -> tuple[Overlay, list[ValidationIssue]]:
