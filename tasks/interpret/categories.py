@@ -98,13 +98,11 @@ def phrase_regex(phrase: str, plural: bool = False) -> str:
 
 @functools.lru_cache(maxsize=1)
 def _mention_regex() -> tuple[re.Pattern[str], dict[str, tuple[str, bool]]]:
-    pri = load_priors()
+    # phrase -> (category, weak)
     phrase_to: dict[str, tuple[str, bool]] = {}
-    for name, cat in pri.categories.items():
+    for name, cat in load_priors().categories.items():
         for syn in cat.synonyms:
-            weak = syn.startswith("~")
-            s = " ".join(syn.lstrip("~").lower().split())
-            phrase_to.setdefault(s, (name, weak))
+            phrase_to.setdefault(" ".join(syn.lstrip("~").lower().split()), (name, syn.startswith("~")))
     alts = sorted(phrase_to, key=lambda p: (-len(p), p))
     src = "|".join(f"(?:{phrase_regex(p, plural=True)})" for p in alts)
     # tried only where a word starts with some phrase's first letter
@@ -275,8 +273,7 @@ def _best_match(ev: _Evidence, text: str) -> CategoryMatch:
         return round(scores[name], 6), any("request" in r for r in reasons), any(r.startswith("model_cat") for r in reasons), name
 
     best = max(scores, key=rank)
-    total = sum(scores.values())
-    conf = (scores[best] / total) * min(1.0, scores[best] / 3.0)
+    conf = (scores[best] / sum(scores.values())) * min(1.0, scores[best] / 3.0)
     others = sorted(((n, s) for n, s in scores.items() if n != best), key=lambda t: -t[1])
     reason = f"{best}: " + ", ".join(why[best])
     if others:

@@ -108,9 +108,8 @@ def pick(jr: JointStateRequest | MotionPhrase, targets: list[str], centers: dict
         first, second = (v[0], v[1]) if jr.ordinal == 0 else (v[-1], v[-2])
         if min(first, second) >= (1.0 - SAME_SIZE) * max(first, second):
             word = "smaller" if jr.ordinal == 0 else "larger"
-            volumes = ", ".join(f"{x:.3g}" for x in v)
-            warnings.append(f"WARNING: '{jr.phrase}' asks for the {word} {part} but the {what} are "
-                            f"of one size (box volumes {volumes} m^3): none is {word}; not applied")
+            warnings.append(f"WARNING: '{jr.phrase}' asks for the {word} {part} but the {what} are of one size (box volumes "
+                            f"{', '.join(f'{x:.3g}' for x in v)} m^3): none is {word}; not applied")
             return []
     if order == "size" and jr.ordinal == 0 and n < 2:
         warnings.append(f"WARNING: '{jr.phrase}' asks for the smaller of several {what} but this "
@@ -121,7 +120,8 @@ def pick(jr: JointStateRequest | MotionPhrase, targets: list[str], centers: dict
                         f"{ordinal_words(jr.ordinal, jr.order, jr.label)} but only {n} exist; ignored")
         return []
     chosen = targets[jr.ordinal]
-    first_word, last_word = ORDER_ENDS.get(order, ("first", "last"))  # the words of the report ("the highest of 2 drawers")
+    # the words of the report ("the highest of 2 drawers")
+    first_word, last_word = ORDER_ENDS.get(order, ("first", "last"))
     rank = (f"the {first_word}" if jr.ordinal == 0
             else f"the {last_word}" if jr.ordinal == -1 or jr.ordinal == n - 1
             else f"number {jr.ordinal + 1} ({first_word} first)")
@@ -140,8 +140,8 @@ def joints_named(ctx: PartsContext, label: str, notes: list[str] | None = None) 
     """Movable joints whose moving link carries ``label`` (``priors.request_label_matches``), else a
     label the synonym table gives for it (:func:`named_joints`, said in ``notes``)."""
     joints = ctx.asset.movable_joints()
-    labels = [ctx.asset.link(j.child).semantic_label for j in joints]
-    return named_joints(ctx.category, label, [j.name for j in joints], labels, notes)
+    return named_joints(ctx.category, label, [j.name for j in joints], [ctx.asset.link(j.child).semantic_label for j in joints],
+                        notes)
 
 
 def joints_of(ctx: PartsContext, d: DynamicsValue | MotionPhrase, relevant: list[str],

@@ -97,7 +97,7 @@ def operating_range(category: str | None, label: str | None, table: OperatingFor
     raw = "_".join(label.lower().replace("-", " ").split()) if label else None
     if raw and raw in cat:
         return cat[raw], f"{category}.{raw}"
-    lab = canonical_label(label) if label else None
+    lab = canonical_label(label)
     if lab and lab in cat:
         return cat[lab], f"{category}.{lab}"
     if lab and lab in t.parts:

@@ -90,7 +90,7 @@ NOT_HANDLED_LABELS = frozenset({"wheel"})
 def handled(semantic_label: str | None) -> bool:
     """Whether a part with this label is operated by hand: every part but :data:`NOT_HANDLED_LABELS`; an
     unlabelled part counts as handled."""
-    return canonical_label(semantic_label) not in NOT_HANDLED_LABELS if semantic_label else True
+    return canonical_label(semantic_label) not in NOT_HANDLED_LABELS
 
 
 def spring_expected(category: str, semantic_label: str | None) -> bool:

@@ -58,8 +58,7 @@ def intent_schema() -> dict[str, Any]:
 def intent_messages(text: str, schema: dict[str, Any]) -> list[dict[str, Any]]:
     """OpenAI-format messages: the system prompt with ``schema``, then :data:`INTENT_MARK` and the
     request."""
-    materials = ", ".join(sorted(load_priors().materials))
-    system = (SYSTEM_PROMPT.replace("{materials}", materials) + "\nJSON schema:\n"
+    system = (SYSTEM_PROMPT.replace("{materials}", ", ".join(sorted(load_priors().materials))) + "\nJSON schema:\n"
               + json.dumps(schema, separators=(",", ":")))
     return [{"role": "system", "content": system},
             {"role": "user", "content": f"{INTENT_MARK}\n{text}"}]
@@ -109,8 +108,8 @@ def normalised(intent: RequestIntent) -> RequestIntent:
         return [x.model_copy(update={"label": x.label and " ".join(x.label.lower().split())})
                 for x in items]
 
-    lists = ("joint_states", "properties", "dynamics_values", "part_counts")
-    return intent.model_copy(update={k: norm(getattr(intent, k)) for k in lists})
+    return intent.model_copy(update={k: norm(getattr(intent, k))
+                                     for k in ("joint_states", "properties", "dynamics_values", "part_counts")})
 
 
 def with_intent(offline: RequestSpec, intent: RequestIntent, note: str) -> RequestSpec:

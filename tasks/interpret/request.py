@@ -10,7 +10,7 @@ import functools
 import math
 import re
 from bisect import bisect_left
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 from asset2sim.schemas.request import PartProperty, RequestSpec
 from asset2sim.tasks.interpret.categories import CategoryMention, find_category_mentions, phrase_regex, request_category, variant_mention
@@ -164,8 +164,8 @@ def parse_request(text: str) -> RequestSpec:
     # step 5: the spec
     return RequestSpec(
         text=text, category_hint=hint, size_class=size.size_class, size_factor=size.factor, size_phrase=size.phrase,  # type: ignore[arg-type]
-        joint_states=states.requests, damping=motion.damping, holds_position=motion.holds_position, spring=motion.spring,  # type: ignore[arg-type]
-        stiff=motion.stiff, free_moving=motion.free_moving, motions=motion.motions, pose_hint=pose, mass_level=mass_level, properties=properties,  # type: ignore[arg-type]
+        joint_states=states.requests, **{f.name: getattr(motion, f.name) for f in fields(motion)},
+        pose_hint=pose, mass_level=mass_level, properties=properties,  # type: ignore[arg-type]
         sizes=[f.value for f in sizes], dynamics_values=[f.value for f in dyn_found],  # type: ignore[misc]
         part_counts={str(f.value[0]): int(f.value[1]) for f in counts},  # type: ignore[index]
         ignored=groups, warnings=warnings, overridden=states.overridden, matched=in_order, unused_words=unused,
@@ -195,7 +195,8 @@ def _merge_properties(props: list[PartProperty], warnings: list[str]) -> list[Pa
             new, prev = getattr(p, field), getattr(old, field)
             if new is None:
                 continue
-            other = {"mass": "mass_range", "mass_range": "mass"}.get(field)  # a mass and a range of masses exclude each other
+            # a mass and a range of masses exclude each other
+            other = {"mass": "mass_range", "mass_range": "mass"}.get(field)
             if other and getattr(old, other) is not None:
                 prev = getattr(old, other)
             if prev is not None and prev != new:

@@ -39,8 +39,7 @@ NUM = r"(?:\d+(?:\.\d+)?|\.\d+|" + "|".join(sorted((re.escape(w) for w in _WORD_
 def part_label(word: str) -> str:
     """The label a request's part word names, singular: its canonical label (``part_labels.canonical_label``:
     "covers" -> lid, "hatches" -> door), else the word made singular ("arms" -> arm)."""
-    labels = load_priors().labels
-    known = set(labels.labels)
+    known = set(load_priors().labels.labels)
     cands = [word] + ([word[:-2]] if word.endswith("es") else []) + ([word[:-1]] if word.endswith("s") and not word.endswith("ss") else [])
     for c in cands:
         hit = canonical_label(c)
@@ -116,8 +115,8 @@ class Found:
 
 def _next_words(low: str, end: int, n: int) -> list[tuple[int, int, str]]:
     """(start, end, word) of the first ``n`` (at least one) words or clause marks after ``end``."""
-    runs = itertools.islice(re.finditer(r"[\w'-]+|[,;:.!?]", low[end: end + 80]), max(n, 1))
-    return [(end + m.start(), end + m.end(), m.group(0)) for m in runs]
+    return [(end + m.start(), end + m.end(), m.group(0))
+            for m in itertools.islice(re.finditer(r"[\w'-]+|[,;:.!?]", low[end: end + 80]), max(n, 1))]
 
 
 def _near_category(low: str, end: int, mention_starts: list[int], max_words: int = 2) -> bool:
@@ -167,7 +166,8 @@ def state_quantities(low: str, mention_starts: list[int]) -> StateQuantities:
             continue  # "a third" without open/out next to it is not a state
         else:
             f = int(m.group("n")) / int(m.group("d")) if m.group("n") else (2 / 3 if m.group("frac").startswith(("two", "2")) else 1 / 3)
-        band = min(BAND_TARGET, key=lambda b: abs(BAND_TARGET[b] - f))  # the nearest band (by target fraction)
+        # the nearest band (by target fraction)
+        band = min(BAND_TARGET, key=lambda b: abs(BAND_TARGET[b] - f))
         states.append(Found(s, e, low[s:e].strip(), (band, StateTarget(kind="fraction", value=f))))
     for m in _LENGTH_RX.finditer(low):
         v = _quantity(m, _LENGTH_UNITS)

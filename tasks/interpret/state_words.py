@@ -73,9 +73,8 @@ def _state_hits(low: str, numeric: list[rv.Found]) -> list[Hit]:
             nums[k] = Hit(h.start, nums[k].end, low[h.start: nums[k].end], nums[k].value, "number")
         elif not under_number(h):
             words.append(h)
-    hits = words + nums
     moving = [(h.start, h.end) for h in scan(low, _MOVING_TABLE)]  # "swings shut on its own": a closer, not a state
-    return rv.leftmost_longest([h for h in hits if _is_state(low, h) and not any(a <= h.start and h.end <= b for a, b in moving)])
+    return rv.leftmost_longest([h for h in words + nums if _is_state(low, h) and not any(a <= h.start and h.end <= b for a, b in moving)])
 
 
 #: The words about motion that say how a part moves or closes (``words.yaml`` ``motion``: flags "close" and "soft",

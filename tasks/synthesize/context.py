@@ -107,8 +107,8 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
     cfg = config or RefineConfig()
     meaning = interpret(asset, prompt, category, cfg.overrides, config)
     mount = root_mounting(asset, meaning.request, meaning.category, ReadOptions(body=cfg.body, mjcf_angle=cfg.mjcf.angle))
-    kin_options = SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=cfg.sim)
-    with open_session("pybullet", asset.urdf_path, kin_options) as kin:  # the input asset, kinematics only
+    with open_session("pybullet", asset.urdf_path,  # the input asset, kinematics only
+                      SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=cfg.sim)) as kin:
         hull = link_hull_points(asset, cache=cache)
         buttons = push_buttons(asset, meaning.category)
         closed = closed_positions(kin, asset, hull_points=hull, pushed=buttons)

@@ -109,8 +109,7 @@ def plausible_mass_range(ctx: EstimationContext, scale: float) -> tuple[float, f
     base_lo, base_hi = var.mass_range if var is not None else cat.mass_range
     base = np.sort(np.asarray(target.base_dims, float))[::-1]
     actual = np.sort(np.asarray(ctx.closed_extents, float) * scale)[::-1]
-    f = float(np.exp(np.mean(np.log(np.maximum(actual[:2], 1e-9) / base[:2]))))
-    return scale_mass_range(base_lo, base_hi, f)
+    return scale_mass_range(base_lo, base_hi, float(np.exp(np.mean(np.log(np.maximum(actual[:2], 1e-9) / base[:2])))))
 
 
 def request_variant(ctx: EstimationContext) -> str | None:
@@ -121,8 +120,8 @@ def request_variant(ctx: EstimationContext) -> str | None:
 
 def link_material(ctx: EstimationContext, label: str | None, link: str | None = None) -> physics.MaterialChoice:
     """The material the request names for ``link``, else the category's prior for ``label``."""
-    m = (request_apply.requested_material(ctx, link) if link is not None else None) or material_for(ctx.category, label, request_variant(ctx))
-    return physics.material_choice(m)
+    return physics.material_choice((request_apply.requested_material(ctx, link) if link is not None else None)
+                                   or material_for(ctx.category, label, request_variant(ctx)))
 
 
 def band_intervals(bands: dict[str, str], intervals: dict[str, tuple[float, float]] | None = None) -> dict[str, tuple[float, float]]:

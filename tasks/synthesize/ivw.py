@@ -38,8 +38,7 @@ def fuse(estimates: Iterable[tuple[float, float]]) -> Fused:
     W = math.fsum(w)
     if not math.isfinite(W) or W <= 0:
         raise ValueError(f"weights sum to {W}; stds too small to weight ({min(s for _, s in pairs)})")
-    x_hat = math.fsum(wi * v for wi, (v, _) in zip(w, pairs)) / W
-    return Fused(x_hat, 1.0 / math.sqrt(W))
+    return Fused(math.fsum(wi * v for wi, (v, _) in zip(w, pairs)) / W, 1.0 / math.sqrt(W))
 
 
 def fuse_all(groups: Mapping[str, Iterable[tuple[float, float]]]) -> dict[str, Fused]:

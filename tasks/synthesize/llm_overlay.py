@@ -60,7 +60,6 @@ def overlay_from_reply(ctx: EstimationContext, kin: SimSession, reply: ModelRepl
     s = float(reply.scale.value)
     by_link = {lr.link: lr for lr in reply.links}
     read = _link_physics(ctx, by_link, s)
-    mat_notes = read.material_notes
     notes = [f"the model gave no material for {read.missing}; offline priors used"] if read.missing else []
     links, mass_note = _within_model_mass(read.links, by_link)
     bands, band_notes = _bands(ctx, kin, reply)
@@ -76,7 +75,7 @@ def overlay_from_reply(ctx: EstimationContext, kin: SimSession, reply: ModelRepl
         links=links, joints=joints, initial_joint_positions=state if asked_state else None,
         notes=ValidationNotes(
             size=f"model: s = {s:.4g} +- {reply.scale.std:.3g}; {reply.notes.size}",
-            material="; ".join(mat_notes) + (f" | model: {reply.notes.material}" if reply.notes.material else ""),
+            material="; ".join(read.material_notes) + (f" | model: {reply.notes.material}" if reply.notes.material else ""),
             mass_arithmetic=mass_note + (f" | model: {reply.notes.mass_arithmetic}" if reply.notes.mass_arithmetic else ""),
             other=[f"category: {ctx.category} ({ctx.category_reason})", "bands (model): " + ", ".join(f"{k}={v}" for k, v in bands.items())] + notes,
         ),

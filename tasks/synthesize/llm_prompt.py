@@ -127,9 +127,9 @@ def png_data_url(image: np.ndarray) -> str:
 def render_closed_views(ctx: EstimationContext, views: tuple[str, ...] = VIEWS, size: tuple[int, int] = (384, 384)) -> tuple[dict[str, str], list[str]]:
     """(view -> PNG data URL, notes) of the input asset at its geometric closed state; a render failure
     leaves the views out and the note says why."""
-    q = {n: float(cs.q_closed) for n, cs in ctx.closed.items()}
     try:
-        images = render.render_views(ctx.asset.urdf_path, q, views=views, size=size)
+        images = render.render_views(ctx.asset.urdf_path, {n: float(cs.q_closed) for n, cs in ctx.closed.items()}, views=views,
+                                     size=size)
     except Exception as exc:  # renders are evidence, not a requirement
         return {}, [f"renders failed ({type(exc).__name__}: {one_line(exc)}); the model got the description only"]
     return {v: png_data_url(img) for v, img in images.items()}, []

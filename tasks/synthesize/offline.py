@@ -52,8 +52,8 @@ class OfflineEstimator:
             # into the plausible range, a margin inside its ends (10 %)
             target = lo * 1.1 if total < lo else hi * 0.9
             f = target / total
-            note = f"; x{f:.3g} to the category's plausible total mass"
-            links = {name: request_apply.scaled_link(lp, f, note) for name, lp in links.items()}
+            links = {name: request_apply.scaled_link(lp, f, f"; x{f:.3g} to the category's plausible total mass")
+                     for name, lp in links.items()}
             mass_note += f"; outside the plausible {lo:g}-{hi:g} kg for {ctx.category} ({ctx.request.size_class or 'regular'}): every link scaled by {f:.3g} to {target:g} kg"
         # ---- state
         prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}

@@ -39,7 +39,7 @@ END_SAMPLES = 41
 END_SNAP = 0.1
 
 
-def box_center(ctx: "EstimationContext", kin: "SimSession", joint: str) -> np.ndarray:
+def box_center(ctx: EstimationContext, kin: SimSession, joint: str) -> np.ndarray:
     """(3,) world center (m, scale 1, resting pose applied) of the joint's moving subtree's box at ``kin``'s
     current state; zeros without geometry."""
     R = np.asarray(ctx.root_rotation, float) if ctx.root_rotation is not None else np.eye(3)
@@ -47,7 +47,7 @@ def box_center(ctx: "EstimationContext", kin: "SimSession", joint: str) -> np.nd
     return np.zeros(3) if box is None else R @ (0.5 * (box[0] + box[1]))
 
 
-def _radius(ctx: "EstimationContext", kin: "SimSession", joint: str, state: dict[str, float]) -> float:
+def _radius(ctx: EstimationContext, kin: SimSession, joint: str, state: dict[str, float]) -> float:
     """Largest distance (m, scale 1) of the joint's moving hull points from its axis at ``state`` (``kin`` moved there)."""
     kin.set_joint_positions(state)
     p0, Rc = kin.link_frame(kin.joint_child[joint])
@@ -61,7 +61,7 @@ def _radius(ctx: "EstimationContext", kin: "SimSession", joint: str, state: dict
     return r
 
 
-def _end_fraction(ctx: "EstimationContext", kin: "SimSession", joint: str, end: str,
+def _end_fraction(ctx: EstimationContext, kin: SimSession, joint: str, end: str,
                   closed_state: dict[str, float]) -> tuple[float | None, str]:
     """Opening fraction of the joint's highest / lowest position in world z (``kin`` moved along its travel);
     None and why when it moves flat."""
@@ -86,7 +86,7 @@ def _end_fraction(ctx: "EstimationContext", kin: "SimSession", joint: str, end: 
     return float(fr[i]), f"{word} position in world z at opening fraction {fr[i]:.3g}"
 
 
-def weight_moment(ctx: "EstimationContext", kin: "SimSession", joint: str, state: dict[str, float]) -> float:
+def weight_moment(ctx: EstimationContext, kin: SimSession, joint: str, state: dict[str, float]) -> float:
     """Moment of gravity (world -z, the resting pose ``ctx.root_rotation`` applied) about a hinge's axis per unit of
     its part's weight, m (> 0: it turns the part open), taken at its moving subtree's box center with ``kin`` (the
     input's kinematics session) moved to ``state`` (joint -> rad or m, input units). Source: the moment of a force
@@ -98,7 +98,7 @@ def weight_moment(ctx: "EstimationContext", kin: "SimSession", joint: str, state
     return float(axis @ np.cross(box_center(ctx, kin, joint) - R @ p0, [0.0, 0.0, -1.0])) * float(ctx.closed[joint].direction)
 
 
-def falls_open(ctx: "EstimationContext", kin: "SimSession", joint: str, closed_state: dict[str, float]) -> bool:
+def falls_open(ctx: EstimationContext, kin: SimSession, joint: str, closed_state: dict[str, float]) -> bool:
     """Whether a hinged part's own weight carries it open to its open end: its :func:`weight_moment` turns it open
     at each of :data:`FALL_FRACTIONS` of its range (an oven's or a dishwasher's drop-down door, a drop-front lid: the
     parts :func:`~asset2sim.tasks.synthesize.spring_holds.counterbalance` balances). ``closed_state`` in input units;
@@ -109,7 +109,7 @@ def falls_open(ctx: "EstimationContext", kin: "SimSession", joint: str, closed_s
     return all(weight_moment(ctx, kin, joint, {**closed_state, joint: cs.position(f)}) > 0.0 for f in FALL_FRACTIONS)
 
 
-def fraction_for(ctx: "EstimationContext", kin: "SimSession", joint: str, target: StateTarget, scale: float, label: str,
+def fraction_for(ctx: EstimationContext, kin: SimSession, joint: str, target: StateTarget, scale: float, label: str,
                  closed_state: dict[str, float]) -> tuple[float | None, str]:
     """(opening fraction ``target`` asks of ``joint``, how it was decided), None with the reason when it cannot
     be applied; distances in m at ``scale``, ``closed_state`` in input units; ``kin`` (the input's kinematics

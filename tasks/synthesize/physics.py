@@ -94,8 +94,8 @@ def link_physics(geom: LinkGeometry, scale: float, material: MaterialChoice, sou
         hollow = eta < 0.999
     if not (mass > 0):
         raise ValueError(f"link {geom.link!r}: zero volume and area; cannot compute a mass")
-    inertia = geometry_inertia(geom, mass, scale, hollow)
-    return LinkPhysics(mass=float(mass), inertia=Inertia.from_matrix(inertia), com=tuple(float(c) * scale for c in geom.com),
+    return LinkPhysics(mass=float(mass), inertia=Inertia.from_matrix(geometry_inertia(geom, mass, scale, hollow)),
+                       com=tuple(float(c) * scale for c in geom.com),
                        material=material.name, density=float(material.density), hollow_fraction=None if eta is None else float(eta),
                        source=f"{source}: {formula}")
 
@@ -136,8 +136,7 @@ def joint_loads(session, links: dict[str, LinkPhysics], state: dict[str, float],
         session.set_joint_positions(to_input(st))
         axis_local = session.joint_axis(name)
         child_pos, child_R = session.link_frame(session.joint_child[name])
-        child_pos = child_pos * scale
-        axis = child_R @ axis_local
+        child_pos, axis = child_pos * scale, child_R @ axis_local
         axis = axis / max(np.linalg.norm(axis), 1e-12)
         M, mc, I_axis = 0.0, np.zeros(3), 0.0
         for ln in (ln for ln in subtrees[name] if ln in links):

@@ -66,10 +66,10 @@ class StateResolution:
     in), an ordinal beyond the count, a number that cannot be applied, every part it names set by a later phrase"""
 
 
-def task_relevant_joints(ctx: "EstimationContext") -> list[str]:
+def task_relevant_joints(ctx: EstimationContext) -> list[str]:
     """Movable joints whose moving part tasks manipulate, by the category's priority (``part_priors.task_relevant_joints``)."""
-    labelled = [(j.name, ctx.asset.link(j.child).semantic_label) for j in ctx.asset.movable_joints()]
-    return part_priors.task_relevant_joints(ctx.category, labelled)[0]
+    return part_priors.task_relevant_joints(ctx.category, [(j.name, ctx.asset.link(j.child).semantic_label)
+                                                           for j in ctx.asset.movable_joints()])[0]
 
 
 def band_of(f: float) -> str:
@@ -86,7 +86,7 @@ def _target(joint: str, f: float, kind: str, asked: float | None, phrase: str, n
                        asked=asked, phrase=phrase, note=note)
 
 
-def resolve_states(ctx: "EstimationContext", kin: "SimSession", scale: float) -> StateResolution:
+def resolve_states(ctx: EstimationContext, kin: SimSession, scale: float) -> StateResolution:
     """Band per movable joint and the targets of numbers and ends at the overlay's ``scale``; joints not
     addressed are closed; a request naming a part (or a joint) overrides one that names none ("half open"),
     else a later request for a joint overrides an earlier one. Acceptance: +-5 % of a number
@@ -187,13 +187,13 @@ def retarget(targets: dict[str, JointTarget], old: dict, new: dict) -> dict[str,
     return out
 
 
-def state_with_targets(ctx: "EstimationContext", state: dict[str, float], res: StateResolution, scale: float) -> dict[str, float]:
+def state_with_targets(ctx: EstimationContext, state: dict[str, float], res: StateResolution, scale: float) -> dict[str, float]:
     """``state`` (output units) with every resolved target's position."""
     return {**state, **{n: ctx.closed[n].position(t.fraction) * (scale if ctx.asset.joint(n).type == "prismatic" else 1.0)
                         for n, t in res.targets.items() if t.fraction is not None}}
 
 
-def scale_from_sizes(ctx: "EstimationContext") -> tuple[float, str] | None:
+def scale_from_sizes(ctx: EstimationContext) -> tuple[float, str] | None:
     """(scale, note) of an override, else the geometric mean over the sizes in numbers of value / closed
     extent along the named dimension; None without either."""
     if ctx.request.scale is not None:
@@ -216,13 +216,13 @@ def scale_from_sizes(ctx: "EstimationContext") -> tuple[float, str] | None:
     return s, note
 
 
-def size_residuals(ctx: "EstimationContext", scale: float) -> list[tuple[str, float, float]]:
+def size_residuals(ctx: EstimationContext, scale: float) -> list[tuple[str, float, float]]:
     """(phrase, asked, obtained) of every size in numbers at ``scale``: m, or m^3 for a volume."""
     along = _extents(ctx)
     return [(sz.phrase, sz.value, float(along[sz.dimension]) * scale ** (3 if sz.dimension == "volume" else 1)) for sz in ctx.request.sizes]
 
 
-def _extents(ctx: "EstimationContext") -> dict:
+def _extents(ctx: EstimationContext) -> dict:
     """The closed extent (m, scale 1) per size dimension: height z, width / depth the larger / smaller horizontal;
     ``volume`` the closed object's convex-hull volume (m^3, ``ctx.closed_volume``)."""
     ext = np.asarray(ctx.closed_extents, float)
@@ -233,7 +233,7 @@ def _extents(ctx: "EstimationContext") -> dict:
             "volume": float(ctx.closed_volume or 0.0)}
 
 
-def requested_material(ctx: "EstimationContext", link: str) -> MaterialPrior | None:
+def requested_material(ctx: EstimationContext, link: str) -> MaterialPrior | None:
     """The material the request names for ``link``: a part's over the body's over the whole object's."""
     ranked = [(0 if p.label is None else (1 if p.label == "body" else 2), p.material) for p in ctx.request.properties
               if p.material is not None and link_named(ctx, link, p.label)]
@@ -241,7 +241,7 @@ def requested_material(ctx: "EstimationContext", link: str) -> MaterialPrior | N
     return None if best is None else load_priors().materials[best[1]]
 
 
-def _missing_parts(ctx: "EstimationContext") -> list[tuple[str, str, list[str] | None, str]]:
+def _missing_parts(ctx: EstimationContext) -> list[tuple[str, str, list[str] | None, str]]:
     """(phrase, why, stand-in joints, how they stand in) of every mass or material naming a part the object lacks
     (no stand-ins), then of every joint parameter naming a part no joint carries."""
     links = [ln.name for ln in ctx.asset.links]
@@ -254,13 +254,13 @@ def _missing_parts(ctx: "EstimationContext") -> list[tuple[str, str, list[str] |
     return out
 
 
-def unmatched_properties(ctx: "EstimationContext") -> list[str]:
+def unmatched_properties(ctx: EstimationContext) -> list[str]:
     """Warnings for masses, materials and joint parameters naming a part the object lacks."""
     return [f"WARNING: '{phrase}' {why}; its moving parts: {moving_parts(ctx)}; " + (f"applied to {how} {to}" if to else "not applied")
             for phrase, why, to, how in _missing_parts(ctx)]
 
 
-def unapplied_properties(ctx: "EstimationContext") -> list[tuple[str, str]]:
+def unapplied_properties(ctx: EstimationContext) -> list[tuple[str, str]]:
     """(phrase, why) of every mass or material naming a part the object lacks, and every joint parameter naming a
     part no joint carries and none stands in for (:func:`unmatched_properties` warns of both)."""
     return [(phrase, f"{why} (its moving parts: {moving_parts(ctx)})") for phrase, why, to, _ in _missing_parts(ctx) if not to]
@@ -294,7 +294,7 @@ def whole_masses(spec: RequestSpec) -> tuple[PartProperty | None, PartProperty |
     return next((p for p in whole if p.mass is not None), None), next((p for p in whole if p.mass_range is not None), None)
 
 
-def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausible: tuple[float, float]) -> AskedMasses:
+def apply_masses(ctx: EstimationContext, links: dict[str, LinkPhysics], plausible: tuple[float, float]) -> AskedMasses:
     """Masses in numbers and words on the links (inertia scaled alike): per-part masses first, then the total
     (other links scaled), else "heavy" / "light" at 0.9 x the upper / 1.1 x the lower plausible end."""
     notes: list[str] = []
@@ -345,7 +345,7 @@ def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausi
     return AskedMasses(out, notes, True)
 
 
-def apply_dynamics_values(ctx: "EstimationContext", joints: dict[str, JointDynamics], relevant: list[str],
+def apply_dynamics_values(ctx: EstimationContext, joints: dict[str, JointDynamics], relevant: list[str],
                           state: dict[str, float]) -> tuple[dict[str, JointDynamics], list[str]]:
     """Explicit damping / friction / stiffness on the joints they name (else ``relevant``) whose motion fits
     the unit; a stiffness gets its spring reference at ``state`` (output units)."""

@@ -25,7 +25,7 @@ if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
     from asset2sim.tasks.synthesize.context import EstimationContext
 
 
-def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResolution) -> list[str]:
+def check_overlay(ctx: EstimationContext, overlay: Overlay, res: StateResolution) -> list[str]:
     """One line per departure of an overlay from the request: total mass and sizes (5 %), materials, explicit
     joint parameters, initial positions vs the targets' intervals."""
     out: list[str] = []
@@ -56,10 +56,8 @@ def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResoluti
         for n, t in res.targets.items():
             if n not in overlay.initial_joint_positions or t.interval is None:
                 continue
-            q = overlay.initial_joint_positions[n]
-            cs = ctx.closed[n]
             unit = overlay.scale if ctx.asset.joint(n).type == "prismatic" else 1.0
-            f = cs.fraction(q / unit)
+            f = ctx.closed[n].fraction(overlay.initial_joint_positions[n] / unit)
             if not (t.interval[0] - 1e-9 <= f <= t.interval[1] + 1e-9):
                 out.append(f"joint {n}: initial opening fraction {f:.3g} outside {t.interval[0]:.3g}..{t.interval[1]:.3g} asked by '{t.phrase}'")
     return out
@@ -79,7 +77,7 @@ def summary(spec: RequestSpec) -> list[str]:
     return out + [f"{d.label or 'joints'}: {d.quantity} {d.value:g} ({d.motion})" for d in spec.dynamics_values]
 
 
-def phrase_lines(ctx: "EstimationContext", res: StateResolution, closed_out: dict, state: dict[str, float]) -> list[str]:
+def phrase_lines(ctx: EstimationContext, res: StateResolution, closed_out: dict, state: dict[str, float]) -> list[str]:
     """One line per state phrase of the request, in its order: the joints it set with their labels, the amount
     each has from its closed end (``closed_out`` at the output's scale, ``state`` output units) and what was asked
     ("'lid open 30 degrees': joint_2 (lid) 30.0 deg from closed, 25 % open (asked 30 deg from closed)"), or why it
@@ -111,7 +109,7 @@ def phrase_lines(ctx: "EstimationContext", res: StateResolution, closed_out: dic
     return out
 
 
-def _named(ctx: "EstimationContext", joint: str) -> str:
+def _named(ctx: EstimationContext, joint: str) -> str:
     """``joint_2 (lid)``: a joint with its moving part's label, or its name alone."""
     label = ctx.asset.link(ctx.asset.joint(joint).child).semantic_label
     return joint + (f" ({label})" if label else "")
@@ -121,7 +119,7 @@ def _named(ctx: "EstimationContext", joint: str) -> str:
 DYNAMICS_UNITS = {"damping": ("N m s/rad", "N s/m"), "friction": ("N m", "N"), "stiffness": ("N m/rad", "N/m")}
 
 
-def motion_lines(ctx: "EstimationContext", overlay: Overlay, words: dict[str, list], escalation: list | None = None) -> list[str]:
+def motion_lines(ctx: EstimationContext, overlay: Overlay, words: dict[str, list], escalation: list | None = None) -> list[str]:
     """One line per word of the request about a part's motion, in its order: the joints it applies to with the
     damping, friction and stiffness they end with ("'swings freely' (door): free on joint_1 (door): friction 0.0056 N m,
     damping 0.30 N m s/rad, stiffness 0 N m/rad"), what it kept from the post-check (``escalation``'s ``words_kept``),
@@ -133,16 +131,19 @@ def motion_lines(ctx: "EstimationContext", overlay: Overlay, words: dict[str, li
         joints = [n for n, ws in words.items() if any(w is word or w == word for w in ws)]
         if not joints:
             continue
-        got = [_named(ctx, n) + ": " + ", ".join(f"{p} {getattr(d, p):.3g} {DYNAMICS_UNITS[p][ctx.asset.joint(n).type == 'prismatic']}"
-                                                 for p in ("friction", "damping", "stiffness"))
-               for n in joints if (d := overlay.joints.get(n)) is not None]
+        got = []
+        for n in joints:
+            if (d := overlay.joints.get(n)) is not None:
+                linear = ctx.asset.joint(n).type == "prismatic"
+                got.append(_named(ctx, n) + ": " + ", ".join(
+                    f"{p} {getattr(d, p):.3g} {DYNAMICS_UNITS[p][linear]}" for p in ("friction", "damping", "stiffness")))
         line = f"{word.short()} on " + "; ".join(got)
         held = [x for x in kept if f"'{word.phrase}'" in x]
         out.append(line + (f" (kept through the post-check: {'; '.join(dict.fromkeys(held))})" if held else ""))
     return out
 
 
-def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_out: dict, state: dict[str, float],
+def findings(ctx: EstimationContext, targets: dict[str, JointTarget], closed_out: dict, state: dict[str, float],
              overlay: Overlay, escalation: list | None = None, resolution: StateResolution | None = None,
              motion_words: dict[str, list] | None = None) -> RequestFindings:
     """The report's account of the request: ignored words, warnings (the parser's and the ``WARNING`` lines of the
@@ -200,7 +201,7 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
     return RequestFindings(ignored=list(ctx.request.ignored), warnings=warnings, asked=summary(ctx.request), quantities=q, phrases=phrases)
 
 
-def _dynamics_outcomes(ctx: "EstimationContext", overlay: Overlay, escalation: list) -> list[QuantityOutcome]:
+def _dynamics_outcomes(ctx: EstimationContext, overlay: Overlay, escalation: list) -> list[QuantityOutcome]:
     """Explicit joint parameters asked vs the final overlay, a change explained by its post-check round."""
     out = []
     relevant = task_relevant_joints(ctx)
@@ -223,7 +224,7 @@ def _dynamics_outcomes(ctx: "EstimationContext", overlay: Overlay, escalation: l
     return out
 
 
-def check_against_request(ctx: "EstimationContext", kin: "SimSession", overlay: Overlay,
+def check_against_request(ctx: EstimationContext, kin: SimSession, overlay: Overlay,
                           targets: dict[str, JointTarget]) -> tuple[Overlay, dict[str, JointTarget]]:
     """(overlay, targets): every :func:`check_overlay` departure added as a ``WARNING`` note; ``targets``
     resolved here at the overlay's scale when the estimator gave none (a model backend; ``kin`` moved then)."""

@@ -131,8 +131,7 @@ def landings(session, links: dict[str, LinkPhysics], state: dict[str, float], sc
     fields = {"drop": {ln: (drop, np.zeros(3)) for ln in bodies},
               **{trial: _tilt_field(trial, bodies, points, com, total) for trial in LANDING_TRIALS[1:]}}
     for name in names:
-        child = session.joint_child[name]
-        o, R = frames[child]
+        o, R = frames[session.joint_child[name]]
         a = R @ np.asarray(session.joint_axis(name), float)
         a = a / max(float(np.linalg.norm(a)), 1e-12)
         prismatic = session.joint_types[name] == "prismatic"

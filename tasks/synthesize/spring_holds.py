@@ -212,12 +212,11 @@ def counterbalance(ctx: EstimationContext, kin: SimSession, links: dict[str, Lin
     if not all(t > 0 for t in open_loads) or not cs.open_range > 0:
         return None
     k = open_loads[-1] / cs.open_range
-    q_s = cs.position(0.0)
-    fractions = sorted({*(float(f) for f in hold_fractions), *CLOSED_HOLD_FRACTIONS})
-    hold = max(abs(load(f) * cs.direction - k * f * cs.open_range) for f in fractions)
+    hold = max(abs(load(f) * cs.direction - k * f * cs.open_range)
+               for f in sorted({*(float(f) for f in hold_fractions), *CLOSED_HOLD_FRACTIONS}))
     why = (f"counterbalance spring of a door opening downward (door-balance springs of ranges and dishwashers): "
            f"k = {k:.4g} N m/rad at rest closed balances the {open_loads[-1]:.3g} N m weight moment fully open")
-    return SpringHold((float(k), float(q_s)), float(hold), why)
+    return SpringHold((float(k), float(cs.position(0.0))), float(hold), why)
 
 
 #: Share of the top of its operating force range above which the force that lifts a hinged lid or door its weight

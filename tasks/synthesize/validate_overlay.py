@@ -152,8 +152,7 @@ def inertia_problems(m: np.ndarray) -> str | None:
 def geometry_inertia(geom: LinkGeometry, mass: float, scale: float, hollow: bool) -> np.ndarray:
     """Inertia (3, 3) kg*m^2 about the COM: per-kg tensor (shell when ``hollow``) x mass x scale^2, made valid
     by a tiny isotropic term (else the bounding box's) if degenerate."""
-    per_kg = np.asarray(geom.inertia_shell if hollow else geom.inertia_solid, float)
-    m = per_kg * mass * scale**2
+    m = np.asarray(geom.inertia_shell if hollow else geom.inertia_solid, float) * mass * scale**2
     m = 0.5 * (m + m.T)
     if inertia_problems(m) is not None:
         ext = np.asarray(geom.extents, float) * scale
