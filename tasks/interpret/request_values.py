@@ -251,7 +251,7 @@ def part_after(low: str, end: int, max_words: int = 2, mention_starts: list[int]
         if BODY_RX.fullmatch(w):
             return "body", e
         if w in {",", ";", ":", ".", "!", "?", "and", "with", "on", "in", "of"}:
-            return None, end
+            break
     return None, end
 
 

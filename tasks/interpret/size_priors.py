@@ -100,7 +100,7 @@ def target_size(category: str, request: RequestSpec | str | None = None) -> Size
         request = parse_request(request)
     cat = category_prior(category)
     size_class = request.size_class if request is not None else None
-    var = find_variant(cat.name, request.text) if request is not None and request.text else None
+    var = find_variant(cat.name, request.text) if request is not None else None
     notes: list[str] = []
     if var is not None:
         base = var.dims

@@ -74,7 +74,8 @@ def _state_hits(low: str, numeric: list[rv.Found]) -> list[Hit]:
         elif not under_number(h):
             words.append(h)
     moving = [(h.start, h.end) for h in scan(low, _MOVING_TABLE)]  # "swings shut on its own": a closer, not a state
-    return rv.leftmost_longest([h for h in words + nums if _is_state(low, h) and not any(a <= h.start and h.end <= b for a, b in moving)])
+    return rv.leftmost_longest([h for h in words + nums
+                                if _is_state(low, h) and not any(a <= h.start and h.end <= b for a, b in moving)])
 
 
 #: The words about motion that say how a part moves or closes (``words.yaml`` ``motion``: flags "close" and "soft",
@@ -143,8 +144,7 @@ def _parts(low: str, tokens: Tokens) -> list[_Part]:
     # enumerations ("the first, second and third drawers"): chain[j] is the first ordinal of the run ending at ords[j]
     chain: list[int] = []
     for j, o in enumerate(ords):
-        prev = ords[j - 1] if j else None
-        joined = prev is not None and prev.flag != "quant" and _ORD_JOIN.match(low, prev.end, o.start) is not None
+        joined = j and ords[j - 1].flag != "quant" and _ORD_JOIN.match(low, ords[j - 1].end, o.start) is not None
         chain.append(chain[j - 1] if joined else j)
     out: list[_Part] = []
     for m in rv.PART_RX.finditer(low):

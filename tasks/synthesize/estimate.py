@@ -114,7 +114,7 @@ def plausible_mass_range(ctx: EstimationContext, scale: float) -> tuple[float, f
 
 def request_variant(ctx: EstimationContext) -> str | None:
     """The category variant the request names ("office cabinet"), or None."""
-    v = find_variant(ctx.category, ctx.request.text) if ctx.request.text else None
+    v = find_variant(ctx.category, ctx.request.text)
     return v.name if v is not None else None
 
 

@@ -68,12 +68,11 @@ class OfflineEstimator:
         joints, dyn_notes = request_apply.apply_dynamics_values(ctx, joints, relevant, state)
         band_notes += dyn_notes
         body_prior = material_for(ctx.category, None, request_variant(ctx))
-        body_mat = link_material(ctx, None)
         asked_state = bool(ctx.request.joint_states)
         overlay = Overlay(
             estimator=EstimatorInfo(name=self.name, model=None, version=__version__, queries=0), scale=s, category=ctx.category,
             contact_material=ContactMaterial(lateral_friction=float(body_prior.lateral_friction), restitution=float(body_prior.restitution),
-                                             note=f"{body_mat.name}: {body_prior.friction_source}"),
+                                             note=f"{body_prior.name}: {body_prior.friction_source}"),
             links=links, joints=joints, initial_joint_positions=state if asked_state else None,
             notes=ValidationNotes(
                 size=size_note, material="; ".join(mat_notes), mass_arithmetic=mass_note,

@@ -81,11 +81,10 @@ def solid_volume(geom: LinkGeometry | None, scale: float) -> float | None:
     return geom.volume * scale**3
 
 
-def _raise_light_links(ov: Overlay, add, asset: AssetDescription | None = None,
-                       geometry: dict[str, LinkGeometry] | None = None) -> None:
+def _raise_light_links(ov: Overlay, add, asset: AssetDescription, geometry: dict[str, LinkGeometry]) -> None:
     """Raise links below :data:`MIN_LINK_MASS_FRACTION` of the total to that floor (inertia alike), never
-    beyond :func:`max_density` over :func:`solid_volume` (a density its material cannot have); with ``asset``,
-    joints whose moving subtree got heavier get friction, damping and axis inertia times its ratio."""
+    beyond :func:`max_density` over :func:`solid_volume` (a density its material cannot have); the joints of ``asset``
+    whose moving subtree got heavier get friction, damping and axis inertia times its ratio."""
     before = {n: lp.mass for n, lp in ov.links.items()}
     masses = {n: lp.mass for n, lp in ov.links.items() if math.isfinite(lp.mass) and lp.mass > 0}
     total = sum(masses.values())
@@ -99,7 +98,7 @@ def _raise_light_links(ov: Overlay, add, asset: AssetDescription | None = None,
         floor = new
     for name, lp in list(ov.links.items()):
         if name in masses and lp.mass < floor * (1 - 1e-9):
-            vol, rho = solid_volume((geometry or {}).get(name), ov.scale), max_density(lp)
+            vol, rho = solid_volume(geometry.get(name), ov.scale), max_density(lp)
             target = floor if vol is None else min(floor, max(vol * rho, lp.mass))
             why = (f"; not to the floor {floor:.3g} kg: {floor / vol:.3g} kg/m^3 in its {vol * 1e6:.3g} cm^3, denser than "
                    f"its material ({rho:.3g} kg/m^3 at most); the mass ratio stays below the solver floor") if target < floor else ""
@@ -114,8 +113,6 @@ def _raise_light_links(ov: Overlay, add, asset: AssetDescription | None = None,
                 "source": lp.source + ("; mass raised to the floor by validator" if target == floor else
                                        "; mass raised by validator to the densest its material allows"),
             })
-    if asset is None:
-        return
     for jd in asset.movable_joints():
         dyn = ov.joints.get(jd.name)
         if dyn is None:
