@@ -197,8 +197,7 @@ def state_targets(ctx: PartsContext, jr: JointStateRequest, relevant: list[str],
     part of the object carries moves nothing (warned: [] returned) unless some ``relevant`` joints
     stand in for it (:func:`stand_ins`, warned). Warnings appended to ``warnings``."""
     if jr.selector == "joint":  # an override names the joint itself
-        movable = any(j.name == jr.joint for j in ctx.asset.movable_joints())
-        return [jr.joint] if jr.joint in relevant or movable else []
+        return [jr.joint] if jr.joint in relevant or any(j.name == jr.joint for j in ctx.asset.movable_joints()) else []
     named = jr.names_part
     targets = joints_named(ctx, str(jr.label), notes) if named else []
     if named and not targets:

@@ -148,7 +148,6 @@ def _parts(low: str, tokens: Tokens) -> list[_Part]:
         chain.append(chain[j - 1] if joined else j)
     out: list[_Part] = []
     for m in rv.PART_RX.finditer(low):
-        label = rv.part_label(m.group(0))
         ordinals: list[tuple[int, str]] = []
         quant = False
         pstart = m.start()
@@ -171,7 +170,8 @@ def _parts(low: str, tokens: Tokens) -> list[_Part]:
         if not ordinals and num is not None and not quant:
             ordinals = [(int(n) - 1, "vertical") for n in re.findall(r"\d+", num.group(1)) if int(n) >= 1]
         none = _NONE_OF.search(low, max(0, pstart - 24), pstart)
-        out.append(_Part(m.start(), m.end(), label, ordinals, quant, none.start() if none else pstart, none is not None))
+        out.append(_Part(m.start(), m.end(), rv.part_label(m.group(0)), ordinals, quant, none.start() if none else pstart,
+                         none is not None))
     return out
 
 
