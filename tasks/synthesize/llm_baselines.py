@@ -26,14 +26,10 @@ def _numeric_overlay(ctx: EstimationContext, name: str, model: str, usage: Usage
                      joint_values: dict[str, dict[str, float]], contact: tuple[float, float], notes: list[str]) -> Overlay:
     """An overlay from the model's numbers as they are (no validation); inertia and COM of the scaled
     geometry at the given mass (shell or solid tensor as the model said)."""
-    links = {}
-    for ln, (mass, shell) in link_mass.items():
-        g = ctx.geometry.get(ln)
-        if g is None:
-            continue
-        inertia = Inertia.from_matrix(validate_overlay.geometry_inertia(g, float(mass), scale, shell))
-        links[ln] = LinkPhysics(mass=float(mass), inertia=inertia, com=tuple(float(c) * scale for c in g.com),
-                                source=f"{name}: model mass, geometry inertia")
+    links = {ln: LinkPhysics(mass=float(mass),
+                             inertia=Inertia.from_matrix(validate_overlay.geometry_inertia(g, float(mass), scale, shell)),
+                             com=tuple(float(c) * scale for c in g.com), source=f"{name}: model mass, geometry inertia")
+             for ln, (mass, shell) in link_mass.items() if (g := ctx.geometry.get(ln)) is not None}
     joints = {jn: JointDynamics(damping=float(v["damping"]), friction=float(v["friction"]), stiffness=float(v["stiffness"]),
                                 spring_reference=float(v["position"]) if v["stiffness"] > 0 else None,
                                 source=f"{name}: model values") for jn, v in joint_values.items()}

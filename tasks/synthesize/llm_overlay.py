@@ -103,8 +103,7 @@ def _link_physics(ctx: EstimationContext, by_link: dict, s: float) -> _ReplyLink
     links: dict[str, LinkPhysics] = {}
     mat_notes, missing, errors = [], [], []
     for ln in ctx.asset.links:
-        geom = ctx.geometry.get(ln.name)
-        if geom is None:
+        if (geom := ctx.geometry.get(ln.name)) is None:
             continue
         lr = by_link.get(ln.name)
         if lr is None:

@@ -34,8 +34,7 @@ class OfflineEstimator:
         links: dict[str, LinkPhysics] = {}
         mat_notes = []
         for ln in ctx.asset.links:
-            geom = ctx.geometry.get(ln.name)
-            if geom is None:
+            if (geom := ctx.geometry.get(ln.name)) is None:
                 continue
             mat = link_material(ctx, ln.semantic_label, ln.name)
             links[ln.name] = physics.link_physics(geom, s, mat, source=f"geometry + {mat.name} prior")

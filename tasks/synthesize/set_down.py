@@ -158,7 +158,7 @@ def _tilt_field(trial: str, bodies: dict[str, _Body], points: np.ndarray, com: n
     """link -> (COM velocity, angular velocity) as the object tilted by ``trial`` (as robust rest tilts it: about the
     world axis through its footprint's centre, its lowest point on the ground) falls back flat about the edge it
     rests on; None when the tilted object does not fall back (its centre of mass beyond that edge)."""
-    axis = np.array([1.0, 0.0, 0.0]) if trial.endswith("x") else np.array([0.0, 1.0, 0.0])
+    axis = np.eye(3)[0 if trial.endswith("x") else 1]
     sign = 1.0 if trial[4] == "+" else -1.0
     Rt = axis_angle_matrix(axis, sign * SET_DOWN_LEAN)
     pivot = points[int(np.argmin((points @ Rt.T)[:, 2]))].copy()

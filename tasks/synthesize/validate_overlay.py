@@ -114,8 +114,7 @@ def _raise_light_links(ov: Overlay, add, asset: AssetDescription, geometry: dict
                                        "; mass raised by validator to the densest its material allows"),
             })
     for jd in asset.movable_joints():
-        dyn = ov.joints.get(jd.name)
-        if dyn is None:
+        if (dyn := ov.joints.get(jd.name)) is None:
             continue
         sub = [ln for ln in subtree_links(asset, jd.child) if ln in ov.links]
         m0 = sum(before.get(ln, 0.0) for ln in sub)
