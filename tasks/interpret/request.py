@@ -6,7 +6,6 @@ string of at most :data:`MAX_REQUEST_CHARS` characters.
 
 from __future__ import annotations
 
-import functools
 import math
 import re
 from bisect import bisect_left
@@ -53,11 +52,6 @@ _PART_WORD = re.compile(r"(?:" + rv.PART_WORDS + r")")
 _POSE_TABLE = word_table("pose")
 
 
-@functools.lru_cache(maxsize=1)
-def _size_factors() -> dict[str, float]:
-    return {k: v.factor for k, v in load_priors().size_classes.items()}
-
-
 _COMPARED = re.compile(r"(?:small|large|big)(?:ger|er|r|est|st)")
 
 
@@ -90,7 +84,7 @@ def _parse_size(low: str, mentions: list[CategoryMention], tokens: Tokens) -> _S
         used.append(h)
     if not used:
         return _SizeWords(None, 1.0, "", [], [])
-    facs = _size_factors()
+    facs = {k: v.factor for k, v in load_priors().size_classes.items()}
     first_dir = math.copysign(1.0, math.log(facs[str(used[0].value)])) if facs[str(used[0].value)] != 1.0 else 0.0
     same = [h for h in used if first_dir == 0.0 or math.log(facs[str(h.value)]) * first_dir >= 0.0]
     best = max(same, key=lambda h: abs(math.log(facs[str(h.value)])))

@@ -149,7 +149,7 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
         # a push button or key resting out of its body: its return spring is preloaded onto that stop
         button = name in ctx.push_buttons and ch.spring and not ch.free_moving
         if ch.self_closing or (button and abs(state[name] - cs.position(0.0) * unit) <= band):
-            pushed = opening_loads(kin, links, state, scale, cs, name, ctx.subtrees[name], unit, rot)
+            pushed = opening_loads(ctx, kin, links, state, scale, name, unit)
             held = closer(ctx, load, cs, unit, hold, pushed, at_closed, stopped_shut(ctx, kin, state, scale, name),
                           hand=hand_top(ctx, name, scale, linear), free=free_standing(ctx),
                           floor=0.0 if on_slide else physics.friction_floor(load, linear),

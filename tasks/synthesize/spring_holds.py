@@ -133,14 +133,13 @@ CLOSER_EFFORT_SHARE = 0.5
 CLOSER_PROGRESSION = 1.25
 
 
-def opening_loads(kin: SimSession, links: dict[str, LinkPhysics], state: dict[str, float], scale: float, cs: ClosedState,
-                  name: str, subtree: list[str], unit: float, root_rotation: np.ndarray | None = None) -> np.ndarray:
+def opening_loads(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
+                  name: str, unit: float) -> np.ndarray:
     """Gravity loads (N m, or N for a slide; 0 where none) that push joint ``name``'s part open at
-    :data:`OPENING_LOAD_FRACTIONS` of its range (shape (11,)), the other joints at ``state`` (output units; ``kin``,
-    the input's kinematics session, posed for the loads; ``subtree``: the part's links). A closer returns the part
-    from wherever it is left, so it must outpull them (:func:`closer`)."""
-    return np.array([max(0.0, physics.joint_loads(kin, links, {**state, name: cs.position(f) * unit}, scale, {name: subtree},
-                                                  root_rotation=root_rotation)[name].gravity_load * cs.direction)
+    :data:`OPENING_LOAD_FRACTIONS` of its range (shape (11,); :func:`gravity_at`, ``unit``: the scale of a slide's
+    positions), the other joints at ``state`` (output units; ``kin``, the input's kinematics session, posed for the
+    loads). A closer returns the part from wherever it is left, so it must outpull them (:func:`closer`)."""
+    return np.array([max(0.0, gravity_at(ctx, kin, links, state, scale, name, f, unit) * ctx.closed[name].direction)
                      for f in OPENING_LOAD_FRACTIONS])
 
 
