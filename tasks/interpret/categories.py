@@ -193,15 +193,39 @@ def recognize_category(
     """
     ev = _Evidence()
     text = request_text or ""
-    _request_evidence(ev, text)
+    head_cat, head = request_category(text)  # the request's object, then each other category it mentions
+    if head is not None:
+        ev.add(head.category, _W_REQUEST_OTHER if (head.weak or head.possessive) else _W_REQUEST_HEAD,
+               f"request names {head.phrase!r}")
+    for m in find_category_mentions(text):
+        if m.category == head_cat or m.possessive or any("request" in r for r in ev.why.get(m.category, [])):
+            continue  # "with its door" names a part, not the object
+        ev.add(m.category, _W_REQUEST_OTHER, f"request also mentions {m.phrase!r}")
     mc = resolve_category(model_cat)
     if mc not in (None, GENERIC):
         ev.add(mc, _W_MODEL_CAT, f"model_cat {model_cat!r}")
     labels = sorted({lab for lab in semantic_labels if lab})
     _label_evidence(ev, labels)
-    if not ev.scores or max(ev.scores.values()) < _MIN_SCORE:
-        return _generic_match(ev, model_cat, labels)
-    return _best_match(ev, text)
+    scores, why = ev.scores, ev.why
+    rounded = {k: round(v, 3) for k, v in scores.items()}
+    if not scores or max(scores.values()) < _MIN_SCORE:  # the generic fallback, with why the evidence was not enough
+        reason = ("no usable evidence" + (f" (model_cat {model_cat!r} unknown)" if model_cat else "")
+                  + (f"; labels {labels}" if labels else ""))
+        return CategoryMatch(name=GENERIC, prior=load_priors().categories[GENERIC], confidence=0.0,
+                             reason=reason + "; using the generic fallback", scores=rounded)
+
+    def rank(name: str) -> tuple[float, bool, bool, str]:  # ties: request evidence, model_cat, name
+        reasons = why.get(name, [])
+        return round(scores[name], 6), any("request" in r for r in reasons), any(r.startswith("model_cat") for r in reasons), name
+
+    best = max(scores, key=rank)
+    conf = (scores[best] / sum(scores.values())) * min(1.0, scores[best] / 3.0)
+    others = sorted(((n, s) for n, s in scores.items() if n != best), key=lambda t: -t[1])
+    reason = f"{best}: " + ", ".join(why[best])
+    if others:
+        reason += "; against: " + ", ".join(f"{n} ({s:.1f}: {', '.join(why[n])})" for n, s in others)
+    return CategoryMatch(name=best, prior=load_priors().categories[best], confidence=round(max(0.0, min(1.0, conf)), 3),
+                         reason=reason, variant=find_variant(best, text), scores=rounded)
 
 
 @dataclass
@@ -214,18 +238,6 @@ class _Evidence:
     def add(self, cat: str, w: float, msg: str) -> None:
         self.scores[cat] = self.scores.get(cat, 0.0) + w
         self.why.setdefault(cat, []).append(msg)
-
-
-def _request_evidence(ev: _Evidence, text: str) -> None:
-    """Evidence of the request's object and of each other category it mentions."""
-    head_cat, head = request_category(text)
-    if head is not None and head_cat is not None:
-        w = _W_REQUEST_OTHER if (head.weak or head.possessive) else _W_REQUEST_HEAD
-        ev.add(head_cat, w, f"request names {head.phrase!r}")
-    for m in find_category_mentions(text):
-        if m.category == head_cat or m.possessive or any("request" in r for r in ev.why.get(m.category, [])):
-            continue  # "with its door" names a part, not the object
-        ev.add(m.category, _W_REQUEST_OTHER, f"request also mentions {m.phrase!r}")
 
 
 def _label_evidence(ev: _Evidence, labels: list[str]) -> None:
@@ -251,32 +263,3 @@ def _label_evidence(ev: _Evidence, labels: list[str]) -> None:
                 part_why.setdefault(name, []).append(canon)
     for name, s in part_sum.items():
         ev.add(name, min(_W_PART_CAP, s), f"part labels {part_why[name]}")
-
-
-def _generic_match(ev: _Evidence, model_cat: str | None, labels: list[str]) -> CategoryMatch:
-    """The ``Generic`` fallback (confidence 0) with the reason the evidence was not enough."""
-    reason = "no usable evidence"
-    if model_cat:
-        reason += f" (model_cat {model_cat!r} unknown)"
-    if labels:
-        reason += f"; labels {labels}"
-    return CategoryMatch(name=GENERIC, prior=load_priors().categories[GENERIC], confidence=0.0,
-                         reason=reason + "; using the generic fallback", scores={k: round(v, 3) for k, v in ev.scores.items()})
-
-
-def _best_match(ev: _Evidence, text: str) -> CategoryMatch:
-    """The best-scoring category (ties: request evidence, model_cat, name) with reasons and variant."""
-    scores, why = ev.scores, ev.why
-
-    def rank(name: str) -> tuple[float, bool, bool, str]:
-        reasons = why.get(name, [])
-        return round(scores[name], 6), any("request" in r for r in reasons), any(r.startswith("model_cat") for r in reasons), name
-
-    best = max(scores, key=rank)
-    conf = (scores[best] / sum(scores.values())) * min(1.0, scores[best] / 3.0)
-    others = sorted(((n, s) for n, s in scores.items() if n != best), key=lambda t: -t[1])
-    reason = f"{best}: " + ", ".join(why[best])
-    if others:
-        reason += "; against: " + ", ".join(f"{n} ({s:.1f}: {', '.join(why[n])})" for n, s in others)
-    return CategoryMatch(name=best, prior=load_priors().categories[best], confidence=round(max(0.0, min(1.0, conf)), 3), reason=reason,
-                         variant=find_variant(best, text), scores={k: round(v, 3) for k, v in scores.items()})

@@ -58,19 +58,6 @@ def named_joints(category: str, word: str | None, joints: Sequence[str],
     return [joints[i] for i in hit]
 
 
-def _order_key(order: str, c: np.ndarray) -> float:
-    """Sort key of a joint for an ordinal's order (ascending = first); ``c`` the (3,) box center,
-    m."""
-    return float({"left_right": -c[1], "right_left": c[1], "front_back": c[0]}.get(order, -c[2]))
-
-
-def _spread_order(targets: list[str], centers: dict[str, np.ndarray]) -> str:
-    """The order along which ``targets``' box centers spread most: ``vertical`` (world z, also
-    without targets) or ``left_right`` (y)."""
-    c = np.array([centers.get(n, np.zeros(3)) for n in targets])
-    return "vertical" if not targets or np.ptp(c[:, 2]) >= np.ptp(c[:, 1]) else "left_right"
-
-
 def pick(jr: JointStateRequest | MotionPhrase, targets: list[str], centers: dict[str, np.ndarray],
          sizes: dict[str, float], warnings: list[str] | None = None,
          notes: list[str] | None = None) -> list[str]:
@@ -86,11 +73,15 @@ def pick(jr: JointStateRequest | MotionPhrase, targets: list[str], centers: dict
     part = jr.label or "part"
     what = f"{jr.label}s" if jr.label else "parts"
     n = len(targets)
-    order = _spread_order(targets, centers) if jr.order == "middle" else jr.order
+    order = jr.order
+    if order == "middle":  # along the direction the box centers spread most: world z (also without targets), else y
+        c = np.array([centers.get(n, np.zeros(3)) for n in targets])
+        order = "vertical" if not targets or np.ptp(c[:, 2]) >= np.ptp(c[:, 1]) else "left_right"
     if order == "size":
         targets.sort(key=lambda t: sizes.get(t, 0.0))
-    else:
-        targets.sort(key=lambda t: _order_key(order, centers.get(t, np.zeros(3))))
+    else:  # ascending = first: -y left to right, +y right to left, +x front to back, else -z top to bottom
+        sign, axis = {"left_right": (-1, 1), "right_left": (1, 1), "front_back": (1, 0)}.get(order, (-1, 2))
+        targets.sort(key=lambda t: sign * float(centers.get(t, np.zeros(3))[axis]))
     if jr.ordinal is None:
         return targets
     if jr.order == "middle":

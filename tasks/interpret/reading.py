@@ -211,5 +211,4 @@ def interpret(asset: AssetDescription, prompt: str, category: str | None = None,
     spec = apply_overrides(parse_request_for(prompt, config), overrides, asset)
     labels = [ln.semantic_label for ln in asset.links if ln.semantic_label]
     match = recognize_category(category or asset.category, labels, prompt)
-    return Interpretation(spec, getattr(match, "name", None) or str(match),
-                          getattr(match, "reason", ""))
+    return Interpretation(spec, match.name, match.reason)

@@ -170,11 +170,8 @@ def size_mass_prior(category: str | None, spec: RequestSpec | None = None) -> di
     try:
         t = target_size(category, spec)
         cat = category_prior(category)
-        base_mass = cat.mass_range
-        if t.variant:
-            var = next((v for v in cat.variants if v.name == t.variant), None)
-            if var is not None:
-                base_mass = var.mass_range
+        var = cat.variant(t.variant) if t.variant else None
+        base_mass = var.mass_range if var is not None else cat.mass_range
     except Exception:
         return {}
     return {"category": t.category, "target_dims": [float(x) for x in t.dims], "base_dims": [float(x) for x in t.base_dims],

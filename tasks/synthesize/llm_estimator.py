@@ -43,10 +43,6 @@ class LLMEstimator:
         self.max_reasks = max_reasks
         self._memo: dict[tuple, tuple[ModelReply, Usage, list[list[str]], list[str]]] = {}
 
-    @staticmethod
-    def _memo_key(ctx: EstimationContext) -> tuple:
-        return (ctx.asset.asset_id, ctx.asset.input_hash, str(ctx.asset.urdf_path), ctx.request.text, ctx.category)
-
     def joint_proposer(self, ctx: EstimationContext):
         """``proposer(state, pairs, intervals) -> (list of {joint: value}, model calls)`` for the state
         search when it stalls: the model proposes candidate states (one call, at most two re-asks)."""
@@ -83,7 +79,7 @@ class LLMEstimator:
             ReplyInvalid: a remembered reply no longer validates for this context.
         """
         cfg = self.client.config
-        key = self._memo_key(ctx)
+        key = (ctx.asset.asset_id, ctx.asset.input_hash, str(ctx.asset.urdf_path), ctx.request.text, ctx.category)
         memo = self._memo.get(key)
         if memo is None:
             schema = reply_json_schema()

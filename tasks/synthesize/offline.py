@@ -58,7 +58,9 @@ class OfflineEstimator:
         prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
         resolved = request_apply.resolve_states(ctx, kin, s)
         bands, band_notes = resolved.bands, resolved.warnings + resolved.notes + request_apply.unmatched_properties(ctx)
-        state = request_apply.state_with_targets(ctx, state_from_bands(ctx.closed, bands, s, prismatic), resolved, s)
+        state = state_from_bands(ctx.closed, bands, s, prismatic)  # then every resolved target's position
+        state.update({n: ctx.closed[n].position(t.fraction) * (s if n in prismatic else 1.0) for n, t in resolved.targets.items()
+                      if t.fraction is not None})
         # ---- dynamics
         relevant = request_apply.task_relevant_joints(ctx)
         choices, _ = motion_choices(ctx, relevant)

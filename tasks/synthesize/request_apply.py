@@ -187,12 +187,6 @@ def retarget(targets: dict[str, JointTarget], old: dict, new: dict) -> dict[str,
     return out
 
 
-def state_with_targets(ctx: EstimationContext, state: dict[str, float], res: StateResolution, scale: float) -> dict[str, float]:
-    """``state`` (output units) with every resolved target's position."""
-    return {**state, **{n: ctx.closed[n].position(t.fraction) * (scale if ctx.asset.joint(n).type == "prismatic" else 1.0)
-                        for n, t in res.targets.items() if t.fraction is not None}}
-
-
 def scale_from_sizes(ctx: EstimationContext) -> tuple[float, str] | None:
     """(scale, note) of an override, else the geometric mean over the sizes in numbers of value / closed
     extent along the named dimension; None without either."""

@@ -177,13 +177,6 @@ def conservative_dynamics(joint_type: str) -> JointDynamics:
                          source="conservative default")
 
 
-def scaled_limits(asset: AssetDescription, scale: float) -> dict[str, tuple[float, float]]:
-    """Limits of movable joints in output units (prismatic x scale); continuous joints (-inf, inf)."""
-    return {j.name: (-math.inf, math.inf) if j.type == "continuous" or j.lower is None or j.upper is None
-            else (j.lower * scale, j.upper * scale) if j.type == "prismatic" else (j.lower, j.upper)
-            for j in asset.movable_joints()}
-
-
 def validate_overlay(overlay: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry] | None = None) -> tuple[Overlay, list[ValidationIssue]]:
     """(corrected copy of ``overlay``, issues) by the SPEC rules for ``asset``; ``geometry`` (link -> scale-1
     geometry) enables fills and fixes.
@@ -214,7 +207,9 @@ def validate_overlay(overlay: Overlay, asset: AssetDescription, geometry: dict[s
         else:
             _check_link(ov, ln.name, lp, geometry.get(ln.name), s, add)
     _raise_light_links(ov, add, asset, geometry)
-    limits = scaled_limits(asset, s)
+    # limits in output units (prismatic x scale); continuous joints (-inf, inf)
+    limits = {n: (-math.inf, math.inf) if j.type == "continuous" or j.lower is None or j.upper is None
+              else (j.lower * s, j.upper * s) if j.type == "prismatic" else (j.lower, j.upper) for n, j in movable.items()}
     for name, jd in movable.items():
         _check_joint(ov, name, jd.type, limits[name], add)
     if ov.initial_joint_positions is not None:
@@ -244,15 +239,16 @@ def _fill_link(ov: Overlay, ln: LinkDesc, geom: LinkGeometry | None, s: float, t
         ov.links[ln.name] = LinkPhysics(mass=mass, inertia=Inertia.from_matrix(geometry_inertia(geom, mass, s, hollow=False)),
                                         com=tuple(c * s for c in geom.com), material="unknown (conservative fill: 1000 kg/m^3 solid)",
                                         density=1000.0, hollow_fraction=1.0, source="validator fill from geometry")
-        if ln.has_geometry:
-            add("OVL_LINK_MISSING", "warning", ln.name, f"no overlay entry; filled from geometry: {mass:.4g} kg", fixed=True)
-        return
-    mass = max(1e-3 * total_known, 1e-4)
-    i = mass * 1e-4 * s**2
-    ov.links[ln.name] = LinkPhysics(mass=mass, inertia=Inertia(ixx=i, iyy=i, izz=i), com=(0.0, 0.0, 0.0),
-                                    material="none (link without geometry)", source="validator placeholder for a link without geometry")
+        why = f"no overlay entry; filled from geometry: {mass:.4g} kg"
+    else:
+        mass = max(1e-3 * total_known, 1e-4)
+        i = mass * 1e-4 * s**2
+        ov.links[ln.name] = LinkPhysics(mass=mass, inertia=Inertia(ixx=i, iyy=i, izz=i), com=(0.0, 0.0, 0.0),
+                                        material="none (link without geometry)",
+                                        source="validator placeholder for a link without geometry")
+        why = f"no overlay entry and no geometry analysis; placeholder {mass:.3g} kg"
     if ln.has_geometry:
-        add("OVL_LINK_MISSING", "warning", ln.name, f"no overlay entry and no geometry analysis; placeholder {mass:.3g} kg", fixed=True)
+        add("OVL_LINK_MISSING", "warning", ln.name, why, fixed=True)
 
 
 def _check_link(ov: Overlay, name: str, lp: LinkPhysics, geom: LinkGeometry | None, s: float, add) -> None:
