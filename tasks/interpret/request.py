@@ -138,7 +138,12 @@ def parse_request(text: str) -> RequestSpec:
     dyn_found, dyn_warn = rv.dynamics_values(low, head_starts)
     warnings += dyn_warn
     properties = _merge_properties([f.value for f in mass_found + material_found], warnings)  # type: ignore[misc]
-    mass_level = _mass_level(level_found, properties, warnings)
+    mass_level = level_found[-1].value if level_found else None  # the last mass word's; two, or one beside a number: warned
+    if len({f.value for f in level_found}) > 1:
+        warnings.append("contradiction: " + " and ".join(f"'{f.text}'" for f in level_found)
+                        + f" for the mass; '{level_found[-1].text}' is used")
+    if mass_level is not None and any(p.mass is not None and p.label is None for p in properties):
+        warnings.append(f"'{level_found[-1].text}' and a mass in numbers: the number is used")
     counts = rv.part_counts(low)
     found: list = size.hits + size.against + states.hits + sizes + vols + numbers.verbs + mass_found + material_found + level_found + dyn_found + counts
     matched += [(f.start, f.text) for f in found] + [(m.start(), m.group(0)) for m in rv.DESCRIPTOR_RX.finditer(low)]
@@ -164,16 +169,6 @@ def parse_request(text: str) -> RequestSpec:
         part_counts={str(f.value[0]): int(f.value[1]) for f in counts},  # type: ignore[index]
         ignored=groups, warnings=warnings, overridden=states.overridden, matched=in_order, unused_words=unused,
     )
-
-
-def _mass_level(level_found: list[rv.Found], properties: list[PartProperty], warnings: list[str]) -> object:
-    """The last mass word's level (None without one); two levels, or one beside a number, are warned."""
-    mass_level = level_found[-1].value if level_found else None
-    if len({f.value for f in level_found}) > 1:
-        warnings.append("contradiction: " + " and ".join(f"'{f.text}'" for f in level_found) + f" for the mass; '{level_found[-1].text}' is used")
-    if mass_level is not None and any(p.mass is not None and p.label is None for p in properties):
-        warnings.append(f"'{level_found[-1].text}' and a mass in numbers: the number is used")
-    return mass_level
 
 
 def _merge_properties(props: list[PartProperty], warnings: list[str]) -> list[PartProperty]:
