@@ -100,7 +100,7 @@ def export_usd(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: boo
 def _new_stage(model: UrdfModel):
     """An in-memory stage (z up, m, kg) and the path of its default prim
     ``/<robot>``, an Xform with the ArticulationRootAPI."""
-    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    _, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
     stage = Usd.Stage.CreateInMemory()
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
@@ -123,7 +123,7 @@ def _write_links(stage, root_path, model: UrdfModel, initial: dict[str, float], 
     """Every link as a rigid body under ``root_path``, posed at the initial
     state, with its visuals (``visuals``, their files read through ``meshes``) and collision pieces; returns URDF
     link name -> prim path."""
-    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    Tf = _pxr()[2]
     link_names = _names(model.tree_order(), Tf.MakeValidIdentifier)
     poses = model.link_poses(initial)
     link_paths: dict[str, str] = {}
@@ -141,7 +141,7 @@ def _write_body(stage, path, model: UrdfModel, name: str, pose: np.ndarray, note
     """Link ``name``'s Xform at ``pose`` (4, 4) with RigidBodyAPI, MassAPI
     (mass kg, COM m, principal moments kg*m^2 and axes) and a physics
     material when the URDF gives a lateral friction."""
-    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    Gf, Sdf, _, _, UsdGeom, UsdPhysics = _pxr()
     link = model.links[name]
     prim = _placed(UsdGeom.Xform.Define(stage, path), pose).GetPrim()
     prim.CreateAttribute("asset2sim:name", Sdf.ValueTypeNames.String, custom=True).Set(name)
@@ -169,7 +169,7 @@ def _write_joints(stage, root_path, model: UrdfModel, link_paths: dict[str, str]
     """Every URDF joint under ``/<robot>/joints`` and, for a ``fixed`` root,
     a FixedJoint from the world to the root link; returns URDF joint name ->
     prim path."""
-    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    Gf, Sdf, Tf, _, UsdGeom, UsdPhysics = _pxr()
     joint_names = _names([j.name for j in model.joints], Tf.MakeValidIdentifier)
     joints_scope = root_path.AppendChild("joints")
     UsdGeom.Scope.Define(stage, joints_scope)
@@ -217,7 +217,7 @@ def _save(stage, target: Path) -> Path:
 
 
 def _write_visuals(stage, link_path, model: UrdfModel, link: str, notes: list[str], meshes: MeshCache) -> None:
-    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    Gf, _, _, _, UsdGeom, _ = _pxr()
     scope = link_path.AppendChild("visuals")
     UsdGeom.Scope.Define(stage, scope)
     for k, v in enumerate(model.links[link].visuals):
@@ -233,10 +233,7 @@ def _write_visuals(stage, link_path, model: UrdfModel, link: str, notes: list[st
             if len(faces) == 0:
                 notes.append(f"link {link!r} visual {k} ({v.filename}) has no faces; left out")
                 continue
-            pts = _transform(verts * v.scale, v.origin)
-            mesh = UsdGeom.Mesh.Define(stage, p)
-            _set_mesh(mesh, pts, faces)
-            mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+            mesh = _mesh(stage, p, _transform(verts * v.scale, v.origin), faces)
             mesh.CreateDoubleSidedAttr(True)
         else:
             mesh = _primitive(stage, p, v.kind, v.size, v.radius, v.length, v.origin)
@@ -247,18 +244,21 @@ def _write_visuals(stage, link_path, model: UrdfModel, link: str, notes: list[st
             mesh.CreateDisplayColorAttr([Gf.Vec3f(*map(float, rgba[:3]))])
 
 
-def _set_mesh(mesh, points: np.ndarray, triangles: np.ndarray) -> None:
-    """Points (k, 3) m and triangles (m, 3) of a UsdGeom.Mesh (binary32 points)."""
-    from pxr import Vt
+def _mesh(stage, path, points: np.ndarray, triangles: np.ndarray):
+    """A UsdGeom.Mesh at ``path`` of points (k, 3) m (binary32) and triangles (m, 3), not subdivided."""
+    from pxr import UsdGeom, Vt
 
+    mesh = UsdGeom.Mesh.Define(stage, path)
     mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(points, np.float32)))
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(triangles), 3, np.int32)))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(triangles, np.int32).ravel()))
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    return mesh
 
 
 def _primitive(stage, path, kind: str, size, radius, length, origin: np.ndarray):
     """A box / sphere / cylinder prim (UsdGeom Cube / Sphere / Cylinder along z) at ``origin`` (4, 4)."""
-    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    Gf, _, _, _, UsdGeom, _ = _pxr()
     if kind == "box":
         g = UsdGeom.Cube.Define(stage, path)
         g.CreateSizeAttr(1.0)
@@ -279,16 +279,13 @@ def _primitive(stage, path, kind: str, size, radius, length, origin: np.ndarray)
 
 
 def _write_collisions(stage, link_path, pieces: list[CollisionPiece]) -> None:
-    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    _, _, _, _, UsdGeom, UsdPhysics = _pxr()
     scope = link_path.AppendChild("collisions")
     UsdGeom.Scope.Define(stage, scope)
     for k, piece in enumerate(pieces):
         p = scope.AppendChild(f"piece_{k}")
         if piece.kind == "hull":
-            verts, tris = convex_hull_mesh(_transform(piece.points, piece.origin))
-            g = UsdGeom.Mesh.Define(stage, p)
-            _set_mesh(g, verts, tris)
-            g.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+            g = _mesh(stage, p, *convex_hull_mesh(_transform(piece.points, piece.origin)))
             UsdPhysics.CollisionAPI.Apply(g.GetPrim())
             UsdPhysics.MeshCollisionAPI.Apply(g.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.convexHull)
         else:
@@ -300,14 +297,10 @@ def _write_collisions(stage, link_path, pieces: list[CollisionPiece]) -> None:
 
 
 def _write_joint(stage, path, j: UrdfJoint, link_paths: dict[str, str], initial: dict[str, float], spring) -> None:
-    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    Gf, Sdf, _, _, _, UsdPhysics = _pxr()
     rot = j.type in ("revolute", "continuous")
-    if rot:
-        joint = UsdPhysics.RevoluteJoint.Define(stage, path)
-    elif j.type == "prismatic":
-        joint = UsdPhysics.PrismaticJoint.Define(stage, path)
-    else:
-        joint = UsdPhysics.FixedJoint.Define(stage, path)
+    kind = UsdPhysics.RevoluteJoint if rot else UsdPhysics.PrismaticJoint if j.type == "prismatic" else UsdPhysics.FixedJoint
+    joint = kind.Define(stage, path)
     joint.CreateBody0Rel().SetTargets([Sdf.Path(link_paths[j.parent])])
     joint.CreateBody1Rel().SetTargets([Sdf.Path(link_paths[j.child])])
     prim = joint.GetPrim()
@@ -326,8 +319,7 @@ def _write_joint(stage, path, j: UrdfJoint, link_paths: dict[str, str], initial:
         joint.CreateLowerLimitAttr(float(j.lower * unit))
         joint.CreateUpperLimitAttr(float(j.upper * unit))
     dof = "angular" if rot else "linear"
-    k = spring.stiffness if spring is not None else 0.0
-    ref = spring.reference if spring is not None else 0.0
+    k, ref = (spring.stiffness, spring.reference) if spring is not None else (0.0, 0.0)
     if j.damping > 0 or k > 0:
         drive = UsdPhysics.DriveAPI.Apply(prim, dof)
         drive.CreateTypeAttr(UsdPhysics.Tokens.force)

@@ -140,7 +140,7 @@ def read_usd_asset(path: Path | str) -> ReadAsset:
 def _collect(ctx: StageReading) -> tuple[list, list[_Joint]]:
     """The rigid bodies to read (under the articulation root, or all, and those jointed to them) and the joints
     touching them."""
-    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
+    _, _, _, Usd, _, UsdPhysics = pxr_modules()
     prims = list(ctx.stage.Traverse(Usd.TraverseInstanceProxies()))
     roots = [p for p in prims if p.HasAPI(UsdPhysics.ArticulationRootAPI)]
     if len(roots) > 1:
@@ -168,7 +168,7 @@ def _collect(ctx: StageReading) -> tuple[list, list[_Joint]]:
 
 def _read_joint(ctx: StageReading, prim) -> _Joint | None:
     """A joint prim's kind, bodies and frame prims (None for a disabled joint, noted)."""
-    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
+    UsdPhysics = pxr_modules()[5]
     api = UsdPhysics.Joint(prim)
     kinds = ((UsdPhysics.RevoluteJoint, "revolute"), (UsdPhysics.PrismaticJoint, "prismatic"), (UsdPhysics.FixedJoint, "fixed"))
     j = _Joint(prim, _name(prim), next((k for t, k in kinds if prim.IsA(t)), None))
@@ -237,7 +237,7 @@ def _tree(ctx: StageReading, bodies: list, joints: list[_Joint]) -> tuple[dict, 
 
 def _joint_frame(ctx: StageReading, j: _Joint, side: int) -> np.ndarray:
     """The joint frame (4, 4) in the world (m, Z up) of ``localPos<side>`` / ``localRot<side>``."""
-    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
+    UsdPhysics = pxr_modules()[5]
     api = UsdPhysics.Joint(j.prim)
     pos = np.array((api.GetLocalPos1Attr() if side else api.GetLocalPos0Attr()).Get(), float)
     rot = ctx.u @ _quat((api.GetLocalRot1Attr() if side else api.GetLocalRot0Attr()).Get()) @ ctx.u.T
@@ -248,7 +248,7 @@ def _joint_frame(ctx: StageReading, j: _Joint, side: int) -> np.ndarray:
 def _joint(ctx: StageReading, j: _Joint, parent_frame: np.ndarray, key: dict) -> tuple[np.ndarray, UrdfJoint, DeclaredSpring | None]:
     """The child's link frame (4, 4, world), the URDF joint (origin in the parent link frame ``parent_frame``,
     axis in the child's) and the declared spring."""
-    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
+    UsdPhysics = pxr_modules()[5]
     j0, j1 = _joint_frame(ctx, j, 0), _joint_frame(ctx, j, 1)
     child = rigid_matrix(ctx.frame(j.body1)[:3, :3], j1[:3, 3])
     turn = j1[:3, :3].T @ child[:3, :3]  # joint frame -> child link axes
@@ -271,7 +271,7 @@ def _joint(ctx: StageReading, j: _Joint, parent_frame: np.ndarray, key: dict) ->
 
 def _limits(ctx: StageReading, j: _Joint) -> tuple[str, UrdfLimit | None]:
     """URDF type (revolute / continuous / prismatic) and limits (rad or m; velocity rad/s or m/s)."""
-    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
+    UsdPhysics = pxr_modules()[5]
     rot = j.kind == "revolute"
     api = UsdPhysics.RevoluteJoint(j.prim) if rot else UsdPhysics.PrismaticJoint(j.prim)
     unit = 1.0 / DEG if rot else ctx.m
@@ -290,7 +290,7 @@ def _limits(ctx: StageReading, j: _Joint) -> tuple[str, UrdfLimit | None]:
 
 def _dynamics(ctx: StageReading, j: _Joint) -> tuple[UrdfDynamics | None, DeclaredSpring | None, float | None]:
     """Damping and friction, the spring (stiffness > 0) and the effort limit (N*m or N) of a movable joint, in SI."""
-    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
+    UsdPhysics = pxr_modules()[5]
     rot = j.kind == "revolute"
     dof = "angular" if rot else "linear"
     force = ctx.kg * ctx.m * (ctx.m if rot else 1.0)  # stage unit of torque or force -> N*m or N

@@ -98,7 +98,7 @@ def open_layers(path: Path | str) -> list:
             socket), ``INPUT_TOO_LARGE``, ``INPUT_OUTSIDE_TREE`` (the file given a symlink out of its folder),
             ``INPUT_UNREADABLE``; without a code when pxr cannot read a layer.
     """
-    _, Sdf, _, _, _, _ = pxr_modules()
+    Sdf = pxr_modules()[1]
     path = Path(os.path.abspath(str(path)))
     root = str(input_tree(path))
 
@@ -218,7 +218,7 @@ def link_geometry(ctx: StageReading, body, link: UrdfLink, inverse: np.ndarray) 
 
 def _color(prim) -> UrdfMaterial | None:
     """rgba (4,) of the first displayColor / displayOpacity values, None when no colour is authored."""
-    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
+    UsdGeom = pxr_modules()[4]
     gp = UsdGeom.Gprim(prim)
     color = gp.GetDisplayColorPrimvar().Get() if gp.GetDisplayColorPrimvar().HasAuthoredValue() else None
     if not color:
@@ -229,7 +229,7 @@ def _color(prim) -> UrdfMaterial | None:
 
 def _shape(ctx: StageReading, prim, link: str, to_link: np.ndarray) -> UrdfGeometry | None:
     """The geometry of a Gprim whose local coordinates (stage units) ``to_link`` (4, 4) maps to the link frame (m)."""
-    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
+    UsdGeom = pxr_modules()[4]
     import trimesh
 
     if prim.IsA(UsdGeom.Mesh):
@@ -280,7 +280,7 @@ def _exact(m: np.ndarray, kind: str, size: np.ndarray) -> UrdfGeometry | None:
 
 def _mesh(ctx: StageReading, prim, link: str, to_link: np.ndarray) -> UrdfGeometry | None:
     """A UsdGeom.Mesh, fan-triangulated, its points mapped to the link frame (m) by ``to_link`` (4, 4)."""
-    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
+    UsdGeom = pxr_modules()[4]
     mesh = UsdGeom.Mesh(prim)
     attrs = (mesh.GetPointsAttr(), mesh.GetFaceVertexCountsAttr(), mesh.GetFaceVertexIndicesAttr())
     points, counts, idx = (a.Get() for a in attrs)
