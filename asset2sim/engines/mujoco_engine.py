@@ -164,13 +164,9 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
         """``mj_geomDistance`` of every pair of the links' colliding geoms."""
         mj = self._mj
         mj.mj_kinematics(self.m, self.d)
-        out = []
-        for ga in self._geoms[link_a]:
-            for gb in self._geoms[link_b]:
-                dist = float(mj.mj_geomDistance(self.m, self.d, ga, gb, max_distance, None))
-                if dist < max_distance:
-                    out.append(dist)
-        return out
+        dists = (float(mj.mj_geomDistance(self.m, self.d, ga, gb, max_distance, None))
+                 for ga in self._geoms[link_a] for gb in self._geoms[link_b])
+        return [d for d in dists if d < max_distance]
 
     def apply_link_force(self, link: str, force, point) -> None:
         """As force + torque about the body's COM (``xfrc_applied``)."""

@@ -461,27 +461,21 @@ def held_physics_of_usd(path: Path, links: list[str] | None = None, joints: list
 
     wp, newton = import_newton()
     stage = Usd.Stage.Open(str(path))
-    names = {}
-    for prim in stage.Traverse():
-        a = prim.GetAttribute("asset2sim:name")
-        if a and a.HasAuthoredValue():
-            names[str(prim.GetPath())] = str(a.Get())
+    names = {str(prim.GetPath()): str(a.Get()) for prim in stage.Traverse()
+             if (a := prim.GetAttribute("asset2sim:name")) and a.HasAuthoredValue()}
     b = newton.ModelBuilder()
     b.add_usd(str(path))
     model = b.finalize(device="cpu")
-    bodies = {}
-    for i, lab in enumerate(b.body_label):
-        if lab not in names:
-            raise ValueError(f"{path}: Newton body {lab!r} has no asset2sim:name")
-        bodies[names[lab]] = i
+
+    def urdf_name(label: str, what: str) -> str:
+        if label not in names:
+            raise ValueError(f"{path}: Newton {what} {label!r} has no asset2sim:name")
+        return names[label]
+
+    bodies = {urdf_name(lab, "body"): i for i, lab in enumerate(b.body_label)}
     qs, ds, jt = model.joint_q_start.numpy(), model.joint_qd_start.numpy(), model.joint_type.numpy()
     movable = {int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC)}
-    dofs = {}
-    for i, lab in enumerate(b.joint_label):
-        if int(jt[i]) in movable:
-            if lab not in names:
-                raise ValueError(f"{path}: Newton joint {lab!r} has no asset2sim:name")
-            dofs[names[lab]] = (int(qs[i]), int(ds[i]))
+    dofs = {urdf_name(lab, "joint"): (int(qs[i]), int(ds[i])) for i, lab in enumerate(b.joint_label) if int(jt[i]) in movable}
     return held_physics_of_model(model, model.joint_q.numpy(), bodies, dofs, source=f"usd ({Path(path).name}, add_usd)")
 
 

@@ -129,11 +129,8 @@ class OvPhysxSession(SessionDefaults):
         self._set_joint_tables(self.urdf)
         self.link_names = list(self.urdf.tree_order())
         usd_stage = Usd.Stage.Open(str(self.usd))
-        prim_of_joint: dict[str, str] = {}
-        for prim in usd_stage.Traverse():
-            name = prim.GetAttribute("asset2sim:name")
-            if name and name.HasAuthoredValue():
-                prim_of_joint[prim.GetName()] = str(name.Get())
+        prim_of_joint = {prim.GetName(): str(name.Get()) for prim in usd_stage.Traverse()
+                         if (name := prim.GetAttribute("asset2sim:name")) and name.HasAuthoredValue()}
         links = {Tf.MakeValidIdentifier(n): n for n in self.link_names}
         root_prim = next((k for k, v in links.items() if v == self.urdf.root), self.urdf.root)
         state = {**{j: 0.0 for j in self.joint_names}, **options.initial_state}
@@ -184,9 +181,7 @@ class OvPhysxSession(SessionDefaults):
         """+1 or -1: PhysX's DOF coordinate along the URDF joint's (the export turns each joint frame so its axis is
         x; the sign is read from the lower limit PhysX holds against the file's; +1 for limits symmetric about 0 or
         none, which the export's frames give on every dev row: each initial state reads back as written)."""
-        lim = np.zeros(self._limits.shape, np.float32)
-        self._limits.read(lim)
-        lo = float(lim[0, self._dof[joint], 0])
+        lo = float(self._read(self._limits)[0, self._dof[joint], 0])
         want_lo, want_hi = self.joint_limits[joint]
         if not (math.isfinite(want_lo) and math.isfinite(want_hi)) or abs(want_lo + want_hi) < 1e-6:
             return 1.0
@@ -232,14 +227,15 @@ class OvPhysxSession(SessionDefaults):
         self._applied = True
 
     def save_state(self) -> int:
-        return self._keep_state((self._read(self._q), self._read(self._qd), self._read(self._root), self._read(self._root_v)))
+        return self._keep_state(tuple(self._read(b) for b in self._saved()))
 
     def restore_state(self, handle: int) -> None:
-        q, qd, root, root_v = self._states[handle]
-        self._q.write(q)
-        self._qd.write(qd)
-        self._root.write(root)
-        self._root_v.write(root_v)
+        for binding, values in zip(self._saved(), self._states[handle]):
+            binding.write(values)
+
+    def _saved(self) -> tuple:
+        """The bindings a snapshot holds: DOF positions and velocities, root pose and velocity."""
+        return self._q, self._qd, self._root, self._root_v
 
     def step(self, n: int = 1) -> None:
         spend(n)  # the refine's one budget of steps (asset2sim.engines.step_budget)

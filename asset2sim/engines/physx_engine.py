@@ -288,28 +288,19 @@ class PhysXSession(ArrayJoints, SessionDefaults):
 
     def link_collision_vertices(self, link: str) -> np.ndarray:
         """Vertices (k, 3) m of the link's cooked convex meshes, link frame."""
-        out = []
-        for shape in self.links[link].get_collision_shapes():
-            if isinstance(shape, physx.PhysxCollisionShapeConvexMesh):
-                out.append(_hull_vertices(shape, shape.get_local_pose().to_transformation_matrix()))
+        out = [_hull_vertices(shape, shape.get_local_pose().to_transformation_matrix())
+               for shape in self.links[link].get_collision_shapes() if isinstance(shape, physx.PhysxCollisionShapeConvexMesh)]
         return np.concatenate(out) if out else np.zeros((0, 3))
 
     def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of the cooked hull vertices (PhysX's tight box for primitives)."""
         comp = self.links[link]
-        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
         v = self.link_collision_vertices(link)
-        if len(v):
-            pos, R = self.link_frame(link)
-            w = v @ R.T + pos
-            lo, hi = w.min(axis=0), w.max(axis=0)
+        lo, hi = self._world_bounds(link, v) if len(v) else (np.full(3, np.inf), np.full(3, -np.inf))
         if any(not isinstance(sh, physx.PhysxCollisionShapeConvexMesh) for sh in comp.get_collision_shapes()):
             box = comp.compute_global_aabb_tight()
             lo, hi = np.minimum(lo, np.asarray(box[0], float)), np.maximum(hi, np.asarray(box[1], float))
-        if not np.all(np.isfinite(lo)):
-            pos, _ = self.link_frame(link)
-            return pos.copy(), pos.copy()
-        return lo, hi
+        return (lo, hi) if np.all(np.isfinite(lo)) else self._world_bounds(link, v)
 
     def link_has_collision(self, link: str) -> bool:
         return bool(self.links[link].get_collision_shapes())
@@ -442,10 +433,8 @@ class PhysXSession(ArrayJoints, SessionDefaults):
 
     def held_physics(self) -> HeldPhysics:
         """Links and joints from PhysX's getters; friction is the drive's force limit at rest."""
-        links = {}
-        for name, comp in self.links.items():
-            links[name] = HeldLink(mass=float(comp.get_mass()), com=np.array(comp.get_cmass_local_pose().p, float),
-                                   principal=np.sort(np.array(comp.get_inertia(), float)))
+        links = {name: HeldLink(mass=float(comp.get_mass()), com=np.array(comp.get_cmass_local_pose().p, float),
+                                principal=np.sort(np.array(comp.get_inertia(), float))) for name, comp in self.links.items()}
         q = self.art.get_qpos()
         joints = {}
         coeff = []
@@ -474,9 +463,7 @@ class PhysXSession(ArrayJoints, SessionDefaults):
                 for ent in [*getattr(self, "_entities", []), getattr(self, "_ground_entity", None)]:
                     if ent is not None:
                         self.scene.remove_entity(ent)
-            self.scene = None
-            self.system = None
-            self.art = None
+            self.scene = self.system = self.art = None
             self.links = {}
 
 

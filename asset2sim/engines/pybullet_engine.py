@@ -61,7 +61,6 @@ class PyBulletSession(SessionDefaults):
         self._teleported = False  # a teleport since the last contact detection (:meth:`_forget_contacts`)
         self._index: dict[str, int] = {}
         self._friction: dict[str, float] = {}
-        self.joint_names: list[str] = []
         self.joint_types: dict[str, str] = {}
         self.joint_limits: dict[str, tuple[float, float]] = {}
         self.joint_child: dict[str, str] = {}
@@ -74,13 +73,13 @@ class PyBulletSession(SessionDefaults):
             lo, hi = float(info[8]), float(info[9])
             if lo > hi:  # continuous joint: Bullet reports lower=0, upper=-1
                 jtype, lo, hi = "continuous", -np.inf, np.inf
-            self.joint_names.append(name)
             self._index[name] = j
             self.joint_types[name] = jtype
             self.joint_limits[name] = (lo, hi)
             self.joint_child[name] = info[12].decode()
             self._friction[name] = float(info[7])
             self._motor(name, 0.0, float(info[7]))  # Coulomb friction
+        self.joint_names = list(self._index)
         self.link_names: list[str] = list(self._link_by_index.values())
         self._link_index = {name: idx for idx, name in reversed(list(self._link_by_index.items()))}
         # step 4: the initial state, the object placed on the ground
@@ -182,10 +181,8 @@ class PyBulletSession(SessionDefaults):
             with quiet_stdout():
                 n, verts = self._p.getMeshData(self.body, self.link_index(link), physicsClientId=self.cid)
         except Exception:
-            return np.zeros((0, 3))
-        if not n:
-            return np.zeros((0, 3))
-        return np.asarray(verts, float)
+            n = 0
+        return np.asarray(verts, float) if n else np.zeros((0, 3))
 
     def link_masses(self) -> dict[str, float]:
         p = self._p
@@ -253,10 +250,8 @@ class PyBulletSession(SessionDefaults):
             parent = {j: info[16] for j, info in enumerate(joint_infos(p, self.body, self.cid))}
             cache = [(a, b) for a in with_shape for b in with_shape if a < b and parent.get(b) != a and parent.get(a) != b]
             self._pairs_cache = cache
-        points = []
-        for a, b in cache:
-            points.extend(p.getClosestPoints(self.body, self.body, 0.0, a, b, physicsClientId=self.cid))
-        return self._penetration_of(points)
+        return self._penetration_of([pt for a, b in cache
+                                     for pt in p.getClosestPoints(self.body, self.body, 0.0, a, b, physicsClientId=self.cid)])
 
     def ground_penetration(self, detect: bool = True) -> float:
         if self.plane is None:

@@ -203,6 +203,10 @@ class UrdfMimic(_ArrayEq):
     offset: float | None = None
 
 
+def _or_zero(value: float | None) -> float:
+    return 0.0 if value is None else float(value)
+
+
 @dataclass(eq=False)
 class UrdfJoint(_ArrayEq):
     """A joint as written: ``origin`` (4, 4) child frame in the parent frame,
@@ -232,28 +236,28 @@ class UrdfJoint(_ArrayEq):
     @property
     def lower(self) -> float:
         """Lower limit, rad or m (-inf without a range)."""
-        if self.type in ("revolute", "prismatic") and self.limit is not None:
-            return 0.0 if self.limit.lower is None else float(self.limit.lower)
-        return -math.inf
+        return self._limit("lower", -math.inf)
 
     @property
     def upper(self) -> float:
         """Upper limit, rad or m (+inf without a range)."""
+        return self._limit("upper", math.inf)
+
+    def _limit(self, key: str, unlimited: float) -> float:
+        """``limit.<key>`` of a revolute or prismatic joint with a ``<limit>`` (0 when not written), else ``unlimited``."""
         if self.type in ("revolute", "prismatic") and self.limit is not None:
-            return 0.0 if self.limit.upper is None else float(self.limit.upper)
-        return math.inf
+            return _or_zero(getattr(self.limit, key))
+        return unlimited
 
     @property
     def damping(self) -> float:
         """Viscous damping, N*m*s/rad or N*s/m (0 when not written)."""
-        d = self.dynamics
-        return 0.0 if d is None or d.damping is None else float(d.damping)
+        return _or_zero(getattr(self.dynamics, "damping", None))
 
     @property
     def friction(self) -> float:
         """Coulomb friction, N*m or N (0 when not written)."""
-        d = self.dynamics
-        return 0.0 if d is None or d.friction is None else float(d.friction)
+        return _or_zero(getattr(self.dynamics, "friction", None))
 
 
 @dataclass(eq=False)

@@ -100,21 +100,15 @@ def set_options(root, conv: SimConventions, gravity: bool, meshdir: str) -> None
                  ("balanceinertia", "false"), ("boundmass", "0"), ("boundinertia", "0"), ("fusestatic", "false"),
                  ("discardvisual", "false")):
         comp.set(k, v)
-    root.remove(comp)
-    root.insert(0, comp)
-    opt = etree.Element("option")
-    for k, v in (("timestep", num_text(conv.timestep)), ("gravity", f"0 0 {num_text(conv.gravity if gravity else 0.0)}"),
-                 ("integrator", "implicitfast"), ("cone", CONE)):
-        opt.set(k, v)
-    for old in root.findall("option"):
-        root.remove(old)
-    root.insert(1, opt)
     default = etree.Element("default")
     etree.SubElement(default, "geom", condim="3", friction=f"{num_text(BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION)} 0.005 0.0001")
     etree.SubElement(default, "joint", armature="0")
-    for old in root.findall("default"):
-        root.remove(old)
-    root.insert(2, default)
+    opt = etree.Element("option", timestep=num_text(conv.timestep), gravity=f"0 0 {num_text(conv.gravity if gravity else 0.0)}",
+                        integrator="implicitfast", cone=CONE)
+    for i, el in enumerate((comp, opt, default)):
+        for old in root.findall(el.tag):
+            root.remove(old)
+        root.insert(i, el)
 
 
 def rename_meshes(root, virtual: dict[str, tuple[str, np.ndarray | None]], urdf_path: Path) -> tuple[dict[str, str], set[str]]:

@@ -185,11 +185,8 @@ class _Gather:
 
     def run(self) -> MjcfSources:
         self.document(self.main, "model file", 0, (self.main,))
-        dirs = {}
-        for attr in ("meshdir", "texturedir", "assetdir"):
-            if attr in self.compiler:
-                value = self.compiler[attr]
-                dirs[attr] = _resolve(value, self.main_dir, self.tree, self.path, f"<compiler {attr}>") if value else self.main_dir
+        dirs = {attr: _resolve(value, self.main_dir, self.tree, self.path, f"<compiler {attr}>") if value else self.main_dir
+                for attr in ("meshdir", "texturedir", "assetdir") if (value := self.compiler.get(attr)) is not None}
         meshdir = dirs.get("meshdir", dirs.get("assetdir", self.main_dir))
         texdir = dirs.get("texturedir", dirs.get("assetdir", self.main_dir))
         built_bytes = built_faces = 0

@@ -83,11 +83,9 @@ class HostExport:
 
 def _names(m, mujoco) -> dict[str, list[str]]:
     """Names of the compiled model's bodies, joints, geoms and sites (sorted; unnamed ones left out)."""
-    out = {}
-    for kind, obj, n in (("body", mujoco.mjtObj.mjOBJ_BODY, m.nbody), ("joint", mujoco.mjtObj.mjOBJ_JOINT, m.njnt),
-                         ("geom", mujoco.mjtObj.mjOBJ_GEOM, m.ngeom), ("site", mujoco.mjtObj.mjOBJ_SITE, m.nsite)):
-        out[kind] = sorted(x for i in range(n) if (x := mujoco.mj_id2name(m, obj, i)))
-    return out
+    return {kind: sorted(x for i in range(n) if (x := mujoco.mj_id2name(m, obj, i)))
+            for kind, obj, n in (("body", mujoco.mjtObj.mjOBJ_BODY, m.nbody), ("joint", mujoco.mjtObj.mjOBJ_JOINT, m.njnt),
+                                 ("geom", mujoco.mjtObj.mjOBJ_GEOM, m.ngeom), ("site", mujoco.mjtObj.mjOBJ_SITE, m.nsite))}
 
 
 def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOptions | None = None, *,

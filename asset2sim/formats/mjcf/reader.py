@@ -37,6 +37,7 @@ Conventions (MJCF -> URDF):
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -234,7 +235,7 @@ class _Reader:
             r = quat_wxyz_matrix(m.body_iquat[b])
             tensor = r @ np.diag(m.body_inertia[b]) @ r.T
             rot = to_link[:3, :3]
-            com = to_link[:3, :3] @ m.body_ipos[b] + to_link[:3, 3]
+            com = rot @ m.body_ipos[b] + to_link[:3, 3]
             compiled = UrdfInertial(mass=float(m.body_mass[b]), origin=translation_matrix(com), inertia=rot @ tensor @ rot.T)
             if self.explicit.get(name, False):
                 inertial = compiled
@@ -317,16 +318,15 @@ class _Reader:
         kind, size = int(m.geom_type[g]), np.asarray(m.geom_size[g], float)
         name = m.geom(g).name or None
         rgba = np.asarray(m.mat_rgba[m.geom_matid[g]] if m.geom_matid[g] >= 0 else m.geom_rgba[g], float)
-        mat = rgba_material(rgba)
+        shape = partial(UrdfGeometry, origin=origin, name=name, material=rgba_material(rgba))
         if kind == T.mjGEOM_BOX:
-            return UrdfGeometry(kind="box", origin=origin, name=name, size=2.0 * size, material=mat)
+            return shape(kind="box", size=2.0 * size)
         if kind == T.mjGEOM_SPHERE:
-            return UrdfGeometry(kind="sphere", origin=origin, name=name, radius=float(size[0]), material=mat)
+            return shape(kind="sphere", radius=float(size[0]))
         if kind == T.mjGEOM_CYLINDER:
-            return UrdfGeometry(kind="cylinder", origin=origin, name=name, radius=float(size[0]), length=2.0 * float(size[1]), material=mat)
+            return shape(kind="cylinder", radius=float(size[0]), length=2.0 * float(size[1]))
         if kind in (T.mjGEOM_MESH, T.mjGEOM_CAPSULE, T.mjGEOM_ELLIPSOID):
-            fname = self._mesh_file(g, kind, size)
-            return UrdfGeometry(kind="mesh", origin=origin, name=name, filename=fname, material=mat)
+            return shape(kind="mesh", filename=self._mesh_file(g, kind, size))
         self.notes.append(f"geom {name or g} of body {self.body_name(int(m.geom_bodyid[g]))!r}: type "
                           f"{T(kind).name.removeprefix('mjGEOM_').lower()} has no URDF geometry; left out")
         return None
