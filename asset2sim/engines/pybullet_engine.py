@@ -13,7 +13,7 @@ from asset2sim.engines.base import (ContactPair, EngineTraits, HeldJoint, HeldLi
                                     penetration_sum, register_engine, register_shape_world, register_viewer)
 from asset2sim.engines import pybullet_clients
 from asset2sim.engines.pybullet_worlds import (
-    BULLET_JOINT_TYPES, PyBulletShapeWorld, PyBulletViewer, body_link_frame, bullet, joint_infos,
+    BULLET_JOINT_TYPES, BoundClient, PyBulletShapeWorld, PyBulletViewer, body_link_frame, bullet, joint_infos,
 )
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.step_budget import spend
@@ -29,20 +29,20 @@ class PyBulletSession(SessionDefaults):
     traits = EngineTraits(reference=True, conservative_aabb=True, springs_by_torque=True, incremental_penetration=True)
 
     def __init__(self, urdf_path: Path, options: SessionOptions, client: int | None = None, ground: bool = True):
-        p = bullet()
-        self._p = p
+        p = self._bullet = bullet()
         self.options = options
         self._root_hold: int | None = None  # hold_root's constraint
         conv = options.conventions
         # step 1: a physics client (taken from the pool, or the caller's)
         self._owns_client = client is None
         self.cid = pybullet_clients.take(p, options.files_key) if client is None else int(client)
+        self._p = p = BoundClient(p, self.cid)
         self.body = None
         # step 2: time step, gravity, the ground plane; load the URDF without its visual shapes
         try:
             if self._owns_client:
-                p.setTimeStep(conv.timestep, physicsClientId=self.cid)
-                p.setGravity(0, 0, conv.gravity if options.gravity else 0.0, physicsClientId=self.cid)
+                p.setTimeStep(conv.timestep)
+                p.setGravity(0, 0, conv.gravity if options.gravity else 0.0)
             self.plane = None
             if options.ground and ground:
                 self.plane = self._add_plane()
@@ -50,12 +50,12 @@ class PyBulletSession(SessionDefaults):
             flags = (p.URDF_USE_SELF_COLLISION | p.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT | p.URDF_USE_INERTIA_FROM_FILE
                      | p.URDF_IGNORE_VISUAL_SHAPES)
             with quiet_stdout():
-                self.body = p.loadURDF(str(urdf_path), useFixedBase=options.fixed_base, flags=flags, physicsClientId=self.cid)
+                self.body = p.loadURDF(str(urdf_path), useFixedBase=options.fixed_base, flags=flags)
         except Exception as exc:
             self._release()
             raise RuntimeError(f"PyBullet could not load {urdf_path}: {exc}") from exc
         # step 3: the movable joints, their limits and child links; each joint's Coulomb friction as a motor
-        self.base_link = p.getBodyInfo(self.body, physicsClientId=self.cid)[0].decode()
+        self.base_link = p.getBodyInfo(self.body)[0].decode()
         self._link_by_index: dict[int, str] = {-1: self.base_link}
         self._has_collision: dict[int, bool] = {}
         self._teleported = False  # a teleport since the last contact detection (:meth:`_forget_contacts`)
@@ -90,15 +90,15 @@ class PyBulletSession(SessionDefaults):
                 try:
                     self.place_on_ground()
                 finally:
-                    p.removeBody(self.plane, physicsClientId=self.cid)
+                    p.removeBody(self.plane)
                     self.plane = None
             else:
                 self.place_on_ground()
 
     def _add_plane(self) -> int:
         p = self._p
-        shape = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=self.cid)
-        return p.createMultiBody(0, shape, physicsClientId=self.cid)
+        shape = p.createCollisionShape(p.GEOM_PLANE)
+        return p.createMultiBody(0, shape)
 
     # ------------------------------------------------------------------ state
     def set_joint_positions(self, q: dict[str, float]) -> None:
@@ -107,10 +107,10 @@ class PyBulletSession(SessionDefaults):
         for nothing (a keyboard's 108 keys: 108 passes over 109 links)."""
         p = self._p
         named = [(self._index[n], float(v)) for n, v in q.items() if n in self._index]
-        now = p.getJointStates(self.body, [j for j, _ in named], physicsClientId=self.cid) if len(named) > 1 else None
+        now = p.getJointStates(self.body, [j for j, _ in named]) if len(named) > 1 else None
         for k, (j, value) in enumerate(named):
             if now is None or now[k][0] != value or now[k][1] != 0.0:
-                p.resetJointState(self.body, j, value, 0.0, physicsClientId=self.cid)
+                p.resetJointState(self.body, j, value, 0.0)
         self._teleported = True
 
     def _forget_contacts(self) -> None:
@@ -131,14 +131,14 @@ class PyBulletSession(SessionDefaults):
         for i, link in self._link_by_index.items():
             if self.link_has_collision(link):
                 static = i == -1 and self.options.fixed_base
-                self._p.setCollisionFilterGroupMask(self.body, i, 2 if static else 1, -1 ^ 2 if static else -1, physicsClientId=self.cid)
+                self._p.setCollisionFilterGroupMask(self.body, i, 2 if static else 1, -1 ^ 2 if static else -1)
         self._teleported = False
 
     def _joint_field(self, k: int) -> dict[str, float]:
         """Field ``k`` (0 position, 1 velocity) of every movable joint's state."""
         if not self._index:
             return {}
-        states = self._p.getJointStates(self.body, list(self._index.values()), physicsClientId=self.cid)
+        states = self._p.getJointStates(self.body, list(self._index.values()))
         return {name: float(s[k]) for name, s in zip(self._index, states)}
 
     def joint_positions(self) -> dict[str, float]:
@@ -148,30 +148,30 @@ class PyBulletSession(SessionDefaults):
         return self._joint_field(1)
 
     def joint_state(self, joint: str) -> tuple[float, float]:
-        s = self._p.getJointState(self.body, self._index[joint], physicsClientId=self.cid)
+        s = self._p.getJointState(self.body, self._index[joint])
         return float(s[0]), float(s[1])
 
     def joint_axis(self, joint: str) -> np.ndarray:
         # getJointInfo's axis is in the child's local inertial frame, which Bullet
         # turns to the principal axes of a non-diagonal inertia tensor: back to the link frame.
         idx = self._index[joint]
-        info = self._p.getJointInfo(self.body, idx, physicsClientId=self.cid)
-        orn = self._p.getDynamicsInfo(self.body, idx, physicsClientId=self.cid)[4]
+        info = self._p.getJointInfo(self.body, idx)
+        orn = self._p.getDynamicsInfo(self.body, idx)[4]
         R = np.array(self._p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
         return R @ np.array(info[13], float)
 
     # ------------------------------------------------------------------ links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        return body_link_frame(self._p, self.body, self.link_index(link), self.cid)
+        return body_link_frame(self._bullet, self.body, self.link_index(link), self.cid)
 
     def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        lo, hi = self._p.getAABB(self.body, self.link_index(link), physicsClientId=self.cid)
+        lo, hi = self._p.getAABB(self.body, self.link_index(link))
         return np.array(lo, float), np.array(hi, float)
 
     def link_has_collision(self, link: str) -> bool:
         idx = self.link_index(link)
         if idx not in self._has_collision:
-            self._has_collision[idx] = bool(self._p.getCollisionShapeData(self.body, idx, physicsClientId=self.cid))
+            self._has_collision[idx] = bool(self._p.getCollisionShapeData(self.body, idx))
         return self._has_collision[idx]
 
     def link_collision_vertices(self, link: str) -> np.ndarray:
@@ -179,32 +179,31 @@ class PyBulletSession(SessionDefaults):
         stdout for each primitive shape (box, capsule) it has no mesh of: kept out of the product's output."""
         try:
             with quiet_stdout():
-                n, verts = self._p.getMeshData(self.body, self.link_index(link), physicsClientId=self.cid)
+                n, verts = self._p.getMeshData(self.body, self.link_index(link))
         except Exception:
             n = 0
         return np.asarray(verts, float) if n else np.zeros((0, 3))
 
     def link_masses(self) -> dict[str, float]:
         p = self._p
-        return {name: float(p.getDynamicsInfo(self.body, idx, physicsClientId=self.cid)[0]) for idx, name in self._link_by_index.items()}
+        return {name: float(p.getDynamicsInfo(self.body, idx)[0]) for idx, name in self._link_by_index.items()}
 
     def link_distances(self, link_a: str, link_b: str, max_distance: float = 0.0) -> list[float]:
-        pts = self._p.getClosestPoints(self.body, self.body, max_distance, self.link_index(link_a), self.link_index(link_b),
-                                       physicsClientId=self.cid)
+        pts = self._p.getClosestPoints(self.body, self.body, max_distance, self.link_index(link_a), self.link_index(link_b))
         return [pt[8] for pt in pts]
 
     def apply_link_force(self, link: str, force, point) -> None:
         p = self._p
         p.applyExternalForce(self.body, self.link_index(link), np.asarray(force, float).tolist(), np.asarray(point, float).tolist(),
-                             p.WORLD_FRAME, physicsClientId=self.cid)
+                             p.WORLD_FRAME)
 
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        pos, orn = self._p.getBasePositionAndOrientation(self.body, physicsClientId=self.cid)
+        pos, orn = self._p.getBasePositionAndOrientation(self.body)
         return np.array(pos, float), np.array(orn, float)
 
     def set_root_pose(self, pos, orn) -> None:
-        self._p.resetBasePositionAndOrientation(self.body, list(pos), list(orn), physicsClientId=self.cid)
-        self._p.resetBaseVelocity(self.body, [0, 0, 0], [0, 0, 0], physicsClientId=self.cid)
+        self._p.resetBasePositionAndOrientation(self.body, list(pos), list(orn))
+        self._p.resetBaseVelocity(self.body, [0, 0, 0], [0, 0, 0])
         self._teleported = True
 
     def place_on_ground(self) -> float:
@@ -212,14 +211,14 @@ class PyBulletSession(SessionDefaults):
         returns the vertical shift (m): by the AABBs, then refined by the closest
         points to the plane (Bullet's AABBs of rotated hulls are loose)."""
         p = self._p
-        lo = min(p.getAABB(self.body, link, physicsClientId=self.cid)[0][2] for link in self._link_by_index)
+        lo = min(p.getAABB(self.body, link)[0][2] for link in self._link_by_index)
         pos, orn = self.root_pose()
         shift = -lo
         self.set_root_pose(pos + np.array([0.0, 0.0, shift]), orn)
         if self.plane is not None:
-            p.performCollisionDetection(physicsClientId=self.cid)
-            hi = max(p.getAABB(self.body, link, physicsClientId=self.cid)[1][2] for link in self._link_by_index)
-            pts = p.getClosestPoints(self.body, self.plane, max(hi, 0.0) + 0.05, physicsClientId=self.cid)
+            p.performCollisionDetection()
+            hi = max(p.getAABB(self.body, link)[1][2] for link in self._link_by_index)
+            pts = p.getClosestPoints(self.body, self.plane, max(hi, 0.0) + 0.05)
             if pts:
                 dmin = min(pt[8] for pt in pts)
                 pos, orn = self.root_pose()
@@ -231,8 +230,8 @@ class PyBulletSession(SessionDefaults):
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
         p = self._p
         self._forget_contacts()
-        p.performCollisionDetection(physicsClientId=self.cid)
-        return self._penetration_of(p.getContactPoints(self.body, self.body, physicsClientId=self.cid))
+        p.performCollisionDetection()
+        return self._penetration_of(p.getContactPoints(self.body, self.body))
 
     def _penetration_of(self, points) -> tuple[float, list[ContactPair]]:
         """Phi of Bullet contact/closest points (fields 3/4: link indices, 8: signed distance)."""
@@ -246,20 +245,20 @@ class PyBulletSession(SessionDefaults):
         p = self._p
         cache = self.__dict__.setdefault("_pairs_cache", None)
         if cache is None:
-            with_shape = [i for i in self._link_by_index if p.getCollisionShapeData(self.body, i, physicsClientId=self.cid)]
+            with_shape = [i for i in self._link_by_index if p.getCollisionShapeData(self.body, i)]
             parent = {j: info[16] for j, info in enumerate(joint_infos(p, self.body, self.cid))}
             cache = [(a, b) for a in with_shape for b in with_shape if a < b and parent.get(b) != a and parent.get(a) != b]
             self._pairs_cache = cache
         return self._penetration_of([pt for a, b in cache
-                                     for pt in p.getClosestPoints(self.body, self.body, 0.0, a, b, physicsClientId=self.cid)])
+                                     for pt in p.getClosestPoints(self.body, self.body, 0.0, a, b)])
 
     def ground_penetration(self, detect: bool = True) -> float:
         if self.plane is None:
             return 0.0
         if detect:
             self._forget_contacts()
-            self._p.performCollisionDetection(physicsClientId=self.cid)
-        pts = self._p.getContactPoints(self.body, self.plane, physicsClientId=self.cid)
+            self._p.performCollisionDetection()
+        pts = self._p.getContactPoints(self.body, self.plane)
         return float(max([0.0] + [-pt[8] for pt in pts]))
 
     def step_ground_penetration(self) -> float:
@@ -272,7 +271,7 @@ class PyBulletSession(SessionDefaults):
         self._forget_contacts()
         for _ in range(n):
             self.apply_passive_forces()
-            self._p.stepSimulation(physicsClientId=self.cid)
+            self._p.stepSimulation()
 
     def apply_passive_forces(self) -> None:
         """Each joint spring's torque ``-k (q - q_ref)`` (:meth:`Spring.force`) for the next ``stepSimulation``."""
@@ -283,15 +282,13 @@ class PyBulletSession(SessionDefaults):
         q = self.joint_positions()
         sprung = [(self._index[name], spring.force(q[name])) for name, spring in springs.items() if name in self._index]
         if sprung:  # one call for every spring (a keyboard's 108 keys: 108 calls a step otherwise)
-            p.setJointMotorControlArray(self.body, [j for j, _ in sprung], p.TORQUE_CONTROL, forces=[tau for _, tau in sprung],
-                                        physicsClientId=self.cid)
+            p.setJointMotorControlArray(self.body, [j for j, _ in sprung], p.TORQUE_CONTROL, forces=[tau for _, tau in sprung])
 
     def apply_joint_effort(self, name: str, effort: float) -> None:
-        self._p.setJointMotorControl2(self.body, self._index[name], self._p.TORQUE_CONTROL, force=float(effort), physicsClientId=self.cid)
+        self._p.setJointMotorControl2(self.body, self._index[name], self._p.TORQUE_CONTROL, force=float(effort))
 
     def _motor(self, name: str, velocity: float, force: float) -> None:
-        self._p.setJointMotorControl2(self.body, self._index[name], self._p.VELOCITY_CONTROL, targetVelocity=velocity, force=force,
-                                      physicsClientId=self.cid)
+        self._p.setJointMotorControl2(self.body, self._index[name], self._p.VELOCITY_CONTROL, targetVelocity=velocity, force=force)
 
     def drive_joint(self, name: str, velocity: float, max_force: float) -> None:
         """The passive friction motor gets target ``velocity`` and force ``max_force + friction``."""
@@ -306,29 +303,29 @@ class PyBulletSession(SessionDefaults):
             return
         self.release_root()
         p = self._p
-        pos, orn = p.getBasePositionAndOrientation(self.body, physicsClientId=self.cid)
+        pos, orn = p.getBasePositionAndOrientation(self.body)
         self._root_hold = p.createConstraint(self.body, -1, -1, -1, p.JOINT_FIXED, [0, 0, 0], [0, 0, 0], list(pos),
-                                             childFrameOrientation=list(orn), physicsClientId=self.cid)
-        p.changeConstraint(self._root_hold, maxForce=float(max(max_force, 0.0)), physicsClientId=self.cid)
+                                             childFrameOrientation=list(orn))
+        p.changeConstraint(self._root_hold, maxForce=float(max(max_force, 0.0)))
 
     def release_root(self) -> None:
         if self._root_hold is not None:
-            self._p.removeConstraint(self._root_hold, physicsClientId=self.cid)
+            self._p.removeConstraint(self._root_hold)
             self._root_hold = None
 
     def set_root_velocity(self, linear, angular) -> None:
         self._movable_root()
-        self._p.resetBaseVelocity(self.body, [float(v) for v in linear], [float(v) for v in angular], physicsClientId=self.cid)
+        self._p.resetBaseVelocity(self.body, [float(v) for v in linear], [float(v) for v in angular])
 
     def save_state(self) -> int:
-        return self._p.saveState(physicsClientId=self.cid)
+        return self._p.saveState()
 
     def restore_state(self, handle: int) -> None:
-        self._p.restoreState(stateId=handle, physicsClientId=self.cid)
+        self._p.restoreState(stateId=handle)
         self._teleported = True
 
     def discard_state(self, handle: int) -> None:
-        self._p.removeState(handle, physicsClientId=self.cid)
+        self._p.removeState(handle)
 
     def link_index(self, link_name: str) -> int:
         """Bullet's link index (-1 for the root) of a link (KeyError: unknown link)."""
@@ -341,12 +338,12 @@ class PyBulletSession(SessionDefaults):
         p = self._p
         links = {}
         for idx, name in self._link_by_index.items():
-            info = p.getDynamicsInfo(self.body, idx, physicsClientId=self.cid)
+            info = p.getDynamicsInfo(self.body, idx)
             links[name] = HeldLink(mass=float(info[0]), com=np.array(info[3], float), principal=np.sort(np.array(info[2], float)))
         q = self.joint_positions()
         joints = {}
         for name, j in self._index.items():
-            info = p.getJointInfo(self.body, j, physicsClientId=self.cid)
+            info = p.getJointInfo(self.body, j)
             lo, hi = self.joint_limits[name]
             s = self.options.springs.get(name)
             joints[name] = HeldJoint(lower=lo, upper=hi, damping=float(info[6]), friction=float(info[7]),
@@ -368,17 +365,17 @@ class PyBulletSession(SessionDefaults):
     def _release(self) -> None:
         p = self._p
         if self._owns_client:
-            pybullet_clients.give_back(p, self.cid, self.options.files_key)
+            pybullet_clients.give_back(self._bullet, self.cid, self.options.files_key)
             return
         self.release_root()
         for body in (self.body, self.plane):
             if body is not None:
-                p.removeBody(body, physicsClientId=self.cid)
+                p.removeBody(body)
 
     def __del__(self):  # pragma: no cover - best effort
         try:
             if getattr(self, "cid", None) is not None and self._owns_client:
-                self._p.disconnect(self.cid)
+                self._bullet.disconnect(self.cid)
         except Exception:
             pass
 

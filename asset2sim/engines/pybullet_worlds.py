@@ -6,6 +6,7 @@ the quiet import (:func:`bullet`), joint infos and a link's world frame (positio
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +38,21 @@ def body_link_frame(p, body: int, idx: int, cid: int) -> tuple[np.ndarray, np.nd
     return np.array(pos, float), np.array(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
 
 
+class BoundClient:
+    """The ``pybullet`` module with ``physicsClientId`` bound to the client ``cid`` in every function (a call may still
+    pass its own), as ``pybullet_utils.bullet_client.BulletClient`` binds it, for a client connected elsewhere."""
+
+    def __init__(self, module, cid: int):
+        self._module, self.cid = module, cid
+
+    def __getattr__(self, name: str):
+        value = getattr(self._module, name)
+        if callable(value):
+            value = functools.partial(value, physicsClientId=self.cid)
+        setattr(self, name, value)  # looked up once
+        return value
+
+
 class PyBulletShapeWorld:
     """A :class:`~asset2sim.engines.base.ShapeWorld`: static convex mesh bodies in a private DIRECT client."""
 
@@ -45,27 +61,26 @@ class PyBulletShapeWorld:
     contact_margin = 0.002
 
     def __init__(self):
-        p = bullet()
-        self._p = p
+        self._bullet = p = bullet()
         self.cid = p.connect(p.DIRECT)
+        self._p = BoundClient(p, self.cid)
 
     def add_convex(self, vertices, scale, position, orientation) -> int:
         p = self._p
         shape = p.createCollisionShape(p.GEOM_MESH, vertices=np.asarray(vertices, float).tolist(),
-                                       meshScale=np.asarray(scale, float).tolist(), physicsClientId=self.cid)
+                                       meshScale=np.asarray(scale, float).tolist())
         return p.createMultiBody(0, shape, basePosition=np.asarray(position, float).tolist(),
-                                 baseOrientation=np.asarray(orientation, float).tolist(), physicsClientId=self.cid)
+                                 baseOrientation=np.asarray(orientation, float).tolist())
 
     def set_pose(self, shape: int, position, orientation) -> None:
-        self._p.resetBasePositionAndOrientation(shape, np.asarray(position, float).tolist(), np.asarray(orientation, float).tolist(),
-                                                physicsClientId=self.cid)
+        self._p.resetBasePositionAndOrientation(shape, np.asarray(position, float).tolist(), np.asarray(orientation, float).tolist())
 
     def distances(self, shape_a: int, shape_b: int, max_distance: float = 0.0) -> list[float]:
-        return [pt[8] for pt in self._p.getClosestPoints(shape_a, shape_b, max_distance, physicsClientId=self.cid)]
+        return [pt[8] for pt in self._p.getClosestPoints(shape_a, shape_b, max_distance)]
 
     def close(self) -> None:
         if self.cid is not None:
-            self._p.disconnect(self.cid)
+            self._bullet.disconnect(self.cid)
             self.cid = None
 
 
@@ -79,19 +94,19 @@ class PyBulletViewer:
     def __init__(self, urdf_path: Path):
         self.cid = None
         with quiet_fds():  # the import prints PyBullet's build time
-            self._p = p = bullet()
-            self.cid = cid = p.connect(p.DIRECT)
+            p = bullet()
+            self.cid = p.connect(p.DIRECT)
+            self._p = p = BoundClient(p, self.cid)
         try:
             with quiet_fds():
-                self.body = p.loadURDF(str(urdf_path), basePosition=[0, 0, 0], useFixedBase=True, flags=p.URDF_USE_MATERIAL_COLORS_FROM_MTL,
-                                       physicsClientId=cid)
+                self.body = p.loadURDF(str(urdf_path), basePosition=[0, 0, 0], useFixedBase=True, flags=p.URDF_USE_MATERIAL_COLORS_FROM_MTL)
         except Exception as exc:
             self.close()
             raise RuntimeError(f"PyBullet could not load {urdf_path}: {exc}") from exc
-        self._links: dict[int, str] = {-1: p.getBodyInfo(self.body, physicsClientId=cid)[0].decode()}
+        self._links: dict[int, str] = {-1: p.getBodyInfo(self.body)[0].decode()}
         self._joints: dict[str, int] = {}
         self.joint_names: list[str] = []
-        for j, info in enumerate(joint_infos(p, self.body, cid)):
+        for j, info in enumerate(joint_infos(p, self.body, self.cid)):
             self._links[j] = info[12].decode()
             name = info[1].decode()
             self._joints[name] = j
@@ -103,7 +118,7 @@ class PyBulletViewer:
     def visual_colors(self) -> list[tuple[str, int, tuple[float, float, float, float]]]:
         out = []
         counts: dict[int, int] = {}
-        for row in self._p.getVisualShapeData(self.body, physicsClientId=self.cid):
+        for row in self._p.getVisualShapeData(self.body):
             link = row[1]
             k = counts.get(link, 0)
             counts[link] = k + 1
@@ -111,27 +126,27 @@ class PyBulletViewer:
         return out
 
     def set_visual_color(self, link: str, shape: int, rgba) -> None:
-        self._p.changeVisualShape(self.body, self._index[link], shapeIndex=shape, rgbaColor=list(rgba), physicsClientId=self.cid)
+        self._p.changeVisualShape(self.body, self._index[link], shapeIndex=shape, rgbaColor=list(rgba))
 
     def set_joint_positions(self, q: dict[str, float]) -> None:
         for name, value in q.items():
-            self._p.resetJointState(self.body, self._joints[name], float(value), 0.0, physicsClientId=self.cid)
+            self._p.resetJointState(self.body, self._joints[name], float(value), 0.0)
 
     def set_root_pose(self, position, quat_xyzw) -> None:
         self._p.resetBasePositionAndOrientation(self.body, np.asarray(position, float).tolist(),
-                                                np.asarray(quat_xyzw, float).tolist(), physicsClientId=self.cid)
+                                                np.asarray(quat_xyzw, float).tolist())
 
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
         return body_link_frame(self._p, self.body, self._index[link], self.cid)
 
     def draw(self, width: int, height: int, camera: dict, light: dict) -> tuple[np.ndarray, np.ndarray]:
         p = self._p
-        view = p.computeViewMatrix(*(np.asarray(camera[k], float).tolist() for k in ("eye", "target", "up")), physicsClientId=self.cid)
-        proj = p.computeProjectionMatrixFOV(camera["fov_deg"], width / height, camera["near"], camera["far"], physicsClientId=self.cid)
+        view = p.computeViewMatrix(*(np.asarray(camera[k], float).tolist() for k in ("eye", "target", "up")))
+        proj = p.computeProjectionMatrixFOV(camera["fov_deg"], width / height, camera["near"], camera["far"])
         res = p.getCameraImage(width, height, view, proj, lightDirection=np.asarray(light["direction"], float).tolist(),
                                lightColor=list(light["color"]), lightDistance=light["distance"], shadow=int(light["shadow"]),
                                lightAmbientCoeff=light["ambient"], lightDiffuseCoeff=light["diffuse"],
-                               lightSpecularCoeff=light["specular"], renderer=p.ER_TINY_RENDERER, physicsClientId=self.cid)
+                               lightSpecularCoeff=light["specular"], renderer=p.ER_TINY_RENDERER)
         if res is None or len(res) < 5:
             raise RuntimeError("PyBullet returned no image")
         rgba = np.asarray(res[2], dtype=np.uint8).reshape(height, width, 4)
@@ -141,7 +156,7 @@ class PyBulletViewer:
     def close(self) -> None:
         if self.cid is not None:
             try:
-                self._p.disconnect(physicsClientId=self.cid)
+                self._p.disconnect()
             except Exception:
                 pass
             self.cid = None

@@ -73,7 +73,7 @@ def _factory(name: str) -> EngineFactory:
         module, packages = _LAZY[name]
         for package in packages:
             try:
-                if package in sys.modules and sys.modules[package] is not None:
+                if sys.modules.get(package) is not None:
                     continue
                 with startup_quiet():
                     importlib.import_module(package)

@@ -86,6 +86,11 @@ def _eye() -> np.ndarray:
     return np.eye(4)
 
 
+def _source_line():
+    """The field of an element's source line (1-based; None when unknown), left out of comparisons."""
+    return field(default=None, compare=False)
+
+
 @dataclass(eq=False)
 class UrdfMaterial(_ArrayEq):
     """``<material>``: ``rgba`` (4,) in [0, 1], ``texture`` the first
@@ -94,7 +99,7 @@ class UrdfMaterial(_ArrayEq):
     name: str | None = None
     rgba: np.ndarray | None = None
     texture: str | None = None
-    line: int | None = field(default=None, compare=False)
+    line: int | None = _source_line()
     texture_line: int | None = field(default=None, compare=False)
 
 
@@ -106,7 +111,7 @@ class UrdfInertial(_ArrayEq):
     mass: float | None
     origin: np.ndarray = field(default_factory=_eye)
     inertia: np.ndarray | None = None
-    line: int | None = field(default=None, compare=False)
+    line: int | None = _source_line()
 
     def com(self) -> np.ndarray:
         """Center of mass (3,) in the link frame, m."""
@@ -135,7 +140,7 @@ class UrdfGeometry(_ArrayEq):
     radius: float | None = None
     length: float | None = None
     material: UrdfMaterial | None = None
-    line: int | None = field(default=None, compare=False)
+    line: int | None = _source_line()
     complete: bool = field(default=True, compare=False, repr=False)
     """False when mode-collect reading could not read all of it."""
 
@@ -157,7 +162,7 @@ class UrdfLink(_ArrayEq):
     collisions: list[UrdfGeometry] = field(default_factory=list)
     visuals: list[UrdfGeometry] = field(default_factory=list)
     contact: dict[str, float] = field(default_factory=dict)
-    line: int | None = field(default=None, compare=False)
+    line: int | None = _source_line()
 
     @property
     def lateral_friction(self) -> float | None:
@@ -179,7 +184,7 @@ class UrdfLimit(_ArrayEq):
     upper: float | None = None
     effort: float | None = None
     velocity: float | None = None
-    line: int | None = field(default=None, compare=False)
+    line: int | None = _source_line()
     unreadable: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
     """Attributes written but not readable (mode collect; their value is None)."""
 
@@ -191,7 +196,7 @@ class UrdfDynamics(_ArrayEq):
 
     damping: float | None = None
     friction: float | None = None
-    line: int | None = field(default=None, compare=False)
+    line: int | None = _source_line()
 
 
 @dataclass(eq=False)
@@ -224,7 +229,7 @@ class UrdfJoint(_ArrayEq):
     mimic: UrdfMimic | None = None
     calibration: dict[str, float] | None = None
     safety_controller: dict[str, float] | None = None
-    line: int | None = field(default=None, compare=False)
+    line: int | None = _source_line()
 
     @property
     def axis(self) -> np.ndarray:

@@ -31,10 +31,8 @@ def parse_number_list(text: str | None, count: int | tuple[int, ...]) -> tuple[f
             NUMBER_MALFORMED (anything but ``[+-]digits[.digits][e[+-]digits]``),
             NUMBER_COUNT (wrong number of values).
     """
-    if text is None or not text.strip():
-        raise NumberError("NUMBER_EMPTY", "empty value where a number is required")
     out = []
-    for tok in text.split():
+    for tok in _tokens(text):
         low = tok.lower()
         if low in _NAN:
             raise NumberError("NUMBER_NAN", f"{tok!r} is NaN")
@@ -50,6 +48,13 @@ def parse_number_list(text: str | None, count: int | tuple[int, ...]) -> tuple[f
     return tuple(out)
 
 
+def _tokens(text: str | None) -> list[str]:
+    """The whitespace-separated tokens of ``text`` (NumberError NUMBER_EMPTY: none)."""
+    if text is None or not text.strip():
+        raise NumberError("NUMBER_EMPTY", "empty value where a number is required")
+    return text.split()
+
+
 def _check_count(values: list[float], text: str, count: int | tuple[int, ...]) -> None:
     allowed = (count,) if isinstance(count, int) else count
     if len(values) not in allowed:
@@ -59,10 +64,9 @@ def _check_count(values: list[float], text: str, count: int | tuple[int, ...]) -
 
 def parse_number_list_lenient(text: str | None, count: int | tuple[int, ...]) -> tuple[float, ...]:
     """``float`` of every token (NaN and infinities accepted), right count."""
-    if text is None or not text.strip():
-        raise NumberError("NUMBER_EMPTY", "empty value where a number is required")
+    tokens = _tokens(text)
     try:
-        out = [float(tok) for tok in text.split()]
+        out = [float(tok) for tok in tokens]
     except ValueError as exc:
         raise NumberError("NUMBER_MALFORMED", str(exc)) from None
     _check_count(out, text, count)

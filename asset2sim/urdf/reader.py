@@ -73,9 +73,7 @@ class _Reader:
                 return self._bad_number("NUMBER_EMPTY", f"<{el.tag}> has no {attr}=", el, link, joint)
             return default
         try:
-            if self.mode == "lenient":
-                return parse_number_list_lenient(text, count)
-            return parse_number_list(text, count)
+            return (parse_number_list_lenient if self.mode == "lenient" else parse_number_list)(text, count)
         except NumberError as exc:
             return self._bad_number(exc.code, f"<{el.tag} {attr}={text[:60]!r}>: {exc}", el, link, joint, attribute=attr)
 
@@ -227,9 +225,7 @@ class _Reader:
         elif jtype not in self.joint_types:
             self.problem("JOINT_TYPE_UNSUPPORTED", f"joint type {jtype!r} is not supported ({', '.join(self.joint_types)})",
                          line=_line(el), joint=name)
-        p, c = el.find("parent"), el.find("child")
-        parent = p.get("link") if p is not None else None
-        child = c.get("link") if c is not None else None
+        parent, child = ((e.get("link") if e is not None else None) for e in (el.find("parent"), el.find("child")))
         if not parent:
             self.problem("JOINT_PARENT_MISSING", "no <parent link=...>", line=_line(el), joint=name)
         if not child:

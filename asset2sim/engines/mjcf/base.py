@@ -199,16 +199,15 @@ def lowest_point(m, d) -> float:
         pos, mat = d.geom_xpos[g], d.geom_xmat[g].reshape(3, 3)
         size = m.geom_size[g]
         if gt == mujoco.mjtGeom.mjGEOM_MESH:
-            low = min(low, float((pos[2] + mesh_vertices(m, g) @ mat[2]).min()))
+            z = (pos[2] + mesh_vertices(m, g) @ mat[2]).min()
         elif gt == mujoco.mjtGeom.mjGEOM_BOX:
-            corners = BOX_CORNERS * size
-            low = min(low, float((pos[2] + corners @ mat[2]).min()))
+            z = (pos[2] + BOX_CORNERS * size @ mat[2]).min()
         elif gt == mujoco.mjtGeom.mjGEOM_SPHERE:
-            low = min(low, float(pos[2] - size[0]))
+            z = pos[2] - size[0]
         elif gt == mujoco.mjtGeom.mjGEOM_CYLINDER:
             axis = mat[:, 2]
-            radial = size[0] * math.sqrt(max(0.0, 1 - axis[2] ** 2))
-            low = min(low, float(pos[2] - abs(axis[2]) * size[1] - radial))
+            z = pos[2] - abs(axis[2]) * size[1] - size[0] * math.sqrt(max(0.0, 1 - axis[2] ** 2))
         else:  # capsule, ellipsoid: bounding sphere (not produced from URDF)
-            low = min(low, float(pos[2] - m.geom_rbound[g]))
+            z = pos[2] - m.geom_rbound[g]
+        low = min(low, float(z))
     return low

@@ -40,9 +40,7 @@ def contact_policy(model: UrdfModel, pieces: dict[str, list[CollisionPiece]], fr
 
     def mujoco_filters(a: str, b: str) -> bool:
         wa, wb = weld[a], weld[b]
-        if wa == wb:
-            return True
-        return wa != world and wb != world and (wa == weld_parent(wb) or wb == weld_parent(wa))
+        return wa == wb or wa != world and wb != world and (wa == weld_parent(wb) or wb == weld_parent(wa))
 
     adjacent = model.adjacent_pairs()
     names = [n for n in model.tree_order() if pieces.get(n)]
