@@ -28,6 +28,11 @@ BULLET_PLANE_FRICTION = 0.5
 BOX_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 
 
+def transform_points(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``points`` (k, 3) m moved by ``pose`` (4, 4): rotated, then translated."""
+    return np.asarray(points, float) @ pose[:3, :3].T + pose[:3, 3]
+
+
 def read_urdf(path: Path | str) -> UrdfModel:
     """:func:`asset2sim.urdf.read_urdf` (strict) limited to the joint types the
     engines build (UrdfError naming the file, line and link or joint)."""

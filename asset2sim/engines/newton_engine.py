@@ -22,7 +22,7 @@ from asset2sim.engines.base import (ArrayJoints, ContactPair, HeldJoint, HeldLin
                                     SessionOptions, penetration_sum, principal_moments, register_engine, register_file_reader,
                                     unsupported)
 from asset2sim.engines.loading import (BOX_CORNERS, BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS,
-                                       BULLET_PLANE_FRICTION, CollisionPiece, collision_pieces, read_urdf)
+                                       BULLET_PLANE_FRICTION, CollisionPiece, collision_pieces, read_urdf, transform_points)
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, quat_wxyz_to_xyzw, quat_xyzw_to_wxyz, translation_matrix
 from asset2sim.mesh_io import convex_hull_mesh
 from asset2sim.urdf import MOVABLE
@@ -96,7 +96,7 @@ class NewtonSession(ArrayJoints, SessionDefaults):
         for name in self.link_names:
             pts = [self._piece_points(p) for p in pieces.get(name, [])]
             self._points[name] = np.vstack(pts) if pts else np.zeros((0, 3))
-        lows = [] if self._fixed else [_apply(poses[n], v)[:, 2].min() for n, v in self._points.items() if len(v)]
+        lows = [] if self._fixed else [transform_points(poses[n], v)[:, 2].min() for n, v in self._points.items() if len(v)]
         lift = -min(lows) if lows else 0.0
         return self.urdf.link_poses(self.options.initial_state, translation_matrix([0.0, 0.0, lift]))
 
@@ -200,16 +200,16 @@ class NewtonSession(ArrayJoints, SessionDefaults):
         """The piece's vertices (k, 3) in the link frame, m."""
         o = piece.origin
         if piece.kind == "hull":
-            return _apply(o, piece.points)
+            return transform_points(o, piece.points)
         if piece.kind == "box":
-            return _apply(o, BOX_CORNERS * (0.5 * np.asarray(piece.size, float)))
+            return transform_points(o, BOX_CORNERS * (0.5 * np.asarray(piece.size, float)))
         r = float(piece.radius)
         if piece.kind == "sphere":
-            return _apply(o, np.array([[0, 0, -r], [0, 0, r], [r, 0, 0], [-r, 0, 0], [0, r, 0], [0, -r, 0]], float))
+            return transform_points(o, np.array([[0, 0, -r], [0, 0, r], [r, 0, 0], [-r, 0, 0], [0, r, 0], [0, -r, 0]], float))
         hl = 0.5 * float(piece.length)
         ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
         ring = np.column_stack([r * np.cos(ang), r * np.sin(ang), np.zeros_like(ang)])
-        return _apply(o, np.vstack([ring + [0, 0, hl], ring - [0, 0, hl]]))
+        return transform_points(o, np.vstack([ring + [0, 0, hl], ring - [0, 0, hl]]))
 
     def _add_shape(self, b, body: int, piece: CollisionPiece, cfg) -> None:
         wp, newton = self._wp, self._nt
@@ -398,10 +398,6 @@ def _state_arrays(state, wp) -> dict:
     """Name -> warp array of every array a ``newton.State`` holds, the attributes a solver adds to it included
     (Kamino: ``joint_q_prev``, ``joint_lambdas``, ``joint_lambdas_f``, ...)."""
     return {k: v for k, v in vars(state).items() if isinstance(v, wp.array)}
-
-
-def _apply(pose: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    return np.asarray(pts, float) @ pose[:3, :3].T + pose[:3, 3]
 
 
 def _body_frame(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

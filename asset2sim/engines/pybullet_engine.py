@@ -288,7 +288,8 @@ class PyBulletSession(SessionDefaults):
         self._p.setJointMotorControl2(self.body, self._index[name], self._p.TORQUE_CONTROL, force=float(effort))
 
     def _motor(self, name: str, velocity: float, force: float) -> None:
-        self._p.setJointMotorControl2(self.body, self._index[name], self._p.VELOCITY_CONTROL, targetVelocity=velocity, force=force)
+        self._p.setJointMotorControl2(self.body, self._index[name], self._p.VELOCITY_CONTROL, targetVelocity=velocity,
+                                      force=force)
 
     def drive_joint(self, name: str, velocity: float, max_force: float) -> None:
         """The passive friction motor gets target ``velocity`` and force ``max_force + friction``."""

@@ -73,7 +73,8 @@ class PyBulletShapeWorld:
                                  baseOrientation=np.asarray(orientation, float).tolist())
 
     def set_pose(self, shape: int, position, orientation) -> None:
-        self._p.resetBasePositionAndOrientation(shape, np.asarray(position, float).tolist(), np.asarray(orientation, float).tolist())
+        self._p.resetBasePositionAndOrientation(shape, np.asarray(position, float).tolist(),
+                                                np.asarray(orientation, float).tolist())
 
     def distances(self, shape_a: int, shape_b: int, max_distance: float = 0.0) -> list[float]:
         return [pt[8] for pt in self._p.getClosestPoints(shape_a, shape_b, max_distance)]
@@ -99,7 +100,8 @@ class PyBulletViewer:
             self._p = p = BoundClient(p, self.cid)
         try:
             with quiet_fds():
-                self.body = p.loadURDF(str(urdf_path), basePosition=[0, 0, 0], useFixedBase=True, flags=p.URDF_USE_MATERIAL_COLORS_FROM_MTL)
+                self.body = p.loadURDF(str(urdf_path), basePosition=[0, 0, 0], useFixedBase=True,
+                                       flags=p.URDF_USE_MATERIAL_COLORS_FROM_MTL)
         except Exception as exc:
             self.close()
             raise RuntimeError(f"PyBullet could not load {urdf_path}: {exc}") from exc

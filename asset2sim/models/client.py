@@ -227,14 +227,14 @@ class LLMClient:
                                               bounds.status) from None
                     retryable, status, kind = classify(exc, litellm)
                     cls, detail = ModelCallError, one_line(exc, 200)
+                    failure, said = bounds.failure or (None, "")
                     if bounds.tripped == "deadline":
                         retryable, detail = True, f"{cfg.timeout_s:g} s"
                         kind = "MODEL_DEADLINE_EXCEEDED: timeout, no reply within the deadline"
-                    elif bounds.failure and bounds.failure[0] == "MODEL_REDIRECT_REFUSED":
-                        retryable, detail, kind = False, "", f"MODEL_REDIRECT_REFUSED: {bounds.failure[1]}"
-                    elif bounds.failure and bounds.failure[0] == "MODEL_CONNECTION_REFUSED":
-                        cls, retryable, detail = ConnectionRefused, True, ""
-                        kind = f"MODEL_CONNECTION_REFUSED: {bounds.failure[1]}"
+                    elif failure == "MODEL_REDIRECT_REFUSED":
+                        retryable, detail, kind = False, "", f"{failure}: {said}"
+                    elif failure == "MODEL_CONNECTION_REFUSED":
+                        cls, retryable, detail, kind = ConnectionRefused, True, "", f"{failure}: {said}"
                     elif bounds.requests and bounds.status is None:  # no HTTP status arrived: what the network said
                         retryable, status, detail = True, None, one_line(exception_chain(exc)[-1], 200)
                         kind = ("MODEL_CONNECTION_FAILED: the connection to the server ended before an HTTP "

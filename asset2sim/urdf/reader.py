@@ -273,8 +273,8 @@ class _Reader:
         out = UrdfLimit(line=_line(lim), **{k: self.num(lim, k, joint=name) for k in keys})
         out.unreadable = frozenset(k for k in keys if lim.get(k) is not None and getattr(out, k) is None)
         if jtype in ("revolute", "prismatic"):
-            if lim.get("lower") is None or lim.get("upper") is None:
-                miss = [k for k in ("lower", "upper") if lim.get(k) is None]
+            miss = [k for k in ("lower", "upper") if lim.get(k) is None]
+            if miss:
                 self.problem("JOINT_LIMIT_INCOMPLETE", f"<limit> without {' and '.join(miss)} (URDF default 0)", line=_line(lim), joint=name)
             lo_v = out.lower if out.lower is not None else (0.0 if lim.get("lower") is None else None)
             hi_v = out.upper if out.upper is not None else (0.0 if lim.get("upper") is None else None)

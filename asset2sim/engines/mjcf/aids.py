@@ -39,7 +39,7 @@ import math
 import numpy as np
 from lxml import etree
 
-from asset2sim.engines.mjcf.base import ARMATURE_FLOOR, FRICTION_SOLIMP, friction_solref, load_mujoco, num_text, vec_text
+from asset2sim.engines.mjcf.base import ARMATURE_FLOOR, FRICTION_SOLIMP, child, friction_solref, load_mujoco, num_text, vec_text
 from asset2sim.schemas.report import SolverAid
 
 #: MuJoCo's default ``solref`` and ``solimp`` of every constraint (MuJoCo XML reference, ``option``/``geom``).
@@ -160,10 +160,7 @@ def prism_aid(geom: str) -> SolverAid:
 def write_aids(root, aids: list[SolverAid]) -> None:
     """``aids`` as the MJCF's custom text :data:`AIDS_TEXT` (none: nothing written)."""
     if aids:
-        custom = root.find("custom")
-        if custom is None:
-            custom = etree.SubElement(root, "custom")
-        etree.SubElement(custom, "text", name=AIDS_TEXT, data=json.dumps([a.model_dump() for a in aids]))
+        etree.SubElement(child(root, "custom"), "text", name=AIDS_TEXT, data=json.dumps([a.model_dump() for a in aids]))
 
 
 def read_aids(model) -> list[SolverAid]:

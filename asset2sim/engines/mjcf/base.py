@@ -97,6 +97,12 @@ def quat_text(r: np.ndarray) -> str:
     return vec_text(matrix_quat_wxyz(r))
 
 
+def child(parent, tag: str):
+    """``parent``'s first ``<tag>`` child, appended when it has none."""
+    el = parent.find(tag)
+    return etree.SubElement(parent, tag) if el is None else el
+
+
 def close(a, b, tol: float) -> bool:
     """Whether arrays ``a`` and ``b`` agree to ``tol``, absolute and relative."""
     return bool(np.allclose(np.asarray(a, float), np.asarray(b, float), atol=tol, rtol=tol))

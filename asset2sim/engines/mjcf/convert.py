@@ -13,8 +13,9 @@ from lxml import etree
 
 from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, CollisionPiece, collision_pieces, read_urdf
-from asset2sim.engines.mjcf.base import (DERIVED_MESH_DIR, GROUND, KEYFRAME, MjcfError, compile_xml, load_mujoco, mujoco_messages, mujoco_warnings,
-                                         num_text, place_on_ground, relative_to, safe_name, vec_text)
+from asset2sim.engines.mjcf.base import (DERIVED_MESH_DIR, GROUND, KEYFRAME, MjcfError, child, compile_xml, load_mujoco,
+                                         mujoco_messages, mujoco_warnings, num_text, place_on_ground, relative_to, safe_name,
+                                         vec_text)
 from asset2sim.engines.mjcf.aids import add_solver_aids, ground_aid, prism_aid, write_aids
 from asset2sim.engines.mjcf.rewrite import (add_root_and_ground, cylinder_prisms, place_bodies, rename_meshes, set_contacts, set_geoms,
                                             set_inertial, set_joints, set_options, zero_armature)
@@ -191,9 +192,7 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     spec, root = import_skeleton(urdf_text, meshes.import_assets, urdf_path, notes)
     set_options(root, conv, gravity, meshdir)
     file_to_mesh, used = rename_meshes(root, meshes.virtual, urdf_path)
-    asset_el = root.find("asset")
-    if asset_el is None:
-        asset_el = etree.SubElement(root, "asset")
+    asset_el = child(root, "asset")
     worldbody = root.find("worldbody")
     geom_mesh = {key: file_to_mesh[v] for key, v in meshes.names.items()}
     bodies = _rewrite_bodies(worldbody, model, spec, pieces, geom_mesh, springs, missing_inertial, visuals, notes)

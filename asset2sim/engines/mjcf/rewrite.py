@@ -12,7 +12,8 @@ from lxml import etree
 from asset2sim.engines.base import Spring
 from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
                                        CollisionPiece, link_friction)
-from asset2sim.engines.mjcf.base import ARMATURE, CONE, FREE_JOINT, GROUND, MjcfError, close, num_text, quat_text, safe_name, vec_text
+from asset2sim.engines.mjcf.base import (ARMATURE, CONE, FREE_JOINT, GROUND, MjcfError, child, close, num_text, quat_text,
+                                         safe_name, vec_text)
 from asset2sim.schemas.config import SimConventions
 from asset2sim.urdf import UrdfModel
 
@@ -90,9 +91,7 @@ def set_contacts(root, model: UrdfModel, pieces: dict[str, list[CollisionPiece]]
 
 def set_options(root, conv: SimConventions, gravity: bool, meshdir: str) -> None:
     """``<compiler>``, ``<option>`` and ``<default>`` as the first three children of ``root``."""
-    comp = root.find("compiler")
-    if comp is None:
-        comp = etree.SubElement(root, "compiler")
+    comp = child(root, "compiler")
     comp.attrib.clear()
     for k, v in (("angle", "radian"), ("meshdir", meshdir), ("autolimits", "true"), ("inertiafromgeom", "false"),
                  ("balanceinertia", "false"), ("boundmass", "0"), ("boundinertia", "0"), ("fusestatic", "false"),

@@ -15,7 +15,7 @@ import numpy as np
 
 from asset2sim import atomic
 from asset2sim.extras import pxr_modules as _pxr
-from asset2sim.engines.loading import CollisionPiece, principal_axes
+from asset2sim.engines.loading import CollisionPiece, principal_axes, transform_points
 from asset2sim.refined_asset import RefinedAsset
 from asset2sim.formats.staging import numbered
 from asset2sim.formats.usd.check import check_usd
@@ -34,10 +34,6 @@ def _axis_frame(axis: np.ndarray) -> np.ndarray:
     y /= np.linalg.norm(y)
     z = np.cross(x, y)
     return np.column_stack([x, y, z])
-
-
-def _transform(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    return np.asarray(points, float) @ pose[:3, :3].T + pose[:3, 3]
 
 
 def _placed(xformable, pose: np.ndarray):
@@ -233,7 +229,7 @@ def _write_visuals(stage, link_path, model: UrdfModel, link: str, notes: list[st
             if len(faces) == 0:
                 notes.append(f"link {link!r} visual {k} ({v.filename}) has no faces; left out")
                 continue
-            mesh = _mesh(stage, p, _transform(verts * v.scale, v.origin), faces)
+            mesh = _mesh(stage, p, transform_points(v.origin, verts * v.scale), faces)
             mesh.CreateDoubleSidedAttr(True)
         else:
             mesh = _primitive(stage, p, v.kind, v.size, v.radius, v.length, v.origin)
@@ -285,7 +281,7 @@ def _write_collisions(stage, link_path, pieces: list[CollisionPiece]) -> None:
     for k, piece in enumerate(pieces):
         p = scope.AppendChild(f"piece_{k}")
         if piece.kind == "hull":
-            g = _mesh(stage, p, *convex_hull_mesh(_transform(piece.points, piece.origin)))
+            g = _mesh(stage, p, *convex_hull_mesh(transform_points(piece.origin, piece.points)))
             UsdPhysics.CollisionAPI.Apply(g.GetPrim())
             UsdPhysics.MeshCollisionAPI.Apply(g.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.convexHull)
         else:
