@@ -91,7 +91,7 @@ class MjxSession(MuJoCoSession):
         while remaining:
             k = 1 if (self._drive or self._applied) else remaining
             if self._drive:
-                self._mj.mj_forward(self.m, self.d)  # the mass matrix at the pulled positions, for the drive's gain
+                self._forward()  # the mass matrix at the pulled positions, for the drive's gain
                 self._apply_drives()
             self._push()
             self._dx = self._run(self._mx, self._dx, k)

@@ -64,7 +64,7 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
         self._root = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_BODY, self.urdf.root)
         kid = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_KEY, KEYFRAME)
         mujoco.mj_resetDataKeyframe(self.m, self.d, kid)
-        mujoco.mj_forward(self.m, self.d)
+        self._forward()
 
     # ------------------------------------------------------------------ state
     def _joint_q(self) -> np.ndarray:
@@ -74,7 +74,11 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
         return self.d.qvel
 
     def _put_joints(self, q: np.ndarray, qd: np.ndarray) -> None:
-        self._mj.mj_forward(self.m, self.d)  # q, qd: MjData's own arrays
+        self._forward()  # q, qd: MjData's own arrays
+
+    def _forward(self) -> None:
+        """``mj_forward`` of the session's data: everything derived from its state."""
+        self._mj.mj_forward(self.m, self.d)
 
     def joint_axis(self, joint: str) -> np.ndarray:
         jid = self._mj.mj_name2id(self.m, self._mj.mjtObj.mjOBJ_JOINT, joint)
@@ -125,7 +129,7 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
         self._mj.mju_quat2Mat(R, np.array(self.d.qpos[3:7], float))
         self.d.qvel[0:3] = np.asarray(linear, float)
         self.d.qvel[3:6] = R.reshape(3, 3).T @ np.asarray(angular, float)
-        self._mj.mj_forward(self.m, self.d)
+        self._forward()
 
     # ------------------------------------------------------------------ links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
@@ -184,7 +188,7 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
         self.d.qpos[0:3] = np.asarray(pos, float)
         self.d.qpos[3:7] = quat_xyzw_to_wxyz(orn_xyzw)
         self.d.qvel[0:6] = 0.0
-        self._mj.mj_forward(self.m, self.d)
+        self._forward()
 
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         d = self.d
@@ -196,7 +200,7 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
     # ---------------------------------------------------------------- contact
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
         """Phi of each penetrating contact's ``dist`` (m) between two links (the ground's left out)."""
-        self._mj.mj_forward(self.m, self.d)
+        self._forward()
         points = []
         for c in (self.d.contact[i] for i in range(self.d.ncon)):
             if c.geom1 == self._ground or c.geom2 == self._ground or c.dist >= 0.0:
@@ -222,7 +226,7 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
 
     def restore_state(self, handle: int) -> None:
         self._mj.mj_setState(self.m, self.d, self._states[handle], self._state_sig)
-        self._mj.mj_forward(self.m, self.d)
+        self._forward()
 
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:

@@ -300,7 +300,7 @@ class PhysXSession(ArrayJoints, SessionDefaults):
         if any(not isinstance(sh, physx.PhysxCollisionShapeConvexMesh) for sh in comp.get_collision_shapes()):
             box = comp.compute_global_aabb_tight()
             lo, hi = np.minimum(lo, np.asarray(box[0], float)), np.maximum(hi, np.asarray(box[1], float))
-        return (lo, hi) if np.all(np.isfinite(lo)) else self._world_bounds(link, v)
+        return (lo, hi) if np.all(np.isfinite(lo)) else self._world_bounds(link, ())
 
     def link_has_collision(self, link: str) -> bool:
         return bool(self.links[link].get_collision_shapes())
@@ -441,9 +441,8 @@ class PhysXSession(ArrayJoints, SessionDefaults):
         for name, i in self._index.items():
             joint = self._joints[i]
             lim = np.array(joint.get_limits(), float).reshape(-1, 2)
-            lo, hi = (float(lim[0, 0]), float(lim[0, 1])) if len(lim) else (-np.inf, np.inf)
-            if self.joint_types[name] == "continuous":
-                lo, hi = -np.inf, np.inf
+            limited = len(lim) and self.joint_types[name] != "continuous"
+            lo, hi = (float(lim[0, 0]), float(lim[0, 1])) if limited else (-np.inf, np.inf)
             p = self._passive
             ref = float(p.reference[i]) if name in self.options.springs else None
             joints[name] = HeldJoint(lower=lo, upper=hi, damping=float(p.damping[i]), friction=float(joint.get_force_limit()),

@@ -90,6 +90,11 @@ class CallBounds:
         return BodyRefused(sentence)
 
 
+def _current() -> CallBounds | None:
+    """The bounds of the calling thread's attempt (None outside :func:`call_bounds`)."""
+    return getattr(_BOUNDS, "current", None)
+
+
 @contextmanager
 def call_bounds(deadline_s: float, max_bytes: int) -> Iterator[CallBounds]:
     """Bound the model calls the calling thread makes inside the block (see the module docstring).
@@ -97,7 +102,7 @@ def call_bounds(deadline_s: float, max_bytes: int) -> Iterator[CallBounds]:
     if not (deadline_s > 0 and math.isfinite(deadline_s)):
         raise ValueError(f"deadline must be a finite number of seconds > 0, got {deadline_s}")
     bounds = CallBounds(deadline_s, max_bytes)
-    previous = getattr(_BOUNDS, "current", None)
+    previous = _current()
     _BOUNDS.current = bounds
     try:
         yield bounds
@@ -135,7 +140,7 @@ def _bounder():
 
     def connect_time(timeout):
         """The time a connection or TLS handshake may take within :func:`call_bounds` (``timeout`` outside)."""
-        bounds = getattr(_BOUNDS, "current", None)
+        bounds = _current()
         return timeout if bounds is None else _bounded_time(timeout, bounds, httpcore.ConnectTimeout)
 
     class BoundedStream(httpcore.NetworkStream):
@@ -143,7 +148,7 @@ def _bounder():
             self._inner = inner
 
         def read(self, max_bytes: int, timeout: float | None = None) -> bytes:
-            bounds = getattr(_BOUNDS, "current", None)
+            bounds = _current()
             if bounds is None:
                 return self._inner.read(max_bytes, timeout)
             room = max(1, bounds.max_bytes - bounds.received + 1)
@@ -155,7 +160,7 @@ def _bounder():
             return data
 
         def write(self, buffer: bytes, timeout: float | None = None) -> None:
-            bounds = getattr(_BOUNDS, "current", None)
+            bounds = _current()
             if bounds is None:
                 return self._inner.write(buffer, timeout)
             return _within_deadline(bounds, timeout, httpcore.WriteTimeout, lambda t: self._inner.write(buffer, t))
@@ -269,7 +274,7 @@ def _decoded_transport(inner):
             self.wrapped = wrapped
 
         def handle_request(self, request):
-            bounds = getattr(_BOUNDS, "current", None)
+            bounds = _current()
             if bounds is None:
                 return self.wrapped.handle_request(request)
             request.headers["Accept-Encoding"] = "identity"
