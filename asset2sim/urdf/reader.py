@@ -215,21 +215,21 @@ class _Reader:
 
     def _parse_joint(self, el) -> UrdfJoint:
         name = el.get("name") or None
+        at = {"line": _line(el), "joint": name}  # where the joint's problems are
         if name is None:
-            self.problem("JOINT_NAME_MISSING", "<joint> without name", line=_line(el))
+            self.problem("JOINT_NAME_MISSING", "<joint> without name", **at)
         jtype = el.get("type")
         if jtype is None:
-            self.problem("JOINT_TYPE_MISSING", "<joint> without type", line=_line(el), joint=name)
+            self.problem("JOINT_TYPE_MISSING", "<joint> without type", **at)
         elif jtype not in JOINT_TYPES:
-            self.problem("JOINT_TYPE_INVALID", f"type {jtype!r} is not one of {', '.join(JOINT_TYPES)}", line=_line(el), joint=name)
+            self.problem("JOINT_TYPE_INVALID", f"type {jtype!r} is not one of {', '.join(JOINT_TYPES)}", **at)
         elif jtype not in self.joint_types:
-            self.problem("JOINT_TYPE_UNSUPPORTED", f"joint type {jtype!r} is not supported ({', '.join(self.joint_types)})",
-                         line=_line(el), joint=name)
+            self.problem("JOINT_TYPE_UNSUPPORTED", f"joint type {jtype!r} is not supported ({', '.join(self.joint_types)})", **at)
         parent, child = ((e.get("link") if e is not None else None) for e in (el.find("parent"), el.find("child")))
         if not parent:
-            self.problem("JOINT_PARENT_MISSING", "no <parent link=...>", line=_line(el), joint=name)
+            self.problem("JOINT_PARENT_MISSING", "no <parent link=...>", **at)
         if not child:
-            self.problem("JOINT_CHILD_MISSING", "no <child link=...>", line=_line(el), joint=name)
+            self.problem("JOINT_CHILD_MISSING", "no <child link=...>", **at)
         origin, _ = self._parse_origin(el, joint=name)
         j = UrdfJoint(name=name or "", type=jtype or "", parent=parent or "", child=child or "", origin=origin, line=_line(el))
         a = el.find("axis")
@@ -247,7 +247,7 @@ class _Reader:
         if lim is not None:
             j.limit = self._parse_limit(lim, jtype, name)
         elif jtype in ("revolute", "prismatic"):
-            self.problem("JOINT_LIMIT_MISSING", f"a {jtype} joint needs <limit lower upper>", line=_line(el), joint=name)
+            self.problem("JOINT_LIMIT_MISSING", f"a {jtype} joint needs <limit lower upper>", **at)
         dyn = el.find("dynamics")
         if dyn is not None:
             j.dynamics = UrdfDynamics(line=_line(dyn))
