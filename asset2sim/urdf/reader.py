@@ -124,11 +124,12 @@ class _Reader:
             g.complete = False
             return g
         s = shapes[0]
+        at = {"line": _line(s), "link": link}  # where the shape's problems are
         g.kind = s.tag
         if s.tag == "mesh":
             g.filename = s.get("filename")
             if not (g.filename or "").strip() and self.mode != "collect":
-                self.problem("MESH_FILENAME_EMPTY", "<mesh> has no filename", line=_line(s), link=link)
+                self.problem("MESH_FILENAME_EMPTY", "<mesh> has no filename", **at)
             if g.filename and self.base is not None:
                 g.path = resolve_mesh_path(g.filename, self.base)
             if s.get("scale") is not None:
@@ -140,10 +141,10 @@ class _Reader:
                     sc3 = tuple(sc * 3) if len(sc) == 1 else sc
                     if any(v == 0 for v in sc3):
                         self.problem("MESH_SCALE_ZERO", f"mesh scale {s.get('scale')!r} has a zero component (the mesh collapses)",
-                                     line=_line(s), link=link)
+                                     **at)
                         g_ok = False
                     elif any(v < 0 for v in sc3):
-                        self.problem("MESH_SCALE_NEGATIVE", f"mesh scale {s.get('scale')!r} mirrors the mesh", line=_line(s), link=link)
+                        self.problem("MESH_SCALE_NEGATIVE", f"mesh scale {s.get('scale')!r} mirrors the mesh", **at)
         else:
             spec = {"box": (("size", 3),), "cylinder": (("radius", 1), ("length", 1)), "sphere": (("radius", 1),)}.get(s.tag)
             required = spec is not None
@@ -159,7 +160,7 @@ class _Reader:
                 else:
                     setattr(g, attr, float(v[0]))
                 if any(x <= 0 for x in v):
-                    self.problem("GEOMETRY_SIZE_NONPOSITIVE", f"<{s.tag} {attr}={s.get(attr)!r}> must be > 0", line=_line(s), link=link)
+                    self.problem("GEOMETRY_SIZE_NONPOSITIVE", f"<{s.tag} {attr}={s.get(attr)!r}> must be > 0", **at)
                     g_ok = False
         g.complete = g_ok
         return g
@@ -270,24 +271,25 @@ class _Reader:
 
     def _parse_limit(self, lim, jtype: str | None, name: str | None) -> UrdfLimit:
         keys = ("lower", "upper", "effort", "velocity")
+        at = {"line": _line(lim), "joint": name}  # where the limit's problems are
         out = UrdfLimit(line=_line(lim), **{k: self.num(lim, k, joint=name) for k in keys})
         out.unreadable = frozenset(k for k in keys if lim.get(k) is not None and getattr(out, k) is None)
         if jtype in ("revolute", "prismatic"):
             miss = [k for k in ("lower", "upper") if lim.get(k) is None]
             if miss:
-                self.problem("JOINT_LIMIT_INCOMPLETE", f"<limit> without {' and '.join(miss)} (URDF default 0)", line=_line(lim), joint=name)
+                self.problem("JOINT_LIMIT_INCOMPLETE", f"<limit> without {' and '.join(miss)} (URDF default 0)", **at)
             lo_v = out.lower if out.lower is not None else (0.0 if lim.get("lower") is None else None)
             hi_v = out.upper if out.upper is not None else (0.0 if lim.get("upper") is None else None)
             if lo_v is not None and hi_v is not None:
                 if lo_v > hi_v:
-                    self.problem("JOINT_LIMIT_REVERSED", f"lower {lo_v!r} > upper {hi_v!r}", line=_line(lim), joint=name, lower=lo_v, upper=hi_v)
+                    self.problem("JOINT_LIMIT_REVERSED", f"lower {lo_v!r} > upper {hi_v!r}", **at, lower=lo_v, upper=hi_v)
                 elif lo_v == hi_v:
-                    self.problem("JOINT_LIMIT_EQUAL", f"lower == upper == {lo_v!r}: the joint cannot move", line=_line(lim),
-                                 joint=name, lower=lo_v, upper=hi_v)
+                    self.problem("JOINT_LIMIT_EQUAL", f"lower == upper == {lo_v!r}: the joint cannot move", **at,
+                                 lower=lo_v, upper=hi_v)
         for k, code in (("effort", "JOINT_EFFORT_NEGATIVE"), ("velocity", "JOINT_VELOCITY_NEGATIVE")):
             v = getattr(out, k)
             if v is not None and v < 0:
-                self.problem(code, f"{k} {v!r} < 0", line=_line(lim), joint=name, **{k: v})
+                self.problem(code, f"{k} {v!r} < 0", **at, **{k: v})
         return out
 
     def _parse_robot(self, root) -> UrdfModel:
