@@ -23,15 +23,6 @@ from asset2sim.engines.mujoco_engine import MuJoCoSession
 from asset2sim.engines.step_budget import spend
 
 
-def _mjx():
-    """(``jax``, ``jax.numpy``, ``mujoco.mjx``), imported on first use (ImportError: the extra is missing)."""
-    import jax
-    import jax.numpy as jnp
-    from mujoco import mjx
-
-    return jax, jnp, mjx
-
-
 class MjxSession(MuJoCoSession):
     """A :class:`~asset2sim.engines.base.SimSession` stepped in MJX (see the module docstring).
 
@@ -46,7 +37,10 @@ class MjxSession(MuJoCoSession):
 
     def __init__(self, urdf_path: Path, options: SessionOptions):
         super().__init__(urdf_path, options)
-        jax, jnp, mjx = _mjx()
+        import jax  # imported on first use (ImportError: the extra is missing)
+        import jax.numpy as jnp
+        from mujoco import mjx
+
         self._jnp = jnp
         try:
             self._mx = mjx.put_model(self.m)

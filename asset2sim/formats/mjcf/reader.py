@@ -142,7 +142,12 @@ class _Reader:
                 origin = rigid_inverse(frames[parent]) @ _pose(m.body_pos[b], m.body_quat[b]) @ frame
                 joints.append(self._urdf_joint(b, joint, origin))
             links[self.body_name(b)] = self._link(b, rigid_inverse(frame))
-        self._other_notes()
+        if m.ntendon:
+            self.notes.append(f"{m.ntendon} tendon(s) not carried (URDF has no element for them)")
+        if m.neq:
+            self.notes.append(f"{m.neq} equality constraint(s) not carried (URDF has no element for them)")
+        self.notes += [f"solver aid {a.kind} on {a.element!r} {a.written} ({a.criterion}; {a.effect}): not carried, an aid of "
+                       "the MJCF solver only" for a in read_aids(m)]
         model = UrdfModel(name=self.spec.modelname or self.path.stem, links=links, joints=joints, root=self.body_name(root))
         files = tuple(sorted({self.path.resolve(), *self.sources.real.values()}))
         initial = self._keyframe_state(joints)
@@ -359,12 +364,3 @@ class _Reader:
             self.mesh_files[key] = fname
             self.notes.append(f"{label} geom(s) written as a mesh of {len(shape.faces)} triangles ({fname})")
         return self.mesh_files[key]
-
-    def _other_notes(self) -> None:
-        m = self.m
-        if m.ntendon:
-            self.notes.append(f"{m.ntendon} tendon(s) not carried (URDF has no element for them)")
-        if m.neq:
-            self.notes.append(f"{m.neq} equality constraint(s) not carried (URDF has no element for them)")
-        self.notes += [f"solver aid {a.kind} on {a.element!r} {a.written} ({a.criterion}; {a.effect}): not carried, an aid of "
-                       "the MJCF solver only" for a in read_aids(m)]

@@ -75,13 +75,6 @@ class StageReading:
 MAX_LAYERS = 1024
 
 
-def _layer_file(identifier: str) -> tuple[str, bool]:
-    """(the file on disk, True when ``identifier`` names a layer inside a package: ``pkg.usdz[inner.usd]``)."""
-    if identifier.endswith("]") and "[" in identifier:
-        return identifier[:identifier.index("[")], True
-    return identifier, False
-
-
 def open_layers(path: Path | str) -> list:
     """Open the root layer at ``path`` and every layer it composes (sublayers, references, payloads, in variants
     too: ``Sdf.Layer.GetCompositionAssetDependencies``), each checked before pxr opens it: a regular file inside
@@ -128,7 +121,8 @@ def open_layers(path: Path | str) -> list:
             if not dep:
                 continue
             resolved = current.ComputeAbsolutePath(dep)
-            file, packaged = _layer_file(resolved)
+            packaged = resolved.endswith("]") and "[" in resolved  # a layer inside a package: pkg.usdz[inner.usd]
+            file = resolved[:resolved.index("[")] if packaged else resolved
             what = f"USD layer {dep!r} named by {current.identifier}"
             if "://" in file or not os.path.isabs(file):
                 raise StagingError(f"{what}: resolves to {resolved!r}, not a file inside {root}", code="USD_LAYER_OUTSIDE_ASSET")
