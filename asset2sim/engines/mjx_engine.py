@@ -28,6 +28,7 @@ class MjxSession(MuJoCoSession):
 
     Raises:
         UrdfError, MjcfError: as :class:`MuJoCoSession`.
+        ImportError: the extra ``mjx`` is missing (imported on first use).
         RuntimeError: MJX cannot take the model (``mujoco.mjx.put_model`` refuses a feature it lacks; the message
             names the file).
     """
@@ -37,7 +38,7 @@ class MjxSession(MuJoCoSession):
 
     def __init__(self, urdf_path: Path, options: SessionOptions):
         super().__init__(urdf_path, options)
-        import jax  # imported on first use (ImportError: the extra is missing)
+        import jax
         import jax.numpy as jnp
         from mujoco import mjx
 

@@ -121,7 +121,8 @@ def open_layers(path: Path | str) -> list:
             if not dep:
                 continue
             resolved = current.ComputeAbsolutePath(dep)
-            packaged = resolved.endswith("]") and "[" in resolved  # a layer inside a package: pkg.usdz[inner.usd]
+            # a layer inside a package: pkg.usdz[inner.usd]
+            packaged = resolved.endswith("]") and "[" in resolved
             file = resolved[:resolved.index("[")] if packaged else resolved
             what = f"USD layer {dep!r} named by {current.identifier}"
             if "://" in file or not os.path.isabs(file):
