@@ -48,20 +48,19 @@ def _origin(matrix) -> Origin:
 
 def _geometry(g: UrdfGeometry, role: str, mesh_paths: dict[str, Path], where: str) -> GeometryRef | None:
     """The description of one ``<visual>`` / ``<collision>`` of the model."""
-    origin = _origin(g.origin)
+    ref = dict(role=role, kind=g.kind, name=g.name, origin=_origin(g.origin))
     if g.kind == "mesh":
         fname = g.filename
         path = mesh_paths.get(fname or "")
         if path is None:  # validation refuses every unresolved reference; defensive
             raise AssetError(f"{where}: mesh {fname!r} was not validated")
-        sc = tuple(float(v) for v in g.scale)
-        return GeometryRef(role=role, kind="mesh", name=g.name, origin=origin, filename=fname, path=path, scale=sc)
+        return GeometryRef(**ref, filename=fname, path=path, scale=tuple(float(v) for v in g.scale))
     if g.kind == "box" and g.size is not None:
-        return GeometryRef(role=role, kind="box", name=g.name, origin=origin, size=tuple(float(v) for v in g.size))
+        return GeometryRef(**ref, size=tuple(float(v) for v in g.size))
     if g.kind == "cylinder":
-        return GeometryRef(role=role, kind="cylinder", name=g.name, origin=origin, radius=float(g.radius), length=float(g.length))
+        return GeometryRef(**ref, radius=float(g.radius), length=float(g.length))
     if g.kind == "sphere":
-        return GeometryRef(role=role, kind="sphere", name=g.name, origin=origin, radius=float(g.radius))
+        return GeometryRef(**ref, radius=float(g.radius))
     return None
 
 
@@ -187,15 +186,11 @@ def _stage_other_format(asset: Path | str, reading: ReadOptions | None = None) -
         return out
     source, fmt = found
     try:
-        read = read_asset_file(source, fmt, reading)
-        return staging.stage(read, staging.staging_folder(source))
-    except staging.StagingError as exc:
-        if exc.code is None:
-            raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc}") from exc
-        finding = validate_input.Finding(code=exc.code, severity="error", message=str(exc), file=str(source), action="refuse")
-        raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc.code}: {exc}", [finding]) from exc
-    except (ImportError, OSError) as exc:
-        raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc}") from exc
+        return staging.stage(read_asset_file(source, fmt, reading), staging.staging_folder(source))
+    except (staging.StagingError, ImportError, OSError) as exc:
+        code = exc.code if isinstance(exc, staging.StagingError) else None  # a file the reader policy refused: its finding
+        found = [validate_input.Finding(code=code, severity="error", message=str(exc), file=str(source), action="refuse")] if code else []
+        raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {f'{code}: ' if code else ''}{exc}", found) from exc
 
 
 def validate_any(asset: Path | str, policy: "ValidationPolicy | None" = None,
@@ -294,9 +289,7 @@ def _input_files(urdf: Path, links: list[LinkDesc], result: "ValidationResult") 
     """Every file the asset references, for the input hash: the URDF, its meshes, semantics.txt,
     meta.json, the MTL libraries and texture maps."""
     files = [urdf] + sorted({g.path for ln in links for g in ln.visuals + ln.collisions if g.path})
-    files += [Path(os.path.realpath(p)) for p in result.extra_files]
-    files += [Path(os.path.realpath(p)) for p in result.material_files]
-    return files
+    return files + [Path(os.path.realpath(p)) for p in [*result.extra_files, *result.material_files]]
 
 
 def _copy_extracted(value: tuple[AssetDescription, list["Finding"]]) -> tuple[AssetDescription, list["Finding"]]:

@@ -83,14 +83,12 @@ def find_urdf(asset: Path | str) -> Path:
     asset = Path(asset)
     if asset.is_dir():
         cands = urdf_candidates(asset)
-        if len(cands) == 1:
-            if not _is_regular(cands[0]):
-                raise AssetError(f"{cands[0]}: not a regular file")
-            return cands[0]
         if not cands:
             raise AssetError(f"{asset}: no mobility.urdf or other *.urdf file")
-        raise AssetError(f"{asset}: several URDF files ({', '.join(p.name for p in cands)}); pass one")
-    if not os.path.lexists(asset):
+        if len(cands) > 1:
+            raise AssetError(f"{asset}: several URDF files ({', '.join(p.name for p in cands)}); pass one")
+        asset = cands[0]
+    elif not os.path.lexists(asset):
         raise AssetError(f"{asset}: no such file or folder")
     if not _is_regular(asset):
         raise AssetError(f"{asset}: not a regular file")
@@ -180,9 +178,9 @@ def format_semantics(entries: dict[str, Semantics]) -> str:
     """
     lines = []
     for link, (kind, label) in entries.items():
-        if not link or len(link.split()) != 1 or link.split()[0] != link:
+        if not link or link.split() != [link]:
             raise ValueError(f"semantics.txt: link name {link!r} is empty or contains whitespace")
-        if not kind or len(kind.split()) != 1 or kind.split()[0] != kind:
+        if not kind or kind.split() != [kind]:
             raise ValueError(f"semantics.txt: link {link!r}: joint kind {kind!r} is empty or contains whitespace")
         words = str(label).split()
         if not words or len(str(label).splitlines()) > 1:
@@ -247,9 +245,7 @@ def read_reference(folder: Path | str) -> GenSim2Reference:
     ru = folder / REFERENCE_URDF
     if not ru.is_file():
         return GenSim2Reference(scale=scale, joint_position_range=rng)
-    types: dict[str, str] = {}
-    for j in read_urdf(ru, mode="lenient").joints:
-        types[j.name] = j.type  # a name written twice keeps its first place and last type
+    types = {j.name: j.type for j in read_urdf(ru, mode="lenient").joints}  # a name written twice: first place, last type
     task = [n for n, t in types.items() if t in MOVABLE]
     return GenSim2Reference(scale=scale, joint_position_range=rng, urdf=ru, task_joints=task)
 
