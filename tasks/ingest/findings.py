@@ -116,16 +116,19 @@ class Finding(BaseModel):
             return f"link {self.link!r}"
         return "global"
 
+    @property
+    def loc(self) -> str:
+        """``file:line``, or ``file`` without a line."""
+        return f"{self.file}:{self.line}" if self.line else self.file
+
     def describe(self) -> str:
         """One line: ``error CODE file:line joint 'j': message``."""
-        loc = f"{self.file}:{self.line}" if self.line else self.file
-        return f"{self.severity} {self.code} {loc} {self.where}: {self.message}"
+        return f"{self.severity} {self.code} {self.loc} {self.where}: {self.message}"
 
     def to_issue(self) -> ValidationIssue:
         """As the overlay schema's :class:`ValidationIssue` (for report.json)."""
-        loc = f"{self.file}:{self.line}" if self.line else self.file
-        return ValidationIssue(code=self.code, severity=self.severity, where=self.where if self.where != "global" else loc,
-                               message=f"{loc}: {self.message}", fixed=self.action in ("replace_with_estimate", "mass_from_area"))
+        return ValidationIssue(code=self.code, severity=self.severity, where=self.where if self.where != "global" else self.loc,
+                               message=f"{self.loc}: {self.message}", fixed=self.action in ("replace_with_estimate", "mass_from_area"))
 
 
 @dataclass(frozen=True)
@@ -246,15 +249,11 @@ class Recorder:
     def add(self, code: str, message: str, *, file: str | None = None, line: int | None = None, link: str | None = None,
             joint: str | None = None, use: MeshUse | None = None, action: Action | None = None, **values: Any) -> None:
         sev = self.policy.severity(code, use)
-        if action is None:
-            action = "refuse" if sev == "error" else None
         self.findings.append(Finding(code=code, severity=sev, message=message, file=file if file is not None else self.urdf_rel,
-                                     line=line, link=link, joint=joint, action=action, values=values))
+                                     line=line, link=link, joint=joint, action=action or ("refuse" if sev == "error" else None),
+                                     values=values))
 
     def rel(self, path: Path | str) -> str:
-        if self.folder is None:
-            return str(path)
-        try:
+        if self.folder is not None and Path(path).is_relative_to(self.folder):
             return str(Path(path).relative_to(self.folder))
-        except ValueError:
-            return str(path)
+        return str(path)

@@ -57,6 +57,17 @@ class _Triangles:
     mtllibs: list[str] = field(default_factory=list)
 
 
+def _malformed(defects: dict[str, str], why: str) -> _Triangles:
+    """No triangles: ``defects`` with ``MESH_MALFORMED`` saying ``why``."""
+    defects["MESH_MALFORMED"] = why
+    return _Triangles(np.zeros((0, 3)), np.zeros((0, 3), np.int64), defects)
+
+
+def _bad_faces(f: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Which faces (M,) of ``f`` (M, 3) index a vertex outside ``v`` (N, 3)."""
+    return np.any((f < 0) | (f >= len(v)), axis=1) if len(f) else np.zeros(0, bool)
+
+
 #: A line (after its newline: a search for a literal first byte is several times faster than for a line start) whose
 #: first byte after blanks begins no OBJ record.
 _OBJ_NOT_RECORD = re.compile(rb"\n[ \t]*([^A-Za-z#\s][^\r\n]{0,39})")
@@ -82,7 +93,7 @@ def _scan_obj(data: bytes, max_faces: int) -> _Triangles:
         raise _Unparsable(defects.get("MESH_MALFORMED") or str(exc), mtllibs) from None
     if len(f) > max_faces:
         raise _TooManyFaces(len(f), max_faces)
-    bad = np.any((f < 0) | (f >= len(v)), axis=1) if len(f) else np.zeros(0, bool)
+    bad = _bad_faces(f, v)
     if bad.any() or notes:
         what = [f"{int(bad.sum())} face(s) index vertices outside the {len(v)} defined"] if bad.any() else []
         defects["MESH_BAD_INDEX"] = "; ".join(what + [n.replace("OBJ: ", "") for n in notes])
@@ -97,21 +108,18 @@ def _scan_stl(data: bytes, max_faces: int) -> _Triangles:
             if n > max_faces:
                 raise _TooManyFaces(n, max_faces)
             dt = np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
-            tri = np.frombuffer(data, dtype=dt, count=n, offset=84)["v"].astype(np.float64)
-            v = tri.reshape(-1, 3)
+            v = np.frombuffer(data, dtype=dt, count=n, offset=84)["v"].astype(np.float64).reshape(-1, 3)
             return _Triangles(v, np.arange(len(v)).reshape(-1, 3), defects)
     head = data[:512].lstrip().lower()
     if not head.startswith(b"solid"):
-        defects["MESH_MALFORMED"] = "neither a binary STL (size != 84 + 50 n) nor an ASCII STL"
-        return _Triangles(np.zeros((0, 3)), np.zeros((0, 3), np.int64), defects)
+        return _malformed(defects, "neither a binary STL (size != 84 + 50 n) nor an ASCII STL")
     if data.count(b"facet") // 2 > max_faces:
         raise _TooManyFaces(data.count(b"facet") // 2, max_faces, "facets (about)")
     coords = re.findall(rb"vertex\s+(\S+)\s+(\S+)\s+(\S+)", data)
     try:
         v = np.array(coords, dtype=np.float64).reshape(-1, 3)
     except ValueError:
-        defects["MESH_MALFORMED"] = "an ASCII STL vertex is not numeric"
-        return _Triangles(np.zeros((0, 3)), np.zeros((0, 3), np.int64), defects)
+        return _malformed(defects, "an ASCII STL vertex is not numeric")
     if len(v) % 3:
         defects["MESH_MALFORMED"] = f"{len(v)} vertices is not a whole number of triangles"
         v = v[: len(v) - len(v) % 3]
@@ -129,7 +137,7 @@ def _scan_trimesh(data: bytes, ext: str, max_faces: int, source: str) -> _Triang
     if len(f) > max_faces:
         raise _TooManyFaces(len(f), max_faces)
     defects: dict[str, str] = {}
-    bad = np.any((f < 0) | (f >= len(v)), axis=1) if len(f) else np.zeros(0, bool)
+    bad = _bad_faces(f, v)
     if bad.any():
         defects["MESH_BAD_INDEX"] = f"{int(bad.sum())} face(s) index beyond the {len(v)} vertices"
     return _Triangles(v, f[~bad], defects)
@@ -184,14 +192,11 @@ def _scan_data(data: bytes, ext: str, max_faces: int, max_coordinate: float, sou
         scan.n_faces = exc.count
         return scan
     except _Unparsable as exc:
-        scan.defects["MESH_MALFORMED"] = str(exc)
-        scan.mtllibs = exc.mtllibs
-        return scan
-    except safexml.SafeXMLError as exc:
-        scan.defects["MESH_MALFORMED"] = f"unsafe or malformed XML: {exc.code}: {exc.detail}"
+        scan.defects["MESH_MALFORMED"], scan.mtllibs = str(exc), exc.mtllibs
         return scan
     except Exception as exc:  # trimesh / numpy raise many types on garbage
-        scan.defects["MESH_MALFORMED"] = f"cannot parse ({type(exc).__name__}: {str(exc)[:200]})"
+        scan.defects["MESH_MALFORMED"] = (f"unsafe or malformed XML: {exc.code}: {exc.detail}" if isinstance(exc, safexml.SafeXMLError)
+                                          else f"cannot parse ({type(exc).__name__}: {str(exc)[:200]})")
         return scan
     scan.defects.update(defects)
     scan.n_vertices, scan.n_faces = len(v), len(f)
@@ -203,33 +208,25 @@ def _scan_data(data: bytes, ext: str, max_faces: int, max_coordinate: float, sou
     finite = np.isfinite(uv).all(axis=1)
     if not finite.all():
         scan.defects["MESH_NONFINITE_VERTEX"] = f"{int((~finite).sum())} used vertex(es) with NaN or infinite coordinates"
-        goodf = np.isfinite(v[f]).all(axis=(1, 2))
-        f = f[goodf]
-        uv = uv[finite]
+        f, uv = f[np.isfinite(v[f]).all(axis=(1, 2))], uv[finite]
         if len(f) == 0:
             return scan
     far = np.abs(uv) > max_coordinate  # a comparison: no overflow, no warning
     if far.any():
-        worst = float(np.abs(uv).max())
         scan.defects["MESH_COORDINATE_IMPLAUSIBLE"] = (
             f"{int(far.any(axis=1).sum())} used vertex(es) beyond +-{max_coordinate:g} file units (largest |coordinate| "
-            f"{worst:.3g}): no overlay scale can make this a household object; check the mesh's units")
+            f"{float(np.abs(uv).max()):.3g}): no overlay scale can make this a household object; check the mesh's units")
         return scan
     tri = v[f]
-    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    area2 = np.linalg.norm(cross, axis=1)
-    ext3 = uv.max(axis=0) - uv.min(axis=0)
-    diag = float(np.linalg.norm(ext3))
+    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    diag = float(np.linalg.norm(uv.max(axis=0) - uv.min(axis=0)))
     scan.area = float(area2.sum() / 2.0)
     if diag == 0.0 or scan.area <= 1e-14 * diag * diag:
         scan.defects["MESH_ZERO_AREA"] = f"all {len(f)} faces are degenerate (total area {scan.area:.3g})"
         return scan
-    n = len(uv)
-    s1 = uv.sum(axis=0)
-    s2 = uv.T @ uv
-    scan.moments = (n, s1, s2)
+    scan.moments = (len(uv), uv.sum(axis=0), uv.T @ uv)
     scan.bounds = np.stack([uv.min(axis=0), uv.max(axis=0)])
-    if is_flat(n, s1, s2):
+    if is_flat(*scan.moments):
         scan.defects["MESH_ZERO_VOLUME"] = "all vertices lie in one plane (zero volume)"
     return scan
 
