@@ -27,23 +27,19 @@ from asset2sim.tasks.geometry import analyze, limits
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import overrides, request
-from asset2sim.tasks.synthesize import request_apply, request_findings
 from asset2sim.tasks.check import as_asked
 from asset2sim.tasks.assemble import write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
-from asset2sim.tasks.publish import extra_outputs, output, refine_report
-from asset2sim.tasks.publish import media as media_phase
-from asset2sim.tasks.state import placement
+from asset2sim.tasks.publish import extra_outputs, media as media_phase, output, refine_report
 from asset2sim.tasks.geometry.closed_state import closed_tuples
 from asset2sim.tasks.interpret.request import request_notes
 from asset2sim.stage_log import Progress, StageLog
 from asset2sim.tasks.publish.contract import (MARKER_NAME, REPORT_NAME, is_complete, read_report_json, run_hash, write_completion_marker,
                                               write_report_json)
-from asset2sim.tasks.state import ground_clearance, pose, stability
-from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
+from asset2sim.tasks.state import ground_clearance, placement, pose, stability
+from asset2sim.tasks.synthesize import backends, estimate, estimator, request_apply, request_findings, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
-from asset2sim.tasks.tune import escalation
-from asset2sim.tasks.tune import keep_declared as keep
+from asset2sim.tasks.tune import escalation, keep_declared as keep
 from asset2sim.tasks.tune.attempt import Attempt, balanced_attempt, opened_lying, rested_attempt, settled_attempt, steadier_opening
 from asset2sim.inert import one_line
 from asset2sim.engines.base import SimSession

@@ -20,12 +20,9 @@ from asset2sim import atomic, file_memo, input_files
 from asset2sim.atomic import sha256_files
 from asset2sim.frames import matrix_rpy
 from asset2sim.schemas.asset import AssetDescription, GeometryRef, GivenInertial, JointDesc, LinkDesc, Origin
-from asset2sim.tasks.ingest import urdf_meshes, validate_input
-from asset2sim.formats import read_asset_file
-from asset2sim.formats import staging
+from asset2sim.tasks.ingest import partnet_mobility, urdf_meshes, validate_input
+from asset2sim.formats import ReadOptions, read_asset_file, staging
 from asset2sim.tasks.ingest.errors import AssetError
-from asset2sim.formats import ReadOptions
-from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.partnet_mobility import URDF_NAMES
 from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfJoint, UrdfLink, UrdfModel, parse_urdf_bytes
 

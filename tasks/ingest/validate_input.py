@@ -19,9 +19,7 @@ from pathlib import Path
 
 from asset2sim.tasks.ingest import partnet_mobility
 
-from asset2sim.formats import read_asset_file
-
-from asset2sim.formats import staging
+from asset2sim.formats import read_asset_file, staging
 from asset2sim.tasks.ingest.findings import (CODES, DEFAULT_POLICY, MAX_LINKS, MAX_TOTAL_FACES, SEMANTIC_KINDS, Finding,
                                              ValidationPolicy, ValidationResult, has_errors)
 from asset2sim.tasks.ingest.mesh_checks import MeshChecks

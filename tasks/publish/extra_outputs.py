@@ -5,6 +5,8 @@ the loss of the refined asset, except an output folder that cannot be written (`
 from __future__ import annotations
 
 import errno
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from asset2sim import output_folder
@@ -47,6 +49,17 @@ def raise_if_unwritable(exc: BaseException, out_dir: Path) -> None:
                                             "OUTPUT_WRITE_FAILED", where) from cur
 
 
+@contextmanager
+def _noted(report: RefineReport, out_dir: Path, what: str, named: bool = False) -> Iterator[None]:
+    """A failure inside is the note ``what: why`` (``named``: the exception's type first) in ``report``, never the loss
+    of the refined asset, except what :func:`raise_if_unwritable` raises."""
+    try:
+        yield
+    except Exception as exc:
+        raise_if_unwritable(exc, out_dir)
+        report.notes.append(f"{what}: {type(exc).__name__ + ': ' if named else ''}{one_line(exc)}")
+
+
 def host_files(out_dir: Path, asset: AssetDescription, config: RefineConfig, report: RefineReport) -> dict[str, str]:
     """An MJCF or USD input's refined object written back into its own files (``mjcf/host/``,
     :func:`asset2sim.formats.mjcf.physics.write_host_mjcf`; ``usd/host/``,
@@ -64,13 +77,11 @@ def _host_mjcf(out_dir: Path, source: Path, staged_urdf: Path, config: RefineCon
         report.notes.append(f"host MJCF not written: the files of {source.name} as read when the refine began are no "
                             "longer at hand (its staged folder is gone); the input is not read a second time")
         return {}
-    try:
-        with quiet_stdout():
-            done = write_host_mjcf(out_dir, source, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle),
-                                        sources=read[0], angle=read[1].get("angle"))
-    except Exception as exc:  # the host file must not lose the refined asset
-        raise_if_unwritable(exc, out_dir)
-        report.notes.append(f"host MJCF not written: {one_line(exc)}")
+    done = None
+    with _noted(report, out_dir, "host MJCF not written"), quiet_stdout():
+        done = write_host_mjcf(out_dir, source, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle),
+                               sources=read[0], angle=read[1].get("angle"))
+    if done is None:
         return {}
     rel = done.path.relative_to(out_dir).as_posix()
     report.notes.append(f"host MJCF: {rel} is {source.name} with the refined physics (bodies {list(done.bodies)}, joints "
@@ -83,11 +94,10 @@ def _host_mjcf(out_dir: Path, source: Path, staged_urdf: Path, config: RefineCon
 
 
 def _host_usd(out_dir: Path, source: Path, staged_urdf: Path, config: RefineConfig, report: RefineReport) -> dict[str, str]:
-    try:
+    done = None
+    with _noted(report, out_dir, "host USD not written"):
         done = write_host_usd(out_dir, source)
-    except Exception as exc:  # the host stage must not lose the refined asset
-        raise_if_unwritable(exc, out_dir)
-        report.notes.append(f"host USD not written: {one_line(exc)}")
+    if done is None:
         return {}
 
     def rel(p: Path) -> str:
@@ -127,30 +137,21 @@ def write_extras(out_dir: Path, report: RefineReport, att: Attempt, ctx: Estimat
                 raise_if_unwritable(exc, out_dir)
                 report.notes.append(f"{what} failed: {one_line(exc)}")
             log.lap(f"extras_{key}")
-        try:
-            ev = evaluate.refined_evaluation(ctx, att, report, resolution, out_dir, reference=reference, shown=shown)
-            evaluate.write_evaluation(ev, out_dir, report=False)
-        except Exception as exc:
-            raise_if_unwritable(exc, out_dir)
-            report.notes.append(f"evaluation.json failed: {type(exc).__name__}: {one_line(exc)}")
-            ev = None
+        ev = views = None
+        with _noted(report, out_dir, "evaluation.json failed", named=True):
+            made = evaluate.refined_evaluation(ctx, att, report, resolution, out_dir, reference=reference, shown=shown)
+            evaluate.write_evaluation(made, out_dir, report=False)
+            ev = made
         log.lap("extras_evaluation")
         if media and ev is not None:
-            views = None
-            try:
+            with _noted(report, out_dir, "renders failed"):
                 views = media_phase.output_views(out_dir, report.initial_joint_positions)
                 out["views"] = str(out_dir / VIEWS_DIR)
-            except Exception as exc:
-                raise_if_unwritable(exc, out_dir)
-                report.notes.append(f"renders failed: {one_line(exc)}")
             log.lap("extras_render")
-            try:
+            with _noted(report, out_dir, "HTML report failed", named=True):
                 out["html"] = str(evaluate.write_media(ev, out_dir, views=views, clips=clips))
                 if clips and (out_dir / CLIPS_DIR / CLIPS_JSON).is_file():
                     out["clips"] = str(out_dir / CLIPS_DIR)
-            except Exception as exc:
-                raise_if_unwritable(exc, out_dir)
-                report.notes.append(f"HTML report failed: {type(exc).__name__}: {one_line(exc)}")
             log.lap("extras_report")
     report.media = "done" if media else "deferred"
     if not media:
