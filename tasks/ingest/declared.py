@@ -88,21 +88,20 @@ def _link(name: str, inertial: UrdfInertial | None, how: How, density: float | N
 def declared_from_model(source: Path, fmt: str, model: UrdfModel, read: staging.ReadAsset | None = None) -> DeclaredPhysics:
     """The declared physics of an asset model (a URDF's, or a reader's ``read.model`` with its springs,
     inferred inertials and densities)."""
-    links = {}
-    for name, ln in model.links.items():
-        if read is not None and name in read.inferred:
-            links[name] = _link(name, read.simulated.get(name), "inferred", read.densities.get(name))
-        else:
-            links[name] = _link(name, ln.inertial, "declared", written=None if read is None else read.written_moments.get(name))
+    links = {name: _link(name, read.simulated.get(name), "inferred", read.densities.get(name))
+             if read is not None and name in read.inferred else
+             _link(name, ln.inertial, "declared", written=None if read is None else read.written_moments.get(name))
+             for name, ln in model.links.items()}
     joints = {}
     for j in model.joints:
         if j.type not in ("revolute", "continuous", "prismatic"):
             continue
         spring = read.springs.get(j.name) if read is not None else None
         lim, dyn = j.limit, j.dynamics
+        stops = None if j.type == "continuous" else lim
         joints[j.name] = DeclaredJoint(
             name=j.name, type=j.type, child=j.child,
-            lower=None if lim is None or j.type == "continuous" else lim.lower, upper=None if lim is None or j.type == "continuous" else lim.upper,
+            lower=None if stops is None else stops.lower, upper=None if stops is None else stops.upper,
             damping=None if dyn is None else dyn.damping, friction=None if dyn is None else dyn.friction,
             stiffness=None if spring is None else spring.stiffness, reference=None if spring is None else spring.reference,
             effort=None if lim is None else lim.effort)

@@ -67,51 +67,53 @@ def resolve_mesh_reference(folder: Path | str, filename: str | None, *, base: Pa
     Returns a :class:`MeshReference` (never raises for bad input).
     """
     fname = filename if filename is not None else ""
+
+    def refused(code: str, message: str, size: int | None = None) -> MeshReference:
+        return MeshReference(fname, None, code, message, size)
+
     if not fname.strip():
-        return MeshReference(fname, None, "MESH_FILENAME_EMPTY", "<mesh> has no filename")
+        return refused("MESH_FILENAME_EMPTY", "<mesh> has no filename")
     if "\x00" in fname:
-        return MeshReference(fname, None, "MESH_PATH_NUL", "the path contains a NUL byte")
+        return refused("MESH_PATH_NUL", "the path contains a NUL byte")
     if any(ord(ch) < 32 or ord(ch) == 127 for ch in fname):
-        return MeshReference(fname, None, "MESH_PATH_CONTROL_CHAR", "the path contains a control character")
+        return refused("MESH_PATH_CONTROL_CHAR", "the path contains a control character")
     if _URI.match(fname) or (_SCHEME.match(fname) and not _DRIVE.match(fname)):
-        return MeshReference(fname, None, "MESH_URI_FORBIDDEN", f"URI {fname!r}: only relative paths inside the asset folder are accepted")
+        return refused("MESH_URI_FORBIDDEN", f"URI {fname!r}: only relative paths inside the asset folder are accepted")
     if fname.startswith(("/", "\\")) or _DRIVE.match(fname):
-        return MeshReference(fname, None, "MESH_PATH_ABSOLUTE", f"absolute path {fname!r}: only relative paths inside the asset folder are accepted")
+        return refused("MESH_PATH_ABSOLUTE", f"absolute path {fname!r}: only relative paths inside the asset folder are accepted")
     root_abs = os.path.abspath(str(folder))
     base_abs = os.path.abspath(str(base)) if base is not None else root_abs
     lexical = os.path.normpath(os.path.join(base_abs, fname))
     if not inside(lexical, root_abs):
-        return MeshReference(fname, None, "MESH_PATH_ESCAPES", f"{fname!r} resolves to {lexical}, outside the asset folder")
-    root_real = os.path.realpath(root_abs)
+        return refused("MESH_PATH_ESCAPES", f"{fname!r} resolves to {lexical}, outside the asset folder")
     real = os.path.realpath(os.path.join(base_abs, fname))
-    if not inside(real, root_real):
-        return MeshReference(fname, None, "MESH_SYMLINK_ESCAPES", f"{fname!r} is a symlink (or under one) to {real}, outside the asset folder")
+    if not inside(real, os.path.realpath(root_abs)):
+        return refused("MESH_SYMLINK_ESCAPES", f"{fname!r} is a symlink (or under one) to {real}, outside the asset folder")
     try:
         st = os.stat(real)
     except FileNotFoundError:
-        return MeshReference(fname, None, "MESH_NOT_FOUND", f"{fname!r} does not exist")
+        return refused("MESH_NOT_FOUND", f"{fname!r} does not exist")
     except NotADirectoryError:
-        return MeshReference(fname, None, "MESH_NOT_FOUND", f"{fname!r} does not exist (a parent is a file)")
+        return refused("MESH_NOT_FOUND", f"{fname!r} does not exist (a parent is a file)")
     except OSError as exc:
-        return MeshReference(fname, None, "MESH_UNREADABLE", f"{fname!r}: {exc.strerror or exc}")
+        return refused("MESH_UNREADABLE", f"{fname!r}: {exc.strerror or exc}")
     if stat.S_ISDIR(st.st_mode):
-        return MeshReference(fname, None, "MESH_IS_DIRECTORY", f"{fname!r} is a directory")
+        return refused("MESH_IS_DIRECTORY", f"{fname!r} is a directory")
     if not stat.S_ISREG(st.st_mode):
-        return MeshReference(fname, None, "MESH_NOT_REGULAR_FILE", f"{fname!r} is a {_kind(st.st_mode)}, not a regular file")
+        return refused("MESH_NOT_REGULAR_FILE", f"{fname!r} is a {_kind(st.st_mode)}, not a regular file")
     try:  # the path as written, as the operating system (PyBullet, a user's simulator) opens it
         os.stat(os.path.join(base_abs, fname))
     except OSError:
-        return MeshReference(fname, None, "MESH_NOT_FOUND",
-                             f"{fname!r} cannot be opened as written: a folder it walks through ('dir/../') does not exist "
-                             "(only the normalized path does)")
+        return refused("MESH_NOT_FOUND",
+                       f"{fname!r} cannot be opened as written: a folder it walks through ('dir/../') does not exist "
+                       "(only the normalized path does)")
     exts = frozenset(e.lower() for e in extensions)
     if exts:
         for name in (fname, real):
-            suf = os.path.splitext(name)[1].lower()
-            if suf not in exts:
-                return MeshReference(fname, None, "MESH_EXTENSION_UNSUPPORTED",
-                                     f"{os.path.basename(name)!r} does not end in a mesh extension ({', '.join(sorted(exts))})")
+            if os.path.splitext(name)[1].lower() not in exts:
+                return refused("MESH_EXTENSION_UNSUPPORTED",
+                               f"{os.path.basename(name)!r} does not end in a mesh extension ({', '.join(sorted(exts))})")
     if max_bytes is not None and st.st_size > max_bytes:
-        return MeshReference(fname, None, "MESH_TOO_LARGE", f"{fname!r} has {st.st_size} bytes > cap {max_bytes}", st.st_size)
+        return refused("MESH_TOO_LARGE", f"{fname!r} has {st.st_size} bytes > cap {max_bytes}", st.st_size)
     return MeshReference(fname, Path(real), None, "", st.st_size)
 
