@@ -185,9 +185,7 @@ class MeshChecks(Recorder):
             lname = ln.name or None
             geoms = [("visual", g) for g in ln.visuals] + [("collision", g) for g in ln.collisions]
             mass_role = "collision" if ln.collisions else "visual"
-            link_moments = None
-            link_has_volume = False
-            link_mass_geoms = 0
+            link_moments, link_has_volume, link_mass_geoms = None, False, 0
             for role, g in geoms:
                 use: MeshUse = "collision" if role == "collision" else ("mass" if mass_role == "visual" else "visual")
                 in_mass = role == mass_role
@@ -233,11 +231,9 @@ class MeshChecks(Recorder):
                 if scan.bounds is not None:
                     self.mesh_bounds[id(g)] = scan.bounds
                 for code, msg in scan.defects.items():
-                    if code == "MESH_ZERO_VOLUME":
-                        self.add(code, f"{msg} (<{role}> at {at})", file=frel, link=lname, role=role, urdf_line=g.line)
-                    else:
-                        self.add(code, f"{msg}; used for {use} (<{role}> at {at})", file=frel, link=lname, use=use,
-                                 role=role, urdf_line=g.line)
+                    flat = code == "MESH_ZERO_VOLUME"
+                    self.add(code, f"{msg}{'' if flat else f'; used for {use}'} (<{role}> at {at})", file=frel, link=lname,
+                             use=None if flat else use, role=role, urdf_line=g.line)
                 if in_mass and g.complete:
                     link_mass_geoms += 1
                     if scan.moments is not None:
@@ -261,8 +257,7 @@ class MeshChecks(Recorder):
         """Why refine cannot load this mesh file (None: it can): the suffix as written (PyBullet's choice)
         and the real file's must be the same format of ``policy.simulator_mesh_extensions``, or both GLB, glTF
         or PLY (:data:`~asset2sim.tasks.ingest.urdf_meshes.CONVERTED_SUFFIXES`: converted to OBJ first)."""
-        written = os.path.splitext(fname)[1].lower()
-        actual = real.suffix.lower()
+        written, actual = os.path.splitext(fname)[1].lower(), real.suffix.lower()
         if written == actual and written in urdf_meshes.CONVERTED_SUFFIXES:  # staged as OBJ before refine loads it
             return None
         allowed = self.policy.simulator_mesh_extensions
