@@ -173,8 +173,7 @@ class DynamicsSearch:
         out = self._last
         if b is None or out is None or joint not in out.task_ok or joint not in out.peak_force or b.force_n == float("inf"):
             return 0.0
-        h = operating.BUDGET_SHARE * float(b.force_n) - out.peak_force[joint]
-        return max(0.0, h * (float(b.lever) if b.lever else 1.0))
+        return max(0.0, (operating.BUDGET_SHARE * float(b.force_n) - out.peak_force[joint]) * float(b.lever or 1.0))
 
     def settle(self, before: Overlay, proposal: Overlay, changes: dict[str, dict[str, float]],
                caps: dict[str, float] | None = None) -> Retuning:
@@ -188,14 +187,12 @@ class DynamicsSearch:
         out = self._last or RoundOutcome()
         ov = proposal.model_copy(deep=True)
         notes: list[str] = []
-        names = list(dict.fromkeys([*changes, *sorted(out.not_held)]))
-        for name in names:
+        for name in list(dict.fromkeys([*changes, *sorted(out.not_held)])):
             d0, d1 = before.joints.get(name), ov.joints.get(name)
             if d0 is None or d1 is None:
                 continue
             rec = self.joints.get(name, JointRecord())
-            cur = Setting(float(d0.friction), float(d0.damping))
-            prop = Setting(float(d1.friction), float(d1.damping))
+            cur, prop = Setting(float(d0.friction), float(d0.damping)), Setting(float(d1.friction), float(d1.damping))
             new, why = prop, ""
             c_prop, c_cur = self._cost(name, prop), self._cost(name, cur)
             up, down = c_prop > c_cur, c_prop < c_cur
@@ -305,8 +302,7 @@ def force_excess(metrics: list[MetricResult], budgets: dict[str, operating.Opera
                 b = budgets.get(a["joint"])
                 if not (a.get("slid") or a.get("tipped")) or b is None or not a.get("moved"):
                     continue
-                e = float(a["peak_operating_force_n"]) - b.force_n
-                e = e * b.lever if b.lever else e
+                e = (float(a["peak_operating_force_n"]) - b.force_n) * (b.lever or 1.0)
                 if e > 0:
                     excess[a["joint"]] = max(excess.get(a["joint"], 0.0), e)
                     why.setdefault(a["joint"], "the free object slid under the gripper's push")
@@ -344,5 +340,4 @@ def relieve(overlay: Overlay, metrics: list[MetricResult], limits: operating.Ope
         limits.friction_caps[name] = fr
         limits.damping_caps[name] = dm
         changes[name] = {"damping": dm, "friction": fr}
-    reason = "; ".join(f"{j}: {w}" for j, w in why.items() if j in changes)
-    return Retuning(ov, changes, reason)
+    return Retuning(ov, changes, "; ".join(f"{j}: {w}" for j, w in why.items() if j in changes))

@@ -89,10 +89,9 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         step = dynamics_search.relieve(overlay, check.metrics, lim)
         if not step.changes:
             step = escalate(overlay, check, config.escalation_factor, caps, floors, dcaps)
-        reason = step.reason
         settled = search.settle(before, step.overlay, step.changes, caps)
         overlay, notes = settled.overlay, settled.notes
-        reason = "; ".join([reason, *notes]) if reason and notes else reason or "; ".join(notes)
+        reason = "; ".join(filter(None, [step.reason, *notes]))
         overlay, held = word_guard.keep(before, overlay, kept_words)
         changes = _changed(before, overlay)
         for line in held:
@@ -180,9 +179,8 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
             for line in rep.notes:
                 log.say("sweep_repair", line)
             st.collision_changes = list(st.collision_changes) + rep.notes
-            n = len(rounds)
-            rounds = rounds + [r.model_copy(update={"round": n + r.round, "reason": f"{rep.what} ({label}): {r.reason}"})
-                               for r in tuned.rounds]
+            rounds = rounds + [r.model_copy(update={"round": len(rounds) + r.round,
+                                                    "reason": f"{rep.what} ({label}): {r.reason}"}) for r in tuned.rounds]
             return Tuned(tuned.overlay, check2, rounds, rep.overrides, closed2)
         log.say("sweep_repair", f"{rep.what} not kept ({label}; failing metrics {dynamics_search.failing_tiers(check.metrics)} -> "
                                 f"{dynamics_search.failing_tiers(check2.metrics)}{'; would fail ' + ', '.join(lost) if lost else ''}); "
@@ -208,10 +206,9 @@ def escalate(overlay: Overlay, check: postcheck.PostCheck, factor: float, fricti
 
     Returns the new overlay, its changes (joint -> {parameter: new value}) and the reason.
     """
-    other_osc = check.engine_failures()[1]
-    osc = list(dict.fromkeys(list(check.metric("oscillation").details.get("failing", [])) + other_osc))
+    osc = list(dict.fromkeys([*check.metric("oscillation").details.get("failing", []), *check.engine_failures()[1]]))
     not_held = joints_not_held(check.metrics)
-    targets = list(dict.fromkeys(list(osc) + list(check.sagging) + not_held))
+    targets = list(dict.fromkeys([*osc, *check.sagging, *not_held]))
     reason = [f"{why}: {', '.join(joints)}" for why, joints in
               (("oscillating", osc), ("sagging", check.sagging), ("not held under robust rest", not_held)) if joints]
     if not targets and not check.stable:
@@ -244,9 +241,8 @@ def escalate(overlay: Overlay, check: postcheck.PostCheck, factor: float, fricti
             damping = max(dcap, d.damping)
         if friction == d.friction and damping == d.damping:
             continue
-        new = d.model_copy(update={"damping": damping, "friction": friction, "source": d.source + note})
-        ov.joints[name] = new
-        changes[name] = {"damping": new.damping, "friction": new.friction}
+        ov.joints[name] = d.model_copy(update={"damping": damping, "friction": friction, "source": d.source + note})
+        changes[name] = {"damping": damping, "friction": friction}
     return dynamics_search.Retuning(ov, changes, "; ".join(reason))
 
 

@@ -56,10 +56,8 @@ def operating_effort(overlay: Overlay, asset: AssetDescription, joint: str, geom
         KeyError: ``joint`` is not in ``asset``.
     """
     cfg = ProbeConfig()
-    jd = asset.joint(joint)
-    total = sum(lp.mass for lp in overlay.links.values())
-    f_max = max(cfg.min_force, cfg.force_factor * total * GRAVITY)
-    if jd.type == "prismatic":
+    f_max = max(cfg.min_force, cfg.force_factor * sum(lp.mass for lp in overlay.links.values()) * GRAVITY)
+    if asset.joint(joint).type == "prismatic":
         return float(f_max)
     return float(f_max * push_lever(overlay, asset, joint, geometry))
 
@@ -217,13 +215,11 @@ def operating_budgets(obj: SimObject, overlay: Overlay, closed: dict[str, tuple[
     try:
         total = sum(float(m) for m in session.link_masses().values())
         for name, (qc, d, rng) in closed.items():
-            if name not in session.joint_child or name not in overlay.joints or not rng > 0:
-                continue
-            if session.joint_types[name] not in ("revolute", "continuous", "prismatic"):
+            if name not in session.joint_child or name not in overlay.joints or not rng > 0 or session.joint_types[name] not in (
+                    "revolute", "continuous", "prismatic"):
                 continue
             grasp = _grasp(session, model, name, d, state, free)
-            child = session.joint_child[name]
-            range_of = operating_range(category, labels.get(child) if grasp.side == "child" else None)
+            range_of = operating_range(category, labels.get(session.joint_child[name]) if grasp.side == "child" else None)
             paths = _paths(float(d * (state.get(name, qc) - qc) / rng), actions, whole)
             tight = _tightest(session, model, name, (qc, d, rng), paths, grasp, range_of,
                               (mu, total) if free and ground else None, springs.get(name))
@@ -299,7 +295,6 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
     ``range_of``: the part's operating range and where it comes from; ``ground``: (mu, whole mass kg) where the
     ground bound applies."""
     qc, d, rng = closed
-    rng_, where = range_of
     state = session.options.initial_state
     prismatic = session.joint_types[joint] == "prismatic"
     f_state = float(d * (state.get(joint, qc) - qc) / rng)
@@ -312,10 +307,9 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
         for f in fractions:
             session.set_joint_positions({**state, joint: qc + d * f * rng})
             t, lever = _grasp_motion(session, joint, grasp, prismatic, model)
-            nt = max(float(np.linalg.norm(t)), 1e-12)
-            force, bound = range_force(rng_, where, lever)
+            force, bound = range_force(*range_of, lever)
             hand = BUDGET_SHARE * force * (lever if lever is not None else 1.0)
-            fg = _ground_force(t, nt, s_motion, *ground) if ground is not None else None
+            fg = _ground_force(t, s_motion, *ground) if ground is not None else None
             if fg is not None and fg < force:
                 force, bound = fg, f"ground friction mu={ground[0]:g} of the free object (M={ground[1]:.3g} kg)"
             qg = gravity_force(session, model, joint, grasp.moving) + side * _spring_force(spring, qc + d * f * rng)
@@ -345,10 +339,11 @@ def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: boo
     return np.cross(a, p - o), grasp_lever(session, joint, grasp.link, grasp.point, model)
 
 
-def _ground_force(t: np.ndarray, nt: float, s_motion: float, mu: float, total: float) -> float | None:
-    """mu M g / (h - mu v), N: the push along ``s_motion`` ``t`` (|t| = ``nt``) the
+def _ground_force(t: np.ndarray, s_motion: float, mu: float, total: float) -> float | None:
+    """mu M g / (h - mu v), N: the push along ``s_motion`` ``t`` the
     ground friction still resists; None where the gripper presses or lifts (a vertical share of the push of
     :data:`VERTICAL_SHARE` or more) or h <= mu v."""
+    nt = max(float(np.linalg.norm(t)), 1e-12)
     horiz = float(np.linalg.norm(t[:2])) / nt
     down = max(0.0, -s_motion * float(t[2]) / nt)  # a push with a downward part loads the ground more
     if abs(float(t[2])) / nt < VERTICAL_SHARE and horiz - mu * down > 0:
@@ -418,16 +413,14 @@ def damping_caps(obj: SimObject, closed: dict[str, tuple[float, float, float]]) 
     """
     cfg = sweep.SweepConfig()
     source, initial_state = obj.source, dict(obj.state)
-    model = source.model()
-    subtrees = limits.subtrees(model)
+    subtrees = limits.subtrees(source.model())
     caps: dict[str, float] = {}
     with source.open("pybullet", fixed_root_options(initial_state, obj.conventions, dict(obj.springs))) as session:
         for name, (qc, d, rng) in closed.items():
             if name not in session.joint_types or not rng > 0:
                 continue
             session.set_joint_positions({**initial_state, name: qc})
-            links = subtrees.get(name, [session.joint_child[name]])
-            e = sweep.effort_limit(session, name, links, rng, cfg, qc, d)
+            e = sweep.effort_limit(session, name, subtrees.get(name, [session.joint_child[name]]), rng, cfg, qc, d)
             caps[name] = e * cfg.time_limit / (DAMPED_SPEED_MARGIN * rng)
     return caps
 
