@@ -144,15 +144,12 @@ class TreeChecks(Recorder):
             self.add("JOINT_SELF_LOOP", f"parent and child are both {parent!r}", line=j.line, joint=jname, link=child)
             tree.touched.add(parent)
             return False
-        for n in (parent, child):
-            if n in seen:
-                tree.touched.add(n)
+        tree.touched.update(n for n in (parent, child) if n in seen)
         if child in seen:
             tree.has_parent.setdefault(child, []).append(jname or "?")
-        if ok and parent and child:
-            if child not in tree.first_parent:
-                tree.first_parent[child] = parent
-                tree.children[parent].append(child)
+        if ok and parent and child and child not in tree.first_parent:
+            tree.first_parent[child] = parent
+            tree.children[parent].append(child)
         return True
 
     def _joint_support(self, j: UrdfJoint, jseen: dict[str, UrdfJoint]) -> None:
@@ -256,9 +253,7 @@ class TreeChecks(Recorder):
                              line=ine.line, link=ln.name, action="replace_with_estimate",
                              eigenvalues=lam, inertia=list(inertia))
                     bad = True
-            if mass is None or inertia is None:
-                bad = True
-            if bad:
+            if bad or mass is None or inertia is None:
                 self.result.replace_inertials.add(ln.name)
 
     def joint_travel(self, model: UrdfModel, root: str | None) -> None:

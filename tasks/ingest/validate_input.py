@@ -76,8 +76,7 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
         else:
             urdf = asset
             folder = asset.parent
-        self.folder = folder
-        self.result.folder = folder
+        self.folder = self.result.folder = folder
         self.urdf_rel = self.rel(urdf)
         real = os.path.realpath(urdf)
         if not inside(real, os.path.realpath(folder)):
@@ -97,42 +96,39 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
     # -- extras
     def extras(self, link_names: set[str]) -> None:
         assert self.folder is not None
-        sem = self.folder / partnet_mobility.SEMANTICS_NAME
-        if os.path.lexists(sem):
-            text = self._read_extra(sem)
-            if text is not None:
-                self.result.extra_files.append(sem)
-                for ln in partnet_mobility.iter_semantics(text):
-                    i, link, entry = ln.lineno, ln.link, ln.entry
-                    if link is None or entry is None:
-                        self.add("SEMANTICS_MALFORMED_LINE", f"line {i}: expected 'link_name joint_kind semantic_label', got {ln.text[:80]!r}",
-                                 file="semantics.txt", line=i)
-                        continue
-                    self.result.semantics[link] = entry
-                    if link_names and link not in link_names:
-                        self.add("SEMANTICS_UNKNOWN_LINK", f"line {i}: no link {link!r} in the URDF", file="semantics.txt", line=i, link=link)
-                    if entry.joint_kind not in SEMANTIC_KINDS:
-                        self.add("SEMANTICS_UNKNOWN_KIND", f"line {i}: joint kind {entry.joint_kind!r} is not one of {', '.join(sorted(SEMANTIC_KINDS))}",
-                                 file="semantics.txt", line=i, link=link)
-        meta = self.folder / partnet_mobility.META_NAME
-        if os.path.lexists(meta):
-            text = self._read_extra(meta)
-            if text is not None:
-                self.result.extra_files.append(meta)
-                try:
-                    obj = json.loads(text)
-                except ValueError as exc:
-                    self.add("META_UNREADABLE", f"not JSON: {exc}", file="meta.json")
-                    return
-                if not isinstance(obj, dict):
-                    self.add("META_UNREADABLE", "not a JSON object", file="meta.json")
-                    return
-                self.result.category = partnet_mobility.meta_category(obj)
+        for ln in partnet_mobility.iter_semantics(self._read_extra(partnet_mobility.SEMANTICS_NAME) or ""):
+            i, link, entry = ln.lineno, ln.link, ln.entry
+            if link is None or entry is None:
+                self.add("SEMANTICS_MALFORMED_LINE", f"line {i}: expected 'link_name joint_kind semantic_label', got {ln.text[:80]!r}",
+                         file="semantics.txt", line=i)
+                continue
+            self.result.semantics[link] = entry
+            if link_names and link not in link_names:
+                self.add("SEMANTICS_UNKNOWN_LINK", f"line {i}: no link {link!r} in the URDF", file="semantics.txt", line=i, link=link)
+            if entry.joint_kind not in SEMANTIC_KINDS:
+                self.add("SEMANTICS_UNKNOWN_KIND", f"line {i}: joint kind {entry.joint_kind!r} is not one of {', '.join(sorted(SEMANTIC_KINDS))}",
+                         file="semantics.txt", line=i, link=link)
+        text = self._read_extra(partnet_mobility.META_NAME)
+        if text is None:
+            return
+        try:
+            obj = json.loads(text)
+        except ValueError as exc:
+            self.add("META_UNREADABLE", f"not JSON: {exc}", file="meta.json")
+            return
+        if not isinstance(obj, dict):
+            self.add("META_UNREADABLE", "not a JSON object", file="meta.json")
+            return
+        self.result.category = partnet_mobility.meta_category(obj)
 
-    def _read_extra(self, path: Path) -> str | None:
-        """The text of ``semantics.txt`` or ``meta.json``, or None after recording why it cannot be read
-        (``ASSET_FILE_TOO_LARGE``, never opened, or ``ASSET_FILE_NOT_REGULAR``)."""
+    def _read_extra(self, name: str) -> str | None:
+        """The text of the folder's ``semantics.txt`` or ``meta.json`` (``name``), recorded in ``result.extra_files``;
+        None when absent, or after recording why it cannot be read (``ASSET_FILE_TOO_LARGE``, never opened, or
+        ``ASSET_FILE_NOT_REGULAR``)."""
         assert self.folder is not None
+        path = self.folder / name
+        if not os.path.lexists(path):
+            return None
         cap = self.policy.max_extra_bytes
         ref = resolve_mesh_reference(self.folder, path.name, extensions=(), max_bytes=cap)
         if ref.code == "MESH_TOO_LARGE":  # a regular file, only too big to read
@@ -144,10 +140,12 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
             self.add("ASSET_FILE_NOT_REGULAR", f"{path.name}: {ref.message}", file=path.name)
             return None
         try:
-            return read_regular(ref.path, self.policy.max_extra_bytes).decode("utf-8", "replace")
+            text = read_regular(ref.path, cap).decode("utf-8", "replace")
         except OSError as exc:
             self.add("ASSET_FILE_NOT_REGULAR", f"{path.name}: {exc}", file=path.name)
             return None
+        self.result.extra_files.append(path)
+        return text
 
     def geometry_present(self, links: list) -> None:
         """``ASSET_NO_GEOMETRY`` when the URDF has links but none has a ``<visual>`` or ``<collision>``."""
