@@ -34,14 +34,8 @@ CODE_SUFFIXES = (".py", ".yaml", ".yml", ".json", ".csv", ".txt")
 def _package_dirs() -> list[Path]:
     import importlib.util
 
-    dirs = []
-    for name in CODE_PACKAGES:
-        spec = importlib.util.find_spec(name)  # imports only the parent package
-        for loc in (spec.submodule_search_locations or []) if spec is not None else []:
-            p = Path(loc).resolve()
-            if p not in dirs:
-                dirs.append(p)
-    return dirs
+    specs = [importlib.util.find_spec(name) for name in CODE_PACKAGES]  # imports only the parent packages
+    return list(dict.fromkeys(Path(loc).resolve() for s in specs if s is not None for loc in s.submodule_search_locations or []))
 
 
 @functools.lru_cache(maxsize=1)

@@ -46,22 +46,23 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     asset, overlay, state = candidate.asset, candidate.overlay, dict(candidate.state)
     if overlay.initial_joint_positions is not None:
         overlay = overlay.model_copy(update={"initial_joint_positions": state})
-    rounds: list[EscalationRound] = []
-    cand = replace(candidate, overlay=overlay)
     recorded = postcheck.RecordedRuns()  # the manipulation tiers' runs, reused by a round with the same inputs
     n = 0
     spec = task_tier.task_spec_for(ctx.task, asset, ctx.category, request_apply.task_relevant_joints(ctx), state, closed) \
         if ctx.task and closed else None
+
+    def written(overlay: Overlay):
+        """The candidate with ``overlay``, loaded from the workspace (a SimObject)."""
+        return postcheck.overlay_object(ws.source(replace(candidate, overlay=overlay)), state, overlay, config.sim)
+
     # what the task's gripper can still operate on the task's joints (operating.operating_limits); estimates above it are lowered
-    lim = operating.operating_limits(postcheck.overlay_object(ws.source(cand), state, overlay, config.sim), overlay, asset,
-                                     ctx.geometry, closed, category=ctx.category, task=ctx.task,
+    lim = operating.operating_limits(written(overlay), overlay, asset, ctx.geometry, closed, category=ctx.category, task=ctx.task,
                                      free_moving=ctx.request.free_moving, joints=spec.joints if spec is not None else None)
     bounded, notes = operating.bound_overlay(overlay, lim.budgets)
     for line in notes:
         log.say("post_check", line)
     if bounded != overlay:
         overlay = bounded
-        cand = replace(cand, overlay=overlay)
     kept_words = word_guard.guards(ctx, overlay)  # the request's words about motion, at the values they set
     caps, dcaps = dict(lim.friction_caps), lim.damping_caps
     for name in overlay.joints:  # a drawer's friction never past its slide's range
@@ -73,12 +74,11 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     def escalated(chk: postcheck.PostCheck) -> bool:  # this loop escalates ``chk`` (the post-check then skips the sweep)
         return n < config.max_escalation_rounds and bool(escalate(overlay, chk, config.escalation_factor, caps, floors, dcaps).changes)
 
-    def checked(cand: Candidate, overlay: Overlay, escalated=None) -> postcheck.PostCheck:  # every tier, the task's included
-        return postcheck.check_object(ctx, postcheck.overlay_object(ws.source(cand), state, overlay, config.sim), config, closed, spec,
-                                      escalated=escalated, recorded=recorded)
+    def checked(overlay: Overlay, escalated=None) -> postcheck.PostCheck:  # every tier, the task's included
+        return postcheck.check_object(ctx, written(overlay), config, closed, spec, escalated=escalated, recorded=recorded)
 
-    check = checked(cand, overlay, escalated)
-    rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
+    check = checked(overlay, escalated)
+    rounds = [EscalationRound(round=0, metrics=check.metrics, reason="initial post-check")]
     search = dynamics_search.DynamicsSearch(lim.budgets, lim.hand_caps, floors)  # relief and escalation bracketed by what each round measured
     search.record(overlay, check.metrics)
     tried = [(overlay, check)]
@@ -100,8 +100,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
             if held:
                 rounds[-1] = rounds[-1].model_copy(update={"words_kept": [*rounds[-1].words_kept, *held]})
             break
-        cand = replace(cand, overlay=overlay)
-        check = checked(cand, overlay, escalated)
+        check = checked(overlay, escalated)
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason, words_kept=held))
         search.record(overlay, check.metrics)
         tried.append((overlay, check))
@@ -113,8 +112,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
                   else "the last round's setting checked again with the joint sweep")
         if earlier:
             overlay = tried[best][0]
-            cand = replace(cand, overlay=overlay)
-        check = checked(cand, overlay)
+        check = checked(overlay)
         changes = {n_: {"damping": d.damping, "friction": d.friction} for n_, d in overlay.joints.items()}
         rounds.append(EscalationRound(round=rounds[-1].round + 1, metrics=check.metrics, changes=changes, reason=reason))
     log.lap("post_check")
