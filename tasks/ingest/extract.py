@@ -271,15 +271,14 @@ def _joint(jt: UrdfJoint, held: bool = False) -> JointDesc:
     a movable joint the asset's part kinds hold where it was modelled (:func:`partnet_mobility.held_bodies`), described
     as the fixed joint the output writes."""
     axis = tuple(float(v) for v in (jt.axis_xyz if jt.axis_xyz is not None else (1.0, 0.0, 0.0)))
+    frame = dict(name=jt.name, parent=jt.parent, child=jt.child, origin=_origin(jt.origin), axis=axis)
     if held:
-        return JointDesc(name=jt.name, type="fixed", parent=jt.parent, child=jt.child, origin=_origin(jt.origin), axis=axis)
+        return JointDesc(**frame, type="fixed")
     lim, dyn = jt.limit, jt.dynamics
-    bounded = jt.type in ("revolute", "prismatic")
-    return JointDesc(
-        name=jt.name, type=jt.type, parent=jt.parent, child=jt.child, origin=_origin(jt.origin), axis=axis,
-        lower=_float_or_none(lim, "lower") if bounded else None, upper=_float_or_none(lim, "upper") if bounded else None,
-        effort=_float_or_none(lim, "effort"), velocity=_float_or_none(lim, "velocity"),
-        damping=_float_or_none(dyn, "damping"), friction=_float_or_none(dyn, "friction"))
+    stops = lim if jt.type in ("revolute", "prismatic") else None
+    return JointDesc(**frame, type=jt.type, lower=_float_or_none(stops, "lower"), upper=_float_or_none(stops, "upper"),
+                     effort=_float_or_none(lim, "effort"), velocity=_float_or_none(lim, "velocity"),
+                     damping=_float_or_none(dyn, "damping"), friction=_float_or_none(dyn, "friction"))
 
 
 def _input_files(urdf: Path, links: list[LinkDesc], result: "ValidationResult") -> list[Path]:

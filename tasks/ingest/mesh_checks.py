@@ -88,8 +88,7 @@ def zero_pose_bounds(model: UrdfModel, root: str | None, mesh_bounds: dict[int, 
                         return None  # a size is unknown: no claim about the object's size
                     continue
                 pts.append(c @ T[:3, :3].T + T[:3, 3])
-            for j in by_parent.get(name, []):
-                stack.append((j.child, T @ j.origin))
+            stack.extend((j.child, T @ j.origin) for j in by_parent.get(name, []))
         if not pts:
             return None
         allp = np.vstack(pts)

@@ -360,11 +360,8 @@ def write_reference(folder: Path | str, out_dir: Path | str, label: str | None =
     ref = read_reference(folder)
     if ref.urdf is None:
         raise AssetError(f"no {REFERENCE_URDF} in {folder}")
-    notes = []
-    scale = ref.scale
-    if scale is None:
-        scale = 1.0
-        notes.append(f"{REFERENCE_JSON} has no scale: 1.0 (SAPIEN's default)")
+    scale = 1.0 if ref.scale is None else ref.scale
+    notes = [f"{REFERENCE_JSON} has no scale: 1.0 (SAPIEN's default)"] if ref.scale is None else []
     rng = ref.joint_position_range
     limits = None
     if rng is not None:

@@ -98,16 +98,17 @@ def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.Oper
     against a joint as relief counts it (:func:`force_excess`)."""
     out = RoundOutcome()
     seen: set[str] = set()
+    drifts = []  # joint -> drift, per robust-rest trial and rest test
     for m in metrics:
         if m.name == "robust_rest":
             for trial in (m.details.get("trials") or {}).values():
                 out.not_held.update(trial.get("failing_joints") or [])
-                seen.update((trial.get("joint_drift") or {}).keys())
-                for j, d in (trial.get("joint_drift") or {}).items():
-                    out.drift[j] = max(out.drift.get(j, 0.0), float(d))
+                drifts.append(trial.get("joint_drift") or {})
+                seen.update(drifts[-1])
         elif m.name == "state_hold":
-            for j, d in (m.details.get("drift") or {}).items():
-                out.drift[j] = max(out.drift.get(j, 0.0), float(d))
+            drifts.append(m.details.get("drift") or {})
+    for j, d in (jd for drift in drifts for jd in drift.items()):
+        out.drift[j] = max(out.drift.get(j, 0.0), float(d))
     out.held = seen - out.not_held
     tried: dict[str, bool] = {}
     for m in metrics:
@@ -267,7 +268,7 @@ class DynamicsSearch:
 
 def failing_tiers(metrics: list[MetricResult]) -> int:
     """Number of metrics of a post-check round that fail (``passed`` False)."""
-    return sum(1 for m in metrics if m.passed is False)
+    return sum(m.passed is False for m in metrics)
 
 
 def fewest_failures(rounds: list[list[MetricResult]]) -> int:
