@@ -101,16 +101,16 @@ class TreeChecks(Recorder):
 
     def _caps(self, model: UrdfModel) -> None:
         """The link cap and the movable-joint cap."""
-        links = model.link_elements
-        if len(links) > self.policy.max_links:
-            self.add("URDF_TOO_MANY_LINKS", f"{len(links)} links > cap {self.policy.max_links}: PyBullet, which refine "
-                     f"runs, loads at most {self.policy.max_links} links per body", links=len(links), cap=self.policy.max_links)
-        movable = model.movable_joints
-        if len(movable) > self.policy.max_movable_joints:
-            self.add("URDF_TOO_MANY_MOVABLE_JOINTS", f"{len(movable)} movable joints > cap {self.policy.max_movable_joints}: "
+        links, cap = len(model.link_elements), self.policy.max_links
+        if links > cap:
+            self.add("URDF_TOO_MANY_LINKS", f"{links} links > cap {cap}: PyBullet, which refine "
+                     f"runs, loads at most {cap} links per body", links=links, cap=cap)
+        movable, cap = len(model.movable_joints), self.policy.max_movable_joints
+        if movable > cap:
+            self.add("URDF_TOO_MANY_MOVABLE_JOINTS", f"{movable} movable joints > cap {cap}: "
                      f"refine's closed-state, state search and rest tests grow with the number of joints; with every "
                      f"link touching (worst case, benchmarks/bench_joint_cap.py) it may not finish within the flow's "
-                     f"per-asset time limit, which then ends it", joints=len(movable), cap=self.policy.max_movable_joints)
+                     f"per-asset time limit, which then ends it", joints=movable, cap=cap)
 
     def _first_by_name(self, items: list, kind: str) -> dict:
         """``kind`` ("link" or "joint") elements by name, the first of each; the others are duplicates. A name longer

@@ -464,8 +464,7 @@ def operating_limits(obj: SimObject, overlay: Overlay, asset: AssetDescription, 
                                       actions=task_actions(task), free_moving=free_moving).items():
             if n not in budgets or b.budget < budgets[n].budget:
                 budgets[n] = b
-    caps = friction_caps(overlay, asset, geometry)
-    caps.update({n: b.friction_cap for n, b in budgets.items()})
+    caps = {**friction_caps(overlay, asset, geometry), **{n: b.friction_cap for n, b in budgets.items()}}
     dcaps = {n: b.damping_cap for n, b in budgets.items()}
     if closed:  # what the joint sweep's drive still moves through the range in time
         for name, c in damping_caps(obj, closed).items():

@@ -44,16 +44,9 @@ def guards(ctx: EstimationContext, overlay: Overlay) -> list[Guard]:
     of ``ctx.request.motions`` sets on a joint it applies to
     (:func:`~asset2sim.tasks.synthesize.joint_dynamics.motion_choices`), at the overlay's value."""
     choices, _ = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
-    out = []
-    for joint, ch in choices.items():
-        dyn = overlay.joints.get(joint)
-        if dyn is None:
-            continue
-        prismatic = ctx.asset.joint(joint).type == "prismatic"
-        for word in ch.words:
-            for parameter, way in MOTION_GUARDS[word.kind].items():
-                out.append(Guard(joint, parameter, way, float(getattr(dyn, parameter)), word.phrase, prismatic))
-    return out
+    return [Guard(joint, parameter, way, float(getattr(dyn, parameter)), word.phrase, ctx.asset.joint(joint).type == "prismatic")
+            for joint, ch in choices.items() if (dyn := overlay.joints.get(joint)) is not None
+            for word in ch.words for parameter, way in MOTION_GUARDS[word.kind].items()]
 
 
 def keep(before: Overlay, overlay: Overlay, kept: list[Guard]) -> tuple[Overlay, list[str]]:
