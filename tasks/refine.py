@@ -245,8 +245,7 @@ def input_shown(asset_dir: Path | str, asset: AssetDescription) -> str:
     if asset.staged_from is None:
         return str(given)
     fmt = "USD" if asset.staged_from.suffix.lower() in (".usd", ".usda", ".usdc", ".usdz") else "MJCF"
-    shown = given / asset.staged_from.name if given.is_dir() else given
-    return f"{shown} ({fmt})"
+    return f"{given / asset.staged_from.name if given.is_dir() else given} ({fmt})"
 
 
 def _announce_extract(asset_dir: Path | str, asset: AssetDescription, findings: list, log: StageLog) -> None:

@@ -38,9 +38,7 @@ def _origin(matrix) -> Origin:
     if matrix is None:
         return Origin()
     m = np.asarray(matrix, float)
-    xyz = tuple(float(v) for v in m[:3, 3])
-    rpy = tuple(float(v) for v in matrix_rpy(m))
-    return Origin(xyz=xyz, rpy=rpy)
+    return Origin(xyz=tuple(float(v) for v in m[:3, 3]), rpy=tuple(float(v) for v in matrix_rpy(m)))
 
 
 def _geometry(g: UrdfGeometry, role: str, mesh_paths: dict[str, Path], where: str) -> GeometryRef | None:

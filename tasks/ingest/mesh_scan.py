@@ -110,8 +110,7 @@ def _scan_stl(data: bytes, max_faces: int) -> _Triangles:
             dt = np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
             v = np.frombuffer(data, dtype=dt, count=n, offset=84)["v"].astype(np.float64).reshape(-1, 3)
             return _Triangles(v, np.arange(len(v)).reshape(-1, 3), defects)
-    head = data[:512].lstrip().lower()
-    if not head.startswith(b"solid"):
+    if not data[:512].lstrip().lower().startswith(b"solid"):
         return _malformed(defects, "neither a binary STL (size != 84 + 50 n) nor an ASCII STL")
     if data.count(b"facet") // 2 > max_faces:
         raise _TooManyFaces(data.count(b"facet") // 2, max_faces, "facets (about)")

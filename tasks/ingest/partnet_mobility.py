@@ -246,8 +246,8 @@ def read_reference(folder: Path | str) -> GenSim2Reference:
     if not ru.is_file():
         return GenSim2Reference(scale=scale, joint_position_range=rng)
     types = {j.name: j.type for j in read_urdf(ru, mode="lenient").joints}  # a name written twice: first place, last type
-    task = [n for n, t in types.items() if t in MOVABLE]
-    return GenSim2Reference(scale=scale, joint_position_range=rng, urdf=ru, task_joints=task)
+    return GenSim2Reference(scale=scale, joint_position_range=rng, urdf=ru,
+                            task_joints=[n for n, t in types.items() if t in MOVABLE])
 
 
 def scale_urdf(src: Path | str, dst: Path | str, scale: float, *, joint_limits: dict[str, tuple[float, float]] | None = None,

@@ -31,8 +31,7 @@ def check_inertia(ixx: float, ixy: float, ixz: float, iyy: float, iyz: float, iz
     (tolerance 1e-9 of the trace), else ``INERTIA_NOT_POSITIVE_DEFINITE`` or
     ``INERTIA_TRIANGLE_INEQUALITY``.
     """
-    m = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]], float)
-    lam = np.linalg.eigvalsh(m)
+    lam = np.linalg.eigvalsh(np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]], float))
     vals = [float(x) for x in lam]
     if lam[2] <= 0 or lam[0] <= 1e-12 * lam[2]:
         return "INERTIA_NOT_POSITIVE_DEFINITE", vals
@@ -95,9 +94,7 @@ class TreeChecks(Recorder):
                 self._joint_support(j, jseen)
         roots = self._parents_and_orphans(tree, names, seen)
         self._cycles(tree, names, roots, seen)
-        root = self._root(tree, names, roots)
-        moving = {j.child for j in joints if j.child and j.type in MOVABLE_TYPES}
-        return moving, root
+        return {j.child for j in joints if j.child and j.type in MOVABLE_TYPES}, self._root(tree, names, roots)
 
     def _caps(self, model: UrdfModel) -> None:
         """The link cap and the movable-joint cap."""

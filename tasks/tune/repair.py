@@ -81,8 +81,7 @@ def sweep_repairs(obj: SimObject, asset: AssetDescription, sweep_metric: MetricR
         OSError: a collision file cannot be read or written.
     """
     source, state = obj.source, dict(obj.state)
-    model = source.model()
-    repair = clearance_repair(model, source.path, blocked, state, overrides, scale, out_dir, folder)
+    repair = clearance_repair(source.model(), source.path, blocked, state, overrides, scale, out_dir, folder)
     if repair is not None:
         yield repair
         return

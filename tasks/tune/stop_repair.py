@@ -71,8 +71,7 @@ def decompose_for_blocked(obj: SimObject, asset: AssetDescription, metric: Metri
     adjacent = {frozenset((j.parent, j.child)) for j in model.joints}
     overrides: dict[str, list[CollisionPiece]] = {}
     notes: list[str] = []
-    opts = obj.options(springs={}, fixed_base=True, gravity=False, ground=False)
-    with source.open("pybullet", opts) as session:
+    with source.open("pybullet", obj.options(springs={}, fixed_base=True, gravity=False, ground=False)) as session:
         with_collision = [ln for ln in session.link_names if session.link_has_collision(ln)]
         for name, (stall, goal) in stops.items():
             if name not in session.joint_types:
