@@ -77,7 +77,7 @@ def _scan_obj(data: bytes, max_faces: int) -> _Triangles:
     """An OBJ as refine reads it (:func:`asset2sim.mesh_io.read_obj`) plus strict checks (face cap before
     parsing, non-records, bad indices, skipped faces)."""
     defects: dict[str, str] = {}
-    approx_faces = data.count(b"\nf ") + data.count(b"\nf\t") + (1 if data[:2] in (b"f ", b"f\t") else 0)
+    approx_faces = data.count(b"\nf ") + data.count(b"\nf\t") + (data[:2] in (b"f ", b"f\t"))
     if approx_faces > max_faces:
         raise _TooManyFaces(approx_faces, max_faces, "face records")
     mtllibs = [m for m in mesh_materials.mtl_libraries(data) if m.strip()]
@@ -135,10 +135,8 @@ def _scan_trimesh(data: bytes, ext: str, max_faces: int, source: str) -> _Triang
     f = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), np.int64).reshape(-1, 3)
     if len(f) > max_faces:
         raise _TooManyFaces(len(f), max_faces)
-    defects: dict[str, str] = {}
     bad = _bad_faces(f, v)
-    if bad.any():
-        defects["MESH_BAD_INDEX"] = f"{int(bad.sum())} face(s) index beyond the {len(v)} vertices"
+    defects = {"MESH_BAD_INDEX": f"{int(bad.sum())} face(s) index beyond the {len(v)} vertices"} if bad.any() else {}
     return _Triangles(v, f[~bad], defects)
 
 

@@ -308,7 +308,7 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
             session.set_joint_positions({**state, joint: qc + d * f * rng})
             t, lever = _grasp_motion(session, joint, grasp, prismatic, model)
             force, bound = range_force(*range_of, lever)
-            hand = BUDGET_SHARE * force * (lever if lever is not None else 1.0)
+            hand = BUDGET_SHARE * force * (lever or 1.0)
             fg = _ground_force(t, s_motion, *ground) if ground is not None else None
             if fg is not None and fg < force:
                 force, bound = fg, f"ground friction mu={ground[0]:g} of the free object (M={ground[1]:.3g} kg)"
@@ -356,7 +356,7 @@ def _budget(name: str, jtype: str, grasp: _Grasp, lever: float | None, best: tup
     """The caps of ``name``'s tightest budget ``best`` (:func:`operating_budgets`): friction takes
     :data:`FRICTION_SHARE` of it, damping at the gripper's top speed the rest."""
     budget, force, bound = best
-    speed = lim.max_speed_m_s / lever if lever is not None else lim.max_speed_m_s
+    speed = lim.max_speed_m_s / (lever or 1.0)
     fcap = FRICTION_SHARE * max(budget, 0.0)
     dcap = (1.0 - FRICTION_SHARE) * max(budget, 0.0) / speed
     conflict = ""
