@@ -179,35 +179,30 @@ def read_manifest_rows(path: Path | str, root: Path | str | None = None) -> Mani
     prompt_col = header.index("prompt")
     out = ManifestReading(path=path)
     seen: set[str] = set()
-    consumed = reader.line_num
     while True:
-        line = consumed + 1
+        line = reader.line_num + 1  # where the next record starts
         lines.record = []
         try:
             fields = next(reader)
         except StopIteration:
             break
         except csv.Error as exc:
-            consumed = reader.line_num
             rid = _id_of_refused(lines.record[0], id_col) if lines.record else None
             too_large = "field limit" in str(exc)
             code = "MANIFEST_ROW_TOO_LARGE" if too_large else "MANIFEST_ROW_MALFORMED"
             where = f"{path}:{line}" + (f" (id {rid})" if rid else "")
             what = f"a field is longer than the CSV field limit of {csv.field_size_limit()} characters" if too_large else str(exc)
             out.errors.append(ManifestRowError(line, rid, code, f"{where}: {what}"))
-            if is_valid_id(rid):
-                seen.add(rid)  # type: ignore[arg-type]
-            continue
-        consumed = reader.line_num
-        if not fields or (len(fields) == 1 and not fields[0].strip()):
-            continue  # a blank line
-        rid = fields[id_col].strip() if id_col < len(fields) else ""
-        try:
-            out.rows.append(_row(path, base, line, header, fields, rid, prompt_col, seen))
-        except _RowError as exc:
-            out.errors.append(ManifestRowError(line, rid or None, exc.code, str(exc)))
+        else:
+            if not fields or (len(fields) == 1 and not fields[0].strip()):
+                continue  # a blank line
+            rid = fields[id_col].strip() if id_col < len(fields) else ""
+            try:
+                out.rows.append(_row(path, base, line, header, fields, rid, prompt_col, seen))
+            except _RowError as exc:
+                out.errors.append(ManifestRowError(line, rid or None, exc.code, str(exc)))
         if is_valid_id(rid):
-            seen.add(rid)
+            seen.add(rid)  # type: ignore[arg-type]
     return out
 
 
