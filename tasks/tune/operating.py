@@ -204,7 +204,6 @@ def operating_budgets(obj: SimObject, overlay: Overlay, closed: dict[str, tuple[
     Raises:
         EngineUnavailable; whatever loading ``obj.source`` raises.
     """
-    lim = GripperLimits()
     source, state, free = obj.source, dict(obj.state), not obj.fixed_base
     model = source.model(mode="lenient")
     springs = overlay_springs(overlay, state)
@@ -225,7 +224,7 @@ def operating_budgets(obj: SimObject, overlay: Overlay, closed: dict[str, tuple[
                               (mu, total) if free and ground else None, springs.get(name))
             session.set_joint_positions(dict(state))
             if tight.best is not None:
-                out[name] = _budget(name, session.joint_types[name], grasp, tight.lever, tight.best, tight.gravity_state, lim,
+                out[name] = _budget(name, session.joint_types[name], grasp, tight.lever, tight.best, tight.gravity_state,
                                     free_moving, overlay.joints[name].inertia_axis)
     finally:
         session.close()
@@ -352,11 +351,12 @@ def _ground_force(t: np.ndarray, s_motion: float, mu: float, total: float) -> fl
 
 
 def _budget(name: str, jtype: str, grasp: _Grasp, lever: float | None, best: tuple[float, float, str],
-            q_state: float | None, lim: GripperLimits, free_moving: bool, inertia: float | None) -> OperatingBudget:
+            q_state: float | None, free_moving: bool, inertia: float | None) -> OperatingBudget:
     """The caps of ``name``'s tightest budget ``best`` (:func:`operating_budgets`): friction takes
-    :data:`FRICTION_SHARE` of it, damping at the gripper's top speed the rest."""
+    :data:`FRICTION_SHARE` of it, damping at the top speed of the task's gripper
+    (:class:`~asset2sim.tasks.check.gripper.GripperLimits`) the rest."""
     budget, force, bound = best
-    speed = lim.max_speed_m_s / (lever or 1.0)
+    speed = GripperLimits().max_speed_m_s / (lever or 1.0)
     fcap = FRICTION_SHARE * max(budget, 0.0)
     dcap = (1.0 - FRICTION_SHARE) * max(budget, 0.0) / speed
     conflict = ""
