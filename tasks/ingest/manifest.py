@@ -86,9 +86,9 @@ def is_valid_id(text: str | None) -> bool:
     return bool(text) and _ID_RE.match(text) is not None
 
 
-def _short(text: str, n: int = 80) -> str:
-    """``repr`` of ``text``, cut to ``n`` characters (messages never echo a huge field)."""
-    return repr(text) if len(text) <= n else repr(text[:n]) + f"... ({len(text)} characters)"
+def _short(text: str) -> str:
+    """``repr`` of ``text``, cut to 80 characters (messages never echo a huge field)."""
+    return repr(text) if len(text) <= 80 else repr(text[:80]) + f"... ({len(text)} characters)"
 
 
 class _RowError(Exception):

@@ -37,15 +37,15 @@ __all__ = [
 ]
 
 
-def _did_you_mean(path: Path, most: int = 3) -> str:
-    """``"; did you mean NAME, ...?"`` with up to ``most`` names in ``path``'s folder close to its name
+def _did_you_mean(path: Path) -> str:
+    """``"; did you mean NAME, ...?"`` with up to three names in ``path``'s folder close to its name
     (:func:`asset2sim.inert.did_you_mean`; the folder's first 10,000 entries), else ``""``."""
     try:
         with os.scandir(path.parent) as it:
             names = [e.name for _, e in zip(range(10_000), it)]
     except OSError:
         return ""
-    return did_you_mean(path.name, names, most)
+    return did_you_mean(path.name, names, 3)
 
 
 class _Validator(UrdfChecks, TreeChecks, MeshChecks):
