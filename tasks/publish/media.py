@@ -80,7 +80,6 @@ def make_media(out_dir: Path | str, *, reference: Path | str | None = None, clip
     if report.media == "done" and (out_dir / REPORT_HTML_NAME).is_file() and not force:
         return {}
     out: dict[str, str] = {}
-    added: set[str] = set()
     try:
         with output_folder.adopting(out_dir) as owner, quiet_stdout():  # renderers print from C; the library must not
             views = None

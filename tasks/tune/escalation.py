@@ -158,7 +158,7 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
         label = "parts held together"
         touching = clearance.touching_joints(model, pairs, state, limits.subtrees(model))
         one = repair.clearance_repair(model, current.path, touching, state, overrides, unclipped.scale, ws.root, folder) if touching else None
-        repairs = iter([one] if one is not None else [])
+        repairs = [one] if one is not None else []
 
         def better(chk2) -> bool:
             return dynamics_search.failing_tiers(chk2.metrics) < dynamics_search.failing_tiers(check.metrics)
