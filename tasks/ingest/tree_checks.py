@@ -190,18 +190,16 @@ class TreeChecks(Recorder):
         for n in names:
             if n in reached or n in reported or n not in tree.first_parent:
                 continue
-            path: list[str] = []
             cur = n
-            pos: dict[str, int] = {}
+            pos: dict[str, int] = {}  # the path walked: link -> its place on it
             while cur in tree.first_parent and cur not in pos and cur not in reported:
-                pos[cur] = len(path)
-                path.append(cur)
+                pos[cur] = len(pos)
                 cur = tree.first_parent[cur]
             if cur in pos:
-                cyc = path[pos[cur]:]
+                cyc = list(pos)[pos[cur]:]
                 self.add("TREE_CYCLE", f"joints form a cycle through links {' -> '.join(cyc + [cyc[0]])}",
                          line=seen[cyc[0]].line, link=cyc[0], links=cyc)
-            reported.update(path)
+            reported.update(pos)
 
     def _root(self, tree: _Tree, names: list[str], roots: list[str]) -> str | None:
         """The one root link, or None with ``TREE_NO_ROOT`` / ``TREE_MULTIPLE_ROOTS``."""

@@ -184,7 +184,7 @@ def ground_friction(model: UrdfModel) -> float:
     ``<contact><lateral_friction>`` a link writes (PyBullet's plane has 0.5)."""
     vals = [0.5 * float(lk.contact["lateral_friction"]) for lk in model.links.values()
             if "lateral_friction" in (lk.contact or {})]
-    return float(min(vals)) if vals else GROUND_FRICTION
+    return float(min(vals, default=GROUND_FRICTION))
 
 
 def operating_budgets(obj: SimObject, overlay: Overlay, closed: dict[str, tuple[float, float, float]], *,
