@@ -191,7 +191,7 @@ class TreeChecks(Recorder):
             if n in reached or n in reported or n not in tree.first_parent:
                 continue
             cur = n
-            pos: dict[str, int] = {}  # the path walked: link -> its place on it
+            pos: dict[str, int] = {}  # the path: link -> its place
             while cur in tree.first_parent and cur not in pos and cur not in reported:
                 pos[cur] = len(pos)
                 cur = tree.first_parent[cur]
