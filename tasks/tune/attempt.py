@@ -88,9 +88,10 @@ def steadier_opening(ws: Workspace, att: Attempt, log: StageLog) -> tuple[dict[s
         log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {one_line(exc)})")
         return None
     why = "unstable" if not att.check.stable else "toppled by a robust-rest disturbance"
+    head = f"stability by design: {why} at the bands' targets"
     fractions = steadiest.fractions
     if fractions and steadiest.after.stable:
-        note = (f"stability by design: {why} at the bands' targets; "
+        note = (f"{head}; "
                 + ", ".join(f"{n} opened to {f:.2f} of its range (allowed {intervals[n][0]:.2f}-{intervals[n][1]:.2f})" for n, f in fractions.items())
                 + f", where the object stands steadiest: static margin {steadiest.before.margin * 1000:.3g} -> {steadiest.after.margin * 1000:.3g} mm"
                 f" (asked >= {steadiest.after.required * 1000:.3g} mm)")
@@ -98,7 +99,7 @@ def steadier_opening(ws: Workspace, att: Attempt, log: StageLog) -> tuple[dict[s
         fractions = least_openings(att, intervals)
         if not fractions:
             return None
-        note = (f"stability by design: {why} at the bands' targets although statically steady (margin "
+        note = (f"{head} although statically steady (margin "
                 f"{steadiest.before.margin * 1000:.3g} mm, asked >= {steadiest.before.required * 1000:.3g} mm); "
                 + ", ".join(f"{n} opened to {f:.2f} of its range, the least its band allows ({intervals[n][0]:.2f}-{intervals[n][1]:.2f})"
                             for n, f in fractions.items()))
