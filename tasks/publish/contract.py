@@ -47,13 +47,9 @@ def code_hash() -> str:
     dirs = _package_dirs()
     files: list[tuple[str, Path]] = []
     for i, d in enumerate(dirs):
-        nested = [o for o in dirs if o != d and d in o.parents]
-        for p in d.rglob("*"):
-            if p.suffix not in CODE_SUFFIXES or "__pycache__" in p.parts or not p.is_file():
-                continue
-            if any(o in p.parents for o in nested):  # hashed with its own package
-                continue
-            files.append((f"{i}/{p.relative_to(d).as_posix()}", p))
+        nested = [o for o in dirs if o != d and d in o.parents]  # each hashed with its own package
+        files += [(f"{i}/{p.relative_to(d).as_posix()}", p) for p in d.rglob("*") if p.suffix in CODE_SUFFIXES
+                  and "__pycache__" not in p.parts and p.is_file() and not any(o in p.parents for o in nested)]
     for rel, p in sorted(files):
         h.update(b"\0" + rel.encode() + b"\0")
         h.update(p.read_bytes())
