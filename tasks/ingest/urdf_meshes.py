@@ -65,11 +65,10 @@ def read_urdf_converting(urdf: Path | str) -> ReadAsset:
             if key not in names:
                 try:
                     mesh = mesh_io.read_mesh(key)
-                    v, f = mesh.vertices, mesh.faces
                 except mesh_io.MeshReadError as exc:
                     raise StagingError(f"{urdf}: link {link.name!r}: {exc}") from exc
                 names[key] = mesh_name(key.stem, used)
-                meshes[names[key]] = (v, f)
+                meshes[names[key]] = (mesh.vertices, mesh.faces)
                 if key.suffix.lower() in CONVERTED_SUFFIXES:
                     converted.add(key.suffix.lower())
             g.filename, g.path = names[key], None
