@@ -225,8 +225,8 @@ def opened_lying(ctx: EstimationContext, kin, att: Attempt, moving_links: list[s
     ``moving_links``, the task parts' links), with the pose note, when it settles there, at the bands' targets or, where
     a part's weight turns it off them, at the opening its band allows where the weight turns it least
     (:func:`balanced_attempt`); else None."""
-    opening = any(b != "closed" for b in att.bands.values())
-    if ctx.request.pose_hint is not None or att.settles or not opening or not category_prior(ctx.category).opened_lying:
+    if ctx.request.pose_hint is not None or att.settles or all(b == "closed" for b in att.bands.values()) or not category_prior(
+            ctx.category).opened_lying:
         return None
     rotation, note = pose.resting_rotation(kin, ctx.asset, ctx.closed_state(), ctx.hull_points, moving_links)
     if np.allclose(rotation, np.eye(3)):

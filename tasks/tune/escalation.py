@@ -259,9 +259,7 @@ def joints_not_held(metrics: list[MetricResult]) -> list[str]:
                 tol = (trial.get("joint_tolerance") or {}).get(j)
                 if d is not None and tol and float(d) > HOLD_TARGET_SHARE * float(tol):
                     near.append(j)
-    if not failing_:
-        return []
-    return list(dict.fromkeys(failing_ + near))
+    return list(dict.fromkeys(failing_ + near)) if failing_ else []
 
 
 #: Share of a joint's tolerance that escalation aims its drift at (:func:`hold_factor`).
