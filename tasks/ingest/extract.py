@@ -184,7 +184,8 @@ def _stage_other_format(asset: Path | str, reading: ReadOptions | None = None) -
         return staging.stage(read_asset_file(source, fmt, reading), staging.staging_folder(source))
     except (staging.StagingError, ImportError, OSError) as exc:
         code = exc.code if isinstance(exc, staging.StagingError) else None  # a file the reader policy refused: its finding
-        found = [validate_input.Finding(code=code, severity="error", message=str(exc), file=str(source), action="refuse")] if code else []
+        found = [validate_input.Finding(code=code, severity="error", message=str(exc), file=str(source),
+                                        action="refuse")] if code else []
         raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {f'{code}: ' if code else ''}{exc}", found) from exc
 
 

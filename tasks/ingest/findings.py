@@ -128,7 +128,8 @@ class Finding(BaseModel):
     def to_issue(self) -> ValidationIssue:
         """As the overlay schema's :class:`ValidationIssue` (for report.json)."""
         return ValidationIssue(code=self.code, severity=self.severity, where=self.where if self.where != "global" else self.loc,
-                               message=f"{self.loc}: {self.message}", fixed=self.action in ("replace_with_estimate", "mass_from_area"))
+                               message=f"{self.loc}: {self.message}",
+                               fixed=self.action in ("replace_with_estimate", "mass_from_area"))
 
 
 @dataclass(frozen=True)

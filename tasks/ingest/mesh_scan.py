@@ -192,7 +192,8 @@ def _scan_data(data: bytes, ext: str, max_faces: int, max_coordinate: float, sou
         scan.defects["MESH_MALFORMED"], scan.mtllibs = str(exc), exc.mtllibs
         return scan
     except Exception as exc:  # trimesh / numpy raise many types on garbage
-        scan.defects["MESH_MALFORMED"] = (f"unsafe or malformed XML: {exc.code}: {exc.detail}" if isinstance(exc, safexml.SafeXMLError)
+        scan.defects["MESH_MALFORMED"] = (f"unsafe or malformed XML: {exc.code}: {exc.detail}"
+                                          if isinstance(exc, safexml.SafeXMLError)
                                           else f"cannot parse ({type(exc).__name__}: {str(exc)[:200]})")
         return scan
     scan.defects.update(defects)

@@ -99,14 +99,17 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
         for ln in partnet_mobility.iter_semantics(self._read_extra(partnet_mobility.SEMANTICS_NAME) or ""):
             i, link, entry = ln.lineno, ln.link, ln.entry
             if link is None or entry is None:
-                self.add("SEMANTICS_MALFORMED_LINE", f"line {i}: expected 'link_name joint_kind semantic_label', got {ln.text[:80]!r}",
+                self.add("SEMANTICS_MALFORMED_LINE",
+                         f"line {i}: expected 'link_name joint_kind semantic_label', got {ln.text[:80]!r}",
                          file="semantics.txt", line=i)
                 continue
             self.result.semantics[link] = entry
             if link_names and link not in link_names:
-                self.add("SEMANTICS_UNKNOWN_LINK", f"line {i}: no link {link!r} in the URDF", file="semantics.txt", line=i, link=link)
+                self.add("SEMANTICS_UNKNOWN_LINK", f"line {i}: no link {link!r} in the URDF", file="semantics.txt", line=i,
+                         link=link)
             if entry.joint_kind not in SEMANTIC_KINDS:
-                self.add("SEMANTICS_UNKNOWN_KIND", f"line {i}: joint kind {entry.joint_kind!r} is not one of {', '.join(sorted(SEMANTIC_KINDS))}",
+                self.add("SEMANTICS_UNKNOWN_KIND",
+                         f"line {i}: joint kind {entry.joint_kind!r} is not one of {', '.join(sorted(SEMANTIC_KINDS))}",
                          file="semantics.txt", line=i, link=link)
         text = self._read_extra(partnet_mobility.META_NAME)
         if text is None:
