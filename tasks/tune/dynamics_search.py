@@ -218,7 +218,7 @@ class DynamicsSearch:
                     if h > HEADROOM_MIN_SHARE * max(cur.friction, 1e-9):
                         new = Setting(cur.friction + h, cur.damping)
                         why = (f"not held at its caps; the task's measured operating force leaves {h:.3g} "
-                               f"{'N' if self._is_prismatic(name) else 'N m'} of the real range: friction raised by it")
+                               f"{self.budgets[name].unit} of the real range: friction raised by it")
                         if caps is not None:
                             caps[name] = max(caps.get(name, 0.0), new.friction)
             if up and new == prop and (why := self._unanswered(name)):
@@ -249,10 +249,6 @@ class DynamicsSearch:
         (first, d0), (last, d1) = seen[0], seen[-1]
         return (f"friction {first.friction:.3g} -> {last.friction:.3g} left its drift at {d0:.3g} -> {d1:.3g}: not what "
                 f"holds it (a contact moves it), raised no more")
-
-    def _is_prismatic(self, joint: str) -> bool:
-        b = self.budgets.get(joint)
-        return b is not None and b.joint_type == "prismatic"
 
     def _inside(self, joint: str, rec: JointRecord, cur: Setting, bound: Setting, what: str) -> tuple[Setting, str]:
         """The bisection of ``weak`` and ``strong`` when both are known, else halfway from ``cur`` to ``bound``."""
@@ -334,9 +330,8 @@ def relieve(overlay: Overlay, metrics: list[MetricResult], limits: operating.Ope
         dm = max(d.damping - left / b.speed, 0.0) if left > 0 else d.damping
         if fr == d.friction and dm == d.damping:
             continue
-        unit = "N" if b.joint_type == "prismatic" else "N m"
         ov.joints[name] = d.model_copy(update={"friction": fr, "damping": dm, "source": d.source + (
-            f"; task needed {e:.3g} {unit} more than a real operating force: friction {d.friction:.3g} -> {fr:.3g}, "
+            f"; task needed {e:.3g} {b.unit} more than a real operating force: friction {d.friction:.3g} -> {fr:.3g}, "
             f"damping {d.damping:.3g} -> {dm:.3g}")})
         limits.friction_caps[name] = fr
         limits.damping_caps[name] = dm

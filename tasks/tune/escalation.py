@@ -58,11 +58,9 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     # what the task's gripper can still operate on the task's joints (operating.operating_limits); estimates above it are lowered
     lim = operating.operating_limits(written(overlay), overlay, asset, ctx.geometry, closed, category=ctx.category, task=ctx.task,
                                      free_moving=ctx.request.free_moving, joints=spec.joints if spec is not None else None)
-    bounded, notes = operating.bound_overlay(overlay, lim.budgets)
+    overlay, notes = operating.bound_overlay(overlay, lim.budgets)
     for line in notes:
         log.say("post_check", line)
-    if bounded != overlay:
-        overlay = bounded
     kept_words = word_guard.guards(ctx, overlay)  # the request's words about motion, at the values they set
     caps, dcaps = dict(lim.friction_caps), lim.damping_caps
     for name in overlay.joints:  # a drawer's friction never past its slide's range

@@ -178,6 +178,11 @@ class OperatingBudget:
     hold_floor: float = 0.0
     """friction (N m or N) below which the requested state does not hold (0 for parts moving freely)"""
 
+    @property
+    def unit(self) -> str:
+        """Unit of the joint's friction, budget and loads: N (prismatic) or N m."""
+        return "N" if self.joint_type == "prismatic" else "N m"
+
 
 def ground_friction(model: UrdfModel) -> float:
     """Ground friction mu of ``model``: :data:`GROUND_FRICTION`, or 0.5 x the smallest
@@ -388,8 +393,7 @@ def bound_overlay(overlay: Overlay, budgets: dict[str, OperatingBudget]) -> tupl
             notes.append(b.conflict)
         if fr == d.friction and dm == d.damping:
             continue
-        unit = "N" if b.joint_type == "prismatic" else "N m"
-        note = (f"; operable: friction {d.friction:.3g} -> {fr:.3g} {unit}, damping {d.damping:.3g} -> {dm:.3g} "
+        note = (f"; operable: friction {d.friction:.3g} -> {fr:.3g} {b.unit}, damping {d.damping:.3g} -> {dm:.3g} "
                 f"(operating force <= {b.force_n:.3g} N: {b.bound})")
         ov.joints[name] = d.model_copy(update={"friction": fr, "damping": dm, "source": d.source + note})
         notes.append(f"{name}{note[1:]}")
