@@ -64,29 +64,34 @@ class TreeChecks(Recorder):
 
     mesh_bounds: dict[int, np.ndarray]  # set by MeshChecks (mesh vertex bounds by id of the geometry)
 
-    def _file_names(self, links: dict[str, UrdfLink]) -> None:
-        """Link names that are not clean file names (with the name their files get), and clashes."""
-        for name, ln in links.items():
-            if not file_names.is_clean(name):
-                self.add("LINK_NAME_NOT_A_FILE_NAME", f"not a safe file name; files made for it are "
-                         f"named {file_names.file_stem(name)!r}", line=ln.line, link=name)
-        for stem, same in file_names.clashes(links).items():
-            self.add("LINK_FILE_NAMES_CLASH", f"links {', '.join(map(repr, same))} would give their files one name "
-                     f"{stem!r}; rename one", line=links[same[1]].line, link=same[1])
-
     def structure(self, model: UrdfModel) -> tuple[set[str], str | None]:
         """The structure checks of ``model`` (every ``<link>`` element); returns (moving links, root)."""
         links, joints = model.link_elements, model.joints
         if not links:
             self.add("URDF_NO_LINKS", "the robot has no <link>")
             return set(), None
-        self._caps(model)
+        links_n, cap = len(links), self.policy.max_links
+        if links_n > cap:
+            self.add("URDF_TOO_MANY_LINKS", f"{links_n} links > cap {cap}: PyBullet, which refine "
+                     f"runs, loads at most {cap} links per body", links=links_n, cap=cap)
+        movable, cap = len(model.movable_joints), self.policy.max_movable_joints
+        if movable > cap:
+            self.add("URDF_TOO_MANY_MOVABLE_JOINTS", f"{movable} movable joints > cap {cap}: "
+                     f"refine's closed-state, state search and rest tests grow with the number of joints; with every "
+                     f"link touching (worst case, benchmarks/bench_joint_cap.py) it may not finish within the flow's "
+                     f"per-asset time limit, which then ends it", joints=movable, cap=cap)
         if model.name and len(model.name) > MAX_NAME_CHARS:
             self.add("NAME_TOO_LONG", f"robot name of {len(model.name)} characters > cap {MAX_NAME_CHARS} "
                      f"({shorten(model.name, 60)!r})", length=len(model.name), cap=MAX_NAME_CHARS)
         seen = self._first_by_name(links, "link")
         jseen = self._first_by_name(joints, "joint")
-        self._file_names(seen)
+        for name, ln in seen.items():  # link names that are not clean file names (with the name their files get), and clashes
+            if not file_names.is_clean(name):
+                self.add("LINK_NAME_NOT_A_FILE_NAME", f"not a safe file name; files made for it are "
+                         f"named {file_names.file_stem(name)!r}", line=ln.line, link=name)
+        for stem, same in file_names.clashes(seen).items():
+            self.add("LINK_FILE_NAMES_CLASH", f"links {', '.join(map(repr, same))} would give their files one name "
+                     f"{stem!r}; rename one", line=seen[same[1]].line, link=same[1])
         names = list(seen)
         tree = _Tree(children={n: [] for n in names})
         for j in joints:
@@ -95,19 +100,6 @@ class TreeChecks(Recorder):
         roots = self._parents_and_orphans(tree, names, seen)
         self._cycles(tree, names, roots, seen)
         return {j.child for j in joints if j.child and j.type in MOVABLE_TYPES}, self._root(tree, names, roots)
-
-    def _caps(self, model: UrdfModel) -> None:
-        """The link cap and the movable-joint cap."""
-        links, cap = len(model.link_elements), self.policy.max_links
-        if links > cap:
-            self.add("URDF_TOO_MANY_LINKS", f"{links} links > cap {cap}: PyBullet, which refine "
-                     f"runs, loads at most {cap} links per body", links=links, cap=cap)
-        movable, cap = len(model.movable_joints), self.policy.max_movable_joints
-        if movable > cap:
-            self.add("URDF_TOO_MANY_MOVABLE_JOINTS", f"{movable} movable joints > cap {cap}: "
-                     f"refine's closed-state, state search and rest tests grow with the number of joints; with every "
-                     f"link touching (worst case, benchmarks/bench_joint_cap.py) it may not finish within the flow's "
-                     f"per-asset time limit, which then ends it", joints=movable, cap=cap)
 
     def _first_by_name(self, items: list, kind: str) -> dict:
         """``kind`` ("link" or "joint") elements by name, the first of each; the others are duplicates. A name longer
