@@ -118,15 +118,22 @@ def refine_asset(
     asset, findings = _extract(asset_dir, out_dir, asset_id, category, extracted, config)
     with _invalid_input(overrides.OverrideError):  # OVERRIDE_*: ``config.overrides`` do not fit the asset
         overrides.apply_overrides(RequestSpec(), config.overrides, asset)
-    if config.keep_declared:
-        est = _keep_declared(est, asset_dir, asset)
+    if config.keep_declared:  # the estimator keeps the asset's plausible declared physics (keep_declared.KeepDeclared)
+        try:
+            declared = read_declared(asset_dir, asset.urdf_path)
+        except Exception as exc:
+            raise RefineError(f"{asset.urdf_path}: the declared physics cannot be read: {exc}", "invalid_input") from exc
+        est = keep.KeepDeclared(est, declared)
     chash = run_hash(config, prompt + (f"\ntask: {task}" if task else ""), category)
     if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
         output_folder.remove_stale_staging(out_dir)  # what a killed --force run left beside it
         if extras and media and media_phase.media_pending(out_dir):  # a deferred media phase, resumed
             made = media_phase.make_media(out_dir, reference=reference, clips=config.clips)
             log.say("media", f"{out_dir}: " + ", ".join(sorted(made)) + " made (the deferred media phase)")
-        return _completed_result(out_dir, log)
+        report = read_report_json(out_dir)  # the recorded result, nothing recomputed
+        overlay = Overlay.model_validate_json(atomic.read_regular(out_dir / write.OVERLAY_NAME, output_folder.MAX_RECORD_BYTES))
+        log.say("skip", f"{out_dir} is complete for this input and configuration")
+        return RefineResult(out_dir=out_dir, report=report, overlay=overlay, skipped=True)
     with _invalid_input(output_folder.OutputError):  # the output folder claimed, or refused with its OUTPUT_* code
         owner = output_folder.start(asset.source_dir, out_dir, overwrite=overwrite)
     if owner.replaced:  # an earlier output of another request or configuration: said before it goes
@@ -139,7 +146,12 @@ def refine_asset(
     with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference), threadpool_limits(1, "blas"), \
             step_budget(MAX_REFINE_STEPS, MAX_REFINE_SECONDS):  # as the CLI and the flow's workers run (docs/design/pipeline.md)
         try:
-            _announce_extract(asset_dir, asset, findings, log)
+            said = (f"{asset.category} as declared (the category used is decided next, from the request and the parts)"
+                    if asset.category else "not declared (recognised from the request and the parts next)")
+            log.say("extract", f"{input_shown(asset_dir, asset)}: {len(asset.links)} links, {len(asset.movable_joints())} "
+                    f"movable joints, category {said}"
+                    + (f"; {len(findings)} validation findings (none fatal)" if findings else ""))
+            log.lap("extract")
             cache = analyze.MeshCache()
             geometry = _analyze(asset, cache, log)
             with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as (ctx, kin), \
@@ -219,24 +231,6 @@ def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, categor
     return asset, findings
 
 
-def _keep_declared(est: estimator.Estimator, asset_dir: Path | str, asset: AssetDescription) -> estimator.Estimator:
-    """``est`` keeping the asset's plausible declared physics (:class:`asset2sim.tasks.tune.keep_declared.KeepDeclared`);
-    RefineError("invalid_input") when the declared physics cannot be read."""
-    try:
-        declared = read_declared(asset_dir, asset.urdf_path)
-    except Exception as exc:
-        raise RefineError(f"{asset.urdf_path}: the declared physics cannot be read: {exc}", "invalid_input") from exc
-    return keep.KeepDeclared(est, declared)
-
-
-def _completed_result(out_dir: Path, log: StageLog) -> RefineResult:
-    """The result recorded in a complete output folder (nothing recomputed)."""
-    report = read_report_json(out_dir)
-    overlay = Overlay.model_validate_json(atomic.read_regular(out_dir / write.OVERLAY_NAME, output_folder.MAX_RECORD_BYTES))
-    log.say("skip", f"{out_dir} is complete for this input and configuration")
-    return RefineResult(out_dir=out_dir, report=report, overlay=overlay, skipped=True)
-
-
 def input_shown(asset_dir: Path | str, asset: AssetDescription) -> str:
     """The input as the user gave it, for the progress lines: ``asset_dir`` as given, and for an MJCF or USD file
     read into the asset model (staged as a URDF in a temporary folder) the file and its format, never the staged
@@ -246,14 +240,6 @@ def input_shown(asset_dir: Path | str, asset: AssetDescription) -> str:
         return str(given)
     fmt = "USD" if asset.staged_from.suffix.lower() in (".usd", ".usda", ".usdc", ".usdz") else "MJCF"
     return f"{given / asset.staged_from.name if given.is_dir() else given} ({fmt})"
-
-
-def _announce_extract(asset_dir: Path | str, asset: AssetDescription, findings: list, log: StageLog) -> None:
-    category = (f"{asset.category} as declared (the category used is decided next, from the request and the parts)"
-                if asset.category else "not declared (recognised from the request and the parts next)")
-    log.say("extract", f"{input_shown(asset_dir, asset)}: {len(asset.links)} links, {len(asset.movable_joints())} movable joints, "
-            f"category {category}" + (f"; {len(findings)} validation findings (none fatal)" if findings else ""))
-    log.lap("extract")
 
 
 def _analyze(asset: AssetDescription, cache: analyze.MeshCache, log: StageLog) -> dict[str, LinkGeometry]:
