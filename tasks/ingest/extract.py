@@ -27,7 +27,7 @@ from asset2sim.tasks.ingest.partnet_mobility import URDF_NAMES
 from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfJoint, UrdfLink, UrdfModel, parse_urdf_bytes
 
 if TYPE_CHECKING:  # pragma: no cover
-    from asset2sim.tasks.ingest.validate_input import Finding, ValidationPolicy, ValidationResult
+    from asset2sim.tasks.ingest.validate_input import Finding, ValidationPolicy
 
 
 #: How many error findings the AssetError message lists (all are in ``.findings``).
@@ -110,7 +110,10 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
     held = partnet_mobility.held_bodies(robot.joints, {ln.name: ln.semantic_joint for ln in links})  # the part kinds as meant
     joints = [_joint(jt, held=jt.name in held) for jt in robot.joints]
     root = _root(urdf, links, joints)  # validation refuses none or several; defensive
-    files = _input_files(urdf, links, result)
+    # every file the asset references, for the input hash: the URDF, its meshes, semantics.txt, meta.json, the MTL
+    # libraries and texture maps
+    files = [urdf, *sorted({g.path for ln in links for g in ln.visuals + ln.collisions if g.path}),
+             *(Path(os.path.realpath(p)) for p in [*result.extra_files, *result.material_files])]
     if staged_asset is not None:  # the file read and what it names, then the staged URDF and meshes made of them
         files = [*staged_asset.read.files, *files]
         read = file_memo.identities(list(staged_asset.read.files))
@@ -156,7 +159,7 @@ def _digests_read(staged_asset: "staging.StagedAsset | None") -> dict[str, str]:
     return {str(src.real[k]): hashlib.sha256(data).hexdigest() for k, data in src.files.items()}
 
 
-def _stage_other_format(asset: Path | str, reading: ReadOptions | None = None) -> "staging.StagedAsset | None":
+def _stage_other_format(asset: Path | str, reading: ReadOptions | None) -> "staging.StagedAsset | None":
     """An MJCF or USD file (:func:`~asset2sim.formats.staging.other_format_file` of ``asset``) read (:mod:`~asset2sim.formats.mjcf.reader`, :mod:`~asset2sim.formats.usd.reader`)
     and staged as a URDF folder (:func:`~asset2sim.formats.staging.stage`), or a URDF naming GLB / glTF / PLY
     meshes staged with OBJ copies (:mod:`~asset2sim.tasks.ingest.urdf_meshes`, its ``semantics.txt`` and
@@ -278,13 +281,6 @@ def _joint(jt: UrdfJoint, held: bool = False) -> JointDesc:
     return JointDesc(**frame, type=jt.type, lower=_float_or_none(stops, "lower"), upper=_float_or_none(stops, "upper"),
                      effort=_float_or_none(lim, "effort"), velocity=_float_or_none(lim, "velocity"),
                      damping=_float_or_none(dyn, "damping"), friction=_float_or_none(dyn, "friction"))
-
-
-def _input_files(urdf: Path, links: list[LinkDesc], result: "ValidationResult") -> list[Path]:
-    """Every file the asset references, for the input hash: the URDF, its meshes, semantics.txt,
-    meta.json, the MTL libraries and texture maps."""
-    files = [urdf] + sorted({g.path for ln in links for g in ln.visuals + ln.collisions if g.path})
-    return files + [Path(os.path.realpath(p)) for p in [*result.extra_files, *result.material_files]]
 
 
 def _copy_extracted(value: tuple[AssetDescription, list["Finding"]]) -> tuple[AssetDescription, list["Finding"]]:
