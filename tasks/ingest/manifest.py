@@ -12,6 +12,7 @@ import io
 import json
 import math
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -122,22 +123,6 @@ def _joint_range(where: str, rec: dict) -> tuple[float, float] | None:
                         f"{where}: reference_joint_range {_short(text)} is not [lo, hi] ({str(exc)[:80]})") from exc
 
 
-class _Lines:
-    """Iterator over the lines of a text that keeps those of the record being parsed."""
-
-    def __init__(self, text: str):
-        self._it = iter(io.StringIO(text))
-        self.record: list[str] = []
-
-    def __iter__(self) -> "_Lines":
-        return self
-
-    def __next__(self) -> str:
-        line = next(self._it)
-        self.record.append(line)
-        return line
-
-
 def _id_of_refused(first_line: str, id_col: int) -> str | None:
     """The id field of a record the CSV reader refused, from the start of its first line (None when cut)."""
     try:
@@ -165,8 +150,14 @@ def read_manifest_rows(path: Path | str, root: Path | str | None = None) -> Mani
     except UnicodeDecodeError as exc:
         raise ManifestError(f"{path}: not a CSV manifest (not UTF-8 text: {exc.reason} at byte {exc.start})",
                             "MANIFEST_NOT_TEXT", path) from exc
-    lines = _Lines(text)
-    reader = csv.reader(lines)
+    record: list[str] = []  # the lines of the record being parsed
+
+    def lines() -> Iterator[str]:
+        for text_line in io.StringIO(text):
+            record.append(text_line)
+            yield text_line
+
+    reader = csv.reader(lines())
     try:
         header = [h.strip() for h in next(reader, [])]
     except csv.Error as exc:
@@ -181,13 +172,13 @@ def read_manifest_rows(path: Path | str, root: Path | str | None = None) -> Mani
     seen: set[str] = set()
     while True:
         line = reader.line_num + 1  # where the next record starts
-        lines.record = []
+        record.clear()
         try:
             fields = next(reader)
         except StopIteration:
             break
         except csv.Error as exc:
-            rid = _id_of_refused(lines.record[0], id_col) if lines.record else None
+            rid = _id_of_refused(record[0], id_col) if record else None
             too_large = "field limit" in str(exc)
             code = "MANIFEST_ROW_TOO_LARGE" if too_large else "MANIFEST_ROW_MALFORMED"
             where = f"{path}:{line}" + (f" (id {rid})" if rid else "")
