@@ -150,16 +150,16 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
         repairs = repair.sweep_repairs(postcheck.overlay_object(current, state, overlay, config.sim), ctx.asset, sw,
                                        blocked, overrides, unclipped.scale, ws.root, folder, config)
 
-        def better(chk2) -> bool:
-            return sweep_stalls.sweep_score(next(m for m in chk2.metrics if m.name == "joint_sweep")) < sweep_stalls.sweep_score(sw)
+        def score(chk):  # sweep_stalls.sweep_score: lower is better
+            return sweep_stalls.sweep_score(next(m for m in chk.metrics if m.name == "joint_sweep"))
     else:
         label = "parts held together"
         touching = clearance.touching_joints(model, pairs, state, limits.subtrees(model))
         one = repair.clearance_repair(model, current.path, touching, state, overrides, unclipped.scale, ws.root, folder) if touching else None
         repairs = [one] if one is not None else []
 
-        def better(chk2) -> bool:
-            return dynamics_search.failing_tiers(chk2.metrics) < dynamics_search.failing_tiers(check.metrics)
+        def score(chk):  # failing tiers: fewer is better
+            return dynamics_search.failing_tiers(chk.metrics)
     passed_before = {(m.name, m.engine) for m in check.metrics if m.passed}
     # the repaired pieces are checked at the dynamics the escalation kept, with the rounds it left (a work-counted
     # budget: the repair's check does not replay the escalation from the estimate)
@@ -171,7 +171,7 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
                            closed=closed_tuples(closed2))
         check2 = tuned.check
         lost = [m.name for m in check2.metrics if (m.name, m.engine) in passed_before and m.passed is False]
-        if better(check2) and not lost:
+        if score(check2) < score(check) and not lost:
             for line in rep.notes:
                 log.say("sweep_repair", line)
             st.collision_changes = list(st.collision_changes) + rep.notes
