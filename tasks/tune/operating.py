@@ -302,9 +302,8 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
     state = session.options.initial_state
     prismatic = session.joint_types[joint] == "prismatic"
     f_state = float(d * (state.get(joint, qc) - qc) / rng)
-    lever = None
-    best: tuple[float, float, str] | None = None  # (budget, force, bound)
-    q_state = None
+    lever = budget = q_state = None
+    least, least_bound = float("inf"), ""
     side = 1.0 if grasp.side == "child" else -1.0  # Q of the parent side pushes q the other way
     for action, fractions in paths:
         s_motion = (-d if action == "close" else d) * side
@@ -324,11 +323,11 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
                 # a part asked shut that gravity presses into its closed end rests on it: no hold floor
                 q_state = 0.0 if f_state <= CLOSED_FRACTION and q_signed * -d > 0 else abs(q_signed)
             b = hand + qg * s_motion
-            if best is None or b < best[0]:
-                best = (b, best[1] if best else float("inf"), best[2] if best else "")
-            if force < best[1]:
-                best = (best[0], force, bound)
-    return _Tightest(best, lever, q_state)
+            if budget is None or b < budget:
+                budget = b
+            if force < least:
+                least, least_bound = force, bound
+    return _Tightest(None if budget is None else (budget, least, least_bound), lever, q_state)
 
 
 def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: bool,
