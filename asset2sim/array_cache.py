@@ -151,10 +151,7 @@ def content_digest(arrays: dict[str, np.ndarray]) -> str:
 
 def _finite(arrays: dict[str, np.ndarray]) -> str | None:
     """The name of the first array holding NaN or an infinity, else None."""
-    for name, a in arrays.items():
-        if a.dtype.kind in "fc" and not np.isfinite(a).all():
-            return name
-    return None
+    return next((name for name, a in arrays.items() if a.dtype.kind in "fc" and not np.isfinite(a).all()), None)
 
 
 class _Rejected(Exception):
@@ -172,12 +169,10 @@ def _check_directory(data: bytes) -> None:
         for info in infos:
             with zf.open(info) as fh:
                 version = np.lib.format.read_magic(fh)
-                if version == (1, 0):
-                    shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
-                elif version == (2, 0):
-                    shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
-                else:
+                read = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}.get(version)
+                if read is None:
                     raise _Rejected(f"{info.filename}: npy format {version} is not one savez writes")
+                shape, _, dtype = read(fh)
             if dtype.hasobject:
                 raise _Rejected(f"{info.filename}: an object array")
             if math.prod(shape) * dtype.itemsize > info.file_size:
@@ -213,8 +208,7 @@ def _read_proven(path: Path, kind: str, key: str) -> dict[str, np.ndarray]:
                         "key (copied or moved between keys)")
     if proof.get("sha256") != content_digest(arrays):
         raise _Rejected("its arrays do not match their digest (altered)")
-    bad = _finite(arrays)
-    if bad is not None:
+    if (bad := _finite(arrays)) is not None:
         raise _Rejected(f"array {bad!r} holds NaN or infinite numbers")
     return arrays
 
@@ -239,10 +233,8 @@ def reject(path: Path, message: str) -> None:
     """Delete the cache entry ``path`` that did not prove itself, with a :class:`CacheWarning` ``message`` (at the
     cache's caller); None, the miss."""
     warnings.warn(message, CacheWarning, stacklevel=3)
-    try:
+    with contextlib.suppress(OSError):  # else rewritten (replaced) by the caller's store, or never used again
         path.unlink()
-    except OSError:
-        pass  # rewritten (replaced) by the caller's store, or never used again
 
 
 def store(kind: str, key: str, arrays: dict[str, np.ndarray]) -> None:
@@ -258,18 +250,15 @@ def store(kind: str, key: str, arrays: dict[str, np.ndarray]) -> None:
     path = _path(kind, key)
     if path is None:
         return
-    try:
+    with contextlib.suppress(OSError, ValueError):  # an optimisation only
         arrays = {name: np.asarray(a) for name, a in arrays.items()}
         if _finite(arrays) is not None:
             return
         proof = {"format": _PROOF_FORMAT, "kind": kind, "key": key, "sha256": content_digest(arrays)}
         buf = io.BytesIO()
         np.savez(buf, **arrays, **{_PROOF: text_array(json.dumps(proof))})
-        if buf.tell() > MAX_ENTRY_BYTES:
-            return
-        atomic.write_bytes(path, buf.getvalue())
-    except (OSError, ValueError):
-        pass  # an optimisation only
+        if buf.tell() <= MAX_ENTRY_BYTES:
+            atomic.write_bytes(path, buf.getvalue())
 
 
 def text_array(text: str) -> np.ndarray:

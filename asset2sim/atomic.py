@@ -13,6 +13,7 @@ destination before anything is created.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import errno
 import hashlib
 import json
@@ -57,10 +58,7 @@ def remove_scratch(folder: Path | str) -> None:
 
 def _durable(path: Path) -> bool:
     """False for a path under a scratch folder (:func:`add_scratch`)."""
-    if not _SCRATCH:
-        return True
-    ap = os.path.abspath(path)
-    return not any(ap.startswith(root) for root in list(_SCRATCH))
+    return not _SCRATCH or not any(os.path.abspath(path).startswith(root) for root in list(_SCRATCH))
 
 
 def add_observer(observer: Observer) -> None:
@@ -118,23 +116,17 @@ def _create_temp(path: Path) -> tuple[int, str]:
 
 def _unlink_quietly(names: Iterable[str]) -> None:
     for name in names:
-        try:
+        with contextlib.suppress(OSError):
             os.unlink(name)
-        except OSError:
-            pass
 
 
 def _fsync_dir(folder: Path) -> None:
-    try:
+    with contextlib.suppress(OSError):
         fd = os.open(str(folder), os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 def _replace(tmp: str, path: Path) -> None:
@@ -364,8 +356,5 @@ def sha256_files(paths: Iterable[Path | str], known: dict[str, str] | None = Non
     h = hashlib.sha256()
     known = known or {}
     for key, name, p in sorted({(named(p) if named else str(p), str(p), p) for p in map(Path, paths)}):
-        h.update(key.encode())
-        h.update(b"\0")
-        h.update((known.get(name) or sha256_file(p)).encode())
-        h.update(b"\0")
+        h.update(f"{key}\0{known.get(name) or sha256_file(p)}\0".encode())
     return h.hexdigest()

@@ -226,11 +226,7 @@ class OwnedFolder:
         return rel
 
     def _observe(self, paths: list[Path]) -> None:
-        new = []
-        for p in paths:
-            rel = self._rel(p)
-            if rel is not None and rel not in _BOOKKEEPING and rel not in self.files:
-                new.append(rel)
+        new = [rel for p in paths if (rel := self._rel(p)) is not None and rel not in _BOOKKEEPING and rel not in self.files]
         if new:
             with self._lock:
                 self.files.update(new)
@@ -264,13 +260,12 @@ class OwnedFolder:
             staging, final = self.root, self.final
             try:
                 atomic.exchange_folders(staging, final)
+                self.root, self.final = final, None
             except OSError as exc:
+                raise _write_failed(self.given, exc) from exc
+            finally:
                 shutil.rmtree(staging, ignore_errors=True)
                 self._release()
-                raise _write_failed(self.given, exc) from exc
-            shutil.rmtree(staging, ignore_errors=True)
-            self.root, self.final = final, None
-            self._release()
         return hashes
 
     def write_path(self, path: Path | str) -> Path:

@@ -6,6 +6,7 @@ it without following a symlink out. Errors are :class:`OutputError`.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import stat
 from pathlib import Path, PurePosixPath
@@ -212,8 +213,6 @@ def _prune_empty(root: Path, rels: Iterable[str]) -> None:
     folders = sorted({p for rel in rels for p in PurePosixPath(rel).parents if p.as_posix() != "."}, key=lambda p: -len(p.parts))
     for p in folders:
         d = root / p
-        try:
+        with contextlib.suppress(OSError):
             if d.is_dir() and not d.is_symlink() and not any(d.iterdir()):
                 d.rmdir()
-        except OSError:
-            pass
