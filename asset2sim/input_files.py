@@ -54,6 +54,11 @@ class InputFileError(ValueError):
 _OUTSIDE: contextvars.ContextVar[tuple[tuple[str, str], ...]] = contextvars.ContextVar("asset2sim_allowed_outside", default=())
 
 
+def _refused(code: str, path: Path | str, what: str, text: str) -> InputFileError:
+    """The :class:`InputFileError` ``code`` of the file ``path``, its message ``"{what} {path}: {text}"``."""
+    return InputFileError(code, path, f"{what} {path}: {text}")
+
+
 def _pairs(folders) -> tuple[tuple[str, str], ...]:
     pairs = []
     for f in folders:
@@ -136,23 +141,23 @@ def check_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: i
     if root is not None and allowed_outside(name):  # a folder the user allowed (allow_outside): the tree is wider
         root = None
     if root is not None and not inside(os.path.normpath(os.path.abspath(name)), root):
-        raise InputFileError("INPUT_OUTSIDE_TREE", path, f"{what} {name}: lies outside {root}, the folder the input may read")
+        raise _refused("INPUT_OUTSIDE_TREE", path, what, f"lies outside {root}, the folder the input may read")
     try:
         st = os.stat(name)
     except (FileNotFoundError, NotADirectoryError):
-        raise InputFileError("INPUT_NOT_FOUND", path, f"{what} {name}: no such file") from None
+        raise _refused("INPUT_NOT_FOUND", path, what, "no such file") from None
     except OSError as exc:
-        raise InputFileError("INPUT_UNREADABLE", path, f"{what} {name}: {exc.strerror or exc}") from None
+        raise _refused("INPUT_UNREADABLE", path, what, f"{exc.strerror or exc}") from None
     if not stat.S_ISREG(st.st_mode):
-        raise InputFileError("INPUT_NOT_REGULAR_FILE", path, f"{what} {name}: a {file_kind(st.st_mode)}, not a regular file "
+        raise _refused("INPUT_NOT_REGULAR_FILE", path, what, f"a {file_kind(st.st_mode)}, not a regular file "
                              "(FIFOs, devices, sockets and folders are never read)")
     if root is not None:
         real = os.path.realpath(name)
         if not inside(real, os.path.realpath(root)):
-            raise InputFileError("INPUT_OUTSIDE_TREE", path, f"{what} {name}: a symlink leads to {real}, outside {root}, "
+            raise _refused("INPUT_OUTSIDE_TREE", path, what, f"a symlink leads to {real}, outside {root}, "
                                  "the folder the input may read")
     if max_bytes is not None and st.st_size > max_bytes:
-        raise InputFileError("INPUT_TOO_LARGE", path, f"{what} {name}: {st.st_size} bytes, above the cap of {max_bytes} bytes; not read")
+        raise _refused("INPUT_TOO_LARGE", path, what, f"{st.st_size} bytes, above the cap of {max_bytes} bytes; not read")
     return st
 
 
@@ -166,26 +171,25 @@ def read_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: in
         InputFileError: as :func:`check_file`; ``INPUT_TOO_LARGE`` also when the file grew past the cap.
     """
     checked = check_file(path, tree=tree, max_bytes=max_bytes, what=what)
-    name = str(path)
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
     try:
-        fd = os.open(name, flags)
+        fd = os.open(str(path), flags)
     except OSError as exc:
-        raise InputFileError("INPUT_UNREADABLE", path, f"{what} {name}: {exc.strerror or exc}") from None
+        raise _refused("INPUT_UNREADABLE", path, what, f"{exc.strerror or exc}") from None
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            raise InputFileError("INPUT_NOT_REGULAR_FILE", path, f"{what} {name}: a {file_kind(st.st_mode)}, not a regular file")
+            raise _refused("INPUT_NOT_REGULAR_FILE", path, what, f"a {file_kind(st.st_mode)}, not a regular file")
         if (st.st_dev, st.st_ino) != (checked.st_dev, checked.st_ino):  # swapped between the check and the open
-            raise InputFileError("INPUT_UNREADABLE", path, f"{what} {name}: replaced by another file while it was opened")
+            raise _refused("INPUT_UNREADABLE", path, what, "replaced by another file while it was opened")
         with open(fd, "rb", closefd=False) as fh:
             data = fh.read(max_bytes + 1)
     except OSError as exc:
-        raise InputFileError("INPUT_UNREADABLE", path, f"{what} {name}: {exc.strerror or exc}") from None
+        raise _refused("INPUT_UNREADABLE", path, what, f"{exc.strerror or exc}") from None
     finally:
         os.close(fd)
     if len(data) > max_bytes:
-        raise InputFileError("INPUT_TOO_LARGE", path, f"{what} {name}: grew above the cap of {max_bytes} bytes while read")
+        raise _refused("INPUT_TOO_LARGE", path, what, f"grew above the cap of {max_bytes} bytes while read")
     return data
 
 
@@ -234,12 +238,12 @@ def load_yaml(path: Path | str, *, what: str = "configuration file"):
             if self.check_event(yaml.AliasEvent):
                 self.aliases += 1
                 if self.aliases > MAX_YAML_ALIASES:
-                    raise InputFileError("YAML_ALIAS_LIMIT", path, f"{what} {path}: more than {MAX_YAML_ALIASES} YAML aliases "
+                    raise _refused("YAML_ALIAS_LIMIT", path, what, f"more than {MAX_YAML_ALIASES} YAML aliases "
                                          "(*name); refused before expanding them")
             self.depth += 1
             try:
                 if self.depth > MAX_YAML_DEPTH:
-                    raise InputFileError("YAML_TOO_DEEP", path, f"{what} {path}: YAML nested deeper than {MAX_YAML_DEPTH} levels")
+                    raise _refused("YAML_TOO_DEEP", path, what, f"YAML nested deeper than {MAX_YAML_DEPTH} levels")
                 return super().compose_node(parent, index)
             finally:
                 self.depth -= 1
@@ -247,7 +251,7 @@ def load_yaml(path: Path | str, *, what: str = "configuration file"):
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise InputFileError("YAML_MALFORMED", path, f"{what} {path}: not UTF-8 ({exc})") from None
+        raise _refused("YAML_MALFORMED", path, what, f"not UTF-8 ({exc})") from None
     loader = _Bounded(text)
     try:
         node = loader.get_single_node()
@@ -257,7 +261,7 @@ def load_yaml(path: Path | str, *, what: str = "configuration file"):
 
         def expanded(n) -> int:  # nodes of the document with every alias expanded (each shared node counted once per use)
             if sizes.get(id(n)) == 0:
-                raise InputFileError("YAML_ALIAS_LIMIT", path, f"{what} {path}: a YAML alias inside its own anchor (a recursive document)")
+                raise _refused("YAML_ALIAS_LIMIT", path, what, "a YAML alias inside its own anchor (a recursive document)")
             if id(n) not in sizes:
                 sizes[id(n)] = 0  # in progress
                 if isinstance(n, yaml.SequenceNode):
@@ -270,10 +274,10 @@ def load_yaml(path: Path | str, *, what: str = "configuration file"):
 
         total = expanded(node)
         if total > MAX_YAML_NODES:
-            raise InputFileError("YAML_ALIAS_LIMIT", path, f"{what} {path}: its aliases expand to {total} YAML nodes, above the "
+            raise _refused("YAML_ALIAS_LIMIT", path, what, f"its aliases expand to {total} YAML nodes, above the "
                                  f"cap of {MAX_YAML_NODES}; refused before expanding them")
         return loader.construct_document(node)
     except yaml.YAMLError as exc:
-        raise InputFileError("YAML_MALFORMED", path, f"{what} {path}: not YAML: {exc}") from None
+        raise _refused("YAML_MALFORMED", path, what, f"not YAML: {exc}") from None
     finally:
         loader.dispose()
