@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
-from asset2sim.demo_geometry import DemoArticulation, DemoJoint, DemoLink, Part, Pose, box_xyz, open_box
+from asset2sim.demo_geometry import DemoArticulation, DemoJoint, DemoLink, Part, Pose, Vec3, box_xyz, open_box
 
 #: rpy of PartNet-Mobility's fixed joint base -> body (y-up object frame to z-up).
 _PARTNET_BASE_RPY = "1.570796326794897 0 -1.570796326794897"
@@ -39,6 +39,16 @@ def _base_joint(name: str, body: str) -> DemoJoint:
     return DemoJoint(name, "fixed", "base", body, rpy=_PARTNET_BASE_RPY)
 
 
+def _hinged(asset_id: str, category: str, moving: tuple, body: tuple, hinge: Vec3, axis: Vec3, lower: float,
+            upper: float) -> DemoArticulation:
+    """A body ``link_1`` (its semantic joint kind, label and parts), hung from ``base``, and one part ``link_0`` (its
+    label and parts) on the revolute ``joint_0`` about ``axis`` through ``hinge``, limits ``lower`` / ``upper`` rad."""
+    return _demo(asset_id, category, [DemoLink("link_0", "hinge", *moving), DemoLink("link_1", *body)], [
+        DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=axis, lower=lower, upper=upper),
+        _base_joint("joint_1", "link_1"),
+    ])
+
+
 def _box_with_lid() -> DemoArticulation:
     # Body: x [-0.5, 0.5], y [-0.3, 0.22], z [-0.35, 0.35], walls 0.03.
     body = open_box(-0.5, 0.5, -0.3, 0.22, -0.35, 0.35, 0.03, "box_body", _WOOD)
@@ -51,10 +61,7 @@ def _box_with_lid() -> DemoArticulation:
         _part("lid_skirt-8", _WOOD, (0.505, 0.525, 0.18, 0.225, -0.35, 0.375)),
         _part("lid_lip-9", _METAL, (-0.505, 0.505, 0.18, 0.225, 0.355, 0.375), (-0.08, 0.08, 0.19, 0.21, 0.375, 0.405)),
     ]
-    return _demo("box_lid", "Box", [DemoLink("link_0", "hinge", "rotation_lid", lid), DemoLink("link_1", "free", "box_body", body)], [
-        DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(-1.0, 0.0, 0.0), lower=-0.5, upper=1.9),
-        _base_joint("joint_1", "link_1"),
-    ])
+    return _hinged("box_lid", "Box", ("rotation_lid", lid), ("free", "box_body", body), hinge, (-1.0, 0.0, 0.0), -0.5, 1.9)
 
 
 #: Thickness of a demo drawer's bottom panel, object units (:func:`_drawer`).
@@ -214,10 +221,7 @@ def _trash_can() -> DemoArticulation:
         _part("lid_skirt-9", _GREEN, (0.355, 0.375, 0.47, 0.505, -0.35, 0.37)),
         _part("lid_lip-10", _DARK, (-0.355, 0.355, 0.46, 0.505, 0.355, 0.37), (-0.06, 0.06, 0.47, 0.49, 0.37, 0.4)),
     ]
-    return _demo("trash_can", "TrashCan", [DemoLink("link_0", "hinge", "lid", lid), DemoLink("link_1", "free", "trashcan_body", body)], [
-        DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(1.0, 0.0, 0.0), lower=-1.9, upper=0.0),
-        _base_joint("joint_1", "link_1"),
-    ])
+    return _hinged("trash_can", "TrashCan", ("lid", lid), ("free", "trashcan_body", body), hinge, (1.0, 0.0, 0.0), -1.9, 0.0)
 
 
 def _door_in_frame() -> DemoArticulation:
@@ -240,10 +244,7 @@ def _door_in_frame() -> DemoArticulation:
         _part("panel-8", _WHITE, (-0.205, 0.205, -0.6, 0.605, 0.012, 0.028)),
         _part("handle-9", _METAL, (0.17, 0.19, -0.05, -0.02, 0.035, 0.06), (0.1, 0.19, -0.05, -0.03, 0.06, 0.075)),
     ]
-    return _demo("door", "Door", [DemoLink("link_0", "hinge", "rotation_door", door), DemoLink("link_1", "static", "door_frame", frame)], [
-        DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(0.0, -1.0, 0.0), lower=0.0, upper=1.75),
-        _base_joint("joint_1", "link_1"),
-    ])
+    return _hinged("door", "Door", ("rotation_door", door), ("static", "door_frame", frame), hinge, (0.0, -1.0, 0.0), 0.0, 1.75)
 
 
 #: The manipulation task of each demo category (the manifest's ``task`` column),

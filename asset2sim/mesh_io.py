@@ -199,17 +199,13 @@ def _parse_obj_general(data: bytes, where: str) -> MeshData:
                 ids = [int(p.split(b"/", 1)[0]) for p in parts]
             except ValueError:
                 raise MeshReadError(f"{where}: line {lineno}: bad face record") from None
-            nvert = len(verts)
             if len(ids) < 3 or 0 in ids:  # OBJ indices start at 1: 0 names no vertex
                 bad += 1
                 continue
-            ids = [i - 1 if i > 0 else nvert + i for i in ids]
-            for j in range(1, len(ids) - 1):
-                faces.append((ids[0], ids[j], ids[j + 1]))
+            ids = [i - 1 if i > 0 else len(verts) + i for i in ids]
+            faces += [(ids[0], ids[j], ids[j + 1]) for j in range(1, len(ids) - 1)]
     notes = [f"{where}: {bad} face records with < 3 vertices or index 0 skipped"] if bad else []
-    v = np.asarray(verts, np.float64).reshape(-1, 3)
-    f = np.asarray(faces, np.int64).reshape(-1, 3)
-    return MeshData(v, f, notes)
+    return MeshData(np.asarray(verts, np.float64).reshape(-1, 3), np.asarray(faces, np.int64).reshape(-1, 3), notes)
 
 
 def read_obj(data: bytes, where: str = "<obj>") -> MeshData:
@@ -372,8 +368,7 @@ def group_meshes(path: Path | str) -> list[tuple[np.ndarray, np.ndarray]]:
     path = Path(path)
     if path.suffix.lower() != ".obj":
         mesh = read_mesh(path)
-        v, f = mesh.vertices, mesh.faces
-        return [(v, f)]
+        return [(mesh.vertices, mesh.faces)]
     v, groups = _obj_group_polygons(path)
     out = []
     for polygons in groups:

@@ -262,13 +262,11 @@ def _build(directory: Path | None) -> Priors:
     for lab, lp in labels.labels.items():
         if lp.material not in materials:
             raise PriorsError(f"labels.yaml: labels.{lab}.material: unknown material {lp.material!r}")
-    for alias, target in labels.aliases.items():
+    refs = [(f"aliases.{a}: target", t) for a, t in labels.aliases.items()]
+    refs += [(f"words.{w}:", t) for w, targets in labels.words.items() for t in targets]
+    for where, target in refs:
         if target not in labels.labels:
-            raise PriorsError(f"labels.yaml: aliases.{alias}: target {target!r} is not a label")
-    for word, targets in labels.words.items():
-        for target in targets:
-            if target not in labels.labels:
-                raise PriorsError(f"labels.yaml: words.{word}: {target!r} is not a label")
+            raise PriorsError(f"labels.yaml: {where} {target!r} is not a label")
 
     categories = _table(directory, CategoryPrior, "categories.yaml", "name")
     if GENERIC not in categories:

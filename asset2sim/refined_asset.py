@@ -193,8 +193,7 @@ class RefinedAsset:
         data = read_record(p)
         if not isinstance(data, dict):
             raise ValueError(f"{p}: not a JSON object")
-        where = non_finite(data)
-        if where is not None:
+        if (where := non_finite(data)) is not None:
             raise ValueError(f"{p}: {where} is not a finite number (NaN or infinity), which asset2sim never writes")
         try:
             timings = read_record(self.folder / TIMINGS_NAME)
