@@ -119,11 +119,10 @@ class CommandParser(argparse.ArgumentParser):
         unknown = unknown_options(self, argv)
         known = [s for a in self._actions for s in a.option_strings]
         where = f"asset2sim {self.command} --help" if self.command else "asset2sim --help"
-        lines = [CommandError(INVALID_REQUEST, "OPTION_UNKNOWN", None,
-                              f"unknown option {name}{did_you_mean(name, known)} (options: {where})").line(self.command)
-                 for name in unknown]
+        lines = [CommandError.invalid("OPTION_UNKNOWN", f"unknown option {name}{did_you_mean(name, known)} (options: {where})")
+                 .line(self.command) for name in unknown]
         if not lines:
-            lines = [CommandError(INVALID_REQUEST, "USAGE_INVALID", None, f"{message} (usage: {where})").line(self.command)]
+            lines = [CommandError.invalid("USAGE_INVALID", f"{message} (usage: {where})").line(self.command)]
         self.exit(INVALID_REQUEST, "\n".join(lines) + "\n")
 
 
@@ -160,11 +159,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
 def command_word(argv: list[str]) -> str | None:
     """The first word of ``argv`` after the top-level flags (the command, known or not); None when an option
     such as ``--help`` comes first or nothing does."""
-    for arg in argv:
-        if arg in TOP_LEVEL_FLAGS:
-            continue
-        return None if arg.startswith("-") else arg
-    return None
+    word = next((arg for arg in argv if arg not in TOP_LEVEL_FLAGS), None)
+    return None if word is None or word.startswith("-") else word
 
 
 def requested_command(argv: list[str]) -> str | None:
@@ -200,8 +196,8 @@ def _main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("MUJOCO_GL", "disable")
     word, names = command_word(argv), command_names()
     if word is not None and word not in names:
-        print(CommandError(INVALID_REQUEST, "COMMAND_UNKNOWN", None, f"unknown command {word!r}{did_you_mean(word, names)} "
-                           f"(commands: {', '.join(names)})").line(None), file=sys.stderr, flush=True)
+        print(CommandError.invalid("COMMAND_UNKNOWN", f"unknown command {word!r}{did_you_mean(word, names)} "
+                                   f"(commands: {', '.join(names)})").line(None), file=sys.stderr, flush=True)
         return INVALID_REQUEST
     parser = build_parser(only=word)
     try:

@@ -219,8 +219,7 @@ def failure(exc: BaseException, command: str | None, args=None) -> CommandError 
     if isinstance(exc, CommandError):
         return exc
     outs = _arg_paths(args, _OUTPUT_ARGS.get(command or "", ("out", "asset_out", "dataset")))
-    inputs = _arg_paths(args, _INPUT_ARGS)
-    inp = inputs[0] if inputs else None
+    inp = next(iter(_arg_paths(args, _INPUT_ARGS)), None)
     names = [c.__name__ for c in type(exc).__mro__]
     reading = next((ERRORS[k] for n in names for k in (f"{command} {n}", n) if k in ERRORS), None)
     if reading is None:

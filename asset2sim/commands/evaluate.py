@@ -84,8 +84,8 @@ def refined_request(asset: Path, prompt: str | None, task: str | None) -> Evalua
     try:
         report = read_report_json(asset if asset.is_dir() else asset.parent)
     except (OSError, ValueError):  # not a refined output: evaluated as given
-        return EvaluatedRequest(prompt, task)
-    if not report.prompt:
+        report = None
+    if report is None or not report.prompt:
         return EvaluatedRequest(prompt, task)
     return EvaluatedRequest(report.prompt, task if task is not None else report.task,
                             f"'{report.prompt}' (from report.json; --prompt gives another)")

@@ -72,7 +72,8 @@ def run(args: argparse.Namespace) -> int:
     prepare_prefect_environment(cat.project_root)  # before Prefect is imported
     if args.serve:
         return _serve(args, cat)
-    live = not getattr(args, "no_progress", False) and _output.raw(sys.stdout).isatty()
+    shown = not getattr(args, "no_progress", False)
+    live = shown and _output.raw(sys.stdout).isatty()
     if live:  # the bar replaces Prefect's INFO lines in the terminal (here and in the workers)
         os.environ.setdefault("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", "WARNING")
     from asset2sim.flows.refine_flow import NOTHING_TO_DO, run_outcome, run_refine_flow  # imports Prefect: after its environment is set
@@ -80,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     ids = listed(args.ids) if args.ids else None
     progress = FlowProgress(live=live)
     with contextlib.ExitStack() as stack:  # a full disk: status 4 naming the file (finished assets are kept)
-        if not getattr(args, "no_progress", False):
+        if shown:
             stack.enter_context(listening(progress))
         stack.callback(progress.close)
         summary = run_refine_flow(cat.path, args.dataset, args.workers, args.dask_address, ids=ids, limit=args.limit, force=args.force,
@@ -88,8 +89,8 @@ def run(args: argparse.Namespace) -> int:
                                   dashboard=False if getattr(args, "no_dashboard", False) else None)
     total = time.perf_counter() - t0
     prefect_s = max(0.0, float(summary.get("flow_started_epoch") or t0_epoch) - t0_epoch)
-    dask_s = float(summary.get("dask_startup_seconds") or 0.0) + float(summary.get("dask_teardown_seconds") or 0.0)
-    servers_s, assets_s, tracking_s = (float(summary.get(f"{k}_seconds") or 0.0) for k in ("stage_servers", "assets", "tracking"))
+    dask_s, teardown_s, servers_s, assets_s, tracking_s = (float(summary.get(f"{k}_seconds") or 0.0) for k in
+                                                            ("dask_startup", "dask_teardown", "stage_servers", "assets", "tracking"))
     worked = int(summary.get("done", 0)) + int(summary.get("failed", 0))
     if run_outcome(summary) == NOTHING_TO_DO:
         print(f"run {summary['run']} of dataset {summary['dataset']}: nothing to do: every asset ({summary['assets']}) finished "
@@ -101,11 +102,10 @@ def run(args: argparse.Namespace) -> int:
           f"{_fmt(summary.get('stability_pass_rate'), True)}; oscillation {_fmt(summary.get('oscillation_pass_rate'), True)}; "
           f"penetration {_fmt(summary.get('penetration_mm_mean'))} mm (mean); "
           f"queries/asset {_fmt(summary.get('queries_per_asset'))}")
-    modes = {k: v for k, v in (summary.get("failure_modes") or {}).items() if v}
-    print("  failure modes: " + (", ".join(f"{k} {v}" for k, v in modes.items()) or "none"))
+    print("  failure modes: " + (", ".join(f"{k} {v}" for k, v in (summary.get("failure_modes") or {}).items() if v) or "none"))
     startup = (f"Prefect start-up {prefect_s:.1f} s" if summary.get("flow_run_id")
                else "no Prefect flow run (nothing to dispatch)")
-    print(f"  wall time {total:.1f} s: {startup}, Dask start-up + tear-down {dask_s:.1f} s, "
+    print(f"  wall time {total:.1f} s: {startup}, Dask start-up + tear-down {dask_s + teardown_s:.1f} s, "
           f"stage servers {servers_s:.1f} s, assets {assets_s:.1f} s"
           + (f" ({worked / assets_s * 60:.2f} assets/min)" if worked and assets_s > 0 else "")
           + f", summary + MLflow {tracking_s:.1f} s")

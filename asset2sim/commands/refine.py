@@ -118,6 +118,11 @@ def _joint_words(out_dir) -> tuple[dict[str, str], dict[str, str]]:
     return types, labels
 
 
+#: How a joint's asked state reads beside it: the asked number's unit -> (its number in the shown unit, that unit).
+_ASKED_UNITS = {"rad": (math.degrees, "deg"), "m": (lambda v: 1000.0 * v, "mm"),
+                "opening fraction": (lambda v: 100.0 * v, "% open")}
+
+
 def _state_text(name: str, q: float, report, types: dict[str, str], labels: dict[str, str], moves: dict[str, str] | None = None) -> str:
     """One joint's initial state in the one frame of every amount: "joint_2 (lid) = 30.0 deg from closed (asked 30 deg),
     25 % open", the number asked (``report.request.quantities``) beside what it has, and why it stands elsewhere than
@@ -127,10 +132,9 @@ def _state_text(name: str, q: float, report, types: dict[str, str], labels: dict
     ask = ""
     if asked is not None and asked.what.endswith(" end"):
         ask = f" (asked '{asked.phrase}')"
-    elif asked is not None and asked.unit in ("rad", "m", "opening fraction"):
-        v = asked.asked
-        ask = (f" (asked {math.degrees(v):.4g} deg)" if asked.unit == "rad" else f" (asked {1000.0 * v:.4g} mm)" if asked.unit == "m"
-               else f" (asked {100.0 * v:.4g} % open)")
+    elif asked is not None and asked.unit in _ASKED_UNITS:
+        scale, unit = _ASKED_UNITS[asked.unit]
+        ask = f" (asked {scale(asked.asked):.4g} {unit})"
     who = f"{name} ({labels[name]})" if labels.get(name) else name
     return (f"{who} = {from_closed_text(q, report.closed_positions.get(name), types.get(name, 'revolute'))}{ask}"
             + (f", {opening_text(report.opening_fractions[name])}" if name in report.opening_fractions else "")
@@ -213,11 +217,11 @@ def engine_lines(report) -> list[str]:
     as a pass beside the verdict's failure."""
     failing = readiness(report.metrics).failures
     out = []
+    words = {True: "pass", False: "FAIL", None: "n/a"}
     for row in report.parity:
         if row["status"] != "ok":  # skipped (its extra missing) or an error: said with its reason
             out.append(f"engine {row['engine']:<8} {row['status']}" + (f": {row['reason']}" if row["reason"] else ""))
             continue
-        words = {True: "pass", False: "FAIL", None: "n/a"}
         here = [f.split("@")[0] for f in failing if f.endswith(f"@{row['engine']}")]
         rest = False if set(here) & set(TIERS["rest"][0]) else row["rest_stability"]  # the rest tier, as the verdict reads it
         out.append(f"engine {row['engine']:<8} rest {words.get(rest, rest)}, oscillation "
@@ -279,14 +283,9 @@ def as_asked_lines(report) -> list[str]:
 
 def _manipulation_line(report) -> str:
     """Joint sweep, robust rest, task execution and operating force of the post-check, one line."""
-    parts = []
-    for name, label in (("joint_sweep", "sweep"), ("robust_rest", "robust rest"), ("task_execution", "task"),
-                        ("operating_force", "force")):
-        m = report.metric(name)
-        if m is None:
-            continue
-        verdict = "n/a" if m.passed is None else ("PASS" if m.passed else "FAIL")
-        parts.append(f"{label} {verdict}{_failures_text(m)}")
+    parts = [f"{label} {'n/a' if m.passed is None else 'PASS' if m.passed else 'FAIL'}{_failures_text(m)}"
+             for name, label in (("joint_sweep", "sweep"), ("robust_rest", "robust rest"), ("task_execution", "task"),
+                                 ("operating_force", "force")) if (m := report.metric(name)) is not None]
     return "manipulation " + (", ".join(parts) if parts else "n/a")
 
 
@@ -378,9 +377,8 @@ def options(args: argparse.Namespace) -> RefineConfig:
                                 ("body", args.body or None)) if v is not None}
     if args.mjcf_angle:
         fields["mjcf"] = base.mjcf.model_copy(update={"angle": args.mjcf_angle})
-    engines = args.engines
-    if engines or not args.config:
-        listed = parse_engines(engines or ",".join(default_engines()))
+    if args.engines or not args.config:
+        listed = parse_engines(args.engines or ",".join(default_engines()))
         fields["engines"] = ["pybullet"] + [e for e in listed if e != "pybullet"]
     given = {k: v for k in ("mass", "size", "scale", "mount", "material") if (v := getattr(args, k)) is not None}
     state = {}

@@ -41,8 +41,7 @@ def run(args: argparse.Namespace) -> int:
     if unknown:
         raise CommandError.invalid("CODE_UNKNOWN", f"--error/--allow: unknown code(s): {', '.join(unknown)} "
                                    "(docs/guide/validation.md lists the codes)")
-    overrides = {c: "error" for c in args.error}
-    overrides.update({c: "warning" for c in args.allow})
+    overrides = dict.fromkeys(args.error, "error") | dict.fromkeys(args.allow, "warning")
     policy = ValidationPolicy(overrides=overrides, warnings_as_errors=args.strict, check_mesh_contents=not args.paths_only)
     with outside_paths(args):
         findings, notes = validate_any(args.asset, policy, ReadOptions(body=args.body, mjcf_angle=args.mjcf_angle))
