@@ -90,8 +90,7 @@ def _serialise(obj: DemoArticulation) -> dict[str, bytes]:
     files["mobility.urdf"] = write_urdf(model, style=PARTNET_STYLE)
     files["semantics.txt"] = "".join(f"{l.name} {l.semantic_joint} {l.semantic_label}\n" for l in obj.links).encode()
     meta = {"model_cat": obj.category, "anno_id": obj.asset_id, "source": "asset2sim demo generator (built from geometry)",
-            "generator_version": GENERATOR_VERSION}
-    meta.update(obj.extra_meta)
+            "generator_version": GENERATOR_VERSION, **obj.extra_meta}
     files["meta.json"] = (json.dumps(meta, indent=2) + "\n").encode()
     pts = np.concatenate(all_vertices, axis=0)
     bbox = {k: [round(float(v), 6) + 0.0 for v in a] for k, a in (("min", pts.min(axis=0)), ("max", pts.max(axis=0)))}
@@ -146,9 +145,7 @@ def _entry_digest(folder: Path, rel: str) -> str | None:
     try:
         if path.is_symlink() or Path(os.path.realpath(path.parent)) != Path(os.path.realpath(folder)) / PurePosixPath(rel).parent:
             return None
-        if not stat.S_ISREG(os.lstat(path).st_mode):
-            return None
-        return atomic.sha256_file(path)
+        return atomic.sha256_file(path) if stat.S_ISREG(os.lstat(path).st_mode) else None
     except OSError:
         return None
 

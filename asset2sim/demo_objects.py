@@ -34,6 +34,11 @@ def _part(name: str, color: tuple[float, float, float], *boxes: tuple[float, ...
     return Part(name, [box_xyz(*b) for b in boxes], color, pose)
 
 
+def _parts(prefix: str, color: Vec3, first: int, *boxes: tuple[float, ...]) -> list[Part]:
+    """The parts ``<prefix>-<first>``, ``<prefix>-<first + 1>`` ... of ``color``, one box each (as :func:`_part`)."""
+    return [_part(f"{prefix}-{n}", color, box) for n, box in enumerate(boxes, first)]
+
+
 def _base_joint(name: str, body: str) -> DemoJoint:
     """PartNet-Mobility's fixed joint ``base`` -> ``body`` (y-up object frame to z-up)."""
     return DemoJoint(name, "fixed", "base", body, rpy=_PARTNET_BASE_RPY)
@@ -99,11 +104,12 @@ def _cabinet_two_drawers() -> DemoArticulation:
     # 0.03 boards, a divider at y = 0.
     t = 0.03
     body = [
-        _part("board-1", _WOOD, (-0.5, -0.5 + t, -0.55, 0.55, -0.4, 0.4)),
-        _part("board-2", _WOOD, (0.5 - t, 0.5, -0.55, 0.55, -0.4, 0.4)),
-        _part("board-3", _WOOD, (-0.5 + t, 0.5 - t, 0.55 - t, 0.55, -0.4, 0.4)),
-        _part("board-4", _WOOD, (-0.5 + t, 0.5 - t, -0.55, -0.55 + t, -0.4, 0.4)),
-        _part("board-5", _WOOD, (-0.5 + t, 0.5 - t, -0.55 + t, 0.55 - t, -0.4, -0.4 + t)),
+        *_parts("board", _WOOD, 1,
+                (-0.5, -0.5 + t, -0.55, 0.55, -0.4, 0.4),
+                (0.5 - t, 0.5, -0.55, 0.55, -0.4, 0.4),
+                (-0.5 + t, 0.5 - t, 0.55 - t, 0.55, -0.4, 0.4),
+                (-0.5 + t, 0.5 - t, -0.55, -0.55 + t, -0.4, 0.4),
+                (-0.5 + t, 0.5 - t, -0.55 + t, 0.55 - t, -0.4, -0.4 + t)),
         _part("shelf-6", _WOOD, (-0.5 + t, 0.5 - t, -0.015, 0.015, -0.4 + t, 0.4)),
     ]
     # Drawer boxes clear the divider (|y| <= 0.015), the top board (y >= 0.52)
@@ -174,12 +180,13 @@ def _microwave() -> DemoArticulation:
     # (x < 0.25), control panel on the right; open front at z = 0.4.
     t = 0.03
     body = [
-        _part("frame-1", _WHITE, (-0.6, 0.6, -0.35, -0.35 + t, -0.4, 0.4)),
-        _part("frame-2", _WHITE, (-0.6, 0.6, 0.35 - t, 0.35, -0.4, 0.4)),
-        _part("frame-3", _WHITE, (-0.6, -0.6 + t, -0.35 + t, 0.35 - t, -0.4, 0.4)),
-        _part("frame-4", _WHITE, (0.6 - t, 0.6, -0.35 + t, 0.35 - t, -0.4, 0.4)),
-        _part("frame-5", _WHITE, (-0.6 + t, 0.6 - t, -0.35 + t, 0.35 - t, -0.4, -0.4 + t)),
-        _part("frame-6", _WHITE, (0.25, 0.25 + t, -0.35 + t, 0.35 - t, -0.4 + t, 0.4)),
+        *_parts("frame", _WHITE, 1,
+                (-0.6, 0.6, -0.35, -0.35 + t, -0.4, 0.4),
+                (-0.6, 0.6, 0.35 - t, 0.35, -0.4, 0.4),
+                (-0.6, -0.6 + t, -0.35 + t, 0.35 - t, -0.4, 0.4),
+                (0.6 - t, 0.6, -0.35 + t, 0.35 - t, -0.4, 0.4),
+                (-0.6 + t, 0.6 - t, -0.35 + t, 0.35 - t, -0.4, -0.4 + t),
+                (0.25, 0.25 + t, -0.35 + t, 0.35 - t, -0.4 + t, 0.4)),
         _part("control_panel-7", _DARK, (0.25 + t, 0.6 - t, -0.35 + t, 0.35 - t, 0.37, 0.4), (0.36, 0.48, 0.12, 0.2, 0.4, 0.42)),
     ]
     # Turntable tray: a fixed (static) child link resting inside the cavity.
@@ -189,10 +196,11 @@ def _microwave() -> DemoArticulation:
     # free edge; hinge on the left at the body's front-left edge.
     hinge = (-0.6, 0.0, 0.405)
     door = [
-        _part("door_frame-9", _WHITE, (-0.6, 0.245, -0.35, -0.25, 0.405, 0.445)),
-        _part("door_frame-10", _WHITE, (-0.6, 0.245, 0.25, 0.35, 0.405, 0.445)),
-        _part("door_frame-11", _WHITE, (-0.6, -0.5, -0.25, 0.25, 0.405, 0.445)),
-        _part("door_frame-12", _WHITE, (0.145, 0.245, -0.25, 0.25, 0.405, 0.445)),
+        *_parts("door_frame", _WHITE, 9,
+                (-0.6, 0.245, -0.35, -0.25, 0.405, 0.445),
+                (-0.6, 0.245, 0.25, 0.35, 0.405, 0.445),
+                (-0.6, -0.5, -0.25, 0.25, 0.405, 0.445),
+                (0.145, 0.245, -0.25, 0.25, 0.405, 0.445)),
         _part("window-13", _GLASS, (-0.5, 0.145, -0.25, 0.25, 0.415, 0.435)),
         _part("handle-14", _METAL,
             (0.18, 0.22, -0.2, -0.16, 0.445, 0.485),
@@ -227,20 +235,20 @@ def _trash_can() -> DemoArticulation:
 def _door_in_frame() -> DemoArticulation:
     # Frame: two posts x [-0.3, -0.26] and [0.26, 0.3], a header y [0.66, 0.7], all z [-0.035, 0.035]; no threshold
     # (the door stands on the floor at y = -0.7, its panel 0.005 above it).
-    frame = [
-        _part("door_frame-1", _WOOD, (-0.3, -0.26, -0.7, 0.7, -0.035, 0.035)),
-        _part("door_frame-2", _WOOD, (0.26, 0.3, -0.7, 0.7, -0.035, 0.035)),
-        _part("door_frame-3", _WOOD, (-0.26, 0.26, 0.66, 0.7, -0.035, 0.035)),
-    ]
+    frame = _parts("door_frame", _WOOD, 1,
+                   (-0.3, -0.26, -0.7, 0.7, -0.035, 0.035),
+                   (0.26, 0.3, -0.7, 0.7, -0.035, 0.035),
+                   (-0.26, 0.26, 0.66, 0.7, -0.035, 0.035))
     # Door (closed at 0): stiles and rails around a thinner centre panel, 0.005 inside the frame on every side, its
     # front flush with the frame's; a lever handle near the free edge. The hinge line is the panel's front edge on
     # the left post, so the door swings out (+z) past 90 deg clear of the post.
     hinge = (-0.255, 0.0, 0.035)
     door = [
-        _part("door-4", _WHITE, (-0.255, -0.205, -0.695, 0.655, 0.005, 0.035)),
-        _part("door-5", _WHITE, (0.205, 0.255, -0.695, 0.655, 0.005, 0.035)),
-        _part("door-6", _WHITE, (-0.205, 0.205, 0.605, 0.655, 0.005, 0.035)),
-        _part("door-7", _WHITE, (-0.205, 0.205, -0.695, -0.6, 0.005, 0.035)),
+        *_parts("door", _WHITE, 4,
+                (-0.255, -0.205, -0.695, 0.655, 0.005, 0.035),
+                (0.205, 0.255, -0.695, 0.655, 0.005, 0.035),
+                (-0.205, 0.205, 0.605, 0.655, 0.005, 0.035),
+                (-0.205, 0.205, -0.695, -0.6, 0.005, 0.035)),
         _part("panel-8", _WHITE, (-0.205, 0.205, -0.6, 0.605, 0.012, 0.028)),
         _part("handle-9", _METAL, (0.17, 0.19, -0.05, -0.02, 0.035, 0.06), (0.1, 0.19, -0.05, -0.03, 0.06, 0.075)),
     ]
