@@ -21,8 +21,7 @@ def eta_seconds(elapsed: float, finished: int, total: int, worked: int | None = 
     assets take moments)."""
     if finished <= 0 or finished >= total:
         return 0.0 if finished >= total else None
-    n = worked if worked else finished
-    return elapsed / n * (total - finished)
+    return elapsed / (worked or finished) * (total - finished)
 
 
 #: Shown until the first asset finishes (a temporary Prefect server, a Dask cluster and the stage servers start first).

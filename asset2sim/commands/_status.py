@@ -114,7 +114,7 @@ def output_failure(exc: OutputError, outs: list[Path], _inp=None, _reading=None)
     if isinstance(exc.__cause__, OSError):
         code = f"{code} [{errno_name(exc.__cause__)}]"
     msg = str(exc) + (f"; {_HINTS[exc.code]}" if exc.code in _HINTS else "")
-    return CommandError(OUTPUT_LOCATION, code, exc.path or (outs[0] if outs else None), msg)
+    return CommandError(OUTPUT_LOCATION, code, exc.path or next(iter(outs), None), msg)
 
 
 def os_failure(exc: OSError, outs: list[Path], inp, reading: Reading | None) -> CommandError:
@@ -124,7 +124,7 @@ def os_failure(exc: OSError, outs: list[Path], inp, reading: Reading | None) -> 
     full = next((c for c in exception_chain(exc) if isinstance(c, OSError) and c.errno in UNWRITABLE_ERRNOS), None)
     if full is not None or any(_inside(p, out) for p in (exc.filename, exc.filename2) for out in outs):
         exc = full or exc
-        return CommandError(OUTPUT_LOCATION, f"OUTPUT_WRITE_FAILED [{errno_name(exc)}]", exc.filename or (outs[0] if outs else None),
+        return CommandError(OUTPUT_LOCATION, f"OUTPUT_WRITE_FAILED [{errno_name(exc)}]", exc.filename or next(iter(outs), None),
                             exc.strerror or str(exc))
     reading = reading or Reading(INVALID_INPUT, "INPUT_READ_FAILED")
     return CommandError(reading.status, f"{reading.code} [{errno_name(exc)}]", exc.filename or inp,

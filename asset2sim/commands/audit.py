@@ -10,6 +10,7 @@ values or fails a check, 1 an asset could not be audited, 2 usage errors, 4 the 
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -56,11 +57,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _run_all(targets: list[AuditTarget], out: Path | None, category: str | None, simulate: bool, jobs: int,
              config: RefineConfig | None = None) -> list:
+    one = functools.partial(audit_one, out_root=out, category=category, simulate=simulate, config=config)
     if jobs <= 1 or len(targets) <= 1:
-        return [audit_one(t, out, category=category, simulate=simulate, config=config) for t in targets]
+        return [one(t) for t in targets]
     with ProcessPoolExecutor(max_workers=jobs, initializer=set_allowed_outside, initargs=allowed_folders()) as pool:
-        futures = [pool.submit(audit_one, t, out, category=category, simulate=simulate, config=config) for t in targets]
-        return [f.result() for f in futures]
+        return list(pool.map(one, targets))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -116,6 +117,4 @@ def run(args: argparse.Namespace) -> int:
     failed = [r for r in rows if r.failure_mode == "audit_failed"]
     for r in failed:  # the whole reason, one line each (the table cuts it; a missing extra's hint ends it)
         print(CommandError(INVALID_INPUT, "AUDIT_FAILED", r.source, r.error).line(NAME), file=sys.stderr)
-    if failed:
-        return INVALID_INPUT
-    return NOT_READY if any(r.failure_mode != "none" for r in rows) else 0
+    return INVALID_INPUT if failed else NOT_READY if any(r.failure_mode != "none" for r in rows) else 0

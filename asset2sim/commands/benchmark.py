@@ -107,9 +107,8 @@ def run(args: argparse.Namespace) -> int:
     def progress(method: str, rid: str, msg: str) -> None:
         console.print(f"[bold]{markup(method)}[/bold] {markup(rid)}: {markup(msg)}")
 
-    records = run_benchmark(args.manifest, methods, out, rows=ids, seed=args.seed, engines=engines,
-                            reports=not args.no_reports, progress=progress)
-    records = jsonable(records)  # strict JSON, as results.json holds them (--compare reads that)
+    records = jsonable(run_benchmark(args.manifest, methods, out, rows=ids, seed=args.seed, engines=engines,
+                                     reports=not args.no_reports, progress=progress))  # strict JSON, as results.json holds them
     tables = benchmark_tables(records, methods)
     realism = _realism(out, methods)
     for summary in tables.values():

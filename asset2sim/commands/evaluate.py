@@ -9,6 +9,7 @@ be written.
 from __future__ import annotations
 
 import argparse
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -96,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
 
     # a terminal: its width (the threshold column wraps); a pipe or file: lines kept whole for grep
     console = _output.console()
+    say = functools.partial(console.print, markup=False, soft_wrap=True)  # lines of text, kept whole
     out = args.out = args.out or default_out(args.asset)
     engines = tuple(parse_engines(args.engines)) if args.engines else None
     check_out(out, [args.asset], adopt=True)  # never into the input, but into a refined folder (its own files then)
@@ -118,19 +120,19 @@ def run(args: argparse.Namespace) -> int:
     console.print(table)
     if not wide:
         console.print(f"[dim]thresholds: report.html, or a terminal of {WIDE_TABLE} columns or more[/dim]")
-    console.print(f"verdict      {ready.line()}", markup=False, soft_wrap=True)  # refine's words, report.html's badge
+    say(f"verdict      {ready.line()}")  # refine's words, report.html's badge
     if req.taken_from:
-        console.print(terminal(f"request      {req.taken_from}"), markup=False, soft_wrap=True)
+        say(terminal(f"request      {req.taken_from}"))
     whys = why_it_failed(ev.metrics)
     for why in whys:  # the sentences of report.html's "Why it failed"
-        console.print(f"why it failed {terminal(why)}", markup=False, soft_wrap=True)
+        say(f"why it failed {terminal(why)}")
     asked = ev.metric("request_met")  # as asked: each unmet phrase with its gap, unless a sentence above says it
     for u in (asked.details.get("unmet") or []) if asked is not None and asked.passed is False else []:
         text = str(u.get("text") or u.get("phrase"))
         if not any(text in w for w in whys):
-            console.print(f"NOT AS ASKED {terminal(text)}", markup=False, soft_wrap=True)
+            say(f"NOT AS ASKED {terminal(text)}")
     for n in ev.notes:
         console.print(f"[dim]note: {markup(n)}[/dim]")
-    console.print(f"evaluated in {ev.seconds:.2f} s; wrote {out / 'evaluation.json'}" + ("" if args.no_report else f" and {out / 'report.html'}"),
-                  markup=False, soft_wrap=True)
+    say(f"evaluated in {ev.seconds:.2f} s; wrote {out / 'evaluation.json'}"
+        + ("" if args.no_report else f" and {out / 'report.html'}"))
     return 0 if ev.passed else 1

@@ -371,10 +371,10 @@ def options(args: argparse.Namespace) -> RefineConfig:
         base = load_config(args.config) if args.config else RefineConfig()
     except (OSError, ValueError) as exc:
         raise CommandError(INVALID_REQUEST, getattr(exc, "code", None) or "CONFIG_INVALID", args.config, str(exc)) from exc
-    fields = {k: v for k, v in (("estimator", args.estimator), ("model", args.model), ("base_url", args.base_url),
-                                ("request_parser", args.request_parser), ("keep_declared", args.keep_declared or None),
-                                ("clips", False if args.no_clips else None), ("open_containers", args.open_containers or None),
-                                ("body", args.body or None)) if v is not None}
+    fields = {k: v for k in ("estimator", "model", "base_url", "request_parser") if (v := getattr(args, k)) is not None}
+    fields |= {k: v for k in ("keep_declared", "open_containers", "body") if (v := getattr(args, k))}
+    if args.no_clips:
+        fields["clips"] = False
     if args.mjcf_angle:
         fields["mjcf"] = base.mjcf.model_copy(update={"angle": args.mjcf_angle})
     if args.engines or not args.config:
@@ -432,8 +432,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(json_summary(result), indent=2))
     else:
-        for line in summary_lines(result):
-            print(line)
+        print("\n".join(summary_lines(result)))
     return 0 if result.report.failure_mode == "none" else NOT_READY
 
 
