@@ -27,8 +27,7 @@ def keep_freed_memory() -> bool:
     Never raises."""
     try:
         name = ctypes.util.find_library("c")
-        libc = ctypes.CDLL(name) if name else None
-        mallopt = getattr(libc, "mallopt", None) if libc is not None else None
+        mallopt = getattr(ctypes.CDLL(name), "mallopt", None) if name else None
         if mallopt is None:
             return False
         mallopt.argtypes = [ctypes.c_int, ctypes.c_int]

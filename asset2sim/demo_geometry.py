@@ -122,12 +122,8 @@ def obj_text(part: Part, mtl_name: str) -> str:
     lines = ["# asset2sim demo asset (generated from geometry)", f"mtllib {mtl_name}"]
     base = 0
     for i, verts in enumerate(part.vertices()):
-        lines.append(f"o {part.name}/piece{i}")
-        for v in verts:
-            lines.append("v " + " ".join(f"{c + 0.0:.6f}" for c in v))
-        lines.append("usemtl material_0")
-        for tri in _BOX_FACES:
-            lines.append("f " + " ".join(str(base + k + 1) for k in tri))
+        lines += [f"o {part.name}/piece{i}", *("v " + " ".join(f"{c + 0.0:.6f}" for c in v) for v in verts), "usemtl material_0",
+                  *("f " + " ".join(str(base + k + 1) for k in tri) for tri in _BOX_FACES)]
         base += 8
     return "\n".join(lines) + "\n"
 

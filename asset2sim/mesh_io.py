@@ -307,8 +307,7 @@ def _obj_group_polygons(path: Path | str) -> tuple[np.ndarray, list[list[list[in
     fast = _parse_obj_fast(data, groups=True)
     if fast is not None:
         v, f, group = fast
-        cuts = np.flatnonzero(np.diff(group)) + 1
-        return v, [part for part in np.split(f, cuts) if len(part)]
+        return v, [part for part in np.split(f, np.flatnonzero(np.diff(group)) + 1) if len(part)]
     text = data.decode(errors="replace")
     verts: list[tuple[float, float, float]] = []
     groups: list[list[list[int]]] = []

@@ -168,13 +168,9 @@ def _entries(root: Path) -> list[str]:
     to folders included (not entered)."""
     out: list[str] = []
     for folder, dirs, files in os.walk(root, followlinks=False):
-        base = Path(folder)
-        for name in files:
-            out.append((base / name).relative_to(root).as_posix())
-        for name in list(dirs):
-            if (base / name).is_symlink():
-                out.append((base / name).relative_to(root).as_posix())
-                dirs.remove(name)
+        links = [name for name in dirs if (Path(folder) / name).is_symlink()]
+        dirs[:] = [name for name in dirs if name not in links]
+        out += [(Path(folder) / name).relative_to(root).as_posix() for name in files + links]
     return sorted(out)
 
 

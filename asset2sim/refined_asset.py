@@ -124,9 +124,9 @@ class RefinedAsset:
         if not isinstance(rec, dict) or not isinstance(rec.get("fixed"), bool):
             raise OutputError(f"{p}: \"{ROOT_KEY}\" must be an object with a boolean \"fixed\"")
         fixed = rec["fixed"]
-        kind = rec.get("mounting") or ("wall-mounted" if fixed else "free-standing")
         try:
-            return RootMount(kind=kind, fixed=fixed, source=str(rec.get("source") or f"declared in {STATE_NAME}"))
+            return RootMount(kind=rec.get("mounting") or ("wall-mounted" if fixed else "free-standing"), fixed=fixed,
+                             source=str(rec.get("source") or f"declared in {STATE_NAME}"))
         except ValueError as exc:
             raise OutputError(f"{p}: \"{ROOT_KEY}\": {exc}") from exc
 

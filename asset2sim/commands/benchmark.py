@@ -133,8 +133,7 @@ def run(args: argparse.Namespace) -> int:
                       f"method runs, report writing and start-up excluded)")
     console.print(f"wrote {out / 'summary.html'}, {out / 'index.html'}, results.csv/json/parquet, summary.csv/json", markup=False)
     if args.compare is not None:
-        prev = json.loads(Path(args.compare).read_text())["records"]
-        diffs = compare_records(prev, records)
+        diffs = compare_records(json.loads(Path(args.compare).read_text())["records"], records)
         if diffs:
             console.print(f"[red]{len(diffs)} differences from {markup(args.compare)}:[/red]")
             for d in diffs[:50]:

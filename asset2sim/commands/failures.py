@@ -79,8 +79,7 @@ def run(args: argparse.Namespace) -> int:
 
     cat = load_catalog(args.catalog)
     store = ResultCatalog(cat.catalog_root)
-    latest = _latest(store, args.dataset)
-    if latest is None:
+    if _latest(store, args.dataset) is None:
         print(f"the catalog {cat.catalog_root} has no rows" + (f" for dataset {args.dataset!r}" if args.dataset else "")
               + "; run `make flow` first")
         return 1

@@ -57,8 +57,7 @@ def run(args: argparse.Namespace) -> int:
         if unknown:
             raise CommandError.invalid("DEFECT_UNKNOWN", f"unknown defects {unknown}; known: {sorted(DEFECTS)}")
     check_out(out)
-    against = tuple(listed(args.against))
-    specs, skipped = specs_from_folders(args.folders, out, against=against, defects=defects)
+    specs, skipped = specs_from_folders(args.folders, out, against=tuple(listed(args.against)), defects=defects)
     pair_set = build_pair_set(specs, out, skipped=skipped, progress=lambda text: console.print(markup(text)))
     for key, why in pair_set.skipped.items():
         console.print(f"[yellow]skipped {markup(key)}: {markup(why)}[/yellow]")

@@ -26,5 +26,4 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from asset2sim.commands import flow
 
-    ns = argparse.Namespace(**vars(args), serve=True, ids=None, limit=None, force=False)
-    return flow.run(ns)
+    return flow.run(argparse.Namespace(**vars(args), serve=True, ids=None, limit=None, force=False))
