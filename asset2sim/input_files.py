@@ -264,12 +264,10 @@ def load_yaml(path: Path | str, *, what: str = "configuration file"):
                 raise _refused("YAML_ALIAS_LIMIT", path, what, "a YAML alias inside its own anchor (a recursive document)")
             if id(n) not in sizes:
                 sizes[id(n)] = 0  # in progress
-                if isinstance(n, yaml.SequenceNode):
-                    sizes[id(n)] = 1 + sum(expanded(c) for c in n.value)
-                elif isinstance(n, yaml.MappingNode):
-                    sizes[id(n)] = 1 + sum(expanded(k) + expanded(v) for k, v in n.value)
-                else:
-                    sizes[id(n)] = 1
+                kids = n.value if isinstance(n, yaml.SequenceNode) else []  # a mapping's: its keys and values
+                if isinstance(n, yaml.MappingNode):
+                    kids = [c for pair in n.value for c in pair]
+                sizes[id(n)] = 1 + sum(expanded(c) for c in kids)
             return sizes[id(n)]
 
         total = expanded(node)

@@ -105,8 +105,6 @@ def _parse_obj_fast(data: bytes, groups: bool = False) -> tuple[np.ndarray, ...]
     n = arr.size
     if groups and np.any(np.isin(arr, _OTHER_LINE_ENDS) | (arr >= 128)):
         return None
-    if n == 0:
-        return (np.zeros((0, 3)), np.zeros((0, 3), np.int64)) + ((np.zeros(0, np.int64),) if groups else ())
     nl = np.flatnonzero(arr == 10)
     starts = np.concatenate(([0], nl + 1))
     lens = np.diff(np.concatenate((starts, [n + 1])))
@@ -117,7 +115,7 @@ def _parse_obj_fast(data: bytes, groups: bool = False) -> tuple[np.ndarray, ...]
     is_v = (c0 == 118) & ws
     is_f = (c0 == 102) & ws
     nv, nf = int(is_v.sum()), int(is_f.sum())
-    group = np.cumsum(((c0 == 111) | (c0 == 103)) & (ws | (c1 == 10) | (c1 == 0)))[is_f] if groups else None
+    group = (np.cumsum(((c0 == 111) | (c0 == 103)) & (ws | (c1 == 10) | (c1 == 0)))[is_f],) if groups else ()
 
     def select(mask_lines: np.ndarray) -> np.ndarray:
         mask = np.repeat(mask_lines, lens)[:n]
@@ -136,7 +134,7 @@ def _parse_obj_fast(data: bytes, groups: bool = False) -> tuple[np.ndarray, ...]
             if verts.size != 3 * nv:
                 return None
             if nf == 0:
-                return (verts.reshape(-1, 3), np.zeros((0, 3), np.int64)) + ((group,) if groups else ())
+                return (verts.reshape(-1, 3), np.zeros((0, 3), np.int64)) + group
             fbytes = select(is_f).copy()
             if np.any(fbytes == 35):
                 return None
@@ -159,7 +157,7 @@ def _parse_obj_fast(data: bytes, groups: bool = False) -> tuple[np.ndarray, ...]
     faces = idx.reshape(nf, 3, per_vertex)[:, :, 0]
     if np.any(faces < 1):
         return None  # negative (relative) or zero indices: general parser
-    return (verts.reshape(-1, 3), faces - 1) + ((group,) if groups else ())
+    return (verts.reshape(-1, 3), faces - 1) + group
 
 
 #: NUL and the bytes other than ``\n`` that :meth:`str.splitlines` ends a line at (ASCII ones; any byte >= 128 is checked apart).
