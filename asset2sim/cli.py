@@ -207,7 +207,6 @@ def _main(argv: list[str] | None = None) -> int:
     if not hasattr(args, "_run"):
         parser.print_help()
         return 2
-    debug = bool(getattr(args, "debug", False))
     if getattr(args, "verbose", False):  # inherited by the worker processes a command starts
         os.environ[STARTUP_MESSAGES] = "1"
     else:  # before any library is imported: their loggers read these when configured
@@ -224,7 +223,7 @@ def _main(argv: list[str] | None = None) -> int:
         closed_pipe()
         return 0
     except Exception as exc:  # the one place that turns a failure into a status: _status.ERRORS, else a bug
-        if debug:
+        if getattr(args, "debug", False):
             traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
         err = _status.failure(exc, command, args)
         if err is None:

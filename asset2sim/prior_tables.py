@@ -274,20 +274,18 @@ def _build(directory: Path | None) -> Priors:
     seen_syn: dict[str, str] = {}
     for name, cat in categories.items():
         where = f"categories.yaml: {name}"
-        mats = [("body_material", cat.body_material)] + [(f"part_materials.{k}", m) for k, m in cat.part_materials.items()]
-        for i, var in enumerate(cat.variants):
-            if var.body_material is not None:
-                mats.append((f"variants.{i}.body_material", var.body_material))
-            mats += [(f"variants.{i}.part_materials.{k}", m) for k, m in var.part_materials.items()]
+        owners = [("", cat), *((f"variants.{i}.", var) for i, var in enumerate(cat.variants))]  # the category, then each variant
+        mats = [(f"{at}{key}", m) for at, o in owners
+                for key, m in [("body_material", o.body_material),
+                               *((f"part_materials.{k}", v) for k, v in o.part_materials.items())]]
         for key, mat in mats:
-            if mat not in materials:
+            if mat is not None and mat not in materials:
                 raise PriorsError(f"{where}.{key}: unknown material {mat!r} (not in materials.yaml)")
         label_refs = [(f"part_materials.{k}", k) for k in cat.part_materials]
         label_refs += [(key, k) for key in ("spring_labels", "task_relevant", "accessories") for k in getattr(cat, key)]
         label_refs += [(f"label_synonyms.{k}", v) for k, vs in cat.label_synonyms.items() for v in vs]
         label_refs += [(f"part_evidence.{k}", k) for k in cat.part_evidence]
-        for i, var in enumerate(cat.variants):
-            label_refs += [(f"variants.{i}.part_materials.{k}", k) for k in var.part_materials]
+        label_refs += [(f"{at}part_materials.{k}", k) for at, var in owners[1:] for k in var.part_materials]
         for key, lab in label_refs:
             if lab not in labels.labels:
                 raise PriorsError(f"{where}.{key}: {lab!r} is not a canonical label of labels.yaml")

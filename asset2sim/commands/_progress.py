@@ -68,12 +68,12 @@ class FlowProgress:
             self.close()
 
     def _line(self, ev: ProgressEvent) -> str:
-        n = sum(self.counts.values())
+        c = self.counts
+        n = sum(c.values())
         elapsed = time.perf_counter() - self.started
-        eta = eta_seconds(elapsed, n, self.total, self.counts["done"] + self.counts["failed"])
+        eta = eta_seconds(elapsed, n, self.total, c["done"] + c["failed"])
         mode = f" ({ev.failure_mode})" if ev.failure_mode and ev.failure_mode != "none" else ""
         secs = f" {ev.seconds:.1f} s" if ev.seconds is not None else ""
-        c = self.counts
         return (f"[{n}/{self.total}] {ev.asset_id}: {ev.status}{mode}{secs} | done {c['done']}, skipped {c['skipped']}, "
                 f"failed {c['failed']} | elapsed {elapsed:.0f} s" + ("" if eta is None else f", ETA {eta:.0f} s"))
 

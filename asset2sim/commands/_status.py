@@ -144,9 +144,7 @@ def catalog_failure(exc: Exception, _outs, catalog, _reading=None) -> CommandErr
 def extra_failure(exc: ImportError, _outs, _inp, _reading=None) -> CommandError | None:
     """Status 2 ``EXTRA_MISSING`` naming the extra of a missing optional dependency; None for any other import
     error (a bug)."""
-    if missing_module(exc) not in EXTRA_OF_MODULE:
-        return None
-    return CommandError.invalid("EXTRA_MISSING", install_hint(exc))
+    return CommandError.invalid("EXTRA_MISSING", install_hint(exc)) if missing_module(exc) in EXTRA_OF_MODULE else None
 
 
 Converter = Callable[[BaseException, list, object, "Reading | None"], "CommandError | None"]

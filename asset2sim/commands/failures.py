@@ -47,12 +47,10 @@ def format_table(table) -> str:
     text, like ``DataFrame.to_string`` but in time linear in its size."""
     names = [str(n) if n is not None else "" for n in table.index.names]
     keys = [k if isinstance(k, tuple) else (k,) for k in table.index]
-    cols = [str(c) for c in table.columns]
     body = [[str(v) for v in k] + [str(int(x)) for x in vals] for k, vals in zip(keys, table.to_numpy().tolist())]
-    head = names + cols
+    head = names + [str(c) for c in table.columns]
     widths = [max([len(head[i])] + [len(r[i]) for r in body]) for i in range(len(head))]
-    nk = len(names)
-    fmt = "  ".join(f"{{:<{w}}}" if i < nk else f"{{:>{w}}}" for i, w in enumerate(widths))
+    fmt = "  ".join(f"{{:<{w}}}" if i < len(names) else f"{{:>{w}}}" for i, w in enumerate(widths))
     return "\n".join(fmt.format(*cells).rstrip() for cells in [head, *body])
 
 

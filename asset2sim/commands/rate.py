@@ -64,9 +64,9 @@ def _print_scores(scores, folder: Path) -> None:
 
     console = _output.console()
     table = Table(title=f"realism (Bradley-Terry, people) of {markup(folder)}")
-    for column, justify in (("method", "left"), ("strength", "right"), ("95 % interval", "right"), ("Elo", "right"),
-                            ("wins", "right"), ("comparisons", "right")):
-        table.add_column(column, justify=justify)
+    table.add_column("method", justify="left")
+    for column in ("strength", "95 % interval", "Elo", "wins", "comparisons"):
+        table.add_column(column, justify="right")
     for s in scores:
         table.add_row(markup(s.method), f"{s.strength:+.2f}", f"[{s.ci_low:+.2f}, {s.ci_high:+.2f}]", f"{s.elo:.0f}",
                       str(s.wins), str(s.comparisons))
