@@ -97,11 +97,7 @@ def one_line(text: object, limit: int = MAX_LINE) -> str:
     """The first line of ``text`` (a Python traceback and what follows it cut off), control characters escaped,
     at most ``limit`` characters (``...`` marking a cut): one sentence for a note, an error line or
     ``report.json``."""
-    s = str(text)
-    m = _TRACEBACK.search(s)
-    if m is not None:
-        s = s[:m.start()]
-    lines = [ln.strip() for ln in s.splitlines() if ln.strip()]
+    lines = [ln.strip() for ln in _TRACEBACK.split(str(text), 1)[0].splitlines() if ln.strip()]
     s = terminal(lines[0] if lines else "", newlines=False)
     return s if len(s) <= limit else s[: max(0, limit - 3)].rstrip() + "..."
 

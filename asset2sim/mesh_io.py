@@ -219,7 +219,7 @@ def read_obj(data: bytes, where: str = "<obj>") -> MeshData:
         hit = _PARSED.get(key)
     if hit is None:
         fast = _parse_obj_fast(data)
-        hit = MeshData(fast[0], fast[1]) if fast is not None else _parse_obj_general(data, where)
+        hit = MeshData(*fast) if fast is not None else _parse_obj_general(data, where)
         if hit.notes:  # they name ``where``
             return hit
         with _PARSED_LOCK:

@@ -428,8 +428,8 @@ def remove_owned(out_dir: Path | str) -> list[str]:
 
 def _write_failed(given: Path, exc: OSError) -> OutputError:
     """``OUTPUT_WRITE_FAILED`` for an OSError."""
-    where = exc.filename or given
-    return OutputError(f"output folder {given} cannot be created or written ({exc.strerror or exc})", "OUTPUT_WRITE_FAILED", where)
+    return OutputError(f"output folder {given} cannot be created or written ({exc.strerror or exc})", "OUTPUT_WRITE_FAILED",
+                       exc.filename or given)
 
 
 def product_folder(path: Path | str) -> Path | None:
@@ -442,10 +442,7 @@ def product_folder(path: Path | str) -> Path | None:
 def product_folder_as_named(path: Path | str) -> Path | None:
     """:func:`product_folder` as ``path`` names it (absolute, symlinks kept), or None."""
     p = Path(os.path.abspath(path))
-    for folder in (p, *p.parents):
-        if (folder / MARKER_NAME).is_file() or (folder / RECORD_NAME).is_file():
-            return folder
-    return None
+    return next((f for f in (p, *p.parents) if (f / MARKER_NAME).is_file() or (f / RECORD_NAME).is_file()), None)
 
 
 @contextlib.contextmanager
