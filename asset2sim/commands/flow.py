@@ -89,8 +89,8 @@ def run(args: argparse.Namespace) -> int:
                                   dashboard=False if getattr(args, "no_dashboard", False) else None)
     total = time.perf_counter() - t0
     prefect_s = max(0.0, float(summary.get("flow_started_epoch") or t0_epoch) - t0_epoch)
-    dask_s, teardown_s, servers_s, assets_s, tracking_s = (float(summary.get(f"{k}_seconds") or 0.0) for k in
-                                                            ("dask_startup", "dask_teardown", "stage_servers", "assets", "tracking"))
+    dask_s = float(summary.get("dask_startup_seconds") or 0.0) + float(summary.get("dask_teardown_seconds") or 0.0)
+    servers_s, assets_s, tracking_s = (float(summary.get(f"{k}_seconds") or 0.0) for k in ("stage_servers", "assets", "tracking"))
     worked = int(summary.get("done", 0)) + int(summary.get("failed", 0))
     if run_outcome(summary) == NOTHING_TO_DO:
         print(f"run {summary['run']} of dataset {summary['dataset']}: nothing to do: every asset ({summary['assets']}) finished "
@@ -105,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     print("  failure modes: " + (", ".join(f"{k} {v}" for k, v in (summary.get("failure_modes") or {}).items() if v) or "none"))
     startup = (f"Prefect start-up {prefect_s:.1f} s" if summary.get("flow_run_id")
                else "no Prefect flow run (nothing to dispatch)")
-    print(f"  wall time {total:.1f} s: {startup}, Dask start-up + tear-down {dask_s + teardown_s:.1f} s, "
+    print(f"  wall time {total:.1f} s: {startup}, Dask start-up + tear-down {dask_s:.1f} s, "
           f"stage servers {servers_s:.1f} s, assets {assets_s:.1f} s"
           + (f" ({worked / assets_s * 60:.2f} assets/min)" if worked and assets_s > 0 else "")
           + f", summary + MLflow {tracking_s:.1f} s")

@@ -206,8 +206,9 @@ def stability_line(metrics) -> str:
     if stab is None:
         return "stability    n/a"
     failing = [f for f in readiness(metrics).failures if f.split("@")[0] in TIERS["rest"][0] and not f.startswith("rest_stability@")]
-    return (f"stability    {'PASS' if stab.passed and not failing else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, "
-            f"D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad" + (f"; failing: {', '.join(failing)}" if failing else "") + ")")
+    return (f"stability    {'PASS' if stab.passed and not failing else 'FAIL'} (D_pos "
+            f"{stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad"
+            + (f"; failing: {', '.join(failing)}" if failing else "") + ")")
 
 
 def engine_lines(report) -> list[str]:
