@@ -258,7 +258,7 @@ def request_lines(found) -> list[str]:
     achieved, warnings, words no rule used."""
     if found is None:
         return []
-    out = [f"request      {p}" for p in found.phrases] + [f"request      {a}" for a in found.asked]
+    out = [f"request      {p}" for p in (*found.phrases, *found.asked)]
     for q in found.quantities:
         if q.asked is None or q.achieved is None:
             continue
