@@ -137,9 +137,8 @@ def check_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: i
     name = str(path)
     if "\x00" in name:
         raise InputFileError("INPUT_UNREADABLE", "?", f"{what} {name!r}: the path contains a NUL byte")
-    root = os.path.abspath(str(tree)) if tree is not None else None
-    if root is not None and allowed_outside(name):  # a folder the user allowed (allow_outside): the tree is wider
-        root = None
+    # a folder the user allowed (allow_outside): the tree is wider
+    root = os.path.abspath(str(tree)) if tree is not None and not allowed_outside(name) else None
     if root is not None and not inside(os.path.normpath(os.path.abspath(name)), root):
         raise _refused("INPUT_OUTSIDE_TREE", path, what, f"lies outside {root}, the folder the input may read")
     try:

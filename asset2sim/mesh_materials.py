@@ -111,8 +111,5 @@ def obj_material_files(mesh_path: Path, keep=lambda p: True, skip_library=lambda
             mdata = mtl.read_bytes()
         except OSError:
             continue
-        for tname in mtl_texture_maps(mdata):
-            tex = (mtl.parent / tname).resolve()
-            if tex.is_file() and keep(tex):
-                deps.append(tex)
+        deps += [tex for tname in mtl_texture_maps(mdata) if (tex := (mtl.parent / tname).resolve()).is_file() and keep(tex)]
     return deps
