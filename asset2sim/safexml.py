@@ -211,8 +211,7 @@ def _install_guards(parser, builder: ET.TreeBuilder, lim: XMLLimits, source: str
             if len(v) > lim.max_token_bytes:
                 fail(XMLTokenTooLarge, f"attribute {k!r} of <{tag}> has {len(v)} characters > limit {lim.max_token_bytes}")
         state["text"] = 0
-        el = builder.start(tag, attrs)
-        el.sourceline = parser.CurrentLineNumber
+        builder.start(tag, attrs).sourceline = parser.CurrentLineNumber
 
     def end(tag):
         state["depth"] -= 1

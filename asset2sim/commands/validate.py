@@ -47,8 +47,7 @@ def run(args: argparse.Namespace) -> int:
         findings, notes = validate_any(args.asset, policy, ReadOptions(body=args.body, mjcf_angle=args.mjcf_angle))
     infos = bool(getattr(args, "verbose", False)) and not args.quiet  # how the input was read: behind --verbose
     if args.json:
-        shown = [f for f in findings if not (args.quiet and f.severity == "info")]
-        print(json.dumps([f.model_dump(mode="json") for f in shown], indent=2))
+        print(json.dumps([f.model_dump(mode="json") for f in findings if not (args.quiet and f.severity == "info")], indent=2))
         return 1 if has_errors(findings) else 0
     if infos:
         for note in notes:
