@@ -162,15 +162,8 @@ def _claim(folder: Path, files: dict[str, bytes], *, exclusive: bool) -> dict[st
     recorded = _recorded(folder)
     wanted = {rel: _sha(data) for rel, data in files.items()}
     names = output_paths._entries(folder) if exclusive else sorted(set(files) | set(recorded))
-    foreign = []
-    for rel in names:
-        if rel == RECORD_NAME and _entry_digest(folder, rel) is not None:
-            continue
-        if not os.path.lexists(folder / rel):
-            continue
-        digest = _entry_digest(folder, rel)
-        if digest is None or not (digest in recorded.get(rel, ()) or digest == wanted.get(rel)):
-            foreign.append(rel)
+    foreign = [rel for rel in names if os.path.lexists(folder / rel) and ((digest := _entry_digest(folder, rel)) is None or not (
+        rel == RECORD_NAME or digest in recorded.get(rel, ()) or digest == wanted.get(rel)))]
     if foreign:
         listed = ", ".join(foreign[:_MAX_LISTED]) + (", ..." if len(foreign) > _MAX_LISTED else "")
         raise OutputError(f"{folder} holds {len(foreign)} file(s) the demo generator did not write or that changed since "

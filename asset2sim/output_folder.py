@@ -16,11 +16,12 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import posixpath
 import shutil
 import stat
 import threading
 from dataclasses import dataclass, field
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 from typing import Any, Iterable, Iterator
 
 from asset2sim import atomic
@@ -89,20 +90,11 @@ def foreign_files(out_dir: Path | str, owned: Iterable[str] | None = None) -> li
     :func:`recorded_files`), not bookkeeping, not a temporary file of an owned path."""
     root = Path(out_dir)
     owned = set(recorded_files(root) if owned is None else owned)
-    tmp_targets: dict[str, set[str]] = {}
-    for rel in owned:
-        p = PurePosixPath(rel)
-        tmp_targets.setdefault(p.parent.as_posix(), set()).add(p.name)
-    out = []
-    for rel in _entries(root):
-        if rel in owned or rel in _BOOKKEEPING:
-            continue
-        p = PurePosixPath(rel)
-        names = tmp_targets.get(p.parent.as_posix(), set()) | (_BOOKKEEPING if p.parent.as_posix() == "." else set())
-        if any(atomic.is_temp_of(p.name, t) for t in names):
-            continue
-        out.append(rel)
-    return out
+    tmp_targets: dict[str, set[str]] = {"": set(_BOOKKEEPING)}  # folder -> the names whose temporary files it may hold
+    for folder, name in map(posixpath.split, owned):
+        tmp_targets.setdefault(folder, set()).add(name)
+    return [rel for rel in _entries(root) if rel not in owned and rel not in _BOOKKEEPING
+            and not any(atomic.is_temp_of(posixpath.basename(rel), t) for t in tmp_targets.get(posixpath.dirname(rel), ()))]
 
 
 _ACTIVE: dict[Path, "OwnedFolder"] = {}
@@ -462,9 +454,8 @@ def adopting(path: Path | str) -> Iterator[OwnedFolder | None]:
         try:
             yield owner
         finally:
-            with _ACTIVE_LOCK:
-                if previous is not None:
+            if previous is None:
+                owner.close()
+            else:
+                with _ACTIVE_LOCK:
                     _ACTIVE[root] = previous
-                elif _ACTIVE.get(root) is owner:
-                    del _ACTIVE[root]
-                _stop_observing_if_idle()

@@ -169,12 +169,11 @@ class CategoryPrior(PriorModel):
 
     @model_validator(mode="after")
     def _consistency(self) -> "CategoryPrior":
-        if self.spring_labels and len(self.spring_source) < 10:
-            raise ValueError("spring_labels given without a spring_source")
-        if self.levelling_feet_m is not None and len(self.levelling_feet_source) < 10:
-            raise ValueError("levelling_feet_m given without a levelling_feet_source")
-        if self.opened_lying and len(self.opened_lying_source) < 10:
-            raise ValueError("opened_lying given without an opened_lying_source")
+        for given, source, article in (("spring_labels", "spring_source", "a"),
+                                       ("levelling_feet_m", "levelling_feet_source", "a"),
+                                       ("opened_lying", "opened_lying_source", "an")):
+            if getattr(self, given) and len(getattr(self, source)) < 10:  # levelling_feet_m is > 0 when given
+                raise ValueError(f"{given} given without {article} {source}")
         if self.handheld and self.dims[1] > GRASPABLE_WIDTH_M + 1e-9:
             raise ValueError(f"handheld but the middle dimension {self.dims[1]} m exceeds the "
                              f"gripper limit GRASPABLE_WIDTH_M = {GRASPABLE_WIDTH_M} m")

@@ -161,9 +161,11 @@ def summary_lines(result) -> list[str]:
         _manipulation_line(r),
         _operability_line(r),
         f"verdict      {verdict_line(r.failure_mode, r.readiness, readiness(r.metrics).failures)}",
-    ] + why_lines(r) + as_asked_lines(r) + skipped_lines(r) + engine_lines(r) + request_lines(r.request) + host_lines(r) + [
-        "wall time    " + wall_time_text(r.stage_seconds),
-    ]
+    ] + [f"why it failed {why}" for why in (why_it_failed(r.metrics) if r.failure_mode != "none" else [])] + as_asked_lines(r)
+    # an export or check skipped for a missing optional dependency, with the extra that would do it
+    lines += [f"skipped      {n.replace(' skipped: ', ': ', 1)}" for n in r.notes if " skipped: " in n and "asset2sim[" in n]
+    lines += engine_lines(r) + request_lines(r.request) + [f"host         {n}" for n in host_notes(r.notes)]
+    lines.append("wall time    " + wall_time_text(r.stage_seconds))
     return once(lines) + [report_line(r, result.out_dir)]
 
 
@@ -229,28 +231,6 @@ def engine_lines(report) -> list[str]:
                    f"{'-' if row['penetration_mm'] is None else format(float(row['penetration_mm']), '.3f')} mm"
                    + (f"; failing here: {', '.join(here)}" if here else "") + (f" ({row['reason']})" if row["reason"] else ""))
     return out
-
-
-def why_lines(report) -> list[str]:
-    """``why it failed SENTENCE``, one per sentence of :func:`~asset2sim.tasks.check.failure_reasons.why_it_failed` (the
-    sentences ``report.html`` shows); nothing when the output is interaction-ready."""
-    if report.failure_mode == "none":
-        return []
-    return [f"why it failed {why}" for why in why_it_failed(report.metrics)]
-
-
-def skipped_lines(report) -> list[str]:
-    """An export or check skipped for a missing optional dependency, one line each with the extra that would do it
-    (``skipped      MJCF export: MuJoCo is not installed: pip install 'asset2sim[mujoco]'``)."""
-    return [f"skipped      {n.replace(' skipped: ', ': ', 1)}" for n in report.notes if " skipped: " in n and "asset2sim[" in n]
-
-
-def host_lines(report) -> list[str]:
-    """The way back into the input's own package (an MJCF or USD input): the files written back (``mjcf/host/``,
-    ``usd/host/``), what the package's code sets over them at run time and the call that keeps the refined values
-    (robosuite's ``DoorObject(friction=..., damping=...)``), or why none was written; one line each, as report.json's
-    notes say them."""
-    return [f"host         {n}" for n in host_notes(report.notes)]
 
 
 def request_lines(found) -> list[str]:

@@ -46,9 +46,10 @@ def run(args: argparse.Namespace) -> int:
     with outside_paths(args):
         findings, notes = validate_any(args.asset, policy, ReadOptions(body=args.body, mjcf_angle=args.mjcf_angle))
     infos = bool(getattr(args, "verbose", False)) and not args.quiet  # how the input was read: behind --verbose
+    refused = has_errors(findings)
     if args.json:
         print(json.dumps([f.model_dump(mode="json") for f in findings if not (args.quiet and f.severity == "info")], indent=2))
-        return 1 if has_errors(findings) else 0
+        return 1 if refused else 0
     if infos:
         for note in notes:
             print(f"{'info':<7} {'INPUT_READ':<32} {args.asset.name}  {note}")
@@ -59,11 +60,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"{f.severity:<7} {f.code:<32} {loc}  {f.where}: {f.message}")
     n = Counter(f.severity for f in findings)
     n["info"] += len(notes)  # every info line counted, printed or not
-    verdict = "REFUSED" if has_errors(findings) else "OK"
     hidden = "" if infos or not n["info"] else ", shown with --verbose"
-    print(f"{args.asset}: {verdict} ({_count(n['error'], 'error')}, {_count(n['warning'], 'warning')}, "
+    print(f"{args.asset}: {'REFUSED' if refused else 'OK'} ({_count(n['error'], 'error')}, {_count(n['warning'], 'warning')}, "
           f"{_count(n['info'], 'info')}{hidden})")
-    return 1 if has_errors(findings) else 0
+    return 1 if refused else 0
 
 
 def _count(n: int, what: str) -> str:
