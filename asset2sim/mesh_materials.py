@@ -28,17 +28,8 @@ def is_texture_statement(key: str) -> bool:
 def mtl_libraries(obj_data: bytes) -> list[str]:
     """The ``mtllib`` names of OBJ bytes, in file order (only lines holding
     ``mtllib`` are matched: a scan of the whole file is slow)."""
-    out: list[str] = []
-    pos = obj_data.find(b"mtllib")
-    while pos != -1:
-        start = obj_data.rfind(b"\n", 0, pos) + 1
-        end = obj_data.find(b"\n", pos)
-        end = len(obj_data) if end == -1 else end
-        m = _MTLLIB.match(obj_data, start, end)
-        if m is not None:
-            out.append(m.group(1).decode("utf-8", "replace"))
-        pos = obj_data.find(b"mtllib", end)
-    return out
+    starts = dict.fromkeys(obj_data.rfind(b"\n", 0, m.start()) + 1 for m in re.finditer(b"mtllib", obj_data))
+    return [m.group(1).decode("utf-8", "replace") for m in (_MTLLIB.match(obj_data, s) for s in starts) if m]
 
 
 def mtl_texture_maps(mtl_data: bytes) -> list[str]:
