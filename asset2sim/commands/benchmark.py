@@ -83,20 +83,11 @@ def _print_table(console, title: str, summary: dict) -> None:
     console.print(t)
 
 
-def _realism(out: Path, methods: list[str]) -> dict[str, str]:
-    """The realism column: Bradley-Terry scores of ``OUT/realism`` (``asset2sim pairs OUT``, then ``rate`` or
-    ``judge``), else "not rated" (never an invented score)."""
-    from asset2sim.apps.realism.pair_set import PairSetError
-    from asset2sim.apps.realism.scores import NOT_RATED, realism_column
-
-    try:
-        return realism_column(out / "realism", methods)
-    except PairSetError as exc:
-        return {m: f"{NOT_RATED} ({exc})" for m in methods}
-
-
 def run(args: argparse.Namespace) -> int:
     from rich.table import Table
+
+    from asset2sim.apps.realism.pair_set import PairSetError
+    from asset2sim.apps.realism.scores import NOT_RATED, realism_column
 
     console = _output.console(width=180)
     methods = listed(args.methods)
@@ -110,7 +101,10 @@ def run(args: argparse.Namespace) -> int:
     records = jsonable(run_benchmark(args.manifest, methods, out, rows=ids, seed=args.seed, engines=engines,
                                      reports=not args.no_reports, progress=progress))  # strict JSON, as results.json holds them
     tables = benchmark_tables(records, methods)
-    realism = _realism(out, methods)
+    try:  # the Bradley-Terry scores of OUT/realism (`asset2sim pairs OUT`, then rate or judge), never invented ones
+        realism = realism_column(out / "realism", methods)
+    except PairSetError as exc:
+        realism = {m: f"{NOT_RATED} ({exc})" for m in methods}
     for summary in tables.values():
         for method, row in summary.items():
             row["realism"] = realism[method]

@@ -89,8 +89,9 @@ def run(args: argparse.Namespace) -> int:
                                   dashboard=False if getattr(args, "no_dashboard", False) else None)
     total = time.perf_counter() - t0
     prefect_s = max(0.0, float(summary.get("flow_started_epoch") or t0_epoch) - t0_epoch)
-    dask_s = float(summary.get("dask_startup_seconds") or 0.0) + float(summary.get("dask_teardown_seconds") or 0.0)
-    servers_s, assets_s, tracking_s = (float(summary.get(f"{k}_seconds") or 0.0) for k in ("stage_servers", "assets", "tracking"))
+    dask_s, servers_s, assets_s, tracking_s, media_s = (
+        float(summary.get(f"{k}_seconds") or 0.0) for k in ("dask_startup", "stage_servers", "assets", "tracking", "media"))
+    dask_s += float(summary.get("dask_teardown_seconds") or 0.0)
     worked = int(summary.get("done", 0)) + int(summary.get("failed", 0))
     if run_outcome(summary) == NOTHING_TO_DO:
         print(f"run {summary['run']} of dataset {summary['dataset']}: nothing to do: every asset ({summary['assets']}) finished "
@@ -110,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
           + (f" ({worked / assets_s * 60:.2f} assets/min)" if worked and assets_s > 0 else "")
           + f", summary + MLflow {tracking_s:.1f} s")
     if summary.get("media_made") is not None:  # catalog.yaml run.extras: deferred
-        print(f"  media    {summary['media_made']} made after the verdicts in {float(summary.get('media_seconds') or 0):.1f} s"
+        print(f"  media    {summary['media_made']} made after the verdicts in {media_s:.1f} s"
               + (f", {summary['media_failed']} left deferred (`asset2sim report OUT` makes them)" if summary.get("media_failed") else ""))
     print(f"  outputs  {summary.get('output_store') or summary['output_dir']}")
     print(f"  catalog  {summary['catalog_root']}")

@@ -59,20 +59,6 @@ def pair_set_folder(folder: Path) -> Path:
         raise CommandError(INVALID_INPUT, "PAIRS_MISSING", folder, f"{exc} (docs/guide/realism.md)") from None
 
 
-def _print_scores(scores, folder: Path) -> None:
-    from rich.table import Table
-
-    console = _output.console()
-    table = Table(title=f"realism (Bradley-Terry, people) of {markup(folder)}")
-    table.add_column("method", justify="left")
-    for column in ("strength", "95 % interval", "Elo", "wins", "comparisons"):
-        table.add_column(column, justify="right")
-    for s in scores:
-        table.add_row(markup(s.method), f"{s.strength:+.2f}", f"[{s.ci_low:+.2f}, {s.ci_high:+.2f}]", f"{s.elo:.0f}",
-                      str(s.wins), str(s.comparisons))
-    console.print(table)
-
-
 def run(args: argparse.Namespace) -> int:
     if not 0 < args.port < 65536:
         raise CommandError.invalid("PORT_INVALID", f"--port must be 1-65535, got {args.port}")
@@ -97,8 +83,17 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _scores(folder: Path, tracking_uri: str | None) -> int:
+    from rich.table import Table
+
     scores = realism_scores(folder)
-    _print_scores(scores, folder)
+    table = Table(title=f"realism (Bradley-Terry, people) of {markup(folder)}")
+    table.add_column("method", justify="left")
+    for column in ("strength", "95 % interval", "Elo", "wins", "comparisons"):
+        table.add_column(column, justify="right")
+    for s in scores:
+        table.add_row(markup(s.method), f"{s.strength:+.2f}", f"[{s.ci_low:+.2f}, {s.ci_high:+.2f}]", f"{s.elo:.0f}",
+                      str(s.wins), str(s.comparisons))
+    _output.console().print(table)
     print(f"written: {folder / SCORES_FILE}")
     if tracking_uri:
         from asset2sim.flows.realism_tracking import REALISM_EXPERIMENT, log_realism_scores  # MLflow: only when asked
