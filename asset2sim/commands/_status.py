@@ -123,9 +123,7 @@ def os_failure(exc: OSError, outs: list[Path], inp, reading: Reading | None) -> 
     ``INPUT_READ_FAILED [ERRNO]``)."""
     full = next((c for c in exception_chain(exc) if isinstance(c, OSError) and c.errno in UNWRITABLE_ERRNOS), None)
     if full is not None or any(_inside(p, out) for p in (exc.filename, exc.filename2) for out in outs):
-        exc = full or exc
-        return CommandError(OUTPUT_LOCATION, f"OUTPUT_WRITE_FAILED [{errno_name(exc)}]", exc.filename or next(iter(outs), None),
-                            exc.strerror or str(exc))
+        exc, inp, reading = full or exc, next(iter(outs), None), Reading(OUTPUT_LOCATION, "OUTPUT_WRITE_FAILED")
     reading = reading or Reading(INVALID_INPUT, "INPUT_READ_FAILED")
     return CommandError(reading.status, f"{reading.code} [{errno_name(exc)}]", exc.filename or inp,
                         reading.prefix + (exc.strerror or str(exc)))

@@ -19,7 +19,7 @@ from asset2sim.commands._status import (INVALID_INPUT, NOT_READY, CommandError, 
                                         check_out, outside_paths)
 from asset2sim.input_files import allowed_folders, set_allowed_outside
 from asset2sim.flows import audit_catalog
-from asset2sim.apps.audit.batch import AuditTarget, audit_one, find_assets
+from asset2sim.apps.audit.batch import audit_one, find_assets
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.check.verdict import verdict_line
 from asset2sim.commands import _output
@@ -55,15 +55,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_allow_outside(p)
 
 
-def _run_all(targets: list[AuditTarget], out: Path | None, category: str | None, simulate: bool, jobs: int,
-             config: RefineConfig | None = None) -> list:
-    one = functools.partial(audit_one, out_root=out, category=category, simulate=simulate, config=config)
-    if jobs <= 1 or len(targets) <= 1:
-        return [one(t) for t in targets]
-    with ProcessPoolExecutor(max_workers=jobs, initializer=set_allowed_outside, initargs=allowed_folders()) as pool:
-        return list(pool.map(one, targets))
-
-
 def run(args: argparse.Namespace) -> int:
     from rich.table import Table
 
@@ -89,8 +80,13 @@ def run(args: argparse.Namespace) -> int:
         rows = summary["rows"]
     else:
         config = RefineConfig(body=args.body, mjcf={"angle": args.mjcf_angle})
+        one = functools.partial(audit_one, out_root=args.out, category=args.category, simulate=not args.no_sim, config=config)
         with outside_paths(args):
-            rows = _run_all(targets, args.out, args.category, not args.no_sim, args.jobs, config)
+            if args.jobs <= 1 or len(targets) <= 1:
+                rows = [one(t) for t in targets]
+            else:  # the workers read the folders --allow-outside-paths allows here
+                with ProcessPoolExecutor(max_workers=args.jobs, initializer=set_allowed_outside, initargs=allowed_folders()) as pool:
+                    rows = list(pool.map(one, targets))
         if args.out is not None:
             audit_catalog.write_audit_catalog(args.out, rows)
     console = _output.console()
