@@ -15,11 +15,6 @@ _TABLE = package_yaml(__package__, "extras.yaml")
 EXTRA_OF_MODULE: dict[str, tuple[str, str]] = {module: tuple(entry) for module, entry in _TABLE.items()}
 
 
-def install_command(extra: str) -> str:
-    """``pip install 'asset2sim[extra]'``."""
-    return f"pip install 'asset2sim[{extra}]'"
-
-
 def missing_module(exc: BaseException) -> str | None:
     """The name of the module an ImportError could not import (``exc.name``) as :data:`EXTRA_OF_MODULE` knows it: the
     dotted name where it is listed (``mujoco.mjx``, a package of its own), else its top-level name; or None."""
@@ -35,7 +30,7 @@ def install_hint(exc: BaseException) -> str:
     module = missing_module(exc)
     if module in EXTRA_OF_MODULE:
         what, extra = EXTRA_OF_MODULE[module]
-        return f"{what} is not installed: {install_command(extra)}"
+        return f"{what} is not installed: pip install 'asset2sim[{extra}]'"
     return (str(exc).strip().splitlines() or [""])[0] or type(exc).__name__
 
 

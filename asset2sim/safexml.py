@@ -148,18 +148,6 @@ def parse_xml_bytes(data: bytes, source: str = "<bytes>", limits: XMLLimits | No
         XMLMalformed: not well-formed, or not bytes.
     """
     lim = limits or DEFAULT_LIMITS
-    data = _checked_bytes(data, source, lim)
-    parser = expat.ParserCreate()
-    # Never read external DTD subsets or parameter entities.
-    parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
-    builder = ET.TreeBuilder(element_factory=SourceElement)
-    _install_guards(parser, builder, lim, source)
-    _parse(parser, data, source)
-    return builder.close()  # type: ignore[return-value]
-
-
-def _checked_bytes(data: bytes, source: str, lim: XMLLimits) -> bytes:
-    """``data`` as bytes once type, size and longest token are checked."""
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise XMLMalformed(f"expected bytes, got {type(data).__name__}", source=source)
     data = bytes(data)
@@ -169,7 +157,21 @@ def _checked_bytes(data: bytes, source: str, lim: XMLLimits) -> bytes:
     if run > lim.max_token_bytes:
         raise XMLTokenTooLarge(f"a token of {run} bytes (starting at byte {at}) > limit {lim.max_token_bytes}",
                                source=source, line=data.count(b"\n", 0, at) + 1)
-    return data
+    parser = expat.ParserCreate()
+    # Never read external DTD subsets or parameter entities.
+    parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
+    builder = ET.TreeBuilder(element_factory=SourceElement)
+    _install_guards(parser, builder, lim, source)
+    try:
+        parser.Parse(data, True)
+    except _Abort as abort:
+        raise abort.error from None
+    except expat.ExpatError as exc:
+        raise XMLMalformed(f"{expat.errors.messages[exc.code] if exc.code else exc} (line {exc.lineno}, column {exc.offset})",
+                           source=source, line=exc.lineno) from None
+    except (UnicodeError, ValueError) as exc:  # e.g. an unknown declared encoding
+        raise XMLMalformed(str(exc), source=source) from None
+    return builder.close()  # type: ignore[return-value]
 
 
 def _install_guards(parser, builder: ET.TreeBuilder, lim: XMLLimits, source: str) -> None:
@@ -233,19 +235,6 @@ def _install_guards(parser, builder: ET.TreeBuilder, lim: XMLLimits, source: str
     parser.EndElementHandler = end
     parser.CharacterDataHandler = chars
     parser.buffer_text = True
-
-
-def _parse(parser, data: bytes, source: str) -> None:
-    """Feed the document to ``parser``; expat's and decoding errors raise XMLMalformed."""
-    try:
-        parser.Parse(data, True)
-    except _Abort as abort:
-        raise abort.error from None
-    except expat.ExpatError as exc:
-        raise XMLMalformed(f"{expat.errors.messages[exc.code] if exc.code else exc} (line {exc.lineno}, column {exc.offset})",
-                           source=source, line=exc.lineno) from None
-    except (UnicodeError, ValueError) as exc:  # e.g. an unknown declared encoding
-        raise XMLMalformed(str(exc), source=source) from None
 
 
 def read_xml_file(path: Path | str, limits: XMLLimits | None = None) -> bytes:

@@ -43,17 +43,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-extras", action="store_true", help="skip MJCF export, renders and the HTML report")
 
 
-def _entry(asset_id: str):
-    for entry in DEMO_OBJECTS:
-        if entry.asset_id == asset_id:
-            return entry
-    known = [o.asset_id for o in DEMO_OBJECTS]
-    close = difflib.get_close_matches(asset_id, known, n=1)
-    hint = f"; did you mean {close[0]!r}?" if close else ""
-    raise CommandError.invalid("DEMO_OBJECT_UNKNOWN", f"--object {asset_id!r} is not a built-in object{hint} "
-                               f"(known: {', '.join(known)}; `asset2sim demo --list`)")
-
-
 def run(args: argparse.Namespace) -> int:
     if args.list:
         for o in DEMO_OBJECTS:
@@ -63,7 +52,13 @@ def run(args: argparse.Namespace) -> int:
         root = demo_assets.build_demo_dataset(args.dataset)
         print(f"wrote {len(DEMO_OBJECTS)} objects and {root / 'manifest.csv'}")
         return 0
-    entry = _entry(args.object)
+    entry = next((o for o in DEMO_OBJECTS if o.asset_id == args.object), None)
+    if entry is None:
+        known = [o.asset_id for o in DEMO_OBJECTS]
+        close = difflib.get_close_matches(args.object, known, n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise CommandError.invalid("DEMO_OBJECT_UNKNOWN", f"--object {args.object!r} is not a built-in object{hint} "
+                                   f"(known: {', '.join(known)}; `asset2sim demo --list`)")
     if args.no_refine and args.asset_out is None:
         raise CommandError.invalid("DEMO_NOTHING_TO_DO", "--no-refine writes only the input folder: give --asset-out DIR")
     with tempfile.TemporaryDirectory(prefix="asset2sim-demo-") as tmp:

@@ -54,8 +54,17 @@ def run(args: argparse.Namespace) -> int:
     parity = parse_engines(args.parity, "--parity") if args.parity else []
     if not (out / URDF_NAME).is_file():
         raise CommandError(INVALID_REQUEST, "NOT_AN_OUTPUT_FOLDER", out, "has no mobility.urdf (not an output folder)")
-    if args.format == "usd":
-        return _run_usd(args, out)
+    if args.format == "usd":  # write OUT/usd/mobility.usd, read it back and print the check
+        with output_folder.adopting(out):
+            build = export_usd(asset := RefinedAsset(out), visuals=not args.no_visuals, check=False)
+        check = check_usd(build.path, asset)
+        print(f"wrote       {build.path}")
+        print(f"read back   {check.links} links, {check.joints} movable joints; largest relative difference "
+              f"{check.max_rel_error:.1e} (binary32 attributes)")
+        print(f"root        {'fixed (root_joint to the world)' if build.fixed_root else 'free'}")
+        for note in build.notes[:5]:
+            print(f"note        {note}")
+        return 0
     if "mujoco" not in available_engines():
         raise CommandError.invalid("ENGINE_UNAVAILABLE",
                                    "MuJoCo is not installed; install the extra: pip install 'asset2sim[mujoco]'")
@@ -88,16 +97,3 @@ def run(args: argparse.Namespace) -> int:
                 status = 1
     return status
 
-
-def _run_usd(args: argparse.Namespace, out: Path) -> int:
-    """``--format usd``: write ``OUT/usd/mobility.usd``, read it back and print the check."""
-    with output_folder.adopting(out):
-        build = export_usd(asset := RefinedAsset(out), visuals=not args.no_visuals, check=False)
-    check = check_usd(build.path, asset)
-    print(f"wrote       {build.path}")
-    print(f"read back   {check.links} links, {check.joints} movable joints; largest relative difference "
-          f"{check.max_rel_error:.1e} (binary32 attributes)")
-    print(f"root        {'fixed (root_joint to the world)' if build.fixed_root else 'free'}")
-    for note in build.notes[:5]:
-        print(f"note        {note}")
-    return 0
