@@ -169,18 +169,6 @@ def requested_command(argv: list[str]) -> str | None:
     return word if word in command_names() else None
 
 
-def write_error_log(command: str | None, exc: BaseException) -> str:
-    """Write ``exc``'s traceback to a new log file (``$ASSET2SIM_LOG_DIR`` or
-    the temporary folder); returns its path."""
-    folder = os.environ.get("ASSET2SIM_LOG_DIR") or tempfile.gettempdir()
-    os.makedirs(folder, exist_ok=True)
-    fd, path = tempfile.mkstemp(prefix=f"asset2sim-{command or 'cli'}-{time.strftime('%Y%m%d-%H%M%S')}-", suffix=".log", dir=folder)
-    with os.fdopen(fd, "w", encoding="utf-8") as fh:
-        fh.write(f"asset2sim {__version__} {command or ''}: internal error\nargv: {sys.argv!r}\n\n")
-        fh.write("".join(traceback.format_exception(type(exc), exc, exc.__traceback__)))
-    return path
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit code. Everything the command prints passes through
     :mod:`asset2sim.commands._output` (no control character of a name or a request reaches the terminal)."""
@@ -263,9 +251,17 @@ def closed_pipe() -> None:
 
 
 def internal_error(command: str | None, exc: BaseException) -> int:
-    """One line naming a log of ``exc``'s traceback; returns :data:`INTERNAL_ERROR`."""
+    """One line naming a log of ``exc``'s traceback (a new file in ``$ASSET2SIM_LOG_DIR`` or the temporary folder);
+    returns :data:`INTERNAL_ERROR`."""
     try:
-        where = f"traceback in {write_error_log(command, exc)}"
+        folder = os.environ.get("ASSET2SIM_LOG_DIR") or tempfile.gettempdir()
+        os.makedirs(folder, exist_ok=True)
+        fd, path = tempfile.mkstemp(prefix=f"asset2sim-{command or 'cli'}-{time.strftime('%Y%m%d-%H%M%S')}-", suffix=".log",
+                                    dir=folder)
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(f"asset2sim {__version__} {command or ''}: internal error\nargv: {sys.argv!r}\n\n")
+            fh.write("".join(traceback.format_exception(type(exc), exc, exc.__traceback__)))
+        where = f"traceback in {path}"
     except OSError as log_exc:
         where = f"no log written ({log_exc}); rerun with --debug for the traceback"
     first = (str(exc).strip().splitlines() or [""])[0]

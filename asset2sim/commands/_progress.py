@@ -86,12 +86,7 @@ class FlowProgress:
                             "[red]failed {task.fields[failed]}[/]")
         self._progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), counts, TimeElapsedColumn(),
                                   TextColumn("ETA"), TimeRemainingColumn(), console=Console(file=raw(self.stream)), transient=False)
-        self._quiet_console_logs()
-        self._progress.start()
-        self._task = self._progress.add_task(f"{markup(ev.dataset)}: {starting(ev)}", total=max(1, ev.total), **self.counts)
-
-    def _quiet_console_logs(self) -> None:
-        """Raise every terminal log handler to WARNING (remembering its level)."""
+        # every terminal log handler raised to WARNING (its level remembered)
         loggers = [logging.getLogger()] + [lg for lg in logging.root.manager.loggerDict.values() if isinstance(lg, logging.Logger)]
         for lg in loggers:
             for h in lg.handlers:
@@ -100,6 +95,8 @@ class FlowProgress:
                     if h.level < logging.WARNING and all(h is not q for q, _ in self._quieted):
                         self._quieted.append((h, h.level))
                         h.setLevel(logging.WARNING)
+        self._progress.start()
+        self._task = self._progress.add_task(f"{markup(ev.dataset)}: {starting(ev)}", total=max(1, ev.total), **self.counts)
 
     def close(self) -> None:
         """Stop drawing the bar and restore the log handlers (idempotent)."""
