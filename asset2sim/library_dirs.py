@@ -32,16 +32,6 @@ _LOCK = threading.Lock()
 _TEMP: list[Path] = []
 
 
-def _own_matplotlib_config() -> bool:
-    """True when the user has a matplotlib configuration folder (``$XDG_CONFIG_HOME/matplotlib``,
-    ``~/.config/matplotlib`` or the legacy ``~/.matplotlib``)."""
-    home = Path(os.path.expanduser("~"))
-    xdg = os.environ.get("XDG_CONFIG_HOME")
-    candidates = [Path(xdg) / "matplotlib"] if xdg else []
-    candidates += [home / ".config" / "matplotlib", home / ".matplotlib"]
-    return any(p.is_dir() for p in candidates)
-
-
 def matplotlib_dir() -> Path:
     """The folder ``MPLCONFIGDIR`` gets: ``<asset2sim cache>/matplotlib``, or a temporary folder of this process
     (``asset2sim-matplotlib-*`` in the temporary directory, removed at exit) when the cache is off."""
@@ -58,7 +48,10 @@ def configure() -> dict[str, str]:
     """Set the libraries' folders and switches in ``os.environ`` where they are unset (module docstring); returns
     what it set (name -> value). Raises nothing (a cache folder that cannot be made is matplotlib's to report)."""
     done: dict[str, str] = {}
-    if "MPLCONFIGDIR" not in os.environ and not _own_matplotlib_config():
+    # the user's own matplotlib configuration folder: $XDG_CONFIG_HOME/matplotlib, ~/.config/matplotlib or ~/.matplotlib
+    home, xdg = Path(os.path.expanduser("~")), os.environ.get("XDG_CONFIG_HOME")
+    own = [*([Path(xdg) / "matplotlib"] if xdg else []), home / ".config" / "matplotlib", home / ".matplotlib"]
+    if "MPLCONFIGDIR" not in os.environ and not any(p.is_dir() for p in own):
         done["MPLCONFIGDIR"] = os.environ["MPLCONFIGDIR"] = str(matplotlib_dir())
     if "MLFLOW_DISABLE_TELEMETRY" not in os.environ:
         done["MLFLOW_DISABLE_TELEMETRY"] = os.environ["MLFLOW_DISABLE_TELEMETRY"] = "true"

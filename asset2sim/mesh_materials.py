@@ -69,17 +69,6 @@ _USEMTL = re.compile(r"^[ \t]*usemtl[ \t]+(.+?)[ \t\r]*$", re.M)
 _MTL_NAMES: file_memo.FileMemo[list[str]] = file_memo.FileMemo(list, max_entries=8192)
 
 
-def _obj_mtl_names(mesh_path: Path) -> list[str]:
-    """:func:`mtl_libraries` of the OBJ file ``mesh_path``, read once per file
-    version; OSError when unreadable."""
-    names = _MTL_NAMES.get(str(mesh_path))
-    if names is None:
-        files = file_memo.identities([mesh_path])  # before reading
-        names = mtl_libraries(mesh_path.read_bytes())
-        _MTL_NAMES.put(str(mesh_path), files, names)
-    return names
-
-
 def obj_material_files(mesh_path: Path, keep=lambda p: True, skip_library=lambda name: False) -> list[Path]:
     """The MTL libraries and their texture maps an OBJ mesh needs, resolved, in
     file order; missing files, those ``keep(path)`` refuses and libraries
@@ -87,10 +76,14 @@ def obj_material_files(mesh_path: Path, keep=lambda p: True, skip_library=lambda
     deps: list[Path] = []
     if mesh_path.suffix.lower() != ".obj":
         return deps
-    try:
-        names = _obj_mtl_names(mesh_path)
-    except OSError:
-        return deps
+    names = _MTL_NAMES.get(str(mesh_path))  # the OBJ file's mtllib names, read once per file version
+    if names is None:
+        files = file_memo.identities([mesh_path])  # before reading
+        try:
+            names = mtl_libraries(mesh_path.read_bytes())
+        except OSError:
+            return deps
+        _MTL_NAMES.put(str(mesh_path), files, names)
     for name in names:
         if skip_library(name):
             continue
