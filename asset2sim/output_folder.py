@@ -101,7 +101,7 @@ _ACTIVE: dict[Path, "OwnedFolder"] = {}
 _ACTIVE_LOCK = threading.Lock()
 
 
-_GUARDS: list["_Guard"] = []
+_GUARDS: list[tuple[Path, Path]] = []  # (a guarded folder as given, absolute; its real folder)
 
 
 def _observe(root: Path, owner: "OwnedFolder") -> "OwnedFolder | None":
@@ -125,17 +125,11 @@ def _dispatch(paths: list[Path]) -> None:
     refuse it)."""
     with _ACTIVE_LOCK:
         guards, owners = list(_GUARDS), list(_ACTIVE.values())
-    for guard in guards:
+    for given, root in guards:
         for path in paths:
-            write_inside(path, guard.given, guard.root)
+            write_inside(path, given, root)
     for owner in owners:
         owner._observe(paths)
-
-
-@dataclass(frozen=True)
-class _Guard:
-    given: Path
-    root: Path
 
 
 @contextlib.contextmanager
@@ -149,12 +143,12 @@ def guarding(folder: Path | str) -> Iterator[Path]:
     Raises (from the write, which is then not made):
         OutputError: ``OUTPUT_SYMLINK_ESCAPES`` or ``OUTPUT_PATH_ESCAPES``.
     """
-    guard = _Guard(given=Path(os.path.abspath(folder)), root=Path(os.path.realpath(folder)))
+    guard = (Path(os.path.abspath(folder)), Path(os.path.realpath(folder)))
     with _ACTIVE_LOCK:
         _GUARDS.append(guard)
         atomic.add_observer(_dispatch)
     try:
-        yield guard.root
+        yield guard[1]
     finally:
         with _ACTIVE_LOCK:
             _GUARDS.remove(guard)
