@@ -140,9 +140,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
                         help="also show the simulators' start-up messages and the libraries' INFO logs (PyBullet's build line, "
                              "SAPIEN's renderer warnings, Dask's and Prefect's logs)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=CommandParser)
-    for name in command_names():
-        if only is not None and name != only:
-            continue
+    for name in (n for n in command_names() if only in (None, n)):
         module = importlib.import_module(f"asset2sim.commands.{name}")
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP,
                            epilog=f"exit statuses: {exit_statuses_text(getattr(module, 'EXITS', {}))} "

@@ -120,9 +120,7 @@ def _recorded(folder: Path) -> dict[str, set[str]]:
     except (OSError, ValueError):
         return {}
     out: dict[str, set[str]] = {}
-    if not isinstance(data, dict):
-        return out
-    for part in ("files", "pending"):
+    for part in ("files", "pending") if isinstance(data, dict) else ():
         entries = data.get(part)
         for rel, digest in (entries.items() if isinstance(entries, dict) else ()):
             safe = output_paths._safe_rel(rel)
