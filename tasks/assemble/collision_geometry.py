@@ -34,6 +34,9 @@ from asset2sim.tasks.assemble.parent_child_separation import separate_parent_chi
 from asset2sim.tasks.assemble.piece_penetration import parent_child_depths
 from asset2sim.tasks.assemble.sliding_clearance import running_clearance, swept_clearance
 
+#: (link -> convex pieces (link frame, m), notes): what :func:`link_pieces` returns.
+PiecesNotes = tuple[dict[str, list[Piece]], list[str]]
+
 def _group_hulls(link: urdf.UrdfLink, mesh_path, notes: list[str]) -> list[tuple[int, int, Piece]]:
     """(collision index, group index, hull) of every OBJ group of ``link``'s mesh collisions (link frame, m); a
     group without a hull gets a note and no piece.
@@ -115,7 +118,7 @@ def _sliding_neighbours(model: urdf.UrdfModel, hulls: dict[str, list[tuple[int, 
 def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None = None, *,
                 limit: int = MAX_PIECES_PER_LINK, decompose: bool = True,
                 level: bool = False, feet: float | None = None,
-                open_containers: bool = False, pushed: Collection[str] = ()) -> tuple[dict[str, list[Piece]], list[str]]:
+                open_containers: bool = False, pushed: Collection[str] = ()) -> PiecesNotes:
     """The convex pieces of every link's mesh collisions (link frame, m), cached in this process and on disk.
 
     The pieces depend on the joint limits (the ranges swept); only what ``state`` puts a child into its
@@ -152,7 +155,7 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
 
 
 def _cached_pieces(key: str, disk_key: str | None, model: urdf.UrdfModel, mesh_path, limit: int,
-                   decompose: bool, opening: bool) -> tuple[dict[str, list[Piece]], list[str]]:
+                   decompose: bool, opening: bool) -> PiecesNotes:
     """:func:`link_pieces`' state-independent (pieces, notes), from the process's or the disk's cache (keys of
     :func:`_piece_keys`), else made."""
     hit = _recalled(_PIECE_CACHE, key)
@@ -168,7 +171,7 @@ def _cached_pieces(key: str, disk_key: str | None, model: urdf.UrdfModel, mesh_p
 
 
 def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
-                 opening: bool = False) -> tuple[dict[str, list[Piece]], list[str]]:
+                 opening: bool = False) -> PiecesNotes:
     """(link -> pieces, notes) before any state; ``opening``: containers decomposed (:func:`container_pieces.open_pieces`)."""
     notes: list[str] = []
     pieces: dict[str, list[Piece]] = {}
@@ -200,7 +203,7 @@ def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
     swept_clearance(model, pieces, notes)
     for name in model.links:
         pieces[name] = drop_slivers(pieces[name])
-    return {k: list(v) for k, v in pieces.items()}, list(notes)
+    return pieces, notes
 
 
 def _merge_link(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], name: str, limit: int, decompose: bool,
@@ -226,9 +229,9 @@ def _merge_link(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], name: str
             _trim(pieces, name, ", ".join(repr(c) for c in swept), pts, d, notes)
 
 
-def _state_pieces(model: urdf.UrdfModel, hit: tuple[dict[str, list[Piece]], list[str]], state: dict[str, float],
+def _state_pieces(model: urdf.UrdfModel, hit: PiecesNotes, state: dict[str, float],
                   decompose: bool, level: bool, feet: float | None = None,
-                  pushed: Collection[str] = ()) -> tuple[dict[str, list[Piece]], list[str]]:
+                  pushed: Collection[str] = ()) -> PiecesNotes:
     """(link -> pieces, notes) of ``hit`` at the initial ``state``, each ``pushed`` joint's part and parent also cut
     apart at both ends of its range (:func:`link_pieces`)."""
     pieces, notes = {k: list(v) for k, v in hit[0].items()}, list(hit[1])
@@ -258,14 +261,13 @@ _STATE_CACHE: cachetools.FIFOCache = cachetools.FIFOCache(maxsize=16)
 _CACHE_LOCK = threading.Lock()
 
 
-def _recalled(cache: cachetools.Cache, key) -> tuple[dict[str, list[Piece]], list[str]] | None:
+def _recalled(cache: cachetools.Cache, key) -> PiecesNotes | None:
     """What ``cache`` holds under ``key``, or None."""
     with _CACHE_LOCK:
         return cache.get(key)
 
 
-def _remember(cache: cachetools.Cache, key, hit: tuple[dict[str, list[Piece]], list[str]]
-              ) -> tuple[dict[str, list[Piece]], list[str]]:
+def _remember(cache: cachetools.Cache, key, hit: PiecesNotes) -> PiecesNotes:
     """``hit``, kept in ``cache``."""
     with _CACHE_LOCK:
         cache[key] = hit
@@ -312,7 +314,7 @@ def _piece_keys(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool, o
     return key, None if unread else array_cache.digest(code, key)
 
 
-def _store_pieces(key: str, hit: tuple[dict[str, list[Piece]], list[str]]) -> None:
+def _store_pieces(key: str, hit: PiecesNotes) -> None:
     """Write :func:`link_pieces`' state-independent result to the on-disk cache (kind ``pieces``)."""
     pieces, notes = hit
     links = {name: [list(p.sources) for p in plist] for name, plist in pieces.items()}
@@ -323,7 +325,7 @@ def _store_pieces(key: str, hit: tuple[dict[str, list[Piece]], list[str]]) -> No
     array_cache.store("pieces", key, arrays)
 
 
-def _load_pieces(key: str, model: urdf.UrdfModel) -> tuple[dict[str, list[Piece]], list[str]] | None:
+def _load_pieces(key: str, model: urdf.UrdfModel) -> PiecesNotes | None:
     """What :func:`_store_pieces` wrote under ``key``, or None (none, unreadable, or other links)."""
     data = array_cache.load("pieces", key)
     if data is None:

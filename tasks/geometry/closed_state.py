@@ -113,13 +113,10 @@ def link_hull_points(asset: AssetDescription, cache=None) -> dict[str, np.ndarra
                 except Exception:
                     continue
                 v = v[np.all(np.isfinite(v), axis=1)] * np.asarray(g.scale, float)
-            elif g.kind == "box" and g.size is not None:
-                h = np.asarray(g.size, float) / 2
+            elif g.kind == "box" and g.size is not None or g.kind in ("cylinder", "sphere") and g.radius is not None:
+                # the box's corners, or those of the cylinder's or sphere's bounding box
+                h = np.asarray(g.size, float) / 2 if g.kind == "box" else (g.radius, g.radius, (g.length or 2 * g.radius) / 2)
                 v = np.array([[sx, sy, sz] for sx in (-h[0], h[0]) for sy in (-h[1], h[1]) for sz in (-h[2], h[2])])
-            elif g.kind in ("cylinder", "sphere") and g.radius is not None:
-                r = g.radius
-                hz = (g.length or 2 * r) / 2
-                v = np.array([[sx, sy, sz] for sx in (-r, r) for sy in (-r, r) for sz in (-hz, hz)])
             else:
                 continue
             if len(v) == 0:
@@ -194,12 +191,7 @@ class _PairScreen:
 
 def _subtree_phi(session, screen: _PairScreen) -> float:
     """Penetration (m) between the moving subtree and every other link, parent included."""
-    total = 0.0
-    for a, b in screen.pairs():
-        for d in session.link_distances(a, b, 0.0):
-            if d < 0:
-                total += -d
-    return total
+    return sum((-d for a, b in screen.pairs() for d in session.link_distances(a, b, 0.0) if d < 0), 0.0)
 
 
 def closed_positions(session, asset: AssetDescription, *, hull_points: dict[str, np.ndarray] | None = None,

@@ -97,8 +97,9 @@ def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed:
     the range or the part cannot open from ``q_close`` even then. The session is left at ``state`` with ``name``
     at ``q_close``."""
     pairs = collision_pairs(session, sub, chain_links(model, name) - set(sub))
+    none = _ChainEnd(float(far_raw), None, [])
     if not pairs:
-        return _ChainEnd(float(far_raw), None, [])
+        return none
     parent_of = {j.child: j for j in model.joints}
     opened, ln = {}, model.joint(name).parent
     while ln in parent_of:
@@ -109,17 +110,17 @@ def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed:
                 opened[j.name] = kc + kd * kr
         ln = j.parent
     if not opened:
-        return _ChainEnd(float(far_raw), None, [])
+        return none
     try:
         session.set_joint_positions({**state, **opened, name: q_close})
         _, depth = depth_scan(session, name, pairs, *sorted((q_close, far_raw)), q_close, SCAN_SAMPLES)
         base = depth.min(axis=0)
         session.set_joint_positions({name: q_close})
         if float((pair_depths(session, pairs) - base).max(initial=0.0)) > EXCESS_TOLERANCE:
-            return _ChainEnd(float(far_raw), None, [])  # not free at its closed end even with the chain open: the sweep's finding
+            return none  # not free at its closed end even with the chain open: the sweep's finding
         far, who = free_end(session, name, q_close, far_raw, pairs, base, SCAN_SAMPLES, STOP_DEPTH)
         if who is None or abs(far - q_close) < MIN_FREE_FRACTION * range_:
-            return _ChainEnd(float(far_raw), None, [])
+            return none
         far = contact_onset(session, name, far, q_close, pairs, base, BACK_OFF_FRACTION * range_)
         return _ChainEnd(float(far), who, sorted(opened))
     finally:
