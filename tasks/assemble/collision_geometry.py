@@ -170,8 +170,7 @@ def _cached_pieces(key: str, disk_key: str | None, model: urdf.UrdfModel, mesh_p
     return hit
 
 
-def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
-                 opening: bool = False) -> PiecesNotes:
+def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool, opening: bool) -> PiecesNotes:
     """(link -> pieces, notes) before any state; ``opening``: containers decomposed (:func:`container_pieces.open_pieces`)."""
     notes: list[str] = []
     pieces: dict[str, list[Piece]] = {}
@@ -207,7 +206,7 @@ def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
 
 
 def _merge_link(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], name: str, limit: int, decompose: bool,
-                notes: list[str], cavity: np.ndarray | None = None) -> None:
+                notes: list[str], cavity: np.ndarray | None) -> None:
     """Merge the pieces of link ``name`` (in place) down to ``limit``, guarded against the other links and the
     link's own open cavities (``cavity`` (K, 3) m core points); a merge that holds a child again is trimmed
     (``decompose``)."""
@@ -230,8 +229,7 @@ def _merge_link(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], name: str
 
 
 def _state_pieces(model: urdf.UrdfModel, hit: PiecesNotes, state: dict[str, float],
-                  decompose: bool, level: bool, feet: float | None = None,
-                  pushed: Collection[str] = ()) -> PiecesNotes:
+                  decompose: bool, level: bool, feet: float | None, pushed: Collection[str]) -> PiecesNotes:
     """(link -> pieces, notes) of ``hit`` at the initial ``state``, each ``pushed`` joint's part and parent also cut
     apart at both ends of its range (:func:`link_pieces`)."""
     pieces, notes = {k: list(v) for k, v in hit[0].items()}, list(hit[1])
@@ -275,13 +273,11 @@ def _remember(cache: cachetools.Cache, key, hit: PiecesNotes) -> PiecesNotes:
 
 
 #: Modules whose source the pieces depend on (part of the on-disk key).
-PIECES_CODE = ("asset2sim.tasks.assemble.collision_geometry", "asset2sim.tasks.assemble.containment_cuts",
-               "asset2sim.tasks.assemble.convex_pieces", "asset2sim.tasks.assemble.footprint", "asset2sim.tasks.assemble.joint_sweep",
-               "asset2sim.tasks.assemble.parent_child_separation", "asset2sim.tasks.assemble.piece_penetration",
-               "asset2sim.tasks.assemble.sliding_clearance", "asset2sim.tasks.geometry.limits", "asset2sim.mesh_io",
-               "asset2sim.tasks.assemble.container_pieces",
-               "asset2sim.engines.loading", "asset2sim.urdf", "asset2sim.frames", "asset2sim.tasks.geometry.cavities",
-               "asset2sim.tasks.geometry.decomposition", "asset2sim.tasks.geometry.voxels")
+PIECES_CODE = (*(f"asset2sim.tasks.assemble.{m}" for m in ("collision_geometry", "containment_cuts", "convex_pieces", "footprint",
+                                                             "joint_sweep", "parent_child_separation", "piece_penetration",
+                                                             "sliding_clearance", "container_pieces")),
+               *(f"asset2sim.tasks.geometry.{m}" for m in ("limits", "cavities", "decomposition", "voxels")),
+               "asset2sim.mesh_io", "asset2sim.engines.loading", "asset2sim.urdf", "asset2sim.frames")
 
 
 def _piece_keys(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool, opening: bool = False
@@ -388,10 +384,10 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
             data = piece_obj(p)
             rel = f"{folder}/{safe}_hull{i}_{hashlib.sha256(data).hexdigest()[:12]}.obj"
             dst = file_names.join_inside(out_dir, rel)
-            if not (dst.is_file() and not dst.is_symlink() and mesh_io.file_bytes(dst) == data):
-                mesh_io.write_file(dst, data)
-            else:
+            if dst.is_file() and not dst.is_symlink() and mesh_io.file_bytes(dst) == data:
                 atomic.announce([dst])
+            else:
+                mesh_io.write_file(dst, data)
             kept.append(urdf.UrdfGeometry(kind="mesh", filename=rel, path=dst))
         link.collisions = kept
         vol, rho = sum(p.volume for p in pieces[name]), (max_density or {}).get(name)

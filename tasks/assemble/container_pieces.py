@@ -112,18 +112,19 @@ def open_pieces(link: str, c: urdf.UrdfGeometry, g: int, hull: Piece, mesh: tupl
         return None
     what = (f"link {link!r}: group {g} of {c.filename} {CAVITY_NOTE} (a ball of {cav.radius * 1000:.0f} mm radius, "
             f"{100 * cav.volume / max(cav.hull_volume, 1e-12):.0f} % of its hull)")
+    as_hull = f"{what}; kept as one convex hull, solid inside:"
     if up is not None and cav.regions and all(float(r.mouth @ up) < -MOUTH_BELOW for r in cav.regions):
         notes.append(f"{what}; kept as one convex hull: its opening faces down at the joints' reference state "
                      f"({_below_horizontal(cav.regions, up)}), so nothing put in would stay in it")
         return None
     if slides_along:
-        notes.append(f"{what}; kept as one convex hull, solid inside: it slides along {', '.join(map(repr, sorted(slides_along)))} "
+        notes.append(f"{as_hull} it slides along {', '.join(map(repr, sorted(slides_along)))} "
                      "and a part sliding across the seams between convex pieces catches on them")
         return None
     try:
         parts = decomposition.decompose(mesh[0], mesh[1], CAVITY_COACD, refit=False)
     except (decomposition.DecompositionUnavailable, ValueError) as exc:
-        notes.append(f"{what}; kept as one convex hull, solid inside: {exc}")
+        notes.append(f"{as_hull} {exc}")
         return None
     # refitted to points on the part's own surface: CoACD's pieces lie on its remesh, offset from the surface,
     # and a few corners per wall are too few to refit to
@@ -141,7 +142,7 @@ def open_pieces(link: str, c: urdf.UrdfGeometry, g: int, hull: Piece, mesh: tupl
             continue
     free = cavities.open_fraction(cav.core, [p.equations for p in pieces])
     if not pieces or free < OPENED_SHARE:
-        notes.append(f"{what}; kept as one convex hull, solid inside: its convex decomposition leaves "
+        notes.append(f"{as_hull} its convex decomposition leaves "
                      f"{100 * free:.0f} % of the cavity free")
         return None
     notes.append(f"{what}: {len(pieces)} convex pieces (CoACD) instead of its hull, so that things can be put in it")

@@ -273,7 +273,7 @@ def probe_points(points: np.ndarray, pieces: list[Piece], n: int = PROBE_POINTS)
 
 
 def _resolve_containment(model, pieces, mesh_path, notes, decompose: bool, limit: int,
-                         whole: frozenset[tuple[str, str]] = frozenset()) -> None:
+                         whole: frozenset[tuple[str, str]]) -> None:
     """Cut, in place, the parent pieces that contain a child deeper than
     :data:`CONTAINMENT_TOLERANCE` anywhere over the child's joint range
     (:func:`_split_pieces` around all children at once, kept only when they

@@ -57,11 +57,8 @@ def _joint_motion(joint: urdf.UrdfJoint, q: float) -> np.ndarray:
 def reference_state(model: urdf.UrdfModel) -> dict[str, float]:
     """Joint -> 0 clipped to its limits (rad or m; 0 for a joint without
     finite limits): the pose the other joints hold while one is swept."""
-    ref = {}
-    for j in model.movable_joints:
-        lo, hi = j.lower, j.upper
-        ref[j.name] = float(np.clip(0.0, lo, hi)) if np.isfinite(lo) and np.isfinite(hi) else 0.0
-    return ref
+    return {j.name: float(np.clip(0.0, j.lower, j.upper)) if np.isfinite(j.lower) and np.isfinite(j.upper) else 0.0
+            for j in model.movable_joints}
 
 
 def swept_child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], link: str,

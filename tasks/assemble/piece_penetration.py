@@ -29,8 +29,7 @@ def _edge_directions(piece: Piece) -> np.ndarray:
                         verts[tris[:, 0]] - verts[tris[:, 2]]])
     n = np.linalg.norm(e, axis=1)
     e = e[n > 1e-12] / n[n > 1e-12, None]
-    flip = (e[:, 0] < 0) | ((e[:, 0] == 0) & (e[:, 1] < 0)) | ((e[:, 0] == 0) & (e[:, 1] == 0) & (e[:, 2] < 0))
-    e[flip] *= -1
+    e[e[np.arange(len(e)), np.argmax(e != 0, axis=1)] < 0] *= -1  # the first non-zero component positive
     _, keep = np.unique(np.round(e * 50.0), axis=0, return_index=True)  # one per ~1 degree cell
     e = e[np.sort(keep)]
     if len(e) > MAX_EDGE_DIRECTIONS:  # an even subsample: fewer axes only bound the depth from above
@@ -144,11 +143,8 @@ def containment_depths(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], st
     """(parent, child) -> largest depth (m) of a child's collision vertex
     inside one of the parent's pieces, at joint positions ``state`` (rad or m)."""
     poses = model.link_poses(state)
-    out = {}
-    for parent in model.links:
-        for child, pts in _child_points(model, pieces, poses, parent).items():
-            out[(parent, child)] = max((depth_inside(pts, p) for p in pieces.get(parent, [])), default=0.0)
-    return out
+    return {(parent, child): max((depth_inside(pts, p) for p in pieces.get(parent, [])), default=0.0)
+            for parent in model.links for child, pts in _child_points(model, pieces, poses, parent).items()}
 
 
 def parent_child_depths(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], state: dict[str, float]) -> dict[tuple[str, str], float]:

@@ -104,11 +104,9 @@ def _replace_collisions(model: urdf.UrdfModel, overrides: dict) -> None:
         link.contact = {}
         pieces = overrides.get(link.name)
         if pieces:
-            kept = [c for c in link.collisions if c.kind != "mesh"]
-            for piece in pieces:
-                kept.append(urdf.UrdfGeometry(kind="mesh", origin=frames.pose_matrix(piece.source.origin.xyz, piece.source.origin.rpy),
-                                              filename=piece.filename, mesh_scale=np.asarray(piece.source.scale, float)))
-            link.collisions = kept
+            link.collisions = [c for c in link.collisions if c.kind != "mesh"] + [
+                urdf.UrdfGeometry(kind="mesh", origin=frames.pose_matrix(piece.source.origin.xyz, piece.source.origin.rpy),
+                                  filename=piece.filename, mesh_scale=np.asarray(piece.source.scale, float)) for piece in pieces]
 
 
 def _set_inertials(model: urdf.UrdfModel, overlay: Overlay) -> None:
@@ -136,7 +134,7 @@ def _rotate_root(model: urdf.UrdfModel, root_link: str, rotation: np.ndarray) ->
             root.inertial.origin = T @ root.inertial.origin
 
 
-def _set_joints(model: urdf.UrdfModel, overlay: Overlay, fixed: set[str] = frozenset()) -> None:
+def _set_joints(model: urdf.UrdfModel, overlay: Overlay, fixed: set[str]) -> None:
     """Every joint without ``<mimic>``, ``<calibration>``, ``<safety_controller>`` and with an explicit axis; every
     movable one with a ``<limit>`` and the overlay's ``<dynamics>`` and limits (OutputError when it lacks one); the
     joints in ``fixed`` (those the asset model holds, ``partnet_mobility.held_bodies``) written fixed at 0."""
@@ -211,11 +209,9 @@ def write_output(asset: AssetDescription, overlay: Overlay, out_dir: Path, initi
 def part_labels(asset: AssetDescription) -> dict[str, partnet_mobility.Semantics]:
     """link -> (joint kind, part label) of the asset's labelled links, in link order; links whose name or
     label the format cannot express (whitespace) are left out."""
-    out: dict[str, partnet_mobility.Semantics] = {}
-    for ln in asset.links:
-        if ln.semantic_label and ln.semantic_joint and ln.name.split() == [ln.name] and ln.semantic_joint.split() == [ln.semantic_joint]:
-            out[ln.name] = partnet_mobility.Semantics(ln.semantic_joint, ln.semantic_label)
-    return out
+    return {ln.name: partnet_mobility.Semantics(ln.semantic_joint, ln.semantic_label) for ln in asset.links
+            if ln.semantic_label and ln.semantic_joint and ln.name.split() == [ln.name]
+            and ln.semantic_joint.split() == [ln.semantic_joint]}
 
 
 def root_record(mount: RootMount | None) -> dict:

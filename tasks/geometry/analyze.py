@@ -81,9 +81,8 @@ def _tup33(m: np.ndarray):
 
 
 #: Modules whose source the analysis of a link depends on (part of the on-disk cache key).
-ANALYSIS_CODE: tuple[str, ...] = (
-    "asset2sim.tasks.geometry.analyze", "asset2sim.tasks.geometry.surface", "asset2sim.tasks.geometry.voxels",
-    "asset2sim.tasks.geometry.moments", "asset2sim.mesh_io", "asset2sim.frames", "asset2sim.schemas.asset")
+ANALYSIS_CODE: tuple[str, ...] = (*(f"asset2sim.tasks.geometry.{m}" for m in ("analyze", "surface", "voxels", "moments")),
+                                   "asset2sim.mesh_io", "asset2sim.frames", "asset2sim.schemas.asset")
 
 
 def _disk_key(link: LinkDesc, params: tuple) -> str | None:

@@ -236,7 +236,7 @@ def closed_positions(session, asset: AssetDescription, *, hull_points: dict[str,
 
 
 def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, float], points: dict[str, np.ndarray],
-                        pushed: bool = False) -> ClosedState:
+                        pushed: bool) -> ClosedState:
     """The closed end of the bounded joint ``jd``, the others at ``state`` (module docstring). A ``pushed`` part (a push
     button, a key) rests where its spring returns it, standing out of its body, and a press moves it in: where
     compactness changes over its range, its closed end is the end of the range where the box of its parent and its

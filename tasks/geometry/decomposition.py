@@ -110,8 +110,7 @@ def _remember(digest: str, pieces: list[tuple[np.ndarray, np.ndarray]]) -> list[
     return pieces
 
 
-def _decompose(digest: str, mesh, where: str, settings: dict = COACD_SETTINGS,
-               refit: bool = True) -> list[tuple[np.ndarray, np.ndarray]]:
+def _decompose(digest: str, mesh, where: str, settings: dict, refit: bool = True) -> list[tuple[np.ndarray, np.ndarray]]:
     hit = _remembered(digest)
     if hit is not None:
         return hit

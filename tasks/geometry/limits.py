@@ -253,21 +253,20 @@ class _JointScan:
         return q_close
 
     def far_end(self, clip: LimitClip, far: float, who: str | None, q_close: float, far_raw: float,
-                chain_end: _ChainEnd | None) -> tuple[float, str | None]:
+                chain_end: _ChainEnd) -> tuple[float, str | None]:
         """(limit on the opening side, the link run into): the chain's end when nearer, else
         ``far`` at its contact's onset when it clips ``far_raw``, else ``far_raw``."""
         side = "upper" if self.d > 0 else "lower"
-        if chain_end is not None:
-            far_c, who_c, opened = chain_end.far, chain_end.who, chain_end.opened
-            if who_c is not None and (far_c - far) * self.d < 0 and self.clips(far_raw, far_c):
-                if self.clips(far_raw, far):  # the parent's stop, at its onset, may still be nearer
-                    far_s = self.onset(far, q_close)
-                    if (far_s - far_c) * self.d < 0:
-                        far_c, who_c, opened = far_s, who, []
-                clip.blocked_by = who_c
-                clip.notes.append(_limit_note(side, far_raw, far_c, f"): runs into {who_c}"
-                                              + (f" even with {', '.join(opened)} open" if opened else "")))
-                return far_c, who_c  # the chain's end, already at its onset
+        far_c, who_c, opened = chain_end.far, chain_end.who, chain_end.opened
+        if who_c is not None and (far_c - far) * self.d < 0 and self.clips(far_raw, far_c):
+            if self.clips(far_raw, far):  # the parent's stop, at its onset, may still be nearer
+                far_s = self.onset(far, q_close)
+                if (far_s - far_c) * self.d < 0:
+                    far_c, who_c, opened = far_s, who, []
+            clip.blocked_by = who_c
+            clip.notes.append(_limit_note(side, far_raw, far_c, f"): runs into {who_c}"
+                                          + (f" even with {', '.join(opened)} open" if opened else "")))
+            return far_c, who_c  # the chain's end, already at its onset
         if self.clips(far_raw, far):
             far = self.onset(far, q_close)
             clip.blocked_by = who
@@ -319,11 +318,8 @@ def apply_clips(overlay: Overlay, clips: dict[str, LimitClip]) -> tuple[Overlay,
 
 def clipped_closed(closed: dict, clips: dict[str, LimitClip]) -> dict:
     """``closed`` (joint -> ``ClosedState``) with the clipped joints' limits and opening range."""
-    out = dict(closed)
-    for name, c in clips.items():
-        if name in out and c.clipped:
-            out[name] = replace(out[name], q_closed=c.q_closed, lower=c.lower, upper=c.upper, open_range=c.open_range)
-    return out
+    return {**closed, **{name: replace(closed[name], q_closed=c.q_closed, lower=c.lower, upper=c.upper, open_range=c.open_range)
+                         for name, c in clips.items() if name in closed and c.clipped}}
 
 
 def strip_clips(overlay: Overlay) -> Overlay:

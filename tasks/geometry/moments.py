@@ -170,8 +170,7 @@ def watertight_properties(vertices: np.ndarray, faces: np.ndarray) -> SolidMomen
             for m in range(3):
                 second[:, k, m] += np.bincount(c, sw[:, k, m], ncomp)
     notes: list[str] = []
-    bmin = np.full((ncomp, 3), np.inf)
-    bmax = np.full((ncomp, 3), -np.inf)
+    bmin, bmax = np.full((ncomp, 3), np.inf), np.full((ncomp, 3), -np.inf)
     fcomp = np.repeat(comp, 3)
     corners = vertices[faces].reshape(-1, 3)
     for k in range(3):
@@ -195,11 +194,6 @@ def watertight_properties(vertices: np.ndarray, faces: np.ndarray) -> SolidMomen
     com = fst / vol_t
     cov = snd / vol_t - np.outer(com, com)
     pos = np.flatnonzero(sign * vol > tol_vol)
-    overlap = False
-    for n_i, i in enumerate(pos[:-1]):
-        others = pos[n_i + 1 :]
-        gap = np.minimum(bmax[i], bmax[others]) - np.maximum(bmin[i], bmin[others])
-        if np.any(np.all(gap > 1e-9 * size, axis=1)):
-            overlap = True
-            break
+    overlap = any(np.any(np.all(np.minimum(bmax[i], bmax[pos[n + 1:]]) - np.maximum(bmin[i], bmin[pos[n + 1:]]) > 1e-9 * size,
+                                axis=1)) for n, i in enumerate(pos[:-1]))  # closed components whose boxes overlap
     return SolidMoments(vol_t, com + ref, 0.5 * (cov + cov.T), "watertight_exact", notes, overlap_candidates=overlap)

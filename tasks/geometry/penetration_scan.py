@@ -35,6 +35,12 @@ def pair_depths(session, pairs: list[tuple[str, str]]) -> np.ndarray:
     return out
 
 
+def _excess(session, joint: str, q: float, pairs: list[tuple[str, str]], baseline: np.ndarray) -> np.ndarray:
+    """Each pair's depth over ``baseline`` (P,) m with ``joint`` at ``q``."""
+    session.set_joint_positions({joint: q})
+    return pair_depths(session, pairs) - baseline
+
+
 def free_end(session, joint: str, q_from: float, q_to: float, pairs: list[tuple[str, str]], baseline: np.ndarray,
              samples: int = SCAN_SAMPLES, stop_depth: float | None = None) -> tuple[float, str | None]:
     """(free end, the link run into) of ``joint`` from ``q_from`` towards ``q_to``: the first sample whose
@@ -47,9 +53,7 @@ def free_end(session, joint: str, q_from: float, q_to: float, pairs: list[tuple[
     exc_max: list[float] = []
     hit = None
     for k, q in enumerate(qs):
-        session.set_joint_positions({joint: q})
-        exc = pair_depths(session, pairs) - baseline
-        exc_max.append(float(exc.max(initial=0.0)))
+        exc_max.append(float(_excess(session, joint, q, pairs, baseline).max(initial=0.0)))
         if k > 0 and exc_max[-1] >= stop:
             hit = k
             break
@@ -61,13 +65,10 @@ def free_end(session, joint: str, q_from: float, q_to: float, pairs: list[tuple[
     if k == 0:
         return float(q_from), None
     lo, hi = qs[k - 1], qs[k]
-    session.set_joint_positions({joint: hi})
-    e = pair_depths(session, pairs) - baseline
-    worst = pairs[int(np.argmax(e))][1]
+    worst = pairs[int(np.argmax(_excess(session, joint, hi, pairs, baseline)))][1]
     for _ in range(BISECTIONS):
         mid = 0.5 * (lo + hi)
-        session.set_joint_positions({joint: mid})
-        e = pair_depths(session, pairs) - baseline
+        e = _excess(session, joint, mid, pairs, baseline)
         if float(e.max(initial=0.0)) > tol:
             hi, worst = mid, pairs[int(np.argmax(e))][1]
         else:
@@ -83,8 +84,7 @@ def contact_onset(session, joint: str, q_end: float, q_free: float, pairs: list[
     back = min(max_back, abs(q_free - q_end))
     for k in range(1, 9):
         q = q_end + sgn * back * k / 8
-        session.set_joint_positions({joint: q})
-        if float((pair_depths(session, pairs) - baseline).max(initial=0.0)) <= ONSET_TOLERANCE:
+        if float(_excess(session, joint, q, pairs, baseline).max(initial=0.0)) <= ONSET_TOLERANCE:
             return float(q)
     return float(q_end + sgn * back)
 

@@ -185,8 +185,7 @@ def voxelize(vertices: np.ndarray, faces: np.ndarray, *, voxels_per_axis: int = 
     stats: tuple = (None, None, None)
     if subvoxel:
         # statistics where the weights need them: exposed cells (mean), cells exposed both ways (spread)
-        exposed = np.zeros(filled.shape, bool)
-        thin = np.zeros(filled.shape, bool)
+        exposed, thin = np.zeros((2, *filled.shape), bool)
         for up, down in _exposures(filled):
             exposed |= up | down
             thin |= up & down
@@ -200,8 +199,7 @@ def _exposures(filled: np.ndarray) -> Iterable[tuple[np.ndarray, np.ndarray]]:
     for ax in range(3):
         lo_sl = tuple(slice(0, -1) if k == ax else slice(None) for k in range(3))
         hi_sl = tuple(slice(1, None) if k == ax else slice(None) for k in range(3))
-        up = np.zeros(filled.shape, bool)
-        down = np.zeros(filled.shape, bool)
+        up, down = np.zeros((2, *filled.shape), bool)
         up[lo_sl] = filled[lo_sl] & ~filled[hi_sl]
         down[hi_sl] = filled[hi_sl] & ~filled[lo_sl]
         yield up, down

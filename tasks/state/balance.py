@@ -137,12 +137,7 @@ def _world_at(session, pieces: dict, state: dict[str, float]) -> tuple[dict, dic
         if ln not in frames:
             continue
         pos, R = frames[ln]
-        arr = []
-        for pc in pcs:
-            if pc.points is None:
-                continue
-            local = pc.points @ pc.origin[:3, :3].T + pc.origin[:3, 3]
-            arr.append(local @ R.T + pos)
+        arr = [(pc.points @ pc.origin[:3, :3].T + pc.origin[:3, 3]) @ R.T + pos for pc in pcs if pc.points is not None]
         if arr:
             pts[ln] = np.vstack(arr)
     return frames, pts

@@ -6,6 +6,7 @@ written as the writer's collision overrides.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -55,13 +56,7 @@ def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float
     collision file cannot be read."""
     root = Path(urdf).parent
     rep = ClearanceRepair()
-    cache: dict[str, list[np.ndarray]] = {}
-
-    def pieces(ln: str) -> list[np.ndarray]:
-        if ln not in cache:
-            cache[ln] = link_pieces(model, root, ln)
-        return cache[ln]
-
+    pieces = functools.cache(lambda ln: link_pieces(model, root, ln))  # link -> its pieces, read once
     parent_of = {j.child: j.parent for j in model.joints}
     for name, q in blocked.items():
         joint = model.joint(name)

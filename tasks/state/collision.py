@@ -107,33 +107,22 @@ class _PieceWorld:
             self.world.set_pose(b, tw, self._rot.from_matrix(Rw).as_quat())
         self.bodies[key] = old
 
+    def _depths(self, ids: list[int], other: str):
+        """:func:`overlap_depths` of each body of ``ids`` with each body of the link ``other``, in order."""
+        for (lb, _), ids_b in self.bodies.items():
+            if lb == other:
+                for ia in ids:
+                    for ib in ids_b:
+                        yield overlap_depths(self.world, ia, ib)
+
     def penetration(self, a: str, b: str) -> float:
         """Sum over piece pairs of the deepest penetration, m (net of the contact margins, :func:`overlap_depths`)."""
-        total = 0.0
-        for (la, _), ids_a in self.bodies.items():
-            if la != a:
-                continue
-            for (lb, _), ids_b in self.bodies.items():
-                if lb != b:
-                    continue
-                for ia in ids_a:
-                    for ib in ids_b:
-                        d = overlap_depths(self.world, ia, ib)
-                        if d:
-                            total += max(d)
-        return total
+        return sum((max(d) for (la, _), ids_a in self.bodies.items() if la == a for d in self._depths(ids_a, b) if d), 0.0)
 
     def overlapping(self, key: tuple[str, int], other: str) -> float:
         """Deepest penetration (m, net of the contact margins; 0 when
         apart or touching) of the piece ``key`` into the link ``other``."""
-        worst = 0.0
-        for (lb, _), ids_b in self.bodies.items():
-            if lb != other:
-                continue
-            for ia in self.bodies[key]:
-                for ib in ids_b:
-                    worst = max([worst, *overlap_depths(self.world, ia, ib)])
-        return worst
+        return max([0.0, *(x for d in self._depths(self.bodies[key], other) for x in d)])
 
     def close(self) -> None:
         self.world.close()

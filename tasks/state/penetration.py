@@ -56,8 +56,7 @@ class StatePenetration:
         if len(stale):
             if self._screen:
                 used = np.union1d(self._ia[stale], self._ib[stale])
-                lo = np.zeros((len(self.links), 3))
-                hi = np.zeros((len(self.links), 3))
+                lo, hi = np.zeros((2, len(self.links), 3))
                 for i in used:
                     lo[i], hi[i] = self.session.link_aabb(self.links[i])
                 a, b = self._ia[stale], self._ib[stale]

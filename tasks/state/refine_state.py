@@ -163,11 +163,8 @@ class _Search:
     def focus_joints(self) -> list[str]:
         """Movable joints on the paths between the links of the 3 worst pairs at the best state, the opened ones
         first (each group in path order)."""
-        out: list[str] = []
-        for c in self.pairs_at_best()[:3]:
-            for j in path_joints(self.asset, c.link_a, c.link_b):
-                if j in self.box and self.box[j].width > 0 and j not in out:
-                    out.append(j)
+        out = dict.fromkeys(j for c in self.pairs_at_best()[:3] for j in path_joints(self.asset, c.link_a, c.link_b)
+                            if j in self.box and self.box[j].width > 0)  # first-seen order
         return sorted(out, key=lambda j: j not in self.opened)
 
     def movable(self) -> list[str]:
@@ -228,9 +225,8 @@ def _pattern_search(s: _Search) -> None:
                 if not s.budget():
                     break
                 improved |= s.accept({**s.best_q, j: s.box[j].clip(s.best_q[j] + sgn * steps[j])})
-        if improved:
-            improved_any = True
-        else:
+        improved_any |= improved
+        if not improved:
             steps = {n: v * 0.5 for n, v in steps.items()}
     if improved_any:
         s.method.append("local pattern search")
@@ -248,10 +244,6 @@ def _ask_proposer(s: _Search, proposer) -> int:
         s.method.append(f"model proposals failed: {type(exc).__name__}")
     accepted = 0
     for prop in proposals:
-        cand = dict(s.best_q)
-        for n, v in prop.items():
-            if n in s.box:
-                cand[n] = s.box[n].clip(float(v))
-        accepted += s.accept(cand)
+        accepted += s.accept({**s.best_q, **{n: s.box[n].clip(float(v)) for n, v in prop.items() if n in s.box}})
     s.method.append(f"model proposals ({len(proposals)} asked, {accepted} accepted)")
     return model_queries

@@ -127,9 +127,7 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
 def _opened_links(asset: AssetDescription, category: str | None) -> tuple[set[str], dict[str, PartFraction]]:
     """(links a movable joint moves, link -> the sourced fraction of its opened part)."""
     movable = [j for j in asset.joints if j.type in ("revolute", "prismatic", "continuous")]
-    moved: set[str] = set()
-    for j in movable:
-        moved |= set(subtree_links(asset, j.child))
+    moved = {ln for j in movable for ln in subtree_links(asset, j.child)}
     labels = {ln.name: canonical_label(ln.semantic_label) for ln in asset.links}
     parts: dict[str, PartFraction] = {}
     for j in movable:
