@@ -59,8 +59,7 @@ def may_hold_cavity(piece: Piece) -> bool:
     if len(p) < 4:
         return False
     _, _, vt = np.linalg.svd(p - p.mean(axis=0), full_matrices=False)
-    ext = np.ptp(p @ vt.T, axis=0)
-    return bool(ext.min() >= 2.0 * cavities.MIN_CAVITY_RADIUS)
+    return bool(np.ptp(p @ vt.T, axis=0).min() >= 2.0 * cavities.MIN_CAVITY_RADIUS)
 
 
 def link_surfaces(link: urdf.UrdfLink, mesh_path) -> tuple[tuple[np.ndarray, np.ndarray],

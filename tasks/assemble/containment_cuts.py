@@ -65,16 +65,15 @@ def facets(triangles: np.ndarray, gap: float) -> list[np.ndarray]:
     tri, n = tri[good], n[good]
     if len(tri) == 0:
         return []
-    dirs = np.vstack([np.eye(3), -np.eye(3)])
-    bin_ = np.argmax(n @ dirs.T / np.linalg.norm(n, axis=1)[:, None], axis=1)
+    # +-x, +-y, +-z
+    bin_ = np.argmax(n @ np.vstack([np.eye(3), -np.eye(3)]).T / np.linalg.norm(n, axis=1)[:, None], axis=1)
     out = []
     for b in range(6):
         t = tri[bin_ == b]
         if len(t) == 0:
             continue
         ax = b % 3
-        c = t[:, :, ax].mean(axis=1)
-        order = np.argsort(c)
+        order = np.argsort(t[:, :, ax].mean(axis=1))
         lo, hi = t[order][:, :, ax].min(axis=1), t[order][:, :, ax].max(axis=1)
         reach = np.maximum.accumulate(hi)
         cuts = np.nonzero(lo[1:] > reach[:-1] + gap)[0] + 1
@@ -186,19 +185,17 @@ def _split_pieces(link: urdf.UrdfLink, source: str, mesh_path, keep_out: np.ndar
             continue
         try:
             mesh = mesh_io.read_mesh(mesh_path(c))
-            v, f = mesh.vertices, mesh.faces
         except mesh_io.MeshReadError as exc:
             raise CollisionGeometryError(f"link {link.name!r}: {exc}") from exc
-        v = np.asarray(v, float) * c.scale @ c.origin[:3, :3].T + c.origin[:3, 3]
-        f = np.asarray(f, int)
+        v = np.asarray(mesh.vertices, float) * c.scale @ c.origin[:3, :3].T + c.origin[:3, 3]
+        f = np.asarray(mesh.faces, int)
         f = f[np.all((f >= 0) & (f < len(v)), axis=1)]
         t = v[f]
         tris.append(t[np.all(np.isfinite(t), axis=(1, 2))])
     if not tris:
         return []
     tri = np.concatenate(tris)
-    size = float(np.ptp(tri.reshape(-1, 3), axis=0).max())
-    spacing = size / SPLIT_RESOLUTION
+    spacing = float(np.ptp(tri.reshape(-1, 3), axis=0).max()) / SPLIT_RESOLUTION
     best: list[Piece] = []
     best_depth = np.inf
     for parts in (facets(tri, 2 * spacing), [tri]):  # cut facet by facet, or the whole surface: the better

@@ -383,8 +383,7 @@ def drop_slivers(pieces: list[Piece]) -> list[Piece]:
         p = pieces[i]
         if kept and p.volume < MIN_PIECE_VOLUME:
             continue
-        size = float(np.ptp(p.points, axis=0).max())
-        tol = 1e-9 * max(size, 1e-9)
+        tol = 1e-9 * max(float(np.ptp(p.points, axis=0).max()), 1e-9)
         if any(not _surely_outside(p.support, q, tol)
                and np.all(p.points @ q.equations[:, :3].T + q.equations[:, 3] <= tol) for q in kept):
             continue

@@ -42,8 +42,7 @@ def level_footprint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], state
         return
     allpts = np.vstack([w for ws in world.values() for w in ws])
     zmin = float(allpts[:, 2].min())
-    extent = float(np.max(allpts[:, :2].max(axis=0) - allpts[:, :2].min(axis=0)))
-    base = min(LEVEL_TOLERANCE, LEVEL_FRACTION * extent)
+    base = min(LEVEL_TOLERANCE, LEVEL_FRACTION * float(np.max(allpts[:, :2].max(axis=0) - allpts[:, :2].min(axis=0))))
     tol = max(base, feet or 0.0)
     for ln, ws in world.items():
         if ln not in body:

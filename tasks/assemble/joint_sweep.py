@@ -31,8 +31,7 @@ def sweep_positions(joint: urdf.UrdfJoint, reach: float) -> np.ndarray:
     if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
         return np.array([0.0 if not np.isfinite(lo) else lo])
     travel = (hi - lo) * (1.0 if joint.type == "prismatic" else max(reach, 1e-9))
-    n = int(np.clip(np.ceil(travel / SWEEP_STEP) + 1, 2, MAX_SWEEP_SAMPLES))
-    return np.linspace(lo, hi, n)
+    return np.linspace(lo, hi, int(np.clip(np.ceil(travel / SWEEP_STEP) + 1, 2, MAX_SWEEP_SAMPLES)))
 
 
 def _positions_for(joint: urdf.UrdfJoint, local: np.ndarray) -> np.ndarray:
@@ -125,5 +124,4 @@ def _joint_transforms(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joi
     :func:`sweep_positions` over its range (reach: the child's pieces), in
     order, and the index of the one nearest :func:`reference_state`."""
     qs = _positions_for(joint, np.vstack([p.points for p in pieces[joint.child]]))
-    ref = reference_state(model).get(joint.name, 0.0)
-    return [_joint_motion(joint, q) for q in qs], int(np.argmin(np.abs(qs - ref)))
+    return [_joint_motion(joint, q) for q in qs], int(np.argmin(np.abs(qs - reference_state(model).get(joint.name, 0.0))))

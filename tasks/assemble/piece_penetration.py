@@ -29,7 +29,8 @@ def _edge_directions(piece: Piece) -> np.ndarray:
                         verts[tris[:, 0]] - verts[tris[:, 2]]])
     n = np.linalg.norm(e, axis=1)
     e = e[n > 1e-12] / n[n > 1e-12, None]
-    e[e[np.arange(len(e)), np.argmax(e != 0, axis=1)] < 0] *= -1  # the first non-zero component positive
+    # the first non-zero component positive
+    e[e[np.arange(len(e)), np.argmax(e != 0, axis=1)] < 0] *= -1
     _, keep = np.unique(np.round(e * 50.0), axis=0, return_index=True)  # one per ~1 degree cell
     e = e[np.sort(keep)]
     if len(e) > MAX_EDGE_DIRECTIONS:  # an even subsample: fewer axes only bound the depth from above

@@ -66,8 +66,7 @@ def _sat_on(p: np.ndarray, q: np.ndarray, axes: np.ndarray) -> tuple[float, np.n
     behind = sp.min(axis=0) - sq.max(axis=0)  # q before p
     gaps = np.maximum(ahead, behind)
     i = int(np.argmax(gaps))
-    n = axes[i] if ahead[i] >= behind[i] else -axes[i]
-    return float(gaps[i]), n
+    return float(gaps[i]), axes[i] if ahead[i] >= behind[i] else -axes[i]
 
 
 def squeeze(p: np.ndarray, n: np.ndarray, delta: float) -> tuple[np.ndarray, float]:
@@ -103,8 +102,8 @@ def clear_sliding_contact(p: np.ndarray, q: np.ndarray, velocity: Callable[[np.n
     if g >= RUNNING_CLEARANCE - 1e-9 or g <= -deepest:  # (rounding of a piece already given clearance)
         return None
     s = p @ n
-    face = p[s >= s.max() - 1e-3].mean(axis=0)
-    t = np.asarray(velocity(face), float)
+    # at the contact face's centre
+    t = np.asarray(velocity(p[s >= s.max() - 1e-3].mean(axis=0)), float)
     norm = float(np.linalg.norm(t))
     if norm > 1e-9 and abs(float(n @ t)) / norm >= SLIDING_COS:
         return None
@@ -252,8 +251,7 @@ def _swept_gap(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis: np.ndarra
     behind = sp.min(axis=1) - sq.max(axis=1)
     gaps = np.maximum(ahead, behind)  # (A, F)
     best = gaps.argmax(axis=1)
-    rows = np.arange(len(rt))
-    a = int(np.argmin(gaps[rows, best]))
+    a = int(np.argmin(gaps.max(axis=1)))
     i = int(best[a])
     return float(gaps[a, i]), float(angles[a]), (axes[a, i] if ahead[a, i] >= behind[a, i] else -axes[a, i])
 

@@ -220,8 +220,8 @@ def root_record(mount: RootMount | None) -> dict:
     link frame in the world, ``{"xyz": [0, 0, 0] m, "quat_xyzw": [0, 0, 0, 1]}``; a free root's is null
     (the SPEC rests it on the ground at z = 0)."""
     mount = mount or RootMount()
-    pose = {"xyz": [0.0, 0.0, 0.0], "quat_xyzw": [0.0, 0.0, 0.0, 1.0]} if mount.fixed else None
-    return {"fixed": bool(mount.fixed), "mounting": mount.kind, "pose": pose, "source": mount.source}
+    return {"fixed": bool(mount.fixed), "mounting": mount.kind,
+            "pose": {"xyz": [0.0, 0.0, 0.0], "quat_xyzw": [0.0, 0.0, 0.0, 1.0]} if mount.fixed else None, "source": mount.source}
 
 
 def root_sentence(mount: RootMount | None) -> str:

@@ -202,7 +202,7 @@ def _analyze_surface(link: LinkDesc, prefer, cache: MeshCache | None) -> LinkGeo
         c_solid = solid.second
     d = np.asarray(s_centroid) - np.asarray(com)
     c_shell = s_cov + np.outer(d, d)  # the surface's second moment about com (parallel axis)
-    sep = float(np.linalg.norm(s_centroid - com))
+    sep = float(np.linalg.norm(d))
     if sep > 0.01 * size:
         notes.append(f"surface centroid {np.round(s_centroid, 6).tolist()} m differs from com by {sep:.4g} m")
     i_solid, reg_s = regularize_inertia(inertia_from_second_moment(c_solid), size * size)
@@ -225,9 +225,4 @@ def analyze_asset(asset: AssetDescription, cache: MeshCache | None = None) -> di
         MeshAnalysisError: a link with geometry has no usable geometry.
     """
     cache = MeshCache() if cache is None else cache
-    out: dict[str, LinkGeometry] = {}
-    for link in asset.links:
-        geo = analyze_link(link, cache=cache)
-        if geo is not None:
-            out[link.name] = geo
-    return out
+    return {link.name: geo for link in asset.links if (geo := analyze_link(link, cache=cache)) is not None}

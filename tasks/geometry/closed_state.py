@@ -48,8 +48,7 @@ class ClosedState:
 
     def position(self, fraction: float) -> float:
         """Joint position at opening fraction ``fraction``, clipped to the limits."""
-        q = self.q_closed + self.direction * fraction * self.open_range
-        return float(np.clip(q, self.lower, self.upper))
+        return float(np.clip(self.q_closed + self.direction * fraction * self.open_range, self.lower, self.upper))
 
 
 def subtree_links(asset: AssetDescription | UrdfModel, link: str) -> list[str]:
@@ -121,8 +120,7 @@ def link_hull_points(asset: AssetDescription, cache=None) -> dict[str, np.ndarra
                 continue
             if len(v) == 0:
                 continue
-            R = rpy_matrix(g.origin.rpy)
-            v = v @ R.T + np.asarray(g.origin.xyz, float)
+            v = v @ rpy_matrix(g.origin.rpy).T + np.asarray(g.origin.xyz, float)
             if len(v) > 8:
                 try:
                     v = v[ConvexHull(v).vertices]
@@ -177,12 +175,9 @@ class _PairScreen:
         only the joint whose subtree this is moves between calls."""
         if not self.screen or not self.sub or not self.rest:
             return [(a, b) for a in self.sub for b in self.rest]
-        boxes = {n: self.session.link_aabb(n) for n in self.sub}
-        lo_s = np.array([boxes[n][0] for n in self.sub])
-        hi_s = np.array([boxes[n][1] for n in self.sub])
+        lo_s, hi_s = (np.array(x) for x in zip(*(self.session.link_aabb(n) for n in self.sub)))
         if self._rest_boxes is None:
-            rest = [self.session.link_aabb(n) for n in self.rest]
-            self._rest_boxes = np.array([b[0] for b in rest]), np.array([b[1] for b in rest])
+            self._rest_boxes = tuple(np.array(x) for x in zip(*(self.session.link_aabb(n) for n in self.rest)))
         lo_r, hi_r = self._rest_boxes
         # (S, R): boxes overlap (touching counts) on every axis
         overlap = np.all((lo_s[:, None, :] <= hi_r[None, :, :]) & (lo_r[None, :, :] <= hi_s[:, None, :]), axis=2)
@@ -255,8 +250,7 @@ def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, f
     qs = np.linspace(lo, hi, COARSE)
     vals = np.array([measure(q) for q in qs])
     c = vals[:, 0]
-    cmin = c.min()
-    ratio = float(c.max() / max(cmin, 1e-12))
+    ratio = float(c.max() / max(c.min(), 1e-12))
     notes = []
     modelled = _modelled_end(qs, vals, ratio)
     if pushed and ratio >= 1.0 + TIE_TOL:

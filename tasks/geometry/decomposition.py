@@ -129,8 +129,7 @@ def _decompose(digest: str, mesh, where: str, settings: dict, refit: bool = True
     if not good.all():
         raise ValueError(f"{where}: NaN vertices; not decomposed")
     coacd.set_log_level("error")
-    parts = coacd.run_coacd(coacd.Mesh(v, f), **settings)
-    pieces = [(np.asarray(pv, float), np.asarray(pf, int)) for pv, pf in parts]
+    pieces = [(np.asarray(pv, float), np.asarray(pf, int)) for pv, pf in coacd.run_coacd(coacd.Mesh(v, f), **settings)]
     if refit:
         pieces = refit_pieces(v, pieces)
     arrays = {"n": np.array(len(pieces))}

@@ -157,8 +157,7 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
         pairs = collision_pairs(session, sub, rigid_group(model, model.joint(name).parent) - set(sub))
         out[name] = _raw_clip(name, lo, hi, qc, d, rng)
         if pairs:
-            scan = _JointScan(session, name, lo, hi, qc, d, rng, pairs)
-            out[name] = scan.clip(out[name], model, sub, parent_of, closed, state)
+            out[name] = _JointScan(session, name, lo, hi, qc, d, rng, pairs).clip(out[name], model, sub, parent_of, closed, state)
     session.set_joint_positions(state)
     return out
 

@@ -91,9 +91,7 @@ def surface_properties(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, 
 
 def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, tol: float) -> tuple[np.ndarray, int]:
     """Faces (M, 3) re-indexed onto vertices merged on a grid of size tol."""
-    lo = vertices.min(axis=0)
-    key = np.round((vertices - lo) / tol).astype(np.int64)
-    inverse = _row_labels(key)
+    inverse = _row_labels(np.round((vertices - vertices.min(axis=0)) / tol).astype(np.int64))
     return inverse[faces], int(inverse.max()) + 1
 
 
@@ -104,8 +102,7 @@ def _is_closed_oriented(fm: np.ndarray, nv: int) -> bool:
     d = np.sort(a * nv + b)
     if d.size and np.any(d[1:] == d[:-1]):
         return False
-    r = np.sort(b * nv + a)
-    return bool(np.array_equal(d, r))
+    return bool(np.array_equal(d, np.sort(b * nv + a)))
 
 
 @dataclass
@@ -150,8 +147,7 @@ def watertight_properties(vertices: np.ndarray, faces: np.ndarray) -> SolidMomen
             return None
     rows = np.concatenate((fm[:, 0], fm[:, 1]))
     cols = np.concatenate((fm[:, 1], fm[:, 2]))
-    graph = coo_matrix((np.ones(rows.size, np.int8), (rows, cols)), shape=(nv, nv))
-    ncomp, vlabel = connected_components(graph, directed=False)
+    ncomp, vlabel = connected_components(coo_matrix((np.ones(rows.size, np.int8), (rows, cols)), shape=(nv, nv)), directed=False)
     comp = vlabel[fm[:, 0]]
     ref = 0.5 * (lo + hi)
     vol = np.zeros(ncomp)
@@ -194,6 +190,7 @@ def watertight_properties(vertices: np.ndarray, faces: np.ndarray) -> SolidMomen
     com = fst / vol_t
     cov = snd / vol_t - np.outer(com, com)
     pos = np.flatnonzero(sign * vol > tol_vol)
+    # closed components whose bounding boxes overlap
     overlap = any(np.any(np.all(np.minimum(bmax[i], bmax[pos[n + 1:]]) - np.maximum(bmin[i], bmin[pos[n + 1:]]) > 1e-9 * size,
-                                axis=1)) for n, i in enumerate(pos[:-1]))  # closed components whose boxes overlap
+                                axis=1)) for n, i in enumerate(pos[:-1]))
     return SolidMoments(vol_t, com + ref, 0.5 * (cov + cov.T), "watertight_exact", notes, overlap_candidates=overlap)

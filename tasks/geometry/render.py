@@ -168,8 +168,7 @@ class SceneRenderer:
         """Draw each visual's diffuse color c as f + (1 - f) c, f = :data:`ALBEDO_FLOOR`."""
         f = ALBEDO_FLOOR
         for link, k, rgba in self._viewer.visual_colors():
-            lifted = [f + (1 - f) * c for c in rgba[:3]] + [rgba[3]]
-            self._viewer.set_visual_color(link, k, lifted)
+            self._viewer.set_visual_color(link, k, [f + (1 - f) * c for c in rgba[:3]] + [rgba[3]])
 
     def set_joint_positions(self, q: Mapping[str, float] | None) -> None:
         """Set joints (rad or m) by name; others keep their position (initially zero); limits not applied.
@@ -203,7 +202,7 @@ class SceneRenderer:
         if missing:
             raise KeyError(f"{self.urdf_path}: no visual of link(s) {missing}")
         for link, k, rgba in self._own_colors:
-            c = (colors or {}).get(link) if colors is not None else None
+            c = colors.get(link) if colors is not None else None
             if c is None and colors is not None and others is not None:
                 c = others
             self._viewer.set_visual_color(link, k, rgba if c is None else tuple(float(x) for x in c))
@@ -220,8 +219,7 @@ class SceneRenderer:
     def place_root(self, position: np.ndarray, rotation: np.ndarray) -> None:
         """Put the root link's frame at ``position`` (3,) m with ``rotation`` (3, 3), in the world frame (a
         pose a simulator recorded)."""
-        R = np.asarray(rotation, float)
-        self._viewer.set_root_pose(np.asarray(position, float), quat_wxyz_to_xyzw(matrix_quat_wxyz(R)))
+        self._viewer.set_root_pose(np.asarray(position, float), quat_wxyz_to_xyzw(matrix_quat_wxyz(np.asarray(rotation, float))))
 
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """(position (3,) m, rotation (3, 3)) of the root link's frame in the world now."""

@@ -49,8 +49,8 @@ def primitive_points(geom: UrdfGeometry) -> np.ndarray:
         h = length / 2 + (r if kind == "capsule" else 0.0)
         return np.concatenate([np.c_[ring, np.full(24, -h)], np.c_[ring, np.full(24, h)]])
     if kind == "sphere":
-        el = np.linspace(-np.pi / 2, np.pi / 2, 9)
-        A, E = np.meshgrid(ang, el)
+        # azimuths, elevations
+        A, E = np.meshgrid(ang, np.linspace(-np.pi / 2, np.pi / 2, 9))
         return r * np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], -1).reshape(-1, 3)
     return np.zeros((0, 3))
 

@@ -125,8 +125,7 @@ def link_surface(link: LinkDesc, *, prefer: Literal["collision", "visual"] = "co
             scale = np.asarray(ref.scale, np.float64)
             if not np.all(np.isfinite(scale)) or np.any(scale == 0):
                 raise _PieceError(f"{where}: scale {ref.scale!r} must be finite and non-zero")
-            rot = rpy_matrix(ref.origin.rpy)
-            vt = (v * scale) @ rot.T + np.asarray(ref.origin.xyz, np.float64)
+            vt = (v * scale) @ rpy_matrix(ref.origin.rpy).T + np.asarray(ref.origin.xyz, np.float64)
             if np.prod(np.sign(scale)) < 0:
                 f = f[:, ::-1]
         except _PieceError as exc:

@@ -135,8 +135,7 @@ def replace_positions(state: dict[str, float], old: dict[str, ClosedState], new:
         if a is None or b is None:
             continue
         if n in keep_opening:
-            q2 = b.q_closed + b.direction * a.direction * (q - a.q_closed)
-            out[n] = float(np.clip(q2, b.lower, b.upper))
+            out[n] = float(np.clip(b.q_closed + b.direction * a.direction * (q - a.q_closed), b.lower, b.upper))
         else:
             out[n] = b.position(a.fraction(q))
     return out

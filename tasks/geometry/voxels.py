@@ -81,8 +81,7 @@ def _surface_points(tri: np.ndarray, spacing: float) -> Iterable[np.ndarray]:
 def mean_size(ext: np.ndarray) -> float:
     """The length scale (m) of a link for voxelization: the geometric mean of its bounding-box
     extents (3,), each taken at least 1/16 of the longest."""
-    size = float(np.max(ext))
-    return float(np.prod(np.maximum(ext, size / 16.0))) ** (1.0 / 3.0)
+    return float(np.prod(np.maximum(ext, float(np.max(ext)) / 16.0))) ** (1.0 / 3.0)
 
 
 def grid_pitch(ext: np.ndarray, voxels_per_axis: int, max_voxels: int, pad: int) -> float:

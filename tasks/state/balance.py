@@ -117,8 +117,8 @@ def support_polygon(points: np.ndarray, tol: float, com: np.ndarray | None = Non
             on = np.abs(pts @ plane[:3] + plane[3]) <= tol
             if on.sum() >= 3:
                 return _hull2d(pts[on][:, :2])
-    low = pts[pts[:, 2] <= pts[:, 2].min() + tol]
-    return _hull2d(low[:, :2])
+    # the points within tol of the lowest
+    return _hull2d(pts[pts[:, 2] <= pts[:, 2].min() + tol][:, :2])
 
 
 def _link_world(source: SimSource, state: dict[str, float]) -> tuple[dict, dict[str, np.ndarray]]:
@@ -168,8 +168,8 @@ def _balance(overlay: Overlay, frames: dict, pts: dict[str, np.ndarray]) -> Bala
     com = _com(overlay, frames)
     if not len(allp):
         return Balance(com, np.zeros((0, 2)), -np.inf, 0.0)
-    height = float(allp[:, 2].max() - allp[:, 2].min())
-    poly = support_polygon(allp, max(1e-3, 0.005 * height), com)
+    # 0.5 % of the height
+    poly = support_polygon(allp, max(1e-3, 0.005 * float(allp[:, 2].max() - allp[:, 2].min())), com)
     h = max(float(com[2] - allp[:, 2].min()), 0.0)
     area = 0.5 * abs(float(np.dot(poly[:, 0], np.roll(poly[:, 1], -1)) - np.dot(poly[:, 1], np.roll(poly[:, 0], -1)))) if len(poly) >= 3 else 0.0
     return Balance(com, poly, _signed_margin(poly, com[:2]), max(2e-3, SUPPORT_MARGIN_FRACTION * np.sqrt(area), h * np.tan(TILT_RECOVERY_RAD)))
@@ -204,8 +204,7 @@ def steadiest_fractions(source: SimSource, overlay: Overlay, state: dict[str, fl
     ``closed``: joint -> ``ClosedState`` in the URDF's units. No fraction moved
     and the same balance before and after for a mounted asset or when nothing gains.
     """
-    model = source.model()
-    pieces, _ = collision_pieces(model)
+    pieces, _ = collision_pieces(source.model())
     cur = dict(state)
     with source.open("pybullet", SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False)) as s:
         frames, pts = _world_at(s, pieces, cur)

@@ -56,7 +56,8 @@ def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float
     collision file cannot be read."""
     root = Path(urdf).parent
     rep = ClearanceRepair()
-    pieces = functools.cache(lambda ln: link_pieces(model, root, ln))  # link -> its pieces, read once
+    # link -> its pieces, read once
+    pieces = functools.cache(lambda ln: link_pieces(model, root, ln))
     parent_of = {j.child: j.parent for j in model.joints}
     for name, q in blocked.items():
         joint = model.joint(name)
@@ -64,8 +65,7 @@ def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float
         sub = subtrees.get(name, [joint.child])
         others = [ln for ln in model.links if ln not in sub and pieces(ln)]
         for ln in sub:
-            Tl = poses[ln]
-            inv = np.linalg.inv(Tl)
+            inv = np.linalg.inv(poses[ln])
             velocity = joint_velocity(joint, inv @ poses[joint.child])
             own = [P.copy() for P in (rep.pieces.get(ln) or pieces(ln))]
             changed = False

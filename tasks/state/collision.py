@@ -43,8 +43,7 @@ def convexity_ratio(path: Path, cache=None) -> float:
 
     cache = cache or MeshCache()
     mesh = cache.get(path)
-    v, f = mesh.vertices, mesh.faces
-    m = trimesh.Trimesh(np.asarray(v, float), np.asarray(f, int), process=False)
+    m = trimesh.Trimesh(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, int), process=False)
     try:
         hull_area = float(m.convex_hull.area)
     except Exception:
@@ -82,16 +81,17 @@ class _PieceWorld:
                 self.poses[(ln, k)] = (Rw, tw)
                 self.refs[(ln, k)] = g
                 v = np.asarray(cache.get(g.path).vertices, float)
-                self.bodies[(ln, k)] = [self._body(v[np.all(np.isfinite(v), axis=1)], g)]
+                self.bodies[(ln, k)] = [self._body(v[np.all(np.isfinite(v), axis=1)], (ln, k))]
 
-    def _body(self, vertices: np.ndarray, g: GeometryRef) -> int:
-        Rw, tw = self.poses[next(key for key, ref in self.refs.items() if ref is g)]
-        return self.world.add_convex(vertices, np.asarray(g.scale, float) * self.scale, tw, self._rot.from_matrix(Rw).as_quat())
+    def _body(self, vertices: np.ndarray, key: tuple[str, int]) -> int:
+        Rw, tw = self.poses[key]
+        return self.world.add_convex(vertices, np.asarray(self.refs[key].scale, float) * self.scale, tw,
+                                     self._rot.from_matrix(Rw).as_quat())
 
     def replace(self, key: tuple[str, int], pieces: list[np.ndarray]) -> list[int]:
         """Swap the bodies of ``key`` for ``pieces`` (vertex arrays); returns the old ids."""
         old = self._park(key)
-        self.bodies[key] = [self._body(v, self.refs[key]) for v in pieces]
+        self.bodies[key] = [self._body(v, key) for v in pieces]
         return old
 
     def _park(self, key: tuple[str, int]) -> list[int]:
@@ -160,8 +160,7 @@ class _Repair:
         self.area = {}  # (link, k) -> surface area of the piece (input units, mesh scale applied)
         for (ln, k), g in world.refs.items():
             mesh = cache.get(g.path)
-            v, f = mesh.vertices, mesh.faces
-            tri = np.asarray(v, float)[np.asarray(f, int)] * np.asarray(g.scale, float)
+            tri = np.asarray(mesh.vertices, float)[np.asarray(mesh.faces, int)] * np.asarray(g.scale, float)
             self.area[(ln, k)] = float(0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
         self.link_area = {ln: sum(a for (l2, _), a in self.area.items() if l2 == ln) for ln in links}
         self.changed: dict[tuple[str, int], list[tuple[np.ndarray, np.ndarray]] | None] = {}
@@ -227,10 +226,9 @@ def _write_pieces(asset: AssetDescription, changed: dict, out_dir: Path, folder:
     for ln in sorted({k[0] for k in changed}):
         pieces_out: list[CollisionPiece] = []
         for k, g in enumerate(asset.link(ln).collisions):
+            # None: removed
             if (ln, k) in changed:
-                if changed[(ln, k)] is None:
-                    continue
-                for i, (v, f) in enumerate(changed[(ln, k)]):
+                for i, (v, f) in enumerate(changed[(ln, k)] or []):
                     rel = f"{folder}/{file_names.file_stem(ln)}_{k}_{i}.obj"
                     mesh_io.write_file(file_names.join_inside(out_dir, rel), mesh_io.obj_bytes(v, f))
                     pieces_out.append(CollisionPiece(filename=rel, source=g))

@@ -103,8 +103,7 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
             continue  # half of what a flat-lying object lies on: part of its support
         if not _drags(j, poses[j.parent][:3, :3] @ j.origin[:3, :3]):
             continue
-        R = poses[ln][:3, :3]
-        n = R.T @ np.array([0.0, 0.0, -1.0])  # the ground side, link frame
+        n = poses[ln][:3, :3].T @ np.array([0.0, 0.0, -1.0])  # the ground side, link frame
         own = [P.copy() for P in scene.local[ln]]
         changed = False
         for i, W in enumerate(ws):

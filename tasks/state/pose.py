@@ -91,15 +91,13 @@ def static_margin(session, asset: AssetDescription, links: dict, state: dict[str
         return 0.0, 0.0
     P = np.concatenate(pts)
     size = float(np.max(P.max(axis=0) - P.min(axis=0)))
-    zmin = P[:, 2].min()
-    base = P[P[:, 2] <= zmin + SUPPORT_BAND_FRACTION * size][:, :2]
+    base = P[P[:, 2] <= P[:, 2].min() + SUPPORT_BAND_FRACTION * size][:, :2]
     com = mc / m_tot
     try:
         hull = ConvexHull(base)
     except (QhullError, ValueError):
         return -size, size  # a point or a line of support: not statically stable
-    margin = float(np.min(-(hull.equations[:, :2] @ com[:2] + hull.equations[:, 2])))
-    return margin, size
+    return float(np.min(-(hull.equations[:, :2] @ com[:2] + hull.equations[:, 2]))), size
 
 
 def most_stable_rotation(session, asset: AssetDescription, links: dict, state: dict[str, float], scale: float,

@@ -141,8 +141,7 @@ class _Search:
         self.evals += 1
         self.session.set_joint_positions(q)
         phi, _ = self.penetration(q)
-        reg = sum(((q[n] - self.q_req[n]) / self.scale[n]) ** 2 for n in self.names)
-        return phi + self.lam * reg, phi
+        return phi + self.lam * sum(((q[n] - self.q_req[n]) / self.scale[n]) ** 2 for n in self.names), phi
 
     def accept(self, cand: dict[str, float]) -> bool:
         """Evaluate ``cand``; True (and it becomes the best) when it lowers the objective."""
@@ -163,8 +162,9 @@ class _Search:
     def focus_joints(self) -> list[str]:
         """Movable joints on the paths between the links of the 3 worst pairs at the best state, the opened ones
         first (each group in path order)."""
+        # in first-seen order
         out = dict.fromkeys(j for c in self.pairs_at_best()[:3] for j in path_joints(self.asset, c.link_a, c.link_b)
-                            if j in self.box and self.box[j].width > 0)  # first-seen order
+                            if j in self.box and self.box[j].width > 0)
         return sorted(out, key=lambda j: j not in self.opened)
 
     def movable(self) -> list[str]:
@@ -203,8 +203,8 @@ def _perturb_focus_joints(s: _Search, rng: np.random.Generator) -> None:
             break
         cand = dict(s.best_q)
         for j in focus:
-            sigma = 0.25 * s.box[j].width
-            cand[j] = s.box[j].clip(s.best_q[j] + rng.normal(0.0, sigma))
+            # sigma a quarter of the interval
+            cand[j] = s.box[j].clip(s.best_q[j] + rng.normal(0.0, 0.25 * s.box[j].width))
         improved |= s.accept(cand)
     if improved:
         s.method.append("random perturbations")

@@ -217,6 +217,6 @@ def _with_masses(overlay: Overlay, new: dict[str, float], links: list[str]) -> O
     for ln in links:
         lp = ov.links[ln]
         f = new[ln] / lp.mass
-        scaled = request_apply.scaled_link(lp, f, f"; mass x{f:.3g} for stability by design")
-        ov.links[ln] = scaled.model_copy(update={"mass": new[ln]})
+        ov.links[ln] = request_apply.scaled_link(lp, f, f"; mass x{f:.3g} for stability by design").model_copy(
+            update={"mass": new[ln]})
     return ov
