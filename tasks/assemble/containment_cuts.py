@@ -314,8 +314,8 @@ def _resolve_containment(model, pieces, mesh_path, notes, decompose: bool, limit
 def _trim(pieces: dict[str, list[Piece]], parent: str, child: str, pts: np.ndarray, depth: float, notes: list[str]) -> None:
     """Trim the pieces of ``parent`` that hold any of ``pts`` (k, 3) m, the swept vertices of its children ``child``,
     deeper than :data:`CONTAINMENT_TOLERANCE` (:func:`shave_piece`), kept when they then sit less deep than ``depth`` m."""
-    shaved = [shave_piece(p, pts) if depth_inside(pts, p) > CONTAINMENT_TOLERANCE else p for p in pieces[parent]]
-    shaved = [q if q is not None else p for p, q in zip(pieces[parent], shaved)]
+    # a piece that cannot be shaved (None) stays as it is
+    shaved = [shave_piece(p, pts) or p if depth_inside(pts, p) > CONTAINMENT_TOLERANCE else p for p in pieces[parent]]
     after = max((depth_inside(pts, p) for p in shaved), default=0.0)
     if after < depth - 1e-6:
         pieces[parent] = shaved

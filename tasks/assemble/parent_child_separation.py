@@ -187,14 +187,15 @@ def _pair_cuts(a: Piece, b: Piece, transforms: list[np.ndarray], ref: int, toler
         c = _transformed(b, T)
         depth = max(depth, d)
         # a on the low side along n: keep n.x <= min(c.n) + gap, or c above max(a.n) - gap
-        lo_c, hi_p = float((c.points @ n).min()), float((a.points @ n).max())
+        cn, an = c.points @ n, a.points @ n
+        lo_c, hi_p = float(cn.min()), float(an.max())
         planes_p.append((n, -(lo_c + SEPARATION_GAP)))
         nc = T[:3, :3].T @ n  # the same direction in the child frame
-        planes_c.append((-nc, hi_p - SEPARATION_GAP - float(n @ T[:3, 3])))
-        # or a slot: the band the other piece spans along n taken out (two pieces left)
-        slots_p.append((n, lo_c + SEPARATION_GAP, float((c.points @ n).max()) - SEPARATION_GAP, c))
         shift = float(n @ T[:3, 3])
-        slots_c.append((nc, float((a.points @ n).min()) - shift + SEPARATION_GAP, hi_p - shift - SEPARATION_GAP,
+        planes_c.append((-nc, hi_p - SEPARATION_GAP - shift))
+        # or a slot: the band the other piece spans along n taken out (two pieces left)
+        slots_p.append((n, lo_c + SEPARATION_GAP, float(cn.max()) - SEPARATION_GAP, c))
+        slots_c.append((nc, float(an.min()) - shift + SEPARATION_GAP, hi_p - shift - SEPARATION_GAP,
                         _transformed(a, np.linalg.inv(T))))
     # the positions not carried read <= tolerance, so the deepest measured is the deepest carried
     return depth, max(d for d, _ in found.values()), {"p": (planes_p, slots_p), "c": (planes_c, slots_c)}

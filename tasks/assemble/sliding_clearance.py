@@ -163,7 +163,7 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
     pairs: set[tuple[str, str]] = set()
     poses = model.link_poses(reference_state(model))
     done: set[tuple[str, int, str, int]] = set()
-    boxes = {ln: [(p.points @ poses[ln][:3, :3].T + poses[ln][:3, 3]) for p in pl] for ln, pl in pieces.items()}
+    boxes = {ln: [p.points @ poses[ln][:3, :3].T + poses[ln][:3, 3] for p in pl] for ln, pl in pieces.items()}
     still = lambda c: np.zeros(3)  # noqa: E731  a point of a pair no joint moves apart
     moving = [(f"sliding along {j.name!r}", ln, others, j) for j, ln, others in _moving_links(model, pieces)]
     for why, ln, others, joint in moving + [("no joint moves them apart", ln, others, None) for ln, others in _fixed_pairs(model, pieces)]:
@@ -181,9 +181,9 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
                     if np.any(np.minimum(pw.max(axis=0), qw.max(axis=0)) + RUNNING_CLEARANCE
                               < np.maximum(pw.min(axis=0), qw.min(axis=0))):
                         continue  # bounding boxes apart by more than the clearance
+                    ql = Q.points @ To[:3, :3].T + To[:3, 3]
                     try:
-                        hit = clear_sliding_contact(P.points, Q.points @ To[:3, :3].T + To[:3, 3], velocity,
-                                                    deepest=deepest)
+                        hit = clear_sliding_contact(P.points, ql, velocity, deepest=deepest)
                     except ValueError:
                         continue
                     if hit is None:
@@ -195,7 +195,6 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
                     except (QhullError, ValueError):
                         continue
                     boxes[ln][i] = pieces[ln][i].points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
-                    ql = Q.points @ To[:3, :3].T + To[:3, 3]
                     short, n = sat_gap(pts, ql)
                     ql, rest = squeeze(ql, -n, RUNNING_CLEARANCE - short) if short < RUNNING_CLEARANCE - 1e-6 else (ql, 0.0)
                     if rest > 0:  # the rest from the other piece's face, back in its link's frame

@@ -93,9 +93,7 @@ def _remembered(digest: str) -> list[tuple[np.ndarray, np.ndarray]] | None:
     """Copies of the pieces :data:`_MEMO` holds under ``digest``, or None."""
     with _MEMO_LOCK:
         hit = _MEMO.get(digest)
-    if hit is None:
-        return None
-    return [(v.copy(), f.copy()) for v, f in hit]
+    return None if hit is None else [(v.copy(), f.copy()) for v, f in hit]
 
 
 def _remember(digest: str, pieces: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -131,9 +131,7 @@ def split_obj(path: Path, work: Path, tag: str, textures: TextureLinks) -> Drawa
         out = work / f"{stem}.obj"
         out.write_text(body, encoding="utf-8")
         parts.append(out)
-    bare_text = None
-    if unknown:
-        bare_text = "\n".join([header, *(f for m in unknown for f in faces[m])]) + "\n"
+    bare_text = "\n".join([header, *(f for m in unknown for f in faces[m])]) + "\n" if unknown else None
     return DrawableMesh(vertices, parts, bare_text=bare_text)
 
 

@@ -129,12 +129,8 @@ def _opened_links(asset: AssetDescription, category: str | None) -> tuple[set[st
     movable = [j for j in asset.joints if j.type in ("revolute", "prismatic", "continuous")]
     moved = {ln for j in movable for ln in subtree_links(asset, j.child)}
     labels = {ln.name: canonical_label(ln.semantic_label) for ln in asset.links}
-    parts: dict[str, PartFraction] = {}
-    for j in movable:
-        pf = PART_MASS_FRACTION.get((category or "", labels.get(j.child) or ""))
-        if pf is not None:
-            for ln in subtree_links(asset, j.child):
-                parts[ln] = pf
+    parts = {ln: pf for j in movable if (pf := PART_MASS_FRACTION.get((category or "", labels.get(j.child) or ""))) is not None
+             for ln in subtree_links(asset, j.child)}
     return moved, parts
 
 
