@@ -27,7 +27,7 @@ from asset2sim.tasks.assemble import container_pieces
 from asset2sim.tasks.assemble.containment_cuts import _resolve_containment, _trim
 from asset2sim.tasks.assemble.convex_pieces import (CONTAINMENT_TOLERANCE, MAX_PIECES_HARD, MAX_PIECES_PER_LINK,
                                                     CollisionGeometryError, Piece, depth_inside, drop_slivers,
-                                                    merge_pieces, piece_obj, solid_points)
+                                                    merge_pieces, piece_obj, posed, solid_points)
 from asset2sim.tasks.assemble.footprint import level_footprint
 from asset2sim.tasks.assemble.joint_sweep import reference_state, swept_child_points, swept_other_points
 from asset2sim.tasks.assemble.parent_child_separation import separate_parent_child
@@ -57,7 +57,7 @@ def _group_hulls(link: urdf.UrdfLink, mesh_path, notes: list[str]) -> list[tuple
             if solid is None:
                 notes.append(f"link {link.name!r}: group {g} of {c.filename} spans no area; no collision")
                 continue
-            world = solid @ c.origin[:3, :3].T + c.origin[:3, 3]
+            world = posed(solid, c.origin)
             try:
                 found.append((k, g, Piece.of(world, (str(c.filename),))))
             except (QhullError, ValueError):

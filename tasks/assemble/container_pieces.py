@@ -13,7 +13,7 @@ from scipy.spatial import QhullError
 from asset2sim import mesh_io, urdf
 from asset2sim.engines.loading import mesh_hulls
 from asset2sim.tasks.assemble.containment_cuts import surface_samples
-from asset2sim.tasks.assemble.convex_pieces import CONTAINMENT_TOLERANCE, Piece, depth_inside, thinnest_axis
+from asset2sim.tasks.assemble.convex_pieces import CONTAINMENT_TOLERANCE, Piece, depth_inside, posed, thinnest_axis
 from asset2sim.tasks.assemble.joint_sweep import swept_child_points
 from asset2sim.tasks.geometry import cavities, decomposition
 
@@ -77,10 +77,9 @@ def link_surfaces(link: urdf.UrdfLink, mesh_path) -> tuple[tuple[np.ndarray, np.
                 return None
         except (mesh_io.MeshReadError, urdf.UrdfError):
             return None
-        s, R, t = c.scale, c.origin[:3, :3], c.origin[:3, 3]
         for g, (v, f) in enumerate(meshes):
             if len(f):
-                by_group[(k, g)] = ((v * s) @ R.T + t, f)
+                by_group[(k, g)] = (posed(v * c.scale, c.origin), f)
     if not by_group:
         return None
     offsets = np.cumsum([0] + [len(v) for v, _ in by_group.values()])

@@ -16,7 +16,7 @@ import numpy as np
 
 from asset2sim import mesh_io, urdf
 from asset2sim.tasks.assemble.convex_pieces import (CONTAINMENT_TOLERANCE, CollisionGeometryError, Piece, clip_piece,
-                                                    depth_inside, merge_pieces, solid_piece)
+                                                    depth_inside, merge_pieces, posed, solid_piece)
 from asset2sim.tasks.assemble.joint_sweep import swept_child_points
 
 def surface_samples(triangles: np.ndarray, spacing: float) -> np.ndarray:
@@ -73,11 +73,11 @@ def facets(triangles: np.ndarray, gap: float) -> list[np.ndarray]:
         if len(t) == 0:
             continue
         ax = b % 3
-        order = np.argsort(t[:, :, ax].mean(axis=1))
-        lo, hi = t[order][:, :, ax].min(axis=1), t[order][:, :, ax].max(axis=1)
+        t = t[np.argsort(t[:, :, ax].mean(axis=1))]
+        lo, hi = t[:, :, ax].min(axis=1), t[:, :, ax].max(axis=1)
         reach = np.maximum.accumulate(hi)
         cuts = np.nonzero(lo[1:] > reach[:-1] + gap)[0] + 1
-        out += [t[order][a:b2] for a, b2 in zip(np.r_[0, cuts], np.r_[cuts, len(t)])]
+        out += [t[a:b2] for a, b2 in zip(np.r_[0, cuts], np.r_[cuts, len(t)])]
     return sorted(out, key=len, reverse=True)
 
 
@@ -187,7 +187,7 @@ def _split_pieces(link: urdf.UrdfLink, source: str, mesh_path, keep_out: np.ndar
             mesh = mesh_io.read_mesh(mesh_path(c))
         except mesh_io.MeshReadError as exc:
             raise CollisionGeometryError(f"link {link.name!r}: {exc}") from exc
-        v = np.asarray(mesh.vertices, float) * c.scale @ c.origin[:3, :3].T + c.origin[:3, 3]
+        v = posed(np.asarray(mesh.vertices, float) * c.scale, c.origin)
         f = np.asarray(mesh.faces, int)
         f = f[np.all((f >= 0) & (f < len(v)), axis=1)]
         t = v[f]

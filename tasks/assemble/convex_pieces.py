@@ -32,6 +32,11 @@ CONTAINMENT_TOLERANCE = 0.002
 _INSIDE_EPS = 1e-9
 
 
+def posed(points: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """``points`` (k, 3) m moved by the rigid transform ``T`` (4, 4): ``points @ R.T + t``."""
+    return points @ T[:3, :3].T + T[:3, 3]
+
+
 class CollisionGeometryError(RuntimeError):
     """A link's collision geometry cannot be made into convex pieces (names the link and file)."""
 
@@ -377,10 +382,8 @@ def drop_slivers(pieces: list[Piece]) -> list[Piece]:
     duplicate adds no volume); the largest piece is always kept."""
     if len(pieces) <= 1:
         return list(pieces)
-    order = sorted(range(len(pieces)), key=lambda i: -pieces[i].volume)
     kept: list[Piece] = []
-    for i in order:
-        p = pieces[i]
+    for p in sorted(pieces, key=lambda p: -p.volume):
         if kept and p.volume < MIN_PIECE_VOLUME:
             continue
         tol = 1e-9 * max(float(np.ptp(p.points, axis=0).max()), 1e-9)

@@ -9,7 +9,7 @@ import numpy as np
 from scipy.spatial import QhullError
 
 from asset2sim import urdf
-from asset2sim.tasks.assemble.convex_pieces import Piece
+from asset2sim.tasks.assemble.convex_pieces import Piece, posed
 from asset2sim.tasks.geometry import limits
 
 #: Height (m) above the lowest collision point within which the body's
@@ -37,7 +37,7 @@ def level_footprint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], state
     changed and the largest move."""
     poses = model.link_poses(state)
     body = limits.rigid_group(model, model.root)  # the links no movable joint moves
-    world = {ln: [p.points @ poses[ln][:3, :3].T + poses[ln][:3, 3] for p in pl] for ln, pl in pieces.items() if pl}
+    world = {ln: [posed(p.points, poses[ln]) for p in pl] for ln, pl in pieces.items() if pl}
     if not world:
         return
     allpts = np.vstack([w for ws in world.values() for w in ws])

@@ -8,7 +8,7 @@ import numpy as np
 
 from asset2sim import urdf
 from asset2sim.frames import axis_angle_matrix
-from asset2sim.tasks.assemble.convex_pieces import CONTAINMENT_TOLERANCE, Piece
+from asset2sim.tasks.assemble.convex_pieces import CONTAINMENT_TOLERANCE, Piece, posed
 
 #: Largest motion (m) of a child's vertex between two neighbouring swept positions (:func:`sweep_positions`),
 #: at most :data:`MAX_SWEEP_SAMPLES` positions.
@@ -75,14 +75,14 @@ def swept_child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], li
             ln = stack.pop()
             stack.extend(c.child for c in model.children(ln))
             T = inv @ poses[ln]
-            pts += [(p.support if support else p.points) @ T[:3, :3].T + T[:3, 3] for p in pieces.get(ln, [])]
+            pts += [posed(p.support if support else p.points, T) for p in pieces.get(ln, [])]
         if not pts:
             continue
         local = np.vstack(pts)
         sets = []
         for q in _positions_for(j, local):
             T = _joint_motion(j, q)
-            sets.append(local @ T[:3, :3].T + T[:3, 3])
+            sets.append(posed(local, T))
         out[j.child] = np.vstack(sets)
     return out
 
@@ -115,7 +115,7 @@ def swept_other_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], li
             if any(np.allclose(T, U, atol=1e-9) for U in seen[o]):
                 continue
             seen[o].append(T)
-            out.append(pts @ T[:3, :3].T + T[:3, 3])
+            out.append(posed(pts, T))
     return np.vstack(out)
 
 

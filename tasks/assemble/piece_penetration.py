@@ -8,7 +8,7 @@ import numpy as np
 from scipy.spatial import QhullError
 
 from asset2sim import mesh_io, urdf
-from asset2sim.tasks.assemble.convex_pieces import Piece, depth_inside
+from asset2sim.tasks.assemble.convex_pieces import Piece, depth_inside, posed
 
 #: Axes projected at once by :func:`penetration_depth` (memory: chunk x points).
 _AXIS_CHUNK = 4096
@@ -121,7 +121,7 @@ def _boxes_apart(a: Piece, b: Piece, T: np.ndarray) -> bool:
     """Whether ``b`` moved by the (4, 4) transform ``T`` has an axis-aligned
     bounding box more than 1e-9 m (rounding) clear of ``a``'s: the
     first test of :func:`penetration_depth`, without moving ``b``'s planes."""
-    moved = b.points @ T[:3, :3].T + T[:3, 3]
+    moved = posed(b.points, T)
     lo = np.maximum(a.points.min(axis=0), moved.min(axis=0))
     hi = np.minimum(a.points.max(axis=0), moved.max(axis=0))
     return bool(np.any(hi + 1e-9 < lo))
@@ -136,7 +136,7 @@ def _child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], poses: 
         if not pts:
             continue
         T = inv @ poses[j.child]
-        out[j.child] = np.vstack(pts) @ T[:3, :3].T + T[:3, 3]
+        out[j.child] = posed(np.vstack(pts), T)
     return out
 
 

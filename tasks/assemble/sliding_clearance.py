@@ -15,7 +15,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from asset2sim import urdf
 from asset2sim.frames import axis_angle_matrix
-from asset2sim.tasks.assemble.convex_pieces import Piece
+from asset2sim.tasks.assemble.convex_pieces import Piece, posed
 from asset2sim.tasks.assemble.joint_sweep import reference_state
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.geometry.closed_state import tree_path
@@ -163,7 +163,7 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
     pairs: set[tuple[str, str]] = set()
     poses = model.link_poses(reference_state(model))
     done: set[tuple[str, int, str, int]] = set()
-    boxes = {ln: [p.points @ poses[ln][:3, :3].T + poses[ln][:3, 3] for p in pl] for ln, pl in pieces.items()}
+    boxes = {ln: [posed(p.points, poses[ln]) for p in pl] for ln, pl in pieces.items()}
     still = lambda c: np.zeros(3)  # noqa: E731  a point of a pair no joint moves apart
     moving = [(f"sliding along {j.name!r}", ln, others, j) for j, ln, others in _moving_links(model, pieces)]
     for why, ln, others, joint in moving + [("no joint moves them apart", ln, others, None) for ln, others in _fixed_pairs(model, pieces)]:
@@ -181,7 +181,7 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
                     if np.any(np.minimum(pw.max(axis=0), qw.max(axis=0)) + RUNNING_CLEARANCE
                               < np.maximum(pw.min(axis=0), qw.min(axis=0))):
                         continue  # bounding boxes apart by more than the clearance
-                    ql = Q.points @ To[:3, :3].T + To[:3, 3]
+                    ql = posed(Q.points, To)
                     try:
                         hit = clear_sliding_contact(P.points, ql, velocity, deepest=deepest)
                     except ValueError:
@@ -194,7 +194,7 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
                         pieces[ln][i] = Piece.of(pts, P.sources)
                     except (QhullError, ValueError):
                         continue
-                    boxes[ln][i] = pieces[ln][i].points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
+                    boxes[ln][i] = posed(pieces[ln][i].points, poses[ln])
                     short, n = sat_gap(pts, ql)
                     ql, rest = squeeze(ql, -n, RUNNING_CLEARANCE - short) if short < RUNNING_CLEARANCE - 1e-6 else (ql, 0.0)
                     if rest > 0:  # the rest from the other piece's face, back in its link's frame
@@ -202,7 +202,7 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
                             pieces[other][k] = Piece.of((ql - To[:3, 3]) @ To[:3, :3], Q.sources)
                         except (QhullError, ValueError):
                             rest = 0.0
-                        boxes[other][k] = pieces[other][k].points @ poses[other][:3, :3].T + poses[other][:3, 3]
+                        boxes[other][k] = posed(pieces[other][k].points, poses[other])
                     if joint is not None:  # a sliding pair (a fixed one slides along nothing)
                         pairs.add((ln, other))
                     notes.append(f"link {ln!r}: collision piece {i} given {used * 1000:.2g} mm {RUNNING_CLEARANCE_NOTE} against "
@@ -326,10 +326,10 @@ def swept_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes
         Tj = poses[joint.child]
         origin, axis = Tj[:3, 3], Tj[:3, :3] @ np.asarray(joint.axis, float)
         axis = axis / max(float(np.linalg.norm(axis)), 1e-12)
-        world = {o: [Q.points @ poses[o][:3, :3].T + poses[o][:3, 3] for Q in pieces[o]] for o in others}  # they do not change here
+        world = {o: [posed(Q.points, poses[o]) for Q in pieces[o]] for o in others}  # they do not change here
         turns, faces = _turns(axis, angles), {}  # the rotations and the other pieces' face normals, made once
         for i, P in enumerate(pieces[ln]):
-            pw = P.points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
+            pw = posed(P.points, poses[ln])
             rel = pw - origin
             along = rel @ axis
             radius = float(np.linalg.norm(rel - np.outer(along, axis), axis=1).max())
@@ -352,7 +352,7 @@ def swept_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes
                     pts, shrink, g = hit
                     inv = np.linalg.inv(poses[ln])
                     try:
-                        pieces[ln][i] = P = Piece.of(pts @ inv[:3, :3].T + inv[:3, 3], P.sources)
+                        pieces[ln][i] = P = Piece.of(posed(pts, inv), P.sources)
                     except (QhullError, ValueError):
                         continue
                     pw, own = pts, None

@@ -182,11 +182,6 @@ def ends_at_the_floor(closed: dict[str, ClosedState], stops: Mapping[str, float]
 FLOOR_GAP = 0.002
 
 
-def _lowest(world: dict[str, list[np.ndarray]], links) -> float:
-    vals = [float(W[:, 2].min()) for ln in links for W in world.get(ln, [])]
-    return min(vals) if vals else np.inf
-
-
 class _FloorScene:
     """A URDF's collision pieces posed by joint positions, and the floor its body stands on."""
 
@@ -204,11 +199,12 @@ class _FloorScene:
 
     def floor(self, q: dict[str, float]) -> float:
         """The body's lowest point (m, root frame) at ``q`` plus :data:`FLOOR_GAP`."""
-        return _lowest(self.posed(self.model.link_poses(q)), self.body) + FLOOR_GAP
+        return self.lowest(q, self.body) + FLOOR_GAP
 
     def lowest(self, q: dict[str, float], links) -> float:
         """Lowest point (m, root frame) of ``links`` at ``q``; inf without pieces."""
-        return _lowest(self.posed(self.model.link_poses(q)), links)
+        world = self.posed(self.model.link_poses(q))
+        return min((float(W[:, 2].min()) for ln in links for W in world.get(ln, [])), default=np.inf)
 
 
 def floor_limited_state(model: UrdfModel, urdf: Path | str, state: dict[str, float],
