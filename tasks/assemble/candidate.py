@@ -86,7 +86,7 @@ def _remove_orphans(parent: Path) -> None:
     """Remove the workspace folders in ``parent`` that this user's processes left when killed (their
     owner's process id names no running process); never a symlink or another user's folder."""
     for entry in parent.glob(f"{SCRATCH_PREFIX}*-*"):
-        pid = entry.name[len(SCRATCH_PREFIX):].split("-", 1)[0]
+        pid = entry.name.removeprefix(SCRATCH_PREFIX).split("-", 1)[0]
         try:
             st = entry.lstat()
             if not (pid.isdigit() and stat.S_ISDIR(st.st_mode) and st.st_uid == os.getuid()):

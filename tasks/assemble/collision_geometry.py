@@ -301,7 +301,7 @@ def _piece_keys(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool, o
                     parts.append(str(mesh_path(c)))
     for j in model.joints:
         parts.append(repr((j.name, j.type, j.parent, j.child, j.lower, j.upper)))
-        parts.append(np.asarray(j.origin, float).tobytes() + np.asarray(j.axis, float).tobytes())
+        parts.append(np.asarray(j.origin, float).tobytes() + j.axis.tobytes())
     key = array_cache.digest(*parts)
     try:
         code = array_cache.source_digest(*PIECES_CODE)

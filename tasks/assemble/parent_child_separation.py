@@ -140,8 +140,7 @@ def _is_stop(a: Piece, b: Piece, T_ref: np.ndarray, T_near: np.ndarray | None, t
 def _toward(joint: urdf.UrdfJoint, q_ref: float, q: float) -> np.ndarray | None:
     """The child's pose (4, 4) :data:`limits.MIN_FREE_FRACTION` of ``joint``'s range from ``q_ref`` toward ``q`` (rad or
     m); None without finite limits or when ``q`` is nearer than that."""
-    lo, hi = _limits(joint)
-    step = limits.MIN_FREE_FRACTION * (hi - lo)
+    step = limits.MIN_FREE_FRACTION * (joint.upper - joint.lower)
     if not (np.isfinite(step) and step > 0) or abs(q - q_ref) <= step:
         return None
     return _joint_motion(joint, q_ref + np.sign(q - q_ref) * step)
@@ -152,14 +151,9 @@ def _toward(joint: urdf.UrdfJoint, q_ref: float, q: float) -> np.ndarray | None:
 PRESSED_GROWTH = 1e-4
 
 
-def _limits(joint: urdf.UrdfJoint) -> tuple[float, float]:
-    """``joint``'s (lower, upper) limits, rad or m (NaN when missing)."""
-    return tuple(np.nan if v is None else float(v) for v in (joint.lower, joint.upper))
-
-
 def _at_limit(joint: urdf.UrdfJoint, q: float) -> bool:
     """Whether ``q`` (rad or m) lies within :data:`AT_LIMIT_FRACTION` of ``joint``'s range from one of its finite limits."""
-    lo, hi = _limits(joint)
+    lo, hi = joint.lower, joint.upper
     if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
         return False
     return min(abs(q - lo), abs(q - hi)) <= AT_LIMIT_FRACTION * (hi - lo)

@@ -116,7 +116,7 @@ def joint_velocity(joint: urdf.UrdfJoint, T: np.ndarray) -> Callable[[np.ndarray
     frame where its child frame is ``T`` (4, 4): the axis (prismatic), or axis
     x (point - origin) (revolute, continuous)."""
     R, t = T[:3, :3], T[:3, 3]
-    axis = R @ np.asarray(joint.axis, float)
+    axis = R @ joint.axis
     if joint.type == "prismatic":
         return lambda c: axis
     return lambda c: np.cross(axis, np.asarray(c, float) - t)
@@ -319,12 +319,12 @@ def swept_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes
     for joint, ln, others in _moving_links(model, pieces):
         if joint.type not in ("revolute", "continuous"):
             continue
-        if joint.type == "continuous" or joint.lower is None or joint.upper is None:
+        if joint.type == "continuous":
             angles = np.linspace(0.0, 2 * np.pi, SWEPT_SAMPLES, endpoint=False)
         else:
             angles = np.concatenate([[0.0], np.linspace(float(joint.lower), float(joint.upper), SWEPT_SAMPLES) - ref.get(joint.name, 0.0)])
         Tj = poses[joint.child]
-        origin, axis = Tj[:3, 3], Tj[:3, :3] @ np.asarray(joint.axis, float)
+        origin, axis = Tj[:3, 3], Tj[:3, :3] @ joint.axis
         axis = axis / max(float(np.linalg.norm(axis)), 1e-12)
         world = {o: [posed(Q.points, poses[o]) for Q in pieces[o]] for o in others}  # they do not change here
         turns, faces = _turns(axis, angles), {}  # the rotations and the other pieces' face normals, made once

@@ -16,11 +16,9 @@ from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfLink, UrdfMaterial, Urdf
 
 def resolve_mesh_path(filename: str, urdf_dir: Path) -> Path:
     """Absolute path of a URDF mesh reference (relative, absolute, file://, package://)."""
-    name = filename.strip()
-    if name.startswith("file://"):
-        name = name[len("file://") :]
+    name = filename.strip().removeprefix("file://")
     if name.startswith("package://"):
-        rest = name[len("package://") :]
+        rest = name.removeprefix("package://")
         _pkg, _, sub = rest.partition("/")
         candidates = [urdf_dir / sub, urdf_dir / rest]
         for parent in urdf_dir.parents:

@@ -44,7 +44,7 @@ def link_pieces(model: UrdfModel, root: Path, link: str) -> list[np.ndarray]:
         v = mesh_io.read_obj(mesh_io.file_bytes(path), str(path)).vertices
         if not len(v):
             continue
-        v = np.asarray(v, float) * (c.mesh_scale if c.mesh_scale is not None else 1.0)
+        v = np.asarray(v, float) * c.scale
         out.append(v @ c.origin[:3, :3].T + c.origin[:3, 3])
     return out
 

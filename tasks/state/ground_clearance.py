@@ -68,7 +68,7 @@ def _floor_area(pieces: list[np.ndarray], z_g: float) -> float:
 
 def _drags(joint, R_parent_joint: np.ndarray) -> bool:
     """The joint moves its part along the ground: a hinge near vertical, a slide near horizontal."""
-    a = R_parent_joint @ np.asarray(joint.axis, float)
+    a = R_parent_joint @ joint.axis
     az = abs(float(a[2])) / max(float(np.linalg.norm(a)), 1e-12)
     if joint.type == "revolute":
         return az >= math.cos(SLIDE_ANGLE)
