@@ -103,18 +103,6 @@ def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str], decompose: b
     return _LinkPieces(out, np.vstack(cores) if cores else None, opened_files)
 
 
-def _sliding_neighbours(model: urdf.UrdfModel, hulls: dict[str, list[tuple[int, int, Piece]]]) -> dict[str, set[str]]:
-    """Link -> the links it slides along (:func:`running_clearance` on every link's group ``hulls``
-    (:func:`_group_hulls`): contacts between a moving link and a link its joint does not move, parent and child
-    excepted)."""
-    trial = {name: [p for _, _, p in found] for name, found in hulls.items()}
-    out: dict[str, set[str]] = {}
-    for a, b in running_clearance(model, trial, []):
-        out.setdefault(a, set()).add(b)
-        out.setdefault(b, set()).add(a)
-    return out
-
-
 def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None = None, *,
                 limit: int = MAX_PIECES_PER_LINK, decompose: bool = True,
                 level: bool = False, feet: float | None = None,
@@ -146,28 +134,18 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
     """
     opening = decompose and open_containers
     key, disk_key = _piece_keys(model, mesh_path, limit, decompose, opening)
-    done = _cached_pieces(key, disk_key, model, mesh_path, limit, decompose, opening)
+    # the state-independent (pieces, notes), from the process's or the disk's cache, else made
+    done = _recalled(_PIECE_CACHE, key)
+    if done is None:
+        hit = _load_pieces(disk_key, model) if disk_key is not None else None
+        done = _remember(_PIECE_CACHE, key, hit or _made_pieces(model, mesh_path, limit, decompose, opening))
+        if hit is None and disk_key is not None:
+            _store_pieces(disk_key, done)
     if state is not None:
         skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())), bool(level), feet, tuple(sorted(pushed)))
         done = _recalled(_STATE_CACHE, skey) or _remember(_STATE_CACHE, skey, _state_pieces(model, done, state, decompose, level, feet,
                                                                                              pushed))
     return {k: list(v) for k, v in done[0].items()}, list(done[1])
-
-
-def _cached_pieces(key: str, disk_key: str | None, model: urdf.UrdfModel, mesh_path, limit: int,
-                   decompose: bool, opening: bool) -> PiecesNotes:
-    """:func:`link_pieces`' state-independent (pieces, notes), from the process's or the disk's cache (keys of
-    :func:`_piece_keys`), else made."""
-    hit = _recalled(_PIECE_CACHE, key)
-    if hit is not None:
-        return hit
-    hit = _load_pieces(disk_key, model) if disk_key is not None else None
-    if hit is not None:
-        return _remember(_PIECE_CACHE, key, hit)
-    hit = _remember(_PIECE_CACHE, key, _made_pieces(model, mesh_path, limit, decompose, opening))
-    if disk_key is not None:
-        _store_pieces(disk_key, hit)
-    return hit
 
 
 def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool, opening: bool) -> PiecesNotes:
@@ -179,7 +157,13 @@ def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool, 
     # with ``opening`` each link's group hulls are made once: for the sliding contacts and for its pieces
     hull_notes: dict[str, list[str]] = {name: [] for name in model.links}
     hulls = {name: _group_hulls(link, mesh_path, hull_notes[name]) for name, link in model.links.items()} if opening else {}
-    sliding = _sliding_neighbours(model, hulls) if opening else {}
+    # link -> the links it slides along (:func:`running_clearance` on the group hulls: contacts between a moving link
+    # and a link its joint does not move, parent and child excepted)
+    sliding: dict[str, set[str]] = {}
+    trial = {name: [p for _, _, p in found] for name, found in hulls.items()}
+    for a, b in running_clearance(model, trial, []) if opening else ():
+        sliding.setdefault(a, set()).add(b)
+        sliding.setdefault(b, set()).add(a)
     poses = model.link_poses(reference_state(model)) if opening else {}
     holding = container_pieces.holding_children(model, hulls) if opening else set()
     for name, link in model.links.items():

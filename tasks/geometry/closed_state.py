@@ -184,11 +184,6 @@ class _PairScreen:
         return [(self.sub[i], self.rest[k]) for i, k in zip(*np.nonzero(overlap))]
 
 
-def _subtree_phi(session, screen: _PairScreen) -> float:
-    """Penetration (m) between the moving subtree and every other link, parent included."""
-    return sum((-d for a, b in screen.pairs() for d in session.link_distances(a, b, 0.0) if d < 0), 0.0)
-
-
 def closed_positions(session, asset: AssetDescription, *, hull_points: dict[str, np.ndarray] | None = None,
                      pushed: Collection[str] = ()) -> dict[str, ClosedState]:
     """Closed end of every movable joint of ``session`` (a fixed-base session of ``asset``).
@@ -245,7 +240,9 @@ def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, f
 
     def measure(q: float) -> tuple[float, float, float]:
         session.set_joint_positions({name: q})
-        return _aabb_volume(session, union_links, points), _aabb_volume(session, sub, points), _subtree_phi(session, screen)
+        # the penetration (m) between the moving subtree and every other link, parent included
+        phi = sum((-d for a, b in screen.pairs() for d in session.link_distances(a, b, 0.0) if d < 0), 0.0)
+        return _aabb_volume(session, union_links, points), _aabb_volume(session, sub, points), phi
 
     qs = np.linspace(lo, hi, COARSE)
     vals = np.array([measure(q) for q in qs])

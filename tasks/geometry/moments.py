@@ -89,12 +89,6 @@ def surface_properties(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, 
     return area, c + ref, 0.5 * (cov + cov.T)
 
 
-def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, tol: float) -> tuple[np.ndarray, int]:
-    """Faces (M, 3) re-indexed onto vertices merged on a grid of size tol."""
-    inverse = _row_labels(np.round((vertices - vertices.min(axis=0)) / tol).astype(np.int64))
-    return inverse[faces], int(inverse.max()) + 1
-
-
 def _is_closed_oriented(fm: np.ndarray, nv: int) -> bool:
     """Every edge in exactly two faces with opposite orientation."""
     a = np.concatenate((fm[:, 0], fm[:, 1], fm[:, 2]))
@@ -141,7 +135,8 @@ def watertight_properties(vertices: np.ndarray, faces: np.ndarray) -> SolidMomen
     # topology as indexed first, else with coincident vertices merged (polygon soups)
     fm, nv = faces, len(vertices)
     if not _is_closed_oriented(fm, nv):
-        fm, nv = _merge_vertices(vertices, faces, 1e-9 * size)
+        inverse = _row_labels(np.round((vertices - lo) / (1e-9 * size)).astype(np.int64))  # merged on a grid
+        fm, nv = inverse[faces], int(inverse.max()) + 1
         ok = (fm[:, 0] != fm[:, 1]) & (fm[:, 1] != fm[:, 2]) & (fm[:, 0] != fm[:, 2])
         if not _is_closed_oriented(fm[ok], nv):
             return None

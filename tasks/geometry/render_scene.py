@@ -120,15 +120,6 @@ def _all_materials(model: UrdfModel) -> list[UrdfMaterial]:
     return [*model.materials, *(v.material for ln in model.links.values() for v in ln.visuals if v.material is not None)]
 
 
-def _named_colors(model: UrdfModel) -> dict[str, tuple[float, ...]]:
-    """Material name -> RGBA of its first definition with a color (URDF materials are global by name)."""
-    named: dict[str, tuple[float, ...]] = {}
-    for mat in _all_materials(model):
-        if mat.name and mat.rgba is not None and mat.name not in named:
-            named[mat.name] = tuple(float(v) for v in mat.rgba)
-    return named
-
-
 def _prepare_link(urdf_path: Path, urdf_dir: Path, lname: str, link: UrdfLink, meshes: _VisualFiles,
                   named: dict[str, tuple[float, ...]]) -> np.ndarray | None:
     """Strip ``link``'s collisions and inertial, replace its mesh visuals by their drawable files;
@@ -189,7 +180,8 @@ def prepare_scene(urdf_path: Path, work: Path, texture_max: int = 1024) -> Rende
     except UrdfError as exc:
         raise ValueError(f"{urdf_path}: not a parseable URDF ({exc})") from exc
     urdf_dir = urdf_path.parent.resolve()
-    named = _named_colors(model)
+    # material name -> RGBA of its first definition with a color (URDF materials are global by name)
+    named = {m.name: tuple(float(v) for v in m.rgba) for m in reversed(_all_materials(model)) if m.name and m.rgba is not None}
     notes: list[str] = []
     if not any(ln.visuals for ln in model.links.values()) and any(ln.collisions for ln in model.links.values()):
         for ln in model.links.values():  # nothing else to show: draw the collision shapes
