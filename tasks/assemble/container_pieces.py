@@ -112,8 +112,10 @@ def open_pieces(link: str, c: urdf.UrdfGeometry, g: int, hull: Piece, mesh: tupl
             f"{100 * cav.volume / max(cav.hull_volume, 1e-12):.0f} % of its hull)")
     as_hull = f"{what}; kept as one convex hull, solid inside:"
     if up is not None and cav.regions and all(float(r.mouth @ up) < -MOUTH_BELOW for r in cav.regions):
+        # how far below the horizontal the mouths face (degrees)
+        below = sorted({round(float(np.degrees(np.arcsin(min(1.0, max(0.0, -float(r.mouth @ up))))))) for r in cav.regions})
         notes.append(f"{what}; kept as one convex hull: its opening faces down at the joints' reference state "
-                     f"({_below_horizontal(cav.regions, up)}), so nothing put in would stay in it")
+                     f"({', '.join(f'{a} deg' for a in below)} below the horizontal), so nothing put in would stay in it")
         return None
     if slides_along:
         notes.append(f"{as_hull} it slides along {', '.join(map(repr, sorted(slides_along)))} "
@@ -145,12 +147,6 @@ def open_pieces(link: str, c: urdf.UrdfGeometry, g: int, hull: Piece, mesh: tupl
         return None
     notes.append(f"{what}: {len(pieces)} convex pieces (CoACD) instead of its hull, so that things can be put in it")
     return pieces, cav.core
-
-
-def _below_horizontal(regions: tuple[cavities.CavityRegion, ...], up: np.ndarray) -> str:
-    """How far below the horizontal (against ``up`` (3,)) the mouths of ``regions`` face, in words (degrees)."""
-    angles = sorted({round(float(np.degrees(np.arcsin(min(1.0, max(0.0, -float(r.mouth @ up))))))) for r in regions})
-    return ", ".join(f"{a} deg" for a in angles) + " below the horizontal"
 
 
 def _thick_wall(points: np.ndarray, inward: np.ndarray) -> np.ndarray | None:

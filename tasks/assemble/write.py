@@ -77,9 +77,8 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
     model = urdf.read_urdf(asset.urdf_path, mode="lenient")
     model.extensions = []
     model.name = model.name or ""
-    _replace_collisions(model, collision_overrides or {})
+    _set_links(model, collision_overrides or {}, overlay)
     urdf.scale_model(model, s, joints=False, inertials=False)
-    _set_inertials(model, overlay)
     if root_rotation is not None and not np.allclose(root_rotation, np.eye(3)):
         _rotate_root(model, asset.root_link, root_rotation)
     urdf.scale_model(model, s, geometry=False, inertials=False)
@@ -98,8 +97,9 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
     return urdf.write_urdf(model, comment=_urdf_comment(s, overlay))
 
 
-def _replace_collisions(model: urdf.UrdfModel, overrides: dict) -> None:
-    """Drop every link's ``<contact>``; the mesh collisions of each link in ``overrides`` become its pieces."""
+def _set_links(model: urdf.UrdfModel, overrides: dict, overlay: Overlay) -> None:
+    """Drop every link's ``<contact>``; the mesh collisions of each link in ``overrides`` become its pieces; every
+    link's ``<inertial>`` from ``overlay`` (OutputError when it lacks a link that has geometry)."""
     for link in model.links.values():
         link.contact = {}
         pieces = overrides.get(link.name)
@@ -107,18 +107,11 @@ def _replace_collisions(model: urdf.UrdfModel, overrides: dict) -> None:
             link.collisions = [c for c in link.collisions if c.kind != "mesh"] + [
                 urdf.UrdfGeometry(kind="mesh", origin=frames.pose_matrix(piece.source.origin.xyz, piece.source.origin.rpy),
                                   filename=piece.filename, mesh_scale=np.asarray(piece.source.scale, float)) for piece in pieces]
-
-
-def _set_inertials(model: urdf.UrdfModel, overlay: Overlay) -> None:
-    """Every link's ``<inertial>`` from ``overlay``; OutputError when it lacks a link that has geometry."""
-    for link in model.links.values():
         lp = overlay.links.get(link.name)
-        if lp is None:
-            if link.visuals or link.collisions:
-                raise OutputError(f"overlay has no mass/inertia for link {link.name!r} (validate the overlay first)")
-            link.inertial = None
-            continue
-        link.inertial = urdf.UrdfInertial(mass=float(lp.mass), origin=frames.translation_matrix(lp.com), inertia=lp.inertia.matrix())
+        if lp is None and (link.visuals or link.collisions):
+            raise OutputError(f"overlay has no mass/inertia for link {link.name!r} (validate the overlay first)")
+        link.inertial = None if lp is None else urdf.UrdfInertial(mass=float(lp.mass), origin=frames.translation_matrix(lp.com),
+                                                                  inertia=lp.inertia.matrix())
 
 
 def _rotate_root(model: urdf.UrdfModel, root_link: str, rotation: np.ndarray) -> None:

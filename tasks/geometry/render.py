@@ -161,14 +161,10 @@ class SceneRenderer:
             self._viewer = open_viewer("pybullet", self._prep.urdf)
         except RuntimeError as exc:
             raise RenderError(f"PyBullet could not load {self.urdf_path} for rendering: {exc.__cause__ or exc}") from exc
-        self._lift_dark_colors()
-        self.joint_names: list[str] = list(self._viewer.joint_names)
-
-    def _lift_dark_colors(self) -> None:
-        """Draw each visual's diffuse color c as f + (1 - f) c, f = :data:`ALBEDO_FLOOR`."""
-        f = ALBEDO_FLOOR
+        f = ALBEDO_FLOOR  # each visual's diffuse color c drawn as f + (1 - f) c
         for link, k, rgba in self._viewer.visual_colors():
             self._viewer.set_visual_color(link, k, [f + (1 - f) * c for c in rgba[:3]] + [rgba[3]])
+        self.joint_names: list[str] = list(self._viewer.joint_names)
 
     def set_joint_positions(self, q: Mapping[str, float] | None) -> None:
         """Set joints (rad or m) by name; others keep their position (initially zero); limits not applied.

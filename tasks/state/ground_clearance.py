@@ -19,7 +19,7 @@ from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.geometry.limits import subtrees
 from asset2sim.tasks.state.clearance import ClearanceRepair, link_pieces, write_piece_overrides
-from asset2sim.urdf import UrdfModel
+from asset2sim.urdf import MOVABLE, UrdfModel
 
 __all__ = ["CONTACT_BAND", "FLOOR_GAP", "GROUND_CLEARANCE", "SUPPORT_AREA", "THIN_OBJECT", "apply_ground_clearance", "floor_limited_state",
            "floor_stops", "ground_clearance"]
@@ -46,7 +46,7 @@ def _moving_joint(model: UrdfModel) -> dict[str, object]:
         pj = model.parent_joint(name)
         if pj is None:
             out[name] = None
-        elif pj.type in ("revolute", "continuous", "prismatic"):
+        elif pj.type in MOVABLE:
             out[name] = pj
         else:
             out[name] = out.get(pj.parent)
