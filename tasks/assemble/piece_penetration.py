@@ -127,25 +127,18 @@ def _boxes_apart(a: Piece, b: Piece, T: np.ndarray) -> bool:
     return bool(np.any(hi + 1e-9 < lo))
 
 
-def _child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], poses: dict[str, np.ndarray], link: str) -> dict[str, np.ndarray]:
-    """Vertices of every child link's pieces in ``link``'s frame at ``poses``."""
-    inv = np.linalg.inv(poses[link])
-    out = {}
-    for j in model.children(link):
-        pts = [p.points for p in pieces.get(j.child, [])]
-        if not pts:
-            continue
-        T = inv @ poses[j.child]
-        out[j.child] = posed(np.vstack(pts), T)
-    return out
-
-
 def containment_depths(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], state: dict[str, float]) -> dict[tuple[str, str], float]:
     """(parent, child) -> largest depth (m) of a child's collision vertex
     inside one of the parent's pieces, at joint positions ``state`` (rad or m)."""
     poses = model.link_poses(state)
-    return {(parent, child): max((depth_inside(pts, p) for p in pieces.get(parent, [])), default=0.0)
-            for parent in model.links for child, pts in _child_points(model, pieces, poses, parent).items()}
+    out = {}
+    for parent in model.links:
+        inv = np.linalg.inv(poses[parent])
+        for j in model.children(parent):
+            if pieces.get(j.child):  # the child's vertices in the parent's frame
+                pts = posed(np.vstack([p.points for p in pieces[j.child]]), inv @ poses[j.child])
+                out[parent, j.child] = max((depth_inside(pts, p) for p in pieces.get(parent, [])), default=0.0)
+    return out
 
 
 def parent_child_depths(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], state: dict[str, float]) -> dict[tuple[str, str], float]:

@@ -218,14 +218,6 @@ MAX_RADIAL_SHRINK = 0.25
 SWEPT_TRIGGER = 0.002
 
 
-def _shrink(points: np.ndarray, origin: np.ndarray, axis: np.ndarray, f: float) -> np.ndarray:
-    """``points`` (k, 3) m with their distance from the line (``origin`` (3,), unit ``axis`` (3,)) times ``f``: an
-    affine map, so a convex piece stays convex."""
-    rel = points - origin
-    along = np.outer(rel @ axis, axis)
-    return origin + along + f * (rel - along)
-
-
 def _turns(axis: np.ndarray, angles: np.ndarray) -> np.ndarray:
     """Rotations (A, 3, 3) by each of ``angles`` (A,) rad about the unit ``axis`` (3,) (:func:`axis_angle_matrix`)."""
     return np.stack([axis_angle_matrix(axis, float(a)) for a in angles]).reshape(-1, 3, 3)
@@ -296,11 +288,14 @@ def _clear_turning_piece(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis:
     rel = face - origin
     r = float(np.linalg.norm(rel - axis * float(rel @ axis)))
     f = 1.0
+    # p's distance from the line times f: an affine map, so a convex piece stays convex
+    offset = p - origin
+    along = np.outer(offset @ axis, axis)
     for _ in range(4):  # the radius at the contact gives the first shrink; what the samples still find, the next
         f -= (RUNNING_CLEARANCE - g) / max(r, 1e-9)
         if f < 1.0 - MAX_RADIAL_SHRINK:
             return None
-        out = _shrink(p, origin, axis, f)
+        out = origin + along + f * (offset - along)
         g = _swept_gap(out, q, origin, axis, angles, turns, (_normals(out), normals[1]))[0]
         if g >= RUNNING_CLEARANCE - 1e-6:
             return out, 1.0 - f, least

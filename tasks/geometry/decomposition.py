@@ -89,13 +89,6 @@ _MEMO: cachetools.LRUCache = cachetools.LRUCache(maxsize=64)
 _MEMO_LOCK = threading.Lock()
 
 
-def _remembered(digest: str) -> list[tuple[np.ndarray, np.ndarray]] | None:
-    """Copies of the pieces :data:`_MEMO` holds under ``digest``, or None."""
-    with _MEMO_LOCK:
-        hit = _MEMO.get(digest)
-    return None if hit is None else [(v.copy(), f.copy()) for v, f in hit]
-
-
 def _remember(digest: str, pieces: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
     """``pieces``, a read-only copy of them kept in :data:`_MEMO` under ``digest``."""
     kept = []
@@ -109,9 +102,10 @@ def _remember(digest: str, pieces: list[tuple[np.ndarray, np.ndarray]]) -> list[
 
 
 def _decompose(digest: str, mesh, where: str, settings: dict, refit: bool = True) -> list[tuple[np.ndarray, np.ndarray]]:
-    hit = _remembered(digest)
-    if hit is not None:
-        return hit
+    with _MEMO_LOCK:
+        hit = _MEMO.get(digest)
+    if hit is not None:  # copies of the read-only pieces kept
+        return [(v.copy(), f.copy()) for v, f in hit]
     data = array_cache.load("coacd", digest)
     if data is not None:
         try:
