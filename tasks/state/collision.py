@@ -173,14 +173,9 @@ class _Repair:
         before = world.penetration(a, b)
         if before <= IMPROVEMENT_EPS:
             return  # this pair no longer overlaps: spend no budget on it
-        cands = []
-        for ln, other in ((a, b), (b, a)):
-            for key in [k for k in world.refs if k[0] == ln]:
-                depth = world.overlapping(key, other)
-                if depth > 0:
-                    cands.append((depth, key, other))
-        cands.sort(key=lambda c: -c[0])
-        for _, key, other in cands:
+        cands = [(depth, key, other) for ln, other in ((a, b), (b, a)) for key in world.refs
+                 if key[0] == ln and (depth := world.overlapping(key, other)) > 0]
+        for _, key, other in sorted(cands, key=lambda c: -c[0]):
             if key in self.changed or key in tried or before <= IMPROVEMENT_EPS:
                 continue
             tried.add(key)
