@@ -17,10 +17,9 @@ from asset2sim.output_folder import (EVALUATION_NAME, MARKER_NAME, OVERLAY_NAME,
 from asset2sim.schemas.asset import AssetDescription
 
 
-def _inside(path: Path, root: Path, *, resolved: bool = False) -> bool:
-    """True when ``path`` lies inside ``root`` after resolving symlinks
-    (``resolved``: both are resolved already)."""
-    return (path if resolved else path.resolve()).is_relative_to(root if resolved else root.resolve())
+def _inside(path: Path, root: Path) -> bool:
+    """True when ``path`` lies inside ``root`` after resolving symlinks."""
+    return path.resolve().is_relative_to(root.resolve())
 
 
 #: output paths a copied input file may not take (the contract's own files)
@@ -110,7 +109,7 @@ def _mesh_copies(asset: AssetDescription) -> dict[str, Path]:
     copies: dict[str, Path] = {}
 
     def add(rel: str, src: Path) -> None:  # src resolved
-        if not _inside(src, root, resolved=True):
+        if not src.is_relative_to(root):  # both resolved
             raise OutputError(f"mesh {src} lies outside the asset folder {root}", "OUTPUT_OUTSIDE_INPUT", src)
         rel = PurePosixPath(os.path.normpath(rel).replace(os.sep, "/")).as_posix()
         if rel.startswith("../") or rel in ("..", ".") or rel.startswith("/"):
@@ -216,13 +215,11 @@ def material_references(asset: AssetDescription, copies: dict[str, Path] | None 
     return kinds
 
 
-def _edited_copy(data: bytes, rel: str, kind: str | None) -> bytes | None:
+def _edited_copy(data: bytes, rel: str, kind: str) -> bytes | None:
     """``data`` of an OBJ (``kind="obj"``) or MTL (``"mtl"``) copied to ``rel`` with every ``mtllib`` / texture
     statement naming a file outside the asset folder replaced by a comment; None when nothing was dropped.
     An OBJ is edited line by line (the slowest part of a copy) only when a ``mtllib`` of the whole file names
     a file outside, or a CR could split its lines otherwise than the whole-file scan reads them."""
-    if kind not in ("obj", "mtl"):
-        return None
     if kind == "obj" and (b"mtllib" not in data or (b"\r" not in data and not any(
             reference_leaves_folder(n, rel) for n in mesh_io.mtl_libraries(data)))):
         return None
