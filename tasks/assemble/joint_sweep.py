@@ -79,11 +79,7 @@ def swept_child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], li
         if not pts:
             continue
         local = np.vstack(pts)
-        sets = []
-        for q in _positions_for(j, local):
-            T = _joint_motion(j, q)
-            sets.append(posed(local, T))
-        out[j.child] = np.vstack(sets)
+        out[j.child] = np.vstack([posed(local, _joint_motion(j, q)) for q in _positions_for(j, local)])
     return out
 
 

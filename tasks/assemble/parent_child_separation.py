@@ -245,13 +245,8 @@ def _slot(piece: Piece, slots: list[tuple[np.ndarray, float, float, Piece]], tol
     ``most`` parts would be left."""
     parts = [piece]
     for n, lo, hi, other in slots:
-        out = []
-        for q in parts:
-            if penetration_depth(q, other, tolerance)[0] <= tolerance:
-                out.append(q)
-                continue
-            out += [x for x in (clip_piece(q, n, -lo), clip_piece(q, -n, hi)) if x is not None]
-        parts = out
+        parts = [x for q in parts for x in ((q,) if penetration_depth(q, other, tolerance)[0] <= tolerance
+                                              else (clip_piece(q, n, -lo), clip_piece(q, -n, hi))) if x is not None]
         if len(parts) > most:
             return None
     return parts
