@@ -56,7 +56,7 @@ def closed_session(source: SimSource, *, model: UrdfModel | None = None, pushed:
             hull = link_hull_points(desc)
         except Exception:
             hull = None
-        cs = closed_positions(s, desc, pushed=pushed, **({"hull_points": hull} if hull is not None else {}))
+        cs = closed_positions(s, desc, hull_points=hull, pushed=pushed)
         yield UrdfClosed(session=s, asset=desc, hull=hull, closed=cs)
     finally:
         s.close()
