@@ -40,12 +40,7 @@ class Interval:
 def allowed_intervals(closed: dict[str, ClosedState], fractions: dict[str, tuple[float, float]]) -> dict[str, Interval]:
     """Positions allowed per joint: the band's opening fractions mapped through
     the closed state and clipped to the limits (``closed`` in output units)."""
-    out = {}
-    for name, cs in closed.items():
-        f0, f1 = fractions.get(name, (0.0, 0.03))
-        a, b = cs.position(f0), cs.position(f1)
-        out[name] = Interval(min(a, b), max(a, b))
-    return out
+    return {name: Interval(*sorted(map(cs.position, fractions.get(name, (0.0, 0.03))))) for name, cs in closed.items()}
 
 
 def joints_in_the_way(asset: AssetDescription, worst_pairs: list[dict], bands: dict[str, str], addressed: set[str],
@@ -93,21 +88,20 @@ def refine_initial_state(session, asset: AssetDescription, closed: dict[str, Clo
             lifting the lid 3 degrees off its stop, where only friction would hold it.
     """
     cfg = config or RefineConfig()
-    tolerance, lam, max_evaluations, seed = cfg.penetration_tolerance, cfg.state_lambda, cfg.max_state_evaluations, cfg.seed
     t0 = time.perf_counter()
-    rng = np.random.default_rng(seed)
     names = [n for n in session.joint_names if n in closed]
     box = allowed_intervals({n: closed[n] for n in names}, fractions)
     q_req = {n: box[n].clip(requested.get(n, closed[n].q_closed)) for n in names}
     scale = {n: max(closed[n].open_range, 1e-9) for n in names}
-    s = _Search(session, asset, names, box, q_req, scale, lam, tolerance, max_evaluations, opened)
+    s = _Search(session, asset, names, box, q_req, scale, cfg.state_lambda, cfg.penetration_tolerance, cfg.max_state_evaluations,
+                opened)
     phi_req = s.best_phi
     worst = [{"link_a": c.link_a, "link_b": c.link_b, "depth_m": c.depth, "max_depth_m": c.max_depth, "points": c.points}
              for c in s.pairs_at_best()[:5]]
     _line_search_focus_joints(s)
-    _perturb_focus_joints(s, rng)
+    _perturb_focus_joints(s, np.random.default_rng(cfg.seed))
     _pattern_search(s)
-    model_queries = _ask_proposer(s, proposer) if proposer is not None and s.best_phi > tolerance else 0
+    model_queries = _ask_proposer(s, proposer) if proposer is not None and s.best_phi > s.tolerance else 0
     session.set_joint_positions(s.best_q)
     return StateRefinement(requested={k: float(v) for k, v in q_req.items()}, result={k: float(v) for k, v in s.best_q.items()},
                            phi_requested=float(phi_req), phi_result=float(s.best_phi), evaluations=s.evals,
