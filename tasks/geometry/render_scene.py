@@ -154,15 +154,6 @@ def _prepare_link(urdf_path: Path, urdf_dir: Path, lname: str, link: UrdfLink, m
     return np.concatenate(pts) if pts else None
 
 
-def _link_material_textures(model: UrdfModel, urdf_dir: Path, textures: TextureLinks) -> None:
-    """Point each existing ``<material><texture filename=...>`` at its link in the work folder."""
-    for mat in {id(m): m for m in _all_materials(model)}.values():
-        if mat.texture:
-            src = resolve_mesh_path(mat.texture, urdf_dir)
-            if src.is_file():
-                mat.texture = textures.link(src)[0]
-
-
 def prepare_scene(urdf_path: Path, work: Path, texture_max: int = 1024) -> RenderScene:
     """Write the render-only URDF into ``work`` and collect visual points per link: no ``<collision>`` or
     ``<inertial>`` (the root link frame is the body frame), each visual mesh replaced by drawable
@@ -196,7 +187,9 @@ def prepare_scene(urdf_path: Path, work: Path, texture_max: int = 1024) -> Rende
             link_points[lname] = pts
     if not link_points:
         raise ValueError(f"{urdf_path}: no visual geometry to render")
-    _link_material_textures(model, urdf_dir, textures)
+    for mat in {id(m): m for m in _all_materials(model)}.values():  # each <texture filename=...> at its link in ``work``
+        if mat.texture and (src := resolve_mesh_path(mat.texture, urdf_dir)).is_file():
+            mat.texture = textures.link(src)[0]
     if meshes.n_split:
         notes.append(f"{meshes.n_split} multi-material OBJ file(s) split into one OBJ per material")
     if textures.downscaled:
