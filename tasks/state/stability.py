@@ -96,7 +96,12 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
     bal = _balance(overlay, frames, points)
     if (bal.stable and not most) or len(bal.support) < 3:
         return overlay, []
-    moved, parts = _opened_links(asset, category)
+    # the links a movable joint moves, and link -> the sourced fraction of its opened part
+    movable = [j for j in asset.joints if j.is_movable]
+    moved = {ln for j in movable for ln in subtree_links(asset, j.child)}
+    labels = {ln.name: canonical_label(ln.semantic_label) for ln in asset.links}
+    parts = {ln: frac for j in movable if (frac := PART_MASS_FRACTION.get((category or "", labels.get(j.child) or ""))) is not None
+             for ln in subtree_links(asset, j.child)}
     body = [ln for ln in overlay.links if ln not in moved]
     m_body = sum(overlay.links[ln].mass for ln in body)
     least = _mass_floors(overlay, parts, moved, points, geometry)
@@ -122,16 +127,6 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
                 f"{', '.join(body)} (opened parts {m_part / total:.0%} -> {m_after / total:.0%} of {total:.3g} kg, "
                 + "; ".join(reasons) + f"); margin now {after * 1000:.3g} mm; total mass, scale and state unchanged"
                 + ("; the whole transfer: a drop or tilt toppled it with less moved" if most else "")]
-
-
-def _opened_links(asset: AssetDescription, category: str | None) -> tuple[set[str], dict[str, PartFraction]]:
-    """(links a movable joint moves, link -> the sourced fraction of its opened part)."""
-    movable = [j for j in asset.joints if j.type in ("revolute", "prismatic", "continuous")]
-    moved = {ln for j in movable for ln in subtree_links(asset, j.child)}
-    labels = {ln.name: canonical_label(ln.semantic_label) for ln in asset.links}
-    parts = {ln: pf for j in movable if (pf := PART_MASS_FRACTION.get((category or "", labels.get(j.child) or ""))) is not None
-             for ln in subtree_links(asset, j.child)}
-    return moved, parts
 
 
 @dataclass(frozen=True, slots=True)
