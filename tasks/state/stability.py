@@ -100,7 +100,8 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
     movable = [j for j in asset.joints if j.is_movable]
     moved = {ln for j in movable for ln in subtree_links(asset, j.child)}
     labels = {ln.name: canonical_label(ln.semantic_label) for ln in asset.links}
-    parts = {ln: frac for j in movable if (frac := PART_MASS_FRACTION.get((category or "", labels.get(j.child) or ""))) is not None
+    parts = {ln: frac for j in movable
+             if (frac := PART_MASS_FRACTION.get((category or "", labels.get(j.child) or ""))) is not None
              for ln in subtree_links(asset, j.child)}
     body = [ln for ln in overlay.links if ln not in moved]
     m_body = sum(overlay.links[ln].mass for ln in body)
