@@ -216,9 +216,7 @@ class TaskEnv(gym.Env):
         moved = self._moved()
         if moved:
             return False, f"{moved} after release"
-        if self.task.hold_required and not self.task.reached(f):
-            return False, "target not held after release"
-        return True, ""
+        return (False, "target not held after release") if self.task.hold_required and not self.task.reached(f) else (True, "")
 
     # ------------------------------------------------------------ reference
     def scripted_action(self, speed: float = 0.5, vertical_share: float = TaskConfig.vertical_share) -> np.ndarray:

@@ -263,7 +263,7 @@ class _ArticulationTaskEnv(BaseEnv):
         else:
             picks = [int(k) for k in self._batched_episode_rng.randint(0, len(self.objects))]
         self.env_objects: list[TaskObject] = [self.objects[k] for k in picks]
-        arts, links, self._passive, self._task_index, self._physx_arts = [], [], [], [], []
+        arts, links, self._passive, self._task_index, self._physx_arts, self._joint_names = [], [], [], [], [], []
         for i, obj in enumerate(self.env_objects):
             name = f"object-{i}"
             art = build_object(self.scene, obj, i, name)
@@ -275,27 +275,21 @@ class _ArticulationTaskEnv(BaseEnv):
             passive.configure(px.active_joints)
             self._passive.append(passive)
             self._physx_arts.append(px)
+            self._joint_names.append(names)
             self._task_index.append(names.index(obj.joint))
             links.append(next(lk for lk in art.links if _bare(lk._objs[0].name, prefix) == obj.grasp_link))
             arts.append(art)
         self.object = Articulation.merge(arts, name="object")
         self.add_to_state_dict_registry(self.object)
         self.grasp_link = Link.merge(links, name="grasp_link")
-        self._joint_names = [[_bare(j.name, f"scene-{i}-object-{i}_") for j in px.active_joints]
-                             for i, px in enumerate(self._physx_arts)]
         with torch.device(self.device):
             objs = self.env_objects
             self.task_index = torch.tensor(self._task_index, dtype=torch.long)
             self.grasp_point_local = torch.tensor(np.array([o.grasp_point for o in objs]), dtype=torch.float32)
-            self.q_closed = torch.tensor([o.q_closed for o in objs], dtype=torch.float32)
-            self.direction = torch.tensor([o.direction for o in objs], dtype=torch.float32)
-            self.open_range = torch.tensor([o.open_range for o in objs], dtype=torch.float32)
-            self.start_fraction = torch.tensor([o.start_fraction for o in objs], dtype=torch.float32)
-            self.target_fraction = torch.tensor([o.target_fraction for o in objs], dtype=torch.float32)
-            self.reach_fraction = torch.tensor([o.reach_fraction for o in objs], dtype=torch.float32)
+            for k in ("q_closed", "direction", "open_range", "start_fraction", "target_fraction", "reach_fraction", "base_z"):
+                setattr(self, k, torch.tensor([getattr(o, k) for o in objs], dtype=torch.float32))
             self.opens = torch.tensor([o.action == "open" for o in objs], dtype=torch.bool)
             self.rest_speed = torch.tensor([REST_SPEED.get(o.joint_type, 1.0) for o in objs], dtype=torch.float32)
-            self.base_z = torch.tensor([o.base_z for o in objs], dtype=torch.float32)
             dof = self.object.max_dof
             start = np.zeros((len(objs), dof))
             for i, o in enumerate(objs):

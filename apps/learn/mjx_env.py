@@ -130,7 +130,7 @@ def build_scene(folder: Path | str, task: LearnTask, config: LearnConfig | None 
     return MjxScene(model=m, qpos=d.qpos.copy(), qvel=d.qvel.copy(), qadr=qadr, dadr=dadr, limits=lo_hi, body=body,
                     point=np.asarray(point, float), length=max(length, 1e-3),
                     stiffness=min(lim.grasp_stiffness_n_m, m_eff / dt**2), damping=min(lim.grasp_damping_n_s_m, m_eff / dt),
-                    free_root=bool(m.njnt) and int(m.jnt_type[0]) == int(mujoco.mjtJoint.mjJNT_FREE), z_low=low,
+                    free_root=_free_root(m), z_low=low,
                     source=source, grasp_rule=rule)
 
 
@@ -140,9 +140,9 @@ def _settle(m, d, cfg: LearnConfig) -> None:
     dt = float(m.opt.timestep)
     n, n_max = int(round(cfg.settle_time / dt)), int(round(cfg.settle_max_time / dt))
     mujoco.mj_step(m, d, nstep=n)
-    free = bool(m.njnt) and int(m.jnt_type[0]) == int(mujoco.mjtJoint.mjJNT_FREE)
-    hinge = [int(m.jnt_dofadr[j]) for j in range(m.njnt) if int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_HINGE)]
-    slide = [int(m.jnt_dofadr[j]) for j in range(m.njnt) if int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_SLIDE)]
+    free = _free_root(m)
+    hinge, slide = ([int(m.jnt_dofadr[j]) for j in range(m.njnt) if int(m.jnt_type[j]) == int(kind)]
+                    for kind in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE))
     while n < n_max:
         mujoco.mj_step(m, d, nstep=cfg.action_repeat)
         n += cfg.action_repeat
@@ -150,6 +150,11 @@ def _settle(m, d, cfg: LearnConfig) -> None:
         if (root_v < cfg.rest_root_speed and np.all(np.abs(d.qvel[hinge]) < cfg.rest_joint_speed[0])
                 and np.all(np.abs(d.qvel[slide]) < cfg.rest_joint_speed[1])):
             break
+
+
+def _free_root(m) -> bool:
+    """Whether the model's root is free (its first joint a free joint)."""
+    return bool(m.njnt) and int(m.jnt_type[0]) == int(mujoco.mjtJoint.mjJNT_FREE)
 
 
 def _quat_mat(q: jax.Array) -> jax.Array:
@@ -203,6 +208,10 @@ class TaskMjxEnv(Env):
         """The task's reach rule (:meth:`LearnTask.reached`) on fractions ``f``."""
         return self._sense * (f - self.task.reach_fraction) <= 0.0
 
+    def _root_pose(self, qpos: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """The root's position (3,) m and rotation (3, 3) at ``qpos`` (the origin and identity when it is not free)."""
+        return (qpos[:3], _quat_mat(qpos[3:7])) if self.scene.free_root else (jnp.zeros(3), jnp.eye(3))
+
     def _grasp_point(self, d) -> jax.Array:
         b = self.scene.body
         return d.xpos[b] + d.xmat[b] @ jnp.asarray(self.scene.point, d.xpos.dtype)
@@ -214,10 +223,7 @@ class TaskMjxEnv(Env):
         q = q.at[sc.qadr].set(jnp.clip(q[sc.qadr] + dq, *sc.limits))
         d = mjx.kinematics(self._mx, self._d0.replace(qpos=q))
         p = self._grasp_point(d)
-        if sc.free_root:
-            p0, R0 = q[:3], _quat_mat(q[3:7])
-        else:
-            p0, R0 = jnp.zeros(3), jnp.eye(3)
+        p0, R0 = self._root_pose(q)
         foot0 = jnp.array([p0[0], p0[1], sc.z_low])
         zero = jnp.zeros(())
         f = self.fraction(q)
@@ -264,8 +270,7 @@ class TaskMjxEnv(Env):
                                                   None, length=cfg.action_repeat)
         steps = ep["steps"] + 1
         f = self.fraction(d.qpos)
-        R = _quat_mat(d.qpos[3:7]) if sc.free_root else jnp.eye(3)
-        p_root = d.qpos[:3] if sc.free_root else jnp.zeros(3)
+        p_root, R = self._root_pose(d.qpos)
         moved_xy = (p_root + R @ ep["foot_local"] - ep["foot0"])[:2]
         tilt_now = jnp.arccos(jnp.clip((R @ ep["up_local"])[2], -1.0, 1.0))
         slide = jnp.maximum(ep["slide"], jnp.linalg.norm(moved_xy))
