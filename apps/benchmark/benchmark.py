@@ -23,7 +23,7 @@ from asset2sim.atomic import jsonable
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRow, ManifestRowError, read_manifest_rows
 from asset2sim.tasks.evaluation.plots import plot_method_summary
-from asset2sim.tasks.evaluation.benchmark_pages import render_benchmark_index, render_benchmark_summary
+from asset2sim.tasks.evaluation.benchmark_pages import _PASS_RATES, render_benchmark_index, render_benchmark_summary
 from asset2sim.package_data import package_yaml
 
 #: The SPEC's "Numbers to beat" (thesis results, 9-object set, Isaac Sim): ``research_numbers.yaml`` beside this module.
@@ -33,6 +33,9 @@ RESEARCH_NUMBERS: list[dict[str, str]] = package_yaml(__package__, "research_num
 RECORD_METRICS = ("penetration", "ground_penetration", "rest_stability", "oscillation", "divergence", "state_hold",
                   "scale_deviation", "initial_joint_deviation", "total_mass", "prompt_alignment", "probes",
                   "joint_sweep", "robust_rest", "task_execution", "operating_force")
+
+#: The record's column of each pass rate of the summary (``_PASS_RATES``) whose key is not that column's name.
+_RATE_COLUMNS = {"sweep_pass": "joint_sweep_pass", "task_pass": "task_execution_pass", "force_pass": "operating_force_pass"}
 
 
 def evaluation_record(ev: Evaluation, row: ManifestRow, method: str, *, engine: str = "pybullet") -> dict[str, Any]:
@@ -45,9 +48,7 @@ def evaluation_record(ev: Evaluation, row: ManifestRow, method: str, *, engine: 
         rec[name] = None if m is None else m.value
         rec[f"{name}_pass"] = None if m is None else m.passed
     rs = ev.metric("rest_stability", engine)
-    rec["D_pos_m"] = rs.details.get("D_pos_m") if rs else None
-    rec["D_ori_rad"] = rs.details.get("D_ori_rad") if rs else None
-    rec["scale"] = ev.scale
+    rec.update({k: rs.details.get(k) if rs else None for k in ("D_pos_m", "D_ori_rad")}, scale=ev.scale)
     ready = readiness(list(ev.metrics))  # every engine evaluated: the verdict report.html shows
     rec["ready"] = ready.ready and not any(f.startswith("engine@") for f in ev.failures)
     rec["ready_failures"] = ";".join(ready.failures)
@@ -84,12 +85,8 @@ def summarize(records: list[dict[str, Any]], methods: list[str]) -> dict[str, di
         row["scale_mean"], row["scale_sd"] = _mean_sd([r["scale_deviation"] for r in ok])
         row["init_mean"], row["init_sd"] = _mean_sd([r["initial_joint_deviation"] for r in ok])
         row["prompt_mean"], _ = _mean_sd([r["prompt_alignment"] for r in ok])
-        for key, n_key, column in (
-                ("rest_stability_pass", "rest_n", "rest_stability_pass"), ("oscillation_pass", "osc_n", "oscillation_pass"),
-                ("probes_pass", "probes_n", "probes_pass"), ("sweep_pass", "sweep_n", "joint_sweep_pass"),
-                ("robust_rest_pass", "robust_n", "robust_rest_pass"), ("task_pass", "task_n", "task_execution_pass"),
-                ("force_pass", "force_n", "operating_force_pass"), ("ready", "ready_n", "ready")):
-            row[key], row[n_key] = _rate([r.get(column) for r in ok])
+        for key, n_key in _PASS_RATES:
+            row[key], row[n_key] = _rate([r.get(_RATE_COLUMNS.get(key, key)) for r in ok])
         row["all_pass"], _ = _rate([r["all_pass"] for r in ok])
         secs = [r["seconds"] for r in ok if r.get("seconds") is not None]
         row["median_seconds"] = statistics.median(secs) if secs else None

@@ -150,13 +150,12 @@ def _prompt_alignment(ctx: EstimationContext, model: UrdfModel, state: dict[str,
         return MetricResult(name="prompt_alignment", value=None, unit="fraction", details={"reason": "no prompt"}, engine="none")
     types = {j.name: j.type for j in model.joints}
     checks = []
-    requests = resolution.requests if resolution is not None else {}
-    for name, jr in requests.items():
+    for name, jr in (resolution.requests if resolution is not None else {}).items():
         c, q = closed.get(name), state.get(name)
+        known = c is not None and q is not None
         label = ctx.asset.link(ctx.asset.joint(name).child).semantic_label
-        checks.append(sem.JointStateCheck(name, jr.band, c.fraction(q) if c is not None and q is not None else None, label, jr.phrase,
-                                          jr.target, c.direction * (q - c.q_closed) if c is not None and q is not None else None,
-                                          types.get(name, "revolute")))
+        checks.append(sem.JointStateCheck(name, jr.band, c.fraction(q) if known else None, label, jr.phrase, jr.target,
+                                          c.direction * (q - c.q_closed) if known else None, types.get(name, "revolute")))
     unmatched = [p for p, _ in (resolution.unapplied if resolution is not None else [])]
     dims = prior.get("base_dims")
     m = sem.prompt_alignment(size_requested=spec.size_class is not None, largest_extent=largest,
@@ -358,14 +357,11 @@ def clip_joints(task_joints: list[str], swept: list[str], labels: dict[str, str 
     ``swept``: the joints with a recorded sweep, in sweep order; ``labels``: joint -> part label."""
     task = [j for j in task_joints if j in swept]
     order = task + [j for j in swept if j not in task]
-    first, seen = [], set()
+    kinds: dict[str, str] = {}
     for j in order:
-        kind = labels.get(j) or f"joint:{j}"
-        if kind not in seen:
-            seen.add(kind)
-            first.append(j)
-    rest = [j for j in task if j not in first] + [j for j in order if j not in first and j not in task]
-    return first + rest
+        kinds.setdefault(labels.get(j) or f"joint:{j}", j)
+    first = list(kinds.values())
+    return first + [j for j in order if j not in first]
 
 
 def _write_clips(ev: Evaluation, out_dir: Path | str) -> ClipSet | None:
@@ -376,8 +372,7 @@ def _write_clips(ev: Evaluation, out_dir: Path | str) -> ClipSet | None:
     if sweep is None or not sweep.joints:
         ev.notes.append("clips: none (pybullet ran no joint sweep)")
         return None
-    model = ev._context.model
-    labels = _joint_labels(ev._context.urdf, model)
+    labels = _joint_labels(ev._context.urdf, ev._context.model)
     joints = clip_joints(ev.task_joints, [js.joint for js in sweep.joints], labels)
     try:
         return clip_files.sweep_clips(ev._context.urdf, sweep, joints, dict(ev.initial_state), out_dir, task_run=run.task)

@@ -58,8 +58,7 @@ def trial_plot(trial: Trial, dt: float) -> bytes:
     a = axes[0, 0]
     a.set(title=f"{trial.name}: {trial.failure or 'passed'}", xlabel="time since the end of settling (s)",
           ylabel="tilt of the up direction (rad)")
-    n_settle = max((len(v) for v in tr.settle_joints.values()), default=0)
-    t_place = -n_settle * dt
+    t_place = -max((len(v) for v in tr.settle_joints.values()), default=0) * dt
     placed = up_change(q_ref, tr.initial_root_quat) if tr.initial_root_quat is not None else math.nan
     a.plot([t_place, 0.0], [placed, up_change(q_ref, tr.q0)], color="C7", label="settling (placement to rest)")
     a.plot(np.asarray(tr.t, float), [up_change(q_ref, q) for q in tr.root_quat], color="C3", label="test")
@@ -154,13 +153,9 @@ class Highlight:
 def operability_failures(metrics: list) -> list[tuple[str, dict, dict]]:
     """(engine, part summary, stroke) of every failing operability stroke (``operability`` details: the part and
     the stroke as :func:`~asset2sim.tasks.check.operability.operability_metric` records them)."""
-    out = []
-    for m in metrics:
-        if m.name != "operability" or m.passed is not False:
-            continue
-        for part in ((m.details or {}).get("parts") or {}).values():
-            out += [(m.engine, part, s) for s in part.get("strokes") or [] if not s.get("passed", True)]
-    return out
+    return [(m.engine, part, s) for m in metrics if m.name == "operability" and m.passed is False
+            for part in ((m.details or {}).get("parts") or {}).values()
+            for s in part.get("strokes") or [] if not s.get("passed", True)]
 
 
 def operability_poses(part: dict, stroke: dict, closed: dict, others: dict[str, float]) -> list[Pose]:
@@ -186,11 +181,10 @@ def _opened(closed: dict, fraction: float) -> float:
 
 def _stroke_table(part: dict, stroke: dict) -> str:
     top = (part.get("force_range_n") or [None, None])[1]
-    cells = [("stroke", stroke.get("action")), ("asked to", f"{100 * float(stroke.get('target') or 0):.0f} % open"),
-             ("reached", f"{100 * float(stroke.get('reached') or 0):.0f} % open"),
-             ("force it needed (N)", stroke.get("needed_force_n")), ("the hand's range (N)", top),
-             ("torque it needed (N m)", stroke.get("needed_torque_nm")), ("stopped by", stroke.get("stopped_by") or "-")]
-    return _one_row(cells)
+    return _one_row([("stroke", stroke.get("action")), ("asked to", f"{100 * float(stroke.get('target') or 0):.0f} % open"),
+                     ("reached", f"{100 * float(stroke.get('reached') or 0):.0f} % open"),
+                     ("force it needed (N)", stroke.get("needed_force_n")), ("the hand's range (N)", top),
+                     ("torque it needed (N m)", stroke.get("needed_torque_nm")), ("stopped by", stroke.get("stopped_by") or "-")])
 
 
 def draw_poses(renderer: SceneRenderer, poses: list[Pose], highlight: Highlight | None = None) -> dict[str, np.ndarray]:
@@ -219,10 +213,11 @@ def _h3(text: str) -> str:
 
 
 def _task_table(attempt: dict) -> str:
-    cells = [("reached the target", attempt.get("reached")), ("held after release", attempt.get("held")),
-             ("peak gripper force (N)", attempt.get("peak_force_n")), ("object slid (mm)", 1000 * (attempt.get("root_slide_m") or 0.0)),
-             ("object tilted (rad)", attempt.get("root_tilt_rad")), ("gripper at its force limit", attempt.get("force_limited"))]
-    return _one_row(cells)
+    return _one_row([("reached the target", attempt.get("reached")), ("held after release", attempt.get("held")),
+                     ("peak gripper force (N)", attempt.get("peak_force_n")),
+                     ("object slid (mm)", 1000 * (attempt.get("root_slide_m") or 0.0)),
+                     ("object tilted (rad)", attempt.get("root_tilt_rad")),
+                     ("gripper at its force limit", attempt.get("force_limited"))])
 
 
 def _one_row(cells: list[tuple[str, object]]) -> str:

@@ -47,9 +47,7 @@ def fmt(v: Any, digits: int = 4) -> str:
 
 def img_tag(png: bytes | None, alt: str, mime: str = "image/png") -> str:
     """An ``<img>`` with the PNG (or other ``mime`` image) inline (empty string for None)."""
-    if not png:
-        return ""
-    return f'<img alt="{html_text(alt)}" src="data:{mime};base64,{base64.b64encode(png).decode()}"/>'
+    return f'<img alt="{html_text(alt)}" src="data:{mime};base64,{base64.b64encode(png).decode()}"/>' if png else ""
 
 
 def svg_tag(svg: bytes | None, alt: str) -> str:

@@ -9,7 +9,7 @@ from typing import Any
 
 from asset2sim.tasks.check.plausibility import joint_unit
 from asset2sim.tasks.evaluation.html_blocks import fmt, table
-from asset2sim.tasks.evaluation.report_changes import esc
+from asset2sim.tasks.evaluation.report_changes import esc, escalated
 
 
 def _param(parameter: str, where: str, value: Any, unit: str, source: str) -> dict[str, Any]:
@@ -26,11 +26,7 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
     ov, rep = ctx.overlay, ctx.report
     joints = {j.name: j for j in ctx.model.joints}
     types = {j.name: j.type for j in ctx.model.joints}
-    escal: dict[tuple[str, str], int] = {}
-    for rnd in (rep or {}).get("escalation", []) or []:
-        for j, ch in (rnd.get("changes") or {}).items():
-            for k in ch:
-                escal[(j, k)] = rnd.get("round", 0)
+    escal = escalated(rep)
     # step 2: masses, inertias and joint dynamics from the overlay (the URDF's value where escalation changed it)
     est = ((ov or {}).get("estimator") or {}).get("name")
     by_estimator = f"estimator {est}" if est else "overlay"
@@ -50,7 +46,8 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
             for k in ("damping", "friction", "stiffness"):
                 src = jd.get("source") or by_estimator
                 if (jn, k) in escal:
-                    src = f"changed after check round {escal[(jn, k)]} (the checks failed; see What asset2sim changed)"
+                    src = (f"changed after check round {escal[(jn, k)].get('round', 0)} (the checks failed; "
+                           "see What asset2sim changed)")
                 val = jd.get(k)
                 # the URDF written after escalation is what is simulated
                 if k in ("damping", "friction") and jn in joints:
@@ -68,7 +65,7 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
                                "URDF <inertial>" if declared else "engine default (1 kg, inertia diag(1,1,1) kg*m^2)"))
         for jd in ctx.model.movable_joints:
             for k in ("damping", "friction"):
-                v = getattr(jd.dynamics, k, None) if jd.dynamics is not None else None
+                v = getattr(jd.dynamics, k, None)
                 rows.append(_param(k, f"joint {jd.name}", 0.0 if v is None else v, joint_unit(jd.type, k),
                                    "URDF <dynamics>" if v is not None else "engine default (0)"))
             rows.append(_param("stiffness", f"joint {jd.name}", 0.0, joint_unit(jd.type, "stiffness"), "none (URDF has no springs)"))

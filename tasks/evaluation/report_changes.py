@@ -40,9 +40,7 @@ def position_text(q: float | None, jtype: str) -> str:
     ``"12.5 mm"`` (prismatic); ``"-"`` for None. ``q`` in rad or m."""
     if q is None or not math.isfinite(float(q)):
         return "-"
-    if jtype == "prismatic":
-        return f"{float(q) * 1000.0:.4g} mm"
-    return f"{float(q):.4g} rad ({math.degrees(float(q)):.1f} deg)"
+    return f"{float(q) * 1000.0:.4g} mm" if jtype == "prismatic" else f"{float(q):.4g} rad ({math.degrees(float(q)):.1f} deg)"
 
 
 def from_closed_text(q: float | None, q_closed: float | None, jtype: str) -> str:
@@ -54,9 +52,7 @@ def from_closed_text(q: float | None, q_closed: float | None, jtype: str) -> str
     if q_closed is None or not math.isfinite(float(q_closed)):
         return f"joint position {position_text(q, jtype)}"
     d = abs(float(q) - float(q_closed))
-    if jtype == "prismatic":
-        return f"{d * 1000.0:.4g} mm from closed"
-    return f"{math.degrees(d):.1f} deg from closed"
+    return f"{d * 1000.0:.4g} mm from closed" if jtype == "prismatic" else f"{math.degrees(d):.1f} deg from closed"
 
 
 def opening_text(fraction: float | None) -> str:
@@ -197,15 +193,21 @@ def state_moves(report: dict[str, Any]) -> dict[str, str]:
     return out
 
 
+def escalated(report: dict[str, Any] | None) -> dict[tuple[str, str], dict[str, Any]]:
+    """(joint, quantity) -> the last check round that changed it (its entry of ``report.json``'s ``escalation``)."""
+    return {(joint, k): rnd for rnd in (report or {}).get("escalation") or [] for joint, ch in (rnd.get("changes") or {}).items()
+            for k in ch}
+
+
 def change_rows(report: dict[str, Any], ov: dict[str, Any], joint_types: dict[str, str], side: InputSide) -> list[str]:
     """The table rows (HTML) of every change refine made, each with its reason, the input column as the input's own
     file declares it (``side``, :func:`read_input`): scale, total mass, joint limits clipped to the geometry, the joint
     state, every movable joint's damping, friction and (when either side has a spring) stiffness with their units,
     collision pieces, stability by design and the root's mounting; ``ov``: ``overlay.json`` as a dict."""
     notes = ov.get("notes") or {}
-    rows = [_row("scale", "1 (the input's units)", f"{float(report.get('scale', 1.0)):.4g}", notes.get("size", ""))]
-    rows.append(_row("total mass", _declared_mass(side), f"{float(report.get('total_mass', 0.0)):.4g} kg",
-                     "; ".join(x for x in (notes.get("mass_arithmetic"), notes.get("material")) if x)))
+    rows = [_row("scale", "1 (the input's units)", f"{float(report.get('scale', 1.0)):.4g}", notes.get("size", "")),
+            _row("total mass", _declared_mass(side), f"{float(report.get('total_mass', 0.0)):.4g} kg",
+                 "; ".join(x for x in (notes.get("mass_arithmetic"), notes.get("material")) if x))]
     before = side.physics.joints if side.physics is not None else {}
     for name, jd in (ov.get("joints") or {}).items():
         src = str(jd.get("limit_source") or "")
@@ -213,14 +215,12 @@ def change_rows(report: dict[str, Any], ov: dict[str, Any], joint_types: dict[st
             jt = joint_types.get(name, "revolute")
             old = before.get(name)
             k = float(report.get("scale", 1.0)) if jt == "prismatic" else 1.0  # the input's lengths at the output's scale
-            lo, hi = (None, None) if old is None else (old.lower, old.upper)
-            lo, hi = (None if x is None else float(x) * k for x in (lo, hi))
-            new_lo, new_hi = (lo if jd.get("lower") is None else jd["lower"]), (hi if jd.get("upper") is None else jd["upper"])
+            lo, hi = (None if x is None else float(x) * k for x in ((None, None) if old is None else (old.lower, old.upper)))
             rows.append(_row(f"{name} limits", _limits_text(lo, hi, jt) if old else "as the input declares",
-                             _limits_text(new_lo, new_hi, jt), src.split(": ", 1)[-1]))
+                             _limits_text(lo if jd.get("lower") is None else jd["lower"],
+                                          hi if jd.get("upper") is None else jd["upper"], jt), src.split(": ", 1)[-1]))
     fractions = report.get("opening_fractions") or {}
     bands = report.get("requested_bands") or {}
-    state = report.get("state") or {}
     closed = report.get("closed_positions") or {}
     moves = state_moves(report)
     for name, q in (report.get("initial_joint_positions") or {}).items():
@@ -234,11 +234,7 @@ def change_rows(report: dict[str, Any], ov: dict[str, Any], joint_types: dict[st
         rows.append(_row(f"{name} initial position", "as modelled (0)" if start is None else
                          f"{position_text(start, jt)} (the file's keyframe)",
                          f"{from_closed_text(q, closed.get(name), jt)}, {opening_text(fractions.get(name))}".rstrip(", "), why))
-    changed: dict[tuple[str, str], str] = {}
-    for rnd in report.get("escalation") or []:
-        for joint, ch in (rnd.get("changes") or {}).items():
-            for k in ch:
-                changed[(joint, k)] = f"after check round {rnd.get('round')}: {rnd.get('reason', '')}"
+    changed = escalated(report)
     for name, jd in (ov.get("joints") or {}).items():
         jt = joint_types.get(name, "revolute")
         dj = before.get(name)
@@ -246,12 +242,12 @@ def change_rows(report: dict[str, Any], ov: dict[str, Any], joint_types: dict[st
         for k in ("damping", "friction", "stiffness"):
             if k == "stiffness" and not spring:
                 continue
-            why = changed.get((name, k)) or _source_of(str(jd.get("source") or ""), k)
+            rnd = changed.get((name, k))
+            why = (f"after check round {rnd.get('round')}: {rnd.get('reason', '')}" if rnd
+                   else _source_of(str(jd.get("source") or ""), k))
             rows.append(_row(f"{name} {k}", _declared_value(side, name, k, jt), _output_value(jd, k, jt), why))
-    for line in (state.get("collision_changes") or []):
-        rows.append(_row("collision pieces", "", "", line))
-    for line in report.get("design_changes") or []:
-        rows.append(_row("stability by design", "", "", line))
+    rows += [_row("collision pieces", "", "", line) for line in (report.get("state") or {}).get("collision_changes") or []]
+    rows += [_row("stability by design", "", "", line) for line in report.get("design_changes") or []]
     mount = report.get("mounting") or {}
     if mount:
         rows.append(_row("root", "", f"{mount.get('kind', '')}{' (fixed)' if mount.get('fixed') else ''}", mount.get("source", "")))
@@ -318,6 +314,4 @@ def understood(found: dict[str, Any] | None) -> str:
                          ("within tolerance" if q.get("within_tolerance") else "MISSED") + (f": {q['why']}" if q.get("why") else "")))
     if found.get("ignored"):
         rows.append(_row("words not used", "", "", "; ".join(found["ignored"])))
-    if not rows:
-        return ""
-    return "<h3>The request as understood</h3>" + table(("what", "asked", "output", "note"), rows)
+    return "<h3>The request as understood</h3>" + table(("what", "asked", "output", "note"), rows) if rows else ""

@@ -60,7 +60,6 @@ def _verdict_table(ev) -> str:
     rows = []
     for m in ev.metrics:
         d = m.details
-        val = "-" if m.value is None else fmt(m.value)
         extra = ""
         if m.name == "rest_stability" and "D_ori_rad" in d:
             extra = f"D_pos {fmt(d['D_pos_m'])} m, D_ori {fmt(d['D_ori_rad'])} rad"
@@ -75,7 +74,8 @@ def _verdict_table(ev) -> str:
         elif d.get("reasons"):
             extra = "; ".join(d["reasons"])
         rows.append(
-            f"<tr><td>{esc(m.name)}</td><td>{esc(m.engine)}</td><td class='num'>{val}</td><td>{esc(m.unit)}</td>"
+            f"<tr><td>{esc(m.name)}</td><td>{esc(m.engine)}</td><td class='num'>{'-' if m.value is None else fmt(m.value)}</td>"
+            f"<td>{esc(m.unit)}</td>"
             f"{verdict_cell(m.passed)}<td class='small'>{esc(m.threshold)}</td><td class='small'>{esc(extra)}</td></tr>"
         )
     return table(("metric", "engine", "value", "unit", "verdict", "threshold", "notes"), rows)
@@ -91,9 +91,8 @@ def _penetration_details(ev) -> str:
     """The penetration tier at the initial state: one sentence with its verdict (the readiness rule, the words of the
     terminal's penetration line), then the self-contact pairs and the children inside their parents, each with its
     verdict; never "no penetration" above a failing pair."""
-    r = readiness(list(ev.metrics))
     measures = penetration_measures(ev.metrics)
-    verdict = {True: "pass", False: "FAIL", None: "not measured"}[r.tiers.get("penetration")]
+    verdict = {True: "pass", False: "FAIL", None: "not measured"}[readiness(list(ev.metrics)).tiers.get("penetration")]
     out = [f"<p>penetration tier: <b>{verdict}</b>" + (f" ({esc('; '.join(measures))})" if measures else "") + "</p>"]
     for m in ev.metrics:
         if m.name != "penetration" or m.value is None:
@@ -146,10 +145,9 @@ def _prompt_details(ev) -> str:
         reason = (m.details.get("reason") if m else None) or "not scored"
         return f"<p class='small'>prompt alignment: {esc(reason)}</p>" + (_request_warnings(m.details) if m else "")
     d = m.details
-    rows = []
     size = d.get("size") or {}
-    rows.append(f"<tr><td>size</td><td>{esc(d.get('size_class') or 'regular (not stated)')}</td>"
-                f"<td class='num'>{fmt(size.get('score'))}</td><td class='small'>{esc(size.get('reason'))}</td></tr>")
+    rows = [f"<tr><td>size</td><td>{esc(d.get('size_class') or 'regular (not stated)')}</td>"
+            f"<td class='num'>{fmt(size.get('score'))}</td><td class='small'>{esc(size.get('reason'))}</td></tr>"]
     for j in d.get("joints", []):
         rows.append(f"<tr><td>joint {esc(j.get('joint'))} ({esc(j.get('label'))})</td><td>{esc(j.get('band'))}</td>"
                     f"<td class='num'>{fmt(j.get('score'))}</td><td class='small'>{esc(j.get('reason'))}</td></tr>")
@@ -166,14 +164,14 @@ def _probe_details(ev) -> str:
     rows = []
     for p in m.details["probes"]:
         unit, eff_unit = ("m", "N") if p["joint_type"] == "prismatic" else ("rad", "N*m")
-        cls = "pass" if p["success"] else "fail"
         rows.append(
             f"<tr><td>{esc(p['joint'])}</td><td>{esc(p['action'])}</td><td class='num'>{fmt(p['start'])} {unit}</td>"
             f"<td class='num'>{fmt(p['target'])} {unit}</td><td>{fmt(p['reached'])}</td>"
             f"<td class='num'>{fmt(p['peak_force'])} N</td><td class='num'>{fmt(p['peak_effort'])} {eff_unit}</td>"
             f"<td class='num'>{fmt(p['root_displacement'] * 1000)} mm / {fmt(p['root_rotation'])} rad</td>"
             f"<td>{fmt(p['rebound'])}</td><td>{fmt(p['kept_moving'])}</td>"
-            f"<td class='{cls}'>{esc(p['failure'] or 'ok')}</td><td class='small'>{esc('; '.join(p['notes']))}</td></tr>"
+            f"<td class='{'pass' if p['success'] else 'fail'}'>{esc(p['failure'] or 'ok')}</td>"
+            f"<td class='small'>{esc('; '.join(p['notes']))}</td></tr>"
         )
     return table(("joint", "probe", "start", "target", "reached (crossed the line that counts)", "peak force", "peak torque/force",
                   "object moved", "rebound", "kept moving", "verdict", "notes"), rows)
@@ -196,7 +194,6 @@ def operability_section(ev) -> str:
             limit = (f"{fmt(rng[1])} N" if rng else "") + (f", {fmt(trng[1])} N m" if trng else "")
             lever = "" if p.get("lever_m") is None else f", lever {fmt(p['lever_m'], 3)} m"
             for s in p.get("strokes") or []:
-                cls = "pass" if s["passed"] else "fail"
                 torque = "" if s.get("needed_torque_nm") is None else f" / {fmt(s['needed_torque_nm'])} N m"
                 got = f"{fmt(100.0 * s['reached'], 3)} % open" + (f", stopped by {s['stopped_by']}" if s.get("stopped_by") else "")
                 rows.append(
@@ -204,7 +201,7 @@ def operability_section(ev) -> str:
                     f"<td>{esc(p['rule'])}{lever}</td>"
                     f"<td>{esc(s['action'])}</td><td class='num'>{fmt(s['needed_force_n'])} N{torque}</td>"
                     f"<td class='num'>{esc(limit)} ({esc(p['range_of'])})</td><td>{esc(got)}</td>"
-                    f"<td class='{cls}'>{esc(s['failure'] or 'ok')}</td>"
+                    f"<td class='{'pass' if s['passed'] else 'fail'}'>{esc(s['failure'] or 'ok')}</td>"
                     f"<td class='small'>{', '.join(f'[{cited.setdefault(src, len(cited) + 1)}]' for src in p.get('sources') or [])}</td></tr>")
     if not rows:
         return "<p class='small'>operability not measured</p>"
@@ -331,7 +328,6 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
     ctx = ev._context
     dt = ctx.conventions.timestep
     settle_n = int(round(ctx.conventions.settle_time / dt))
-    badge = _badge(ev)
     error = None
     if views is None:
         try:
@@ -353,7 +349,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         f"request: <i>{esc(ev.prompt or '-')}</i><br/>"
         f"reference: <code>{esc(ev.reference or '-')}</code></p>",
         _request_warnings(pa.details) if (pa := ev.metric("prompt_alignment")) is not None else "",
-        f"<p>{badge}</p>",
+        f"<p>{_badge(ev)}</p>",
         why_section(ev),
         as_asked_block(ev),
         host_section(ctx.report),

@@ -107,11 +107,8 @@ def size_score(largest_extent: float, typical_largest: float, size_factor: float
         score, verdict = 0.5, "near miss"
     else:
         score, verdict = 0.0, "miss"
-    reason = (
-        f"largest extent {largest_extent:.3f} m vs target {target:.3f} m "
-        f"(typical {typical_largest:.3f} m x {size_factor:g}): ratio {r:.2f}, {verdict}"
-    )
-    return SizeScore(score, reason, r)
+    return SizeScore(score, f"largest extent {largest_extent:.3f} m vs target {target:.3f} m "
+                            f"(typical {typical_largest:.3f} m x {size_factor:g}): ratio {r:.2f}, {verdict}", r)
 
 
 def band_score(fraction: float, band: str) -> tuple[float, str]:
@@ -179,9 +176,7 @@ def target_score(check: JointStateCheck) -> tuple[float | None, str]:
     why = f"asked {asked:.4g}{unit}, measured {achieved:.4g}{unit} (error {err:.3g}, tolerance {tol:.3g})"
     if err <= tol:
         return 1.0, why
-    if err <= max(TARGET_HALF_REL_TOL * abs(asked), 2 * TARGET_ABS_TOL[t.kind]):
-        return 0.5, why
-    return 0.0, why
+    return (0.5 if err <= max(TARGET_HALF_REL_TOL * abs(asked), 2 * TARGET_ABS_TOL[t.kind]) else 0.0), why
 
 
 def prompt_alignment(*, size_requested: bool, largest_extent: float | None, typical_largest: float | None, size_factor: float,
@@ -195,8 +190,8 @@ def prompt_alignment(*, size_requested: bool, largest_extent: float | None, typi
     details: dict[str, Any] = {"request": text, "size": None, "joints": [], "warnings": list(warnings or []),
                                "not_counted": [{"phrase": p, "reason": "names no part of this object"} for p in unmatched_requests or []]}
     if not understood:
-        details.update(joint_state_score=None, joint_state_reason="no word of the request was understood")
-        details["size"] = {"score": None, "reason": "no word of the request was understood"}
+        why = "no word of the request was understood"
+        details.update(joint_state_score=None, joint_state_reason=why, size={"score": None, "reason": why})
         return _result("prompt_alignment", 0.0, "fraction", "nothing understood: not aligned", details)
     halves = []
     if typical_largest and largest_extent:
@@ -228,5 +223,5 @@ def prompt_alignment(*, size_requested: bool, largest_extent: float | None, typi
             halves.append(js)
     else:
         details.update(joint_state_score=None, joint_state_reason="the request asks for no joint state")
-    value = float(np.mean(halves)) if halves else None
-    return _result("prompt_alignment", value, "fraction", "reported: 0.5 size + 0.5 joint state, each 1 / 0.5 / 0", details)
+    return _result("prompt_alignment", float(np.mean(halves)) if halves else None, "fraction",
+                   "reported: 0.5 size + 0.5 joint state, each 1 / 0.5 / 0", details)
