@@ -33,14 +33,9 @@ def _is_asset(path: Path) -> bool:
 def _model_files(folder: Path) -> list[Path]:
     """The MJCF and USD files directly in ``folder``; MJCF files whose root element is not ``<mujoco>`` (include
     fragments such as ``<mujocoinclude>``) are parts of other files, not assets."""
-    out = []
-    for f in sorted(folder.iterdir()):
-        if not f.is_file() or f.suffix.lower() not in (*staging.MJCF_SUFFIXES, *staging.USD_SUFFIXES):
-            continue
-        fmt = FORMATS.get(staging.input_format(f))
-        if fmt is not None and fmt.is_model(f):
-            out.append(f)
-    return out
+    return [f for f in sorted(folder.iterdir())
+            if f.is_file() and f.suffix.lower() in (*staging.MJCF_SUFFIXES, *staging.USD_SUFFIXES)
+            and (fmt := FORMATS.get(staging.input_format(f))) is not None and fmt.is_model(f)]
 
 
 def find_assets(paths: list[Path | str]) -> list[AuditTarget]:

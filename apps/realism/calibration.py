@@ -56,9 +56,7 @@ def cohen_kappa(a: Sequence[Hashable], b: Sequence[Hashable]) -> float | None:
     p_o = sum(x == y for x, y in zip(a, b)) / n
     ca, cb = Counter(a), Counter(b)
     p_e = sum(ca[k] * cb[k] for k in ca.keys() | cb.keys()) / (n * n)
-    if p_e >= 1.0:
-        return None
-    return (p_o - p_e) / (1.0 - p_e)
+    return None if p_e >= 1.0 else (p_o - p_e) / (1.0 - p_e)
 
 
 class DefectTally(Strict):
@@ -219,8 +217,7 @@ def judge_calibration(verdicts: Sequence[JudgeVerdict], *, threshold: float = SE
     models = [_one_model(m, family[m], rows, threshold, min_defect_pairs) for m, rows in by_model.items()]
     kappas = []
     for m1, m2 in combinations(by_model, 2):
-        s1 = {v.pair_id: kept_side(v) for v in by_model[m1] if kept_side(v) is not None}
-        s2 = {v.pair_id: kept_side(v) for v in by_model[m2] if kept_side(v) is not None}
+        s1, s2 = ({v.pair_id: kept_side(v) for v in by_model[m] if kept_side(v) is not None} for m in (m1, m2))
         both = [p for p in s1 if p in s2]
         l1, l2 = [s1[p] for p in both], [s2[p] for p in both]
         kappas.append(KappaReport(model_1=m1, family_1=family[m1], model_2=m2, family_2=family[m2],

@@ -70,14 +70,8 @@ def _short(text: str) -> str:
 
 def _claims(text: str) -> set[str]:
     """Letters the prose's claims make the more realistic video."""
-    found: set[str] = set()
-    for pat in _FOR:
-        for m in pat.finditer(text):
-            found.update(g.upper() for g in m.groups() if g)
-    for pat in _AGAINST:
-        for m in pat.finditer(text):
-            found.update({"A": "B", "B": "A"}[g.upper()] for g in m.groups() if g)
-    return found
+    return ({g.upper() for pat in _FOR for m in pat.finditer(text) for g in m.groups() if g}
+            | {{"A": "B", "B": "A"}[g.upper()] for pat in _AGAINST for m in pat.finditer(text) for g in m.groups() if g})
 
 
 def read_reply(content: str, *, finish_reason: str | None = None, refusal: str | None = None) -> Reading:
@@ -94,9 +88,9 @@ def read_reply(content: str, *, finish_reason: str | None = None, refusal: str |
         return Reading(None, f"refused: {_short(refusal)}")
     if finish_reason == "content_filter":
         return Reading(None, "blocked by the provider's content filter")
-    text = content or ""
+    text, cut = content or "", " (cut off at the token limit)" if finish_reason == "length" else ""
     if not text.strip():
-        return Reading(None, "empty reply" + (" (cut off at the token limit)" if finish_reason == "length" else ""))
+        return Reading(None, "empty reply" + cut)
     try:
         obj = parse_json_strict(text)
     except ReplyInvalid:
@@ -112,5 +106,4 @@ def read_reply(content: str, *, finish_reason: str | None = None, refusal: str |
     if len(letters) == 1:
         return Reading(letters.pop(), _short(text))  # type: ignore[arg-type]
     why = "names both videos as more realistic" if letters else "names no video as more realistic"
-    cut = " (cut off at the token limit)" if finish_reason == "length" else ""
     return Reading(None, f"prose that {why}{cut}: {_short(text)}")

@@ -78,8 +78,8 @@ def _page(title: str, body: str, status: int = 200) -> "HTMLResponse":
 
 
 def _start_page(error: str = "", status: int = 200) -> "HTMLResponse":
-    message = f"<p class=\"error\" id=\"error\">{html_text(error)}</p>" if error else ""
-    return _page("Realism rating", _PAGES["start"].format(message=message), status)
+    return _page("Realism rating", _PAGES["start"].format(
+        message=f"<p class=\"error\" id=\"error\">{html_text(error)}</p>" if error else ""), status)
 
 
 def form_token(secret: bytes, rater: str) -> str:
@@ -130,13 +130,8 @@ def _error_page(code: str, message: str, rater: str | None = None) -> "HTMLRespo
 def _media_table(store: RatingStore) -> dict[tuple[int, str, int, str], Path]:
     """(pair index, slot, view index, kind) -> the file ``pairs.json`` names (PairSetError when one is missing or
     outside the folder)."""
-    table = {}
-    for i, pair in enumerate(store.pairs):
-        for slot in ("a", "b"):
-            for v, clip in enumerate(side(pair, slot).clips):
-                for kind in _KINDS:  # video, poster
-                    table[(i, slot, v, kind)] = media_path(store.folder, getattr(clip, kind))
-    return table
+    return {(i, slot, v, kind): media_path(store.folder, getattr(clip, kind)) for i, pair in enumerate(store.pairs)
+            for slot in ("a", "b") for v, clip in enumerate(side(pair, slot).clips) for kind in _KINDS}  # video, poster
 
 
 async def _answer(store: RatingStore, secret: bytes, rater: str, request: "Request") -> "Response":
@@ -147,14 +142,14 @@ async def _answer(store: RatingStore, secret: bytes, rater: str, request: "Reque
     origin = request.headers.get("origin")
     if origin is not None and origin.lower() != f"{request.url.scheme}://{request.headers.get('host', '')}".lower():
         return _error_page("ORIGIN_REFUSED", "refused: the answer was sent from another site")
-    length = request.headers.get("content-length")
+    length, too_large = request.headers.get("content-length"), f"the answer is larger than {MAX_FORM_BYTES} bytes"
     if length is not None and (not length.strip().isdigit() or int(length) > MAX_FORM_BYTES):
-        return _error_page("ANSWER_TOO_LARGE", f"the answer is larger than {MAX_FORM_BYTES} bytes")
+        return _error_page("ANSWER_TOO_LARGE", too_large)
     body = bytearray()
     async for chunk in request.stream():  # a chunked body: read only up to the cap
         body += chunk
         if len(body) > MAX_FORM_BYTES:
-            return _error_page("ANSWER_TOO_LARGE", f"the answer is larger than {MAX_FORM_BYTES} bytes")
+            return _error_page("ANSWER_TOO_LARGE", too_large)
     try:
         form = {k: v[0] for k, v in parse_qs(body.decode("utf-8"), keep_blank_values=True).items()}
     except UnicodeDecodeError:
@@ -172,8 +167,8 @@ async def _answer(store: RatingStore, secret: bytes, rater: str, request: "Reque
         store.record(rater, store.pairs[index].pair_id, form.get("choice", ""), score=score,
                      comment=form.get("comment", ""))
     except ValueError as exc:  # RatingError, or a number that is not one
-        code = exc.code if isinstance(exc, RatingError) else "ANSWER_INVALID"
-        message = str(exc) if isinstance(exc, RatingError) else "pair and score must be whole numbers"
+        code, message = ((exc.code, str(exc)) if isinstance(exc, RatingError)
+                         else ("ANSWER_INVALID", "pair and score must be whole numbers"))
         return _error_page(code, message, rater if code != "RATER_INVALID" else None)
     except sqlite3.Error as exc:  # the database failed under the app: the rater is told, nothing is pretended
         return _error_page("STORE_FAILED", f"the answer could not be stored ({exc}); tell the person running "

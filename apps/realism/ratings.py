@@ -328,8 +328,7 @@ class RatingStore:
         """Rewrite ``ratings.parquet`` from the database, atomically (:func:`asset2sim.atomic.write_bytes`),
         readable by the file's group; returns its path. Raises OSError when the folder cannot be written."""
         with self._sync_lock:
-            data = ratings_parquet_bytes(self.ratings())
-            atomic.write_bytes(self.parquet, data)
+            atomic.write_bytes(self.parquet, ratings_parquet_bytes(self.ratings()))
             mode = os.stat(self.parquet).st_mode
             if not mode & stat.S_IRGRP:
                 os.chmod(self.parquet, stat.S_IMODE(mode) | stat.S_IRGRP)
