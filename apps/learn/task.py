@@ -22,12 +22,8 @@ from asset2sim.tasks.check.probes import (
 )
 from asset2sim.tasks.check.task_spec import parse_task
 from asset2sim.tasks.check.task_tier import hold_required_by_label
-from asset2sim.refined_asset import RefinedAsset
-from asset2sim.tasks.evaluation.folder_reading import EvaluationError, closed_ends, sim_object, task_joints
+from asset2sim.tasks.evaluation.folder_reading import closed_ends, read_asset, sim_object, task_joints
 from asset2sim.tasks.geometry.closed_state import ClosedState
-from asset2sim.tasks.ingest import partnet_mobility
-from asset2sim.tasks.ingest.errors import AssetError
-from asset2sim.tasks.ingest.extract import extract_asset
 
 #: Common start of the task joint per action, opening fraction (``start="task"``).
 START_FRACTION: dict[str, float] = {"close": 0.5, "open": 0.0}
@@ -138,12 +134,8 @@ def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None =
     range > 0 to act on) or EvaluationError (unreadable asset)."""
     if start not in ("task", "asset"):
         raise ValueError(f"start must be 'task' or 'asset', got {start!r}")
-    try:
-        urdf = partnet_mobility.find_urdf(asset).resolve()
-        desc = extract_asset(asset, category=category)
-    except AssetError as exc:
-        raise EvaluationError(str(exc)) from exc
-    files = RefinedAsset(urdf.parent, urdf.name)
+    files, desc = read_asset(asset, category)
+    urdf = files.urdf_path
     obj, _ = sim_object(files, conventions)
     cat = category or desc.category or "Generic"
     chosen, tj_rule = task_joints(desc, cat, Path(reference) if reference is not None else None)

@@ -26,12 +26,8 @@ from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.realism import Clip, ClipPair, PairSet, PairSide
 from asset2sim.tasks.evaluation.clips import (CLIP_FPS, CLIP_SIZE, CLIP_VIEWS, draw_frames, fit_cameras, fit_poses, pose_points,
                                               write_clip)
-from asset2sim.refined_asset import RefinedAsset
-from asset2sim.tasks.evaluation.folder_reading import EvaluationError, closed_ends, sim_object, task_joints
+from asset2sim.tasks.evaluation.folder_reading import closed_ends, read_asset, sim_object, task_joints
 from asset2sim.tasks.geometry.closed_state import ClosedState
-from asset2sim.tasks.ingest import partnet_mobility
-from asset2sim.tasks.ingest.errors import AssetError
-from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.geometry.render import SceneRenderer
 from asset2sim.tasks.geometry.render_camera import view_spec
 from asset2sim.apps.realism.pair_set import write_pair_set
@@ -61,20 +57,11 @@ def pushed_joints(folder: Path | str, limit: int = 1) -> list[tuple[str, ClosedS
     """The joints a pair of an asset folder pushes: its task-relevant joints (:func:`asset2sim.tasks.evaluation.folder_reading.task_joints`)
     then its other movable ones, those that can open, at most ``limit``, with their closed ends (rad or m;
     :func:`asset2sim.tasks.evaluation.folder_reading.closed_ends`). Raises EvaluationError: the folder cannot be read."""
-    files, desc = _read(folder)
+    files, desc = read_asset(folder)
     chosen, _ = task_joints(desc, desc.category or "Generic")
     names = list(dict.fromkeys([*chosen, *(j.name for j in desc.movable_joints())]))
     closed, _ = closed_ends(files, names)
     return [(n, closed[n]) for n in names if closed[n].open_range > 0][:limit]
-
-
-def _read(folder: Path | str) -> tuple[RefinedAsset, object]:
-    """(the folder's files, its asset description). Raises EvaluationError: it cannot be read."""
-    try:
-        urdf = partnet_mobility.find_urdf(folder).resolve()
-        return RefinedAsset(urdf.parent, urdf.name), extract_asset(folder)
-    except AssetError as exc:
-        raise EvaluationError(str(exc)) from exc
 
 
 @dataclass(frozen=True)
@@ -99,7 +86,7 @@ def subject_of(folder: Path | str, object_id: str, conventions: SimConventions |
     if not joints:
         return None
     joint, closed = joints[0]
-    files, desc = _read(folder)
+    files, desc = read_asset(folder)
     side = side_of(sim_object(files)[0], "asset2sim")
     report = files.record("report.json") or {}
     return Subject(side=side, joint=joint, closed=closed, force_limit=drive_limit(side, joint, closed, conventions),

@@ -23,6 +23,7 @@ from asset2sim.schemas.report import RefineReport
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.geometry.urdf_closed import measure_closed_ends
 from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.interpret.part_labels import labels_from_names
 from asset2sim.tasks.interpret.part_priors import push_buttons
@@ -33,6 +34,16 @@ from asset2sim.urdf import UrdfError, UrdfModel, read_urdf
 
 class EvaluationError(ValueError):
     """The asset cannot be evaluated (the message names the file and why)."""
+
+
+def read_asset(asset: Path | str, category: str | None = None) -> tuple[RefinedAsset, AssetDescription]:
+    """(the files of the asset folder or URDF ``asset``, its URDF found as refine finds one; its description, of
+    ``category`` when given). Raises EvaluationError: it cannot be read."""
+    try:
+        urdf = partnet_mobility.find_urdf(asset).resolve()
+        return RefinedAsset(urdf.parent, urdf.name), extract_asset(asset, category=category)
+    except AssetError as exc:
+        raise EvaluationError(str(exc)) from exc
 
 
 def reference_state(ref: partnet_mobility.GenSim2Reference, model: UrdfModel, scale: float | None) -> tuple[dict[str, float], str]:
