@@ -104,8 +104,7 @@ class TaskEnv(gym.Env):
     def joint_fraction(self) -> tuple[float, float]:
         """(opening fraction, its rate 1/s) of the task joint now."""
         q, qd = self.session.joint_state(self.task.joint)
-        rng = self.task.closed.open_range
-        return self.task.fraction(q), float(self.task.closed.direction * qd / rng)
+        return self.task.fraction(q), float(self.task.closed.direction * qd / self.task.closed.open_range)
 
     def _obs(self) -> np.ndarray:
         f, fd = self.joint_fraction()

@@ -290,8 +290,7 @@ class _ArticulationTaskEnv(BaseEnv):
                 setattr(self, k, torch.tensor([getattr(o, k) for o in objs], dtype=torch.float32))
             self.opens = torch.tensor([o.action == "open" for o in objs], dtype=torch.bool)
             self.rest_speed = torch.tensor([REST_SPEED.get(o.joint_type, 1.0) for o in objs], dtype=torch.float32)
-            dof = self.object.max_dof
-            start = np.zeros((len(objs), dof))
+            start = np.zeros((len(objs), self.object.max_dof))
             for i, o in enumerate(objs):
                 q = o.start_qpos(self._joint_names[i])
                 start[i, :len(q)] = q
@@ -389,9 +388,8 @@ class _ArticulationTaskEnv(BaseEnv):
     def evaluate(self) -> dict:
         f = self.task_fraction()
         reached = self._reached(f)
-        at_rest = self.task_speed() <= self.rest_speed
-        return {"success": reached & at_rest, "reached": reached, "fraction": f, "progress": self._progress(f),
-                "grasp_pos": self.grasp_positions()}
+        return {"success": reached & (self.task_speed() <= self.rest_speed), "reached": reached, "fraction": f,
+                "progress": self._progress(f), "grasp_pos": self.grasp_positions()}
 
     def _get_obs_extra(self, info: dict):
         obs = dict(tcp_pose=self.agent.tcp.pose.raw_pose)
@@ -402,12 +400,10 @@ class _ArticulationTaskEnv(BaseEnv):
         return obs
 
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        dist = torch.linalg.norm(self.agent.tcp.pose.p - info["grasp_pos"], axis=1)
-        reaching = 1 - torch.tanh(5 * dist)
+        reaching = 1 - torch.tanh(5 * torch.linalg.norm(self.agent.tcp.pose.p - info["grasp_pos"], axis=1))
         progress = info["progress"]
         reaching = torch.where(progress > 1e-3, torch.full_like(reaching, 2.0), reaching)
-        moving = torch.where(info["reached"], torch.full_like(progress, 3.0), 2 * progress)
-        reward = reaching + moving
+        reward = reaching + torch.where(info["reached"], torch.full_like(progress, 3.0), 2 * progress)
         return torch.where(info["success"], torch.full_like(reward, MAX_REWARD), reward)
 
     def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):

@@ -22,6 +22,7 @@ from brax.envs import training as brax_training
 from brax.envs.base import Env, State
 
 from asset2sim.apps.learn.task import LearnConfig, LearnTask
+from asset2sim.engines.loading import BOX_CORNERS
 from asset2sim.engines.mjcf import mujoco_messages, urdf_to_mjcf
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
@@ -123,8 +124,8 @@ def build_scene(folder: Path | str, task: LearnTask, config: LearnConfig | None 
     m_eff = max(float(m.body_mass[body]) * EFFECTIVE_MASS_SHARE, 1e-4)
     lim = cfg.limits
     mujoco.mj_forward(m, d)
-    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
-    low = min((float(np.min((d.geom_xpos[g] + (m.geom_aabb[g][:3] + corners * m.geom_aabb[g][3:]) @ d.geom_xmat[g].reshape(3, 3).T)[:, 2]))
+    low = min((float(np.min((d.geom_xpos[g] + (m.geom_aabb[g][:3] + BOX_CORNERS * m.geom_aabb[g][3:])
+                             @ d.geom_xmat[g].reshape(3, 3).T)[:, 2]))
                for g in range(m.ngeom) if m.geom_bodyid[g] > 0 and m.geom_contype[g] | m.geom_conaffinity[g]), default=0.0)
     lo_hi = (float(m.jnt_range[jid][0]), float(m.jnt_range[jid][1])) if m.jnt_limited[jid] else (-np.inf, np.inf)
     return MjxScene(model=m, qpos=d.qpos.copy(), qvel=d.qvel.copy(), qadr=qadr, dadr=dadr, limits=lo_hi, body=body,

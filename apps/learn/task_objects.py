@@ -194,7 +194,8 @@ def task_object(folder: str | Path, action: str, task: str | None = None, *, def
                      open_range=open_range, start_fraction=lt.start_fraction, target_fraction=target, reach_fraction=reach,
                      initial_state=dict(lt.initial_state), springs=dict(lt.springs), fixed_root=bool(lt.root_fixed),
                      grasp_link="", grasp_point=np.zeros(3), base_z=0.0, task=text, notes=list(lt.notes) + notes)
-    q0 = dict(zip([j.name for j in model.movable_joints], obj.start_qpos([j.name for j in model.movable_joints])))
+    names = [j.name for j in model.movable_joints]
+    q0 = dict(zip(names, obj.start_qpos(names)))
     link, point, rule = contact_point_rule(_Kinematics(model, q0), lt.joint, model, opening_direction=direction)
     obj.grasp_link, obj.grasp_point = _moving_link(model, link, np.asarray(point, float))
     obj.notes.append(f"grasp point: {rule} of {link}" + (f" (on {obj.grasp_link}, which carries it)" if obj.grasp_link != link else ""))
