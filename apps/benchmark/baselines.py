@@ -80,8 +80,8 @@ def make_defaults(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
         scale = 1.0
         notes.append("no reference scale: raw scale 1.0")
     urdf = scale_urdf(src, out_dir / URDF_NAME, scale, header=f"asset2sim baseline 'defaults' of {row.id} at scale {scale}")
-    joints = urdf_joints(urdf)
-    state = {n: _clip(0.0, j["lower"], j["upper"]) for n, j in joints.items() if j["type"] in ("revolute", "continuous", "prismatic")}
+    state = {n: _clip(0.0, j["lower"], j["upper"]) for n, j in urdf_joints(urdf).items()
+             if j["type"] in ("revolute", "continuous", "prismatic")}
     write_json(out_dir / STATE_NAME, {"initial_joint_positions": state})
     notes.append("no <inertial>: PyBullet uses 1 kg and inertia diag(1,1,1) kg*m^2 per link; no <dynamics>: zero damping and friction")
     write_json(out_dir / "baseline.json", {"method": "defaults", "asset_id": row.id, "source": str(src), "scale": scale,

@@ -181,7 +181,7 @@ def write_benchmark_outputs(records: list[dict[str, Any]], methods: list[str], o
         meta["parquet_error"] = f"{type(exc).__name__}: {exc}"
     flat = [dict(subset=s, method=m, **row) for s, t in tables.items() for m, row in t.items()]
     paths["summary.csv"] = write_text(out_dir / "summary.csv", csv_text(pd.DataFrame(flat)))
-    chart = plot_method_summary(tables["all rows"])
-    paths["summary.html"] = write_text(out_dir / "summary.html", render_benchmark_summary(tables, RESEARCH_NUMBERS, meta, chart))
+    paths["summary.html"] = write_text(out_dir / "summary.html", render_benchmark_summary(
+        tables, RESEARCH_NUMBERS, meta, plot_method_summary(tables["all rows"])))
     paths["index.html"] = write_text(out_dir / "index.html", render_benchmark_index(records, meta))
     return paths

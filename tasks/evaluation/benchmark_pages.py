@@ -68,9 +68,8 @@ def render_benchmark_index(records: list[dict[str, Any]], meta: dict[str, Any]) 
             return f"<td class='{cls}'>{fmt(r.get(name))}</td>"
 
         link = f"<a href='{esc(r['report'])}'>report</a>" if r.get("report") else "-"
-        allcls = "pass" if r.get("all_pass") else "fail"
         rows.append(
-            f"{lead}<td class='{allcls}'>{'pass' if r.get('all_pass') else 'FAIL'}</td>"
+            f"{lead}<td class='{'pass' if r.get('all_pass') else 'fail'}'>{'pass' if r.get('all_pass') else 'FAIL'}</td>"
             + "".join(map(v, ("penetration", "rest_stability", "oscillation", "ground_penetration", "divergence", "state_hold",
                               "probes", "total_mass")))
             + f"<td class='num'>{fmt(r.get('scale_deviation'))}</td><td class='num'>{fmt(r.get('initial_joint_deviation'))}</td>"

@@ -236,15 +236,14 @@ def sweep_clips(urdf: Path | str, sweep: SweepRun, joints: Sequence[str], others
         RenderError / FileNotFoundError: the URDF cannot be drawn.
         OSError: the folder cannot be written.
     """
-    folder, max_joints = Path(out_dir) / CLIPS_DIR, MAX_CLIP_JOINTS
+    folder = Path(out_dir) / CLIPS_DIR
     by_joint = {js.joint: js for js in sweep.joints}
     clips: list[Clip] = []
-    skipped: dict[str, str] = {}
     chosen = list(dict.fromkeys(joints))
-    for name in chosen[max_joints:]:
-        skipped[name] = f"only {max_joints} joints get clips (one of each kind of part first, the task's first)"
+    skipped = {name: f"only {MAX_CLIP_JOINTS} joints get clips (one of each kind of part first, the task's first)"
+               for name in chosen[MAX_CLIP_JOINTS:]}
     todo = []
-    for name in chosen[:max_joints]:
+    for name in chosen[:MAX_CLIP_JOINTS]:
         js = by_joint.get(name)
         if js is None:
             skipped[name] = sweep.skipped.get(name, "not swept")

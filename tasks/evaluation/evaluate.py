@@ -111,7 +111,6 @@ def semantic_metrics(ctx: EstimationContext, model: UrdfModel, state: dict[str, 
     Raises:
         EvaluationError: the reference folder or its files cannot be read.
     """
-    out: list[MetricResult] = []
     ref = None
     if reference is not None:
         try:
@@ -119,15 +118,13 @@ def semantic_metrics(ctx: EstimationContext, model: UrdfModel, state: dict[str, 
             ref_state, rule = reference_state(ref, model, scale)
         except (ValueError, OSError, UrdfError) as exc:
             raise EvaluationError(f"reference {reference}: {exc}") from exc
-    out.append(sem.scale_deviation(scale, ref.scale if ref is not None else None, scale_source=scale_source))
     if ref is None:
-        out.append(MetricResult(name="initial_joint_deviation", value=None, unit="rad", passed=None,
-                                details={"reason": "no reference given"}, engine="none"))
+        m = MetricResult(name="initial_joint_deviation", value=None, unit="rad", passed=None,
+                         details={"reason": "no reference given"}, engine="none")
     else:
         tj = [j for j in ref.task_joints if j in state] or task_relevant_joints(ctx)
         m = sem.initial_joint_deviation(state, ref_state, tj, {j.name: j.type for j in model.joints})
         m.details["reference_rule"] = rule
-        out.append(m)
     extents = np.asarray(ctx.closed_extents, float) * length_scale
     largest = float(np.max(extents)) if extents.size and float(np.max(extents)) > 0 else None
     prior = size_mass_prior(ctx.category, ctx.request)
@@ -137,9 +134,8 @@ def semantic_metrics(ctx: EstimationContext, model: UrdfModel, state: dict[str, 
                          "base_mass_range_kg": prior.get("base_mass_range"), "prior_source": prior.get("source")})
     if rng is not None:
         mass.threshold = f"{rng[0]:.3g} kg <= m <= {rng[1]:.3g} kg (category range scaled to the asset's size, f = {f:.3g})"
-    out.append(mass)
-    out.append(_prompt_alignment(ctx, model, state, closed, resolution, prior, largest))
-    return out
+    return [sem.scale_deviation(scale, ref.scale if ref is not None else None, scale_source=scale_source), m, mass,
+            _prompt_alignment(ctx, model, state, closed, resolution, prior, largest)]
 
 
 def _prompt_alignment(ctx: EstimationContext, model: UrdfModel, state: dict[str, float], closed: dict[str, ClosedState],

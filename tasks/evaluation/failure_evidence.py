@@ -244,12 +244,12 @@ def evidence_section(runs: dict, urdf: Path | str, dt: float, svg: Callable[[byt
     for f in penetration_failures(metrics or []):
         if f.link_a is None:  # a measure that names no pair: nothing to draw
             continue
-        engine, kind, a, b, depth, nested = f.metric.engine, f.kind, f.link_a, f.link_b, f.depth_mm, f.kind == "parent-child"
-        what = (f"'{b}' inside its parent '{a}'" if nested else f"'{a}' and '{b}'")
+        a, b, nested = f.link_a, f.link_b, f.kind == "parent-child"
+        what = f"'{b}' inside its parent '{a}'" if nested else f"'{a}' and '{b}'"
         poses: list[Pose] = [("at the initial state", others, np.eye(3))]
         if nested:
             poses.append(("as modelled", dict(modelled_state or {}), np.eye(3)))
-        items.append((_h3(f"penetration ({kind}, {engine}): {what}, {depth:.1f} mm deep at the initial state")
+        items.append((_h3(f"penetration ({f.kind}, {f.metric.engine}): {what}, {f.depth_mm:.1f} mm deep at the initial state")
                       + f"<p class='small'>{html_text(a)} in red, {html_text(b)} in blue, every other part grey.</p>",
                       lambda poses=poses: poses, Highlight((a, b))))
     for engine, part, stroke in operability_failures(metrics or []):

@@ -142,8 +142,8 @@ def _request_warnings(d: dict) -> str:
 def _prompt_details(ev) -> str:
     m = ev.metric("prompt_alignment")
     if m is None or m.value is None:
-        reason = (m.details.get("reason") if m else None) or "not scored"
-        return f"<p class='small'>prompt alignment: {esc(reason)}</p>" + (_request_warnings(m.details) if m else "")
+        return (f"<p class='small'>prompt alignment: {esc((m.details.get('reason') if m else None) or 'not scored')}</p>"
+                + (_request_warnings(m.details) if m else ""))
     d = m.details
     size = d.get("size") or {}
     rows = [f"<tr><td>size</td><td>{esc(d.get('size_class') or 'regular (not stated)')}</td>"
@@ -285,8 +285,7 @@ def engines_section(report: dict | None) -> str:
 
     cells = []
     for r in rows:
-        held = r.get("joints_held") or {}
-        held_text = ", ".join(f"{esc(j)}{'' if ok else ' (moves)'}" for j, ok in held.items()) or "-"
+        held_text = ", ".join(f"{esc(j)}{'' if ok else ' (moves)'}" for j, ok in (r.get("joints_held") or {}).items()) or "-"
         cells.append(f"\n<tr><td>{esc(r.get('engine'))}</td><td>{esc(r.get('status'))} <span class='small'>{esc(r.get('reason') or '')}</span>"
                      f"</td><td>{verdict_cell(r.get('rest_stability'))}</td><td class='small'>{held_text}</td>"
                      f"<td>{breakaway_cell(r.get('breakaway'))}</td></tr>")

@@ -46,15 +46,10 @@ def initial_joint_deviation(state: dict[str, float], reference_state: dict[str, 
     """``initial_joint_deviation``: mean |q - q_ref| (rad or m) over the task-relevant
     ``joints`` found in both states (others in ``details.skipped``); unit ``rad``,
     ``m`` when all are prismatic, else ``mixed``; value None when none compares."""
-    per = {}
-    skipped = []
-    for j in joints:
-        if j not in state or j not in reference_state:
-            skipped.append(j)
-            continue
-        per[j] = {"q": float(state[j]), "q_ref": float(reference_state[j]),
-                  "deviation": abs(float(state[j]) - float(reference_state[j])),
-                  "unit": "m" if joint_types.get(j) == "prismatic" else "rad"}
+    skipped = [j for j in joints if j not in state or j not in reference_state]
+    per = {j: {"q": float(state[j]), "q_ref": float(reference_state[j]),
+               "deviation": abs(float(state[j]) - float(reference_state[j])),
+               "unit": "m" if joint_types.get(j) == "prismatic" else "rad"} for j in joints if j not in skipped}
     units = {v["unit"] for v in per.values()}
     unit = units.pop() if len(units) == 1 else ("mixed" if units else "rad")
     value = float(np.mean([v["deviation"] for v in per.values()])) if per else None
