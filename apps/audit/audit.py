@@ -150,9 +150,8 @@ def _overlay_springs(asset: AssetDescription, dp: declared_mod.DeclaredPhysics) 
         springs = springs_from_overlay(asset.source_dir)
     except ValueError as exc:
         raise AuditError(str(exc)) from exc
-    joints = {n: replace(j, stiffness=springs[n].stiffness, reference=springs[n].reference) if n in springs else j
-              for n, j in dp.joints.items()}
-    return replace(dp, joints=joints)
+    return replace(dp, joints={n: replace(j, stiffness=springs[n].stiffness, reference=springs[n].reference) if n in springs
+                               else j for n, j in dp.joints.items()})
 
 
 def _state_file(asset: AssetDescription) -> tuple[dict[str, float], RootMount | None]:

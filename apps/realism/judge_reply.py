@@ -88,7 +88,8 @@ def read_reply(content: str, *, finish_reason: str | None = None, refusal: str |
         return Reading(None, f"refused: {_short(refusal)}")
     if finish_reason == "content_filter":
         return Reading(None, "blocked by the provider's content filter")
-    text, cut = content or "", " (cut off at the token limit)" if finish_reason == "length" else ""
+    text = content or ""
+    cut = " (cut off at the token limit)" if finish_reason == "length" else ""
     if not text.strip():
         return Reading(None, "empty reply" + cut)
     try:

@@ -135,10 +135,9 @@ def push_release(side: PhysicsSide, joint: str, closed: ClosedState, force_limit
     conv = conventions or SimConventions()
     if not force_limit > 0 or not closed.open_range > 0:
         raise ValueError(f"joint {joint!r}: force limit {force_limit} and open range {closed.open_range} must be > 0")
-    prismatic_scale = side.scale
     session = _session(side, joint, conv)
     try:
-        speed = closed.open_range / cfg.traverse_time * (prismatic_scale if session.joint_types[joint] == "prismatic" else 1.0)
+        speed = closed.open_range / cfg.traverse_time * (side.scale if session.joint_types[joint] == "prismatic" else 1.0)
         # the drive's whole force is the limit: the joint's own friction is a load within it (a hand pushing a stiff hinge)
         drive = max(float(force_limit) - float(session.held_physics().joints[joint].friction), 0.0)
         dt = conv.timestep

@@ -142,7 +142,8 @@ async def _answer(store: RatingStore, secret: bytes, rater: str, request: "Reque
     origin = request.headers.get("origin")
     if origin is not None and origin.lower() != f"{request.url.scheme}://{request.headers.get('host', '')}".lower():
         return _error_page("ORIGIN_REFUSED", "refused: the answer was sent from another site")
-    length, too_large = request.headers.get("content-length"), f"the answer is larger than {MAX_FORM_BYTES} bytes"
+    length = request.headers.get("content-length")
+    too_large = f"the answer is larger than {MAX_FORM_BYTES} bytes"
     if length is not None and (not length.strip().isdigit() or int(length) > MAX_FORM_BYTES):
         return _error_page("ANSWER_TOO_LARGE", too_large)
     body = bytearray()
