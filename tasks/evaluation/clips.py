@@ -93,7 +93,7 @@ class Trajectory:
         idx = np.clip(np.searchsorted(self.t, want), 0, len(self.t) - 1)
         prev = np.clip(idx - 1, 0, len(self.t) - 1)
         idx = np.where(np.abs(self.t[prev] - want) <= np.abs(self.t[idx] - want), prev, idx)
-        return sorted(set(int(i) for i in idx))
+        return sorted({int(i) for i in idx})
 
 
 def sweep_trajectory(js: JointSweep, others: Mapping[str, float]) -> Trajectory:

@@ -89,12 +89,12 @@ def evidence_runs(check: postcheck.PostCheck, probes: list[Any] | None = None) -
     """engine -> :class:`EngineRun` of a post-check: PyBullet's rest test and manipulation runs (and ``probes``), the
     other engines' verdicts only (their metrics, no recording)."""
     rec = check.recording
-    runs = {"pybullet": EngineRun("pybullet", trace=rec.trace if rec else check.trace, root_series=rec.root_series if rec else None,
-                                  joint_series=dict(rec.joint_series) if rec else {}, robust_rest=check.runs.get("robust_rest"),
-                                  sweep=check.runs.get("joint_sweep"), task=check.runs.get("task_execution"), probes=list(probes or []))}
-    for e, results in check.engine_results.items():
-        runs[e] = EngineRun(e, error=next((str(m.details.get("error")) for m in results if m.details.get("error")), None))
-    return runs
+    return {"pybullet": EngineRun(
+                "pybullet", trace=rec.trace if rec else check.trace, root_series=rec.root_series if rec else None,
+                joint_series=dict(rec.joint_series) if rec else {}, robust_rest=check.runs.get("robust_rest"),
+                sweep=check.runs.get("joint_sweep"), task=check.runs.get("task_execution"), probes=list(probes or [])),
+            **{e: EngineRun(e, error=next((str(m.details.get("error")) for m in results if m.details.get("error")), None))
+               for e, results in check.engine_results.items()}}
 
 
 # ---------------------------------------------------------------- the semantic measures

@@ -116,11 +116,8 @@ def closed_ends(files: RefinedAsset, joints: list[str] | None = None) -> tuple[d
         measured = measure_closed_ends(UrdfFile(files.urdf_path), pushed).closed
     except Exception:  # the geometry cannot be measured: every joint closed at its limit nearest 0
         measured = {}
-    out = {}
-    for n in names:
-        c = measured.get(n)
-        out[n] = c if c is not None and c.open_range > 0 else _closed_fallback(model.joint(n))
-    return out, "geometry (closed_state)"
+    return {n: c if (c := measured.get(n)) is not None and c.open_range > 0 else _closed_fallback(model.joint(n))
+            for n in names}, "geometry (closed_state)"
 
 
 def _closed_fallback(j) -> ClosedState:

@@ -127,8 +127,8 @@ def _declared_mass(side: InputSide) -> str:
     dp = side.physics
     if dp is None:
         return side.error or "-"
-    declared = {n: ln.mass for n, ln in dp.links.items() if ln.how == "declared" and ln.mass is not None}
-    inferred = {n: ln.mass for n, ln in dp.links.items() if ln.how == "inferred" and ln.mass is not None}
+    declared, inferred = ({n: ln.mass for n, ln in dp.links.items() if ln.how == how and ln.mass is not None}
+                          for how in ("declared", "inferred"))
     if not declared and not inferred:
         return "none declared"
     total = sum(declared.values()) + sum(inferred.values())

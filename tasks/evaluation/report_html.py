@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any, Iterable
 
 import numpy as np
 
@@ -120,13 +121,18 @@ def _penetration_details(ev) -> str:
     return "".join(out)
 
 
+def _listed(items: Iterable[Any]) -> str:
+    """The ``<li>`` items (HTML) of ``items``, each escaped."""
+    return "".join(f"<li>{esc(x)}</li>" for x in items)
+
+
 def why_section(ev) -> str:
     """``Why it failed``, at the top of the report: for every failing tier, one sentence per failing measure naming
     the tier, the parts, the measured value against its threshold and what to do, the sentences the terminal prints
     (:func:`~asset2sim.tasks.check.failure_reasons.why_it_failed`); empty when ready. The failing trials' evidence follows
     under the verdicts."""
     why = why_it_failed(ev.metrics)
-    return ("<h2>Why it failed</h2><ul class='why'>" + "".join(f"<li>{esc(w)}</li>" for w in why) + "</ul>") if why else ""
+    return f"<h2>Why it failed</h2><ul class='why'>{_listed(why)}</ul>" if why else ""
 
 
 def _request_warnings(d: dict) -> str:
@@ -136,7 +142,7 @@ def _request_warnings(d: dict) -> str:
         items.append("not counted in prompt alignment: " + ", ".join(f"'{n['phrase']}'" for n in d["not_counted"]))
     if not items:
         return ""
-    return "<div class='warn' style='padding:6px 12px;border-radius:6px'><b>Request warnings</b><ul>" + "".join(f"<li>{esc(w)}</li>" for w in items) + "</ul></div>"
+    return f"<div class='warn' style='padding:6px 12px;border-radius:6px'><b>Request warnings</b><ul>{_listed(items)}</ul></div>"
 
 
 def _prompt_details(ev) -> str:
@@ -245,7 +251,7 @@ def as_asked_block(ev) -> str:
     if m.passed:
         return (f"<p class='small'>As asked: every part and state the request names is applied ({int(d.get('graded') or 0)} "
                 "checked; states measured from the closed end).</p>")
-    items = "".join(f"<li>{esc(u.get('text') or u.get('phrase'))}</li>" for u in d.get("unmet") or [])
+    items = _listed(u.get("text") or u.get("phrase") for u in d.get("unmet") or [])
     if d.get("error"):
         items += f"<li>{esc(d['error'])}</li>"
     return ("<div class='fail' style='padding:6px 12px;border-radius:6px'><b>Not as asked</b> (failure mode "
@@ -263,8 +269,7 @@ def host_section(report: dict | None) -> str:
     """"Back into its package": the write-back of an MJCF or USD input (:func:`host_notes` of report.json's notes),
     empty for other inputs."""
     notes = host_notes(list((report or {}).get("notes") or []))
-    return ("<h2>Back into its package</h2><ul class='host'>" + "".join(f"<li>{esc(n)}</li>" for n in notes) + "</ul>"
-            if notes else "")
+    return f"<h2>Back into its package</h2><ul class='host'>{_listed(notes)}</ul>" if notes else ""
 
 
 def engines_section(report: dict | None) -> str:
@@ -386,7 +391,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
     if pb is not None and pb.probes:
         sections.append(svg_tag(plots.plot_probes(pb.probes), "probes"))
     sections += ["<h2>Physical parameters</h2>", parameter_table(ev)]
-    sections.append("<h2>Notes</h2><ul>" + "".join(f"<li>{esc(n)}</li>" for n in ev.notes) + "</ul>")
+    sections.append(f"<h2>Notes</h2><ul>{_listed(ev.notes)}</ul>")
     sections.append("<h2>What the checks mean</h2>" + table(("check", "unit", "what it measures"), (
         f"<tr><td>{esc(i.name)}</td><td>{esc(i.unit)}</td><td class='small'>{esc(i.description)}</td></tr>"
         for i in METRIC_INFO.values() if ev.metric(i.name) is not None)))
