@@ -146,11 +146,11 @@ class TaskEnv(gym.Env):
         p = self.grasp.grasp_point_world()
         self._p_reset = p.copy()
         if t.joint_type == "prismatic":
-            self._length = max(t.closed.open_range, 1e-3)
+            length = t.closed.open_range
         else:
             o, a = joint_frame_axis(s, t.joint, s.joint_child[t.joint])
-            r = (p - o) - ((p - o) @ a) * a
-            self._length = max(float(np.linalg.norm(r)), 1e-3)
+            length = float(np.linalg.norm((p - o) - ((p - o) @ a) * a))
+        self._length = max(length, 1e-3)
         self._watch = SupportWatch(s, s.link_names[0])
         self._steps = 0
         self._f_prev, _ = self.joint_fraction()

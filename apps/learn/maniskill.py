@@ -346,8 +346,7 @@ class _ArticulationTaskEnv(BaseEnv):
                 px.set_qf(passive.joint_forces(px.get_qpos()).astype(np.float32))
 
     def _gpu_passive_tables(self) -> None:
-        dof = self.object.max_dof
-        tabs = np.zeros((4, self.num_envs, dof))
+        tabs = np.zeros((4, self.num_envs, self.object.max_dof))
         for i, p in enumerate(self._passive):
             n = len(p.names)
             tabs[0, i, :n], tabs[1, i, :n], tabs[2, i, :n] = p.damping, p.stiffness, p.reference

@@ -147,11 +147,8 @@ def kept_side(v: JudgeVerdict) -> str | None:
 def kept_comparisons(verdicts: Sequence[JudgeVerdict], model: str | None = None) -> list[tuple[str, str]]:
     """(winner, loser) methods of every kept verdict on a plain (non-defect) pair, of ``model`` or of all
     models: the comparisons a Bradley-Terry fit takes."""
-    out = []
-    for v in verdicts:
-        if v.defect is None and (model is None or v.model == model) and kept_side(v) is not None:
-            out.append((v.winner, v.method_b if kept_side(v) == "a" else v.method_a))
-    return out
+    return [(v.winner, v.method_b if kept_side(v) == "a" else v.method_a) for v in verdicts
+            if v.defect is None and (model is None or v.model == model) and kept_side(v) is not None]
 
 
 def _one_model(model: str, family: str, rows: list[JudgeVerdict], threshold: float, min_defect_pairs: int) -> ModelCalibration:

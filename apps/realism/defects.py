@@ -103,14 +103,14 @@ def _penetration(model: UrdfModel, side: PhysicsSide, joint: str, closed: Closed
 def _scale_x3(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedState, force: float) -> PhysicsSide:
     scale_model(model, SCALE_FACTOR)
     prismatic = {j.name for j in model.joints if j.type == "prismatic"}
-    state = {k: v * SCALE_FACTOR if k in prismatic else v for k, v in side.initial_state.items()}
-    return replace(side, scale=side.scale * SCALE_FACTOR, initial_state=state)
+    return replace(side, scale=side.scale * SCALE_FACTOR,
+                   initial_state={k: v * SCALE_FACTOR if k in prismatic else v for k, v in side.initial_state.items()})
 
 
 def _slamming_spring(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedState, force: float) -> PhysicsSide:
     _joint(model, joint).dynamics = UrdfDynamics(damping=0.0, friction=0.0)
-    k = SLAM_SHARE * force / closed.open_range
-    return replace(side, springs={**side.springs, joint: Spring(stiffness=float(k), reference=float(closed.q_closed))})
+    return replace(side, springs={**side.springs, joint: Spring(stiffness=float(SLAM_SHARE * force / closed.open_range),
+                                                                reference=float(closed.q_closed))})
 
 
 #: Defect name -> what it does to the model (in place) and the side (returned).

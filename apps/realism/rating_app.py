@@ -164,8 +164,7 @@ async def _answer(store: RatingStore, secret: bytes, rater: str, request: "Reque
         if not 0 <= index < len(store.pairs):
             raise RatingError("PAIR_UNKNOWN", f"no pair {index}")
         score_text = form.get("score", "").strip()
-        score = int(score_text) if score_text else None
-        store.record(rater, store.pairs[index].pair_id, form.get("choice", ""), score=score,
+        store.record(rater, store.pairs[index].pair_id, form.get("choice", ""), score=int(score_text) if score_text else None,
                      comment=form.get("comment", ""))
     except ValueError as exc:  # RatingError, or a number that is not one
         code, message = ((exc.code, str(exc)) if isinstance(exc, RatingError)

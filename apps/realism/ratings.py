@@ -339,8 +339,8 @@ def ratings_parquet_bytes(ratings: list[Rating]) -> bytes:
     """``ratings`` as the bytes of a Parquet file, one row per :class:`Rating` (its fields as columns)."""
     import pyarrow as pa
 
-    schema = model_arrow_schema(Rating, score=pa.int8())
-    return parquet_bytes(pa.Table.from_pylist([r.model_dump() for r in ratings], schema=schema))
+    return parquet_bytes(pa.Table.from_pylist([r.model_dump() for r in ratings],
+                                              schema=model_arrow_schema(Rating, score=pa.int8())))
 
 
 def read_ratings(path: Path | str) -> list[Rating]:

@@ -44,8 +44,8 @@ def write_scores(path: Path | str, scores: list[MethodScore]) -> Path:
     path = Path(path)
     sources = {s.source for s in scores}
     kept = [s for s in read_scores(path) if s.source not in sources] if path.exists() else []
-    table = pa.Table.from_pylist([s.model_dump() for s in [*kept, *scores]], schema=model_arrow_schema(MethodScore))
-    return atomic.write_bytes(path, parquet_bytes(table))
+    return atomic.write_bytes(path, parquet_bytes(pa.Table.from_pylist([s.model_dump() for s in [*kept, *scores]],
+                                                                        schema=model_arrow_schema(MethodScore))))
 
 
 def realism_scores(folder: Path | str, *, write: bool = True) -> list[MethodScore]:
