@@ -339,8 +339,7 @@ class _ArticulationTaskEnv(BaseEnv):
             return
         for px, passive in zip(self._physx_arts, self._passive):
             if passive.damped:
-                limits = passive.force_limits(px.get_qvel())
-                for joint, limit in zip(px.active_joints, limits):
+                for joint, limit in zip(px.active_joints, passive.force_limits(px.get_qvel())):
                     joint.set_drive_properties(0.0, FRICTION_DRIVE_DAMPING, float(limit), "force")
             if passive.sprung:
                 px.set_qf(passive.joint_forces(px.get_qpos()).astype(np.float32))

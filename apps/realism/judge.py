@@ -123,9 +123,9 @@ def build_messages(pair: ClipPair, first: Frames, second: Frames) -> list[dict[s
     """The chat messages of one question (OpenAI format): the :data:`RUBRIC` as the system message, then
     one user message: what is shown, ``Video A:`` and the stills of ``first`` (``image_url`` data URIs),
     ``Video B:`` and the stills of ``second``, the question. Neither methods nor file names are shown."""
-    motion = MOTION_TEXT.get(pair.motion, pair.motion)
     parts: list[dict[str, Any]] = [{"type": "text", "text": (
-        f"Object: {pair.category or 'unknown category'}. Moving part: joint {pair.joint!r}; {motion}.")}]
+        f"Object: {pair.category or 'unknown category'}. Moving part: joint {pair.joint!r}; "
+        f"{MOTION_TEXT.get(pair.motion, pair.motion)}.")}]
     for label, frames in (("Video A", first), ("Video B", second)):
         views = list(dict.fromkeys(v for v, _, _ in frames))
         parts.append({"type": "text", "text": f"{label}: {len(frames)} stills in time order (camera: {', '.join(views)})."})

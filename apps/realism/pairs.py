@@ -215,9 +215,8 @@ def specs_from_folders(paths: Sequence[Path | str], pair_set: Path | str, *, aga
     for path in map(Path, paths):
         if (path / "asset2sim").is_dir():
             for asset in sorted(p for p in (path / "asset2sim").iterdir() if (p / "asset").is_dir()):
-                folders = {"asset2sim": asset / "asset"}
-                folders.update({m: path / m / asset.name / "asset" for m in against if (path / m / asset.name / "asset").is_dir()})
-                outputs.append((asset.name, folders))
+                outputs.append((asset.name, {"asset2sim": asset / "asset", **{
+                    m: path / m / asset.name / "asset" for m in against if (path / m / asset.name / "asset").is_dir()}}))
         elif (path / "report.json").is_file():
             outputs.append((path.name, {"asset2sim": path}))
         else:

@@ -98,15 +98,8 @@ def realism_column(pair_set: Path | str | None, methods: list[str]) -> dict[str,
         by_source.setdefault(s.source, {})[s.method] = s
     source = PEOPLE if PEOPLE in by_source else min(by_source, default=None)
     got = by_source.get(source, {}) if source is not None else {}
-    out = {}
-    for m in methods:
-        s = got.get(m)
-        if s is None:
-            out[m] = NOT_RATED
-            continue
-        lo, hi = (1000.0 + ELO_PER_UNIT * v for v in (s.ci_low, s.ci_high))
-        out[m] = f"{s.elo:.0f} Elo [{lo:.0f}, {hi:.0f}], {source}, {s.comparisons}"
-    return out
+    return {m: f"{s.elo:.0f} Elo [{1000.0 + ELO_PER_UNIT * s.ci_low:.0f}, {1000.0 + ELO_PER_UNIT * s.ci_high:.0f}], {source}, "
+               f"{s.comparisons}" if (s := got.get(m)) is not None else NOT_RATED for m in methods}
 
 
 def judge_scores(folder: Path | str, verdicts, calibration, *, write: bool = True) -> list[MethodScore]:
