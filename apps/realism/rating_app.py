@@ -185,7 +185,7 @@ def _clip_response(store: RatingStore, media: dict, rater: str, index: int, posi
     if kind in _KINDS and position in ("left", "right") and 0 <= index < len(store.pairs):
         with contextlib.suppress(RatingError):
             shown = store.showing(rater, store.pairs[index].pair_id)
-            path = media.get((index, shown.left if position == "left" else shown.right, view, kind))
+            path = media.get((index, getattr(shown, position), view, kind))
     if path is None:
         return Response("not found", status_code=404, media_type="text/plain")
     return FileResponse(path, media_type=_KINDS[kind], headers={"Cache-Control": "private, max-age=3600",

@@ -381,21 +381,19 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
             sections.append(f"<p class='small'>{esc(eng)}: " + esc(run.error or "its verdicts above; the rest test recorded in "
                                                                   "PyBullet only") + "</p>")
             continue
-        sections.append(f"<h3>{esc(eng)}</h3>")
-        sections.append(svg_tag(plots.plot_root_drift(run.root_series, run.trace, dt, settle_n), f"root drift {eng}"))
         closed = {n: c["q_closed"] for n, c in ev.closed_positions.items()}
-        sections.append(svg_tag(plots.plot_joints(run.joint_series, run.trace.joint_types, dt, settle_n, closed), f"joints {eng}"))
+        sections += [f"<h3>{esc(eng)}</h3>",
+                     svg_tag(plots.plot_root_drift(run.root_series, run.trace, dt, settle_n), f"root drift {eng}"),
+                     svg_tag(plots.plot_joints(run.joint_series, run.trace.joint_types, dt, settle_n, closed), f"joints {eng}")]
     # step 4: prompt alignment, probes, parameters, notes and what the checks mean
     sections += ["<h2>Prompt alignment</h2>", _prompt_details(ev), "<h2>Passive probes</h2>", _probe_details(ev)]
     pb = ev._runs.get("pybullet")
     if pb is not None and pb.probes:
         sections.append(svg_tag(plots.plot_probes(pb.probes), "probes"))
-    sections += ["<h2>Physical parameters</h2>", parameter_table(ev)]
-    sections.append(f"<h2>Notes</h2><ul>{_listed(ev.notes)}</ul>")
-    sections.append("<h2>What the checks mean</h2>" + table(("check", "unit", "what it measures"), (
-        f"<tr><td>{esc(i.name)}</td><td>{esc(i.unit)}</td><td class='small'>{esc(i.description)}</td></tr>"
-        for i in METRIC_INFO.values() if ev.metric(i.name) is not None)))
-    sections.append(TEXTS["simulation"])
+    sections += ["<h2>Physical parameters</h2>", parameter_table(ev), f"<h2>Notes</h2><ul>{_listed(ev.notes)}</ul>",
+                 "<h2>What the checks mean</h2>" + table(("check", "unit", "what it measures"), (
+                     f"<tr><td>{esc(i.name)}</td><td>{esc(i.unit)}</td><td class='small'>{esc(i.description)}</td></tr>"
+                     for i in METRIC_INFO.values() if ev.metric(i.name) is not None)), TEXTS["simulation"]]
     return page(f"asset2sim {esc(command)} {esc(ev.asset_id)}", "\n".join(sections))
 
 
