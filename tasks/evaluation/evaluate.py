@@ -191,10 +191,9 @@ def refined_evaluation(ctx: EstimationContext, att: Attempt, report: RefineRepor
     state = dict(report.initial_joint_positions)
     semantic = semantic_metrics(ctx, model, state, att.closed_out, resolution, _masses(att.overlay, model), report.scale,
                                 output_folder.OVERLAY_NAME, ref, length_scale=report.scale)
-    metrics = [*report.metrics, *semantic]
-    ev = _evaluation((shown or out_dir) / output_folder.URDF_NAME, ref, att.closed_out, metrics, report.failure_mode,
-                     asset_id=report.asset_id, method="asset2sim", prompt=report.prompt or None, category=report.category,
-                     scale=report.scale, scale_source=output_folder.OVERLAY_NAME,
+    ev = _evaluation((shown or out_dir) / output_folder.URDF_NAME, ref, att.closed_out, [*report.metrics, *semantic],
+                     report.failure_mode, asset_id=report.asset_id, method="asset2sim", prompt=report.prompt or None,
+                     category=report.category, scale=report.scale, scale_source=output_folder.OVERLAY_NAME,
                      engines=list(dict.fromkeys(["pybullet", *att.check.engine_results])), initial_state=state,
                      initial_state_source=output_folder.STATE_NAME, task_joints=task_relevant_joints(ctx),
                      seconds=time.perf_counter() - t0)
@@ -253,7 +252,8 @@ def evaluate_asset(
         desc = extract_asset(asset, category=category)
     except (AssetError, UrdfError, OSError) as exc:
         why = one_line(" ".join(str(exc).split()), 600)  # a validation refusal lists its findings after its first line
-        raise EvaluationError(why if str(Path(asset)) in why or str(Path(asset).name) in why else f"{asset}: {why}") from exc
+        # the reason names the asset when it holds its name (its path holds the name too)
+        raise EvaluationError(why if Path(asset).name in why else f"{asset}: {why}") from exc
     notes: list[str] = []
     report, raw_report, baseline, overlay = read_records(files, notes)
     prompt = prompt if prompt is not None else getattr(report, "prompt", None)
