@@ -102,8 +102,7 @@ def read_reply(content: str, *, finish_reason: str | None = None, refusal: str |
             return Reading(None, f"JSON reply without more_realistic 'A' or 'B': {_short(text)}")
         return Reading(choice, _short(obj.get("reason", "") if isinstance(obj.get("reason"), str) else ""))
     prose = " ".join(text.split())  # one space between words: every \s* below matches at most one character
-    fields = {m.upper() for m in _JSON_FIELD.findall(prose)}
-    letters = fields or _claims(prose)
+    letters = {m.upper() for m in _JSON_FIELD.findall(prose)} or _claims(prose)
     if len(letters) == 1:
         return Reading(letters.pop(), _short(text))  # type: ignore[arg-type]
     why = "names both videos as more realistic" if letters else "names no video as more realistic"
