@@ -39,9 +39,7 @@ def fmt(v: Any, digits: int = 4) -> str:
     if isinstance(v, (int, np.integer)):
         return str(int(v))
     if isinstance(v, (float, np.floating)):
-        if not math.isfinite(float(v)):
-            return "-"
-        return f"{float(v):.{digits}g}"
+        return f"{float(v):.{digits}g}" if math.isfinite(float(v)) else "-"
     return html_text(v)
 
 
