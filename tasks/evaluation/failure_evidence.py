@@ -179,14 +179,6 @@ def _opened(closed: dict, fraction: float) -> float:
     return closed["q_closed"] + closed["direction"] * float(fraction) * closed["open_range"]
 
 
-def _stroke_table(part: dict, stroke: dict) -> str:
-    top = (part.get("force_range_n") or [None, None])[1]
-    return _one_row([("stroke", stroke.get("action")), ("asked to", f"{100 * float(stroke.get('target') or 0):.0f} % open"),
-                     ("reached", f"{100 * float(stroke.get('reached') or 0):.0f} % open"),
-                     ("force it needed (N)", stroke.get("needed_force_n")), ("the hand's range (N)", top),
-                     ("torque it needed (N m)", stroke.get("needed_torque_nm")), ("stopped by", stroke.get("stopped_by") or "-")])
-
-
 def draw_poses(renderer: SceneRenderer, poses: list[Pose], highlight: Highlight | None = None) -> dict[str, np.ndarray]:
     """caption -> (H, W, 3) uint8 perspective render of each pose (every joint a pose names set, the root
     turned by its rotation); with ``highlight``, its two links in colour and the others grey, each of its views
@@ -210,14 +202,6 @@ def draw_poses(renderer: SceneRenderer, poses: list[Pose], highlight: Highlight 
 def _h3(text: str) -> str:
     """A heading of the evidence: ``text`` (names and failure text from the run) escaped."""
     return f"<h3>{html_text(text)}</h3>"
-
-
-def _task_table(attempt: dict) -> str:
-    return _one_row([("reached the target", attempt.get("reached")), ("held after release", attempt.get("held")),
-                     ("peak gripper force (N)", attempt.get("peak_force_n")),
-                     ("object slid (mm)", 1000 * (attempt.get("root_slide_m") or 0.0)),
-                     ("object tilted (rad)", attempt.get("root_tilt_rad")),
-                     ("gripper at its force limit", attempt.get("force_limited"))])
 
 
 def _one_row(cells: list[tuple[str, object]]) -> str:
@@ -254,10 +238,22 @@ def evidence_section(runs: dict, urdf: Path | str, dt: float, svg: Callable[[byt
                       lambda poses=poses: poses, Highlight((a, b))))
     for engine, part, stroke in operability_failures(metrics or []):
         items.append((_h3(f"operability of {part['joint']} ({part.get('label') or 'unlabelled'}, {engine}): "
-                          f"{stroke['action']}: {stroke.get('failure', '')}") + _stroke_table(part, stroke),
+                          f"{stroke['action']}: {stroke.get('failure', '')}")
+                      + _one_row([("stroke", stroke.get("action")),
+                                  ("asked to", f"{100 * float(stroke.get('target') or 0):.0f} % open"),
+                                  ("reached", f"{100 * float(stroke.get('reached') or 0):.0f} % open"),
+                                  ("force it needed (N)", stroke.get("needed_force_n")),
+                                  ("the hand's range (N)", (part.get("force_range_n") or [None, None])[1]),
+                                  ("torque it needed (N m)", stroke.get("needed_torque_nm")),
+                                  ("stopped by", stroke.get("stopped_by") or "-")]),
                       lambda p=part, s=stroke: operability_poses(p, s, dict(closed or {}), others), None))
     for attempt in [a for a in (task or {}).get("attempts", []) if not a.get("success")]:
-        items.append((_h3(f"task: {attempt['action']} {attempt['joint']}: {attempt.get('failure', '')}") + _task_table(attempt),
+        items.append((_h3(f"task: {attempt['action']} {attempt['joint']}: {attempt.get('failure', '')}")
+                      + _one_row([("reached the target", attempt.get("reached")), ("held after release", attempt.get("held")),
+                                  ("peak gripper force (N)", attempt.get("peak_force_n")),
+                                  ("object slid (mm)", 1000 * (attempt.get("root_slide_m") or 0.0)),
+                                  ("object tilted (rad)", attempt.get("root_tilt_rad")),
+                                  ("gripper at its force limit", attempt.get("force_limited"))]),
                       lambda a=attempt: task_poses(a, dict(closed or {}), others), None))
     sweeps, trials = failing(runs)
     for engine, js in sweeps:
