@@ -110,16 +110,11 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
     report = AuditReport(asset_id=asset.asset_id, source=str(source), format=dp.format, category=ctx.category,
                          category_reason=match.reason, labels={ln.name: ln.semantic_label for ln in asset.links if ln.semantic_label}, root_fixed=mount.fixed,
                          root_source=mount.source, values=judged.values, checks=checks,
-                         notes=[*_unit_warnings(findings), *judged.notes, *asset.staging_notes])
+                         notes=[*(f"WARNING: {f.describe()}" for f in findings if f.code == "JOINT_RANGE_WRONG_UNIT"),
+                                *judged.notes, *asset.staging_notes])
     if out_dir is None:
         return AuditResult(report=report)
     return AuditResult(report=_write(report, asset, dp, judged, out_dir), out_dir=out_dir)
-
-
-def _unit_warnings(findings: list) -> list[str]:
-    """``WARNING: ...`` lines of the validation findings that say a joint range only makes sense in the other unit
-    (``JOINT_RANGE_WRONG_UNIT``: an MJCF fragment's radians read as degrees)."""
-    return [f"WARNING: {f.describe()}" for f in findings if f.code == "JOINT_RANGE_WRONG_UNIT"]
 
 
 def _cannot(path: Path | str, exc: BaseException, with_type: bool = False) -> str:

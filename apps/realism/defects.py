@@ -44,14 +44,6 @@ SCALE_FACTOR = 3.0
 SLAM_SHARE = 0.8
 
 
-def _absolute_meshes(model: UrdfModel, src: Path) -> None:
-    """Point every mesh of ``model`` (read from ``src``) at its file by absolute path (the copy lives elsewhere)."""
-    for link in model.links.values():
-        for g in [*link.visuals, *link.collisions]:
-            if g.kind == "mesh" and g.filename:
-                g.filename = str(resolve_mesh_path(g.filename, src.parent).resolve())
-
-
 def _joint(model: UrdfModel, name: str):
     for j in model.joints:
         if j.name == name:
@@ -137,7 +129,10 @@ def plant_defect(side: PhysicsSide, defect: str, joint: str, closed: ClosedState
         raise KeyError(f"unknown defect {defect!r}; known: {sorted(DEFECTS)}")
     src = Path(side.urdf).resolve()
     model = read_urdf(src, mode="lenient")
-    _absolute_meshes(model, src)
+    for link in model.links.values():  # every mesh by absolute path: the copy lives elsewhere
+        for g in [*link.visuals, *link.collisions]:
+            if g.kind == "mesh" and g.filename:
+                g.filename = str(resolve_mesh_path(g.filename, src.parent).resolve())
     broken = DEFECTS[defect](model, side, joint, closed, float(force_limit))
     dst = Path(folder) / "mobility.urdf"
     write_bytes(dst, write_urdf(model, comment=f" asset2sim realism calibration: planted defect {defect} "))

@@ -115,10 +115,6 @@ def side_frames(folder: Path | str, pair: ClipPair, side: str) -> Frames:
 
 
 # ----------------------------------------------------------------------------- messages
-def _data_uri(png: bytes) -> str:
-    return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
-
-
 def build_messages(pair: ClipPair, first: Frames, second: Frames) -> list[dict[str, Any]]:
     """The chat messages of one question (OpenAI format): the :data:`RUBRIC` as the system message, then
     one user message: what is shown, ``Video A:`` and the stills of ``first`` (``image_url`` data URIs),
@@ -129,7 +125,8 @@ def build_messages(pair: ClipPair, first: Frames, second: Frames) -> list[dict[s
     for label, frames in (("Video A", first), ("Video B", second)):
         views = list(dict.fromkeys(v for v, _, _ in frames))
         parts.append({"type": "text", "text": f"{label}: {len(frames)} stills in time order (camera: {', '.join(views)})."})
-        parts += [{"type": "image_url", "image_url": {"url": _data_uri(data)}} for _, _, data in frames]
+        parts += [{"type": "image_url", "image_url": {"url": "data:image/png;base64," + base64.b64encode(data).decode("ascii")}}
+                  for _, _, data in frames]
     parts.append({"type": "text", "text": 'Which video is more physically realistic? Answer with the JSON object only: '
                                           '{"more_realistic": "A" or "B", "reason": "..."}'})
     return [{"role": "system", "content": RUBRIC}, {"role": "user", "content": parts}]
