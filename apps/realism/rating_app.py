@@ -115,10 +115,6 @@ def _rating_page(rater: str, index: int, shown: Showing, done: int, total: int, 
         r=r, index=index, token=html_text(token), scores=scores))
 
 
-def _done_page(rater: str, total: int) -> "HTMLResponse":
-    return _page("Realism rating: done", _PAGES["done"].format(rater=html_text(rater), total=total))
-
-
 def _error_page(code: str, message: str, rater: str | None = None) -> "HTMLResponse":
     link = f"/rate/{quote(rater, safe='')}" if rater else "/"
     back = f"<p><a href=\"{link}\">{'Continue rating' if rater else 'Start'}</a></p>"
@@ -177,21 +173,6 @@ async def _answer(store: RatingStore, secret: bytes, rater: str, request: "Reque
     return RedirectResponse(f"/rate/{quote(rater, safe='')}", status_code=303, headers=_HEADERS)
 
 
-def _clip_response(store: RatingStore, media: dict, rater: str, index: int, position: str, view: int, kind: str) -> "Response":
-    """The clip or poster shown to ``rater`` at ``position`` of pair ``index`` (404 for anything else)."""
-    from fastapi.responses import FileResponse, Response
-
-    path = None
-    if kind in _KINDS and position in ("left", "right") and 0 <= index < len(store.pairs):
-        with contextlib.suppress(RatingError):
-            shown = store.showing(rater, store.pairs[index].pair_id)
-            path = media.get((index, getattr(shown, position), view, kind))
-    if path is None:
-        return Response("not found", status_code=404, media_type="text/plain")
-    return FileResponse(path, media_type=_KINDS[kind], headers={"Cache-Control": "private, max-age=3600",
-                                                                  "X-Content-Type-Options": "nosniff"})
-
-
 def create_app(folder: Path | str, *, host: str = "127.0.0.1",
                allowed_hosts: Sequence[str] = ()) -> "FastAPI":
     """The rating app of the pair set in ``folder`` (``pairs.json``; answers in ``ratings.sqlite`` and
@@ -206,7 +187,7 @@ def create_app(folder: Path | str, *, host: str = "127.0.0.1",
         RatingsDatabaseError: ``ratings.sqlite`` damaged (naming it and what to do).
     """
     from fastapi import FastAPI, Request  # optional (the pipeline extra): imported when an app is made
-    from fastapi.responses import HTMLResponse, RedirectResponse, Response
+    from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
     from starlette.middleware.trustedhost import TrustedHostMiddleware
 
     store = RatingStore(folder)
@@ -243,7 +224,7 @@ def create_app(folder: Path | str, *, host: str = "127.0.0.1",
             return _start_page(str(exc), 400)
         done, total = store.progress(rater)
         if shown is None:
-            return _done_page(rater, total)
+            return _page("Realism rating: done", _PAGES["done"].format(rater=html_text(rater), total=total))
         return _rating_page(rater, store.index[shown.pair.pair_id], shown, done, total, form_token(secret, rater))
 
     @app.post("/rate/{rater}/answer")
@@ -252,7 +233,15 @@ def create_app(folder: Path | str, *, host: str = "127.0.0.1",
 
     @app.get("/media/{rater}/{index}/{position}/{view}/{kind}")
     def clip_file(rater: str, index: int, position: str, view: int, kind: str) -> Response:
-        return _clip_response(store, media, rater, index, position, view, kind)
+        path = None  # the clip or poster shown to ``rater`` at ``position`` of pair ``index`` (404 for anything else)
+        if kind in _KINDS and position in ("left", "right") and 0 <= index < len(store.pairs):
+            with contextlib.suppress(RatingError):
+                shown = store.showing(rater, store.pairs[index].pair_id)
+                path = media.get((index, getattr(shown, position), view, kind))
+        if path is None:
+            return Response("not found", status_code=404, media_type="text/plain")
+        return FileResponse(path, media_type=_KINDS[kind], headers={"Cache-Control": "private, max-age=3600",
+                                                                      "X-Content-Type-Options": "nosniff"})
 
     return app
 
