@@ -376,18 +376,13 @@ class _ArticulationTaskEnv(BaseEnv):
         """The grasp point in the world per sub-scene (b, 3) m."""
         return transform_points(self.grasp_link.pose.to_transformation_matrix().clone(), self.grasp_point_local)
 
-    def _progress(self, f: torch.Tensor) -> torch.Tensor:
-        span = self.reach_fraction - self.start_fraction
-        return torch.clamp((f - self.start_fraction) / torch.where(span.abs() > 1e-9, span, torch.ones_like(span)), 0.0, 1.0)
-
-    def _reached(self, f: torch.Tensor) -> torch.Tensor:
-        return torch.where(self.opens, f >= self.reach_fraction, f <= self.reach_fraction)
-
     def evaluate(self) -> dict:
         f = self.task_fraction()
-        reached = self._reached(f)
+        reached = torch.where(self.opens, f >= self.reach_fraction, f <= self.reach_fraction)
+        span = self.reach_fraction - self.start_fraction
+        progress = torch.clamp((f - self.start_fraction) / torch.where(span.abs() > 1e-9, span, torch.ones_like(span)), 0.0, 1.0)
         return {"success": reached & (self.task_speed() <= self.rest_speed), "reached": reached, "fraction": f,
-                "progress": self._progress(f), "grasp_pos": self.grasp_positions()}
+                "progress": progress, "grasp_pos": self.grasp_positions()}
 
     def _get_obs_extra(self, info: dict):
         obs = dict(tcp_pose=self.agent.tcp.pose.raw_pose)
