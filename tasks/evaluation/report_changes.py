@@ -138,26 +138,11 @@ def _declared_mass(side: InputSide) -> str:
     return f"{total:.4g} kg ({how}: {parts} kg)"
 
 
-def _declared_value(side: InputSide, joint: str, quantity: str, jtype: str) -> str:
-    """A joint's ``quantity`` as the input declares it, with its unit; ``none declared`` (a simulator's default 0)."""
-    dp = side.physics
-    if dp is None:
-        return "-"
-    dj = dp.joints.get(joint)
-    v = None if dj is None else getattr(dj, quantity)
-    if v is None:
-        return "none declared"
-    text = f"{float(v):.4g} {dynamics_unit(quantity, jtype)}"
-    if quantity == "stiffness" and dj.reference is not None:
-        text += f" about {position_text(dj.reference, jtype)}"
-    return text
-
-
-def _output_value(jd: dict[str, Any], quantity: str, jtype: str) -> str:
-    v = float(jd.get(quantity) or 0.0)
+def _dynamics_text(v: float, quantity: str, jtype: str, reference: float | None) -> str:
+    """A joint's ``quantity`` ``v`` with its unit; a spring's with the position it pulls toward (``reference``)."""
     text = f"{v:.4g} {dynamics_unit(quantity, jtype)}"
-    if quantity == "stiffness" and v > 0 and jd.get("spring_reference") is not None:
-        text += f" about {position_text(jd['spring_reference'], jtype)}"
+    if quantity == "stiffness" and reference is not None:
+        text += f" about {position_text(reference, jtype)}"
     return text
 
 
@@ -245,7 +230,11 @@ def change_rows(report: dict[str, Any], ov: dict[str, Any], joint_types: dict[st
             rnd = changed.get((name, k))
             why = (f"after check round {rnd.get('round')}: {rnd.get('reason', '')}" if rnd
                    else _source_of(str(jd.get("source") or ""), k))
-            rows.append(_row(f"{name} {k}", _declared_value(side, name, k, jt), _output_value(jd, k, jt), why))
+            declared = getattr(dj, k) if dj is not None else None  # none declared: a simulator's default 0
+            out = float(jd.get(k) or 0.0)
+            rows.append(_row(f"{name} {k}", "-" if side.physics is None else "none declared" if declared is None
+                             else _dynamics_text(float(declared), k, jt, dj.reference),
+                             _dynamics_text(out, k, jt, jd.get("spring_reference") if out > 0 else None), why))
     rows += [_row("collision pieces", "", "", line) for line in (report.get("state") or {}).get("collision_changes") or []]
     rows += [_row("stability by design", "", "", line) for line in report.get("design_changes") or []]
     mount = report.get("mounting") or {}
