@@ -80,10 +80,9 @@ def summarize(records: list[dict[str, Any]], methods: list[str]) -> dict[str, di
         ok = [r for r in rs if not r.get("error")]
         ts = [r for r in ok if (r.get("category") or "").lower() in ("toilet", "stapler")]
         row: dict[str, Any] = {"n": len(rs), "errors": len(rs) - len(ok)}
-        row["pen_mean"], row["pen_sd"] = _mean_sd([r["penetration"] for r in ok])
-        row["pen_ts_mean"], row["pen_ts_sd"] = _mean_sd([r["penetration"] for r in ts])
-        row["scale_mean"], row["scale_sd"] = _mean_sd([r["scale_deviation"] for r in ok])
-        row["init_mean"], row["init_sd"] = _mean_sd([r["initial_joint_deviation"] for r in ok])
+        for key, column, among in (("pen", "penetration", ok), ("pen_ts", "penetration", ts), ("scale", "scale_deviation", ok),
+                                   ("init", "initial_joint_deviation", ok)):
+            row[f"{key}_mean"], row[f"{key}_sd"] = _mean_sd([r[column] for r in among])
         row["prompt_mean"], _ = _mean_sd([r["prompt_alignment"] for r in ok])
         for key, n_key in _PASS_RATES:
             row[key], row[n_key] = _rate([r.get(_RATE_COLUMNS.get(key, key)) for r in ok])
