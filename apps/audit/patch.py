@@ -45,7 +45,17 @@ def write_patch(asset: AssetDescription, dp: DeclaredPhysics, values: list[Value
     if fmt is not None:
         children = {name: j.child for name, j in dp.joints.items()}
         return fmt.patch(dp.source, dp.read, children, links, joints, folder, asset.urdf_path)
-    return _write_urdf(asset, dp.source, links, joints, folder)
+    model = apply_physics(read_urdf(dp.source, mode="lenient"), links, joints)
+    if asset.staged_from is not None:  # meshes the simulators could not load were converted: the originals copied
+        for link in model.links.values():
+            for g in (*link.visuals, *link.collisions):
+                if g.kind == "mesh" and g.path is not None:
+                    g.filename = copy_named(g.path, dp.source.parent, folder)
+    else:
+        copied_meshes.copy_meshes(asset, folder)
+    out = folder / file_names.file_stem(dp.source.name)
+    atomic.write_bytes(out, write_urdf(model, comment=f"patched by asset2sim audit from {dp.source.name}"))
+    return out
 
 
 def apply_physics(model: UrdfModel, links: dict[str, LinkPhysics], joints: dict[str, JointDynamics]) -> UrdfModel:
@@ -58,19 +68,3 @@ def apply_physics(model: UrdfModel, links: dict[str, LinkPhysics], joints: dict[
             jd = joints[j.name]
             j.dynamics = UrdfDynamics(damping=jd.damping, friction=jd.friction)
     return model
-
-
-def _write_urdf(asset: AssetDescription, source: Path, links: dict[str, LinkPhysics], joints: dict[str, JointDynamics], folder: Path) -> Path:
-    model = apply_physics(read_urdf(source, mode="lenient"), links, joints)
-    if asset.staged_from is not None:  # meshes the simulators could not load were converted: the originals copied
-        for link in model.links.values():
-            for g in (*link.visuals, *link.collisions):
-                if g.kind == "mesh" and g.path is not None:
-                    g.filename = copy_named(g.path, source.parent, folder)
-    else:
-        copied_meshes.copy_meshes(asset, folder)
-    out = folder / file_names.file_stem(source.name)
-    atomic.write_bytes(out, write_urdf(model, comment=f"patched by asset2sim audit from {source.name}"))
-    return out
-
-
