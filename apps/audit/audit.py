@@ -99,7 +99,10 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
         else:
             initial, declared_root = dict(dp.initial_state), None
         with build_context(asset, "", config, category=match.name) as (ctx, kin):
-            mount = declared_root or _mounting(dp, ctx.category)
+            # the root as the file declares it (MJCF: no free joint welds it; USD: a fixed joint to the world), read as a
+            # --mount override reads, else the category's prior
+            mount = (declared_root or mounting.declared_mounting(ctx.category, dp.root_fixed, f"the {dp.format.upper()} file")
+                     or mounting.category_mounting(ctx.category))
             judged = judge(ctx, kin, dp, mount)
             with quiet_stdout():  # engines print from C; the library must not
                 checks = _simulate(ctx, judged, config, initial) if simulate else []
@@ -125,13 +128,6 @@ def _cannot(path: Path | str, exc: BaseException, with_type: bool = False) -> st
         for prefix in (f"{path}: ", f"{Path(path).resolve()}: ", "cannot read this MJCF file: ", "cannot read this USD file: "):
             why = why.removeprefix(prefix)
     return f"{path}: cannot audit: " + (f"{type(exc).__name__}: " if with_type else "") + why
-
-
-def _mounting(dp: declared_mod.DeclaredPhysics, category: str) -> RootMount:
-    """The root as the file declares it (MJCF: no free joint welds it; USD: a fixed joint to the world), read as a
-    ``--mount`` override reads (:func:`asset2sim.tasks.interpret.mounting.resolve_mounting`), else the category's prior."""
-    declared = mounting.declared_mounting(category, dp.root_fixed, f"the {dp.format.upper()} file")
-    return declared if declared is not None else mounting.category_mounting(category)
 
 
 def _overlay_springs(asset: AssetDescription, dp: declared_mod.DeclaredPhysics) -> declared_mod.DeclaredPhysics:
