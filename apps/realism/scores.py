@@ -97,7 +97,7 @@ def realism_column(pair_set: Path | str | None, methods: list[str]) -> dict[str,
     for s in read_scores(path):
         by_source.setdefault(s.source, {})[s.method] = s
     source = PEOPLE if PEOPLE in by_source else min(by_source, default=None)
-    got = by_source.get(source, {}) if source is not None else {}
+    got = by_source.get(source, {})  # no source (None): no score
     return {m: f"{s.elo:.0f} Elo [{1000.0 + ELO_PER_UNIT * s.ci_low:.0f}, {1000.0 + ELO_PER_UNIT * s.ci_high:.0f}], {source}, "
                f"{s.comparisons}" if (s := got.get(m)) is not None else NOT_RATED for m in methods}
 
