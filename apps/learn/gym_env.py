@@ -184,7 +184,8 @@ class TaskEnv(gym.Env):
         reward -= cfg.stretch_weight * stretch * self.grasp.stiffness / cfg.limits.max_force_n
         self._f_prev = f
         failure = "diverged" if not np.isfinite(f) else self._moved()
-        if failure or t.reached(f):
+        truncated = self._steps >= self.max_steps
+        if failure or t.reached(f) or truncated:  # the episode ends
             self.episodes += 1
         if failure:
             return self._obs(), float(reward - cfg.moved_penalty), True, False, self._info(False, failure)
@@ -193,9 +194,6 @@ class TaskEnv(gym.Env):
             if ok:
                 reward += cfg.success_bonus
             return self._obs(), float(reward), True, False, self._info(ok, why)
-        truncated = self._steps >= self.max_steps
-        if truncated:
-            self.episodes += 1
         return self._obs(), float(reward), False, truncated, self._info(False, "time limit" if truncated else "")
 
     def _moved(self) -> str:
