@@ -91,8 +91,11 @@ class JointSweep:
         return d
 
 
-def _lever(session: SimSession, joint: str, links: list[str]) -> float:
-    """Largest distance (m, >= 1e-3) of ``links``' collision vertices from ``joint``'s axis."""
+def _arm(session: SimSession, joint: str, links: list[str]) -> float:
+    """The lever of a force on ``links`` about ``joint``: 1 for a slide; for a hinge the largest distance (m, >= 1e-3)
+    of ``links``' collision vertices from ``joint``'s axis."""
+    if session.joint_types[joint] == "prismatic":
+        return 1.0
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
     best = 1e-3
     for ln in links:
@@ -105,11 +108,6 @@ def _lever(session: SimSession, joint: str, links: list[str]) -> float:
             v_w = v @ Rl.T + p
         best = max(best, float(np.max(off_axis(v_w, o, a))))
     return best
-
-
-def _arm(session: SimSession, joint: str, links: list[str]) -> float:
-    """The lever of a force on ``links`` about ``joint``: :func:`_lever` (m) for a hinge, 1 for a slide."""
-    return 1.0 if session.joint_types[joint] == "prismatic" else _lever(session, joint, links)
 
 
 def effort_limit(session: SimSession, joint: str, links: list[str], open_range: float, cfg: SweepConfig,
