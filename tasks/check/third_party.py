@@ -13,6 +13,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import logging
+import logging.handlers
 import shutil
 import subprocess
 import sys
@@ -148,15 +149,6 @@ def check_mjcf_doctor(xml: Path) -> CheckerResult:
     return res
 
 
-class _Collect(logging.Handler):
-    def __init__(self):
-        super().__init__(logging.WARNING)
-        self.messages: list[str] = []
-
-    def emit(self, record):
-        self.messages.append(record.getMessage())
-
-
 def check_drake(urdf: Path) -> CheckerResult:
     """Parse ``urdf`` into a Drake ``MultibodyPlant``. Errors: the exception, each body
     whose spatial inertia is not physically valid, each joint whose damping Drake
@@ -171,7 +163,8 @@ def check_drake(urdf: Path) -> CheckerResult:
     from pydrake.multibody.tree import BodyIndex, JointIndex
 
     res = CheckerResult("drake", str(urdf))
-    handler = _Collect()
+    handler = logging.handlers.BufferingHandler(sys.maxsize)
+    handler.setLevel(logging.WARNING)
     log = logging.getLogger("drake")
     saved = log.handlers[:], log.propagate
     log.handlers, log.propagate = [handler], False  # collected, not printed
@@ -184,7 +177,7 @@ def check_drake(urdf: Path) -> CheckerResult:
         return res
     finally:
         log.handlers, log.propagate = saved
-    for m in handler.messages:  # Drake's parser only warns about an invalid inertia and goes on
+    for m in (r.getMessage() for r in handler.buffer):  # Drake's parser only warns about an invalid inertia and goes on
         (res.errors if "PhysicallyValid" in m else res.warnings).append(" ".join(m.split()))
     model = read_urdf(urdf)
     context = plant.CreateDefaultContext()
