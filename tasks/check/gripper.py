@@ -38,12 +38,11 @@ class GripperLimits:
     grasp_damping_n_s_m: float = 40.0
 
     def __post_init__(self) -> None:
-        for name in ("max_force_n", "max_speed_m_s", "grasp_stiffness_n_m"):
+        for name, floor in (("max_force_n", ">"), ("max_speed_m_s", ">"), ("grasp_stiffness_n_m", ">"),
+                            ("grasp_damping_n_s_m", ">=")):
             v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ValueError(f"GripperLimits.{name} must be > 0, got {v!r}")
-        if not (np.isfinite(self.grasp_damping_n_s_m) and self.grasp_damping_n_s_m >= 0):
-            raise ValueError(f"GripperLimits.grasp_damping_n_s_m must be >= 0, got {self.grasp_damping_n_s_m!r}")
+            if not (np.isfinite(v) and (v >= 0 if floor == ">=" else v > 0)):
+                raise ValueError(f"GripperLimits.{name} must be {floor} 0, got {v!r}")
 
 
 class BoundedGrasp:
