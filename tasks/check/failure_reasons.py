@@ -123,14 +123,13 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
             if "toppled" in str(t.get("failure", "")):
                 out.append(f"joint '{j}' moved {amount} when the object {how} and toppled "
                            f"({m.engine}): the part swings as the object falls (the toppling is explained next). {_ADVICE['swing']}")
-                continue
-            if j in skip:
+            elif j in skip:
                 out.append(f"joint '{j}' moved {amount} when the object {how} ({m.engine}), as "
                            "it moves at rest with no disturbance (the rest tier). " + advice("hold", asked_weight(metrics)))
-                continue
-            out.append(f"joint '{j}' came to rest {amount} when the object {how} ({m.engine}); its "
-                       "friction and damping stay within what a hand may use on it, and at that the part's momentum carries it "
-                       "out of its band. " + _holding_choices(m, metrics, j, unit == "m"))
+            else:
+                out.append(f"joint '{j}' came to rest {amount} when the object {how} ({m.engine}); its friction and damping stay "
+                           "within what a hand may use on it, and at that the part's momentum carries it out of its band. "
+                           + _holding_choices(m, metrics, j, unit == "m"))
         # step 3: the trials the object did not come to rest in
         for name, what in restless.items():
             rest = re.search(r"at rest \(([^)]*)\)", m.threshold or "")

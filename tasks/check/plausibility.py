@@ -78,9 +78,8 @@ def _judge_link(ctx: EstimationContext, dl: DeclaredLink, label: str | None, out
         density_ok = dens_v.verdict == "plausible"
     per_kg = [np.asarray(geom.inertia_shell, float), np.asarray(geom.inertia_solid, float)]
     inertia_v = bands.inertia_verdict(where, dl.inertia, dl.mass, per_kg, dl.written_moments)
-    out.append(inertia_v)
     com_v = bands.com_verdict(where, dl.com, np.asarray(geom.bbox_min), np.asarray(geom.bbox_max), np.asarray(geom.com))
-    out.append(com_v)
+    out += [inertia_v, com_v]
     keep_mass = mass_v.verdict == "plausible" and density_ok
     mass = dl.mass if keep_mass else est.mass
     if inertia_v.verdict == "plausible" and dl.inertia is not None and dl.mass:
