@@ -66,8 +66,7 @@ def parent_child_penetration(source: SimSource, initial_state: dict[str, float],
     finally:
         session.close()
     worst = max(pairs.values(), default=0.0)
-    beyond = max((d - modelled.get(k, 0.0) for k, d in pairs.items()), default=0.0)
-    beyond = round(max(beyond, 0.0), 4)
+    beyond = round(max([0.0, *(d - modelled.get(k, 0.0) for k, d in pairs.items())]), 4)
     return MetricResult(name="parent_child_penetration", value=worst, unit=unit("parent_child_penetration"),
                         passed=beyond <= UNRESOLVED_PENETRATION_MM,
                         threshold=f"a child at most {UNRESOLVED_PENETRATION_MM:g} mm deeper inside its parent than as modelled "
