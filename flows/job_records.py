@@ -191,10 +191,25 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
     mode is :func:`asset2sim.tasks.check.verdict.asset_failure_mode`'s.
     """
     prepared = prepared or Prepared()
-    row = _row_head(job, prepared, refined, flow_run_id, started_at, finished_at)
+    now = time.time()  # a ``failed`` row with the job's and the input stage's columns (times default to now)
+    row = CatalogRow(
+        asset_id=job.asset_id, status="failed", category=prepared.category or job.category, prompt=job.prompt,
+        estimator=job.config.get("estimator"), model=job.config.get("model"), reference_scale=job.reference_scale,
+        input_hash=prepared.input_hash, config_hash=prepared.config_hash, refine_config_hash=prepared.refine_config_hash,
+        code_version=job.code_version, code_hash=contract.code_hash(), flow_run_id=flow_run_id,
+        worker=(refined.worker if refined is not None else None) or prepared.worker,
+        started_at=_utc(started_at or now), finished_at=_utc(finished_at or now), source_run=job.run_id)
     stages = {k: _s(v) for k, v in (("prepare", prepared.seconds), ("cpu.prepare", prepared.cpu_seconds)) if v is not None}
-    if prepared.skip is not None:  # reuse an earlier finished result
-        return _reused_row(row, prepared.skip, stages)
+    if prepared.skip is not None:  # the ``skipped`` row reusing an earlier finished row
+        prev = prepared.skip
+        for col in REUSED_COLUMNS:
+            setattr(row, col, prev.get(col))
+        row.status = "skipped"
+        row.source_run = prev.get("source_run") or prev.get("run")
+        row.model_queries = row.tokens = 0
+        row.stage_seconds = json.dumps(stages)
+        row.wall_seconds = sum(v for k, v in stages.items() if "." not in k)
+        return row
     errors: list[str] = []
     input_failure = None
     if not prepared.ok and prepared.seconds is not None:
@@ -203,7 +218,11 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
     refine_status = refined.status if refined is not None else None
     refine_mode = _add_refined(row, job, refined, stages, errors)
     measured_status = measured.status if measured is not None else None
-    _add_measured(row, measured, stages)
+    if measured_status == "ok":  # the metrics stage's columns
+        stages["metrics"] = _s(measured.seconds)
+        for col, v in measured.value.columns.items():
+            if v is not None:
+                setattr(row, col, v)
     verdict = asset_failure_mode(input_failure=input_failure, refine_status=refine_status, refine_mode=refine_mode,
                                  measured_status=measured_status, chain_error_mode=(failure_mode or "crash") if error else None)
     errors += verdict.errors
@@ -224,31 +243,6 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
     row.error = "\n".join(e for e in errors if e) or None
     row.stage_seconds = json.dumps(stages, sort_keys=True)
     row.wall_seconds = round(sum(v for k, v in stages.items() if "." not in k), 4)
-    return row
-
-
-def _row_head(job: Any, prepared: Prepared, refined: StageRecord | None, flow_run_id: str | None,
-              started_at: float | None, finished_at: float | None) -> CatalogRow:
-    """A ``failed`` row with the job's and the input stage's columns (times default to now)."""
-    now = time.time()
-    return CatalogRow(
-        asset_id=job.asset_id, status="failed", category=prepared.category or job.category, prompt=job.prompt,
-        estimator=job.config.get("estimator"), model=job.config.get("model"), reference_scale=job.reference_scale,
-        input_hash=prepared.input_hash, config_hash=prepared.config_hash, refine_config_hash=prepared.refine_config_hash,
-        code_version=job.code_version, code_hash=contract.code_hash(), flow_run_id=flow_run_id,
-        worker=(refined.worker if refined is not None else None) or prepared.worker,
-        started_at=_utc(started_at or now), finished_at=_utc(finished_at or now), source_run=job.run_id)
-
-
-def _reused_row(row: CatalogRow, prev: dict[str, Any], stages: dict[str, float]) -> CatalogRow:
-    """``row`` made the ``skipped`` row reusing the finished row ``prev``."""
-    for col in REUSED_COLUMNS:
-        setattr(row, col, prev.get(col))
-    row.status = "skipped"
-    row.source_run = prev.get("source_run") or prev.get("run")
-    row.model_queries = row.tokens = 0
-    row.stage_seconds = json.dumps(stages)
-    row.wall_seconds = sum(v for k, v in stages.items() if "." not in k)
     return row
 
 
@@ -308,16 +302,6 @@ def extra_rounds(report: RefineReport) -> list[dict[str, Any]]:
     rounds = report.escalation
     return [{"round": cur.round, "after": failed_checks(prev.metrics), "reason": cur.reason}
             for prev, cur in zip(rounds, rounds[1:])]
-
-
-def _add_measured(row: CatalogRow, measured: StageRecord | None, stages: dict[str, float]) -> None:
-    """Add the metrics stage's columns and seconds (nothing when it did not run)."""
-    if measured is None or measured.status != "ok":
-        return
-    stages["metrics"] = _s(measured.seconds)
-    for col, v in measured.value.columns.items():
-        if v is not None:
-            setattr(row, col, v)
 
 
 def manifest_row_id(error: ManifestRowError, taken: set[str]) -> str:

@@ -87,7 +87,8 @@ def plan_run(
     entries, errors = read_manifest_entries(cat.manifest_path(name), root)
     taken = {e.asset_id for e in entries}
     bad = [BadManifestRow(manifest_row_id(err, taken), err) for err in errors]
-    ordered: list[ManifestEntry | BadManifestRow] = sorted([*entries, *bad], key=_manifest_line)  # file order
+    ordered: list[ManifestEntry | BadManifestRow] = sorted(  # file order
+        [*entries, *bad], key=lambda item: item.error.line if isinstance(item, BadManifestRow) else (item.line or 0))
     # step 2: only the ids asked for, at most ``limit`` rows
     if ids:
         known = {it.asset_id for it in ordered} | {b.error.id for b in bad if b.error.id}
@@ -136,10 +137,6 @@ def plan_run(
             )
         )
     return RunPlan(jobs=jobs, bad_rows=[b for b in ordered if isinstance(b, BadManifestRow)])
-
-
-def _manifest_line(item: ManifestEntry | BadManifestRow) -> int:
-    return item.error.line if isinstance(item, BadManifestRow) else (item.line or 0)
 
 
 def unrecorded_jobs(cat: Catalog, dataset: str, run_id: str) -> dict[str, list[dict[str, Any]]]:
