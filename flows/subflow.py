@@ -136,7 +136,13 @@ def refine_assets(
     all_jobs = job_order.start_order([AssetJob(**j) for j in jobs])  # copies of one folder apart, largest first
     servers_seconds = _ready_stage_servers(all_jobs, log)
     body_started = time.time()  # the stage servers' start-up is not the assets'
-    _run_assets(_submit_prepares(all_jobs, batch_size, rec.starts), chain_task, rec, fingerprints or {})
+    prep_futures = {}  # one prepare task per batch of ``batch_size`` jobs -> the batch
+    size = max(1, int(batch_size))
+    for i in range(0, len(all_jobs), size):
+        batch = all_jobs[i:i + size]
+        rec.starts.update({job.asset_id: time.time() for job in batch})
+        prep_futures[prepare_many.submit(Sealed(batch))] = batch
+    _run_assets(prep_futures, chain_task, rec, fingerprints or {})
     return {"rows": rec.rows, "inputs": rec.inputs, "body_started": body_started, "body_seconds": time.time() - body_started,
             "cluster_up": cluster_up, "servers_seconds": servers_seconds}
 
@@ -185,18 +191,6 @@ def emit_finished(dataset: str, run_id: str, row) -> None:
                                      status=row.status, failure_mode=row.failure_mode, seconds=row.wall_seconds))
 
 
-def _submit_prepares(jobs: list[AssetJob], batch_size: int, starts: dict[str, float]) -> dict:
-    """Submit one ``prepare`` task per batch of ``batch_size`` jobs, noting each job's start (epoch s) in ``starts``;
-    returns future -> batch."""
-    prep_futures = {}
-    size = max(1, int(batch_size))
-    for i in range(0, len(jobs), size):
-        batch = jobs[i:i + size]
-        starts.update({job.asset_id: time.time() for job in batch})
-        prep_futures[prepare_many.submit(Sealed(batch))] = batch
-    return prep_futures
-
-
 def _run_assets(prep_futures: dict, chain_task, rec: _AssetRecorder, fingerprints: dict[str, str | None]) -> None:
     """Record every asset's row as soon as what ends it has ended, prepares and chains alike, in the order they
     finish (one queue fed by the futures' done callbacks: ``PrefectFuture.add_done_callback``): as a prepare batch
@@ -210,7 +204,12 @@ def _run_assets(prep_futures: dict, chain_task, rec: _AssetRecorder, fingerprint
     while prep_futures or chains:  # a chain joins the queue as it is submitted
         fut = finished.get()
         if fut in chains:
-            _record_chain(fut, chains.pop(fut), rec)
+            job, prepared = chains.pop(fut)  # the asset's chain ended
+            res, exc = _outcome(fut)
+            if exc is not None:
+                rec.record(job, prepared, None, None, exc)
+            else:
+                rec.record(job, prepared, res.refined, res.measured, res.error, res.published)
             continue
         for cf, job_prepared in _submit_batch(prep_futures.pop(fut), fut, chain_task, rec, fingerprints):
             chains[cf] = job_prepared
@@ -240,16 +239,6 @@ def _submit_batch(batch: list[AssetJob], fut, chain_task, rec: _AssetRecorder, f
         limit = {} if job.isolation in ("process", "spawn") else {"timeout_seconds": job.time_limit_seconds}
         out.append((chain_task.with_options(**limit).submit(Sealed(job), Sealed(prepared)), (job, prepared)))
     return out
-
-
-def _record_chain(cf, job_prepared: tuple, rec: _AssetRecorder) -> None:
-    """Record the row of the asset whose chain ``cf`` ended."""
-    job, prepared = job_prepared
-    res, exc = _outcome(cf)
-    if exc is not None:
-        rec.record(job, prepared, None, None, exc)
-    else:
-        rec.record(job, prepared, res.refined, res.measured, res.error, res.published)
 
 
 def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
