@@ -60,6 +60,7 @@ def failure_modes(df, by: str | Iterable[str] = "category", run: str | None = No
     import numpy as np
     import pandas as pd
     import pyarrow as pa
+    import pyarrow.compute as pc
 
     keys = [by] if isinstance(by, str) else list(by)
     columns = df.schema.names if _is_table(df) else list(df.columns)
@@ -68,7 +69,14 @@ def failure_modes(df, by: str | Iterable[str] = "category", run: str | None = No
             raise KeyError(f"no catalog column {k!r}; columns: {list(columns)}")
     if not _is_table(df):  # a DataFrame: counted in Arrow too
         df = pa.Table.from_pandas(df[list(dict.fromkeys([*keys, *(["run"] if run else []), "failure_mode"]))], preserve_index=False)
-    counts = _failure_counts_arrow(df, keys, run)
+    # rows per (keys..., failure mode), missing key values as ``(unknown)``
+    df = plain_strings(df)
+    if run is not None:
+        df = df.filter(pc.equal(df["run"], run))
+    cols = {k: pc.fill_null(df[k] if pa.types.is_string(df[k].type) else df[k].cast(pa.string()), "(unknown)") for k in keys}
+    cols["failure_mode"] = pc.fill_null(df["failure_mode"], MISSING_FAILURE_MODE)
+    grouped = pa.table(cols).group_by([*keys, "failure_mode"]).aggregate([([], "count_all")]).to_pandas()
+    counts = grouped.sort_values([*keys, "failure_mode"]).set_index([*keys, "failure_mode"])["count_all"]
     if len(counts) == 0:
         return pd.DataFrame(columns=[*keys, *FAILURE_MODES, "total"]).set_index(keys)
     table = counts.unstack("failure_mode", fill_value=0)
@@ -79,23 +87,6 @@ def failure_modes(df, by: str | Iterable[str] = "category", run: str | None = No
     total = table.sum(axis=0).to_frame().T
     total.index = pd.MultiIndex.from_tuples([("total",) * len(keys)], names=keys) if len(keys) > 1 else pd.Index(["total"], name=keys[0])
     return pd.concat([table, total]).astype(int)
-
-
-def _failure_counts_arrow(table, keys: list[str], run: str | None):
-    """Rows per (keys..., failure mode) of an Arrow table, as a pandas Series
-    with a MultiIndex (missing key values as ``(unknown)``)."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
-    table = plain_strings(table)
-    if run is not None:
-        table = table.filter(pc.equal(table["run"], run))
-    cols = {k: pc.fill_null(table[k] if pa.types.is_string(table[k].type) else table[k].cast(pa.string()), "(unknown)")
-            for k in keys}
-    cols["failure_mode"] = pc.fill_null(table["failure_mode"], MISSING_FAILURE_MODE)
-    grouped = pa.table(cols).group_by([*keys, "failure_mode"]).aggregate([([], "count_all")]).to_pandas()
-    grouped = grouped.sort_values([*keys, "failure_mode"])
-    return grouped.set_index([*keys, "failure_mode"])["count_all"]
 
 
 def _rate(series) -> float | None:
