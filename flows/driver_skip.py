@@ -119,19 +119,6 @@ def entry_for(job: Any, prepared: Prepared, fingerprint: str | None) -> InputEnt
     )
 
 
-def _decide(job: Any, entry: InputEntry | None, fingerprint: str | None, code: str) -> Prepared | None:
-    t0 = time.perf_counter()
-    if (entry is None or fingerprint is None or entry.fingerprint != fingerprint or entry.code_hash != code
-            or entry.job_category != job.category or not job.finished):
-        return None
-    rec = reusable(Prepared(worker=f"{worker_name()} (driver)", category=entry.category,
-                            links=entry.links, movable_joints=entry.movable_joints), job, entry.input_hash)
-    if rec.skip is None:
-        return None
-    rec.seconds = time.perf_counter() - t0
-    return rec
-
-
 def decide_skips(
     jobs: list[Any],
     index: dict[str, InputEntry],
@@ -150,11 +137,19 @@ def decide_skips(
     if not todo:
         return {}
 
-    def one(job):
-        return job.asset_id, _decide(job, index.get(job.asset_id), fingerprints.get(job.asset_id), code)
+    def decide(job: Any) -> Prepared | None:
+        t0, entry, fingerprint = time.perf_counter(), index[job.asset_id], fingerprints.get(job.asset_id)
+        if fingerprint is None or entry.fingerprint != fingerprint or entry.code_hash != code or entry.job_category != job.category:
+            return None
+        rec = reusable(Prepared(worker=f"{worker_name()} (driver)", category=entry.category,
+                                links=entry.links, movable_joints=entry.movable_joints), job, entry.input_hash)
+        if rec.skip is None:
+            return None
+        rec.seconds = time.perf_counter() - t0
+        return rec
 
     with ThreadPoolExecutor(max_workers=min(8, len(todo))) as pool:
-        return {aid: p for aid, p in pool.map(one, todo) if p is not None}
+        return {job.asset_id: p for job, p in zip(todo, pool.map(decide, todo)) if p is not None}
 
 
 def fingerprints(jobs: list[Any]) -> dict[str, str | None]:
