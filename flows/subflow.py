@@ -176,7 +176,19 @@ class _AssetRecorder:
             failure_mode=None if exc is None else exception_failure_mode(exc, ModelCallFailure),
             flow_run_id=self.flow_run_id, started_at=self.starts[job.asset_id], finished_at=time.time(),
         )  # fmt: skip
-        _add_isolation_times(row, refined, measured)
+        # the isolated stages' ``cpu.refine`` / ``cpu.metrics`` and ``isolation.server_start`` (s) in ``stage_seconds``
+        add: dict[str, float] = {}
+        for name, rec in (("refine", refined), ("metrics", measured)):
+            extra = (getattr(rec, "model_extra", None) or {}).get("extra") if rec is not None else None
+            if not isinstance(extra, dict):
+                continue
+            if extra.get("cpu_seconds") is not None:
+                add[f"cpu.{name}"] = round(float(extra["cpu_seconds"]), 4)
+            if extra.get("server_start_seconds") is not None:
+                add["isolation.server_start"] = round(
+                    add.get("isolation.server_start", 0.0) + float(extra["server_start_seconds"]), 4)
+        if add:
+            row.stage_seconds = json.dumps({**json.loads(row.stage_seconds or "{}"), **add}, sort_keys=True)
         if published is not None and published.status == "ok" and isinstance(published.value.get("clips"), list):
             row.clips = json.dumps(published.value["clips"])  # read in the worker: the row's out_dir is the store's
         self.store.append_row(job.dataset, job.run_id, row)
@@ -256,21 +268,6 @@ def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
     except (RuntimeError, OSError, TimeoutError) as exc:
         log.warning("stage servers not started before the first asset: %s: %s", type(exc).__name__, exc)
     return time.perf_counter() - t0
-
-
-def _add_isolation_times(row, refined, measured) -> None:
-    """Add the isolated stages' ``cpu.refine`` / ``cpu.metrics`` and ``isolation.server_start`` (s) to ``stage_seconds``."""
-    add: dict[str, float] = {}
-    for name, rec in (("refine", refined), ("metrics", measured)):
-        extra = (getattr(rec, "model_extra", None) or {}).get("extra") if rec is not None else None
-        if not isinstance(extra, dict):
-            continue
-        if extra.get("cpu_seconds") is not None:
-            add[f"cpu.{name}"] = round(float(extra["cpu_seconds"]), 4)
-        if extra.get("server_start_seconds") is not None:
-            add["isolation.server_start"] = round(add.get("isolation.server_start", 0.0) + float(extra["server_start_seconds"]), 4)
-    if add:
-        row.stage_seconds = json.dumps({**json.loads(row.stage_seconds or "{}"), **add}, sort_keys=True)
 
 
 def _record_resumed(store: ResultCatalog, prepared: Prepared, refined, measured,
