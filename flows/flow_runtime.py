@@ -116,17 +116,12 @@ def prefect_api_for_run(project_root: Path | str):
         with temporary_settings({PREFECT_API_URL: url}):
             try:
                 yield url
-            finally:
-                _drain_prefect_workers()
+            finally:  # Prefect's background log and event workers flushed before the server stops
+                with contextlib.suppress(Exception):  # best effort: the catalog, not Prefect's log, is the record
+                    from prefect.events.worker import EventsWorker
+                    from prefect.logging.handlers import APILogWorker
+
+                    APILogWorker.drain_all(timeout=5)
+                    EventsWorker.drain_all(timeout=5)
     finally:
         server.stop_server(proc)
-
-
-def _drain_prefect_workers() -> None:
-    """Flush Prefect's background log and event workers before the server stops."""
-    with contextlib.suppress(Exception):  # best effort: the catalog, not Prefect's log, is the record
-        from prefect.events.worker import EventsWorker
-        from prefect.logging.handlers import APILogWorker
-
-        APILogWorker.drain_all(timeout=5)
-        EventsWorker.drain_all(timeout=5)

@@ -84,7 +84,6 @@ def start_local_server(project_root: Path | str, timeout: float = 120.0, *, ephe
             raise RuntimeError(f"prefect server did not answer at {url} within {timeout:.0f} s; see {log_path}")
         if proc.returncode != 3 or attempt == 2:  # 3: uvicorn could not bind the port
             raise RuntimeError(f"prefect server exited with code {proc.returncode}; see {log_path}")
-    raise RuntimeError(f"prefect server did not start; see {log_path}")  # not reached
 
 
 def stop_server(proc, timeout: float = 20.0) -> None:
