@@ -30,16 +30,6 @@ def metric_key(source: str, method: str, field: str) -> str:
     return f"{clean(source)}/{clean(method)}/{field}"
 
 
-def _artifact_location(tracking_uri: str, experiment: str) -> str | None:
-    """Artifacts of a new experiment of a SQLite store beside the database (``<db folder>/mlruns/<experiment>``),
-    not under the working folder; None (MLflow's default) for other stores."""
-    parsed = urlparse(tracking_uri)
-    if parsed.scheme == "sqlite" and parsed.path:
-        db = Path(unquote(parsed.path))
-        return (db.resolve().parent / "mlruns" / re.sub(r"[^\w.-]", "_", experiment)).as_uri()
-    return None
-
-
 def log_realism_scores(scores: list[MethodScore], *, tracking_uri: str, experiment: str = REALISM_EXPERIMENT,
                        ratings_parquet: Path | None = None, run_name: str | None = None) -> str:
     """Log ``scores`` as one MLflow run in ``experiment`` (created when missing) of the store at
@@ -64,7 +54,12 @@ def log_realism_scores(scores: list[MethodScore], *, tracking_uri: str, experime
         raise ValueError(f"{ratings_parquet}: no such ratings table")
     client = MlflowClient(tracking_uri=tracking_uri)  # never the process-wide URI
     sources = sorted({s.source for s in scores})
-    with client_run(client, experiment, _artifact_location(tracking_uri, experiment), run_name or f"realism-{'-'.join(sources)}",
+    # artifacts of a new experiment of a SQLite store beside the database (``<db folder>/mlruns/<experiment>``), not
+    # under the working folder; None (MLflow's default) for other stores
+    parsed, location = urlparse(tracking_uri), None
+    if parsed.scheme == "sqlite" and parsed.path:
+        location = (Path(unquote(parsed.path)).resolve().parent / "mlruns" / re.sub(r"[^\w.-]", "_", experiment)).as_uri()
+    with client_run(client, experiment, location, run_name or f"realism-{'-'.join(sources)}",
                     tags={"asset2sim.kind": "realism"}) as run_id:
         for key, value in {"sources": ",".join(sources), "methods": ",".join(sorted({s.method for s in scores})),
                            "model": "Bradley-Terry (MAP, virtual games prior)", "prior_games": PRIOR_GAMES,
