@@ -223,34 +223,25 @@ def _run_assets(prep_futures: dict, chain_task, rec: _AssetRecorder, fingerprint
             else:
                 rec.record(job, prepared, res.refined, res.measured, res.error, res.published)
             continue
-        for cf, job_prepared in _submit_batch(prep_futures.pop(fut), fut, chain_task, rec, fingerprints):
-            chains[cf] = job_prepared
+        results, exc_b = _outcome(fut)  # a prepare batch ended
+        for k, job in enumerate(prep_futures.pop(fut)):
+            prepared = None if exc_b is not None else results[k]
+            exc = exc_b if exc_b is not None else (prepared if isinstance(prepared, BaseException) else None)
+            if exc is not None:
+                prepared = None
+            else:
+                entry = driver_skip.entry_for(job, prepared, fingerprints.get(job.asset_id))
+                if entry is not None:
+                    rec.inputs[job.asset_id] = entry
+            if exc is not None or prepared is None or prepared.skip is not None or not prepared.ok:
+                rec.record(job, prepared, None, None, exc)
+                continue
+            # a killed run's complete folder (prepared.resume): refine reads its report, metrics its evaluation; the
+            # time limit of a non-isolated stage is Prefect's (process isolation has its own)
+            limit = {} if job.isolation in ("process", "spawn") else {"timeout_seconds": job.time_limit_seconds}
+            cf = chain_task.with_options(**limit).submit(Sealed(job), Sealed(prepared))
+            chains[cf] = job, prepared
             cf.add_done_callback(finished.put)
-
-
-def _submit_batch(batch: list[AssetJob], fut, chain_task, rec: _AssetRecorder, fingerprints: dict[str, str | None]) -> list:
-    """The ended prepare ``fut`` of ``batch``: record its input index entries and the row of each asset that ends
-    there (failed, skipped, invalid); submit the ``refine-metrics`` chain of the others. Returns [(chain future,
-    (job, prepared))]."""
-    results, exc_b = _outcome(fut)
-    out = []
-    for k, job in enumerate(batch):
-        prepared = None if exc_b is not None else results[k]
-        exc = exc_b if exc_b is not None else (prepared if isinstance(prepared, BaseException) else None)
-        if exc is not None:
-            prepared = None
-        else:
-            entry = driver_skip.entry_for(job, prepared, fingerprints.get(job.asset_id))
-            if entry is not None:
-                rec.inputs[job.asset_id] = entry
-        if exc is not None or prepared is None or prepared.skip is not None or not prepared.ok:
-            rec.record(job, prepared, None, None, exc)
-            continue
-        # a killed run's complete folder (prepared.resume): refine reads its report, metrics its evaluation; the time
-        # limit of a non-isolated stage is Prefect's (process isolation has its own)
-        limit = {} if job.isolation in ("process", "spawn") else {"timeout_seconds": job.time_limit_seconds}
-        out.append((chain_task.with_options(**limit).submit(Sealed(job), Sealed(prepared)), (job, prepared)))
-    return out
 
 
 def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
