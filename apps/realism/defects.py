@@ -100,8 +100,7 @@ def _scale_x3(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedSta
 
 
 def _slamming_spring(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedState, force: float) -> PhysicsSide:
-    _joint(model, joint).dynamics = UrdfDynamics(damping=0.0, friction=0.0)
-    return replace(side, springs={**side.springs, joint: Spring(stiffness=float(SLAM_SHARE * force / closed.open_range),
+    return replace(_zero_damping(model, side, joint, closed, force), springs={**side.springs, joint: Spring(stiffness=float(SLAM_SHARE * force / closed.open_range),
                                                                 reference=float(closed.q_closed))})
 
 

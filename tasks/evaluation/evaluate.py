@@ -145,20 +145,22 @@ def _prompt_alignment(ctx: EstimationContext, model: UrdfModel, state: dict[str,
     if not spec.text:
         return MetricResult(name="prompt_alignment", value=None, unit="fraction", details={"reason": "no prompt"}, engine="none")
     types = {j.name: j.type for j in model.joints}
+    requests, unapplied, warnings = ({}, [], []) if resolution is None else (
+        resolution.requests, resolution.unapplied, list(resolution.warnings))
     checks = []
-    for name, jr in (resolution.requests if resolution is not None else {}).items():
+    for name, jr in requests.items():
         c, q = closed.get(name), state.get(name)
         known = c is not None and q is not None
         label = ctx.asset.link(ctx.asset.joint(name).child).semantic_label
         checks.append(sem.JointStateCheck(name, jr.band, c.fraction(q) if known else None, label, jr.phrase, jr.target,
                                           c.direction * (q - c.q_closed) if known else None, types.get(name, "revolute")))
-    unmatched = [p for p, _ in (resolution.unapplied if resolution is not None else [])]
+    unmatched = [p for p, _ in unapplied]
     dims = prior.get("base_dims")
     m = sem.prompt_alignment(size_requested=spec.size_class is not None, largest_extent=largest,
                              typical_largest=dims[0] if dims else None, size_factor=float(prior.get("factor", 1.0)),
                              joint_checks=checks, state_requested=bool(spec.joint_states), unmatched_requests=unmatched,
                              text=spec.text, understood=spec.understood,
-                             warnings=request_warnings(spec, unmatched, ctx.category) + list(resolution.warnings if resolution is not None else []))
+                             warnings=request_warnings(spec, unmatched, ctx.category) + warnings)
     m.details.update({"size_class": spec.size_class, "category": ctx.category, "variant": prior.get("variant"),
                       "extent_state": "closed state", "prior_note": prior.get("note")})
     return m

@@ -223,7 +223,7 @@ def evidence_section(runs: dict, urdf: Path | str, dt: float, svg: Callable[[byt
     ``figure`` make the HTML of a plot and of a captioned image; ``initial_state``: the joints' positions (rad or
     m); ``task``: the ``task_execution`` metric's details; ``closed``: joint -> {q_closed, direction, open_range};
     ``metrics``: the evaluation's metrics (the penetration and operability measures)."""
-    others = dict(initial_state or {})
+    others, closed = dict(initial_state or {}), dict(closed or {})
     items: list[tuple[str, Callable[[], list[Pose]], Highlight | None]] = []  # (the HTML before the frames, poses, colours)
     for f in penetration_failures(metrics or []):
         if f.link_a is None:  # a measure that names no pair: nothing to draw
@@ -246,7 +246,7 @@ def evidence_section(runs: dict, urdf: Path | str, dt: float, svg: Callable[[byt
                                   ("the hand's range (N)", (part.get("force_range_n") or [None, None])[1]),
                                   ("torque it needed (N m)", stroke.get("needed_torque_nm")),
                                   ("stopped by", stroke.get("stopped_by") or "-")]),
-                      lambda p=part, s=stroke: operability_poses(p, s, dict(closed or {}), others), None))
+                      lambda p=part, s=stroke: operability_poses(p, s, closed, others), None))
     for attempt in [a for a in (task or {}).get("attempts", []) if not a.get("success")]:
         items.append((_h3(f"task: {attempt['action']} {attempt['joint']}: {attempt.get('failure', '')}")
                       + _one_row([("reached the target", attempt.get("reached")), ("held after release", attempt.get("held")),
@@ -254,7 +254,7 @@ def evidence_section(runs: dict, urdf: Path | str, dt: float, svg: Callable[[byt
                                   ("object slid (mm)", 1000 * (attempt.get("root_slide_m") or 0.0)),
                                   ("object tilted (rad)", attempt.get("root_tilt_rad")),
                                   ("gripper at its force limit", attempt.get("force_limited"))]),
-                      lambda a=attempt: task_poses(a, dict(closed or {}), others), None))
+                      lambda a=attempt: task_poses(a, closed, others), None))
     sweeps, trials = failing(runs)
     for engine, js in sweeps:
         items.append((_h3(f"joint sweep of {js.joint} ({engine}): {js.failure}") + svg(sweep_plot(js), f"sweep {js.joint}"),
