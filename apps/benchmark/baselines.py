@@ -57,14 +57,6 @@ class BaselineResult:
     notes: list[str] = field(default_factory=list)
 
 
-def _clip(q: float, lo: float | None, hi: float | None) -> float:
-    if lo is not None:
-        q = max(q, lo)
-    if hi is not None:
-        q = min(q, hi)
-    return float(q)
-
-
 def make_defaults(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
     """``defaults`` baseline for one manifest row (module docstring).
     Raises BaselineError: no ``mobility.urdf`` in the row's folder."""
@@ -80,8 +72,7 @@ def make_defaults(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
         scale = 1.0
         notes.append("no reference scale: raw scale 1.0")
     urdf = scale_urdf(src, out_dir / URDF_NAME, scale, header=f"asset2sim baseline 'defaults' of {row.id} at scale {scale}")
-    state = {n: _clip(0.0, j["lower"], j["upper"]) for n, j in urdf_joints(urdf).items()
-             if j["type"] in ("revolute", "continuous", "prismatic")}
+    state = partnet_mobility.reference_initial_state(urdf_joints(urdf), [], None, scale)  # every movable joint: 0 clipped
     write_json(out_dir / STATE_NAME, {"initial_joint_positions": state})
     notes.append("no <inertial>: PyBullet uses 1 kg and inertia diag(1,1,1) kg*m^2 per link; no <dynamics>: zero damping and friction")
     write_json(out_dir / "baseline.json", {"method": "defaults", "asset_id": row.id, "source": str(src), "scale": scale,
