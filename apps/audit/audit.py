@@ -50,11 +50,6 @@ class AuditResult:
     out_dir: Path | None = None
 
 
-def _name_words(asset: AssetDescription) -> str:
-    """The asset's own names as phrases (``storage_box`` -> ``storage box``), for recognising its category."""
-    return ". ".join(dict.fromkeys(" ".join(w for w in s.replace("-", "_").split("_") if w) for s in (asset.robot_name, asset.asset_id)))
-
-
 def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category: str | None = None,
                 asset_id: str | None = None, simulate: bool = True, config: RefineConfig | None = None) -> AuditResult:
     """Audit the asset at ``path``.
@@ -84,7 +79,10 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
     except Exception as exc:
         raise AuditError(_cannot(path, exc)) from exc
     asset = labels_from_names(asset)  # as the context builder labels it
-    match = recognize_category(category or asset.category, [ln.semantic_label for ln in asset.links], _name_words(asset))
+    # the asset's own names as phrases (storage_box -> storage box), for recognising its category
+    words = ". ".join(dict.fromkeys(" ".join(w for w in s.replace("-", "_").split("_") if w)
+                                    for s in (asset.robot_name, asset.asset_id)))
+    match = recognize_category(category or asset.category, [ln.semantic_label for ln in asset.links], words)
     source = asset.staged_from or asset.urdf_path
     if out_dir is not None:
         out_dir = Path(out_dir)

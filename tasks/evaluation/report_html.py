@@ -82,12 +82,6 @@ def _verdict_table(ev) -> str:
     return table(("metric", "engine", "value", "unit", "verdict", "threshold", "notes"), rows)
 
 
-def measured_engines(ev) -> list[str]:
-    """The engines the report's verdicts were measured in (those of its metrics, then those the evaluation ran), in
-    order: the header names every engine a row of the verdict table comes from."""
-    return list(dict.fromkeys([m.engine for m in ev.metrics if m.engine and m.engine != "none"] + list(ev.engines)))
-
-
 def _penetration_details(ev) -> str:
     """The penetration tier at the initial state: one sentence with its verdict (the readiness rule, the words of the
     terminal's penetration line), then the self-contact pairs and the children inside their parents, each with its
@@ -114,8 +108,9 @@ def _penetration_details(ev) -> str:
             continue
         modelled = m.details.get("modelled") or {}
         rows = "".join(f"<tr><td>{esc(k.partition('/')[0])}</td><td>{esc(k.partition('/')[2])}</td><td class='num'>{fmt(v)}</td>"
-                       f"<td class='num'>{fmt(modelled.get(k, 0.0))}</td><td class='num'>{fmt(max(v - modelled.get(k, 0.0), 0.0))}</td>"
-                       f"{verdict_cell(max(v - modelled.get(k, 0.0), 0.0) <= UNRESOLVED_PENETRATION_MM)}</tr>" for k, v in pairs.items())
+                       f"<td class='num'>{fmt(modelled.get(k, 0.0))}</td><td class='num'>{fmt(over)}</td>"
+                       f"{verdict_cell(over <= UNRESOLVED_PENETRATION_MM)}</tr>"
+                       for k, v in pairs.items() for over in [max(v - modelled.get(k, 0.0), 0.0)])
         out.append(f"<h3>A child inside its parent ({esc(m.engine)}; {esc(m.threshold)})</h3>" + table(
             ("parent", "child", "depth (mm)", "at its modelled pose (mm)", "deeper than modelled (mm)", "verdict"), rows))
     return "".join(out)
@@ -343,10 +338,13 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
     joint_types = {j.name: j.type for j in ctx.model.joints}
     state_text = ", ".join(f"{k} = {_joint_state(ev, k, v, joint_types.get(k, 'revolute'))}"
                            for k, v in ev.initial_state.items()) or "none"
+    # the engines the verdicts were measured in (those of the metrics, then those the evaluation ran): the header names
+    # every engine a row of the verdict table comes from
+    engines = dict.fromkeys([m.engine for m in ev.metrics if m.engine and m.engine != "none"] + list(ev.engines))
     sections = [
         f"<h1>asset2sim {esc(command)}: {esc(ev.asset_id)}</h1>",
         f"<p class='meta'>method <b>{esc(ev.method or '-')}</b> &middot; category {esc(ev.category or '-')} &middot; "
-        f"engines {esc(', '.join(measured_engines(ev)))} &middot; scale {fmt(ev.scale)} ({esc(ev.scale_source)})</p>",
+        f"engines {esc(', '.join(engines))} &middot; scale {fmt(ev.scale)} ({esc(ev.scale_source)})</p>",
         f"<p class='meta'>URDF <code>{esc(portable_urdf(ev, folder) if folder is not None else ev.urdf)}</code>"
         + (f" &middot; input <code>{esc(Path(str(ctx.report['source'])).name)}</code>"
            if ctx.report and ctx.report.get("source") else "") + "<br/>"
