@@ -7,11 +7,9 @@ from __future__ import annotations
 
 import hashlib
 import os
-import threading
-import cachetools
 from pathlib import Path, PurePosixPath
 
-from asset2sim import atomic, file_names, mesh_io
+from asset2sim import atomic, file_memo, file_names, mesh_io
 from asset2sim.output_folder import (EVALUATION_NAME, MARKER_NAME, OVERLAY_NAME, RECORD_NAME, REPORT_HTML_NAME, REPORT_NAME,
                                      STATE_NAME, TIMINGS_NAME, URDF_NAME, OutputError)
 from asset2sim.schemas.asset import AssetDescription
@@ -49,28 +47,13 @@ def _reference_dirs(filename: str) -> list[str]:
     return out
 
 
-#: Results of :func:`mesh_copies` kept per process: key -> (files it read, their and their folders' stamps, copies).
-_COPIES_CACHE: cachetools.LRUCache = cachetools.LRUCache(maxsize=32)
-_COPIES_LOCK = threading.Lock()
+#: Results of :func:`mesh_copies` kept per process while the files it read, and their folders, are unchanged.
+_COPIES_MEMO: file_memo.FileMemo[dict[str, Path]] = file_memo.FileMemo(dict, max_entries=32)
 
 
 def _meshes(asset: AssetDescription) -> list:
     """The mesh geometries (visual and collision) of ``asset``'s links, in order."""
     return [g for ln in asset.links for g in ln.visuals + ln.collisions if g.kind == "mesh"]
-
-
-def _stamps(files: list[Path]) -> tuple:
-    """(path, size, modification time ns, inode) of each file and of each
-    folder holding one (a file added, removed or renamed there changes the
-    folder's time); None for a path that cannot be read."""
-    out = []
-    for p in sorted({str(f) for f in files} | {os.path.dirname(os.path.abspath(f)) for f in files}):
-        try:
-            st = os.stat(p)
-            out.append((p, st.st_size, st.st_mtime_ns, st.st_ino))
-        except OSError:
-            out.append((p, None, None, None))
-    return tuple(out)
 
 
 def mesh_copies(asset: AssetDescription) -> dict[str, Path]:
@@ -88,18 +71,17 @@ def mesh_copies(asset: AssetDescription) -> dict[str, Path]:
             one output path, or an input file named like a contract file).
     """
     key = (str(asset.source_dir), str(asset.urdf_path), tuple((str(g.path), g.filename) for g in _meshes(asset) if g.path is not None))
-    with _COPIES_LOCK:
-        hit = _COPIES_CACHE.get(key)
-    if hit is not None and _stamps(hit[0]) == hit[1]:
-        return dict(hit[2])
+    hit = _COPIES_MEMO.get(key)
+    if hit is not None:
+        return hit
     read = [g.path for g in _meshes(asset) if g.path is not None]
     # the paths as written too: a library added beside a symlinked mesh changes where its material comes from
     read += [asset.urdf_path.parent / g.filename for g in _meshes(asset) if g.path is not None and g.filename]
     copies = _mesh_copies(asset)
+    # a file added, removed or renamed in a folder holding one changes the folder's time
     files = [*read, *copies.values()]
-    entry = (files, _stamps(files), dict(copies))
-    with _COPIES_LOCK:
-        _COPIES_CACHE[key] = entry
+    _COPIES_MEMO.put(key, file_memo.identities({str(f) for f in files} | {os.path.dirname(os.path.abspath(f)) for f in files}),
+                     copies)
     return copies
 
 
