@@ -72,14 +72,6 @@ def _analytic_primitive(ref: GeometryRef) -> tuple[float, float, np.ndarray, np.
     return None
 
 
-def _tup3(a: np.ndarray) -> tuple[float, float, float]:
-    return (float(a[0]), float(a[1]), float(a[2]))
-
-
-def _tup33(m: np.ndarray):
-    return tuple(_tup3(row) for row in m)
-
-
 #: Modules whose source the analysis of a link depends on (part of the on-disk cache key).
 ANALYSIS_CODE: tuple[str, ...] = (*(f"asset2sim.tasks.geometry.{m}" for m in ("analyze", "surface", "voxels", "moments")),
                                    "asset2sim.mesh_io", "asset2sim.frames", "asset2sim.schemas.asset")
@@ -213,8 +205,9 @@ def _analyze_surface(link: LinkDesc, prefer, cache: MeshCache | None) -> LinkGeo
     if analytic is None:  # the area a shell's mass takes: a surface drawn twice, once facing each way, counts once
         area = surface_properties(v, single_sided(v, f))[0]
     return LinkGeometry(link=link.name, volume=volume, volume_method=method, watertight=watertight, area=float(area),
-                        bbox_min=_tup3(bmin), bbox_max=_tup3(bmax), com=_tup3(com), inertia_solid=_tup33(i_solid),
-                        inertia_shell=_tup33(i_shell), n_meshes=len(surf.sources), n_faces=int(len(f)), notes=notes)
+                        bbox_min=bmin.tolist(), bbox_max=bmax.tolist(), com=np.asarray(com).tolist(),
+                        inertia_solid=i_solid.tolist(), inertia_shell=i_shell.tolist(), n_meshes=len(surf.sources),
+                        n_faces=int(len(f)), notes=notes)
 
 
 def analyze_asset(asset: AssetDescription, cache: MeshCache | None = None) -> dict[str, LinkGeometry]:
