@@ -207,7 +207,7 @@ class SceneRenderer:
         """Draw the object turned by ``rotation`` (3, 3) about the world origin from its pose as loaded (a
         tilted or toppled object as it lies; the cameras fit whatever pose)."""
         if self._root0 is None:
-            self._root0 = self._viewer.link_frame(self._viewer.link_names[0])
+            self._root0 = self.root_pose()
         pos0, R0 = self._root0
         R = np.asarray(rotation, float)
         self._viewer.set_root_pose(R @ pos0, quat_wxyz_to_xyzw(matrix_quat_wxyz(R @ R0)))

@@ -41,7 +41,7 @@ def render_contact_sheet(images: Mapping[str, np.ndarray], *, title: str | None 
     Raises:
         ValueError: no images, or an image that is not (H, W, 3|4) uint8.
     """
-    from PIL import Image, ImageDraw
+    from PIL import Image, ImageDraw, ImageFont
 
     if not images:
         raise ValueError("render_contact_sheet needs at least one image")
@@ -56,8 +56,15 @@ def render_contact_sheet(images: Mapping[str, np.ndarray], *, title: str | None 
     rows = math.ceil(n / cols)
     tw = max(a.shape[1] for a in arrays.values())
     th = max(a.shape[0] for a in arrays.values())
-    font = _font(max(11, tw // 16))
-    label_h = _text_height(font) + 8
+    try:
+        font = ImageFont.load_default(size=max(11, tw // 16))
+    except TypeError:  # Pillow without FreeType sizes
+        font = ImageFont.load_default()
+    try:
+        box = font.getbbox("Ag")
+        label_h = int(box[3] - box[1]) + 10  # the text and 10 px around it
+    except Exception:  # pragma: no cover
+        label_h = 20
     title_h = label_h + 4 if title else 0
     pad = 4
     W = cols * tw + (cols + 1) * pad
@@ -75,20 +82,3 @@ def render_contact_sheet(images: Mapping[str, np.ndarray], *, title: str | None 
         tile.paste(Image.fromarray(a), ((tw - a.shape[1]) // 2, (th - a.shape[0]) // 2))
         sheet.paste(tile, (x0, y0 + label_h))
     return np.asarray(sheet, dtype=np.uint8)
-
-
-def _font(size: int):
-    from PIL import ImageFont
-
-    try:
-        return ImageFont.load_default(size=size)
-    except TypeError:  # Pillow without FreeType sizes
-        return ImageFont.load_default()
-
-
-def _text_height(font) -> int:
-    try:
-        box = font.getbbox("Ag")
-        return int(box[3] - box[1]) + 2
-    except Exception:  # pragma: no cover
-        return 12
