@@ -9,7 +9,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, SimSession
+from asset2sim.engines.base import SimSession
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import StateRefinement
@@ -259,8 +259,7 @@ def clip_limits(candidate: Candidate, closed_out: dict[str, ClosedState], ws: Wo
     (:mod:`asset2sim.tasks.geometry.limits`; with a carrying chain, also against the chain opened).
     Returns (overlay, closed ends)."""
     overlay, state = candidate.overlay, dict(candidate.state)
-    with ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
-                                                          conventions=config.sim)) as sess:
+    with state_search.kinematic_session(ws, candidate, config, state) as sess:
         clips = limits.geometric_limits(sess, ws.model(candidate), closed_tuples(closed_out), state)
     if any(c.clipped for c in clips.values()):
         overlay, notes = limits.apply_clips(overlay, clips)

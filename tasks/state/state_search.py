@@ -9,7 +9,7 @@ from typing import Callable
 
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.base import SessionOptions, SimSession
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.assemble import write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
@@ -18,10 +18,17 @@ from asset2sim.tasks.state import collision, refine_state
 from asset2sim.tasks.synthesize import estimate
 
 
+def kinematic_session(ws: Workspace, candidate: Candidate, config: RefineConfig,
+                      state: dict[str, float] | None = None) -> SimSession:
+    """A PyBullet session of ``candidate`` (loaded into ``ws``) with its root pinned, no gravity and no ground, at
+    ``state`` (joint -> rad or m; None: 0); the caller closes it."""
+    return ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False,
+                                                            initial_state=state or {}, conventions=config.sim))
+
+
 def phi_at(ws: Workspace, candidate: Candidate, state: dict[str, float], config: RefineConfig) -> float:
     """Phi (m, the SPEC's self-penetration) of ``candidate`` (loaded into ``ws``) at ``state`` (joint -> rad or m)."""
-    with ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
-                                                          conventions=config.sim)) as sess:
+    with kinematic_session(ws, candidate, config, state) as sess:
         return float(sess.self_penetration_fresh()[0])
 
 
@@ -46,8 +53,7 @@ def _left_note(candidate: Candidate, st, closed_out, bands, intervals, config: R
     (the requested band within the limits); none of those states, nor a collision piece change (where the repair is
     on), cleared it."""
     allowed = refine_state.allowed_intervals(closed_out, estimate.band_intervals(bands, intervals))
-    with ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=st.result,
-                                                          conventions=config.sim)) as sess:
+    with kinematic_session(ws, candidate, config, st.result) as sess:
         pairs = sess.self_penetration_fresh()[1][:3]
     said = []
     for c in pairs:
@@ -65,7 +71,7 @@ def _refine(candidate: Candidate, closed_out, bands, config, ws: Workspace, say,
     asset, requested = candidate.asset, dict(candidate.state)
 
     def search(on: Candidate, start: dict[str, float]):
-        with ws.session(on, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=config.sim)) as sess:
+        with kinematic_session(ws, on, config) as sess:
             return refine_state.refine_initial_state(sess, asset, closed_out, start, fractions, config, proposer=proposer,
                                                      opened=frozenset(j for j, b in bands.items() if b != "closed"))
 
