@@ -85,15 +85,6 @@ def tree_path(joints: Sequence, link_a: str, link_b: str) -> tuple[list, list]:
     return [parent[ln] for ln in path_a if ln in parent], [parent[ln] for ln in path_b if ln in parent]
 
 
-def default_reference(session) -> dict[str, float]:
-    """Reference state: 0 clipped to each joint's limits."""
-    ref = {}
-    for name in session.joint_names:
-        lo, hi = session.joint_limits[name]
-        ref[name] = float(np.clip(0.0, lo, hi)) if np.isfinite(lo) else 0.0
-    return ref
-
-
 def link_hull_points(asset: AssetDescription, cache=None) -> dict[str, np.ndarray]:
     """Convex-hull vertices (N, 3) of every link's collision geometry (else visual), link frame, scale 1:
     exact bounding boxes at any state (Bullet's AABBs of rotated hulls are loose). ``cache``: a
@@ -198,7 +189,9 @@ def closed_positions(session, asset: AssetDescription, *, hull_points: dict[str,
 
     Returns joint name -> :class:`ClosedState`; the session is left at the closed state.
     """
-    state = default_reference(session)
+    # the reference state: 0 clipped to each joint's limits
+    state = {n: float(np.clip(0.0, *session.joint_limits[n])) if np.isfinite(session.joint_limits[n][0]) else 0.0
+             for n in session.joint_names}
     result: dict[str, ClosedState] = {}
     points = link_hull_points(asset) if hull_points is None else hull_points
     names = list(session.joint_names)
