@@ -111,8 +111,16 @@ def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint
     gone = sum(p is None for p in P) + sum(c is None for c in C)
     P[:] = [p for p in P if p is not None]
     C[:] = [c for c in C if c is not None]
-    if before > 0.0:
-        notes.append(_separation_note(joint, before, after, len(cut["p"]), len(cut["c"]), kept, gone, state is None))
+    if before > 0.0:  # the pieces cut, removed whole and held whole; swept from the reference position on without a state
+        n_p, n_c = len(cut["p"]), len(cut["c"])
+        what = ", ".join(x for x in (f"{n_p} of {joint.parent!r}'s pieces" if n_p else "",
+                                     f"{n_c} of {joint.child!r}'s" if n_c else "") if x)
+        notes.append(f"joint {joint.name!r}: {joint.child!r} penetrated its parent {joint.parent!r} up to {before * 1000:.3g} mm "
+                     + ("from its reference position on" if state is None else "at the initial state")
+                     + f"; cut {what or 'nothing'}"
+                     + (f" ({gone} removed whole)" if gone else "")
+                     + (f"; {kept} overlap(s) of a link's last piece held whole inside another kept ({after * 1000:.3g} mm)"
+                        if kept else ""))
     if past > 0.0:
         notes.append(f"joint {joint.name!r}: {joint.child!r} lies {past * 1000:.3g} mm inside its parent {joint.parent!r} at the "
                      f"initial state, {PAST_STOP_NOTE} (too deep to cut): the pieces are kept, not cut")
@@ -209,17 +217,6 @@ def _cut_options(which: str, piece: Piece, size: float, others: bool, planes: li
             continue
         out.append(((piece.volume - sum(q.volume for q in parts)) / size, len(parts), which, parts))
     return out
-
-
-def _separation_note(joint: urdf.UrdfJoint, before: float, after: float, n_p: int, n_c: int, kept: int, gone: int,
-                     swept: bool) -> str:
-    """The note on ``joint``: overlap ``before`` m, ``n_p`` / ``n_c`` pieces cut, ``gone`` removed whole, ``kept``
-    overlaps kept (``after`` m); ``swept``: from the reference position on (else at the initial state)."""
-    what = ", ".join(x for x in (f"{n_p} of {joint.parent!r}'s pieces" if n_p else "", f"{n_c} of {joint.child!r}'s" if n_c else "") if x)
-    return (f"joint {joint.name!r}: {joint.child!r} penetrated its parent {joint.parent!r} up to {before * 1000:.3g} mm "
-            + ("from its reference position on" if swept else "at the initial state") + f"; cut {what or 'nothing'}"
-            + (f" ({gone} removed whole)" if gone else "")
-            + (f"; {kept} overlap(s) of a link's last piece held whole inside another kept ({after * 1000:.3g} mm)" if kept else ""))
 
 
 def _clip_all(piece: Piece, planes: list[tuple[np.ndarray, float]]) -> Piece | None:

@@ -119,7 +119,11 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
                          "the lower end of their range (" + "; ".join(reasons) + ") it stays outside: masses kept"]
     t = 1.0 if most else t
     new = masses_for(t)
-    ov = _with_masses(overlay, new, light + body)
+    ov = overlay.model_copy(deep=True)  # the masses moved, inertia scaled alike, noted in the source
+    for ln in light + body:
+        f = new[ln] / ov.links[ln].mass
+        ov.links[ln] = request_apply.scaled_link(ov.links[ln], f, f"; mass x{f:.3g} for stability by design").model_copy(
+            update={"mass": new[ln]})
     after = _signed_margin(bal.support, _com(ov, frames)[:2])
     total = overlay.total_mass()
     m_part, m_after = sum(overlay.links[ln].mass for ln in floors), sum(new[ln] for ln in floors)
@@ -201,14 +205,3 @@ def _smallest_transfer(margin, required: float) -> float | None:
         mid = 0.5 * (lo + hi)
         lo, hi = (lo, mid) if margin(mid) >= required else (mid, hi)
     return hi
-
-
-def _with_masses(overlay: Overlay, new: dict[str, float], links: list[str]) -> Overlay:
-    """A copy of ``overlay`` with masses ``new`` (kg) for ``links``, inertia scaled alike, noted in the source."""
-    ov = overlay.model_copy(deep=True)
-    for ln in links:
-        lp = ov.links[ln]
-        f = new[ln] / lp.mass
-        ov.links[ln] = request_apply.scaled_link(lp, f, f"; mass x{f:.3g} for stability by design").model_copy(
-            update={"mass": new[ln]})
-    return ov
