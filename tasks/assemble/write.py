@@ -94,7 +94,17 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
                                                      pushed=push_buttons(asset, overlay.category))
         if collision_notes is not None:
             collision_notes.extend(notes)
-    return urdf.write_urdf(model, comment=_urdf_comment(s, overlay))
+    # the comment: the scale baked in, where the state, the springs and the notes are, how the root is held
+    springs = sorted(n for n, d in overlay.joints.items() if d.stiffness > 0)
+    return urdf.write_urdf(model, comment=(
+        f" Written by asset2sim. Uniform scale {s!r} is baked in (mesh scale, origins, prismatic limits, inertials); "
+        f"load at scale 1.0. Initial joint positions (rad / m): see {STATE_NAME} (URDF has no field for them). "
+        f"Joint stiffness, spring references and the reasoning notes: see {OVERLAY_NAME}"
+        + (f"; springs on {', '.join(springs)}" if springs else "")
+        + f". Joint limits carry effort=\"{urdf.PASSIVE_EFFORT:g}\" velocity=\"{urdf.PASSIVE_VELOCITY:g}\" where the input declared none, "
+        "as the URDF format requires: a passive part, no actuator (Drake adds none for effort 0; MuJoCo, PyBullet and "
+        "SAPIEN do not drive a joint from them) and no speed clamp below the one Bullet already applies. "
+        + root_sentence(overlay.mounting)))
 
 
 def _set_links(model: urdf.UrdfModel, overrides: dict, overlay: Overlay) -> None:
@@ -148,21 +158,6 @@ def _set_joints(model: urdf.UrdfModel, overlay: Overlay, fixed: set[str]) -> Non
                 joint.limit.lower = float(dyn.lower)
             if dyn.upper is not None:
                 joint.limit.upper = float(dyn.upper)
-
-
-def _urdf_comment(s: float, overlay: Overlay) -> str:
-    """The URDF's comment: the scale ``s`` baked in, where the state, the springs and the notes are, how the root is held."""
-    springs = {n: (d.stiffness, d.spring_reference) for n, d in overlay.joints.items() if d.stiffness > 0}
-    return (
-        f" Written by asset2sim. Uniform scale {s!r} is baked in (mesh scale, origins, prismatic limits, inertials); "
-        f"load at scale 1.0. Initial joint positions (rad / m): see {STATE_NAME} (URDF has no field for them). "
-        f"Joint stiffness, spring references and the reasoning notes: see {OVERLAY_NAME}"
-        + (f"; springs on {', '.join(sorted(springs))}" if springs else "")
-        + f". Joint limits carry effort=\"{urdf.PASSIVE_EFFORT:g}\" velocity=\"{urdf.PASSIVE_VELOCITY:g}\" where the input declared none, "
-        "as the URDF format requires: a passive part, no actuator (Drake adds none for effort 0; MuJoCo, PyBullet and "
-        "SAPIEN do not drive a joint from them) and no speed clamp below the one Bullet already applies. "
-        + root_sentence(overlay.mounting)
-    )
 
 
 def write_output(asset: AssetDescription, overlay: Overlay, out_dir: Path, initial_state: dict[str, float], *, copy: bool = True,
