@@ -67,26 +67,22 @@ class _PieceWorld:
 
         self.world = open_shape_world("pybullet")
         self.scale = scale
-        self.poses = {}
+        self.poses = {}  # (link, collision) -> (position (3,), quaternion xyzw)
         self.bodies: dict[tuple[str, int], list[int]] = {}
         self.refs: dict[tuple[str, int], GeometryRef] = {}
-        self._rot = Rotation
         for ln in links:
             pos, R = session.link_frame(ln)
             for k, g in enumerate(asset.link(ln).collisions):
                 if g.kind != "mesh" or g.path is None:
                     continue
-                Rw = R @ rpy_matrix(g.origin.rpy)
-                tw = pos + R @ (np.asarray(g.origin.xyz, float) * scale)
-                self.poses[(ln, k)] = (Rw, tw)
+                self.poses[(ln, k)] = (pos + R @ (np.asarray(g.origin.xyz, float) * scale),
+                                       Rotation.from_matrix(R @ rpy_matrix(g.origin.rpy)).as_quat())
                 self.refs[(ln, k)] = g
                 v = np.asarray(cache.get(g.path).vertices, float)
                 self.bodies[(ln, k)] = [self._body(v[np.all(np.isfinite(v), axis=1)], (ln, k))]
 
     def _body(self, vertices: np.ndarray, key: tuple[str, int]) -> int:
-        Rw, tw = self.poses[key]
-        return self.world.add_convex(vertices, np.asarray(self.refs[key].scale, float) * self.scale, tw,
-                                     self._rot.from_matrix(Rw).as_quat())
+        return self.world.add_convex(vertices, np.asarray(self.refs[key].scale, float) * self.scale, *self.poses[key])
 
     def replace(self, key: tuple[str, int], pieces: list[np.ndarray]) -> list[int]:
         """Swap the bodies of ``key`` for ``pieces`` (vertex arrays); returns the old ids."""
@@ -102,9 +98,8 @@ class _PieceWorld:
 
     def restore(self, key: tuple[str, int], old: list[int]) -> None:
         self._park(key)
-        Rw, tw = self.poses[key]
         for b in old:
-            self.world.set_pose(b, tw, self._rot.from_matrix(Rw).as_quat())
+            self.world.set_pose(b, *self.poses[key])
         self.bodies[key] = old
 
     def _depths(self, ids: list[int], other: str):
