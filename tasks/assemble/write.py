@@ -101,7 +101,8 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
         f"load at scale 1.0. Initial joint positions (rad / m): see {STATE_NAME} (URDF has no field for them). "
         f"Joint stiffness, spring references and the reasoning notes: see {OVERLAY_NAME}"
         + (f"; springs on {', '.join(springs)}" if springs else "")
-        + f". Joint limits carry effort=\"{urdf.PASSIVE_EFFORT:g}\" velocity=\"{urdf.PASSIVE_VELOCITY:g}\" where the input declared none, "
+        + f". Joint limits carry effort=\"{urdf.PASSIVE_EFFORT:g}\" velocity=\"{urdf.PASSIVE_VELOCITY:g}\" "
+        "where the input declared none, "
         "as the URDF format requires: a passive part, no actuator (Drake adds none for effort 0; MuJoCo, PyBullet and "
         "SAPIEN do not drive a joint from them) and no speed clamp below the one Bullet already applies. "
         + root_sentence(overlay.mounting)))
