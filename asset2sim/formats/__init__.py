@@ -44,12 +44,6 @@ class Format:
     real_units: str
 
 
-def _read_usd(path: Path, options: ReadOptions | None = None) -> ReadAsset:
-    """:func:`~asset2sim.formats.usd.reader.read_usd_asset` (a USD stage carries its own units and up
-    axis: ``options`` do not apply)."""
-    return usd_reader.read_usd_asset(path)
-
-
 def _export_usd(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: bool = True) -> Path:
     """The path of :func:`~asset2sim.formats.usd.export.export_usd`'s file (``out_dir``: the folder, or the folder as a
     refine holds it, :meth:`~asset2sim.refined_asset.RefinedAsset.held`)."""
@@ -62,8 +56,10 @@ FORMATS: dict[str, Format] = {
                    patch=mjcf_physics.write_patched_mjcf, aids=mjcf_export.solver_aids, suffixes=staging.MJCF_SUFFIXES,
                    is_model=lambda path: staging.root_element(path) == "mujoco", declares_root=True,
                    real_units="an MJCF file ({name}: MuJoCo's lengths are metres)"),
-    "usd": Format(label="USD", read=_read_usd, export=_export_usd, patch=usd_physics.write_patched_usd, aids=lambda path: [],
-                  suffixes=staging.USD_SUFFIXES, is_model=lambda path: True, declares_root=False,
+    # a USD stage carries its own units and up axis: the read options do not apply
+    "usd": Format(label="USD", read=lambda path, options=None: usd_reader.read_usd_asset(path), export=_export_usd,
+                  patch=usd_physics.write_patched_usd, aids=lambda path: [], suffixes=staging.USD_SUFFIXES,
+                  is_model=lambda path: True, declares_root=False,
                   real_units="a USD stage ({name}, read in metres through its metersPerUnit)"),
 }
 

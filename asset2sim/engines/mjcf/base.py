@@ -113,17 +113,13 @@ def close(a, b, tol: float) -> bool:
 MUJOCO_LOGGER = logging.getLogger("asset2sim.mujoco")
 
 
-def _log_warning(msg) -> None:
-    MUJOCO_LOGGER.warning("MuJoCo: %s", msg)
-
-
 def load_mujoco():
     """The ``mujoco`` module (ImportError: not installed), its warning handler set to :data:`MUJOCO_LOGGER` when
     none is set, so that no MuJoCo warning writes ``MUJOCO_LOG.TXT`` into the current directory."""
     import mujoco
 
     if mujoco.get_mju_user_warning() is None:
-        mujoco.set_mju_user_warning(_log_warning)
+        mujoco.set_mju_user_warning(lambda msg: MUJOCO_LOGGER.warning("MuJoCo: %s", msg))
     return mujoco
 
 
