@@ -139,7 +139,8 @@ def decide_skips(
 
     def decide(job: Any) -> Prepared | None:
         t0, entry, fingerprint = time.perf_counter(), index[job.asset_id], fingerprints.get(job.asset_id)
-        if fingerprint is None or entry.fingerprint != fingerprint or entry.code_hash != code or entry.job_category != job.category:
+        if (fingerprint is None or entry.fingerprint != fingerprint or entry.code_hash != code
+                or entry.job_category != job.category):
             return None
         rec = reusable(Prepared(worker=f"{worker_name()} (driver)", category=entry.category,
                                 links=entry.links, movable_joints=entry.movable_joints), job, entry.input_hash)

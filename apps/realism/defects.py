@@ -100,8 +100,8 @@ def _scale_x3(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedSta
 
 
 def _slamming_spring(model: UrdfModel, side: PhysicsSide, joint: str, closed: ClosedState, force: float) -> PhysicsSide:
-    return replace(_zero_damping(model, side, joint, closed, force), springs={**side.springs, joint: Spring(stiffness=float(SLAM_SHARE * force / closed.open_range),
-                                                                reference=float(closed.q_closed))})
+    spring = Spring(stiffness=float(SLAM_SHARE * force / closed.open_range), reference=float(closed.q_closed))
+    return replace(_zero_damping(model, side, joint, closed, force), springs={**side.springs, joint: spring})
 
 
 #: Defect name -> what it does to the model (in place) and the side (returned).

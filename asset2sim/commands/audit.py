@@ -85,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
             if args.jobs <= 1 or len(targets) <= 1:
                 rows = [one(t) for t in targets]
             else:  # the workers read the folders --allow-outside-paths allows here
-                with ProcessPoolExecutor(max_workers=args.jobs, initializer=set_allowed_outside, initargs=allowed_folders()) as pool:
+                with ProcessPoolExecutor(max_workers=args.jobs, initializer=set_allowed_outside,
+                                         initargs=allowed_folders()) as pool:
                     rows = list(pool.map(one, targets))
         if args.out is not None:
             audit_catalog.write_audit_catalog(args.out, rows)

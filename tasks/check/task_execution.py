@@ -146,7 +146,8 @@ def execute_task(session, joint: str, closed: tuple[float, float, float], *, act
     elif not m.held_ok and hold_required:
         failure = "target not held 1 s after release"
     if not m.held_ok and not hold_required and not failure:
-        notes.append("does not hold the target after release (allowed: the joint moves freely or returns by its spring by design)")
+        notes.append("does not hold the target after release (allowed: the joint moves freely or returns by its spring "
+                     "by design)")
     return TaskAttempt(
         joint=joint, joint_type=session.joint_types[joint], action=action, link=link, side=side, contact_rule=rule,
         contact_point=[float(x) for x in point], started_from=started_from, start_fraction=f0, target_fraction=float(target_fraction),
