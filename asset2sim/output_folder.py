@@ -246,12 +246,13 @@ class OwnedFolder:
             staging, final = self.root, self.final
             try:
                 atomic.exchange_folders(staging, final)
-                self.root, self.final = final, None
             except OSError as exc:
-                raise _write_failed(self.given, exc) from exc
-            finally:
                 shutil.rmtree(staging, ignore_errors=True)
                 self._release()
+                raise _write_failed(self.given, exc) from exc
+            shutil.rmtree(staging, ignore_errors=True)
+            self.root, self.final = final, None
+            self._release()
         return hashes
 
     def write_path(self, path: Path | str) -> Path:
