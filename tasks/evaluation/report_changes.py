@@ -155,9 +155,6 @@ def state_moves(report: dict[str, Any]) -> dict[str, str]:
     out: dict[str, str] = {}
     positions = report.get("initial_joint_positions") or {}
     for note in report.get("design_changes") or []:
-        name, _, floor = str(note).partition(": opening limited by the floor, ")
-        if floor and name in positions:  # the floor stopped the opening (tasks.state.ground_clearance)
-            out.setdefault(name, "stopped by the floor, where a real one stops")
         if not str(note).startswith("stability by design"):
             continue
         head, _, rest = str(note).partition("; ")
@@ -169,6 +166,10 @@ def state_moves(report: dict[str, Any]) -> dict[str, str]:
                              f"{head.removeprefix('stability by design: ')}"
                              + (f"; the object stands steadiest there{where}" if where else "")
                              + ("; the least opening its band allows" if "the least its band allows" in note else ""))
+    for note in report.get("design_changes") or []:  # the floor stopped the opening (tasks.state.ground_clearance)
+        name, _, rest = str(note).partition(": opening limited by the floor, ")
+        if rest and name in positions:
+            out.setdefault(name, "stopped by the floor, where a real one stops")
     state = report.get("state") or {}
     for name, q in positions.items():
         asked = (state.get("requested") or {}).get(name)
