@@ -158,7 +158,7 @@ def unrecorded_jobs(cat: Catalog, dataset: str, run_id: str) -> dict[str, list[d
         except ValueError:  # not a run id the catalog could hold
             continue
         for folder in sorted(work.iterdir()):
-            if folder.name in recorded:
+            if folder.name in recorded or not (folder / JOB_RECORD_NAME).is_file():  # a FIFO or device is never opened
                 continue
             try:
                 rec = JobRecord.model_validate_json((folder / JOB_RECORD_NAME).read_text())
