@@ -14,7 +14,8 @@ table (what each engine holds after loading, against the files).
 
 Newton (Kamino on the CPU) takes 1-3 minutes per object. Each (object,
 engine) result is stored in FOLDER/parity/ENGINE.json with a hash of the
-files it was computed from; ``--reuse`` takes a stored result whose hash
+files it was computed from (every file of the output folder but the stored
+results, and the code's git commit); ``--reuse`` takes a stored result whose hash
 still matches instead of running the engine again (so Newton can be run per
 object in the background, ``--engines newton --ids X``, and the table
 assembled afterwards). Writes ROOT/parity.json.
@@ -26,6 +27,7 @@ import argparse
 import dataclasses
 import hashlib
 import json
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -34,20 +36,23 @@ ROOT = Path(__file__).resolve().parents[1]
 #: The six paths: PyBullet and asset2sim's SAPIEN on the URDF, host MuJoCo (float64, no no-slip pass) and MJX (JAX's
 #: float32, the CPU here) on the MJCF's physics, PhysX on the USD export (ovphysx), Newton.
 ENGINES = ("pybullet", "physx", "mujoco", "mjx", "ovphysx", "newton")
-#: The files a parity result depends on.
-INPUTS = ("mobility.urdf", "initial_state.json", "overlay.json")
 #: A disagreement in the deepest point (mm) worth explaining: PyBullet's
 #: 1 mm margin per shape makes touching hulls read 2 mm there only.
 DEPTH_GAP_MM = 2.5
 
 
 def inputs_hash(folder: Path) -> str:
-    """sha256 over the files a parity result depends on (:data:`INPUTS`)."""
+    """sha256 over what a parity result depends on: every file of the output folder ``folder`` (the URDF, the state,
+    the overlay, the meshes, the MJCF and USD exports and the solver aids ``report.json`` names) but the stored
+    results under ``parity/``, and the git commit of the code that computes it (a changed engine or check runs
+    again)."""
     h = hashlib.sha256()
-    for name in INPUTS:
-        p = folder / name
-        h.update(name.encode())
-        h.update(p.read_bytes() if p.is_file() else b"-")
+    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True)
+    h.update(commit.stdout.strip().encode() or b"-")
+    for p in sorted(folder.rglob("*")):
+        rel = p.relative_to(folder).as_posix()
+        if p.is_file() and not rel.startswith("parity/") and p.name != "timings.json":
+            h.update(rel.encode() + b"\0" + hashlib.sha256(p.read_bytes()).digest())
     return h.hexdigest()
 
 
@@ -78,15 +83,10 @@ def parity_rows(folder: Path, engines: list[str], reuse: bool) -> tuple[list[dic
 
 def authored_checks(folder: Path, engines: list[str], reuse: bool) -> list:
     """``held_by_engines`` per engine, stored in FOLDER/parity/authored_ENGINE.json
-    with a hash of the inputs and the exported MJCF and USD (reused with
-    ``reuse``)."""
+    with :func:`inputs_hash` (reused with ``reuse``)."""
     from asset2sim.tasks.check.authored import AuthoredCheck, Mismatch, held_by_engines
 
-    h = hashlib.sha256(inputs_hash(folder).encode())
-    for rel in ("mjcf/mobility.xml", "usd/mobility.usd"):
-        p = folder / rel
-        h.update(p.read_bytes() if p.is_file() else b"-")
-    digest = h.hexdigest()
+    digest = inputs_hash(folder)
     out = []
     for e in engines:
         cache = folder / "parity" / f"authored_{e}.json"
