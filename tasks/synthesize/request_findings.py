@@ -28,17 +28,11 @@ if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
 def check_overlay(ctx: EstimationContext, overlay: Overlay, res: StateResolution) -> list[str]:
     """One line per departure of an overlay from the request: total mass and sizes (5 %), materials, explicit
     joint parameters, initial positions vs the targets' intervals."""
-    out: list[str] = []
-    total_req, rng = whole_masses(ctx.request)
-    total = overlay.total_mass()
-    if total_req is not None and abs(total - total_req.mass) > NUMBER_TOLERANCE * total_req.mass:
-        out.append(f"total mass {total:.4g} kg but the request asks {total_req.mass:.4g} kg")
-    if rng is not None and not rng.mass_range[0] * (1 - NUMBER_TOLERANCE) <= total <= rng.mass_range[1] * (1 + NUMBER_TOLERANCE):
-        out.append(f"total mass {total:.4g} kg but the request asks {rng.mass_range[0]:g}-{rng.mass_range[1]:g} kg")
-    for sz, (phrase, asked, got) in zip(ctx.request.sizes, size_residuals(ctx, overlay.scale)):
-        unit = "m^3" if sz.dimension == "volume" else "m"
-        if abs(got - asked) > NUMBER_TOLERANCE * asked:
-            out.append(f"'{phrase}': {got:.4g} {unit} at scale {overlay.scale:.4g}, asked {asked:.4g} {unit}")
+    sizes, masses = _size_and_mass_outcomes(ctx, overlay)
+    out = [f"total mass {o.achieved:.4g} kg but the request asks "
+           + (f"{o.asked:.4g}" if o.asked_high is None else f"{o.asked:g}-{o.asked_high:g}") + " kg" for o in masses if not o.within_tolerance]
+    out += [f"'{o.phrase}': {o.achieved:.4g} {o.unit} at scale {overlay.scale:.4g}, asked {o.asked:.4g} {o.unit}"
+            for o in sizes if not o.within_tolerance]
     for name, lp in overlay.links.items():
         mat = requested_material(ctx, name) if name in ctx.geometry else None  # links with geometry only
         if mat is not None and (lp.density is None or abs(lp.density - mat.density) > 1e-6 * mat.density):
@@ -151,7 +145,6 @@ def findings(ctx: EstimationContext, targets: dict[str, JointTarget], closed_out
     ``state`` in output units, the ``overlay``'s scale, total mass (kg) and joint parameters; ``escalation`` rounds
     explain changed parameters) and, with the ``resolution`` of the request, each state phrase with what it set
     (:func:`phrase_lines`)."""
-    scale, total_mass = overlay.scale, overlay.total_mass()
     warnings = list(ctx.request.warnings) + [n for n in overlay.notes.other if n.startswith("WARNING")]
     if not ctx.request.understood:
         warnings.insert(0, "WARNING: no word of the request was understood; refined with the category's defaults")
@@ -179,26 +172,34 @@ def findings(ctx: EstimationContext, targets: dict[str, JointTarget], closed_out
                 why += "; the state search moved it inside its interval to remove self-penetration"
         q.append(QuantityOutcome(what=f"{n} {t.kind}", phrase=t.phrase, asked=asked, achieved=got, unit=unit, within_tolerance=ok, why=why,
                                  kind="state"))
-    for sz, (phrase, asked, got) in zip(ctx.request.sizes, size_residuals(ctx, scale)):
-        ok = abs(got - asked) <= NUMBER_TOLERANCE * asked
-        q.append(QuantityOutcome(what="volume" if sz.dimension == "volume" else "size", phrase=phrase, asked=asked, achieved=got,
-                                 unit="m^3" if sz.dimension == "volume" else "m", within_tolerance=ok,
-                                 why="" if ok else "one uniform scale cannot meet every size asked", kind="size"))
-    total_req, rng = whole_masses(ctx.request)
-    if total_req is not None:
-        ok = abs(total_mass - total_req.mass) <= NUMBER_TOLERANCE * total_req.mass
-        q.append(QuantityOutcome(what="total mass", phrase=total_req.phrase, asked=total_req.mass, achieved=total_mass, unit="kg",
-                                 within_tolerance=ok, why="" if ok else "the parts' requested masses exceed it", kind="mass"))
-    if rng is not None:
-        lo, hi = rng.mass_range
-        ok = lo * (1 - NUMBER_TOLERANCE) <= total_mass <= hi * (1 + NUMBER_TOLERANCE)
-        q.append(QuantityOutcome(what="total mass", phrase=rng.phrase, asked=lo, asked_high=hi, achieved=total_mass, unit="kg",
-                                 within_tolerance=ok, why="a range: met anywhere in it" if ok else "the parts' requested masses exceed it",
-                                 kind="mass"))
-    q += _dynamics_outcomes(ctx, overlay, escalation or [])
+    sizes, masses = _size_and_mass_outcomes(ctx, overlay)
+    q += sizes + masses + _dynamics_outcomes(ctx, overlay, escalation or [])
     phrases = phrase_lines(ctx, resolution, closed_out, state) if resolution is not None else []
     phrases += motion_lines(ctx, overlay, motion_words or {}, escalation)
     return RequestFindings(ignored=list(ctx.request.ignored), warnings=warnings, asked=summary(ctx.request), quantities=q, phrases=phrases)
+
+
+def _size_and_mass_outcomes(ctx: EstimationContext, overlay: Overlay) -> tuple[list[QuantityOutcome], list[QuantityOutcome]]:
+    """(the sizes in numbers, the total mass and the range of masses asked) against ``overlay``'s scale and total mass."""
+    sizes, masses = [], []
+    for sz, (phrase, asked, got) in zip(ctx.request.sizes, size_residuals(ctx, overlay.scale)):
+        ok = abs(got - asked) <= NUMBER_TOLERANCE * asked
+        sizes.append(QuantityOutcome(what="volume" if sz.dimension == "volume" else "size", phrase=phrase, asked=asked, achieved=got,
+                                     unit="m^3" if sz.dimension == "volume" else "m", within_tolerance=ok,
+                                     why="" if ok else "one uniform scale cannot meet every size asked", kind="size"))
+    total_req, rng = whole_masses(ctx.request)
+    total_mass = overlay.total_mass()
+    if total_req is not None:
+        ok = abs(total_mass - total_req.mass) <= NUMBER_TOLERANCE * total_req.mass
+        masses.append(QuantityOutcome(what="total mass", phrase=total_req.phrase, asked=total_req.mass, achieved=total_mass, unit="kg",
+                                      within_tolerance=ok, why="" if ok else "the parts' requested masses exceed it", kind="mass"))
+    if rng is not None:
+        lo, hi = rng.mass_range
+        ok = lo * (1 - NUMBER_TOLERANCE) <= total_mass <= hi * (1 + NUMBER_TOLERANCE)
+        masses.append(QuantityOutcome(what="total mass", phrase=rng.phrase, asked=lo, asked_high=hi, achieved=total_mass, unit="kg",
+                                      within_tolerance=ok, why="a range: met anywhere in it" if ok else "the parts' requested masses exceed it",
+                                      kind="mass"))
+    return sizes, masses
 
 
 def _dynamics_outcomes(ctx: EstimationContext, overlay: Overlay, escalation: list) -> list[QuantityOutcome]:
