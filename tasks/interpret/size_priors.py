@@ -28,8 +28,9 @@ GENERIC_SIZE_M: tuple[float, float] = (0.02, 3.0)
 
 
 class SizeTarget(PriorModel):
-    """The size and mass an output asset should have: ``dims`` m = ``base_dims * factor``, ``mass_range`` kg,
-    ``gripper_limit_factor`` the largest factor keeping a handheld object graspable (else None)."""
+    """The size and mass an output asset should have: ``dims`` m = ``base_dims * factor``, ``mass_range`` kg (the
+    category's or variant's ``base_mass_range`` kg scaled by ``factor``), ``gripper_limit_factor`` the largest factor
+    keeping a handheld object graspable (else None)."""
 
     category: str
     variant: str | None = None
@@ -38,7 +39,7 @@ class SizeTarget(PriorModel):
     factor: float
     dims: Dims
     mass_range: tuple[float, float]
-    body_material: str
+    base_mass_range: tuple[float, float]
     handheld: bool
     gripper_limit_factor: float | None = None
     note: str = ""
@@ -108,7 +109,6 @@ def target_size(category: str, request: RequestSpec | str | None = None) -> Size
         if f > 1.0 and size_class is not None and size_factor(size_class) <= 1.0:
             f = 1.0  # a "small"/"regular" word never enlarges a variant that is already smaller
         lo, hi = var.mass_range
-        body = var.body_material or cat.body_material
         notes.append(
             f"variant {var.name!r} ({var.size_class}) dims {list(base)} m; "
             f"size words {size_class or 'none'} -> factor {f:.3g} relative to it"
@@ -117,7 +117,6 @@ def target_size(category: str, request: RequestSpec | str | None = None) -> Size
         base = cat.dims
         f = request.size_factor if request is not None and size_class else 1.0
         lo, hi = cat.mass_range
-        body = cat.body_material
         notes.append(
             f"{cat.name} regular dims {list(base)} m; size class {size_class or 'regular'} -> factor {f:.3g}"
         )
@@ -129,7 +128,7 @@ def target_size(category: str, request: RequestSpec | str | None = None) -> Size
             notes.append(f"handheld but the middle dimension {sorted(dims)[1]:.3f} m exceeds the gripper "
                          f"limit {GRASPABLE_WIDTH_M} m (largest graspable factor {glf:.3g})")
     return SizeTarget(category=cat.name, variant=var.name if var else None, size_class=size_class, base_dims=base, factor=f,
-                      dims=dims, mass_range=scale_mass_range(lo, hi, f), body_material=body,  # type: ignore[arg-type]
+                      dims=dims, mass_range=scale_mass_range(lo, hi, f), base_mass_range=(lo, hi),  # type: ignore[arg-type]
                       handheld=cat.handheld,
                       gripper_limit_factor=glf, note="; ".join(notes))
 
@@ -170,8 +169,7 @@ def size_mass_prior(category: str | None, spec: RequestSpec | None = None) -> di
     try:
         t = target_size(category, spec)
         cat = category_prior(category)
-        var = cat.variant(t.variant) if t.variant else None
-        base_mass = var.mass_range if var is not None else cat.mass_range
+        base_mass = t.base_mass_range
     except Exception:
         return {}
     return {"category": t.category, "target_dims": [float(x) for x in t.dims], "base_dims": [float(x) for x in t.base_dims],

@@ -13,7 +13,7 @@ from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.declared import real_units
 from asset2sim.prior_tables import GRASPABLE_WIDTH_M
-from asset2sim.tasks.interpret.categories import category_prior, find_variant
+from asset2sim.tasks.interpret.categories import find_variant
 from asset2sim.tasks.interpret.part_priors import material_for
 from asset2sim.tasks.interpret.size_priors import plausible_largest_dimension, scale_mass_range, target_size
 from asset2sim.tasks.synthesize import physics, request_apply
@@ -104,12 +104,9 @@ def plausible_mass_range(ctx: EstimationContext, scale: float) -> tuple[float, f
     """Plausible total mass (kg) as sized: the regular mass range scaled (``scale_mass_range``) by f,
     the geometric mean of scaled closed extents / regular dims over the two largest dimensions."""
     target = target_size(ctx.category, ctx.request)
-    cat = category_prior(ctx.category)
-    var = cat.variant(target.variant) if target.variant else None
-    base_lo, base_hi = var.mass_range if var is not None else cat.mass_range
     base = np.sort(np.asarray(target.base_dims, float))[::-1]
     actual = np.sort(np.asarray(ctx.closed_extents, float) * scale)[::-1]
-    return scale_mass_range(base_lo, base_hi, float(np.exp(np.mean(np.log(np.maximum(actual[:2], 1e-9) / base[:2])))))
+    return scale_mass_range(*target.base_mass_range, float(np.exp(np.mean(np.log(np.maximum(actual[:2], 1e-9) / base[:2])))))
 
 
 def request_variant(ctx: EstimationContext) -> str | None:

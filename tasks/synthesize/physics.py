@@ -124,13 +124,10 @@ def joint_loads(session, links: dict[str, LinkPhysics], state: dict[str, float],
     if root_rotation is not None:
         gvec = np.asarray(root_rotation, float).T @ gvec
     out: dict[str, JointLoad] = {}
+    g_hat = gvec / G
 
     def to_input(st: dict[str, float]) -> dict[str, float]:
-        return {
-            n: (v / scale if session.joint_types.get(n) == "prismatic" else v) for n, v in st.items()
-        }
-
-    g_hat = gvec / G
+        return {n: (v / scale if session.joint_types.get(n) == "prismatic" else v) for n, v in st.items()}
 
     def load_at(name: str, st: dict[str, float]) -> tuple[float, float, float, float]:
         session.set_joint_positions(to_input(st))
@@ -152,18 +149,18 @@ def joint_loads(session, links: dict[str, LinkPhysics], state: dict[str, float],
             return 0.0, 0.0, 0.0, 0.0
         com = mc / M
         # w: the load per unit gravity, load = w . g ((c - p) x M g . a = M (a x (c - p)) . g)
-        w = M * axis if session.joint_types[name] == "prismatic" else M * np.cross(axis, com - child_pos)
+        prismatic = session.joint_types[name] == "prismatic"
+        w = M * axis if prismatic else M * np.cross(axis, com - child_pos)
         lateral = float(np.linalg.norm(w - np.dot(w, g_hat) * g_hat))
-        if session.joint_types[name] == "prismatic":
+        if prismatic:
             return M, M, float(M * np.dot(gvec, axis)), lateral
         return M, I_axis, float(np.dot(np.cross(com - child_pos, M * gvec), axis)), lateral
 
     for name in [n for n in session.joint_names if n in subtrees]:
         q0 = state.get(name, 0.0)
-        lo, hi = session.joint_limits[name]
-        if session.joint_types[name] == "prismatic":
-            lo, hi = lo * scale, hi * scale
-        step = 0.02 if session.joint_types[name] != "prismatic" else 0.002
+        prismatic = session.joint_types[name] == "prismatic"
+        lo, hi = (x * scale if prismatic else x for x in session.joint_limits[name])
+        step = 0.002 if prismatic else 0.02
         M, inertia, load, lateral = load_at(name, state)
         qa = max(q0 - step, lo) if np.isfinite(lo) else q0 - step
         qb = min(q0 + step, hi) if np.isfinite(hi) else q0 + step

@@ -319,9 +319,9 @@ def apply_masses(ctx: EstimationContext, links: dict[str, LinkPhysics], plausibl
             notes.append(why + "; kept")
             return AskedMasses(out, notes, True)
     lo, hi = plausible
-    if total_req is None and ctx.request.mass_level is not None:
-        total_req = 0.9 * hi if ctx.request.mass_level == "heavy" else 1.1 * lo
-        why = f"'{ctx.request.mass_level}': {'0.9 x the upper' if ctx.request.mass_level == 'heavy' else '1.1 x the lower'} end of the plausible {lo:.3g}-{hi:.3g} kg"
+    if total_req is None and (level := ctx.request.mass_level) is not None:
+        total_req = 0.9 * hi if level == "heavy" else 1.1 * lo
+        why = f"'{level}': {'0.9 x the upper' if level == 'heavy' else '1.1 x the lower'} end of the plausible {lo:.3g}-{hi:.3g} kg"
     if total_req is None:
         return AskedMasses(out, notes, bool(fixed))
     fixed_mass = sum(out[n].mass for n in fixed)
