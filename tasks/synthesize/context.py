@@ -70,6 +70,10 @@ class EstimationContext:
         return {n: float(0.5 * (self.joint_boxes[n][0][2] + self.joint_boxes[n][1][2])) if n in self.joint_boxes else 0.0
                 for n in self.subtrees}
 
+    def joint_label(self, joint: str) -> str | None:
+        """The semantic label of ``joint``'s moving (child) link, None when unlabelled."""
+        return self.asset.link(self.asset.joint(joint).child).semantic_label
+
     def closed_state(self) -> dict[str, float]:
         """joint -> closed position (rad, or input units for prismatic joints)."""
         return {n: c.q_closed for n, c in self.closed.items()}

@@ -87,8 +87,7 @@ def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tu
         out[j.name] = JointChoice(
             damping_level=levels[-1] if levels else ("high" if closing else "moderate"), holds_position="hold" in kinds,
             spring=bool(kinds & {"spring", "self_closing"})
-            or ((j.name in relevant or j.name in ctx.push_buttons)
-                and spring_expected(ctx.category, ctx.asset.link(j.child).semantic_label)),
+            or (j.name in relevant or j.name in ctx.push_buttons) and spring_expected(ctx.category, ctx.joint_label(j.name)),
             stiff="stiff" in kinds, free_moving="free" in kinds, self_closing=closing, words=tuple(words))
     return out, missing
 

@@ -68,7 +68,7 @@ class StateResolution:
 
 def task_relevant_joints(ctx: EstimationContext) -> list[str]:
     """Movable joints whose moving part tasks manipulate, by the category's priority (``part_priors.task_relevant_joints``)."""
-    return part_priors.task_relevant_joints(ctx.category, [(j.name, ctx.asset.link(j.child).semantic_label)
+    return part_priors.task_relevant_joints(ctx.category, [(j.name, ctx.joint_label(j.name))
                                                            for j in ctx.asset.movable_joints()])[0]
 
 
@@ -107,7 +107,7 @@ def resolve_states(ctx: EstimationContext, kin: SimSession, scale: float) -> Sta
         if not joints and not jr.names_part and jr.band == "closed" and jr.target is None:
             res.notes.append(f"'{jr.phrase}': this {ctx.category} has no part that opens: it is closed as it is")
         elif not joints:
-            endless = [f"{ctx.asset.link(ctx.asset.joint(n).child).semantic_label or 'part'} ({n})" for n in relevant
+            endless = [f"{ctx.joint_label(n) or 'part'} ({n})" for n in relevant
                        if ctx.asset.joint(n).type == "continuous"]
             why = res.warnings[-1].removeprefix("WARNING: ") if len(res.warnings) > before else (
                 f"names joint {jr.joint}, not a movable joint of this object" if jr.selector == "joint"
@@ -120,7 +120,7 @@ def resolve_states(ctx: EstimationContext, kin: SimSession, scale: float) -> Sta
             res.addressed.add(t)
             res.requests[t] = jr
             res.targets.pop(t, None)
-            label = ctx.asset.link(ctx.asset.joint(t).child).semantic_label or ""
+            label = ctx.joint_label(t) or ""
             if jr.target is None:
                 if jr.bare and falls_open(ctx, kin, t, closed_state):  # a drop-down door open rests on its open stop
                     res.bands[t] = "fully"

@@ -41,7 +41,7 @@ def check_overlay(ctx: EstimationContext, overlay: Overlay, res: StateResolution
         for n, jd in overlay.joints.items():
             linear = n in {j.name for j in ctx.asset.joints} and ctx.asset.joint(n).type == "prismatic"
             if not unit_fits(d, linear) or (n not in task_relevant_joints(ctx) if d.label is None else not request_label_matches(
-                    ctx.category, d.label, ctx.asset.link(ctx.asset.joint(n).child).semantic_label)):
+                    ctx.category, d.label, ctx.joint_label(n))):
                 continue
             v = getattr(jd, d.quantity)
             if abs(v - d.value) > NUMBER_TOLERANCE * max(d.value, 1e-12):
@@ -105,7 +105,7 @@ def phrase_lines(ctx: EstimationContext, res: StateResolution, closed_out: dict,
 
 def _named(ctx: EstimationContext, joint: str) -> str:
     """``joint_2 (lid)``: a joint with its moving part's label, or its name alone."""
-    label = ctx.asset.link(ctx.asset.joint(joint).child).semantic_label
+    label = ctx.joint_label(joint)
     return joint + (f" ({label})" if label else "")
 
 

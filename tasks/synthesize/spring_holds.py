@@ -334,4 +334,4 @@ def balance(load: physics.JointLoad, cs: ClosedState, unit: float) -> SpringHold
 
 def part_label(ctx: EstimationContext, joint: str) -> str | None:
     """Canonical part label of ``joint``'s child link, None when unlabelled."""
-    return canonical_label(ctx.asset.link(ctx.asset.joint(joint).child).semantic_label)
+    return canonical_label(ctx.joint_label(joint))
