@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -121,6 +122,7 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
         ch = choices.get(name, JointChoice())
         cs = ctx.closed[name]
         unit = scale if linear else 1.0
+        gravity = partial(gravity_at, ctx, kin, links, state, scale, name, unit=unit)  # the load at an opening fraction
         if ch.holds_position:
             fr = np.linspace(0.0, 1.0, 11)
         else:
@@ -129,7 +131,7 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
         hold, at_closed = 0.0, 0.0
         # a part stays shut once closed: friction also holds a load pushing it open near its closed end
         for f, near_closed in [*((f, False) for f in fr), *((f, True) for f in CLOSED_HOLD_FRACTIONS)]:
-            g = gravity_at(ctx, kin, links, state, scale, name, f, unit)
+            g = gravity(f)
             if near_closed and f == 0.0:
                 at_closed = g
             if not near_closed or g * cs.direction > 0:
@@ -148,10 +150,9 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
         # a push button or key resting out of its body: its return spring is preloaded onto that stop
         button = name in ctx.push_buttons and ch.spring and not ch.free_moving
         if ch.self_closing or (button and abs(state[name] - cs.position(0.0) * unit) <= band):
-            pushed = opening_loads(ctx, kin, links, state, scale, name, unit)
-            held = closer(ctx, load, cs, unit, hold, pushed, at_closed, stopped_shut(ctx, kin, state, scale, name),
-                          hand=hand_top(ctx, name, scale, linear), free=free_standing(ctx),
-                          floor=0.0 if on_slide else physics.friction_floor(load, linear),
+            held = closer(ctx, load, cs, unit, hold, opening_loads(ctx, name, gravity), at_closed,
+                          stopped_shut(ctx, kin, state, scale, name), hand=hand_top(ctx, name, scale, linear),
+                          free=free_standing(ctx), floor=0.0 if on_slide else physics.friction_floor(load, linear),
                           what="self-closing: a closer spring" if ch.self_closing else "a push button's return spring")
             spring, hold = held.spring, held.hold
             note, mechanism = f"{note}; {held.note}", "closer" if ch.self_closing else "return spring"
@@ -161,7 +162,7 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
             spring, mechanism = (k, ref), "return spring"
             hold = 0.1 * hold  # the spring carries the load; friction only adds feel
         elif not linear and part_label(ctx, name) in COUNTERBALANCE_LABELS:  # a word about friction keeps it
-            counter = counterbalance(ctx, kin, links, state, scale, name, fr) or lid_support(ctx, kin, links, state, scale, name, fr)
+            counter = counterbalance(ctx, name, gravity, fr) or lid_support(ctx, name, scale, gravity, fr)
             if counter is not None:
                 spring, hold = counter.spring, counter.hold
                 note, balanced, mechanism = f"{note}; {counter.note}", True, counter.note.split(" (")[0]

@@ -9,6 +9,7 @@ N m (revolute) or N (prismatic), output units.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -133,14 +134,12 @@ CLOSER_EFFORT_SHARE = 0.5
 CLOSER_PROGRESSION = 1.25
 
 
-def opening_loads(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
-                  name: str, unit: float) -> np.ndarray:
+def opening_loads(ctx: EstimationContext, name: str, gravity: Callable[[float], float]) -> np.ndarray:
     """Gravity loads (N m, or N for a slide; 0 where none) that push joint ``name``'s part open at
-    :data:`OPENING_LOAD_FRACTIONS` of its range (shape (11,); :func:`gravity_at`, ``unit``: the scale of a slide's
-    positions), the other joints at ``state`` (output units; ``kin``, the input's kinematics session, posed for the
-    loads). A closer returns the part from wherever it is left, so it must outpull them (:func:`closer`)."""
-    return np.array([max(0.0, gravity_at(ctx, kin, links, state, scale, name, f, unit) * ctx.closed[name].direction)
-                     for f in OPENING_LOAD_FRACTIONS])
+    :data:`OPENING_LOAD_FRACTIONS` of its range (shape (11,)); ``gravity(f)``: the gravity load on the joint with its
+    part at opening fraction f, the other joints at the state (:func:`gravity_at`). A closer returns the part from
+    wherever it is left, so it must outpull them (:func:`closer`)."""
+    return np.array([max(0.0, gravity(f) * ctx.closed[name].direction) for f in OPENING_LOAD_FRACTIONS])
 
 
 #: Opening fractions at which :func:`opening_load` weighs a self-closing part.
@@ -188,8 +187,7 @@ COUNTERBALANCE_LABELS = frozenset({"door", "lid"})
 DOWNWARD_FRACTIONS = (0.25, 0.5, 0.75, 1.0)
 
 
-def counterbalance(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPhysics], state: dict[str, float],
-                   scale: float, name: str, hold_fractions) -> SpringHold | None:
+def counterbalance(ctx: EstimationContext, name: str, gravity: Callable[[float], float], hold_fractions) -> SpringHold | None:
     """The counterbalance spring of a hinged door or lid (:data:`COUNTERBALANCE_LABELS`) that opens downward (an
     oven's or a dishwasher's drop-down door, a drop-front desk lid): gravity pushes it open at every one of
     :data:`DOWNWARD_FRACTIONS`. Such doors
@@ -197,21 +195,18 @@ def counterbalance(ctx: EstimationContext, kin: SimSession, links: dict[str, Lin
     consumer range and dishwasher); modelled as a torsion spring about the hinge with its rest position at
     the closed end and the rate k = |tau_g(open end)| / R that balances the weight moment fully open (R the
     opening range, rad). Friction then holds only what the spring leaves: the largest |tau_g + tau_s| over
-    ``hold_fractions`` and the closed end.
+    ``hold_fractions`` and the closed end. ``gravity(f)``: the gravity load on the joint (N m) with its part at
+    opening fraction f, the other joints at the state (:func:`gravity_at`).
 
     Returns:
         the spring (k N m/rad, q_s rad) and hold load (N m), or None when the part does not open downward.
     """
     cs = ctx.closed[name]
-
-    def load(f: float) -> float:
-        return gravity_at(ctx, kin, links, state, scale, name, f)
-
-    open_loads = [load(f) * cs.direction for f in DOWNWARD_FRACTIONS]
+    open_loads = [gravity(f) * cs.direction for f in DOWNWARD_FRACTIONS]
     if not all(t > 0 for t in open_loads) or not cs.open_range > 0:
         return None
     k = open_loads[-1] / cs.open_range
-    hold = max(abs(load(f) * cs.direction - k * f * cs.open_range)
+    hold = max(abs(gravity(f) * cs.direction - k * f * cs.open_range)
                for f in sorted({*(float(f) for f in hold_fractions), *CLOSED_HOLD_FRACTIONS}))
     why = (f"counterbalance spring of a door opening downward (door-balance springs of ranges and dishwashers): "
            f"k = {k:.4g} N m/rad at rest closed balances the {open_loads[-1]:.3g} N m weight moment fully open")
@@ -225,8 +220,8 @@ LID_SUPPORT_SHARE = 0.5
 SUPPORT_FRACTIONS = tuple(float(f) for f in np.linspace(0.0, 1.0, 11))
 
 
-def lid_support(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPhysics], state: dict[str, float],
-                scale: float, name: str, hold_fractions) -> SpringHold | None:
+def lid_support(ctx: EstimationContext, name: str, scale: float, gravity: Callable[[float], float],
+                hold_fractions) -> SpringHold | None:
     """The lid support of a hinged lid or door (:data:`COUNTERBALANCE_LABELS`) that a hand could hardly move against its
     weight unaided: its largest weight moment over its range, over the lever to its far edge, is more than
     :data:`LID_SUPPORT_SHARE` of the top of its operating range (a chest's or a large case's lid). Such lids ride on
@@ -235,7 +230,9 @@ def lid_support(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPh
     hold it in any position). Modelled as a torsion spring about the hinge whose torque is the straight line in the
     opening fraction f that best cancels the weight moment tau(f) over :data:`SUPPORT_FRACTIONS` (the Chebyshev line:
     slope -(tau(1) - tau(0)), offset half way between the largest and smallest remainder); friction then holds the
-    largest remainder, and the largest over ``hold_fractions`` around the state.
+    largest remainder, and the largest over ``hold_fractions`` around the state. ``gravity(f)``: the gravity load on
+    the joint (N m) with its part at opening fraction f, the other joints at the state (:func:`gravity_at`); ``scale``:
+    the output's.
 
     Returns:
         the spring (k N m/rad, q_s rad) and hold load (N m), or None when the part does not need one.
@@ -244,11 +241,7 @@ def lid_support(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPh
     lever = far_edge(ctx, name, scale)
     if not cs.open_range > 0 or not lever > 0:
         return None
-
-    def opening_load(f: float) -> float:
-        return cs.direction * gravity_at(ctx, kin, links, state, scale, name, f)
-
-    tau = np.array([opening_load(f) for f in SUPPORT_FRACTIONS])
+    tau = np.array([cs.direction * gravity(f) for f in SUPPORT_FRACTIONS])
     top = (operating_range(ctx.category, part_label(ctx, name))[0].force_n or (0.0, np.inf))[1]
     if np.abs(tau).max() / lever <= LID_SUPPORT_SHARE * top:
         return None
@@ -261,7 +254,7 @@ def lid_support(ctx: EstimationContext, kin: SimSession, links: dict[str, LinkPh
         return None
     q_s = float(cs.position(0.0) + cs.direction * offset / k)
     remainder = np.abs(rest + offset)
-    hold = max(float(remainder.max()), *(abs(opening_load(x) + offset + slope * x) for x in hold_fractions))
+    hold = max(float(remainder.max()), *(abs(cs.direction * gravity(x) + offset + slope * x) for x in hold_fractions))
     why = (f"lid support (a torsion or gas spring sized to the lid's torque, as lid stays are): k = {k:.4g} N m/rad about "
            f"{q_s:.4g} rad carries the weight moment (up to {np.abs(tau).max():.3g} N m, {np.abs(tau).max() / lever:.3g} N at its "
            f"far edge against a hand's {top:g} N) to within {remainder.max():.3g} N m over its range")
