@@ -34,8 +34,8 @@ VIEWS: tuple[str, ...] = ("front", "back", "left", "right", "perspective")
 """Views sent with a request (the SPEC's five)."""
 
 
-def _r(x: float, n: int = 5) -> float:
-    return float(f"{float(x):.{n}g}")
+def _r(x: float | None) -> float | None:
+    return None if x is None else float(f"{float(x):.5g}")
 
 
 def describe(ctx: EstimationContext, kin: SimSession) -> dict[str, Any]:
@@ -53,9 +53,7 @@ def describe(ctx: EstimationContext, kin: SimSession) -> dict[str, Any]:
         g = ctx.geometry.get(ln.name)
         pj = asset.parent_joint(ln.name)
         entry: dict[str, Any] = {
-            "name": ln.name,
-            "semantic_label": ln.semantic_label,
-            "semantic_joint": ln.semantic_joint,
+            **ln.model_dump(include={"name", "semantic_label", "semantic_joint"}),
             "parent_joint": pj.name if pj else None,
             "has_geometry": g is not None,
         }
@@ -63,21 +61,17 @@ def describe(ctx: EstimationContext, kin: SimSession) -> dict[str, Any]:
             mat = material_for(ctx.category, ln.semantic_label)
             entry.update({"volume_m3": _r(g.volume), "volume_method": g.volume_method, "watertight": g.watertight, "area_m2": _r(g.area),
                           "extents_m": [_r(e) for e in g.extents],
-                          "typical_material": {"name": mat.name, "density": mat.density, "shell": mat.shell,
-                                               "wall_thickness": mat.wall_thickness}})
+                          "typical_material": mat.model_dump(include={"name", "density", "shell", "wall_thickness"})})
         links.append(entry)
     joints = []
     for j in asset.movable_joints():
         cs = ctx.closed.get(j.name)
         entry = {
-            "name": j.name,
-            "type": j.type,
-            "parent": j.parent,
-            "child": j.child,
+            **j.model_dump(include={"name", "type", "parent", "child"}),
             "child_label": asset.link(j.child).semantic_label,
             "axis": [_r(a) for a in j.axis],
-            "lower": None if j.lower is None else _r(j.lower),
-            "upper": None if j.upper is None else _r(j.upper),
+            "lower": _r(j.lower),
+            "upper": _r(j.upper),
             "unit": "m at scale 1 (multiply by the scale)" if j.type == "prismatic" else "rad",
             "task_relevant": j.name in relevant,
             "requested_band": bands.get(j.name, "closed"),
