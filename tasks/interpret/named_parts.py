@@ -177,14 +177,12 @@ def link_named(ctx: PartsContext, link: str, label: str | None) -> bool:
     return ctx.asset.link(link).semantic_label in {labels[i] for i in hit}
 
 
-def state_targets(ctx: PartsContext, jr: JointStateRequest, relevant: list[str],
-                  centers: dict[str, np.ndarray], warnings: list[str],
-                  sizes: dict[str, float] | None = None,
+def state_targets(ctx: PartsContext, jr: JointStateRequest, relevant: list[str], warnings: list[str],
                   notes: list[str] | None = None) -> list[str]:
     """The joints a state request names: the joint of an override, the movable joints whose part
     carries the label, or for a request that names no part the non-continuous ``relevant`` ones;
-    an ordinal picks among them (:func:`pick`) by ``centers`` (joint -> (3,) box center, m) or
-    ``sizes`` (joint -> box volume, m^3: order ``size``), how it picked in ``notes``. A label no
+    an ordinal picks among them (:func:`pick`) by the parts' boxes (:func:`part_boxes`: centers, or
+    volumes for order ``size``), how it picked in ``notes``. A label no
     part of the object carries moves nothing (warned: [] returned) unless some ``relevant`` joints
     stand in for it (:func:`stand_ins`, warned). Warnings appended to ``warnings``."""
     if jr.selector == "joint":  # an override names the joint itself
@@ -204,7 +202,7 @@ def state_targets(ctx: PartsContext, jr: JointStateRequest, relevant: list[str],
     if not named:
         targets = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
     if jr.ordinal is not None:
-        targets = pick(jr, list(targets), centers, sizes or {}, warnings, notes)
+        targets = pick(jr, list(targets), *part_boxes(ctx), warnings, notes)
     return targets
 
 

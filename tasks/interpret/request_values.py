@@ -202,14 +202,9 @@ def state_quantities(low: str, mention_starts: list[int]) -> StateQuantities:
 def volumes(low: str) -> list[Found]:
     """A container's volume in numbers ("a 500 ml bottle", "2 litres", "16 fl oz") as a ``SizeTarget`` of
     dimension ``volume`` (m^3)."""
-    out = []
-    for m in _VOLUME_RX.finditer(low):
-        if m.group("unit") == "l" and not m.group("num")[0].isdigit():
-            continue  # "a l": not a number
-        v = _quantity(m, _VOLUME_UNITS)
-        if v > 0:
-            out.append(Found(m.start(), m.end(), m.group(0), SizeTarget(dimension="volume", value=v, phrase=m.group(0))))
-    return out
+    return [Found(m.start(), m.end(), m.group(0), SizeTarget(dimension="volume", value=v, phrase=m.group(0)))
+            for m in _VOLUME_RX.finditer(low)  # "a l": not a number
+            if (m.group("unit") != "l" or m.group("num")[0].isdigit()) and (v := _quantity(m, _VOLUME_UNITS)) > 0]
 
 
 def leftmost_longest(found: list) -> list:
@@ -292,14 +287,8 @@ def masses(low: str, mention_starts: list[int] | None = None) -> list[Found]:
         if lo <= 0 or hi <= 0:
             continue
         out.append(_mass_found(low, m, mention_starts, mass_range=(min(lo, hi), max(lo, hi))))
-    for m in _MASS_RX.finditer(low):
-        if any(r.start() <= m.start() < r.end() for r in ranges):
-            continue
-        v = _quantity(m, _MASS_UNITS)
-        if v <= 0:
-            continue
-        out.append(_mass_found(low, m, mention_starts, mass=v))
-    return out
+    return out + [_mass_found(low, m, mention_starts, mass=v) for m in _MASS_RX.finditer(low)
+                  if not any(r.start() <= m.start() < r.end() for r in ranges) and (v := _quantity(m, _MASS_UNITS)) > 0]
 
 
 _MASS_LEVEL_RX = re.compile(

@@ -59,8 +59,8 @@ class OfflineEstimator:
         resolved = request_apply.resolve_states(ctx, kin, s)
         bands, band_notes = resolved.bands, resolved.warnings + resolved.notes + request_apply.unmatched_properties(ctx)
         state = state_from_bands(ctx.closed, bands, s, prismatic)  # then every resolved target's position
-        state.update({n: ctx.closed[n].position(t.fraction) * (s if n in prismatic else 1.0) for n, t in resolved.targets.items()
-                      if t.fraction is not None})
+        state.update({n: ctx.closed[n].position(t.fraction) * (s if n in prismatic else 1.0)
+                      for n, t in resolved.targets.items()})
         # ---- dynamics
         relevant = request_apply.task_relevant_joints(ctx)
         choices, _ = motion_choices(ctx, relevant)

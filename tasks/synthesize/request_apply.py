@@ -17,7 +17,7 @@ from asset2sim.schemas.overlay import Inertia, JointDynamics, LinkPhysics
 from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, JointStateRequest, PartProperty, RequestSpec
 from asset2sim.tasks.interpret import part_priors
 from asset2sim.prior_tables import MaterialPrior, load_priors
-from asset2sim.tasks.interpret.named_parts import (count_warnings, joints_named, joints_of, link_named, moving_parts, part_boxes, stand_ins,
+from asset2sim.tasks.interpret.named_parts import (count_warnings, joints_named, joints_of, link_named, moving_parts, stand_ins,
                                                   state_targets, unit_fits)
 from asset2sim.tasks.interpret.state_words import OTHERS
 from asset2sim.tasks.synthesize.opening_fractions import falls_open, fraction_for
@@ -40,8 +40,8 @@ class JointTarget:
 
     joint: str
     band: str
-    fraction: float | None = None
-    interval: tuple[float, float] | None = None
+    fraction: float
+    interval: tuple[float, float]
     kind: str = "band"
     asked: float | None = None
     """The number asked (rad, m or fraction), None for bands and ends."""
@@ -97,12 +97,11 @@ def resolve_states(ctx: EstimationContext, kin: SimSession, scale: float) -> Sta
     res = StateResolution(bands={})
     relevant = task_relevant_joints(ctx)
     closed_state = ctx.closed_state()
-    centers, sizes = part_boxes(ctx)
     named: list[tuple[JointStateRequest, list[str]]] = []
     cannot: list[tuple[JointStateRequest, str, str]] = []
     for jr in sorted(ctx.request.joint_states, key=lambda jr: jr.names_part):  # a part named wins over a request for "it", in any order
         before = len(res.warnings)
-        joints = state_targets(ctx, jr, relevant, centers, res.warnings, sizes, res.notes)
+        joints = state_targets(ctx, jr, relevant, res.warnings, res.notes)
         named.append((jr, joints))
         if not joints and not jr.names_part and jr.band == "closed" and jr.target is None:
             res.notes.append(f"'{jr.phrase}': this {ctx.category} has no part that opens: it is closed as it is")
@@ -177,7 +176,7 @@ def retarget(targets: dict[str, JointTarget], old: dict, new: dict) -> dict[str,
     out = dict(targets)
     for n, t in targets.items():
         a, b = old.get(n), new.get(n)
-        if t.kind not in ("angle", "distance") or t.fraction is None or a is None or b is None or not b.open_range > 0:
+        if t.kind not in ("angle", "distance") or a is None or b is None or not b.open_range > 0:
             continue
         if abs(a.q_closed - b.q_closed) <= 1e-12 and abs(a.open_range - b.open_range) <= 1e-12 and a.direction == b.direction:
             continue

@@ -48,7 +48,7 @@ def check_overlay(ctx: EstimationContext, overlay: Overlay, res: StateResolution
                 out.append(f"joint {n}: {d.quantity} {v:.4g} but the request asks {d.value:g} ('{d.phrase}')")
     if overlay.initial_joint_positions:
         for n, t in res.targets.items():
-            if n not in overlay.initial_joint_positions or t.interval is None:
+            if n not in overlay.initial_joint_positions:
                 continue
             unit = overlay.scale if ctx.asset.joint(n).type == "prismatic" else 1.0
             f = ctx.closed[n].fraction(overlay.initial_joint_positions[n] / unit)
@@ -151,7 +151,7 @@ def findings(ctx: EstimationContext, targets: dict[str, JointTarget], closed_out
     q: list[QuantityOutcome] = []
     for n, t in targets.items():
         cs = closed_out.get(n)
-        if cs is None or n not in state or t.fraction is None:
+        if cs is None or n not in state:
             continue
         f = cs.fraction(state[n])
         if t.kind == "end":
@@ -166,7 +166,7 @@ def findings(ctx: EstimationContext, targets: dict[str, JointTarget], closed_out
               else asked is not None and abs(got - asked) <= NUMBER_TOLERANCE * abs(asked) + 1e-9)
         why = t.note
         if not ok and t.kind != "end":
-            if t.interval is not None and (t.interval[1] >= 1.0 - 1e-9 and f >= 1.0 - 1e-6 or t.fraction >= 1.0 - 1e-9):
+            if t.interval[1] >= 1.0 - 1e-9 and f >= 1.0 - 1e-6 or t.fraction >= 1.0 - 1e-9:
                 why += "; the joint's limit is below the number"
             else:
                 why += "; the state search moved it inside its interval to remove self-penetration"
