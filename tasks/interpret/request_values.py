@@ -119,9 +119,9 @@ def _next_words(low: str, end: int, n: int) -> list[tuple[int, int, str]]:
             for m in itertools.islice(re.finditer(r"[\w'-]+|[,;:.!?]", low[end: end + 80]), max(n, 1))]
 
 
-def _near_category(low: str, end: int, mention_starts: list[int], max_words: int = 2) -> bool:
-    """A category mention starts within ``max_words`` words after ``end``."""
-    for s, _e, w in _next_words(low, end, max_words + 1):
+def _near_category(low: str, end: int, mention_starts: list[int]) -> bool:
+    """A category mention starts within two words after ``end``."""
+    for s, _e, w in _next_words(low, end, 3):
         if s in mention_starts or w in {",", ";", ":", ".", "!", "?"}:
             return s in mention_starts
     return False
@@ -238,9 +238,9 @@ def part_before(low: str, pos: int, max_words: int = 4, mention_starts: list[int
     return None, pos
 
 
-def part_after(low: str, end: int, max_words: int = 2, mention_starts: list[int] | None = None) -> tuple[str | None, int]:
-    """(label, end) of the part or body noun within ``max_words`` words after ``end``; None for a category mention."""
-    for s, e, w in _next_words(low, end, max_words):
+def part_after(low: str, end: int, mention_starts: list[int] | None = None) -> tuple[str | None, int]:
+    """(label, end) of the part or body noun within two words after ``end``; None for a category mention."""
+    for s, e, w in _next_words(low, end, 2):
         if PART_RX.fullmatch(w):
             return (None if mention_starts and s in mention_starts else part_label(w)), e
         if BODY_RX.fullmatch(w):
@@ -301,10 +301,10 @@ _MASS_LEVEL_BEFORE = re.compile(r"(?:is|it's|feels?|be|and|but|,)\s+$")
 JOINT_WORD_RX = re.compile(r"(?:hinges?|joints?|action|feel|slides?|runners?|pivots?|springs?|mechanisms?)")
 
 
-def joint_word_soon(low: str, end: int, max_words: int = 3) -> bool:
-    """Whether a joint word (:data:`JOINT_WORD_RX`) is among the next ``max_words`` words after ``end``, before any
+def joint_word_soon(low: str, end: int) -> bool:
+    """Whether a joint word (:data:`JOINT_WORD_RX`) is among the next three words after ``end``, before any
     ("a heavy, well-damped hinge": yes; "a heavy 25 kg door": no)."""
-    return any(JOINT_WORD_RX.fullmatch(w) for _, _, w in _next_words(low, end, max_words))
+    return any(JOINT_WORD_RX.fullmatch(w) for _, _, w in _next_words(low, end, 3))
 
 
 def mass_levels(low: str, mention_starts: list[int]) -> list[Found]:
@@ -316,7 +316,7 @@ def mass_levels(low: str, mention_starts: list[int]) -> list[Found]:
         nxt = _next_words(low, m.end(), 1)
         if joint_word_soon(low, m.end()):
             continue
-        if (w.endswith("weight") or _near_category(low, m.end(), mention_starts, 2) or _MASS_RX.match(low, m.end() + 1)
+        if (w.endswith("weight") or _near_category(low, m.end(), mention_starts) or _MASS_RX.match(low, m.end() + 1)
                 or any(PART_RX.fullmatch(x) for _, _, x in _next_words(low, m.end(), 3))
                 or _MASS_LEVEL_BEFORE.search(low[max(0, m.start() - 12): m.start()])
                 and (not nxt or nxt[0][2] in {",", ".", ";", "!", "and", "but", "to"})):
@@ -341,7 +341,7 @@ def materials(low: str, mention_starts: list[int], head_starts: list[int] | None
                       else part_after(low, h.end, mention_starts=head_starts))
         if not made_of and label is None:
             nxt = _next_words(low, h.end, 1)
-            if not (_near_category(low, h.end, mention_starts, 2) or not nxt or nxt[0][2] in {",", ".", ";", "!", "and", "with", "but"}):
+            if not (_near_category(low, h.end, mention_starts) or not nxt or nxt[0][2] in {",", ".", ";", "!", "and", "with", "but"}):
                 continue  # "a rubber duck": not the object's material
         text = low[h.start:max(end, h.end)].strip()
         out.append(Found(h.start, max(end, h.end), text, PartProperty(label=label, material=str(h.value), phrase=text)))

@@ -4,6 +4,8 @@ validation, physics or state refinement): ``direct`` (one call, five views) and
 
 from __future__ import annotations
 
+from collections import defaultdict
+
 import numpy as np
 
 from asset2sim.models.client import LLMClient
@@ -20,6 +22,9 @@ from asset2sim.inert import one_line
 
 IVW_TEMPERATURE = 1.0
 """Sampling temperature of the IVW baseline's repeated queries (independent samples)."""
+
+#: The numbers of a reply's joint entry the baselines apply.
+_JOINT_VALUES = ("damping", "friction", "stiffness", "position")
 
 
 def _numeric_overlay(ctx: EstimationContext, name: str, model: str, usage: Usage, scale: float, link_mass: dict[str, tuple[float, bool]],
@@ -57,7 +62,7 @@ def direct_overlay(ctx: EstimationContext, kin: SimSession, client: LLMClient) -
     r = answer.reply
     return _numeric_overlay(
         ctx, "direct", cfg.model, answer.usage, r.scale.value, {lr.link: (lr.mass.value, lr.shell) for lr in r.links},
-        {jr.joint: {k: getattr(jr, k).value for k in ("damping", "friction", "stiffness", "position")} for jr in r.joints},
+        {jr.joint: {k: getattr(jr, k).value for k in _JOINT_VALUES} for jr in r.joints},
         (r.lateral_friction, r.restitution), render_notes + ["direct: one model call applied as is (no validation, no refinement)"])
 
 
@@ -100,18 +105,14 @@ def ivw_overlay(ctx: EstimationContext, kin: SimSession, client: LLMClient, n_vi
     if not replies:
         raise ReplyError(f"ivw: no usable reply from {len(views) * n_calls} calls ({failures[-1] if failures else 'no calls'})", [failures]) from last_exc
     scale = ivw.fuse([(r.scale.value, r.scale.std) for r in replies])
-    masses: dict[str, list[tuple[float, float]]] = {}
-    shells: dict[str, list[bool]] = {}
-    jvals: dict[str, dict[str, list[tuple[float, float]]]] = {}
+    masses, shells, jvals = defaultdict(list), defaultdict(list), defaultdict(lambda: defaultdict(list))
     for r in replies:
         for lr in r.links:
-            masses.setdefault(lr.link, []).append((lr.mass.value, lr.mass.std))
-            shells.setdefault(lr.link, []).append(lr.shell)
+            masses[lr.link].append((lr.mass.value, lr.mass.std))
+            shells[lr.link].append(lr.shell)
         for jr in r.joints:
-            d = jvals.setdefault(jr.joint, {})
-            for k in ("damping", "friction", "stiffness", "position"):
-                e = getattr(jr, k)
-                d.setdefault(k, []).append((e.value, e.std))
+            for k in _JOINT_VALUES:
+                jvals[jr.joint][k].append((getattr(jr, k).value, getattr(jr, k).std))
     fused_mass = ivw.fuse_all(masses)
     # IVW of non-negative values stays non-negative; keep it explicit (all but the position)
     joint_values = {jn: {k: f.value if k == "position" else max(0.0, f.value) for k, f in ivw.fuse_all(d).items()}

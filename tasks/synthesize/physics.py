@@ -174,10 +174,10 @@ def joint_loads(session, links: dict[str, LinkPhysics], state: dict[str, float],
 TIMESTEP = 1.0 / 240.0
 
 
-def max_stable_damping(inertia_axis: float, timestep: float = TIMESTEP) -> float:
+def max_stable_damping(inertia_axis: float) -> float:
     """Largest viscous damping (N*m*s/rad or N*s/m) a semi-implicit integrator takes without overshooting
-    in one step: c <= I / dt."""
-    return float(max(inertia_axis, 0.0) / timestep)
+    in one step: c <= I / dt (dt :data:`TIMESTEP`)."""
+    return float(max(inertia_axis, 0.0) / TIMESTEP)
 
 
 #: Largest joint speed Bullet's multibodies allow, rad/s or m/s (``btMultiBody::m_maxCoordinateVelocity`` = 100,
@@ -188,11 +188,11 @@ MAX_JOINT_SPEED = 100.0
 FRICTION_LOCK_SHARE = 0.8
 
 
-def max_stable_friction(inertia_axis: float, timestep: float = TIMESTEP) -> float:
+def max_stable_friction(inertia_axis: float) -> float:
     """Largest joint friction (N*m or N) the engines' friction motor takes without locking the joint:
-    FRICTION_LOCK_SHARE * I v_max / dt (I about the axis, kg*m^2, or the moving mass, kg); see
+    FRICTION_LOCK_SHARE * I v_max / dt (I about the axis, kg*m^2, or the moving mass, kg; dt :data:`TIMESTEP`); see
     ``docs/design/metrics.md`` for the measurement."""
-    return float(FRICTION_LOCK_SHARE * max(inertia_axis, 0.0) * MAX_JOINT_SPEED / timestep)
+    return float(FRICTION_LOCK_SHARE * max(inertia_axis, 0.0) * MAX_JOINT_SPEED / TIMESTEP)
 
 
 def damping_for(load: JointLoad, zeta: float, stiffness: float = 0.0) -> float:

@@ -43,8 +43,7 @@ CLOSER_STOP_SHARE = 0.01
 
 
 def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, unit: float, hold: float, pushes: np.ndarray,
-           closed_load: float = 0.0, stopped: bool = True, *, hand: float = 0.0, free: bool = True,
-           floor: float = 0.0, what: str = "self-closing: a closer spring") -> SpringHold:
+           closed_load: float, stopped: bool, *, hand: float, free: bool, floor: float, what: str) -> SpringHold:
     """The spring of a self-closing part (a door closer, a self-closing lid or slide): it presses the part into its
     closed end with a preload F0 and pulls F1 at its far end, rate k = (F1 - F0) / R about a reference F0 / k beyond
     the closed end (R: the range), so that the part returns shut from anywhere in its range against friction of at
