@@ -115,9 +115,9 @@ def request_variant(ctx: EstimationContext) -> str | None:
     return v.name if v is not None else None
 
 
-def link_material(ctx: EstimationContext, label: str | None, link: str | None = None) -> physics.MaterialChoice:
+def link_material(ctx: EstimationContext, label: str | None, link: str) -> physics.MaterialChoice:
     """The material the request names for ``link``, else the category's prior for ``label``."""
-    return physics.material_choice((request_apply.requested_material(ctx, link) if link is not None else None)
+    return physics.material_choice(request_apply.requested_material(ctx, link)
                                    or material_for(ctx.category, label, request_variant(ctx)))
 
 

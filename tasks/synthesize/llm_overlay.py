@@ -111,7 +111,7 @@ def _link_physics(ctx: EstimationContext, by_link: dict, s: float) -> _ReplyLink
             missing.append(ln.name)
             src = f"geometry + {mat.name} (offline prior; no model entry)"
         else:
-            mat = physics.MaterialChoice(name=lr.material, density=lr.density, shell=lr.shell, wall_thickness=lr.wall_thickness, source="model")
+            mat = physics.MaterialChoice(name=lr.material, density=lr.density, shell=lr.shell, wall_thickness=lr.wall_thickness)
             src = f"geometry + {mat.name} (model)"
         try:
             links[ln.name] = physics.link_physics(geom, s, mat, source=src)

@@ -114,8 +114,10 @@ def png_data_url(image: np.ndarray) -> str:
     return "data:image/png;base64," + base64.b64encode(png_bytes(image)).decode("ascii")
 
 
-def render_closed_views(ctx: EstimationContext, views: tuple[str, ...] = VIEWS, size: tuple[int, int] = (384, 384)) -> tuple[dict[str, str], list[str]]:
-    """(view -> PNG data URL, notes) of the input asset at its geometric closed state; a render failure
+def render_closed_views(ctx: EstimationContext, views: tuple[str, ...],
+                        size: tuple[int, int]) -> tuple[dict[str, str], list[str]]:
+    """(view -> PNG data URL, notes) of ``views`` (of :data:`VIEWS`) of the input asset at its geometric closed state,
+    ``size`` (width, height) pixels; a render failure
     leaves the views out and the note says why."""
     try:
         images = render.render_views(ctx.asset.urdf_path, {n: float(cs.q_closed) for n, cs in ctx.closed.items()}, views=views,

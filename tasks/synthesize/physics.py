@@ -44,7 +44,6 @@ class MaterialChoice:
     shell: bool
     wall_thickness: float
     """m, real-world wall thickness for shell parts"""
-    source: str = ""
     panel: bool = False
     """a board (``MaterialPrior.panel``)"""
 
@@ -56,7 +55,7 @@ class MaterialChoice:
 def material_choice(m) -> MaterialChoice:
     """A prior's material (``MaterialPrior``) as a :class:`MaterialChoice`."""
     return MaterialChoice(name=m.name, density=float(m.density), shell=bool(m.shell), wall_thickness=float(m.wall_thickness),
-                          source=m.source, panel=bool(m.panel))
+                          panel=bool(m.panel))
 
 
 def hollow_fraction(geom: LinkGeometry, scale: float, material: MaterialChoice) -> float | None:

@@ -53,13 +53,13 @@ def joint_band(lower: float, upper: float, prismatic: bool) -> float:
     return rest_band(lower, upper, REST_BAND_FLOORS["prismatic" if prismatic else "revolute"])
 
 
-def lean_load(load: JointLoad, lean: float = SET_DOWN_LEAN, *, on_stop: bool = False) -> float:
-    """Largest |gravity load| (N*m or N) on a joint when its object leans ``lean`` rad in any direction:
+def lean_load(load: JointLoad, *, on_stop: bool = False) -> float:
+    """Largest |gravity load| (N*m or N) on a joint when its object leans lean = :data:`SET_DOWN_LEAN` in any direction:
     |tau_g| cos(lean) + g sin(lean) |w_h| (module docstring). ``on_stop``: the part rests on the stop its weight
     presses it onto, so only a lean that lifts it off loads the joint: g sin(lean) |w_h| - |tau_g| cos(lean)
     (negative: none does)."""
-    pressed = abs(load.gravity_load) * np.cos(lean)
-    lateral = G * np.sin(abs(lean)) * load.lateral_moment
+    pressed = abs(load.gravity_load) * np.cos(SET_DOWN_LEAN)
+    lateral = G * np.sin(SET_DOWN_LEAN) * load.lateral_moment
     return float(lateral - pressed if on_stop else pressed + lateral)
 
 
