@@ -70,6 +70,11 @@ class EstimationContext:
         return {n: float(0.5 * (self.joint_boxes[n][0][2] + self.joint_boxes[n][1][2])) if n in self.joint_boxes else 0.0
                 for n in self.subtrees}
 
+    @property
+    def prismatic(self) -> set[str]:
+        """The movable joints that slide (positions in the input's units, at the output x its scale)."""
+        return {j.name for j in self.asset.movable_joints() if j.type == "prismatic"}
+
     def joint_label(self, joint: str) -> str | None:
         """The semantic label of ``joint``'s moving (child) link, None when unlabelled."""
         return self.asset.link(self.asset.joint(joint).child).semantic_label

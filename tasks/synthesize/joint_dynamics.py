@@ -246,7 +246,7 @@ def slide_cap(ctx: EstimationContext, joint: str, mass: float) -> float | None:
     """The most friction (N) a drawer-like part (:data:`SLIDE_LABELS`) of ``mass`` kg may have: the upper end of the
     kind of slide the request names for it, else of the stiffest kind (no real slide is stiffer); None for other
     joints."""
-    if ctx.asset.joint(joint).type != "prismatic" or part_label(ctx, joint) not in SLIDE_LABELS:
+    if joint not in ctx.prismatic or part_label(ctx, joint) not in SLIDE_LABELS:
         return None
     choices, _ = motion_choices(ctx, request_apply.task_relevant_joints(ctx))
     table = load_priors().slides

@@ -64,7 +64,7 @@ def overlay_from_reply(ctx: EstimationContext, kin: SimSession, reply: ModelRepl
     links, mass_note = _within_model_mass(read.links, by_link)
     bands, band_notes = _bands(ctx, kin, reply)
     notes += band_notes
-    state = estimate.state_from_bands(ctx.closed, bands, s, {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"})
+    state = estimate.state_from_bands(ctx.closed, bands, s, ctx.prismatic)
     joints = joint_dynamics.joint_dynamics_for(ctx, kin, links, state, s, _joint_choices(ctx, reply), source=f"{name} physics (model choices)")
     asked_state = bool(ctx.request.joint_states) or any(b != "closed" for b in bands.values())
     if reply.category.strip().lower() != str(ctx.category).lower():

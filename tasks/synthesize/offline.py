@@ -55,7 +55,7 @@ class OfflineEstimator:
                      for name, lp in links.items()}
             mass_note += f"; outside the plausible {lo:g}-{hi:g} kg for {ctx.category} ({ctx.request.size_class or 'regular'}): every link scaled by {f:.3g} to {target:g} kg"
         # ---- state
-        prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
+        prismatic = ctx.prismatic
         resolved = request_apply.resolve_states(ctx, kin, s)
         bands, band_notes = resolved.bands, resolved.warnings + resolved.notes + request_apply.unmatched_properties(ctx)
         state = state_from_bands(ctx.closed, bands, s, prismatic)  # then every resolved target's position

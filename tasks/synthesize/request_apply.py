@@ -350,7 +350,7 @@ def apply_dynamics_values(ctx: EstimationContext, joints: dict[str, JointDynamic
             continue
         applied = []
         for n in names:
-            if n not in out or not unit_fits(d, ctx.asset.joint(n).type == "prismatic"):
+            if n not in out or not unit_fits(d, n in ctx.prismatic):
                 continue
             upd: dict = {d.quantity: float(d.value), "source": out[n].source + f"; {d.quantity} {d.value:g} from the request ('{d.phrase}')"}
             if d.quantity == "stiffness":

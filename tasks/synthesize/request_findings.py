@@ -39,7 +39,7 @@ def check_overlay(ctx: EstimationContext, overlay: Overlay, res: StateResolution
             out.append(f"link {name}: density {lp.density:g} kg/m^3 but the request names {mat.name} ({mat.density:g})")
     for d in ctx.request.dynamics_values:
         for n, jd in overlay.joints.items():
-            linear = n in {j.name for j in ctx.asset.joints} and ctx.asset.joint(n).type == "prismatic"
+            linear = n in ctx.prismatic
             if not unit_fits(d, linear) or (n not in task_relevant_joints(ctx) if d.label is None else not request_label_matches(
                     ctx.category, d.label, ctx.joint_label(n))):
                 continue
@@ -50,7 +50,7 @@ def check_overlay(ctx: EstimationContext, overlay: Overlay, res: StateResolution
         for n, t in res.targets.items():
             if n not in overlay.initial_joint_positions:
                 continue
-            unit = overlay.scale if ctx.asset.joint(n).type == "prismatic" else 1.0
+            unit = overlay.scale if n in ctx.prismatic else 1.0
             f = ctx.closed[n].fraction(overlay.initial_joint_positions[n] / unit)
             if not (t.interval[0] - 1e-9 <= f <= t.interval[1] + 1e-9):
                 out.append(f"joint {n}: initial opening fraction {f:.3g} outside {t.interval[0]:.3g}..{t.interval[1]:.3g} asked by '{t.phrase}'")
@@ -97,7 +97,7 @@ def phrase_lines(ctx: EstimationContext, res: StateResolution, closed_out: dict,
                 got.append(_named(ctx, n))
                 continue
             d = abs(q - cs.q_closed)
-            amount = f"{1000.0 * d:.4g} mm" if ctx.asset.joint(n).type == "prismatic" else f"{np.degrees(d):.1f} deg"
+            amount = f"{1000.0 * d:.4g} mm" if n in ctx.prismatic else f"{np.degrees(d):.1f} deg"
             got.append(_named(ctx, n) + f" {amount} from closed, {100.0 * abs(cs.fraction(q)):.0f} % open")
         out.append(f"'{jr.phrase}': " + "; ".join(got) + f" (asked {asked})")
     return out
@@ -128,7 +128,7 @@ def motion_lines(ctx: EstimationContext, overlay: Overlay, words: dict[str, list
         got = []
         for n in joints:
             if (d := overlay.joints.get(n)) is not None:
-                linear = ctx.asset.joint(n).type == "prismatic"
+                linear = n in ctx.prismatic
                 got.append(_named(ctx, n) + ": " + ", ".join(
                     f"{p} {getattr(d, p):.3g} {DYNAMICS_UNITS[p][linear]}" for p in ("friction", "damping", "stiffness")))
         line = f"{word.short()} on " + "; ".join(got)
@@ -156,7 +156,7 @@ def findings(ctx: EstimationContext, targets: dict[str, JointTarget], closed_out
         f = cs.fraction(state[n])
         if t.kind == "end":
             asked, got, unit = t.fraction, f, "opening fraction"
-        elif t.kind == "angle" or t.kind == "distance" and ctx.asset.joint(n).type == "prismatic":
+        elif t.kind == "angle" or t.kind == "distance" and n in ctx.prismatic:
             asked, got, unit = t.asked, f * cs.open_range, "rad" if t.kind == "angle" else "m"
         elif t.kind == "distance":
             asked, got, unit = t.asked, (t.asked or 0.0) * f / max(t.fraction, 1e-12), "m"
@@ -209,7 +209,7 @@ def _dynamics_outcomes(ctx: EstimationContext, overlay: Overlay, escalation: lis
     for d in ctx.request.dynamics_values:
         for n in joints_of(ctx, d, relevant):
             jd = overlay.joints.get(n)
-            linear = ctx.asset.joint(n).type == "prismatic"
+            linear = n in ctx.prismatic
             if jd is None or not unit_fits(d, linear):
                 continue
             got = float(getattr(jd, d.quantity))

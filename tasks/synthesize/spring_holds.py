@@ -90,7 +90,7 @@ def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, uni
     cap = CLOSER_EFFORT_SHARE * hand if hand > 0 else np.inf
     sized = max(set_down.LEAN_SAFETY * lean, min(set_down.LEAN_SAFETY * set_down.lean_load(load), cap / CLOSER_PROGRESSION))
 
-    prismatic = ctx.asset.joint(load.joint).type == "prismatic"
+    prismatic = load.joint in ctx.prismatic
     least_pull = CLOSER_FLOOR_MARGIN * floor  # the least friction the joint gets, overcome
 
     def least(ratio: float) -> float:  # the preload whose pull outpulls the opening loads everywhere, at F1 / F0 = ratio
