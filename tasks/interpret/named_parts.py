@@ -10,7 +10,7 @@ part's box center, or left / right / front / back facing the front, or by size
 
 from __future__ import annotations
 
-from typing import Protocol, Sequence
+from typing import Protocol
 
 import numpy as np
 
@@ -47,15 +47,15 @@ def part_boxes(ctx: PartsContext) -> tuple[dict[str, np.ndarray], dict[str, floa
             {n: float(np.prod(np.maximum(b[1] - b[0], 0.0))) for n, b in ctx.joint_boxes.items()})
 
 
-def named_joints(category: str, word: str | None, joints: Sequence[str],
-                 labels: Sequence[str | None], notes: list[str] | None = None) -> list[str]:
-    """Of ``joints``, those whose moving link's label (``labels``, one per joint) the part ``word``
-    names (``part_priors.named_by_word``); a label the synonym table gives for it said in
+def named_joints(category: str, word: str | None, asset: AssetDescription, notes: list[str] | None = None) -> list[str]:
+    """Of ``asset``'s movable joints, those whose moving link's label the part ``word`` names
+    (``part_priors.named_by_word``), in file order; a label the synonym table gives for it said in
     ``notes``."""
-    hit, how = named_by_word(category, word, labels)
+    joints = asset.movable_joints()
+    hit, how = named_by_word(category, word, [asset.link(j.child).semantic_label for j in joints])
     if how and notes is not None:
-        notes.append(f"{how}: {', '.join(joints[i] for i in hit)}")
-    return [joints[i] for i in hit]
+        notes.append(f"{how}: {', '.join(joints[i].name for i in hit)}")
+    return [joints[i].name for i in hit]
 
 
 def pick(jr: JointStateRequest | MotionPhrase, targets: list[str], centers: dict[str, np.ndarray],
@@ -130,9 +130,7 @@ def moving_parts(ctx: PartsContext) -> str:
 def joints_named(ctx: PartsContext, label: str, notes: list[str] | None = None) -> list[str]:
     """Movable joints whose moving link carries ``label`` (``priors.request_label_matches``), else a
     label the synonym table gives for it (:func:`named_joints`, said in ``notes``)."""
-    joints = ctx.asset.movable_joints()
-    return named_joints(ctx.category, label, [j.name for j in joints], [ctx.asset.link(j.child).semantic_label for j in joints],
-                        notes)
+    return named_joints(ctx.category, label, ctx.asset, notes)
 
 
 def joints_of(ctx: PartsContext, d: DynamicsValue | MotionPhrase, relevant: list[str],
@@ -226,6 +224,4 @@ def labelled_joints(spec: RequestSpec | None, asset: AssetDescription, category:
     file order (repeats kept)."""
     if spec is None:
         return []
-    joints = asset.movable_joints()
-    names, labels = [j.name for j in joints], [asset.link(j.child).semantic_label for j in joints]
-    return [n for js in spec.joint_states if js.selector == "label" for n in named_joints(category or "Generic", js.label, names, labels)]
+    return [n for js in spec.joint_states if js.selector == "label" for n in named_joints(category or "Generic", js.label, asset)]

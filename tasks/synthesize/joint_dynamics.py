@@ -140,7 +140,7 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
         on_stop = _on_stop(load, cs, state[name], unit, band)
         if ch.free_moving and (on_stop or not ch.state_asked):
             hold = 0.0  # asked to move freely, and resting on the stop its weight presses it onto or given no state
-        spring, balanced = None, False
+        spring = held = balancer = None
         mechanism = "moves freely (asked)" if ch.free_moving else ("friction slide" if linear else "friction hinge")
         if ch.free_moving and ch.state_asked and not on_stop and abs(load.gravity_load) > physics.friction_floor(
                 load, linear, True):
@@ -154,23 +154,20 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
                           stopped_shut(ctx, kin, state, scale, name), hand=hand_top(ctx, name, scale, linear),
                           free=free_standing(ctx), floor=0.0 if on_slide else physics.friction_floor(load, linear),
                           what="self-closing: a closer spring" if ch.self_closing else "a push button's return spring")
-            spring, hold = held.spring, held.hold
-            note, mechanism = f"{note}; {held.note}", "closer" if ch.self_closing else "return spring"
+            mechanism = "closer" if ch.self_closing else "return spring"
         elif ch.spring:
             k = max(3.0 * physics.HOLD_SAFETY * max(hold, 1e-6) / max(cs.open_range * unit, 1e-6), load.gravity_stiffness * 2.0)
             ref = float(np.clip(state[name] - load.gravity_load / k, cs.lower * unit, cs.upper * unit))
             spring, mechanism = (k, ref), "return spring"
             hold = 0.1 * hold  # the spring carries the load; friction only adds feel
         elif not linear and part_label(ctx, name) in COUNTERBALANCE_LABELS:  # a word about friction keeps it
-            counter = counterbalance(ctx, name, gravity, fr) or lid_support(ctx, name, scale, gravity, fr)
-            if counter is not None:
-                spring, hold = counter.spring, counter.hold
-                note, balanced, mechanism = f"{note}; {counter.note}", True, counter.note.split(" (")[0]
+            held = balancer = counterbalance(ctx, name, gravity, fr) or lid_support(ctx, name, scale, gravity, fr)
         elif linear and part_label(ctx, name) in BALANCE_LABELS:  # "slides easily" is friction, not the balance
-            bal = balance(load, cs, unit)
-            if bal is not None:
-                spring, hold = bal.spring, bal.hold
-                note, balanced, mechanism = f"{note}; {bal.note}", True, "balance"
+            held = balancer = balance(load, cs, unit)
+        if held is not None:
+            spring, hold, note = held.spring, held.hold, f"{note}; {held.note}"
+        if balanced := balancer is not None:
+            mechanism = "balance" if linear else balancer.note.split(" (")[0]
         impact, static, landing = 0.0, hold, ""
         if (spring is None or balanced) and not ch.free_moving and name in landed:
             # a part of a free-standing object is held by its friction where it was left when the object is set
