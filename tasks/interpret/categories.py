@@ -245,7 +245,6 @@ def _label_evidence(ev: _Evidence, labels: list[str]) -> None:
     pri = load_priors()
     tokens = _lookup_tables()[1]
     body_hit: set[str] = set()
-    part_sum: dict[str, float] = {}
     part_why: dict[str, list[str]] = {}
     for lab in labels:
         for tok in body_label_tokens(lab):
@@ -259,7 +258,6 @@ def _label_evidence(ev: _Evidence, labels: list[str]) -> None:
         for name, cat in pri.categories.items():
             w = cat.part_evidence.get(canon)
             if w and canon not in part_why.get(name, []):
-                part_sum[name] = part_sum.get(name, 0.0) + w
                 part_why.setdefault(name, []).append(canon)
-    for name, s in part_sum.items():
-        ev.add(name, min(_W_PART_CAP, s), f"part labels {part_why[name]}")
+    for name, canons in part_why.items():
+        ev.add(name, min(_W_PART_CAP, sum(pri.categories[name].part_evidence[c] for c in canons)), f"part labels {canons}")

@@ -143,11 +143,8 @@ def named_by_word(category: str, word: str | None, labels: Sequence[str | None])
 def task_relevant_joints(category: str, joint_labels: Sequence[tuple[str, str | None]]) -> tuple[list[str], str]:
     """(joints whose part tasks manipulate, the rule) from ``joint_labels`` ((joint, part label or None)):
     the task-relevant parts by priority; else every joint of neither body nor accessory; else every joint."""
-    ranked = []
-    for name, label in joint_labels:
-        rank = task_relevant_rank(category, label)
-        if rank is not None or part_role(category, label) == "task":
-            ranked.append((rank if rank is not None else 99, name))
+    ranked = [(99 if rank is None else rank, name) for name, label in joint_labels
+              if (rank := task_relevant_rank(category, label)) is not None or part_role(category, label) == "task"]
     if ranked:
         return [n for _, n in sorted(ranked, key=lambda t: t[0])], f"the task-relevant parts of {category} (category prior)"
     out = [name for name, label in joint_labels if part_role(category, label) not in ("accessory", "body")]

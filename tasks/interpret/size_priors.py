@@ -106,7 +106,7 @@ def target_size(category: str, request: RequestSpec | str | None = None) -> Size
     if var is not None:
         base = var.dims
         f = size_factor(size_class) / size_factor(var.size_class) if size_class else 1.0
-        if f > 1.0 and size_class is not None and size_factor(size_class) <= 1.0:
+        if f > 1.0 and size_factor(size_class) <= 1.0:
             f = 1.0  # a "small"/"regular" word never enlarges a variant that is already smaller
         lo, hi = var.mass_range
         notes.append(

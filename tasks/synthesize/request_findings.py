@@ -125,12 +125,9 @@ def motion_lines(ctx: EstimationContext, overlay: Overlay, words: dict[str, list
         joints = [n for n, ws in words.items() if any(w is word or w == word for w in ws)]
         if not joints:
             continue
-        got = []
-        for n in joints:
-            if (d := overlay.joints.get(n)) is not None:
-                linear = n in ctx.prismatic
-                got.append(_named(ctx, n) + ": " + ", ".join(
-                    f"{p} {getattr(d, p):.3g} {DYNAMICS_UNITS[p][linear]}" for p in ("friction", "damping", "stiffness")))
+        got = [_named(ctx, n) + ": " + ", ".join(f"{p} {getattr(d, p):.3g} {DYNAMICS_UNITS[p][n in ctx.prismatic]}"
+                                                 for p in ("friction", "damping", "stiffness"))
+               for n in joints if (d := overlay.joints.get(n)) is not None]
         line = f"{word.short()} on " + "; ".join(got)
         held = [x for x in kept if f"'{word.phrase}'" in x]
         out.append(line + (f" (kept through the post-check: {'; '.join(dict.fromkeys(held))})" if held else ""))

@@ -260,9 +260,9 @@ def _check_link(ov: Overlay, name: str, lp: LinkPhysics, geom: LinkGeometry | No
         mass = _fill_mass(geom, s)
         add("OVL_MASS_INVALID", "warning", name, f"mass {lp.mass!r} is not > 0; replaced by {mass:.4g} kg from geometry", fixed=True)
         lp = lp.model_copy(update={"mass": mass, "source": lp.source + "; mass fixed by validator"})
-    prob = inertia_problems(lp.inertia.matrix())
-    if prob is not None:
-        ev = np.linalg.eigvalsh(np.nan_to_num(0.5 * (lp.inertia.matrix() + lp.inertia.matrix().T))).tolist()
+    m = lp.inertia.matrix()
+    if (prob := inertia_problems(m)) is not None:
+        ev = np.linalg.eigvalsh(np.nan_to_num(0.5 * (m + m.T))).tolist()
         if geom is not None:
             new = geometry_inertia(geom, lp.mass, s, (lp.hollow_fraction or 1.0) < 1.0)
             add("OVL_INERTIA_INVALID", "warning", name, f"inertia {prob} (eigenvalues {ev}); replaced by the scaled geometry's inertia", fixed=True)
