@@ -34,15 +34,8 @@ def check_reply_names(ctx: EstimationContext, reply: ModelReply) -> list[str]:
 
 def _name_errors(where: str, names: list[str], known: set[str], unknown: str) -> list[str]:
     """One error per name not in ``known`` (``unknown`` says why) and per repeated name; ``where`` has a slot for the index."""
-    errors = []
-    seen: set[str] = set()
-    for i, n in enumerate(names):
-        if n not in known:
-            errors.append(f"{where.format(i)}: {n!r} {unknown}")
-        elif n in seen:
-            errors.append(f"{where.format(i)}: {n!r} appears twice")
-        seen.add(n)
-    return errors
+    return [f"{where.format(i)}: {n!r} " + (unknown if n not in known else "appears twice")
+            for i, n in enumerate(names) if n not in known or n in names[:i]]
 
 
 def overlay_from_reply(ctx: EstimationContext, kin: SimSession, reply: ModelReply, *, name: str = "llm",
@@ -164,19 +157,11 @@ def _joint_choices(ctx: EstimationContext, reply: ModelReply) -> dict[str, joint
     where they speak); without a model entry the words alone (:func:`~asset2sim.tasks.synthesize.joint_dynamics.motion_choices`)."""
     by_joint = {jr.joint: jr for jr in reply.joints}
     parsed, _ = joint_dynamics.motion_choices(ctx, request_apply.task_relevant_joints(ctx))
-    choices: dict[str, joint_dynamics.JointChoice] = {}
-    for j in ctx.asset.movable_joints():
-        jr = by_joint.get(j.name)
-        if jr is None:
-            choices[j.name] = parsed[j.name]
-            continue
-        # the model's choices, and the request's own words about this part kept: a word wins where it speaks
-        words = parsed[j.name]
-        choices[j.name] = joint_dynamics.JointChoice(
-            words.damping_level if any(w.kind in joint_dynamics.WORD_DAMPING for w in words.words) else jr.damping_level,
-            jr.holds_position or words.holds_position, jr.spring or words.spring, jr.stiff or words.stiff,
-            jr.free_moving or words.free_moving, words.self_closing, words.words)
-    return choices
+    # the model's choices, and the request's own words about each part kept: a word wins where it speaks
+    return {n: words if (jr := by_joint.get(n)) is None else joint_dynamics.JointChoice(
+        words.damping_level if any(w.kind in joint_dynamics.WORD_DAMPING for w in words.words) else jr.damping_level,
+        jr.holds_position or words.holds_position, jr.spring or words.spring, jr.stiff or words.stiff,
+        jr.free_moving or words.free_moving, words.self_closing, words.words) for n, words in parsed.items()}
 
 
 def estimator_info(name: str, model: str, usage: Usage) -> EstimatorInfo:
