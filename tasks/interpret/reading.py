@@ -64,6 +64,11 @@ def intent_messages(text: str, schema: dict[str, Any]) -> list[dict[str, Any]]:
             {"role": "user", "content": f"{INTENT_MARK}\n{text}"}]
 
 
+#: The most a target of each kind may ask (fraction, rad, m), its unit and the range as a problem names it.
+_TARGET_RANGES = {"fraction": (1.0, "", "0..1"), "angle": (2.0 * math.pi, " rad", "0..2 pi (radians from the closed end)"),
+                  "distance": (10.0, " m", "0..10 m")}
+
+
 def intent_problems(intent: RequestIntent) -> list[str]:
     """What a schema-valid intent still gets wrong, one line each ([] when usable): a joint named (a
     request names parts), a part state without its label, a target without its number or end or out
@@ -85,13 +90,9 @@ def intent_problems(intent: RequestIntent) -> list[str]:
                 out.append(f"{where}: target kind 'end' without its end")
         elif t.value is None or not math.isfinite(t.value):
             out.append(f"{where}: target kind {t.kind!r} without a finite value")
-        elif t.kind == "fraction" and not 0.0 <= t.value <= 1.0:
-            out.append(f"{where}: fraction {t.value} outside 0..1")
-        elif t.kind == "angle" and not 0.0 <= t.value <= 2.0 * math.pi:
-            out.append(f"{where}: angle {t.value} rad outside 0..2 pi (radians from the closed "
-                       "end)")
-        elif t.kind == "distance" and not 0.0 <= t.value <= 10.0:
-            out.append(f"{where}: distance {t.value} m outside 0..10 m")
+        elif not 0.0 <= t.value <= _TARGET_RANGES[t.kind][0]:
+            _, unit, span = _TARGET_RANGES[t.kind]
+            out.append(f"{where}: {t.kind} {t.value}{unit} outside {span}")
     known = load_priors().materials
     for i, p in enumerate(intent.properties):
         if p.material is not None and p.material not in known:
