@@ -185,9 +185,9 @@ def state_targets(ctx: PartsContext, jr: JointStateRequest, relevant: list[str],
     stand in for it (:func:`stand_ins`, warned). Warnings appended to ``warnings``."""
     if jr.selector == "joint":  # an override names the joint itself
         return [jr.joint] if jr.joint in relevant or any(j.name == jr.joint for j in ctx.asset.movable_joints()) else []
-    named = jr.names_part
-    targets = joints_named(ctx, str(jr.label), notes) if named else []
-    if named and not targets:
+    if not jr.names_part:
+        targets = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
+    elif not (targets := joints_named(ctx, str(jr.label), notes)):
         targets, how = stand_ins(ctx, str(jr.label), relevant)
         applied = f"applied to {how} {targets}" if targets else "not applied"
         fixed = any(link_named(ctx, ln.name, str(jr.label)) for ln in ctx.asset.links)  # a wheel on a fixed joint
@@ -197,8 +197,6 @@ def state_targets(ctx: PartsContext, jr: JointStateRequest, relevant: list[str],
                         + f"; its moving parts: {moving_parts(ctx)}; '{jr.phrase}' {applied}")
         if not targets:
             return []
-    if not named:
-        targets = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
     if jr.ordinal is not None:
         targets = pick(jr, list(targets), *part_boxes(ctx), warnings, notes)
     return targets
