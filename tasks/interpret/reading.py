@@ -105,11 +105,8 @@ def intent_problems(intent: RequestIntent) -> list[str]:
 def normalised(intent: RequestIntent) -> RequestIntent:
     """``intent`` with its part labels as the offline parser writes them: stripped, lower case,
     single spaces ("Door " -> "door")."""
-    def norm(items: list) -> list:
-        return [x.model_copy(update={"label": x.label and " ".join(x.label.lower().split())})
-                for x in items]
-
-    return intent.model_copy(update={k: norm(getattr(intent, k))
+    return intent.model_copy(update={k: [x.model_copy(update={"label": x.label and " ".join(x.label.lower().split())})
+                                         for x in getattr(intent, k)]
                                      for k in ("joint_states", "properties", "dynamics_values", "part_counts")})
 
 

@@ -228,12 +228,14 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found]) -> JointStat
     prev_subjects: list[_Part] = []
     claimed: set[int] = set()
 
-    def make(selector: str, label: str | None, ordinal: int | None, order: str, b: Hit, phrase: str, none: bool = False) -> JointStateRequest:
+    # a request for the parts of ``label`` (None: every part)
+    def make(label: str | None, b: Hit, phrase: str, ordinal: int | None = None, order: str = "vertical",
+             none: bool = False) -> JointStateRequest:
         band, target = _band_and_target(b.value, label)
         if none:  # "none of the drawers open": closed; "none of the doors closed": open
             band, target = ("mostly" if band == "closed" else "closed"), None
-        js = JointStateRequest(selector=selector, label=label, ordinal=ordinal, order=order,  # type: ignore[arg-type]
-                               band=band, target=target, phrase=phrase,  # type: ignore[arg-type]
+        js = JointStateRequest(selector="all" if label is None else "label", label=label,  # type: ignore[arg-type]
+                               ordinal=ordinal, order=order, band=band, target=target, phrase=phrase,  # type: ignore[arg-type]
                                bare=b.flag == "bare" and not none)
         if js.bare:
             lone.add(id(js))
@@ -267,7 +269,7 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found]) -> JointStat
                     end = max(p.end, b.end)
                     phrase = " ".join(low[start:end].split())
                     for ordinal, order in (p.ordinals if p.ordinals and not p.quant else [(None, "vertical")]):
-                        result.append(make("label", p.label, ordinal, order, b, phrase, p.none))
+                        result.append(make(p.label, b, phrase, ordinal, order, p.none))
                     last_label = p.label
                 prev_subjects = subjects
                 continue
@@ -275,15 +277,15 @@ def joint_states(low: str, tokens: Tokens, numeric: list[rv.Found]) -> JointStat
             others = OTHERS.search(low, seg0, b.start)
             if others is not None and last_label is not None:
                 used.append(Hit(others.start(), others.end(), others.group(0), None))
-                result.append(make("label", last_label, None, "vertical", b, " ".join(low[others.start(): b.end].split())))
+                result.append(make(last_label, b, " ".join(low[others.start(): b.end].split())))
                 continue
             seg_ords = ords[bisect_left(ord_starts, seg0): bisect_right(ord_ends, b.start)]
             if seg_ords:
                 o = seg_ords[-1]
                 phrase = " ".join(low[o.start: b.end].split())
-                result.append(make("label" if last_label is not None else "all", last_label, int(o.value), o.flag or "vertical", b, phrase))  # type: ignore[arg-type]
+                result.append(make(last_label, b, phrase, int(o.value), o.flag or "vertical"))  # type: ignore[arg-type]
                 continue
-            result.append(make("all", None, None, "vertical", b, b.text))
+            result.append(make(None, b, b.text))
     # step 4: one request per target, contradictions warned
     # one request per target: a later phrase overrides an earlier one; a different state is warned
     warnings: list[str] = []
