@@ -173,15 +173,10 @@ def variant_mention(category: str, text: str) -> tuple[int, int, VariantPrior] |
     """(start, end, variant) of the earliest variant of ``category`` (unknown: ``Generic``) in ``text`` (longest first), or None."""
     if not text:
         return None
-    cat = category_prior(category)
     low = text.lower()
-    best: tuple[int, int, VariantPrior] | None = None
-    for var in cat.variants:
-        for ph in var.phrases:
-            m = re.search(phrase_regex(" ".join(ph.lower().split())), low)
-            if m and (best is None or (m.start(), -m.end()) < (best[0], -best[1])):
-                best = (m.start(), m.end(), var)
-    return best
+    hits = [(m.start(), m.end(), var) for var in category_prior(category).variants for ph in var.phrases
+            if (m := re.search(phrase_regex(" ".join(ph.lower().split())), low))]
+    return min(hits, key=lambda h: (h[0], -h[1]), default=None)
 
 
 def recognize_category(

@@ -20,7 +20,7 @@ def material_for(
     cat = category_prior(category)
     var = cat.variant(variant) if variant else None
     canon = canonical_label(semantic_label)
-    body = (var.body_material if var and var.body_material else None) or cat.body_material
+    body = (var and var.body_material) or cat.body_material
     key: str
     if var is not None and canon in var.part_materials:
         key = var.part_materials[canon]
