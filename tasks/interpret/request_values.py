@@ -314,9 +314,8 @@ def mass_levels(low: str, mention_starts: list[int]) -> list[Found]:
     for m in _MASS_LEVEL_RX.finditer(low):
         w = m.group("w")
         nxt = _next_words(low, m.end(), 1)
-        if joint_word_soon(low, m.end()):
-            continue
-        if (w.endswith("weight") or _near_category(low, m.end(), mention_starts) or _MASS_RX.match(low, m.end() + 1)
+        if not joint_word_soon(low, m.end()) and (
+                w.endswith("weight") or _near_category(low, m.end(), mention_starts) or _MASS_RX.match(low, m.end() + 1)
                 or any(PART_RX.fullmatch(x) for _, _, x in _next_words(low, m.end(), 3))
                 or _MASS_LEVEL_BEFORE.search(low[max(0, m.start() - 12): m.start()])
                 and (not nxt or nxt[0][2] in {",", ".", ";", "!", "and", "but", "to"})):

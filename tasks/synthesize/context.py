@@ -127,8 +127,7 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
         boxes = {n: np.array(box) for n, box in ((n, links_aabb(kin, links, hull)) for n, links in subtrees.items()) if box is not None}
         volume = (object_hull_volume(kin, closed_q, asset, hull)
                   if any(sz.dimension == "volume" for sz in meaning.request.sizes) else None)
-        ctx = EstimationContext(asset=asset, geometry=geometry, request=meaning.request, category=meaning.category,
+        yield EstimationContext(asset=asset, geometry=geometry, request=meaning.request, category=meaning.category,
                                 category_reason=meaning.category_reason, closed=closed, closed_extents=extents,
                                 subtrees=subtrees, joint_boxes=boxes, hull_points=hull, closed_volume=volume,
-                                push_buttons=buttons, mounting=mount)
-        yield ctx, kin
+                                push_buttons=buttons, mounting=mount), kin

@@ -46,8 +46,7 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
     target = target_size(ctx.category, ctx.request)
     dims = np.sort(np.asarray(target.dims, float))[::-1]
     ext = np.maximum(np.sort(np.asarray(ctx.closed_extents, float))[::-1], 1e-9)
-    ratios = dims[:2] / ext[:2]
-    s = float(np.exp(np.mean(np.log(ratios))))
+    s = float(np.exp(np.mean(np.log(dims[:2] / ext[:2]))))
     note = (
         f"closed extents at scale 1 {np.round(ext, 4).tolist()}; target {np.round(dims, 4).tolist()} m ({target.note})"
         f" -> s = geometric mean of the two largest ratios = {s:.4g}"

@@ -47,8 +47,7 @@ def overlay_from_reply(ctx: EstimationContext, kin: SimSession, reply: ModelRepl
     Raises:
         ReplyInvalid: unknown or duplicated names, a link without a computable mass, a rejected overlay.
     """
-    errors = check_reply_names(ctx, reply)
-    if errors:
+    if errors := check_reply_names(ctx, reply):
         raise ReplyInvalid(errors)
     s = float(reply.scale.value)
     by_link = {lr.link: lr for lr in reply.links}

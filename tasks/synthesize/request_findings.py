@@ -64,8 +64,7 @@ def summary(spec: RequestSpec) -> list[str]:
         out.append("sizes: " + ", ".join(f"{s.dimension} {s.value:g} m" for s in spec.sizes))
     for p in spec.properties:
         mass = f"{p.mass:g} kg" if p.mass is not None else f"{p.mass_range[0]:g}-{p.mass_range[1]:g} kg" if p.mass_range else ""
-        what = ", ".join(x for x in (mass, (p.material or "")) if x)
-        out.append(f"{p.label or 'object'}: {what}")
+        out.append(f"{p.label or 'object'}: " + ", ".join(x for x in (mass, p.material) if x))
     if spec.mass_level:
         out.append(f"mass: {spec.mass_level}")
     return out + [f"{d.label or 'joints'}: {d.quantity} {d.value:g} ({d.motion})" for d in spec.dynamics_values]

@@ -290,8 +290,7 @@ def _check_joint(ov: Overlay, name: str, joint_type: str, limits: tuple[float, f
         ov.joints[name] = conservative_dynamics(joint_type)
         add("OVL_JOINT_MISSING", "warning", name, "no dynamics in the overlay; conservative values filled", fixed=True)
         return
-    bad = [k for k in ("damping", "friction", "stiffness") if not (math.isfinite(getattr(dyn, k)) and getattr(dyn, k) >= 0)]
-    if bad:
+    if bad := [k for k in ("damping", "friction", "stiffness") if not (math.isfinite(getattr(dyn, k)) and getattr(dyn, k) >= 0)]:
         add("OVL_DYNAMICS_NEGATIVE", "error", name, f"{', '.join(bad)} must be finite and >= 0 (got " + ", ".join(f"{k}={getattr(dyn, k)!r}" for k in bad) + ")")
         return
     if dyn.stiffness > 0:
