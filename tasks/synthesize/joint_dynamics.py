@@ -151,7 +151,7 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
         button = name in ctx.push_buttons and ch.spring and not ch.free_moving
         if ch.self_closing or (button and abs(state[name] - cs.position(0.0) * unit) <= band):
             held = closer(ctx, load, cs, unit, hold, opening_loads(ctx, name, gravity), at_closed,
-                          stopped_shut(ctx, kin, state, scale, name), hand=hand_top(ctx, name, scale, linear),
+                          stopped_shut(ctx, kin, state, scale, name), hand=hand_top(ctx, name, scale),
                           free=free_standing(ctx), floor=0.0 if on_slide else physics.friction_floor(load, linear),
                           what="self-closing: a closer spring" if ch.self_closing else "a push button's return spring")
             mechanism = "closer" if ch.self_closing else "return spring"
@@ -182,7 +182,7 @@ def joint_dynamics_for(ctx: EstimationContext, kin: SimSession, links: dict[str,
         slide = on_slide and not ch.free_moving
         dyn = physics.joint_dynamics(load, hold, prismatic=linear, damping_level=ch.damping_level, stiff=ch.stiff,
                                      free_moving=ch.free_moving, spring=spring, source=note, impact=impact, floor=not slide,
-                                     stiff_least=stiff_least(ctx, name, scale, linear) if ch.stiff and spring is None else 0.0)
+                                     stiff_least=stiff_least(ctx, name, scale) if ch.stiff and spring is None else 0.0)
         if slide:
             rides = slide_for(dyn.friction, load.mass * physics.G, requested_slide(ch.words))
             dyn = dyn.model_copy(update={"friction": rides.friction, "source": f"{dyn.source}; {rides.note}"})
@@ -272,17 +272,17 @@ def free_standing(ctx: EstimationContext) -> bool:
 STIFF_EFFORT_SHARE = 0.25
 
 
-def stiff_least(ctx: EstimationContext, name: str, scale: float, prismatic: bool) -> float:
+def stiff_least(ctx: EstimationContext, name: str, scale: float) -> float:
     """Least friction of stiff joint ``name`` (N m, or N for a prismatic joint): :data:`STIFF_EFFORT_SHARE` of
     :func:`hand_top`; 0 where no range is known."""
-    return STIFF_EFFORT_SHARE * hand_top(ctx, name, scale, prismatic)
+    return STIFF_EFFORT_SHARE * hand_top(ctx, name, scale)
 
 
-def hand_top(ctx: EstimationContext, name: str, scale: float, prismatic: bool) -> float:
+def hand_top(ctx: EstimationContext, name: str, scale: float) -> float:
     """The top of joint ``name``'s part's operating range (``operating_forces.yaml``) where a hand works it: its force
     range's top at :func:`far_edge` (m, at ``scale``) for a hinge, N m (or its torque range's top), its force range's
     top for a slide, N; 0 where neither is known."""
     rng = operating_range(ctx.category, part_label(ctx, name))[0]
-    if rng.torque_nm is not None and not prismatic:
+    if rng.torque_nm is not None and name not in ctx.prismatic:
         return float(rng.torque_nm[1])
-    return float((rng.force_n or (0.0, 0.0))[1] * (1.0 if prismatic else far_edge(ctx, name, scale)))
+    return float((rng.force_n or (0.0, 0.0))[1] * (1.0 if name in ctx.prismatic else far_edge(ctx, name, scale)))

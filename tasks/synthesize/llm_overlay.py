@@ -101,12 +101,11 @@ def _link_physics(ctx: EstimationContext, by_link: dict, s: float) -> _ReplyLink
         if lr is None:
             mat = physics.material_choice(material_for(ctx.category, ln.semantic_label))
             missing.append(ln.name)
-            src = f"geometry + {mat.name} (offline prior; no model entry)"
         else:
             mat = physics.MaterialChoice(name=lr.material, density=lr.density, shell=lr.shell, wall_thickness=lr.wall_thickness)
-            src = f"geometry + {mat.name} (model)"
         try:
-            links[ln.name] = physics.link_physics(geom, s, mat, source=src)
+            links[ln.name] = physics.link_physics(geom, s, mat, source=f"geometry + {mat.name} "
+                                                  + ("(offline prior; no model entry)" if lr is None else "(model)"))
         except ValueError as exc:
             errors.append(f"links: {exc}")
             continue

@@ -237,13 +237,12 @@ def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: boo
     zeta = DAMPING_RATIO.get(damping_level, DAMPING_RATIO["moderate"])
     k = spring[0] if spring else 0.0
     c = damping_for(load_at_state, zeta, k)
-    c_max = max_stable_damping(load_at_state.inertia_axis)
     floor = friction_floor(load_at_state, prismatic, free_moving) if floor else 0.0
     friction = HOLD_SAFETY * abs(hold_load) + floor + max(impact, 0.0)
     if stiff:
         friction = max(friction * 2.0, 4.0 * HOLD_SAFETY * abs(load_at_state.gravity_load) + 4.0 * floor, stiff_least)
         c *= 2.0
-    c = min(c, c_max)
+    c = min(c, max_stable_damping(load_at_state.inertia_axis))
     if load_at_state.inertia_axis > 0:  # above it the engine's friction motor locks the joint
         friction = min(friction, max_stable_friction(load_at_state.inertia_axis))
     return JointDynamics(

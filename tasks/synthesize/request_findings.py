@@ -227,8 +227,7 @@ def check_against_request(ctx: EstimationContext, kin: SimSession, overlay: Over
     resolved here at the overlay's scale when the estimator gave none (a model backend; ``kin`` moved then)."""
     if not targets:
         targets = resolve_states(ctx, kin, overlay.scale).targets
-    departures = check_overlay(ctx, overlay, StateResolution(bands={}, targets=targets))
-    if departures:
+    if departures := check_overlay(ctx, overlay, StateResolution(bands={}, targets=targets)):
         notes = overlay.notes.model_copy(update={"other": list(overlay.notes.other)
                                                  + [f"WARNING: the overlay departs from the request: {d}" for d in departures]})
         overlay = overlay.model_copy(update={"notes": notes})

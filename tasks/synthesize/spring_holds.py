@@ -84,8 +84,7 @@ def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, uni
         the spring and the friction's hold load.
     """
     rng = max(cs.open_range * unit, 1e-9)
-    pushes = np.maximum(np.asarray(pushes, float), 0.0)
-    frac = np.asarray(OPENING_LOAD_FRACTIONS[: len(pushes)], float)
+    frac = np.asarray(OPENING_LOAD_FRACTIONS)
     lean = max(set_down.lean_load(load, on_stop=stopped and load.gravity_load * cs.direction < 0), 0.0) if free else 0.0
     cap = CLOSER_EFFORT_SHARE * hand if hand > 0 else np.inf
     sized = max(set_down.LEAN_SAFETY * lean, min(set_down.LEAN_SAFETY * set_down.lean_load(load), cap / CLOSER_PROGRESSION))
