@@ -61,11 +61,10 @@ def _radius(ctx: EstimationContext, kin: SimSession, joint: str, state: dict[str
     return r
 
 
-def _end_fraction(ctx: EstimationContext, kin: SimSession, joint: str, end: str,
-                  closed_state: dict[str, float]) -> tuple[float | None, str]:
-    """Opening fraction of the joint's highest / lowest position in world z (``kin`` moved along its travel);
-    None and why when it moves flat."""
-    cs = ctx.closed[joint]
+def _end_fraction(ctx: EstimationContext, kin: SimSession, joint: str, end: str) -> tuple[float | None, str]:
+    """Opening fraction of the joint's highest / lowest position in world z (``kin`` moved along its travel, the
+    other joints at their closed ends); None and why when it moves flat."""
+    cs, closed_state = ctx.closed[joint], ctx.closed_state()
     fr = np.linspace(0.0, 1.0, END_SAMPLES)
     zs = []
     for f in fr:
@@ -98,22 +97,22 @@ def weight_moment(ctx: EstimationContext, kin: SimSession, joint: str, state: di
     return float(axis @ np.cross(box_center(ctx, kin, joint) - R @ p0, [0.0, 0.0, -1.0])) * float(ctx.closed[joint].direction)
 
 
-def falls_open(ctx: EstimationContext, kin: SimSession, joint: str, closed_state: dict[str, float]) -> bool:
+def falls_open(ctx: EstimationContext, kin: SimSession, joint: str) -> bool:
     """Whether a hinged part's own weight carries it open to its open end: its :func:`weight_moment` turns it open
     at each of :data:`FALL_FRACTIONS` of its range (an oven's or a dishwasher's drop-down door, a drop-front lid: the
-    parts :func:`~asset2sim.tasks.synthesize.spring_holds.counterbalance` balances). ``closed_state`` in input units;
-    ``kin`` (the input's kinematics session) is moved."""
+    parts :func:`~asset2sim.tasks.synthesize.spring_holds.counterbalance` balances), the other joints at their closed
+    ends; ``kin`` (the input's kinematics session) is moved."""
     cs = ctx.closed[joint]
     if ctx.asset.joint(joint).type != "revolute" or not cs.open_range > 0:
         return False
-    return all(weight_moment(ctx, kin, joint, {**closed_state, joint: cs.position(f)}) > 0.0 for f in FALL_FRACTIONS)
+    return all(weight_moment(ctx, kin, joint, {**ctx.closed_state(), joint: cs.position(f)}) > 0.0 for f in FALL_FRACTIONS)
 
 
-def fraction_for(ctx: EstimationContext, kin: SimSession, joint: str, target: StateTarget, scale: float, label: str,
-                 closed_state: dict[str, float]) -> tuple[float | None, str]:
+def fraction_for(ctx: EstimationContext, kin: SimSession, joint: str, target: StateTarget, scale: float,
+                 label: str) -> tuple[float | None, str]:
     """(opening fraction ``target`` asks of ``joint``, how it was decided), None with the reason when it cannot
-    be applied; distances in m at ``scale``, ``closed_state`` in input units; ``kin`` (the input's kinematics
-    session) is moved for ends and distances."""
+    be applied; distances in m at ``scale``, ends and distances measured with the other joints at their closed ends;
+    ``kin`` (the input's kinematics session) is moved for ends and distances."""
     cs = ctx.closed[joint]
     jt = ctx.asset.joint(joint).type
     if target.kind == "fraction":
@@ -124,11 +123,11 @@ def fraction_for(ctx: EstimationContext, kin: SimSession, joint: str, target: St
         if end in ("on", "off"):
             if canon in COVER_LABELS:
                 return (0.0 if end == "on" else 1.0), f"'{target.end}' of a {canon}: {'in place, closed' if end == 'on' else 'taken off, fully open'}"
-            f, why = _end_fraction(ctx, kin, joint, "high" if end == "on" else "low", closed_state) if canon in TOGGLE_LABELS else (None, "")
+            f, why = _end_fraction(ctx, kin, joint, "high" if end == "on" else "low") if canon in TOGGLE_LABELS else (None, "")
             # a toggle flipped up for on; one that turns flat (a faucet's handle) or another part: as "turned on" / "turned off"
             return (f, why) if f is not None else ((1.0 if end == "on" else 0.0), f"'{target.end}' of a {canon or 'part'}: "
                                                    f"{'fully open' if end == 'on' else 'closed'} ({why or 'not a toggle switch'})")
-        return _end_fraction(ctx, kin, joint, str(end), closed_state)
+        return _end_fraction(ctx, kin, joint, str(end))
     if target.kind == "angle":
         if jt == "prismatic":
             return None, f"{np.degrees(target.value):.4g} degrees asked of a sliding joint (it moves in metres)"
@@ -138,7 +137,7 @@ def fraction_for(ctx: EstimationContext, kin: SimSession, joint: str, target: St
     if jt == "prismatic":
         rng = cs.open_range * scale
         return float(target.value) / max(rng, 1e-12), f"{target.value:.4g} m from the closed end of a {rng:.4g} m travel"
-    r = _radius(ctx, kin, joint, closed_state) * scale
+    r = _radius(ctx, kin, joint, ctx.closed_state()) * scale
     if r <= 0:
         return None, "no geometry to measure a distance on"
     ang = float(target.value) / r

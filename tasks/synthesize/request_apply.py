@@ -121,12 +121,12 @@ def resolve_states(ctx: EstimationContext, kin: SimSession, scale: float) -> Sta
             res.targets.pop(t, None)
             label = ctx.joint_label(t) or ""
             if jr.target is None:
-                if jr.bare and falls_open(ctx, kin, t, closed_state):  # a drop-down door open rests on its open stop
+                if jr.bare and falls_open(ctx, kin, t):  # a drop-down door open rests on its open stop
                     res.bands[t] = "fully"
                     res.notes.append(f"{t} ({label or 'part'}): '{jr.phrase}': its weight carries it open (it opens downward, "
                                      f"a drop-down door), so it is open resting on its open stop: fully open")
                 continue
-            f, why = fraction_for(ctx, kin, t, jr.target, scale, label, closed_state)
+            f, why = fraction_for(ctx, kin, t, jr.target, scale, label)
             if f is None:
                 res.warnings.append(f"WARNING: {t} ({label}): '{jr.phrase}' cannot be applied: {why}; the nominal band '{jr.band}' is used")
                 cannot.append((jr, t, f"{t} ({label}): cannot be applied: {why}"))
