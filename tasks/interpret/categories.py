@@ -136,12 +136,9 @@ def find_category_mentions(text: str) -> list[CategoryMention]:
     out: list[CategoryMention] = []
     rev = low[::-1]  # words before a mention are read backwards: linear in len(text)
     for m in rx.finditer(low):
+        # the phrase, else its singular
         key = " ".join(m.group(0).split())
-        if key not in phrase_to:
-            for suf in ("es", "s"):
-                if key.endswith(suf) and key[: -len(suf)] in phrase_to:
-                    key = key[: -len(suf)]
-                    break
+        key = next((k for k in (key, key.removesuffix("es"), key.removesuffix("s")) if k in phrase_to), key)
         cat, weak = phrase_to[key]
         possessive = any(w in _POSSESSIVES for w in _last_words(rev, len(low) - m.start()))
         out.append(CategoryMention(m.start(), m.end(), m.group(0), cat, weak, possessive))

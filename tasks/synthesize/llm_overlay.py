@@ -126,8 +126,7 @@ def _within_model_mass(links: dict[str, LinkPhysics], by_link: dict) -> tuple[di
         ratio = geo_known / model_total
         mass_note += f"; the model estimated {model_total:.4g} kg for those links (ratio {ratio:.3g})"
         if ratio > MASS_AGREEMENT or ratio < 1.0 / MASS_AGREEMENT:
-            target = model_total * (MASS_AGREEMENT if ratio > MASS_AGREEMENT else 1.0 / MASS_AGREEMENT)
-            f = target / geo_known
+            f = model_total * (MASS_AGREEMENT if ratio > MASS_AGREEMENT else 1.0 / MASS_AGREEMENT) / geo_known
             links = {n: request_apply.scaled_link(lp, f, f"; x{f:.3g} to within {MASS_AGREEMENT:g}x of the model's mass estimate") for n, lp in links.items()}
             mass_note += f"; more than {MASS_AGREEMENT:g}x apart: every link scaled by {f:.3g}"
     return links, mass_note

@@ -46,7 +46,6 @@ def describe(ctx: EstimationContext, kin: SimSession) -> dict[str, Any]:
     req = ctx.request
     target = target_size(ctx.category, req)
     resolved = request_apply.resolve_states(ctx, kin, estimate.choose_scale(ctx)[0])
-    bands, band_notes = resolved.bands, resolved.warnings + resolved.notes
     relevant = set(request_apply.task_relevant_joints(ctx))
     links = []
     for ln in asset.links:
@@ -74,7 +73,7 @@ def describe(ctx: EstimationContext, kin: SimSession) -> dict[str, Any]:
             "upper": _r(j.upper),
             "unit": "m at scale 1 (multiply by the scale)" if j.type == "prismatic" else "rad",
             "task_relevant": j.name in relevant,
-            "requested_band": bands.get(j.name, "closed"),
+            "requested_band": resolved.bands.get(j.name, "closed"),
             "requested_opening_fraction": None if j.name not in resolved.targets else _r(resolved.targets[j.name].fraction),
             "height_m": _r(ctx.joint_heights.get(j.name, 0.0)),
         }
@@ -93,7 +92,7 @@ def describe(ctx: EstimationContext, kin: SimSession) -> dict[str, Any]:
             **{k: getattr(req, k) for k in ("damping", "holds_position", "spring", "stiff", "free_moving")},
             "pose": req.pose_hint,
             **request_apply.prompt_fields(req),
-            "notes": band_notes,
+            "notes": resolved.warnings + resolved.notes,
         },
         "closed_extents_m": [_r(e) for e in np.asarray(ctx.closed_extents, float)],
         "typical_dims_m": [_r(d) for d in target.dims],

@@ -96,7 +96,6 @@ def resolve_states(ctx: EstimationContext, kin: SimSession, scale: float) -> Sta
     ordinals and ends and left at the closed state."""
     res = StateResolution(bands={})
     relevant = task_relevant_joints(ctx)
-    closed_state = ctx.closed_state()
     named: list[tuple[JointStateRequest, list[str]]] = []
     cannot: list[tuple[JointStateRequest, str, str]] = []
     for jr in sorted(ctx.request.joint_states, key=lambda jr: jr.names_part):  # a part named wins over a request for "it", in any order
@@ -143,7 +142,7 @@ def resolve_states(ctx: EstimationContext, kin: SimSession, scale: float) -> Sta
     res.unapplied += [(jr.phrase, why) for jr, t, why in cannot if res.requests.get(t) is jr]
     res.unapplied += _replaced(named, res.requests)
     res.warnings += count_warnings(ctx)
-    if closed_state:
+    if closed_state := ctx.closed_state():
         kin.set_joint_positions(closed_state)
     return res
 

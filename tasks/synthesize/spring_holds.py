@@ -316,11 +316,10 @@ def balance(load: physics.JointLoad, cs: ClosedState, unit: float) -> SpringHold
         return None
     k = 2.0 * BALANCE_VARIATION * abs(load.gravity_load) / travel
     q_s = cs.position(0.5) * unit - load.gravity_load / k
-    hold = BALANCE_VARIATION * abs(load.gravity_load)
     why = (f"balance of a part on a vertical slide (sash balances of hung windows, counterbalances of lift-up doors): "
            f"k = {k:.4g} N/m about {q_s:.4g} m carries the {abs(load.gravity_load):.3g} N weight at mid-travel, "
            f"+-{BALANCE_VARIATION:.0%} from end to end")
-    return SpringHold((float(k), float(q_s)), float(hold), why)
+    return SpringHold((float(k), float(q_s)), float(BALANCE_VARIATION * abs(load.gravity_load)), why)
 
 
 def part_label(ctx: EstimationContext, joint: str) -> str | None:
