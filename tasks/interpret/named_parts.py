@@ -158,7 +158,7 @@ def stand_ins(ctx: PartsContext, label: str, relevant: list[str]) -> tuple[list[
 def unit_fits(d: DynamicsValue, linear: bool) -> bool:
     """Whether a joint parameter's unit fits a prismatic (``linear``) or revolute joint (a value
     without unit fits both)."""
-    return not ((d.motion == "rotational" and linear) or (d.motion == "linear" and not linear))
+    return d.motion != ("rotational" if linear else "linear")
 
 
 def link_named(ctx: PartsContext, link: str, label: str | None) -> bool:

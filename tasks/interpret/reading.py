@@ -120,8 +120,7 @@ def with_intent(offline: RequestSpec, intent: RequestIntent, note: str) -> Reque
         fields["size_factor"] = size_factor(intent.size_class)
         fields["size_phrase"] = ""
     if not offline.matched:  # nothing recognised offline: the model's phrases were understood
-        phrases = ([js.phrase for js in intent.joint_states] + [s.phrase for s in intent.sizes]
-                   + [p.phrase for p in intent.properties])
+        phrases = [x.phrase for x in (*intent.joint_states, *intent.sizes, *intent.properties)]
         fields["matched"] = list(dict.fromkeys(" ".join(p.split()) for p in phrases if p.strip()))
     return offline.model_copy(update={**fields, "parser": "model", "parse_note": note})
 

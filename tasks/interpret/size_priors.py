@@ -169,11 +169,10 @@ def size_mass_prior(category: str | None, spec: RequestSpec | None = None) -> di
     try:
         t = target_size(category, spec)
         cat = category_prior(category)
-        base_mass = t.base_mass_range
     except Exception:
         return {}
     return {"category": t.category, "target_dims": [float(x) for x in t.dims], "base_dims": [float(x) for x in t.base_dims],
-            "factor": float(t.factor), "variant": t.variant, "base_mass_range": (float(base_mass[0]), float(base_mass[1])),
+            "factor": float(t.factor), "variant": t.variant, "base_mass_range": tuple(map(float, t.base_mass_range)),
             "note": t.note, "source": f"asset2sim/priors/categories.yaml: {cat.dims_source}; {cat.mass_source}"}
 
 

@@ -220,8 +220,8 @@ def _extents(ctx: EstimationContext) -> dict:
     ext = np.asarray(ctx.closed_extents, float)
     if ctx.root_rotation is not None:
         ext = np.abs(np.asarray(ctx.root_rotation, float)) @ ext
-    horiz = sorted([ext[0], ext[1]], reverse=True)
-    return {"height": ext[2], "width": horiz[0], "depth": horiz[1], "length": float(ext.max()), "largest": float(ext.max()),
+    return {"height": ext[2], "width": max(ext[0], ext[1]), "depth": min(ext[0], ext[1]),
+            "length": float(ext.max()), "largest": float(ext.max()),
             "volume": float(ctx.closed_volume or 0.0)}
 
 

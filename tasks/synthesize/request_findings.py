@@ -85,8 +85,7 @@ def phrase_lines(ctx: EstimationContext, res: StateResolution, closed_out: dict,
         if jr.phrase in why_not:
             out.append(f"'{jr.phrase}': not applied: {why_not.pop(jr.phrase)}")
             continue
-        joints = by_phrase.pop(jr.phrase, None)
-        if not joints:
+        if not (joints := by_phrase.pop(jr.phrase, None)):
             continue
         asked = jr.short().split("=", 1)[1]
         got = []
