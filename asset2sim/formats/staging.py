@@ -17,8 +17,6 @@ import json
 import math
 import os
 import re
-import threading
-import cachetools
 import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -26,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim import atomic, file_names
+from asset2sim import atomic, file_memo, file_names
 from asset2sim.input_files import read_head
 from asset2sim.urdf import UrdfInertial, UrdfLink, UrdfMaterial, UrdfModel, write_urdf
 
@@ -305,35 +303,22 @@ def stage(read: ReadAsset, folder: Path | str) -> StagedAsset:
     comment = f" staged by asset2sim from {read.format.upper()} {read.source.name} "
     atomic.write_bytes(urdf_path, write_urdf(read.model, comment=comment))
     real = os.path.realpath(urdf_path)
-    with _READS_LOCK:
-        _READS[real] = (_identity(real), read)
+    _READS.put(real, file_memo.identities([real]), read)
     return StagedAsset(read=read, urdf_path=urdf_path)
 
 
 #: How many staged reads are kept (each holds its meshes' arrays).
 _READS_KEPT = 8
-#: The reads staged last in this process, by their staged URDF (real path), with that file's identity when
-#: written: what :func:`read_of` answers; the least recently used dropped first.
-_READS: cachetools.LRUCache = cachetools.LRUCache(maxsize=_READS_KEPT)
-_READS_LOCK = threading.Lock()
+#: The reads staged last in this process, by their staged URDF (real path), while that file keeps its identity when
+#: written: what :func:`read_of` answers; the least recently used dropped first (kept as they are: a read is frozen).
+_READS: file_memo.FileMemo[ReadAsset] = file_memo.FileMemo(lambda read: read, max_entries=_READS_KEPT)
 
 
 def read_of(urdf_path: Path | str) -> ReadAsset | None:
     """The :class:`ReadAsset` this process staged as ``urdf_path`` (one of the last :data:`_READS_KEPT`, the file
-    unchanged since: same inode, size and modification time), so the input need not be read again; None otherwise
-    (then read it)."""
-    real = os.path.realpath(urdf_path)
-    with _READS_LOCK:
-        hit = _READS.get(real)
-    return hit[1] if hit is not None and hit[0] == _identity(real) else None
-
-
-def _identity(path: str) -> tuple:
-    try:
-        st = os.stat(path)
-    except OSError:
-        return ()
-    return (st.st_ino, st.st_size, st.st_mtime_ns)
+    unchanged since: same device, inode, size and modification time, :func:`asset2sim.file_memo.identity`), so the
+    input need not be read again; None otherwise (then read it)."""
+    return _READS.get(os.path.realpath(urdf_path))
 
 
 _STAGING_ROOT: list[Path] = []
