@@ -42,14 +42,14 @@ import numpy as np
 
 from asset2sim import atomic, file_names, output_folder
 from asset2sim.refined_asset import RefinedAsset
-from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, rigid_inverse
+from asset2sim.frames import matrix_quat_wxyz, rigid_inverse
 from asset2sim.extras import pxr_modules
 from asset2sim.output_folder import URDF_NAME, USD_DIR
 from asset2sim.schemas.overlay import JointDynamics, LinkPhysics
 from asset2sim.formats.staging import HOST_DIR, ReadAsset, host_overlay
 from asset2sim.formats.usd import reader
 from asset2sim.formats.usd.reader import DEG, FRICTION_ATTRS
-from asset2sim.formats.usd.stage import StageReading, open_stage
+from asset2sim.formats.usd.stage import StageReading, authored, open_stage, value_or
 
 __all__ = ["HOST_DIR", "HostUsdError", "HostUsdExport", "UsdEdit", "applied_schemas", "set_body_mass", "set_joint_dynamics", "write_host_usd"]
 
@@ -163,13 +163,11 @@ def _principal(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _authored_tensor(body) -> np.ndarray:
     """The inertia tensor (3, 3, body axes, stage units) ``body``'s diagonal inertia and principal axes give; NaN
     where no diagonal inertia is authored."""
-    diag = body.GetAttribute("physics:diagonalInertia")
-    if not (diag and diag.HasAuthoredValue()):
+    diag = authored(body, "physics:diagonalInertia")
+    if diag is None:
         return np.full((3, 3), np.nan)
-    axes = body.GetAttribute("physics:principalAxes")
-    q = axes.Get() if axes and axes.HasValue() else None
-    r = np.eye(3) if q is None else quat_wxyz_matrix(_numbers(q) / max(float(np.linalg.norm(_numbers(q))), 1e-300))
-    return r @ np.diag(np.asarray(diag.Get(), float)) @ r.T
+    r = reader.quat_matrix(value_or(body, "physics:principalAxes", None))
+    return r @ np.diag(np.asarray(diag, float)) @ r.T
 
 
 def set_body_mass(edit: UsdEdit, ctx: StageReading, body, link_frame: np.ndarray, world: np.ndarray, mass: float,
@@ -189,8 +187,7 @@ def set_body_mass(edit: UsdEdit, ctx: StageReading, body, link_frame: np.ndarray
     if not same(_authored_tensor(body), tensor):  # the moments and axes together: one tensor has many of them
         edit.set(body, "physics:diagonalInertia", Gf.Vec3f(*(float(v) for v in d)), Sdf.ValueTypeNames.Float3)
         edit.set(body, "physics:principalAxes", Gf.Quatf(*matrix_quat_wxyz(q).tolist()), Sdf.ValueTypeNames.Quatf)
-    density = body.GetAttribute("physics:density")
-    if density and density.HasAuthoredValue() and density.Get():
+    if authored(body, "physics:density"):
         edit.set(body, "physics:density", 0.0)  # an explicit mass wins; no density contradicts it
 
 

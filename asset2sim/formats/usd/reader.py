@@ -33,7 +33,7 @@ FRICTION_ATTRS = ("asset2sim:friction", "newton:friction")
 _AXES = {"X": np.array([1.0, 0.0, 0.0]), "Y": np.array([0.0, 1.0, 0.0]), "Z": np.array([0.0, 0.0, 1.0])}
 
 
-def _quat(q) -> np.ndarray:
+def quat_matrix(q) -> np.ndarray:
     """Rotation (3, 3) of a Gf quaternion (identity when zero or None)."""
     v = np.zeros(4) if q is None else np.array([q.GetReal(), *q.GetImaginary()], float)
     n = float(np.linalg.norm(v))
@@ -240,7 +240,7 @@ def _joint_frame(ctx: StageReading, j: _Joint, side: int) -> np.ndarray:
     UsdPhysics = pxr_modules()[5]
     api = UsdPhysics.Joint(j.prim)
     pos = np.array((api.GetLocalPos1Attr() if side else api.GetLocalPos0Attr()).Get(), float)
-    rot = ctx.u @ _quat((api.GetLocalRot1Attr() if side else api.GetLocalRot0Attr()).Get()) @ ctx.u.T
+    rot = ctx.u @ quat_matrix((api.GetLocalRot1Attr() if side else api.GetLocalRot0Attr()).Get()) @ ctx.u.T
     target = j.target1 if side else j.target0
     return rigid_matrix(ctx.frame(target)[:3, :3] @ rot, (ctx.world(target) @ np.append(pos, 1.0))[:3])
 
@@ -341,7 +341,7 @@ def _inertial(ctx: StageReading, body, name: str, frame: np.ndarray) -> UrdfIner
     a = to_link[:3, :3] / ctx.m  # body axes -> link axes (identity when the link frame is the body frame)
     if not np.allclose(a.T @ a, np.eye(3), atol=1e-6):
         raise ctx.error(f"body {body.GetPath()}", "scaled, with an authored inertia (its units are ambiguous)")
-    q = a @ _quat(value_or(body, "physics:principalAxes", None))
+    q = a @ quat_matrix(value_or(body, "physics:principalAxes", None))
     inertia = ctx.kg * ctx.m ** 2 * (q @ np.diag(np.array(diag, float)) @ q.T)
     origin = rigid_matrix(np.eye(3), (to_link @ np.append(np.array(com, float), 1.0))[:3])
     return UrdfInertial(mass=float(mass) * ctx.kg, origin=origin, inertia=(inertia + inertia.T) / 2)
