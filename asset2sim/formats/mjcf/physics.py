@@ -131,7 +131,7 @@ def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: 
     pick = scene.pick_object(original, source, reading.body)
     per_rad = 180.0 / math.pi if unit == "degree" else 1.0
     explicit = {b.name: bool(b.explicitinertial) for b in spec.bodies if b.name}
-    bodies, joints = [], []
+    bodies, joints, moving = [], [], {}
     for b in pick.bodies:
         name = scene.label(original, b)
         link = model.links.get(name)
@@ -151,6 +151,7 @@ def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: 
             target = next(x for x in spec.joints if x.id == j)
             _set_joint(target, original, j, jname, model, overlay, per_rad)
             joints.append((jname, j))
+            moving.setdefault(name, []).append((target, bool(original.jnt_limited[j])))
     _set_keyframe(spec, original, state, joints)
     try:
         written = opened.compile()  # from the private copy of the bytes read
@@ -158,18 +159,15 @@ def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: 
         raise HostExportError(f"{source}: the refined host file does not compile: {exc}") from exc
     _check(source, original, written, mujoco, model, bodies)
     xml = spec.to_xml()
-    folder = out_dir / MJCF_DIR / HOST_DIR
-    path = file_names.join_inside(folder, file_names.file_stem(source.stem) + ".xml")
+    folder, stem = out_dir / MJCF_DIR / HOST_DIR, file_names.file_stem(source.stem)
+    path = file_names.join_inside(folder, stem + ".xml")
     atomic.write_bytes(path, xml.encode("utf-8"))
     before = opened.sources.files[opened.sources.main].decode("utf-8", "replace").splitlines(keepends=True)
     diff = "".join(difflib.unified_diff(before, xml.splitlines(keepends=True), fromfile=f"{source.name} (the input)", tofile=path.name))
-    diff_path = file_names.join_inside(folder, file_names.file_stem(source.stem) + ".diff")
+    diff_path = file_names.join_inside(folder, stem + ".diff")
     atomic.write_bytes(diff_path, diff.encode("utf-8"))
-    moving = {scene.label(original, b): [_joint_physics(next(x for x in spec.joints if x.id == j), bool(original.jnt_limited[j]))
-                                              for j in scene.body_joints(original, b, (scene.JNT_HINGE, scene.JNT_SLIDE))]
-              for b in pick.bodies}
-    files = write_package_files(folder / FILES_DIR, source, xml, set(bodies), {b: v for b, v in moving.items() if v},
-                                sources=opened.sources)
+    files = write_package_files(folder / FILES_DIR, source, xml, set(bodies),
+                                {b: [_joint_physics(*x) for x in v] for b, v in moving.items()}, sources=opened.sources)
     return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(name for name, _ in joints),
                       files=tuple(files), overrides=tuple(override_notes(source, spec, [name for name, _ in joints])))
 
@@ -396,7 +394,7 @@ def write_patched_mjcf(source: Path, read: ReadAsset | None, children: dict[str,
     spec.modelfiledir = str(folder)  # MuJoCo resolves the copies' relative paths from the patch's folder
     if spec.compiler.inertiafromgeom == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE:  # else explicit inertials would be ignored
         spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_AUTO
-    bodies = {(model.body(b).name or f"body_{b}"): b for b in range(1, model.nbody)}
+    bodies = {scene.label(model, b): b for b in range(1, model.nbody)}
     for name, lp in links.items():
         b = bodies[name]  # the link frame is the body frame moved to its joint's pos
         set_body_inertial(spec.bodies[b], lp.mass, lp.com, lp.inertia.matrix(), _joint_offset(model, b))
