@@ -44,10 +44,10 @@ def _placed(xformable, pose: np.ndarray):
     return xformable
 
 
-def _names(names: list[str], make_valid) -> dict[str, str]:
+def _names(names: list[str]) -> dict[str, str]:
     """URDF name -> a unique valid USD prim name."""
     used: set[str] = set()
-    return {n: numbered(make_valid(n) or "_", used) for n in names}
+    return {n: numbered(_pxr()[2].MakeValidIdentifier(n) or "_", used) for n in names}
 
 
 # ---------------------------------------------------------------------- writing
@@ -119,12 +119,10 @@ def _write_links(stage, root_path, model: UrdfModel, initial: dict[str, float], 
     """Every link as a rigid body under ``root_path``, posed at the initial
     state, with its visuals (``visuals``, their files read through ``meshes``) and collision pieces; returns URDF
     link name -> prim path."""
-    Tf = _pxr()[2]
-    link_names = _names(model.tree_order(), Tf.MakeValidIdentifier)
     poses = model.link_poses(initial)
     link_paths: dict[str, str] = {}
-    for name in model.tree_order():
-        path = root_path.AppendChild(link_names[name])
+    for name, prim_name in _names(model.tree_order()).items():
+        path = root_path.AppendChild(prim_name)
         link_paths[name] = str(path)
         _write_body(stage, path, model, name, poses[name], notes)
         if visuals:
@@ -165,8 +163,8 @@ def _write_joints(stage, root_path, model: UrdfModel, link_paths: dict[str, str]
     """Every URDF joint under ``/<robot>/joints`` and, for a ``fixed`` root,
     a FixedJoint from the world to the root link; returns URDF joint name ->
     prim path."""
-    Gf, Sdf, Tf, _, UsdGeom, UsdPhysics = _pxr()
-    joint_names = _names([j.name for j in model.joints], Tf.MakeValidIdentifier)
+    Gf, Sdf, _, _, UsdGeom, UsdPhysics = _pxr()
+    joint_names = _names([j.name for j in model.joints])
     joints_scope = root_path.AppendChild("joints")
     UsdGeom.Scope.Define(stage, joints_scope)
     joint_paths: dict[str, str] = {}
