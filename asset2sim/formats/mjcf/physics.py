@@ -51,7 +51,7 @@ from asset2sim.output_folder import MJCF_DIR, URDF_NAME
 from asset2sim.schemas.overlay import JointDynamics, LinkPhysics, Overlay
 from asset2sim.formats.mjcf import conventions, scene
 from asset2sim.formats.mjcf.conventions import ReadOptions
-from asset2sim.formats.mjcf.files import MjcfSources, OpenedMjcf, compile_mjcf, gather_mjcf, opened_mjcf, staged_sources
+from asset2sim.formats.mjcf.files import MjcfSources, compile_mjcf, gather_mjcf, opened_mjcf, staged_sources
 from asset2sim.formats.mjcf.export import MASS_RTOL
 from asset2sim.formats.staging import HOST_DIR, host_overlay, MJCF_SUFFIXES, ReadAsset, StagingError, copy_named
 
@@ -111,65 +111,60 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
         HostExportError: the output was rescaled; a refined link or joint has no counterpart in the file; the
             written model does not compile or loses a name or a mass.
     """
-    source = Path(source)
+    source, out_dir = Path(source), Path(out_dir)
     reading = reading or ReadOptions()
     if sources is None:
         sources = gather_mjcf(source)  # once, under the reader policy
     unit = angle or conventions.mjcf_angle(source, reading.mjcf_angle, files=sources.files).unit
     with output_folder.guarding(out_dir), opened_mjcf(sources, degree=unit == "degree") as opened:
         # nothing through a symlinked mjcf/ or mjcf/host/; MuJoCo reads the bytes read before, never the input
-        return _write_host_mjcf(Path(out_dir), source, reading, opened, unit)
-
-
-def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions, opened: OpenedMjcf, unit: str) -> HostExport:
-    import mujoco
-
-    asset = RefinedAsset(out_dir)
-    overlay = host_overlay(asset, source, "file", HostExportError)
-    model, state = asset.model, asset.initial_state
-    spec, original = opened.spec, opened.model
-    pick = scene.pick_object(original, source, reading.body)
-    per_rad = 180.0 / math.pi if unit == "degree" else 1.0
-    explicit = {b.name: bool(b.explicitinertial) for b in spec.bodies if b.name}
-    bodies, joints, moving = [], [], {}
-    for b in pick.bodies:
-        name = scene.label(original, b)
-        link = model.links.get(name)
-        if link is None:
-            raise HostExportError(f"{source}: body {name!r} has no link in the refined {URDF_NAME}")
-        offset = np.zeros(3)
-        jids = scene.body_joints(original, b, (scene.JNT_HINGE, scene.JNT_SLIDE))
-        if jids:
-            offset = np.asarray(original.jnt_pos[jids[0]], float)  # the link frame sits on the joint
-        carries = int(original.body_geomnum[b]) > 0 or explicit.get(original.body(b).name, False)
-        if carries and link.inertial is not None and link.inertial.mass:
-            inertial = link.inertial
-            set_body_inertial(spec.bodies[b], float(inertial.mass), inertial.com(), inertial.inertia_in_link_axes(), offset)
-            bodies.append(name)
-        for j in jids:
-            jname = original.joint(j).name or f"{name}_joint"  # the reader's name for an unnamed joint
-            target = next(x for x in spec.joints if x.id == j)
-            _set_joint(target, original, j, jname, model, overlay, per_rad)
-            joints.append((jname, j))
-            moving.setdefault(name, []).append((target, bool(original.jnt_limited[j])))
-    _set_keyframe(spec, original, state, joints)
-    try:
-        written = opened.compile()  # from the private copy of the bytes read
-    except Exception as exc:  # StagingError with the compiler's message
-        raise HostExportError(f"{source}: the refined host file does not compile: {exc}") from exc
-    _check(source, original, written, mujoco, model, bodies)
-    xml = spec.to_xml()
-    folder, stem = out_dir / MJCF_DIR / HOST_DIR, file_names.file_stem(source.stem)
-    path = file_names.join_inside(folder, stem + ".xml")
-    atomic.write_bytes(path, xml.encode("utf-8"))
-    before = opened.sources.files[opened.sources.main].decode("utf-8", "replace").splitlines(keepends=True)
-    diff = "".join(difflib.unified_diff(before, xml.splitlines(keepends=True), fromfile=f"{source.name} (the input)", tofile=path.name))
-    diff_path = file_names.join_inside(folder, stem + ".diff")
-    atomic.write_bytes(diff_path, diff.encode("utf-8"))
-    files = write_package_files(folder / FILES_DIR, source, xml, set(bodies),
-                                {b: [_joint_physics(*x) for x in v] for b, v in moving.items()}, sources=opened.sources)
-    return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(name for name, _ in joints),
-                      files=tuple(files), overrides=tuple(override_notes(source, spec, [name for name, _ in joints])))
+        asset = RefinedAsset(out_dir)
+        overlay = host_overlay(asset, source, "file", HostExportError)
+        model, state = asset.model, asset.initial_state
+        spec, original = opened.spec, opened.model
+        pick = scene.pick_object(original, source, reading.body)
+        per_rad = 180.0 / math.pi if unit == "degree" else 1.0
+        explicit = {b.name: bool(b.explicitinertial) for b in spec.bodies if b.name}
+        bodies, joints, moving = [], [], {}
+        for b in pick.bodies:
+            name = scene.label(original, b)
+            link = model.links.get(name)
+            if link is None:
+                raise HostExportError(f"{source}: body {name!r} has no link in the refined {URDF_NAME}")
+            offset = np.zeros(3)
+            jids = scene.body_joints(original, b, (scene.JNT_HINGE, scene.JNT_SLIDE))
+            if jids:
+                offset = np.asarray(original.jnt_pos[jids[0]], float)  # the link frame sits on the joint
+            carries = int(original.body_geomnum[b]) > 0 or explicit.get(original.body(b).name, False)
+            if carries and link.inertial is not None and link.inertial.mass:
+                inertial = link.inertial
+                set_body_inertial(spec.bodies[b], float(inertial.mass), inertial.com(), inertial.inertia_in_link_axes(), offset)
+                bodies.append(name)
+            for j in jids:
+                jname = original.joint(j).name or f"{name}_joint"  # the reader's name for an unnamed joint
+                target = next(x for x in spec.joints if x.id == j)
+                _set_joint(target, original, j, jname, model, overlay, per_rad)
+                joints.append((jname, j))
+                moving.setdefault(name, []).append((target, bool(original.jnt_limited[j])))
+        _set_keyframe(spec, original, state, joints)
+        try:
+            written = opened.compile()  # from the private copy of the bytes read
+        except Exception as exc:  # StagingError with the compiler's message
+            raise HostExportError(f"{source}: the refined host file does not compile: {exc}") from exc
+        _check(source, original, written, load_mujoco(), model, bodies)
+        xml = spec.to_xml()
+        folder, stem = out_dir / MJCF_DIR / HOST_DIR, file_names.file_stem(source.stem)
+        path = file_names.join_inside(folder, stem + ".xml")
+        atomic.write_bytes(path, xml.encode("utf-8"))
+        before = opened.sources.files[opened.sources.main].decode("utf-8", "replace").splitlines(keepends=True)
+        diff = "".join(difflib.unified_diff(before, xml.splitlines(keepends=True), fromfile=f"{source.name} (the input)",
+                                            tofile=path.name))
+        diff_path = file_names.join_inside(folder, stem + ".diff")
+        atomic.write_bytes(diff_path, diff.encode("utf-8"))
+        files = write_package_files(folder / FILES_DIR, source, xml, set(bodies),
+                                    {b: [_joint_physics(*x) for x in v] for b, v in moving.items()}, sources=opened.sources)
+        return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(name for name, _ in joints),
+                          files=tuple(files), overrides=tuple(override_notes(source, spec, [name for name, _ in joints])))
 
 
 def override_notes(source: Path, spec, joints: list[str]) -> list[str]:

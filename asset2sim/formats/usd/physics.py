@@ -235,61 +235,58 @@ def write_host_usd(out_dir: Path | str, source: Path | str) -> HostUsdExport:
         HostUsdError: the output was rescaled; a refined link or joint has no prim in the stage; the written
             stage loses a prim path or does not hold a refined value.
     """
+    out_dir, source = Path(out_dir), Path(source)
     with output_folder.guarding(out_dir):  # nothing through a symlinked usd/ or usd/host/
-        return _write_host_usd(Path(out_dir), Path(source))
-
-
-def _write_host_usd(out_dir: Path, source: Path) -> HostUsdExport:
-    _, _, _, Usd, _, UsdPhysics = pxr_modules()
-    asset = RefinedAsset(out_dir)
-    overlay = host_overlay(asset, source, "stage", HostUsdError)
-    model, state = asset.model, asset.initial_state
-    read = reader.read_usd_asset(source)
-    ctx = open_stage(source)
-    stage = ctx.stage
-    before = _prim_paths(stage, Usd)
-    stage.SetEditTarget(Usd.EditTarget(stage.GetSessionLayer()))
-    edit = UsdEdit()
-    for name, link in model.links.items():
-        if link.inertial is None or not link.inertial.mass:
-            continue
-        if name not in read.prims:
-            raise HostUsdError(f"{source}: link {name!r} of the refined {URDF_NAME} has no rigid body in the stage")
-        body = stage.GetPrimAtPath(read.prims[name])
-        set_body_mass(edit, ctx, body, read.frames[name], ctx.world(body), float(link.inertial.mass), link.inertial.com(),
-                      link.inertial.inertia_in_link_axes())
-    for j in model.movable_joints:
-        if j.name not in read.prims:
-            raise HostUsdError(f"{source}: joint {j.name!r} of the refined {URDF_NAME} has no joint prim in the stage")
-        prim = stage.GetPrimAtPath(read.prims[j.name])
-        rot = prim.IsA(UsdPhysics.RevoluteJoint)
-        unit = DEG if rot else 1.0 / ctx.m  # rad -> degrees, m -> stage units
-        dyn = overlay.joints.get(j.name)
-        set_joint_dynamics(edit, ctx, prim, float(j.dynamics.damping or 0.0) if j.dynamics else 0.0,
-                           float(j.dynamics.friction or 0.0) if j.dynamics else 0.0,
-                           None if dyn is None else float(dyn.stiffness), None if dyn is None else dyn.spring_reference)
-        if j.type != "continuous" and j.limit is not None and j.limit.lower is not None and j.limit.upper is not None:
-            edit.set(prim, "physics:lowerLimit", float(j.limit.lower * unit))
-            edit.set(prim, "physics:upperLimit", float(j.limit.upper * unit))
-        dof = "angular" if rot else "linear"
-        position = float(state.get(j.name, 0.0) * unit)
-        edit.apply(prim, f"PhysicsJointStateAPI:{dof}")
-        edit.set(prim, f"state:{dof}:physics:position", position)
-        edit.set(prim, f"state:{dof}:physics:velocity", 0.0)
-        edit.set(prim, f"newton:{dof}:position", position)
-    folder = out_dir / USD_DIR / HOST_DIR
-    stem = file_names.file_stem(source.stem)
-    name = f"{stem}.usd" if source.suffix.lower() == ".usdz" else file_names.file_stem(source.name)
-    path = file_names.join_inside(folder, name)
-    flat = stage.Flatten()
-    _write_layer(flat, path)
-    layer = file_names.join_inside(folder, f"{stem}.physics.usda")
-    atomic.write_text(layer, stage.GetSessionLayer().ExportToString())
-    _check(source, path, before, edit, Usd)
-    diff = file_names.join_inside(folder, f"{stem}.diff")
-    atomic.write_text(diff, "".join(line + "\n" for line in edit.lines()))
-    prims = tuple(dict.fromkeys(p for p, *_ in edit.changes))
-    return HostUsdExport(path=path, layer=layer, diff=diff, prims=prims, changes=len(edit.changes))
+        _, _, _, Usd, _, UsdPhysics = pxr_modules()
+        asset = RefinedAsset(out_dir)
+        overlay = host_overlay(asset, source, "stage", HostUsdError)
+        model, state = asset.model, asset.initial_state
+        read = reader.read_usd_asset(source)
+        ctx = open_stage(source)
+        stage = ctx.stage
+        before = _prim_paths(stage, Usd)
+        stage.SetEditTarget(Usd.EditTarget(stage.GetSessionLayer()))
+        edit = UsdEdit()
+        for name, link in model.links.items():
+            if link.inertial is None or not link.inertial.mass:
+                continue
+            if name not in read.prims:
+                raise HostUsdError(f"{source}: link {name!r} of the refined {URDF_NAME} has no rigid body in the stage")
+            body = stage.GetPrimAtPath(read.prims[name])
+            set_body_mass(edit, ctx, body, read.frames[name], ctx.world(body), float(link.inertial.mass), link.inertial.com(),
+                          link.inertial.inertia_in_link_axes())
+        for j in model.movable_joints:
+            if j.name not in read.prims:
+                raise HostUsdError(f"{source}: joint {j.name!r} of the refined {URDF_NAME} has no joint prim in the stage")
+            prim = stage.GetPrimAtPath(read.prims[j.name])
+            rot = prim.IsA(UsdPhysics.RevoluteJoint)
+            unit = DEG if rot else 1.0 / ctx.m  # rad -> degrees, m -> stage units
+            dyn = overlay.joints.get(j.name)
+            set_joint_dynamics(edit, ctx, prim, float(j.dynamics.damping or 0.0) if j.dynamics else 0.0,
+                               float(j.dynamics.friction or 0.0) if j.dynamics else 0.0,
+                               None if dyn is None else float(dyn.stiffness), None if dyn is None else dyn.spring_reference)
+            if j.type != "continuous" and j.limit is not None and j.limit.lower is not None and j.limit.upper is not None:
+                edit.set(prim, "physics:lowerLimit", float(j.limit.lower * unit))
+                edit.set(prim, "physics:upperLimit", float(j.limit.upper * unit))
+            dof = "angular" if rot else "linear"
+            position = float(state.get(j.name, 0.0) * unit)
+            edit.apply(prim, f"PhysicsJointStateAPI:{dof}")
+            edit.set(prim, f"state:{dof}:physics:position", position)
+            edit.set(prim, f"state:{dof}:physics:velocity", 0.0)
+            edit.set(prim, f"newton:{dof}:position", position)
+        folder = out_dir / USD_DIR / HOST_DIR
+        stem = file_names.file_stem(source.stem)
+        name = f"{stem}.usd" if source.suffix.lower() == ".usdz" else file_names.file_stem(source.name)
+        path = file_names.join_inside(folder, name)
+        flat = stage.Flatten()
+        _write_layer(flat, path)
+        layer = file_names.join_inside(folder, f"{stem}.physics.usda")
+        atomic.write_text(layer, stage.GetSessionLayer().ExportToString())
+        _check(source, path, before, edit, Usd)
+        diff = file_names.join_inside(folder, f"{stem}.diff")
+        atomic.write_text(diff, "".join(line + "\n" for line in edit.lines()))
+        prims = tuple(dict.fromkeys(p for p, *_ in edit.changes))
+        return HostUsdExport(path=path, layer=layer, diff=diff, prims=prims, changes=len(edit.changes))
 
 
 def _prim_paths(stage, Usd) -> list[str]:
