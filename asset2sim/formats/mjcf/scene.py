@@ -28,14 +28,12 @@ JNT_FREE, JNT_BALL, JNT_SLIDE, JNT_HINGE = 0, 1, 2, 3
 @dataclass(frozen=True)
 class ScenePick:
     """The object of a scene: ``root`` its body id (a child of the world body), ``bodies`` its subtree (body ids,
-    depth first, ``root`` first); ``static`` the names of the world body's other children whose subtrees carry no
-    joint (the world around the object); ``left_out`` the names of other children that carry joints (other objects,
-    loose bodies); ``notes`` what was chosen and why, one line each."""
+    depth first, ``root`` first); ``notes`` what was chosen and why, one line each (the world body's other children
+    named: those whose subtrees carry no joint, the world around the object, and those that carry joints, other
+    objects or loose bodies)."""
 
     root: int
     bodies: tuple[int, ...]
-    static: tuple[str, ...] = ()
-    left_out: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
 
 
@@ -131,12 +129,11 @@ def pick_object(m, path: Path | str, body: str | None = None) -> ScenePick:
         raise StagingError(f"{path}: none of the {len(tops)} bodies under the world body {[label(m, b) for b in tops]} "
                            "carries a hinge or slide joint: name the object with --body NAME (config body:)")
     home = next(t for t in tops if root in trees[t])  # the world body's child holding the object (itself, mostly)
-    static = tuple(label(m, b) for b in tops if b != home and not joint_types(m, trees[b]))
-    left_out = tuple(label(m, b) for b in tops if b != home and joint_types(m, trees[b]))
+    static = [label(m, b) for b in tops if b != home and not joint_types(m, trees[b])]
+    left_out = [label(m, b) for b in tops if b != home and joint_types(m, trees[b])]
     if static:
-        free = JNT_FREE in joint_types(m, [root])
-        where = "stands on" if free else "is mounted on"
-        notes.append(f"static bodies {list(static)} (no joints): the world the object {where}; left out, not refined")
+        where = "stands on" if JNT_FREE in joint_types(m, [root]) else "is mounted on"
+        notes.append(f"static bodies {static} (no joints): the world the object {where}; left out, not refined")
     if left_out:
-        notes.append(f"other bodies with joints {list(left_out)} left out (one object is read; --body picks another)")
-    return ScenePick(root=root, bodies=tuple(subtree(m, root)), static=static, left_out=left_out, notes=tuple(notes))
+        notes.append(f"other bodies with joints {left_out} left out (one object is read; --body picks another)")
+    return ScenePick(root=root, bodies=tuple(subtree(m, root)), notes=tuple(notes))
