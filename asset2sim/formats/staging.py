@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from asset2sim import atomic, file_memo, file_names
-from asset2sim.input_files import read_head
+from asset2sim.input_files import DEFAULT_MAX_BYTES, read_head
 from asset2sim.urdf import UrdfInertial, UrdfLink, UrdfMaterial, UrdfModel, write_urdf
 
 #: The staged URDF's file name inside its folder.
@@ -262,9 +262,9 @@ def write_snapshot(folder: Path | str, files: dict[str, bytes], **meta: Any) -> 
     return folder
 
 
-def read_snapshot(folder: Path | str, max_file_bytes: int) -> tuple[dict[str, bytes], dict[str, Any]]:
+def read_snapshot(folder: Path | str) -> tuple[dict[str, bytes], dict[str, Any]]:
     """(path -> bytes, the other fields) of a snapshot :func:`write_snapshot` wrote, each file checked against its
-    SHA-256 and read as a regular file of at most ``max_file_bytes``.
+    SHA-256 and read as a regular file of at most :data:`~asset2sim.input_files.DEFAULT_MAX_BYTES`.
 
     Raises:
         OSError: no snapshot, or a file missing or not a regular file.
@@ -276,7 +276,7 @@ def read_snapshot(folder: Path | str, max_file_bytes: int) -> tuple[dict[str, by
         raise ValueError(f"{folder / SNAPSHOT_NAME}: not a snapshot of an input's files")
     files = {}
     for key, entry in doc["files"].items():
-        data = atomic.read_regular(folder / "files" / str(int(entry["file"])), max_file_bytes)
+        data = atomic.read_regular(folder / "files" / str(int(entry["file"])), DEFAULT_MAX_BYTES)
         if hashlib.sha256(data).hexdigest() != entry["sha256"]:
             raise ValueError(f"{folder}: the copy of {key} changed since it was read")
         files[key] = data

@@ -38,7 +38,7 @@ from typing import Iterator
 from asset2sim import atomic, safexml
 from asset2sim.engines.mjcf.base import load_mujoco, mujoco_messages
 from asset2sim.extras import import_extra
-from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, allowed_outside, inside, read_file
+from asset2sim.input_files import InputFileError, allowed_outside, inside, read_file
 from asset2sim.formats.mjcf import conventions
 from asset2sim.formats.staging import MAX_BUILT_FACES, SOURCE_DIR, StagingError, input_tree, read_of, read_snapshot, write_snapshot
 
@@ -86,7 +86,7 @@ class MjcfSources:
             OSError: no snapshot there, or a file missing or not a regular file.
             ValueError: not an MJCF snapshot, or a file changed since.
         """
-        files, meta = read_snapshot(folder, DEFAULT_MAX_BYTES)
+        files, meta = read_snapshot(folder)
         if meta.get("kind") != "mjcf":
             raise ValueError(f"{folder}: not a snapshot of MJCF sources")
         real = {k: Path(meta["real"][k]) for k in files}

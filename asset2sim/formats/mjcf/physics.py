@@ -184,15 +184,15 @@ def override_notes(source: Path, spec, joints: list[str]) -> list[str]:
 
 
 def write_package_files(folder: Path, source: Path, host_xml: str, inertials: set[str],
-                    joints: dict[str, list[dict[str, str]]], *, sources: MjcfSources | None = None) -> list[Path]:
+                        joints: dict[str, list[dict[str, str]]], *, sources: MjcfSources) -> list[Path]:
     """``source`` and the files it includes that hold a body of ``inertials`` or ``joints`` (names), written again
     under ``folder`` at their path in the input's tree (the host package's asset folder,
     :func:`~asset2sim.formats.mjcf.conventions.package_tree`, else the input's folder; a file from a folder
     ``--allow-outside-paths`` allows is left out): the ``<inertial>`` of the bodies of ``inertials`` as ``host_xml``
     (the host file written) has it, and on the hinge and slide ``<joint>`` elements of the bodies of ``joints``
     (body name -> attributes per joint in order, :func:`_joint_physics`) those attributes; their unified diff against
-    the package's files in ``folder``'s parent as :data:`FILES_DIFF`; ``sources``: the files as already read (None:
-    gathered once here under the reader policy). Returns the files written.
+    the package's files in ``folder``'s parent as :data:`FILES_DIFF`; ``sources``: the files as already read (under
+    the reader policy). Returns the files written.
 
     Raises:
         StagingError: an included file cannot be read again under the input's trust rules.
@@ -206,8 +206,6 @@ def write_package_files(folder: Path, source: Path, host_xml: str, inertials: se
         keys.setdefault(_body_key(b), []).append(label)
         if label in inertials:
             hosted[label] = b
-    if sources is None:
-        sources = gather_mjcf(source)  # the files the reader read, in the tree it read them in
     out, diffs = [], []
     for name, data in sorted(sources.files.items()):
         if Path(name).suffix.lower() not in MJCF_SUFFIXES:  # meshes and textures
