@@ -116,25 +116,26 @@ def read_usd_asset(path: Path | str) -> ReadAsset:
     bodies, joints = _collect(ctx)
     parent_of, order = _tree(ctx, bodies, joints)
     key = {b.GetPath(): n for b, n in zip(order, _unique([_name(b) for b in order]))}
-    frames = {order[0].GetPath(): rigid_matrix(np.eye(3), ctx.world(order[0])[:3, 3])}  # the world's axes at the root
+    root = key[order[0].GetPath()]
+    frames = {root: rigid_matrix(np.eye(3), ctx.world(order[0])[:3, 3])}  # link -> its frame; the world's axes at the root
     tree_joints = [parent_of[b.GetPath()] for b in order[1:]]
     for j, name in zip(tree_joints, _unique([j.name for j in tree_joints])):
         j.name = name
     out_joints, springs = [], {}
     for j in tree_joints:
-        frames[j.body1.GetPath()], uj, spring = _joint(ctx, j, frames[j.body0.GetPath()], key)
+        frame, uj, spring = _joint(ctx, j, frames[key[j.body0.GetPath()]], key)
+        frames[uj.child] = frame
         out_joints.append(uj)
         if spring is not None:
             springs[uj.name] = spring
-    links = {key[b.GetPath()]: _link(ctx, b, key[b.GetPath()], frames[b.GetPath()]) for b in order}
+    links = {n: _link(ctx, b, n, frames[n]) for b, n in zip(order, key.values())}
     default = ctx.stage.GetDefaultPrim()
-    model = UrdfModel(name=_name(default) if default else ctx.path.stem, links=links, joints=out_joints,
-                      root=key[order[0].GetPath()])
+    model = UrdfModel(name=_name(default) if default else ctx.path.stem, links=links, joints=out_joints, root=root)
     return ReadAsset(source=ctx.path, format="usd", model=model, meshes=ctx.meshes, springs=springs,
                      inferred=tuple(n for n, lk in links.items() if lk.inertial is None), notes=tuple(ctx.notes),
                      files=used_files(ctx), root_fixed=any("(fixed_root)" in n for n in ctx.notes),
-                     prims={**{key[b.GetPath()]: str(b.GetPath()) for b in order}, **{j.name: str(j.prim.GetPath()) for j in tree_joints}},
-                     frames={key[b.GetPath()]: frames[b.GetPath()] for b in order})
+                     prims={**{n: str(p) for p, n in key.items()}, **{j.name: str(j.prim.GetPath()) for j in tree_joints}},
+                     frames=frames)
 
 
 def _collect(ctx: StageReading) -> tuple[list, list[_Joint]]:

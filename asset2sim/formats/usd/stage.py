@@ -168,7 +168,7 @@ def open_stage(path: Path) -> StageReading:
     if str(UsdGeom.GetStageUpAxis(stage)) == "Y":
         u = _Y_TO_Z
         notes.append("stage is Y up: the object is turned +90 deg about x to Z up")
-    L = rigid_matrix(m * u, np.zeros(3))
+    L = rigid_matrix(m * u)
     return StageReading(path=path, stage=stage, cache=UsdGeom.XformCache(Usd.TimeCode.Default()), L=L, u=u, m=m, kg=kg, notes=notes)
 
 
@@ -229,7 +229,7 @@ def _shape(ctx: StageReading, prim, link: str, to_link: np.ndarray) -> UrdfGeome
 
     if prim.IsA(UsdGeom.Mesh):
         return _mesh(ctx, prim, link, to_link)
-    turn = rigid_matrix(_AXIS_TURN.get(str(value_or(prim, "axis", "Z")), np.eye(3)), np.zeros(3))
+    turn = rigid_matrix(_AXIS_TURN.get(str(value_or(prim, "axis", "Z")), np.eye(3)))
     r, h = float(value_or(prim, "radius", 1.0)), float(value_or(prim, "height", 2.0))
     if prim.IsA(UsdGeom.Cube):
         size = float(value_or(prim, "size", 2.0))
