@@ -16,7 +16,6 @@ from asset2sim.formats.mjcf import export as mjcf_export, physics as mjcf_physic
 from asset2sim.formats.mjcf.conventions import ReadOptions
 from asset2sim.formats.staging import ReadAsset, StagingError
 from asset2sim.formats.usd import export as usd_export, physics as usd_physics, reader as usd_reader
-from asset2sim.refined_asset import RefinedAsset
 
 __all__ = ["FORMATS", "Format", "ReadOptions", "read_asset_file"]
 
@@ -44,12 +43,6 @@ class Format:
     real_units: str
 
 
-def _export_usd(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: bool = True) -> Path:
-    """The path of :func:`~asset2sim.formats.usd.export.export_usd`'s file (``out_dir``: the folder, or the folder as a
-    refine holds it, :meth:`~asset2sim.refined_asset.RefinedAsset.held`)."""
-    return usd_export.export_usd(out_dir, visuals=visuals, check=check).path
-
-
 #: Format name -> its entries.
 FORMATS: dict[str, Format] = {
     "mjcf": Format(label="MJCF", read=mjcf_reader.read_mjcf_asset, export=mjcf_export.export_mjcf,
@@ -57,7 +50,10 @@ FORMATS: dict[str, Format] = {
                    is_model=lambda path: staging.root_element(path) == "mujoco", declares_root=True,
                    real_units="an MJCF file ({name}: MuJoCo's lengths are metres)"),
     # a USD stage carries its own units and up axis: the read options do not apply
-    "usd": Format(label="USD", read=lambda path, options=None: usd_reader.read_usd_asset(path), export=_export_usd,
+    # export: the path of export_usd's file (out_dir: the folder, or the folder as a refine holds it, RefinedAsset.held)
+    "usd": Format(label="USD", read=lambda path, options=None: usd_reader.read_usd_asset(path),
+                  export=lambda out_dir, *, visuals=True, check=True: usd_export.export_usd(
+                      out_dir, visuals=visuals, check=check).path,
                   patch=usd_physics.write_patched_usd, aids=lambda path: [], suffixes=staging.USD_SUFFIXES,
                   is_model=lambda path: True, declares_root=False,
                   real_units="a USD stage ({name}, read in metres through its metersPerUnit)"),

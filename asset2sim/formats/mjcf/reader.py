@@ -123,7 +123,7 @@ class _Reader:
 
     def body_name(self, b: int) -> str:
         """Body ``b``'s name (MuJoCo refuses repeated names), ``body_<b>`` for an unnamed one."""
-        return self.m.body(b).name or f"body_{b}"
+        return scene.label(self.m, b)
 
     def read(self, root: int, bodies: tuple[int, ...]) -> ReadAsset:
         """The object whose root body is ``root`` and whose bodies are ``bodies`` (depth first, ``root`` first)."""
@@ -158,10 +158,10 @@ class _Reader:
     # ------------------------------------------------------------------ joints
     def _joint(self, b: int, is_root: bool) -> tuple[int | None, np.ndarray]:
         """(the body's joint id or None, the URDF link frame (4, 4) in the body frame)."""
-        m, mj = self.m, self.mj
+        m = self.m
         ids = scene.body_joints(m, b)
         n = len(ids)
-        free = [j for j in ids if m.jnt_type[j] == mj.mjtJoint.mjJNT_FREE]
+        free = scene.body_joints(m, b, (scene.JNT_FREE,))
         if free and not is_root:
             raise StagingError(f"{self.path}: body {self.body_name(b)!r} has a free joint below the root")
         if is_root:
@@ -179,20 +179,20 @@ class _Reader:
             raise StagingError(f"{self.path}: body {self.body_name(b)!r} has {n} joints "
                                f"{[m.joint(j).name for j in ids]}; a link takes one joint to its parent")
         j = ids[0]
-        if m.jnt_type[j] == mj.mjtJoint.mjJNT_BALL:
+        if m.jnt_type[j] == scene.JNT_BALL:
             raise StagingError(f"{self.path}: joint {m.joint(j).name!r} of body {self.body_name(b)!r} is a ball joint; "
                                "only hinge and slide joints are read")
         return j, translation_matrix(m.jnt_pos[j])
 
     def _urdf_joint(self, b: int, j: int | None, origin: np.ndarray) -> UrdfJoint:
         """The URDF joint carrying body ``b`` (fixed when ``j`` is None); ``origin`` at MuJoCo's ``ref``."""
-        m, mj = self.m, self.mj
+        m = self.m
         parent, child = self.body_name(int(m.body_parentid[b])), self.body_name(b)
         if j is None:
             return UrdfJoint(name=f"{child}_fixed", type="fixed", parent=parent, child=child, origin=origin)
         name = m.joint(j).name or f"{child}_joint"
         axis = np.asarray(m.jnt_axis[j], float)
-        hinge = m.jnt_type[j] == mj.mjtJoint.mjJNT_HINGE
+        hinge = m.jnt_type[j] == scene.JNT_HINGE
         ref = float(m.qpos0[m.jnt_qposadr[j]])
         if ref != 0.0:  # the body frame is drawn at q = ref; URDF's origin is q = 0
             undo = np.eye(4)

@@ -150,9 +150,7 @@ def _write_body(stage, path, model: UrdfModel, name: str, pose: np.ndarray, note
     else:
         notes.append(f"link {name!r} has no <inertial>: physics:mass not authored (computed from colliders)")
     if link.lateral_friction is not None:
-        mat_path = path.AppendChild("physics_material")
-        UsdGeom.Scope.Define(stage, mat_path)
-        mat = UsdPhysics.MaterialAPI.Apply(stage.GetPrimAtPath(mat_path))
+        mat = UsdPhysics.MaterialAPI.Apply(UsdGeom.Scope.Define(stage, path.AppendChild("physics_material")).GetPrim())
         mat.CreateStaticFrictionAttr(float(link.lateral_friction))
         mat.CreateDynamicFrictionAttr(float(link.lateral_friction))
         mat.CreateRestitutionAttr(float(link.restitution or 0.0))
