@@ -6,7 +6,6 @@ geometry, the ``direct`` and ``ivw`` baselines apply its estimates. Units as :mo
 
 from __future__ import annotations
 
-import copy
 from typing import Annotated, Any
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
@@ -139,9 +138,15 @@ _KEEP = {
 
 
 def _prune(node: Any) -> Any:
+    """``node`` (a JSON schema) anew with only :data:`_KEEP` keywords, every object's properties required and no
+    additional properties."""
     if isinstance(node, dict):
-        return {k: {name: _prune(sub) for name, sub in v.items()} if k in ("properties", "$defs") else _prune(v)
-                for k, v in node.items() if k in _KEEP}
+        out = {k: {name: _prune(sub) for name, sub in v.items()} if k in ("properties", "$defs") else _prune(v)
+               for k, v in node.items() if k in _KEEP}
+        if out.get("type") == "object" and "properties" in out:
+            out["required"] = list(out["properties"])
+            out["additionalProperties"] = False
+        return out
     if isinstance(node, list):
         return [_prune(x) for x in node]
     return node
@@ -176,19 +181,5 @@ def reply_json_schema(model: type[BaseModel] | None = None) -> dict[str, Any]:
     """The JSON schema of ``model`` (default :class:`ModelReply`) as sent to
     model APIs: every property required, no additional properties, only
     :data:`_KEEP` keywords. A fresh dict."""
-    schema = _prune(copy.deepcopy((model or ModelReply).model_json_schema()))
-
-    def close(node: Any) -> None:
-        if isinstance(node, dict):
-            if node.get("type") == "object" and "properties" in node:
-                node["required"] = list(node["properties"])
-                node["additionalProperties"] = False
-            for v in node.values():
-                close(v)
-        elif isinstance(node, list):
-            for v in node:
-                close(v)
-
-    close(schema)
-    return schema
+    return _prune((model or ModelReply).model_json_schema())
 
