@@ -293,10 +293,15 @@ def set_body_inertial(body, mass: float, com, tensor: np.ndarray, offset: np.nda
 
 def set_joint_friction(joint, damping: float, friction: float) -> None:
     """``joint``'s (an ``mjsJoint``) damping (its first value; N*m*s/rad or N*s/m) and friction loss (N*m or N)."""
-    values = np.array(joint.damping, float)
-    values[0] = damping
-    joint.damping = values
+    joint.damping = _with_first(joint.damping, damping)
     joint.frictionloss = friction
+
+
+def _with_first(values, first: float) -> np.ndarray:
+    """``values`` (a MuJoCo spec's array attribute) as floats, the first replaced by ``first``."""
+    out = np.array(values, float)
+    out[0] = first
+    return out
 
 
 def _set_joint(joint, m, j: int, name: str, model, overlay: Overlay, per_rad: float) -> None:
@@ -316,9 +321,7 @@ def _set_joint(joint, m, j: int, name: str, model, overlay: Overlay, per_rad: fl
         joint.solimp_friction = list(FRICTION_SOLIMP)
     dyn = overlay.joints.get(name)
     if dyn is not None:
-        stiffness = np.array(joint.stiffness, float)
-        stiffness[0] = float(dyn.stiffness)
-        joint.stiffness = stiffness
+        joint.stiffness = _with_first(joint.stiffness, float(dyn.stiffness))
         if dyn.stiffness > 0 and dyn.spring_reference is not None:
             joint.springref = float(dyn.spring_reference) * unit
     lim = urdf.limit

@@ -213,12 +213,10 @@ def link_geometry(ctx: StageReading, body, link: UrdfLink, inverse: np.ndarray) 
 
 def _color(prim) -> UrdfMaterial | None:
     """rgba (4,) of the first displayColor / displayOpacity values, None when no colour is authored."""
-    UsdGeom = pxr_modules()[4]
-    gp = UsdGeom.Gprim(prim)
-    color = gp.GetDisplayColorPrimvar().Get() if gp.GetDisplayColorPrimvar().HasAuthoredValue() else None
+    color = authored(prim, "primvars:displayColor")
     if not color:
         return None
-    opacity = gp.GetDisplayOpacityPrimvar().Get() if gp.GetDisplayOpacityPrimvar().HasAuthoredValue() else None
+    opacity = authored(prim, "primvars:displayOpacity")
     return rgba_material([*color[0], opacity[0] if opacity else 1.0])
 
 
