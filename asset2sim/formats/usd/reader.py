@@ -238,10 +238,8 @@ def _tree(ctx: StageReading, bodies: list, joints: list[_Joint]) -> tuple[dict, 
 
 def _joint_frame(ctx: StageReading, j: _Joint, side: int) -> np.ndarray:
     """The joint frame (4, 4) in the world (m, Z up) of ``localPos<side>`` / ``localRot<side>``."""
-    UsdPhysics = pxr_modules()[5]
-    api = UsdPhysics.Joint(j.prim)
-    pos = np.array((api.GetLocalPos1Attr() if side else api.GetLocalPos0Attr()).Get(), float)
-    rot = ctx.u @ quat_matrix((api.GetLocalRot1Attr() if side else api.GetLocalRot0Attr()).Get()) @ ctx.u.T
+    pos = np.array(value_or(j.prim, f"physics:localPos{side}", None), float)
+    rot = ctx.u @ quat_matrix(value_or(j.prim, f"physics:localRot{side}", None)) @ ctx.u.T
     target = j.target1 if side else j.target0
     return rigid_matrix(ctx.frame(target)[:3, :3] @ rot, (ctx.world(target) @ np.append(pos, 1.0))[:3])
 
