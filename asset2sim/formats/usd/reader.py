@@ -247,7 +247,6 @@ def _joint_frame(ctx: StageReading, j: _Joint, side: int) -> np.ndarray:
 def _joint(ctx: StageReading, j: _Joint, parent_frame: np.ndarray, key: dict) -> tuple[np.ndarray, UrdfJoint, DeclaredSpring | None]:
     """The child's link frame (4, 4, world), the URDF joint (origin in the parent link frame ``parent_frame``,
     axis in the child's) and the declared spring."""
-    UsdPhysics = pxr_modules()[5]
     j0, j1 = _joint_frame(ctx, j, 0), _joint_frame(ctx, j, 1)
     child = rigid_matrix(ctx.frame(j.body1)[:3, :3], j1[:3, 3])
     turn = j1[:3, :3].T @ child[:3, :3]  # joint frame -> child link axes
@@ -255,8 +254,7 @@ def _joint(ctx: StageReading, j: _Joint, parent_frame: np.ndarray, key: dict) ->
     uj = UrdfJoint(name=j.name, type=j.kind, parent=key[j.body0.GetPath()], child=key[j.body1.GetPath()], origin=origin)
     spring = None
     if j.kind != "fixed":
-        schema = UsdPhysics.RevoluteJoint if j.kind == "revolute" else UsdPhysics.PrismaticJoint
-        token = str(schema(j.prim).GetAxisAttr().Get())
+        token = str(value_or(j.prim, "physics:axis", None))
         if token not in _AXES:
             raise ctx.error(j.what, f"axis {token!r} is not X, Y or Z")
         uj.axis_xyz = turn.T @ ctx.u @ _AXES[token]  # the joint frame's axis in the child link axes
@@ -270,11 +268,9 @@ def _joint(ctx: StageReading, j: _Joint, parent_frame: np.ndarray, key: dict) ->
 
 def _limits(ctx: StageReading, j: _Joint) -> tuple[str, UrdfLimit | None]:
     """URDF type (revolute / continuous / prismatic) and limits (rad or m; velocity rad/s or m/s)."""
-    UsdPhysics = pxr_modules()[5]
     rot = j.kind == "revolute"
-    api = UsdPhysics.RevoluteJoint(j.prim) if rot else UsdPhysics.PrismaticJoint(j.prim)
     unit = 1.0 / DEG if rot else ctx.m
-    lo, hi = float(api.GetLowerLimitAttr().Get()), float(api.GetUpperLimitAttr().Get())  # fallbacks -inf, inf
+    lo, hi = (float(value_or(j.prim, f"physics:{end}Limit", None)) for end in ("lower", "upper"))  # fallbacks -inf, inf
     limited = [math.isfinite(v) and abs(v) < UNLIMITED for v in (lo, hi)]
     vel = authored(j.prim, "physxJoint:maxJointVelocity")
     vel = float(vel) * unit if vel is not None and math.isfinite(vel) and abs(vel) < UNLIMITED else None
