@@ -78,6 +78,5 @@ def column_values(metrics: Iterable[MetricResult], engine: str | None = "pybulle
                 or (engine is not None and m.engine not in (engine, "none"))):
             continue
         seen.add(m.name)
-        for col, source in info.columns.items():
-            out[col] = _field(m, source)
+        out.update({col: _field(m, source) for col, source in info.columns.items()})
     return out

@@ -440,10 +440,9 @@ class StateOverride(Frozen):
                 raise ValueError(f"{where}: unit missing in {raw!r}: an opening fraction is 0-1; an angle needs deg or rad, "
                                  "a distance m, cm or mm")
             return cls(kind="fraction", value=value, text=raw)
-        if unit in ANGLE_UNITS:
-            return cls(kind="angle", value=value * ANGLE_UNITS[unit], text=raw)
-        if unit in LENGTH_UNITS:
-            return cls(kind="distance", value=value * LENGTH_UNITS[unit], text=raw)
+        for kind, units in (("angle", ANGLE_UNITS), ("distance", LENGTH_UNITS)):
+            if unit in units:
+                return cls(kind=kind, value=value * units[unit], text=raw)
         raise ValueError(f"{where}: unknown unit {unit!r} in {raw!r} (angles: deg, rad; distances: m, cm, mm)")
 
 

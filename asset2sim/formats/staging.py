@@ -294,7 +294,7 @@ def stage(read: ReadAsset, folder: Path | str) -> StagedAsset:
         except StagingError as exc:
             raise StagingError(f"{read.source}: {rel}: {exc}") from exc
         atomic.write_bytes(file_names.join_inside(folder, rel), data)
-    if read.sources is not None and hasattr(read.sources, "snapshot"):  # the bytes read, for the stages after extraction
+    if hasattr(read.sources, "snapshot"):  # the bytes read, for the stages after extraction
         read.sources.snapshot(folder / SOURCE_DIR, angle=read.angle_unit)
     urdf_path = folder / STAGED_URDF
     comment = f" staged by asset2sim from {read.format.upper()} {read.source.name} "

@@ -89,7 +89,7 @@ def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float],
             if mass != 0.0:
                 raise ExportError(f"{xml_path}: body {name!r} weighs {mass} kg, the URDF link has no <inertial>")
             continue
-        r = np.array(quat_wxyz_matrix(m.body_iquat[bid]))
+        r = quat_wxyz_matrix(m.body_iquat[bid])
         tensor = r @ np.diag(m.body_inertia[bid]) @ r.T
         want = link.inertial.inertia_in_link_axes()
         dc = float(np.abs(m.body_ipos[bid] - link.inertial.com()).max())

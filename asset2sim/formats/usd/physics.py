@@ -140,10 +140,8 @@ def _text(value) -> str:
         return "None"
     if isinstance(value, float):
         return f"{value:.9g}"
-    if hasattr(value, "GetReal"):
-        return "(" + ", ".join(f"{float(v):.9g}" for v in (value.GetReal(), *value.GetImaginary())) + ")"
-    if hasattr(value, "__len__") and not isinstance(value, str):
-        return "(" + ", ".join(_text(float(v)) for v in value) + ")"
+    if hasattr(value, "GetReal") or hasattr(value, "__len__") and not isinstance(value, str):
+        return "(" + ", ".join(f"{v:.9g}" for v in _numbers(value)) + ")"
     return str(value)
 
 
