@@ -325,8 +325,7 @@ class RequestIntent(Strict):
 
     def fields(self) -> dict[str, object]:
         """The intent as :class:`RequestSpec` field values (``part_counts`` a dict; copies of the nested models)."""
-        out = {k: getattr(self, k) for k in INTENT_FIELDS}
-        out = {k: [x.model_copy(deep=True) for x in v] if isinstance(v, list) else v for k, v in out.items()}
+        out = {k: [x.model_copy(deep=True) for x in v] if isinstance(v := getattr(self, k), list) else v for k in INTENT_FIELDS}
         out["part_counts"] = {c.label: c.count for c in self.part_counts}
         return out
 

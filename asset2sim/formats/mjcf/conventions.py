@@ -198,10 +198,8 @@ def _element_compiler_angle(root, base: Path, top: Path, seen: set[str],
                 continue
             seen.add(key)
             try:
-                sub = _parsed(inc, files)
+                sub = _parsed(inc, files)  # among ``files`` when given: found there above
             except (safexml.SafeXMLError, OSError):  # an unreadable include: MuJoCo's compile reports it
-                continue
-            if sub is None:
                 continue
             angle, where = _element_compiler_angle(sub, inc.parent, top, seen, files)
             if angle is not None:

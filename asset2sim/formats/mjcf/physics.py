@@ -211,11 +211,8 @@ def write_package_files(folder: Path, source: Path, host_xml: str, inertials: se
         if Path(name).suffix.lower() not in MJCF_SUFFIXES:  # meshes and textures
             continue
         root = safexml.parse_xml_bytes(data, source=name)
-        found = []
-        for body in root.iter("body"):
-            match = keys.get(_body_key(body), [])
-            if len(match) == 1 and (match[0] in hosted or match[0] in joints):  # one body of the host file is this one
-                found.append((body, match[0]))
+        found = [(body, match[0]) for body in root.iter("body")  # one body of the host file is this one
+                 if len(match := keys.get(_body_key(body), [])) == 1 and (match[0] in hosted or match[0] in joints)]
         if not found:
             continue
         for body, label in found:

@@ -283,9 +283,8 @@ def _mesh(ctx: StageReading, prim, link: str, to_link: np.ndarray) -> UrdfGeomet
             raise StagingError(f"{ctx.path}: the stage's meshes come to more than {MAX_BUILT_FACES} triangles as they are built "
                                f"(every mesh prim counted, a referenced or instanced mesh as often as it appears; at "
                                f"{prim.GetPath()}); not read", code="INPUT_TOO_LARGE")
-    pts = np.array(points if points is not None else [], float).reshape(-1, 3)
-    counts = np.array(counts if counts is not None else [], np.int64)
-    idx = np.array(idx if idx is not None else [], np.int64)
+    pts = np.array(points or [], float).reshape(-1, 3)
+    counts, idx = np.array(counts or [], np.int64), np.array(idx or [], np.int64)
     if counts.sum() != len(idx) or (counts < 0).any():
         raise ctx.error(f"mesh {prim.GetPath()}", f"faceVertexCounts sum to {counts.sum()}, not the {len(idx)} faceVertexIndices")
     ntri = np.clip(counts - 2, 0, None)  # a fan of c - 2 triangles per polygon of c corners
