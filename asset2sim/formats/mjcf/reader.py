@@ -142,10 +142,8 @@ class _Reader:
                 origin = rigid_inverse(frames[parent]) @ _pose(m.body_pos[b], m.body_quat[b]) @ frame
                 joints.append(self._urdf_joint(b, joint, origin))
             links[self.body_name(b)] = self._link(b, rigid_inverse(frame))
-        if m.ntendon:
-            self.notes.append(f"{m.ntendon} tendon(s) not carried (URDF has no element for them)")
-        if m.neq:
-            self.notes.append(f"{m.neq} equality constraint(s) not carried (URDF has no element for them)")
+        self.notes += [f"{n} {what} not carried (URDF has no element for them)"
+                       for n, what in ((m.ntendon, "tendon(s)"), (m.neq, "equality constraint(s)")) if n]
         self.notes += [f"solver aid {a.kind} on {a.element!r} {a.written} ({a.criterion}; {a.effect}): not carried, an aid of "
                        "the MJCF solver only" for a in read_aids(m)]
         model = UrdfModel(name=self.spec.modelname or self.path.stem, links=links, joints=joints, root=self.body_name(root))

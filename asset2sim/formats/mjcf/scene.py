@@ -45,12 +45,10 @@ def label(m, b: int) -> str:
 def subtree(m, b: int) -> list[int]:
     """Body ``b`` and every body below it (ids, depth first)."""
     inside = {b}
-    out = [b]
     for c in range(b + 1, m.nbody):
         if int(m.body_parentid[c]) in inside:
             inside.add(c)
-            out.append(c)
-    return out
+    return sorted(inside)  # ids ascending: depth first, as MuJoCo numbers bodies
 
 
 def body_joints(m, b: int, types: tuple[int, ...] | None = None) -> list[int]:

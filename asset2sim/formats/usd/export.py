@@ -232,8 +232,7 @@ def _write_visuals(stage, link_path, model: UrdfModel, link: str, notes: list[st
             if mesh is None:
                 continue
         if v.material is not None and v.material.rgba is not None:
-            rgba = np.asarray(v.material.rgba, float)
-            mesh.CreateDisplayColorAttr([Gf.Vec3f(*map(float, rgba[:3]))])
+            mesh.CreateDisplayColorAttr([Gf.Vec3f(*map(float, v.material.rgba[:3]))])
 
 
 def _mesh(stage, path, points: np.ndarray, triangles: np.ndarray):

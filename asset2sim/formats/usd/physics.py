@@ -181,9 +181,9 @@ def set_body_mass(edit: UsdEdit, ctx: StageReading, body, link_frame: np.ndarray
     local = (np.linalg.inv(to_link) @ np.append(np.asarray(com, float), 1.0))[:3]
     edit.apply(body, "PhysicsMassAPI")
     edit.set(body, "physics:mass", float(mass / ctx.kg))
-    edit.set(body, "physics:centerOfMass", Gf.Vec3f(*(float(v) for v in local)), Sdf.ValueTypeNames.Point3f)
+    edit.set(body, "physics:centerOfMass", Gf.Vec3f(*map(float, local)), Sdf.ValueTypeNames.Point3f)
     if not same(_authored_tensor(body), tensor):  # the moments and axes together: one tensor has many of them
-        edit.set(body, "physics:diagonalInertia", Gf.Vec3f(*(float(v) for v in d)), Sdf.ValueTypeNames.Float3)
+        edit.set(body, "physics:diagonalInertia", Gf.Vec3f(*map(float, d)), Sdf.ValueTypeNames.Float3)
         edit.set(body, "physics:principalAxes", Gf.Quatf(*matrix_quat_wxyz(q).tolist()), Sdf.ValueTypeNames.Quatf)
     if authored(body, "physics:density"):
         edit.set(body, "physics:density", 0.0)  # an explicit mass wins; no density contradicts it
