@@ -131,7 +131,8 @@ def input_format(path: Path | str) -> str:
     if suffix in USD_SUFFIXES:
         return "usd"
     if suffix in MJCF_SUFFIXES:  # the first 4 KiB of a regular file only: a FIFO or /dev/zero is never read here
-        head = read_head(p) or b""  # unreadable: MJCF by its suffix
+        # unreadable: MJCF by its suffix
+        head = read_head(p) or b""
         return "urdf" if b"<robot" in head and b"<mujoco" not in head else "mjcf"
     return "urdf"
 

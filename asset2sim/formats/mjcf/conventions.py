@@ -198,7 +198,8 @@ def _element_compiler_angle(root, base: Path, top: Path, seen: set[str],
                 continue
             seen.add(key)
             try:
-                sub = _parsed(inc, files)  # among ``files`` when given: found there above
+                # among ``files`` when given: found there above
+                sub = _parsed(inc, files)
             except (safexml.SafeXMLError, OSError):  # an unreadable include: MuJoCo's compile reports it
                 continue
             angle, where = _element_compiler_angle(sub, inc.parent, top, seen, files)

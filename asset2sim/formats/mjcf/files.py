@@ -107,7 +107,8 @@ def _resolve(value: str, base: str, tree: str, source: Path, what: str) -> str:
         StagingError: ``MJCF_PATH_ESCAPES`` for a control character, a URI, an absolute path (unless allowed) or one
             leaving ``tree`` (lexically or through a symlink, unless into an allowed folder).
     """
-    if "\x00" in value or any(ord(c) < 32 for c in value):
+    # NUL among them
+    if any(ord(c) < 32 for c in value):
         raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: a control character in the path")
     if _URI.match(value) and not _DRIVE.match(value):
         raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: a URI; only relative paths inside {tree} are read")
@@ -176,9 +177,7 @@ class _Gather:
                 self.document(inc, f"<include file={value!r}>", depth + 1, (*stack, inc))
                 continue
             if tag == "compiler":
-                for attr in ("meshdir", "texturedir", "assetdir"):
-                    if el.get(attr) is not None:
-                        self.compiler[attr] = el.get(attr, "")
+                self.compiler.update({a: v for a in ("meshdir", "texturedir", "assetdir") if (v := el.get(a)) is not None})
             for attr, value in el.attrib.items():
                 if attr.startswith("file") and value:
                     self.refs.append((tag, attr, value, name))

@@ -48,7 +48,8 @@ def subtree(m, b: int) -> list[int]:
     for c in range(b + 1, m.nbody):
         if int(m.body_parentid[c]) in inside:
             inside.add(c)
-    return sorted(inside)  # ids ascending: depth first, as MuJoCo numbers bodies
+    # ids ascending: depth first, as MuJoCo numbers bodies
+    return sorted(inside)
 
 
 def body_joints(m, b: int, types: tuple[int, ...] | None = None) -> list[int]:

@@ -117,7 +117,8 @@ def read_usd_asset(path: Path | str) -> ReadAsset:
     parent_of, order = _tree(ctx, bodies, joints)
     key = {b.GetPath(): n for b, n in zip(order, _unique([_name(b) for b in order]))}
     root = key[order[0].GetPath()]
-    frames = {root: rigid_matrix(np.eye(3), ctx.world(order[0])[:3, 3])}  # link -> its frame; the world's axes at the root
+    # link -> its frame; the world's axes at the root
+    frames = {root: rigid_matrix(np.eye(3), ctx.world(order[0])[:3, 3])}
     tree_joints = [parent_of[b.GetPath()] for b in order[1:]]
     for j, name in zip(tree_joints, _unique([j.name for j in tree_joints])):
         j.name = name
