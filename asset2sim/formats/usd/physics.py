@@ -331,17 +331,16 @@ def write_patched_usd(source: Path, read: ReadAsset | None, children: dict[str, 
         StagingError: the stage cannot be opened.
         KeyError: a link or joint the reader did not record a prim for.
     """
-    _, _, _, Usd, UsdGeom, _ = pxr_modules()
+    Usd = pxr_modules()[3]
     assert read is not None
     ctx = open_stage(Path(source))
     layer = ctx.stage.Flatten()
     stage = Usd.Stage.Open(layer)
-    cache = UsdGeom.XformCache(Usd.TimeCode.Default())
     edit = UsdEdit()
     for name, lp in links.items():
         body = stage.GetPrimAtPath(read.prims[name])
-        world = ctx.L @ np.array(cache.GetLocalToWorldTransform(body), float).T
-        set_body_mass(edit, ctx, body, read.frames[name], world, lp.mass, np.asarray(lp.com, float), lp.inertia.matrix())
+        set_body_mass(edit, ctx, body, read.frames[name], ctx.world(body), lp.mass, np.asarray(lp.com, float),
+                      lp.inertia.matrix())
     for name, jd in joints.items():
         set_joint_dynamics(edit, ctx, stage.GetPrimAtPath(read.prims[name]), jd.damping, jd.friction)
     out = folder / f"{file_names.file_stem(Path(source).stem)}.usda"
