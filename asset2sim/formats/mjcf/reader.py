@@ -272,20 +272,20 @@ class _Reader:
             return {}
         names = [m.key(k).name for k in range(m.nkey)]
         k = names.index("initial") if "initial" in names else 0
+        key = repr(names[k] or f"#{k}")
         out = {}
         for j in joints:
             if j.type == "fixed":
                 continue
             jid = self.mj.mj_name2id(m, self.mj.mjtObj.mjOBJ_JOINT, j.name)
             if jid >= 0:
-                adr = int(m.jnt_qposadr[jid])
-                value = float(m.key_qpos[k, adr])  # as MuJoCo reads it (a joint's ref moves its frame, not the value)
+                value = float(m.key_qpos[k, int(m.jnt_qposadr[jid])])  # as MuJoCo reads it (a joint's ref moves its frame, not the value)
                 if not np.isfinite(value):  # a NaN or infinity in the keyframe is no position: the joint's default kept
-                    self.notes.append(f"keyframe {names[k] or '#' + str(k)!r}: joint {j.name!r} at {value}, not a number: not used")
+                    self.notes.append(f"keyframe {key}: joint {j.name!r} at {value}, not a number: not used")
                     continue
                 out[j.name] = value
         if out:
-            self.notes.append(f"initial joint positions from keyframe {names[k] or '#' + str(k)!r}")
+            self.notes.append(f"initial joint positions from keyframe {key}")
         return out
 
     def _written_moments(self, b: int, name: str) -> None:

@@ -22,7 +22,7 @@ from asset2sim.formats.usd.check import check_usd
 from asset2sim.formats.usd.reader import DEG
 from asset2sim.frames import matrix_quat_wxyz
 from asset2sim.mesh_io import MeshCache, MeshReadError, convex_hull_mesh
-from asset2sim.urdf import UrdfJoint, UrdfModel
+from asset2sim.urdf import MOVABLE, UrdfJoint, UrdfModel
 from asset2sim.output_folder import USD_DIR
 
 # --------------------------------------------------------------------- helpers
@@ -296,7 +296,7 @@ def _write_joint(stage, path, j: UrdfJoint, link_paths: dict[str, str], initial:
     joint.CreateBody1Rel().SetTargets([Sdf.Path(link_paths[j.child])])
     prim = joint.GetPrim()
     prim.CreateAttribute("asset2sim:name", Sdf.ValueTypeNames.String, custom=True).Set(j.name)
-    a = _axis_frame(j.axis) if j.type in ("revolute", "continuous", "prismatic") else np.eye(3)
+    a = _axis_frame(j.axis) if j.type in MOVABLE else np.eye(3)
     r0 = j.origin[:3, :3] @ a
     joint.CreateLocalPos0Attr(Gf.Vec3f(*map(float, j.origin[:3, 3])))
     joint.CreateLocalRot0Attr(Gf.Quatf(*map(float, matrix_quat_wxyz(r0))))
