@@ -93,13 +93,11 @@ def pick_object(m, path: Path | str, body: str | None = None) -> ScenePick:
     articulated = [b for b in tops if moving[b]]
     notes: list[str] = []
     if body is not None:
-        hits = [b for b in range(1, m.nbody) if _matches(m, b, body)]
-        if not hits:
+        named = next((b for b in range(1, m.nbody) if _matches(m, b, body)), None)
+        if named is None:
             names = [label(m, b) for b in (articulated or tops)]
             raise StagingError(f"{path}: no body named {body!r}; the objects under the world body: {names}")
-        named = hits[0]
-        own = [t for t in joint_types(m, [named]) if t in (JNT_HINGE, JNT_SLIDE)]
-        if named in trees or own:  # an object under the world body, or a moving part of one: that object
+        if named in trees or body_joints(m, named, (JNT_HINGE, JNT_SLIDE)):  # an object under the world body, or a moving part of one: that object
             root = next(t for t in tops if named in trees[t])
             notes.append(f"object: body {label(m, root)!r} (asked: --body {body})")
         else:  # a body deeper in a scene (a kitchen's microwave on its counter): its own subtree, mounted where it is
