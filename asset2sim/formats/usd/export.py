@@ -81,11 +81,11 @@ def export_usd(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: boo
     """
     _pxr()  # ImportError first, without usd-core
     asset = RefinedAsset.existing(out_dir)
-    model, initial, springs, fixed = asset.model, asset.initial_state, asset.springs, asset.root.fixed
-    pieces, notes = asset.collision[0], list(asset.collision[1])  # the cached notes stay as read
+    model, springs, fixed = asset.model, asset.springs, asset.root.fixed
+    notes = list(asset.collision[1])  # the cached notes stay as read
     stage, root_path = _new_stage(model)
-    link_paths = _write_links(stage, root_path, model, initial, pieces, visuals, notes, asset.meshes)
-    joint_paths = _write_joints(stage, root_path, model, link_paths, initial, springs, fixed)
+    link_paths = _write_links(stage, root_path, asset, visuals, notes)
+    joint_paths = _write_joints(stage, root_path, asset, link_paths, springs)
     target = _save(stage, asset.folder / USD_DIR / f"{asset.urdf_path.stem}.usd")
     build = UsdBuild(path=target, links=link_paths, joints=joint_paths, fixed_root=fixed, notes=notes)
     if check:
@@ -114,20 +114,20 @@ def _new_stage(model: UrdfModel):
     return stage, root_path
 
 
-def _write_links(stage, root_path, model: UrdfModel, initial: dict[str, float], pieces: dict[str, list[CollisionPiece]],
-                 visuals: bool, notes: list[str], meshes: MeshCache) -> dict[str, str]:
-    """Every link as a rigid body under ``root_path``, posed at the initial
-    state, with its visuals (``visuals``, their files read through ``meshes``) and collision pieces; returns URDF
+def _write_links(stage, root_path, asset: RefinedAsset, visuals: bool, notes: list[str]) -> dict[str, str]:
+    """Every link of ``asset``'s model as a rigid body under ``root_path``, posed at the folder's initial
+    state, with its visuals (``visuals``, their files read through ``asset.meshes``) and collision pieces; returns URDF
     link name -> prim path."""
-    poses = model.link_poses(initial)
+    model = asset.model
+    poses = model.link_poses(asset.initial_state)
     link_paths: dict[str, str] = {}
     for name, prim_name in _names(model.tree_order()).items():
         path = root_path.AppendChild(prim_name)
         link_paths[name] = str(path)
         _write_body(stage, path, model, name, poses[name], notes)
         if visuals:
-            _write_visuals(stage, path, model, name, notes, meshes)
-        _write_collisions(stage, path, pieces.get(name, []))
+            _write_visuals(stage, path, model, name, notes, asset.meshes)
+        _write_collisions(stage, path, asset.collision[0].get(name, []))
     return link_paths
 
 
@@ -156,12 +156,12 @@ def _write_body(stage, path, model: UrdfModel, name: str, pose: np.ndarray, note
         mat.CreateRestitutionAttr(float(link.restitution or 0.0))
 
 
-def _write_joints(stage, root_path, model: UrdfModel, link_paths: dict[str, str], initial: dict[str, float], springs: dict,
-                  fixed: bool) -> dict[str, str]:
-    """Every URDF joint under ``/<robot>/joints`` and, for a ``fixed`` root,
-    a FixedJoint from the world to the root link; returns URDF joint name ->
+def _write_joints(stage, root_path, asset: RefinedAsset, link_paths: dict[str, str], springs: dict) -> dict[str, str]:
+    """Every URDF joint of ``asset`` under ``/<robot>/joints`` at the folder's initial state (``springs``: joint ->
+    its spring) and, for a fixed root, a FixedJoint from the world to the root link; returns URDF joint name ->
     prim path."""
     Gf, Sdf, _, _, UsdGeom, UsdPhysics = _pxr()
+    model = asset.model
     joint_names = _names([j.name for j in model.joints])
     joints_scope = root_path.AppendChild("joints")
     UsdGeom.Scope.Define(stage, joints_scope)
@@ -169,9 +169,9 @@ def _write_joints(stage, root_path, model: UrdfModel, link_paths: dict[str, str]
     for j in model.joints:
         jp = joints_scope.AppendChild(joint_names[j.name])
         joint_paths[j.name] = str(jp)
-        _write_joint(stage, jp, j, link_paths, initial, springs.get(j.name))
+        _write_joint(stage, jp, j, link_paths, asset.initial_state, springs.get(j.name))
     _filter_parent_child(stage, model, link_paths)
-    if fixed:
+    if asset.root.fixed:
         jp = joints_scope.AppendChild("root_joint" if "root_joint" not in joint_names.values() else "asset2sim_root_joint")
         fj = UsdPhysics.FixedJoint.Define(stage, jp)
         fj.CreateBody1Rel().SetTargets([Sdf.Path(link_paths[model.root])])
