@@ -97,7 +97,8 @@ def pick_object(m, path: Path | str, body: str | None = None) -> ScenePick:
         if named is None:
             names = [label(m, b) for b in (articulated or tops)]
             raise StagingError(f"{path}: no body named {body!r}; the objects under the world body: {names}")
-        if named in trees or body_joints(m, named, (JNT_HINGE, JNT_SLIDE)):  # an object under the world body, or a moving part of one: that object
+        # an object under the world body, or a moving part of one: that object
+        if named in trees or body_joints(m, named, (JNT_HINGE, JNT_SLIDE)):
             root = next(t for t in tops if named in trees[t])
             notes.append(f"object: body {label(m, root)!r} (asked: --body {body})")
         else:  # a body deeper in a scene (a kitchen's microwave on its counter): its own subtree, mounted where it is
