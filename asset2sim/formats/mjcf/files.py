@@ -107,25 +107,24 @@ def _resolve(value: str, base: str, tree: str, source: Path, what: str) -> str:
         StagingError: ``MJCF_PATH_ESCAPES`` for a control character, a URI, an absolute path (unless allowed) or one
             leaving ``tree`` (lexically or through a symlink, unless into an allowed folder).
     """
-    # NUL among them
-    if any(ord(c) < 32 for c in value):
-        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: a control character in the path")
-    if _URI.match(value) and not _DRIVE.match(value):
-        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: a URI; only relative paths inside {tree} are read")
     absolute = value.startswith(("/", "\\")) or bool(_DRIVE.match(value))
     joined = os.path.normpath(value if absolute else os.path.join(base, value))
-    if allowed_outside(joined):
+    widen = " (--allow-outside-paths DIR widens this)"
+    if any(ord(c) < 32 for c in value):  # NUL among them
+        why = ": a control character in the path"
+    elif _URI.match(value) and not _DRIVE.match(value):
+        why = f": a URI; only relative paths inside {tree} are read"
+    elif allowed_outside(joined):
         return joined
-    if absolute:
-        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: an absolute path; only relative paths inside {tree} "
-                      "are read (--allow-outside-paths DIR widens this)")
-    if not inside(joined, tree):
-        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r} resolves to {joined}, outside {tree} "
-                      "(--allow-outside-paths DIR widens this)")
-    real = os.path.realpath(joined)
-    if not inside(real, os.path.realpath(tree)):
-        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r} is a symlink (or under one) to {real}, outside {tree}")
-    return joined
+    elif absolute:
+        why = f": an absolute path; only relative paths inside {tree} are read{widen}"
+    elif not inside(joined, tree):
+        why = f" resolves to {joined}, outside {tree}{widen}"
+    elif not inside(real := os.path.realpath(joined), os.path.realpath(tree)):
+        why = f" is a symlink (or under one) to {real}, outside {tree}"
+    else:
+        return joined
+    raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}{why}")
 
 
 class _Gather:

@@ -77,13 +77,16 @@ def check_usd(path: Path, out_dir: Path | RefinedAsset) -> UsdCheck:
     usd = read_usd(path)
     worst = 0.0
 
+    def fail(message: str) -> UsdExportError:
+        return UsdExportError(f"{path}: {message}")
+
     def cmp(what: str, got, want, scale: float) -> None:
         nonlocal worst
         got, want = np.atleast_1d(np.asarray(got, float)), np.atleast_1d(np.asarray(want, float))
         err = float(np.abs(got - want).max()) / max(scale, 1e-300)
         worst = max(worst, err)
         if not all(abs(float(g) - float(w)) <= FLOAT_RTOL * max(abs(float(w)), scale) + 1e-15 for g, w in zip(got.ravel(), want.ravel())):
-            raise UsdExportError(f"{path}: {what} is {got.tolist()} in the USD, {want.tolist()} in {out_dir}")
+            raise fail(f"{what} is {got.tolist()} in the USD, {want.tolist()} in {out_dir}")
 
     def cmp_inertial(what: str, got: UrdfInertial, mass: float, com: np.ndarray, inertia: np.ndarray) -> None:
         cmp(f"{what} mass (kg)", got.mass, mass, abs(mass))
@@ -91,18 +94,18 @@ def check_usd(path: Path, out_dir: Path | RefinedAsset) -> UsdCheck:
         cmp(f"{what} inertia tensor (kg*m^2)", got.inertia_in_link_axes(), inertia, float(np.abs(inertia).max()))
 
     if usd.root_fixed != fixed:
-        raise UsdExportError(f"{path}: root {'fixed' if usd.root_fixed else 'free'} in the USD, "
-                             f"{'fixed' if fixed else 'free'} in {out_dir / 'initial_state.json'}")
+        raise fail(f"root {'fixed' if usd.root_fixed else 'free'} in the USD, "
+                   f"{'fixed' if fixed else 'free'} in {out_dir / 'initial_state.json'}")
     for name, link in model.links.items():
         if name not in usd.model.links:
-            raise UsdExportError(f"{path}: no rigid body for link {name!r}")
+            raise fail(f"no rigid body for link {name!r}")
         got = usd.model.links[name].inertial
         if link.inertial is None:
             if got is not None:
-                raise UsdExportError(f"{path}: link {name!r} has a mass in the USD but no <inertial> in the URDF")
+                raise fail(f"link {name!r} has a mass in the USD but no <inertial> in the URDF")
             continue
         if got is None:
-            raise UsdExportError(f"{path}: link {name!r} lacks mass, COM or inertia in the USD")
+            raise fail(f"link {name!r} lacks mass, COM or inertia in the USD")
         cmp_inertial(f"link {name!r}", got, link.inertial.mass, link.inertial.com(), link.inertial.inertia_in_link_axes())
     joints = {j.name: j for j in usd.model.joints}
     overlay = asset.overlay
@@ -110,11 +113,11 @@ def check_usd(path: Path, out_dir: Path | RefinedAsset) -> UsdCheck:
         for name, lp in overlay.links.items():
             got = usd.model.links.get(name)
             if got is None or got.inertial is None:
-                raise UsdExportError(f"{path}: overlay link {name!r} has no mass, COM or inertia in the USD")
+                raise fail(f"overlay link {name!r} has no mass, COM or inertia in the USD")
             cmp_inertial(f"overlay link {name!r}", got.inertial, lp.mass, np.asarray(lp.com, float), lp.inertia.matrix())
         for name, jd in overlay.joints.items():
             if name not in joints:
-                raise UsdExportError(f"{path}: overlay joint {name!r} is not in the USD")
+                raise fail(f"overlay joint {name!r} is not in the USD")
             spring = usd.springs.get(name)
             held = {"damping": joints[name].damping, "friction": joints[name].friction, "stiffness": spring.stiffness if spring else 0.0}
             for q, value in held.items():
@@ -122,13 +125,13 @@ def check_usd(path: Path, out_dir: Path | RefinedAsset) -> UsdCheck:
     for j in model.movable_joints:
         got = joints.get(j.name)
         if got is None:
-            raise UsdExportError(f"{path}: no joint {j.name!r}")
+            raise fail(f"no joint {j.name!r}")
         if j.type in ("revolute", "prismatic"):
             if got.type != j.type:
-                raise UsdExportError(f"{path}: joint {j.name!r} has no limits in the USD")
+                raise fail(f"joint {j.name!r} has no limits in the USD")
             cmp(f"joint {j.name!r} limits", [got.lower, got.upper], [j.lower, j.upper], max(abs(j.lower), abs(j.upper), 1e-3))
         elif got.type != "continuous":
-            raise UsdExportError(f"{path}: continuous joint {j.name!r} has limits in the USD")
+            raise fail(f"continuous joint {j.name!r} has limits in the USD")
         for q in ("damping", "friction"):
             cmp(f"joint {j.name!r} {q}", getattr(got, q), getattr(j, q), abs(getattr(j, q)))
         s, held = springs.get(j.name), usd.springs.get(j.name)
