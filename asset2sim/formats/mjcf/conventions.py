@@ -99,8 +99,13 @@ class ReadOptions:
     mjcf_angle: AngleUnit | None = None
 
     def __post_init__(self) -> None:
-        if self.mjcf_angle is not None and self.mjcf_angle not in ANGLE_UNITS:
-            raise ValueError(f"mjcf angle {self.mjcf_angle!r}: expected one of {list(ANGLE_UNITS)}")
+        _check_unit(self.mjcf_angle)
+
+
+def _check_unit(unit: str | None) -> None:
+    """ValueError: ``unit`` (an angle unit asked) is neither None, ``radian`` nor ``degree``."""
+    if unit is not None and unit not in ANGLE_UNITS:
+        raise ValueError(f"mjcf angle {unit!r}: expected one of {list(ANGLE_UNITS)}")
 
 
 @dataclass(frozen=True)
@@ -249,9 +254,8 @@ def mjcf_angle(path: Path | str, override: AngleUnit | None = None, files: Mappi
         ValueError: ``override`` is neither ``radian`` nor ``degree``.
     """
     path = Path(path)
+    _check_unit(override)
     if override is not None:
-        if override not in ANGLE_UNITS:
-            raise ValueError(f"mjcf angle {override!r}: expected one of {list(ANGLE_UNITS)}")
         return AngleConvention(override, "override", None, f"asked (--mjcf-angle {override}, config mjcf.angle)")
     own, where = file_compiler_angle(path, files)
     if own is not None:

@@ -333,9 +333,9 @@ def _set_keyframe(spec, m, state: dict[str, float], joints: list[tuple[str, int]
     for name, j in joints:
         if name in state:
             qpos[int(m.jnt_qposadr[j])] = float(state[name])
-    existing = [k for k in spec.keys if k.name == KEYFRAME]
-    if existing:
-        existing[0].qpos = qpos
+    existing = next((k for k in spec.keys if k.name == KEYFRAME), None)
+    if existing is not None:
+        existing.qpos = qpos
     else:
         spec.add_key(name=KEYFRAME, qpos=qpos)
 

@@ -220,13 +220,11 @@ class _Reader:
     def _effort(self, j: int) -> float | None:
         """Largest force (N or N*m) the joint's actuator force range or an actuator on it allows; None when unbounded."""
         m, mj = self.m, self.mj
-        forces = []
-        if bool(m.jnt_actfrclimited[j]):
-            forces.append(float(np.abs(m.jnt_actfrcrange[j]).max()))
-        for a in range(m.nu):
-            if m.actuator_trntype[a] == mj.mjtTrn.mjTRN_JOINT and int(m.actuator_trnid[a, 0]) == j and bool(m.actuator_forcelimited[a]):
-                forces.append(float(np.abs(m.actuator_forcerange[a]).max() * abs(float(m.actuator_gear[a, 0]))))
-        return max(forces) if forces else None
+        forces = [float(np.abs(m.jnt_actfrcrange[j]).max())] if bool(m.jnt_actfrclimited[j]) else []
+        forces += [float(np.abs(m.actuator_forcerange[a]).max() * abs(float(m.actuator_gear[a, 0]))) for a in range(m.nu)
+                   if m.actuator_trntype[a] == mj.mjtTrn.mjTRN_JOINT and int(m.actuator_trnid[a, 0]) == j
+                   and bool(m.actuator_forcelimited[a])]
+        return max(forces, default=None)
 
     # ------------------------------------------------------------------- links
     def _link(self, b: int, to_link: np.ndarray) -> UrdfLink:
