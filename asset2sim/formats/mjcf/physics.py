@@ -131,10 +131,8 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
             link = model.links.get(name)
             if link is None:
                 raise HostExportError(f"{source}: body {name!r} has no link in the refined {URDF_NAME}")
-            offset = np.zeros(3)
             jids = scene.body_joints(original, b, (scene.JNT_HINGE, scene.JNT_SLIDE))
-            if jids:
-                offset = np.asarray(original.jnt_pos[jids[0]], float)  # the link frame sits on the joint
+            offset = np.asarray(original.jnt_pos[jids[0]], float) if jids else np.zeros(3)  # the link frame sits on the joint
             carries = int(original.body_geomnum[b]) > 0 or explicit.get(original.body(b).name, False)
             if carries and link.inertial is not None and link.inertial.mass:
                 inertial = link.inertial
@@ -397,9 +395,7 @@ def write_patched_mjcf(source: Path, read: ReadAsset | None, children: dict[str,
     with mujoco_messages():
         spec.compile()
         xml = spec.to_xml()
-    out = folder / file_names.file_stem(source.name)
-    atomic.write_text(out, xml)
-    return out
+    return atomic.write_text(folder / file_names.file_stem(source.name), xml)
 
 
 def _joint_offset(model, b: int) -> np.ndarray:

@@ -170,7 +170,11 @@ def _write_joints(stage, root_path, asset: RefinedAsset, link_paths: dict[str, s
         jp = joints_scope.AppendChild(joint_names[j.name])
         joint_paths[j.name] = str(jp)
         _write_joint(stage, jp, j, link_paths, asset.initial_state, springs.get(j.name))
-    _filter_parent_child(stage, model, link_paths)
+        # UsdPhysics.FilteredPairsAPI on the child body naming its parent: the SPEC's exclusion of a link and its
+        # parent, explicit for a runtime or importer that collides jointed bodies (UsdPhysics joints disable their two
+        # bodies' collision only through physics:collisionEnabled, which a fixed joint merged by an importer loses)
+        api = UsdPhysics.FilteredPairsAPI.Apply(stage.GetPrimAtPath(link_paths[j.child]))
+        api.CreateFilteredPairsRel().AddTarget(Sdf.Path(link_paths[j.parent]))
     if asset.root.fixed:
         jp = joints_scope.AppendChild("root_joint" if "root_joint" not in joint_names.values() else "asset2sim_root_joint")
         fj = UsdPhysics.FixedJoint.Define(stage, jp)
@@ -180,17 +184,6 @@ def _write_joints(stage, root_path, asset: RefinedAsset, link_paths: dict[str, s
         fj.CreateLocalPos1Attr(Gf.Vec3f(0, 0, 0))
         fj.CreateLocalRot1Attr(Gf.Quatf(1, 0, 0, 0))
     return joint_paths
-
-
-def _filter_parent_child(stage, model: UrdfModel, link_paths: dict[str, str]) -> None:
-    """``UsdPhysics.FilteredPairsAPI`` on every joint's child body naming its parent: the SPEC's exclusion of a link and
-    its parent, explicit for a runtime or importer that collides jointed bodies (UsdPhysics joints disable their two
-    bodies' collision only through ``physics:collisionEnabled``, which a fixed joint merged by an importer loses)."""
-    _, Sdf, _, _, _, UsdPhysics = _pxr()
-    for j in model.joints:
-        child = stage.GetPrimAtPath(link_paths[j.child])
-        api = UsdPhysics.FilteredPairsAPI.Apply(child)
-        api.CreateFilteredPairsRel().AddTarget(Sdf.Path(link_paths[j.parent]))
 
 
 def _save(stage, target: Path) -> Path:
@@ -297,9 +290,8 @@ def _write_joint(stage, path, j: UrdfJoint, link_paths: dict[str, str], initial:
     prim = joint.GetPrim()
     prim.CreateAttribute("asset2sim:name", Sdf.ValueTypeNames.String, custom=True).Set(j.name)
     a = _axis_frame(j.axis) if j.type in MOVABLE else np.eye(3)
-    r0 = j.origin[:3, :3] @ a
     joint.CreateLocalPos0Attr(Gf.Vec3f(*map(float, j.origin[:3, 3])))
-    joint.CreateLocalRot0Attr(Gf.Quatf(*map(float, matrix_quat_wxyz(r0))))
+    joint.CreateLocalRot0Attr(Gf.Quatf(*map(float, matrix_quat_wxyz(j.origin[:3, :3] @ a))))
     joint.CreateLocalPos1Attr(Gf.Vec3f(0.0, 0.0, 0.0))
     joint.CreateLocalRot1Attr(Gf.Quatf(*map(float, matrix_quat_wxyz(a))))
     if j.type == "fixed":

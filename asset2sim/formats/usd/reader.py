@@ -303,8 +303,7 @@ def _dynamics(ctx: StageReading, j: _Joint) -> tuple[UrdfDynamics | None, Declar
         effort = max_force * force if math.isfinite(max_force) and 0 <= max_force < UNLIMITED else None
         if str(drive.GetTypeAttr().Get()) == "acceleration":
             ctx.notes.append(f"{j.what}: acceleration drive, its gains read as force gains")
-    given = [authored(j.prim, a) for a in FRICTION_ATTRS]
-    friction = next((float(v) * force for v in given if v is not None), None)
+    friction = next((float(v) * force for a in FRICTION_ATTRS if (v := authored(j.prim, a)) is not None), None)
     physx = authored(j.prim, "physxJoint:jointFriction")
     if physx is not None and friction is None:
         ctx.notes.append(f"{j.what}: physxJoint:jointFriction {physx} is PhysX's unitless coefficient, not a "
