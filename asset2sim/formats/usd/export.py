@@ -79,18 +79,46 @@ def export_usd(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: boo
         UrdfError: the URDF or a collision mesh cannot be read.
         UsdExportError: the written file does not check out.
     """
-    _pxr()  # ImportError first, without usd-core
+    Gf, Sdf, _, _, UsdGeom, UsdPhysics = _pxr()  # ImportError first, without usd-core
     asset = RefinedAsset.existing(out_dir)
-    model, springs, fixed = asset.model, asset.springs, asset.root.fixed
+    model, state = asset.model, asset.initial_state
     notes = list(asset.collision[1])  # the cached notes stay as read
     stage, root_path = _new_stage(model)
-    link_paths = _write_links(stage, root_path, asset, visuals, notes)
-    joint_paths = _write_joints(stage, root_path, asset, link_paths, springs)
+    # every link a rigid body under /<robot>, posed at the folder's initial state, with its visuals (``visuals``, their
+    # files read through asset.meshes) and collision pieces: URDF link name -> prim path
+    poses, links = model.link_poses(state), {}
+    for name, prim_name in _names(model.tree_order()).items():
+        path = root_path.AppendChild(prim_name)
+        links[name] = str(path)
+        _write_body(stage, path, model, name, poses[name], notes)
+        if visuals:
+            _write_visuals(stage, path, model, name, notes, asset.meshes)
+        _write_collisions(stage, path, asset.collision[0].get(name, []))
+    # every URDF joint under /<robot>/joints at the initial state, with its spring, and for a fixed root a FixedJoint
+    # from the world to the root link: URDF joint name -> prim path
+    joint_names, scope, joints = _names([j.name for j in model.joints]), root_path.AppendChild("joints"), {}
+    UsdGeom.Scope.Define(stage, scope)
+    for j in model.joints:
+        jp = scope.AppendChild(joint_names[j.name])
+        joints[j.name] = str(jp)
+        _write_joint(stage, jp, j, links, state, asset.springs.get(j.name))
+        # UsdPhysics.FilteredPairsAPI on the child body naming its parent: the SPEC's exclusion of a link and its
+        # parent, explicit for a runtime or importer that collides jointed bodies (UsdPhysics joints disable their two
+        # bodies' collision only through physics:collisionEnabled, which a fixed joint merged by an importer loses)
+        api = UsdPhysics.FilteredPairsAPI.Apply(stage.GetPrimAtPath(links[j.child]))
+        api.CreateFilteredPairsRel().AddTarget(Sdf.Path(links[j.parent]))
+    if asset.root.fixed:
+        fj = UsdPhysics.FixedJoint.Define(stage, scope.AppendChild(
+            "root_joint" if "root_joint" not in joint_names.values() else "asset2sim_root_joint"))
+        fj.CreateBody1Rel().SetTargets([Sdf.Path(links[model.root])])
+        fj.CreateLocalPos0Attr(Gf.Vec3f(0, 0, 0))
+        fj.CreateLocalRot0Attr(Gf.Quatf(1, 0, 0, 0))
+        fj.CreateLocalPos1Attr(Gf.Vec3f(0, 0, 0))
+        fj.CreateLocalRot1Attr(Gf.Quatf(1, 0, 0, 0))
     target = _save(stage, asset.folder / USD_DIR / f"{asset.urdf_path.stem}.usd")
-    build = UsdBuild(path=target, links=link_paths, joints=joint_paths, fixed_root=fixed, notes=notes)
     if check:
         check_usd(target, asset)
-    return build
+    return UsdBuild(path=target, links=links, joints=joints, fixed_root=asset.root.fixed, notes=notes)
 
 
 def _new_stage(model: UrdfModel):
@@ -112,23 +140,6 @@ def _new_stage(model: UrdfModel):
         "UsdPhysics prescribes; Coulomb joint friction in newton:friction / asset2sim:friction (N*m or N)."
     )
     return stage, root_path
-
-
-def _write_links(stage, root_path, asset: RefinedAsset, visuals: bool, notes: list[str]) -> dict[str, str]:
-    """Every link of ``asset``'s model as a rigid body under ``root_path``, posed at the folder's initial
-    state, with its visuals (``visuals``, their files read through ``asset.meshes``) and collision pieces; returns URDF
-    link name -> prim path."""
-    model = asset.model
-    poses = model.link_poses(asset.initial_state)
-    link_paths: dict[str, str] = {}
-    for name, prim_name in _names(model.tree_order()).items():
-        path = root_path.AppendChild(prim_name)
-        link_paths[name] = str(path)
-        _write_body(stage, path, model, name, poses[name], notes)
-        if visuals:
-            _write_visuals(stage, path, model, name, notes, asset.meshes)
-        _write_collisions(stage, path, asset.collision[0].get(name, []))
-    return link_paths
 
 
 def _write_body(stage, path, model: UrdfModel, name: str, pose: np.ndarray, notes: list[str]) -> None:
@@ -154,36 +165,6 @@ def _write_body(stage, path, model: UrdfModel, name: str, pose: np.ndarray, note
         mat.CreateStaticFrictionAttr(float(link.lateral_friction))
         mat.CreateDynamicFrictionAttr(float(link.lateral_friction))
         mat.CreateRestitutionAttr(float(link.restitution or 0.0))
-
-
-def _write_joints(stage, root_path, asset: RefinedAsset, link_paths: dict[str, str], springs: dict) -> dict[str, str]:
-    """Every URDF joint of ``asset`` under ``/<robot>/joints`` at the folder's initial state (``springs``: joint ->
-    its spring) and, for a fixed root, a FixedJoint from the world to the root link; returns URDF joint name ->
-    prim path."""
-    Gf, Sdf, _, _, UsdGeom, UsdPhysics = _pxr()
-    model = asset.model
-    joint_names = _names([j.name for j in model.joints])
-    joints_scope = root_path.AppendChild("joints")
-    UsdGeom.Scope.Define(stage, joints_scope)
-    joint_paths: dict[str, str] = {}
-    for j in model.joints:
-        jp = joints_scope.AppendChild(joint_names[j.name])
-        joint_paths[j.name] = str(jp)
-        _write_joint(stage, jp, j, link_paths, asset.initial_state, springs.get(j.name))
-        # UsdPhysics.FilteredPairsAPI on the child body naming its parent: the SPEC's exclusion of a link and its
-        # parent, explicit for a runtime or importer that collides jointed bodies (UsdPhysics joints disable their two
-        # bodies' collision only through physics:collisionEnabled, which a fixed joint merged by an importer loses)
-        api = UsdPhysics.FilteredPairsAPI.Apply(stage.GetPrimAtPath(link_paths[j.child]))
-        api.CreateFilteredPairsRel().AddTarget(Sdf.Path(link_paths[j.parent]))
-    if asset.root.fixed:
-        jp = joints_scope.AppendChild("root_joint" if "root_joint" not in joint_names.values() else "asset2sim_root_joint")
-        fj = UsdPhysics.FixedJoint.Define(stage, jp)
-        fj.CreateBody1Rel().SetTargets([Sdf.Path(link_paths[model.root])])
-        fj.CreateLocalPos0Attr(Gf.Vec3f(0, 0, 0))
-        fj.CreateLocalRot0Attr(Gf.Quatf(1, 0, 0, 0))
-        fj.CreateLocalPos1Attr(Gf.Vec3f(0, 0, 0))
-        fj.CreateLocalRot1Attr(Gf.Quatf(1, 0, 0, 0))
-    return joint_paths
 
 
 def _save(stage, target: Path) -> Path:
