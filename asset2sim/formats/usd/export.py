@@ -88,9 +88,27 @@ def export_usd(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: boo
     # files read through asset.meshes) and collision pieces: URDF link name -> prim path
     poses, links = model.link_poses(state), {}
     for name, prim_name in _names(model.tree_order()).items():
-        path = root_path.AppendChild(prim_name)
+        path, link = root_path.AppendChild(prim_name), model.links[name]
         links[name] = str(path)
-        _write_body(stage, path, model, name, poses[name], notes)
+        # an Xform with RigidBodyAPI, MassAPI (mass kg, COM m, principal moments kg*m^2 and axes) and a physics
+        # material when the URDF gives a lateral friction
+        prim = _placed(UsdGeom.Xform.Define(stage, path), poses[name]).GetPrim()
+        prim.CreateAttribute("asset2sim:name", Sdf.ValueTypeNames.String, custom=True).Set(name)
+        UsdPhysics.RigidBodyAPI.Apply(prim)
+        mass_api = UsdPhysics.MassAPI.Apply(prim)
+        if link.inertial is not None and link.inertial.mass is not None:
+            mass_api.CreateMassAttr(float(link.inertial.mass))
+            mass_api.CreateCenterOfMassAttr(Gf.Vec3f(*map(float, link.inertial.com())))
+            moments, axes = principal_axes(link.inertial.inertia_in_link_axes())
+            mass_api.CreateDiagonalInertiaAttr(Gf.Vec3f(*map(float, moments)))
+            mass_api.CreatePrincipalAxesAttr(Gf.Quatf(*matrix_quat_wxyz(axes).tolist()))
+        else:
+            notes.append(f"link {name!r} has no <inertial>: physics:mass not authored (computed from colliders)")
+        if link.lateral_friction is not None:
+            mat = UsdPhysics.MaterialAPI.Apply(UsdGeom.Scope.Define(stage, path.AppendChild("physics_material")).GetPrim())
+            mat.CreateStaticFrictionAttr(float(link.lateral_friction))
+            mat.CreateDynamicFrictionAttr(float(link.lateral_friction))
+            mat.CreateRestitutionAttr(float(link.restitution or 0.0))
         if visuals:
             _write_visuals(stage, path, model, name, notes, asset.meshes)
         _write_collisions(stage, path, asset.collision[0].get(name, []))
@@ -140,31 +158,6 @@ def _new_stage(model: UrdfModel):
         "UsdPhysics prescribes; Coulomb joint friction in newton:friction / asset2sim:friction (N*m or N)."
     )
     return stage, root_path
-
-
-def _write_body(stage, path, model: UrdfModel, name: str, pose: np.ndarray, notes: list[str]) -> None:
-    """Link ``name``'s Xform at ``pose`` (4, 4) with RigidBodyAPI, MassAPI
-    (mass kg, COM m, principal moments kg*m^2 and axes) and a physics
-    material when the URDF gives a lateral friction."""
-    Gf, Sdf, _, _, UsdGeom, UsdPhysics = _pxr()
-    link = model.links[name]
-    prim = _placed(UsdGeom.Xform.Define(stage, path), pose).GetPrim()
-    prim.CreateAttribute("asset2sim:name", Sdf.ValueTypeNames.String, custom=True).Set(name)
-    UsdPhysics.RigidBodyAPI.Apply(prim)
-    mass_api = UsdPhysics.MassAPI.Apply(prim)
-    if link.inertial is not None and link.inertial.mass is not None:
-        mass_api.CreateMassAttr(float(link.inertial.mass))
-        mass_api.CreateCenterOfMassAttr(Gf.Vec3f(*map(float, link.inertial.com())))
-        moments, axes = principal_axes(link.inertial.inertia_in_link_axes())
-        mass_api.CreateDiagonalInertiaAttr(Gf.Vec3f(*map(float, moments)))
-        mass_api.CreatePrincipalAxesAttr(Gf.Quatf(*matrix_quat_wxyz(axes).tolist()))
-    else:
-        notes.append(f"link {name!r} has no <inertial>: physics:mass not authored (computed from colliders)")
-    if link.lateral_friction is not None:
-        mat = UsdPhysics.MaterialAPI.Apply(UsdGeom.Scope.Define(stage, path.AppendChild("physics_material")).GetPrim())
-        mat.CreateStaticFrictionAttr(float(link.lateral_friction))
-        mat.CreateDynamicFrictionAttr(float(link.lateral_friction))
-        mat.CreateRestitutionAttr(float(link.restitution or 0.0))
 
 
 def _save(stage, target: Path) -> Path:
