@@ -260,10 +260,33 @@ def _joint(ctx: StageReading, j: _Joint, parent_frame: np.ndarray, key: dict) ->
             raise ctx.error(j.what, f"axis {token!r} is not X, Y or Z")
         uj.axis_xyz = turn.T @ ctx.u @ _AXES[token]  # the joint frame's axis in the child link axes
         uj.type, uj.limit = _limits(ctx, j)
-        uj.dynamics, spring, effort = _dynamics(ctx, j)
-        if effort is not None:
-            uj.limit = uj.limit or UrdfLimit()
-            uj.limit.effort = effort
+        # damping and friction, the spring (stiffness > 0) and the effort limit (N*m or N), in SI
+        UsdPhysics = pxr_modules()[5]
+        rot = j.kind == "revolute"
+        dof = "angular" if rot else "linear"
+        force = ctx.kg * ctx.m * (ctx.m if rot else 1.0)  # stage unit of torque or force -> N*m or N
+        gain = ctx.kg * ctx.m ** 2 * DEG if rot else ctx.kg  # per degree or per stage length -> per rad or per m
+        damping = None
+        if j.prim.HasAPI(UsdPhysics.DriveAPI, dof):
+            drive = UsdPhysics.DriveAPI.Get(j.prim, dof)
+            damping = float(drive.GetDampingAttr().Get() or 0.0) * gain
+            stiffness = float(drive.GetStiffnessAttr().Get() or 0.0) * gain
+            if stiffness > 0:
+                target = float(drive.GetTargetPositionAttr().Get() or 0.0) * (1.0 / DEG if rot else ctx.m)
+                spring = DeclaredSpring(stiffness=stiffness, reference=target)
+            max_force = float(drive.GetMaxForceAttr().Get())
+            if math.isfinite(max_force) and 0 <= max_force < UNLIMITED:
+                uj.limit = uj.limit or UrdfLimit()
+                uj.limit.effort = max_force * force
+            if str(drive.GetTypeAttr().Get()) == "acceleration":
+                ctx.notes.append(f"{j.what}: acceleration drive, its gains read as force gains")
+        friction = next((float(v) * force for a in FRICTION_ATTRS if (v := authored(j.prim, a)) is not None), None)
+        physx = authored(j.prim, "physxJoint:jointFriction")
+        if physx is not None and friction is None:
+            ctx.notes.append(f"{j.what}: physxJoint:jointFriction {physx} is PhysX's unitless coefficient, not a "
+                             "friction torque or force: not taken")
+        if damping is not None or friction is not None:
+            uj.dynamics = UrdfDynamics(damping=damping, friction=friction)
     return child, uj, spring
 
 
@@ -282,34 +305,6 @@ def _limits(ctx: StageReading, j: _Joint) -> tuple[str, UrdfLimit | None]:
     if lo > hi:
         raise ctx.error(j.what, f"lower limit {lo} > upper limit {hi}")
     return j.kind, UrdfLimit(lower=lo * unit, upper=hi * unit, velocity=vel)
-
-
-def _dynamics(ctx: StageReading, j: _Joint) -> tuple[UrdfDynamics | None, DeclaredSpring | None, float | None]:
-    """Damping and friction, the spring (stiffness > 0) and the effort limit (N*m or N) of a movable joint, in SI."""
-    UsdPhysics = pxr_modules()[5]
-    rot = j.kind == "revolute"
-    dof = "angular" if rot else "linear"
-    force = ctx.kg * ctx.m * (ctx.m if rot else 1.0)  # stage unit of torque or force -> N*m or N
-    gain = ctx.kg * ctx.m ** 2 * DEG if rot else ctx.kg  # per degree or per stage length -> per rad or per m
-    damping = effort = spring = None
-    if j.prim.HasAPI(UsdPhysics.DriveAPI, dof):
-        drive = UsdPhysics.DriveAPI.Get(j.prim, dof)
-        damping = float(drive.GetDampingAttr().Get() or 0.0) * gain
-        stiffness = float(drive.GetStiffnessAttr().Get() or 0.0) * gain
-        if stiffness > 0:
-            target = float(drive.GetTargetPositionAttr().Get() or 0.0) * (1.0 / DEG if rot else ctx.m)
-            spring = DeclaredSpring(stiffness=stiffness, reference=target)
-        max_force = float(drive.GetMaxForceAttr().Get())
-        effort = max_force * force if math.isfinite(max_force) and 0 <= max_force < UNLIMITED else None
-        if str(drive.GetTypeAttr().Get()) == "acceleration":
-            ctx.notes.append(f"{j.what}: acceleration drive, its gains read as force gains")
-    friction = next((float(v) * force for a in FRICTION_ATTRS if (v := authored(j.prim, a)) is not None), None)
-    physx = authored(j.prim, "physxJoint:jointFriction")
-    if physx is not None and friction is None:
-        ctx.notes.append(f"{j.what}: physxJoint:jointFriction {physx} is PhysX's unitless coefficient, not a "
-                         "friction torque or force: not taken")
-    dyn = UrdfDynamics(damping=damping, friction=friction) if damping is not None or friction is not None else None
-    return dyn, spring, effort
 
 
 def _link(ctx: StageReading, body, name: str, frame: np.ndarray) -> UrdfLink:
