@@ -240,7 +240,17 @@ class _Reader:
             compiled = UrdfInertial(mass=float(m.body_mass[b]), origin=translation_matrix(com), inertia=rot @ tensor @ rot.T)
             if self.explicit.get(name, False):
                 inertial = compiled
-                self._written_moments(b, name)
+                # the principal moments as written, when MuJoCo's balanceinertia changed them on loading (noted)
+                body = self.spec.bodies[b]
+                full = np.asarray(body.fullinertia, float)
+                declared = (np.array([[full[0], full[3], full[4]], [full[3], full[1], full[5]], [full[4], full[5], full[2]]])
+                            if not np.isnan(full).any() else np.diag(np.asarray(body.inertia, float)))
+                written = np.sort(np.linalg.eigvalsh(declared))
+                loaded = np.sort(np.asarray(m.body_inertia[b], float))
+                if not np.allclose(written, loaded, rtol=1e-6, atol=1e-12):
+                    self.written_moments[name] = tuple(float(v) for v in written)
+                    self.notes.append(f"body {name!r}: principal moments written {np.round(written, 9).tolist()} kg*m^2, "
+                                      f"loaded as {np.round(loaded, 9).tolist()} (MuJoCo's balanceinertia)")
             else:
                 self.inferred.append(name)
                 self.simulated[name] = compiled
@@ -285,19 +295,6 @@ class _Reader:
         if out:
             self.notes.append(f"initial joint positions from keyframe {key}")
         return out
-
-    def _written_moments(self, b: int, name: str) -> None:
-        """Record body ``b``'s principal moments as written when MuJoCo's ``balanceinertia`` changed them (noted)."""
-        body = self.spec.bodies[b]
-        full = np.asarray(body.fullinertia, float)
-        tensor = (np.array([[full[0], full[3], full[4]], [full[3], full[1], full[5]], [full[4], full[5], full[2]]])
-                  if not np.isnan(full).any() else np.diag(np.asarray(body.inertia, float)))
-        written = np.sort(np.linalg.eigvalsh(tensor))
-        compiled = np.sort(np.asarray(self.m.body_inertia[b], float))
-        if not np.allclose(written, compiled, rtol=1e-6, atol=1e-12):
-            self.written_moments[name] = tuple(float(v) for v in written)
-            self.notes.append(f"body {name!r}: principal moments written {np.round(written, 9).tolist()} kg*m^2, loaded as "
-                              f"{np.round(compiled, 9).tolist()} (MuJoCo's balanceinertia)")
 
     def _density(self, b: int) -> float | None:
         """The density (kg/m^3) MuJoCo infers body ``b``'s mass from: the one ``density`` of the geoms that
