@@ -387,8 +387,10 @@ def write_patched_mjcf(source: Path, read: ReadAsset | None, children: dict[str,
         spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_AUTO
     bodies = {scene.label(model, b): b for b in range(1, model.nbody)}
     for name, lp in links.items():
-        b = bodies[name]  # the link frame is the body frame moved to its joint's pos
-        set_body_inertial(spec.bodies[b], lp.mass, lp.com, lp.inertia.matrix(), _joint_offset(model, b))
+        b = bodies[name]  # the link frame is the body frame moved to its joint's pos, if it has one hinge or slide
+        n, adr = int(model.body_jntnum[b]), int(model.body_jntadr[b])
+        offset = np.asarray(model.jnt_pos[adr], float) if n == 1 and model.jnt_type[adr] in (2, 3) else np.zeros(3)
+        set_body_inertial(spec.bodies[b], lp.mass, lp.com, lp.inertia.matrix(), offset)
     for name, jd in joints.items():
         joint = next(j for j in spec.bodies[bodies[children[name]]].joints if j.type != mujoco.mjtJoint.mjJNT_FREE)
         set_joint_friction(joint, jd.damping, jd.friction)
@@ -396,9 +398,3 @@ def write_patched_mjcf(source: Path, read: ReadAsset | None, children: dict[str,
         spec.compile()
         xml = spec.to_xml()
     return atomic.write_text(folder / file_names.file_stem(source.name), xml)
-
-
-def _joint_offset(model, b: int) -> np.ndarray:
-    """(3,) m: the position of body ``b``'s hinge or slide joint in the body frame (0 without one)."""
-    n, adr = int(model.body_jntnum[b]), int(model.body_jntadr[b])
-    return np.asarray(model.jnt_pos[adr], float) if n == 1 and model.jnt_type[adr] in (2, 3) else np.zeros(3)

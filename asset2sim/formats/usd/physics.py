@@ -158,16 +158,6 @@ def _principal(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return d, q
 
 
-def _authored_tensor(body) -> np.ndarray:
-    """The inertia tensor (3, 3, body axes, stage units) ``body``'s diagonal inertia and principal axes give; NaN
-    where no diagonal inertia is authored."""
-    diag = authored(body, "physics:diagonalInertia")
-    if diag is None:
-        return np.full((3, 3), np.nan)
-    r = reader.quat_matrix(value_or(body, "physics:principalAxes", None))
-    return r @ np.diag(np.asarray(diag, float)) @ r.T
-
-
 def set_body_mass(edit: UsdEdit, ctx: StageReading, body, link_frame: np.ndarray, world: np.ndarray, mass: float,
                   com: np.ndarray, inertia: np.ndarray) -> None:
     """Author a link's ``mass`` kg, ``com`` (3,) m and ``inertia`` (3, 3) kg*m^2 about the COM, both in the link
@@ -182,7 +172,9 @@ def set_body_mass(edit: UsdEdit, ctx: StageReading, body, link_frame: np.ndarray
     edit.apply(body, "PhysicsMassAPI")
     edit.set(body, "physics:mass", float(mass / ctx.kg))
     edit.set(body, "physics:centerOfMass", Gf.Vec3f(*map(float, local)), Sdf.ValueTypeNames.Point3f)
-    if not same(_authored_tensor(body), tensor):  # the moments and axes together: one tensor has many of them
+    diag, r = authored(body, "physics:diagonalInertia"), reader.quat_matrix(value_or(body, "physics:principalAxes", None))
+    held = np.full((3, 3), np.nan) if diag is None else r @ np.diag(np.asarray(diag, float)) @ r.T  # stage units
+    if not same(held, tensor):  # the moments and axes together: one tensor has many of them
         edit.set(body, "physics:diagonalInertia", Gf.Vec3f(*map(float, d)), Sdf.ValueTypeNames.Float3)
         edit.set(body, "physics:principalAxes", Gf.Quatf(*matrix_quat_wxyz(q).tolist()), Sdf.ValueTypeNames.Quatf)
     if authored(body, "physics:density"):
