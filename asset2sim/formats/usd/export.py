@@ -15,7 +15,7 @@ import numpy as np
 
 from asset2sim import atomic
 from asset2sim.extras import pxr_modules as _pxr
-from asset2sim.engines.loading import CollisionPiece, principal_axes, transform_points
+from asset2sim.engines.loading import principal_axes, transform_points
 from asset2sim.refined_asset import RefinedAsset
 from asset2sim.formats.staging import numbered
 from asset2sim.formats.usd.check import check_usd
@@ -111,7 +111,18 @@ def export_usd(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: boo
             mat.CreateRestitutionAttr(float(link.restitution or 0.0))
         if visuals:
             _write_visuals(stage, path, model, name, notes, asset.meshes)
-        _write_collisions(stage, path, asset.collision[0].get(name, []))
+        scope = path.AppendChild("collisions")  # the collision pieces, guides; a hull a convex-hull mesh collider
+        UsdGeom.Scope.Define(stage, scope)
+        for k, piece in enumerate(asset.collision[0].get(name, [])):
+            p, hull = scope.AppendChild(f"piece_{k}"), piece.kind == "hull"
+            g = (_mesh(stage, p, *convex_hull_mesh(transform_points(piece.origin, piece.points))) if hull
+                 else _primitive(stage, p, piece.kind, piece.size, piece.radius, piece.length, piece.origin))
+            if g is None:
+                continue
+            UsdPhysics.CollisionAPI.Apply(g.GetPrim())
+            if hull:
+                UsdPhysics.MeshCollisionAPI.Apply(g.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.convexHull)
+            g.CreatePurposeAttr(UsdGeom.Tokens.guide)
     # every URDF joint under /<robot>/joints at the initial state, with its spring, and for a fixed root a FixedJoint
     # from the world to the root link: URDF joint name -> prim path
     joint_names, scope, joints = _names([j.name for j in model.joints]), root_path.AppendChild("joints"), {}
@@ -234,24 +245,6 @@ def _primitive(stage, path, kind: str, size, radius, length, origin: np.ndarray)
     if kind == "box":
         g.AddScaleOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, size)))
     return g
-
-
-def _write_collisions(stage, link_path, pieces: list[CollisionPiece]) -> None:
-    _, _, _, _, UsdGeom, UsdPhysics = _pxr()
-    scope = link_path.AppendChild("collisions")
-    UsdGeom.Scope.Define(stage, scope)
-    for k, piece in enumerate(pieces):
-        p = scope.AppendChild(f"piece_{k}")
-        if piece.kind == "hull":
-            g = _mesh(stage, p, *convex_hull_mesh(transform_points(piece.origin, piece.points)))
-            UsdPhysics.CollisionAPI.Apply(g.GetPrim())
-            UsdPhysics.MeshCollisionAPI.Apply(g.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.convexHull)
-        else:
-            g = _primitive(stage, p, piece.kind, piece.size, piece.radius, piece.length, piece.origin)
-            if g is None:
-                continue
-            UsdPhysics.CollisionAPI.Apply(g.GetPrim())
-        g.CreatePurposeAttr(UsdGeom.Tokens.guide)
 
 
 def _write_joint(stage, path, j: UrdfJoint, link_paths: dict[str, str], initial: dict[str, float], spring) -> None:
