@@ -155,8 +155,19 @@ def export_mjcf(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: bo
             atomic.write_bytes(dst, data)
     _remove_stale_pieces(out_dir, set(build.derived_meshes))
     xml_path = out_dir / MJCF_DIR / f"{urdf.stem}.xml"
+    text = (
+        "Written by asset2sim from mobility.urdf (the source of truth), overlay.json (springs) and "
+        "initial_state.json (keyframe 'initial'). Load with mujoco.MjModel.from_xml_path; "
+        + ("mj_resetDataKeyframe(model, data, 0) puts the object at its initial state. Mounted asset: the root is "
+           "fixed at the world origin (no free joint, no ground plane; initial_state.json \"root\")."
+           if fixed else
+           "mj_resetDataKeyframe(model, data, 0) puts the object on the ground at its initial state.")
+    )
+    if build.notes:
+        text += " Conversion notes: " + "; ".join(build.notes)
+    header = "<!-- " + text.replace("--", "- -") + " -->\n"
     # checked as written, before it replaces the file: a file MuJoCo refuses never lands
-    return atomic.write_text(xml_path, _header(build.notes, fixed) + own_folder_paths(build.xml) + "\n",
+    return atomic.write_text(xml_path, header + own_folder_paths(build.xml) + "\n",
                              check=(lambda tmp: check_mjcf(tmp, urdf, initial, fixed_base=fixed, shown=xml_path)) if check else None)
 
 
@@ -201,17 +212,3 @@ def _remove_stale_pieces(out_dir: Path, keep: set[str]) -> None:
             continue
         if rel in owned:
             p.unlink(missing_ok=True)
-
-
-def _header(notes: list[str], fixed: bool = False) -> str:
-    text = (
-        "Written by asset2sim from mobility.urdf (the source of truth), overlay.json (springs) and "
-        "initial_state.json (keyframe 'initial'). Load with mujoco.MjModel.from_xml_path; "
-        + ("mj_resetDataKeyframe(model, data, 0) puts the object at its initial state. Mounted asset: the root is "
-           "fixed at the world origin (no free joint, no ground plane; initial_state.json \"root\")."
-           if fixed else
-           "mj_resetDataKeyframe(model, data, 0) puts the object on the ground at its initial state.")
-    )
-    if notes:
-        text += " Conversion notes: " + "; ".join(notes)
-    return "<!-- " + text.replace("--", "- -") + " -->\n"
