@@ -125,7 +125,7 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
         pick = scene.pick_object(original, source, reading.body)
         per_rad = 180.0 / math.pi if unit == "degree" else 1.0
         explicit = {b.name: bool(b.explicitinertial) for b in spec.bodies if b.name}
-        bodies, joints, moving = [], [], {}
+        bodies, joints, moving, qpos = [], [], {}, np.array(original.qpos0, float)
         for b in pick.bodies:
             name = scene.label(original, b)
             link = model.links.get(name)
@@ -142,9 +142,15 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
                 jname = original.joint(j).name or f"{name}_joint"  # the reader's name for an unnamed joint
                 target = next(x for x in spec.joints if x.id == j)
                 _set_joint(target, original, j, jname, model, overlay, per_rad)
-                joints.append((jname, j))
+                joints.append(jname)
+                if jname in state:  # the keyframe's: the refined initial state (rad or m, the same values in MuJoCo)
+                    qpos[int(original.jnt_qposadr[j])] = float(state[jname])
                 moving.setdefault(name, []).append((target, bool(original.jnt_limited[j])))
-        _set_keyframe(spec, original, state, joints)
+        key = next((k for k in spec.keys if k.name == KEYFRAME), None)  # the keyframe KEYFRAME: replaced, else added
+        if key is not None:
+            key.qpos = qpos
+        else:
+            spec.add_key(name=KEYFRAME, qpos=qpos)
         try:
             written = opened.compile()  # from the private copy of the bytes read
         except Exception as exc:  # StagingError with the compiler's message
@@ -161,8 +167,8 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
         atomic.write_bytes(diff_path, diff.encode("utf-8"))
         files = write_package_files(folder / FILES_DIR, source, xml, set(bodies),
                                     {b: [_joint_physics(*x) for x in v] for b, v in moving.items()}, sources=opened.sources)
-        return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(name for name, _ in joints),
-                          files=tuple(files), overrides=tuple(override_notes(source, spec, [name for name, _ in joints])))
+        return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(joints), files=tuple(files),
+                          overrides=tuple(override_notes(source, spec, joints)))
 
 
 def override_notes(source: Path, spec, joints: list[str]) -> list[str]:
@@ -322,20 +328,6 @@ def _set_joint(joint, m, j: int, name: str, model, overlay: Overlay, per_rad: fl
     lim = urdf.limit
     if lim is not None and lim.lower is not None and lim.upper is not None and bool(m.jnt_limited[j]):
         joint.range = [float(lim.lower) * unit, float(lim.upper) * unit]
-
-
-def _set_keyframe(spec, m, state: dict[str, float], joints: list[tuple[str, int]]) -> None:
-    """The keyframe :data:`KEYFRAME`: the model's ``qpos0`` with the object's joints (URDF name, joint id in ``m``)
-    at their refined initial state (``state``: joint -> rad or m, the same values in MuJoCo)."""
-    qpos = np.array(m.qpos0, float)
-    for name, j in joints:
-        if name in state:
-            qpos[int(m.jnt_qposadr[j])] = float(state[name])
-    existing = next((k for k in spec.keys if k.name == KEYFRAME), None)
-    if existing is not None:
-        existing.qpos = qpos
-    else:
-        spec.add_key(name=KEYFRAME, qpos=qpos)
 
 
 def _check(source: Path, original, written, mujoco, model, bodies: list[str]) -> None:
