@@ -128,8 +128,7 @@ class _Reader:
     def read(self, root: int, bodies: tuple[int, ...]) -> ReadAsset:
         """The object whose root body is ``root`` and whose bodies are ``bodies`` (depth first, ``root`` first)."""
         m = self.m
-        world_geoms = int(m.body_geomnum[0])
-        if world_geoms:
+        if world_geoms := int(m.body_geomnum[0]):
             self.notes.append(f"{world_geoms} geom(s) on the world body (scenery, e.g. a ground plane) left out")
         links: dict[str, UrdfLink] = {}
         joints: list[UrdfJoint] = []
@@ -206,7 +205,12 @@ class _Reader:
         kind = ("revolute" if limited else "continuous") if hinge else "prismatic"
         lo, hi = (float(v) for v in m.jnt_range[j]) if limited else (None, None)
         dof = int(m.jnt_dofadr[j])
-        effort = self._effort(j)
+        # the largest force (N or N*m) its actuator force range or an actuator on it allows; None when unbounded
+        forces = [float(np.abs(m.jnt_actfrcrange[j]).max())] if bool(m.jnt_actfrclimited[j]) else []
+        forces += [float(np.abs(m.actuator_forcerange[a]).max() * abs(float(m.actuator_gear[a, 0]))) for a in range(m.nu)
+                   if m.actuator_trntype[a] == self.mj.mjtTrn.mjTRN_JOINT and int(m.actuator_trnid[a, 0]) == j
+                   and bool(m.actuator_forcelimited[a])]
+        effort = max(forces, default=None)
         limit = UrdfLimit(lower=lo, upper=hi, effort=effort) if limited or effort is not None else None
         dyn = UrdfDynamics(damping=float(m.dof_damping[dof]), friction=float(m.dof_frictionloss[dof]))
         k = float(m.jnt_stiffness[j])
@@ -216,15 +220,6 @@ class _Reader:
             self.notes.append(f"joint {name!r}: armature {float(m.dof_armature[dof]):g} not carried (URDF has no element for it)")
         return UrdfJoint(name=name, type=kind, parent=parent, child=child, origin=origin, axis_xyz=axis,
                          limit=limit, dynamics=dyn)
-
-    def _effort(self, j: int) -> float | None:
-        """Largest force (N or N*m) the joint's actuator force range or an actuator on it allows; None when unbounded."""
-        m, mj = self.m, self.mj
-        forces = [float(np.abs(m.jnt_actfrcrange[j]).max())] if bool(m.jnt_actfrclimited[j]) else []
-        forces += [float(np.abs(m.actuator_forcerange[a]).max() * abs(float(m.actuator_gear[a, 0]))) for a in range(m.nu)
-                   if m.actuator_trntype[a] == mj.mjtTrn.mjTRN_JOINT and int(m.actuator_trnid[a, 0]) == j
-                   and bool(m.actuator_forcelimited[a])]
-        return max(forces, default=None)
 
     # ------------------------------------------------------------------- links
     def _link(self, b: int, to_link: np.ndarray) -> UrdfLink:
