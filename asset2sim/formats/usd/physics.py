@@ -145,19 +145,6 @@ def _text(value) -> str:
     return str(value)
 
 
-def _principal(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(principal moments (3,), rotation (3, 3) with det +1 whose columns are the principal axes) of a tensor; a
-    tensor diagonal in the body's axes keeps them (identity)."""
-    tensor = 0.5 * (tensor + tensor.T)
-    off = tensor - np.diag(np.diag(tensor))
-    if np.abs(off).max() <= 1e-12 * max(np.abs(tensor).max(), 1e-300):
-        return np.diag(tensor).copy(), np.eye(3)
-    d, q = np.linalg.eigh(tensor)
-    if np.linalg.det(q) < 0:
-        q[:, 0] = -q[:, 0]
-    return d, q
-
-
 def set_body_mass(edit: UsdEdit, ctx: StageReading, body, link_frame: np.ndarray, world: np.ndarray, mass: float,
                   com: np.ndarray, inertia: np.ndarray) -> None:
     """Author a link's ``mass`` kg, ``com`` (3,) m and ``inertia`` (3, 3) kg*m^2 about the COM, both in the link
@@ -167,7 +154,6 @@ def set_body_mass(edit: UsdEdit, ctx: StageReading, body, link_frame: np.ndarray
     to_link = rigid_inverse(link_frame) @ world  # body-local (stage units) -> link frame (m)
     a = to_link[:3, :3] / ctx.m  # body axes -> link axes
     tensor = a.T @ np.asarray(inertia, float) @ a / (ctx.kg * ctx.m ** 2)
-    d, q = _principal(tensor)
     local = (np.linalg.inv(to_link) @ np.append(np.asarray(com, float), 1.0))[:3]
     edit.apply(body, "PhysicsMassAPI")
     edit.set(body, "physics:mass", float(mass / ctx.kg))
@@ -175,6 +161,14 @@ def set_body_mass(edit: UsdEdit, ctx: StageReading, body, link_frame: np.ndarray
     diag, r = authored(body, "physics:diagonalInertia"), reader.quat_matrix(value_or(body, "physics:principalAxes", None))
     held = np.full((3, 3), np.nan) if diag is None else r @ np.diag(np.asarray(diag, float)) @ r.T  # stage units
     if not same(held, tensor):  # the moments and axes together: one tensor has many of them
+        # its principal moments and axes (columns of a rotation, det +1); a tensor diagonal in the body's axes keeps them
+        sym = 0.5 * (tensor + tensor.T)
+        if np.abs(sym - np.diag(np.diag(sym))).max() <= 1e-12 * max(np.abs(sym).max(), 1e-300):
+            d, q = np.diag(sym).copy(), np.eye(3)
+        else:
+            d, q = np.linalg.eigh(sym)
+            if np.linalg.det(q) < 0:
+                q[:, 0] = -q[:, 0]
         edit.set(body, "physics:diagonalInertia", Gf.Vec3f(*map(float, d)), Sdf.ValueTypeNames.Float3)
         edit.set(body, "physics:principalAxes", Gf.Quatf(*matrix_quat_wxyz(q).tolist()), Sdf.ValueTypeNames.Quatf)
     if authored(body, "physics:density"):
