@@ -147,7 +147,22 @@ class _Reader:
                        "the MJCF solver only" for a in read_aids(m)]
         model = UrdfModel(name=self.spec.modelname or self.path.stem, links=links, joints=joints, root=self.body_name(root))
         files = tuple(sorted({self.path.resolve(), *self.sources.real.values()}))
-        initial = self._keyframe_state(joints)
+        # joint -> position (rad or m) in the keyframe named initial, else the first keyframe (noted when used); MuJoCo's
+        # joint values are the URDF joint's: ref moved the URDF origin, not the values
+        initial = {}
+        names = [m.key(k).name for k in range(m.nkey)]
+        k = names.index("initial") if "initial" in names else 0
+        for j in joints if m.nkey else []:
+            jid = self.mj.mj_name2id(m, self.mj.mjtObj.mjOBJ_JOINT, j.name)
+            if j.type == "fixed" or jid < 0:
+                continue
+            value = float(m.key_qpos[k, int(m.jnt_qposadr[jid])])  # as MuJoCo reads it (a joint's ref moves its frame)
+            if np.isfinite(value):
+                initial[j.name] = value
+            else:  # a NaN or infinity in the keyframe is no position: the joint's default kept
+                self.notes.append(f"keyframe {names[k] or f'#{k}'!r}: joint {j.name!r} at {value}, not a number: not used")
+        if initial:
+            self.notes.append(f"initial joint positions from keyframe {names[k] or f'#{k}'!r}")
         return ReadAsset(source=self.path, format="mjcf", model=model, meshes=self.meshes, springs=self.springs, initial_state=initial,
                          inferred=tuple(self.inferred), notes=tuple(self.notes), files=files, root_fixed=self.root_fixed,
                          simulated=self.simulated, densities=self.densities, written_moments=self.written_moments)
@@ -266,30 +281,6 @@ class _Reader:
         link = UrdfLink(name=name, inertial=inertial, visuals=visuals, collisions=collisions, contact=contact)
         collisions_as_visuals(link)
         return link
-
-    def _keyframe_state(self, joints: list[UrdfJoint]) -> dict[str, float]:
-        """joint -> position (rad or m) in the keyframe named ``initial``, else the first keyframe; {} without one
-        (noted when used). MuJoCo's joint values are the URDF joint's: ``ref`` moved the URDF origin, not the values."""
-        m = self.m
-        if m.nkey == 0:
-            return {}
-        names = [m.key(k).name for k in range(m.nkey)]
-        k = names.index("initial") if "initial" in names else 0
-        key = repr(names[k] or f"#{k}")
-        out = {}
-        for j in joints:
-            if j.type == "fixed":
-                continue
-            jid = self.mj.mj_name2id(m, self.mj.mjtObj.mjOBJ_JOINT, j.name)
-            if jid >= 0:
-                value = float(m.key_qpos[k, int(m.jnt_qposadr[jid])])  # as MuJoCo reads it (a joint's ref moves its frame, not the value)
-                if not np.isfinite(value):  # a NaN or infinity in the keyframe is no position: the joint's default kept
-                    self.notes.append(f"keyframe {key}: joint {j.name!r} at {value}, not a number: not used")
-                    continue
-                out[j.name] = value
-        if out:
-            self.notes.append(f"initial joint positions from keyframe {key}")
-        return out
 
     def _density(self, b: int) -> float | None:
         """The density (kg/m^3) MuJoCo infers body ``b``'s mass from: the one ``density`` of the geoms that
