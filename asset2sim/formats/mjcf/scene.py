@@ -63,12 +63,6 @@ def joint_types(m, bodies: list[int]) -> list[int]:
     return [int(m.jnt_type[j]) for b in bodies for j in body_joints(m, b)]
 
 
-def _matches(m, b: int, name: str) -> bool:
-    """Whether ``name`` names body ``b``: its name, or ``#<b>`` / ``body_<b>`` for an unnamed body."""
-    own = m.body(b).name
-    return name == own if own else name in (f"#{b}", f"body_{b}")
-
-
 def pick_object(m, path: Path | str, body: str | None = None) -> ScenePick:
     """The articulated object of the compiled scene ``m`` (an ``MjModel``) read from ``path``.
 
@@ -93,7 +87,9 @@ def pick_object(m, path: Path | str, body: str | None = None) -> ScenePick:
     articulated = [b for b in tops if moving[b]]
     notes: list[str] = []
     if body is not None:
-        named = next((b for b in range(1, m.nbody) if _matches(m, b, body)), None)
+        # by its name; an unnamed body by #<id> or body_<id>
+        named = next((b for b in range(1, m.nbody) if body in ((m.body(b).name,) if m.body(b).name else (f"#{b}", f"body_{b}"))),
+                     None)
         if named is None:
             names = [label(m, b) for b in (articulated or tops)]
             raise StagingError(f"{path}: no body named {body!r}; the objects under the world body: {names}")
