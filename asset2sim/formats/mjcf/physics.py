@@ -316,7 +316,7 @@ def _set_joint(joint, m, j: int, name: str, model, overlay: Overlay, per_rad: fl
     hinge = int(m.jnt_type[j]) == scene.JNT_HINGE
     unit = per_rad if hinge else 1.0
     if urdf.dynamics is not None:
-        set_joint_friction(joint, urdf.damping, urdf.friction)
+        set_joint_friction(joint, urdf.damping or 0.0, urdf.friction or 0.0)
         # the friction held without the no-slip pass, as the MJCF export holds it, at the host's time step
         joint.solref_friction = list(friction_solref(float(m.opt.timestep)))
         joint.solimp_friction = list(FRICTION_SOLIMP)

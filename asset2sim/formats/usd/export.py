@@ -82,6 +82,7 @@ def export_usd(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: boo
     Gf, Sdf, _, _, UsdGeom, UsdPhysics = _pxr()  # ImportError first, without usd-core
     asset = RefinedAsset.existing(out_dir)
     model, state = asset.model, asset.initial_state
+    springs, fixed = asset.springs, asset.root.fixed  # the overlay's and state's errors before any mesh is read
     notes = list(asset.collision[1])  # the cached notes stay as read
     stage, root_path = _new_stage(model)
     # every link a rigid body under /<robot>, posed at the folder's initial state, with its visuals (``visuals``, their
@@ -130,13 +131,13 @@ def export_usd(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: boo
     for j in model.joints:
         jp = scope.AppendChild(joint_names[j.name])
         joints[j.name] = str(jp)
-        _write_joint(stage, jp, j, links, state, asset.springs.get(j.name))
+        _write_joint(stage, jp, j, links, state, springs.get(j.name))
         # UsdPhysics.FilteredPairsAPI on the child body naming its parent: the SPEC's exclusion of a link and its
         # parent, explicit for a runtime or importer that collides jointed bodies (UsdPhysics joints disable their two
         # bodies' collision only through physics:collisionEnabled, which a fixed joint merged by an importer loses)
         api = UsdPhysics.FilteredPairsAPI.Apply(stage.GetPrimAtPath(links[j.child]))
         api.CreateFilteredPairsRel().AddTarget(Sdf.Path(links[j.parent]))
-    if asset.root.fixed:
+    if fixed:
         fj = UsdPhysics.FixedJoint.Define(stage, scope.AppendChild(
             "root_joint" if "root_joint" not in joint_names.values() else "asset2sim_root_joint"))
         fj.CreateBody1Rel().SetTargets([Sdf.Path(links[model.root])])
@@ -147,7 +148,7 @@ def export_usd(out_dir: Path | RefinedAsset, *, visuals: bool = True, check: boo
     target = _save(stage, asset.folder / USD_DIR / f"{asset.urdf_path.stem}.usd")
     if check:
         check_usd(target, asset)
-    return UsdBuild(path=target, links=links, joints=joints, fixed_root=asset.root.fixed, notes=notes)
+    return UsdBuild(path=target, links=links, joints=joints, fixed_root=fixed, notes=notes)
 
 
 def _new_stage(model: UrdfModel):

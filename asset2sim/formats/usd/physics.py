@@ -246,7 +246,8 @@ def write_host_usd(out_dir: Path | str, source: Path | str) -> HostUsdExport:
             rot = prim.IsA(UsdPhysics.RevoluteJoint)
             unit = DEG if rot else 1.0 / ctx.m  # rad -> degrees, m -> stage units
             dyn = overlay.joints.get(j.name)
-            set_joint_dynamics(edit, ctx, prim, j.damping, j.friction, None if dyn is None else float(dyn.stiffness),
+            set_joint_dynamics(edit, ctx, prim, j.damping or 0.0, j.friction or 0.0,
+                               None if dyn is None else float(dyn.stiffness),
                                None if dyn is None else dyn.spring_reference)
             if j.type != "continuous" and j.limit is not None and j.limit.lower is not None and j.limit.upper is not None:
                 edit.set(prim, "physics:lowerLimit", float(j.limit.lower * unit))
