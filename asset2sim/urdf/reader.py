@@ -138,12 +138,11 @@ class _Reader:
                     g_ok = False
                 else:
                     g.mesh_scale = np.asarray(sc, float)
-                    sc3 = tuple(sc * 3) if len(sc) == 1 else sc
-                    if any(v == 0 for v in sc3):
+                    if any(v == 0 for v in sc):
                         self.problem("MESH_SCALE_ZERO", f"mesh scale {s.get('scale')!r} has a zero component (the mesh collapses)",
                                      **at)
                         g_ok = False
-                    elif any(v < 0 for v in sc3):
+                    elif any(v < 0 for v in sc):
                         self.problem("MESH_SCALE_NEGATIVE", f"mesh scale {s.get('scale')!r} mirrors the mesh", **at)
         else:
             spec = {"box": (("size", 3),), "cylinder": (("radius", 1), ("length", 1)), "sphere": (("radius", 1),)}.get(s.tag)
@@ -179,11 +178,9 @@ class _Reader:
             self.problem("INERTIA_MISSING", "<inertial> has no <inertia>; an estimate replaces it",
                          line=_line(el), link=link, action="replace_with_estimate")
         else:
-            vals = []
-            for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
-                dflt = (0.0,) if k in ("ixy", "ixz", "iyz") else None
-                v = self.nums(i, k, 1, default=dflt, link=link, required=dflt is None)
-                vals.append(None if v is None else float(v[0]))
+            diagonal = ("ixx", "iyy", "izz")
+            vals = [self.num(i, k, default=None if k in diagonal else (0.0,), link=link, required=k in diagonal)
+                    for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")]
             if all(v is not None for v in vals):
                 ixx, ixy, ixz, iyy, iyz, izz = vals
                 ine.inertia = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]], float)
@@ -278,8 +275,7 @@ class _Reader:
             miss = [k for k in ("lower", "upper") if lim.get(k) is None]
             if miss:
                 self.problem("JOINT_LIMIT_INCOMPLETE", f"<limit> without {' and '.join(miss)} (URDF default 0)", **at)
-            lo_v = out.lower if out.lower is not None else (0.0 if lim.get("lower") is None else None)
-            hi_v = out.upper if out.upper is not None else (0.0 if lim.get("upper") is None else None)
+            lo_v, hi_v = (0.0 if k in miss else getattr(out, k) for k in ("lower", "upper"))  # URDF default 0; None: unreadable
             if lo_v is not None and hi_v is not None:
                 if lo_v > hi_v:
                     self.problem("JOINT_LIMIT_REVERSED", f"lower {lo_v!r} > upper {hi_v!r}", **at, lower=lo_v, upper=hi_v)

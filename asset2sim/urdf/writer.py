@@ -58,8 +58,11 @@ class _Out:
         self.fmt = style.number
         self.lines: list[str] = []
 
-    def vec(self, v) -> str:
-        return " ".join(self.fmt(x) for x in np.asarray(v, float).ravel())
+    def vec(self, v) -> str | None:
+        return None if v is None else " ".join(self.fmt(x) for x in np.asarray(v, float).ravel())
+
+    def num(self, v: float | None) -> str | None:
+        return None if v is None else self.fmt(v)
 
     @staticmethod
     def _attrs(attrs) -> str:
@@ -123,11 +126,9 @@ def _write_material(out: _Out, depth: int, mat: UrdfMaterial) -> None:
 def _write_shape(out: _Out, depth: int, g: UrdfGeometry) -> None:
     def body(d: int) -> None:
         if g.kind == "mesh":
-            scale = None if g.mesh_scale is None else out.vec(g.mesh_scale)
-            out.leaf(d, "mesh", (("filename", g.filename), ("scale", scale)))
+            out.leaf(d, "mesh", (("filename", g.filename), ("scale", out.vec(g.mesh_scale))))
         elif g.kind is not None:
-            out.leaf(d, g.kind, (("size", None if g.size is None else out.vec(g.size)), ("radius", _num_or_none(out, g.radius)),
-                                 ("length", _num_or_none(out, g.length))))
+            out.leaf(d, g.kind, (("size", out.vec(g.size)), ("radius", out.num(g.radius)), ("length", out.num(g.length))))
 
     out.element(depth, "geometry", (), body)
 
@@ -175,10 +176,6 @@ def _write_link(out: _Out, depth: int, link: UrdfLink) -> None:
     out.element(depth, "link", (("name", link.name),), body)
 
 
-def _num_or_none(out: _Out, v: float | None) -> str | None:
-    return None if v is None else out.fmt(v)
-
-
 def _write_joint(out: _Out, depth: int, j: UrdfJoint) -> None:
     def body(d: int) -> None:
         if out.style.partnet_order:
@@ -195,13 +192,12 @@ def _write_joint(out: _Out, depth: int, j: UrdfJoint) -> None:
                 out.leaf(d, "axis", (("xyz", out.vec(j.axis_xyz)),))
         if j.limit is not None:
             keys = ("lower", "upper", "effort", "velocity") if out.style.partnet_order else ("effort", "velocity", "lower", "upper")
-            out.leaf(d, "limit", tuple((k, _num_or_none(out, getattr(j.limit, k))) for k in keys))
+            out.leaf(d, "limit", tuple((k, out.num(getattr(j.limit, k))) for k in keys))
         if j.dynamics is not None:
-            out.leaf(d, "dynamics", (("damping", _num_or_none(out, j.dynamics.damping)),
-                                     ("friction", _num_or_none(out, j.dynamics.friction))))
+            out.leaf(d, "dynamics", (("damping", out.num(j.dynamics.damping)), ("friction", out.num(j.dynamics.friction))))
         if j.mimic is not None:
-            out.leaf(d, "mimic", (("joint", j.mimic.joint), ("multiplier", _num_or_none(out, j.mimic.multiplier)),
-                                  ("offset", _num_or_none(out, j.mimic.offset))))
+            out.leaf(d, "mimic", (("joint", j.mimic.joint), ("multiplier", out.num(j.mimic.multiplier)),
+                                  ("offset", out.num(j.mimic.offset))))
         for tag in ("calibration", "safety_controller"):
             vals = getattr(j, tag)
             if vals is not None:
