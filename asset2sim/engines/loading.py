@@ -24,6 +24,8 @@ BULLET_DEFAULT_INERTIA = (1.0, 1.0, 1.0)
 #: PyBullet's default lateral friction of a link and of its ground plane (contact friction: the product).
 BULLET_DEFAULT_FRICTION = 0.5
 BULLET_PLANE_FRICTION = 0.5
+#: Contact friction of a link without ``<contact>`` on the ground (PyBullet's 0.5 x 0.5).
+CONTACT_FRICTION = BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION
 #: The eight corners (8, 3) of the box [-1, 1]^3.
 BOX_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 

@@ -21,15 +21,13 @@ import numpy as np
 from asset2sim.engines.base import (ArrayJoints, ContactPair, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
                                     SessionOptions, penetration_sum, principal_moments, register_engine, register_file_reader,
                                     unsupported)
-from asset2sim.engines.loading import (BOX_CORNERS, BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS,
-                                       BULLET_PLANE_FRICTION, CollisionPiece, collision_pieces, read_urdf, transform_points)
+from asset2sim.engines.loading import (BOX_CORNERS, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, CONTACT_FRICTION, CollisionPiece,
+                                       collision_pieces, read_urdf, transform_points)
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, quat_wxyz_to_xyzw, quat_xyzw_to_wxyz, translation_matrix
 from asset2sim.mesh_io import convex_hull_mesh
 from asset2sim.urdf import MOVABLE
 from asset2sim.engines.step_budget import spend
 
-#: Contact friction on every shape and the ground (PyBullet's 0.5 x 0.5).
-CONTACT_FRICTION = BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION
 #: Newton's default limit magnitude for an unlimited DOF (``ModelBuilder``'s 1e6) and above: read back as unlimited.
 NEWTON_UNLIMITED = 1e6
 

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.engines.base import EngineUnavailable, SessionDefaults, SessionOptions, register_engine, unsupported
-from asset2sim.engines.loading import collision_pieces, read_urdf
+from asset2sim.engines.loading import collision_pieces, read_urdf, transform_points
 from asset2sim.engines.step_budget import spend
 from asset2sim.extras import pxr_modules
 
@@ -59,14 +59,9 @@ def lowest_point(model, state: dict[str, float]) -> float:
     the USD export poses the links); 0 without pieces."""
     pieces, _ = collision_pieces(model)
     poses = model.link_poses(state)
-    low = math.inf
-    for link, plist in pieces.items():
-        for p in plist:
-            if p.points is None:
-                continue
-            t = poses[link] @ p.origin
-            low = min(low, float((p.points @ t[:3, :3].T + t[:3, 3])[:, 2].min()))
-    return 0.0 if not math.isfinite(low) else low
+    lows = [float(transform_points(poses[link] @ p.origin, p.points)[:, 2].min())
+            for link, plist in pieces.items() for p in plist if p.points is not None]
+    return min(lows, default=0.0)
 
 
 def scene_layer(usd: Path, options: SessionOptions, lift: float, root_link_prim: str | None) -> str:

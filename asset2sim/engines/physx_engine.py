@@ -19,8 +19,8 @@ with startup_quiet():
 
 from asset2sim.engines.base import (ArrayJoints, ContactPair, HeldJoint, HeldLink, HeldPhysics, SessionDefaults, SessionOptions,
                                     penetration_sum, register_engine, unsupported)
-from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
-                                       collision_pieces, link_friction, principal_axes, read_urdf)
+from asset2sim.engines.loading import (BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, CONTACT_FRICTION, collision_pieces,
+                                       link_friction, principal_axes, read_urdf)
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_to_xyzw, quat_xyzw_to_wxyz, rigid_matrix
 from asset2sim.engines.passive_joints import FRICTION_DRIVE_DAMPING, PassiveJoints
 from asset2sim.engines.step_budget import spend
@@ -197,11 +197,10 @@ class PhysXSession(ArrayJoints, SessionDefaults):
     # --------------------------------------------------------------- building
     def _add_ground(self):
         """The static ground plane z = 0 (its component), contact friction 0.25."""
-        mu = BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION
         ent = sapien.Entity()
         ent.name = "ground"
         comp = physx.PhysxRigidStaticComponent()
-        plane = physx.PhysxCollisionShapePlane(physx.PhysxMaterial(mu, mu, 0.0))
+        plane = physx.PhysxCollisionShapePlane(physx.PhysxMaterial(CONTACT_FRICTION, CONTACT_FRICTION, 0.0))
         # PhysX planes face +x; turn the normal to +z.
         plane.local_pose = sapien.Pose(q=[math.sqrt(0.5), 0.0, -math.sqrt(0.5), 0.0])
         comp.attach(plane)

@@ -64,7 +64,7 @@ class PyBulletSession(SessionDefaults):
         self.joint_types: dict[str, str] = {}
         self.joint_limits: dict[str, tuple[float, float]] = {}
         self.joint_child: dict[str, str] = {}
-        for j, info in enumerate(joint_infos(p, self.body, self.cid)):
+        for j, info in enumerate(joint_infos(p, self.body)):
             name = info[1].decode()
             self._link_by_index[j] = info[12].decode()
             jtype = BULLET_JOINT_TYPES.get(info[2], "other")
@@ -162,7 +162,7 @@ class PyBulletSession(SessionDefaults):
 
     # ------------------------------------------------------------------ links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        return body_link_frame(self._bullet, self.body, self.link_index(link), self.cid)
+        return body_link_frame(self._p, self.body, self.link_index(link))
 
     def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self._p.getAABB(self.body, self.link_index(link))
@@ -246,7 +246,7 @@ class PyBulletSession(SessionDefaults):
         cache = self.__dict__.setdefault("_pairs_cache", None)
         if cache is None:
             with_shape = [i for i in self._link_by_index if p.getCollisionShapeData(self.body, i)]
-            parent = {j: info[16] for j, info in enumerate(joint_infos(p, self.body, self.cid))}
+            parent = {j: info[16] for j, info in enumerate(joint_infos(p, self.body))}
             cache = [(a, b) for a in with_shape for b in with_shape if a < b and parent.get(b) != a and parent.get(a) != b]
             self._pairs_cache = cache
         return self._penetration_of([pt for a, b in cache
@@ -330,10 +330,7 @@ class PyBulletSession(SessionDefaults):
 
     def link_index(self, link_name: str) -> int:
         """Bullet's link index (-1 for the root) of a link (KeyError: unknown link)."""
-        try:
-            return self._link_index[link_name]
-        except KeyError:
-            raise KeyError(link_name) from None
+        return self._link_index[link_name]
 
     def held_physics(self) -> HeldPhysics:
         p = self._p

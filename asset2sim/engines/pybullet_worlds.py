@@ -24,16 +24,16 @@ def bullet():
     return pybullet
 
 
-def joint_infos(p, body: int, cid: int) -> list:
-    return [p.getJointInfo(body, j, physicsClientId=cid) for j in range(p.getNumJoints(body, physicsClientId=cid))]
+def joint_infos(p: "BoundClient", body: int) -> list:
+    return [p.getJointInfo(body, j) for j in range(p.getNumJoints(body))]
 
 
-def body_link_frame(p, body: int, idx: int, cid: int) -> tuple[np.ndarray, np.ndarray]:
-    """World position (3,) and rotation (3, 3) of link ``idx`` (-1: the base)."""
+def body_link_frame(p: "BoundClient", body: int, idx: int) -> tuple[np.ndarray, np.ndarray]:
+    """World position (3,) and rotation (3, 3) of link ``idx`` (-1: the base) in client ``p``."""
     if idx < 0:
-        pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=cid)
+        pos, orn = p.getBasePositionAndOrientation(body)
     else:
-        st = p.getLinkState(body, idx, computeForwardKinematics=True, physicsClientId=cid)
+        st = p.getLinkState(body, idx, computeForwardKinematics=True)
         pos, orn = st[4], st[5]
     return np.array(pos, float), np.array(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
 
@@ -108,7 +108,7 @@ class PyBulletViewer:
         self._links: dict[int, str] = {-1: p.getBodyInfo(self.body)[0].decode()}
         self._joints: dict[str, int] = {}
         self.joint_names: list[str] = []
-        for j, info in enumerate(joint_infos(p, self.body, self.cid)):
+        for j, info in enumerate(joint_infos(p, self.body)):
             self._links[j] = info[12].decode()
             name = info[1].decode()
             self._joints[name] = j
@@ -139,7 +139,7 @@ class PyBulletViewer:
                                                 np.asarray(quat_xyzw, float).tolist())
 
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        return body_link_frame(self._p, self.body, self._index[link], self.cid)
+        return body_link_frame(self._p, self.body, self._index[link])
 
     def draw(self, width: int, height: int, camera: dict, light: dict) -> tuple[np.ndarray, np.ndarray]:
         p = self._p

@@ -31,14 +31,12 @@ from asset2sim.urdf import UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, 
 @dataclass
 class MeshAssets:
     """Mesh files of the convex pieces: ``derived`` path -> OBJ bytes written
-    anew; ``files`` path -> source file referenced as it is; ``names`` /
-    ``scales`` piece key (link, collision, group) -> import name / scale (3,)
-    or None; ``virtual`` import name -> (path, scale); ``import_assets`` import name -> bytes."""
+    anew; ``files`` path -> source file referenced as it is; ``names`` piece key (link, collision, group) -> import
+    name; ``virtual`` import name -> (path, scale (3,) or None); ``import_assets`` import name -> bytes."""
 
     derived: dict[str, bytes] = field(default_factory=dict)
     files: dict[str, Path] = field(default_factory=dict)
     names: dict[tuple, str] = field(default_factory=dict)
-    scales: dict[tuple, np.ndarray | None] = field(default_factory=dict)
     virtual: dict[str, tuple[str, np.ndarray | None]] = field(default_factory=dict)
     import_assets: dict[str, bytes] = field(default_factory=dict)
 
@@ -52,7 +50,6 @@ def mesh_assets(pieces: dict[str, list[CollisionPiece]], mesh_root: Path) -> Mes
         for p in plist:
             if p.kind != "hull":
                 continue
-            key = (name, p.collision, p.group)
             rel = relative_to(p.source, mesh_root) if p.whole_file else None
             if rel is not None:
                 out.files[rel] = p.source
@@ -65,16 +62,14 @@ def mesh_assets(pieces: dict[str, list[CollisionPiece]], mesh_root: Path) -> Mes
                 scale = None
             vname = f"piece{len(out.virtual)}.obj"
             out.virtual[vname] = (rel, scale)
-            out.names[key] = vname
-            out.scales[key] = scale
+            out.names[(name, p.collision, p.group)] = vname
             out.import_assets[vname] = data
     return out
 
 
-def urdf_for_import(model: UrdfModel, pieces: dict[str, list[CollisionPiece]], mesh_names: dict[tuple, str],
-                    mesh_scales: dict[tuple, np.ndarray | None], missing_inertial: str) -> str:
+def urdf_for_import(model: UrdfModel, pieces: dict[str, list[CollisionPiece]], meshes: MeshAssets, missing_inertial: str) -> str:
     """A URDF equivalent to ``model`` whose collisions are the convex pieces
-    (mesh files named as in ``mesh_names``), inertias in the link axes, with
+    (mesh files named and scaled as in ``meshes``), inertias in the link axes, with
     MuJoCo's ``<mujoco><compiler/>`` extension."""
     mujoco_ext = ET.Element("mujoco")
     ET.SubElement(mujoco_ext, "compiler", {
@@ -91,8 +86,9 @@ def urdf_for_import(model: UrdfModel, pieces: dict[str, list[CollisionPiece]], m
             ln.inertial = UrdfInertial(mass=ine.mass, origin=translation_matrix(ine.com()), inertia=ine.inertia_in_link_axes())
         for p in pieces[name]:
             if p.kind == "hull":
-                key = (name, p.collision, p.group)
-                ln.collisions.append(UrdfGeometry(kind="mesh", origin=p.origin, filename=mesh_names[key], mesh_scale=mesh_scales[key]))
+                vname = meshes.names[(name, p.collision, p.group)]
+                scale = meshes.virtual[vname][1]
+                ln.collisions.append(UrdfGeometry(kind="mesh", origin=p.origin, filename=vname, mesh_scale=scale))
             else:
                 ln.collisions.append(UrdfGeometry(kind=p.kind, origin=p.origin, size=p.size, radius=p.radius, length=p.length))
         out.links[name] = ln
@@ -188,7 +184,7 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     meshes = mesh_assets(pieces, mesh_root)
     final_assets = {rel: meshes.import_assets[v] for v, (rel, _) in meshes.virtual.items()}
 
-    urdf_text = urdf_for_import(model, pieces, meshes.names, meshes.scales, missing_inertial)
+    urdf_text = urdf_for_import(model, pieces, meshes, missing_inertial)
     spec, root = import_skeleton(urdf_text, meshes.import_assets, urdf_path, notes)
     set_options(root, conv, gravity, meshdir)
     file_to_mesh, used = rename_meshes(root, meshes.virtual, urdf_path)
@@ -265,8 +261,7 @@ def _rewrite_bodies(worldbody, model: UrdfModel, spec, pieces: dict[str, list[Co
         link = model.links[b.get("name")]
         set_inertial(b, link, missing_inertial, notes)
         names_in_qpos += set_joints(b, link, model, spec, springs, urdf_path)
-        own = {key: name for key, name in geom_mesh.items() if key[0] == link.name}
-        set_geoms(b, link, model, pieces[link.name], own, visuals, urdf_path)
+        set_geoms(b, link, model, pieces[link.name], geom_mesh, visuals, urdf_path)
     if set(names_in_qpos) != set(movable):
         raise MjcfError(f"{urdf_path}: MuJoCo's import has joints {names_in_qpos}, the URDF {sorted(movable)}")
     return bodies

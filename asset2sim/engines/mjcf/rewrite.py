@@ -10,8 +10,7 @@ import numpy as np
 from lxml import etree
 
 from asset2sim.engines.base import Spring
-from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
-                                       CollisionPiece, link_friction)
+from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, CONTACT_FRICTION, CollisionPiece, link_friction
 from asset2sim.engines.mjcf.base import (ARMATURE, CONE, FREE_JOINT, GROUND, MjcfError, child, close, num_text, quat_text,
                                          safe_name, vec_text)
 from asset2sim.schemas.config import SimConventions
@@ -98,7 +97,7 @@ def set_options(root, conv: SimConventions, gravity: bool, meshdir: str) -> None
                  ("discardvisual", "false")):
         comp.set(k, v)
     default = etree.Element("default")
-    etree.SubElement(default, "geom", condim="3", friction=f"{num_text(BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION)} 0.005 0.0001")
+    etree.SubElement(default, "geom", condim="3", friction=f"{num_text(CONTACT_FRICTION)} 0.005 0.0001")
     etree.SubElement(default, "joint", armature="0")
     opt = etree.Element("option", timestep=num_text(conv.timestep), gravity=f"0 0 {num_text(conv.gravity if gravity else 0.0)}",
                         integrator="implicitfast", cone=CONE)
@@ -227,7 +226,7 @@ def set_geoms(b, link, model: UrdfModel, plist: list[CollisionPiece], geom_mesh:
         g.set("quat", quat_text(p.origin[:3, :3]))
         if p.kind == "hull":
             g.set("mesh", geom_mesh[(link.name, p.collision, p.group)])
-        if not math.isclose(fr, BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION):
+        if not math.isclose(fr, CONTACT_FRICTION):
             g.set("friction", f"{num_text(fr)} 0.005 0.0001")
         if visuals:
             g.set("group", "3")
