@@ -324,20 +324,19 @@ def _install_bounded_transport(litellm) -> None:
     import httpx
 
     bound = _bounder()
+
+    def bounded(transport):
+        bound(transport)
+        return _decoded_transport(transport)
+
     if getattr(litellm, "client_session", None) is None:
         client = httpx.Client(follow_redirects=False)
-        for transport in [client._transport, *client._mounts.values()]:
-            if transport is not None:
-                bound(transport)
-        client._transport = _decoded_transport(client._transport)
-        client._mounts = {pattern: None if t is None else _decoded_transport(t)
-                          for pattern, t in client._mounts.items()}
+        client._transport = bounded(client._transport)
+        client._mounts = {pattern: None if t is None else bounded(t) for pattern, t in client._mounts.items()}
         litellm.client_session = client
     proxies = [k for k in urllib.request.getproxies() if k != "no"]
     if getattr(litellm, "sync_transport", None) is None and not proxies:
-        transport = httpx.HTTPTransport()
-        bound(transport)
-        litellm.sync_transport = _decoded_transport(transport)
+        litellm.sync_transport = bounded(httpx.HTTPTransport())
 
 
 def import_litellm():

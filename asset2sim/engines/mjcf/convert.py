@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
-from asset2sim.engines.base import SessionOptions, Spring
+from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, CollisionPiece, collision_pieces, read_urdf
 from asset2sim.engines.mjcf.base import (DERIVED_MESH_DIR, GROUND, KEYFRAME, MjcfError, child, compile_xml, load_mujoco,
                                          mujoco_messages, mujoco_warnings, num_text, place_on_ground, relative_to, safe_name,
@@ -191,7 +191,19 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     asset_el = child(root, "asset")
     worldbody = root.find("worldbody")
     geom_mesh = {key: file_to_mesh[v] for key, v in meshes.names.items()}
-    bodies = _rewrite_bodies(worldbody, model, spec, pieces, geom_mesh, springs, missing_inertial, visuals, notes)
+    # every body of the import (pose, inertial, joint, collision geoms) rewritten from the URDF
+    bodies = {b.get("name"): b for b in worldbody.iter("body")}
+    if set(bodies) != set(model.links):
+        raise MjcfError(f"{urdf_path}: MuJoCo's import has bodies {sorted(bodies)}, the URDF links {sorted(model.links)}")
+    place_bodies(model, spec, bodies, urdf_path)
+    names_in_qpos: list[str] = []
+    for b in worldbody.iter("body"):
+        link = model.links[b.get("name")]
+        set_inertial(b, link, missing_inertial, notes)
+        names_in_qpos += set_joints(b, link, model, spec, springs, urdf_path)
+        set_geoms(b, link, model, pieces[link.name], geom_mesh, visuals, urdf_path)
+    if set(names_in_qpos) != set(movable):
+        raise MjcfError(f"{urdf_path}: MuJoCo's import has joints {names_in_qpos}, the URDF {sorted(movable)}")
     zero_armature(worldbody)
     set_contacts(root, model, pieces, fixed_base, notes)
     root_body = bodies[model.root]
@@ -242,26 +254,3 @@ def object_model(root, root_name: str, assets: dict[str, bytes], initial_state: 
     model, qpos, _ = place_on_ground(copy, body, assets, initial_state, own, urdf_path, [])
     return model, qpos
 
-
-def _rewrite_bodies(worldbody, model: UrdfModel, spec, pieces: dict[str, list[CollisionPiece]], geom_mesh: dict[tuple, str],
-                    springs: dict[str, Spring], missing_inertial: str, visuals: bool, notes: list[str]) -> dict:
-    """Rewrite every body of the import (pose, inertial, joint, collision
-    geoms) from the URDF ``model`` (read from its file); ``geom_mesh``: (link, ...) key of a collision mesh -> the
-    MJCF mesh name. Returns body name -> element (MjcfError: the import's bodies or joints are not the URDF's, or a
-    per-body check fails).
-    """
-    urdf_path = model.path
-    movable = [j.name for j in model.movable_joints]
-    bodies = {b.get("name"): b for b in worldbody.iter("body")}
-    if set(bodies) != set(model.links):
-        raise MjcfError(f"{urdf_path}: MuJoCo's import has bodies {sorted(bodies)}, the URDF links {sorted(model.links)}")
-    place_bodies(model, spec, bodies, urdf_path)
-    names_in_qpos: list[str] = []
-    for b in worldbody.iter("body"):
-        link = model.links[b.get("name")]
-        set_inertial(b, link, missing_inertial, notes)
-        names_in_qpos += set_joints(b, link, model, spec, springs, urdf_path)
-        set_geoms(b, link, model, pieces[link.name], geom_mesh, visuals, urdf_path)
-    if set(names_in_qpos) != set(movable):
-        raise MjcfError(f"{urdf_path}: MuJoCo's import has joints {names_in_qpos}, the URDF {sorted(movable)}")
-    return bodies
