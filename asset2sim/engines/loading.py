@@ -154,7 +154,7 @@ def collision_pieces(model: UrdfModel) -> tuple[dict[str, list[CollisionPiece]],
                         continue
                     notes.append(f"link {name!r} collision {k} group {g} ({c.filename}) is flat: made a {FLAT_HULL_THICKNESS * 1000:g} mm slab")
                     pts, thick = slab, True
-                pieces.append(CollisionPiece(name, k, g, "hull", c.origin, points=pts, source=c.path, scale=np.asarray(c.scale, float),
+                pieces.append(CollisionPiece(name, k, g, "hull", c.origin, points=pts, source=c.path, scale=c.scale,
                                              whole_file=len(groups) == 1 and not thick, thickened=thick))
         out[name] = pieces
     return out, notes

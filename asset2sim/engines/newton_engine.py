@@ -264,8 +264,8 @@ class NewtonSession(ArrayJoints, SessionDefaults):
     # -------------------------------------------------------------------- root
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         if self.urdf.root in self._welded:
-            pose = self._welded[self.urdf.root]
-            return pose[:3, 3].copy(), quat_wxyz_to_xyzw(matrix_quat_wxyz(pose[:3, :3]))
+            pos, rot = self.link_frame(self.urdf.root)
+            return pos, quat_wxyz_to_xyzw(matrix_quat_wxyz(rot))
         t = self.state0.body_q.numpy()[self._body[self.urdf.root]]
         q = np.array(t[3:7], float)
         n = np.linalg.norm(q)

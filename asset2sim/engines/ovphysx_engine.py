@@ -122,7 +122,7 @@ class OvPhysxSession(SessionDefaults):
                                     "(asset2sim export OUT --format usd)")
         self.urdf = read_urdf(urdf_path)
         self._set_joint_tables(self.urdf)
-        self.link_names = list(self.urdf.tree_order())
+        self.link_names = self.urdf.tree_order()
         usd_stage = Usd.Stage.Open(str(self.usd))
         prim_of_joint = {prim.GetName(): str(name.Get()) for prim in usd_stage.Traverse()
                          if (name := prim.GetAttribute("asset2sim:name")) and name.HasAuthoredValue()}

@@ -76,9 +76,9 @@ class PyBulletSession(SessionDefaults):
             self._index[name] = j
             self.joint_types[name] = jtype
             self.joint_limits[name] = (lo, hi)
-            self.joint_child[name] = info[12].decode()
+            self.joint_child[name] = self._link_by_index[j]
             self._friction[name] = float(info[7])
-            self._motor(name, 0.0, float(info[7]))  # Coulomb friction
+            self.release_joint(name)  # Coulomb friction: the motor at rest
         self.joint_names = list(self._index)
         self.link_names: list[str] = list(self._link_by_index.values())
         self._link_index = {name: idx for idx, name in reversed(list(self._link_by_index.items()))}

@@ -105,15 +105,10 @@ class PyBulletViewer:
         except Exception as exc:
             self.close()
             raise RuntimeError(f"PyBullet could not load {urdf_path}: {exc}") from exc
-        self._links: dict[int, str] = {-1: p.getBodyInfo(self.body)[0].decode()}
-        self._joints: dict[str, int] = {}
-        self.joint_names: list[str] = []
-        for j, info in enumerate(joint_infos(p, self.body)):
-            self._links[j] = info[12].decode()
-            name = info[1].decode()
-            self._joints[name] = j
-            if info[2] in (p.JOINT_REVOLUTE, p.JOINT_PRISMATIC):
-                self.joint_names.append(name)
+        infos = joint_infos(p, self.body)
+        self._links = {-1: p.getBodyInfo(self.body)[0].decode(), **{j: info[12].decode() for j, info in enumerate(infos)}}
+        self._joints = {info[1].decode(): j for j, info in enumerate(infos)}
+        self.joint_names = [info[1].decode() for info in infos if info[2] in (p.JOINT_REVOLUTE, p.JOINT_PRISMATIC)]
         self.link_names = list(self._links.values())
         self._index = {name: idx for idx, name in reversed(list(self._links.items()))}
 

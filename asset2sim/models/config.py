@@ -7,7 +7,6 @@ import math
 import os
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
 
 
 def _env_float(name: str, default: float) -> float:
@@ -86,13 +85,7 @@ class ClientConfig:
         """
         cache_env = os.environ.get("ASSET2SIM_LLM_CACHE_DIR", "")
         size = max(int(_env_float("ASSET2SIM_LLM_RENDER_SIZE", 384)), 16)
-        kw: dict[str, Any] = dict(
-            model=model,
-            base_url=base_url,
-            **{f.name: type(f.default)(_env_float(f"ASSET2SIM_LLM_{f.name.upper()}", f.default))
-               for f in fields(cls) if f.name in _ENV_KNOBS},
-            cache_dir=None if cache_env.lower() in ("off", "none", "0") else default_cache_dir(),
-            render_size=(size, size),
-        )
-        kw.update(overrides)
-        return cls(**kw)
+        knobs = {f.name: type(f.default)(_env_float(f"ASSET2SIM_LLM_{f.name.upper()}", f.default))
+                 for f in fields(cls) if f.name in _ENV_KNOBS}
+        cache_dir = None if cache_env.lower() in ("off", "none", "0") else default_cache_dir()
+        return cls(**{"model": model, "base_url": base_url, **knobs, "cache_dir": cache_dir, "render_size": (size, size), **overrides})

@@ -312,12 +312,11 @@ class _Reader:
             model.links[ln.name] = ln
         if self.mode != "collect":  # (the validator reports it as a finding: NAME_TOO_LONG)
             self._check_name_lengths(model)
+        children = {j.child for j in joints}
+        roots = [n for n in model.links if n not in children]
+        model.root = roots[0] if len(roots) == 1 else None
         if self.mode == "strict":
-            self._check_tree(model)
-        else:
-            children = {j.child for j in joints}
-            roots = [n for n in model.links if n not in children]
-            model.root = roots[0] if len(roots) == 1 else None
+            self._check_tree(model, roots)
         return model
 
     def _check_name_lengths(self, model: UrdfModel) -> None:
@@ -331,9 +330,9 @@ class _Reader:
                     raise UrdfError(f"{kind} name of {len(name)} characters > cap {MAX_NAME_CHARS} ({shown!r})", code="NAME_TOO_LONG",
                                     source=self.source, line=line)
 
-    def _check_tree(self, model: UrdfModel) -> None:
+    def _check_tree(self, model: UrdfModel, roots: list[str]) -> None:
         """Mode strict: parent and child name links, no link has two parents,
-        one root, and every link hangs from it."""
+        one root (of ``roots``, the links without a parent), and every link hangs from it."""
         children: set[str] = set()
         for j in model.joints:
             if j.parent not in model.links or j.child not in model.links:
@@ -342,10 +341,8 @@ class _Reader:
             if j.child in children:
                 self.problem("LINK_MULTIPLE_PARENTS", f"link {j.child!r} has two parent joints", line=j.line, joint=j.name)
             children.add(j.child)
-        roots = [n for n in model.links if n not in children]
         if len(roots) != 1:
             self.problem("TREE_ROOTS", f"expected one root link, found {roots}")
-        model.root = roots[0]
         if len(model.tree_order()) != len(model.links):
             self.problem("TREE_NOT_CONNECTED", "the joints do not form a tree over all links")
 

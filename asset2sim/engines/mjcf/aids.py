@@ -97,7 +97,7 @@ def add_solver_aids(worldbody, compiled, qpos: np.ndarray, press: dict[str, floa
             continue
         inertia, bound, unit = 1.0 / float(compiled.dof_invweight0[dof]), BOUND[kind], "deg" if kind == "hinge" else "mm"
         force = "N*m" if kind == "hinge" else "N"
-        show = (lambda x: math.degrees(x)) if kind == "hinge" else (lambda x: 1e3 * x)
+        show = math.degrees if kind == "hinge" else (lambda x: 1e3 * x)
         friction, arm = float(compiled.dof_frictionloss[dof]), 0.0
         if friction > 0:
             tau = min(abs(float(load[dof])), friction)
