@@ -13,19 +13,10 @@ import numpy as np
 from asset2sim.engines.base import (ArrayJoints, ContactPair, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
                                     SessionOptions, penetration_sum, register_engine, register_file_reader)
 from asset2sim.engines.loading import BOX_CORNERS, read_urdf
-from asset2sim.engines.mjcf import GROUND, KEYFRAME, MjcfError, lowest_point, mujoco_messages, urdf_to_mjcf
-from asset2sim.engines.mjcf.base import load_mujoco as _mujoco, mesh_vertices, safe_name
+from asset2sim.engines.mjcf import GROUND, KEYFRAME, lowest_point, urdf_to_mjcf
+from asset2sim.engines.mjcf.base import load_mujoco as _mujoco, mesh_vertices, mujoco_call, safe_name
 from asset2sim.engines.step_budget import spend
 from asset2sim.frames import quat_wxyz_to_xyzw, quat_xyzw_to_wxyz
-
-
-def _compile(load, path) -> object:
-    """``load()`` (an ``MjModel``) with MuJoCo's messages collected (MjcfError naming ``path``)."""
-    try:
-        with mujoco_messages():
-            return load()
-    except Exception as exc:
-        raise MjcfError(f"MuJoCo could not compile {path}: {exc}") from exc
 
 
 class MuJoCoSession(ArrayJoints, SessionDefaults):
@@ -41,7 +32,8 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
         self.options = options
         self.build = urdf_to_mjcf(urdf_path, options, missing_inertial="bullet")
         self.notes = list(self.build.notes)
-        self.m = _compile(lambda: mujoco.MjModel.from_xml_string(self.build.xml, assets=self.build.assets()), urdf_path)
+        self.m = mujoco_call(lambda: mujoco.MjModel.from_xml_string(self.build.xml, assets=self.build.assets()),
+                             f"MuJoCo could not compile {urdf_path}")
         self.d = mujoco.MjData(self.m)
         self.urdf = read_urdf(urdf_path)
         self._set_joint_tables(self.urdf)
@@ -110,11 +102,10 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
         dt = float(self.m.opt.timestep)
         for joint, (v, fmax) in self._drive.items():
             i = self._dadr[joint]
-            e = np.zeros(self.m.nv)
-            e[i] = 1.0
-            x = np.zeros(self.m.nv)
-            mj.mj_solveM(self.m, self.d, x.reshape(1, -1), e.reshape(1, -1))
-            inertia = 1.0 / max(float(x[i]), 1e-12)
+            e = np.eye(1, self.m.nv, i)  # the unit row of dof i
+            x = np.zeros_like(e)
+            mj.mj_solveM(self.m, self.d, x, e)
+            inertia = 1.0 / max(float(x[0, i]), 1e-12)
             load = float(self.m.dof_frictionloss[i]) * float(np.sign(v)) + float(self.m.dof_damping[i]) * v
             load += float(self.d.qfrc_bias[i] - self.d.qfrc_spring[i])  # gravity and the spring held, as a motor does
             limit = fmax + float(self.m.dof_frictionloss[i]) + abs(float(self.m.dof_damping[i]) * v)
@@ -290,7 +281,7 @@ def held_physics_of_mjcf(path: Path, links: list[str], joints: list[str]) -> Hel
     :data:`KEYFRAME` (``qpos0`` without one) (MjcfError: it does not compile;
     KeyError: a link or joint is not in the model)."""
     mujoco = _mujoco()
-    m = _compile(lambda: mujoco.MjModel.from_xml_path(str(path)), path)
+    m = mujoco_call(lambda: mujoco.MjModel.from_xml_path(str(path)), f"MuJoCo could not compile {path}")
     kid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, KEYFRAME)
     qpos = np.array(m.key_qpos[kid], float) if kid >= 0 else np.array(m.qpos0, float)
     return held_physics_of_model(m, qpos, links, joints, source=f"mjcf ({Path(path).name}, keyframe {KEYFRAME!r})")

@@ -164,7 +164,6 @@ class OvPhysxSession(SessionDefaults):
             self.close()
             raise RuntimeError(f"ovphysx holds no DOF for joints {missing} of {self.usd}")
         self._sign = {j: self._axis_sign(j) for j in self.joint_names}
-        self._angle = {j: self.joint_types[j] != "prismatic" for j in self.joint_names}
         self._effort = np.zeros(self._f.shape, np.float32)
         self._applied = False
         self._states: dict[int, tuple] = {}

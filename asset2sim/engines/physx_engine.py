@@ -220,7 +220,7 @@ class PhysXSession(ArrayJoints, SessionDefaults):
         for ent in entities:
             self.scene.add_entity(ent)
         self._entities = list(entities)
-        self.art = entities[0].find_component_by_type(physx.PhysxArticulationLinkComponent).articulation
+        self.art = next(iter(self.links.values())).articulation
         configure_articulation(self.art)
 
     def _passive_drives(self, urdf_path: Path) -> None:

@@ -20,27 +20,23 @@ MAX_JSON_DEPTH = 64
 _NESTING = re.compile(r'[\[\]{}"\\]')
 
 
-class _Reject(ValueError):
-    pass
-
-
 def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for k, v in pairs:
         if k in out:
-            raise _Reject(f"duplicate key {k!r}")
+            raise ValueError(f"duplicate key {k!r}")
         out[k] = v
     return out
 
 
 def _no_constant(name: str) -> Any:
-    raise _Reject(f"non-finite number {name} is not allowed")
+    raise ValueError(f"non-finite number {name} is not allowed")
 
 
 def _finite_float(text: str) -> float:
     x = float(text)
     if not math.isfinite(x):
-        raise _Reject(f"number {text} overflows to a non-finite value")
+        raise ValueError(f"number {text} overflows to a non-finite value")
     return x
 
 
@@ -99,13 +95,11 @@ def parse_json_strict(text: str) -> dict[str, Any]:
         obj, end = dec.raw_decode(t)
     except RecursionError:
         raise ReplyInvalid([too_deep]) from None
-    except _Reject as exc:
-        raise ReplyInvalid([f"invalid JSON: {exc}"]) from None
     except json.JSONDecodeError as exc:
         what = "the reply is not JSON" if exc.pos == 0 else "invalid or truncated JSON"
         raise ReplyInvalid([f"{what}: {exc.msg} at line {exc.lineno} column {exc.colno} "
                             f"(character {exc.pos} of {len(t)})"]) from None
-    except ValueError as exc:  # e.g. an integer with too many digits
+    except ValueError as exc:  # a duplicate key, a non-finite number (the hooks above), an integer with too many digits
         raise ReplyInvalid([f"invalid JSON: {exc}"]) from None
     if t[end:].strip():
         raise ReplyInvalid([f"extra text after the JSON object at character {end} of {len(t)}"])

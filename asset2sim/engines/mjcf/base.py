@@ -140,19 +140,27 @@ def mujoco_messages():
         mujoco.set_mju_user_warning(previous)
 
 
+def mujoco_call(load, failure: str, notes: list[str] | None = None):
+    """``load()`` (a MuJoCo import or compile) with MuJoCo's messages collected (:func:`mujoco_messages`), its
+    warnings added to ``notes`` as notes (texture-coordinate complaints dropped); returns what ``load`` returns
+    (MjcfError ``failure: <MuJoCo's message>`` when it raises)."""
+    try:
+        with mujoco_messages() as caught:
+            out = load()
+    except Exception as exc:  # mujoco raises ValueError with its message
+        raise MjcfError(f"{failure}: {exc}") from exc
+    if notes is not None:
+        notes.extend(f"MuJoCo: {text}" for text in caught if "texture coordinate" not in text)
+    return out
+
+
 def compile_xml(xml: str, assets: dict[str, bytes], urdf_path: Path, notes: list[str] | None = None):
     """Compile the MJCF text ``xml`` with the mesh ``assets`` (relative path
     -> bytes), MuJoCo's warnings added to ``notes``; returns the ``MjModel``
     (MjcfError naming the URDF: MuJoCo refuses it)."""
     mujoco = load_mujoco()
-    try:
-        with mujoco_messages() as caught:
-            compiled = mujoco.MjModel.from_xml_string(xml, assets=assets)
-    except Exception as exc:
-        raise MjcfError(f"{urdf_path}: the converted MJCF does not compile: {exc}") from exc
-    if notes is not None:
-        notes.extend(mujoco_warnings(caught))
-    return compiled
+    return mujoco_call(lambda: mujoco.MjModel.from_xml_string(xml, assets=assets),
+                       f"{urdf_path}: the converted MJCF does not compile", notes)
 
 
 def place_on_ground(root, root_body, assets: dict[str, bytes], initial_state: dict[str, float], fixed_base: bool,
@@ -176,11 +184,6 @@ def place_on_ground(root, root_body, assets: dict[str, bytes], initial_state: di
         root_body.set("pos", vec_text([0.0, 0.0, height]))
         root_body.set("quat", "1 0 0 0")
     return compiled, qpos, height
-
-
-def mujoco_warnings(caught: list[str]) -> list[str]:
-    """MuJoCo's warnings as notes (texture-coordinate complaints dropped)."""
-    return [f"MuJoCo: {text}" for text in caught if "texture coordinate" not in text]
 
 
 def mesh_vertices(m, g: int):

@@ -14,8 +14,7 @@ from lxml import etree
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, CollisionPiece, collision_pieces, read_urdf
 from asset2sim.engines.mjcf.base import (DERIVED_MESH_DIR, GROUND, KEYFRAME, MjcfError, child, compile_xml, load_mujoco,
-                                         mujoco_messages, mujoco_warnings, num_text, place_on_ground, relative_to, safe_name,
-                                         vec_text)
+                                         mujoco_call, num_text, place_on_ground, relative_to, safe_name, vec_text)
 from asset2sim.engines.mjcf.aids import add_solver_aids, ground_aid, prism_aid, write_aids
 from asset2sim.engines.mjcf.rewrite import (add_root_and_ground, cylinder_prisms, place_bodies, rename_meshes, set_contacts, set_geoms,
                                             set_inertial, set_joints, set_options, zero_armature)
@@ -92,24 +91,22 @@ def urdf_for_import(model: UrdfModel, pieces: dict[str, list[CollisionPiece]], m
             else:
                 ln.collisions.append(UrdfGeometry(kind=p.kind, origin=p.origin, size=p.size, radius=p.radius, length=p.length))
         out.links[name] = ln
-    for j in model.joints:
-        out.joints.append(UrdfJoint(
-            name=j.name, type=j.type, parent=j.parent, child=j.child, origin=j.origin, axis_xyz=j.axis,
-            limit=UrdfLimit(lower=j.lower, upper=j.upper, effort=0.0, velocity=0.0) if j.type in ("revolute", "prismatic") else None,
-            dynamics=None if j.type == "fixed" else UrdfDynamics(damping=j.damping, friction=j.friction)))
+    out.joints = [UrdfJoint(
+        name=j.name, type=j.type, parent=j.parent, child=j.child, origin=j.origin, axis_xyz=j.axis,
+        limit=UrdfLimit(lower=j.lower, upper=j.upper, effort=0.0, velocity=0.0) if j.type in ("revolute", "prismatic") else None,
+        dynamics=None if j.type == "fixed" else UrdfDynamics(damping=j.damping, friction=j.friction)) for j in model.joints]
     return write_urdf(out, style=UrdfStyle(number=num_text)).decode("utf-8")
 
 
 def import_skeleton(urdf_text: str, assets: dict[str, bytes], urdf_path: Path, notes: list[str]):
     """MuJoCo's own URDF import: (``MjSpec``, root element of its MJCF) (MjcfError: refused)."""
     mujoco = load_mujoco()
-    try:
-        with mujoco_messages() as caught:
-            spec = mujoco.MjSpec.from_string(urdf_text, assets=assets)
-            skeleton = spec.to_xml()
-    except Exception as exc:  # mujoco raises ValueError with its message
-        raise MjcfError(f"MuJoCo could not import {urdf_path}: {exc}") from exc
-    notes.extend(mujoco_warnings(caught))
+
+    def load():
+        spec = mujoco.MjSpec.from_string(urdf_text, assets=assets)
+        return spec, spec.to_xml()
+
+    spec, skeleton = mujoco_call(load, f"MuJoCo could not import {urdf_path}", notes)
     return spec, etree.fromstring(skeleton.encode())
 
 

@@ -67,7 +67,7 @@ def set_contacts(root, model: UrdfModel, pieces: dict[str, list[CollisionPiece]]
     # collide: the filter then travels with the file into a host scene that turns filterparent off, and into MJX
     shaped = [n for n in model.tree_order() if pieces.get(n)]
     for j in model.joints:
-        if j.parent in shaped and j.child in shaped and (j.parent, j.child) not in needed and (j.child, j.parent) not in needed:
+        if j.parent in shaped and j.child in shaped and needed.isdisjoint({(j.parent, j.child), (j.child, j.parent)}):
             excludes.append((j.parent, j.child))
     for a, b in pairs:
         f = num_text(max(link_friction(model, a), link_friction(model, b)))
