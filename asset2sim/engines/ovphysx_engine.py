@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import EngineUnavailable, SessionDefaults, SessionOptions, register_engine, unsupported
+from asset2sim.engines.base import ArrayJoints, EngineUnavailable, SessionDefaults, SessionOptions, register_engine, unsupported
 from asset2sim.engines.loading import collision_pieces, read_urdf, transform_points
 from asset2sim.engines.step_budget import spend
 from asset2sim.extras import pxr_modules
@@ -101,7 +101,7 @@ def Xform "World"
 '''
 
 
-class OvPhysxSession(SessionDefaults):
+class OvPhysxSession(ArrayJoints, SessionDefaults):
     """A :class:`~asset2sim.engines.base.SimSession` of the USD export in ovphysx (module docstring).
 
     Raises:
@@ -164,6 +164,9 @@ class OvPhysxSession(SessionDefaults):
             self.close()
             raise RuntimeError(f"ovphysx holds no DOF for joints {missing} of {self.usd}")
         self._sign = {j: self._axis_sign(j) for j in self.joint_names}
+        self._qadr = self._dadr = {j: i for j, i in self._dof.items() if j in self._sign}
+        self._signs = np.ones(self._q.shape[1], np.float32)  # per DOF: PhysX's coordinate along the URDF axis
+        self._signs[list(self._qadr.values())] = [self._sign[j] for j in self._qadr]
         self._effort = np.zeros(self._f.shape, np.float32)
         self._applied = False
         self._states: dict[int, tuple] = {}
@@ -187,29 +190,16 @@ class OvPhysxSession(SessionDefaults):
         binding.read(out)
         return out
 
-    def _by_joint(self, binding) -> dict[str, float]:
-        """The first articulation's DOF values of ``binding``, by URDF joint, along the URDF axes."""
-        values = self._read(binding)[0]
-        return {j: self._sign[j] * float(values[i]) for j, i in self._dof.items() if j in self._sign}
+    def _joint_q(self) -> np.ndarray:
+        """The first articulation's DOF positions (n,) along the URDF axes (a copy)."""
+        return self._read(self._q)[0] * self._signs
 
-    def joint_positions(self) -> dict[str, float]:
-        return self._by_joint(self._q)
+    def _joint_qd(self) -> np.ndarray:
+        return self._read(self._qd)[0] * self._signs
 
-    def joint_velocities(self) -> dict[str, float]:
-        return self._by_joint(self._qd)
-
-    def joint_state(self, joint: str) -> tuple[float, float]:
-        i = self._dof[joint]
-        return self._sign[joint] * float(self._read(self._q)[0, i]), self._sign[joint] * float(self._read(self._qd)[0, i])
-
-    def set_joint_positions(self, q: dict[str, float]) -> None:
-        pos, vel = self._read(self._q), self._read(self._qd)
-        for name, value in q.items():
-            if name in self._dof:
-                pos[0, self._dof[name]] = self._sign[name] * float(value)
-                vel[0, self._dof[name]] = 0.0
-        self._q.write(pos)
-        self._qd.write(vel)
+    def _put_joints(self, q: np.ndarray, qd: np.ndarray) -> None:
+        self._q.write((q * self._signs)[None])
+        self._qd.write((qd * self._signs)[None])
 
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """Position (3,) m and quaternion (x, y, z, w) of the articulation root (ovphysx: px py pz qx qy qz qw)."""
@@ -247,7 +237,7 @@ class OvPhysxSession(SessionDefaults):
     def held_friction(self) -> dict[str, tuple[float, float, float]]:
         """joint -> (static, dynamic, viscous) friction as PhysX holds it (N*m or N; viscous per its unit)."""
         fr = self._read(self._friction)[0]
-        return {j: tuple(float(x) for x in fr[i]) for j, i in self._dof.items() if j in self._sign}
+        return {j: tuple(float(x) for x in fr[i]) for j, i in self._qadr.items()}
 
     def close(self) -> None:
         physx, stage = getattr(self, "_physx", None), getattr(self, "_stage", None)
