@@ -307,9 +307,8 @@ class SessionDefaults:
         self.close()
 
     def hold_root(self, max_force: float) -> None:
-        if self.options.fixed_base:
-            return
-        raise EngineUnsupported(f"{self.engine}: no bounded root hold")
+        if not self.options.fixed_base:
+            raise EngineUnsupported(f"{self.engine}: no bounded root hold")
 
     def release_root(self) -> None:
         pass
@@ -443,9 +442,9 @@ def penetration_sum(points: Iterable[tuple[str, str, float]]) -> tuple[float, li
         if d >= 0.0:
             continue
         key = (a, b) if a <= b else (b, a)
-        cp = pairs.get(key)
-        if cp is None:
-            cp = pairs[key] = ContactPair(key[0], key[1], 0.0, 0.0, 0)
+        if key not in pairs:
+            pairs[key] = ContactPair(*key, 0.0, 0.0, 0)
+        cp = pairs[key]
         cp.depth += -d
         cp.max_depth = max(cp.max_depth, -d)
         cp.points += 1

@@ -152,6 +152,4 @@ def reask_text(errors: list[str]) -> str:
 
 def excerpt(text: str, limit: int) -> str:
     """``text`` cut to ``limit`` characters, saying how many were left out."""
-    if len(text) <= limit:
-        return text
-    return text[:limit] + f"... [{len(text) - limit} more characters omitted]"
+    return text if len(text) <= limit else text[:limit] + f"... [{len(text) - limit} more characters omitted]"

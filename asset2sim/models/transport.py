@@ -279,20 +279,20 @@ def _decoded_transport(inner):
                 return self.wrapped.handle_request(request)
             request.headers["Accept-Encoding"] = "identity"
             bounds.requests += 1
+            url = request.url
+            server = f"{url.scheme}://{url.host}:{url.port or ''}"
             try:
                 response = self.wrapped.handle_request(request)
             except httpx.ConnectError as exc:
                 if bounds.failure is None:
-                    url = request.url
                     why = one_line(exc, 160) or "refused"
-                    bounds.failure = ("MODEL_CONNECTION_REFUSED", f"no connection to "
-                                      f"{url.scheme}://{url.host}:{url.port or ''} ({why})")
+                    bounds.failure = ("MODEL_CONNECTION_REFUSED", f"no connection to {server} ({why})")
                 raise
             bounds.status = response.status_code
             if response.has_redirect_location:  # never sent on: the user named one server
                 response.close()
-                url, to = request.url, response.headers.get("location", "")
-                bounds.failure = ("MODEL_REDIRECT_REFUSED", f"the server at {url.scheme}://{url.host}:{url.port or ''} "
+                to = response.headers.get("location", "")
+                bounds.failure = ("MODEL_REDIRECT_REFUSED", f"the server at {server} "
                                   f"answered HTTP {response.status_code} with a redirect to {one_line(to, 160)!r}, not "
                                   "followed (give that address as --base-url to use it)")
                 raise httpx.TransportError(bounds.failure[1], request=request)

@@ -100,7 +100,7 @@ class UrdfMaterial(_ArrayEq):
     rgba: np.ndarray | None = None
     texture: str | None = None
     line: int | None = _source_line()
-    texture_line: int | None = field(default=None, compare=False)
+    texture_line: int | None = _source_line()
 
 
 @dataclass(eq=False)
@@ -147,9 +147,7 @@ class UrdfGeometry(_ArrayEq):
     @property
     def scale(self) -> np.ndarray:
         """Mesh scale (3,), dimensionless (ones when not written)."""
-        if self.mesh_scale is None:
-            return np.ones(3)
-        return np.broadcast_to(np.asarray(self.mesh_scale, float).ravel(), (3,)).copy()
+        return np.ones(3) if self.mesh_scale is None else np.broadcast_to(np.asarray(self.mesh_scale, float).ravel(), (3,)).copy()
 
 
 @dataclass(eq=False)

@@ -36,12 +36,11 @@ MAX_NAME_CHARS = 256
 class _Reader:
     """One pass over a parsed ``<robot>`` element (see the module docstring for the modes)."""
 
-    #: Problems that refuse the file in mode "strict" (the others are remarks).
-    STRICT_FATAL = frozenset({
-        "URDF_ROOT_NOT_ROBOT", "LINK_NAME_MISSING", "LINK_NAME_DUPLICATE", "JOINT_NAME_MISSING", "JOINT_TYPE_MISSING",
-        "JOINT_TYPE_INVALID", "JOINT_TYPE_UNSUPPORTED", "JOINT_PARENT_MISSING", "JOINT_CHILD_MISSING", "JOINT_PARENT_UNKNOWN",
-        "JOINT_CHILD_UNKNOWN", "LINK_MULTIPLE_PARENTS", "TREE_ROOTS", "TREE_NOT_CONNECTED", "JOINT_AXIS_ZERO",
-        "JOINT_LIMIT_MISSING", "INERTIAL_MASS_MISSING", "INERTIA_MISSING", "GEOMETRY_MISSING", "MESH_FILENAME_EMPTY",
+    #: Problems mode "strict" lets pass as remarks; every other problem refuses the file.
+    STRICT_REMARKS = frozenset({
+        "URDF_ROBOT_NAME_MISSING", "MESH_SCALE_ZERO", "MESH_SCALE_NEGATIVE", "GEOMETRY_SIZE_NONPOSITIVE", "JOINT_AXIS_NOT_UNIT",
+        "JOINT_LIMIT_INCOMPLETE", "JOINT_LIMIT_REVERSED", "JOINT_LIMIT_EQUAL", "JOINT_DYNAMICS_NEGATIVE", "JOINT_EFFORT_NEGATIVE",
+        "JOINT_VELOCITY_NEGATIVE",
     })
 
     def __init__(self, source: str, base: Path | None, mode: Mode, joint_types: Iterable[str],
@@ -61,7 +60,7 @@ class _Reader:
         if self.mode == "collect":
             assert self.on_problem is not None
             self.on_problem(Problem(code, message, line, link, joint, values))
-        elif self.mode == "strict" and code in self.STRICT_FATAL:
+        elif self.mode == "strict" and code not in self.STRICT_REMARKS:
             raise UrdfError(message, code=code, source=self.source, line=line, link=link, joint=joint)
 
     def nums(self, el, attr: str, count, *, default=None, link=None, joint=None, required=False):
@@ -111,9 +110,8 @@ class _Reader:
         return mat
 
     def _parse_geometry(self, el, role: str, link: str | None) -> UrdfGeometry:
-        origin, ok = self._parse_origin(el, link=link)
+        origin, g_ok = self._parse_origin(el, link=link)
         g = UrdfGeometry(kind=None, origin=origin, name=el.get("name"), line=_line(el))
-        g_ok = ok
         geo = el.find("geometry")
         shapes = list(geo) if geo is not None else []
         known = len(shapes) == 1 and shapes[0].tag in GEOMETRY_KINDS
