@@ -72,7 +72,7 @@ class FakeSession(SessionDefaults):
         self.options = options
         self.behaviour = behaviour or _DEFAULT_BEHAVIOUR
         self.dt = options.conventions.timestep
-        self._set_joint_tables(self.model)
+        self._use_urdf(self.model)
         self.link_names = self.model.tree_order()
         self.steps = 0
         self._anchor = {n: (0.0, 0) for n in self.joint_names}  # value, step when set

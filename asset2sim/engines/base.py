@@ -340,9 +340,10 @@ class SessionDefaults:
     def discard_state(self, handle: int) -> None:
         self._states.pop(handle, None)
 
-    def _set_joint_tables(self, model) -> None:
-        """``joint_names``, ``joint_types``, ``joint_limits`` and ``joint_child`` of the movable joints of ``model``
-        (an :class:`~asset2sim.urdf.UrdfModel`), in file order."""
+    def _use_urdf(self, model) -> None:
+        """``urdf`` = ``model`` (an :class:`~asset2sim.urdf.UrdfModel`) and ``joint_names``, ``joint_types``,
+        ``joint_limits`` and ``joint_child`` of its movable joints, in file order."""
+        self.urdf = model
         self.joint_names = [j.name for j in model.movable_joints]
         self.joint_types = {j.name: j.type for j in model.movable_joints}
         self.joint_limits = {j.name: (j.lower, j.upper) for j in model.movable_joints}

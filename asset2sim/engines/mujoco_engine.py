@@ -35,8 +35,7 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
         self.m = mujoco_call(lambda: mujoco.MjModel.from_xml_string(self.build.xml, assets=self.build.assets()),
                              f"MuJoCo could not compile {urdf_path}")
         self.d = mujoco.MjData(self.m)
-        self.urdf = read_urdf(urdf_path)
-        self._set_joint_tables(self.urdf)
+        self._use_urdf(read_urdf(urdf_path))
         self.joint_names = list(self.build.joint_names)  # MuJoCo's compiled order
         self.link_names = [mujoco.mj_id2name(self.m, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(1, self.m.nbody)]
         self._body = {n: b + 1 for b, n in enumerate(self.link_names)}

@@ -54,10 +54,8 @@ class NewtonSession(ArrayJoints, SessionDefaults):
         self.options = options
         conv = options.conventions
         self.dt = conv.timestep
-        self.urdf = read_urdf(urdf_path)
-        pieces, notes = collision_pieces(self.urdf)
-        self.notes = list(notes)
-        self._set_joint_tables(self.urdf)
+        self._use_urdf(read_urdf(urdf_path))
+        pieces, self.notes = collision_pieces(self.urdf)
         self.link_names = self.urdf.tree_order()
         self._fixed = bool(options.fixed_base)
         poses = self._placed_poses(pieces)

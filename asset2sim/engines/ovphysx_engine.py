@@ -120,8 +120,7 @@ class OvPhysxSession(ArrayJoints, SessionDefaults):
         if not self.usd.is_file():  # a refine's candidate, or an output not exported: this engine has nothing to run
             raise EngineUnavailable(f"engine 'ovphysx' runs the USD export, and {self.usd} does not exist "
                                     "(asset2sim export OUT --format usd)")
-        self.urdf = read_urdf(urdf_path)
-        self._set_joint_tables(self.urdf)
+        self._use_urdf(read_urdf(urdf_path))
         self.link_names = self.urdf.tree_order()
         usd_stage = Usd.Stage.Open(str(self.usd))
         prim_of_joint = {prim.GetName(): str(name.Get()) for prim in usd_stage.Traverse()

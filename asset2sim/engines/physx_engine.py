@@ -172,9 +172,8 @@ class PhysXSession(ArrayJoints, SessionDefaults):
     def __init__(self, urdf_path: Path, options: SessionOptions, scene=None, ground: bool = True):
         self.options = options
         self.dt = options.conventions.timestep
-        self.urdf = read_urdf(urdf_path)
-        pieces, notes = collision_pieces(self.urdf)
-        self.notes = list(notes)
+        self._use_urdf(read_urdf(urdf_path))
+        pieces, self.notes = collision_pieces(self.urdf)
         self._owns_scene = scene is None
         if scene is None:
             self.scene = new_scene(options.conventions.gravity if options.gravity else 0.0, self.dt)
@@ -185,7 +184,6 @@ class PhysXSession(ArrayJoints, SessionDefaults):
         builder = fill_articulation_builder(self.scene.create_articulation_builder(), self.urdf, urdf_path,
                                             fixed_base=options.fixed_base, notes=self.notes)
         self._add_articulation(builder, pieces, urdf_path)
-        self._set_joint_tables(self.urdf)
         self.link_names = list(self.links)
         self._states: dict[int, tuple] = {}
         self._effort = None

@@ -25,7 +25,7 @@ def startup_quiet():
     if os.environ.get(STARTUP_MESSAGES) == "1":
         yield
         return
-    with warnings.catch_warnings(), _quiet_fds((1, 2)):
+    with warnings.catch_warnings(), quiet_fds():
         for text in STARTUP_WARNINGS:
             warnings.filterwarnings("ignore", message=text)
         yield
@@ -34,17 +34,13 @@ def startup_quiet():
 def quiet_stdout():
     """Silence C-level prints (Bullet's b3Warning ...) on fd 1 while the block
     runs; process-wide: threads take turns, nesting is fine."""
-    return _quiet_fds((1,))
-
-
-def quiet_fds():
-    """Silence C-level prints on fd 1 and 2 while the block runs."""
-    return _quiet_fds((1, 2))
+    return quiet_fds((1,))
 
 
 @contextmanager
-def _quiet_fds(fds: tuple[int, ...]):
-    """File descriptors ``fds`` sent to /dev/null while the block runs (C and Python buffers flushed on both sides)."""
+def quiet_fds(fds: tuple[int, ...] = (1, 2)):
+    """Silence C-level prints on the file descriptors ``fds`` (default 1 and 2): sent to /dev/null while the block runs
+    (C and Python buffers flushed on both sides)."""
     with _LOCK:
         saved = []
         for stream in (sys.stdout, sys.stderr):

@@ -53,7 +53,7 @@ def mesh_assets(pieces: dict[str, list[CollisionPiece]], mesh_root: Path) -> Mes
             if rel is not None:
                 out.files[rel] = p.source
                 data = p.source.read_bytes()
-                scale = None if np.allclose(p.scale, 1.0) else np.asarray(p.scale, float)
+                scale = None if np.allclose(p.scale, 1.0) else p.scale
             else:
                 rel = f"{DERIVED_MESH_DIR}/{file_stem(name)}__c{p.collision}_g{p.group}.obj"
                 data = hull_obj(p.points, num_text)
@@ -130,9 +130,7 @@ class MjcfBuild:
 
     def assets(self) -> dict[str, bytes]:
         """Every mesh as bytes, keyed as the MJCF names them (for in-memory compiles)."""
-        out = {k: p.read_bytes() for k, p in self.mesh_files.items()}
-        out.update(self.derived_meshes)
-        return out
+        return {**{k: p.read_bytes() for k, p in self.mesh_files.items()}, **self.derived_meshes}
 
 
 def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *, missing_inertial: str = "massless",

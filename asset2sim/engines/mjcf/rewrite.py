@@ -262,9 +262,8 @@ def cylinder_prisms(worldbody, asset_el) -> list[str]:
 def add_root_and_ground(root_body, worldbody, fixed_base: bool, ground: bool) -> None:
     """A free joint on the root body (unless ``fixed_base``) and the ground plane :data:`GROUND`."""
     if not fixed_base:
-        fj = etree.Element("freejoint", name=FREE_JOINT)
-        idx = 1 if root_body.find("inertial") is not None and list(root_body).index(root_body.find("inertial")) == 0 else 0
-        root_body.insert(idx, fj)
+        first_inertial = len(root_body) and root_body[0].tag == "inertial"  # the free joint after it
+        root_body.insert(1 if first_inertial else 0, etree.Element("freejoint", name=FREE_JOINT))
     if ground:
         # friction 0: MuJoCo takes the larger friction, the link's
         worldbody.insert(0, etree.Element("geom", name=GROUND, type="plane", size="0 0 1", friction="0 0.005 0.0001",
