@@ -237,7 +237,7 @@ class NewtonSession(ArrayJoints, SessionDefaults):
     def joint_axis(self, joint: str) -> np.ndarray:
         if joint not in self._qadr:
             raise KeyError(joint)
-        return np.asarray(self.urdf.joint(joint).axis, float)
+        return self.urdf.joint(joint).axis
 
     # ------------------------------------------------------------------- links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:

@@ -248,7 +248,7 @@ class PhysXSession(ArrayJoints, SessionDefaults):
         """The URDF axis (3,) (PhysX's joint x axis is built on it)."""
         if joint not in self._index:
             raise KeyError(joint)
-        return np.asarray(self.urdf.parent_joint(self.joint_child[joint]).axis, float).copy()
+        return self.urdf.joint(joint).axis
 
     def apply_joint_effort(self, joint: str, effort: float) -> None:
         """Added to the spring forces of the next step."""

@@ -243,7 +243,7 @@ class PyBulletSession(SessionDefaults):
         non-adjacent link pair, so it cannot depend on contacts Bullet cached
         at earlier states of the session."""
         p = self._p
-        cache = self.__dict__.setdefault("_pairs_cache", None)
+        cache = getattr(self, "_pairs_cache", None)
         if cache is None:
             with_shape = [i for i in self._link_by_index if p.getCollisionShapeData(self.body, i)]
             parent = {j: info[16] for j, info in enumerate(joint_infos(p, self.body))}

@@ -17,7 +17,7 @@ from asset2sim.engines.mjcf.base import (DERIVED_MESH_DIR, GROUND, KEYFRAME, Mjc
                                          mujoco_call, num_text, place_on_ground, relative_to, safe_name, vec_text)
 from asset2sim.engines.mjcf.aids import add_solver_aids, ground_aid, prism_aid, write_aids
 from asset2sim.engines.mjcf.rewrite import (add_root_and_ground, cylinder_prisms, place_bodies, rename_meshes, set_contacts, set_geoms,
-                                            set_inertial, set_joints, set_options, zero_armature)
+                                            set_inertial, set_joints, set_options)
 from asset2sim.engines.mjcf.visuals import add_visuals
 from asset2sim.file_names import file_stem
 from asset2sim.frames import translation_matrix
@@ -190,16 +190,15 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     bodies = {b.get("name"): b for b in worldbody.iter("body")}
     if set(bodies) != set(model.links):
         raise MjcfError(f"{urdf_path}: MuJoCo's import has bodies {sorted(bodies)}, the URDF links {sorted(model.links)}")
-    place_bodies(model, spec, bodies, urdf_path)
+    place_bodies(model, spec, bodies)
     names_in_qpos: list[str] = []
     for b in worldbody.iter("body"):
         link = model.links[b.get("name")]
         set_inertial(b, link, missing_inertial, notes)
-        names_in_qpos += set_joints(b, link, model, spec, springs, urdf_path)
-        set_geoms(b, link, model, pieces[link.name], geom_mesh, visuals, urdf_path)
+        names_in_qpos += set_joints(b, link, model, spec, springs)
+        set_geoms(b, link, model, pieces[link.name], geom_mesh, visuals)
     if set(names_in_qpos) != set(movable):
         raise MjcfError(f"{urdf_path}: MuJoCo's import has joints {names_in_qpos}, the URDF {sorted(movable)}")
-    zero_armature(worldbody)
     set_contacts(root, model, pieces, fixed_base, notes)
     root_body = bodies[model.root]
     add_root_and_ground(root_body, worldbody, fixed_base, ground)

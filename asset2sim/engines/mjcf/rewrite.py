@@ -92,10 +92,9 @@ def set_options(root, conv: SimConventions, gravity: bool, meshdir: str) -> None
     """``<compiler>``, ``<option>`` and ``<default>`` as the first three children of ``root``."""
     comp = child(root, "compiler")
     comp.attrib.clear()
-    for k, v in (("angle", "radian"), ("meshdir", meshdir), ("autolimits", "true"), ("inertiafromgeom", "false"),
-                 ("balanceinertia", "false"), ("boundmass", "0"), ("boundinertia", "0"), ("fusestatic", "false"),
-                 ("discardvisual", "false")):
-        comp.set(k, v)
+    comp.attrib.update({"angle": "radian", "meshdir": meshdir, "autolimits": "true", "inertiafromgeom": "false",
+                        "balanceinertia": "false", "boundmass": "0", "boundinertia": "0", "fusestatic": "false",
+                        "discardvisual": "false"})
     default = etree.Element("default")
     etree.SubElement(default, "geom", condim="3", friction=f"{num_text(CONTACT_FRICTION)} 0.005 0.0001")
     etree.SubElement(default, "joint", armature="0")
@@ -135,7 +134,7 @@ def rename_meshes(root, virtual: dict[str, tuple[str, np.ndarray | None]], urdf_
     return file_to_mesh, used
 
 
-def place_bodies(model: UrdfModel, spec, bodies: dict, urdf_path: Path) -> None:
+def place_bodies(model: UrdfModel, spec, bodies: dict) -> None:
     """Body poses at full precision from the joint origins (MjcfError: MuJoCo
     placed a body elsewhere, beyond 2e-5 relative)."""
     tol = 2e-5
@@ -143,7 +142,7 @@ def place_bodies(model: UrdfModel, spec, bodies: dict, urdf_path: Path) -> None:
         b = bodies[jnt.child]
         sb = spec.body(jnt.child)
         if sb is None or not close(sb.pos, jnt.origin[:3, 3], tol * max(1.0, float(np.abs(jnt.origin[:3, 3]).max()))):
-            raise MjcfError(f"{urdf_path}: MuJoCo placed body {jnt.child!r} elsewhere than the URDF ({jnt.origin[:3, 3]})")
+            raise MjcfError(f"{model.path}: MuJoCo placed body {jnt.child!r} elsewhere than the URDF ({jnt.origin[:3, 3]})")
         b.set("pos", vec_text(jnt.origin[:3, 3]))
         b.set("quat", quat_text(jnt.origin[:3, :3]))
         for k in ("euler", "axisangle", "xyaxes", "zaxis"):
@@ -170,21 +169,21 @@ def set_inertial(b, link, missing_inertial: str, notes: list[str]) -> None:
         b.insert(0, el)
 
 
-def set_joints(b, link, model: UrdfModel, spec, springs: dict[str, Spring], urdf_path: Path) -> list[str]:
-    """Rewrite the body's joint at full precision; returns the joint names
-    written (MjcfError: an unexpected joint, or another axis / damping / friction)."""
+def set_joints(b, link, model: UrdfModel, spec, springs: dict[str, Spring]) -> list[str]:
+    """Rewrite the body's joint at full precision, its ``armature`` :data:`~asset2sim.engines.mjcf.base.ARMATURE`;
+    returns the joint names written (MjcfError: an unexpected joint, or another axis / damping / friction)."""
     pj = model.parent_joint(link.name)
     names = []
     for je in b.findall("joint"):
         if pj is None or je.get("name") != pj.name:
-            raise MjcfError(f"{urdf_path}: unexpected joint {je.get('name')!r} in body {link.name!r}")
+            raise MjcfError(f"{model.path}: unexpected joint {je.get('name')!r} in body {link.name!r}")
         sj = spec.joint(pj.name)
         axis = np.asarray(sj.axis, float)
         if not close(axis / np.linalg.norm(axis), pj.axis, 1e-5):
-            raise MjcfError(f"{urdf_path}: MuJoCo read axis {axis} for joint {pj.name!r}, the URDF {pj.axis}")
+            raise MjcfError(f"{model.path}: MuJoCo read axis {axis} for joint {pj.name!r}, the URDF {pj.axis}")
         if not (math.isclose(float(np.atleast_1d(sj.damping)[0]), pj.damping, rel_tol=1e-5, abs_tol=1e-12)
                 and math.isclose(float(sj.frictionloss), pj.friction, rel_tol=1e-5, abs_tol=1e-12)):
-            raise MjcfError(f"{urdf_path}: MuJoCo read other damping/friction for joint {pj.name!r}")
+            raise MjcfError(f"{model.path}: MuJoCo read other damping/friction for joint {pj.name!r}")
         for k in list(je.attrib):
             if k not in ("name", "type"):
                 del je.attrib[k]
@@ -200,25 +199,20 @@ def set_joints(b, link, model: UrdfModel, spec, springs: dict[str, Spring], urdf
         if sp is not None and sp.stiffness > 0:
             je.set("stiffness", num_text(sp.stiffness))
             je.set("springref", num_text(sp.reference))
+        # ARMATURE on the joint itself, so that a host scene's <default> adds no inertia the files do not hold (an aid
+        # may raise it: asset2sim.engines.mjcf.aids)
+        je.set("armature", num_text(ARMATURE))
         names.append(pj.name)
     return names
 
 
-def zero_armature(worldbody) -> None:
-    """``armature`` :data:`~asset2sim.engines.mjcf.base.ARMATURE` on every joint under ``worldbody``, on the joint itself
-    so that a host scene's ``<default>`` adds no inertia the files do not hold (an aid may raise it:
-    :mod:`asset2sim.engines.mjcf.aids`)."""
-    for je in worldbody.iter("joint"):
-        je.set("armature", num_text(ARMATURE))
-
-
-def set_geoms(b, link, model: UrdfModel, plist: list[CollisionPiece], geom_mesh: dict[tuple, str], visuals: bool, urdf_path: Path) -> None:
+def set_geoms(b, link, model: UrdfModel, plist: list[CollisionPiece], geom_mesh: dict[tuple, str], visuals: bool) -> None:
     """Name and place the body's collision geoms (one per piece) with their
     mesh (``geom_mesh``: piece key -> mesh name) and friction (MjcfError:
     another number of geoms than pieces)."""
     geoms = b.findall("geom")
     if len(geoms) != len(plist):
-        raise MjcfError(f"{urdf_path}: MuJoCo made {len(geoms)} geoms for link {link.name!r}, expected {len(plist)}")
+        raise MjcfError(f"{model.path}: MuJoCo made {len(geoms)} geoms for link {link.name!r}, expected {len(plist)}")
     fr = link_friction(model, link.name)
     for g, p in zip(geoms, plist):
         g.set("name", f"{safe_name(link.name)}__c{p.collision}_g{p.group}")

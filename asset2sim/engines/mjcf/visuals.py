@@ -50,12 +50,11 @@ def visual_mesh_problem(path: Path, meshes: mesh_io.MeshCache) -> str:
         return f"is a {path.suffix} file (MuJoCo reads OBJ, STL and MSH)"
     try:
         mesh = meshes.get(path)
-        v, f = mesh.vertices, mesh.faces
     except mesh_io.MeshReadError as exc:
         return f"cannot be read ({exc})"
-    v = np.asarray(v, float)
+    v = np.asarray(mesh.vertices, float)
     v = v[np.all(np.isfinite(v), axis=1)]
-    if len(f) == 0:
+    if len(mesh.faces) == 0:
         return "has no faces"
     if len(np.unique(v[:64], axis=0)) < MIN_MESH_VERTICES and len(np.unique(v, axis=0)) < MIN_MESH_VERTICES:
         return f"has fewer than {MIN_MESH_VERTICES} distinct vertices"
