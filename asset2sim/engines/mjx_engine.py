@@ -49,10 +49,7 @@ class MjxSession(MuJoCoSession):
         except Exception as exc:  # NotImplementedError / ValueError naming the feature
             raise RuntimeError(f"MJX cannot take {urdf_path}: {exc}") from exc
 
-        def run(mx, dx, n):
-            return jax.lax.fori_loop(0, n, lambda _, d: mjx.step(mx, d), dx)
-
-        self._run = jax.jit(run)
+        self._run = jax.jit(lambda mx, dx, n: jax.lax.fori_loop(0, n, lambda _, d: mjx.step(mx, d), dx))
         note = (f"stepped by MJX (mujoco.mjx.step, JAX on the {jax.default_backend().upper()}): "
                 "no no-slip pass, the MJCF's cones and friction solver parameters")
         self.notes = [*self.notes, note]

@@ -156,16 +156,16 @@ class OvPhysxSession(ArrayJoints, SessionDefaults):
         if self._q.count != 1:
             self.close()
             raise RuntimeError(f"ovphysx found {self._q.count} articulations in {self.usd}, expected 1")
-        dof_prims = [str(n).rsplit("/", 1)[-1] for n in self._q.dof_names]
-        self._dof = {prim_of_joint.get(p, p): i for i, p in enumerate(dof_prims)}
+        prims = (str(n).rsplit("/", 1)[-1] for n in self._q.dof_names)
+        self._dof = {prim_of_joint.get(p, p): i for i, p in enumerate(prims)}
         missing = [j for j in self.joint_names if j not in self._dof]
         if missing:
             self.close()
             raise RuntimeError(f"ovphysx holds no DOF for joints {missing} of {self.usd}")
-        self._sign = {j: self._axis_sign(j) for j in self.joint_names}
-        self._qadr = self._dadr = {j: i for j, i in self._dof.items() if j in self._sign}
+        self._qadr = self._dadr = {j: i for j, i in self._dof.items() if j in self.joint_types}
         self._signs = np.ones(self._q.shape[1], np.float32)  # per DOF: PhysX's coordinate along the URDF axis
-        self._signs[list(self._qadr.values())] = [self._sign[j] for j in self._qadr]
+        for j, i in self._qadr.items():
+            self._signs[i] = self._axis_sign(j)
         self._effort = np.zeros(self._f.shape, np.float32)
         self._applied = False
         self._states: dict[int, tuple] = {}
@@ -206,7 +206,8 @@ class OvPhysxSession(ArrayJoints, SessionDefaults):
         return r[:3].copy(), r[3:7].copy()
 
     def apply_joint_effort(self, joint: str, effort: float) -> None:
-        self._effort[0, self._dof[joint]] += self._sign[joint] * float(effort)
+        i = self._qadr[joint]
+        self._effort[0, i] += self._signs[i] * float(effort)
         self._applied = True
 
     def save_state(self) -> int:

@@ -97,8 +97,7 @@ class PyBulletSession(SessionDefaults):
 
     def _add_plane(self) -> int:
         p = self._p
-        shape = p.createCollisionShape(p.GEOM_PLANE)
-        return p.createMultiBody(0, shape)
+        return p.createMultiBody(0, p.createCollisionShape(p.GEOM_PLANE))
 
     # ------------------------------------------------------------------ state
     def set_joint_positions(self, q: dict[str, float]) -> None:

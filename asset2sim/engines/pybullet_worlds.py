@@ -146,9 +146,7 @@ class PyBulletViewer:
                                lightSpecularCoeff=light["specular"], renderer=p.ER_TINY_RENDERER)
         if res is None or len(res) < 5:
             raise RuntimeError("PyBullet returned no image")
-        rgba = np.asarray(res[2], dtype=np.uint8).reshape(height, width, 4)
-        seg = np.asarray(res[4]).reshape(height, width)
-        return rgba, seg
+        return np.asarray(res[2], dtype=np.uint8).reshape(height, width, 4), np.asarray(res[4]).reshape(height, width)
 
     def close(self) -> None:
         if self.cid is not None:

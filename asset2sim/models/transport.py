@@ -209,7 +209,7 @@ def _codings(headers) -> list[str]:
     if not hasattr(headers, "get_list"):
         return []
     values = headers.get_list("content-encoding", split_commas=True)
-    return [v.strip().lower() for v in values if v.strip() and v.strip().lower() != "identity"]
+    return [c for v in values if (c := v.strip().lower()) not in ("", "identity")]
 
 
 def decode_body(chunks, codings: list[str], bounds: CallBounds) -> bytes:
@@ -225,7 +225,7 @@ def decode_body(chunks, codings: list[str], bounds: CallBounds) -> bytes:
         raise bounds.refuse("invalid", invalid, f"the reply's body is encoded as {codings[0]!r}, "
                             "which asset2sim did not ask for (it asks for identity)")
     wbits = INFLATED[codings[0]] if codings else None
-    inflate = zlib.decompressobj(wbits) if wbits is not None else None
+    inflate = zlib.decompressobj(wbits) if codings else None
     out, size = [], 0
 
     def keep(piece: bytes) -> None:

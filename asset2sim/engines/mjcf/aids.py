@@ -123,8 +123,7 @@ def add_solver_aids(worldbody, compiled, qpos: np.ndarray, press: dict[str, floa
                                                      "float32 ratchets it along its load"),
                                           effect=f"natural frequency and damping ratio x{math.sqrt(inertia / floor):.2f}"))
         effort = press.get(name)
-        limited = bool(compiled.jnt_limited[jid])
-        if effort and limited:
+        if effort and compiled.jnt_limited[jid]:
             over = limit_overrun(DEFAULT_SOLREF, DEFAULT_SOLIMP, effort, inertia + arm)
             if over > bound:
                 # (1 - d) d tc^2 tau / I = LIMIT_MARGIN bound, d near 1

@@ -216,8 +216,7 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
         for b in worldbody.iter("body"):
             add_visuals(b, model.links[b.get("name")], mesh_root, asset_el, meshes.files, final_assets, used, notes,
                         visual_meshes if visual_meshes is not None else MeshCache())
-    key = etree.SubElement(etree.SubElement(root, "keyframe"), "key", name=KEYFRAME)  # the initial state
-    key.set("qpos", vec_text(qpos))
+    etree.SubElement(etree.SubElement(root, "keyframe"), "key", name=KEYFRAME, qpos=vec_text(qpos))  # the initial state
     etree.indent(root, space="  ")
     xml = etree.tostring(root, encoding="unicode")
     if visuals and compile_visuals:  # the file as written must compile too
