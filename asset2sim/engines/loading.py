@@ -51,8 +51,8 @@ def principal_axes(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Principal moments (3,) kg*m^2 and axes (3, 3) (columns, a proper
     rotation, det = +1) of a symmetric inertia tensor (3, 3):
     ``tensor = axes @ diag(moments) @ axes.T`` (numpy ``eigh``)."""
-    t = 0.5 * (np.asarray(tensor, float) + np.asarray(tensor, float).T)
-    w, v = np.linalg.eigh(t)
+    t = np.asarray(tensor, float)
+    w, v = np.linalg.eigh(0.5 * (t + t.T))
     if np.linalg.det(v) < 0:
         v[:, 2] = -v[:, 2]
     return w, v

@@ -53,8 +53,7 @@ class MuJoCoSession(ArrayJoints, SessionDefaults):
         self._dadr = {n: int(self.m.jnt_dofadr[j]) for n, j in jids.items()}
         self._ground = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_GEOM, GROUND) if options.ground else -1
         self._root = self._body[self.urdf.root]
-        kid = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_KEY, KEYFRAME)
-        mujoco.mj_resetDataKeyframe(self.m, self.d, kid)
+        mujoco.mj_resetDataKeyframe(self.m, self.d, mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_KEY, KEYFRAME))
         self._forward()
 
     # ------------------------------------------------------------------ state

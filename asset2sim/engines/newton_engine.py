@@ -88,10 +88,8 @@ class NewtonSession(ArrayJoints, SessionDefaults):
         """Every link's pose (4, 4) at the initial state, a free root lifted so
         the lowest collision vertex is on z = 0; sets ``_points`` (k, 3) per link."""
         poses = self.urdf.link_poses(self.options.initial_state)
-        self._points: dict[str, np.ndarray] = {}
-        for name in self.link_names:
-            pts = [self._piece_points(p) for p in pieces.get(name, [])]
-            self._points[name] = np.vstack(pts) if pts else np.zeros((0, 3))
+        self._points = {name: np.vstack([self._piece_points(p) for p in pieces.get(name, [])] or [np.zeros((0, 3))])
+                        for name in self.link_names}
         lows = [] if self._fixed else [transform_points(poses[n], v)[:, 2].min() for n, v in self._points.items() if len(v)]
         lift = -min(lows) if lows else 0.0
         return self.urdf.link_poses(self.options.initial_state, translation_matrix([0.0, 0.0, lift]))

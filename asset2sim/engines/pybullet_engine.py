@@ -184,8 +184,7 @@ class PyBulletSession(SessionDefaults):
         return np.asarray(verts, float) if n else np.zeros((0, 3))
 
     def link_masses(self) -> dict[str, float]:
-        p = self._p
-        return {name: float(p.getDynamicsInfo(self.body, idx)[0]) for idx, name in self._link_by_index.items()}
+        return {name: float(self._p.getDynamicsInfo(self.body, idx)[0]) for idx, name in self._link_by_index.items()}
 
     def link_distances(self, link_a: str, link_b: str, max_distance: float = 0.0) -> list[float]:
         pts = self._p.getClosestPoints(self.body, self.body, max_distance, self.link_index(link_a), self.link_index(link_b))

@@ -139,13 +139,11 @@ class LLMClient:
         """Store a reply atomically (nothing without a cache folder); OSError when it cannot be
         written."""
         p = self._cache_path(key)
-        if p is None:
-            return
-        model, content, finish = self.config.model, completion.content, completion.finish_reason
-        atomic.write_json(p, {"format": CACHE_FORMAT, "key": key,
-                              "sha256": record_digest(key, model, content, finish),
-                              "model": model, "content": content, "finish_reason": finish,
-                              "created": time.time(), "tokens": completion.usage.total_tokens})
+        if p is not None:
+            model, content, finish = self.config.model, completion.content, completion.finish_reason
+            atomic.write_json(p, {"format": CACHE_FORMAT, "key": key, "sha256": record_digest(key, model, content, finish),
+                                  "model": model, "content": content, "finish_reason": finish,
+                                  "created": time.time(), "tokens": completion.usage.total_tokens})
 
     # ------------------------------------------------------------------ calls
     def _call_kwargs(self, litellm, messages: list[dict[str, Any]], schema: dict[str, Any] | None,

@@ -165,16 +165,15 @@ class _Reader:
     def _parse_inertial(self, el, link: str | None) -> UrdfInertial:
         origin, _ = self._parse_origin(el, link=link)
         ine = UrdfInertial(mass=None, origin=origin, line=_line(el))
+        at = {"line": _line(el), "link": link, "action": "replace_with_estimate"}  # a missing mass or inertia
         m = el.find("mass")
         if m is None or m.get("value") is None:
-            self.problem("INERTIAL_MASS_MISSING", "<inertial> has no <mass value=...>; an estimate replaces it",
-                         line=_line(el), link=link, action="replace_with_estimate")
+            self.problem("INERTIAL_MASS_MISSING", "<inertial> has no <mass value=...>; an estimate replaces it", **at)
         else:
             ine.mass = self.num(m, "value", link=link)
         i = el.find("inertia")
         if i is None:
-            self.problem("INERTIA_MISSING", "<inertial> has no <inertia>; an estimate replaces it",
-                         line=_line(el), link=link, action="replace_with_estimate")
+            self.problem("INERTIA_MISSING", "<inertial> has no <inertia>; an estimate replaces it", **at)
         else:
             diagonal = ("ixx", "iyy", "izz")
             vals = [self.num(i, k, default=None if k in diagonal else (0.0,), link=link, required=k in diagonal)

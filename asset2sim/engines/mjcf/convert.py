@@ -179,8 +179,7 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     meshes = mesh_assets(pieces, mesh_root)
     final_assets = {rel: meshes.import_assets[v] for v, (rel, _) in meshes.virtual.items()}
 
-    urdf_text = urdf_for_import(model, pieces, meshes, missing_inertial)
-    spec, root = import_skeleton(urdf_text, meshes.import_assets, urdf_path, notes)
+    spec, root = import_skeleton(urdf_for_import(model, pieces, meshes, missing_inertial), meshes.import_assets, urdf_path, notes)
     set_options(root, conv, gravity, meshdir)
     file_to_mesh, used = rename_meshes(root, meshes.virtual, urdf_path)
     asset_el = child(root, "asset")
