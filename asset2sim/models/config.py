@@ -88,4 +88,5 @@ class ClientConfig:
         knobs = {f.name: type(f.default)(_env_float(f"ASSET2SIM_LLM_{f.name.upper()}", f.default))
                  for f in fields(cls) if f.name in _ENV_KNOBS}
         cache_dir = None if cache_env.lower() in ("off", "none", "0") else default_cache_dir()
-        return cls(**{"model": model, "base_url": base_url, **knobs, "cache_dir": cache_dir, "render_size": (size, size), **overrides})
+        return cls(**{"model": model, "base_url": base_url, **knobs, "cache_dir": cache_dir, "render_size": (size, size),
+                      **overrides})
