@@ -206,11 +206,10 @@ class NewtonSession(ArrayJoints, SessionDefaults):
         return transform_points(o, np.vstack([ring + [0, 0, hl], ring - [0, 0, hl]]))
 
     def _add_shape(self, b, body: int, piece: CollisionPiece, cfg) -> None:
-        wp, newton = self._wp, self._nt
-        xf = _wp_transform(wp, piece.origin)
+        xf = _wp_transform(self._wp, piece.origin)
         if piece.kind == "hull":
             v, t = convex_hull_mesh(piece.points)
-            b.add_shape_convex_hull(body, xform=xf, mesh=newton.Mesh(v.astype(np.float32), t.ravel().astype(np.int32)), cfg=cfg)
+            b.add_shape_convex_hull(body, xform=xf, mesh=self._nt.Mesh(v.astype(np.float32), t.ravel().astype(np.int32)), cfg=cfg)
         elif piece.kind == "box":
             hx, hy, hz = (0.5 * float(s) for s in piece.size)
             b.add_shape_box(body, xform=xf, hx=hx, hy=hy, hz=hz, cfg=cfg)

@@ -121,9 +121,12 @@ def _bounded_time(timeout: float | None, bounds: CallBounds, error) -> float:
     return left if timeout is None else min(timeout, left)
 
 
-def _within_deadline(bounds: CallBounds, timeout: float | None, timeout_error: type[Exception], call):
-    """``call(t)`` with ``t`` the time it may take (:func:`_bounded_time`); its ``timeout_error`` after the attempt's
-    deadline, not httpx's per-operation time-out, records the attempt as ``deadline``."""
+def _within_deadline(bounds: CallBounds | None, timeout: float | None, timeout_error: type[Exception], call):
+    """``call(t)`` with ``t`` the time it may take (:func:`_bounded_time`; ``timeout`` itself without ``bounds``); its
+    ``timeout_error`` after the attempt's deadline, not httpx's per-operation time-out, records the attempt as
+    ``deadline``."""
+    if bounds is None:  # outside call_bounds: httpx's own time-out
+        return call(timeout)
     t = _bounded_time(timeout, bounds, timeout_error)
     try:
         return call(t)
@@ -160,10 +163,7 @@ def _bounder():
             return data
 
         def write(self, buffer: bytes, timeout: float | None = None) -> None:
-            bounds = _current()
-            if bounds is None:
-                return self._inner.write(buffer, timeout)
-            return _within_deadline(bounds, timeout, httpcore.WriteTimeout, lambda t: self._inner.write(buffer, t))
+            return _within_deadline(_current(), timeout, httpcore.WriteTimeout, lambda t: self._inner.write(buffer, t))
 
         def close(self) -> None:
             self._inner.close()

@@ -75,7 +75,7 @@ def add_visuals(body, link, mesh_root: Path, asset_el, files: dict, assets: dict
                 notes.append(f"link {link.name!r} visual {k} ({v.filename}) {why}: not exported"
                              + ("" if rel is None else " (MuJoCo refuses it)"))
                 continue
-            name = f"{safe_name(link.name)}__v{k}"
+            name = g.get("name")
             while name in used:
                 name += "_"
             used.add(name)
