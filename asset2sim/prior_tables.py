@@ -27,6 +27,8 @@ GENERIC: str = "Generic"
 SIZE_CLASSES: tuple[str, ...] = ("tiny", "very_small", "small", "regular", "large", "very_large")
 
 PartRole = Literal["task", "body", "accessory", "other"]
+#: The references of a prior value, as the yaml tables give them (at least 10 characters).
+Source = Annotated[str, Field(min_length=10)]
 
 
 class PriorsError(ValueError):
@@ -47,13 +49,13 @@ class MaterialPrior(PriorModel):
     key: str = ""
     name: str = Field(min_length=1)
     density: float = Field(gt=50.0, lt=25000.0)
-    density_source: str = Field(min_length=10)
+    density_source: Source
     shell: bool
     panel: bool = False
     wall_thickness: float = Field(gt=0.0, lt=0.1)
-    wall_thickness_source: str = Field(min_length=10)
+    wall_thickness_source: Source
     lateral_friction: float = Field(ge=0.05, le=1.5)
-    friction_source: str = Field(min_length=10)
+    friction_source: Source
     restitution: float = Field(default=0.1, ge=0.0, le=1.0)
 
     @property
@@ -66,7 +68,7 @@ class SizeClassPrior(PriorModel):
     """Linear size factor of one size class (``size_classes.yaml``), dimensionless."""
 
     factor: float = Field(gt=0.0, lt=10.0)
-    source: str = Field(min_length=10)
+    source: Source
 
 
 class LabelPrior(PriorModel):
@@ -130,7 +132,7 @@ class VariantPrior(PriorModel):
     mass_range: MassRange
     body_material: str | None = None
     part_materials: dict[str, str] = Field(default_factory=dict)
-    source: str = Field(min_length=10)
+    source: Source
 
 
 class CategoryPrior(PriorModel):
@@ -142,13 +144,13 @@ class CategoryPrior(PriorModel):
     model_cats: list[str] = Field(default_factory=list)
     label_tokens: list[str] = Field(default_factory=list)
     dims: CheckedDims
-    dims_source: str = Field(min_length=10)
+    dims_source: Source
     handheld: bool = False
     mass_range: MassRange
-    mass_source: str = Field(min_length=10)
+    mass_source: Source
     body_material: str
     part_materials: dict[str, str] = Field(default_factory=dict)
-    material_source: str = Field(min_length=10)
+    material_source: Source
     spring_labels: list[str] = Field(default_factory=list)
     spring_source: str = ""
     task_relevant: list[str] = Field(default_factory=list)
@@ -194,7 +196,7 @@ class SlidePrior(PriorModel):
     key: str = ""
     friction_coefficient: tuple[float, float]
     words: list[str] = Field(min_length=1)
-    source: str = Field(min_length=10)
+    source: Source
     estimate: bool = False
     note: str = ""
 

@@ -95,9 +95,8 @@ def run(args: argparse.Namespace) -> int:
         for r in rows:
             print(r.model_dump_json())
     else:
-        table = Table(title=f"audit of {len(rows)} asset(s)")
-        for col in ("asset", "format", "category", "verdict", "implausible", "declared physics"):
-            table.add_column(col)
+        table = Table("asset", "format", "category", "verdict", "implausible", "declared physics",
+                      title=f"audit of {len(rows)} asset(s)")
         for r in rows:
             checks = "-" if r.declared_passed is None else verdict_line("none" if r.declared_passed else "declared_physics_fails",
                                                                         {}, r.declared_failures)

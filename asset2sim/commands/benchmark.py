@@ -62,11 +62,9 @@ def compare_records(a: list[dict], b: list[dict], rel: float = 1e-9) -> list[str
 def _print_table(console, title: str, summary: dict) -> None:
     from rich.table import Table
 
-    t = Table(title=title)
-    for c in ("method", "pen. mm (toilet+stapler)", "pen. mm (all)", "rest pass", "osc. pass", "probes pass",
-              "sweep pass", "robust rest pass", "task pass", "force plausible", "ready", "scale dev. %", "init. dev.", "prompt", "all pass",
-              "median eval s", "realism", "failed"):
-        t.add_column(c)
+    t = Table("method", "pen. mm (toilet+stapler)", "pen. mm (all)", "rest pass", "osc. pass", "probes pass", "sweep pass",
+              "robust rest pass", "task pass", "force plausible", "ready", "scale dev. %", "init. dev.", "prompt", "all pass",
+              "median eval s", "realism", "failed", title=title)
 
     def pm(m, s):
         return "-" if m is None else f"{m:.3g} +- {s:.3g}"
@@ -115,9 +113,7 @@ def run(args: argparse.Namespace) -> int:
         console.print(f"[yellow]results.parquet not written: {markup(meta['parquet_error'])}[/yellow]")
     for title, summary in tables.items():
         _print_table(console, title, summary)
-    rt = Table(title="research numbers (thesis 9-object set, Isaac Sim)")
-    for c in RESEARCH_NUMBERS[0]:
-        rt.add_column(c)
+    rt = Table(*RESEARCH_NUMBERS[0], title="research numbers (thesis 9-object set, Isaac Sim)")
     for r in RESEARCH_NUMBERS:
         rt.add_row(*r.values())
     console.print(rt)
