@@ -24,6 +24,7 @@ import shutil
 import stat
 import tempfile
 import threading
+from collections import Counter
 from pathlib import Path
 from typing import Any, BinaryIO, Callable, Iterable
 
@@ -33,7 +34,7 @@ it may raise to refuse the write (nothing is then created)."""
 
 _OBSERVERS: list[Observer] = []
 _OBSERVERS_LOCK = threading.Lock()
-_SCRATCH: dict[str, int] = {}  # absolute folder + os.sep -> times added
+_SCRATCH: Counter[str] = Counter()  # absolute folder + os.sep -> times added
 _SCRATCH_LOCK = threading.Lock()
 
 
@@ -42,18 +43,16 @@ def add_scratch(folder: Path | str) -> None:
     removes (every thread; once per :func:`remove_scratch`)."""
     key = os.path.join(os.path.abspath(folder), "")
     with _SCRATCH_LOCK:
-        _SCRATCH[key] = _SCRATCH.get(key, 0) + 1
+        _SCRATCH[key] += 1
 
 
 def remove_scratch(folder: Path | str) -> None:
     """Undo one :func:`add_scratch` of ``folder`` (no error when it was not added)."""
     key = os.path.join(os.path.abspath(folder), "")
     with _SCRATCH_LOCK:
-        n = _SCRATCH.get(key, 0) - 1
-        if n > 0:
-            _SCRATCH[key] = n
-        else:
-            _SCRATCH.pop(key, None)
+        _SCRATCH[key] -= 1
+        if _SCRATCH[key] <= 0:
+            del _SCRATCH[key]
 
 
 def _durable(path: Path) -> bool:

@@ -66,11 +66,11 @@ def terminal(text: object, *, newlines: bool = True) -> str:
     return (_CONTROL if newlines else _CONTROL_LINE).sub(_escape, str(text))
 
 
-def markup(text: object, *, newlines: bool = True) -> str:
+def markup(text: object) -> str:
     """``text`` for ``rich`` console markup: :func:`terminal`, then ``rich.markup.escape``."""
     from rich.markup import escape
 
-    return escape(terminal(text, newlines=newlines))
+    return escape(terminal(text))
 
 
 def html_text(text: object) -> str:

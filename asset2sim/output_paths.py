@@ -158,7 +158,7 @@ def _safe_rel(rel: Any) -> str | None:
     if not isinstance(rel, str) or not rel or "\x00" in rel:
         return None
     p = PurePosixPath(rel)
-    if p.is_absolute() or any(part in ("..", ".", "") for part in p.parts) or rel.startswith("/"):
+    if p.is_absolute() or ".." in p.parts:
         return None
     return p.as_posix()
 

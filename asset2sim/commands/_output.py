@@ -58,13 +58,13 @@ def inert_streams() -> Iterator[None]:
         sys.stdout, sys.stderr = out, err
 
 
-def console(*, stderr: bool = False, width: int | None = None):
-    """A ``rich`` console on the stream beneath standard output (or error): a terminal's width (at least ``width``
+def console(*, width: int | None = None):
+    """A ``rich`` console on the stream beneath standard output: a terminal's width (at least ``width``
     when given); for a pipe or a file, 200 columns with lines kept whole (for grep). Text handed to it must pass
     through :func:`asset2sim.inert.markup`."""
     from rich.console import Console
 
-    stream = raw(sys.stderr if stderr else sys.stdout)
+    stream = raw(sys.stdout)
     if stream.isatty():
         probe = Console(file=stream)
         return Console(file=stream, width=max(probe.width, width) if width else None)

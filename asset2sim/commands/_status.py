@@ -108,7 +108,7 @@ def _inside(path: str | os.PathLike | None, folder: Path | str) -> bool:
     return path is not None and any(inside(how(os.fsdecode(path)), how(folder)) for how in (os.path.abspath, os.path.realpath))
 
 
-def output_failure(exc: OutputError, outs: list[Path], _inp=None, _reading=None) -> CommandError:
+def output_failure(exc: OutputError, outs: list[Path], *_) -> CommandError:
     """Status 4 with the output guard's code (``[ERRNO]`` added when an OSError caused it), path and sentence."""
     code = exc.code
     if isinstance(exc.__cause__, OSError):
@@ -129,7 +129,7 @@ def os_failure(exc: OSError, outs: list[Path], inp, reading: Reading | None) -> 
                         reading.prefix + (exc.strerror or str(exc)))
 
 
-def catalog_failure(exc: Exception, _outs, catalog, _reading=None) -> CommandError:
+def catalog_failure(exc: Exception, _outs, catalog, *_) -> CommandError:
     """Status 2 for a ``catalog.yaml`` that cannot be used: ``CATALOG_NOT_FOUND`` (run where it is, or pass
     ``--catalog``) or ``CATALOG_INVALID`` with the reason."""
     if isinstance(exc.__cause__, FileNotFoundError):
@@ -139,7 +139,7 @@ def catalog_failure(exc: Exception, _outs, catalog, _reading=None) -> CommandErr
     return CommandError(INVALID_REQUEST, "CATALOG_INVALID", catalog, str(exc).removeprefix(f"{where}: "))
 
 
-def extra_failure(exc: ImportError, _outs, _inp, _reading=None) -> CommandError | None:
+def extra_failure(exc: ImportError, *_) -> CommandError | None:
     """Status 2 ``EXTRA_MISSING`` naming the extra of a missing optional dependency; None for any other import
     error (a bug)."""
     return CommandError.invalid("EXTRA_MISSING", install_hint(exc)) if missing_module(exc) in EXTRA_OF_MODULE else None
@@ -303,8 +303,8 @@ def add_mjcf_reading(parser) -> None:
 def outside_paths(args):
     """The block run with ``--allow-outside-paths`` in force (CommandError status 2 ``INPUT_NOT_FOUND``: not a folder)."""
     folders = getattr(args, "allow_outside_paths", None) or []
-    bad = [f for f in folders if not os.path.isdir(f)]
-    if bad:
-        raise CommandError(INVALID_REQUEST, "INPUT_NOT_FOUND", bad[0], f"--allow-outside-paths {bad[0]}: not a folder")
+    bad = next((f for f in folders if not os.path.isdir(f)), None)
+    if bad is not None:
+        raise CommandError(INVALID_REQUEST, "INPUT_NOT_FOUND", bad, f"--allow-outside-paths {bad}: not a folder")
     with allow_outside(*folders):
         yield

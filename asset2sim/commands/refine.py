@@ -123,7 +123,7 @@ _ASKED_UNITS = {"rad": (math.degrees, "deg"), "m": (lambda v: 1000.0 * v, "mm"),
                 "opening fraction": (lambda v: 100.0 * v, "% open")}
 
 
-def _state_text(name: str, q: float, report, types: dict[str, str], labels: dict[str, str], moves: dict[str, str] | None = None) -> str:
+def _state_text(name: str, q: float, report, types: dict[str, str], labels: dict[str, str], moves: dict[str, str]) -> str:
     """One joint's initial state in the one frame of every amount: "joint_2 (lid) = 30.0 deg from closed (asked 30 deg),
     25 % open", the number asked (``report.request.quantities``) beside what it has, and why it stands elsewhere than
     its request put it when something moved it (``moves``: :func:`~asset2sim.tasks.evaluation.report_changes.state_moves`)."""
@@ -138,7 +138,7 @@ def _state_text(name: str, q: float, report, types: dict[str, str], labels: dict
     who = f"{name} ({labels[name]})" if labels.get(name) else name
     return (f"{who} = {from_closed_text(q, report.closed_positions.get(name), types.get(name, 'revolute'))}{ask}"
             + (f", {opening_text(report.opening_fractions[name])}" if name in report.opening_fractions else "")
-            + (f" ({moves[name]})" if moves and name in moves else ""))
+            + (f" ({moves[name]})" if name in moves else ""))
 
 
 def summary_lines(result) -> list[str]:
