@@ -71,7 +71,7 @@ def exit_statuses_text(own: dict[int, str] | None = None) -> str:
         return ", ".join(f"{code} {meaning}" for code, meaning in _status.EXIT_STATUSES.items())
     shared = {INVALID_REQUEST: "usage error", INTERNAL_ERROR: "internal error", INTERRUPTED: "interrupted",
               TERMINATED: "terminated"}
-    merged = {**shared, **own} if INVALID_REQUEST in own else {**own, **shared}
+    merged = {**shared, **own}
     return ", ".join(f"{code} {merged[code]}" for code in sorted(merged))
 
 

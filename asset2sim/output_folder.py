@@ -55,24 +55,27 @@ def read_record(path: Path | str) -> Any:
     return json.loads(atomic.read_regular(path, MAX_RECORD_BYTES).decode("utf-8"))
 
 
+def record_or_none(path: Path | str) -> Any:
+    """:func:`read_record` of ``path``, or None when it cannot be read (missing, not a regular file, too large, not
+    UTF-8 JSON)."""
+    try:
+        return read_record(path)
+    except (OSError, ValueError):
+        return None
+
+
 def merge_timings(out_dir: Path | str, timings: dict[str, Any]) -> Path:
     """Add ``timings`` (JSON values: wall times, s) to ``out_dir/timings.json`` (:data:`VOLATILE`), keeping its other
     entries (an unreadable file is replaced); returns its path."""
     path = Path(out_dir) / TIMINGS_NAME
-    try:
-        old = read_record(path)
-    except (OSError, ValueError):
-        old = {}
+    old = record_or_none(path)
     return atomic.write_json(path, {**(old if isinstance(old, dict) else {}), **timings})
 
 
 def _listed(path: Path) -> set[str]:
     """The safe relative paths the ``files`` (and ``unhashed``) of bookkeeping file ``path`` list (none when
     unreadable)."""
-    try:
-        data = read_record(path)
-    except (OSError, ValueError):
-        return set()
+    data = record_or_none(path)
     if not isinstance(data, dict):
         return set()
     entries = [*(data.get("files") or []), *(data.get("unhashed") or [])]
@@ -346,10 +349,7 @@ def _start_staged(root: Path, given: Path, src: Path, previous: set[str], foreig
     ``OUTPUT_NAME_CONFLICT`` when the staging path is taken by something asset2sim did not make."""
     if foreign or not previous:
         return None
-    try:
-        marker = read_record(root / MARKER_NAME)
-    except (OSError, ValueError):
-        return None
+    marker = record_or_none(root / MARKER_NAME)
     if not (isinstance(marker, dict) and isinstance(marker.get("files"), dict)):  # not a complete output
         return None
     staging = staging_folder(root)

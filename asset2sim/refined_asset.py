@@ -20,7 +20,8 @@ from asset2sim.atomic import non_finite
 from asset2sim.engines.base import SessionOptions, Spring, session_root_options
 from asset2sim.engines.loading import CollisionPiece, collision_pieces, overlay_springs, read_urdf
 from asset2sim.mesh_io import MeshCache
-from asset2sim.output_folder import OVERLAY_NAME, REPORT_NAME, STATE_NAME, TIMINGS_NAME, URDF_NAME, OutputError, read_record
+from asset2sim.output_folder import (OVERLAY_NAME, REPORT_NAME, STATE_NAME, TIMINGS_NAME, URDF_NAME, OutputError, read_record,
+                                     record_or_none)
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.overlay import Overlay, RootMount
 from asset2sim.schemas.report import RefineReport
@@ -195,10 +196,7 @@ class RefinedAsset:
             raise ValueError(f"{p}: not a JSON object")
         if (where := non_finite(data)) is not None:
             raise ValueError(f"{p}: {where} is not a finite number (NaN or infinity), which asset2sim never writes")
-        try:
-            timings = read_record(self.folder / TIMINGS_NAME)
-        except (OSError, ValueError):
-            timings = {}
+        timings = record_or_none(self.folder / TIMINGS_NAME)
         if isinstance(timings, dict):
             if isinstance(timings.get("stage_seconds"), dict) and not data.get("stage_seconds"):
                 data["stage_seconds"] = timings["stage_seconds"]
