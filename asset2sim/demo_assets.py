@@ -47,13 +47,9 @@ def _link_frame_origin(obj: DemoArticulation, link: str) -> np.ndarray:
     joint origins below the body."""
     by_child = {j.child: j for j in obj.joints}
     pos = np.zeros(3)
-    name = link
-    while name in by_child:
-        j = by_child[name]
-        if j.parent == "base":
-            break
+    while link in by_child and (j := by_child[link]).parent != "base":
         pos += np.asarray(j.origin, float)
-        name = j.parent
+        link = j.parent
     return pos
 
 

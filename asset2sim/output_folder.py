@@ -198,7 +198,9 @@ class OwnedFolder:
     #: the files of an earlier output this run replaces (relative paths; removed now, or when a staged run finishes)
     replaced: tuple[str, ...] = ()
 
-    def _release(self) -> None:
+    def _remove_staging(self) -> None:
+        """Remove a staged run's staging folder (``root``), then release the lock its descriptor holds."""
+        shutil.rmtree(self.root, ignore_errors=True)
         if self._held is not None:
             with contextlib.suppress(OSError):
                 os.close(self._held)
@@ -246,16 +248,13 @@ class OwnedFolder:
         finally:
             self.close()
         if self.final is not None:  # exchange the staging folder with the earlier output, then delete that
-            staging, final = self.root, self.final
             try:
-                atomic.exchange_folders(staging, final)
+                atomic.exchange_folders(self.root, self.final)
             except OSError as exc:
-                shutil.rmtree(staging, ignore_errors=True)
-                self._release()
+                self._remove_staging()
                 raise _write_failed(self.given, exc) from exc
-            shutil.rmtree(staging, ignore_errors=True)
-            self.root, self.final = final, None
-            self._release()
+            self._remove_staging()
+            self.root, self.final = self.final, None
         return hashes
 
     def write_path(self, path: Path | str) -> Path:
@@ -275,8 +274,7 @@ class OwnedFolder:
         removed stays recorded."""
         self.close()
         if self.final is not None:
-            shutil.rmtree(self.root, ignore_errors=True)
-            self._release()
+            self._remove_staging()
             return
         for rel in sorted(self.files):
             _remove_with_temps(self.root, rel)
@@ -397,10 +395,8 @@ def remove_owned(out_dir: Path | str) -> list[str]:
     if not root.is_dir() or root.is_symlink():
         return []
     owned = recorded_files(root)
-    for rel in sorted(owned):
+    for rel in [*sorted(owned), *sorted(_BOOKKEEPING)]:
         _remove_with_temps(root, rel)
-    for name in sorted(_BOOKKEEPING):
-        _remove_with_temps(root, name)
     _prune_empty(root, owned)
     left = _entries(root)
     if not left:
