@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from asset2sim.commands._status import check_out, parse_engines
+from asset2sim.commands.refine import as_asked_lines
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.check.failure_reasons import why_it_failed
 from asset2sim.tasks.check.verdict import readiness
@@ -126,11 +127,9 @@ def run(args: argparse.Namespace) -> int:
     whys = why_it_failed(ev.metrics)
     for why in whys:  # the sentences of report.html's "Why it failed"
         say(f"why it failed {terminal(why)}")
-    asked = ev.metric("request_met")  # as asked: each unmet phrase with its gap, unless a sentence above says it
-    for u in (asked.details.get("unmet") or []) if asked is not None and asked.passed is False else []:
-        text = str(u.get("text") or u.get("phrase"))
-        if not any(text in w for w in whys):
-            say(f"NOT AS ASKED {terminal(text)}")
+    for line in as_asked_lines(ev):  # as asked: each unmet phrase with its gap, unless a sentence above says it
+        if not any(line.removeprefix("NOT AS ASKED ") in w for w in whys):
+            say(terminal(line))
     for n in ev.notes:
         console.print(f"[dim]note: {markup(n)}[/dim]")
     say(f"evaluated in {ev.seconds:.2f} s; wrote {out / 'evaluation.json'}"

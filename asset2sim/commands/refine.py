@@ -253,8 +253,8 @@ def request_lines(found) -> list[str]:
 
 
 def as_asked_lines(report) -> list[str]:
-    """The as-asked verdict (``request_met``): one line per unmet phrase with its gap, states from the closed end;
-    nothing when met or not measured."""
+    """The as-asked verdict (``request_met``) of a report or an evaluation: one line per unmet phrase with its gap,
+    states from the closed end; nothing when met or not measured."""
     m = report.metric("request_met")
     if m is None or m.passed is not False:
         return []
