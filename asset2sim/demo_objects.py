@@ -62,8 +62,7 @@ def _box_with_lid() -> DemoArticulation:
     hinge = (0.0, 0.225, -0.35)
     lid = [
         _part("lid_top-6", _WOOD, (-0.525, 0.525, 0.225, 0.255, -0.35, 0.375)),
-        _part("lid_skirt-7", _WOOD, (-0.525, -0.505, 0.18, 0.225, -0.35, 0.375)),
-        _part("lid_skirt-8", _WOOD, (0.505, 0.525, 0.18, 0.225, -0.35, 0.375)),
+        *_parts("lid_skirt", _WOOD, 7, (-0.525, -0.505, 0.18, 0.225, -0.35, 0.375), (0.505, 0.525, 0.18, 0.225, -0.35, 0.375)),
         _part("lid_lip-9", _METAL, (-0.505, 0.505, 0.18, 0.225, 0.355, 0.375), (-0.08, 0.08, 0.19, 0.21, 0.375, 0.405)),
     ]
     return _hinged("box_lid", "Box", ("rotation_lid", lid), ("free", "box_body", body), hinge, (-1.0, 0.0, 0.0), -0.5, 1.9)
@@ -86,8 +85,8 @@ def _drawer(front_y: tuple[float, float], box_y: tuple[float, float], n: int) ->
     front = _part(f"drawer_front-{n}", _WOOD, (-0.495, 0.495, y0, y1, 0.405, 0.435))
     box = [
         _part(f"drawer_bottom-{n + 1}", _WOOD, (-0.46, 0.46, by0, by0 + t, -0.36, 0.405)),
-        _part(f"drawer_side-{n + 2}", _WOOD, (-0.46, -0.44, by0 + t, by1, -0.36, 0.405)),
-        _part(f"drawer_side-{n + 3}", _WOOD, (0.44, 0.46, by0 + t, by1, -0.36, 0.405)),
+        *_parts("drawer_side", _WOOD, n + 2, (-0.46, -0.44, by0 + t, by1, -0.36, 0.405),
+                (0.44, 0.46, by0 + t, by1, -0.36, 0.405)),
         _part(f"drawer_back-{n + 4}", _WOOD, (-0.44, 0.44, by0 + t, by1, -0.36, -0.34)),
     ]
     ym = 0.5 * (y0 + y1)
@@ -114,14 +113,12 @@ def _cabinet_two_drawers() -> DemoArticulation:
     ]
     # Drawer boxes clear the divider (|y| <= 0.015), the top board (y >= 0.52)
     # and the bottom board (y <= -0.52) by at least 0.01.
-    top = _drawer((0.02, 0.545), (0.03, 0.465), 10)
-    bottom = _drawer((-0.545, -0.02), (-0.51, -0.1), 20)
-    slide = (0.0, 0.0, 1.0)
-    links = [DemoLink("link_0", "slider", "drawer", top), DemoLink("link_1", "slider", "drawer", bottom),
+    drawers = [_drawer((0.02, 0.545), (0.03, 0.465), 10), _drawer((-0.545, -0.02), (-0.51, -0.1), 20)]  # top, bottom
+    links = [*(DemoLink(f"link_{i}", "slider", "drawer", d) for i, d in enumerate(drawers)),
              DemoLink("link_2", "heavy", "furniture_body", body)]
     return _demo("cabinet_2drawer", "StorageFurniture", links, [
-        DemoJoint("joint_0", "prismatic", "link_2", "link_0", axis=slide, lower=0.0, upper=0.5),
-        DemoJoint("joint_1", "prismatic", "link_2", "link_1", axis=slide, lower=0.0, upper=0.5),
+        *(DemoJoint(f"joint_{i}", "prismatic", "link_2", f"link_{i}", axis=(0.0, 0.0, 1.0), lower=0.0, upper=0.5)
+          for i in (0, 1)),
         _base_joint("joint_2", "link_2"),
     ])
 
@@ -225,8 +222,7 @@ def _trash_can() -> DemoArticulation:
     hinge = (0.0, 0.505, -0.35)
     lid = [
         _part("lid-7", _GREEN, (-0.375, 0.375, 0.505, 0.535, -0.35, 0.37)),
-        _part("lid_skirt-8", _GREEN, (-0.375, -0.355, 0.47, 0.505, -0.35, 0.37)),
-        _part("lid_skirt-9", _GREEN, (0.355, 0.375, 0.47, 0.505, -0.35, 0.37)),
+        *_parts("lid_skirt", _GREEN, 8, (-0.375, -0.355, 0.47, 0.505, -0.35, 0.37), (0.355, 0.375, 0.47, 0.505, -0.35, 0.37)),
         _part("lid_lip-10", _DARK, (-0.355, 0.355, 0.46, 0.505, 0.355, 0.37), (-0.06, 0.06, 0.47, 0.49, 0.37, 0.4)),
     ]
     return _hinged("trash_can", "TrashCan", ("lid", lid), ("free", "trashcan_body", body), hinge, (1.0, 0.0, 0.0), -1.9, 0.0)
