@@ -306,11 +306,10 @@ def _obj_group_polygons(path: Path | str) -> tuple[np.ndarray, list[list[list[in
     if fast is not None:
         v, f, group = fast
         return v, [part for part in np.split(f, np.flatnonzero(np.diff(group)) + 1) if len(part)]
-    text = data.decode(errors="replace")
     verts: list[tuple[float, float, float]] = []
-    groups: list[list[list[int]]] = []
     current: list[list[int]] = []
-    for line in text.splitlines():
+    groups = [current]  # each o/g line starts a new one
+    for line in data.decode(errors="replace").splitlines():
         if not line or line[0] not in "vfog":
             continue
         parts = line.split()
@@ -328,12 +327,8 @@ def _obj_group_polygons(path: Path | str) -> tuple[np.ndarray, list[list[list[in
             if ids:
                 current.append([i - 1 if i > 0 else len(verts) + i for i in ids])
         elif tag in ("o", "g"):
-            if current:
-                groups.append(current)
-            current = []
-    if current:
-        groups.append(current)
-    return np.asarray(verts, float).reshape(-1, 3), groups
+            groups.append(current := [])
+    return np.asarray(verts, float).reshape(-1, 3), [g for g in groups if g]
 
 
 def obj_groups(path: Path | str) -> list[np.ndarray]:
