@@ -49,7 +49,7 @@ def format_table(table) -> str:
     keys = [k if isinstance(k, tuple) else (k,) for k in table.index]
     body = [[str(v) for v in k] + [str(int(x)) for x in vals] for k, vals in zip(keys, table.to_numpy().tolist())]
     head = names + [str(c) for c in table.columns]
-    widths = [max([len(head[i])] + [len(r[i]) for r in body]) for i in range(len(head))]
+    widths = [max(map(len, column)) for column in zip(head, *body)]
     fmt = "  ".join(f"{{:<{w}}}" if i < len(names) else f"{{:>{w}}}" for i, w in enumerate(widths))
     return "\n".join(fmt.format(*cells).rstrip() for cells in [head, *body])
 
