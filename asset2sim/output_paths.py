@@ -66,7 +66,7 @@ def write_inside(path: Path | str, given: Path | str, root: Path | str, *aliases
     parent = ap.parent.resolve()
     parts = Path(path).parts
     if ".." in parts:
-        head = Path(os.path.abspath(Path(*parts[: parts.index("..")]) if parts.index("..") else Path(".")))
+        head = Path(os.path.abspath(Path(*parts[: parts.index("..")])))
         if any(_within(head, base) for base in bases) and not _within(parent, root):
             raise OutputError(f"{path} would be written outside the output folder {given} (through '..')", "OUTPUT_PATH_ESCAPES", path)
     if _within(parent, root):
