@@ -42,16 +42,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def compare_records(a: list[dict], b: list[dict], rel: float = 1e-9) -> list[str]:
     """Differences between two runs' records, timings excluded (strings)."""
-    key = lambda r: (r["method"], r["id"])  # noqa: E731
-    ia, ib = {key(r): r for r in a}, {key(r): r for r in b}
+    ia, ib = ({(r["method"], r["id"]): r for r in records} for records in (a, b))
     diffs = []
     for k in sorted(set(ia) | set(ib)):
         if k not in ia or k not in ib:
             diffs.append(f"{k}: only in one run")
             continue
-        for f in sorted(set(ia[k]) | set(ib[k])):
-            if f in TIMING_FIELDS:
-                continue
+        for f in sorted((set(ia[k]) | set(ib[k])) - set(TIMING_FIELDS)):
             x, y = ia[k].get(f), ib[k].get(f)
             floats = isinstance(x, float) and isinstance(y, float)
             if not (math.isclose(x, y, rel_tol=rel, abs_tol=1e-12) if floats else x == y):
