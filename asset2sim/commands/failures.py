@@ -54,22 +54,17 @@ def format_table(table) -> str:
     return "\n".join(fmt.format(*cells).rstrip() for cells in [head, *body])
 
 
-def _latest(store: ResultCatalog, dataset: str | None) -> tuple[str, str] | None:
-    """(dataset, run) of the most recent run (run ids start with the UTC start time)."""
-    return max(store.runs(dataset), key=lambda p: (p[1], p[0]), default=None)
-
-
 def latest_worked(store: ResultCatalog, dataset: str | None) -> tuple[tuple[str, str] | None, list[str]]:
     """((dataset, run) of the most recent run that refined anything, the later runs passed over): a rerun with
     nothing to do (``_run.json`` ``outcome`` ``nothing_to_do``: every asset reused) is passed over; a run without that
     record counts as one that worked. ((None), []) when the catalog has no run."""
+    runs = sorted(store.runs(dataset), key=lambda p: (p[1], p[0]), reverse=True)  # run ids start with the UTC start time
     passed: list[str] = []
-    for ds, run in sorted(store.runs(dataset), key=lambda p: (p[1], p[0]), reverse=True):
-        if (store.run_info(ds, run) or {}).get("outcome") == NOTHING_TO_DO:
-            passed.append(run)
-            continue
-        return (ds, run), passed
-    return _latest(store, dataset), []
+    for ds, run in runs:
+        if (store.run_info(ds, run) or {}).get("outcome") != NOTHING_TO_DO:
+            return (ds, run), passed
+        passed.append(run)
+    return next(iter(runs), None), []
 
 
 def run(args: argparse.Namespace) -> int:
@@ -77,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
 
     cat = load_catalog(args.catalog)
     store = ResultCatalog(cat.catalog_root)
-    if _latest(store, args.dataset) is None:
+    if not store.runs(args.dataset):
         print(f"the catalog {cat.catalog_root} has no rows" + (f" for dataset {args.dataset!r}" if args.dataset else "")
               + "; run `make flow` first")
         return 1

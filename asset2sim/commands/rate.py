@@ -86,8 +86,7 @@ def _scores(folder: Path, tracking_uri: str | None) -> int:
     from rich.table import Table
 
     scores = realism_scores(folder)
-    table = Table(title=f"realism (Bradley-Terry, people) of {markup(folder)}")
-    table.add_column("method", justify="left")
+    table = Table("method", title=f"realism (Bradley-Terry, people) of {markup(folder)}")
     for column in ("strength", "95 % interval", "Elo", "wins", "comparisons"):
         table.add_column(column, justify="right")
     for s in scores:
