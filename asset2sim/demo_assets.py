@@ -207,7 +207,6 @@ def _write_folder(out_dir: Path, files: dict[str, bytes]) -> Path:
             touched), ``OUTPUT_NOT_A_FOLDER``.
         OSError: the folder cannot be written.
     """
-    out_dir = Path(out_dir)
     folder = _target(out_dir)
     if folder.is_dir():
         _write_owned(folder, files, exclusive=True)

@@ -11,8 +11,8 @@ from types import ModuleType
 from asset2sim.package_data import package_yaml
 
 #: Top-level module -> (what it is, the extra of ``pyproject.toml`` that installs it): ``extras.yaml`` beside this module.
-_TABLE = package_yaml(__package__, "extras.yaml")
-EXTRA_OF_MODULE: dict[str, tuple[str, str]] = {module: tuple(entry) for module, entry in _TABLE.items()}
+EXTRA_OF_MODULE: dict[str, tuple[str, str]] = {module: tuple(entry)
+                                               for module, entry in package_yaml(__package__, "extras.yaml").items()}
 
 
 def missing_module(exc: BaseException) -> str | None:

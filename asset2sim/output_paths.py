@@ -179,9 +179,7 @@ def _unlink_inside(root: Path, rel: str) -> bool:
     True when something was removed."""
     target = root / rel
     try:
-        if target.parent.resolve() != root / PurePosixPath(rel).parent:
-            return False
-        if target.is_dir() and not target.is_symlink():
+        if target.parent.resolve() != root / PurePosixPath(rel).parent or (target.is_dir() and not target.is_symlink()):
             return False
         target.unlink()
         return True
