@@ -81,10 +81,8 @@ class EvaluatedRequest:
 def refined_request(asset: Path, prompt: str | None, task: str | None) -> EvaluatedRequest:
     """The prompt and task for evaluating ``asset``: those given, else, for a refined output folder, the
     request and task its ``report.json`` records (the evaluation then grades what refine graded)."""
-    if prompt is not None:
-        return EvaluatedRequest(prompt, task)
     try:
-        report = read_report_json(asset if asset.is_dir() else asset.parent)
+        report = None if prompt is not None else read_report_json(asset if asset.is_dir() else asset.parent)
     except (OSError, ValueError):  # not a refined output: evaluated as given
         report = None
     if report is None or not report.prompt:

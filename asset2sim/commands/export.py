@@ -54,9 +54,10 @@ def run(args: argparse.Namespace) -> int:
     parity = parse_engines(args.parity, "--parity") if args.parity else []
     if not (out / URDF_NAME).is_file():
         raise CommandError(INVALID_REQUEST, "NOT_AN_OUTPUT_FOLDER", out, "has no mobility.urdf (not an output folder)")
+    asset = RefinedAsset(out)
     if args.format == "usd":  # write OUT/usd/mobility.usd, read it back and print the check
         with output_folder.adopting(out):
-            build = export_usd(asset := RefinedAsset(out), visuals=not args.no_visuals, check=False)
+            build = export_usd(asset, visuals=not args.no_visuals, check=False)
         check = check_usd(build.path, asset)
         print(f"wrote       {build.path}")
         print(f"read back   {check.links} links, {check.joints} movable joints; largest relative difference "
@@ -70,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
                                    "MuJoCo is not installed; install the extra: pip install 'asset2sim[mujoco]'")
 
     with output_folder.adopting(out):  # the MJCF files become the output folder's own
-        path = export_mjcf(asset := RefinedAsset(out), visuals=not args.no_visuals, check=False)
+        path = export_mjcf(asset, visuals=not args.no_visuals, check=False)
     check = check_mjcf(path, asset.urdf_path, asset.initial_state, fixed_base=asset.root.fixed)
     print(f"wrote       {path}")
     print(f"total mass  {check.total_mass:.6g} kg (URDF {check.urdf_mass:.6g} kg)")
