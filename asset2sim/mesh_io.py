@@ -188,7 +188,7 @@ def _parse_obj_general(data: bytes, where: str) -> MeshData:
             if len(parts) < 4:
                 raise MeshReadError(f"{where}: line {lineno}: vertex with fewer than 3 coordinates")
             try:
-                verts.append((float(parts[1]), float(parts[2]), float(parts[3])))
+                verts.append(tuple(map(float, parts[1:4])))
             except ValueError as exc:
                 raise MeshReadError(f"{where}: line {lineno}: bad vertex ({exc})") from None
         elif line.startswith((b"f ", b"f\t")):
