@@ -104,8 +104,9 @@ _MAX_RECORD_BYTES = 1 << 20
 _MAX_LISTED = 5
 
 
-def _sha(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
+def _digests(files: dict[str, bytes]) -> dict[str, str]:
+    """Relative path -> the SHA-256 of its bytes."""
+    return {rel: hashlib.sha256(data).hexdigest() for rel, data in files.items()}
 
 
 def _recorded(folder: Path) -> dict[str, set[str]]:
@@ -154,7 +155,7 @@ def _claim(folder: Path, files: dict[str, bytes], *, exclusive: bool) -> dict[st
             changed), with the way out; nothing is removed or written.
     """
     recorded = _recorded(folder)
-    wanted = {rel: _sha(data) for rel, data in files.items()}
+    wanted = _digests(files)
     names = output_paths._entries(folder) if exclusive else sorted(set(files) | set(recorded))
     foreign = [rel for rel in names if os.path.lexists(folder / rel) and ((digest := _entry_digest(folder, rel)) is None or not (
         rel == RECORD_NAME or digest in recorded.get(rel, ()) or digest == wanted.get(rel)))]
@@ -184,7 +185,7 @@ def _write_owned(folder: Path, files: dict[str, bytes], *, exclusive: bool) -> N
     (so a killed rebuild leaves every file it may have written listed), then the files that differ, then the
     files the record listed and ``files`` no longer holds are removed, then the final record."""
     recorded = _claim(folder, files, exclusive=exclusive)
-    wanted = {rel: _sha(data) for rel, data in files.items()}
+    wanted = _digests(files)
     present = {rel: d for rel in sorted(set(recorded) | set(files)) if (d := _entry_digest(folder, rel)) is not None}
     _write_record(folder, present, pending=wanted)  # every state until the end: each file as it was or as it will be
     for rel in sorted(files):
@@ -216,7 +217,7 @@ def _write_folder(out_dir: Path, files: dict[str, bytes]) -> Path:
     try:
         for rel in sorted(files):
             atomic.write_bytes(tmp / rel, files[rel])
-        _write_record(tmp, {rel: _sha(data) for rel, data in files.items()})
+        _write_record(tmp, _digests(files))
         os.rename(tmp, folder)  # fails (nothing replaced) when a folder appeared there meanwhile
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

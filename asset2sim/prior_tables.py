@@ -294,9 +294,8 @@ def _build(directory: Path | None) -> Priors:
             s = syn.lstrip("~").strip().lower()
             if not s:
                 raise PriorsError(f"{where}.synonyms: empty synonym")
-            if s in seen_syn and seen_syn[s] != name:
+            if seen_syn.setdefault(s, name) != name:
                 raise PriorsError(f"{where}.synonyms: {s!r} is also a synonym of {seen_syn[s]} (ambiguous)")
-            seen_syn[s] = name
     slides = _table(directory, SlidePrior, "slides.yaml", "key")
     return Priors(size_classes=size_classes, materials=materials, labels=labels, categories=categories, slides=slides)
 
