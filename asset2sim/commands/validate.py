@@ -61,8 +61,8 @@ def run(args: argparse.Namespace) -> int:
     n = Counter(f.severity for f in findings)
     n["info"] += len(notes)  # every info line counted, printed or not
     hidden = "" if infos or not n["info"] else ", shown with --verbose"
-    print(f"{args.asset}: {'REFUSED' if refused else 'OK'} ({_count(n['error'], 'error')}, {_count(n['warning'], 'warning')}, "
-          f"{_count(n['info'], 'info')}{hidden})")
+    counts = ", ".join(_count(n[what], what) for what in ("error", "warning", "info"))
+    print(f"{args.asset}: {'REFUSED' if refused else 'OK'} ({counts}{hidden})")
     return 1 if refused else 0
 
 
