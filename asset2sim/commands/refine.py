@@ -409,10 +409,7 @@ def run(args: argparse.Namespace) -> int:
                                                overwrite=args.overwrite, media=not args.defer_media)
     except RefineError as exc:
         raise _refine_failure(exc, args) from exc
-    if args.json:
-        print(json.dumps(json_summary(result), indent=2))
-    else:
-        print("\n".join(summary_lines(result)))
+    print(json.dumps(json_summary(result), indent=2) if args.json else "\n".join(summary_lines(result)))
     return 0 if result.report.failure_mode == "none" else NOT_READY
 
 
