@@ -408,10 +408,8 @@ def convex_hull_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     a, b, c = (hull.points[tri[:, i]] for i in range(3))
     flip = np.einsum("ij,ij->i", np.cross(b - a, c - a), hull.equations[:, :3]) < 0
     tri[flip] = tri[flip][:, [0, 2, 1]]
-    used = np.unique(tri)
-    remap = np.full(len(hull.points), -1)
-    remap[used] = np.arange(len(used))
-    return hull.points[used], remap[tri]
+    used, inverse = np.unique(tri, return_inverse=True)
+    return hull.points[used], inverse.reshape(tri.shape)
 
 
 def hull_obj(points: np.ndarray, num: Callable[[float], str] = repr) -> bytes:
