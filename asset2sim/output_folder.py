@@ -400,12 +400,9 @@ def remove_owned(out_dir: Path | str) -> list[str]:
     _prune_empty(root, owned)
     left = _entries(root)
     if not left:
-        with contextlib.suppress(OSError):
-            for folder, dirs, _files in sorted(os.walk(root), key=lambda t: -len(t[0])):
-                with contextlib.suppress(OSError):
-                    if folder != str(root):
-                        os.rmdir(folder)
-            root.rmdir()
+        for folder, _dirs, _files in sorted(os.walk(root), reverse=True):  # every folder before its parent, out_dir last
+            with contextlib.suppress(OSError):
+                os.rmdir(folder)
     return left
 
 
