@@ -204,8 +204,8 @@ def _remove_with_temps(root: Path, rel: str) -> None:
 
 def _prune_empty(root: Path, rels: Iterable[str]) -> None:
     """Remove folders left empty by removing ``rels`` (never ``root``)."""
-    folders = sorted({p for rel in rels for p in PurePosixPath(rel).parents if p.as_posix() != "."}, key=lambda p: -len(p.parts))
-    for p in folders:
+    # a folder before its parent (its parts start with the parent's)
+    for p in sorted({p for rel in rels for p in PurePosixPath(rel).parents if p.parts}, reverse=True):
         d = root / p
         with contextlib.suppress(OSError):
             if d.is_dir() and not d.is_symlink() and not any(d.iterdir()):
