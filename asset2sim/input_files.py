@@ -62,7 +62,7 @@ def _refused(code: str, path: Path | str, what: str, text: str) -> InputFileErro
 def _pairs(folders) -> tuple[tuple[str, str], ...]:
     pairs = []
     for f in folders:
-        absolute = os.path.normpath(os.path.abspath(str(f)))
+        absolute = os.path.abspath(str(f))
         if not os.path.isdir(absolute):
             raise InputFileError("INPUT_NOT_FOUND", f, f"--allow-outside-paths {f}: not a folder")
         pairs.append((absolute, os.path.realpath(absolute)))
@@ -101,7 +101,7 @@ def allowed_outside(path: Path | str) -> bool:
     pairs = _OUTSIDE.get()
     if not pairs:
         return False
-    lexical = os.path.normpath(os.path.abspath(str(path)))
+    lexical = os.path.abspath(str(path))
     real = os.path.realpath(lexical)
     return any(inside(lexical, a) or inside(lexical, r) for a, r in pairs) and any(inside(real, r) for _, r in pairs)
 
@@ -139,7 +139,7 @@ def check_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: i
         raise InputFileError("INPUT_UNREADABLE", "?", f"{what} {name!r}: the path contains a NUL byte")
     # a folder the user allowed (allow_outside): the tree is wider
     root = os.path.abspath(str(tree)) if tree is not None and not allowed_outside(name) else None
-    if root is not None and not inside(os.path.normpath(os.path.abspath(name)), root):
+    if root is not None and not inside(os.path.abspath(name), root):
         raise _refused("INPUT_OUTSIDE_TREE", path, what, f"lies outside {root}, the folder the input may read")
     try:
         st = os.stat(name)
