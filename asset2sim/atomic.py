@@ -103,7 +103,7 @@ def is_temp_of(name: str, target: str) -> bool:
 
 def _create_temp(path: Path) -> tuple[int, str]:
     """A new empty temporary file beside ``path``: (fd, name)."""
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOFOLLOW", 0)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC | os.O_NOFOLLOW
     for _ in range(100):
         tmp = str(path.parent / temp_name(path))
         try:
@@ -306,9 +306,7 @@ def open_regular(path: Path | str, follow_links: bool = True) -> BinaryIO:
     """``path`` opened for binary reading, checked on the descriptor to be a regular file
     (``O_NONBLOCK``: a FIFO cannot block the open; ``follow_links=False``: ``O_NOFOLLOW``, a path resolved and
     checked before cannot be swapped for a link). Raises NotRegularFileError, OSError (``ELOOP``: a link)."""
-    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOCTTY", 0)
-    flags |= 0 if follow_links else getattr(os, "O_NOFOLLOW", 0)
-    fd = os.open(str(path), flags)
+    fd = os.open(str(path), os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | os.O_NOCTTY | (0 if follow_links else os.O_NOFOLLOW))
     try:
         mode = os.fstat(fd).st_mode
         if not stat.S_ISREG(mode):

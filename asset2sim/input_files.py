@@ -170,9 +170,8 @@ def read_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: in
         InputFileError: as :func:`check_file`; ``INPUT_TOO_LARGE`` also when the file grew past the cap.
     """
     checked = check_file(path, tree=tree, max_bytes=max_bytes, what=what)
-    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
     try:
-        fd = os.open(str(path), flags)
+        fd = os.open(str(path), os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except OSError as exc:
         raise _refused("INPUT_UNREADABLE", path, what, f"{exc.strerror or exc}") from None
     try:

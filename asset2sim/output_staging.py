@@ -36,7 +36,7 @@ def try_lock(folder: Path) -> int | None:
     """A descriptor of ``folder`` holding an exclusive ``flock`` (released when closed, or when the process ends,
     killed or not); None when another process holds it or the folder cannot be locked."""
     try:
-        fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
     except OSError:
         return None
     try:
