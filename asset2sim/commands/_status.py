@@ -93,7 +93,7 @@ class Reading:
 
 
 #: Exceptions that say the disk cannot take more: whatever file they name, the output is what cannot be written.
-UNWRITABLE_ERRNOS = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None), errno.EROFS) if e is not None)
+UNWRITABLE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS})
 #: What the command line adds to an output-location message (the library names no options).
 _HINTS = {"OUTPUT_NOT_EMPTY": "pass --overwrite to do so"}
 
