@@ -193,12 +193,12 @@ def _main(argv: list[str] | None = None) -> int:
     if not hasattr(args, "_run"):
         parser.print_help()
         return 2
-    if getattr(args, "verbose", False):  # inherited by the worker processes a command starts
+    if args.verbose:  # inherited by the worker processes a command starts
         os.environ[STARTUP_MESSAGES] = "1"
     else:  # before any library is imported: their loggers read these when configured
         for name, value in QUIET_LIBRARY_LOGS.items():
             os.environ.setdefault(name, value)
-    command = getattr(args, "command", None)
+    command = args.command
     previous = _on_sigterm()
     try:
         return int(args._run(args) or 0)
@@ -209,7 +209,7 @@ def _main(argv: list[str] | None = None) -> int:
         closed_pipe()
         return 0
     except Exception as exc:  # the one place that turns a failure into a status: _status.ERRORS, else a bug
-        if getattr(args, "debug", False):
+        if args.debug:
             traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
         err = _status.failure(exc, command, args)
         if err is None:

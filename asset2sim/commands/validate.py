@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     policy = ValidationPolicy(overrides=overrides, warnings_as_errors=args.strict, check_mesh_contents=not args.paths_only)
     with outside_paths(args):
         findings, notes = validate_any(args.asset, policy, ReadOptions(body=args.body, mjcf_angle=args.mjcf_angle))
-    infos = bool(getattr(args, "verbose", False)) and not args.quiet  # how the input was read: behind --verbose
+    infos = args.verbose and not args.quiet  # how the input was read: behind --verbose
     refused = has_errors(findings)
     if args.json:
         print(json.dumps([f.model_dump(mode="json") for f in findings if not (args.quiet and f.severity == "info")], indent=2))
