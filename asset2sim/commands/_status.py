@@ -302,7 +302,7 @@ def add_mjcf_reading(parser) -> None:
 @contextlib.contextmanager
 def outside_paths(args):
     """The block run with ``--allow-outside-paths`` in force (CommandError status 2 ``INPUT_NOT_FOUND``: not a folder)."""
-    folders = getattr(args, "allow_outside_paths", None) or []
+    folders = args.allow_outside_paths
     bad = next((f for f in folders if not os.path.isdir(f)), None)
     if bad is not None:
         raise CommandError(INVALID_REQUEST, "INPUT_NOT_FOUND", bad, f"--allow-outside-paths {bad}: not a folder")
