@@ -129,14 +129,6 @@ def _longest_run_without_markup(data: bytes) -> tuple[int, int]:
     return best, best_at
 
 
-class _Abort(Exception):
-    """Carries a SafeXMLError out of expat's callbacks unchanged."""
-
-    def __init__(self, error: SafeXMLError):
-        super().__init__(str(error))
-        self.error = error
-
-
 def parse_xml_bytes(data: bytes, source: str = "<bytes>", limits: XMLLimits | None = None) -> SourceElement:
     """The root :class:`SourceElement` of untrusted XML ``data`` (any encoding
     expat supports), ``source`` naming it in messages.
@@ -164,8 +156,8 @@ def parse_xml_bytes(data: bytes, source: str = "<bytes>", limits: XMLLimits | No
     _install_guards(parser, builder, lim, source)
     try:
         parser.Parse(data, True)
-    except _Abort as abort:
-        raise abort.error from None
+    except SafeXMLError:  # a guard's refusal, raised in a handler (expat passes it on as it is)
+        raise
     except expat.ExpatError as exc:
         raise XMLMalformed(f"{expat.errors.messages[exc.code] if exc.code else exc} (line {exc.lineno}, column {exc.offset})",
                            source=source, line=exc.lineno) from None
@@ -175,12 +167,12 @@ def parse_xml_bytes(data: bytes, source: str = "<bytes>", limits: XMLLimits | No
 
 
 def _install_guards(parser, builder: ET.TreeBuilder, lim: XMLLimits, source: str) -> None:
-    """Expat handlers that build the tree into ``builder`` and raise
-    :class:`_Abort` at the first DTD, entity, external reference or exceeded limit."""
+    """Expat handlers that build the tree into ``builder`` and raise the :class:`SafeXMLError` of the first DTD,
+    entity, external reference or exceeded limit."""
     state = {"depth": 0, "elements": 0, "text": 0}
 
     def fail(cls: type[SafeXMLError], message: str) -> None:
-        raise _Abort(cls(message, source=source, line=parser.CurrentLineNumber))
+        raise cls(message, source=source, line=parser.CurrentLineNumber)
 
     def start_doctype(name, sysid, pubid, has_internal_subset):
         if sysid or pubid:
