@@ -223,8 +223,7 @@ def read_obj(data: bytes, where: str = "<obj>") -> MeshData:
         if hit.notes:  # they name ``where``
             return hit
         with _PARSED_LOCK:
-            _PARSED[key] = MeshData(hit.vertices.copy(), hit.faces.copy())
-        return hit
+            _PARSED[key] = hit
     return MeshData(hit.vertices.copy(), hit.faces.copy())
 
 
