@@ -79,7 +79,8 @@ def _serialise(obj: DemoArticulation) -> dict[str, bytes]:
         model.links[link.name] = ln
     for link in obj.links:
         j = next(j for j in obj.joints if j.child == link.name)
-        rpy = (0.0, 0.0, 0.0) if j.rpy is None else j.rpy.split()  # numbers as text: rpy_matrix reads them
+        # numbers as text: rpy_matrix reads them
+        rpy = (0.0, 0.0, 0.0) if j.rpy is None else j.rpy.split()
         limit = None if j.lower is None or j.upper is None else UrdfLimit(float(fmt_number(j.lower)), float(fmt_number(j.upper)))
         model.joints.append(UrdfJoint(name=j.name, type=j.type, parent=j.parent, child=j.child, limit=limit,
                                       origin=pose_matrix(_rounded(j.origin), rpy), axis_xyz=None if j.axis is None else _rounded(j.axis)))

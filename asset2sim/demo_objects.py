@@ -113,7 +113,8 @@ def _cabinet_two_drawers() -> DemoArticulation:
     ]
     # Drawer boxes clear the divider (|y| <= 0.015), the top board (y >= 0.52)
     # and the bottom board (y <= -0.52) by at least 0.01.
-    drawers = [_drawer((0.02, 0.545), (0.03, 0.465), 10), _drawer((-0.545, -0.02), (-0.51, -0.1), 20)]  # top, bottom
+    # the top drawer, then the bottom one
+    drawers = [_drawer((0.02, 0.545), (0.03, 0.465), 10), _drawer((-0.545, -0.02), (-0.51, -0.1), 20)]
     links = [*(DemoLink(f"link_{i}", "slider", "drawer", d) for i, d in enumerate(drawers)),
              DemoLink("link_2", "heavy", "furniture_body", body)]
     return _demo("cabinet_2drawer", "StorageFurniture", links, [

@@ -307,7 +307,8 @@ def _obj_group_polygons(path: Path | str) -> tuple[np.ndarray, list[list[list[in
         return v, [part for part in np.split(f, np.flatnonzero(np.diff(group)) + 1) if len(part)]
     verts: list[tuple[float, float, float]] = []
     current: list[list[int]] = []
-    groups = [current]  # each o/g line starts a new one
+    # each o/g line starts a new one
+    groups = [current]
     for line in data.decode(errors="replace").splitlines():
         if not line or line[0] not in "vfog":
             continue

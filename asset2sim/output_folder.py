@@ -400,7 +400,8 @@ def remove_owned(out_dir: Path | str) -> list[str]:
     _prune_empty(root, owned)
     left = _entries(root)
     if not left:
-        for folder, _dirs, _files in sorted(os.walk(root), reverse=True):  # every folder before its parent, out_dir last
+        # every folder before its parent, out_dir last
+        for folder, _dirs, _files in sorted(os.walk(root), reverse=True):
             with contextlib.suppress(OSError):
                 os.rmdir(folder)
     return left

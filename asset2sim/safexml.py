@@ -156,7 +156,8 @@ def parse_xml_bytes(data: bytes, source: str = "<bytes>", limits: XMLLimits | No
     _install_guards(parser, builder, lim, source)
     try:
         parser.Parse(data, True)
-    except SafeXMLError:  # a guard's refusal, raised in a handler (expat passes it on as it is)
+    except SafeXMLError:
+        # a guard's refusal, raised in a handler (expat passes it on as it is)
         raise
     except expat.ExpatError as exc:
         raise XMLMalformed(f"{expat.errors.messages[exc.code] if exc.code else exc} (line {exc.lineno}, column {exc.offset})",

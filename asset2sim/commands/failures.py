@@ -58,7 +58,8 @@ def latest_worked(store: ResultCatalog, dataset: str | None) -> tuple[tuple[str,
     """((dataset, run) of the most recent run that refined anything, the later runs passed over): a rerun with
     nothing to do (``_run.json`` ``outcome`` ``nothing_to_do``: every asset reused) is passed over; a run without that
     record counts as one that worked. ((None), []) when the catalog has no run."""
-    runs = sorted(store.runs(dataset), key=lambda p: (p[1], p[0]), reverse=True)  # run ids start with the UTC start time
+    # the latest first (run ids start with the UTC start time)
+    runs = sorted(store.runs(dataset), key=lambda p: (p[1], p[0]), reverse=True)
     passed: list[str] = []
     for ds, run in runs:
         if (store.run_info(ds, run) or {}).get("outcome") != NOTHING_TO_DO:

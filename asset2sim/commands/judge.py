@@ -32,7 +32,8 @@ class _JudgeOption(argparse.Action):
     """``--model`` starts a judge; ``--base-url`` and ``--family`` set the latest one's."""
 
     def __call__(self, parser, namespace, value, option_string=None):
-        judges = list(namespace.judges)  # the parser's default [] set before any option is read
+        # the parser's default [] is set before any option is read
+        judges = list(namespace.judges)
         if self.dest == "model":
             judges.append({"model": value})
         elif not judges:
