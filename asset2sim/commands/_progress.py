@@ -85,7 +85,7 @@ class FlowProgress:
         counts = TextColumn("[green]done {task.fields[done]}[/] [cyan]skipped {task.fields[skipped]}[/] "
                             "[red]failed {task.fields[failed]}[/]")
         self._progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), counts, TimeElapsedColumn(),
-                                  TextColumn("ETA"), TimeRemainingColumn(), console=Console(file=raw(self.stream)), transient=False)
+                                  TextColumn("ETA"), TimeRemainingColumn(), console=Console(file=raw(self.stream)))
         # every terminal log handler raised to WARNING (its level remembered)
         loggers = [logging.getLogger()] + [lg for lg in logging.root.manager.loggerDict.values() if isinstance(lg, logging.Logger)]
         for lg in loggers:
