@@ -174,17 +174,13 @@ def _entries(root: Path) -> list[str]:
     return sorted(out)
 
 
-def _unlink_inside(root: Path, rel: str) -> bool:
-    """Remove ``root/rel`` unless it is a folder or a symlink lies on the way;
-    True when something was removed."""
+def _unlink_inside(root: Path, rel: str) -> None:
+    """Remove ``root/rel`` unless it is a folder or a symlink lies on the way (nothing when it is gone meanwhile or
+    cannot be removed)."""
     target = root / rel
-    try:
-        if target.parent.resolve() != root / PurePosixPath(rel).parent or (target.is_dir() and not target.is_symlink()):
-            return False
-        target.unlink()
-        return True
-    except OSError:  # gone meanwhile, or not removable
-        return False
+    with contextlib.suppress(OSError):
+        if target.parent.resolve() == root / PurePosixPath(rel).parent and not (target.is_dir() and not target.is_symlink()):
+            target.unlink()
 
 
 def _remove_with_temps(root: Path, rel: str) -> None:

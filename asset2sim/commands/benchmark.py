@@ -114,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
     for r in RESEARCH_NUMBERS:
         rt.add_row(*r.values())
     console.print(rt)
-    secs = sorted(r["seconds"] for r in records if not r.get("error") and r.get("seconds") is not None)
+    secs = [r["seconds"] for r in records if not r.get("error") and r.get("seconds") is not None]
     if secs:
         console.print(f"median evaluation time per asset: {statistics.median(secs):.2f} s over {len(secs)} evaluations (goal <= 1.5 s; "
                       f"method runs, report writing and start-up excluded)")
