@@ -79,7 +79,7 @@ def _listed(path: Path) -> set[str]:
     if not isinstance(data, dict):
         return set()
     entries = [*(data.get("files") or []), *(data.get("unhashed") or [])]
-    return {r for r in (_safe_rel(x) for x in entries if isinstance(x, str)) if r is not None}
+    return {r for r in map(_safe_rel, entries) if r is not None}
 
 
 def recorded_files(out_dir: Path | str) -> set[str]:
