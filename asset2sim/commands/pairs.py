@@ -62,7 +62,8 @@ def run(args: argparse.Namespace) -> int:
     for key, why in pair_set.skipped.items():
         console.print(f"[yellow]skipped {markup(key)}: {markup(why)}[/yellow]")
     n_defect = sum(1 for p in pair_set.pairs if p.defect)
-    console.print(f"wrote {markup(out / 'pairs.json')}: {len(pair_set.pairs)} pairs ({n_defect} calibration pairs with planted defects)")
+    console.print(f"wrote {markup(out / 'pairs.json')}: {len(pair_set.pairs)} pairs "
+                  f"({n_defect} calibration pairs with planted defects)")
     if not pair_set.pairs:
         raise CommandError(INVALID_INPUT, "NO_PAIRS", out, "no pair could be made (see the skipped lines above)")
     return 0
