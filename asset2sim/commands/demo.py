@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     if args.no_refine and args.asset_out is None:
         raise CommandError.invalid("DEMO_NOTHING_TO_DO", "--no-refine writes only the input folder: give --asset-out DIR")
     with tempfile.TemporaryDirectory(prefix="asset2sim-demo-") as tmp:
-        folder = args.asset_out if args.asset_out is not None else Path(tmp) / entry.asset_id
+        folder = args.asset_out or Path(tmp) / entry.asset_id
         src = demo_assets.build_object(entry.asset_id, folder)
         print(f"built demo asset {src} ({entry.category})")
         if args.no_refine:

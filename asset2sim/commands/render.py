@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError.invalid("VIEW_UNKNOWN", f"--views: unknown view(s) {unknown}; known views: {list(VIEWS)}")
     check_out(args.out, [args.asset], adopt=True)  # never into the input, but into a refined folder (its own views then)
     urdf = resolve_urdf(args.asset)
-    state = read_joint_state(args.state) if args.state is not None else {}
+    state = read_joint_state(args.state) if args.state else {}
     t0 = time.perf_counter()
     with SceneRenderer(urdf, size=tuple(args.size), backend=args.backend, shadows=args.shadows) as r:
         r.set_joint_positions(state)
