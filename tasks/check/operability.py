@@ -46,7 +46,7 @@ from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever
 from asset2sim.tasks.geometry.limits import rigid_group
 from asset2sim.tasks.interpret.operating_forces import ForceRange, load_operating_forces, operating_range
 from asset2sim.tasks.check.gripper import GripperLimits
-from asset2sim.tasks.check.stroke import Reach, reach_stroke
+from asset2sim.tasks.check.stroke import reach_stroke
 from asset2sim.tasks.check.sweep import HOLD_FORCE, REACH_FRACTION
 from asset2sim.tasks.interpret.part_priors import handled
 from asset2sim.tasks.synthesize.physics import G as GRAVITY
@@ -196,30 +196,6 @@ def _needed(session: SimSession, model: UrdfModel, joint: str, links: list[str],
     return float(best), at
 
 
-def _push(session: SimSession, joint: str, closed: tuple[float, float, float], sign: float, target: float,
-          effort: float, speed: float, time_limit: float, held: list[str], cfg: OperabilityConfig) -> Reach:
-    """Push ``joint`` in direction ``sign`` (+1 opening) until the opening fraction passes
-    ``target`` with a hand of at most ``effort`` (N m or N), easing off near ``speed`` (rad/s or m/s), for
-    ``time_limit`` s, the ``held`` joints driven still. The hand's force eases off near its
-    speed and changes at most at the rate that raises it from 0 to its limit over ``ramp_time`` (a
-    hand's force builds and relaxes over time): on a light part a force that follows the speed step by
-    step would switch between full and none every step, and in PyBullet that chatter against the
-    joint's friction motor stalls the part (a 27 g lamp arm stopped at 14 % of its range under 2.5 N m
-    against 0.63 N m of friction)."""
-    dt = session.options.conventions.timestep
-    s = sign * closed[1]
-    rate = effort * dt / cfg.ramp_time  # the most the hand's force changes in one step, N m or N
-    force = [0.0]
-
-    def law(k, q, qd):
-        ease = float(np.clip((speed - s * qd) / (0.5 * speed), 0.0, 1.0))
-        force[0] = float(np.clip(effort * ease, force[0] - rate, force[0] + rate))
-        session.apply_joint_effort(joint, s * force[0])
-
-    return reach_stroke(session, joint, closed, target, sign, time_limit, law, held=held,
-                        hold_force=cfg.hold_force)
-
-
 def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tuple[float, float, float],
                  blocker: Blocker, *, category: str | None, label: str | None,
                  config: OperabilityConfig | None = None) -> PartOperability:
@@ -258,14 +234,28 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
                            force_range_n=r_.force_n, torque_range_nm=r_.torque_nm, range_of=where,
                            sources=[table.sources[s] for s in r_.sources], estimate=r_.estimate)
     fractions = np.linspace(0.0, 1.0, max(2, cfg.samples))
+    dt = session.options.conventions.timestep
+    rate = effort * dt / cfg.ramp_time  # the most the hand's force changes in one step, N m or N
     saved = session.save_state()
     reached_open = 0.0  # where the opening stroke left the part: the closing stroke starts there
     try:
         for action, sign, target in (("open", 1.0, cfg.reach_fraction), ("close", -1.0, 1.0 - cfg.reach_fraction)):
             need, at = _needed(session, model, joint, links, closed, sign, fractions, speed)
             session.set_joint_positions({**state, joint: qc if action == "open" else qc + d * reached_open * rng})
-            push = _push(session, joint, closed, sign, target, effort, speed, time_limit, held, cfg)
-            reached, diverged, dt = push.far, push.diverged, session.options.conventions.timestep
+            # the hand's force eases off near its speed and changes at most at the rate that raises it from 0 to its
+            # limit over ramp_time (a hand's force builds and relaxes over time): on a light part a force that follows
+            # the speed step by step would switch between full and none every step, and in PyBullet that chatter
+            # against the joint's friction motor stalls the part (a 27 g lamp arm stopped at 14 % of its range under
+            # 2.5 N m against 0.63 N m of friction)
+            hand, s = [0.0], sign * d
+
+            def law(k, q, qd):
+                ease = float(np.clip((speed - s * qd) / (0.5 * speed), 0.0, 1.0))
+                hand[0] = float(np.clip(effort * ease, hand[0] - rate, hand[0] + rate))
+                session.apply_joint_effort(joint, s * hand[0])
+
+            push = reach_stroke(session, joint, closed, target, sign, time_limit, law, held=held, hold_force=cfg.hold_force)
+            reached, diverged = push.far, push.diverged
             t = None if push.steps is None else push.steps * dt
             if push.steps == push.limit:  # reached at the last reading: the time limit itself
                 t = time_limit
