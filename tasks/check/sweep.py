@@ -174,14 +174,13 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     limit = effort_limit(session, joint, links, open_range, cfg, closed, direction)
     session.set_joint_positions({**initial_state, joint: closed})
     vdiv = explosion_speed(jtype)  # the divergence metric's
-    max_pen, worst = _deepest(session.self_penetration()[1])
-    trace: dict[str, list[float]] = {"t": [], "fraction": [], "phase": []}
+    run = _Swept(joint, (closed, direction, open_range), limit, frozenset(links), v_max, vdiv,
+                 _deepest(session.self_penetration()[1]))
 
     def penetration(k, q, qd):
-        nonlocal max_pen, worst
         d, pair = _deepest(session.self_penetration()[1])
-        if d > max_pen:
-            max_pen, worst = d, pair
+        if d > run.deepest[0]:
+            run.deepest = (d, pair)
 
     def drive(goal: float) -> Reach:
         def law(k, q, qd):
@@ -190,29 +189,26 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
 
         sign = 1.0 if goal == q_far else -1.0
         target = cfg.reach_fraction if sign > 0 else 1.0 - cfg.reach_fraction
-        r = reach_stroke(session, joint, (closed, direction, open_range), target, sign,
-                         cfg.time_limit, law, held=held, hold_force=cfg.hold_force, max_speed=vdiv,
-                         record=penetration)
-        _extend_trace(trace, r.fractions, sign < 0, dt)
+        r = reach_stroke(session, joint, run.closed, target, sign, cfg.time_limit, law, held=held, hold_force=cfg.hold_force,
+                         max_speed=vdiv, record=penetration)
+        _extend_trace(run.trace, r.fractions, sign < 0, dt)
         return r
 
     held = [o for o in session.joint_types if o != joint] if _holds(session, cfg) else []
     try:
         out = drive(q_far)
-        back = Reach(0) if out.diverged else drive(closed)
+        run.strokes = [out, Reach(0) if out.diverged else drive(closed)]
     finally:
         for o in [joint, *held]:
             session.release_joint(o)
-    return _joint_sweep(joint, jtype, (closed, direction, open_range), limit, out, back, (max_pen, worst), trace, dt, cfg)
+    return _joint_sweep(run, jtype, dt, cfg)
 
 
-def _joint_sweep(joint: str, jtype: str, closed: tuple[float, float, float], limit: float, out: Reach, back: Reach,
-                 deepest: tuple[float, tuple[str, str] | None], trace: dict[str, list[float]], dt: float,
-                 cfg: SweepConfig) -> JointSweep:
-    """The sweep of ``joint`` from its two strokes (out, back) and its deepest self-contact (m, pair)."""
-    qc, d, rng = closed
-    (max_pen, worst), diverged = deepest, out.diverged or back.diverged
-    t_out, t_back = (None if r.steps is None else r.steps * dt for r in (out, back))
+def _joint_sweep(r: _Swept, jtype: str, dt: float, cfg: SweepConfig) -> JointSweep:
+    """The sweep of ``r.joint`` from its two strokes (out, back) and its deepest self-contact (m, pair)."""
+    (qc, d, rng), (out, back) = r.closed, r.strokes
+    (max_pen, worst), diverged = r.deepest, out.diverged or back.diverged
+    t_out, t_back = (None if x.steps is None else x.steps * dt for x in (out, back))
     failure = ["diverged"] if diverged else []
     if t_out is None and not diverged:
         failure.append(f"reached only {out.far:.0%} of the range opening")
@@ -221,11 +217,11 @@ def _joint_sweep(joint: str, jtype: str, closed: tuple[float, float, float], lim
     if max_pen >= cfg.max_penetration:
         failure.append(f"self-penetration {max_pen * 1000:.1f} mm" + (f" ({worst[0]} / {worst[1]})" if worst else ""))
     return JointSweep(
-        joint=joint, joint_type=jtype, q_closed=float(qc), q_far=float(qc + d * rng), open_range=float(rng),
-        effort_limit=limit, reached_open=float(out.far), reached_closed=float(back.far),
+        joint=r.joint, joint_type=jtype, q_closed=float(qc), q_far=float(qc + d * rng), open_range=float(rng),
+        effort_limit=r.effort, reached_open=float(out.far), reached_closed=float(back.far),
         time_open=t_out, time_close=t_back,
         max_penetration=max_pen, worst_pair=worst, diverged=diverged, passed=not failure, failure="; ".join(failure),
-        trace=trace)
+        trace=r.trace)
 
 
 @dataclass
@@ -314,8 +310,7 @@ def sweep_together(session: SimSession, joints: list[str], closed: dict[str, tup
     finally:
         for o in session.joint_types:
             session.release_joint(o)
-    return {r.joint: _joint_sweep(r.joint, session.joint_types[r.joint], r.closed, r.effort, r.strokes[0], r.strokes[1],
-                                  r.deepest, r.trace, dt, cfg) for r in runs}
+    return {r.joint: _joint_sweep(r, session.joint_types[r.joint], dt, cfg) for r in runs}
 
 
 def _stroke_ended(session: SimSession, r: _Swept, q: float, qd: float, cfg: SweepConfig) -> bool:
