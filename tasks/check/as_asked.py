@@ -122,19 +122,6 @@ def not_measured(reason: str, request: str = "") -> MetricResult:
                         details={"request": request, "reason": reason, "unmet": []}, engine="none")
 
 
-def overridden_items(spec: RequestSpec) -> list[dict[str, Any]]:
-    """The unmet items of the phrases the parser replaced by a later one for the same part (``spec.overridden``),
-    each with the parser's contradiction as its reason."""
-    return [not_applied(phrase, next((w for w in spec.warnings if w.startswith(f"contradiction: '{phrase}' and ")), "")
-                        .removeprefix("contradiction: ") or "a later phrase of the request sets the same part")
-            for phrase in spec.overridden]
-
-
-def asked_anything(spec: RequestSpec | None) -> bool:
-    """Whether ``spec`` asks something: request text or a typed override."""
-    return spec is not None and (bool(spec.text.strip()) or bool(spec.overrides))
-
-
 def refine_request_met(spec: RequestSpec, res: StateResolution | None, found: RequestFindings | None,
                        closed_out: dict[str, ClosedState], state: dict[str, float],
                        properties: list[tuple[str, str]] | None = None, ranks: dict[str, int | None] | None = None) -> MetricResult:
@@ -146,12 +133,15 @@ def refine_request_met(spec: RequestSpec, res: StateResolution | None, found: Re
     set whose opening fraction at ``state`` (rad / m, output units; ``closed_out`` the output's closed ends) lies
     outside the band (a phrase naming no part graded on the main part it set: ``ranks``, :func:`object_states`). Not
     measured when nothing was asked or no word of it was understood."""
-    if not asked_anything(spec):
+    if spec is None or not (spec.text.strip() or spec.overrides):  # nothing asked: no request text, no typed override
         return not_measured("no request")
     if not spec.understood and not spec.overrides:
         return not_measured("no word of the request was understood", spec.text)
     unapplied = (res.unapplied if res is not None else []) + list(properties or [])
-    unmet = overridden_items(spec) + [not_applied(phrase, why) for phrase, why in unapplied]
+    # the phrases the parser replaced by a later one for the same part, each with the parser's contradiction as its reason
+    unmet = [not_applied(phrase, next((w for w in spec.warnings if w.startswith(f"contradiction: '{phrase}' and ")), "")
+                         .removeprefix("contradiction: ") or "a later phrase of the request sets the same part")
+             for phrase in spec.overridden] + [not_applied(phrase, why) for phrase, why in unapplied]
     graded = len(spec.overridden) + len(unapplied)
     for q in (found.quantities if found is not None else []):
         if q.kind not in GRADED_QUANTITIES or q.asked is None or q.achieved is None:
