@@ -203,7 +203,7 @@ def failing_joints(metrics: list[MetricResult]) -> tuple[dict[str, str], dict[st
     held: dict[str, str] = {}
     operable: dict[str, str] = {}
     for m in (m for m in metrics if m.passed is False):
-        d = m.details or {}
+        d = m.details
         if m.name == "robust_rest":
             for trial, t in (d.get("trials") or {}).items():
                 for j in (t or {}).get("failing_joints") or []:
@@ -266,7 +266,7 @@ def with_unmet(metrics: list[MetricResult], items: list[dict[str, Any]]) -> list
     asked = next((m for m in metrics if m.name == "request_met"), None)
     if asked is None or asked.passed is None or not items:
         return metrics
-    d = dict(asked.details or {})
+    d = dict(asked.details)
     d["unmet"] = list(d.get("unmet") or []) + items
     d["graded"] = int(d.get("graded") or 0) + len(items)
     fixed = asked.model_copy(update={"value": float(len(d["unmet"])), "passed": False, "details": d})
@@ -312,8 +312,8 @@ def not_shut(metrics: list[MetricResult], words: list[tuple[MotionPhrase, list[s
     """The unmet items (kind ``not_shut``) of each self-closing word (``words``: each with the joints it applies to)
     whose part the metric ``shuts_on_its_own`` of ``metrics`` (:mod:`~asset2sim.tasks.check.closer_release`) found
     short of shut after it was released fully open: where it stopped, as a fraction of its range from shut."""
-    rows = {j: (r, m.engine, (m.details or {}).get("seconds")) for m in metrics if m.name == "shuts_on_its_own"
-            for j, r in ((m.details or {}).get("joints") or {}).items()}
+    rows = {j: (r, m.engine, m.details.get("seconds")) for m in metrics if m.name == "shuts_on_its_own"
+            for j, r in (m.details.get("joints") or {}).items()}
     items = []
     for word, joints in words:
         for j in joints:

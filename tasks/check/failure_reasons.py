@@ -49,7 +49,7 @@ def penetration_failures(metrics: list[Any]) -> list[PenetrationFailure]:
     the sentences (:func:`penetration_why`) and the report's frames name."""
     out = []
     for m in _failing(metrics, PENETRATION_METRICS):
-        d = m.details or {}
+        d = m.details
         if m.name == "penetration":
             pairs = sorted(d.get("pairs") or [], key=lambda p: -float(p.get("max_depth_mm") or 0.0))
             top = pairs[0] if pairs else None
@@ -78,7 +78,7 @@ def penetration_why(metrics: list[Any]) -> list[str]:
                        f"{links} at the initial state. {_ADVICE['self_contact']}")
             continue
         out.append(f"parent-child penetration ({m.engine}): link '{f.link_b or '?'}' is {f.depth_mm:.1f} mm inside its parent "
-                   f"'{f.link_a or '?'}' at the initial state, {float((m.details or {}).get('beyond_modelled_mm') or 0.0):.1f} mm "
+                   f"'{f.link_a or '?'}' at the initial state, {float(m.details.get('beyond_modelled_mm') or 0.0):.1f} mm "
                    f"deeper than at its modelled pose (fails above {UNRESOLVED_PENETRATION_MM:g} mm). {_ADVICE['parent_child']}")
     return out
 
@@ -94,7 +94,7 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
     out: list[str] = []
     for m in _failing(metrics, ("robust_rest",)):
         # step 1: per failed trial, the object not at rest, each failing joint's worst drift and the largest topple
-        trials = (m.details or {}).get("trials") or {}
+        trials = m.details.get("trials") or {}
         worst: dict[str, tuple[float, float, str]] = {}
         toppled: tuple[float, str] | None = None
         restless: dict[str, str] = {}
@@ -149,7 +149,7 @@ def _holding_choices(rr: Any, metrics: list[Any], joint: str, prismatic: bool) -
     stiffer slide or hinge than that range (which the operability tier then
     fails); mounting, where its category is mounted in use (``rr.details["category_mounting"]``)."""
     op = next((m for m in metrics if m.name == "operability" and m.engine == rr.engine), None)
-    eff = ((op.details or {}).get("efforts") or {}).get(joint) or {} if op is not None else {}
+    eff = (op.details.get("efforts") or {}).get(joint) or {} if op is not None else {}
     label = eff.get("label") or "part"
     top = (eff.get("force_range_n") or [None, None])[1]
     mech = "slide" if prismatic else "hinge"
@@ -159,7 +159,7 @@ def _holding_choices(rr: Any, metrics: list[Any], joint: str, prismatic: bool) -
     choices.append(f"a stiffer {mech} than a hand may operate" + (f" (more than the {top:g} N of its range, {eff.get('range_of')})"
                                                                  if top is not None else "")
                    + ", which the operability tier then fails")
-    kind = (rr.details or {}).get("category_mounting")
+    kind = rr.details.get("category_mounting")
     if kind and kind != "free-standing":
         choices.append(f"--mount fixed, as the category is used ({kind})")
     return "What remains: " + "; ".join(choices) + "."
@@ -186,7 +186,7 @@ def _rest_why(metrics: list[Any]) -> list[str]:
     out = []
     told: set[tuple[str, str]] = set()  # (joint, engine) a hold measure said: the post-check's and the evaluation's once
     for m in _failing(metrics, TIERS["rest"][0]):
-        d = m.details or {}
+        d = m.details
         if m.name == "rest_stability":
             what = ("the rest test diverged" if d.get("diverged") else
                     f"the object moved D_pos {_num(d.get('D_pos_m'))} m and turned D_ori {_num(d.get('D_ori_rad'))} rad at rest")
@@ -230,7 +230,7 @@ def _failures_why(metrics: list[Any], names: tuple[str, ...], advice: str, what:
     measured value), with its threshold and ``advice``; ``what`` says what was done."""
     out = []
     for m in _failing(metrics, names):
-        fails = (m.details or {}).get("failures") or [f"{_num(m.value)} {m.unit}"]
+        fails = m.details.get("failures") or [f"{_num(m.value)} {m.unit}"]
         out.append(f"{what} ({m.engine}): {'; '.join(fails)} (passes when {m.threshold}). {advice}")
     return out
 
@@ -258,13 +258,13 @@ def _request_why(metrics: list[Any]) -> list[str]:
     of what failed (:func:`_request_advice`)."""
     return [f"the output is not what was asked: {u.get('text') or u.get('phrase')} (passes when {m.threshold})."
             + (f" {_request_advice(u)}" if _request_advice(u) else "")
-            for m in _failing(metrics, ("request_met",)) for u in (m.details or {}).get("unmet") or []]
+            for m in _failing(metrics, ("request_met",)) for u in m.details.get("unmet") or []]
 
 
 def asked_weight(metrics: list[Any]) -> str | None:
     """The request's words that set a mass or a material ("'ceramic'", "'a 3 kg lid'"), read from ``request_met``'s
     request; None when it set none. Advice never asks for a lighter part or another material against them."""
-    text = next(((m.details or {}).get("request") for m in metrics if m.name == "request_met"), None)
+    text = next((m.details.get("request") for m in metrics if m.name == "request_met"), None)
     if not text:
         return None
     props = [p.phrase for p in parse_request(str(text)).properties if p.mass is not None or p.material or p.mass_range]
@@ -303,7 +303,7 @@ def why_it_failed(metrics: list[Any]) -> list[str]:
     """
     metrics = list(metrics)
     asked = asked_weight(metrics)
-    held_not = {j for m in _failing(metrics, HOLD_METRICS) for j in (m.details or {}).get("sagging") or []}
+    held_not = {j for m in _failing(metrics, HOLD_METRICS) for j in m.details.get("sagging") or []}
     explain = {"rest": _rest_why, "penetration": penetration_why, "robust_rest": lambda ms: robust_rest_why(ms, skip=held_not),
                "request": _request_why}
     out: list[str] = []

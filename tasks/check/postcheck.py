@@ -8,12 +8,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from asset2sim.engines.base import SimSession, Spring
+from asset2sim.engines.base import SimSession
 from asset2sim.engines.source import SimObject, SimSource
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.overlay import Overlay
@@ -52,17 +51,13 @@ class RestRecording:
 
     ``root_series`` (K, 3) m root position after every step of settling and
     test; ``ground_series`` (K,) m deepest ground penetration; ``joint_series``
-    joint -> (K,) rad or m. The other fields identify the simulation.
+    joint -> (K,) rad or m; ``conventions`` those it ran under.
     """
 
     trace: metrics.RestTrace
     root_series: np.ndarray
     ground_series: np.ndarray
     joint_series: dict[str, np.ndarray]
-    engine: str
-    urdf: Path
-    initial_state: dict[str, float]
-    springs: dict[str, Spring]
     conventions: SimConventions
     #: The root was fixed (a mounted asset, ``tasks.interpret.mounting``).
     fixed_base: bool = False
@@ -86,7 +81,6 @@ def measure_rest_test(engine: str, obj: SimObject) -> tuple[MetricResult, RestRe
             trace=trace, root_series=np.array(rec.root) if rec.root else np.zeros((0, 3)), ground_series=np.array(rec.ground),
             joint_series={n: np.concatenate([trace.settle_joints.get(n, np.empty(0)), trace.joints[n][1:]])
                           for n in trace.joints},
-            engine=session.engine, urdf=obj.source.path.resolve(), initial_state=dict(obj.state), springs=dict(obj.springs),
             conventions=obj.conventions, fixed_base=bool(session.options.fixed_base), extents=extents)
 
 

@@ -91,7 +91,7 @@ def metric_verdict(m: Any) -> bool | None:
     """A metric's pass/fail as the readiness verdict reads it (:data:`PENETRATION_METRICS`: at most
     :data:`UNRESOLVED_PENETRATION_MM`, a child inside its parent beyond its modelled pose); None: not graded."""
     if m.name in PENETRATION_METRICS:
-        value = (m.details or {}).get(PENETRATION_METRICS[m.name] or "", m.value)
+        value = m.details.get(PENETRATION_METRICS[m.name] or "", m.value)
         return None if value is None else bool(value <= UNRESOLVED_PENETRATION_MM)
     return m.passed
 
@@ -125,9 +125,9 @@ def penetration_measures(metrics: list[Any]) -> list[str]:
         if m.name == "penetration":
             out.append(f"self-contact {m.value:.3f} mm ({m.engine}) {verdict}")
             continue
-        pairs = (m.details or {}).get("pairs") or {}
+        pairs = m.details.get("pairs") or {}
         worst = max(pairs, key=pairs.get) if pairs else None
-        beyond = (m.details or {}).get("beyond_modelled_mm")
+        beyond = m.details.get("beyond_modelled_mm")
         where = ", ".join([m.engine] + ([worst] if worst else []))
         out.append(f"parent-child {m.value:.3f} mm ({where}" + (f"; {beyond:.3f} mm beyond its modelled pose" if pairs and beyond is not None
                                                                  else "") + f") {verdict}")
