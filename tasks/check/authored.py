@@ -131,15 +131,14 @@ def compare_physics(held: HeldPhysics, authored: HeldPhysics, tol: Tolerances | 
         return abs(hv - av) / (tol.length + tol.rel * abs(av))
 
     for name, a in authored.links.items():
-        h = held.links.get(name)
+        h, item = held.links.get(name), f"link {name}"
         if h is None:
-            out.mismatches.append(Mismatch(f"link {name}", "missing", None, "a body"))
+            out.mismatches.append(Mismatch(item, "missing", None, "a body"))
             continue
         if name in held.welded_to_world:  # a fixed root: its mass is never simulated
-            out.notes.append(f"link {name}: welded to the world, mass and inertia not simulated "
+            out.notes.append(f"{item}: welded to the world, mass and inertia not simulated "
                              f"({held.engine} holds {h.mass:g} kg, files say {a.mass:g} kg); not compared")
             continue
-        item = f"link {name}"
         note("mass", abs(h.mass - a.mass) / (tol.rel * max(abs(a.mass), 1e-300)), item, "mass (kg)", h.mass, a.mass)
         e = float(np.abs(np.asarray(h.com) - a.com).max()) / (tol.length + tol.rel * float(np.abs(a.com).max()))
         note("com", e, item, "center of mass (m)", np.round(h.com, 9).tolist(), np.round(a.com, 9).tolist())
@@ -147,21 +146,21 @@ def compare_physics(held: HeldPhysics, authored: HeldPhysics, tol: Tolerances | 
         e = float(np.abs(np.sort(h.principal) - a.principal).max()) / (tol.rel * max(scale, 1e-300))
         note("inertia", e, item, "principal moments (kg*m^2)", np.sort(h.principal).tolist(), a.principal.tolist())
     for name, a in authored.joints.items():
-        h = held.joints.get(name)
+        h, item = held.joints.get(name), f"joint {name}"
         if h is None:
-            out.mismatches.append(Mismatch(f"joint {name}", "missing", None, "a joint"))
+            out.mismatches.append(Mismatch(item, "missing", None, "a joint"))
             continue
         for q in ("lower", "upper"):
             hv, av = getattr(h, q), getattr(a, q)
             e = (0.0 if hv == av else math.inf) if math.isinf(av) or math.isinf(hv) else off(hv, av)
-            note("limits", e, f"joint {name}", f"{q} limit", hv, av)
+            note("limits", e, item, f"{q} limit", hv, av)
         for q in ("damping", "friction", "stiffness"):
             hv, av = getattr(h, q), getattr(a, q)
-            note(q, abs(hv - av) / (tol.floor + tol.rel * abs(av)), f"joint {name}", q, hv, av)
+            note(q, abs(hv - av) / (tol.floor + tol.rel * abs(av)), item, q, hv, av)
         if a.reference is not None and a.stiffness != 0.0:
             e = math.inf if h.reference is None else off(h.reference, a.reference)
-            note("position", e, f"joint {name}", "spring reference", h.reference, a.reference)
-        note("position", off(h.position, a.position), f"joint {name}", "initial position", h.position, a.position)
+            note("position", e, item, "spring reference", h.reference, a.reference)
+        note("position", off(h.position, a.position), item, "initial position", h.position, a.position)
     out.max_error = worst
     return out
 

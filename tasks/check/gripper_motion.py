@@ -13,7 +13,7 @@ from typing import Any, Callable
 import numpy as np
 
 from asset2sim.frames import axis_angle_matrix
-from asset2sim.tasks.check.contact_points import joint_frame_axis
+from asset2sim.tasks.check.contact_points import joint_frame_axis, off_axis
 from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits
 from asset2sim.tasks.check.stroke import run_stroke
 from asset2sim.tasks.check.support import SupportWatch
@@ -216,4 +216,4 @@ def _gripper_target(o: np.ndarray, a: np.ndarray, p: np.ndarray, dq: float, pris
 
 def _lever(o: np.ndarray, a: np.ndarray, p: np.ndarray) -> float:
     """Distance (m, >= 1e-3) of ``p`` (3,) from the axis ``a`` through ``o``."""
-    return max(float(np.linalg.norm((p - o) - float((p - o) @ a) * a)), 1e-3)
+    return max(float(off_axis(p[None], o, a)[0]), 1e-3)

@@ -106,21 +106,21 @@ def parity_table(results: dict[str, list[MetricResult]]) -> list[dict[str, Any]]
     for engine, res in results.items():
         pen, rest, osc = (next((m for m in res if m.name == n), None) for n in ("penetration", "rest_stability", "oscillation"))
         status, reason = "ok", ""
-        for m in (pen, rest, osc):
-            if m is not None and "skipped" in m.details:
-                status, reason = "skipped", m.details["skipped"]
-            elif m is not None and "error" in m.details:
-                status, reason = "error", m.details["error"]
-        pen_d, rest_d, osc_d = (m.details if m is not None else {} for m in (pen, rest, osc))
+        pen_d, rest_d, osc_d = found = [getattr(m, "details", {}) for m in (pen, rest, osc)]
+        for d in found:
+            if "skipped" in d:
+                status, reason = "skipped", d["skipped"]
+            elif "error" in d:
+                status, reason = "error", d["error"]
         pairs, measured = pen_d.get("pairs", []), status == "ok" and pen.value is not None
         rows.append({
             "engine": engine, "status": status, "reason": reason,
-            "penetration_mm": pen.value if pen is not None else None,
+            "penetration_mm": getattr(pen, "value", None),
             "max_depth_mm": max((p["max_depth_mm"] for p in pairs), default=0.0) if measured else None,
             "penetration_points": sum(p["points"] for p in pairs) if measured else None,
-            "rest_stability": rest.passed if rest is not None else None,
+            "rest_stability": getattr(rest, "passed", None),
             "D_pos_m": rest_d.get("D_pos_m"), "D_ori_rad": rest_d.get("D_ori_rad"),
-            "oscillation": osc.passed if osc is not None else None,
+            "oscillation": getattr(osc, "passed", None),
             "failing_joints": list(osc_d.get("failing", [])), "joints_held": dict(rest_d.get("joints_held", {})),
             "breakaway": rest_d.get("breakaway"), "engine_notes": list(pen_d.get("engine_notes", [])),
         })

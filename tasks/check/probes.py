@@ -213,7 +213,7 @@ class _Run:
 
     def record(self, t: float, q: float, force: float, disp: float, phase: float) -> None:
         """One step of the trace (phase 0 push, 1 release)."""
-        for key, x in zip(("t", "q", "force", "root_disp", "phase"), (t, q, force, disp, phase)):
+        for key, x in zip(self.trace, (t, q, force, disp, phase)):
             self.trace[key].append(x)
 
 

@@ -22,12 +22,10 @@ from asset2sim.engines.base import SimSession
 
 @dataclass(frozen=True)
 class StrokeEnd:
-    """Where a stroke ended: after ``steps`` engine steps, the joint at ``q`` (rad or m); ``stopped``: a callback
-    ended it."""
+    """Where a stroke ended: after ``steps`` engine steps, the joint at ``q`` (rad or m)."""
 
     steps: int
     q: float
-    stopped: bool = False
 
 
 def run_stroke(session: SimSession, joint: str, steps: int, law: Callable | None = None,
@@ -45,13 +43,13 @@ def run_stroke(session: SimSession, joint: str, steps: int, law: Callable | None
     q, qd = session.joint_state(joint)
     for k in range(steps):
         if law is not None and law(k, q, qd):
-            return StrokeEnd(k, q, True)
+            return StrokeEnd(k, q)
         for other in held:
             session.drive_joint(other, 0.0, hold_force)
         session.step(1)
         q, qd = session.joint_state(joint)
         if record is not None and record(k + 1, q, qd):
-            return StrokeEnd(k + 1, q, True)
+            return StrokeEnd(k + 1, q)
     return StrokeEnd(steps, q)
 
 

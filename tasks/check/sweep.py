@@ -101,8 +101,7 @@ def _arm(session: SimSession, joint: str, links: list[str]) -> float:
     for ln in links:
         v = session.link_collision_vertices(ln)
         if not len(v):
-            lo, hi = session.link_aabb(ln)
-            v_w = box_corners(lo, hi)
+            v_w = box_corners(*session.link_aabb(ln))
         else:
             p, Rl = session.link_frame(ln)
             v_w = v @ Rl.T + p
