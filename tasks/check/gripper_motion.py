@@ -118,44 +118,18 @@ class GripperMove:
         o, a = joint_frame_axis(session, joint, grasp.link)
         p = grasp.grasp_point_world()
         v_cmd = cfg.limits.max_speed_m_s * speed_share
-        m.lever = None if session.joint_types[joint] == "prismatic" else _lever(o, a, p)
+        prismatic = session.joint_types[joint] == "prismatic"
+        m.lever = None if prismatic else _lever(o, a, p)
         qdot_max = v_cmd / (m.lever or 1.0)
         record_sample(session, m, p)
         travel = abs(q_target - q0) * (m.lever or 1.0)
         n_move = int(round((cfg.accel_time + cfg.travel_margin * travel / v_cmd + cfg.extra_time) / dt))
-        done, pushed_steps = self._lead(q0, q_target, qdot_max, n_move, m)
-        m.peak_force = grasp.peak_force_n
-        grasp.release()
-        if pushed_steps:
-            notes.append(f"vertical press/lift for {pushed_steps * dt:.2f} s of the motion")
-        q_rel, _ = session.joint_state(joint)
-        m.f_rel = self.frac(q_rel)
-        if not done and self.reached(m.f_rel):
-            notes.append("target reached but the joint was still moving at the time limit")
-
-        def wait(k, q, qd):
-            m.steps += 1
-            self.watch.update()
-            if m.steps % RECORD_EVERY == 0:
-                record_sample(session, m, None)
-
-        m.f_end = self.frac(run_stroke(session, joint, int(round(cfg.hold_time / dt)), record=wait).q)
-        m.held_ok = self.reached(m.f_end) if np.isfinite(m.f_end) else False
-        return m
-
-    def _lead(self, q0: float, q_target: float, qdot_max: float, n_move: int, m: Motion) -> tuple[bool, int]:
-        """Lead the gripper for at most ``n_move`` steps, q_des from ``q0`` to ``q_target``
-        at up to ``qdot_max`` (rad/s or m/s), recording the peaks into ``m``.
-        Returns (the joint reached the target and stopped, steps pressed or lifted vertically)."""
-        session, joint, grasp, cfg = self.session, self.joint, self.grasp, self.cfg
-        dt = float(session.options.conventions.timestep)
-        prismatic = session.joint_types[joint] == "prismatic"
+        # lead the gripper for at most n_move steps, q_des from q0 to q_target at up to qdot_max (rad/s or m/s), the
+        # peaks recorded into m; done: the joint reached the target and stopped
         stopped = STOPPED_PRISMATIC if prismatic else STOPPED_REVOLUTE
         sgn = 1.0 if q_target >= q0 else -1.0
         decel = qdot_max / cfg.accel_time
-        q_des = q0
-        pushed_steps = 0
-        done = False
+        q_des, pushed_steps, done = q0, 0, False
 
         def law(k, q, qd):
             nonlocal q_des, pushed_steps
@@ -192,7 +166,24 @@ class GripperMove:
             return done
 
         run_stroke(session, joint, n_move, law=law, record=record)
-        return done, pushed_steps
+        m.peak_force = grasp.peak_force_n
+        grasp.release()
+        if pushed_steps:
+            notes.append(f"vertical press/lift for {pushed_steps * dt:.2f} s of the motion")
+        q_rel, _ = session.joint_state(joint)
+        m.f_rel = self.frac(q_rel)
+        if not done and self.reached(m.f_rel):
+            notes.append("target reached but the joint was still moving at the time limit")
+
+        def wait(k, q, qd):
+            m.steps += 1
+            self.watch.update()
+            if m.steps % RECORD_EVERY == 0:
+                record_sample(session, m, None)
+
+        m.f_end = self.frac(run_stroke(session, joint, int(round(cfg.hold_time / dt)), record=wait).q)
+        m.held_ok = self.reached(m.f_end) if np.isfinite(m.f_end) else False
+        return m
 
 
 def _gripper_target(o: np.ndarray, a: np.ndarray, p: np.ndarray, dq: float, prismatic: bool,

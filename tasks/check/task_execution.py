@@ -6,7 +6,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -120,7 +120,17 @@ def execute_task(session, joint: str, closed: tuple[float, float, float], *, act
         return f <= target_fraction + cfg.reach_tol if action == "close" else f >= target_fraction - cfg.reach_tol
 
     notes: list[str] = []
-    q0, started_from = _settle(session, joint, action, (closed, direction, open_range), cfg, frac, reached, notes)
+    # settle and approach; where the joint is already at the target (``TaskConfig.from_far_side``) from the far side
+    n_settle = int(round((cfg.settle_time + cfg.approach_distance / cfg.limits.max_speed_m_s) / dt))
+    session.step(n_settle)
+    q0, started_from = session.joint_state(joint)[0], "initial state"
+    if reached(frac(q0)) and cfg.from_far_side:
+        f_from = FAR_SIDE_OPEN if action == "close" else 0.0
+        session.set_joint_positions({joint: closed + direction * f_from * open_range})
+        session.step(n_settle)
+        q0, _ = session.joint_state(joint)
+        started_from = f"far side (opening fraction {f_from:g}): the initial state was already at the target"
+        notes.append(started_from)
     f0 = frac(q0)
     side = grasp_side(session, joint, model, root_fixed=bool(session.options.fixed_base))
     link, point, rule = contact_point_rule(session, joint, model, opening_direction=direction, side=side)
@@ -159,27 +169,6 @@ def execute_task(session, joint: str, closed: tuple[float, float, float], *, act
         root_slide_m=float(watch.slide), root_tilt_rad=float(watch.tilt), slid=bool(slid), tipped=bool(tipped),
         force_limited=bool(m.force_limited), moved=m.moved, seconds_simulated=m.steps * dt, success=not failure,
         failure=failure, notes=notes, speed_share=float(speed_share), trace=m.trace)
-
-
-def _settle(session, joint: str, action: str, closed: tuple[float, float, float], cfg: TaskConfig,
-            frac: Callable[[float], float], reached: Callable[[float], bool], notes: list[str]) -> tuple[float, str]:
-    """Settle and approach, from the far side where the joint is already at
-    the target (``TaskConfig.from_far_side``); ``closed``: (q_c, direction, open range). Returns where the task
-    attempt starts: the joint's position q0 (rad or m) and where it started (one line)."""
-    closed, direction, open_range = closed
-    dt = float(session.options.conventions.timestep)
-    n_settle = int(round((cfg.settle_time + cfg.approach_distance / cfg.limits.max_speed_m_s) / dt))
-    session.step(n_settle)
-    q0, _ = session.joint_state(joint)
-    if not (reached(frac(q0)) and cfg.from_far_side):
-        return q0, "initial state"
-    f_from = FAR_SIDE_OPEN if action == "close" else 0.0
-    session.set_joint_positions({joint: closed + direction * f_from * open_range})
-    session.step(n_settle)
-    q0, _ = session.joint_state(joint)
-    started_from = f"far side (opening fraction {f_from:g}): the initial state was already at the target"
-    notes.append(started_from)
-    return q0, started_from
 
 
 def run_task(engine: str, obj: SimObject, joints: dict[str, tuple[float, float, float]], *,
