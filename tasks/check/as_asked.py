@@ -131,8 +131,14 @@ def refine_request_met(spec: RequestSpec, res: StateResolution | None, found: Re
     naming a part the object lacks, ``request_apply.unapplied_properties``), every number of ``found`` (its
     findings, ``request_findings.findings``) of a graded kind missed beyond its tolerance, and every joint a band
     set whose opening fraction at ``state`` (rad / m, output units; ``closed_out`` the output's closed ends) lies
-    outside the band (a phrase naming no part graded on the main part it set: ``ranks``, :func:`object_states`). Not
-    measured when nothing was asked or no word of it was understood."""
+    outside the band. Not measured when nothing was asked or no word of it was understood.
+
+    A phrase naming a part must put each of its joints in the band; one naming no part ("a door, slightly open") asks
+    it of the object's main part, met when one joint of the part it sets that ranks first among the category's
+    task-relevant parts (``ranks``: joint -> its part's rank, 0 first,
+    :func:`~asset2sim.tasks.interpret.part_priors.task_relevant_rank`; None or absent: no rank) is in the band: "a
+    suitcase, mostly open" is its lid's state, not its carrying handle's. A joint it also set that the state does not
+    suit (a latch that stays shut, a handle) is reported, not graded."""
     if spec is None or not (spec.text.strip() or spec.overrides):  # nothing asked: no request text, no typed override
         return not_measured("no request")
     if not spec.understood and not spec.overrides:
@@ -159,21 +165,6 @@ def refine_request_met(spec: RequestSpec, res: StateResolution | None, found: Re
             continue  # a number or an end: graded through the findings
         band = res.bands.get(joint, jr.band)  # as resolved for this part: a drop-down door's lone "open" is fully open
         bands.append((jr, joint, band_missed(jr.phrase or band, joint, band, abs(closed_out[joint].fraction(state[joint])))))
-    missed_bands, not_graded = object_states(bands, ranks)
-    graded += len(bands) - len(not_graded)
-    return request_met_metric(unmet + missed_bands, request=spec.text, graded=graded, not_graded=not_graded,
-                              source="refine (its resolution of the request)")
-
-
-def object_states(bands: list[tuple[JointStateRequest, str, dict[str, Any] | None]],
-                  ranks: dict[str, int | None] | None = None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
-    """(unmet items, not graded) of the band states asked: ``bands`` (the phrase, a joint it set, its
-    :func:`band_missed` item or None). A phrase naming a part must put each of its joints in the band; one naming
-    no part ("a door, slightly open") asks it of the object's main part, met when one joint of the part it sets that
-    ranks first among the category's task-relevant parts (``ranks``: joint -> its part's rank, 0 first,
-    :func:`~asset2sim.tasks.interpret.part_priors.task_relevant_rank`; None or absent: no rank) is in the band: "a
-    suitcase, mostly open" is its lid's state, not its carrying handle's. A joint it also set that the state does not
-    suit (a latch that stays shut, a handle) is reported, not graded."""
     ranks = ranks or {}
     first: dict[int, int] = {}  # phrase -> the best rank among the joints it set
     for jr, joint, _ in bands:
@@ -184,7 +175,7 @@ def object_states(bands: list[tuple[JointStateRequest, str, dict[str, Any] | Non
     def main(jr: JointStateRequest, joint: str) -> bool:
         return id(jr) not in first or ranks.get(joint) == first[id(jr)]
 
-    unmet, not_graded = [], []
+    not_graded = []
     met = {id(jr) for jr, joint, item in bands if item is None and main(jr, joint)}
     for jr, joint, item in bands:
         if item is None:
@@ -194,7 +185,9 @@ def object_states(bands: list[tuple[JointStateRequest, str, dict[str, Any] | Non
             not_graded.append({"phrase": jr.phrase, "joint": joint, "reason": f"the phrase names no part and {why} ({item['text']})"})
             continue
         unmet.append(item)
-    return unmet, not_graded
+    graded += len(bands) - len(not_graded)
+    return request_met_metric(unmet, request=spec.text, graded=graded, not_graded=not_graded,
+                              source="refine (its resolution of the request)")
 
 
 def failing_joints(metrics: list[MetricResult]) -> tuple[dict[str, str], dict[str, str]]:
