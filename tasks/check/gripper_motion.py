@@ -141,7 +141,16 @@ class GripperMove:
                 q_des = q_target
             o, a = joint_frame_axis(session, joint, grasp.link)
             p = grasp.grasp_point_world()
-            target, push = _gripper_target(o, a, p, self.side_sign * (q_des - q), prismatic, cfg.vertical_share)
+            # the gripper led with p moved by dq about or along the axis a through o, or, where the motion is near
+            # vertical (|t_z| >= vertical_share |t|), pressing or lifting vertically as far as moves the part as far
+            dq = self.side_sign * (q_des - q)
+            target = p + a * dq if prismatic else o + axis_angle_matrix(a, dq) @ (p - o)
+            t_dir = a if prismatic else np.cross(a, p - o)
+            nt = float(np.linalg.norm(t_dir))
+            push = nt > 0 and abs(float(t_dir[2])) >= cfg.vertical_share * nt
+            if push:  # (progress along the tangent) / t_z
+                t_hat = t_dir / nt
+                target = p + _UP * (float((target - p) @ t_hat) / float(t_hat[2]))
             F = grasp.step_towards(target, dt, direction=_UP if push else None)
             pushed_steps += int(push)
             if prismatic:  # the peaks of the gripper's force F (3,) N at the grasp point p
@@ -184,25 +193,6 @@ class GripperMove:
         m.f_end = self.frac(run_stroke(session, joint, int(round(cfg.hold_time / dt)), record=wait).q)
         m.held_ok = self.reached(m.f_end) if np.isfinite(m.f_end) else False
         return m
-
-
-def _gripper_target(o: np.ndarray, a: np.ndarray, p: np.ndarray, dq: float, prismatic: bool,
-                    vertical_share: float) -> tuple[np.ndarray, bool]:
-    """(where the gripper is led, world (3,) m; whether it presses or lifts vertically):
-    ``p`` moved by ``dq`` about or along the axis ``a`` through ``o``, or, where the
-    motion is near vertical, the vertical stretch that moves the part as far."""
-    if prismatic:
-        target = p + a * dq
-    else:
-        target = o + axis_angle_matrix(a, dq) @ (p - o)
-    t_dir = a if prismatic else np.cross(a, p - o)
-    nt = float(np.linalg.norm(t_dir))
-    push = nt > 0 and abs(float(t_dir[2])) >= vertical_share * nt
-    if push:
-        # (progress along the tangent) / t_z
-        t_hat = t_dir / nt
-        target = p + _UP * (float((target - p) @ t_hat) / float(t_hat[2]))
-    return target, push
 
 
 def _lever(o: np.ndarray, a: np.ndarray, p: np.ndarray) -> float:

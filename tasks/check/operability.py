@@ -173,29 +173,6 @@ def gravity_force(session: SimSession, model: UrdfModel, joint: str, links: list
     return q
 
 
-def _needed(session: SimSession, model: UrdfModel, joint: str, links: list[str], closed: tuple[float, float, float],
-            sign: float, fractions: np.ndarray, speed: float) -> tuple[float, float]:
-    """(peak effort N m or N, the opening fraction where it peaks) a stroke in direction ``sign`` (+1 opening)
-    needs over ``fractions`` from the session's initial state, its springs acting: f + c w + max(0, -s Q), f and c
-    the joint's friction and damping, w the joint ``speed`` of the hand (rad/s or m/s), Q the generalised force
-    (N m or N; > 0 pushes q up) of gravity on ``links`` (:func:`gravity_force`) plus the joint's spring
-    (:meth:`~asset2sim.engines.base.Spring.force`)."""
-    qc, d, rng = closed
-    state, spring = session.options.initial_state, session.options.springs.get(joint)
-    jm = model.joint(joint)
-    best, at = 0.0, float(fractions[0])
-    for fr in fractions:
-        session.set_joint_positions({**state, joint: qc + d * fr * rng})
-        load = gravity_force(session, model, joint, links)
-        if spring is not None:
-            load += spring.force(session.joint_state(joint)[0])
-        need = jm.friction + jm.damping * speed + max(0.0, -sign * d * load)
-        if need > best:
-            best, at = need, float(fr)
-    session.set_joint_positions(dict(state))
-    return float(best), at
-
-
 def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tuple[float, float, float],
                  blocker: Blocker, *, category: str | None, label: str | None,
                  config: OperabilityConfig | None = None) -> PartOperability:
@@ -234,13 +211,26 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
                            force_range_n=r_.force_n, torque_range_nm=r_.torque_nm, range_of=where,
                            sources=[table.sources[s] for s in r_.sources], estimate=r_.estimate)
     fractions = np.linspace(0.0, 1.0, max(2, cfg.samples))
+    spring, jm = session.options.springs.get(joint), model.joint(joint)
     dt = session.options.conventions.timestep
     rate = effort * dt / cfg.ramp_time  # the most the hand's force changes in one step, N m or N
     saved = session.save_state()
     reached_open = 0.0  # where the opening stroke left the part: the closing stroke starts there
     try:
         for action, sign, target in (("open", 1.0, cfg.reach_fraction), ("close", -1.0, 1.0 - cfg.reach_fraction)):
-            need, at = _needed(session, model, joint, links, closed, sign, fractions, speed)
+            # the peak effort the stroke needs over the fractions from the initial state, its springs acting: f + c w +
+            # max(0, -s Q), f and c the joint's friction and damping, w the hand's joint speed, Q the generalised force
+            # of gravity on the links (gravity_force) plus the joint's spring; at: the opening fraction where it peaks
+            need, at = 0.0, float(fractions[0])
+            for fr in fractions:
+                session.set_joint_positions({**state, joint: qc + d * fr * rng})
+                load = gravity_force(session, model, joint, links)
+                if spring is not None:
+                    load += spring.force(session.joint_state(joint)[0])
+                e = jm.friction + jm.damping * speed + max(0.0, -sign * d * load)
+                if e > need:
+                    need, at = float(e), float(fr)
+            session.set_joint_positions(dict(state))
             session.set_joint_positions({**state, joint: qc if action == "open" else qc + d * reached_open * rng})
             # the hand's force eases off near its speed and changes at most at the rate that raises it from 0 to its
             # limit over ramp_time (a hand's force builds and relaxes over time): on a light part a force that follows
