@@ -124,10 +124,8 @@ def _grasp_points(session, model: UrdfModel | None, link: str) -> np.ndarray:
     v = np.asarray(session.link_collision_vertices(link), float).reshape(-1, 3)
     if len(v):
         return v
-    lo, hi = session.link_aabb(link)
     o, R = session.link_frame(link)
-    corners = box_corners(lo, hi)
-    return (corners - np.asarray(o, float)) @ np.asarray(R, float)
+    return (box_corners(*session.link_aabb(link)) - np.asarray(o, float)) @ np.asarray(R, float)
 
 
 def joint_frame_axis(session, joint: str, link: str) -> tuple[np.ndarray, np.ndarray]:
@@ -191,6 +189,7 @@ def contact_point_rule(session, joint: str, model: UrdfModel | None = None, *, o
                     return ln, 0.5 * (h.min(axis=0) + h.max(axis=0)), "handle"
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
     sgn = 1.0 if opening_direction >= 0 else -1.0
+    prismatic = session.joint_types[joint] == "prismatic"
     best: tuple[float, str, np.ndarray] | None = None  # (reach, link, local points)
     for ln in links:
         v = _grasp_points(session, model, ln)
@@ -198,10 +197,7 @@ def contact_point_rule(session, joint: str, model: UrdfModel | None = None, *, o
             continue
         lo, R = session.link_frame(ln)
         w = v @ np.asarray(R, float).T + np.asarray(lo, float)
-        if session.joint_types[joint] == "prismatic":
-            reach = float(np.max((w - o) @ a * sgn))
-        else:
-            reach = float(np.max(off_axis(w, o, a)))
+        reach = float(np.max((w - o) @ a * sgn if prismatic else off_axis(w, o, a)))
         if best is None or reach > best[0]:
             best = (reach, ln, v)
     if best is None:
@@ -210,7 +206,7 @@ def contact_point_rule(session, joint: str, model: UrdfModel | None = None, *, o
     p, R = session.link_frame(link)
     a_l = np.asarray(R, float).T @ a  # the axis in the grasped link's frame
     o_l = np.asarray(R, float).T @ (o - np.asarray(p, float))
-    if session.joint_types[joint] == "prismatic":
+    if prismatic:
         c = 0.5 * (v.min(axis=0) + v.max(axis=0))
         c = c + a_l * sgn * (float((v @ a_l * sgn).max()) - sgn * float(c @ a_l))
         return link, c, "front"

@@ -51,8 +51,7 @@ def penetration_failures(metrics: list[Any]) -> list[PenetrationFailure]:
     for m in _failing(metrics, PENETRATION_METRICS):
         d = m.details
         if m.name == "penetration":
-            pairs = sorted(d.get("pairs") or [], key=lambda p: -float(p.get("max_depth_mm") or 0.0))
-            top = pairs[0] if pairs else None
+            top = min(d.get("pairs") or [], key=lambda p: -float(p.get("max_depth_mm") or 0.0), default=None)  # the deepest
             out.append(PenetrationFailure(m, "self-contact", top and top["link_a"], top and top["link_b"],
                                           float(top["max_depth_mm"]) if top else float(m.value or 0.0)))
             continue

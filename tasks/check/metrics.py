@@ -153,13 +153,6 @@ def settle_tilt(trace: RestTrace, engine: str = "pybullet") -> MetricResult:
                   details={"tilt_rad": tilt, "displacement_m": float(np.linalg.norm(trace.p0 - trace.initial_root_pos))})
 
 
-def count_sign_changes(q: np.ndarray) -> int:
-    """Sign changes of the step-to-step motion of q (N,), exact zeros skipped."""
-    s = np.sign(np.diff(np.asarray(q, float)))
-    s = s[s != 0]
-    return int(np.count_nonzero(s[1:] != s[:-1]))
-
-
 def oscillation(trace: RestTrace, conventions: SimConventions | None = None, engine: str = "pybullet") -> MetricResult:
     """Joint oscillation during T_test; value = number of failing joints."""
     conv = conventions or SimConventions()
@@ -169,7 +162,9 @@ def oscillation(trace: RestTrace, conventions: SimConventions | None = None, eng
         if not np.all(np.isfinite(q)):
             per_joint[name] = {"sign_changes": None, "amplitude": None, "failed": True, "diverged": True}
             continue
-        changes = count_sign_changes(q)
+        s = np.sign(np.diff(q))  # the sign changes of the step-to-step motion, exact zeros skipped
+        s = s[s != 0]
+        changes = int(np.count_nonzero(s[1:] != s[:-1]))
         amp = float(np.max(q) - np.min(q)) if len(q) else 0.0
         prismatic = trace.joint_types.get(name) == "prismatic"
         limit = conv.oscillation_amp_prismatic if prismatic else conv.oscillation_amp_revolute

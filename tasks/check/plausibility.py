@@ -102,17 +102,6 @@ def _judge_link(ctx: EstimationContext, dl: DeclaredLink, label: str | None, out
     return declared, patched
 
 
-def _lever(ctx: EstimationContext, j: DeclaredJoint) -> float:
-    """Largest distance (m) of the child link's geometry box corners from the joint axis (through the child
-    link frame's origin), the lever a hand pushing the part's far edge has."""
-    geom = ctx.geometry.get(j.child)
-    if geom is None:
-        return 0.0
-    axis = np.asarray(ctx.asset.joint(j.name).axis, float)
-    axis = axis / max(np.linalg.norm(axis), 1e-12)
-    return float(off_axis(box_corners(np.asarray(geom.bbox_min, float), np.asarray(geom.bbox_max, float)), 0.0, axis).max())
-
-
 def _operable(ctx: EstimationContext, j: DeclaredJoint, label: str | None) -> float | None:
     """The highest force (N, prismatic) or torque (N*m, revolute) a hand operates the part with."""
     rng, _ = operating_forces.operating_range(ctx.category, label)
@@ -120,8 +109,15 @@ def _operable(ctx: EstimationContext, j: DeclaredJoint, label: str | None) -> fl
         return rng.force_n[1] if rng.force_n else None
     if rng.torque_nm:
         return rng.torque_nm[1]
-    lever = _lever(ctx, j)
-    return rng.force_n[1] * lever if rng.force_n and lever > 0 else None
+    geom = ctx.geometry.get(j.child)
+    if not rng.force_n or geom is None:
+        return None
+    # the lever a hand pushing the part's far edge has: the largest distance (m) of the child link's geometry box
+    # corners from the joint axis (through the child link frame's origin)
+    axis = np.asarray(ctx.asset.joint(j.name).axis, float)
+    axis = axis / max(np.linalg.norm(axis), 1e-12)
+    lever = float(off_axis(box_corners(np.asarray(geom.bbox_min, float), np.asarray(geom.bbox_max, float)), 0.0, axis).max())
+    return rng.force_n[1] * lever if lever > 0 else None
 
 
 def _judge_joints(ctx: EstimationContext, kin: SimSession, dp: DeclaredPhysics, labels: dict[str, str | None],

@@ -85,10 +85,33 @@ class Pusher:
 
 
 def pusher_for(session, joint: str, cfg: ProbeConfig, weight: float, model: UrdfModel | None = None) -> Pusher:
-    """The hand that probes ``joint`` of a body weighing ``weight`` N (:class:`Pusher`)."""
+    """The hand that probes ``joint`` of a body weighing ``weight`` N (:class:`Pusher`), against a lower bound m_eff (kg,
+    >= 1e-4) of the effective mass of ``joint``'s part at the push point: revolute, sum (I_min + m d^2) / r^2 over
+    the links rigid with the child (I_min the smallest principal moment, d the COM's distance from the axis, r the
+    lever: parallel-axis theorem); prismatic, their mass.
+
+    Raises:
+        KeyError: unknown joint.
+    """
     dt = session.options.conventions.timestep
     f_max = max(cfg.min_force, cfg.force_factor * weight)
-    m_eff = effective_mass(session, joint, model)
+    child = session.joint_child[joint]
+    rigid = [ln for ln in (rigid_group(model, child) if model is not None else {child}) if ln in session.link_names]
+    held = session.held_physics().links
+    lever = push_geometry(session, joint).lever
+    if lever is None:
+        m_eff = max(sum(held[ln].mass for ln in rigid if ln in held), 1e-4)
+    else:
+        o, a = joint_frame_axis(session, joint, child)
+        inertia = 0.0
+        for ln in rigid:
+            h = held.get(ln)
+            if h is None or not h.mass > 0:
+                continue
+            p, Rl = session.link_frame(ln)
+            c = np.asarray(p, float) + np.asarray(Rl, float) @ np.asarray(h.com, float) - o
+            inertia += float(np.min(h.principal)) + h.mass * max(float(c @ c - (c @ a) ** 2), 0.0)
+        m_eff = max(inertia / lever**2, 1e-4)
     stiffness = min(f_max / (cfg.push_speed * cfg.ramp_time), m_eff * (PUSHER_OMEGA_DT / dt) ** 2)
     damping = 2.0 * float(np.sqrt(stiffness * m_eff))
     ramp = max(cfg.ramp_time, cfg.min_force / (stiffness * cfg.push_speed))
@@ -130,34 +153,6 @@ def push_budget(cfg: ProbeConfig, ramp: float, travel: float) -> tuple[float, fl
     (never below ``push_time``)."""
     asked = max(cfg.push_time, ramp + TRAVEL_TIME_MARGIN * travel / cfg.push_speed)
     return min(asked, max(cfg.max_push_time, cfg.push_time)), asked
-
-
-def effective_mass(session, joint: str, model: UrdfModel | None = None) -> float:
-    """Lower bound (kg, >= 1e-4) of the effective mass of ``joint``'s part at the
-    push point: revolute, sum (I_min + m d^2) / r^2 over the links rigid with
-    the child (I_min the smallest principal moment, d the COM's distance from
-    the axis, r the lever: parallel-axis theorem); prismatic, their mass.
-
-    Raises:
-        KeyError: unknown joint.
-    """
-    child = session.joint_child[joint]
-    rigid = [ln for ln in (rigid_group(model, child) if model is not None else {child}) if ln in session.link_names]
-    held = session.held_physics().links
-    lever = push_geometry(session, joint).lever
-    if lever is None:
-        return max(sum(held[ln].mass for ln in rigid if ln in held), 1e-4)
-    o, a = joint_frame_axis(session, joint, child)
-    inertia = 0.0
-    for ln in rigid:
-        h = held.get(ln)
-        if h is None or not h.mass > 0:
-            continue
-        p, Rl = session.link_frame(ln)
-        c = np.asarray(p, float) + np.asarray(Rl, float) @ np.asarray(h.com, float) - o
-        d2 = float(c @ c - (c @ a) ** 2)
-        inertia += float(np.min(h.principal)) + h.mass * max(d2, 0.0)
-    return max(inertia / lever**2, 1e-4)
 
 
 @contextmanager

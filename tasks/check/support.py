@@ -56,8 +56,7 @@ def link_world_vertices(session, link: str) -> np.ndarray:
     if len(v):
         p, R = session.link_frame(link)
         return np.asarray(v, float) @ np.asarray(R, float).T + np.asarray(p, float)
-    lo, hi = session.link_aabb(link)
-    return box_corners(lo, hi)
+    return box_corners(*session.link_aabb(link))
 
 
 def rolling_joints(session, moved: dict[str, list[str]]) -> list[str]:
