@@ -289,13 +289,12 @@ def run_operability(engine: str, obj: SimObject, closed: dict[str, tuple[float, 
         EngineUnavailable: the engine is not installed; whatever loading ``obj.source`` raises.
     """
     cfg = config or OperabilityConfig()
-    source = obj.source
-    model = source.model(mode="lenient")
+    model = obj.source.model(mode="lenient")
     labels = dict(labels or {})
     run = OperabilityRun(engine)
     with quiet_stdout():
         session = obj.open(engine, fixed_base=True, gravity=True, ground=False)
-    blocker = Blocker(session, source, obj.conventions)
+    blocker = Blocker(session, obj.source, obj.conventions)
     try:
         for name, c in closed.items():
             if name not in session.joint_types or session.joint_types[name] not in RANGED:

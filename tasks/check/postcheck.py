@@ -6,6 +6,7 @@ tuning's (:mod:`asset2sim.tasks.tune.escalation`).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -204,10 +205,10 @@ def run_post_check(obj: SimObject, config: RefineConfig, closed: dict[str, tuple
     for m in base:
         m.details["root"] = metrics.root_label(obj.fixed_base)
     recorded = recorded if recorded is not None else RecordedRuns()
+    check = functools.partial(PostCheck, trace=trace, sag=drift, sagging=sagging, recording=recording, recorded=recorded)
 
     def partial_escalated(rr: MetricResult) -> bool:
-        partial = PostCheck(metrics=[*base, rr], trace=trace, sag=drift, sagging=sagging, engine_results=engine_results,
-                            recording=recording, recorded=recorded)
+        partial = check(metrics=[*base, rr], engine_results=engine_results)
         return not partial.passed and escalated(partial)
 
     def sweep_needed(rr: MetricResult) -> str | None:
@@ -224,8 +225,7 @@ def run_post_check(obj: SimObject, config: RefineConfig, closed: dict[str, tuple
         free_joints=free_joints)
     if not sweep_not_run(extra):
         run_parity()
-    return PostCheck(metrics=[*base, *extra], trace=trace, sag=drift, sagging=sagging, engine_results=engine_results,
-                     recording=recording, recorded=recorded, reference_holding=holding, runs=runs)
+    return check(metrics=[*base, *extra], engine_results=engine_results, reference_holding=holding, runs=runs)
 
 
 def check_object(ctx: EstimationContext, obj: SimObject, config: RefineConfig,

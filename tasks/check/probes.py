@@ -187,11 +187,8 @@ def reached_fraction(action: str, target_fraction: float) -> float:
     ``target_fraction`` counts its target reached: at most it (close), at least it (open)."""
     if action == "close":
         return CLOSE_REACHED
-    if target_fraction == OPEN_TARGET:
-        return OPEN_REACHED
-    if target_fraction == OPEN_FAR_TARGET:
-        return OPEN_FAR_REACHED
-    return target_fraction * OPEN_REACHED / OPEN_TARGET  # a target the floor set
+    reached = {OPEN_TARGET: OPEN_REACHED, OPEN_FAR_TARGET: OPEN_FAR_REACHED}
+    return reached.get(target_fraction, target_fraction * OPEN_REACHED / OPEN_TARGET)  # else a target the floor set
 
 
 @dataclass

@@ -126,7 +126,7 @@ def penetration_measures(metrics: list[Any]) -> list[str]:
             out.append(f"self-contact {m.value:.3f} mm ({m.engine}) {verdict}")
             continue
         pairs = m.details.get("pairs") or {}
-        worst = max(pairs, key=pairs.get) if pairs else None
+        worst = max(pairs, key=pairs.get, default=None)
         beyond = m.details.get("beyond_modelled_mm")
         where = ", ".join([m.engine] + ([worst] if worst else []))
         out.append(f"parent-child {m.value:.3f} mm ({where}" + (f"; {beyond:.3f} mm beyond its modelled pose" if pairs and beyond is not None
