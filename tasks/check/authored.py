@@ -193,10 +193,10 @@ def held_by_engines(out_dir: Path, engines: list[str]) -> list[AuthoredCheck]:
             return session.held_physics()
 
     results = [compared(engine, "urdf", lambda engine=engine: loaded(engine)) for engine in dict.fromkeys(engines)]
-    for engine, fmt, rel in EXPORTED_FILES:
-        if engine in engines and not (out_dir / rel).is_file():
+    for engine, fmt, rel in (e for e in EXPORTED_FILES if e[0] in engines):
+        if not (out_dir / rel).is_file():
             results.append(AuthoredCheck(engine, fmt, "skipped", reason=f"{rel} not exported"))
-        elif engine in engines:
+        else:
             results.append(compared(engine, fmt, lambda engine=engine, fmt=fmt, rel=rel: read_held_physics(
                 engine, fmt, out_dir / rel, list(authored.links), list(authored.joints))))
     return results

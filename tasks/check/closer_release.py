@@ -38,9 +38,7 @@ def shuts_on_its_own(engine: str, obj: SimObject, closed: dict[str, tuple[float,
     """
     steps = max(1, round(0.5 / obj.conventions.timestep))
     rows: dict[str, dict[str, Any]] = {}
-    for name in joints:
-        if name not in closed:
-            continue
+    for name in (n for n in joints if n in closed):
         q_closed, direction, rng = closed[name]
         with obj.open(engine, fixed_base=True, ground=False) as session:
             span = max(float(rng), 1e-12)

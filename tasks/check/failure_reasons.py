@@ -56,7 +56,7 @@ def penetration_failures(metrics: list[Any]) -> list[PenetrationFailure]:
                                           float(top["max_depth_mm"]) if top else float(m.value or 0.0)))
             continue
         pairs, modelled = d.get("pairs") or {}, d.get("modelled") or {}
-        worst = max(pairs, key=lambda k: pairs[k] - modelled.get(k, 0.0)) if pairs else None
+        worst = max(pairs, key=lambda k: pairs[k] - modelled.get(k, 0.0), default=None)
         parent, _, child = worst.partition("/") if worst else (None, "", None)
         out.append(PenetrationFailure(m, "parent-child", parent, child, float(pairs[worst]) if worst else float(m.value or 0.0)))
     return out
@@ -227,11 +227,8 @@ _DONE: dict[str, str] = _WORDS["done"]
 def _failures_why(metrics: list[Any], names: tuple[str, ...], advice: str, what: str) -> list[str]:
     """One sentence per failing metric of ``names`` from its ``details["failures"]`` (each names its joint and the
     measured value), with its threshold and ``advice``; ``what`` says what was done."""
-    out = []
-    for m in _failing(metrics, names):
-        fails = m.details.get("failures") or [f"{_num(m.value)} {m.unit}"]
-        out.append(f"{what} ({m.engine}): {'; '.join(fails)} (passes when {m.threshold}). {advice}")
-    return out
+    return [f"{what} ({m.engine}): {'; '.join(m.details.get('failures') or [f'{_num(m.value)} {m.unit}'])} (passes when "
+            f"{m.threshold}). {advice}" for m in _failing(metrics, names)]
 
 
 #: Reasons of an unmet phrase that names a part the object lacks (``as_asked.not_applied``'s, refine's and the

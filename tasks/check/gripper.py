@@ -60,10 +60,7 @@ class BoundedGrasp:
             raise ValueError(f"link {link!r}: grasp point must be 3 finite numbers (m), got {point_link!r}")
         if link not in session.link_names:
             raise KeyError(f"link {link!r} is not a link of the session")
-        self.session = session
-        self.link = link
-        self.point_link = p
-        self.limits = limits
+        self.session, self.link, self.point_link, self.limits = session, link, p, limits
         dt = float(session.options.conventions.timestep)
         m_eff = max(float(session.link_masses().get(link, 0.0)) * EFFECTIVE_MASS_SHARE, 1e-4)
         #: spring constant used, N/m (the limits' value, capped for stable integration)

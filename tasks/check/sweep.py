@@ -294,11 +294,18 @@ def sweep_together(session: SimSession, joints: list[str], closed: dict[str, tup
             for r in list(active):
                 q, qd = session.joint_state(r.joint)
                 while _stroke_ended(session, r, q, qd, cfg):
-                    if not _next_stroke(r, dt):
-                        active.remove(r)
-                        if hold:
-                            session.drive_joint(r.joint, 0.0, cfg.hold_force)
-                        break
+                    # the ended stroke's readings into the trace; the closing stroke begun after the opening one, or over
+                    reach = r.strokes[-1]
+                    _extend_trace(r.trace, reach.fractions, r.sign < 0, dt)
+                    if len(r.strokes) == 1:
+                        r.strokes.append(Reach(0) if reach.diverged else Reach(reach.limit))
+                        r.k = 0
+                        if not reach.diverged:
+                            continue
+                    active.remove(r)
+                    if hold:
+                        session.drive_joint(r.joint, 0.0, cfg.hold_force)
+                    break
             if not active:
                 break
             session.step(1)
@@ -325,18 +332,6 @@ def _stroke_ended(session: SimSession, r: _Swept, q: float, qd: float, cfg: Swee
     goal = qc + d * rng if r.sign > 0 else qc
     session.drive_joint(r.joint, float(np.clip(cfg.position_gain * (goal - q), -r.v_max, r.v_max)), r.effort)
     return False
-
-
-def _next_stroke(r: _Swept, dt: float) -> bool:
-    """The ended stroke's readings into ``r``'s trace; the closing stroke begun after the opening one (True), or the
-    sweep over (False)."""
-    reach = r.strokes[-1]
-    _extend_trace(r.trace, reach.fractions, r.sign < 0, dt)
-    if len(r.strokes) == 2:
-        return False
-    r.strokes.append(Reach(0) if reach.diverged else Reach(reach.limit))
-    r.k = 0
-    return not reach.diverged
 
 
 @dataclass
