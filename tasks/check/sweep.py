@@ -293,9 +293,16 @@ def sweep_together(session: SimSession, joints: list[str], closed: dict[str, tup
         while active:
             for r in list(active):
                 q, qd = session.joint_state(r.joint)
-                while _stroke_ended(session, r, q, qd, cfg):
-                    # the ended stroke's readings into the trace; the closing stroke begun after the opening one, or over
-                    reach = r.strokes[-1]
+                while True:  # reach_stroke's reading of the stroke under way, its drive set while it goes on
+                    reach, (qc, d, rng) = r.strokes[-1], r.closed
+                    target = cfg.reach_fraction if r.sign > 0 else 1.0 - cfg.reach_fraction
+                    if r.k >= reach.limit:  # out of time: the last reading may still be at the target
+                        reach.last(r.closed, target, r.sign, r.k, q)
+                    elif not reach.read(r.closed, target, r.sign, r.max_speed, r.k, q, qd):  # neither reached nor diverged
+                        goal = qc + d * rng if r.sign > 0 else qc
+                        session.drive_joint(r.joint, float(np.clip(cfg.position_gain * (goal - q), -r.v_max, r.v_max)), r.effort)
+                        break
+                    # the stroke ended: its readings into the trace; the closing stroke begun after the opening one, or over
                     _extend_trace(r.trace, reach.fractions, r.sign < 0, dt)
                     if len(r.strokes) == 1:
                         r.strokes.append(Reach(0) if reach.diverged else Reach(reach.limit))
@@ -317,21 +324,6 @@ def sweep_together(session: SimSession, joints: list[str], closed: dict[str, tup
         for o in session.joint_types:
             session.release_joint(o)
     return {r.joint: _joint_sweep(r, session.joint_types[r.joint], dt, cfg) for r in runs}
-
-
-def _stroke_ended(session: SimSession, r: _Swept, q: float, qd: float, cfg: SweepConfig) -> bool:
-    """:func:`reach_stroke`'s reading of ``r``'s stroke under way at (q, qd), its drive set when it goes on; True when
-    the stroke ended (reached, diverged, or out of time)."""
-    reach, (qc, d, rng) = r.strokes[-1], r.closed
-    target = cfg.reach_fraction if r.sign > 0 else 1.0 - cfg.reach_fraction
-    if r.k >= reach.limit:  # out of time: the last reading may still be at the target
-        reach.last(r.closed, target, r.sign, r.k, q)
-        return True
-    if reach.read(r.closed, target, r.sign, r.max_speed, r.k, q, qd):
-        return True
-    goal = qc + d * rng if r.sign > 0 else qc
-    session.drive_joint(r.joint, float(np.clip(cfg.position_gain * (goal - q), -r.v_max, r.v_max)), r.effort)
-    return False
 
 
 @dataclass
