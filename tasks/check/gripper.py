@@ -7,7 +7,7 @@ ch. I; c dt / m < 2 for explicit Euler), ``m_eff`` a third of the grasped link's
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -38,11 +38,10 @@ class GripperLimits:
     grasp_damping_n_s_m: float = 40.0
 
     def __post_init__(self) -> None:
-        for name, floor in (("max_force_n", ">"), ("max_speed_m_s", ">"), ("grasp_stiffness_n_m", ">"),
-                            ("grasp_damping_n_s_m", ">=")):
-            v = getattr(self, name)
+        for f in fields(self):  # every limit positive, the damping possibly 0
+            v, floor = getattr(self, f.name), ">=" if f.name == "grasp_damping_n_s_m" else ">"
             if not (np.isfinite(v) and (v >= 0 if floor == ">=" else v > 0)):
-                raise ValueError(f"GripperLimits.{name} must be {floor} 0, got {v!r}")
+                raise ValueError(f"GripperLimits.{f.name} must be {floor} 0, got {v!r}")
 
 
 class BoundedGrasp:

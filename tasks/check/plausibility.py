@@ -47,9 +47,8 @@ class Judgement:
 def joint_unit(jtype: str, what: str) -> str:
     """The unit of a joint's ``what`` (``damping``, ``friction``, ``stiffness``, ``position``) for a joint of type
     ``jtype`` (prismatic: linear; else rotational)."""
-    prismatic = jtype == "prismatic"
-    return {"damping": "N*s/m" if prismatic else "N*m*s/rad", "friction": "N" if prismatic else "N*m",
-            "stiffness": "N/m" if prismatic else "N*m/rad", "position": "m" if prismatic else "rad"}[what]
+    units = {"damping": ("N*m*s/rad", "N*s/m"), "friction": ("N*m", "N"), "stiffness": ("N*m/rad", "N/m"), "position": ("rad", "m")}
+    return units[what][jtype == "prismatic"]
 
 
 def _link_physics(mass: float, inertia: np.ndarray, com: np.ndarray, source: str, material: str = "") -> LinkPhysics:

@@ -186,16 +186,13 @@ def run_post_check(obj: SimObject, config: RefineConfig, closed: dict[str, tuple
     others = [e for e in dict.fromkeys(config.engines) if e != engine]
     engine_results: dict[str, list[MetricResult]] = {}
     holding: dict = {}
-    parity_done = not others
 
-    def run_parity() -> None:
-        nonlocal engine_results, parity_done
-        if not parity_done:
+    def run_parity() -> None:  # once, with other engines
+        if others and not engine_results:
             options = obj.options()
-            engine_results = {e: parity.session_metrics(source, e, options) for e in others}
+            engine_results.update({e: parity.session_metrics(source, e, options) for e in others})
             holding.update(joints_held={n: s.held for n, s in settling.items()},  # the reference engine's parity row
                            breakaway=parity.engine_breakaway(source, engine, options))
-            parity_done = True
 
     nested = parent_child.parent_child_penetration(source, obj.state, engine, conv)  # the pairs the SPEC's Phi skips
     ground = metrics.ground_penetration(recording.ground_series, conv.timestep, engine=engine)

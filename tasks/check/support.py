@@ -16,12 +16,11 @@ class SupportWatch:
 
     def __init__(self, session, link: str) -> None:
         self.session, self.link = session, link
-        p0, R0 = session.link_frame(link)
-        self.p0, self.R0 = np.asarray(p0, float), np.asarray(R0, float)
+        p0, R0 = (np.asarray(x, float) for x in session.link_frame(link))
         z_low = min(float(session.link_aabb(ln)[0][2]) for ln in session.link_names)
-        self.foot0 = np.array([self.p0[0], self.p0[1], z_low])
-        self.foot_local = self.R0.T @ (self.foot0 - self.p0)
-        self.up_local = self.R0.T @ np.array([0.0, 0.0, 1.0])
+        self.foot0 = np.array([p0[0], p0[1], z_low])
+        self.foot_local = R0.T @ (self.foot0 - p0)
+        self.up_local = R0.T @ np.array([0.0, 0.0, 1.0])
         self.slide = self.tilt = 0.0
 
     def current(self) -> tuple[np.ndarray, float]:
