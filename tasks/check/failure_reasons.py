@@ -220,15 +220,8 @@ def _rest_why(metrics: list[Any]) -> list[str]:
     return out
 
 
-#: What the check of a tier told by its metrics' ``details["failures"]`` did (:func:`_failures_why`).
+#: What the check of a tier told by its metrics' ``details["failures"]`` did (:func:`why_it_failed`).
 _DONE: dict[str, str] = _WORDS["done"]
-
-
-def _failures_why(metrics: list[Any], names: tuple[str, ...], advice: str, what: str) -> list[str]:
-    """One sentence per failing metric of ``names`` from its ``details["failures"]`` (each names its joint and the
-    measured value), with its threshold and ``advice``; ``what`` says what was done."""
-    return [f"{what} ({m.engine}): {'; '.join(m.details.get('failures') or [f'{_num(m.value)} {m.unit}'])} (passes when "
-            f"{m.threshold}). {advice}" for m in _failing(metrics, names)]
 
 
 #: Reasons of an unmet phrase that names a part the object lacks (``as_asked.not_applied``'s, refine's and the
@@ -308,8 +301,11 @@ def why_it_failed(metrics: list[Any]) -> list[str]:
         if not bad:
             continue
         mode = mode_of(tier, bad)
+        # a tier told by its metrics' details["failures"] (each names its joint and the measured value): what its
+        # check did, one sentence per failing metric
         sentences = (explain[tier](metrics) if tier in explain else
-                     _failures_why(metrics, names, advice(tier, asked), _DONE[tier])) or [
+                     [f"{_DONE[tier]} ({m.engine}): {'; '.join(m.details.get('failures') or [f'{_num(m.value)} {m.unit}'])} "
+                      f"(passes when {m.threshold}). {advice(tier, asked)}" for m in bad]) or [
             f"{', '.join(dict.fromkeys(f'{m.name}@{m.engine}' for m in bad))} failed (passes when {bad[0].threshold}). "
             + advice(_FALLBACK_ADVICE.get(tier, tier), asked)]
         out += [f"{mode} ({tier} tier): {s}" for s in sentences]

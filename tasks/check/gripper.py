@@ -70,17 +70,13 @@ class BoundedGrasp:
         #: world position (3,) m of the gripper point
         self.gripper_point = self._p_prev.copy()
         self._released = False
-        self._peak = 0.0
+        #: largest |F| applied so far, N
+        self.peak_force_n = 0.0
 
     def grasp_point_world(self) -> np.ndarray:
         """The grasp point moved with the link, world (3,) m."""
         o, R = self.session.link_frame(self.link)
         return np.asarray(o, float) + np.asarray(R, float) @ self.point_link
-
-    @property
-    def peak_force_n(self) -> float:
-        """Largest |F| applied so far, N."""
-        return self._peak
 
     def step_towards(self, target_world: np.ndarray, dt: float, direction: np.ndarray | None = None) -> np.ndarray:
         """Move the gripper point towards ``target_world`` (3,) m by at most
@@ -138,7 +134,7 @@ class BoundedGrasp:
         else:
             force = np.zeros(3)
             fn = 0.0
-        self._peak = max(self._peak, fn)
+        self.peak_force_n = max(self.peak_force_n, fn)
         return force
 
     def release(self) -> None:

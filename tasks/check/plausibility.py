@@ -47,7 +47,8 @@ class Judgement:
 def joint_unit(jtype: str, what: str) -> str:
     """The unit of a joint's ``what`` (``damping``, ``friction``, ``stiffness``, ``position``) for a joint of type
     ``jtype`` (prismatic: linear; else rotational)."""
-    units = {"damping": ("N*m*s/rad", "N*s/m"), "friction": ("N*m", "N"), "stiffness": ("N*m/rad", "N/m"), "position": ("rad", "m")}
+    units = {"damping": ("N*m*s/rad", "N*s/m"), "friction": ("N*m", "N"), "stiffness": ("N*m/rad", "N/m"),
+             "position": ("rad", "m")}
     return units[what][jtype == "prismatic"]
 
 
