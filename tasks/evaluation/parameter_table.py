@@ -12,16 +12,17 @@ from asset2sim.tasks.evaluation.html_blocks import fmt, table
 from asset2sim.tasks.evaluation.report_changes import esc, escalated
 
 
-def _param(parameter: str, where: str, value: Any, unit: str, source: str) -> dict[str, Any]:
-    """One row of :func:`parameter_rows`."""
-    return {"parameter": parameter, "where": where, "value": value, "unit": unit, "source": source}
-
-
 def parameter_rows(ev) -> list[dict[str, Any]]:
     """Every physical parameter of the evaluated asset as {parameter, where, value, unit, source}: from ``overlay.json``
     (and ``report.json``) when present, else from the URDF and the engine defaults."""
     ctx = ev._context
-    rows = [_param("scale", "global", ev.scale, "-", ev.scale_source)]
+    rows: list[dict[str, Any]] = []
+
+    def add(parameter: str, where: str, value: Any, unit: str, source: str) -> None:
+        """One row."""
+        rows.append({"parameter": parameter, "where": where, "value": value, "unit": unit, "source": source})
+
+    add("scale", "global", ev.scale, "-", ev.scale_source)
     # step 1: the joint parameters each check round changed
     ov, rep = ctx.overlay, ctx.report
     joints = {j.name: j for j in ctx.model.joints}
@@ -32,16 +33,15 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
     by_estimator = f"estimator {est}" if est else "overlay"
     if ov:
         for ln, lp in (ov.get("links") or {}).items():
-            src = lp.get("source") or by_estimator
-            rows.append(_param("mass", f"link {ln}", lp.get("mass"), "kg", src))
+            src, where = lp.get("source") or by_estimator, f"link {ln}"
+            add("mass", where, lp.get("mass"), "kg", src)
             if lp.get("density") is not None:
-                rows.append(_param("density", f"link {ln}", lp["density"], "kg/m^3", src))
+                add("density", where, lp["density"], "kg/m^3", src)
             inertia = lp.get("inertia") or {}
-            rows.append(_param("inertia (ixx, iyy, izz)", f"link {ln}", ", ".join(fmt(inertia.get(k)) for k in ("ixx", "iyy", "izz")),
-                               "kg*m^2", src))
-            rows.append(_param("center of mass", f"link {ln}", ", ".join(fmt(c) for c in lp.get("com", [])), "m", src))
+            add("inertia (ixx, iyy, izz)", where, ", ".join(fmt(inertia.get(k)) for k in ("ixx", "iyy", "izz")), "kg*m^2", src)
+            add("center of mass", where, ", ".join(fmt(c) for c in lp.get("com", [])), "m", src)
             if lp.get("material"):
-                rows.append(_param("material", f"link {ln}", lp["material"], "-", src))
+                add("material", where, lp["material"], "-", src)
         for jn, jd in (ov.get("joints") or {}).items():
             for k in ("damping", "friction", "stiffness"):
                 src = jd.get("source") or by_estimator
@@ -54,21 +54,20 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
                     fv = getattr(joints[jn], k)
                     if val is not None and abs(fv - val) > 1e-12:
                         val, src = fv, src + " (URDF value differs from overlay; URDF shown)"
-                rows.append(_param(k, f"joint {jn}", val, joint_unit(types.get(jn, "revolute"), k), src))
+                add(k, f"joint {jn}", val, joint_unit(types.get(jn, "revolute"), k), src)
     # step 3: without an overlay, the URDF's values and the engine defaults
     else:
         for ln, li in ctx.model.links.items():
             declared = li.inertial is not None and li.inertial.mass is not None
-            if not declared and not (li.collisions or li.visuals):
-                continue
-            rows.append(_param("mass", f"link {ln}", li.inertial.mass if declared else 1.0, "kg",
-                               "URDF <inertial>" if declared else "engine default (1 kg, inertia diag(1,1,1) kg*m^2)"))
+            if declared or li.collisions or li.visuals:
+                add("mass", f"link {ln}", li.inertial.mass if declared else 1.0, "kg",
+                    "URDF <inertial>" if declared else "engine default (1 kg, inertia diag(1,1,1) kg*m^2)")
         for jd in ctx.model.movable_joints:
             for k in ("damping", "friction"):
                 v = getattr(jd.dynamics, k, None)
-                rows.append(_param(k, f"joint {jd.name}", 0.0 if v is None else v, joint_unit(jd.type, k),
-                                   "URDF <dynamics>" if v is not None else "engine default (0)"))
-            rows.append(_param("stiffness", f"joint {jd.name}", 0.0, joint_unit(jd.type, "stiffness"), "none (URDF has no springs)"))
+                add(k, f"joint {jd.name}", 0.0 if v is None else v, joint_unit(jd.type, k),
+                    "URDF <dynamics>" if v is not None else "engine default (0)")
+            add("stiffness", f"joint {jd.name}", 0.0, joint_unit(jd.type, "stiffness"), "none (URDF has no springs)")
     # step 4: the initial joint positions and the limits
     state_src = ev.initial_state_source
     if rep and rep.get("state"):
@@ -78,12 +77,12 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
     elif ctx.baseline and ctx.baseline.get("initial_state_rule"):
         state_src = f"baseline rule: {ctx.baseline['initial_state_rule']}"
     for jn, q in ev.initial_state.items():
-        rows.append(_param("initial position", f"joint {jn}", q, joint_unit(types.get(jn, "revolute"), "position"), state_src))
+        add("initial position", f"joint {jn}", q, joint_unit(types.get(jn, "revolute"), "position"), state_src)
     for jd in ctx.model.joints:
         if jd.type in ("revolute", "prismatic"):
             clipped = ((ov or {}).get("joints") or {}).get(jd.name, {}).get("limit_source") or ""
-            rows.append(_param("limits", f"joint {jd.name}", f"[{fmt(jd.lower)}, {fmt(jd.upper)}]", joint_unit(jd.type, "position"),
-                               f"refine: {clipped}" if clipped else "the input's URDF <limit>"))
+            add("limits", f"joint {jd.name}", f"[{fmt(jd.lower)}, {fmt(jd.upper)}]", joint_unit(jd.type, "position"),
+                f"refine: {clipped}" if clipped else "the input's URDF <limit>")
     return rows
 
 
