@@ -225,12 +225,11 @@ def operating_budgets(obj: SimObject, overlay: Overlay, closed: dict[str, tuple[
             grasp = _grasp(session, model, name, d, state, free)
             range_of = operating_range(category, labels.get(session.joint_child[name]) if grasp.side == "child" else None)
             paths = _paths(float(d * (state.get(name, qc) - qc) / rng), actions, whole)
-            tight = _tightest(session, model, name, (qc, d, rng), paths, grasp, range_of,
-                              (mu, total) if free and ground else None, springs.get(name))
+            tight = _tightest(session, model, name, (qc, d, rng), paths, grasp, range_of, (mu, total) if free and ground else None,
+                              springs.get(name), free_moving, overlay.joints[name].inertia_axis)
             session.set_joint_positions(dict(state))
-            if tight.best is not None:
-                out[name] = _budget(name, session.joint_types[name], grasp, tight.lever, tight.best, tight.gravity_state,
-                                    free_moving, overlay.joints[name].inertia_axis)
+            if tight is not None:
+                out[name] = tight
     finally:
         session.close()
     return out
@@ -280,24 +279,16 @@ def _paths(f_state: float, actions: tuple[str, ...], whole: bool) -> list[tuple[
     return paths
 
 
-@dataclass(frozen=True, slots=True)
-class _Tightest:
-    """A joint's tightest operating budget over its paths (:func:`_tightest`): ``best`` (smallest budget B,
-    smallest allowed force F N, what bounds F; None without a sample), ``lever`` (m, at the last sample; None
-    for a prismatic joint) and ``gravity_state`` (|Q| at the session's initial state, N m or N)."""
-
-    best: tuple[float, float, str] | None
-    lever: float | None
-    gravity_state: float | None
-
-
 def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[float, float, float],
               paths: list[tuple[str, np.ndarray]], grasp: _Grasp, range_of: tuple[ForceRange, str],
-              ground: tuple[float, float] | None, spring: Spring | None) -> _Tightest:
-    """The tightest budget over ``paths`` ((action, opening fractions) from :func:`_paths`); Q of
-    gravity and of the joint's ``spring``.
+              ground: tuple[float, float] | None, spring: Spring | None, free_moving: bool,
+              inertia: float | None) -> OperatingBudget | None:
+    """The tightest budget over ``paths`` ((action, opening fractions) from :func:`_paths`; None without a sample),
+    Q of gravity and of the joint's ``spring``, and its caps (:func:`operating_budgets`): friction takes
+    :data:`FRICTION_SHARE` of it, damping at the top speed of the task's gripper
+    (:class:`~asset2sim.tasks.check.gripper.GripperLimits`) the rest (the lever and speed at the last sample).
     ``range_of``: the part's operating range and where it comes from; ``ground``: (mu, whole mass kg) where the
-    ground bound applies."""
+    ground bound applies; ``inertia``: the joint's axis inertia (kg m^2 or kg), which bounds its friction."""
     qc, d, rng = closed
     state = session.options.initial_state
     prismatic = session.joint_types[joint] == "prismatic"
@@ -327,7 +318,25 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
                 budget = b
             if force < least:
                 least, least_bound = force, bound
-    return _Tightest(None if budget is None else (budget, least, least_bound), lever, q_state)
+    if budget is None:
+        return None
+    speed = GripperLimits().max_speed_m_s / (lever or 1.0)
+    fcap = FRICTION_SHARE * max(budget, 0.0)
+    dcap = (1.0 - FRICTION_SHARE) * max(budget, 0.0) / speed
+    conflict = ""
+    floor = 0.0 if free_moving else HOLD_MARGIN * (q_state or 0.0)
+    if fcap < floor:  # friction takes what holding the state needs, damping the rest of the budget
+        if floor > max(budget, 0.0):
+            conflict = (f"{joint}: the operating budget {max(budget, 0.0):.3g} {'N' if prismatic else 'N m'} "
+                        f"({least_bound}) is below what holds the requested state ({floor:.3g}): friction kept at the hold floor")
+        fcap = floor
+        dcap = min(dcap, max(budget - floor, 0.0) / speed)
+    if inertia:
+        fcap = min(fcap, max_stable_friction(inertia))
+    return OperatingBudget(joint=joint, joint_type=session.joint_types[joint], link=grasp.link, rule=grasp.rule, lever=lever,
+                           force_n=float(least), bound=least_bound, budget=float(budget), speed=float(speed),
+                           gravity_state=float(q_state or 0.0), friction_cap=float(fcap), damping_cap=float(dcap),
+                           conflict=conflict, hold_floor=float(floor))
 
 
 def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: bool,
@@ -352,30 +361,6 @@ def _ground_force(t: np.ndarray, s_motion: float, mu: float, total: float) -> fl
     if abs(float(t[2])) / nt < VERTICAL_SHARE and horiz - mu * down > 0:
         return mu * total * GRAVITY / (horiz - mu * down)
     return None
-
-
-def _budget(name: str, jtype: str, grasp: _Grasp, lever: float | None, best: tuple[float, float, str],
-            q_state: float | None, free_moving: bool, inertia: float | None) -> OperatingBudget:
-    """The caps of ``name``'s tightest budget ``best`` (:func:`operating_budgets`): friction takes
-    :data:`FRICTION_SHARE` of it, damping at the top speed of the task's gripper
-    (:class:`~asset2sim.tasks.check.gripper.GripperLimits`) the rest."""
-    budget, force, bound = best
-    speed = GripperLimits().max_speed_m_s / (lever or 1.0)
-    fcap = FRICTION_SHARE * max(budget, 0.0)
-    dcap = (1.0 - FRICTION_SHARE) * max(budget, 0.0) / speed
-    conflict = ""
-    floor = 0.0 if free_moving else HOLD_MARGIN * (q_state or 0.0)
-    if fcap < floor:  # friction takes what holding the state needs, damping the rest of the budget
-        if floor > max(budget, 0.0):
-            conflict = (f"{name}: the operating budget {max(budget, 0.0):.3g} {'N' if jtype == 'prismatic' else 'N m'} "
-                        f"({bound}) is below what holds the requested state ({floor:.3g}): friction kept at the hold floor")
-        fcap = floor
-        dcap = min(dcap, max(budget - floor, 0.0) / speed)
-    if inertia:
-        fcap = min(fcap, max_stable_friction(inertia))
-    return OperatingBudget(joint=name, joint_type=jtype, link=grasp.link, rule=grasp.rule, lever=lever, force_n=float(force),
-                           bound=bound, budget=float(budget), speed=float(speed), gravity_state=float(q_state or 0.0),
-                           friction_cap=float(fcap), damping_cap=float(dcap), conflict=conflict, hold_floor=float(floor))
 
 
 def bound_overlay(overlay: Overlay, budgets: dict[str, OperatingBudget]) -> tuple[Overlay, list[str]]:
