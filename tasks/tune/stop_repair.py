@@ -6,7 +6,7 @@ positions from the stall, deeper than :data:`MIN_DEPTH`, gets its pieces improve
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import itertools
 from pathlib import Path
 
 from asset2sim.engines.source import SimObject
@@ -21,33 +21,6 @@ from asset2sim.tasks.state.collision import CollisionPiece
 SAMPLES = 8
 #: Penetration (m) under which the stall is not a contact (PyBullet's 1 mm hull margin on each side).
 MIN_DEPTH = 0.0021
-
-
-@dataclass(frozen=True, slots=True)
-class _Stop:
-    """The deepest contact where a sweep stopped (:func:`_deepest_stop`): ``depth`` (m), the joint's ``position``
-    (rad or m) and ``pair`` (moving link, other link; None when nothing touches)."""
-
-    depth: float
-    position: float
-    pair: tuple[str, str] | None
-
-
-def _deepest_stop(session, stall: float, goal: float, joint: str, sub: list[str], others: list[str],
-                  adjacent: set[frozenset[str]], state: dict[str, float]) -> _Stop:
-    """The deepest pair over :data:`SAMPLES` positions from ``stall`` to ``goal``."""
-    best = _Stop(0.0, stall, None)
-    for k in range(SAMPLES + 1):
-        q = stall + (goal - stall) * k / SAMPLES
-        session.set_joint_positions({**state, joint: q})
-        for a in sub:
-            for b in others:
-                if frozenset((a, b)) in adjacent:
-                    continue
-                d = session.link_distances(a, b, 0.0)
-                if d and -min(d) > best.depth:
-                    best = _Stop(-min(d), q, (a, b))
-    return best
 
 
 def decompose_for_blocked(obj: SimObject, asset: AssetDescription, metric: MetricResult, replaced: set[str],
@@ -78,8 +51,14 @@ def decompose_for_blocked(obj: SimObject, asset: AssetDescription, metric: Metri
                 continue
             sub = [ln for ln in subtrees.get(name, [session.joint_child[name]]) if ln in with_collision]
             others = [ln for ln in with_collision if ln not in sub]
-            stop = _deepest_stop(session, stall, goal, name, sub, others, adjacent, state)
-            depth, q, pair = stop.depth, stop.position, stop.pair
+            depth, q, pair = 0.0, stall, None  # the deepest pair over SAMPLES positions from the stall to the goal
+            for k in range(SAMPLES + 1):
+                at = stall + (goal - stall) * k / SAMPLES
+                session.set_joint_positions({**state, name: at})
+                for a, b in itertools.product(sub, others):
+                    d = session.link_distances(a, b, 0.0) if frozenset((a, b)) not in adjacent else None
+                    if d and -min(d) > depth:
+                        depth, q, pair = -min(d), at, (a, b)
             if pair is None or depth < MIN_DEPTH or set(pair) & (replaced | set(overrides)):
                 continue
             session.set_joint_positions({**state, name: q})
