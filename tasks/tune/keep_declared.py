@@ -63,14 +63,16 @@ class KeepDeclared:
         if size_ok and ctx.request.scale is None and not ctx.request.sizes:
             inner_ctx = dataclasses.replace(ctx, request=ctx.request.model_copy(update={"scale": 1.0}))
         est = self.inner.estimate(inner_ctx, kin)
-        overlay, kept = self._keep(ctx, est.overlay, judged, size_ok)
-        return dataclasses.replace(est, overlay=overlay, notes=[*est.notes, *kept])
+        kept, notes = self._keep(ctx, est.overlay, judged, size_ok)
+        overlay = est.overlay.model_copy(update={**kept, "notes": est.overlay.notes.model_copy(update={
+            "other": [*est.overlay.notes.other, *notes]})})
+        return dataclasses.replace(est, overlay=overlay, notes=[*est.notes, *notes])
 
-    def _keep(self, ctx: EstimationContext, overlay: Overlay, judged: Judgement, size_ok: bool) -> tuple[Overlay, list[str]]:
+    def _keep(self, ctx: EstimationContext, overlay: Overlay, judged: Judgement, size_ok: bool) -> tuple[dict[str, dict], list[str]]:
+        """(the overlay's links and joints with the plausible declared values kept, none when nothing is; the notes)."""
         if not size_ok or overlay.scale != 1.0:
             why = "its size is implausible and is rescaled" if not size_ok else f"the request scales it (x{overlay.scale:.4g})"
-            note = f"keep declared: nothing kept: {why}; declared values are judged at the declared size"
-            return overlay.model_copy(update={"notes": overlay.notes.model_copy(update={"other": [*overlay.notes.other, note]})}), [note]
+            return {}, [f"keep declared: nothing kept: {why}; declared values are judged at the declared size"]
         links, joints, kept = dict(overlay.links), dict(overlay.joints), []
         if not _mass_asked(ctx):
             for name, lp in judged.patched.links.items():
@@ -96,6 +98,4 @@ class KeepDeclared:
                                 + (" and its spring" if "spring" in ok else ""))
         notes = [f"keep declared: {k}" for k in kept] or ["keep declared: no declared value is plausible; the estimates are used"]
         notes.append(f"keep declared: the declared size kept (scale 1; {judged.values[0].reason})")
-        other = [*overlay.notes.other, *notes]
-        return overlay.model_copy(update={"links": links, "joints": joints,
-                                          "notes": overlay.notes.model_copy(update={"other": other})}), notes
+        return {"links": links, "joints": joints}, notes
