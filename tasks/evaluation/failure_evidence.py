@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -20,6 +19,7 @@ from asset2sim.frames import quat_wxyz_matrix, quat_xyzw_to_wxyz
 from asset2sim.tasks.check.robust_rest import RobustRestConfig, RobustRestRun, Trial, up_change
 from asset2sim.tasks.check.sweep import JointSweep, SweepConfig, SweepRun
 from asset2sim.tasks.check.failure_reasons import penetration_failures
+from asset2sim.tasks.evaluation.clips import set_pose
 from asset2sim.tasks.evaluation.html_blocks import table
 from asset2sim.tasks.evaluation.plots import legend, new_figure, styled, svg_bytes
 from asset2sim.tasks.geometry.render import SceneRenderer
@@ -141,15 +141,6 @@ PAIR_COLORS = ((0.85, 0.15, 0.1, 1.0), (0.15, 0.35, 0.9, 1.0))
 OTHER_COLOR = (0.86, 0.86, 0.86, 1.0)
 
 
-@dataclass(frozen=True)
-class Highlight:
-    """Frames of a penetration: ``links`` the two links drawn in :data:`PAIR_COLORS` (the others grey), ``views``
-    the views drawn at each pose."""
-
-    links: tuple[str, str]
-    views: tuple[str, ...] = ("perspective", "front")
-
-
 def operability_failures(metrics: list) -> list[tuple[str, dict, dict]]:
     """(engine, part summary, stroke) of every failing operability stroke (``operability`` details: the part and
     the stroke as :func:`~asset2sim.tasks.check.operability.operability_metric` records them)."""
@@ -179,17 +170,18 @@ def _opened(closed: dict, fraction: float) -> float:
     return closed["q_closed"] + closed["direction"] * float(fraction) * closed["open_range"]
 
 
-def draw_poses(renderer: SceneRenderer, poses: list[Pose], highlight: Highlight | None = None) -> dict[str, np.ndarray]:
+def draw_poses(renderer: SceneRenderer, poses: list[Pose], highlight: tuple[str, str] | None = None) -> dict[str, np.ndarray]:
     """caption -> (H, W, 3) uint8 perspective render of each pose (every joint a pose names set, the root
-    turned by its rotation); with ``highlight``, its two links in colour and the others grey, each of its views
-    drawn (``caption, view``), the asset's own colours back afterwards."""
+    turned by its rotation); with ``highlight`` (two links of a penetration), those links in :data:`PAIR_COLORS` and
+    the others grey, each drawn from the perspective and the front view (``caption, view``), the asset's own colours
+    back afterwards."""
     out = {}
-    views = highlight.views if highlight is not None else ("perspective",)
+    views = ("perspective", "front") if highlight is not None else ("perspective",)
     if highlight is not None:
-        renderer.color_links(dict(zip(highlight.links, PAIR_COLORS)), OTHER_COLOR)
+        renderer.color_links(dict(zip(highlight, PAIR_COLORS)), OTHER_COLOR)
     try:
         for caption, joints, rotation in poses:
-            renderer.set_joint_positions({k: v for k, v in joints.items() if k in renderer.joint_names and math.isfinite(v)})
+            set_pose(renderer, joints, None, None)
             renderer.turn_root(rotation)
             for view in views:
                 out[caption if len(views) == 1 else f"{caption}, {view}"] = renderer.render(view)
@@ -224,7 +216,7 @@ def evidence_section(runs: dict, urdf: Path | str, dt: float, svg: Callable[[byt
     m); ``task``: the ``task_execution`` metric's details; ``closed``: joint -> {q_closed, direction, open_range};
     ``metrics``: the evaluation's metrics (the penetration and operability measures)."""
     others, closed = dict(initial_state or {}), dict(closed or {})
-    items: list[tuple[str, Callable[[], list[Pose]], Highlight | None]] = []  # (the HTML before the frames, poses, colours)
+    items: list[tuple[str, Callable[[], list[Pose]], tuple[str, str] | None]] = []  # (the HTML before the frames, poses, colours)
     for f in penetration_failures(metrics or []):
         if f.link_a is None:  # a measure that names no pair: nothing to draw
             continue
@@ -235,7 +227,7 @@ def evidence_section(runs: dict, urdf: Path | str, dt: float, svg: Callable[[byt
             poses.append(("as modelled", dict(modelled_state or {}), np.eye(3)))
         items.append((_h3(f"penetration ({f.kind}, {f.metric.engine}): {what}, {f.depth_mm:.1f} mm deep at the initial state")
                       + f"<p class='small'>{html_text(a)} in red, {html_text(b)} in blue, every other part grey.</p>",
-                      lambda poses=poses: poses, Highlight((a, b))))
+                      lambda poses=poses: poses, (a, b)))
     for engine, part, stroke in operability_failures(metrics or []):
         items.append((_h3(f"operability of {part['joint']} ({part.get('label') or 'unlabelled'}, {engine}): "
                           f"{stroke['action']}: {stroke.get('failure', '')}")
