@@ -111,7 +111,7 @@ def semantic_metrics(ctx: EstimationContext, model: UrdfModel, state: dict[str, 
     Raises:
         EvaluationError: the reference folder or its files cannot be read.
     """
-    ref = None
+    ref, types = None, {j.name: j.type for j in model.joints}
     if reference is not None:
         try:
             ref = partnet_mobility.read_reference(reference)
@@ -123,7 +123,7 @@ def semantic_metrics(ctx: EstimationContext, model: UrdfModel, state: dict[str, 
                          details={"reason": "no reference given"}, engine="none")
     else:
         tj = [j for j in ref.task_joints if j in state] or task_relevant_joints(ctx)
-        m = sem.initial_joint_deviation(state, ref_state, tj, {j.name: j.type for j in model.joints})
+        m = sem.initial_joint_deviation(state, ref_state, tj, types)
         m.details["reference_rule"] = rule
     extents = np.asarray(ctx.closed_extents, float) * length_scale
     largest = float(np.max(extents)) if extents.size and float(np.max(extents)) > 0 else None
@@ -135,32 +135,31 @@ def semantic_metrics(ctx: EstimationContext, model: UrdfModel, state: dict[str, 
     if rng is not None:
         mass.threshold = f"{rng[0]:.3g} kg <= m <= {rng[1]:.3g} kg (category range scaled to the asset's size, f = {f:.3g})"
     return [sem.scale_deviation(scale, ref.scale if ref is not None else None, scale_source=scale_source), m, mass,
-            _prompt_alignment(ctx, model, state, closed, resolution, prior, largest)]
+            _prompt_alignment(ctx, types, state, closed, resolution, prior, largest)]
 
 
-def _prompt_alignment(ctx: EstimationContext, model: UrdfModel, state: dict[str, float], closed: dict[str, ClosedState],
+def _prompt_alignment(ctx: EstimationContext, types: dict[str, str], state: dict[str, float], closed: dict[str, ClosedState],
                       resolution: StateResolution | None, prior: dict[str, Any], largest: float | None) -> MetricResult:
-    """``prompt_alignment`` of the joints the request set (``resolution.requests``, the one reading of the request)."""
+    """``prompt_alignment`` of the joints the request set (``resolution.requests``, the one reading of the request);
+    ``types``: joint -> type."""
     spec = ctx.request
     if not spec.text:
         return MetricResult(name="prompt_alignment", value=None, unit="fraction", details={"reason": "no prompt"}, engine="none")
-    types = {j.name: j.type for j in model.joints}
-    requests, unapplied, warnings = ({}, [], []) if resolution is None else (
-        resolution.requests, resolution.unapplied, list(resolution.warnings))
+    res = resolution or StateResolution({})
     checks = []
-    for name, jr in requests.items():
+    for name, jr in res.requests.items():
         c, q = closed.get(name), state.get(name)
         known = c is not None and q is not None
         label = ctx.asset.link(ctx.asset.joint(name).child).semantic_label
         checks.append(sem.JointStateCheck(name, jr.band, c.fraction(q) if known else None, label, jr.phrase, jr.target,
                                           c.direction * (q - c.q_closed) if known else None, types.get(name, "revolute")))
-    unmatched = [p for p, _ in unapplied]
+    unmatched = [p for p, _ in res.unapplied]
     dims = prior.get("base_dims")
     m = sem.prompt_alignment(size_requested=spec.size_class is not None, largest_extent=largest,
                              typical_largest=dims[0] if dims else None, size_factor=float(prior.get("factor", 1.0)),
                              joint_checks=checks, state_requested=bool(spec.joint_states), unmatched_requests=unmatched,
                              text=spec.text, understood=spec.understood,
-                             warnings=request_warnings(spec, unmatched, ctx.category) + warnings)
+                             warnings=request_warnings(spec, unmatched, ctx.category) + res.warnings)
     m.details.update({"size_class": spec.size_class, "category": ctx.category, "variant": prior.get("variant"),
                       "extent_state": "closed state", "prior_note": prior.get("note")})
     return m
