@@ -104,8 +104,8 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         tried.append((overlay, check))
     best = dynamics_search.fewest_failures([c.metrics for _, c in tried])
     earlier = best != len(tried) - 1
-    sweep_skipped = postcheck.sweep_not_run(check.metrics)  # an escalation round: the sweep (and the other engines) not run
-    if earlier or sweep_skipped:  # checked again, the sweep included
+    # an earlier round kept, or an escalation round's check (the sweep and the other engines not run): checked again, the sweep included
+    if earlier or postcheck.sweep_not_run(check.metrics):
         reason = (f"round {best} failed the fewest tiers: its friction and damping kept" if earlier
                   else "the last round's setting checked again with the joint sweep")
         if earlier:
@@ -151,7 +151,7 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
                                        blocked, overrides, unclipped.scale, ws.root, folder, config)
 
         def score(chk):  # sweep_stalls.sweep_score: lower is better
-            return sweep_stalls.sweep_score(next(m for m in chk.metrics if m.name == "joint_sweep"))
+            return sweep_stalls.sweep_score(chk.metric("joint_sweep"))
     else:
         label = "parts held together"
         touching = clearance.touching_joints(model, pairs, state, limits.subtrees(model))
