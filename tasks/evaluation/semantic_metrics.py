@@ -196,9 +196,7 @@ def prompt_alignment(*, size_requested: bool, largest_extent: float | None, typi
         halves.append(size.score)
     else:
         details["size"] = {"score": None, "reason": "no typical size known for the category or no extent measured"}
-    if state_requested and not joint_checks:
-        details.update(joint_state_score=None, joint_state_reason="no state the request asks names a part of this object")
-    elif state_requested:
+    if state_requested and joint_checks:
         scores = []
         for c in joint_checks:
             if c.fraction is None:
@@ -217,6 +215,7 @@ def prompt_alignment(*, size_requested: bool, largest_extent: float | None, typi
         if js is not None:
             halves.append(js)
     else:
-        details.update(joint_state_score=None, joint_state_reason="the request asks for no joint state")
+        details.update(joint_state_score=None, joint_state_reason="no state the request asks names a part of this object"
+                       if state_requested else "the request asks for no joint state")
     return _result("prompt_alignment", float(np.mean(halves)) if halves else None, "fraction",
                    "reported: 0.5 size + 0.5 joint state, each 1 / 0.5 / 0", details)
