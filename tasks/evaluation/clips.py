@@ -228,8 +228,11 @@ def sweep_clips(urdf: Path | str, sweep: SweepRun, joints: Sequence[str], others
     :data:`CLIP_VIEWS` (:data:`CLIP_SIZE` pixels, :data:`CLIP_FPS` frames per simulated second), written into
     ``out_dir/clips/`` with ``clips.json``. ``others``: every joint's position
     during the sweep of another (the initial state), rad or m. A joint without a recorded sweep is listed
-    in ``skipped`` with the reason. ``task_run``: the task execution's run, whose attempts get clips too
-    (:func:`task_clips`).
+    in ``skipped`` with the reason. ``task_run``: the task execution's run (a
+    :class:`~asset2sim.tasks.check.task_execution.TaskRun`), whose recorded attempts get clips too, at most
+    :data:`MAX_CLIP_JOINTS`: the object as the gripper moved it (root free or mounted as simulated), the grasp point
+    drawn as a red dot while held (``clips/task_<n>_<view>.*``; an attempt without a recorded motion in ``skipped``
+    as ``<joint> <action>``).
 
     Raises:
         ImportError: PyAV is not installed.
@@ -261,10 +264,20 @@ def sweep_clips(urdf: Path | str, sweep: SweepRun, joints: Sequence[str], others
             for v in CLIP_VIEWS:
                 clips.append(write_clip(folder, f"sweep_{n:02d}_{v}", frames[view_spec(v).name], joint=js.joint, motion="sweep",
                                         view=v, poster_index=poster))
-        if task_run is not None:
-            more, why = task_clips(task_run, out_dir, r)
-            clips += more
-            skipped.update(why)
+        tasks = []
+        for att in list(task_run.attempts if task_run is not None else [])[:MAX_CLIP_JOINTS]:
+            try:
+                tasks.append((att, task_trajectory(att)))
+            except ValueError as exc:
+                skipped[f"{att.joint} {att.action}"] = str(exc)
+        for n, (att, traj) in enumerate(tasks):
+            cams = fit_cameras(pose_points(r, fit_poses(traj)), CLIP_VIEWS)
+            frames = draw_frames(r, traj, cams)
+            for v in CLIP_VIEWS:
+                name = view_spec(v).name
+                marked = [draw_mark(img, project(cams[name], traj.marks[i][None], CLIP_SIZE)[0])
+                          for img, i in zip(frames[name], traj.sampled(CLIP_FPS))]
+                clips.append(write_clip(folder, f"task_{n:02d}_{v}", marked, joint=att.joint, motion="task", view=v))
     clip_set = ClipSet(clips=clips, skipped=skipped)
     atomic.write_json(folder / CLIPS_JSON, clip_set.model_dump(mode="json"))
     return clip_set
@@ -320,32 +333,6 @@ def draw_mark(image: np.ndarray, xy: np.ndarray) -> np.ndarray:
     out[d2 <= 5.5 ** 2] = (255, 255, 255)  # a ring 1.5 px wide around a dot of 4 px radius
     out[d2 <= 4 ** 2] = (220, 30, 30)
     return out
-
-
-def task_clips(task_run, out_dir: Path | str, r: SceneRenderer) -> tuple[list[Clip], dict[str, str]]:
-    """Clips of each recorded attempt of ``task_run`` (a :class:`~asset2sim.tasks.check.task_execution.TaskRun`, at
-    most :data:`MAX_CLIP_JOINTS`; views, size and rate as :func:`sweep_clips`): the object as the gripper moved it
-    (root free or mounted as simulated), the grasp point drawn as a red dot while held, written into
-    ``out_dir/clips/task_<n>_<view>.*`` by the renderer ``r`` of the object at :data:`CLIP_SIZE`. Returns (clips, skipped:
-    ``<joint> <action>`` -> why). Raises as :func:`sweep_clips`."""
-    folder = Path(out_dir) / CLIPS_DIR
-    out: list[Clip] = []
-    skipped: dict[str, str] = {}
-    todo = []
-    for att in list(task_run.attempts)[:MAX_CLIP_JOINTS]:
-        try:
-            todo.append((att, task_trajectory(att)))
-        except ValueError as exc:
-            skipped[f"{att.joint} {att.action}"] = str(exc)
-    for n, (att, traj) in enumerate(todo):
-        cams = fit_cameras(pose_points(r, fit_poses(traj)), CLIP_VIEWS)
-        frames = draw_frames(r, traj, cams)
-        for v in CLIP_VIEWS:
-            name = view_spec(v).name
-            marked = [draw_mark(img, project(cams[name], traj.marks[i][None], CLIP_SIZE)[0])
-                      for img, i in zip(frames[name], traj.sampled(CLIP_FPS))]
-            out.append(write_clip(folder, f"task_{n:02d}_{v}", marked, joint=att.joint, motion="task", view=v))
-    return out, skipped
 
 
 def read_clip_set(folder: Path | str) -> ClipSet | None:
