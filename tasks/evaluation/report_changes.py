@@ -69,12 +69,6 @@ def _row(what: str, before: str, after: str, why: str) -> str:
             f"<td class='small'>{esc(why)}</td></tr>")
 
 
-def dynamics_unit(quantity: str, jtype: str) -> str:
-    """The unit of a joint's ``quantity`` (``damping``, ``friction``, ``stiffness``) for a joint of type ``jtype``
-    (:data:`~asset2sim.tasks.synthesize.request_findings.DYNAMICS_UNITS`: revolute and continuous share theirs)."""
-    return DYNAMICS_UNITS[quantity][jtype == "prismatic"]
-
-
 @dataclass
 class InputSide:
     """The input as its own file declares it, for the input column and picture of "What asset2sim changed":
@@ -139,8 +133,10 @@ def _declared_mass(side: InputSide) -> str:
 
 
 def _dynamics_text(v: float, quantity: str, jtype: str, reference: float | None) -> str:
-    """A joint's ``quantity`` ``v`` with its unit; a spring's with the position it pulls toward (``reference``)."""
-    text = f"{v:.4g} {dynamics_unit(quantity, jtype)}"
+    """A joint's ``quantity`` ``v`` (``damping``, ``friction``, ``stiffness``) with its unit for a joint of type ``jtype``
+    (:data:`~asset2sim.tasks.synthesize.request_findings.DYNAMICS_UNITS`: revolute and continuous share theirs); a
+    spring's with the position it pulls toward (``reference``)."""
+    text = f"{v:.4g} {DYNAMICS_UNITS[quantity][jtype == 'prismatic']}"
     if quantity == "stiffness" and reference is not None:
         text += f" about {position_text(reference, jtype)}"
     return text

@@ -34,7 +34,7 @@ class Guard:
 
     def note(self, wanted: float) -> str:
         """``joint_1: 'swings freely' keeps its damping at 0.795 N m s/rad (the step asked 2.39)``."""
-        unit = request_findings.DYNAMICS_UNITS[self.parameter][1 if self.prismatic else 0]
+        unit = request_findings.DYNAMICS_UNITS[self.parameter][self.prismatic]
         return (f"{self.joint}: '{self.phrase}' keeps its {self.parameter} at {self.value:.3g} {unit} "
                 f"(the step asked {wanted:.3g})")
 
