@@ -112,16 +112,14 @@ def semantic_metrics(ctx: EstimationContext, model: UrdfModel, state: dict[str, 
         EvaluationError: the reference folder or its files cannot be read.
     """
     ref, types = None, {j.name: j.type for j in model.joints}
+    m = MetricResult(name="initial_joint_deviation", value=None, unit="rad", passed=None, details={"reason": "no reference given"},
+                     engine="none")
     if reference is not None:
         try:
             ref = partnet_mobility.read_reference(reference)
             ref_state, rule = reference_state(ref, model, scale)
         except (ValueError, OSError, UrdfError) as exc:
             raise EvaluationError(f"reference {reference}: {exc}") from exc
-    if ref is None:
-        m = MetricResult(name="initial_joint_deviation", value=None, unit="rad", passed=None,
-                         details={"reason": "no reference given"}, engine="none")
-    else:
         tj = [j for j in ref.task_joints if j in state] or task_relevant_joints(ctx)
         m = sem.initial_joint_deviation(state, ref_state, tj, types)
         m.details["reference_rule"] = rule

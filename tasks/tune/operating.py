@@ -224,9 +224,8 @@ def operating_budgets(obj: SimObject, overlay: Overlay, closed: dict[str, tuple[
                 continue
             grasp = _grasp(session, model, name, d, state, free)
             range_of = operating_range(category, labels.get(session.joint_child[name]) if grasp.side == "child" else None)
-            paths = _paths(float(d * (state.get(name, qc) - qc) / rng), actions, whole)
-            tight = _tightest(session, model, name, (qc, d, rng), paths, grasp, range_of, (mu, total) if free and ground else None,
-                              springs.get(name), free_moving, overlay.joints[name].inertia_axis)
+            tight = _tightest(session, model, name, (qc, d, rng), (actions, whole), grasp, range_of,
+                              (mu, total) if free and ground else None, springs.get(name), free_moving, overlay.joints[name].inertia_axis)
             session.set_joint_positions(dict(state))
             if tight is not None:
                 out[name] = tight
@@ -280,10 +279,11 @@ def _paths(f_state: float, actions: tuple[str, ...], whole: bool) -> list[tuple[
 
 
 def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[float, float, float],
-              paths: list[tuple[str, np.ndarray]], grasp: _Grasp, range_of: tuple[ForceRange, str],
+              paths: tuple[tuple[str, ...], bool], grasp: _Grasp, range_of: tuple[ForceRange, str],
               ground: tuple[float, float] | None, spring: Spring | None, free_moving: bool,
               inertia: float | None) -> OperatingBudget | None:
-    """The tightest budget over ``paths`` ((action, opening fractions) from :func:`_paths`; None without a sample),
+    """The tightest budget over the paths of ``paths`` ((actions, whole) as :func:`_paths` takes them, from the session's
+    initial state; None without a sample),
     Q of gravity and of the joint's ``spring``, and its caps (:func:`operating_budgets`): friction takes
     :data:`FRICTION_SHARE` of it, damping at the top speed of the task's gripper
     (:class:`~asset2sim.tasks.check.gripper.GripperLimits`) the rest (the lever and speed at the last sample).
@@ -296,7 +296,7 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
     lever = budget = q_state = None
     least, least_bound = float("inf"), ""
     side = 1.0 if grasp.side == "child" else -1.0  # Q of the parent side pushes q the other way
-    for action, fractions in paths:
+    for action, fractions in _paths(f_state, *paths):
         s_motion = (-d if action == "close" else d) * side
         for f in fractions:
             session.set_joint_positions({**state, joint: qc + d * f * rng})
