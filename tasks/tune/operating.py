@@ -222,7 +222,13 @@ def operating_budgets(obj: SimObject, overlay: Overlay, closed: dict[str, tuple[
             if name not in session.joint_child or name not in overlay.joints or not rng > 0 or session.joint_types[name] not in (
                     "revolute", "continuous", "prismatic"):
                 continue
-            grasp = _grasp(session, model, name, d, state, free)
+            session.set_joint_positions(dict(state))  # the task's grasp at the state
+            side = grasp_side(session, name, model, root_fixed=not free)
+            link, point, rule = contact_point_rule(session, name, model, opening_direction=d, side=side)
+            moving = subtree(model, session.joint_child[name])
+            if side == "parent":  # the gripper moves the rest of the object: same relative motion
+                moving = [ln for ln in session.link_names if ln not in moving]
+            grasp = _Grasp(side, link, point, rule, moving)
             range_of = operating_range(category, labels.get(session.joint_child[name]) if grasp.side == "child" else None)
             tight = _tightest(session, model, name, (qc, d, rng), (actions, whole), grasp, range_of,
                               (mu, total) if free and ground else None, springs.get(name), free_moving, overlay.joints[name].inertia_axis)
@@ -243,18 +249,6 @@ class _Grasp:
     point: np.ndarray
     rule: str
     moving: list[str]
-
-
-def _grasp(session: SimSession, model: UrdfModel, joint: str, direction: float, state: dict[str, float],
-           free: bool) -> _Grasp:
-    """The task's grasp of ``joint`` at ``state`` (the session is set there)."""
-    session.set_joint_positions(dict(state))
-    side = grasp_side(session, joint, model, root_fixed=not free)
-    link, point, rule = contact_point_rule(session, joint, model, opening_direction=direction, side=side)
-    moving = subtree(model, session.joint_child[joint])
-    if side == "parent":  # the gripper moves the rest of the object: same relative motion
-        moving = [ln for ln in session.link_names if ln not in moving]
-    return _Grasp(side, link, point, rule, moving)
 
 
 def _spring_force(spring: Spring | None, q: float) -> float:
