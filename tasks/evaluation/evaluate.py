@@ -36,8 +36,7 @@ from asset2sim.engines.base import EngineUnavailable
 from asset2sim.schemas.metrics import unit
 from asset2sim.tasks.check import as_asked, manipulation, postcheck, probes as probe_tier, task_tier
 from asset2sim.tasks.check.verdict import readiness
-from asset2sim.tasks.evaluation import clips as clip_files
-from asset2sim.tasks.evaluation import semantic_metrics as sem
+from asset2sim.tasks.evaluation import clips as clip_files, semantic_metrics as sem
 from asset2sim.tasks.evaluation.folder_reading import (EvaluationError, closed_ends, file_overlay, read_records, reference_state,
                                                        sim_object, stated_scale)
 from asset2sim.tasks.evaluation.report_html import portable_urdf, write_report

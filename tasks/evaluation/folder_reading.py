@@ -26,8 +26,7 @@ from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.interpret.part_labels import labels_from_names
-from asset2sim.tasks.interpret.part_priors import push_buttons
-from asset2sim.tasks.interpret.part_priors import task_relevant_joints as part_task_joints
+from asset2sim.tasks.interpret.part_priors import push_buttons, task_relevant_joints as part_task_joints
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.urdf import UrdfError, UrdfModel, read_urdf
 

@@ -99,6 +99,7 @@ def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.Oper
     out = RoundOutcome()
     seen: set[str] = set()
     drifts = []  # joint -> drift, per robust-rest trial and rest test
+    tried: dict[str, bool] = {}
     for m in metrics:
         if m.name == "robust_rest":
             for trial in (m.details.get("trials") or {}).values():
@@ -107,17 +108,15 @@ def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.Oper
                 seen.update(drifts[-1])
         elif m.name == "state_hold":
             drifts.append(m.details.get("drift") or {})
-    for j, d in (jd for drift in drifts for jd in drift.items()):
-        out.drift[j] = max(out.drift.get(j, 0.0), float(d))
-    out.held = seen - out.not_held
-    tried: dict[str, bool] = {}
-    for m in metrics:
-        if m.name == "task_execution" and m.passed is not None:
+        elif m.name == "task_execution" and m.passed is not None:
             out.task_ran = True
             for a in m.details.get("attempts") or []:
                 j = a["joint"]
                 tried[j] = tried.get(j, True) and bool(a.get("success"))
                 out.peak_force[j] = max(out.peak_force.get(j, 0.0), float(a.get("peak_operating_force_n") or 0.0))
+    for j, d in (jd for drift in drifts for jd in drift.items()):
+        out.drift[j] = max(out.drift.get(j, 0.0), float(d))
+    out.held = seen - out.not_held
     out.task_bad = set(force_excess(metrics, budgets)[0])
     out.task_ok = {j for j, ok in tried.items() if ok and j not in out.task_bad}
     return out
