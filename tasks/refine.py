@@ -437,14 +437,13 @@ def _stages(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float] 
 def _synthesize(ctx: EstimationContext, run: RefineRun) -> placement.Synthesis:
     """Stage 4: the estimator's overlay (validated) and bands, the requested state at its scale.
     RefineError("estimator_failure" or "invalid_overlay")."""
-    config, log = run.config, run.log
-    asset = ctx.asset
+    log, asset = run.log, ctx.asset
     prismatic = {j.name for j in asset.movable_joints() if j.type == "prismatic"}
     try:
         result = run.est.estimate(ctx, run.kin)
     except Exception as exc:
         code = getattr(exc, "code", None)  # a model call's fault by what happened (MODEL_REPLY_INVALID ...)
-        raise RefineError(f"{asset.asset_id}: estimator {config.estimator!r} failed: {one_line(exc, 600)}", "estimator_failure",
+        raise RefineError(f"{asset.asset_id}: estimator {run.config.estimator!r} failed: {one_line(exc, 600)}", "estimator_failure",
                           ["ESTIMATOR_FAILED", *([code] if isinstance(code, str) and code.startswith("MODEL_") else [])]) from exc
     bands = dict(result.bands)
     log.lap("synthesize")

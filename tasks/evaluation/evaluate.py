@@ -131,7 +131,7 @@ def semantic_metrics(ctx: EstimationContext, model: UrdfModel, state: dict[str, 
                          "base_mass_range_kg": prior.get("base_mass_range"), "prior_source": prior.get("source")})
     if rng is not None:
         mass.threshold = f"{rng[0]:.3g} kg <= m <= {rng[1]:.3g} kg (category range scaled to the asset's size, f = {f:.3g})"
-    return [sem.scale_deviation(scale, ref.scale if ref is not None else None, scale_source=scale_source), m, mass,
+    return [sem.scale_deviation(scale, getattr(ref, "scale", None), scale_source=scale_source), m, mass,
             _prompt_alignment(ctx, types, state, closed, resolution, prior, largest)]
 
 
@@ -264,7 +264,7 @@ def evaluate_asset(
     obj, state_source = sim_object(files, config.sim)
     state = dict(obj.state)
     physics = overlay if overlay is not None else file_overlay(model)
-    closed, _ = closed_ends(files) if report is not None and report.closed_ends else ({}, "")
+    closed = closed_ends(files)[0] if report is not None and report.closed_ends else {}
     if obj.fixed_base:
         notes.append("root fixed as initial_state.json declares (mounted asset): every simulation holds it, no ground plane")
     with build_context(desc, prompt or "", config, category=cat) as (ctx, kin):

@@ -108,24 +108,24 @@ def _incomplete(out_dir: Path, why: str, where: Path | None = None) -> OutputErr
                        "again (--force)", "OUTPUT_INCOMPLETE", where or out_dir)
 
 
-def _regular_inside(out_dir: Path, rel: object, what: str) -> Path:
+def _regular_inside(out_dir: Path, rel: object) -> Path:
     """``out_dir/rel`` when ``rel`` is a relative path (no ``..``, not absolute) whose every folder and itself lie
     inside ``out_dir`` without a symlink on the way and it is a regular file (``lstat``: nothing opened); else
     ``OUTPUT_INCOMPLETE``."""
     safe = _safe_rel(rel)
     if safe is None or safe != rel:
-        raise _incomplete(out_dir, f"{what} {rel!r} is not a relative path inside the folder")
+        raise _incomplete(out_dir, f"the file {rel!r} is not a relative path inside the folder")
     path = out_dir / safe
     if Path(os.path.realpath(path.parent)) != Path(os.path.realpath(out_dir)) / PurePosixPath(safe).parent:
-        raise _incomplete(out_dir, f"{what} {safe}: a symlink on the way leads out of the folder", path)
+        raise _incomplete(out_dir, f"the file {safe}: a symlink on the way leads out of the folder", path)
     try:
         mode = os.lstat(path).st_mode
     except FileNotFoundError:
-        raise _incomplete(out_dir, f"{what} {safe} is missing", path) from None
+        raise _incomplete(out_dir, f"the file {safe} is missing", path) from None
     except OSError as exc:
-        raise _incomplete(out_dir, f"{what} {safe} cannot be inspected ({exc.strerror})", path) from None
+        raise _incomplete(out_dir, f"the file {safe} cannot be inspected ({exc.strerror})", path) from None
     if not stat.S_ISREG(mode):
-        raise _incomplete(out_dir, f"{what} {safe} is a {file_kind(mode)}, not the regular file asset2sim wrote", path)
+        raise _incomplete(out_dir, f"the file {safe} is a {file_kind(mode)}, not the regular file asset2sim wrote", path)
     return path
 
 
@@ -151,7 +151,7 @@ def verify_output(out_dir: Path | str) -> dict[str, Any]:
     if not isinstance(marker, dict) or not isinstance(marker.get("files"), dict) or not isinstance(marker.get("unhashed", []), list):
         raise _incomplete(out_dir, f"{MARKER_NAME} is not a completion marker asset2sim wrote", out_dir / MARKER_NAME)
     for rel, digest in marker["files"].items():
-        path = _regular_inside(out_dir, rel, "the file")
+        path = _regular_inside(out_dir, rel)
         try:
             actual = atomic.sha256_file(path)
         except OSError as exc:  # replaced meanwhile
@@ -162,7 +162,7 @@ def verify_output(out_dir: Path | str) -> dict[str, Any]:
     for rel in marker.get("unhashed", []):
         if isinstance(rel, str) and _safe_rel(rel) == rel and not os.path.lexists(out_dir / rel):
             continue
-        _regular_inside(out_dir, rel, "the file")
+        _regular_inside(out_dir, rel)
     return marker
 
 

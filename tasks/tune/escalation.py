@@ -88,9 +88,8 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         if not step.changes:
             step = escalate(overlay, check, config.escalation_factor, caps, floors, dcaps)
         settled = search.settle(before, step.overlay, step.changes, caps)
-        overlay, notes = settled.overlay, settled.notes
-        reason = "; ".join(filter(None, [step.reason, *notes]))
-        overlay, held = word_guard.keep(before, overlay, kept_words)
+        reason = "; ".join(filter(None, [step.reason, *settled.notes]))
+        overlay, held = word_guard.keep(before, settled.overlay, kept_words)
         changes = _changed(before, overlay)
         for line in held:
             log.say("post_check", line)
