@@ -141,7 +141,7 @@ def refine_asset(
         log.say("output", f"WARNING: {out_dir} holds an earlier output, which this run replaces: its {len(owner.replaced)} files "
                           f"({', '.join(tops[:8])}{', ...' if len(tops) > 8 else ''}) are removed")
     work = owner.write_path(out_dir)  # out_dir, or the staging folder that replaces a complete earlier output
-    staged_input = asset.staged_from.parent if asset.staged_from is not None else None  # an MJCF / USD file's own folder
+    staged_input = getattr(asset.staged_from, "parent", None)  # an MJCF / USD file's own folder
     # no cache entry in the input or output; every simulated step of every phase counted against one cap; one BLAS thread,
     with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference), threadpool_limits(1, "blas"), \
             step_budget(MAX_REFINE_STEPS, MAX_REFINE_SECONDS):  # as the CLI and the flow's workers run (docs/design/pipeline.md)

@@ -265,7 +265,7 @@ def sweep_clips(urdf: Path | str, sweep: SweepRun, joints: Sequence[str], others
                 clips.append(write_clip(folder, f"sweep_{n:02d}_{v}", frames[view_spec(v).name], joint=js.joint, motion="sweep",
                                         view=v, poster_index=poster))
         tasks = []
-        for att in list(task_run.attempts if task_run is not None else [])[:MAX_CLIP_JOINTS]:
+        for att in list(getattr(task_run, "attempts", []))[:MAX_CLIP_JOINTS]:
             try:
                 tasks.append((att, task_trajectory(att)))
             except ValueError as exc:

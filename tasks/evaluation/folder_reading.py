@@ -111,7 +111,7 @@ def closed_ends(files: RefinedAsset, joints: list[str] | None = None) -> tuple[d
         return {n: ClosedState(n, float(rec[n]["q_closed"]), float(rec[n]["direction"]), float(rec[n]["open_range"]),
                                bound(rec[n].get("lower"), -math.inf), bound(rec[n].get("upper"), math.inf)) for n in names}, "report.json"
     try:  # push buttons closed where they rest, as the refine measured them (part_priors.push_buttons)
-        pushed = push_buttons(labels_from_names(extract_asset(files.urdf_path)), report.category if report is not None else None)
+        pushed = push_buttons(labels_from_names(extract_asset(files.urdf_path)), getattr(report, "category", None))
         measured = measure_closed_ends(UrdfFile(files.urdf_path), pushed).closed
     except Exception:  # the geometry cannot be measured: every joint closed at its limit nearest 0
         measured = {}

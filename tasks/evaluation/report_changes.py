@@ -189,7 +189,7 @@ def change_rows(report: dict[str, Any], ov: dict[str, Any], joint_types: dict[st
     rows = [_row("scale", "1 (the input's units)", f"{float(report.get('scale', 1.0)):.4g}", notes.get("size", "")),
             _row("total mass", _declared_mass(side), f"{float(report.get('total_mass', 0.0)):.4g} kg",
                  "; ".join(x for x in (notes.get("mass_arithmetic"), notes.get("material")) if x))]
-    before = side.physics.joints if side.physics is not None else {}
+    before = getattr(side.physics, "joints", {})
     for name, jd in (ov.get("joints") or {}).items():
         src = str(jd.get("limit_source") or "")
         if src.startswith("clipped"):
@@ -211,7 +211,7 @@ def change_rows(report: dict[str, Any], ov: dict[str, Any], joint_types: dict[st
                f"the request: {bands[name].replace('_', ' ')}" if name in bands else "not asked: closed")
         if name in moves:
             why += f"; {moves[name]}"
-        start = (side.physics.initial_state if side.physics is not None else {}).get(name)
+        start = getattr(side.physics, "initial_state", {}).get(name)
         rows.append(_row(f"{name} initial position", "as modelled (0)" if start is None else
                          f"{position_text(start, jt)} (the file's keyframe)",
                          f"{from_closed_text(q, closed.get(name), jt)}, {opening_text(fractions.get(name))}".rstrip(", "), why))
@@ -226,7 +226,7 @@ def change_rows(report: dict[str, Any], ov: dict[str, Any], joint_types: dict[st
             rnd = changed.get((name, k))
             why = (f"after check round {rnd.get('round')}: {rnd.get('reason', '')}" if rnd
                    else _source_of(str(jd.get("source") or ""), k))
-            declared = getattr(dj, k) if dj is not None else None  # none declared: a simulator's default 0
+            declared = getattr(dj, k, None)  # none declared: a simulator's default 0
             out = float(jd.get(k) or 0.0)
             rows.append(_row(f"{name} {k}", "-" if side.physics is None else "none declared" if declared is None
                              else _dynamics_text(float(declared), k, jt, dj.reference),

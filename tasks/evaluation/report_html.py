@@ -75,7 +75,7 @@ def _verdict_table(ev) -> str:
         elif d.get("reasons"):
             extra = "; ".join(d["reasons"])
         rows.append(
-            f"<tr><td>{esc(m.name)}</td><td>{esc(m.engine)}</td><td class='num'>{'-' if m.value is None else fmt(m.value)}</td>"
+            f"<tr><td>{esc(m.name)}</td><td>{esc(m.engine)}</td><td class='num'>{fmt(m.value)}</td>"
             f"<td>{esc(m.unit)}</td>"
             f"{verdict_cell(m.passed)}<td class='small'>{esc(m.threshold)}</td><td class='small'>{esc(extra)}</td></tr>"
         )

@@ -95,7 +95,7 @@ def make_media(out_dir: Path | str, *, reference: Path | str | None = None, clip
                 out["clips"] = str(out_dir / CLIPS_DIR)
             report.media = "done"
             report.notes = [n for n in report.notes if not n.startswith(DEFERRED_NOTE)]
-            added = set(owner.files) if owner is not None else set()
+            added = set(getattr(owner, "files", ()))
             write_report_json(out_dir, report)
         _extend_marker(out_dir, head, added)
     except BaseException:

@@ -57,7 +57,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
 
     # what the task's gripper can still operate on the task's joints (operating.operating_limits); estimates above it are lowered
     lim = operating.operating_limits(written(overlay), overlay, asset, ctx.geometry, closed, category=ctx.category, task=ctx.task,
-                                     free_moving=ctx.request.free_moving, joints=spec.joints if spec is not None else None)
+                                     free_moving=ctx.request.free_moving, joints=getattr(spec, "joints", None))
     overlay, notes = operating.bound_overlay(overlay, lim.budgets)
     for line in notes:
         log.say("post_check", line)
