@@ -10,7 +10,7 @@ from asset2sim.tasks.evaluation.html_blocks import TEXTS, fmt, page, svg_tag, ta
 from asset2sim.tasks.evaluation.report_changes import esc
 
 
-def _pm(mean: float | None, sd: float | None, pct: bool = False) -> str:
+def _pm(mean: float | None, sd: float | None = None, pct: bool = False) -> str:
     if mean is None:
         return "-"
     k = 100.0 if pct else 1.0
@@ -36,11 +36,14 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
     for subset, rows in tables.items():
         cells = []
         for method, r in rows.items():
-            row = [_pm(r.get("pen_ts_mean"), r.get("pen_ts_sd")), _pm(r.get("pen_mean"), r.get("pen_sd")),
-                     *(_pm(r.get(rate), None, pct=True) + f" ({r.get(n, 0)})" for rate, n in _PASS_RATES),
-                     _pm(r.get("scale_mean"), r.get("scale_sd")) + ("%" if r.get("scale_mean") is not None else ""),
-                     _pm(r.get("init_mean"), r.get("init_sd")), _pm(r.get("prompt_mean"), None, pct=True),
-                     _pm(r.get("all_pass"), None, pct=True), fmt(r.get("median_seconds"), 3), esc(r.get("realism", "not rated"))]
+            def spread(key: str) -> str:
+                """The row's mean and standard deviation of ``key``."""
+                return _pm(r.get(f"{key}_mean"), r.get(f"{key}_sd"))
+
+            row = [spread("pen_ts"), spread("pen"), *(_pm(r.get(rate), pct=True) + f" ({r.get(n, 0)})" for rate, n in _PASS_RATES),
+                   spread("scale") + ("%" if r.get("scale_mean") is not None else ""), spread("init"),
+                   _pm(r.get("prompt_mean"), pct=True), _pm(r.get("all_pass"), pct=True), fmt(r.get("median_seconds"), 3),
+                   esc(r.get("realism", "not rated"))]
             err = f" <span class='small'>({r.get('errors')} failed to produce)</span>" if r.get("errors") else ""
             cells.append(f"\n<tr><td>{esc(method)}{err}</td>" + "".join(f"<td class='num'>{c}</td>" for c in row) + "</tr>")
         parts.append(f"<h2>{esc(subset)}</h2>" + table(["method", *cols], [*cells, "\n"]))

@@ -95,11 +95,8 @@ def _penetration_details(ev) -> str:
         if not m.details.get("pairs"):
             out.append(f"<p class='small'>self-contact ({esc(m.engine)}): no two links that are not parent and child overlap</p>")
             continue
-        rows = "".join(
-            f"<tr><td>{esc(p['link_a'])}</td><td>{esc(p['link_b'])}</td><td class='num'>{fmt(p['depth_mm'])}</td>"
-            f"<td class='num'>{fmt(p['max_depth_mm'])}</td><td class='num'>{p['points']}</td></tr>"
-            for p in m.details["pairs"]
-        )
+        rows = (f"<tr><td>{esc(p['link_a'])}</td><td>{esc(p['link_b'])}</td><td class='num'>{fmt(p['depth_mm'])}</td>"
+                f"<td class='num'>{fmt(p['max_depth_mm'])}</td><td class='num'>{p['points']}</td></tr>" for p in m.details["pairs"])
         out.append(f"<h3>Self-contact: penetrating link pairs ({esc(m.engine)}; {'pass' if m.passed else 'FAIL'}: {esc(m.threshold)})</h3>"
                    + table(("link a", "link b", "sum of depths (mm)", "deepest point (mm)", "points"), rows))
     for m in ev.metrics:  # the pairs the self-contact Phi skips: a child inside its parent
@@ -107,10 +104,10 @@ def _penetration_details(ev) -> str:
         if not pairs:
             continue
         modelled = m.details.get("modelled") or {}
-        rows = "".join(f"<tr><td>{esc(k.partition('/')[0])}</td><td>{esc(k.partition('/')[2])}</td><td class='num'>{fmt(v)}</td>"
-                       f"<td class='num'>{fmt(modelled.get(k, 0.0))}</td><td class='num'>{fmt(over)}</td>"
-                       f"{verdict_cell(over <= UNRESOLVED_PENETRATION_MM)}</tr>"
-                       for k, v in pairs.items() for over in [max(v - modelled.get(k, 0.0), 0.0)])
+        rows = (f"<tr><td>{esc(k.partition('/')[0])}</td><td>{esc(k.partition('/')[2])}</td><td class='num'>{fmt(v)}</td>"
+                f"<td class='num'>{fmt(modelled.get(k, 0.0))}</td><td class='num'>{fmt(over)}</td>"
+                f"{verdict_cell(over <= UNRESOLVED_PENETRATION_MM)}</tr>"
+                for k, v in pairs.items() for over in [max(v - modelled.get(k, 0.0), 0.0)])
         out.append(f"<h3>A child inside its parent ({esc(m.engine)}; {esc(m.threshold)})</h3>" + table(
             ("parent", "child", "depth (mm)", "at its modelled pose (mm)", "deeper than modelled (mm)", "verdict"), rows))
     return "".join(out)

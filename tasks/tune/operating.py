@@ -222,7 +222,8 @@ def operating_budgets(obj: SimObject, overlay: Overlay, closed: dict[str, tuple[
             if name not in session.joint_child or name not in overlay.joints or not rng > 0 or session.joint_types[name] not in (
                     "revolute", "continuous", "prismatic"):
                 continue
-            session.set_joint_positions(dict(state))  # the task's grasp at the state
+            # the task's grasp at the state
+            session.set_joint_positions(dict(state))
             side = grasp_side(session, name, model, root_fixed=not free)
             link, point, rule = contact_point_rule(session, name, model, opening_direction=d, side=side)
             moving = subtree(model, session.joint_child[name])

@@ -51,7 +51,8 @@ def decompose_for_blocked(obj: SimObject, asset: AssetDescription, metric: Metri
                 continue
             sub = [ln for ln in subtrees.get(name, [session.joint_child[name]]) if ln in with_collision]
             others = [ln for ln in with_collision if ln not in sub]
-            depth, q, pair = 0.0, stall, None  # the deepest pair over SAMPLES positions from the stall to the goal
+            # the deepest pair over SAMPLES positions from the stall to the goal
+            depth, q, pair = 0.0, stall, None
             for k in range(SAMPLES + 1):
                 at = stall + (goal - stall) * k / SAMPLES
                 session.set_joint_positions({**state, name: at})
