@@ -183,7 +183,7 @@ def plot_probes(probes: list[Any]) -> bytes | None:
             at = reached_fraction(pr.action, pr.target_fraction)
             a.axhline(pr.start + (at - pr.start_fraction) * (pr.target - pr.start) / (pr.target_fraction - pr.start_fraction),
                       color="C2", ls="--", label="counts as reached")
-        if len(ph) and np.any(ph > 0):
+        if np.any(ph > 0):
             a.axvline(t[int(np.argmax(ph > 0))], color="gray", ls="--", label="release")
         r = a.twinx()
         r.set_ylabel("N")
