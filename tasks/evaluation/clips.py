@@ -135,7 +135,7 @@ def fit_poses(traj: Trajectory, fps: float = CLIP_FPS, extra: Sequence[int] = ()
     """:data:`FIT_POSES` poses spread over the frames of ``traj`` at ``fps``, plus the samples ``extra``:
     what a clip's cameras are fitted to."""
     idx = np.asarray(traj.sampled(fps))
-    picks = idx[np.linspace(0, len(idx) - 1, min(len(idx), FIT_POSES)).round().astype(int)] if len(idx) else idx
+    picks = idx[np.linspace(0, len(idx) - 1, min(len(idx), FIT_POSES)).round().astype(int)]
     return trajectory_poses(traj, sorted({*picks.tolist(), *extra}))
 
 

@@ -96,10 +96,9 @@ def read_input(source: Path | str | None) -> InputSide:
     if not source:
         return InputSide(name="the input", error="report.json names no input")
     path = Path(source)
-    side = InputSide(name=path.name)
     if not path.exists():
-        side.error = f"{path.name} is no longer where it was read from"
-        return side
+        return InputSide(name=path.name, error=f"{path.name} is no longer where it was read from")
+    side = InputSide(name=path.name)
     try:
         other = staging.other_format_file(path)
         if other is not None:

@@ -214,7 +214,7 @@ def _badge(ev) -> str:
     with the other failing checks beside it."""
     r = readiness(list(ev.metrics))
     engine_errors = [f for f in ev.failures if f.startswith("engine@")]
-    other = [f for f in ev.failures if f not in r.failures and not f.startswith("engine@")]
+    other = [f for f in ev.failures if f not in r.failures and f not in engine_errors]
     if r.ready and not engine_errors:
         html = f"<span class='badge pass'>{esc(r.line())}</span>"
     else:

@@ -79,7 +79,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     rounds = [EscalationRound(round=0, metrics=check.metrics, reason="initial post-check")]
     search = dynamics_search.DynamicsSearch(lim.budgets, lim.hand_caps, floors)  # relief and escalation bracketed by what each round measured
     search.record(overlay, check.metrics)
-    tried = [(overlay, check)]
+    tried = [overlay]
     while (not check.passed or task_tier.task_failing(check.metrics)) and n < config.max_escalation_rounds:
         n += 1
         before = overlay
@@ -100,15 +100,15 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         check = checked(overlay, escalated)
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason, words_kept=held))
         search.record(overlay, check.metrics)
-        tried.append((overlay, check))
-    best = dynamics_search.fewest_failures([c.metrics for _, c in tried])
+        tried.append(overlay)
+    best = dynamics_search.fewest_failures([r.metrics for r in rounds])
     earlier = best != len(tried) - 1
     # an earlier round kept, or an escalation round's check (the sweep and the other engines not run): checked again, the sweep included
     if earlier or postcheck.sweep_not_run(check.metrics):
         reason = (f"round {best} failed the fewest tiers: its friction and damping kept" if earlier
                   else "the last round's setting checked again with the joint sweep")
         if earlier:
-            overlay = tried[best][0]
+            overlay = tried[best]
         check = checked(overlay)
         changes = {n_: {"damping": d.damping, "friction": d.friction} for n_, d in overlay.joints.items()}
         rounds.append(EscalationRound(round=rounds[-1].round + 1, metrics=check.metrics, changes=changes, reason=reason))
