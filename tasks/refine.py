@@ -120,10 +120,9 @@ def refine_asset(
         overrides.apply_overrides(RequestSpec(), config.overrides, asset)
     if config.keep_declared:  # the estimator keeps the asset's plausible declared physics (keep_declared.KeepDeclared)
         try:
-            declared = read_declared(asset_dir, asset.urdf_path)
+            est = keep.KeepDeclared(est, read_declared(asset_dir, asset.urdf_path))
         except Exception as exc:
             raise RefineError(f"{asset.urdf_path}: the declared physics cannot be read: {exc}", "invalid_input") from exc
-        est = keep.KeepDeclared(est, declared)
     chash = run_hash(config, prompt + (f"\ntask: {task}" if task else ""), category)
     if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
         output_folder.remove_stale_staging(out_dir)  # what a killed --force run left beside it

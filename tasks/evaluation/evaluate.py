@@ -304,7 +304,7 @@ def _manipulation(engine: str, obj: SimObject, closed: dict[str, tuple[float, fl
     """The manipulation tiers (joint sweep, operability, robust rest) of ``obj`` in another ``engine``, as the post-check
     measures them in PyBullet (the parts asked to move freely those of ``check``); skipped where the engine is not
     installed, failed where it cannot load or step the object."""
-    free = tuple(sorted(((check.metric("robust_rest").details or {}).get("free_moving") or {}))) if check.runs else ()
+    free = tuple(sorted((check.metric("robust_rest").details.get("free_moving") or {}))) if check.runs else ()
     try:
         return manipulation.measure_manipulation(engine, obj, closed, category=ctx.category,
                                                  labels=task_tier.link_labels(ctx.asset), free_joints=free)

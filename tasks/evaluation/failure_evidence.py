@@ -145,7 +145,7 @@ def operability_failures(metrics: list) -> list[tuple[str, dict, dict]]:
     """(engine, part summary, stroke) of every failing operability stroke (``operability`` details: the part and
     the stroke as :func:`~asset2sim.tasks.check.operability.operability_metric` records them)."""
     return [(m.engine, part, s) for m in metrics if m.name == "operability" and m.passed is False
-            for part in ((m.details or {}).get("parts") or {}).values()
+            for part in (m.details.get("parts") or {}).values()
             for s in part.get("strokes") or [] if not s.get("passed", True)]
 
 

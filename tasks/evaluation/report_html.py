@@ -239,7 +239,7 @@ def as_asked_block(ev) -> str:
     m = ev.metric("request_met")
     if m is None or m.passed is None:
         return ""
-    d = m.details or {}
+    d = m.details
     if m.passed:
         return (f"<p class='small'>As asked: every part and state the request names is applied ({int(d.get('graded') or 0)} "
                 "checked; states measured from the closed end).</p>")

@@ -113,9 +113,8 @@ def band_score(fraction: float, band: str) -> tuple[float, str]:
     if lo <= fraction <= hi:
         return 1.0, f"opening {fraction:.2f} inside {band} [{lo}, {hi}]"
     dist = lo - fraction if fraction < lo else fraction - hi
-    if dist <= BAND_HALF_MARGIN:
-        return 0.5, f"opening {fraction:.2f} just outside {band} [{lo}, {hi}] (by {dist:.2f})"
-    return 0.0, f"opening {fraction:.2f} outside {band} [{lo}, {hi}] (by {dist:.2f})"
+    near = dist <= BAND_HALF_MARGIN
+    return (0.5 if near else 0.0), f"opening {fraction:.2f} {'just ' if near else ''}outside {band} [{lo}, {hi}] (by {dist:.2f})"
 
 
 #: Relative tolerance of a number asked in a request, its half-score bound,
@@ -152,8 +151,7 @@ def target_score(check: JointStateCheck) -> tuple[float | None, str]:
         return 0.0, "closed end unknown"
     if t.kind == "end":
         at_end = check.fraction <= END_FRACTION_TOL or check.fraction >= 1.0 - END_FRACTION_TOL
-        where = f"opening {check.fraction:.2f}"
-        return (1.0, f"{where}: at a travel end ({t.end})") if at_end else (0.0, f"{where}: not at a travel end ({t.end})")
+        return (1.0 if at_end else 0.0), f"opening {check.fraction:.2f}: {'' if at_end else 'not '}at a travel end ({t.end})"
     if t.kind == "fraction":
         achieved, unit = check.fraction, ""
     else:
