@@ -391,7 +391,6 @@ def _stages(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float] 
     syn = clipped
     searched = syn.candidate(ctx, shut)
     st, kept = placement.search_state(ctx, run.kin, run.est, syn, searched, config, ws, log)
-    st.collision_changes = shut_notes + list(st.collision_changes)
     state = dict(st.result)
     room = [f"{j} ({ctx.asset.link(ctx.asset.joint(j).child).semantic_label or 'part'}) opened to {f:.2f} of its range: the request "
             f"did not address it (closed by default) and a part the request opened lay through it closed" for j, f in st.room_made.items()]
@@ -403,7 +402,7 @@ def _stages(ctx: EstimationContext, run: RefineRun, fractions: dict[str, float] 
     lifted = ground_clearance.apply_ground_clearance(replace(kept, state=state), ws,
                                                      closed_tuples({n: c for n, c in syn.closed_out.items() if n not in syn.rests}))
     state, overrides, floored = lifted.state, lifted.overrides, lifted.state_notes
-    st.collision_changes = list(st.collision_changes) + lifted.collision_notes
+    st.collision_changes = shut_notes + list(st.collision_changes) + lifted.collision_notes
     refined = Candidate(ctx.asset, syn.overlay, state, overrides, ctx.root_rotation)
     measured, moved = refined, []  # the pieces the statics are measured on: those the limits were clipped on
     # the state search's repairs changed the collision pieces: the limits are clipped again on them (stage 6b); a lift

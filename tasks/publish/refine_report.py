@@ -35,6 +35,7 @@ def build_report(ctx: EstimationContext, prompt: str, chash: str, att: Attempt, 
     """``report.json``'s model from the final attempt and its as-asked tier (``asked``: :func:`as_asked.as_asked_tier`
     of the attempt's metrics): the verdict decided here, once, from every measurement it records."""
     asset, overlay, st, state, closed_out = ctx.asset, att.overlay, att.st, att.state, att.closed_out
+    est = overlay.estimator
     metrics = asked.metrics
     verdict = readiness(metrics)
     return RefineReport(
@@ -46,12 +47,12 @@ def build_report(ctx: EstimationContext, prompt: str, chash: str, att: Attempt, 
         version=__version__,
         input_hash=asset.input_hash,
         config_hash=chash,
-        estimator=overlay.estimator.name,
-        model=overlay.estimator.model,
-        model_queries=overlay.estimator.queries + st.model_queries,
-        model_tokens=overlay.estimator.tokens,
-        model_cost_usd=overlay.estimator.cost_usd,
-        model_seconds=overlay.estimator.seconds,
+        estimator=est.name,
+        model=est.model,
+        model_queries=est.queries + st.model_queries,
+        model_tokens=est.tokens,
+        model_cost_usd=est.cost_usd,
+        model_seconds=est.seconds,
         scale=overlay.scale,
         total_mass=overlay.total_mass(),
         initial_joint_positions=state,

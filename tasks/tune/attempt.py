@@ -233,9 +233,8 @@ def opened_lying(ctx: EstimationContext, kin, att: Attempt, moving_links: list[s
         return None
     second = balanced_attempt(replace(ctx, root_rotation=rotation), kin, posed(rotation),
                               lambda fractions: posed(rotation, fractions=fractions), log)
-    failed = [m.name for m in att.check.metrics if m.passed is False]
-    short = f"{', '.join(att.off_band)} short of the band asked" if att.off_band else f"{', '.join(failed) or 'a check'} failed"
-    short += " as modelled"
+    failed = ", ".join(m.name for m in att.check.metrics if m.passed is False) or "a check"
+    short = (f"{', '.join(att.off_band)} short of the band asked" if att.off_band else f"{failed} failed") + " as modelled"
     if not second.settles:
         log.say("post_check", f"{short}; laid down to open, not every check passes: kept as modelled")
         return None
