@@ -441,7 +441,8 @@ def _synthesize(ctx: EstimationContext, run: RefineRun) -> placement.Synthesis:
         result = run.est.estimate(ctx, run.kin)
     except Exception as exc:
         code = getattr(exc, "code", None)  # a model call's fault by what happened (MODEL_REPLY_INVALID ...)
-        raise RefineError(f"{asset.asset_id}: estimator {run.config.estimator!r} failed: {one_line(exc, 600)}", "estimator_failure",
+        raise RefineError(f"{asset.asset_id}: estimator {run.config.estimator!r} failed: {one_line(exc, 600)}",
+                          "estimator_failure",
                           ["ESTIMATOR_FAILED", *([code] if isinstance(code, str) and code.startswith("MODEL_") else [])]) from exc
     bands = dict(result.bands)
     log.lap("synthesize")

@@ -40,7 +40,8 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
                 """The row's mean and standard deviation of ``key``."""
                 return _pm(r.get(f"{key}_mean"), r.get(f"{key}_sd"))
 
-            row = [spread("pen_ts"), spread("pen"), *(_pm(r.get(rate), pct=True) + f" ({r.get(n, 0)})" for rate, n in _PASS_RATES),
+            row = [spread("pen_ts"), spread("pen"),
+                   *(_pm(r.get(rate), pct=True) + f" ({r.get(n, 0)})" for rate, n in _PASS_RATES),
                    spread("scale") + ("%" if r.get("scale_mean") is not None else ""), spread("init"),
                    _pm(r.get("prompt_mean"), pct=True), _pm(r.get("all_pass"), pct=True), fmt(r.get("median_seconds"), 3),
                    esc(r.get("realism", "not rated"))]

@@ -96,7 +96,8 @@ def _penetration_details(ev) -> str:
             out.append(f"<p class='small'>self-contact ({esc(m.engine)}): no two links that are not parent and child overlap</p>")
             continue
         rows = (f"<tr><td>{esc(p['link_a'])}</td><td>{esc(p['link_b'])}</td><td class='num'>{fmt(p['depth_mm'])}</td>"
-                f"<td class='num'>{fmt(p['max_depth_mm'])}</td><td class='num'>{p['points']}</td></tr>" for p in m.details["pairs"])
+                f"<td class='num'>{fmt(p['max_depth_mm'])}</td><td class='num'>{p['points']}</td></tr>"
+                for p in m.details["pairs"])
         out.append(f"<h3>Self-contact: penetrating link pairs ({esc(m.engine)}; {'pass' if m.passed else 'FAIL'}: {esc(m.threshold)})</h3>"
                    + table(("link a", "link b", "sum of depths (mm)", "deepest point (mm)", "points"), rows))
     for m in ev.metrics:  # the pairs the self-contact Phi skips: a child inside its parent
@@ -132,9 +133,8 @@ def _request_warnings(d: dict) -> str:
     items = list(d.get("warnings", []))
     if d.get("not_counted"):
         items.append("not counted in prompt alignment: " + ", ".join(f"'{n['phrase']}'" for n in d["not_counted"]))
-    if not items:
-        return ""
-    return f"<div class='warn' style='padding:6px 12px;border-radius:6px'><b>Request warnings</b><ul>{_listed(items)}</ul></div>"
+    return (f"<div class='warn' style='padding:6px 12px;border-radius:6px'><b>Request warnings</b><ul>{_listed(items)}</ul></div>"
+            if items else "")
 
 
 def _prompt_details(ev) -> str:

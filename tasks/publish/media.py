@@ -89,8 +89,8 @@ def make_media(out_dir: Path | str, *, reference: Path | str | None = None, clip
             except Exception as exc:  # a renderer unavailable: the report without its renders
                 raise_refusal(exc)  # but never a write the output guard refused
                 report.notes.append(f"renders failed: {one_line(exc)}")
-            ev = evaluate.recorded_evaluation(out_dir, reference=reference)
-            out["html"] = str(evaluate.write_media(ev, out_dir, views=views, clips=clips))
+            out["html"] = str(evaluate.write_media(evaluate.recorded_evaluation(out_dir, reference=reference), out_dir,
+                                                   views=views, clips=clips))
             if clips and (out_dir / CLIPS_DIR / CLIPS_JSON).is_file():
                 out["clips"] = str(out_dir / CLIPS_DIR)
             report.media = "done"

@@ -103,7 +103,8 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         tried.append(overlay)
     best = dynamics_search.fewest_failures([r.metrics for r in rounds])
     earlier = best != len(tried) - 1
-    # an earlier round kept, or an escalation round's check (the sweep and the other engines not run): checked again, the sweep included
+    # an earlier round kept, or an escalation round's check (the sweep and the other engines not run): checked again,
+    # the sweep included
     if earlier or postcheck.sweep_not_run(check.metrics):
         reason = (f"round {best} failed the fewest tiers: its friction and damping kept" if earlier
                   else "the last round's setting checked again with the joint sweep")

@@ -68,7 +68,8 @@ class KeepDeclared:
             "other": [*est.overlay.notes.other, *notes]})})
         return dataclasses.replace(est, overlay=overlay, notes=[*est.notes, *notes])
 
-    def _keep(self, ctx: EstimationContext, overlay: Overlay, judged: Judgement, size_ok: bool) -> tuple[dict[str, dict], list[str]]:
+    def _keep(self, ctx: EstimationContext, overlay: Overlay, judged: Judgement,
+              size_ok: bool) -> tuple[dict[str, dict], list[str]]:
         """(the overlay's links and joints with the plausible declared values kept, none when nothing is; the notes)."""
         if not size_ok or overlay.scale != 1.0:
             why = "its size is implausible and is rescaled" if not size_ok else f"the request scales it (x{overlay.scale:.4g})"

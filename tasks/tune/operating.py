@@ -232,7 +232,8 @@ def operating_budgets(obj: SimObject, overlay: Overlay, closed: dict[str, tuple[
             grasp = _Grasp(side, link, point, rule, moving)
             range_of = operating_range(category, labels.get(session.joint_child[name]) if grasp.side == "child" else None)
             tight = _tightest(session, model, name, (qc, d, rng), (actions, whole), grasp, range_of,
-                              (mu, total) if free and ground else None, springs.get(name), free_moving, overlay.joints[name].inertia_axis)
+                              (mu, total) if free and ground else None, springs.get(name), free_moving,
+                              overlay.joints[name].inertia_axis)
             session.set_joint_positions(dict(state))
             if tight is not None:
                 out[name] = tight

@@ -80,8 +80,7 @@ def sweep_repairs(obj: SimObject, asset: AssetDescription, sweep_metric: MetricR
     Raises:
         OSError: a collision file cannot be read or written.
     """
-    source, state = obj.source, dict(obj.state)
-    repair = clearance_repair(source.model(), source.path, blocked, state, overrides, scale, out_dir, folder)
+    repair = clearance_repair(obj.source.model(), obj.source.path, blocked, dict(obj.state), overrides, scale, out_dir, folder)
     if repair is not None:
         yield repair
         return
