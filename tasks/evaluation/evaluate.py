@@ -131,35 +131,28 @@ def semantic_metrics(ctx: EstimationContext, model: UrdfModel, state: dict[str, 
                          "base_mass_range_kg": prior.get("base_mass_range"), "prior_source": prior.get("source")})
     if rng is not None:
         mass.threshold = f"{rng[0]:.3g} kg <= m <= {rng[1]:.3g} kg (category range scaled to the asset's size, f = {f:.3g})"
-    return [sem.scale_deviation(scale, getattr(ref, "scale", None), scale_source=scale_source), m, mass,
-            _prompt_alignment(ctx, types, state, closed, resolution, prior, largest)]
-
-
-def _prompt_alignment(ctx: EstimationContext, types: dict[str, str], state: dict[str, float], closed: dict[str, ClosedState],
-                      resolution: StateResolution | None, prior: dict[str, Any], largest: float | None) -> MetricResult:
-    """``prompt_alignment`` of the joints the request set (``resolution.requests``, the one reading of the request);
-    ``types``: joint -> type."""
     spec = ctx.request
-    if not spec.text:
-        return MetricResult(name="prompt_alignment", value=None, unit="fraction", details={"reason": "no prompt"}, engine="none")
-    res = resolution or StateResolution({})
-    checks = []
-    for name, jr in res.requests.items():
-        c, q = closed.get(name), state.get(name)
-        known = c is not None and q is not None
-        label = ctx.asset.link(ctx.asset.joint(name).child).semantic_label
-        checks.append(sem.JointStateCheck(name, jr.band, c.fraction(q) if known else None, label, jr.phrase, jr.target,
-                                          c.direction * (q - c.q_closed) if known else None, types.get(name, "revolute")))
-    unmatched = [p for p, _ in res.unapplied]
-    dims = prior.get("base_dims")
-    m = sem.prompt_alignment(size_requested=spec.size_class is not None, largest_extent=largest,
-                             typical_largest=dims[0] if dims else None, size_factor=float(prior.get("factor", 1.0)),
-                             joint_checks=checks, state_requested=bool(spec.joint_states), unmatched_requests=unmatched,
-                             text=spec.text, understood=spec.understood,
-                             warnings=request_warnings(spec, unmatched, ctx.category) + res.warnings)
-    m.details.update({"size_class": spec.size_class, "category": ctx.category, "variant": prior.get("variant"),
-                      "extent_state": "closed state", "prior_note": prior.get("note")})
-    return m
+    aligned = MetricResult(name="prompt_alignment", value=None, unit="fraction", details={"reason": "no prompt"}, engine="none")
+    if spec.text:
+        # the joints the request set (``resolution.requests``, the one reading of the request)
+        res = resolution or StateResolution({})
+        checks = []
+        for name, jr in res.requests.items():
+            c, q = closed.get(name), state.get(name)
+            known = c is not None and q is not None
+            label = ctx.asset.link(ctx.asset.joint(name).child).semantic_label
+            checks.append(sem.JointStateCheck(name, jr.band, c.fraction(q) if known else None, label, jr.phrase, jr.target,
+                                              c.direction * (q - c.q_closed) if known else None, types.get(name, "revolute")))
+        unmatched = [p for p, _ in res.unapplied]
+        dims = prior.get("base_dims")
+        aligned = sem.prompt_alignment(size_requested=spec.size_class is not None, largest_extent=largest,
+                                       typical_largest=dims[0] if dims else None, size_factor=float(prior.get("factor", 1.0)),
+                                       joint_checks=checks, state_requested=bool(spec.joint_states), unmatched_requests=unmatched,
+                                       text=spec.text, understood=spec.understood,
+                                       warnings=request_warnings(spec, unmatched, ctx.category) + res.warnings)
+        aligned.details.update({"size_class": spec.size_class, "category": ctx.category, "variant": prior.get("variant"),
+                                "extent_state": "closed state", "prior_note": prior.get("note")})
+    return [sem.scale_deviation(scale, getattr(ref, "scale", None), scale_source=scale_source), m, mass, aligned]
 
 
 def _masses(overlay: Overlay | None, model: UrdfModel) -> dict[str, dict[str, Any]]:
