@@ -359,25 +359,22 @@ def _write_clips(ev: Evaluation, out_dir: Path | str) -> ClipSet | None:
     if sweep is None or not sweep.joints:
         ev.notes.append("clips: none (pybullet ran no joint sweep)")
         return None
-    labels = _joint_labels(ev._context.urdf, ev._context.model)
+    ctx = ev._context
+    # joint -> its moving link's part label (``semantics.txt`` beside the URDF; None without one)
+    try:
+        semantics = partnet_mobility.read_semantics(ctx.urdf.parent)
+    except AssetError:
+        semantics = {}
+    labels = {j.name: (semantics.get(j.child) or (None, None))[1] for j in ctx.model.joints if j.type in MOVABLE}
     joints = clip_joints(ev.task_joints, [js.joint for js in sweep.joints], labels)
     try:
-        return clip_files.sweep_clips(ev._context.urdf, sweep, joints, dict(ev.initial_state), out_dir, task_run=run.task)
+        return clip_files.sweep_clips(ctx.urdf, sweep, joints, dict(ev.initial_state), out_dir, task_run=run.task)
     except ImportError as exc:
         ev.notes.append(f"clips skipped: {exc} (pip install av)")
     except Exception as exc:  # a clip must not cost the evaluation (a full disk shows again writing evaluation.json)
         raise_refusal(exc)  # a write the output guard refused is the output's problem, not the clip's
         ev.notes.append(f"clips failed: {one_line(exc)}")
     return None
-
-
-def _joint_labels(urdf: Path, model: UrdfModel) -> dict[str, str | None]:
-    """joint -> its moving link's part label (``semantics.txt`` beside ``urdf``; None without one)."""
-    try:
-        semantics = partnet_mobility.read_semantics(urdf.parent)
-    except AssetError:
-        semantics = {}
-    return {j.name: (semantics.get(j.child) or (None, None))[1] for j in model.joints if j.type in MOVABLE}
 
 
 def write_media(ev: Evaluation, out_dir: Path | str, *, views: dict[str, np.ndarray] | None = None, clips: bool = True) -> Path:

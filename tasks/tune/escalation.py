@@ -90,7 +90,14 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         settled = search.settle(before, step.overlay, step.changes, caps)
         reason = "; ".join(filter(None, [step.reason, *settled.notes]))
         overlay, held = word_guard.keep(before, settled.overlay, kept_words)
-        changes = _changed(before, overlay)
+        # joint -> {parameter: new value} of the damping, friction and stiffness the round changed
+        changes: dict[str, dict[str, float]] = {}
+        for name, d in overlay.joints.items():
+            b = before.joints.get(name)
+            diff = {k: float(getattr(d, k)) for k in ("damping", "friction", "stiffness")
+                    if b is None or getattr(d, k) != getattr(b, k)}
+            if diff:
+                changes[name] = diff
         for line in held:
             log.say("post_check", line)
         if not changes:
@@ -115,17 +122,6 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         rounds.append(EscalationRound(round=rounds[-1].round + 1, metrics=check.metrics, changes=changes, reason=reason))
     log.lap("post_check")
     return Tuned(overlay, check, rounds)
-
-
-def _changed(before: Overlay, after: Overlay) -> dict[str, dict[str, float]]:
-    """joint -> {parameter: new value} of the damping, friction and stiffness ``after`` changed from ``before``."""
-    out: dict[str, dict[str, float]] = {}
-    for name, d in after.joints.items():
-        b = before.joints.get(name)
-        diff = {k: float(getattr(d, k)) for k in ("damping", "friction", "stiffness") if b is None or getattr(d, k) != getattr(b, k)}
-        if diff:
-            out[name] = diff
-    return out
 
 
 def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[str, ClosedState], result: Tuned, st: StateRefinement,

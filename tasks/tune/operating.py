@@ -316,14 +316,14 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
                 least, least_bound = force, bound
     if budget is None:
         return None
-    speed = GripperLimits().max_speed_m_s / (lever or 1.0)
-    fcap = FRICTION_SHARE * max(budget, 0.0)
-    dcap = (1.0 - FRICTION_SHARE) * max(budget, 0.0) / speed
+    speed, room = GripperLimits().max_speed_m_s / (lever or 1.0), max(budget, 0.0)
+    fcap = FRICTION_SHARE * room
+    dcap = (1.0 - FRICTION_SHARE) * room / speed
     conflict = ""
     floor = 0.0 if free_moving else HOLD_MARGIN * (q_state or 0.0)
     if fcap < floor:  # friction takes what holding the state needs, damping the rest of the budget
-        if floor > max(budget, 0.0):
-            conflict = (f"{joint}: the operating budget {max(budget, 0.0):.3g} {'N' if prismatic else 'N m'} "
+        if floor > room:
+            conflict = (f"{joint}: the operating budget {room:.3g} {'N' if prismatic else 'N m'} "
                         f"({least_bound}) is below what holds the requested state ({floor:.3g}): friction kept at the hold floor")
         fcap = floor
         dcap = min(dcap, max(budget - floor, 0.0) / speed)
