@@ -57,29 +57,21 @@ def point_cloud(urdf: Path, state: dict[str, float]) -> dict[str, np.ndarray]:
     return out
 
 
+#: A metric's note in the verdict table: the first of these details it holds, said so.
+_NOTES = (("skipped", "skipped: {}".format), ("reason", str), ("failures", "; ".join), ("failing", lambda v: "failing: " + ", ".join(v)),
+          ("reasons", "; ".join))
+
+
 def _verdict_table(ev) -> str:
-    rows = []
-    for m in ev.metrics:
-        d = m.details
-        extra = ""
-        if m.name == "rest_stability" and "D_ori_rad" in d:
-            extra = f"D_pos {fmt(d['D_pos_m'])} m, D_ori {fmt(d['D_ori_rad'])} rad"
-        elif d.get("skipped"):
-            extra = f"skipped: {d['skipped']}"
-        elif d.get("reason"):
-            extra = str(d["reason"])
-        elif d.get("failures"):
-            extra = "; ".join(d["failures"])
-        elif d.get("failing"):
-            extra = "failing: " + ", ".join(d["failing"])
-        elif d.get("reasons"):
-            extra = "; ".join(d["reasons"])
-        rows.append(
-            f"<tr><td>{esc(m.name)}</td><td>{esc(m.engine)}</td><td class='num'>{fmt(m.value)}</td>"
-            f"<td>{esc(m.unit)}</td>"
-            f"{verdict_cell(m.passed)}<td class='small'>{esc(m.threshold)}</td><td class='small'>{esc(extra)}</td></tr>"
-        )
-    return table(("metric", "engine", "value", "unit", "verdict", "threshold", "notes"), rows)
+    def note(d: dict, name: str) -> str:
+        if name == "rest_stability" and "D_ori_rad" in d:
+            return f"D_pos {fmt(d['D_pos_m'])} m, D_ori {fmt(d['D_ori_rad'])} rad"
+        return next((say(d[k]) for k, say in _NOTES if d.get(k)), "")
+
+    return table(("metric", "engine", "value", "unit", "verdict", "threshold", "notes"), (
+        f"<tr><td>{esc(m.name)}</td><td>{esc(m.engine)}</td><td class='num'>{fmt(m.value)}</td><td>{esc(m.unit)}</td>"
+        f"{verdict_cell(m.passed)}<td class='small'>{esc(m.threshold)}</td><td class='small'>{esc(note(m.details, m.name))}</td></tr>"
+        for m in ev.metrics))
 
 
 def _penetration_details(ev) -> str:
@@ -159,18 +151,14 @@ def _probe_details(ev) -> str:
     m = ev.metric("probes")
     if m is None or not m.details.get("probes"):
         return "<p class='small'>no probes run" + (f": {esc(m.details.get('skipped'))}" if m and m.details.get("skipped") else "") + "</p>"
-    rows = []
-    for p in m.details["probes"]:
-        unit, eff_unit = ("m", "N") if p["joint_type"] == "prismatic" else ("rad", "N*m")
-        rows.append(
-            f"<tr><td>{esc(p['joint'])}</td><td>{esc(p['action'])}</td><td class='num'>{fmt(p['start'])} {unit}</td>"
+    rows = (f"<tr><td>{esc(p['joint'])}</td><td>{esc(p['action'])}</td><td class='num'>{fmt(p['start'])} {unit}</td>"
             f"<td class='num'>{fmt(p['target'])} {unit}</td><td>{fmt(p['reached'])}</td>"
             f"<td class='num'>{fmt(p['peak_force'])} N</td><td class='num'>{fmt(p['peak_effort'])} {eff_unit}</td>"
             f"<td class='num'>{fmt(p['root_displacement'] * 1000)} mm / {fmt(p['root_rotation'])} rad</td>"
             f"<td>{fmt(p['rebound'])}</td><td>{fmt(p['kept_moving'])}</td>"
             f"<td class='{'pass' if p['success'] else 'fail'}'>{esc(p['failure'] or 'ok')}</td>"
             f"<td class='small'>{esc('; '.join(p['notes']))}</td></tr>"
-        )
+            for p in m.details["probes"] for unit, eff_unit in [("m", "N") if p["joint_type"] == "prismatic" else ("rad", "N*m")])
     return table(("joint", "probe", "start", "target", "reached (crossed the line that counts)", "peak force", "peak torque/force",
                   "object moved", "rebound", "kept moving", "verdict", "notes"), rows)
 
@@ -280,12 +268,10 @@ def engines_section(report: dict | None) -> str:
         parts = [f"{esc(j)} {fmt(r.get('ratio'), 2)} f" for j, r in b.get("joints", {}).items()]
         return f"{verdict_cell(b.get('passed'))} <span class='small'>{', '.join(parts) or 'no joint with friction'}</span>"
 
-    cells = []
-    for r in rows:
-        held_text = ", ".join(f"{esc(j)}{'' if ok else ' (moves)'}" for j, ok in (r.get("joints_held") or {}).items()) or "-"
-        cells.append(f"\n<tr><td>{esc(r.get('engine'))}</td><td>{esc(r.get('status'))} <span class='small'>{esc(r.get('reason') or '')}</span>"
-                     f"</td><td>{verdict_cell(r.get('rest_stability'))}</td><td class='small'>{held_text}</td>"
-                     f"<td>{breakaway_cell(r.get('breakaway'))}</td></tr>")
+    cells = [f"\n<tr><td>{esc(r.get('engine'))}</td><td>{esc(r.get('status'))} <span class='small'>{esc(r.get('reason') or '')}</span>"
+             f"</td><td>{verdict_cell(r.get('rest_stability'))}</td><td class='small'>"
+             + (", ".join(f"{esc(j)}{'' if ok else ' (moves)'}" for j, ok in (r.get("joints_held") or {}).items()) or "-")
+             + f"</td><td>{breakaway_cell(r.get('breakaway'))}</td></tr>" for r in rows]
     return f"<h2>What holds in each engine</h2>\n{TEXTS['engines']}\n" + table(("engine", "status", "rest stability", "joints held", "breakaway"),
                                                                       [*cells, "\n"])
 
