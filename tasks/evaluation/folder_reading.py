@@ -49,20 +49,14 @@ def reference_state(ref: partnet_mobility.GenSim2Reference, model: UrdfModel, sc
     """(GenSim2's state of the reference's task joints present in ``model``, the rule): the lower end of
     ``joint_position_range`` (else 0) clipped to the reference URDF's limits, prismatic values times ``scale`` (else the
     reference's, else 1). Raises UrdfError: the reference URDF cannot be read."""
-    state: dict[str, float] = {}
     if ref.urdf is None:
-        return state, ""
+        return {}, ""
     have = {j.name for j in model.joints}
     ref_joints = {j.name: j for j in read_urdf(ref.urdf, mode="lenient").joints}
     rng = ref.joint_position_range
-    for n in ref.task_joints:
-        if n not in have or n not in ref_joints:
-            continue
-        jr = ref_joints[n]
-        q = float(np.clip(rng[0] if rng is not None else 0.0, jr.lower, jr.upper))
-        if jr.type == "prismatic":
-            q *= scale if scale is not None else (ref.scale or 1.0)
-        state[n] = q
+    k = scale if scale is not None else (ref.scale or 1.0)
+    state = {n: float(np.clip(rng[0] if rng is not None else 0.0, jr.lower, jr.upper)) * (k if jr.type == "prismatic" else 1)
+             for n in ref.task_joints if n in have and n in ref_joints for jr in [ref_joints[n]]}
     return state, (("lower end of joint_position_range" if rng is not None else "0")
                    + " clipped to reference_gensim2.urdf's limits (prismatic x the evaluated scale)")
 

@@ -137,12 +137,11 @@ def _prompt_details(ev) -> str:
     d = m.details
     size = d.get("size") or {}
     rows = [f"<tr><td>size</td><td>{esc(d.get('size_class') or 'regular (not stated)')}</td>"
-            f"<td class='num'>{fmt(size.get('score'))}</td><td class='small'>{esc(size.get('reason'))}</td></tr>"]
-    for j in d.get("joints", []):
-        rows.append(f"<tr><td>joint {esc(j.get('joint'))} ({esc(j.get('label'))})</td><td>{esc(j.get('band'))}</td>"
-                    f"<td class='num'>{fmt(j.get('score'))}</td><td class='small'>{esc(j.get('reason'))}</td></tr>")
-    if d.get("joint_state_score") is None:
-        rows.append(f"<tr><td>joint state</td><td>-</td><td>-</td><td class='small'>{esc(d.get('joint_state_reason'))}</td></tr>")
+            f"<td class='num'>{fmt(size.get('score'))}</td><td class='small'>{esc(size.get('reason'))}</td></tr>",
+            *(f"<tr><td>joint {esc(j.get('joint'))} ({esc(j.get('label'))})</td><td>{esc(j.get('band'))}</td>"
+              f"<td class='num'>{fmt(j.get('score'))}</td><td class='small'>{esc(j.get('reason'))}</td></tr>" for j in d.get("joints", [])),
+            *([f"<tr><td>joint state</td><td>-</td><td>-</td><td class='small'>{esc(d.get('joint_state_reason'))}</td></tr>"]
+              if d.get("joint_state_score") is None else [])]
     return (f"<p>score <b>{fmt(m.value, 3)}</b> for <i>{esc(d.get('request'))}</i></p>" + _request_warnings(d)
             + table(("part", "requested", "score", "reason"), rows))
 
@@ -201,16 +200,9 @@ def _badge(ev) -> str:
     """The interaction-readiness verdict (:func:`asset2sim.tasks.check.verdict.readiness`)
     with the other failing checks beside it."""
     r = readiness(list(ev.metrics))
-    engine_errors = [f for f in ev.failures if f.startswith("engine@")]
-    other = [f for f in ev.failures if f not in r.failures and f not in engine_errors]
-    if r.ready and not engine_errors:
-        html = f"<span class='badge pass'>{esc(r.line())}</span>"
-    else:
-        html = f"<span class='badge fail'>{esc(r.line() if not r.ready else 'NOT READY')}" + (
-            f"; {esc(', '.join(engine_errors))}" if engine_errors else "") + "</span>"
-    if other:
-        html += f" <span class='small'>other checks failing: {esc(', '.join(other))}</span>"
-    return html
+    other = [f for f in ev.failures if f not in r.failures]
+    return f"<span class='badge {'pass' if r.ready else 'fail'}'>{esc(r.line())}</span>" + (
+        f" <span class='small'>other checks failing: {esc(', '.join(other))}</span>" if other else "")
 
 
 def _joint_state(ev, joint: str, q: float, jtype: str) -> str:

@@ -57,10 +57,7 @@ def keep(before: Overlay, overlay: Overlay, kept: list[Guard]) -> tuple[Overlay,
     joints = dict(overlay.joints)
     for g in kept:
         dyn = joints.get(g.joint)
-        if dyn is None:
-            continue
-        wanted = float(getattr(dyn, g.parameter))
-        if g.allows(wanted):
+        if dyn is None or g.allows(wanted := float(getattr(dyn, g.parameter))):
             continue
         mark = f"; '{g.phrase}' kept its {g.parameter}"
         joints[g.joint] = dyn.model_copy(update={g.parameter: g.value,
