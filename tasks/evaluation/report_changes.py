@@ -219,9 +219,7 @@ def change_rows(report: dict[str, Any], ov: dict[str, Any], joint_types: dict[st
         jt = joint_types.get(name, "revolute")
         dj = before.get(name)
         spring = float(jd.get("stiffness") or 0.0) > 0 or (dj is not None and (dj.stiffness or 0.0) > 0)
-        for k in ("damping", "friction", "stiffness"):
-            if k == "stiffness" and not spring:
-                continue
+        for k in ("damping", "friction", "stiffness")[:3 if spring else 2]:
             rnd = changed.get((name, k))
             why = (f"after check round {rnd.get('round')}: {rnd.get('reason', '')}" if rnd
                    else _source_of(str(jd.get("source") or ""), k))
