@@ -12,7 +12,7 @@ import re
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -23,7 +23,7 @@ from asset2sim.tasks.ingest import declared as declared_mod
 from asset2sim.tasks.synthesize.request_findings import DYNAMICS_UNITS
 from asset2sim.formats import staging
 from asset2sim.inert import html_text, one_line
-from asset2sim.tasks.evaluation.html_blocks import table
+from asset2sim.tasks.evaluation.html_blocks import figure, table
 
 #: Views shown for the input and the output, side by side.
 COMPARED_VIEWS = ("perspective", "front")
@@ -236,10 +236,10 @@ def change_rows(report: dict[str, Any], ov: dict[str, Any], joint_types: dict[st
     return rows
 
 
-def before_after(side: InputSide, after: dict[str, np.ndarray] | None, img: Callable[[np.ndarray, str], str]) -> str:
+def before_after(side: InputSide, after: dict[str, np.ndarray] | None) -> str:
     """The input as modelled (every joint at 0, its own scale; an MJCF or USD file as it is read into the asset
     model) beside the output at its initial state, :data:`COMPARED_VIEWS` each; ``side``: :func:`read_input`;
-    ``after``: the output's renders (view -> (H, W, 3) uint8); ``img``: an (image, caption) -> HTML function. A
+    ``after``: the output's renders (view -> (H, W, 3) uint8), each drawn as a captioned figure. A
     one-line note naming the input's file (never a temporary path) when it cannot be drawn."""
     figs = []
     size = next(((a.shape[1], a.shape[0]) for a in (after or {}).values()), (256, 256))
@@ -247,23 +247,23 @@ def before_after(side: InputSide, after: dict[str, np.ndarray] | None, img: Call
         if side.urdf is None:
             raise ValueError(side.error or "not read")
         src = render_views(side.urdf, {}, views=COMPARED_VIEWS, size=size)
-        figs += [img(src[v], f"input ({side.name}), {v}") for v in COMPARED_VIEWS]
+        figs += [figure(src[v], f"input ({side.name}), {v}") for v in COMPARED_VIEWS]
     except Exception as exc:
         why = side.error or f"{type(exc).__name__}: {one_line(exc)}".replace(str(side.urdf), side.name)
         figs.append(f"<p class='small'>the input could not be drawn: {esc(why)}</p>")
-    figs += [img(after[v], f"output, {v}") for v in COMPARED_VIEWS if after and v in after]
+    figs += [figure(after[v], f"output, {v}") for v in COMPARED_VIEWS if after and v in after]
     return "<div class='views'>" + "".join(figs) + "</div>"
 
 
 def changes_section(report: dict[str, Any] | None, overlay: dict[str, Any] | None, joint_types: dict[str, str],
-                    after: dict[str, np.ndarray] | None, img: Callable[[np.ndarray, str], str]) -> str:
+                    after: dict[str, np.ndarray] | None) -> str:
     """The report's "What asset2sim changed" section (HTML): the input (as its own file declares it, URDF, MJCF or
     USD alike) drawn beside the output, the table of changes; empty without a ``report.json``."""
     if not report:
         return ""
     side = read_input(report.get("source"))
     try:
-        return ("<h2>What asset2sim changed</h2>" + before_after(side, after, img)
+        return ("<h2>What asset2sim changed</h2>" + before_after(side, after)
                 + table(("what", f"input ({side.name})", "output", "why"), change_rows(report, overlay or {}, joint_types, side))
                 + understood(report.get("request")))
     finally:

@@ -335,7 +335,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         f"task-relevant: {esc(', '.join(ev.task_joints) or '-')}</p>",
         views_html,
         clips_section(clips),
-        changes_section(ctx.report, ctx.overlay, joint_types, views, figure),
+        changes_section(ctx.report, ctx.overlay, joint_types, views),
         "<h2>Verdicts</h2>",
         _verdict_table(ev),
         engines_section(ctx.report),

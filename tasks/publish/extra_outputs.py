@@ -127,15 +127,12 @@ def write_extras(out_dir: Path, report: RefineReport, att: Attempt, ctx: Estimat
     held = RefinedAsset.held(out_dir, report)  # the exports read the verdict record from memory, not a stale file
     with quiet_stdout():  # engines and renderers print from C; the library must not
         for key, fmt in FORMATS.items():
-            what = f"{fmt.label} export"
-            try:
-                out[key] = str(fmt.export(held))
-                report.solver_aids += fmt.aids(Path(out[key]))  # read back from the file as written
-            except ImportError as exc:  # MuJoCo / usd-core (pxr) not installed: the extra that would do it named
-                report.notes.append(f"{what} skipped: {install_hint(exc)}")
-            except Exception as exc:  # export must not lose the refined asset
-                raise_if_unwritable(exc, out_dir)
-                report.notes.append(f"{what} failed: {one_line(exc)}")
+            with _noted(report, out_dir, f"{fmt.label} export failed"):  # export must not lose the refined asset
+                try:
+                    out[key] = str(fmt.export(held))
+                    report.solver_aids += fmt.aids(Path(out[key]))  # read back from the file as written
+                except ImportError as exc:  # MuJoCo / usd-core (pxr) not installed: the extra that would do it named
+                    report.notes.append(f"{fmt.label} export skipped: {install_hint(exc)}")
             log.lap(f"extras_{key}")
         ev = views = None
         with _noted(report, out_dir, "evaluation.json failed", named=True):
