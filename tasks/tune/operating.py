@@ -22,7 +22,7 @@ from asset2sim.schemas.overlay import JointDynamics, Overlay
 from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.check import sweep
 from asset2sim.tasks.check.blockers import fixed_root_options
-from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, grasp_side, joint_frame_axis, subtree
+from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, grasp_side, joint_frame_axis, off_axis, subtree
 from asset2sim.tasks.ingest.mesh_checks import box_corners
 from asset2sim.tasks.interpret.operating_forces import ForceRange, operating_range
 from asset2sim.tasks.interpret.part_priors import handled
@@ -67,11 +67,6 @@ def _unit_axis(asset: AssetDescription, joint: str) -> np.ndarray:
     return a / max(float(np.linalg.norm(a)), 1e-12)
 
 
-def _off_axis(points: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """Distances (N,) m of ``points`` (N, 3) from the axis through the origin along unit ``a`` (3,)."""
-    return np.linalg.norm(points - np.outer(points @ a, a), axis=1)
-
-
 def push_lever(overlay: Overlay, asset: AssetDescription, joint: str, geometry: dict[str, LinkGeometry]) -> float:
     """Distance (m) from ``joint``'s axis to its child's farthest box corner; 0 without geometry.
 
@@ -82,7 +77,7 @@ def push_lever(overlay: Overlay, asset: AssetDescription, joint: str, geometry: 
     if g is None:
         return 0.0
     lo, hi = np.asarray(g.bbox_min, float), np.asarray(g.bbox_max, float)
-    return float(_off_axis(box_corners(lo, hi), _unit_axis(asset, joint)).max()) * float(overlay.scale)
+    return float(off_axis(box_corners(lo, hi), 0.0, _unit_axis(asset, joint)).max()) * float(overlay.scale)
 
 
 def com_lever(overlay: Overlay, asset: AssetDescription, joint: str) -> float:
@@ -94,7 +89,7 @@ def com_lever(overlay: Overlay, asset: AssetDescription, joint: str) -> float:
     lp = overlay.links.get(asset.joint(joint).child)
     if lp is None:
         return 0.0
-    return float(_off_axis(np.asarray(lp.com, float)[None, :], _unit_axis(asset, joint))[0])
+    return float(off_axis(np.asarray(lp.com, float)[None, :], 0.0, _unit_axis(asset, joint))[0])
 
 
 def friction_caps(overlay: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry]) -> dict[str, float]:
