@@ -111,7 +111,8 @@ def semantic_metrics(ctx: EstimationContext, model: UrdfModel, state: dict[str, 
         EvaluationError: the reference folder or its files cannot be read.
     """
     ref, types = None, {j.name: j.type for j in model.joints}
-    m = MetricResult(name="initial_joint_deviation", value=None, unit="rad", details={"reason": "no reference given"}, engine="none")
+    m = MetricResult(name="initial_joint_deviation", value=None, unit="rad", details={"reason": "no reference given"},
+                     engine="none")
     if reference is not None:
         try:
             ref = partnet_mobility.read_reference(reference)

@@ -58,8 +58,8 @@ def point_cloud(urdf: Path, state: dict[str, float]) -> dict[str, np.ndarray]:
 
 
 #: A metric's note in the verdict table: the first of these details it holds, said so.
-_NOTES = (("skipped", "skipped: {}".format), ("reason", str), ("failures", "; ".join), ("failing", lambda v: "failing: " + ", ".join(v)),
-          ("reasons", "; ".join))
+_NOTES = (("skipped", "skipped: {}".format), ("reason", str), ("failures", "; ".join),
+          ("failing", lambda v: "failing: " + ", ".join(v)), ("reasons", "; ".join))
 
 
 def _verdict_table(ev) -> str:
@@ -70,7 +70,8 @@ def _verdict_table(ev) -> str:
 
     return table(("metric", "engine", "value", "unit", "verdict", "threshold", "notes"), (
         f"<tr><td>{esc(m.name)}</td><td>{esc(m.engine)}</td><td class='num'>{fmt(m.value)}</td><td>{esc(m.unit)}</td>"
-        f"{verdict_cell(m.passed)}<td class='small'>{esc(m.threshold)}</td><td class='small'>{esc(note(m.details, m.name))}</td></tr>"
+        f"{verdict_cell(m.passed)}<td class='small'>{esc(m.threshold)}</td>"
+        f"<td class='small'>{esc(note(m.details, m.name))}</td></tr>"
         for m in ev.metrics))
 
 
@@ -139,7 +140,8 @@ def _prompt_details(ev) -> str:
     rows = [f"<tr><td>size</td><td>{esc(d.get('size_class') or 'regular (not stated)')}</td>"
             f"<td class='num'>{fmt(size.get('score'))}</td><td class='small'>{esc(size.get('reason'))}</td></tr>",
             *(f"<tr><td>joint {esc(j.get('joint'))} ({esc(j.get('label'))})</td><td>{esc(j.get('band'))}</td>"
-              f"<td class='num'>{fmt(j.get('score'))}</td><td class='small'>{esc(j.get('reason'))}</td></tr>" for j in d.get("joints", [])),
+              f"<td class='num'>{fmt(j.get('score'))}</td><td class='small'>{esc(j.get('reason'))}</td></tr>"
+              for j in d.get("joints", [])),
             *([f"<tr><td>joint state</td><td>-</td><td>-</td><td class='small'>{esc(d.get('joint_state_reason'))}</td></tr>"]
               if d.get("joint_state_score") is None else [])]
     return (f"<p>score <b>{fmt(m.value, 3)}</b> for <i>{esc(d.get('request'))}</i></p>" + _request_warnings(d)
@@ -260,8 +262,9 @@ def engines_section(report: dict | None) -> str:
         parts = [f"{esc(j)} {fmt(r.get('ratio'), 2)} f" for j, r in b.get("joints", {}).items()]
         return f"{verdict_cell(b.get('passed'))} <span class='small'>{', '.join(parts) or 'no joint with friction'}</span>"
 
-    cells = [f"\n<tr><td>{esc(r.get('engine'))}</td><td>{esc(r.get('status'))} <span class='small'>{esc(r.get('reason') or '')}</span>"
-             f"</td><td>{verdict_cell(r.get('rest_stability'))}</td><td class='small'>"
+    cells = [f"\n<tr><td>{esc(r.get('engine'))}</td><td>{esc(r.get('status'))} "
+             f"<span class='small'>{esc(r.get('reason') or '')}</span></td><td>{verdict_cell(r.get('rest_stability'))}</td>"
+             "<td class='small'>"
              + (", ".join(f"{esc(j)}{'' if ok else ' (moves)'}" for j, ok in (r.get("joints_held") or {}).items()) or "-")
              + f"</td><td>{breakaway_cell(r.get('breakaway'))}</td></tr>" for r in rows]
     return f"<h2>What holds in each engine</h2>\n{TEXTS['engines']}\n" + table(("engine", "status", "rest stability", "joints held", "breakaway"),
