@@ -202,9 +202,13 @@ def _badge(ev) -> str:
     """The interaction-readiness verdict (:func:`asset2sim.tasks.check.verdict.readiness`)
     with the other failing checks beside it."""
     r = readiness(list(ev.metrics))
-    other = [f for f in ev.failures if f not in r.failures]
-    return f"<span class='badge {'pass' if r.ready else 'fail'}'>{esc(r.line())}</span>" + (
-        f" <span class='small'>other checks failing: {esc(', '.join(other))}</span>" if other else "")
+    # an engine's error (``engine@<engine>``, in evaluations written before the checks recorded it as their metric's)
+    engine_errors = [f for f in ev.failures if f.startswith("engine@")]
+    other = [f for f in ev.failures if f not in r.failures and f not in engine_errors]
+    text = r.line() if not r.ready or not engine_errors else "NOT READY"
+    return (f"<span class='badge {'pass' if r.ready and not engine_errors else 'fail'}'>{esc(text)}"
+            + (f"; {esc(', '.join(engine_errors))}" if engine_errors else "") + "</span>"
+            + (f" <span class='small'>other checks failing: {esc(', '.join(other))}</span>" if other else ""))
 
 
 def _joint_state(ev, joint: str, q: float, jtype: str) -> str:
