@@ -30,6 +30,7 @@ from asset2sim.flows import driver_skip
 from asset2sim.flows.flow_runtime import dask_task_runner, local_cluster_config, prefect_api_for_run
 from asset2sim.flows.forkserver import StageServer
 from asset2sim.flows.store import join_uri, upload_folder
+from asset2sim.flows.tracking import run_outcome
 from asset2sim.output_paths import write_inside
 from asset2sim.flows.run_plan import flow_parameters, make_run_id, plan_run
 from asset2sim.flows.stages import FLOW_NAME, SUBFLOW_NAME, AssetJob, RegressionFailure
@@ -37,7 +38,8 @@ from asset2sim.tasks.publish.contract import code_version
 from asset2sim.flows.subflow import current_flow_run_id, emit_finished, prepare_batch_size, refine_assets
 from asset2sim.flows.job_records import Prepared, build_manifest_row, build_row
 
-__all__ = ["FLOW_NAME", "SUBFLOW_NAME", "AssetJob", "flow_parameters", "refine_assets", "refine_dataset", "run_refine_flow"]
+__all__ = ["FLOW_NAME", "NOTHING_TO_DO", "SUBFLOW_NAME", "AssetJob", "flow_parameters", "refine_assets", "refine_dataset",
+           "run_outcome", "run_refine_flow"]
 
 
 @flow(name=FLOW_NAME, persist_result=False)
@@ -105,21 +107,33 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
     flow_progress.emit(ProgressEvent("run_finished", name, run.run_id, total=run.info["assets"]))
     finish, run_out = _finish_partition(log, run)
     summary, df = _run_summary(run, finish, run_out, out, timing)
-    tracked = _track(log, run, summary, finish, df, run_out)
+    # the run's report files written (and uploaded to the output store), the MLflow run and the Prefect summary artifact
+    artifacts = {} if df.empty else tracking.write_run_artifacts(df, run_out, title=f"{run.name} / {run.run_id}")
+    artifacts.update(finish.artifacts)
+    if summary["output_store"] and run_out.is_dir():  # the run's report files beside its assets in the store
+        try:
+            upload_folder(run_out, summary["output_store"])
+        except (OSError, ValueError) as exc:
+            log.warning("run artifacts not uploaded to %s: %s: %s", summary["output_store"], type(exc).__name__, exc)
+    mlflow_run_id, tracking_error = _log_to_mlflow(run, df, summary, artifacts, finish.comparison.tags())
+    if tracking_error:
+        log.warning("MLflow tracking failed: %s", tracking_error)
+    if run.info["flow_run_id"]:  # in a Prefect flow run
+        _prefect_summary_artifact(summary, finish.comparison, mlflow_run_id, log)
     summary.update(
         flow_run_id=run.info["flow_run_id"],  # None: recorded without a Prefect flow run (nothing was dispatched)
-        mlflow_run_id=tracked.mlflow_run_id,
-        tracking_error=tracked.tracking_error,
+        mlflow_run_id=mlflow_run_id,
+        tracking_error=tracking_error,
         tracking_seconds=time.perf_counter() - t_track,
         flow_body_seconds=time.perf_counter() - t0,
         flow_started_epoch=body_started_epoch,
-        artifacts={k: str(v) for k, v in tracked.artifacts.items()},
+        artifacts={k: str(v) for k, v in artifacts.items()},
     )
     run.info.update(
         status="finished",
         outcome=run_outcome(summary),
         finished_at=datetime.now(timezone.utc).isoformat(),
-        mlflow_run_id=tracked.mlflow_run_id,
+        mlflow_run_id=mlflow_run_id,
         regression={k: summary["regression"][k] for k in ("status", "exceeded", "previous_run", "regressed", "reasons")},
         summary={k: v for k, v in summary.items() if isinstance(v, (int, float, str, type(None)))},
     )
@@ -130,13 +144,6 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
         log.error("%s", report)
         raise RegressionFailure(report, summary)
     return summary
-
-
-def run_outcome(summary: dict[str, Any]) -> str:
-    """``nothing_to_do`` when the run refined no asset (every row skipped: reused from an earlier run), else
-    ``worked``: what ``_run.json`` and the MLflow run say, so ``asset2sim failures`` passes over such a run."""
-    skipped_only = int(summary.get("skipped") or 0) > 0 and not int(summary.get("done") or 0) and not int(summary.get("failed") or 0)
-    return NOTHING_TO_DO if skipped_only else "worked"
 
 
 @dataclasses.dataclass
@@ -300,34 +307,6 @@ def _run_summary(run: _Run, finish, run_out: Path, out: str | None, timing: dict
                    regression=catalog_compare.comparison_summary(finish.comparison),
                    compaction=None if finish.compaction is None else dataclasses.asdict(finish.compaction))
     return summary, df
-
-
-@dataclasses.dataclass(frozen=True, slots=True)
-class _Tracked:
-    """What :func:`_track` recorded: ``artifacts`` (name -> file), the ``mlflow_run_id`` and the
-    ``tracking_error`` (None when tracking worked)."""
-
-    artifacts: dict[str, Any]
-    mlflow_run_id: str | None
-    tracking_error: str | None
-
-
-def _track(log, run: _Run, summary: dict[str, Any], finish, df, run_out: Path) -> _Tracked:
-    """The run's report files written (and uploaded to the output store), the MLflow run and the Prefect summary
-    artifact."""
-    artifacts = {} if df.empty else tracking.write_run_artifacts(df, run_out, title=f"{run.name} / {run.run_id}")
-    artifacts.update(finish.artifacts)
-    if summary["output_store"] and run_out.is_dir():  # the run's report files beside its assets in the store
-        try:
-            upload_folder(run_out, summary["output_store"])
-        except (OSError, ValueError) as exc:
-            log.warning("run artifacts not uploaded to %s: %s: %s", summary["output_store"], type(exc).__name__, exc)
-    mlflow_run_id, tracking_error = _log_to_mlflow(run, df, summary, artifacts, finish.comparison.tags())
-    if tracking_error:
-        log.warning("MLflow tracking failed: %s", tracking_error)
-    if run.info["flow_run_id"]:  # in a Prefect flow run
-        _prefect_summary_artifact(summary, finish.comparison, mlflow_run_id, log)
-    return _Tracked(artifacts, mlflow_run_id, tracking_error)
 
 
 def _record_driver_skips(store: ResultCatalog, jobs: list[AssetJob], skips: dict[str, Prepared],

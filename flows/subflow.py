@@ -121,9 +121,8 @@ def refine_assets(
     fingerprint taken by the driver (:mod:`asset2sim.flows.driver_skip`).
 
     Returns:
-        ``{"rows": [CatalogRow, ...], "inputs": {asset id: InputEntry},
-        "cluster_up": epoch s, "servers_seconds": s (:func:`_ready_stage_servers`),
-        "body_started": epoch s, "body_seconds": s}`` (the body: the assets, after the servers).
+        ``{"inputs": {asset id: InputEntry}, "cluster_up": epoch s, "servers_seconds": s
+        (:func:`_ready_stage_servers`), "body_seconds": s}`` (the body: the assets, after the servers).
     """
     log = get_run_logger()
     flow_run_id = parent_flow_run_id or current_flow_run_id()
@@ -143,19 +142,18 @@ def refine_assets(
         rec.starts.update({job.asset_id: time.time() for job in batch})
         prep_futures[prepare_many.submit(Sealed(batch))] = batch
     _run_assets(prep_futures, chain_task, rec, fingerprints or {})
-    return {"rows": rec.rows, "inputs": rec.inputs, "body_started": body_started, "body_seconds": time.time() - body_started,
-            "cluster_up": cluster_up, "servers_seconds": servers_seconds}
+    return {"inputs": rec.inputs, "body_seconds": time.time() - body_started, "cluster_up": cluster_up,
+            "servers_seconds": servers_seconds}
 
 
 @dataclasses.dataclass
 class _AssetRecorder:
-    """What :func:`refine_assets` records: each asset's catalog row as its chain ends (``rows``), its start
-    (``starts``: asset id -> epoch s) and its input index entry (``inputs``)."""
+    """What :func:`refine_assets` records: each asset's catalog row as its chain ends, its start (``starts``:
+    asset id -> epoch s) and its input index entry (``inputs``)."""
 
     store: ResultCatalog
     flow_run_id: str | None
     log: Any
-    rows: list = dataclasses.field(default_factory=list)
     starts: dict[str, float] = dataclasses.field(default_factory=dict)
     inputs: dict[str, driver_skip.InputEntry] = dataclasses.field(default_factory=dict)
 
@@ -192,7 +190,6 @@ class _AssetRecorder:
         if published is not None and published.status == "ok" and isinstance(published.value.get("clips"), list):
             row.clips = json.dumps(published.value["clips"])  # read in the worker: the row's out_dir is the store's
         self.store.append_row(job.dataset, job.run_id, row)
-        self.rows.append(row)
         emit_finished(job.dataset, job.run_id, row)
         self.log.info("%s: %s (%s) in %.1f s", job.asset_id, row.status, row.failure_mode, row.wall_seconds or 0.0)
 
@@ -225,16 +222,14 @@ def _run_assets(prep_futures: dict, chain_task, rec: _AssetRecorder, fingerprint
             continue
         results, exc_b = _outcome(fut)  # a prepare batch ended
         for k, job in enumerate(prep_futures.pop(fut)):
-            prepared = None if exc_b is not None else results[k]
-            exc = exc_b if exc_b is not None else (prepared if isinstance(prepared, BaseException) else None)
-            if exc is not None:
-                prepared = None
-            else:
-                entry = driver_skip.entry_for(job, prepared, fingerprints.get(job.asset_id))
-                if entry is not None:
-                    rec.inputs[job.asset_id] = entry
-            if exc is not None or prepared is None or prepared.skip is not None or not prepared.ok:
-                rec.record(job, prepared, None, None, exc)
+            prepared = exc_b or results[k]  # the batch's exception, else the job's record or exception
+            if isinstance(prepared, BaseException):
+                rec.record(job, None, None, None, prepared)
+                continue
+            if (entry := driver_skip.entry_for(job, prepared, fingerprints.get(job.asset_id))) is not None:
+                rec.inputs[job.asset_id] = entry
+            if prepared is None or prepared.skip is not None or not prepared.ok:
+                rec.record(job, prepared, None, None, None)
                 continue
             # a killed run's complete folder (prepared.resume): refine reads its report, metrics its evaluation; the
             # time limit of a non-isolated stage is Prefect's (process isolation has its own)

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from asset2sim import atomic
+from asset2sim.flows.catalog import NOTHING_TO_DO
 from asset2sim.flows.catalog_config import TrackingSettings
 from asset2sim.flows.queries import failure_modes, run_summary
 from asset2sim.schemas.report import FAILURE_MODES
@@ -107,6 +108,13 @@ def flow_metrics(summary: dict[str, Any]) -> dict[str, float]:
     return out
 
 
+def run_outcome(summary: dict[str, Any]) -> str:
+    """``nothing_to_do`` when the run refined no asset (every row skipped: reused from an earlier run), else
+    ``worked``: what ``_run.json`` and the MLflow run say, so ``asset2sim failures`` passes over such a run."""
+    skipped_only = int(summary.get("skipped") or 0) > 0 and not int(summary.get("done") or 0) and not int(summary.get("failed") or 0)
+    return NOTHING_TO_DO if skipped_only else "worked"
+
+
 def _asset_metrics(row: dict[str, Any]) -> dict[str, float]:
     out = {}
     for k in ("scale", "total_mass_kg", "penetration_mm", "d_pos_m", "d_ori_rad", "prompt_alignment",
@@ -160,9 +168,8 @@ def log_flow_run(
         client.set_experiment_tag(exp_id, EXPERIMENT_KIND_TAG, EXPERIMENT_KIND)
     ts = int(time.time() * 1000)
     run_name = f"{params.get('dataset', '')}/{params.get('run', '')}".strip("/") or None
-    outcome = "nothing_to_do" if not df.empty and bool((df["status"] == "skipped").all()) else "worked"
     rid = client.create_run(exp_id, run_name=run_name, start_time=_ms(started_at) or ts,
-                            tags={"asset2sim.kind": "flow_run", "asset2sim.outcome": outcome, **tags}).info.run_id
+                            tags={"asset2sim.kind": "flow_run", "asset2sim.outcome": run_outcome(summary), **tags}).info.run_id
     try:
         client.log_batch(
             rid,
