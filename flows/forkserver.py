@@ -298,7 +298,7 @@ def _run_child(spec_path: str, out_fd: int) -> None:
     try:
         os.close(out_fd)
         os.setpgid(0, 0)
-        set_parent_death_signal(signal.SIGKILL)
+        set_parent_death_signal()
         spec = json.loads(Path(spec_path).read_text())
         fd = os.open(spec["log"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         os.dup2(fd, 1)
@@ -313,7 +313,7 @@ def _run_child(spec_path: str, out_fd: int) -> None:
 
 
 def _server_main(argv: list[str]) -> int:
-    set_parent_death_signal(signal.SIGKILL, expected_parent=int(argv[0]))
+    set_parent_death_signal(expected_parent=int(argv[0]))
     out_fd = os.dup(1)  # the protocol pipe; fd 1 goes to stderr so prints cannot break it
     os.dup2(2, 1)
     allocator.keep_freed_memory()  # the children inherit it (Dask gives its workers a 64 KiB trim threshold)

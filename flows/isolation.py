@@ -201,5 +201,5 @@ def run_child_spec(spec: dict[str, Any]) -> None:
 if __name__ == "__main__":  # the child process
     _spec = json.loads(Path(sys.argv[1]).read_text())
     if _spec.get("parent") is not None:  # end with the process that waits for this one
-        set_parent_death_signal(signal.SIGKILL, expected_parent=int(_spec["parent"]))
+        set_parent_death_signal(expected_parent=int(_spec["parent"]))
     run_child_spec(_spec)

@@ -49,7 +49,7 @@ def _main(args: list[str]) -> int:
     if len(args) < 3 or args[1] != "--":
         sys.stderr.write("usage: python -m asset2sim.flows.lifeline <parent pid> -- <program> [args...]\n")
         return 2
-    set_parent_death_signal(signal.SIGKILL, expected_parent=int(args[0]))
+    set_parent_death_signal(expected_parent=int(args[0]))
     os.execvp(args[2], args[2:])
     return 127  # not reached: execvp replaces this process or raises
 

@@ -105,7 +105,12 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
                                   workers=run.n_workers or 1))
     t_track = time.perf_counter()
     flow_progress.emit(ProgressEvent("run_finished", name, run.run_id, total=run.info["assets"]))
-    finish, run_out = _finish_partition(log, run)
+    run_out = cat.output_root / name / run.run_id  # the run's partition compacted, compared with the previous run (logged)
+    finish = catalog_finish.finish_run(run.store, name, run.run_id, run_out, cat.config.results)
+    for line in catalog_compare.comparison_lines(finish.comparison):
+        log.info("%s", line)
+    for err in finish.errors:
+        log.warning("%s", err)
     summary, df = _run_summary(run, finish, run_out, out, timing)
     # the run's report files written (and uploaded to the output store), the MLflow run and the Prefect summary artifact
     artifacts = {} if df.empty else tracking.write_run_artifacts(df, run_out, title=f"{run.name} / {run.run_id}")
@@ -205,19 +210,52 @@ def _record_without_workers(log, run: _Run, planned: DriverPlan) -> None:
         run.store.append_row(run.name, run.run_id, row)
         emit_finished(run.name, run.run_id, row)
         log.warning("%s: manifest row refused (%s): %s", bad.asset_id, bad.error.code, bad.error.message[:300])
-    _record_driver_skips(run.store, planned.plan.jobs, planned.skips, run.info["flow_run_id"])
+    todo = [job for job in planned.plan.jobs if job.asset_id in planned.skips]
+    if not todo:
+        return
+
+    def write(job: AssetJob):
+        prepared = planned.skips[job.asset_id]
+        t = time.time()
+        row = build_row(job, prepared, None, None, flow_run_id=run.info["flow_run_id"],
+                        started_at=t - float(prepared.seconds or 0.0), finished_at=t)
+        run.store.append_row(job.dataset, job.run_id, row)
+        return job, row
+
+    with ThreadPoolExecutor(max_workers=min(4, len(todo))) as pool:
+        for job, row in pool.map(write, todo):  # progress events from this thread, in manifest order
+            emit_finished(job.dataset, job.run_id, row)
 
 
 def _dispatch(log, run: _Run, planned: DriverPlan) -> dict[str, Any]:
-    """The pending assets refined on Dask (:func:`_fan_out`) and the input index updated; returns the timings (s)
-    and ``driver_skipped``."""
-    pending = planned.pending
+    """The pending assets refined by :func:`refine_assets` on a Dask task runner (nothing starts when none is pending)
+    and the input index updated; returns the timings (s) and ``driver_skipped``."""
+    jobs, inputs = planned.pending, {}
     if planned.skips:
         log.info("%d of %d assets finished already (decided by the driver); %d to the workers",
-                 len(planned.skips), len(planned.plan.jobs), len(pending))
-    timing = _fan_out(run, pending, planned.fingerprints)
+                 len(planned.skips), len(planned.plan.jobs), len(jobs))
+    timing = dict.fromkeys(("dask_startup_seconds", "stage_servers_seconds", "assets_seconds", "dask_teardown_seconds"), 0.0)
+    if jobs:
+        cat, n_workers, address = run.cat, run.n_workers, run.address
+        t_fan, t_fan_epoch = time.perf_counter(), time.time()
+        sub = refine_assets.with_options(task_runner=dask_task_runner(n_workers, address, host=run.host, dashboard=run.dashboard))
+        with local_cluster_config(address, run.dashboard, Path(jobs[0].work_dir).parent):  # the run's .work folder
+            out = sub(
+                [asdict(j) for j in jobs],
+                str(cat.catalog_root),
+                retries=cat.config.estimator.retries if cat.config.estimator.name != "offline" else 0,
+                retry_delay_seconds=cat.config.estimator.retry_delay_seconds,
+                batch_size=prepare_batch_size(len(jobs), n_workers if not address else None),
+                parent_flow_run_id=run.info["flow_run_id"],
+                fingerprints={j.asset_id: planned.fingerprints.get(j.asset_id) for j in jobs},
+            )
+        fan_seconds = time.perf_counter() - t_fan
+        startup = max(0.0, out["cluster_up"] - t_fan_epoch)
+        timing.update(dask_startup_seconds=startup, stage_servers_seconds=out["servers_seconds"], assets_seconds=out["body_seconds"],
+                      dask_teardown_seconds=max(0.0, fan_seconds - startup - out["servers_seconds"] - out["body_seconds"]))
+        inputs = out.get("inputs", {})
     try:  # the input index: the next run's skip decisions (a cache: a failed write costs only a miss)
-        driver_skip.write_index(run.store, run.name, timing.pop("inputs", {}))
+        driver_skip.write_index(run.store, run.name, inputs)
     except (OSError, ValueError) as exc:
         log.warning("input index not written: %s: %s", type(exc).__name__, exc)
     timing["driver_skipped"] = len(planned.skips)
@@ -284,18 +322,6 @@ def media_phase(log, rows, *, workers: int = 1, time_limit_seconds: float = 1800
     return {"media_made": len(folders) - failed, "media_failed": failed, "media_seconds": seconds}
 
 
-def _finish_partition(log, run: _Run) -> tuple[Any, Path]:
-    """Compact the run's partition and compare it with the previous run (logged); returns the
-    :func:`asset2sim.flows.catalog_finish.finish_run` result and the run's output folder."""
-    run_out = run.cat.output_root / run.name / run.run_id
-    finish = catalog_finish.finish_run(run.store, run.name, run.run_id, run_out, run.cat.config.results)
-    for line in catalog_compare.comparison_lines(finish.comparison):
-        log.info("%s", line)
-    for err in finish.errors:
-        log.warning("%s", err)
-    return finish, run_out
-
-
 def _run_summary(run: _Run, finish, run_out: Path, out: str | None, timing: dict[str, Any]) -> tuple[dict[str, Any], Any]:
     """The run summary (counts, pass rates, paths, timings, comparison) and the run's catalog rows (DataFrame)."""
     df = run.store.read(run.name, run.run_id)
@@ -307,26 +333,6 @@ def _run_summary(run: _Run, finish, run_out: Path, out: str | None, timing: dict
                    regression=catalog_compare.comparison_summary(finish.comparison),
                    compaction=None if finish.compaction is None else dataclasses.asdict(finish.compaction))
     return summary, df
-
-
-def _record_driver_skips(store: ResultCatalog, jobs: list[AssetJob], skips: dict[str, Prepared],
-                         flow_run_id: str | None) -> None:
-    """The catalog row of each asset the driver skipped (``skips``: asset id -> prepared record)."""
-    todo = [job for job in jobs if job.asset_id in skips]
-    if not todo:
-        return
-
-    def write(job: AssetJob):
-        prepared = skips[job.asset_id]
-        t = time.time()
-        row = build_row(job, prepared, None, None, flow_run_id=flow_run_id,
-                        started_at=t - float(prepared.seconds or 0.0), finished_at=t)
-        store.append_row(job.dataset, job.run_id, row)
-        return job, row
-
-    with ThreadPoolExecutor(max_workers=min(4, len(todo))) as pool:
-        for job, row in pool.map(write, todo):  # progress events from this thread, in manifest order
-            emit_finished(job.dataset, job.run_id, row)
 
 
 def _prefect_summary_artifact(summary: dict[str, Any], comparison, mlflow_run_id: str | None, log) -> None:
@@ -348,32 +354,6 @@ def _prefect_summary_artifact(summary: dict[str, Any], comparison, mlflow_run_id
                                  description=f"asset2sim {summary['dataset']} / {summary['run']}")
     except Exception as exc:  # the catalog and MLflow are the record
         log.warning("Prefect summary artifact not created: %s", exc)
-
-
-def _fan_out(run: _Run, jobs: list[AssetJob], fingerprints: dict[str, str | None]) -> dict[str, Any]:
-    """Run :func:`refine_assets` on a Dask task runner (nothing starts for no jobs); returns its timings (s) and
-    ``inputs``, the input index entries of the assets it read."""
-    if not jobs:
-        return {"dask_startup_seconds": 0.0, "stage_servers_seconds": 0.0, "assets_seconds": 0.0, "dask_teardown_seconds": 0.0,
-                "inputs": {}}
-    cat, n_workers, address = run.cat, run.n_workers, run.address
-    t_fan, t_fan_epoch = time.perf_counter(), time.time()
-    sub = refine_assets.with_options(task_runner=dask_task_runner(n_workers, address, host=run.host, dashboard=run.dashboard))
-    with local_cluster_config(address, run.dashboard, Path(jobs[0].work_dir).parent):  # the run's .work folder
-        out = sub(
-            [asdict(j) for j in jobs],
-            str(cat.catalog_root),
-            retries=cat.config.estimator.retries if cat.config.estimator.name != "offline" else 0,
-            retry_delay_seconds=cat.config.estimator.retry_delay_seconds,
-            batch_size=prepare_batch_size(len(jobs), n_workers if not address else None),
-            parent_flow_run_id=run.info["flow_run_id"],
-            fingerprints={j.asset_id: fingerprints.get(j.asset_id) for j in jobs},
-        )
-    fan_seconds = time.perf_counter() - t_fan
-    startup = max(0.0, out["cluster_up"] - t_fan_epoch)
-    return {"dask_startup_seconds": startup, "stage_servers_seconds": out["servers_seconds"], "assets_seconds": out["body_seconds"],
-            "dask_teardown_seconds": max(0.0, fan_seconds - startup - out["servers_seconds"] - out["body_seconds"]),
-            "inputs": out.get("inputs", {})}
 
 
 def _log_to_mlflow(run: _Run, df, summary, artifacts, extra_tags: dict[str, str]) -> tuple[str | None, str | None]:
