@@ -16,7 +16,6 @@ from asset2sim.flows import audit_catalog, tracking
 from asset2sim.flows.flow_runtime import dask_task_runner, local_cluster_config, prefect_api_for_run
 from asset2sim.schemas.audit import AuditRow
 from asset2sim.apps.audit.batch import AuditTarget, audit_one, find_assets
-from asset2sim import library_dirs
 
 __all__ = ["AUDIT_EXPERIMENT", "AUDIT_FLOW_NAME", "audit_flow", "run_audit_flow"]
 
@@ -74,10 +73,7 @@ def log_audit_run(summary: dict[str, Any], files: dict[str, Path], out: Path, tr
     """One MLflow run in :data:`AUDIT_EXPERIMENT` (the store of ``tracking_uri``, else ``MLFLOW_TRACKING_URI``, else
     ``<out>/mlflow.db``): metrics ``assets``, ``<mode>`` counts and ``implausible_<quantity>``; the catalog files as
     artifacts. Returns the run id."""
-    library_dirs.configure()  # before MLflow's first import: no telemetry file or report
-    from mlflow.tracking import MlflowClient
-
-    client = MlflowClient(tracking_uri=tracking.resolve_tracking_uri(out, tracking_uri))  # never the process-wide URI
+    client = tracking.mlflow_client(tracking.resolve_tracking_uri(out, tracking_uri))
     with tracking.client_run(client, AUDIT_EXPERIMENT, (Path(out).resolve() / "mlruns").as_uri(), f"audit-{out.name}") as run_id:
         client.log_metric(run_id, "assets", summary["assets"])
         for mode, n in summary["failure_modes"].items():

@@ -35,6 +35,15 @@ def resolve_tracking_uri(project_root: Path | str, configured: str | None) -> st
     return os.environ.get("MLFLOW_TRACKING_URI") or configured or "sqlite:///" + str((Path(project_root) / "mlflow.db").resolve())
 
 
+def mlflow_client(tracking_uri: str):
+    """An ``MlflowClient`` of the store at ``tracking_uri`` (never the process-wide URI), MLflow first imported after
+    :func:`asset2sim.library_dirs.configure` (no telemetry file or report)."""
+    library_dirs.configure()
+    from mlflow.tracking import MlflowClient
+
+    return MlflowClient(tracking_uri=tracking_uri)
+
+
 def new_figure(width: float, height: float):
     """``(fig, ax)``: a matplotlib Figure ``width`` x ``height`` in at 100 dpi (the Agg backend) with one Axes."""
     library_dirs.configure()  # before matplotlib's first import
@@ -155,12 +164,10 @@ def log_flow_run(
         ImportError: MLflow is not installed (``pip install asset2sim[pipeline]``).
         mlflow.exceptions.MlflowException: the store refused a write.
     """
-    library_dirs.configure()  # before MLflow's first import: no telemetry file or report
-    from mlflow.entities import Metric, Param, RunTag
-    from mlflow.tracking import MlflowClient
-
     project_root = Path(project_root)
-    client = MlflowClient(tracking_uri=resolve_tracking_uri(project_root, settings.uri))
+    client = mlflow_client(resolve_tracking_uri(project_root, settings.uri))
+    from mlflow.entities import Metric, Param, RunTag
+
     exp = client.get_experiment_by_name(settings.experiment)
     art = project_root / settings.artifact_root / settings.experiment.replace("/", "_")
     exp_id = exp.experiment_id if exp else client.create_experiment(settings.experiment, artifact_location=art.resolve().as_uri())
