@@ -134,43 +134,6 @@ def make_pair(spec: PairSpec, closed: ClosedState, pair_set: Path | str, index: 
                     joint=spec.joint, motion="push_release", a=sides[0], b=sides[1], defect=spec.defect)
 
 
-def calibration_specs(subject: Subject, *, work: Path | str, defects: Sequence[str] | None = None
-                      ) -> tuple[list[tuple[PairSpec, ClosedState]], dict[str, str]]:
-    """The calibration pairs of ``subject``: one per planted defect (:data:`asset2sim.apps.realism.defects.DEFECTS`,
-    or ``defects``) on its pushed joint, each broken copy written under ``work/<k>/`` (``k`` the defect's number: no
-    input name becomes a path). Returns (specs with the closed end, skipped: key -> why)."""
-    from asset2sim.apps.realism.defects import DEFECTS, plant_defect
-
-    specs, skipped = [], {}
-    for k, name in enumerate(defects or list(DEFECTS)):
-        try:
-            b = plant_defect(subject.side, name, subject.joint, subject.closed, subject.force_limit, Path(work) / f"{k:02d}")
-        except OutputError:  # the output guard refused a write: not a defect that cannot be planted
-            raise
-        except (KeyError, ValueError) as exc:
-            skipped[f"{subject.object_id} {name}"] = one_line(exc)
-            continue
-        specs.append(_spec(subject, b, name))
-    return specs, skipped
-
-
-def method_specs(subject: Subject, folders: dict[str, Path]) -> tuple[list[tuple[PairSpec, ClosedState]], dict[str, str]]:
-    """``subject`` against every other method's asset folder of the same object (``folders``: method -> folder; an
-    ``asset2sim`` entry is passed over): one pair each on the subject's pushed joint. A method whose asset cannot be
-    read is skipped. Returns (specs, skipped)."""
-    specs, skipped = [], {}
-    for method, folder in folders.items():
-        if method == "asset2sim":
-            continue
-        try:
-            b = side_from_folder(folder, method)
-        except Exception as exc:  # one method's unreadable asset skips its pair only
-            skipped[f"{subject.object_id} {method}"] = f"{type(exc).__name__}: {exc}"
-            continue
-        specs.append(_spec(subject, b))
-    return specs, skipped
-
-
 def build_pair_set(specs: Sequence[tuple[PairSpec, ClosedState]], pair_set: Path | str, *, skipped: dict[str, str] | None = None,
                    config: PushReleaseConfig | None = None, conventions: SimConventions | None = None,
                    progress=None) -> PairSet:
@@ -211,6 +174,8 @@ def specs_from_folders(paths: Sequence[Path | str], pair_set: Path | str, *, aga
     Raises:
         FileNotFoundError: a path that is neither.
     """
+    from asset2sim.apps.realism.defects import DEFECTS, plant_defect
+
     outputs: list[tuple[str, dict[str, Path]]] = []
     for path in map(Path, paths):
         if (path / "asset2sim").is_dir():
@@ -229,13 +194,28 @@ def specs_from_folders(paths: Sequence[Path | str], pair_set: Path | str, *, aga
             if subject is None:
                 skipped[object_id] = "no joint that opens"
                 continue
-            got, why = method_specs(subject, folders)
-            specs += got
-            skipped.update(why)
+            for method, folder in folders.items():  # against every other method's asset of the object
+                if method == "asset2sim":
+                    continue
+                try:
+                    specs.append(_spec(subject, side_from_folder(folder, method)))
+                except Exception as exc:  # one method's unreadable asset skips its pair only
+                    skipped[f"{object_id} {method}"] = f"{type(exc).__name__}: {exc}"
             if defects is None or len(defects):
+                # one calibration pair per planted defect, each broken copy under defects/<n>/<k>/ (no input name as a path)
+                work, planted, why = Path(pair_set) / DEFECTS_DIR / f"{n:04d}", [], {}
                 with output_folder.guarding(pair_set):  # the broken copies: never through a symlinked defects/
-                    got, why = calibration_specs(subject, work=Path(pair_set) / DEFECTS_DIR / f"{n:04d}", defects=defects)
-                specs += got
+                    for k, name in enumerate(defects or list(DEFECTS)):
+                        try:
+                            b = plant_defect(subject.side, name, subject.joint, subject.closed, subject.force_limit,
+                                             work / f"{k:02d}")
+                        except OutputError:  # the output guard refused a write: not a defect that cannot be planted
+                            raise
+                        except (KeyError, ValueError) as exc:
+                            why[f"{object_id} {name}"] = one_line(exc)
+                            continue
+                        planted.append(_spec(subject, b, name))
+                specs += planted
                 skipped.update(why)
         except OutputError:  # a write the guard refused: the whole set
             raise
