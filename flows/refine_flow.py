@@ -21,12 +21,11 @@ from typing import Any
 from prefect import flow, get_run_logger
 from prefect.settings import PREFECT_API_URL
 
-from asset2sim.flows import catalog_compare, catalog_finish, queries, tracking
+from asset2sim.flows import catalog_compare, catalog_finish, driver_skip, queries, tracking
 from asset2sim import flow_progress
 from asset2sim.flows.catalog import NOTHING_TO_DO, ResultCatalog
 from asset2sim.flows.catalog_config import load_catalog
 from asset2sim.flow_progress import ProgressEvent
-from asset2sim.flows import driver_skip
 from asset2sim.flows.flow_runtime import dask_task_runner, local_cluster_config, prefect_api_for_run
 from asset2sim.flows.forkserver import StageServer
 from asset2sim.flows.store import join_uri, upload_folder

@@ -16,8 +16,7 @@ from typing import Any
 
 from asset2sim import __version__, array_cache, atomic, output_folder
 from asset2sim.flows.catalog import result_key
-from asset2sim.flows import server
-from asset2sim.flows import store as store_mod
+from asset2sim.flows import server, store as store_mod
 from asset2sim.flows.forkserver import run_forked, start_soon
 from asset2sim.flows.isolation import call_target, import_target, run_isolated
 from asset2sim.schemas.asset import AssetDescription

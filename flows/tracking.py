@@ -14,13 +14,12 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, Iterator
 
-from asset2sim import atomic
+from asset2sim import atomic, library_dirs
 from asset2sim.flows.catalog import NOTHING_TO_DO
 from asset2sim.flows.catalog_config import TrackingSettings
 from asset2sim.flows.queries import failure_modes, run_summary
 from asset2sim.schemas.report import FAILURE_MODES
 from asset2sim.inert import csv_text, plot_text, shorten
-from asset2sim import library_dirs
 
 #: Columns of the run's summary table, in order.
 SUMMARY_COLUMNS = (

@@ -23,8 +23,7 @@ from asset2sim.apps.audit import patch, report_md
 from asset2sim.tasks.check.plausibility import Judgement, judge
 from asset2sim.tasks.geometry.closed_state import closed_tuples
 from asset2sim.tasks.check import postcheck
-from asset2sim.tasks.ingest import declared as declared_mod
-from asset2sim.tasks.ingest import extract
+from asset2sim.tasks.ingest import declared as declared_mod, extract
 from asset2sim.formats import ReadOptions
 from asset2sim.tasks.interpret import mounting
 from asset2sim.tasks.interpret.categories import recognize_category

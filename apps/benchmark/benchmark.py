@@ -13,13 +13,12 @@ from pathlib import Path
 from typing import Any, Callable
 
 from asset2sim import output_folder
-from asset2sim.atomic import write_bytes, write_json, write_text
+from asset2sim.atomic import jsonable, write_bytes, write_json, write_text
 from asset2sim.output_paths import raise_refusal
 from asset2sim.inert import csv_text
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.apps.benchmark.baselines import available_methods, run_method
-from asset2sim.atomic import jsonable
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRow, ManifestRowError, read_manifest_rows
 from asset2sim.tasks.evaluation.plots import plot_method_summary

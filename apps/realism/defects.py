@@ -23,11 +23,10 @@ from typing import Callable
 import numpy as np
 
 from asset2sim.atomic import write_bytes
-from asset2sim.engines.base import SessionOptions, Spring
+from asset2sim.engines.base import SessionOptions, Spring, session_root_options
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
 from asset2sim.tasks.geometry.closed_state import ClosedState
-from asset2sim.engines.base import session_root_options
 from asset2sim.apps.realism.motion import PhysicsSide
 from asset2sim.urdf import UrdfDynamics, UrdfModel, read_urdf, resolve_mesh_path, scale_model, write_urdf
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, Spring
+from asset2sim.engines.base import SessionOptions, Spring, session_root_options
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import SimConventions
@@ -34,7 +34,6 @@ from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.geometry.limits import subtrees
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.errors import AssetError
-from asset2sim.engines.base import session_root_options
 from asset2sim.urdf import model_of
 
 
