@@ -110,7 +110,14 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
         log.info("%s", line)
     for err in finish.errors:
         log.warning("%s", err)
-    summary, df = _run_summary(run, finish, run_out, out, timing)
+    df = run.store.read(name, run.run_id)  # the run summary: counts, pass rates, paths, timings, comparison
+    summary = queries.run_summary(df)
+    out_store = out or cat.output_store
+    summary.update(dataset=name, run=run.run_id, catalog_root=str(cat.catalog_root), output_dir=str(run_out), **timing,
+                   output_store=join_uri(out_store, name, run.run_id) if out_store else None,
+                   **finish.comparison.metrics_for_tracking(),
+                   regression=catalog_compare.comparison_summary(finish.comparison),
+                   compaction=None if finish.compaction is None else dataclasses.asdict(finish.compaction))
     # the run's report files written (and uploaded to the output store), the MLflow run and the Prefect summary artifact
     artifacts = {} if df.empty else tracking.write_run_artifacts(df, run_out, title=f"{run.name} / {run.run_id}")
     artifacts.update(finish.artifacts)
@@ -250,7 +257,8 @@ def _dispatch(log, run: _Run, planned: DriverPlan) -> dict[str, Any]:
             )
         fan_seconds = time.perf_counter() - t_fan
         startup = max(0.0, out["cluster_up"] - t_fan_epoch)
-        timing.update(dask_startup_seconds=startup, stage_servers_seconds=out["servers_seconds"], assets_seconds=out["body_seconds"],
+        timing.update(dask_startup_seconds=startup, stage_servers_seconds=out["servers_seconds"],
+                      assets_seconds=out["body_seconds"],
                       dask_teardown_seconds=max(0.0, fan_seconds - startup - out["servers_seconds"] - out["body_seconds"]))
         inputs = out.get("inputs", {})
     try:  # the input index: the next run's skip decisions (a cache: a failed write costs only a miss)
@@ -319,19 +327,6 @@ def media_phase(log, rows, *, workers: int = 1, time_limit_seconds: float = 1800
     if folders:
         log.info("media phase: %d of %d outputs in %.1f s", len(folders) - failed, len(folders), seconds)
     return {"media_made": len(folders) - failed, "media_failed": failed, "media_seconds": seconds}
-
-
-def _run_summary(run: _Run, finish, run_out: Path, out: str | None, timing: dict[str, Any]) -> tuple[dict[str, Any], Any]:
-    """The run summary (counts, pass rates, paths, timings, comparison) and the run's catalog rows (DataFrame)."""
-    df = run.store.read(run.name, run.run_id)
-    summary = queries.run_summary(df)
-    out_store = out or run.cat.output_store
-    summary.update(dataset=run.name, run=run.run_id, catalog_root=str(run.cat.catalog_root), output_dir=str(run_out), **timing,
-                   output_store=join_uri(out_store, run.name, run.run_id) if out_store else None,
-                   **finish.comparison.metrics_for_tracking(),
-                   regression=catalog_compare.comparison_summary(finish.comparison),
-                   compaction=None if finish.compaction is None else dataclasses.asdict(finish.compaction))
-    return summary, df
 
 
 def _prefect_summary_artifact(summary: dict[str, Any], comparison, mlflow_run_id: str | None, log) -> None:

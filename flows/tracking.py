@@ -119,8 +119,8 @@ def flow_metrics(summary: dict[str, Any]) -> dict[str, float]:
 def run_outcome(summary: dict[str, Any]) -> str:
     """``nothing_to_do`` when the run refined no asset (every row skipped: reused from an earlier run), else
     ``worked``: what ``_run.json`` and the MLflow run say, so ``asset2sim failures`` passes over such a run."""
-    skipped_only = int(summary.get("skipped") or 0) > 0 and not int(summary.get("done") or 0) and not int(summary.get("failed") or 0)
-    return NOTHING_TO_DO if skipped_only else "worked"
+    done, skipped, failed = (int(summary.get(k) or 0) for k in ("done", "skipped", "failed"))
+    return NOTHING_TO_DO if skipped > 0 and not done and not failed else "worked"
 
 
 def _asset_metrics(row: dict[str, Any]) -> dict[str, float]:
