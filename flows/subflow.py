@@ -159,11 +159,10 @@ class _AssetRecorder:
 
     def record(self, job: AssetJob, prepared, refined, measured, exc: BaseException | None, published=None) -> None:
         """Append the asset's catalog row; emit its progress event and log line."""
-        publish_error = None
-        if published is not None and published.status == "ok":  # the row points at the store
+        published_status = None if published is None else published.status
+        publish_error = f"publish: {published.error}" if published_status == "error" else None
+        if published_status == "ok":  # the row points at the store
             refined.value.out_dir = published.value["out_uri"]
-        elif published is not None and published.status == "error":
-            publish_error = f"publish: {published.error}"
         if exc is None and prepared is not None and prepared.resume is not None and refined is not None and refined.status == "ok":
             skipped = _record_resumed(self.store, prepared, refined, measured, self.starts[job.asset_id])
             if skipped is not None:
@@ -187,7 +186,7 @@ class _AssetRecorder:
                     add.get("isolation.server_start", 0.0) + float(extra["server_start_seconds"]), 4)
         if add:
             row.stage_seconds = json.dumps({**json.loads(row.stage_seconds or "{}"), **add}, sort_keys=True)
-        if published is not None and published.status == "ok" and isinstance(published.value.get("clips"), list):
+        if published_status == "ok" and isinstance(published.value.get("clips"), list):
             row.clips = json.dumps(published.value["clips"])  # read in the worker: the row's out_dir is the store's
         self.store.append_row(job.dataset, job.run_id, row)
         emit_finished(job.dataset, job.run_id, row)

@@ -61,6 +61,7 @@ CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value BLOB NOT NULL);
 """
 _COLUMNS = tuple(Rating.model_fields)
 _INSERT = f"INTO ratings ({', '.join(_COLUMNS)}) VALUES ({', '.join('?' * len(_COLUMNS))})"
+_SELECT = f"SELECT {', '.join(_COLUMNS)} FROM ratings"
 
 
 class RatingsDatabaseError(PairSetError):
@@ -298,8 +299,7 @@ class RatingStore:
         winner, loser = (left, right) if choice == "left" else (right, left)
         answered_at = time.time() if now is None else float(now)
         with self._transaction() as con:
-            old = con.execute(f"SELECT {', '.join(_COLUMNS)} FROM ratings WHERE rater = ? AND pair_id = ?",
-                              (rater, pair_id)).fetchone()
+            old = con.execute(f"{_SELECT} WHERE rater = ? AND pair_id = ?", (rater, pair_id)).fetchone()
             if old is not None:
                 stored = Rating(**dict(zip(_COLUMNS, old)))
                 if (stored.choice, stored.score, stored.comment) != (choice, score, comment):
@@ -317,7 +317,7 @@ class RatingStore:
 
     def ratings(self) -> list[Rating]:
         """Every stored answer, in the order answered (ties by rater, pair id)."""
-        rows = self._con().execute(f"SELECT {', '.join(_COLUMNS)} FROM ratings ORDER BY answered_at, rater, pair_id")
+        rows = self._con().execute(f"{_SELECT} ORDER BY answered_at, rater, pair_id")
         return [Rating(**dict(zip(_COLUMNS, r))) for r in rows]
 
     def count(self) -> int:
