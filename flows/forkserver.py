@@ -107,14 +107,20 @@ class StageServer:
         self.close()
         env = _child_env()
         env.setdefault("MPLBACKEND", "Agg")
-        self.proc = _popen_from_owner_thread(
+        # started by one thread living as long as this process (PR_SET_PDEATHSIG fires when the forking *thread* ends)
+        with _OWNER_LOCK:
+            owner = _OWNER.get(os.getpid())
+            if owner is None:
+                owner = _OWNER[os.getpid()] = ThreadPoolExecutor(1, thread_name_prefix="asset2sim-stage-server-owner")
+        self.proc = owner.submit(
+            subprocess.Popen,
             [sys.executable, "-m", "asset2sim.flows.forkserver", str(os.getpid()), *self.preload],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             env=env,
             start_new_session=True,
             **({"preexec_fn": functools.partial(os.nice, self.niceness)} if self.niceness else {}),
-        )
+        ).result()
         self.starts += 1
         self._buf = b""
         msg = self._read(timeout=600.0)
@@ -240,18 +246,9 @@ def _kill_group(pid: int) -> None:
         os.killpg(pid, signal.SIGKILL)
 
 
+#: Per process, the one-thread executor that starts its stage servers (:meth:`StageServer.start`).
 _OWNER: dict[int, ThreadPoolExecutor] = {}
 _OWNER_LOCK = threading.Lock()
-
-
-def _popen_from_owner_thread(args: list[str], **kwargs) -> subprocess.Popen:
-    """``subprocess.Popen(args, **kwargs)`` run by one thread living as long as
-    this process (``PR_SET_PDEATHSIG`` fires when the forking *thread* ends): a one-thread executor's."""
-    with _OWNER_LOCK:
-        owner = _OWNER.get(os.getpid())
-        if owner is None:
-            owner = _OWNER[os.getpid()] = ThreadPoolExecutor(1, thread_name_prefix="asset2sim-stage-server-owner")
-    return owner.submit(subprocess.Popen, args, **kwargs).result()
 
 
 _SERVERS: dict[int, StageServer] = {}

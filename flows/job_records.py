@@ -216,7 +216,37 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
         input_failure = prepared.failure_mode or "invalid_input"
         errors.append(f"prepare: {prepared.error or ''}")
     refine_status = refined.status if refined is not None else None
-    refine_mode = _add_refined(row, job, refined, stages, errors)
+    refine_mode = None  # the refine's failure mode (None: it did not finish)
+    if refine_status == "ok":  # the refine stage's columns, seconds and failure mode
+        value: RefineOutput = refined.value
+        report = value.report
+        row.out_dir = value.out_dir or job.out_dir
+        row.clips = json.dumps(clip_videos(row.out_dir)) if row.out_dir else None
+        row.media = report.media
+        stages["refine"] = _s(refined.seconds)
+        stages.update({f"refine.{k}": _s(v) for k, v in report.stage_seconds.items()})
+        row.scale = report.scale
+        row.total_mass_kg = report.total_mass
+        row.initial_state = json.dumps(report.initial_joint_positions or {}, sort_keys=True)
+        row.model_queries = int(report.model_queries or 0)
+        row.postcheck_rounds = len(report.escalation) or None
+        row.extra_rounds = json.dumps(extra_rounds(report)) if report.escalation else None
+        row.refine_config_hash = report.config_hash or row.refine_config_hash
+        row.tokens = value.tokens
+        for col in ("estimator", "model", "category"):  # the report's when it names one
+            setattr(row, col, getattr(report, col) or getattr(row, col))
+        post = column_values(report.metrics, engine=None, names=("penetration", "rest_stability", "oscillation", "request_met"))
+        row.penetration_mm = post.get("penetration_mm")
+        for col in ("rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "request_met", "request_unmet"):
+            if col in post:
+                setattr(row, col, post[col])
+        refine_mode = report.failure_mode
+    elif refine_status in FAILED_STATUSES:  # its seconds and errors
+        stages["refine"] = _s(refined.seconds)
+        errors.append(f"refine: {refined.error_type} {refined.error}".strip())
+        if refine_status == "crash" and refined.log_tail:
+            errors.append(refined.log_tail[-600:])
+        refine_mode = refined.failure_mode
     measured_status = measured.status if measured is not None else None
     if measured_status == "ok":  # the metrics stage's columns
         stages["metrics"] = _s(measured.seconds)
@@ -244,41 +274,6 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
     row.stage_seconds = json.dumps(stages, sort_keys=True)
     row.wall_seconds = round(sum(v for k, v in stages.items() if "." not in k), 4)
     return row
-
-
-def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages: dict[str, float], errors: list[str]) -> str | None:
-    """Add the refine stage's columns, seconds and errors; returns its failure mode (None: not finished)."""
-    if refined is not None and refined.status == "ok":
-        value: RefineOutput = refined.value
-        report = value.report
-        row.out_dir = value.out_dir or job.out_dir
-        row.clips = json.dumps(clip_videos(row.out_dir)) if row.out_dir else None
-        row.media = report.media
-        stages["refine"] = _s(refined.seconds)
-        stages.update({f"refine.{k}": _s(v) for k, v in report.stage_seconds.items()})
-        row.scale = report.scale
-        row.total_mass_kg = report.total_mass
-        row.initial_state = json.dumps(report.initial_joint_positions or {}, sort_keys=True)
-        row.model_queries = int(report.model_queries or 0)
-        row.postcheck_rounds = len(report.escalation) or None
-        row.extra_rounds = json.dumps(extra_rounds(report)) if report.escalation else None
-        row.refine_config_hash = report.config_hash or row.refine_config_hash
-        row.tokens = value.tokens
-        for col in ("estimator", "model", "category"):  # the report's when it names one
-            setattr(row, col, getattr(report, col) or getattr(row, col))
-        post = column_values(report.metrics, engine=None, names=("penetration", "rest_stability", "oscillation", "request_met"))
-        row.penetration_mm = post.get("penetration_mm")
-        for col in ("rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "request_met", "request_unmet"):
-            if col in post:
-                setattr(row, col, post[col])
-        return report.failure_mode
-    if refined is not None and refined.status in FAILED_STATUSES:
-        stages["refine"] = _s(refined.seconds)
-        errors.append(f"refine: {refined.error_type} {refined.error}".strip())
-        if refined.status == "crash" and refined.log_tail:
-            errors.append(refined.log_tail[-600:])
-        return refined.failure_mode
-    return None
 
 
 def failed_checks(metrics: list[MetricResult]) -> list[str]:

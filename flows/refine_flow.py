@@ -129,8 +129,24 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
     mlflow_run_id, tracking_error = _log_to_mlflow(run, df, summary, artifacts, finish.comparison.tags())
     if tracking_error:
         log.warning("MLflow tracking failed: %s", tracking_error)
-    if run.info["flow_run_id"]:  # in a Prefect flow run
-        _prefect_summary_artifact(summary, finish.comparison, mlflow_run_id, log)
+    if run.info["flow_run_id"]:  # in a Prefect flow run: a markdown artifact on it (a failure is logged, not raised)
+        try:
+            from prefect.artifacts import create_markdown_artifact
+
+            lines = [
+                f"### asset2sim run {summary['run']} of dataset {summary['dataset']}",
+                f"{summary['assets']} assets: {summary['done']} done, {summary['skipped']} skipped, {summary['failed']} failed; "
+                f"all checks passed {100 * (summary.get('pass_rate_all') or 0):.1f}%",
+                f"MLflow run: `{mlflow_run_id or 'not logged'}`",
+                "",
+                "```",
+                *catalog_compare.comparison_lines(finish.comparison),
+                "```",
+            ]
+            create_markdown_artifact(markdown="\n".join(lines), key="asset2sim-run-summary",
+                                     description=f"asset2sim {summary['dataset']} / {summary['run']}")
+        except Exception as exc:  # the catalog and MLflow are the record
+            log.warning("Prefect summary artifact not created: %s", exc)
     summary.update(
         flow_run_id=run.info["flow_run_id"],  # None: recorded without a Prefect flow run (nothing was dispatched)
         mlflow_run_id=mlflow_run_id,
@@ -327,27 +343,6 @@ def media_phase(log, rows, *, workers: int = 1, time_limit_seconds: float = 1800
     if folders:
         log.info("media phase: %d of %d outputs in %.1f s", len(folders) - failed, len(folders), seconds)
     return {"media_made": len(folders) - failed, "media_failed": failed, "media_seconds": seconds}
-
-
-def _prefect_summary_artifact(summary: dict[str, Any], comparison, mlflow_run_id: str | None, log) -> None:
-    """A markdown artifact on the Prefect flow run (a failure is logged, not raised)."""
-    try:
-        from prefect.artifacts import create_markdown_artifact
-
-        lines = [
-            f"### asset2sim run {summary['run']} of dataset {summary['dataset']}",
-            f"{summary['assets']} assets: {summary['done']} done, {summary['skipped']} skipped, {summary['failed']} failed; "
-            f"all checks passed {100 * (summary.get('pass_rate_all') or 0):.1f}%",
-            f"MLflow run: `{mlflow_run_id or 'not logged'}`",
-            "",
-            "```",
-            *catalog_compare.comparison_lines(comparison),
-            "```",
-        ]
-        create_markdown_artifact(markdown="\n".join(lines), key="asset2sim-run-summary",
-                                 description=f"asset2sim {summary['dataset']} / {summary['run']}")
-    except Exception as exc:  # the catalog and MLflow are the record
-        log.warning("Prefect summary artifact not created: %s", exc)
 
 
 def _log_to_mlflow(run: _Run, df, summary, artifacts, extra_tags: dict[str, str]) -> tuple[str | None, str | None]:

@@ -22,7 +22,7 @@ from asset2sim.flow_progress import ProgressEvent
 from asset2sim.flows import driver_skip, job_order, stages
 from asset2sim.flows.catalog import ResultCatalog
 from asset2sim.flows.forkserver import ready_server
-from asset2sim.flows.job_records import Prepared, build_row
+from asset2sim.flows.job_records import build_row
 from asset2sim.flows.stages import SUBFLOW_NAME, AssetJob, ModelCallFailure
 from asset2sim.tasks.check.verdict import exception_failure_mode
 
@@ -164,9 +164,18 @@ class _AssetRecorder:
         if published_status == "ok":  # the row points at the store
             refined.value.out_dir = published.value["out_uri"]
         if exc is None and prepared is not None and prepared.resume is not None and refined is not None and refined.status == "ok":
-            skipped = _record_resumed(self.store, prepared, refined, measured, self.starts[job.asset_id])
-            if skipped is not None:
-                prepared, refined, measured = skipped, None, None
+            # the row a killed run owed for its complete folder (prepared.resume), written into its partition; when it
+            # is ``done``, this run's row reuses it (``skip``)
+            known = {f.name for f in dataclasses.fields(AssetJob)}
+            earlier = AssetJob(**{k: v for k, v in prepared.resume["job"].items() if k in known})
+            info = self.store.run_info(earlier.dataset, earlier.run_id) or {}
+            old = build_row(earlier, prepared.model_copy(update={"resume": None}), refined, measured,
+                            flow_run_id=info.get("flow_run_id"), started_at=self.starts[job.asset_id], finished_at=time.time())
+            if old.status == "done":
+                if not self.store.has_row(earlier.dataset, earlier.run_id, earlier.asset_id):  # row files, compacted file
+                    self.store.append_row(earlier.dataset, earlier.run_id, old)
+                skip = {**old.model_dump(mode="json"), "run": earlier.run_id}
+                prepared, refined, measured = prepared.model_copy(update={"skip": skip}), None, None
         row = build_row(
             job, prepared, refined, measured,
             error=publish_error if exc is None else f"{type(exc).__name__}: {exc}",
@@ -253,19 +262,3 @@ def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
     except (RuntimeError, OSError, TimeoutError) as exc:
         log.warning("stage servers not started before the first asset: %s: %s", type(exc).__name__, exc)
     return time.perf_counter() - t0
-
-
-def _record_resumed(store: ResultCatalog, prepared: Prepared, refined, measured,
-                    started: float) -> Prepared | None:
-    """Write the row a killed run owed for its complete folder (``prepared.resume``) into its partition; return
-    ``prepared`` with that row as ``skip``, or None when that row would not be ``done``."""
-    known = {f.name for f in dataclasses.fields(AssetJob)}
-    earlier = AssetJob(**{k: v for k, v in prepared.resume["job"].items() if k in known})
-    info = store.run_info(earlier.dataset, earlier.run_id) or {}
-    old = build_row(earlier, prepared.model_copy(update={"resume": None}), refined, measured,
-                    flow_run_id=info.get("flow_run_id"), started_at=started, finished_at=time.time())
-    if old.status != "done":
-        return None
-    if not store.has_row(earlier.dataset, earlier.run_id, earlier.asset_id):  # row files and the compacted file
-        store.append_row(earlier.dataset, earlier.run_id, old)
-    return prepared.model_copy(update={"skip": {**old.model_dump(mode="json"), "run": earlier.run_id}})

@@ -171,7 +171,12 @@ def _simulate(ctx, judged: Judgement, config: RefineConfig, initial: dict[str, f
     out = []
     with tempfile.TemporaryDirectory(prefix="asset2sim-audit-") as tmp:
         for kind, overlay in (("declared", judged.declared), ("patched", judged.patched)):
-            start = {**_rest_state(ctx, overlay, state), **initial}
+            start = dict(state)  # the closed end, or a spring's reference within the joint's limits
+            for name, dyn in overlay.joints.items():
+                if dyn.stiffness > 0 and dyn.spring_reference is not None and name in ctx.closed:
+                    cs = ctx.closed[name]
+                    start[name] = min(max(dyn.spring_reference, cs.lower), cs.upper)
+            start.update(initial)
             try:
                 urdf = _physics_urdf(ctx.asset, overlay, Path(tmp) / f"{kind}.urdf")
                 check = postcheck.run_post_check(postcheck.overlay_object(UrdfFile(urdf), start, overlay, config.sim), config,
@@ -195,16 +200,6 @@ def _physics_urdf(asset: AssetDescription, overlay: Overlay, path: Path) -> Path
                 g.filename = str(g.path)
     atomic.write_bytes(path, write_urdf(model))
     return path
-
-
-def _rest_state(ctx, overlay: Overlay, closed: dict[str, float]) -> dict[str, float]:
-    """joint -> start position: the closed end, or a spring's reference within the joint's limits."""
-    out = dict(closed)
-    for name, dyn in overlay.joints.items():
-        if dyn.stiffness > 0 and dyn.spring_reference is not None and name in ctx.closed:
-            cs = ctx.closed[name]
-            out[name] = min(max(dyn.spring_reference, cs.lower), cs.upper)
-    return out
 
 
 def _write(report: AuditReport, asset: AssetDescription, dp: declared_mod.DeclaredPhysics, judged: Judgement, out_dir: Path) -> AuditReport:

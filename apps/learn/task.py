@@ -147,7 +147,17 @@ def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None =
     with quiet_stdout():
         closed, how = closed_ends(files, candidates)
     types = {j.name: j.type for j in desc.joints}
-    best = _farthest(dict(obj.state), types, closed, candidates, spec.actions, start)
+    best = None  # (gap, joint, action, start fraction) of the pair whose target is farthest from its start (first on a tie)
+    for j in candidates:
+        c = closed[j]
+        if not c.open_range > 0:
+            continue
+        for action in spec.actions:
+            f0 = c.fraction(obj.state.get(j, 0.0)) if start == "asset" else common_start(action, types[j], c.open_range)
+            target, _ = targets_for(action, f0)
+            gap = abs(target - f0)
+            if best is None or gap > best[0]:
+                best = (gap, j, action, f0)
     if best is None:
         raise LearnTaskError(f"{urdf}: task {task!r}: none of {candidates} can open (range 0)")
     _, joint, action, f0 = best
@@ -163,22 +173,3 @@ def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None =
         springs=dict(obj.springs), root_fixed=obj.fixed_base, conventions=obj.conventions,
         start_fraction=f0, start=start, candidates=candidates, rule=spec.rule, notes=notes,
     )
-
-
-def _farthest(state: dict[str, float], types: dict[str, str], closed: dict[str, ClosedState], candidates: list[str],
-              actions: tuple[str, ...] | list[str], start: str) -> tuple[float, str, str, float] | None:
-    """(gap, joint, action, start fraction) of the pair whose target is farthest from its start (first on a tie);
-    None when no candidate has an opening range > 0. ``state``: the asset's initial state (rad or m); ``types``:
-    joint -> type."""
-    best: tuple[float, str, str, float] | None = None
-    for j in candidates:
-        c = closed[j]
-        if not c.open_range > 0:
-            continue
-        for action in actions:
-            f0 = c.fraction(state.get(j, 0.0)) if start == "asset" else common_start(action, types[j], c.open_range)
-            target, _ = targets_for(action, f0)
-            gap = abs(target - f0)
-            if best is None or gap > best[0]:
-                best = (gap, j, action, f0)
-    return best

@@ -123,13 +123,6 @@ def _error_page(code: str, message: str, rater: str | None = None) -> "HTMLRespo
                  _STATUS.get(code, 400))
 
 
-def _media_table(store: RatingStore) -> dict[tuple[int, str, int, str], Path]:
-    """(pair index, slot, view index, kind) -> the file ``pairs.json`` names (PairSetError when one is missing or
-    outside the folder)."""
-    return {(i, slot, v, kind): media_path(store.folder, getattr(clip, kind)) for i, pair in enumerate(store.pairs)
-            for slot in ("a", "b") for v, clip in enumerate(side(pair, slot).clips) for kind in _KINDS}  # video, poster
-
-
 async def _answer(store: RatingStore, secret: bytes, rater: str, request: "Request") -> "Response":
     """An answer posted by ``rater``: Origin, size, form token and values checked, recorded, the next pair
     (a redirect) or an error page naming what was refused."""
@@ -191,7 +184,9 @@ def create_app(folder: Path | str, *, host: str = "127.0.0.1",
     from starlette.middleware.trustedhost import TrustedHostMiddleware
 
     store = RatingStore(folder)
-    media = _media_table(store)
+    # (pair index, slot, view index, kind) -> the file pairs.json names (PairSetError when one is missing or outside the folder)
+    media = {(i, slot, v, kind): media_path(store.folder, getattr(clip, kind)) for i, pair in enumerate(store.pairs)
+             for slot in ("a", "b") for v, clip in enumerate(side(pair, slot).clips) for kind in _KINDS}  # video, poster
     secret = store.form_secret()
 
     @asynccontextmanager

@@ -327,20 +327,16 @@ class RatingStore:
     def sync_parquet(self) -> Path:
         """Rewrite ``ratings.parquet`` from the database, atomically (:func:`asset2sim.atomic.write_bytes`),
         readable by the file's group; returns its path. Raises OSError when the folder cannot be written."""
+        import pyarrow as pa
+
         with self._sync_lock:
-            atomic.write_bytes(self.parquet, ratings_parquet_bytes(self.ratings()))
+            schema = model_arrow_schema(Rating, score=pa.int8())
+            table = pa.Table.from_pylist([r.model_dump() for r in self.ratings()], schema=schema)
+            atomic.write_bytes(self.parquet, parquet_bytes(table))
             mode = os.stat(self.parquet).st_mode
             if not mode & stat.S_IRGRP:
                 os.chmod(self.parquet, stat.S_IMODE(mode) | stat.S_IRGRP)
         return self.parquet
-
-
-def ratings_parquet_bytes(ratings: list[Rating]) -> bytes:
-    """``ratings`` as the bytes of a Parquet file, one row per :class:`Rating` (its fields as columns)."""
-    import pyarrow as pa
-
-    return parquet_bytes(pa.Table.from_pylist([r.model_dump() for r in ratings],
-                                              schema=model_arrow_schema(Rating, score=pa.int8())))
 
 
 def read_ratings(path: Path | str) -> list[Rating]:
