@@ -129,11 +129,8 @@ def record_learnability(store: ResultCatalog, dataset: str, flags: dict[str, Lea
     if not flags:
         return done
     expr = pads.field("status").isin(["done", "skipped"]) & pads.field("asset_id").isin(sorted(flags))
-    rows = store.read(dataset, filter=expr)
-    latest: dict[str, dict] = {}
-    for rec in rows.to_dict("records"):
-        if rec["asset_id"] not in latest or rec["run"] >= latest[rec["asset_id"]]["run"]:
-            latest[rec["asset_id"]] = rec
+    # the rows come sorted by run (ResultCatalog.read): an asset's last row is its latest
+    latest = {rec["asset_id"]: rec for rec in store.read(dataset, filter=expr).to_dict("records")}
     for aid, flag in sorted(flags.items()):
         row = latest.get(aid)
         if row is None:

@@ -351,7 +351,7 @@ def _log_to_mlflow(run: _Run, df, summary, artifacts, extra_tags: dict[str, str]
     if not cat.config.tracking.enabled:
         return None, None
     try:
-        run = tracking.log_flow_run(
+        return tracking.log_flow_run(
             df,
             summary,
             params={
@@ -370,10 +370,9 @@ def _log_to_mlflow(run: _Run, df, summary, artifacts, extra_tags: dict[str, str]
             settings=cat.config.tracking,
             tags={"prefect.flow_run_id": info["flow_run_id"] or "", "asset2sim.run": run_id, **extra_tags},
             started_at=info.get("requested_at") or info.get("started_at"), ended_at=time.time(),
-        )
+        ), None
     except Exception as exc:  # the catalog is the record; tracking must not lose it
         return None, f"{type(exc).__name__}: {exc}"
-    return run, None
 
 
 def run_refine_flow(
