@@ -151,43 +151,6 @@ def kept_comparisons(verdicts: Sequence[JudgeVerdict], model: str | None = None)
             if v.defect is None and (model is None or v.model == model) and kept_side(v) is not None]
 
 
-def _one_model(model: str, family: str, rows: list[JudgeVerdict], threshold: float, min_defect_pairs: int) -> ModelCalibration:
-    kept = [v for v in rows if kept_side(v) is not None]
-    defects: dict[str, DefectTally] = defaultdict(DefectTally)
-    for v in rows:
-        if v.defect is not None:
-            t = defects[v.defect]
-            t.pairs += 1
-            t.kept += kept_side(v) is not None
-            t.caught += kept_side(v) == "a"
-    n_def = sum(t.pairs for t in defects.values())
-    n_def_kept = sum(t.kept for t in defects.values())
-    caught = sum(t.caught for t in defects.values())
-    sens = _ratio(caught, n_def)
-    if n_def < min_defect_pairs:
-        ok, why = False, f"only {n_def} defect pairs; at least {min_defect_pairs} are needed to calibrate"
-    elif sens is not None and sens >= threshold:
-        ok, why = True, f"caught {caught} of {n_def} planted defects ({100 * sens:.0f} % >= {100 * threshold:.0f} %)"
-    else:
-        ok, why = False, (f"caught {caught} of {n_def} planted defects ({100 * (sens or 0):.0f} % < {100 * threshold:.0f} %; "
-                          f"{n_def - n_def_kept} dropped as order-inconsistent or unanswered)")
-    wins: dict[str, MethodWins] = defaultdict(MethodWins)
-    for winner, loser in kept_comparisons(rows):
-        wins[winner].comparisons += 1
-        wins[winner].wins += 1
-        wins[loser].comparisons += 1
-    for w in wins.values():
-        w.win_rate = _ratio(w.wins, w.comparisons)
-    return ModelCalibration(
-        model=model, family=family, pairs=len(rows), kept=len(kept), kept_rate=_ratio(len(kept), len(rows)),
-        orders_without_answer=sum((v.first is None) + (v.second is None) for v in rows),
-        defect_pairs=n_def, defect_kept=n_def_kept, defect_caught=caught, sensitivity=sens,
-        sensitivity_of_kept=_ratio(caught, n_def_kept), calibrated=ok, why=why,
-        defects=dict(sorted(defects.items())), method_wins=dict(sorted(wins.items())),
-        calls=sum(v.calls for v in rows), prompt_tokens=sum(v.prompt_tokens for v in rows),
-        completion_tokens=sum(v.completion_tokens for v in rows), cost_usd=sum(v.cost_usd for v in rows))
-
-
 def judge_calibration(verdicts: Sequence[JudgeVerdict], *, threshold: float = SENSITIVITY_THRESHOLD,
                       min_defect_pairs: int = MIN_DEFECT_PAIRS) -> JudgeCalibration:
     """Calibration of every judge model among ``verdicts`` (models in first-seen order) and Cohen's kappa
@@ -206,12 +169,46 @@ def judge_calibration(verdicts: Sequence[JudgeVerdict], *, threshold: float = SE
         if family.setdefault(v.model, v.family) != v.family:
             raise ValueError(f"model {v.model!r} appears with families {family[v.model]!r} and {v.family!r}")
         by_model.setdefault(v.model, []).append(v)
-    for m, rows in by_model.items():
+    models = []
+    for model, rows in by_model.items():
         ids = Counter(v.pair_id for v in rows)
         twice = [p for p, n in ids.items() if n > 1]
         if twice:
-            raise ValueError(f"model {m!r} judged pair {twice[0]!r} {ids[twice[0]]} times")
-    models = [_one_model(m, family[m], rows, threshold, min_defect_pairs) for m, rows in by_model.items()]
+            raise ValueError(f"model {model!r} judged pair {twice[0]!r} {ids[twice[0]]} times")
+        kept = [v for v in rows if kept_side(v) is not None]
+        defects: dict[str, DefectTally] = defaultdict(DefectTally)
+        for v in rows:
+            if v.defect is not None:
+                t = defects[v.defect]
+                t.pairs += 1
+                t.kept += kept_side(v) is not None
+                t.caught += kept_side(v) == "a"
+        n_def = sum(t.pairs for t in defects.values())
+        n_def_kept = sum(t.kept for t in defects.values())
+        caught = sum(t.caught for t in defects.values())
+        sens = _ratio(caught, n_def)
+        if n_def < min_defect_pairs:
+            ok, why = False, f"only {n_def} defect pairs; at least {min_defect_pairs} are needed to calibrate"
+        elif sens is not None and sens >= threshold:
+            ok, why = True, f"caught {caught} of {n_def} planted defects ({100 * sens:.0f} % >= {100 * threshold:.0f} %)"
+        else:
+            ok, why = False, (f"caught {caught} of {n_def} planted defects ({100 * (sens or 0):.0f} % < {100 * threshold:.0f} %; "
+                              f"{n_def - n_def_kept} dropped as order-inconsistent or unanswered)")
+        wins: dict[str, MethodWins] = defaultdict(MethodWins)
+        for winner, loser in kept_comparisons(rows):
+            wins[winner].comparisons += 1
+            wins[winner].wins += 1
+            wins[loser].comparisons += 1
+        for w in wins.values():
+            w.win_rate = _ratio(w.wins, w.comparisons)
+        models.append(ModelCalibration(
+            model=model, family=family[model], pairs=len(rows), kept=len(kept), kept_rate=_ratio(len(kept), len(rows)),
+            orders_without_answer=sum((v.first is None) + (v.second is None) for v in rows),
+            defect_pairs=n_def, defect_kept=n_def_kept, defect_caught=caught, sensitivity=sens,
+            sensitivity_of_kept=_ratio(caught, n_def_kept), calibrated=ok, why=why,
+            defects=dict(sorted(defects.items())), method_wins=dict(sorted(wins.items())),
+            calls=sum(v.calls for v in rows), prompt_tokens=sum(v.prompt_tokens for v in rows),
+            completion_tokens=sum(v.completion_tokens for v in rows), cost_usd=sum(v.cost_usd for v in rows)))
     kappas = []
     for m1, m2 in combinations(by_model, 2):
         s1, s2 = ({v.pair_id: kept_side(v) for v in by_model[m] if kept_side(v) is not None} for m in (m1, m2))

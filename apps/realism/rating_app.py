@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Sequence
 from urllib.parse import parse_qs, quote
 
 from asset2sim.apps.realism.pair_set import media_path
-from asset2sim.apps.realism.ratings import RatingError, RatingStore, Showing, check_rater, side
+from asset2sim.apps.realism.ratings import RatingError, RatingStore, check_rater, side
 from asset2sim.inert import CONTENT_SECURITY_POLICY, CSP_META, html_text
 from asset2sim.package_data import package_yaml
 
@@ -94,25 +94,6 @@ def allowed_host_names(host: str = "127.0.0.1", allowed_hosts: Sequence[str] = (
     names = [n.strip().strip("[]").lower() for n in (*LOOPBACK_HOSTS, host, *allowed_hosts)
              if n.strip().strip("[]") not in _ANY_ADDRESS]
     return list(dict.fromkeys(f"[{n}]" if ":" in n else n for n in names))
-
-
-def _rating_page(rater: str, index: int, shown: Showing, done: int, total: int, token: str) -> "HTMLResponse":
-    r = quote(rater, safe="")
-    columns = []
-    for position, slot in (("left", shown.left), ("right", shown.right)):
-        videos = []
-        for v, clip in enumerate(side(shown.pair, slot).clips):
-            base = f"/media/{r}/{index}/{position}/{v}"
-            videos.append(f"<video id=\"{position}-{v}\" autoplay loop muted playsinline controls preload=\"auto\" "
-                          f"poster=\"{base}/poster\" width=\"{clip.width}\" height=\"{clip.height}\" "
-                          f"title=\"{html_text(clip.view)} view\"><source src=\"{base}/video\" type=\"video/webm\">"
-                          "</video>")
-        columns.append(f"<div class=\"side\" id=\"side-{position}\"><h2>{position.capitalize()}</h2>{''.join(videos)}</div>")
-    scores = "".join(f"<label><input type=\"radio\" name=\"score\" value=\"{s}\" id=\"score-{s}\"> {s}</label> "
-                     for s in range(1, 6))
-    return _page(f"Realism rating: pair {done + 1} of {total}", _PAGES["rating"].format(
-        rater=html_text(rater), number=done + 1, total=total, category=html_text(shown.pair.category), columns="".join(columns),
-        r=r, index=index, token=html_text(token), scores=scores))
 
 
 def _error_page(code: str, message: str, rater: str | None = None) -> "HTMLResponse":
@@ -220,7 +201,22 @@ def create_app(folder: Path | str, *, host: str = "127.0.0.1",
         done, total = store.progress(rater)
         if shown is None:
             return _page("Realism rating: done", _PAGES["done"].format(rater=html_text(rater), total=total))
-        return _rating_page(rater, store.index[shown.pair.pair_id], shown, done, total, form_token(secret, rater))
+        r, index = quote(rater, safe=""), store.index[shown.pair.pair_id]
+        columns = []  # each side's clips, by position only
+        for position, slot in (("left", shown.left), ("right", shown.right)):
+            videos = []
+            for v, clip in enumerate(side(shown.pair, slot).clips):
+                base = f"/media/{r}/{index}/{position}/{v}"
+                videos.append(f"<video id=\"{position}-{v}\" autoplay loop muted playsinline controls preload=\"auto\" "
+                              f"poster=\"{base}/poster\" width=\"{clip.width}\" height=\"{clip.height}\" "
+                              f"title=\"{html_text(clip.view)} view\"><source src=\"{base}/video\" type=\"video/webm\">"
+                              "</video>")
+            columns.append(f"<div class=\"side\" id=\"side-{position}\"><h2>{position.capitalize()}</h2>{''.join(videos)}</div>")
+        scores = "".join(f"<label><input type=\"radio\" name=\"score\" value=\"{s}\" id=\"score-{s}\"> {s}</label> "
+                         for s in range(1, 6))
+        return _page(f"Realism rating: pair {done + 1} of {total}", _PAGES["rating"].format(
+            rater=html_text(rater), number=done + 1, total=total, category=html_text(shown.pair.category),
+            columns="".join(columns), r=r, index=index, token=html_text(form_token(secret, rater)), scores=scores))
 
     @app.post("/rate/{rater}/answer")
     async def answer(rater: str, request: Request) -> Response:
