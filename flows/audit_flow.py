@@ -47,34 +47,24 @@ def audit_flow(paths: list[str], out: str, category: str | None = None, simulate
     run summary (assets, failure modes, implausible values per quantity, catalog paths, MLflow run id) and the
     catalog ``rows`` (:class:`~asset2sim.schemas.audit.AuditRow`)."""
     start = time.perf_counter()
+    import pandas as pd
+
     targets = find_assets(paths)
     runner = dask_task_runner(workers, dask_address, dashboard=False)
     with local_cluster_config(dask_address, False, out):
         rows = _audit_each.with_options(task_runner=runner)(targets, out, category, simulate) if targets else []
     files = audit_catalog.write_audit_catalog(out, rows)
-    summary = audit_summary(rows, files)
-    summary["seconds"] = time.perf_counter() - start
-    summary["mlflow_run_id"] = log_audit_run(summary, files, Path(out), tracking_uri)
-    return {**summary, "rows": rows}
-
-
-def audit_summary(rows: list[AuditRow], files: dict[str, Path]) -> dict[str, Any]:
-    """Counts of a run: assets, per failure mode, implausible values per quantity; the catalog's paths."""
-    import pandas as pd
-
     values = pd.read_parquet(files["values"])
     bad = values[values["verdict"] == "implausible"]
-    modes = {m: sum(r.failure_mode == m for r in rows) for m in audit_catalog.AUDIT_MODES}
-    return {"assets": len(rows), "failure_modes": modes, "implausible_by_quantity": bad["quantity"].value_counts().to_dict(),
-            "catalog": {k: str(v) for k, v in files.items()}}
-
-
-def log_audit_run(summary: dict[str, Any], files: dict[str, Path], out: Path, tracking_uri: str | None) -> str | None:
-    """One MLflow run in :data:`AUDIT_EXPERIMENT` (the store of ``tracking_uri``, else ``MLFLOW_TRACKING_URI``, else
-    ``<out>/mlflow.db``): metrics ``assets``, ``<mode>`` counts and ``implausible_<quantity>``; the catalog files as
-    artifacts. Returns the run id."""
+    summary = {"assets": len(rows),
+               "failure_modes": {m: sum(r.failure_mode == m for r in rows) for m in audit_catalog.AUDIT_MODES},
+               "implausible_by_quantity": bad["quantity"].value_counts().to_dict(),
+               "catalog": {k: str(v) for k, v in files.items()}, "seconds": time.perf_counter() - start}
+    # one MLflow run in AUDIT_EXPERIMENT (the store of tracking_uri, else MLFLOW_TRACKING_URI, else <out>/mlflow.db):
+    # metrics ``assets``, ``<mode>`` counts and ``implausible_<quantity>``; the catalog files as artifacts
     client = tracking.mlflow_client(tracking.resolve_tracking_uri(out, tracking_uri))
-    with tracking.client_run(client, AUDIT_EXPERIMENT, (Path(out).resolve() / "mlruns").as_uri(), f"audit-{out.name}") as run_id:
+    artifacts = (Path(out).resolve() / "mlruns").as_uri()
+    with tracking.client_run(client, AUDIT_EXPERIMENT, artifacts, f"audit-{Path(out).name}") as run_id:
         client.log_metric(run_id, "assets", summary["assets"])
         for mode, n in summary["failure_modes"].items():
             client.log_metric(run_id, mode, n)
@@ -82,7 +72,7 @@ def log_audit_run(summary: dict[str, Any], files: dict[str, Path], out: Path, tr
             client.log_metric(run_id, f"implausible_{quantity}", int(n))
         for path in files.values():
             client.log_artifact(run_id, str(path))
-    return run_id
+    return {**summary, "mlflow_run_id": run_id, "rows": rows}
 
 
 def run_audit_flow(paths: list[str], out: str | Path, *, category: str | None = None, simulate: bool = True,

@@ -215,13 +215,12 @@ def compare_with_previous(store: ResultCatalog, dataset: str, run: str,
     work (every asset reused) is not compared (``nothing_done``): its figures would only echo the earlier run's."""
     cols = list(COMPARE_COLUMNS)
     current = store.read(dataset, run, columns=cols)
-    if len(current) and not (current["status"] != "skipped").any():
-        out = compare_runs(None, current, dataset=dataset, run=run, previous_run_id=None, settings=settings)
-        out.nothing_done = True
-        return out
-    prev_id = previous_run(store, dataset, run)
+    nothing_done = bool(len(current)) and not (current["status"] != "skipped").any()
+    prev_id = None if nothing_done else previous_run(store, dataset, run)
     previous = None if prev_id is None else store.read(dataset, prev_id, columns=cols)
-    return compare_runs(previous, current, dataset=dataset, run=run, previous_run_id=prev_id, settings=settings)
+    out = compare_runs(previous, current, dataset=dataset, run=run, previous_run_id=prev_id, settings=settings)
+    out.nothing_done = nothing_done
+    return out
 
 
 def _pct(v: float | None) -> str:

@@ -197,22 +197,17 @@ def task_object(folder: str | Path, action: str, task: str | None = None, *, def
     names = [j.name for j in model.movable_joints]
     q0 = dict(zip(names, obj.start_qpos(names)))
     link, point, rule = contact_point_rule(_Kinematics(model, q0), lt.joint, model, opening_direction=direction)
-    obj.grasp_link, obj.grasp_point = _moving_link(model, link, np.asarray(point, float))
+    # the grasp on the link that carries ``link`` (itself, or its nearest ancestor whose joint to its parent is not fixed):
+    # a link welded on by a fixed joint (a handle on its door) has no joint in a SAPIEN articulation (Link.merge needs one)
+    carrier, point, joint = link, np.asarray(point, float), model.parent_joint(link)
+    while joint is not None and joint.type == "fixed":
+        point = (joint.origin @ np.append(point, 1.0))[:3]
+        carrier, joint = joint.parent, model.parent_joint(joint.parent)
+    obj.grasp_link, obj.grasp_point = carrier, point
     obj.notes.append(f"grasp point: {rule} of {link}" + (f" (on {obj.grasp_link}, which carries it)" if obj.grasp_link != link else ""))
     pts = _world_points(model, pieces, q0)  # free objects rest on the floor; mounted ones are welded standing on it
     obj.base_z = float(-pts[:, 2].min()) if len(pts) else 0.0
     return obj
-
-
-def _moving_link(model: UrdfModel, link: str, point: np.ndarray) -> tuple[str, np.ndarray]:
-    """The link that carries ``link`` (itself, or its nearest ancestor whose joint to its parent is not fixed) and
-    ``point`` (3,) m moved from ``link``'s frame into that link's: a link welded on by a fixed joint (a handle or
-    latch on its door) has no joint of its own in a SAPIEN articulation, and ManiSkill's ``Link.merge`` needs one."""
-    joint = model.parent_joint(link)
-    while joint is not None and joint.type == "fixed":
-        point = (joint.origin @ np.append(point, 1.0))[:3]
-        link, joint = joint.parent, model.parent_joint(joint.parent)
-    return link, point
 
 
 def find_assets(assets: str | Path | Sequence[str | Path]) -> list[Path]:

@@ -79,20 +79,6 @@ class Subject:
     request: str = ""
 
 
-def subject_of(folder: Path | str, object_id: str, conventions: SimConventions | None = None) -> Subject | None:
-    """The :class:`Subject` of the asset2sim output in ``folder``, read once (None: no joint that opens). Raises
-    EvaluationError: the folder cannot be read."""
-    joints = pushed_joints(folder)
-    if not joints:
-        return None
-    joint, closed = joints[0]
-    files, desc = read_asset(folder)
-    side = side_of(sim_object(files)[0], "asset2sim")
-    report = files.record("report.json") or {}
-    return Subject(side=side, joint=joint, closed=closed, force_limit=drive_limit(side, joint, closed, conventions),
-                   object_id=object_id, category=report.get("category") or desc.category or "", request=str(report.get("prompt") or ""))
-
-
 def _spec(subject: Subject, b: PhysicsSide, defect: str | None = None) -> tuple[PairSpec, ClosedState]:
     return PairSpec(a=subject.side, b=b, joint=subject.joint, object_id=subject.object_id, category=subject.category,
                     request=subject.request, defect=defect, force_limit=subject.force_limit), subject.closed
@@ -190,10 +176,15 @@ def specs_from_folders(paths: Sequence[Path | str], pair_set: Path | str, *, aga
     skipped: dict[str, str] = {}
     for n, (object_id, folders) in enumerate(outputs):
         try:
-            subject = subject_of(folders["asset2sim"], object_id, conventions)
-            if subject is None:
+            joints = pushed_joints(folders["asset2sim"])  # asset2sim's output as every pair of the object shows it
+            if not joints:
                 skipped[object_id] = "no joint that opens"
                 continue
+            (joint, closed), (files, desc) = joints[0], read_asset(folders["asset2sim"])
+            side, report = side_of(sim_object(files)[0], "asset2sim"), files.record("report.json") or {}
+            subject = Subject(side=side, joint=joint, closed=closed, force_limit=drive_limit(side, joint, closed, conventions),
+                              object_id=object_id, category=report.get("category") or desc.category or "",
+                              request=str(report.get("prompt") or ""))
             for method, folder in folders.items():  # against every other method's asset of the object
                 if method == "asset2sim":
                     continue
