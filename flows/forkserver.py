@@ -289,26 +289,6 @@ def run_forked(target: str, kwargs: dict[str, Any], *, timeout: float, workdir: 
     return _server_with(preload).call(target, kwargs, timeout=timeout, workdir=workdir, memory_limit_mb=memory_limit_mb)
 
 
-def _run_child(spec_path: str, out_fd: int) -> None:
-    """In the forked child: own process group, output to the log, the call; never returns."""
-    code = 0
-    try:
-        os.close(out_fd)
-        os.setpgid(0, 0)
-        set_parent_death_signal()
-        spec = json.loads(Path(spec_path).read_text())
-        fd = os.open(spec["log"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        os.dup2(fd, 1)
-        os.dup2(fd, 2)
-        os.close(fd)
-        run_child_spec(spec)
-        sys.stdout.flush()
-        sys.stderr.flush()
-    except BaseException:  # noqa: BLE001 - the child must never return into the server loop
-        code = 1
-    os._exit(code)
-
-
 def _server_main(argv: list[str]) -> int:
     set_parent_death_signal(expected_parent=int(argv[0]))
     out_fd = os.dup(1)  # the protocol pipe; fd 1 goes to stderr so prints cannot break it
@@ -338,8 +318,24 @@ def _server_main(argv: list[str]) -> int:
         sys.stdout.flush()
         sys.stderr.flush()
         pid = os.fork()
+        # the child: its own process group, output to the log, the call; never returns into this loop
         if pid == 0:
-            _run_child(spec, out_fd)
+            code = 0
+            try:
+                os.close(out_fd)
+                os.setpgid(0, 0)
+                set_parent_death_signal()
+                spec = json.loads(Path(spec).read_text())
+                fd = os.open(spec["log"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+                os.dup2(fd, 1)
+                os.dup2(fd, 2)
+                os.close(fd)
+                run_child_spec(spec)
+                sys.stdout.flush()
+                sys.stderr.flush()
+            except BaseException:  # noqa: BLE001 - the child must never return into the server loop
+                code = 1
+            os._exit(code)
         say({"pid": pid})
         _, status, usage = os.wait4(pid, 0)
         rc = -os.WTERMSIG(status) if os.WIFSIGNALED(status) else os.WEXITSTATUS(status)

@@ -216,8 +216,9 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
         input_failure = prepared.failure_mode or "invalid_input"
         errors.append(f"prepare: {prepared.error or ''}")
     refine_status = refined.status if refined is not None else None
-    refine_mode = None  # the refine's failure mode (None: it did not finish)
-    if refine_status == "ok":  # the refine stage's columns, seconds and failure mode
+    # the refine's columns, seconds and failure mode (None: it did not finish)
+    refine_mode = None
+    if refine_status == "ok":
         value: RefineOutput = refined.value
         report = value.report
         row.out_dir = value.out_dir or job.out_dir
@@ -241,7 +242,7 @@ def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, 
             if col in post:
                 setattr(row, col, post[col])
         refine_mode = report.failure_mode
-    elif refine_status in FAILED_STATUSES:  # its seconds and errors
+    elif refine_status in FAILED_STATUSES:
         stages["refine"] = _s(refined.seconds)
         errors.append(f"refine: {refined.error_type} {refined.error}".strip())
         if refine_status == "crash" and refined.log_tail:

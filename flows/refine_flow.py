@@ -104,13 +104,15 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
                                   workers=run.n_workers or 1))
     t_track = time.perf_counter()
     flow_progress.emit(ProgressEvent("run_finished", name, run.run_id, total=run.info["assets"]))
-    run_out = cat.output_root / name / run.run_id  # the run's partition compacted, compared with the previous run (logged)
+    # the run's partition compacted, compared with the previous run (logged)
+    run_out = cat.output_root / name / run.run_id
     finish = catalog_finish.finish_run(run.store, name, run.run_id, run_out, cat.config.results)
     for line in catalog_compare.comparison_lines(finish.comparison):
         log.info("%s", line)
     for err in finish.errors:
         log.warning("%s", err)
-    df = run.store.read(name, run.run_id)  # the run summary: counts, pass rates, paths, timings, comparison
+    # the run summary: counts, pass rates, paths, timings, comparison
+    df = run.store.read(name, run.run_id)
     summary = queries.run_summary(df)
     out_store = out or cat.output_store
     summary.update(dataset=name, run=run.run_id, catalog_root=str(cat.catalog_root), output_dir=str(run_out), **timing,
@@ -129,7 +131,8 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
     mlflow_run_id, tracking_error = _log_to_mlflow(run, df, summary, artifacts, finish.comparison.tags())
     if tracking_error:
         log.warning("MLflow tracking failed: %s", tracking_error)
-    if run.info["flow_run_id"]:  # in a Prefect flow run: a markdown artifact on it (a failure is logged, not raised)
+    # in a Prefect flow run: a markdown artifact on it (a failure is logged, not raised)
+    if run.info["flow_run_id"]:
         try:
             from prefect.artifacts import create_markdown_artifact
 

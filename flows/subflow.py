@@ -230,7 +230,8 @@ def _run_assets(prep_futures: dict, chain_task, rec: _AssetRecorder, fingerprint
             continue
         results, exc_b = _outcome(fut)  # a prepare batch ended
         for k, job in enumerate(prep_futures.pop(fut)):
-            prepared = exc_b or results[k]  # the batch's exception, else the job's record or exception
+            # the batch's exception, else the job's record or exception
+            prepared = exc_b or results[k]
             if isinstance(prepared, BaseException):
                 rec.record(job, None, None, None, prepared)
                 continue

@@ -171,7 +171,8 @@ def _simulate(ctx, judged: Judgement, config: RefineConfig, initial: dict[str, f
     out = []
     with tempfile.TemporaryDirectory(prefix="asset2sim-audit-") as tmp:
         for kind, overlay in (("declared", judged.declared), ("patched", judged.patched)):
-            start = dict(state)  # the closed end, or a spring's reference within the joint's limits
+            # the closed end, or a spring's reference within the joint's limits
+            start = dict(state)
             for name, dyn in overlay.joints.items():
                 if dyn.stiffness > 0 and dyn.spring_reference is not None and name in ctx.closed:
                     cs = ctx.closed[name]

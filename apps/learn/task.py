@@ -147,7 +147,8 @@ def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None =
     with quiet_stdout():
         closed, how = closed_ends(files, candidates)
     types = {j.name: j.type for j in desc.joints}
-    best = None  # (gap, joint, action, start fraction) of the pair whose target is farthest from its start (first on a tie)
+    # (gap, joint, action, start fraction) of the pair whose target is farthest from its start (first on a tie)
+    best = None
     for j in candidates:
         c = closed[j]
         if not c.open_range > 0:

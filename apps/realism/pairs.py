@@ -176,7 +176,8 @@ def specs_from_folders(paths: Sequence[Path | str], pair_set: Path | str, *, aga
     skipped: dict[str, str] = {}
     for n, (object_id, folders) in enumerate(outputs):
         try:
-            joints = pushed_joints(folders["asset2sim"])  # asset2sim's output as every pair of the object shows it
+            # asset2sim's output as every pair of the object shows it
+            joints = pushed_joints(folders["asset2sim"])
             if not joints:
                 skipped[object_id] = "no joint that opens"
                 continue
@@ -185,7 +186,8 @@ def specs_from_folders(paths: Sequence[Path | str], pair_set: Path | str, *, aga
             subject = Subject(side=side, joint=joint, closed=closed, force_limit=drive_limit(side, joint, closed, conventions),
                               object_id=object_id, category=report.get("category") or desc.category or "",
                               request=str(report.get("prompt") or ""))
-            for method, folder in folders.items():  # against every other method's asset of the object
+            # against every other method's asset of the object
+            for method, folder in folders.items():
                 if method == "asset2sim":
                     continue
                 try:

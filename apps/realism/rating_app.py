@@ -202,7 +202,8 @@ def create_app(folder: Path | str, *, host: str = "127.0.0.1",
         if shown is None:
             return _page("Realism rating: done", _PAGES["done"].format(rater=html_text(rater), total=total))
         r, index = quote(rater, safe=""), store.index[shown.pair.pair_id]
-        columns = []  # each side's clips, by position only
+        # each side's clips, by position only
+        columns = []
         for position, slot in (("left", shown.left), ("right", shown.right)):
             videos = []
             for v, clip in enumerate(side(shown.pair, slot).clips):
