@@ -97,21 +97,22 @@ def worker_name() -> str:
     return f"{socket.gethostname()}:{os.getpid()}"
 
 
+def finished_in_store(row: dict[str, Any] | None, input_hash: str) -> dict[str, Any] | None:
+    """The skip rule (:func:`asset2sim.flows.job_records.finished_result`) for a row whose output is a local
+    folder or a folder in an output store (:func:`asset2sim.flows.store.store_complete`)."""
+    if row is not None and store_mod.is_store_uri(row.get("out_dir")):
+        return row if store_mod.store_complete(row["out_dir"], input_hash, row.get("refine_config_hash") or "") else None
+    return finished_result(row, input_hash)
+
+
 def reusable(rec: Prepared, job: AssetJob, input_hash: str) -> Prepared:
     """``rec`` made the record of ``job``'s asset read (``ok``) with ``input_hash``: its configuration hashes and
-    ``skip``, the earlier finished row to reuse (the skip rule, :func:`asset2sim.flows.job_records.finished_result`, of
-    ``job.finished``, its output a local folder or a folder in an output store, :func:`asset2sim.flows.store.store_complete`;
-    None: none)."""
+    ``skip``, the earlier finished row to reuse (:func:`finished_in_store` of ``job.finished``; None: none)."""
     rec.ok, rec.input_hash, rec.refine_config_hash = True, input_hash, run_hash(RefineConfig(**job.config), job.prompt, job.category)
     rec.config_hash = flow_config_hash(rec.refine_config_hash, refine_function=job.refine_function, evaluate=job.evaluate,
                                        probes=job.probes, extras=job.extras, reference=bool(job.reference_dir),
                                        reference_scale=job.reference_scale)
-    row = job.finished.get(result_key(job.asset_id, input_hash, rec.config_hash))
-    # a folder in an output store, else a local one
-    if row is not None and store_mod.is_store_uri(row.get("out_dir")):
-        rec.skip = row if store_mod.store_complete(row["out_dir"], input_hash, row.get("refine_config_hash") or "") else None
-    else:
-        rec.skip = finished_result(row, input_hash)
+    rec.skip = finished_in_store(job.finished.get(result_key(job.asset_id, input_hash, rec.config_hash)), input_hash)
     return rec
 
 
