@@ -114,7 +114,15 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
                                 *judged.notes, *asset.staging_notes])
     if out_dir is None:
         return AuditResult(report=report)
-    return AuditResult(report=_write(report, asset, dp, judged, out_dir), out_dir=out_dir)
+    # audit.json, audit.md and the patch (when a value changes), atomic writes
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with output_folder.guarding(out_dir):  # nothing through a symlinked patch/ (or out_dir/..)
+        if any(v.patched is not None for v in report.values):
+            written = patch.write_patch(asset, dp, report.values, judged.patched, out_dir / patch.PATCH_DIR)
+            report = report.model_copy(update={"patch": written.relative_to(out_dir).as_posix()})
+        atomic.write_json(out_dir / AUDIT_JSON, report.model_dump(mode="json"))
+        atomic.write_text(out_dir / AUDIT_MD, report_md.render(report))
+    return AuditResult(report=report, out_dir=out_dir)
 
 
 def _cannot(path: Path | str, exc: BaseException, with_type: bool = False) -> str:
@@ -201,15 +209,3 @@ def _physics_urdf(asset: AssetDescription, overlay: Overlay, path: Path) -> Path
                 g.filename = str(g.path)
     atomic.write_bytes(path, write_urdf(model))
     return path
-
-
-def _write(report: AuditReport, asset: AssetDescription, dp: declared_mod.DeclaredPhysics, judged: Judgement, out_dir: Path) -> AuditReport:
-    """``audit.json``, ``audit.md`` and the patch (when a value changes) into ``out_dir`` (atomic writes)."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    with output_folder.guarding(out_dir):  # nothing through a symlinked patch/ (or out_dir/..)
-        if any(v.patched is not None for v in report.values):
-            written = patch.write_patch(asset, dp, report.values, judged.patched, out_dir / patch.PATCH_DIR)
-            report = report.model_copy(update={"patch": written.relative_to(out_dir).as_posix()})
-        atomic.write_json(out_dir / AUDIT_JSON, report.model_dump(mode="json"))
-        atomic.write_text(out_dir / AUDIT_MD, report_md.render(report))
-    return report

@@ -23,7 +23,7 @@ from asset2sim import atomic, output_folder
 from asset2sim.inert import one_line
 from asset2sim.output_paths import OutputError
 from asset2sim.schemas.config import SimConventions
-from asset2sim.schemas.realism import Clip, ClipPair, PairSet, PairSide
+from asset2sim.schemas.realism import ClipPair, PairSet, PairSide
 from asset2sim.tasks.evaluation.clips import (CLIP_FPS, CLIP_SIZE, CLIP_VIEWS, draw_frames, fit_cameras, fit_poses, pose_points,
                                               write_clip)
 from asset2sim.tasks.evaluation.folder_reading import closed_ends, read_asset, sim_object, task_joints
@@ -84,12 +84,6 @@ def _spec(subject: Subject, b: PhysicsSide, defect: str | None = None) -> tuple[
                     request=subject.request, defect=defect, force_limit=subject.force_limit), subject.closed
 
 
-def _side_clips(renderer: SceneRenderer, traj, cams, folder: Path, base: Path, slot: str, joint: str) -> list[Clip]:
-    frames = draw_frames(renderer, traj, cams, CLIP_FPS)
-    return [write_clip(folder, f"{slot}_{v}", frames[view_spec(v).name], joint=joint, motion="push_release", view=v,
-                       fps=CLIP_FPS, poster_index=len(frames[view_spec(v).name]) // 3, relative_to=base) for v in cams]
-
-
 def make_pair(spec: PairSpec, closed: ClosedState, pair_set: Path | str, index: int, *,
               config: PushReleaseConfig | None = None, conventions: SimConventions | None = None,
               views: Sequence[str] = CLIP_VIEWS) -> ClipPair:
@@ -110,8 +104,12 @@ def make_pair(spec: PairSpec, closed: ClosedState, pair_set: Path | str, index: 
     with SceneRenderer(spec.a.urdf, size=CLIP_SIZE, supersample=1) as ra, SceneRenderer(spec.b.urdf, size=CLIP_SIZE, supersample=1) as rb:
         cloud = np.concatenate([pose_points(r, fit_poses(traj)) for r, traj in ((ra, trajs[0]), (rb, trajs[1]))])
         cams = fit_cameras(cloud, views, CLIP_SIZE)  # one camera per view for both sides
-        sides = [PairSide(method=s.method, clips=_side_clips(r, traj, cams, folder, base, slot, spec.joint))
-                 for s, r, traj, slot in ((spec.a, ra, trajs[0], "a"), (spec.b, rb, trajs[1], "b"))]
+        sides = []
+        for s, r, traj, slot in ((spec.a, ra, trajs[0], "a"), (spec.b, rb, trajs[1], "b")):
+            frames = draw_frames(r, traj, cams, CLIP_FPS)
+            sides.append(PairSide(method=s.method, clips=[
+                write_clip(folder, f"{slot}_{v}", frames[view_spec(v).name], joint=spec.joint, motion="push_release", view=v,
+                           fps=CLIP_FPS, poster_index=len(frames[view_spec(v).name]) // 3, relative_to=base) for v in cams]))
     # the clips' content, and where the pair sits in its set: two refines of one object give the same clips of a
     # planted defect, and each pair still needs its own id
     digest = hashlib.sha256(json.dumps([index, spec.object_id, spec.defect, [[s.method, [atomic.sha256_file(base / c.video)
