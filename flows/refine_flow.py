@@ -76,7 +76,8 @@ def plan_driver(cat, name: str, *, ids: list[str] | None, limit: int | None, for
     run_id = make_run_id(started)
     plan = plan_run(cat, name, run_id, ids=ids, limit=limit, force=force, out_store=out)
     fps = driver_skip.fingerprints(plan.jobs)
-    skips = {} if force else driver_skip.decide_skips(plan.jobs, driver_skip.read_index(ResultCatalog(cat.catalog_root), name), fps)
+    skips = {} if force else driver_skip.decide_skips(
+        plan.jobs, driver_skip.read_index(ResultCatalog(cat.catalog_root), name), fps)
     return DriverPlan(run_id=run_id, started=started, plan=plan, fingerprints=fps, skips=skips)
 
 
@@ -104,75 +105,13 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
                                   workers=run.n_workers or 1))
     t_track = time.perf_counter()
     flow_progress.emit(ProgressEvent("run_finished", name, run.run_id, total=run.info["assets"]))
-    # the run's partition compacted, compared with the previous run (logged)
-    run_out = cat.output_root / name / run.run_id
-    finish = catalog_finish.finish_run(run.store, name, run.run_id, run_out, cat.config.results)
-    for line in catalog_compare.comparison_lines(finish.comparison):
-        log.info("%s", line)
-    for err in finish.errors:
-        log.warning("%s", err)
-    # the run summary: counts, pass rates, paths, timings, comparison
-    df = run.store.read(name, run.run_id)
-    summary = queries.run_summary(df)
-    out_store = out or cat.output_store
-    summary.update(dataset=name, run=run.run_id, catalog_root=str(cat.catalog_root), output_dir=str(run_out), **timing,
-                   output_store=join_uri(out_store, name, run.run_id) if out_store else None,
-                   **finish.comparison.metrics_for_tracking(),
-                   regression=catalog_compare.comparison_summary(finish.comparison),
-                   compaction=None if finish.compaction is None else dataclasses.asdict(finish.compaction))
-    # the run's report files written (and uploaded to the output store), the MLflow run and the Prefect summary artifact
-    artifacts = {} if df.empty else tracking.write_run_artifacts(df, run_out, title=f"{run.name} / {run.run_id}")
-    artifacts.update(finish.artifacts)
-    if summary["output_store"] and run_out.is_dir():  # the run's report files beside its assets in the store
-        try:
-            upload_folder(run_out, summary["output_store"])
-        except (OSError, ValueError) as exc:
-            log.warning("run artifacts not uploaded to %s: %s: %s", summary["output_store"], type(exc).__name__, exc)
-    mlflow_run_id, tracking_error = _log_to_mlflow(run, df, summary, artifacts, finish.comparison.tags())
-    if tracking_error:
-        log.warning("MLflow tracking failed: %s", tracking_error)
-    # in a Prefect flow run: a markdown artifact on it (a failure is logged, not raised)
-    if run.info["flow_run_id"]:
-        try:
-            from prefect.artifacts import create_markdown_artifact
-
-            lines = [
-                f"### asset2sim run {summary['run']} of dataset {summary['dataset']}",
-                f"{summary['assets']} assets: {summary['done']} done, {summary['skipped']} skipped, {summary['failed']} failed; "
-                f"all checks passed {100 * (summary.get('pass_rate_all') or 0):.1f}%",
-                f"MLflow run: `{mlflow_run_id or 'not logged'}`",
-                "",
-                "```",
-                *catalog_compare.comparison_lines(finish.comparison),
-                "```",
-            ]
-            create_markdown_artifact(markdown="\n".join(lines), key="asset2sim-run-summary",
-                                     description=f"asset2sim {summary['dataset']} / {summary['run']}")
-        except Exception as exc:  # the catalog and MLflow are the record
-            log.warning("Prefect summary artifact not created: %s", exc)
-    summary.update(
-        flow_run_id=run.info["flow_run_id"],  # None: recorded without a Prefect flow run (nothing was dispatched)
-        mlflow_run_id=mlflow_run_id,
-        tracking_error=tracking_error,
-        tracking_seconds=time.perf_counter() - t_track,
-        flow_body_seconds=time.perf_counter() - t0,
-        flow_started_epoch=body_started_epoch,
-        artifacts={k: str(v) for k, v in artifacts.items()},
-    )
-    run.info.update(
-        status="finished",
-        outcome=run_outcome(summary),
-        finished_at=datetime.now(timezone.utc).isoformat(),
-        mlflow_run_id=mlflow_run_id,
-        regression={k: summary["regression"][k] for k in ("status", "exceeded", "previous_run", "regressed", "reasons")},
-        summary={k: v for k, v in summary.items() if isinstance(v, (int, float, str, type(None)))},
-    )
-    run.store.write_run_info(run.name, run.run_id, run.info)
-    regression = summary["regression"]
-    if regression.get("exceeded") and cat.config.results.regression.fail_flow:
-        report = "\n".join(["run regressed beyond catalog.yaml results.regression", *regression.get("lines", [])])
-        log.error("%s", report)
-        raise RegressionFailure(report, summary)
+    finish, run_out = _finish_partition(log, run)
+    summary, df = _run_summary(run, finish, run_out, out, timing)
+    artifacts = _track(log, run, summary, finish, df, run_out)
+    summary.update(tracking_seconds=time.perf_counter() - t_track, flow_body_seconds=time.perf_counter() - t0,
+                   flow_started_epoch=body_started_epoch, artifacts={k: str(v) for k, v in artifacts.items()})
+    _record_run_info(run, summary)
+    _raise_on_regression(log, run, summary)
     return summary
 
 
@@ -287,6 +226,96 @@ def _dispatch(log, run: _Run, planned: DriverPlan) -> dict[str, Any]:
     timing["driver_skipped"] = len(planned.skips)
     return timing
 
+
+
+def _finish_partition(log, run: _Run) -> tuple[Any, Path]:
+    """Compact the run's partition and compare it with the previous run (logged); returns the
+    :func:`asset2sim.flows.catalog_finish.finish_run` result and the run's output folder."""
+    run_out = run.cat.output_root / run.name / run.run_id
+    finish = catalog_finish.finish_run(run.store, run.name, run.run_id, run_out, run.cat.config.results)
+    for line in catalog_compare.comparison_lines(finish.comparison):
+        log.info("%s", line)
+    for err in finish.errors:
+        log.warning("%s", err)
+    return finish, run_out
+
+
+def _run_summary(run: _Run, finish, run_out: Path, out: str | None, timing: dict[str, Any]) -> tuple[dict[str, Any], Any]:
+    """The run summary (counts, pass rates, paths, timings, comparison) and the run's catalog rows (DataFrame)."""
+    df = run.store.read(run.name, run.run_id)
+    summary = queries.run_summary(df)
+    out_store = out or run.cat.output_store
+    summary.update(dataset=run.name, run=run.run_id, catalog_root=str(run.cat.catalog_root), output_dir=str(run_out), **timing,
+                   output_store=join_uri(out_store, run.name, run.run_id) if out_store else None,
+                   **finish.comparison.metrics_for_tracking(),
+                   regression=catalog_compare.comparison_summary(finish.comparison),
+                   compaction=None if finish.compaction is None else dataclasses.asdict(finish.compaction))
+    return summary, df
+
+
+def _track(log, run: _Run, summary: dict[str, Any], finish, df, run_out: Path) -> dict[str, Any]:
+    """The run's report files written (and uploaded to the output store), the MLflow run and the Prefect summary
+    artifact; ``summary`` gets ``flow_run_id``, ``mlflow_run_id`` and ``tracking_error`` (None when tracking worked).
+    Returns the report files (name -> file)."""
+    artifacts = {} if df.empty else tracking.write_run_artifacts(df, run_out, title=f"{run.name} / {run.run_id}")
+    artifacts.update(finish.artifacts)
+    if summary["output_store"] and run_out.is_dir():  # the run's report files beside its assets in the store
+        try:
+            upload_folder(run_out, summary["output_store"])
+        except (OSError, ValueError) as exc:
+            log.warning("run artifacts not uploaded to %s: %s: %s", summary["output_store"], type(exc).__name__, exc)
+    mlflow_run_id, tracking_error = _log_to_mlflow(run, df, summary, artifacts, finish.comparison.tags())
+    if tracking_error:
+        log.warning("MLflow tracking failed: %s", tracking_error)
+    if run.info["flow_run_id"]:  # in a Prefect flow run
+        _prefect_summary_artifact(summary, finish.comparison, mlflow_run_id, log)
+    # flow_run_id None: recorded without a Prefect flow run (nothing was dispatched)
+    summary.update(flow_run_id=run.info["flow_run_id"], mlflow_run_id=mlflow_run_id, tracking_error=tracking_error)
+    return artifacts
+
+
+def _prefect_summary_artifact(summary: dict[str, Any], comparison, mlflow_run_id: str | None, log) -> None:
+    """A markdown artifact on the Prefect flow run (a failure is logged, not raised)."""
+    try:
+        from prefect.artifacts import create_markdown_artifact
+
+        lines = [
+            f"### asset2sim run {summary['run']} of dataset {summary['dataset']}",
+            f"{summary['assets']} assets: {summary['done']} done, {summary['skipped']} skipped, {summary['failed']} failed; "
+            f"all checks passed {100 * (summary.get('pass_rate_all') or 0):.1f}%",
+            f"MLflow run: `{mlflow_run_id or 'not logged'}`",
+            "",
+            "```",
+            *catalog_compare.comparison_lines(comparison),
+            "```",
+        ]
+        create_markdown_artifact(markdown="\n".join(lines), key="asset2sim-run-summary",
+                                 description=f"asset2sim {summary['dataset']} / {summary['run']}")
+    except Exception as exc:  # the catalog and MLflow are the record
+        log.warning("Prefect summary artifact not created: %s", exc)
+
+
+def _record_run_info(run: _Run, summary: dict[str, Any]) -> None:
+    """The run's ``_run.json`` written finished: outcome, MLflow run, regression and the summary's scalars."""
+    run.info.update(
+        status="finished",
+        outcome=run_outcome(summary),
+        finished_at=datetime.now(timezone.utc).isoformat(),
+        mlflow_run_id=summary["mlflow_run_id"],
+        regression={k: summary["regression"][k] for k in ("status", "exceeded", "previous_run", "regressed", "reasons")},
+        summary={k: v for k, v in summary.items() if isinstance(v, (int, float, str, type(None)))},
+    )
+    run.store.write_run_info(run.name, run.run_id, run.info)
+
+
+def _raise_on_regression(log, run: _Run, summary: dict[str, Any]) -> None:
+    """Raise :class:`RegressionFailure` (the report logged) when the run regressed beyond ``catalog.yaml``
+    ``results.regression`` with ``fail_flow``."""
+    regression = summary["regression"]
+    if regression.get("exceeded") and run.cat.config.results.regression.fail_flow:
+        report = "\n".join(["run regressed beyond catalog.yaml results.regression", *regression.get("lines", [])])
+        log.error("%s", report)
+        raise RegressionFailure(report, summary)
 
 #: CPU priority (``nice`` increment) of a deferred media phase's children: the verdicts of other work come first.
 MEDIA_NICENESS = 10
