@@ -9,9 +9,10 @@ import re
 from pathlib import Path
 from urllib.parse import unquote, urlparse
 
-from asset2sim.flows.tracking import client_run, mlflow_client
+from asset2sim.flows.tracking import client_run
 from asset2sim.schemas.realism import MethodScore
 from asset2sim.apps.realism.bradley_terry import PRIOR_GAMES
+from asset2sim import library_dirs
 
 #: The default experiment of realism runs.
 REALISM_EXPERIMENT = "asset2sim-realism"
@@ -44,11 +45,14 @@ def log_realism_scores(scores: list[MethodScore], *, tracking_uri: str, experime
         ValueError: no scores, or ``ratings_parquet`` missing.
         mlflow.exceptions.MlflowException: the store refuses the run.
     """
+    library_dirs.configure()  # before MLflow's first import: no telemetry file or report
+    from mlflow.tracking import MlflowClient
+
     if not scores:
         raise ValueError("no realism scores to log")
     if ratings_parquet is not None and not Path(ratings_parquet).is_file():
         raise ValueError(f"{ratings_parquet}: no such ratings table")
-    client = mlflow_client(tracking_uri)
+    client = MlflowClient(tracking_uri=tracking_uri)  # never the process-wide URI
     sources = sorted({s.source for s in scores})
     # artifacts of a new experiment of a SQLite store beside the database (``<db folder>/mlruns/<experiment>``), not
     # under the working folder; None (MLflow's default) for other stores
