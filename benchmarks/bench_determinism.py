@@ -1,6 +1,8 @@
 """Same input, same code, same bytes: refine every dev row twice into the same folder, the on-disk cache empty the
 first time and warm the second, and compare every file byte for byte (the completion marker included; only
-``timings.json``, the wall times, may differ).
+``timings.json``, the wall times, may differ). The second refine runs in a child process under another
+``PYTHONHASHSEED``, so that a result that follows the iteration order of a set of names (which Python's string hashing
+randomises per process) shows as a difference.
 
     .venv/bin/python benchmarks/bench_determinism.py [--manifest PATH] [--ids 103275,7236] [--work DIR] [--no-extras]
         [--keep DIR] [--against DIR]
@@ -18,6 +20,7 @@ import argparse
 import csv
 import os
 import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -26,6 +29,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 DEV = ROOT.parent / "shared" / "datasets" / "partnet_mobility"
 VOLATILE = {"timings.json"}
+#: The second refine of a row, in a child process: argv = source folder, prompt, output folder, task ("" none), extras (1/0).
+CHILD = ("import sys; from pathlib import Path; from asset2sim.schemas.config import RefineConfig; "
+         "from asset2sim.tasks.refine import refine_asset; "
+         "refine_asset(Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3]), RefineConfig(), task=sys.argv[4] or None, "
+         "skip_if_complete=False, extras=sys.argv[5] == '1')")
 
 
 def snapshot(out: Path) -> dict[str, bytes]:
@@ -52,17 +60,19 @@ def main(argv: list[str] | None = None) -> int:
     rows = [r for r in rows if not wanted or r["id"] in wanted]
     work = args.work or Path(tempfile.mkdtemp(prefix="a2s-determinism-"))
     os.environ["ASSET2SIM_CACHE"] = str(work / "cache")  # empty for the first refine of each row, warm for the second
+    # the child's hash seed: another than this process's (random unless PYTHONHASHSEED is set)
+    child_env = {**os.environ, "PYTHONHASHSEED": str((int(os.environ.get("PYTHONHASHSEED") or 0) + 1) % 4294967296)}
     differing = 0
     t0 = time.perf_counter()
     try:
         for r in rows:
             out = work / "out" / r["id"]
-            snaps = []
-            for _ in range(2):
-                refine_asset(args.manifest.parent / r["id"], r["prompt"], out, RefineConfig(), task=r.get("task") or None,
-                             skip_if_complete=False, extras=not args.no_extras)
-                snaps.append(snapshot(out))
-            a, b = snaps
+            refine_asset(args.manifest.parent / r["id"], r["prompt"], out, RefineConfig(), task=r.get("task") or None,
+                         skip_if_complete=False, extras=not args.no_extras)
+            a = snapshot(out)
+            subprocess.run([sys.executable, "-c", CHILD, str(args.manifest.parent / r["id"]), r["prompt"], str(out),
+                            r.get("task") or "", "0" if args.no_extras else "1"], check=True, env=child_env)
+            b = snapshot(out)
             diff = sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
             line = "identical" if not diff else f"{len(diff)} differ: {', '.join(diff[:6])}"
             if args.against is not None:
@@ -75,7 +85,8 @@ def main(argv: list[str] | None = None) -> int:
                 shutil.copytree(out, args.keep / r["id"])
             differing += bool(diff)
             print(f"{r['id']:>8} {r['category']:<17} {len(a):4d} files: {line}", flush=True)
-        print(f"{len(rows) - differing} of {len(rows)} rows byte-identical across two refines (cold, then warm cache) "
+        print(f"{len(rows) - differing} of {len(rows)} rows byte-identical across two refines (cold, then warm cache in "
+              f"a child process of hash seed {child_env['PYTHONHASHSEED']}) "
               f"in {time.perf_counter() - t0:.0f} s")
     finally:
         if args.work is None:
