@@ -196,7 +196,7 @@ def _merge_link(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], name: str
     (``decompose``)."""
     n = len(pieces[name])
     guard = [x for x in (swept_other_points(model, pieces, name),
-                         *swept_child_points(model, pieces, name, support=True).values(), cavity) if x is not None]
+                         *swept_child_points(model, pieces, name).values(), cavity) if x is not None]
     guard = np.vstack(guard) if guard else None
     # merges that hold no other link over the ranges down to the limit; beyond
     # MAX_PIECES_HARD (pieces a parent was cut into around its child) any merge
@@ -204,7 +204,7 @@ def _merge_link(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], name: str
     if len(pieces[name]) > max(limit, MAX_PIECES_HARD):
         pieces[name] = merge_pieces(pieces[name], max(limit, MAX_PIECES_HARD), guard)
     notes.append(f"link {name!r}: {n} convex pieces merged into {len(pieces[name])}")
-    swept = swept_child_points(model, pieces, name, support=True)
+    swept = swept_child_points(model, pieces, name)
     if decompose and swept:  # a merge the limit forced may hold a child again
         pts = np.vstack(list(swept.values()))
         d = max((depth_inside(pts, p) for p in pieces[name]), default=0.0)

@@ -45,7 +45,7 @@ def holding_children(model: urdf.UrdfModel, hulls: dict[str, list[tuple[int, int
     trial = {name: [p for _, _, p in found] for name, found in hulls.items()}
     out = set()
     for name, found in trial.items():
-        swept = swept_child_points(model, trial, name, support=True)
+        swept = swept_child_points(model, trial, name)
         if swept and found:
             pts = np.vstack(list(swept.values()))
             if any(depth_inside(pts, p) > CONTAINMENT_TOLERANCE for p in found):

@@ -223,21 +223,22 @@ MAX_SPLIT_SAMPLES = 8000
 MAX_SHAVE_FRACTION = 0.5
 
 
-def shave_piece(piece: Piece, points: np.ndarray, tolerance: float = CONTAINMENT_TOLERANCE) -> Piece | None:
+def shave_piece(piece: Piece, points: np.ndarray) -> Piece | None:
     """``piece`` with the face that needs the least move moved inwards just
     far enough that none of ``points`` (k, 3) m held deeper than
-    ``tolerance`` m sits deeper than half of it; None when that move exceeds
+    :data:`CONTAINMENT_TOLERANCE` m sits deeper than half of it; None when that move exceeds
     :data:`MAX_SHAVE_FRACTION` of the piece's width along the face's normal."""
     if not len(points):
         return piece
-    if tolerance > 0:  # a point outside the piece's box is outside its hull: never held deeper than the tolerance
-        lo, hi = piece.points.min(axis=0), piece.points.max(axis=0)
-        points = points[np.all((points >= lo) & (points <= hi), axis=1)]
+    # a point outside the piece's box is outside its hull: never held deeper than the tolerance
+    lo, hi = piece.points.min(axis=0), piece.points.max(axis=0)
+    points = points[np.all((points >= lo) & (points <= hi), axis=1)]
     d = points @ piece.equations[:, :3].T + piece.equations[:, 3]  # (k, f), <= 0 inside
-    inside = np.max(d, axis=1) < -tolerance
+    inside = np.max(d, axis=1) < -CONTAINMENT_TOLERANCE
     if not inside.any():
         return piece
-    need = np.max(-d[inside], axis=0) - 0.5 * tolerance  # (f,) move of each face that leaves every point within half the tolerance
+    # (f,) move of each face that leaves every point within half the tolerance
+    need = np.max(-d[inside], axis=0) - 0.5 * CONTAINMENT_TOLERANCE
     f = int(np.argmin(need))
     n = piece.equations[f, :3]
     width = float(np.ptp(piece.points @ n))
@@ -278,7 +279,7 @@ def _resolve_containment(model, pieces, mesh_path, notes, decompose: bool, limit
     The pieces of a (link, source) in ``whole`` (a container's decomposition, whose
     cavity a new cut would fill) are never cut again, only trimmed."""
     for parent in list(pieces):
-        swept = swept_child_points(model, pieces, parent, support=True)
+        swept = swept_child_points(model, pieces, parent)
         if not swept:
             continue
         pts = np.vstack(list(swept.values()))

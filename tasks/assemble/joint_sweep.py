@@ -60,10 +60,9 @@ def reference_state(model: urdf.UrdfModel) -> dict[str, float]:
             for j in model.movable_joints}
 
 
-def swept_child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], link: str,
-                       support: bool = False) -> dict[str, np.ndarray]:
+def swept_child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], link: str) -> dict[str, np.ndarray]:
     """Vertices of every child link's pieces, and of the links below it
-    (their :attr:`Piece.support` points with ``support``; the joints below
+    (their :attr:`Piece.support` points; the joints below
     at :func:`reference_state`), in ``link``'s frame at every position of
     :func:`sweep_positions` of the joint between them: child -> (k, 3) m."""
     out = {}
@@ -75,7 +74,7 @@ def swept_child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], li
             ln = stack.pop()
             stack.extend(c.child for c in model.children(ln))
             T = inv @ poses[ln]
-            pts += [posed(p.support if support else p.points, T) for p in pieces.get(ln, [])]
+            pts += [posed(p.support, T) for p in pieces.get(ln, [])]
         if not pts:
             continue
         local = np.vstack(pts)

@@ -25,26 +25,25 @@ SEPARATION_GAP = 0.0
 STATE_CUT_DEPTH, STATE_CUT_FRACTION, AT_LIMIT_FRACTION, PAST_STOP_NOTE = limits.STOP_DEPTH, 0.05, 0.05, "past a stop"
 
 
-def _carried(depth: Callable[[int], float], n: int, ref: int, tolerance: float) -> list[int]:
+def _carried(depth: Callable[[int], float], n: int, ref: int) -> list[int]:
     """Indices of the ``n`` positions (ordered over the range) whose depth
     (m, ``depth(i)``) the joint carries from its reference position ``ref``:
-    the run of depths above ``tolerance`` m that contains ``ref`` (empty when
+    the run of depths above :data:`CONTAINMENT_TOLERANCE` m that contains ``ref`` (empty when
     it is clear; a depth reached after moving clear is a stop)."""
-    if depth(ref) <= tolerance:
+    if depth(ref) <= CONTAINMENT_TOLERANCE:
         return []
     lo = hi = ref
-    while lo > 0 and depth(lo - 1) > tolerance:
+    while lo > 0 and depth(lo - 1) > CONTAINMENT_TOLERANCE:
         lo -= 1
-    while hi < n - 1 and depth(hi + 1) > tolerance:
+    while hi < n - 1 and depth(hi + 1) > CONTAINMENT_TOLERANCE:
         hi += 1
     return list(range(lo, hi + 1))
 
 
 def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes: list[str],
-                          tolerance: float = CONTAINMENT_TOLERANCE, state: dict[str, float] | None = None,
-                          joints: Collection[str] | None = None) -> None:
+                          state: dict[str, float] | None = None, joints: Collection[str] | None = None) -> None:
     """Clip, in place, the pieces of every parent and child link so that no
-    child piece penetrates a parent piece deeper than ``tolerance`` m
+    child piece penetrates a parent piece deeper than :data:`CONTAINMENT_TOLERANCE` m
     (:func:`penetration_depth`) at the joint's reference position
     (:func:`reference_state`) and at every position the overlap is carried
     to from there (:func:`_carried`; an overlap met only after moving clear
@@ -65,11 +64,11 @@ def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]],
             continue
         P, C = pieces.get(joint.parent), pieces.get(joint.child)
         if P and C:
-            _separate_joint(model, pieces, joint, P, C, tolerance, state, notes)
+            _separate_joint(model, pieces, joint, P, C, state, notes)
 
 
 def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint: urdf.UrdfJoint, P: list[Piece | None],
-                    C: list[Piece | None], tolerance: float, state: dict[str, float] | None, notes: list[str]) -> None:
+                    C: list[Piece | None], state: dict[str, float] | None, notes: list[str]) -> None:
     """Cut, in place, the pieces ``P`` of ``joint``'s parent and ``C`` of its child apart (:func:`separate_parent_child`),
     pair by pair; a note when they overlapped."""
     deepest_cut, T_ref, T_near = np.inf, None, None
@@ -89,15 +88,15 @@ def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint
     while i < len(P):
         k = 0
         while k < len(C) and P[i] is not None:
-            overlap = None if C[k] is None else _pair_cuts(P[i], C[k], transforms, ref, tolerance)
-            if overlap is not None and overlap[0] > deepest_cut and _is_stop(P[i], C[k], T_ref, T_near, tolerance):
+            overlap = None if C[k] is None else _pair_cuts(P[i], C[k], transforms, ref)
+            if overlap is not None and overlap[0] > deepest_cut and _is_stop(P[i], C[k], T_ref, T_near):
                 past = max(past, overlap[0])  # met only after moving clear of the modelled pose: a stop
                 overlap = None
             if overlap is not None:
                 depth, deepest, cuts = overlap
                 before = max(before, depth)
-                options = (_cut_options("p", P[i], sizes["p"], _others(P, i), *cuts["p"], MAX_PIECES_HARD - len(P), tolerance)
-                           + _cut_options("c", C[k], sizes["c"], _others(C, k), *cuts["c"], MAX_PIECES_HARD - len(C), tolerance))
+                options = (_cut_options("p", P[i], sizes["p"], _others(P, i), *cuts["p"], MAX_PIECES_HARD - len(P))
+                           + _cut_options("c", C[k], sizes["c"], _others(C, k), *cuts["c"], MAX_PIECES_HARD - len(C)))
                 if not options:
                     kept, after = kept + 1, max(after, deepest)
                 else:
@@ -126,23 +125,23 @@ def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint
                      f"initial state, {PAST_STOP_NOTE} (too deep to cut): the pieces are kept, not cut")
 
 
-def _depth_at(a: Piece, b: Piece, T: np.ndarray, tolerance: float) -> tuple[float, np.ndarray]:
+def _depth_at(a: Piece, b: Piece, T: np.ndarray) -> tuple[float, np.ndarray]:
     """(depth m, separating direction (3,)) of parent piece ``a`` and child piece ``b`` at the child pose ``T`` (4, 4)
     (:func:`penetration_depth`; (0, 0) when their boxes are apart)."""
-    return (0.0, np.zeros(3)) if _boxes_apart(a, b, T) else penetration_depth(a, _transformed(b, T), tolerance)
+    return (0.0, np.zeros(3)) if _boxes_apart(a, b, T) else penetration_depth(a, _transformed(b, T), CONTAINMENT_TOLERANCE)
 
 
-def _is_stop(a: Piece, b: Piece, T_ref: np.ndarray, T_near: np.ndarray | None, tolerance: float) -> bool:
+def _is_stop(a: Piece, b: Piece, T_ref: np.ndarray, T_near: np.ndarray | None) -> bool:
     """Whether parent piece ``a`` and child piece ``b``, overlapping at the state, meet at a stop: clear at the modelled
-    pose ``T_ref`` (4, 4) (within ``tolerance`` m), and not touching there and pressed deeper a step toward the state
-    (``T_near``, :func:`_toward`). A part in contact with its parent at its modelled pose and driven into it from there
+    pose ``T_ref`` (4, 4) (within :data:`CONTAINMENT_TOLERANCE` m), and not touching there and pressed deeper a step
+    toward the state (``T_near``, :func:`_toward`). A part in contact with its parent at its modelled pose and driven into it from there
     on (a button pressed into a body drawn solid behind it, its recess not modelled) meets no stop: the limit scan keeps
     its limit (``limits.MIN_FREE_FRACTION``), and its pieces are cut at the state as at a limit. A part clear of its
     parent at its modelled pose that runs into it (a door into a bar of its body 2 cm in front of it) meets a stop."""
-    at_ref = _depth_at(a, b, T_ref, tolerance)[0]
-    if at_ref > tolerance:
+    at_ref = _depth_at(a, b, T_ref)[0]
+    if at_ref > CONTAINMENT_TOLERANCE:
         return False
-    return T_near is None or at_ref <= PRESSED_GROWTH or _depth_at(a, b, T_near, tolerance)[0] <= at_ref + PRESSED_GROWTH
+    return T_near is None or at_ref <= PRESSED_GROWTH or _depth_at(a, b, T_near)[0] <= at_ref + PRESSED_GROWTH
 
 
 def _toward(joint: urdf.UrdfJoint, q_ref: float, q: float) -> np.ndarray | None:
@@ -167,7 +166,7 @@ def _at_limit(joint: urdf.UrdfJoint, q: float) -> bool:
     return min(abs(q - lo), abs(q - hi)) <= AT_LIMIT_FRACTION * (hi - lo)
 
 
-def _pair_cuts(a: Piece, b: Piece, transforms: list[np.ndarray], ref: int, tolerance: float) -> tuple[float, float, dict] | None:
+def _pair_cuts(a: Piece, b: Piece, transforms: list[np.ndarray], ref: int) -> tuple[float, float, dict] | None:
     """Parent piece ``a`` and child piece ``b`` (child frame) at the child poses ``transforms`` (4, 4) the overlap is
     carried to from ``ref`` (:func:`_carried`): None when they are clear at ``ref``, else (deepest carried depth m,
     deepest depth measured m, ``"p"`` / ``"c"`` -> (half-spaces, slots) that cut that piece off the other, in its frame)."""
@@ -176,10 +175,10 @@ def _pair_cuts(a: Piece, b: Piece, transforms: list[np.ndarray], ref: int, toler
     def depth_at(t: int) -> float:
         """The pair's depth (m) at position ``t`` (kept in ``found``)."""
         if t not in found:
-            found[t] = _depth_at(a, b, transforms[t], tolerance)
+            found[t] = _depth_at(a, b, transforms[t])
         return found[t][0]
 
-    carried = _carried(depth_at, len(transforms), ref, tolerance)
+    carried = _carried(depth_at, len(transforms), ref)
     if not carried:
         return None
     planes_p, planes_c, slots_p, slots_c = [], [], [], []
@@ -203,13 +202,13 @@ def _pair_cuts(a: Piece, b: Piece, transforms: list[np.ndarray], ref: int, toler
     return depth, max(d for d, _ in found.values()), {"p": (planes_p, slots_p), "c": (planes_c, slots_c)}
 
 
-def _cut_options(which: str, piece: Piece, size: float, others: bool, planes: list, slots: list, room: int,
-                 tolerance: float) -> list[tuple[float, int, str, list[Piece]]]:
+def _cut_options(which: str, piece: Piece, size: float, others: bool, planes: list, slots: list,
+                 room: int) -> list[tuple[float, int, str, list[Piece]]]:
     """The cuts of ``piece`` (of link ``which``, whose pieces hold ``size`` m^3; ``others``: it has other pieces) that
     clear the pair: every half-space of ``planes`` (:func:`_clip_all`), or the ``slots`` (:func:`_slot`, ``room``
     pieces to spare), each (share of the link's volume removed, parts left, ``which``, parts)."""
     out = []
-    for parts in ([_clip_all(piece, planes)], _slot(piece, slots, tolerance, min(SLOT_PIECES, 1 + max(room, 0)))):
+    for parts in ([_clip_all(piece, planes)], _slot(piece, slots, min(SLOT_PIECES, 1 + max(room, 0)))):
         if parts is None:
             continue
         parts = [q for q in parts if q is not None]
@@ -235,14 +234,14 @@ def _clip_all(piece: Piece, planes: list[tuple[np.ndarray, float]]) -> Piece | N
 SLOT_PIECES = 4
 
 
-def _slot(piece: Piece, slots: list[tuple[np.ndarray, float, float, Piece]], tolerance: float, most: int) -> list[Piece] | None:
+def _slot(piece: Piece, slots: list[tuple[np.ndarray, float, float, Piece]], most: int) -> list[Piece] | None:
     """``piece`` with, for each slot (n (3,) unit, lo, hi m, other piece), the
     band ``lo < n . x < hi`` taken out of every part that still penetrates
-    the other piece deeper than ``tolerance`` m; None when more than
+    the other piece deeper than :data:`CONTAINMENT_TOLERANCE` m; None when more than
     ``most`` parts would be left."""
     parts = [piece]
     for n, lo, hi, other in slots:
-        parts = [x for q in parts for x in ((q,) if penetration_depth(q, other, tolerance)[0] <= tolerance
+        parts = [x for q in parts for x in ((q,) if penetration_depth(q, other, CONTAINMENT_TOLERANCE)[0] <= CONTAINMENT_TOLERANCE
                                               else (clip_piece(q, n, -lo), clip_piece(q, -n, hi))) if x is not None]
         if len(parts) > most:
             return None
