@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import threading
 from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,7 +25,7 @@ from asset2sim.engines.loading import mesh_hulls
 from asset2sim.tasks.assemble import container_pieces
 from asset2sim.tasks.assemble.containment_cuts import _resolve_containment, _trim
 from asset2sim.tasks.assemble.convex_pieces import (CONTAINMENT_TOLERANCE, MAX_PIECES_HARD, MAX_PIECES_PER_LINK,
-                                                    CollisionGeometryError, Piece, depth_inside, drop_slivers,
+                                                    CollisionGeometryError, Piece, cached, depth_inside, drop_slivers,
                                                     merge_pieces, piece_obj, posed, solid_points)
 from asset2sim.tasks.assemble.footprint import level_footprint
 from asset2sim.tasks.assemble.joint_sweep import reference_state, swept_child_points, swept_other_points
@@ -134,17 +133,19 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
     """
     opening = decompose and open_containers
     key, disk_key = _piece_keys(model, mesh_path, limit, decompose, opening)
-    # the state-independent (pieces, notes), from the process's or the disk's cache, else made
-    done = _recalled(_PIECE_CACHE, key)
-    if done is None:
+
+    def made() -> PiecesNotes:  # the state-independent (pieces, notes), from the disk's cache, else made (and stored)
         hit = _load_pieces(disk_key, model) if disk_key is not None else None
-        done = _remember(_PIECE_CACHE, key, hit or _made_pieces(model, mesh_path, limit, decompose, opening))
-        if hit is None and disk_key is not None:
-            _store_pieces(disk_key, done)
+        if hit is None:
+            hit = _made_pieces(model, mesh_path, limit, decompose, opening)
+            if disk_key is not None:
+                _store_pieces(disk_key, hit)
+        return hit
+
+    done = cached(_PIECE_CACHE, key, made)
     if state is not None:
         skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())), bool(level), feet, tuple(sorted(pushed)))
-        done = _recalled(_STATE_CACHE, skey) or _remember(_STATE_CACHE, skey, _state_pieces(model, done, state, decompose, level, feet,
-                                                                                             pushed))
+        done = cached(_STATE_CACHE, skey, lambda: _state_pieces(model, done, state, decompose, level, feet, pushed))
     return {k: list(v) for k, v in done[0].items()}, list(done[1])
 
 
@@ -240,20 +241,6 @@ def _state_pieces(model: urdf.UrdfModel, hit: PiecesNotes, state: dict[str, floa
 _PIECE_CACHE: cachetools.FIFOCache = cachetools.FIFOCache(maxsize=16)
 #: What :func:`link_pieces` returned, by (:func:`_piece_keys`' first key, initial state) (the oldest of 16 dropped).
 _STATE_CACHE: cachetools.FIFOCache = cachetools.FIFOCache(maxsize=16)
-_CACHE_LOCK = threading.Lock()
-
-
-def _recalled(cache: cachetools.Cache, key) -> PiecesNotes | None:
-    """What ``cache`` holds under ``key``, or None."""
-    with _CACHE_LOCK:
-        return cache.get(key)
-
-
-def _remember(cache: cachetools.Cache, key, hit: PiecesNotes) -> PiecesNotes:
-    """``hit``, kept in ``cache``."""
-    with _CACHE_LOCK:
-        cache[key] = hit
-    return hit
 
 
 #: Modules whose source the pieces depend on (part of the on-disk key).

@@ -9,13 +9,12 @@ pieces that still hold it are trimmed."""
 from __future__ import annotations
 
 import hashlib
-import threading
 import cachetools
 
 import numpy as np
 
 from asset2sim import mesh_io, urdf
-from asset2sim.tasks.assemble.convex_pieces import (CONTAINMENT_TOLERANCE, CollisionGeometryError, Piece, clip_piece,
+from asset2sim.tasks.assemble.convex_pieces import (CONTAINMENT_TOLERANCE, CollisionGeometryError, Piece, cached, clip_piece,
                                                     depth_inside, merge_pieces, posed, solid_piece)
 from asset2sim.tasks.assemble.joint_sweep import swept_child_points
 
@@ -102,22 +101,19 @@ def split_surface(points: np.ndarray, keep_out: np.ndarray, tolerance: float, bu
     out = np.ascontiguousarray(keep_out, dtype=float)
     key = (pts.shape, out.shape, hashlib.sha256(pts.tobytes() + b"|" + out.tobytes()).digest(), float(tolerance), int(budget),
            float(spacing))
-    with _SPLITS_LOCK:
-        hit = _SPLITS.get(key)
-    if hit is not None:
-        return list(hit)
-    sets = _split_surface(pts.copy(), out, tolerance, budget, spacing)  # a copy: the arrays kept never alias the caller's
-    for a in sets:
-        a.flags.writeable = False
-    with _SPLITS_LOCK:
-        _SPLITS[key] = tuple(sets)
-    return list(sets)
+
+    def made() -> tuple[np.ndarray, ...]:
+        sets = _split_surface(pts.copy(), out, tolerance, budget, spacing)  # a copy: the arrays kept never alias the caller's
+        for a in sets:
+            a.flags.writeable = False
+        return tuple(sets)
+
+    return list(cached(_SPLITS, key, made))
 
 
 #: :func:`split_surface`'s point sets made in this process, by (shapes, SHA-256 of the points and the points kept
 #: out, tolerance, budget, spacing); the least recently used dropped beyond 64.
 _SPLITS: cachetools.LRUCache = cachetools.LRUCache(maxsize=64)
-_SPLITS_LOCK = threading.Lock()
 
 
 def _split_surface(points: np.ndarray, keep_out: np.ndarray, tolerance: float, budget: int, spacing: float) -> list[np.ndarray]:

@@ -79,17 +79,21 @@ def _hull(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     return pts[used], hull.equations, float(hull.volume)
 
 
-def _memo(cache: cachetools.Cache, points: np.ndarray, make: Callable[[np.ndarray], object]):
-    """``make`` of ``points`` (as contiguous floats), kept in ``cache`` by (shape, SHA-1 of the points)."""
-    pts = np.ascontiguousarray(points, dtype=float)
-    key = (pts.shape, hashlib.sha1(pts.tobytes()).digest())
+def cached(cache: cachetools.Cache, key, make: Callable[[], object]):
+    """What ``cache`` holds under ``key``, else ``make()`` kept there (the caches of this package share one lock)."""
     with _MEMO_LOCK:
         hit = cache.get(key)
     if hit is None:
-        hit = make(pts)
+        hit = make()
         with _MEMO_LOCK:
             cache[key] = hit
     return hit
+
+
+def _memo(cache: cachetools.Cache, points: np.ndarray, make: Callable[[np.ndarray], object]):
+    """``make`` of ``points`` (as contiguous floats), kept in ``cache`` by (shape, SHA-1 of the points)."""
+    pts = np.ascontiguousarray(points, dtype=float)
+    return cached(cache, (pts.shape, hashlib.sha1(pts.tobytes()).digest()), lambda: make(pts))
 
 
 #: Hulls (:func:`_hull`) and OBJ bytes (:func:`piece_obj`) made in this process (a refine builds the same pieces
