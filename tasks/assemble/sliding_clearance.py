@@ -125,24 +125,23 @@ def joint_velocity(joint: urdf.UrdfJoint, T: np.ndarray) -> Callable[[np.ndarray
 def _moving_links(model: urdf.UrdfModel, pieces: dict[str, list[Piece]]):
     """(movable joint, a link with pieces it moves, the links with pieces it does not move, parent and
     child of that link excepted), joints in file order: the pairs the clearances look at."""
-    parent_of = {j.child: j.parent for j in model.joints}
-    subtrees = limits.subtrees(model)
+    adjacent, subtrees = model.adjacent_pairs(), limits.subtrees(model)
     for joint in model.movable_joints:
         moved = subtrees[joint.name]
         for ln in moved:
             if pieces.get(ln):
-                yield joint, ln, [o for o in model.links if o not in moved and pieces.get(o)
-                                  and parent_of.get(ln) != o and parent_of.get(o) != ln]
+                yield joint, ln, [o for o in model.links
+                                  if o not in moved and pieces.get(o) and frozenset((ln, o)) not in adjacent]
 
 
 def _fixed_pairs(model: urdf.UrdfModel, pieces: dict[str, list[Piece]]):
     """(a link with pieces, the larger links with pieces that only fixed joints join to it, parent and child
     excepted): pairs no state moves apart, the smaller of each (its pieces' volume; then file order) the one squeezed."""
-    parent_of = {j.child: j.parent for j in model.joints}
+    adjacent = model.adjacent_pairs()
     names = sorted(model.links, key=lambda n: sum(p.volume for p in pieces.get(n, [])))
     for i, ln in enumerate(names):
         group = limits.rigid_group(model, ln)
-        others = [o for o in names[i + 1:] if o in group and pieces.get(o) and parent_of.get(ln) != o and parent_of.get(o) != ln]
+        others = [o for o in names[i + 1:] if o in group and pieces.get(o) and frozenset((ln, o)) not in adjacent]
         if pieces.get(ln) and others:
             yield ln, others
 

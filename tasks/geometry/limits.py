@@ -144,7 +144,7 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
         The session is left at ``state``.
     """
     subs = subtrees(model)
-    parent_of = {j.child: j.parent for j in model.joints}
+    adjacent = model.adjacent_pairs()
     out: dict[str, LimitClip] = {}
     for name, (qc, d, rng) in closed.items():
         if name not in session.joint_limits or not rng > 0:
@@ -157,7 +157,7 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
         pairs = collision_pairs(session, sub, rigid_group(model, model.joint(name).parent) - set(sub))
         out[name] = _raw_clip(name, lo, hi, qc, d, rng)
         if pairs:
-            out[name] = _JointScan(session, name, lo, hi, qc, d, rng, pairs).clip(out[name], model, sub, parent_of, closed, state)
+            out[name] = _JointScan(session, name, lo, hi, qc, d, rng, pairs).clip(out[name], model, sub, adjacent, closed, state)
     session.set_joint_positions(state)
     return out
 
@@ -201,14 +201,13 @@ class _JointScan:
         """Whether ``end`` lies inside the raw limit ``raw`` by more than ``MIN_CLIP_FRACTION`` of the range."""
         return abs(raw - end) > MIN_CLIP_FRACTION * self.rng
 
-    def clip(self, clip: LimitClip, model: UrdfModel, sub: list[str], parent_of: dict[str, str],
+    def clip(self, clip: LimitClip, model: UrdfModel, sub: list[str], adjacent: set[frozenset[str]],
              closed: dict[str, tuple[float, float, float]], state: dict[str, float]) -> LimitClip:
-        """``clip`` with the clipped limits, or the raw limits with a note."""
+        """``clip`` with the clipped limits, or the raw limits with a note (``adjacent``: the parent-child link pairs)."""
         qs, depth = depth_scan(self.session, self.name, self.pairs, self.lo, self.hi, self.qc, SCAN_SAMPLES)
         k_c = int(np.flatnonzero(qs == self.qc)[0])
         # baseline: a parent-child pair's depth at the closed end; any other pair's least over the range
-        adjacent = np.array([parent_of.get(a) == b or parent_of.get(b) == a for a, b in self.pairs])
-        self.base = np.where(adjacent, depth[k_c], depth.min(axis=0))
+        self.base = np.where([frozenset(p) in adjacent for p in self.pairs], depth[k_c], depth.min(axis=0))
         q_close = self.closed_end(clip, qs, depth, k_c)
         if q_close is None:
             return clip

@@ -58,7 +58,7 @@ def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float
     rep = ClearanceRepair()
     # link -> its pieces, read once
     pieces = functools.cache(lambda ln: link_pieces(model, root, ln))
-    parent_of = {j.child: j.parent for j in model.joints}
+    adjacent = model.adjacent_pairs()
     for name, q in blocked.items():
         joint = model.joint(name)
         poses = model.link_poses({**state, name: q})
@@ -70,7 +70,7 @@ def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float
             own = [P.copy() for P in (rep.pieces.get(ln) or pieces(ln))]
             changed = False
             for other in others:
-                if parent_of.get(ln) == other or parent_of.get(other) == ln:
+                if frozenset((ln, other)) in adjacent:
                     continue  # parent-child pairs are not collided (SPEC)
                 To = inv @ poses[other]
                 for Q in (rep.pieces.get(other) or pieces(other)):  # a piece already given clearance is not squeezed again from the other side
