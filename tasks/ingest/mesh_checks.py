@@ -184,14 +184,12 @@ class MeshChecks(Recorder):
             lname = ln.name or None
             geoms = [("visual", g) for g in ln.visuals] + [("collision", g) for g in ln.collisions]
             mass_role = "collision" if ln.collisions else "visual"
-            link_moments, link_has_volume, link_mass_geoms = None, False, 0
+            link_moments, link_has_volume = None, False
             for role, g in geoms:
                 use: MeshUse = "collision" if role == "collision" else ("mass" if mass_role == "visual" else "visual")
                 in_mass = role == mass_role
                 if g.kind != "mesh":
-                    if g.kind is not None and in_mass:
-                        link_mass_geoms += 1
-                        link_has_volume = link_has_volume or g.complete
+                    link_has_volume = link_has_volume or (g.kind is not None and in_mass and g.complete)
                     continue
                 ref = resolve_mesh_reference(self.folder, g.filename, extensions=pol.mesh_extensions, max_bytes=pol.max_mesh_bytes)
                 fname = g.filename or ""
@@ -233,12 +231,10 @@ class MeshChecks(Recorder):
                     flat = code == "MESH_ZERO_VOLUME"
                     self.add(code, f"{msg}{'' if flat else f'; used for {use}'} (<{role}> at {at})", file=frel, link=lname,
                              use=None if flat else use, role=role, urdf_line=g.line)
-                if in_mass and g.complete:
-                    link_mass_geoms += 1
-                    if scan.moments is not None:
-                        mom = _transform_moments(scan.moments, g.origin, g.scale)
-                        link_moments = mom if link_moments is None else tuple(a + b for a, b in zip(link_moments, mom))
-            if link_mass_geoms and not link_has_volume and link_moments is not None and is_flat(*link_moments):
+                if in_mass and g.complete and scan.moments is not None:
+                    mom = _transform_moments(scan.moments, g.origin, g.scale)
+                    link_moments = mom if link_moments is None else tuple(a + b for a, b in zip(link_moments, mom))
+            if not link_has_volume and link_moments is not None and is_flat(*link_moments):
                 self.add("LINK_ZERO_VOLUME", f"all {mass_role} geometry of the link lies in one plane: zero volume; "
                          "mass must come from the surface area (shell), not the volume",
                          line=ln.line, link=lname, action="mass_from_area", role=mass_role)
