@@ -93,8 +93,7 @@ def refine_initial_state(session, asset: AssetDescription, closed: dict[str, Clo
     box = allowed_intervals({n: closed[n] for n in names}, fractions)
     q_req = {n: box[n].clip(requested.get(n, closed[n].q_closed)) for n in names}
     scale = {n: max(closed[n].open_range, 1e-9) for n in names}
-    s = _Search(session, asset, names, box, q_req, scale, cfg.state_lambda, cfg.penetration_tolerance, cfg.max_state_evaluations,
-                opened)
+    s = _Search(session, asset, names, box, q_req, scale, cfg, opened)
     phi_req = s.best_phi
     worst = [{"link_a": c.link_a, "link_b": c.link_b, "depth_m": c.depth, "max_depth_m": c.max_depth, "points": c.points}
              for c in s.pairs_at_best()[:5]]
@@ -111,15 +110,13 @@ def refine_initial_state(session, asset: AssetDescription, closed: dict[str, Clo
 
 class _Search:
     """The search's state: the best candidate (``best_q``, ``best_f``, ``best_phi``,
-    m), evaluations made, phases that improved (``method``)."""
+    m), evaluations made, phases that improved (``method``); its knobs from ``cfg`` (:func:`refine_initial_state`)."""
 
     def __init__(self, session, asset: AssetDescription, names: list[str], box: dict[str, Interval],
-                 q_req: dict[str, float], scale: dict[str, float], lam: float, tolerance: float, max_evaluations: int,
-                 opened: frozenset[str] = frozenset()):
-        self.session, self.names, self.box, self.q_req, self.scale = session, names, box, q_req, scale
-        self.opened = opened
-        self.lam, self.tolerance, self.max_evaluations = lam, tolerance, max_evaluations
-        self.asset = asset
+                 q_req: dict[str, float], scale: dict[str, float], cfg: RefineConfig, opened: frozenset[str]):
+        self.session, self.asset, self.names, self.box, self.q_req, self.scale, self.opened = (session, asset, names, box, q_req,
+                                                                                              scale, opened)
+        self.lam, self.tolerance, self.max_evaluations = cfg.state_lambda, cfg.penetration_tolerance, cfg.max_state_evaluations
         self.evals = 0
         if session.traits.incremental_penetration:
             # the same Phi as the engine's fresh query, re-queried only for moved pairs
