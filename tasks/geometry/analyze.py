@@ -149,11 +149,7 @@ def _analyze_surface(link: LinkDesc, prefer, cache: MeshCache | None) -> LinkGeo
     where = f"link {link.name!r} ({surf.role}: {', '.join(surf.sources[:3])}{' ...' if len(surf.sources) > 3 else ''})"
     if not (area > 0 and size > 0 and math.isfinite(area)):
         raise MeshAnalysisError(f"{where}: degenerate geometry (surface area {area:g} m^2, size {size:g} m)")
-    watertight = False
-    solid: SolidMoments | None = None
-    analytic = None
-    if len(surf.refs) == 1 and surf.kinds[0] != "mesh":
-        analytic = _analytic_primitive(surf.refs[0])
+    analytic = _analytic_primitive(surf.refs[0]) if len(surf.refs) == 1 and surf.refs[0].kind != "mesh" else None
     if analytic is not None:
         ref = surf.refs[0]
         rot = rpy_matrix(ref.origin.rpy)
@@ -163,20 +159,19 @@ def _analyze_surface(link: LinkDesc, prefer, cache: MeshCache | None) -> LinkGeo
         s_centroid, s_cov = centre, rot @ c_shell @ rot.T
         watertight = True
     else:
-        if any(k != "mesh" for k in surf.kinds):
+        if any(r.kind != "mesh" for r in surf.refs):
             notes.append("primitives tessellated (cylinder: 128 sections, volume -0.04%; sphere: 5120-face icosphere, volume -0.2%)")
         solid = watertight_properties(v, f)
-        if solid is not None:
-            watertight = True
-            if solid.overlap_candidates:
-                union = voxel_properties(v, f)
-                # the voxel estimate's error is ~1-3% (docs/design/mesh_analysis.md)
-                if union.volume < 0.95 * solid.volume:
-                    notes.append(f"closed parts overlap: sum of part volumes {solid.volume:.4g} m^3, "
-                                 f"voxel union {union.volume:.4g} m^3 used")
-                    union.method = "voxel_union"
-                    union.notes = solid.notes + union.notes
-                    solid = union
+        watertight = solid is not None
+        if solid is not None and solid.overlap_candidates:
+            union = voxel_properties(v, f)
+            # the voxel estimate's error is ~1-3% (docs/design/mesh_analysis.md)
+            if union.volume < 0.95 * solid.volume:
+                notes.append(f"closed parts overlap: sum of part volumes {solid.volume:.4g} m^3, "
+                             f"voxel union {union.volume:.4g} m^3 used")
+                union.method = "voxel_union"
+                union.notes = solid.notes + union.notes
+                solid = union
         if solid is None:
             solid = voxel_properties(v, f)
         notes.extend(solid.notes)

@@ -47,13 +47,12 @@ def _primitive_mesh(ref: GeometryRef, where: str) -> tuple[np.ndarray, np.ndarra
 @dataclass
 class LinkSurface:
     """The combined, cleaned triangle surface of one link in the link frame: ``vertices`` (N, 3) m,
-    ``faces`` (M, 3) int64, ``sources`` one label per usable element, ``role`` "collision" or
+    ``faces`` (M, 3) int64, ``sources`` one label per usable element (``refs``), ``role`` "collision" or
     "visual", ``notes`` what was dropped and why."""
 
     vertices: np.ndarray
     faces: np.ndarray
     sources: list[str]
-    kinds: list[str]
     refs: list[GeometryRef]
     role: str
     notes: list[str] = field(default_factory=list)
@@ -104,7 +103,7 @@ def link_surface(link: LinkDesc, *, prefer: Literal["collision", "visual"] = "co
         return None
     role = refs[0].role
     cache = cache if cache is not None else MeshCache()
-    verts, faces, sources, kinds, used, notes, failures = [], [], [], [], [], [], []
+    verts, faces, sources, used, notes, failures = [], [], [], [], [], []
     offset = 0
     for i, ref in enumerate(refs):
         label = str(ref.path) if ref.kind == "mesh" else f"{ref.kind} #{i}"
@@ -134,11 +133,10 @@ def link_surface(link: LinkDesc, *, prefer: Literal["collision", "visual"] = "co
         verts.append(vt)
         faces.append(f + offset)
         sources.append(label)
-        kinds.append(ref.kind)
         used.append(ref)
         offset += len(vt)
     if not verts:
         raise MeshAnalysisError(f"link {link.name!r}: no usable {role} geometry: " + "; ".join(failures))
     notes = failures + notes
-    return LinkSurface(vertices=np.concatenate(verts), faces=np.concatenate(faces), sources=sources, kinds=kinds,
+    return LinkSurface(vertices=np.concatenate(verts), faces=np.concatenate(faces), sources=sources,
                        refs=used, role=role, notes=notes)
