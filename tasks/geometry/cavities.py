@@ -67,16 +67,16 @@ class Cavity:
     regions: tuple[CavityRegion, ...]
 
 
-def open_cavity(vertices: np.ndarray, faces: np.ndarray, hull_vertices: np.ndarray, hull_faces: np.ndarray, *,
-                voxels_per_axis: int = CAVITY_VOXELS) -> Cavity | None:
+def open_cavity(vertices: np.ndarray, faces: np.ndarray, hull_vertices: np.ndarray,
+                hull_faces: np.ndarray) -> Cavity | None:
     """The open cavity inside a part's convex hull (``hull_vertices`` (U, 3) m, ``hull_faces`` (G, 3) int, a closed
     triangle mesh) that the surfaces ``vertices`` (V, 3) m, ``faces`` (F, 3) int (the part's and any around it that
     may close it, such as the other parts of its link) leave open to the outside, or None when it holds no ball of
     radius :data:`MIN_CAVITY_RADIUS` m and :data:`MIN_CAVITY_SHARE` of the hull's largest extent, or fills less
     than :data:`MIN_CAVITY_VOLUME_SHARE` of the hull.
 
-    The surfaces alone and with the hull are voxelized on the same grid (the hull's vertices must lie in the
-    surfaces' bounding box): the cavity is the space the hull encloses that the surfaces alone leave open.
+    The surfaces alone and with the hull are voxelized on the same grid (:data:`CAVITY_VOXELS`; the hull's vertices must
+    lie in the surfaces' bounding box): the cavity is the space the hull encloses that the surfaces alone leave open.
 
     Raises:
         ValueError: all vertices coincide, or the hull reaches out of the surfaces' bounding box.
@@ -88,9 +88,9 @@ def open_cavity(vertices: np.ndarray, faces: np.ndarray, hull_vertices: np.ndarr
     hv = np.asarray(hull_vertices, float)
     size = float(np.ptp(hv, axis=0).max()) if len(hv) else 0.0
     need = max(MIN_CAVITY_RADIUS, MIN_CAVITY_SHARE * size)
-    part = voxelize(v, f, voxels_per_axis=voxels_per_axis, subvoxel=False)
+    part = voxelize(v, f, voxels_per_axis=CAVITY_VOXELS, subvoxel=False)
     both = voxelize(np.vstack([v, hv]), np.vstack([f, np.asarray(hull_faces, np.int64) + len(v)]),
-                    voxels_per_axis=voxels_per_axis, subvoxel=False)
+                    voxels_per_axis=CAVITY_VOXELS, subvoxel=False)
     if part.filled.shape != both.filled.shape or not np.array_equal(part.origin, both.origin):
         raise ValueError("the hull reaches out of the surfaces' bounding box")
     cavity = both.filled & ~both.surface & ~part.filled
