@@ -201,7 +201,7 @@ class SceneRenderer:
             c = colors.get(link) if colors is not None else None
             if c is None and colors is not None and others is not None:
                 c = others
-            self._viewer.set_visual_color(link, k, rgba if c is None else tuple(float(x) for x in c))
+            self._viewer.set_visual_color(link, k, rgba if c is None else tuple(map(float, c)))
 
     def turn_root(self, rotation: np.ndarray) -> None:
         """Draw the object turned by ``rotation`` (3, 3) about the world origin from its pose as loaded (a

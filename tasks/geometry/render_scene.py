@@ -60,7 +60,7 @@ def visual_rgba(vis: UrdfGeometry, named: dict[str, tuple[float, ...]]) -> tuple
     if mat is None:
         return None
     if mat.rgba is not None:
-        return tuple(float(v) for v in mat.rgba)
+        return tuple(map(float, mat.rgba))
     rgba = named.get(mat.name or "")
     return rgba if rgba is not None and len(rgba) == 4 else None
 
@@ -172,7 +172,7 @@ def prepare_scene(urdf_path: Path, work: Path, texture_max: int = 1024) -> Rende
         raise ValueError(f"{urdf_path}: not a parseable URDF ({exc})") from exc
     urdf_dir = urdf_path.parent.resolve()
     # material name -> RGBA of its first definition with a color (URDF materials are global by name)
-    named = {m.name: tuple(float(v) for v in m.rgba) for m in reversed(_all_materials(model)) if m.name and m.rgba is not None}
+    named = {m.name: tuple(map(float, m.rgba)) for m in reversed(_all_materials(model)) if m.name and m.rgba is not None}
     notes: list[str] = []
     if not any(ln.visuals for ln in model.links.values()) and any(ln.collisions for ln in model.links.values()):
         for ln in model.links.values():  # nothing else to show: draw the collision shapes

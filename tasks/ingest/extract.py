@@ -38,7 +38,7 @@ def _origin(matrix) -> Origin:
     if matrix is None:
         return Origin()
     m = np.asarray(matrix, float)
-    return Origin(xyz=tuple(float(v) for v in m[:3, 3]), rpy=tuple(float(v) for v in matrix_rpy(m)))
+    return Origin(xyz=tuple(map(float, m[:3, 3])), rpy=tuple(map(float, matrix_rpy(m))))
 
 
 def _geometry(g: UrdfGeometry, role: str, mesh_paths: dict[str, Path], where: str) -> GeometryRef | None:
@@ -49,9 +49,9 @@ def _geometry(g: UrdfGeometry, role: str, mesh_paths: dict[str, Path], where: st
         path = mesh_paths.get(fname or "")
         if path is None:  # validation refuses every unresolved reference; defensive
             raise AssetError(f"{where}: mesh {fname!r} was not validated")
-        return GeometryRef(**ref, filename=fname, path=path, scale=tuple(float(v) for v in g.scale))
+        return GeometryRef(**ref, filename=fname, path=path, scale=tuple(map(float, g.scale)))
     if g.kind == "box" and g.size is not None:
-        return GeometryRef(**ref, size=tuple(float(v) for v in g.size))
+        return GeometryRef(**ref, size=tuple(map(float, g.size)))
     if g.kind == "cylinder":
         return GeometryRef(**ref, radius=float(g.radius), length=float(g.length))
     if g.kind == "sphere":
@@ -225,7 +225,7 @@ def _link(ln: UrdfLink, mesh_paths: dict[str, Path], semantics: dict, replace: s
     if ln.inertial is not None and ln.inertial.mass is not None and ln.name not in replace:
         I = np.asarray(ln.inertial.inertia if ln.inertial.inertia is not None else np.zeros((3, 3)), float)
         given = GivenInertial(mass=float(ln.inertial.mass), origin=_origin(ln.inertial.origin),
-                              inertia=tuple(tuple(float(x) for x in row) for row in I))  # type: ignore[arg-type]
+                              inertia=tuple(tuple(map(float, row)) for row in I))  # type: ignore[arg-type]
     kind, label = semantics.get(ln.name, (None, None))
     return LinkDesc(name=ln.name, visuals=visuals, collisions=collisions, semantic_label=label, semantic_joint=kind,
                     given_inertial=given)
@@ -272,7 +272,7 @@ def _joint(jt: UrdfJoint, held: bool = False) -> JointDesc:
     """The description of one joint (limits on revolute and prismatic joints only; axis default (1, 0, 0)); ``held``:
     a movable joint the asset's part kinds hold where it was modelled (:func:`partnet_mobility.held_bodies`), described
     as the fixed joint the output writes."""
-    axis = tuple(float(v) for v in (jt.axis_xyz if jt.axis_xyz is not None else (1.0, 0.0, 0.0)))
+    axis = tuple(map(float, jt.axis_xyz if jt.axis_xyz is not None else (1.0, 0.0, 0.0)))
     frame = dict(name=jt.name, parent=jt.parent, child=jt.child, origin=_origin(jt.origin), axis=axis)
     if held:
         return JointDesc(**frame, type="fixed")
