@@ -17,7 +17,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.source import SimSource
-from asset2sim.engines.loading import collision_pieces
+from asset2sim.engines.loading import collision_pieces, transform_points
 from asset2sim.schemas.overlay import Overlay
 
 if TYPE_CHECKING:
@@ -137,7 +137,7 @@ def _world_at(session, pieces: dict, state: dict[str, float]) -> tuple[dict, dic
         if ln not in frames:
             continue
         pos, R = frames[ln]
-        arr = [(pc.points @ pc.origin[:3, :3].T + pc.origin[:3, 3]) @ R.T + pos for pc in pcs if pc.points is not None]
+        arr = [transform_points(pc.origin, pc.points) @ R.T + pos for pc in pcs if pc.points is not None]
         if arr:
             pts[ln] = np.vstack(arr)
     return frames, pts
@@ -192,10 +192,10 @@ class SteadiestOpening:
 
 
 def steadiest_fractions(source: SimSource, overlay: Overlay, state: dict[str, float], closed: dict[str, "ClosedState"],
-                        intervals: dict[str, tuple[float, float]], samples: int = BAND_SAMPLES) -> SteadiestOpening:
+                        intervals: dict[str, tuple[float, float]]) -> SteadiestOpening:
     """The opening fractions within the requested bands at which a free-standing
     object stands steadiest: for each opened joint of ``intervals`` (joint ->
-    allowed fraction interval (lo, hi), lo > 0), ``samples`` fractions over it,
+    allowed fraction interval (lo, hi), lo > 0), :data:`BAND_SAMPLES` fractions over it,
     the others as found so far, keeping the largest static margin when it gains
     at least :data:`MARGIN_GAIN`; fractions that lower the object's bottom by
     more than 1 mm are skipped.
@@ -218,7 +218,7 @@ def steadiest_fractions(source: SimSource, overlay: Overlay, state: dict[str, fl
             if cs is None or name not in cur or not lo > 0 or hi <= lo:
                 continue
             top, at = None, None
-            for f in np.linspace(lo, hi, max(2, samples)):
+            for f in np.linspace(lo, hi, BAND_SAMPLES):
                 frames, pts = _world_at(s, pieces, {**cur, name: cs.position(float(f))})
                 if pts and min(float(p[:, 2].min()) for p in pts.values()) < floor - 1e-3:
                     continue
