@@ -24,13 +24,9 @@ class CodeInfo:
     summary: str
 
 
-def _read_codes() -> dict[str, CodeInfo]:
-    """``finding_codes.yaml`` beside this module: code -> [severity, topic, summary], in the order of the guide's table."""
-    return {code: CodeInfo(*entry) for code, entry in package_yaml(__package__, "finding_codes.yaml").items()}
-
-
-#: Every code the validator can emit (stable identifiers; never renamed).
-CODES: dict[str, CodeInfo] = _read_codes()
+#: Every code the validator can emit (stable identifiers; never renamed): ``finding_codes.yaml`` beside this module,
+#: code -> [severity, topic, summary], in the order of the guide's table.
+CODES: dict[str, CodeInfo] = {code: CodeInfo(*entry) for code, entry in package_yaml(__package__, "finding_codes.yaml").items()}
 
 #: Mesh-content codes whose default severity is downgraded where the mesh is only drawn.
 MESH_USE_DEPENDENT = frozenset({"MESH_MALFORMED", "MESH_NO_FACES", "MESH_NONFINITE_VERTEX", "MESH_BAD_INDEX",
