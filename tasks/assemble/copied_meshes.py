@@ -170,12 +170,11 @@ def _drop_outside_references(data: bytes, file_rel: str, names_of) -> tuple[byte
     return b"".join(out), dropped
 
 
-def material_references(asset: AssetDescription, copies: dict[str, Path] | None = None) -> dict[str, str]:
+def material_references(asset: AssetDescription, copies: dict[str, Path]) -> dict[str, str]:
     """The copied files that name other files: output path -> ``"obj"`` (its
     ``mtllib`` statements) or ``"mtl"`` (its texture statements), for the
-    OBJ meshes of the URDF and the MTL libraries they name (as the copies of
-    :func:`mesh_copies` place them)."""
-    copies = mesh_copies(asset) if copies is None else copies
+    OBJ meshes of the URDF and the MTL libraries they name (as ``copies``, what :func:`mesh_copies` gives,
+    place them)."""
     kinds: dict[str, str] = {}
     for g in _meshes(asset):
         if g.path is None or not g.filename:

@@ -202,14 +202,14 @@ def validate_any(asset: Path | str, policy: "ValidationPolicy | None" = None,
     Raises:
         AssetError: an MJCF or USD file that cannot be read into the asset model (names the body, prim or joint).
     """
-    if not os.path.exists(asset):  # ASSET_NOT_FOUND, as for any input
-        return validate_input.validate_asset(asset, policy), ()
-    try:
-        staged_asset = _stage_other_format(asset, reading)
-    except AssetError as exc:
-        if exc.findings:  # a file the reader policy refused: its finding, as validate_asset reports it
-            return list(exc.findings), ()
-        raise
+    staged_asset = None
+    if os.path.exists(asset):  # else ASSET_NOT_FOUND, as for any input
+        try:
+            staged_asset = _stage_other_format(asset, reading)
+        except AssetError as exc:
+            if exc.findings:  # a file the reader policy refused: its finding, as validate_asset reports it
+                return list(exc.findings), ()
+            raise
     if staged_asset is None:
         return validate_input.validate_asset(asset, policy), ()
     return validate_input.validate_asset(staged_asset.folder, policy), staged_asset.read.notes

@@ -49,12 +49,9 @@ def geometry_corners(g: UrdfGeometry, bounds: np.ndarray | None = None) -> np.nd
         if bounds is None:
             return None
         c = box_corners(bounds[0], bounds[1]) * g.scale
-    elif g.kind == "box" and g.size is not None:
-        h = np.asarray(g.size, float) / 2.0
-        c = box_corners(-h, h)
-    elif g.kind in ("cylinder", "sphere") and g.radius is not None:
+    elif g.kind == "box" and g.size is not None or g.kind in ("cylinder", "sphere") and g.radius is not None:
         r = g.radius
-        h = np.array((2 * r, 2 * r, g.length if g.kind == "cylinder" else 2 * r), float) / 2.0
+        h = np.array(g.size if g.kind == "box" else (2 * r, 2 * r, g.length if g.kind == "cylinder" else 2 * r), float) / 2.0
         c = box_corners(-h, h)
     else:
         return None
