@@ -90,7 +90,7 @@ def link_surfaces(link: urdf.UrdfLink, mesh_path) -> tuple[tuple[np.ndarray, np.
 
 def open_pieces(link: str, c: urdf.UrdfGeometry, g: int, hull: Piece, mesh: tuple[np.ndarray, np.ndarray],
                  link_mesh: tuple[np.ndarray, np.ndarray], notes: list[str],
-                 slides_along: set[str] | None = None, up: np.ndarray | None = None) -> tuple[list[Piece], np.ndarray] | None:
+                 slides_along: set[str] | None, up: np.ndarray | None) -> tuple[list[Piece], np.ndarray] | None:
     """The convex pieces (CoACD, :mod:`~asset2sim.tasks.geometry.decomposition`) of ``mesh`` (vertices (V, 3) m,
     faces (F, 3)), group ``g`` of collision ``c``, replacing its hull ``hull`` when the hull holds an open cavity
     that the link's surfaces ``link_mesh`` leave open (:func:`cavities.open_cavity`), the link slides along no

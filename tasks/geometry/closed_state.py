@@ -264,7 +264,7 @@ def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, f
     up, down = hi - q_closed, q_closed - lo
     direction, rng = (1.0, float(up)) if up >= down else (-1.0, float(down))
     return ClosedState(joint=name, q_closed=q_closed, direction=direction, open_range=max(rng, 0.0),
-                       lower=float(session.joint_limits[name][0]), upper=float(session.joint_limits[name][1]),
+                       lower=float(lo), upper=float(hi),
                        compactness_ratio=ratio, notes=notes)
 
 
@@ -293,17 +293,17 @@ def _modelled_end(qs: np.ndarray, vals: np.ndarray, ratio: float) -> float | Non
     return float(qs[i])
 
 
-def object_hull_volume(session, state: dict[str, float], asset: AssetDescription, hull_points: dict[str, np.ndarray] | None = None) -> float:
-    """Volume (the asset's units cubed) of the convex hull of every link at ``state``: the closed object's outer
-    volume, what a container's volume ("a 500 ml bottle") is compared with; 0 without geometry.
+def object_hull_volume(session, state: dict[str, float], asset: AssetDescription, hull_points: dict[str, np.ndarray]) -> float:
+    """Volume (the asset's units cubed) of the convex hull of every link (``hull_points``: :func:`link_hull_points`) at
+    ``state``: the closed object's outer volume, what a container's volume ("a 500 ml bottle") is compared with; 0
+    without geometry.
     Source: Qhull (Barber, Dobkin, Huhdanpaa 1996) through ``scipy.spatial.ConvexHull``."""
     from scipy.spatial import ConvexHull, QhullError  # scipy is heavy to import; only a volume request needs it
 
-    points = link_hull_points(asset) if hull_points is None else hull_points
     session.set_joint_positions(state)
     world = []
     for ln in asset.links:
-        v = points.get(ln.name)
+        v = hull_points.get(ln.name)
         if v is None or not len(v):
             continue
         pos, R = session.link_frame(ln.name)

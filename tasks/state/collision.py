@@ -36,12 +36,11 @@ class CollisionPiece:
     source: GeometryRef
 
 
-def convexity_ratio(path: Path, cache=None) -> float:
+def convexity_ratio(path: Path, cache: MeshCache) -> float:
     """Surface area of the mesh over the area of its convex hull (>= ~1 for
-    concave closed surfaces, ~1 for convex ones; open surfaces can be < 1)."""
+    concave closed surfaces, ~1 for convex ones; open surfaces can be < 1); ``cache`` holds the meshes read."""
     import trimesh
 
-    cache = cache or MeshCache()
     mesh = cache.get(path)
     m = trimesh.Trimesh(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, int), process=False)
     try:
@@ -124,7 +123,7 @@ class _PieceWorld:
 
 
 def improve_collisions(session, asset: AssetDescription, pairs: list[tuple[str, str]], scale: float, out_dir: Path, *,
-                       cache=None, max_decompositions: int = 32, folder: str = "collision",
+                       cache=None, max_decompositions: int = 32, folder: str,
                        threshold: float = COACD_SETTINGS["threshold"]) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
     """Greedy, piece by piece, for link pairs whose hulls keep penetrating: a small piece (< :data:`PIN_AREA_FRACTION` of
     its link's surface) that overlaps the other link loses its collision; a concave one (:func:`convexity_ratio` >= 1.05) is

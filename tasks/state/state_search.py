@@ -68,7 +68,7 @@ def _left_note(candidate: Candidate, st, closed_out, bands, intervals, config: R
 def _refine(candidate: Candidate, closed_out, bands, config, ws: Workspace, say, proposer, intervals, addressed):
     """:func:`refine_state_with_decomposition` without its closing note."""
     fractions = estimate.band_intervals(bands, intervals)
-    asset, requested = candidate.asset, dict(candidate.state)
+    asset, requested, tolerance = candidate.asset, dict(candidate.state), config.penetration_tolerance
 
     def search(on: Candidate, start: dict[str, float]):
         with kinematic_session(ws, on, config) as sess:
@@ -76,8 +76,8 @@ def _refine(candidate: Candidate, closed_out, bands, config, ws: Workspace, say,
                                                      opened=frozenset(j for j, b in bands.items() if b != "closed"))
 
     st = search(candidate, requested)
-    in_the_way = [] if addressed is None or not st.phi_result > config.penetration_tolerance else \
-        refine_state.joints_in_the_way(asset, st.worst_pairs, bands, addressed(), config.penetration_tolerance)
+    in_the_way = [] if addressed is None or not st.phi_result > tolerance else \
+        refine_state.joints_in_the_way(asset, st.worst_pairs, bands, addressed(), tolerance)
     if in_the_way:
         held = fractions
         fractions = {**fractions, **{j: (0.0, 1.0) for j in in_the_way}}
@@ -91,15 +91,57 @@ def _refine(candidate: Candidate, closed_out, bands, config, ws: Workspace, say,
             st = room
         else:
             fractions = held
-    if not (st.phi_result > config.penetration_tolerance and config.convex_decomposition):
+    if not (st.phi_result > tolerance and config.convex_decomposition):
         return st, candidate
+
+    def decomposed_search(threshold: float):
+        """The deep pairs' collision pieces of ``candidate`` at ``first.result`` (the search before any decomposition)
+        repaired with CoACD at concavity ``threshold`` (:func:`collision.improve_collisions`), then the state searched
+        again from ``requested``. Returns (the search, with ``first``'s evaluations added, its notes in
+        ``collision_changes``; the candidate with those pieces, or None when no change was kept: then ``first`` itself
+        with the notes). Pieces at a finer concavity than the first of :data:`COACD_THRESHOLDS` go to a folder of their
+        own, so that the coarser ones stay as they were written."""
+        base, folder = candidate.collision_overrides, write.collision_folder(candidate.asset)
+        if threshold != COACD_THRESHOLDS[0]:  # beside the coarser pieces, which may be the ones kept
+            folder = f"{folder}/concavity_{threshold:g}"
+        deep = [(p_["link_a"], p_["link_b"]) for p_ in first.worst_pairs if p_["depth_m"] > tolerance]
+        links = sorted({ln for pair in deep for ln in pair})
+        sess = ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False,
+                                                               initial_state=first.result))
+        try:
+            overrides, dnotes = collision.improve_collisions(sess, candidate.asset, deep, candidate.overlay.scale, ws.root,
+                                                             cache=ws.mesh_cache, max_decompositions=config.max_decompositions,
+                                                             folder=folder, threshold=threshold)
+        except (DecompositionUnavailable, ValueError) as exc:
+            say("refine_state", f"collision improvement skipped: {exc}")
+            return first.model_copy(update={"collision_changes": [f"collision improvement skipped: {exc}"]}), None
+        finally:
+            sess.close()
+        if not overrides:
+            return first.model_copy(update={"collision_changes": dnotes or [
+                f"no collision piece change lowered the overlap of {', '.join(links)}"]}), None
+        decomposed = replace(candidate, collision_overrides={**base, **overrides})
+        st = search(decomposed, requested)
+        st.evaluations += first.evaluations
+        st.model_queries += first.model_queries
+        st.phi_requested = first.phi_requested
+        if st.phi_result >= first.phi_result:
+            # the decomposition did not help (pieces of neighbours can bulge): keep the original hulls
+            return first.model_copy(update={"evaluations": st.evaluations, "model_queries": st.model_queries,
+                                            "collision_changes": [
+                f"collision pieces changed for {', '.join(links)} but self-penetration went {first.phi_result * 1000:.3g} -> "
+                f"{st.phi_result * 1000:.3g} mm; original collision meshes kept"] + dnotes}), None
+        st.collision_changes = dnotes
+        st.method = first.method + " | collision pieces improved -> " + st.method
+        return st, decomposed
+
     first = st
-    st, decomposed = _decomposed_search(candidate, first, COACD_THRESHOLDS[0], config, ws, say, search, requested)
+    st, decomposed = decomposed_search(COACD_THRESHOLDS[0])
     kept = decomposed or candidate
     for threshold in COACD_THRESHOLDS[1:]:  # finer, only where the coarser pieces helped but leave an overlap they explain
-        if kept is candidate or not config.penetration_tolerance < st.phi_result <= coarse_bulge(candidate, st.worst_pairs, ws):
+        if kept is candidate or not tolerance < st.phi_result <= coarse_bulge(candidate, st.worst_pairs, ws):
             break
-        finer, decomposed = _decomposed_search(candidate, first, threshold, config, ws, say, search, requested)
+        finer, decomposed = decomposed_search(threshold)
         other = finer  # the attempt not kept: its evaluations and model queries are added to the one kept
         if decomposed is not None and finer.phi_result < st.phi_result:
             finer.collision_changes = [f"CoACD at concavity {threshold:g}, where its pieces at the coarser concavity left "
@@ -129,44 +171,3 @@ def coarse_bulge(candidate: Candidate, pairs: list[dict], ws: Workspace) -> floa
                 if len(v):
                     diag = max(diag, float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))))
     return COACD_THRESHOLDS[0] * diag * candidate.overlay.scale
-
-
-def _decomposed_search(candidate: Candidate, before, threshold: float, config: RefineConfig, ws: Workspace, say, search,
-                       requested: dict[str, float]):
-    """The deep pairs' collision pieces of ``candidate`` at ``before.result`` repaired with CoACD at concavity
-    ``threshold`` (:func:`collision.improve_collisions`), then the state searched again from ``requested``. Returns (the
-    search, with ``before``'s evaluations added, its notes in ``collision_changes``; the candidate with those pieces,
-    or None when no change was kept: then ``before`` itself with the notes). Pieces at a finer concavity than the
-    first of :data:`COACD_THRESHOLDS` go to a folder of their own, so that the coarser ones stay as they were written."""
-    base, folder = candidate.collision_overrides, write.collision_folder(candidate.asset)
-    if threshold != COACD_THRESHOLDS[0]:  # beside the coarser pieces, which may be the ones kept
-        folder = f"{folder}/concavity_{threshold:g}"
-    deep = [(p_["link_a"], p_["link_b"]) for p_ in before.worst_pairs if p_["depth_m"] > config.penetration_tolerance]
-    links = sorted({ln for pair in deep for ln in pair})
-    sess = ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False,
-                                                           initial_state=before.result))
-    try:
-        overrides, dnotes = collision.improve_collisions(sess, candidate.asset, deep, candidate.overlay.scale, ws.root,
-                                                         cache=ws.mesh_cache, max_decompositions=config.max_decompositions,
-                                                         folder=folder, threshold=threshold)
-    except (DecompositionUnavailable, ValueError) as exc:
-        say("refine_state", f"collision improvement skipped: {exc}")
-        return before.model_copy(update={"collision_changes": [f"collision improvement skipped: {exc}"]}), None
-    finally:
-        sess.close()
-    if not overrides:
-        return before.model_copy(update={"collision_changes": dnotes or [
-            f"no collision piece change lowered the overlap of {', '.join(links)}"]}), None
-    decomposed = replace(candidate, collision_overrides={**base, **overrides})
-    st = search(decomposed, requested)
-    st.evaluations += before.evaluations
-    st.model_queries += before.model_queries
-    st.phi_requested = before.phi_requested
-    if st.phi_result >= before.phi_result:
-        # the decomposition did not help (pieces of neighbours can bulge): keep the original hulls
-        return before.model_copy(update={"evaluations": st.evaluations, "model_queries": st.model_queries, "collision_changes": [
-            f"collision pieces changed for {', '.join(links)} but self-penetration went {before.phi_result * 1000:.3g} -> "
-            f"{st.phi_result * 1000:.3g} mm; original collision meshes kept"] + dnotes}), None
-    st.collision_changes = dnotes
-    st.method = before.method + " | collision pieces improved -> " + st.method
-    return st, decomposed
