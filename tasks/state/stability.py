@@ -17,7 +17,7 @@ from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.geometry.closed_state import subtree_links
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.prior_tables import MaterialPrior, load_priors
-from asset2sim.tasks.state.balance import Balance, _balance, _com, _link_world, _signed_margin
+from asset2sim.tasks.state.balance import _balance, _com, _link_world, _signed_margin
 from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.engines.source import SimSource
 
@@ -104,50 +104,8 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
              if (frac := PART_MASS_FRACTION.get((category or "", labels.get(j.child) or ""))) is not None
              for ln in subtree_links(asset, j.child)}
     body = [ln for ln in overlay.links if ln not in moved]
-    m_body = sum(overlay.links[ln].mass for ln in body)
-    least = _mass_floors(overlay, parts, moved, points, geometry)
-    floors, reasons, pf = least.floors, least.reasons, least.fraction
-    light = [ln for ln in floors if floors[ln] < overlay.links[ln].mass * (1 - 1e-9)]
-    kept = _why_kept(overlay, bal, category, floors, light, m_body, pf)
-    if kept is not None:
-        return overlay, kept
-    span = sum(overlay.links[ln].mass - floors[ln] for ln in light)
-    masses_for = partial(_masses, overlay, light, body, floors, m_body, span)
-    t = _smallest_transfer(lambda x: _signed_margin(bal.support, _com(overlay, frames, masses_for(x))[:2]), bal.required)
-    if t is None:
-        return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge; even with the opened parts at "
-                         "the lower end of their range (" + "; ".join(reasons) + ") it stays outside: masses kept"]
-    t = 1.0 if most else t
-    new = masses_for(t)
-    ov = overlay.model_copy(deep=True)  # the masses moved, inertia scaled alike, noted in the source
-    for ln in light + body:
-        f = new[ln] / ov.links[ln].mass
-        ov.links[ln] = request_apply.scaled_link(ov.links[ln], f, f"; mass x{f:.3g} for stability by design").model_copy(
-            update={"mass": new[ln]})
-    after = _signed_margin(bal.support, _com(ov, frames)[:2])
-    total = overlay.total_mass()
-    m_part, m_after = sum(overlay.links[ln].mass for ln in floors), sum(new[ln] for ln in floors)
-    return ov, [f"{TRANSFER_NOTE} the centre of mass was {bal.margin * 1000:.3g} mm from the support's "
-                f"edge (needs >= {bal.required * 1000:.3g} mm inside); moved {t * span:.3g} kg from {', '.join(light)} to "
-                f"{', '.join(body)} (opened parts {m_part / total:.0%} -> {m_after / total:.0%} of {total:.3g} kg, "
-                + "; ".join(reasons) + f"); margin now {after * 1000:.3g} mm; total mass, scale and state unchanged"
-                + ("; the whole transfer: a drop or tilt toppled it with less moved" if most else "")]
-
-
-@dataclass(frozen=True, slots=True)
-class _MassFloors:
-    """The least masses of the opened parts: ``floors`` (link -> kg), ``reasons`` (a line per source) and
-    ``fraction`` (the sourced part-mass fraction used, or None)."""
-
-    floors: dict[str, float]
-    reasons: list[str]
-    fraction: PartFraction | None
-
-
-def _mass_floors(overlay: Overlay, parts: dict[str, PartFraction], moved: set[str], points: dict[str, np.ndarray],
-                 geometry: dict[str, LinkGeometry] | None) -> _MassFloors:
-    """The least mass of each opened link and why (``points``: link -> world collision hull points (N, 3) m)."""
-    total = overlay.total_mass()
+    m_body, total = sum(overlay.links[ln].mass for ln in body), overlay.total_mass()
+    # the least mass of each opened link (``floors``, kg) and why (``reasons``: a line per source)
     floors: dict[str, float] = {}
     reasons: list[str] = []
     table = [ln for ln in overlay.links if ln in parts]
@@ -164,25 +122,39 @@ def _mass_floors(overlay: Overlay, parts: dict[str, PartFraction], moved: set[st
         floors.update({ln: env[ln] for ln in env_links})
         reasons.append("envelope shell mass (outer area x wall thickness x density) of "
                        + ", ".join(f"{ln} {env[ln]:.3g} kg" for ln in env_links))
-    return _MassFloors(floors, reasons, pf)
-
-
-def _why_kept(overlay: Overlay, bal: Balance, category: str | None, floors: dict[str, float], light: list[str], m_body: float,
-              pf: PartFraction | None) -> list[str] | None:
-    """The notes when no mass can move; None when some can."""
-    total = overlay.total_mass()
-    if not floors or m_body <= 0 or total <= 0:
+    light = [ln for ln in floors if floors[ln] < overlay.links[ln].mass * (1 - 1e-9)]
+    if not floors or m_body <= 0 or total <= 0:  # no mass can move
         if bal.margin >= 0:  # inside, only closer to the edge than asked: nothing to say without a sourced ratio
-            return []
-        return [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge at the requested state "
-                f"(needs >= {bal.required * 1000:.3g} mm inside); no part-mass ratio of {category} to move within"]
+            return overlay, []
+        return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge at the requested state "
+                         f"(needs >= {bal.required * 1000:.3g} mm inside); no part-mass ratio of {category} to move within"]
     if not light:
         m_part = sum(overlay.links[ln].mass for ln in floors)
-        return [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge; the opened parts already weigh "
-                f"{m_part / total:.0%} of the object, the lower end of the "
-                + ("sourced range" if pf is not None else "physical range") + (f" ({pf.lo:.0%})" if pf is not None else "")
-                + ": masses kept"]
-    return None
+        return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge; the opened parts already weigh "
+                         f"{m_part / total:.0%} of the object, the lower end of the "
+                         + ("sourced range" if pf is not None else "physical range")
+                         + (f" ({pf.lo:.0%})" if pf is not None else "")
+                         + ": masses kept"]
+    span = sum(overlay.links[ln].mass - floors[ln] for ln in light)
+    masses_for = partial(_masses, overlay, light, body, floors, m_body, span)
+    t = _smallest_transfer(lambda x: _signed_margin(bal.support, _com(overlay, frames, masses_for(x))[:2]), bal.required)
+    if t is None:
+        return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge; even with the opened parts at "
+                         "the lower end of their range (" + "; ".join(reasons) + ") it stays outside: masses kept"]
+    t = 1.0 if most else t
+    new = masses_for(t)
+    ov = overlay.model_copy(deep=True)  # the masses moved, inertia scaled alike, noted in the source
+    for ln in light + body:
+        f = new[ln] / ov.links[ln].mass
+        ov.links[ln] = request_apply.scaled_link(ov.links[ln], f, f"; mass x{f:.3g} for stability by design").model_copy(
+            update={"mass": new[ln]})
+    after = _signed_margin(bal.support, _com(ov, frames)[:2])
+    m_part, m_after = sum(overlay.links[ln].mass for ln in floors), sum(new[ln] for ln in floors)
+    return ov, [f"{TRANSFER_NOTE} the centre of mass was {bal.margin * 1000:.3g} mm from the support's "
+                f"edge (needs >= {bal.required * 1000:.3g} mm inside); moved {t * span:.3g} kg from {', '.join(light)} to "
+                f"{', '.join(body)} (opened parts {m_part / total:.0%} -> {m_after / total:.0%} of {total:.3g} kg, "
+                + "; ".join(reasons) + f"); margin now {after * 1000:.3g} mm; total mass, scale and state unchanged"
+                + ("; the whole transfer: a drop or tilt toppled it with less moved" if most else "")]
 
 
 def _masses(overlay: Overlay, light: list[str], body: list[str], floors: dict[str, float], m_body: float, span: float,
