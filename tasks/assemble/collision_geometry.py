@@ -142,10 +142,33 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
                 _store_pieces(disk_key, hit)
         return hit
 
+    def at_state(hit: PiecesNotes) -> PiecesNotes:
+        """(link -> pieces, notes) of ``hit`` at the initial ``state``, each ``pushed`` joint's part and parent also cut
+        apart at both ends of its range."""
+        pieces, notes = {k: list(v) for k, v in hit[0].items()}, list(hit[1])
+        if decompose:
+            separate_parent_child(model, pieces, notes, state=state)
+            joints = {x.name: x for x in model.joints}
+            for name in sorted(pushed):
+                j = joints.get(name)
+                if j is not None and j.type == "prismatic" and np.isfinite(j.lower) and np.isfinite(j.upper):
+                    for end in (j.lower, j.upper):
+                        separate_parent_child(model, pieces, notes, state={**state, name: float(end)}, joints={name})
+            for name in model.links:
+                pieces[name] = drop_slivers(pieces[name])
+        if level:
+            level_footprint(model, pieces, state, notes, feet)
+        if state:
+            for (parent, child), d in parent_child_depths(model, pieces, state).items():
+                if d > CONTAINMENT_TOLERANCE:
+                    notes.append(f"link {child!r} penetrates the collision pieces of its parent {parent!r} {d * 1000:.3g} mm at "
+                                 "the initial state")
+        return pieces, notes
+
     done = cached(_PIECE_CACHE, key, made)
     if state is not None:
         skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())), bool(level), feet, tuple(sorted(pushed)))
-        done = cached(_STATE_CACHE, skey, lambda: _state_pieces(model, done, state, decompose, level, feet, pushed))
+        done = cached(_STATE_CACHE, skey, lambda: at_state(done))
     return {k: list(v) for k, v in done[0].items()}, list(done[1])
 
 
@@ -211,30 +234,6 @@ def _merge_link(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], name: str
         d = max((depth_inside(pts, p) for p in pieces[name]), default=0.0)
         if d > CONTAINMENT_TOLERANCE:
             _trim(pieces, name, ", ".join(repr(c) for c in swept), pts, d, notes)
-
-
-def _state_pieces(model: urdf.UrdfModel, hit: PiecesNotes, state: dict[str, float],
-                  decompose: bool, level: bool, feet: float | None, pushed: Collection[str]) -> PiecesNotes:
-    """(link -> pieces, notes) of ``hit`` at the initial ``state``, each ``pushed`` joint's part and parent also cut
-    apart at both ends of its range (:func:`link_pieces`)."""
-    pieces, notes = {k: list(v) for k, v in hit[0].items()}, list(hit[1])
-    if decompose:
-        separate_parent_child(model, pieces, notes, state=state)
-        joints = {x.name: x for x in model.joints}
-        for name in sorted(pushed):
-            j = joints.get(name)
-            if j is not None and j.type == "prismatic" and np.isfinite(j.lower) and np.isfinite(j.upper):
-                for end in (j.lower, j.upper):
-                    separate_parent_child(model, pieces, notes, state={**state, name: float(end)}, joints={name})
-        for name in model.links:
-            pieces[name] = drop_slivers(pieces[name])
-    if level:
-        level_footprint(model, pieces, state, notes, feet)
-    if state:
-        for (parent, child), d in parent_child_depths(model, pieces, state).items():
-            if d > CONTAINMENT_TOLERANCE:
-                notes.append(f"link {child!r} penetrates the collision pieces of its parent {parent!r} {d * 1000:.3g} mm at the initial state")
-    return pieces, notes
 
 
 #: Pieces made in this process, by :func:`_piece_keys`' first key (the oldest of 16 dropped).

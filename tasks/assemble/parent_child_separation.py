@@ -59,85 +59,82 @@ def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]],
     and noted, unless the pair overlaps at the modelled pose too, the child is
     pressed into its parent from that pose on (:func:`_is_stop`) or the joint
     is at a limit. ``joints``: only these joints' pairs (None: every joint)."""
-    for joint in model.joints:
-        if joints is not None and joint.name not in joints:
-            continue
+    for joint in model.joints:  # parent and child (P, C: their pieces) cut apart pair by pair; a note when they overlapped
         P, C = pieces.get(joint.parent), pieces.get(joint.child)
-        if P and C:
-            _separate_joint(model, pieces, joint, P, C, state, notes)
-
-
-def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint: urdf.UrdfJoint, P: list[Piece | None],
-                    C: list[Piece | None], state: dict[str, float] | None, notes: list[str]) -> None:
-    """Cut, in place, the pieces ``P`` of ``joint``'s parent and ``C`` of its child apart (:func:`separate_parent_child`),
-    pair by pair; a note when they overlapped."""
-    deepest_cut, T_ref, T_near = np.inf, None, None
-    if state is None:
-        transforms, ref = _joint_transforms(model, pieces, joint)
-    else:
-        q_ref = reference_state(model).get(joint.name, 0.0)
-        q = float(state.get(joint.name, q_ref))
-        size = float(np.ptp(np.vstack([c.points for c in C if c is not None]), axis=0).max())
-        transforms, ref, T_ref = [_joint_motion(joint, q)], 0, _joint_motion(joint, q_ref)
-        T_near = _toward(joint, q_ref, q)
-        deepest_cut = np.inf if _at_limit(joint, q) else max(STATE_CUT_DEPTH, STATE_CUT_FRACTION * size)
-    sizes = {"p": sum(p.volume for p in P), "c": sum(c.volume for c in C)}
-    before = after = past = 0.0
-    cut, kept = {"p": set(), "c": set()}, 0
-    i = 0
-    while i < len(P):
-        k = 0
-        while k < len(C) and P[i] is not None:
-            overlap = None if C[k] is None else _pair_cuts(P[i], C[k], transforms, ref)
-            if overlap is not None and overlap[0] > deepest_cut and _is_stop(P[i], C[k], T_ref, T_near):
-                past = max(past, overlap[0])  # met only after moving clear of the modelled pose: a stop
-                overlap = None
-            if overlap is not None:
-                depth, deepest, cuts = overlap
-                before = max(before, depth)
-                options = (_cut_options("p", P[i], sizes["p"], _others(P, i), *cuts["p"], MAX_PIECES_HARD - len(P))
-                           + _cut_options("c", C[k], sizes["c"], _others(C, k), *cuts["c"], MAX_PIECES_HARD - len(C)))
-                if not options:
-                    kept, after = kept + 1, max(after, deepest)
-                else:
-                    _, _, which, parts = min(options, key=lambda o: (o[0], o[1]))
-                    target, idx = (P, i) if which == "p" else (C, k)
-                    target[idx] = parts[0] if parts else None
-                    target.extend(parts[1:])
-                    cut[which].add(idx)
-            k += 1
-        i += 1
-    gone = sum(p is None for p in P) + sum(c is None for c in C)
-    P[:] = [p for p in P if p is not None]
-    C[:] = [c for c in C if c is not None]
-    if before > 0.0:  # the pieces cut, removed whole and held whole; swept from the reference position on without a state
-        n_p, n_c = len(cut["p"]), len(cut["c"])
-        what = ", ".join(x for x in (f"{n_p} of {joint.parent!r}'s pieces" if n_p else "",
-                                     f"{n_c} of {joint.child!r}'s" if n_c else "") if x)
-        notes.append(f"joint {joint.name!r}: {joint.child!r} penetrated its parent {joint.parent!r} up to {before * 1000:.3g} mm "
-                     + ("from its reference position on" if state is None else "at the initial state")
-                     + f"; cut {what or 'nothing'}"
-                     + (f" ({gone} removed whole)" if gone else "")
-                     + (f"; {kept} overlap(s) of a link's last piece held whole inside another kept ({after * 1000:.3g} mm)"
-                        if kept else ""))
-    if past > 0.0:
-        notes.append(f"joint {joint.name!r}: {joint.child!r} lies {past * 1000:.3g} mm inside its parent {joint.parent!r} at the "
-                     f"initial state, {PAST_STOP_NOTE} (too deep to cut): the pieces are kept, not cut")
+        if (joints is not None and joint.name not in joints) or not (P and C):
+            continue
+        deepest_cut, T_ref, T_near = np.inf, None, None
+        if state is None:
+            transforms, ref = _joint_transforms(model, pieces, joint)
+        else:
+            q_ref = reference_state(model).get(joint.name, 0.0)
+            q = float(state.get(joint.name, q_ref))
+            size = float(np.ptp(np.vstack([c.points for c in C if c is not None]), axis=0).max())
+            transforms, ref, T_ref = [_joint_motion(joint, q)], 0, _joint_motion(joint, q_ref)
+            T_near = _toward(joint, q_ref, q)
+            deepest_cut = np.inf if _at_limit(joint, q) else max(STATE_CUT_DEPTH, STATE_CUT_FRACTION * size)
+        sizes = {"p": sum(p.volume for p in P), "c": sum(c.volume for c in C)}
+        before = after = past = 0.0
+        cut, kept = {"p": set(), "c": set()}, 0
+        i = 0
+        while i < len(P):
+            k = 0
+            while k < len(C) and P[i] is not None:
+                overlap = None if C[k] is None else _pair_cuts(P[i], C[k], transforms, ref)
+                if overlap is not None and overlap[0] > deepest_cut and _is_stop(P[i], C[k], T_ref, T_near):
+                    past = max(past, overlap[0])  # met only after moving clear of the modelled pose: a stop
+                    overlap = None
+                if overlap is not None:
+                    depth, deepest, cuts = overlap
+                    before = max(before, depth)
+                    options = (_cut_options("p", P[i], sizes["p"], _others(P, i), *cuts["p"], MAX_PIECES_HARD - len(P))
+                               + _cut_options("c", C[k], sizes["c"], _others(C, k), *cuts["c"], MAX_PIECES_HARD - len(C)))
+                    if not options:
+                        kept, after = kept + 1, max(after, deepest)
+                    else:
+                        _, _, which, parts = min(options, key=lambda o: (o[0], o[1]))
+                        target, idx = (P, i) if which == "p" else (C, k)
+                        target[idx] = parts[0] if parts else None
+                        target.extend(parts[1:])
+                        cut[which].add(idx)
+                k += 1
+            i += 1
+        gone = sum(p is None for p in P) + sum(c is None for c in C)
+        P[:] = [p for p in P if p is not None]
+        C[:] = [c for c in C if c is not None]
+        if before > 0.0:  # the pieces cut, removed whole and held whole; swept from the reference position on without a state
+            n_p, n_c = len(cut["p"]), len(cut["c"])
+            what = ", ".join(x for x in (f"{n_p} of {joint.parent!r}'s pieces" if n_p else "",
+                                         f"{n_c} of {joint.child!r}'s" if n_c else "") if x)
+            notes.append(f"joint {joint.name!r}: {joint.child!r} penetrated its parent {joint.parent!r} up to "
+                         f"{before * 1000:.3g} mm "
+                         + ("from its reference position on" if state is None else "at the initial state")
+                         + f"; cut {what or 'nothing'}"
+                         + (f" ({gone} removed whole)" if gone else "")
+                         + (f"; {kept} overlap(s) of a link's last piece held whole inside another kept ({after * 1000:.3g} mm)"
+                            if kept else ""))
+        if past > 0.0:
+            notes.append(f"joint {joint.name!r}: {joint.child!r} lies {past * 1000:.3g} mm inside its parent "
+                         f"{joint.parent!r} at the initial state, {PAST_STOP_NOTE} (too deep to cut): the pieces are kept, "
+                         "not cut")
 
 
 def _depth_at(a: Piece, b: Piece, T: np.ndarray) -> tuple[float, np.ndarray]:
     """(depth m, separating direction (3,)) of parent piece ``a`` and child piece ``b`` at the child pose ``T`` (4, 4)
     (:func:`penetration_depth`; (0, 0) when their boxes are apart)."""
-    return (0.0, np.zeros(3)) if _boxes_apart(a, b, T) else penetration_depth(a, _transformed(b, T), CONTAINMENT_TOLERANCE)
+    if _boxes_apart(a, b, T):
+        return 0.0, np.zeros(3)
+    return penetration_depth(a, _transformed(b, T), CONTAINMENT_TOLERANCE)
 
 
 def _is_stop(a: Piece, b: Piece, T_ref: np.ndarray, T_near: np.ndarray | None) -> bool:
     """Whether parent piece ``a`` and child piece ``b``, overlapping at the state, meet at a stop: clear at the modelled
     pose ``T_ref`` (4, 4) (within :data:`CONTAINMENT_TOLERANCE` m), and not touching there and pressed deeper a step
-    toward the state (``T_near``, :func:`_toward`). A part in contact with its parent at its modelled pose and driven into it from there
-    on (a button pressed into a body drawn solid behind it, its recess not modelled) meets no stop: the limit scan keeps
-    its limit (``limits.MIN_FREE_FRACTION``), and its pieces are cut at the state as at a limit. A part clear of its
-    parent at its modelled pose that runs into it (a door into a bar of its body 2 cm in front of it) meets a stop."""
+    toward the state (``T_near``, :func:`_toward`). A part in contact with its parent at its modelled pose and driven
+    into it from there on (a button pressed into a body drawn solid behind it, its recess not modelled) meets no stop:
+    the limit scan keeps its limit (``limits.MIN_FREE_FRACTION``), and its pieces are cut at the state as at a limit. A
+    part clear of its parent at its modelled pose that runs into it (a door into a bar of its body 2 cm in front of it)
+    meets a stop."""
     at_ref = _depth_at(a, b, T_ref)[0]
     if at_ref > CONTAINMENT_TOLERANCE:
         return False

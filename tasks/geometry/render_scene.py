@@ -11,7 +11,7 @@ import numpy as np
 
 from asset2sim.tasks.geometry.render_meshes import (DEFAULT_COLOR, DrawableMesh, TextureLinks, colored_obj, convert_other_mesh,
                                                     split_obj)
-from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfLink, UrdfMaterial, UrdfModel, read_urdf, write_urdf
+from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfMaterial, UrdfModel, read_urdf, write_urdf
 
 
 def resolve_mesh_path(filename: str, urdf_dir: Path) -> Path:
@@ -120,40 +120,6 @@ def _all_materials(model: UrdfModel) -> list[UrdfMaterial]:
     return [*model.materials, *(v.material for ln in model.links.values() for v in ln.visuals if v.material is not None)]
 
 
-def _prepare_link(urdf_path: Path, urdf_dir: Path, lname: str, link: UrdfLink, meshes: _VisualFiles,
-                  named: dict[str, tuple[float, ...]]) -> np.ndarray | None:
-    """Strip ``link``'s collisions and inertial, replace its mesh visuals by their drawable files;
-    returns its visual points (N, 3) in the link frame, m, or None when it has none.
-
-    Raises:
-        FileNotFoundError: a visual mesh is missing.
-        ValueError: a mesh does not parse.
-    """
-    link.collisions = []
-    link.inertial = None
-    pts: list[np.ndarray] = []
-    shown: list[UrdfGeometry] = []
-    for vis in link.visuals:
-        if vis.kind is None:
-            continue
-        T = vis.origin
-        if vis.kind != "mesh":
-            local = primitive_points(vis)
-            if len(local):
-                pts.append(local @ T[:3, :3].T + T[:3, 3])
-            shown.append(vis)
-            continue
-        mesh_file = resolve_mesh_path(vis.filename or "", urdf_dir)
-        if not mesh_file.is_file():
-            raise FileNotFoundError(f"{urdf_path}: link {lname!r} visual mesh not found: {mesh_file}")
-        info, files = meshes.files(vis, mesh_file, named)
-        if len(info.vertices):
-            pts.append((info.vertices * vis.scale) @ T[:3, :3].T + T[:3, 3])
-        shown.extend(replace(vis, filename=str(part)) for part in files)
-    link.visuals = shown
-    return np.concatenate(pts) if pts else None
-
-
 def prepare_scene(urdf_path: Path, work: Path, texture_max: int = 1024) -> RenderScene:
     """Write the render-only URDF into ``work`` and collect visual points per link: no ``<collision>`` or
     ``<inertial>`` (the root link frame is the body frame), each visual mesh replaced by drawable
@@ -182,9 +148,32 @@ def prepare_scene(urdf_path: Path, work: Path, texture_max: int = 1024) -> Rende
     meshes = _VisualFiles(work, textures, notes)
     link_points: dict[str, np.ndarray] = {}
     for lname, link in model.links.items():
-        pts = _prepare_link(urdf_path, urdf_dir, lname, link, meshes, named)
-        if pts is not None:
-            link_points[lname] = pts
+        # no collisions or inertial; the mesh visuals replaced by their drawable files, the visual points (N, 3) in the
+        # link frame (m) kept
+        link.collisions = []
+        link.inertial = None
+        pts: list[np.ndarray] = []
+        shown: list[UrdfGeometry] = []
+        for vis in link.visuals:
+            if vis.kind is None:
+                continue
+            T = vis.origin
+            if vis.kind != "mesh":
+                local = primitive_points(vis)
+                if len(local):
+                    pts.append(local @ T[:3, :3].T + T[:3, 3])
+                shown.append(vis)
+                continue
+            mesh_file = resolve_mesh_path(vis.filename or "", urdf_dir)
+            if not mesh_file.is_file():
+                raise FileNotFoundError(f"{urdf_path}: link {lname!r} visual mesh not found: {mesh_file}")
+            info, files = meshes.files(vis, mesh_file, named)
+            if len(info.vertices):
+                pts.append((info.vertices * vis.scale) @ T[:3, :3].T + T[:3, 3])
+            shown.extend(replace(vis, filename=str(part)) for part in files)
+        link.visuals = shown
+        if pts:
+            link_points[lname] = np.concatenate(pts)
     if not link_points:
         raise ValueError(f"{urdf_path}: no visual geometry to render")
     for mat in {id(m): m for m in _all_materials(model)}.values():  # each <texture filename=...> at its link in ``work``
