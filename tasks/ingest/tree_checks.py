@@ -97,9 +97,51 @@ class TreeChecks(Recorder):
         for j in joints:
             if self._connect(j, seen, tree):
                 self._joint_support(j, jseen)
-        roots = self._parents_and_orphans(tree, names, seen)
-        self._cycles(tree, names, roots, seen)
-        return {j.child for j in joints if j.child and j.type in MOVABLE_TYPES}, self._root(tree, names, roots)
+        # links with several parents, orphans, and the links without a parent joint (``roots``, in order)
+        for child, js in tree.has_parent.items():
+            if len(js) > 1:
+                self.add("LINK_MULTIPLE_PARENTS", f"link {child!r} is the child of joints {', '.join(map(repr, js))}",
+                         line=seen[child].line, link=child, joints=js)
+        roots = [n for n in names if n not in tree.has_parent]
+        if len(names) > 1:
+            for n in roots:
+                if n not in tree.touched:
+                    self.add("LINK_ORPHAN", f"link {n!r} is connected by no joint", line=seen[n].line, link=n)
+        # ``TREE_CYCLE`` for each cycle of first parents that no root reaches
+        reached: set[str] = set()
+        stack = list(roots)
+        while stack:
+            n = stack.pop()
+            if n in reached:
+                continue
+            reached.add(n)
+            stack.extend(tree.children.get(n, []))
+        reported: set[str] = set()
+        for n in names:
+            if n in reached or n in reported or n not in tree.first_parent:
+                continue
+            cur = n
+            pos: dict[str, int] = {}  # the path: link -> its place
+            while cur in tree.first_parent and cur not in pos and cur not in reported:
+                pos[cur] = len(pos)
+                cur = tree.first_parent[cur]
+            if cur in pos:
+                cyc = list(pos)[pos[cur]:]
+                self.add("TREE_CYCLE", f"joints form a cycle through links {' -> '.join(cyc + [cyc[0]])}",
+                         line=seen[cyc[0]].line, link=cyc[0], links=cyc)
+            reported.update(pos)
+        # the one root link, or None with ``TREE_NO_ROOT`` / ``TREE_MULTIPLE_ROOTS``
+        connected_roots, root = [n for n in roots if n in tree.touched or len(names) == 1], None
+        if not roots:
+            self.add("TREE_NO_ROOT", "every link has a parent joint: there is no root link")
+        elif len(connected_roots) > 1:
+            self.add("TREE_MULTIPLE_ROOTS", f"several links have no parent: {', '.join(map(repr, connected_roots))}",
+                     roots=connected_roots)
+        elif len(roots) > 1 and not connected_roots:
+            self.add("TREE_MULTIPLE_ROOTS", f"no joint connects the links {', '.join(map(repr, roots))}", roots=roots)
+        else:
+            root = connected_roots[0] if connected_roots else roots[0]
+        return {j.child for j in joints if j.child and j.type in MOVABLE_TYPES}, root
 
     def _first_by_name(self, items: list, kind: str) -> dict:
         """``kind`` ("link" or "joint") elements by name, the first of each; the others are duplicates. A name longer
@@ -154,58 +196,6 @@ class TreeChecks(Recorder):
         if j.type in _UNSUPPORTED_JOINT_TYPES:
             self.add("JOINT_TYPE_UNSUPPORTED", f"a {j.type} joint between {link_name(j.parent)!r} and {link_name(j.child)!r}: "
                      f"{_UNSUPPORTED_JOINT_TYPES[j.type]}", line=j.line, joint=jname, type=j.type)
-
-    def _parents_and_orphans(self, tree: _Tree, names: list[str], seen: dict[str, UrdfLink]) -> list[str]:
-        """Links with several parents and orphans; returns the links without a parent joint, in order."""
-        for child, js in tree.has_parent.items():
-            if len(js) > 1:
-                self.add("LINK_MULTIPLE_PARENTS", f"link {child!r} is the child of joints {', '.join(map(repr, js))}",
-                         line=seen[child].line, link=child, joints=js)
-        roots = [n for n in names if n not in tree.has_parent]
-        if len(names) > 1:
-            for n in roots:
-                if n not in tree.touched:
-                    self.add("LINK_ORPHAN", f"link {n!r} is connected by no joint", line=seen[n].line, link=n)
-        return roots
-
-    def _cycles(self, tree: _Tree, names: list[str], roots: list[str], seen: dict[str, UrdfLink]) -> None:
-        """``TREE_CYCLE`` for each cycle of first parents that no root reaches."""
-        reached: set[str] = set()
-        stack = list(roots)
-        while stack:
-            n = stack.pop()
-            if n in reached:
-                continue
-            reached.add(n)
-            stack.extend(tree.children.get(n, []))
-        reported: set[str] = set()
-        for n in names:
-            if n in reached or n in reported or n not in tree.first_parent:
-                continue
-            cur = n
-            pos: dict[str, int] = {}  # the path: link -> its place
-            while cur in tree.first_parent and cur not in pos and cur not in reported:
-                pos[cur] = len(pos)
-                cur = tree.first_parent[cur]
-            if cur in pos:
-                cyc = list(pos)[pos[cur]:]
-                self.add("TREE_CYCLE", f"joints form a cycle through links {' -> '.join(cyc + [cyc[0]])}",
-                         line=seen[cyc[0]].line, link=cyc[0], links=cyc)
-            reported.update(pos)
-
-    def _root(self, tree: _Tree, names: list[str], roots: list[str]) -> str | None:
-        """The one root link, or None with ``TREE_NO_ROOT`` / ``TREE_MULTIPLE_ROOTS``."""
-        connected_roots = [n for n in roots if n in tree.touched or len(names) == 1]
-        if not roots:
-            self.add("TREE_NO_ROOT", "every link has a parent joint: there is no root link")
-            return None
-        if len(connected_roots) > 1:
-            self.add("TREE_MULTIPLE_ROOTS", f"several links have no parent: {', '.join(map(repr, connected_roots))}", roots=connected_roots)
-            return None
-        if len(roots) > 1 and not connected_roots:
-            self.add("TREE_MULTIPLE_ROOTS", f"no joint connects the links {', '.join(map(repr, roots))}", roots=roots)
-            return None
-        return connected_roots[0] if connected_roots else roots[0]
 
     def inertials(self, model: UrdfModel, moving: set[str]) -> None:
         """The given ``<inertial>`` of every named link (mass > 0 when moving, :func:`check_inertia`);
