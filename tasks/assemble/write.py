@@ -80,7 +80,16 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
     _set_links(model, collision_overrides or {}, overlay)
     urdf.scale_model(model, s, joints=False, inertials=False)
     if root_rotation is not None and not np.allclose(root_rotation, np.eye(3)):
-        _rotate_root(model, asset.root_link, root_rotation)
+        # baked into the root link's geometry and inertial and the joints hanging from it
+        T = frames.rigid_matrix(root_rotation)
+        for joint in model.children(asset.root_link):
+            joint.origin = T @ joint.origin
+        root = model.links.get(asset.root_link)
+        if root is not None:
+            for elem in root.visuals + root.collisions:
+                elem.origin = T @ elem.origin
+            if root.inertial is not None:
+                root.inertial.origin = T @ root.inertial.origin
     urdf.scale_model(model, s, geometry=False, inertials=False)
     _set_joints(model, overlay, {j.name for j in asset.joints if j.type == "fixed"})
     urdf.conform_limits(model, effort=urdf.PASSIVE_EFFORT, velocity=urdf.PASSIVE_VELOCITY)  # no <limit> on fixed joints; a passive part's effort and velocity where the input declared none
@@ -123,19 +132,6 @@ def _set_links(model: urdf.UrdfModel, overrides: dict, overlay: Overlay) -> None
             raise OutputError(f"overlay has no mass/inertia for link {link.name!r} (validate the overlay first)")
         link.inertial = None if lp is None else urdf.UrdfInertial(mass=float(lp.mass), origin=frames.translation_matrix(lp.com),
                                                                   inertia=lp.inertia.matrix())
-
-
-def _rotate_root(model: urdf.UrdfModel, root_link: str, rotation: np.ndarray) -> None:
-    """Bake the (3, 3) ``rotation`` into the root link's geometry and inertial and the joints hanging from it."""
-    T = frames.rigid_matrix(rotation)
-    for joint in model.children(root_link):
-        joint.origin = T @ joint.origin
-    root = model.links.get(root_link)
-    if root is not None:
-        for elem in root.visuals + root.collisions:
-            elem.origin = T @ elem.origin
-        if root.inertial is not None:
-            root.inertial.origin = T @ root.inertial.origin
 
 
 def _set_joints(model: urdf.UrdfModel, overlay: Overlay, fixed: set[str]) -> None:

@@ -142,7 +142,21 @@ def improve_collisions(session, asset: AssetDescription, pairs: list[tuple[str, 
                 rep.improve_pair(a, b, tried)
     finally:
         world.close()
-    return _write_pieces(asset, rep.changed, out_dir, folder), rep.notes
+    # the kept decompositions written as ``out_dir/folder/<link>_<k>_<i>.obj``: link -> its pieces
+    out: dict[str, list[CollisionPiece]] = {}
+    for ln in sorted({k[0] for k in rep.changed}):
+        pieces_out: list[CollisionPiece] = []
+        for k, g in enumerate(asset.link(ln).collisions):
+            # None: removed
+            if (ln, k) in rep.changed:
+                for i, (v, f) in enumerate(rep.changed[(ln, k)] or []):
+                    rel = f"{folder}/{file_names.file_stem(ln)}_{k}_{i}.obj"
+                    mesh_io.write_file(file_names.join_inside(out_dir, rel), mesh_io.obj_bytes(v, f))
+                    pieces_out.append(CollisionPiece(filename=rel, source=g))
+            elif g.kind == "mesh" and g.filename:
+                pieces_out.append(CollisionPiece(filename=g.filename, source=g))
+        out[ln] = pieces_out
+    return out, rep.notes
 
 
 class _Repair:
@@ -207,21 +221,3 @@ class _Repair:
             return after
         self.world.restore(key, old)
         return None
-
-
-def _write_pieces(asset: AssetDescription, changed: dict, out_dir: Path, folder: str) -> dict[str, list[CollisionPiece]]:
-    """Write the kept decompositions as ``out_dir/folder/<link>_<k>_<i>.obj``; returns link -> its pieces."""
-    out: dict[str, list[CollisionPiece]] = {}
-    for ln in sorted({k[0] for k in changed}):
-        pieces_out: list[CollisionPiece] = []
-        for k, g in enumerate(asset.link(ln).collisions):
-            # None: removed
-            if (ln, k) in changed:
-                for i, (v, f) in enumerate(changed[(ln, k)] or []):
-                    rel = f"{folder}/{file_names.file_stem(ln)}_{k}_{i}.obj"
-                    mesh_io.write_file(file_names.join_inside(out_dir, rel), mesh_io.obj_bytes(v, f))
-                    pieces_out.append(CollisionPiece(filename=rel, source=g))
-            elif g.kind == "mesh" and g.filename:
-                pieces_out.append(CollisionPiece(filename=g.filename, source=g))
-        out[ln] = pieces_out
-    return out

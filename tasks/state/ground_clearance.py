@@ -39,20 +39,6 @@ SLIDE_ANGLE = math.radians(30.0)
 MAX_SQUEEZE = 0.5
 
 
-def _moving_joint(model: UrdfModel) -> dict[str, object]:
-    """link -> the nearest movable joint above it (None for the body)."""
-    out: dict[str, object] = {}
-    for name in model.tree_order():
-        pj = model.parent_joint(name)
-        if pj is None:
-            out[name] = None
-        elif pj.type in MOVABLE:
-            out[name] = pj
-        else:
-            out[name] = out.get(pj.parent)
-    return out
-
-
 def _floor_area(pieces: list[np.ndarray], z_g: float) -> float:
     """Area (m^2) of the 2-D hull of the vertices of ``pieces`` ((k, 3) m) within
     :data:`CONTACT_BAND` of the ground ``z_g``; 0 when they span none."""
@@ -64,17 +50,6 @@ def _floor_area(pieces: list[np.ndarray], z_g: float) -> float:
         return float(ConvexHull(pts).volume)
     except (QhullError, ValueError):
         return 0.0
-
-
-def _drags(joint, R_parent_joint: np.ndarray) -> bool:
-    """The joint moves its part along the ground: a hinge near vertical, a slide near horizontal."""
-    a = R_parent_joint @ joint.axis
-    az = abs(float(a[2])) / max(float(np.linalg.norm(a)), 1e-12)
-    if joint.type == "revolute":
-        return az >= math.cos(SLIDE_ANGLE)
-    if joint.type == "prismatic":
-        return az <= math.sin(SLIDE_ANGLE)
-    return False  # continuous: wheels and knobs roll or spin
 
 
 def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]) -> ClearanceRepair:
@@ -101,7 +76,12 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
             continue
         if thin and _floor_area(ws, z_g) >= SUPPORT_AREA * body_area:
             continue  # half of what a flat-lying object lies on: part of its support
-        if not _drags(j, poses[j.parent][:3, :3] @ j.origin[:3, :3]):
+        # unless the joint moves its part along the ground: a hinge near vertical, a slide near horizontal (a continuous
+        # joint's wheels and knobs roll or spin)
+        a = poses[j.parent][:3, :3] @ j.origin[:3, :3] @ j.axis
+        az = abs(float(a[2])) / max(float(np.linalg.norm(a)), 1e-12)
+        if not (j.type == "revolute" and az >= math.cos(SLIDE_ANGLE)
+                or j.type == "prismatic" and az <= math.sin(SLIDE_ANGLE)):
             continue
         n = poses[ln][:3, :3].T @ np.array([0.0, 0.0, -1.0])  # the ground side, link frame
         own = [P.copy() for P in scene.local[ln]]
@@ -189,7 +169,13 @@ class _FloorScene:
         root = Path(urdf).parent
         self.model = model
         self.local = {ln: link_pieces(model, root, ln) for ln in model.links}
-        self.mover = _moving_joint(model)
+        self.mover: dict[str, object] = {}  # link -> the nearest movable joint above it (None for the body)
+        for name in model.tree_order():
+            pj = model.parent_joint(name)
+            if pj is None or pj.type in MOVABLE:
+                self.mover[name] = pj
+            else:
+                self.mover[name] = self.mover.get(pj.parent)
         self.body = [ln for ln in model.links if self.mover.get(ln) is None]
         self.subtrees = subtrees(model)  # movable joint -> the links it moves
 
