@@ -133,9 +133,13 @@ def open_pieces(link: str, c: urdf.UrdfGeometry, g: int, hull: Piece, mesh: tupl
     pieces = []
     inward = cav.core.mean(axis=0)
     for pv, _ in decomposition.refit_pieces(surface, parts):
-        solid = _thick_wall(pv, inward)
-        if solid is None:
+        axis = thinnest_axis(pv)
+        if axis is None:  # spans no area
             continue
+        solid, centre, n, width = axis
+        if width < CAVITY_WALL:  # grown to CAVITY_WALL along its thinnest direction toward the cavity (the outer face stays)
+            n = -n if float(n @ (inward - centre)) < 0 else n
+            solid = np.vstack([solid, solid + n * (CAVITY_WALL - width)])
         try:
             pieces.append(Piece.of(solid, (str(c.filename),)))
         except (QhullError, ValueError):
@@ -148,17 +152,3 @@ def open_pieces(link: str, c: urdf.UrdfGeometry, g: int, hull: Piece, mesh: tupl
     notes.append(f"{what}: {len(pieces)} convex pieces (CoACD) instead of its hull, so that things can be put in it")
     return pieces, cav.core
 
-
-def _thick_wall(points: np.ndarray, inward: np.ndarray) -> np.ndarray | None:
-    """``points`` (k, 3) m of a piece of a container's wall, grown to :data:`CAVITY_WALL` m along their thinnest
-    principal direction toward ``inward`` (3,) m (the cavity: the outer face stays where the part is); None when
-    they span no area."""
-    axis = thinnest_axis(points)
-    if axis is None:
-        return None
-    p, c, n, width = axis
-    if width >= CAVITY_WALL:
-        return p
-    if float(n @ (np.asarray(inward, float) - c)) < 0:
-        n = -n
-    return np.vstack([p, p + n * (CAVITY_WALL - width)])

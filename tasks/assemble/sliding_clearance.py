@@ -134,18 +134,6 @@ def _moving_links(model: urdf.UrdfModel, pieces: dict[str, list[Piece]]):
                                   if o not in moved and pieces.get(o) and frozenset((ln, o)) not in adjacent]
 
 
-def _fixed_pairs(model: urdf.UrdfModel, pieces: dict[str, list[Piece]]):
-    """(a link with pieces, the larger links with pieces that only fixed joints join to it, parent and child
-    excepted): pairs no state moves apart, the smaller of each (its pieces' volume; then file order) the one squeezed."""
-    adjacent = model.adjacent_pairs()
-    names = sorted(model.links, key=lambda n: sum(p.volume for p in pieces.get(n, [])))
-    for i, ln in enumerate(names):
-        group = limits.rigid_group(model, ln)
-        others = [o for o in names[i + 1:] if o in group and pieces.get(o) and frozenset((ln, o)) not in adjacent]
-        if pieces.get(ln) and others:
-            yield ln, others
-
-
 def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes: list[str]) -> set[tuple[str, str]]:
     """Give running clearance, in place, to every sliding contact between a
     link a movable joint moves and a link it does not move (parent-child
@@ -155,8 +143,8 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
     ancestors: a part deeper inside the link that carries it, a latch in the
     body its lid is hinged to, is the state stage's collision repair) is squeezed back (:func:`clear_sliding_contact`) by the first
     joint in file order that moves it, once per pair of pieces; and likewise
-    every contact between two links only fixed joints join (:func:`_fixed_pairs`:
-    nothing moves, so nothing is a stop), the smaller of the two squeezed; what a thin piece cannot give
+    every contact between two links only fixed joints join (nothing moves, so
+    nothing is a stop), the smaller of the two squeezed; what a thin piece cannot give
     (:data:`MAX_SQUEEZE`) the other piece's face gives. Notes
     name each change; returns the (moving link, other link) pairs given clearance."""
     pairs: set[tuple[str, str]] = set()
@@ -165,7 +153,16 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
     boxes = {ln: [posed(p.points, poses[ln]) for p in pl] for ln, pl in pieces.items()}
     still = lambda c: np.zeros(3)  # noqa: E731  a point of a pair no joint moves apart
     moving = [(f"sliding along {j.name!r}", ln, others, j) for j, ln, others in _moving_links(model, pieces)]
-    for why, ln, others, joint in moving + [("no joint moves them apart", ln, others, None) for ln, others in _fixed_pairs(model, pieces)]:
+    # then the pairs no state moves apart: a link with pieces and the larger links with pieces that only fixed joints join
+    # to it, parent and child excepted, the smaller of each (its pieces' volume; then file order) the one squeezed
+    adjacent = model.adjacent_pairs()
+    names = sorted(model.links, key=lambda n: sum(p.volume for p in pieces.get(n, [])))
+    for i, ln in enumerate(names):
+        group = limits.rigid_group(model, ln)
+        others = [o for o in names[i + 1:] if o in group and pieces.get(o) and frozenset((ln, o)) not in adjacent]
+        if pieces.get(ln) and others:
+            moving.append(("no joint moves them apart", ln, others, None))
+    for why, ln, others, joint in moving:
         inv = np.linalg.inv(poses[ln])
         velocity = still if joint is None else joint_velocity(joint, inv @ poses[joint.child])
         for other in others:
@@ -246,18 +243,6 @@ def _swept_gap(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis: np.ndarra
     return float(gaps[a, i]), float(angles[a]), (axes[a, i] if ahead[a, i] >= behind[a, i] else -axes[a, i])
 
 
-def _still_axes_gap(p: np.ndarray, q: np.ndarray, origin: np.ndarray, turns: np.ndarray, nq: np.ndarray) -> float:
-    """A lower bound (m) of :func:`_swept_gap`'s least gap of ``p`` (k, 3) turned by ``turns`` (A, 3, 3) about
-    ``origin`` (3,) against ``q`` (l, 3): the same over ``q``'s face normals ``nq`` (F, 3) alone, which do not turn
-    (a gap over some of the axes is at most the gap over all); at a fraction of its cost."""
-    if not len(turns):
-        return np.inf
-    sp = np.matmul(np.matmul(p - origin, turns.transpose(0, 2, 1)) + origin, nq.T)  # (A, k, F)
-    sq = q @ nq.T  # (l, F)
-    gaps = np.maximum(sq.min(axis=0) - sp.max(axis=1), sp.min(axis=1) - sq.max(axis=0))  # (A, F)
-    return float(gaps.max(axis=1).min())
-
-
 def _clear_turning_piece(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis: np.ndarray, angles: np.ndarray,
                          turns: np.ndarray | None = None, normals: tuple[np.ndarray, np.ndarray] | None = None
                          ) -> tuple[np.ndarray, float, float] | None:
@@ -271,8 +256,13 @@ def _clear_turning_piece(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis:
     normals = (_normals(p), _normals(q)) if normals is None else normals
     if _sat_on(p, q, np.vstack(normals))[0] < RUNNING_CLEARANCE - 1e-9:
         return None
-    # the answer below, cheaper where it is None
-    if _still_axes_gap(p, q, origin, turns, normals[1]) >= SWEPT_TRIGGER + 1e-9:
+    # the answer below, cheaper where it is None: a lower bound of :func:`_swept_gap`'s least gap, the same over q's face
+    # normals alone, which do not turn (a gap over some of the axes is at most the gap over all)
+    nq = normals[1]
+    sp = np.matmul(np.matmul(p - origin, turns.transpose(0, 2, 1)) + origin, nq.T)  # (A, k, F)
+    sq = q @ nq.T  # (l, F)
+    gaps = np.maximum(sq.min(axis=0) - sp.max(axis=1), sp.min(axis=1) - sq.max(axis=0))  # (A, F)
+    if not len(turns) or float(gaps.max(axis=1).min()) >= SWEPT_TRIGGER + 1e-9:
         return None
     g, a, n = _swept_gap(p, q, origin, axis, angles, turns, normals)
     least = g
