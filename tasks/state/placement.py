@@ -105,28 +105,23 @@ def closed_on_output(ctx: EstimationContext, syn: Synthesis, ws: Workspace, log:
     for n in moved:
         log.say("closed_state", f"joint {n}: closed end {new[n].q_closed:.4g} on the output's collision pieces "
                                 f"({syn.closed_out[n].q_closed:.4g} before); the state is placed from it")
-    overlay = _closers_moved(overlay, syn.closed_out, new, moved, log)
-    rt = syn.retargeted(new)  # the angle asked, from the new closed end
-    return replace(syn, overlay=overlay, closed_out=new, requested=requested, targets=rt.targets, bands=rt.bands)
-
-
-def _closers_moved(overlay: Overlay, before: dict[str, ClosedState], after: dict[str, ClosedState], moved: list[str],
-                   log: StageLog) -> Overlay:
-    """``overlay`` with the spring of each closer (``holding.mechanism`` "closer":
-    :func:`~asset2sim.tasks.synthesize.spring_holds.closer`) among the joints ``moved`` shifted with its closed end
-    (``before`` -> ``after``, output units, the same opening direction): its preload and centre were set from the closed
-    end the synthesis knew, so a closer set from a closed end 0.15 rad off the output's (a faucet's lever) pressed or
-    centred the part there, not where the output shuts."""
+    # the spring of each closer (``holding.mechanism`` "closer": :func:`~asset2sim.tasks.synthesize.spring_holds.closer`)
+    # among the joints moved shifted with its closed end (the same opening direction): its preload and centre were set
+    # from the closed end the synthesis knew, so a closer set from a closed end 0.15 rad off the output's (a faucet's
+    # lever) pressed or centred the part there, not where the output shuts
     joints = {}
     for n in moved:
-        d = overlay.joints.get(n)
+        d, was = overlay.joints.get(n), syn.closed_out[n]
         if (d is None or d.holding is None or d.holding.mechanism != "closer" or d.spring_reference is None
-                or after[n].direction != before[n].direction):
+                or new[n].direction != was.direction):
             continue
-        shift = after[n].q_closed - before[n].q_closed
+        shift = new[n].q_closed - was.q_closed
         joints[n] = d.model_copy(update={"spring_reference": float(d.spring_reference + shift)})
         log.say("closed_state", f"joint {n}: its closer's spring reference moved {shift:+.4g} with its closed end")
-    return overlay.model_copy(update={"joints": {**overlay.joints, **joints}}) if joints else overlay
+    if joints:
+        overlay = overlay.model_copy(update={"joints": {**overlay.joints, **joints}})
+    rt = syn.retargeted(new)  # the angle asked, from the new closed end
+    return replace(syn, overlay=overlay, closed_out=new, requested=requested, targets=rt.targets, bands=rt.bands)
 
 
 def clip_synthesis(ctx: EstimationContext, syn: Synthesis, config: RefineConfig, ws: Workspace, log: StageLog,
