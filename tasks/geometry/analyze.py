@@ -77,25 +77,6 @@ ANALYSIS_CODE: tuple[str, ...] = (*(f"asset2sim.tasks.geometry.{m}" for m in ("a
                                    "asset2sim.mesh_io", "asset2sim.frames", "asset2sim.schemas.asset")
 
 
-def _disk_key(link: LinkDesc, params: tuple) -> str | None:
-    """Digest of the link's name, its geometry elements as written (not where the folder lies), the bytes
-    of its mesh files, ``params`` and the source of :data:`ANALYSIS_CODE`; None when one cannot be read."""
-    parts: list[bytes | str] = [link.name, repr(params)]
-    files: dict[Path, bytes] = {}  # a visual and a collision of PartNet-Mobility name the same file: read once
-    try:
-        parts.append(array_cache.source_digest(*ANALYSIS_CODE))
-        for ref in (*link.collisions, *link.visuals):
-            parts.append(ref.model_dump_json(exclude={"path"}))
-            if ref.kind == "mesh" and ref.path is not None:
-                path = Path(ref.path)
-                if path not in files:
-                    files[path] = hashlib.sha256(path.read_bytes()).digest()
-                parts.append(files[path])
-    except (OSError, ImportError):
-        return None
-    return array_cache.digest(*parts)
-
-
 def analyze_link(link: LinkDesc, *, prefer: Literal["collision", "visual"] = "collision",
                  cache: MeshCache | None = None) -> LinkGeometry | None:
     """Mesh analysis of one link at scale 1 in the link frame.
@@ -118,7 +99,22 @@ def analyze_link(link: LinkDesc, *, prefer: Literal["collision", "visual"] = "co
     if not link.has_geometry:
         return None
     params = (prefer, VOXELS_PER_AXIS, MAX_VOXELS, CLOSE_GAPS, LAYER_CORRECTION, True)  # True: subvoxel
-    key = _disk_key(link, params)
+    # the on-disk key: the digest of the link's name, its geometry elements as written (not where the folder lies), the
+    # bytes of its mesh files, ``params`` and the source of ANALYSIS_CODE; None when one cannot be read
+    parts: list[bytes | str] = [link.name, repr(params)]
+    files: dict[Path, bytes] = {}  # a visual and a collision of PartNet-Mobility name the same file: read once
+    try:
+        parts.append(array_cache.source_digest(*ANALYSIS_CODE))
+        for ref in (*link.collisions, *link.visuals):
+            parts.append(ref.model_dump_json(exclude={"path"}))
+            if ref.kind == "mesh" and ref.path is not None:
+                path = Path(ref.path)
+                if path not in files:
+                    files[path] = hashlib.sha256(path.read_bytes()).digest()
+                parts.append(files[path])
+        key = array_cache.digest(*parts)
+    except (OSError, ImportError):
+        key = None
     hit = array_cache.load(DISK_KIND, key) if key is not None else None
     if hit is not None and "json" in hit:
         try:

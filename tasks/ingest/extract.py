@@ -118,15 +118,20 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
         files = [*staged_asset.read.files, *files]
         read = file_memo.identities(list(staged_asset.read.files))
         default_id = given.name if given.is_dir() else staged_asset.read.source.stem
+        # path -> sha256 of the files whose bytes the reader kept (an MJCF input's sources): never read a second time
+        src = staged_asset.read.sources
+        known = ({str(src.real[k]): hashlib.sha256(data).hexdigest() for k, data in src.files.items()}
+                 if hasattr(src, "real") else {})
     else:
         # the files' identities before they are hashed (asset2sim.file_memo): the folder too, whose listing found the URDF
         read = file_memo.identities(([folder] if Path(asset).is_dir() else []) + files)
         default_id = folder.name if urdf.name in URDF_NAMES else urdf.stem
+        known = {}
     desc = AssetDescription(
         asset_id=asset_id or default_id, source_dir=folder, urdf_path=urdf,
         robot_name=robot.name or urdf.stem, links=links, joints=joints, root_link=root,
         category=category or result.category,
-        input_hash=sha256_files(files, known=_digests_read(staged_asset), named=_staged_names(staged_asset, folder)),
+        input_hash=sha256_files(files, known=known, named=_staged_names(staged_asset, folder)),
         staged_from=None if staged_asset is None else Path(os.path.realpath(staged_asset.read.source)),
         staging_notes=([] if staged_asset is None else list(staged_asset.read.notes)) + list(held.values()))
     if key is not None:
@@ -148,15 +153,6 @@ def _staged_names(staged_asset: "staging.StagedAsset | None", folder: Path):
             return str(p)
 
     return named
-
-
-def _digests_read(staged_asset: "staging.StagedAsset | None") -> dict[str, str]:
-    """path -> sha256 of the input's files whose bytes the reader kept (an MJCF input's sources): hashed from those
-    bytes, never read a second time."""
-    src = None if staged_asset is None else staged_asset.read.sources
-    if src is None or not hasattr(src, "real"):
-        return {}
-    return {str(src.real[k]): hashlib.sha256(data).hexdigest() for k, data in src.files.items()}
 
 
 def _stage_other_format(asset: Path | str, reading: ReadOptions | None) -> "staging.StagedAsset | None":

@@ -125,21 +125,6 @@ def _scan_stl(data: bytes, max_faces: int) -> _Triangles:
     return _Triangles(v, np.arange(len(v)).reshape(-1, 3), defects)
 
 
-def _scan_trimesh(data: bytes, ext: str, max_faces: int, source: str) -> _Triangles:
-    if ext == ".dae":
-        safexml.parse_xml_bytes(data, source=source)  # DAE is XML: refuse DTDs/entities first
-    import trimesh
-
-    loaded = trimesh.load(io.BytesIO(data), file_type=ext[1:], force="mesh", process=False, skip_materials=True)
-    v = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), np.float64).reshape(-1, 3)
-    f = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), np.int64).reshape(-1, 3)
-    if len(f) > max_faces:
-        raise _TooManyFaces(len(f), max_faces)
-    bad = _bad_faces(f, v)
-    defects = {"MESH_BAD_INDEX": f"{int(bad.sum())} face(s) index beyond the {len(v)} vertices"} if bad.any() else {}
-    return _Triangles(v, f[~bad], defects)
-
-
 def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: int = 2_000_000,
                    max_coordinate: float = MAX_COORDINATE) -> MeshScan:
     """Strictly read one mesh file and report its defects: OBJ by :func:`asset2sim.mesh_io.read_obj`
@@ -181,8 +166,19 @@ def _scan_data(data: bytes, ext: str, max_faces: int, max_coordinate: float, sou
             scan.mtllibs = read.mtllibs
         elif ext == ".stl":
             read = _scan_stl(data, max_faces)
-        else:
-            read = _scan_trimesh(data, ext, max_faces, source)
+        else:  # other formats by trimesh
+            if ext == ".dae":
+                safexml.parse_xml_bytes(data, source=source)  # DAE is XML: refuse DTDs/entities first
+            import trimesh
+
+            loaded = trimesh.load(io.BytesIO(data), file_type=ext[1:], force="mesh", process=False, skip_materials=True)
+            v = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), np.float64).reshape(-1, 3)
+            f = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), np.int64).reshape(-1, 3)
+            if len(f) > max_faces:
+                raise _TooManyFaces(len(f), max_faces)
+            bad = _bad_faces(f, v)
+            read = _Triangles(v, f[~bad], {"MESH_BAD_INDEX": f"{int(bad.sum())} face(s) index beyond the {len(v)} vertices"}
+                              if bad.any() else {})
         v, f, defects = read.vertices, read.faces, read.defects
     except _TooManyFaces as exc:  # counted in the asset's total all the same
         scan.defects["MESH_TOO_MANY_FACES"] = str(exc)
