@@ -5,15 +5,13 @@ cycles, orphans, one root, caps, mimic and unsupported joints), the given inerti
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from asset2sim import file_names
 from asset2sim.tasks.ingest.findings import MAX_NAME_CHARS, MOVABLE_TYPES, Recorder
 from asset2sim.tasks.ingest.mesh_checks import zero_pose_bounds
 from asset2sim.tasks.ingest.urdf_checks import joint_name, link_name
-from asset2sim.urdf import UrdfJoint, UrdfLink, UrdfModel
+from asset2sim.urdf import UrdfJoint, UrdfModel
 from asset2sim.inert import shorten
 from asset2sim.package_data import package_yaml
 
@@ -46,17 +44,6 @@ _INERTIA_ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # ixx ixy i
 #: Joint types refine refuses (``JOINT_TYPE_UNSUPPORTED``), with why and what to write instead (``messages.yaml``;
 #: docs/design/validation.md, "Joint types").
 _UNSUPPORTED_JOINT_TYPES: dict[str, str] = package_yaml(__package__, "messages.yaml")["unsupported_joint_types"]
-
-
-@dataclass
-class _Tree:
-    """The tree as the joints give it: ``has_parent`` child -> its parent joints' names,
-    ``first_parent`` / ``children`` the edges of each child's first joint, ``touched`` the links named."""
-
-    children: dict[str, list[str]]
-    has_parent: dict[str, list[str]] = field(default_factory=dict)
-    first_parent: dict[str, str] = field(default_factory=dict)
-    touched: set[str] = field(default_factory=set)
 
 
 class TreeChecks(Recorder):
@@ -93,19 +80,38 @@ class TreeChecks(Recorder):
             self.add("LINK_FILE_NAMES_CLASH", f"links {', '.join(map(repr, same))} would give their files one name "
                      f"{stem!r}; rename one", line=seen[same[1]].line, link=same[1])
         names = list(seen)
-        tree = _Tree(children={n: [] for n in names})
-        for j in joints:
-            if self._connect(j, seen, tree):
-                self._joint_support(j, jseen)
+        # the tree as the joints give it: child -> its parent joints' names, the edges of each child's first joint
+        # (both ways), the links named
+        children: dict[str, list[str]] = {n: [] for n in names}
+        has_parent: dict[str, list[str]] = {}
+        first_parent: dict[str, str] = {}
+        touched: set[str] = set()
+        for j in joints:  # unknown links and self loops reported; the joint's support checked when it joins two links
+            jname, parent, child = joint_name(j.name), link_name(j.parent), link_name(j.child)
+            if parent is not None and parent not in seen:
+                self.add("JOINT_PARENT_UNKNOWN", f"parent {parent!r} is not a link", line=j.line, joint=jname)
+            if child is not None and child not in seen:
+                self.add("JOINT_CHILD_UNKNOWN", f"child {child!r} is not a link", line=j.line, joint=jname)
+            if parent is not None and parent == child:
+                self.add("JOINT_SELF_LOOP", f"parent and child are both {parent!r}", line=j.line, joint=jname, link=child)
+                touched.add(parent)
+                continue
+            touched.update(n for n in (parent, child) if n in seen)
+            if child in seen:
+                has_parent.setdefault(child, []).append(jname or "?")
+            if parent in seen and child in seen and child not in first_parent:
+                first_parent[child] = parent
+                children[parent].append(child)
+            self._joint_support(j, jseen)
         # links with several parents, orphans, and the links without a parent joint (``roots``, in order)
-        for child, js in tree.has_parent.items():
+        for child, js in has_parent.items():
             if len(js) > 1:
                 self.add("LINK_MULTIPLE_PARENTS", f"link {child!r} is the child of joints {', '.join(map(repr, js))}",
                          line=seen[child].line, link=child, joints=js)
-        roots = [n for n in names if n not in tree.has_parent]
+        roots = [n for n in names if n not in has_parent]
         if len(names) > 1:
             for n in roots:
-                if n not in tree.touched:
+                if n not in touched:
                     self.add("LINK_ORPHAN", f"link {n!r} is connected by no joint", line=seen[n].line, link=n)
         # ``TREE_CYCLE`` for each cycle of first parents that no root reaches
         reached: set[str] = set()
@@ -115,23 +121,23 @@ class TreeChecks(Recorder):
             if n in reached:
                 continue
             reached.add(n)
-            stack.extend(tree.children.get(n, []))
+            stack.extend(children.get(n, []))
         reported: set[str] = set()
         for n in names:
-            if n in reached or n in reported or n not in tree.first_parent:
+            if n in reached or n in reported or n not in first_parent:
                 continue
             cur = n
             pos: dict[str, int] = {}  # the path: link -> its place
-            while cur in tree.first_parent and cur not in pos and cur not in reported:
+            while cur in first_parent and cur not in pos and cur not in reported:
                 pos[cur] = len(pos)
-                cur = tree.first_parent[cur]
+                cur = first_parent[cur]
             if cur in pos:
                 cyc = list(pos)[pos[cur]:]
                 self.add("TREE_CYCLE", f"joints form a cycle through links {' -> '.join(cyc + [cyc[0]])}",
                          line=seen[cyc[0]].line, link=cyc[0], links=cyc)
             reported.update(pos)
         # the one root link, or None with ``TREE_NO_ROOT`` / ``TREE_MULTIPLE_ROOTS``
-        connected_roots, root = [n for n in roots if n in tree.touched or len(names) == 1], None
+        connected_roots, root = [n for n in roots if n in touched or len(names) == 1], None
         if not roots:
             self.add("TREE_NO_ROOT", "every link has a parent joint: there is no root link")
         elif len(connected_roots) > 1:
@@ -160,28 +166,6 @@ class TreeChecks(Recorder):
             else:
                 seen[it.name] = it
         return seen
-
-    def _connect(self, j: UrdfJoint, seen: dict[str, UrdfLink], tree: _Tree) -> bool:
-        """Record joint ``j`` in ``tree``, reporting unknown links and a self loop (then False)."""
-        jname, parent, child = joint_name(j.name), link_name(j.parent), link_name(j.child)
-        ok = True
-        if parent is not None and parent not in seen:
-            self.add("JOINT_PARENT_UNKNOWN", f"parent {parent!r} is not a link", line=j.line, joint=jname)
-            ok = False
-        if child is not None and child not in seen:
-            self.add("JOINT_CHILD_UNKNOWN", f"child {child!r} is not a link", line=j.line, joint=jname)
-            ok = False
-        if parent is not None and parent == child:
-            self.add("JOINT_SELF_LOOP", f"parent and child are both {parent!r}", line=j.line, joint=jname, link=child)
-            tree.touched.add(parent)
-            return False
-        tree.touched.update(n for n in (parent, child) if n in seen)
-        if child in seen:
-            tree.has_parent.setdefault(child, []).append(jname or "?")
-        if ok and parent and child and child not in tree.first_parent:
-            tree.first_parent[child] = parent
-            tree.children[parent].append(child)
-        return True
 
     def _joint_support(self, j: UrdfJoint, jseen: dict[str, UrdfJoint]) -> None:
         """Mimic joints and joint types refine does not model."""
