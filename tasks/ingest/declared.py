@@ -101,11 +101,10 @@ def declared_from_model(source: Path, fmt: str, model: UrdfModel, read: staging.
         stops = None if j.type == "continuous" else lim
         joints[j.name] = DeclaredJoint(
             name=j.name, type=j.type, child=j.child,
-            lower=None if stops is None else stops.lower, upper=None if stops is None else stops.upper,
-            damping=None if dyn is None else dyn.damping, friction=None if dyn is None else dyn.friction,
-            stiffness=None if spring is None else spring.stiffness, reference=None if spring is None else spring.reference,
-            effort=None if lim is None else lim.effort)
-    return DeclaredPhysics(source=source, format=fmt, links=links, joints=joints, root_fixed=None if read is None else read.root_fixed,
+            lower=getattr(stops, "lower", None), upper=getattr(stops, "upper", None), damping=getattr(dyn, "damping", None),
+            friction=getattr(dyn, "friction", None), stiffness=getattr(spring, "stiffness", None),
+            reference=getattr(spring, "reference", None), effort=getattr(lim, "effort", None))
+    return DeclaredPhysics(source=source, format=fmt, links=links, joints=joints, root_fixed=getattr(read, "root_fixed", None),
                            read=read, initial_state={} if read is None else dict(read.initial_state))
 
 

@@ -303,8 +303,8 @@ def scale_urdf(src: Path | str, dst: Path | str, scale: float, *, joint_limits: 
 def urdf_joints(urdf: Path | str) -> dict[str, dict[str, Any]]:
     """Joint name -> {type, lower, upper} (rad or m; None when absent) of a URDF (lenient reading).
     Raises UrdfError: unreadable XML or a malformed number."""
-    return {j.name: {"type": j.type, "lower": None if j.limit is None else j.limit.lower,
-                     "upper": None if j.limit is None else j.limit.upper} for j in read_urdf(urdf, mode="lenient").joints}
+    return {j.name: {"type": j.type, "lower": getattr(j.limit, "lower", None), "upper": getattr(j.limit, "upper", None)}
+            for j in read_urdf(urdf, mode="lenient").joints}
 
 
 def reference_initial_state(joints: dict[str, dict[str, Any]], task_joints: list[str],
