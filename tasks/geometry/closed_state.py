@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from asset2sim.schemas.asset import AssetDescription
 
+from asset2sim.engines.loading import BOX_CORNERS
 from asset2sim.frames import rpy_matrix
 from asset2sim.mesh_io import MeshCache
 from asset2sim.urdf import UrdfModel
@@ -106,7 +107,7 @@ def link_hull_points(asset: AssetDescription, cache=None) -> dict[str, np.ndarra
             elif g.kind == "box" and g.size is not None or g.kind in ("cylinder", "sphere") and g.radius is not None:
                 # the box's corners, or those of the cylinder's or sphere's bounding box
                 h = np.asarray(g.size, float) / 2 if g.kind == "box" else (g.radius, g.radius, (g.length or 2 * g.radius) / 2)
-                v = np.array([[sx, sy, sz] for sx in (-h[0], h[0]) for sy in (-h[1], h[1]) for sz in (-h[2], h[2])])
+                v = BOX_CORNERS * h
             else:
                 continue
             if len(v) == 0:

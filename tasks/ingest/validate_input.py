@@ -216,11 +216,7 @@ def _other_format(v: _Validator, source: Path, fmt: str) -> ValidationResult:
     except ImportError as exc:
         v.add("FORMAT_UNREADABLE", f"{source}: {exc}", file=str(source))
         return v.result
-    inner = _Validator(staged_asset.folder, v.policy)
-    result = inner.run()
-    v.findings.extend(result.findings)
-    result.findings = v.findings
-    return result
+    return _Validator(staged_asset.folder, v.policy).run()
 
 
 def validate_asset(asset: Path | str, policy: ValidationPolicy | None = None) -> list[Finding]:
