@@ -80,9 +80,8 @@ class TreeChecks(Recorder):
             self.add("LINK_FILE_NAMES_CLASH", f"links {', '.join(map(repr, same))} would give their files one name "
                      f"{stem!r}; rename one", line=seen[same[1]].line, link=same[1])
         names = list(seen)
-        # the tree as the joints give it: child -> its parent joints' names, the edges of each child's first joint
-        # (both ways), the links named
-        children: dict[str, list[str]] = {n: [] for n in names}
+        # the tree as the joints give it: child -> its parent joints' names, the parent of each child's first joint, the
+        # links named
         has_parent: dict[str, list[str]] = {}
         first_parent: dict[str, str] = {}
         touched: set[str] = set()
@@ -101,7 +100,6 @@ class TreeChecks(Recorder):
                 has_parent.setdefault(child, []).append(jname or "?")
             if parent in seen and child in seen and child not in first_parent:
                 first_parent[child] = parent
-                children[parent].append(child)
             self._joint_support(j, jseen)
         # links with several parents, orphans, and the links without a parent joint (``roots``, in order)
         for child, js in has_parent.items():
@@ -113,18 +111,10 @@ class TreeChecks(Recorder):
             for n in roots:
                 if n not in touched:
                     self.add("LINK_ORPHAN", f"link {n!r} is connected by no joint", line=seen[n].line, link=n)
-        # ``TREE_CYCLE`` for each cycle of first parents that no root reaches
-        reached: set[str] = set()
-        stack = list(roots)
-        while stack:
-            n = stack.pop()
-            if n in reached:
-                continue
-            reached.add(n)
-            stack.extend(children.get(n, []))
+        # ``TREE_CYCLE`` for each cycle of first parents (a walk up from a link a root reaches ends at that root)
         reported: set[str] = set()
         for n in names:
-            if n in reached or n in reported or n not in first_parent:
+            if n in reported or n not in first_parent:
                 continue
             cur = n
             pos: dict[str, int] = {}  # the path: link -> its place
