@@ -279,18 +279,15 @@ def voxel_properties(vertices: np.ndarray, faces: np.ndarray, *, voxels_per_axis
             weight -= LAYER_CORRECTION * down
             continue
         both = up & down  # one cell thick along ax: the surfaces' separation is inside
-        for mask, kind in ((up & ~both, "up"), (down & ~both, "down"), (both, "both")):
+        # (cells, the part outside of a cell with samples, of one without: cells added by the closing, half a cell)
+        for mask, known, unknown in ((up & ~both, lambda at: 1.0 - vg.mean[at, ax], 0.5),
+                                     (down & ~both, lambda at: vg.mean[at, ax], 0.5),
+                                     (both, lambda at: 1.0 - vg.thickness[at, ax], 1.0)):
             idx = np.flatnonzero(mask)
             if idx.size == 0:
                 continue
             at = np.minimum(np.searchsorted(vg.cells, idx), max(vg.cells.size - 1, 0))
-            known = vg.cells[at] == idx if vg.cells.size else np.zeros(idx.size, bool)
-            if kind == "up":  # cells added by the closing have no samples: half a cell
-                outside = np.where(known, 1.0 - vg.mean[at, ax], 0.5) if vg.cells.size else 0.5
-            elif kind == "down":
-                outside = np.where(known, vg.mean[at, ax], 0.5) if vg.cells.size else 0.5
-            else:
-                outside = np.where(known, 1.0 - vg.thickness[at, ax], 1.0) if vg.cells.size else 1.0
+            outside = np.where(vg.cells[at] == idx, known(at), unknown) if vg.cells.size else unknown
             flat_weight[idx] -= np.asarray(outside, np.float32)
     np.clip(weight, 0.0, 1.0, out=weight)
     weight *= filled
