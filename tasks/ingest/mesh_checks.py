@@ -153,10 +153,9 @@ class MeshChecks(Recorder):
         self._textures_seen: set[Path] = set()
         self._texture_totals = [0, 0]  # bytes, pixels of the accepted texture maps
 
-    def asset_size(self, model: UrdfModel, root: str | None) -> None:
-        """``ASSET_SIZE_IMPLAUSIBLE`` when the object's size g = sqrt(e1 * e2) (:func:`zero_pose_bounds`)
-        is not finite or outside the policy's :func:`asset_size_range`; skipped when unknown."""
-        box = zero_pose_bounds(model, root, self.mesh_bounds)
+    def asset_size(self, box: np.ndarray | None) -> None:
+        """``ASSET_SIZE_IMPLAUSIBLE`` when the object's size g = sqrt(e1 * e2) (``box``: :func:`zero_pose_bounds`)
+        is not finite or outside the policy's :func:`asset_size_range`; skipped when unknown (None)."""
         if box is None:
             return
         lo, hi = self.policy.asset_size_range or asset_size_range()

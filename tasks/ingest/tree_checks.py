@@ -9,7 +9,6 @@ import numpy as np
 
 from asset2sim import file_names
 from asset2sim.tasks.ingest.findings import MAX_NAME_CHARS, MOVABLE_TYPES, Recorder
-from asset2sim.tasks.ingest.mesh_checks import zero_pose_bounds
 from asset2sim.tasks.ingest.urdf_checks import joint_name, link_name
 from asset2sim.urdf import UrdfJoint, UrdfModel
 from asset2sim.inert import shorten
@@ -48,8 +47,6 @@ _UNSUPPORTED_JOINT_TYPES: dict[str, str] = package_yaml(__package__, "messages.y
 
 class TreeChecks(Recorder):
     """Structure, inertials and joint travel (mixin of the validator)."""
-
-    mesh_bounds: dict[int, np.ndarray]  # set by MeshChecks (mesh vertex bounds by id of the geometry)
 
     def structure(self, model: UrdfModel) -> tuple[set[str], str | None]:
         """The structure checks of ``model`` (every ``<link>`` element); returns (moving links, root)."""
@@ -207,10 +204,9 @@ class TreeChecks(Recorder):
             if bad or mass is None or inertia is None:
                 self.result.replace_inertials.add(ln.name)
 
-    def joint_travel(self, model: UrdfModel, root: str | None) -> None:
-        """Prismatic limits beyond ``policy.max_prismatic_travel`` x the diagonal of :func:`zero_pose_bounds`
-        (after the mesh scan); skipped when that is unknown."""
-        box = zero_pose_bounds(model, root, self.mesh_bounds)
+    def joint_travel(self, model: UrdfModel, box: np.ndarray | None) -> None:
+        """Prismatic limits beyond ``policy.max_prismatic_travel`` x the diagonal of ``box`` (:func:`zero_pose_bounds`,
+        after the mesh scan); skipped when that is unknown (None)."""
         if box is None or not np.isfinite(box).all():
             return
         size = float(np.linalg.norm(box[1] - box[0]))

@@ -22,7 +22,7 @@ from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.formats import read_asset_file, staging
 from asset2sim.tasks.ingest.findings import (CODES, DEFAULT_POLICY, MAX_LINKS, MAX_TOTAL_FACES, SEMANTIC_KINDS, Finding,
                                              ValidationPolicy, ValidationResult, has_errors)
-from asset2sim.tasks.ingest.mesh_checks import MeshChecks
+from asset2sim.tasks.ingest.mesh_checks import MeshChecks, zero_pose_bounds
 from asset2sim.tasks.ingest.mesh_paths import inside, read_regular, resolve_mesh_reference
 from asset2sim.tasks.ingest.mesh_scan import scan_mesh_file
 from asset2sim.tasks.ingest.tree_checks import TreeChecks, check_inertia
@@ -171,8 +171,9 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
         self.geometry_present(model.link_elements)
         self.inertials(model, moving)
         self.meshes(model.link_elements)
-        self.asset_size(model, root)
-        self.joint_travel(model, root)
+        box = zero_pose_bounds(model, root, self.mesh_bounds)
+        self.asset_size(box)
+        self.joint_travel(model, box)
         self.joint_range_units(model)
         self.extras({ln.name for ln in model.link_elements if ln.name})
         return self.result
