@@ -218,9 +218,9 @@ def _merge_link(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], name: str
     """Merge the pieces of link ``name`` (in place) down to ``limit``, guarded against the other links and the
     link's own open cavities (``cavity`` (K, 3) m core points); a merge that holds a child again is trimmed
     (``decompose``)."""
-    n = len(pieces[name])
-    guard = [x for x in (swept_other_points(model, pieces, name),
-                         *swept_child_points(model, pieces, name).values(), cavity) if x is not None]
+    # the children's swept points, which the merge of this link's pieces does not change
+    n, swept = len(pieces[name]), swept_child_points(model, pieces, name)
+    guard = [x for x in (swept_other_points(model, pieces, name), *swept.values(), cavity) if x is not None]
     guard = np.vstack(guard) if guard else None
     # merges that hold no other link over the ranges down to the limit; beyond
     # MAX_PIECES_HARD (pieces a parent was cut into around its child) any merge
@@ -228,7 +228,6 @@ def _merge_link(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], name: str
     if len(pieces[name]) > max(limit, MAX_PIECES_HARD):
         pieces[name] = merge_pieces(pieces[name], max(limit, MAX_PIECES_HARD), guard)
     notes.append(f"link {name!r}: {n} convex pieces merged into {len(pieces[name])}")
-    swept = swept_child_points(model, pieces, name)
     if decompose and swept:  # a merge the limit forced may hold a child again
         pts = np.vstack(list(swept.values()))
         d = max((depth_inside(pts, p) for p in pieces[name]), default=0.0)
