@@ -83,10 +83,11 @@ def resolve_mesh_reference(folder: Path | str, filename: str | None, *, base: Pa
         return refused("MESH_PATH_ABSOLUTE", f"absolute path {fname!r}: only relative paths inside the asset folder are accepted")
     root_abs = os.path.abspath(str(folder))
     base_abs = os.path.abspath(str(base)) if base is not None else root_abs
-    lexical = os.path.normpath(os.path.join(base_abs, fname))
+    written = os.path.join(base_abs, fname)
+    lexical = os.path.normpath(written)
     if not inside(lexical, root_abs):
         return refused("MESH_PATH_ESCAPES", f"{fname!r} resolves to {lexical}, outside the asset folder")
-    real = os.path.realpath(os.path.join(base_abs, fname))
+    real = os.path.realpath(written)
     if not inside(real, os.path.realpath(root_abs)):
         return refused("MESH_SYMLINK_ESCAPES", f"{fname!r} is a symlink (or under one) to {real}, outside the asset folder")
     try:
@@ -102,7 +103,7 @@ def resolve_mesh_reference(folder: Path | str, filename: str | None, *, base: Pa
     if not stat.S_ISREG(st.st_mode):
         return refused("MESH_NOT_REGULAR_FILE", f"{fname!r} is a {_kind(st.st_mode)}, not a regular file")
     try:  # the path as written, as the operating system (PyBullet, a user's simulator) opens it
-        os.stat(os.path.join(base_abs, fname))
+        os.stat(written)
     except OSError:
         return refused("MESH_NOT_FOUND",
                        f"{fname!r} cannot be opened as written: a folder it walks through ('dir/../') does not exist "

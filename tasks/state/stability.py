@@ -128,8 +128,8 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
             return overlay, []
         return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge at the requested state "
                          f"(needs >= {bal.required * 1000:.3g} mm inside); no part-mass ratio of {category} to move within"]
+    m_part = sum(overlay.links[ln].mass for ln in floors)
     if not light:
-        m_part = sum(overlay.links[ln].mass for ln in floors)
         return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge; the opened parts already weigh "
                          f"{m_part / total:.0%} of the object, the lower end of the "
                          + ("sourced range" if pf is not None else "physical range")
@@ -149,7 +149,7 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
         ov.links[ln] = request_apply.scaled_link(ov.links[ln], f, f"; mass x{f:.3g} for stability by design").model_copy(
             update={"mass": new[ln]})
     after = _signed_margin(bal.support, _com(ov, frames)[:2])
-    m_part, m_after = sum(overlay.links[ln].mass for ln in floors), sum(new[ln] for ln in floors)
+    m_after = sum(new[ln] for ln in floors)
     return ov, [f"{TRANSFER_NOTE} the centre of mass was {bal.margin * 1000:.3g} mm from the support's "
                 f"edge (needs >= {bal.required * 1000:.3g} mm inside); moved {t * span:.3g} kg from {', '.join(light)} to "
                 f"{', '.join(body)} (opened parts {m_part / total:.0%} -> {m_after / total:.0%} of {total:.3g} kg, "
