@@ -234,7 +234,12 @@ class MeshChecks(Recorder):
                 self.add("LINK_ZERO_VOLUME", f"all {mass_role} geometry of the link lies in one plane: zero volume; "
                          "mass must come from the surface area (shell), not the volume",
                          line=ln.line, link=lname, action="mass_from_area", role=mass_role)
-        self.texture_totals()
+        # the per-asset texture caps, over every distinct texture map
+        size, pixels = self._texture_totals
+        if size > pol.max_total_texture_bytes or pixels > pol.max_total_texture_pixels:
+            self.add("TEXTURE_TOO_LARGE", f"the textures of the asset total {size} bytes and {pixels} pixels > caps "
+                     f"{pol.max_total_texture_bytes} bytes, {pol.max_total_texture_pixels} pixels (PyBullet loads them all; "
+                     "docs/design/validation.md, Texture caps)", total_bytes=size, total_pixels=pixels)
         if total_faces > pol.max_total_faces:
             self.add("MESH_TOO_MANY_FACES", f"{total_faces} triangles over all meshes > cap {pol.max_total_faces} "
                      "(the bound that keeps one asset's refine within the flow's time and memory limits; docs/design/validation.md)",
@@ -306,15 +311,6 @@ class MeshChecks(Recorder):
         header = texture_header(path, pol.max_texture_bytes)
         self._texture_totals[0] += header.size
         self._texture_totals[1] += header.width * header.height
-
-    def texture_totals(self) -> None:
-        """The per-asset texture caps (bytes and pixels over every distinct texture map)."""
-        pol = self.policy
-        size, pixels = self._texture_totals
-        if size > pol.max_total_texture_bytes or pixels > pol.max_total_texture_pixels:
-            self.add("TEXTURE_TOO_LARGE", f"the textures of the asset total {size} bytes and {pixels} pixels > caps "
-                     f"{pol.max_total_texture_bytes} bytes, {pol.max_total_texture_pixels} pixels (PyBullet loads them all; "
-                     "docs/design/validation.md, Texture caps)", total_bytes=size, total_pixels=pixels)
 
     def _material_ref(self, ref: MeshReference, base: Path, owner: Path, link: str | None) -> bool:
         """Record one MTL or texture reference; True when it is a usable file inside the folder."""
