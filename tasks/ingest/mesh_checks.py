@@ -268,13 +268,14 @@ class MeshChecks(Recorder):
     def materials(self, mesh: Path, mesh_dir: Path, scan: MeshScan, link: str | None) -> None:
         """The ``mtllib`` files of an OBJ (relative to ``mesh_dir``, its folder as written) and their
         texture maps; a library found only beside the real file of a symlinked OBJ is used from there
-        (``MESH_MATERIAL_BESIDE_TARGET``)."""
+        (``MESH_MATERIAL_BESIDE_TARGET``), and the texture caps on each texture map."""
         assert self.folder is not None
+        pol = self.policy
         for name in scan.mtllibs:
-            ref = resolve_mesh_reference(self.folder, name, base=mesh_dir, extensions=(), max_bytes=self.policy.max_mesh_bytes)
+            ref = resolve_mesh_reference(self.folder, name, base=mesh_dir, extensions=(), max_bytes=pol.max_mesh_bytes)
             lib_dir = mesh_dir
             if ref.code == "MESH_NOT_FOUND" and os.path.realpath(mesh_dir) != str(mesh.parent):
-                beside = resolve_mesh_reference(self.folder, name, base=mesh.parent, extensions=(), max_bytes=self.policy.max_mesh_bytes)
+                beside = resolve_mesh_reference(self.folder, name, base=mesh.parent, extensions=(), max_bytes=pol.max_mesh_bytes)
                 if beside.code is None:
                     assert beside.path is not None
                     self.add("MESH_MATERIAL_BESIDE_TARGET",
@@ -287,30 +288,24 @@ class MeshChecks(Recorder):
                 continue
             assert ref.path is not None
             try:
-                data = read_regular(ref.path, self.policy.max_mesh_bytes, follow_links=False)
+                data = read_regular(ref.path, pol.max_mesh_bytes, follow_links=False)
             except OSError:
                 continue
-            mtl_dir = Path(os.path.dirname(os.path.join(str(lib_dir), name)))
+            mtl_dir, owner = Path(os.path.dirname(os.path.join(str(lib_dir), name))), self.rel(ref.path)
             for tname in mesh_materials.mtl_texture_maps(data):
                 tex = resolve_mesh_reference(self.folder, tname, base=mtl_dir, extensions=())
-                if self._material_ref(tex, mtl_dir, ref.path, link):
-                    assert tex.path is not None
-                    self.texture_file(tex.path, tname, self.rel(ref.path), link=link)
-
-    def texture_file(self, path: Path, name: str, owner: str, *, link: str | None = None) -> None:
-        """The texture caps on one texture map, each real file once; ``owner`` the file that names it."""
-        if path in self._textures_seen:
-            return
-        self._textures_seen.add(path)
-        pol = self.policy
-        problem = texture_problem(path, pol.max_texture_bytes, pol.max_texture_pixels)
-        if problem is not None:
-            code, msg = problem
-            self.add(code, f"{owner} refers to texture {name!r}: {msg}", file=self.rel(path), link=link, referenced_by=owner)
-            return
-        header = texture_header(path, pol.max_texture_bytes)
-        self._texture_totals[0] += header.size
-        self._texture_totals[1] += header.width * header.height
+                # the texture caps on each texture map, each real file once
+                if not self._material_ref(tex, mtl_dir, ref.path, link) or tex.path in self._textures_seen:
+                    continue
+                self._textures_seen.add(tex.path)
+                problem = texture_problem(tex.path, pol.max_texture_bytes, pol.max_texture_pixels)
+                if problem is not None:
+                    self.add(problem[0], f"{owner} refers to texture {tname!r}: {problem[1]}", file=self.rel(tex.path), link=link,
+                             referenced_by=owner)
+                    continue
+                header = texture_header(tex.path, pol.max_texture_bytes)
+                self._texture_totals[0] += header.size
+                self._texture_totals[1] += header.width * header.height
 
     def _material_ref(self, ref: MeshReference, base: Path, owner: Path, link: str | None) -> bool:
         """Record one MTL or texture reference; True when it is a usable file inside the folder."""
