@@ -77,7 +77,20 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
     model = urdf.read_urdf(asset.urdf_path, mode="lenient")
     model.extensions = []
     model.name = model.name or ""
-    _set_links(model, collision_overrides or {}, overlay)
+    # every link's <contact> dropped, the mesh collisions of each link in the overrides its pieces, its <inertial> the
+    # overlay's (OutputError when it lacks a link that has geometry)
+    for link in model.links.values():
+        link.contact = {}
+        pieces = (collision_overrides or {}).get(link.name)
+        if pieces:
+            link.collisions = [c for c in link.collisions if c.kind != "mesh"] + [
+                urdf.UrdfGeometry(kind="mesh", origin=frames.pose_matrix(piece.source.origin.xyz, piece.source.origin.rpy),
+                                  filename=piece.filename, mesh_scale=np.asarray(piece.source.scale, float)) for piece in pieces]
+        lp = overlay.links.get(link.name)
+        if lp is None and (link.visuals or link.collisions):
+            raise OutputError(f"overlay has no mass/inertia for link {link.name!r} (validate the overlay first)")
+        link.inertial = None if lp is None else urdf.UrdfInertial(mass=float(lp.mass), origin=frames.translation_matrix(lp.com),
+                                                                  inertia=lp.inertia.matrix())
     urdf.scale_model(model, s, joints=False, inertials=False)
     if root_rotation is not None and not np.allclose(root_rotation, np.eye(3)):
         # baked into the root link's geometry and inertial and the joints hanging from it
@@ -91,7 +104,27 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
             if root.inertial is not None:
                 root.inertial.origin = T @ root.inertial.origin
     urdf.scale_model(model, s, geometry=False, inertials=False)
-    _set_joints(model, overlay, {j.name for j in asset.joints if j.type == "fixed"})
+    # every joint without <mimic>, <calibration>, <safety_controller> and with an explicit axis; every movable one with a
+    # <limit> and the overlay's <dynamics> and limits (OutputError when it lacks one); the joints the asset model holds
+    # (``partnet_mobility.held_bodies``, fixed in the description) written fixed at 0
+    fixed = {j.name for j in asset.joints if j.type == "fixed"}
+    for joint in model.joints:
+        joint.mimic = joint.calibration = joint.safety_controller = None
+        if joint.axis_xyz is None:
+            joint.axis_xyz = np.array([1.0, 0.0, 0.0])
+        if joint.name in fixed and joint.type in urdf.MOVABLE:
+            joint.type, joint.limit, joint.dynamics = "fixed", None, None
+        if joint.type in urdf.MOVABLE:
+            dyn = overlay.joints.get(joint.name)
+            if dyn is None:
+                raise OutputError(f"overlay has no dynamics for joint {joint.name!r} (validate the overlay first)")
+            joint.dynamics = urdf.UrdfDynamics(damping=float(dyn.damping), friction=float(dyn.friction))
+            if joint.limit is None:  # no effort or velocity invented (the input declared none)
+                joint.limit = urdf.UrdfLimit()
+            if dyn.lower is not None:  # clipped to what the geometry allows (tasks.geometry.limits)
+                joint.limit.lower = float(dyn.lower)
+            if dyn.upper is not None:
+                joint.limit.upper = float(dyn.upper)
     urdf.conform_limits(model, effort=urdf.PASSIVE_EFFORT, velocity=urdf.PASSIVE_VELOCITY)  # no <limit> on fixed joints; a passive part's effort and velocity where the input declared none
     if collision_out is not None:
         free = overlay.mounting is None or not overlay.mounting.fixed  # a mounted root does not stand on its footprint
@@ -115,46 +148,6 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
         "as the URDF format requires: a passive part, no actuator (Drake adds none for effort 0; MuJoCo, PyBullet and "
         "SAPIEN do not drive a joint from them) and no speed clamp below the one Bullet already applies. "
         + root_sentence(overlay.mounting)))
-
-
-def _set_links(model: urdf.UrdfModel, overrides: dict, overlay: Overlay) -> None:
-    """Drop every link's ``<contact>``; the mesh collisions of each link in ``overrides`` become its pieces; every
-    link's ``<inertial>`` from ``overlay`` (OutputError when it lacks a link that has geometry)."""
-    for link in model.links.values():
-        link.contact = {}
-        pieces = overrides.get(link.name)
-        if pieces:
-            link.collisions = [c for c in link.collisions if c.kind != "mesh"] + [
-                urdf.UrdfGeometry(kind="mesh", origin=frames.pose_matrix(piece.source.origin.xyz, piece.source.origin.rpy),
-                                  filename=piece.filename, mesh_scale=np.asarray(piece.source.scale, float)) for piece in pieces]
-        lp = overlay.links.get(link.name)
-        if lp is None and (link.visuals or link.collisions):
-            raise OutputError(f"overlay has no mass/inertia for link {link.name!r} (validate the overlay first)")
-        link.inertial = None if lp is None else urdf.UrdfInertial(mass=float(lp.mass), origin=frames.translation_matrix(lp.com),
-                                                                  inertia=lp.inertia.matrix())
-
-
-def _set_joints(model: urdf.UrdfModel, overlay: Overlay, fixed: set[str]) -> None:
-    """Every joint without ``<mimic>``, ``<calibration>``, ``<safety_controller>`` and with an explicit axis; every
-    movable one with a ``<limit>`` and the overlay's ``<dynamics>`` and limits (OutputError when it lacks one); the
-    joints in ``fixed`` (those the asset model holds, ``partnet_mobility.held_bodies``) written fixed at 0."""
-    for joint in model.joints:
-        joint.mimic = joint.calibration = joint.safety_controller = None
-        if joint.axis_xyz is None:
-            joint.axis_xyz = np.array([1.0, 0.0, 0.0])
-        if joint.name in fixed and joint.type in urdf.MOVABLE:
-            joint.type, joint.limit, joint.dynamics = "fixed", None, None
-        if joint.type in urdf.MOVABLE:
-            dyn = overlay.joints.get(joint.name)
-            if dyn is None:
-                raise OutputError(f"overlay has no dynamics for joint {joint.name!r} (validate the overlay first)")
-            joint.dynamics = urdf.UrdfDynamics(damping=float(dyn.damping), friction=float(dyn.friction))
-            if joint.limit is None:  # no effort or velocity invented (the input declared none)
-                joint.limit = urdf.UrdfLimit()
-            if dyn.lower is not None:  # clipped to what the geometry allows (tasks.geometry.limits)
-                joint.limit.lower = float(dyn.lower)
-            if dyn.upper is not None:
-                joint.limit.upper = float(dyn.upper)
 
 
 def write_output(asset: AssetDescription, overlay: Overlay, out_dir: Path, initial_state: dict[str, float], *, copy: bool = True,

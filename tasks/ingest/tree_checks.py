@@ -10,7 +10,7 @@ import numpy as np
 from asset2sim import file_names
 from asset2sim.tasks.ingest.findings import MAX_NAME_CHARS, MOVABLE_TYPES, Recorder
 from asset2sim.tasks.ingest.urdf_checks import joint_name, link_name
-from asset2sim.urdf import UrdfJoint, UrdfModel
+from asset2sim.urdf import UrdfModel
 from asset2sim.inert import shorten
 from asset2sim.package_data import package_yaml
 
@@ -82,7 +82,8 @@ class TreeChecks(Recorder):
         has_parent: dict[str, list[str]] = {}
         first_parent: dict[str, str] = {}
         touched: set[str] = set()
-        for j in joints:  # unknown links and self loops reported; the joint's support checked when it joins two links
+        # unknown links and self loops reported; the joint's support checked when it joins two links
+        for j in joints:
             jname, parent, child = joint_name(j.name), link_name(j.parent), link_name(j.child)
             if parent is not None and parent not in seen:
                 self.add("JOINT_PARENT_UNKNOWN", f"parent {parent!r} is not a link", line=j.line, joint=jname)
@@ -97,7 +98,17 @@ class TreeChecks(Recorder):
                 has_parent.setdefault(child, []).append(jname or "?")
             if parent in seen and child in seen and child not in first_parent:
                 first_parent[child] = parent
-            self._joint_support(j, jseen)
+            # mimic joints and joint types refine does not model
+            leader = getattr(j.mimic, "joint", None)
+            if leader is not None and (leader not in jseen or leader == jname):
+                self.add("JOINT_MIMIC_UNKNOWN", f"<mimic joint={leader!r}> names no other joint", line=j.line, joint=jname)
+            elif leader is not None:
+                self.add("JOINT_MIMIC_UNSUPPORTED", f"<mimic joint={leader!r}>: coupled joints are not modelled (the "
+                         "state search, the post-check simulators and the writer treat every joint as free), so the "
+                         "coupling would be lost; refused rather than dropped", line=j.line, joint=jname, leader=leader)
+            if j.type in _UNSUPPORTED_JOINT_TYPES:
+                self.add("JOINT_TYPE_UNSUPPORTED", f"a {j.type} joint between {parent!r} and {child!r}: "
+                         f"{_UNSUPPORTED_JOINT_TYPES[j.type]}", line=j.line, joint=jname, type=j.type)
         # links with several parents, orphans, and the links without a parent joint (``roots``, in order)
         for child, js in has_parent.items():
             if len(js) > 1:
@@ -153,20 +164,6 @@ class TreeChecks(Recorder):
             else:
                 seen[it.name] = it
         return seen
-
-    def _joint_support(self, j: UrdfJoint, jseen: dict[str, UrdfJoint]) -> None:
-        """Mimic joints and joint types refine does not model."""
-        jname = joint_name(j.name)
-        leader = None if j.mimic is None else j.mimic.joint
-        if leader is not None and (leader not in jseen or leader == jname):
-            self.add("JOINT_MIMIC_UNKNOWN", f"<mimic joint={leader!r}> names no other joint", line=j.line, joint=jname)
-        elif leader is not None:
-            self.add("JOINT_MIMIC_UNSUPPORTED", f"<mimic joint={leader!r}>: coupled joints are not modelled (the "
-                     "state search, the post-check simulators and the writer treat every joint as free), so the "
-                     "coupling would be lost; refused rather than dropped", line=j.line, joint=jname, leader=leader)
-        if j.type in _UNSUPPORTED_JOINT_TYPES:
-            self.add("JOINT_TYPE_UNSUPPORTED", f"a {j.type} joint between {link_name(j.parent)!r} and {link_name(j.child)!r}: "
-                     f"{_UNSUPPORTED_JOINT_TYPES[j.type]}", line=j.line, joint=jname, type=j.type)
 
     def inertials(self, model: UrdfModel, moving: set[str]) -> None:
         """The given ``<inertial>`` of every named link (mass > 0 when moving, :func:`check_inertia`);
