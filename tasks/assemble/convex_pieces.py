@@ -398,17 +398,15 @@ def drop_slivers(pieces: list[Piece]) -> list[Piece]:
     return [p for p in pieces if any(p is k for k in kept)]
 
 
-def _rounding_margin(points: np.ndarray, equations: np.ndarray) -> float:
-    """A bound (m) far above the floating-point error of ``points @ equations[:, :3].T + equations[:, 3]``
-    (unit normals; any summation order): 1e-12 of the largest coordinate and offset (the error is ~1e-16 of them)."""
-    return 1e-12 * (1.0 + float(np.abs(points).max(initial=0.0)) + float(np.abs(equations[:, 3]).max(initial=0.0)))
-
-
 def _surely_outside(points: np.ndarray, piece: Piece, tol: float) -> bool:
-    """Whether one of ``points`` (k, 3) m lies beyond a face plane of ``piece`` by more than ``tol`` m plus
-    :func:`_rounding_margin`: then no computation of the planes over a superset of ``points`` finds them all
-    within ``tol`` (a cheap test on a few points, e.g. :attr:`Piece.support`, before the full one)."""
+    """Whether one of ``points`` (k, 3) m lies beyond a face plane of ``piece`` by more than ``tol`` m plus a bound far
+    above the floating-point error of the distances to the planes (unit normals; any summation order: 1e-12 of the
+    largest coordinate and offset, the error being ~1e-16 of them): then no computation of the planes over a superset
+    of ``points`` finds them all within ``tol`` (a cheap test on a few points, e.g. :attr:`Piece.support`, before the
+    full one)."""
     if len(points) == 0:
         return False
     d = points @ piece.equations[:, :3].T + piece.equations[:, 3]
-    return bool(d.max() > tol + _rounding_margin(points, piece.equations))
+    margin = 1e-12 * (1.0 + float(np.abs(points).max(initial=0.0))
+                      + float(np.abs(piece.equations[:, 3]).max(initial=0.0)))
+    return bool(d.max() > tol + margin)

@@ -112,11 +112,3 @@ def swept_other_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], li
             seen[o].append(T)
             out.append(posed(pts, T))
     return np.vstack(out)
-
-
-def _joint_transforms(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint: urdf.UrdfJoint) -> tuple[list[np.ndarray], int]:
-    """(4, 4) parent-frame poses of ``joint``'s child link at every position of
-    :func:`sweep_positions` over its range (reach: the child's pieces), in
-    order, and the index of the one nearest :func:`reference_state`."""
-    qs = _positions_for(joint, np.vstack([p.points for p in pieces[joint.child]]))
-    return [_joint_motion(joint, q) for q in qs], int(np.argmin(np.abs(qs - reference_state(model).get(joint.name, 0.0))))

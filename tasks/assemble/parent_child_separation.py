@@ -9,9 +9,9 @@ from collections.abc import Callable, Collection
 import numpy as np
 
 from asset2sim import urdf
-from asset2sim.tasks.assemble.convex_pieces import CONTAINMENT_TOLERANCE, MAX_PIECES_HARD, Piece, clip_piece
-from asset2sim.tasks.assemble.joint_sweep import _joint_motion, _joint_transforms, reference_state
-from asset2sim.tasks.assemble.piece_penetration import _boxes_apart, _transformed, penetration_depth
+from asset2sim.tasks.assemble.convex_pieces import CONTAINMENT_TOLERANCE, MAX_PIECES_HARD, Piece, clip_piece, posed
+from asset2sim.tasks.assemble.joint_sweep import _joint_motion, _positions_for, reference_state
+from asset2sim.tasks.assemble.piece_penetration import _transformed, penetration_depth
 from asset2sim.tasks.geometry import limits
 
 #: Overlap (m) along the separating direction that :func:`separate_parent_child` leaves between a parent's and its
@@ -65,7 +65,11 @@ def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]],
             continue
         deepest_cut, T_ref, T_near = np.inf, None, None
         if state is None:
-            transforms, ref = _joint_transforms(model, pieces, joint)
+            # the child's poses at every position of sweep_positions over the range (reach: its pieces), and the one
+            # nearest the reference state
+            qs = _positions_for(joint, np.vstack([p.points for p in C]))
+            transforms = [_joint_motion(joint, q) for q in qs]
+            ref = int(np.argmin(np.abs(qs - reference_state(model).get(joint.name, 0.0))))
         else:
             q_ref = reference_state(model).get(joint.name, 0.0)
             q = float(state.get(joint.name, q_ref))
@@ -121,8 +125,10 @@ def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]],
 
 def _depth_at(a: Piece, b: Piece, T: np.ndarray) -> tuple[float, np.ndarray]:
     """(depth m, separating direction (3,)) of parent piece ``a`` and child piece ``b`` at the child pose ``T`` (4, 4)
-    (:func:`penetration_depth`; (0, 0) when their boxes are apart)."""
-    if _boxes_apart(a, b, T):
+    (:func:`penetration_depth`; (0, 0) when their axis-aligned boxes are more than 1e-9 m (rounding) apart, found
+    without moving ``b``'s planes)."""
+    moved = posed(b.points, T)
+    if np.any(np.minimum(a.points.max(axis=0), moved.max(axis=0)) + 1e-9 < np.maximum(a.points.min(axis=0), moved.min(axis=0))):
         return 0.0, np.zeros(3)
     return penetration_depth(a, _transformed(b, T), CONTAINMENT_TOLERANCE)
 

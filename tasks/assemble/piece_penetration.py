@@ -117,16 +117,6 @@ def _transformed(piece: Piece, T: np.ndarray) -> Piece:
     return Piece(piece.points @ R.T + t, eq, piece.volume, piece.sources, piece.support @ R.T + t, _edge_directions(piece) @ R.T)
 
 
-def _boxes_apart(a: Piece, b: Piece, T: np.ndarray) -> bool:
-    """Whether ``b`` moved by the (4, 4) transform ``T`` has an axis-aligned
-    bounding box more than 1e-9 m (rounding) clear of ``a``'s: the
-    first test of :func:`penetration_depth`, without moving ``b``'s planes."""
-    moved = posed(b.points, T)
-    lo = np.maximum(a.points.min(axis=0), moved.min(axis=0))
-    hi = np.minimum(a.points.max(axis=0), moved.max(axis=0))
-    return bool(np.any(hi + 1e-9 < lo))
-
-
 def containment_depths(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], state: dict[str, float]) -> dict[tuple[str, str], float]:
     """(parent, child) -> largest depth (m) of a child's collision vertex
     inside one of the parent's pieces, at joint positions ``state`` (rad or m)."""

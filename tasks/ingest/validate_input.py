@@ -150,16 +150,6 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
         self.result.extra_files.append(path)
         return text
 
-    def geometry_present(self, links: list) -> None:
-        """``ASSET_NO_GEOMETRY`` when the URDF has links but none has a ``<visual>`` or ``<collision>``."""
-        if not links or any(ln.visuals or ln.collisions for ln in links):
-            return
-        names = [ln.name for ln in links if ln.name]
-        shown = ", ".join(repr(n) for n in names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
-        self.add("ASSET_NO_GEOMETRY", f"none of the {len(links)} links of {self.urdf_rel} ({shown or 'unnamed'}) has a <visual> or "
-                 "<collision> element: there is no geometry to size, weigh or collide, so the asset cannot be refined "
-                 "(add the meshes or primitives of its parts)", links=len(links))
-
     def run(self) -> ValidationResult:
         urdf = self.locate()
         if urdf is None:
@@ -168,14 +158,21 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
         if model is None:
             return self.result
         moving, root = self.structure(model)
-        self.geometry_present(model.link_elements)
+        links = model.link_elements
+        # links, but none with a <visual> or <collision>
+        if links and not any(ln.visuals or ln.collisions for ln in links):
+            names = [ln.name for ln in links if ln.name]
+            shown = ", ".join(repr(n) for n in names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+            self.add("ASSET_NO_GEOMETRY", f"none of the {len(links)} links of {self.urdf_rel} ({shown or 'unnamed'}) has a "
+                     "<visual> or <collision> element: there is no geometry to size, weigh or collide, so the asset cannot be "
+                     "refined (add the meshes or primitives of its parts)", links=len(links))
         self.inertials(model, moving)
-        self.meshes(model.link_elements)
+        self.meshes(links)
         box = zero_pose_bounds(model, root, self.mesh_bounds)
         self.asset_size(box)
         self.joint_travel(model, box)
         self.joint_range_units(model)
-        self.extras({ln.name for ln in model.link_elements if ln.name})
+        self.extras({ln.name for ln in links if ln.name})
         return self.result
 
 
