@@ -61,7 +61,8 @@ def mesh_copies(asset: AssetDescription) -> dict[str, Path]:
     where the output URDF, the copied OBJ and MTL files will look for it) ->
     the real input file. A mesh reached through a symlink is copied as a
     regular file at the referenced path; MTL files and textures are placed
-    relative to their mesh as it looks for them (:func:`beside_link_target`).
+    relative to their mesh as it looks for them (those of a symlinked OBJ found only beside its real file
+    placed beside the copy as they lie there).
     The answer is kept per process, checked against the stamps of every file
     it read and of their folders.
 
@@ -113,24 +114,15 @@ def _mesh_copies(asset: AssetDescription) -> dict[str, Path]:
         # the MTL libraries and texture maps the OBJ names, inside the asset folder (missing ones skipped: visual only)
         deps = [(dep, lookup) for dep in mesh_io.obj_material_files(lexical, keep=lambda p: _inside(p, root))]
         if str(src.parent) != lookup:  # a symlink into another folder
-            deps += [(dep, str(src.parent)) for dep in beside_link_target(lexical, src, root)]
+            # the material files that lie beside the real file and not beside the link: each mtllib found only relative to
+            # the real file, with its texture maps (missing ones left out), placed beside the copy as they lie there
+            deps += [(dep, str(src.parent)) for dep in mesh_io.obj_material_files(
+                src, keep=lambda p: _inside(p, root), skip_library=lambda name: os.path.lexists(lexical.parent / name))]
         for dep, folder in deps:
             dep = dep.resolve()
             dep_rel = os.path.normpath(os.path.join(os.path.dirname(rel), os.path.relpath(dep, folder)))
             add(dep_rel if not dep_rel.startswith("..") else os.path.relpath(dep, root), dep)
     return copies
-
-
-def beside_link_target(lexical: Path, real: Path, asset_root: Path) -> list[Path]:
-    """The material files of an OBJ reached through a symlink into another
-    folder (``lexical``: the path as the URDF writes it; ``real``: the file
-    it leads to) that lie beside the real file and not beside the link: each
-    ``mtllib`` found only relative to the real file, with its texture maps,
-    as resolved paths inside ``asset_root`` (missing ones left out).
-    :func:`mesh_copies` places them beside the copy as they lie beside the
-    real file."""
-    return mesh_io.obj_material_files(real, keep=lambda p: _inside(p, asset_root),
-                                      skip_library=lambda name: os.path.lexists(lexical.parent / name))
 
 
 _URI = ("file:", "http:", "https:", "ftp:", "package:", "data:")

@@ -7,7 +7,7 @@ the post-check; tolerances :data:`~asset2sim.tasks.geometry.penetration_scan.EXC
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -312,12 +312,6 @@ def apply_clips(overlay: Overlay, clips: dict[str, LimitClip]) -> tuple[Overlay,
     if notes:
         ov.notes.other = list(ov.notes.other) + [f"limit clipped to the geometry: {n}" for n in notes]
     return ov, notes
-
-
-def clipped_closed(closed: dict, clips: dict[str, LimitClip]) -> dict:
-    """``closed`` (joint -> ``ClosedState``) with the clipped joints' limits and opening range."""
-    return {**closed, **{name: replace(closed[name], q_closed=c.q_closed, lower=c.lower, upper=c.upper, open_range=c.open_range)
-                         for name, c in clips.items() if name in closed and c.clipped}}
 
 
 def strip_clips(overlay: Overlay) -> Overlay:

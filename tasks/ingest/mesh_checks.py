@@ -25,16 +25,6 @@ from asset2sim.urdf import UrdfGeometry, UrdfLink, UrdfModel
 __all__ = ["MeshChecks", "box_corners", "geometry_corners", "texture_problem", "zero_pose_bounds"]
 
 
-def _transform_moments(mom, origin, scale):
-    """Moments of A x + t for A = R diag(scale), (R, t) the (4, 4) ``origin``."""
-    n, s1, s2 = mom
-    a = origin[:3, :3] @ np.diag(scale)
-    t = origin[:3, 3]
-    with np.errstate(over="ignore", invalid="ignore"):  # huge scales or origins: non-finite, see is_flat
-        as1 = a @ s1
-        return n, as1 + n * t, a @ s2 @ a.T + np.outer(as1, t) + np.outer(t, as1) + n * np.outer(t, t)
-
-
 def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """The 8 corners (8, 3) of the axis-aligned box [lo, hi]."""
     return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], float)
@@ -228,7 +218,12 @@ class MeshChecks(Recorder):
                     self.add(code, f"{msg}{'' if flat else f'; used for {use}'} (<{role}> at {at})", file=frel, link=lname,
                              use=None if flat else use, role=role, urdf_line=g.line)
                 if in_mass and g.complete and scan.moments is not None:
-                    mom = _transform_moments(scan.moments, g.origin, g.scale)
+                    # the moments of A x + t, A = R diag(scale), (R, t) the origin
+                    n, s1, s2 = scan.moments
+                    a, t = g.origin[:3, :3] @ np.diag(g.scale), g.origin[:3, 3]
+                    with np.errstate(over="ignore", invalid="ignore"):  # huge scales or origins: non-finite, see is_flat
+                        as1 = a @ s1
+                        mom = n, as1 + n * t, a @ s2 @ a.T + np.outer(as1, t) + np.outer(t, as1) + n * np.outer(t, t)
                     link_moments = mom if link_moments is None else tuple(a + b for a, b in zip(link_moments, mom))
             if not link_has_volume and link_moments is not None and is_flat(*link_moments):
                 self.add("LINK_ZERO_VOLUME", f"all {mass_role} geometry of the link lies in one plane: zero volume; "

@@ -260,6 +260,9 @@ def clip_limits(candidate: Candidate, closed_out: dict[str, ClosedState], ws: Wo
         overlay, notes = limits.apply_clips(overlay, clips)
         for line in notes:
             log.say("limits", line)
-        closed_out = limits.clipped_closed(closed_out, clips)
+        # the clipped joints' limits and opening range
+        closed_out = {**closed_out, **{n: replace(closed_out[n], q_closed=c.q_closed, lower=c.lower, upper=c.upper,
+                                                  open_range=c.open_range)
+                                       for n, c in clips.items() if n in closed_out and c.clipped}}
     log.lap("limits")
     return overlay, closed_out
