@@ -138,8 +138,14 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
         hit = _load_pieces(disk_key, model) if disk_key is not None else None
         if hit is None:
             hit = _made_pieces(model, mesh_path, limit, decompose, opening)
+            # stored: each piece's arrays, each link's pieces' sources and the notes
             if disk_key is not None:
-                _store_pieces(disk_key, hit)
+                arrays: dict[str, np.ndarray] = {}
+                for n, p in enumerate(p for plist in hit[0].values() for p in plist):
+                    arrays[f"p{n}"], arrays[f"e{n}"], arrays[f"v{n}"] = p.points, p.equations, np.array(p.volume)
+                links = {name: [list(p.sources) for p in plist] for name, plist in hit[0].items()}
+                arrays["meta"] = array_cache.text_array(json.dumps({"links": links, "notes": hit[1]}))
+                array_cache.store("pieces", disk_key, arrays)
         return hit
 
     def at_state(hit: PiecesNotes) -> PiecesNotes:
@@ -279,19 +285,8 @@ def _piece_keys(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool, o
     return key, None if unread else array_cache.digest(code, key)
 
 
-def _store_pieces(key: str, hit: PiecesNotes) -> None:
-    """Write :func:`link_pieces`' state-independent result to the on-disk cache (kind ``pieces``)."""
-    pieces, notes = hit
-    links = {name: [list(p.sources) for p in plist] for name, plist in pieces.items()}
-    arrays: dict[str, np.ndarray] = {}
-    for n, p in enumerate(p for plist in pieces.values() for p in plist):
-        arrays[f"p{n}"], arrays[f"e{n}"], arrays[f"v{n}"] = p.points, p.equations, np.array(p.volume)
-    arrays["meta"] = array_cache.text_array(json.dumps({"links": links, "notes": notes}))
-    array_cache.store("pieces", key, arrays)
-
-
 def _load_pieces(key: str, model: urdf.UrdfModel) -> PiecesNotes | None:
-    """What :func:`_store_pieces` wrote under ``key``, or None (none, unreadable, or other links)."""
+    """What :func:`link_pieces` stored under ``key`` (kind ``pieces``), or None (none, unreadable, or other links)."""
     data = array_cache.load("pieces", key)
     if data is None:
         return None

@@ -38,31 +38,29 @@ def refine_state_with_decomposition(candidate: Candidate, closed_out, bands, con
     then, each kept only if it lowers Phi: a search with the parts the request left closed (not in
     ``addressed()``) free where an opened part penetrates them, and CoACD decomposition of the colliding pieces
     with another search (the pieces changed here replace the candidate's collision overrides of the same links).
-    Where Phi stays above the tolerance, ``collision_changes`` ends with why (:func:`_left_note`).
+    Where Phi stays above the tolerance, ``collision_changes`` ends with why: each of the (up to 3) deepest link pairs
+    at the state found (``st.result``) with its depth, and the joints on its kinematic path with the interval each was
+    searched over (the requested band within the limits); none of those states, nor a collision piece change (where
+    the repair is on), cleared it.
     Returns (StateRefinement, the candidate with the collision overrides kept: ``candidate`` itself when nothing
     changed)."""
     st, kept = _refine(candidate, closed_out, bands, config, ws, say, proposer, intervals, addressed)
     if st.phi_result > config.penetration_tolerance:
-        st.collision_changes = list(st.collision_changes) + [_left_note(kept, st, closed_out, bands, intervals, config, ws)]
-    return st, kept
-
-
-def _left_note(candidate: Candidate, st, closed_out, bands, intervals, config: RefineConfig, ws: Workspace) -> str:
-    """Why the search left Phi above the tolerance: each of the (up to 3) deepest link pairs at the state found
-    (``st.result``) with its depth, and the joints on its kinematic path with the interval each was searched over
-    (the requested band within the limits); none of those states, nor a collision piece change (where the repair is
-    on), cleared it."""
-    allowed = refine_state.allowed_intervals(closed_out, estimate.band_intervals(bands, intervals))
-    with kinematic_session(ws, candidate, config, st.result) as sess:
-        pairs = sess.self_penetration_fresh()[1][:3]
-    said = []
-    for c in pairs:
-        path = [j for j in refine_state.path_joints(candidate.asset, c.link_a, c.link_b) if j in allowed]
-        where = ", ".join(f"{j} over [{allowed[j].lo:.4g}, {allowed[j].hi:.4g}]" for j in path) or "no movable joint between them"
-        said.append(f"'{c.link_a}' and '{c.link_b}' {c.depth * 1000:.3g} mm ({where})")
-    return (f"self-penetration {st.phi_result * 1000:.3g} mm left at the state found: " + "; ".join(said)
+        allowed = refine_state.allowed_intervals(closed_out, estimate.band_intervals(bands, intervals))
+        with kinematic_session(ws, kept, config, st.result) as sess:
+            pairs = sess.self_penetration_fresh()[1][:3]
+        said = []
+        for c in pairs:
+            path = [j for j in refine_state.path_joints(kept.asset, c.link_a, c.link_b) if j in allowed]
+            where = (", ".join(f"{j} over [{allowed[j].lo:.4g}, {allowed[j].hi:.4g}]" for j in path)
+                     or "no movable joint between them")
+            said.append(f"'{c.link_a}' and '{c.link_b}' {c.depth * 1000:.3g} mm ({where})")
+        st.collision_changes = list(st.collision_changes) + [
+            f"self-penetration {st.phi_result * 1000:.3g} mm left at the state found: " + "; ".join(said)
             + f". No state of those intervals (the band asked within the limits; {st.evaluations} states tried) separates "
-            + ("them, and no collision piece change lowered it" if config.convex_decomposition else "them (collision repair off)"))
+            + ("them, and no collision piece change lowered it" if config.convex_decomposition
+               else "them (collision repair off)")]
+    return st, kept
 
 
 def _refine(candidate: Candidate, closed_out, bands, config, ws: Workspace, say, proposer, intervals, addressed):
