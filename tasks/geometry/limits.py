@@ -68,18 +68,6 @@ def rigid_group(model: UrdfModel, link: str) -> set[str]:
     return out
 
 
-def chain_links(model: UrdfModel, joint: str) -> set[str]:
-    """The ancestors of ``joint``'s parent beyond its :func:`rigid_group` (a stapler's base for the
-    magazine hinged on the top)."""
-    parent_of = {j.child: j.parent for j in model.joints}
-    jd = model.joint(joint)
-    chain, ln = set(), parent_of.get(jd.parent)
-    while ln is not None:
-        chain |= rigid_group(model, ln)
-        ln = parent_of.get(ln)
-    return chain - rigid_group(model, jd.parent)
-
-
 @dataclass(frozen=True, slots=True)
 class _ChainEnd:
     """Where a part carried by a chain stops with the chain open (:func:`_chain_far_end`): ``far`` (rad or m, at
@@ -96,12 +84,18 @@ def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed:
     """The chain scan (``chain_open``): the far end, or ``far_raw`` run into nothing when the chain does not end
     the range or the part cannot open from ``q_close`` even then. The session is left at ``state`` with ``name``
     at ``q_close``."""
-    pairs = collision_pairs(session, sub, chain_links(model, name) - set(sub))
+    parent_of, home = {j.child: j for j in model.joints}, model.joint(name).parent
+    # the chain: the ancestors of the joint's parent beyond its rigid group (a stapler's base for the magazine hinged
+    # on the top)
+    chain, ln = set(), home
+    while ln in parent_of:
+        ln = parent_of[ln].parent
+        chain |= rigid_group(model, ln)
+    pairs = collision_pairs(session, sub, chain - rigid_group(model, home) - set(sub))
     none = _ChainEnd(float(far_raw), None, [])
     if not pairs:
         return none
-    parent_of = {j.child: j for j in model.joints}
-    opened, ln = {}, model.joint(name).parent
+    opened, ln = {}, home
     while ln in parent_of:
         j = parent_of[ln]
         if j.name in closed and j.name in session.joint_limits:
