@@ -26,24 +26,20 @@ RESERVED_NAMES = frozenset({URDF_NAME, STATE_NAME, OVERLAY_NAME, REPORT_NAME, RE
 
 
 def _walked_dirs(asset: AssetDescription) -> list[str]:
-    """:func:`_reference_dirs` of every mesh reference of ``asset``, in order."""
-    return [d for g in _meshes(asset) if g.filename for d in _reference_dirs(g.filename)]
-
-
-def _reference_dirs(filename: str) -> list[str]:
-    """Folders (relative POSIX paths) that must exist in the output for the path ``filename`` as written to open
-    there: every folder the path walks through (``dir/../m.obj`` needs ``dir``)."""
+    """Folders (relative POSIX paths) that must exist in the output for every mesh reference of ``asset`` as written to
+    open there, in order: every folder each path walks through (``dir/../m.obj`` needs ``dir``)."""
     out: list[str] = []
-    cur: list[str] = []
-    for part in PurePosixPath(filename).parts[:-1]:
-        if part in ("", "."):
-            continue
-        if part == "..":
-            if cur:
-                cur.pop()
-            continue
-        cur.append(part)
-        out.append("/".join(cur))
+    for g in _meshes(asset):
+        cur: list[str] = []
+        for part in PurePosixPath(g.filename or "").parts[:-1]:
+            if part in ("", "."):
+                continue
+            if part == "..":
+                if cur:
+                    cur.pop()
+                continue
+            cur.append(part)
+            out.append("/".join(cur))
     return out
 
 
