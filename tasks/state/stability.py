@@ -137,10 +137,19 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
                          + ": masses kept"]
     span = sum(overlay.links[ln].mass - floors[ln] for ln in light)
     masses_for = partial(_masses, overlay, light, body, floors, m_body, span)
-    t = _smallest_transfer(lambda x: _signed_margin(bal.support, _com(overlay, frames, masses_for(x))[:2]), bal.required)
-    if t is None:
+
+    def held(t: float) -> bool:
+        return _signed_margin(bal.support, _com(overlay, frames, masses_for(t))[:2]) >= bal.required
+
+    if not held(1.0):
         return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge; even with the opened parts at "
                          "the lower end of their range (" + "; ".join(reasons) + ") it stays outside: masses kept"]
+    # the smallest transfer t in [0, 1] that holds the margin required, in 40 halvings (the margin is monotone in the
+    # transfer along this segment)
+    lo, t = 0.0, 1.0
+    for _ in range(40):
+        mid = 0.5 * (lo + t)
+        lo, t = (lo, mid) if held(mid) else (mid, t)
     t = 1.0 if most else t
     new = masses_for(t)
     ov = overlay.model_copy(deep=True)  # the masses moved, inertia scaled alike, noted in the source
@@ -166,14 +175,3 @@ def _masses(overlay: Overlay, light: list[str], body: list[str], floors: dict[st
     for ln in body:
         out[ln] *= (m_body + t * span) / m_body
     return out
-
-
-def _smallest_transfer(margin, required: float) -> float | None:
-    """Smallest t in [0, 1] with ``margin(t)`` >= ``required`` (40 halvings); None when t = 1 falls short."""
-    if margin(1.0) < required:
-        return None
-    lo, hi = 0.0, 1.0
-    for _ in range(40):  # the margin is monotone in the transfer along this segment
-        mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if margin(mid) >= required else (mid, hi)
-    return hi
