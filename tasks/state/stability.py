@@ -141,7 +141,8 @@ def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Ov
     def held(t: float) -> bool:
         return _signed_margin(bal.support, _com(overlay, frames, masses_for(t))[:2]) >= bal.required
 
-    if not held(1.0):
+    # not ``held``: a NaN margin is searched on (to the whole transfer)
+    if _signed_margin(bal.support, _com(overlay, frames, masses_for(1.0))[:2]) < bal.required:
         return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge; even with the opened parts at "
                          "the lower end of their range (" + "; ".join(reasons) + ") it stays outside: masses kept"]
     # the smallest transfer t in [0, 1] that holds the margin required, in 40 halvings (the margin is monotone in the
