@@ -104,8 +104,7 @@ def _refine(candidate: Candidate, closed_out, bands, config, ws: Workspace, say,
             folder = f"{folder}/concavity_{threshold:g}"
         deep = [(p_["link_a"], p_["link_b"]) for p_ in first.worst_pairs if p_["depth_m"] > tolerance]
         links = sorted({ln for pair in deep for ln in pair})
-        sess = ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False,
-                                                               initial_state=first.result))
+        sess = kinematic_session(ws, candidate, config, first.result)
         try:
             overrides, dnotes = collision.improve_collisions(sess, candidate.asset, deep, candidate.overlay.scale, ws.root,
                                                              cache=ws.mesh_cache, max_decompositions=config.max_decompositions,
