@@ -260,15 +260,18 @@ def sweep_together(session: SimSession, joints: list[str], closed: dict[str, tup
     cfg = config or SweepConfig()
     dt = session.options.conventions.timestep
     limit = int(round(cfg.time_limit / dt))
-    moved = {j: frozenset(subtrees.get(j, [session.joint_child[j]])) for j in joints}
+    # each part's links in the order ``subtrees`` gives them (a part's mass summed in that order, in every process,
+    # as a joint swept alone sums them), and as a set to test pairs against
+    parts = {j: list(subtrees.get(j, [session.joint_child[j]])) for j in joints}
+    moved = {j: frozenset(links) for j, links in parts.items()}
     session.set_joint_positions(dict(initial_state))
     at_rest = session.self_penetration()[1]  # each part's pairs where it stays while another is swept alone
     session.set_joint_positions({**initial_state, **{j: closed[j][0] for j in joints}})
     runs = []
     for j in joints:
         qc, d, rng = closed[j]
-        runs.append(_Swept(j, closed[j], effort_limit(session, j, list(moved[j]), rng, cfg, qc, d), moved[j],
-                           traverse_speed(session, j, list(moved[j]), rng, cfg),
+        runs.append(_Swept(j, closed[j], effort_limit(session, j, parts[j], rng, cfg, qc, d), moved[j],
+                           traverse_speed(session, j, parts[j], rng, cfg),
                            explosion_speed(session.joint_types[j]), strokes=[Reach(limit)]))
     others = {r.joint: [c for c in at_rest if not ({c.link_a, c.link_b} & r.links)
                         and any({c.link_a, c.link_b} & o.links for o in runs if o is not r)] for r in runs}

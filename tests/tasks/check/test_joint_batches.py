@@ -109,3 +109,23 @@ def test_boxes_apart_by_less_than_the_margin_are_not_batched():
     far = ([1.003, 0.0, 0.0], [2.0, 1.0, 1.0])
     assert joint_batches.batches({"a": a, "b": near}) == [["a"], ["b"]]
     assert joint_batches.batches({"a": a, "b": far}) == [["a", "b"]]
+
+
+def test_a_batch_reads_each_parts_links_in_their_subtree_order(tmp_path, monkeypatch):
+    """A part of several links (the desk lamp's lower arm carries the upper arm and the shade) has its mass summed and
+    its lever measured over its links in the order the tree gives them, as when it is swept alone: not in the order
+    of a set of names, which Python's string hashing changes from one process to the next (a sum of three masses can
+    differ in its last bit)."""
+    model = read_urdf(build_desk_lamp(tmp_path / "lamp") / "mobility.urdf")
+    moved = limits.subtrees(model)
+    closed = {j.name: (float(j.limit.lower), 1.0, float(j.limit.upper - j.limit.lower)) for j in model.movable_joints}
+    state = {n: 0.0 for n in closed}
+    seen: dict[str, list[list[str]]] = {}
+    for name in ("effort_limit", "traverse_speed"):
+        real = getattr(sweep, name)
+        monkeypatch.setattr(sweep, name, lambda s, j, links, *a, _real=real, _name=name, **k:
+                            seen.setdefault(_name, []).append(list(links)) or _real(s, j, links, *a, **k))
+    lower = next(n for n, links in moved.items() if len(links) == 3)
+    with open_session("pybullet", model.path, fixed_root_options(state)) as s:
+        sweep.sweep_together(s, [lower], closed, moved, state)
+    assert seen == {"effort_limit": [moved[lower]], "traverse_speed": [moved[lower]]}
