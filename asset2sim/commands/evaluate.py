@@ -14,8 +14,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from asset2sim.commands._status import check_out, parse_engines
-from asset2sim.commands.refine import as_asked_lines
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+from asset2sim.tasks.check.as_asked import as_asked_lines
 from asset2sim.tasks.check.failure_reasons import why_it_failed
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.publish.contract import read_report_json

@@ -27,7 +27,7 @@ from asset2sim.output_folder import OutputError
 from asset2sim.refined_asset import RefinedAsset
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import MESSAGE_FINDINGS
-from asset2sim.tasks.check.as_asked import quantity_text
+from asset2sim.tasks.check.as_asked import as_asked_lines, quantity_text
 from asset2sim.tasks.check.failure_reasons import why_it_failed
 from asset2sim.tasks.check.verdict import TIERS, penetration_measures, readiness, verdict_line
 from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_text, state_moves
@@ -250,15 +250,6 @@ def request_lines(found) -> list[str]:
     if found.ignored:
         out.append("request      not understood: " + "; ".join(f"'{g}'" for g in found.ignored))
     return out
-
-
-def as_asked_lines(report) -> list[str]:
-    """The as-asked verdict (``request_met``) of a report or an evaluation: one line per unmet phrase with its gap,
-    states from the closed end; nothing when met or not measured."""
-    m = report.metric("request_met")
-    if m is None or m.passed is not False:
-        return []
-    return [f"NOT AS ASKED {u.get('text') or u.get('phrase')}" for u in (m.details or {}).get("unmet") or []]
 
 
 def _manipulation_line(report) -> str:

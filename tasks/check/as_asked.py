@@ -340,3 +340,12 @@ def free_motion_conflicts(overlay: Overlay, words: list[tuple[MotionPhrase, list
             items.append(_unmet(word.phrase, "conflict", j, why, f"'{word.phrase}' and {other} conflict on {j}: {why}. Drop one of "
                                 "the two phrases, or ask for the part at an end of its range"))
     return items
+
+
+def as_asked_lines(report) -> list[str]:
+    """The as-asked verdict (``request_met``) of a report or an evaluation: one line per unmet phrase with its gap,
+    states from the closed end; nothing when met or not measured."""
+    m = report.metric("request_met")
+    if m is None or m.passed is not False:
+        return []
+    return [f"NOT AS ASKED {u.get('text') or u.get('phrase')}" for u in (m.details or {}).get("unmet") or []]
