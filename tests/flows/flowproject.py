@@ -1,7 +1,8 @@
 """The flow tests' project: a project folder with generated assets and its own catalog.yaml
 (:func:`make_project`), its manifest (:func:`write_manifest`), the fake refine function's name
 (:data:`FAKE_REFINE`) and the file it logs its calls to (:data:`CALLS_PATH`). Imported by the flow tests and
-their ``conftest.py`` under one name (``flowproject``), so its state exists once."""
+their ``conftest.py`` as ``flowproject``; a test outside tests/flows imports it as ``tests.flows.flowproject``, a
+second module object that keeps the first one's call log (:data:`CALLS_PATH`, set once per process tree)."""
 
 from __future__ import annotations
 
@@ -24,9 +25,11 @@ os.environ.setdefault("DO_NOT_TRACK", "1")
 os.environ.setdefault("PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS", "180")
 os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
 # Every process the flows start (Dask workers, isolated stage processes)
-# inherits this: the fake refine function logs its calls there.
-CALLS_PATH = Path(_PREFECT_HOME) / "fake_refine_calls.jsonl"
-os.environ["FLOWFAKES_CALLS"] = str(CALLS_PATH)
+# inherits this: the fake refine function logs its calls there. Set once per process tree: a second import of this
+# file under another module name (``tests.flows.flowproject`` from a test outside tests/flows) reads the same file
+# rather than moving the log under the tests that hold the first name's CALLS_PATH.
+os.environ.setdefault("FLOWFAKES_CALLS", str(Path(_PREFECT_HOME) / "fake_refine_calls.jsonl"))
+CALLS_PATH = Path(os.environ["FLOWFAKES_CALLS"])
 
 try:  # package layout (tests/flows/__init__.py) or rootdir-on-sys.path layout
     from . import flowfakes  # type: ignore[no-redef]
