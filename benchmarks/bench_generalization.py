@@ -4,7 +4,7 @@ request kind, and the failures by mode.
 
     python benchmarks/bench_generalization.py [--manifest PATH] [--out DIR]
         [--limit N] [--jobs J] [--ids 148,9748] [--kinds plain,state,size,sized,hinge,closed,open,mount,motion]
-        [--no-generated] [--evaluate] [--one-mesh-per-link] [--open-containers]
+        [--no-generated] [--evaluate] [--one-mesh-per-link] [--open-containers] [--against OLD/cases.json]
 
 Corpus: for every manifest object (its category from the
 manifest), the requests
@@ -59,7 +59,10 @@ that no convex piece comes for free from a part's own files or the
 generator's boxes.
 ``--open-containers`` refines with ``RefineConfig(open_containers=True)``
 and prints the cases whose container was kept open.
-Writes DIR/cases.json.
+Writes DIR/cases.json. ``--against OLD/cases.json`` (a run of the same corpus with other code) then prints every case
+whose verdict, joint friction, holding record or source, peak operating force or design, collision and band notes
+differ (:func:`compare_cases`; numbers within a relative 1e-9), and how many: a change that should alter no behaviour
+shows none.
 """
 
 from __future__ import annotations
@@ -67,6 +70,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import math
 import os
 import sys
 import time
@@ -276,6 +280,37 @@ def _measure(res: dict, out: Path, evaluate: bool, open_containers: bool) -> Non
         if res["mode"] == "none" and failures:
             res["mode"] = "evaluation:" + ",".join(sorted(failures))
 
+def compare_cases(old: list[dict], new: list[dict]) -> list[str]:
+    """One line per case of ``new`` (``cases.json`` records) whose outcome differs from the same case of ``old``:
+    verdict, each joint's friction (N or N m), holding record and source, each part's peak operating force (N), the
+    design, collision and band notes, the error; then a summary line. Cases found on one side only are named too."""
+    def same(a, b) -> bool:
+        if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+            return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12)
+        return a == b
+
+    before = {c["case"]: c for c in old}
+    lines, changed = [], 0
+    for c in new:
+        o = before.pop(c["case"], None)
+        if o is None or o["prompt"] != c["prompt"]:
+            lines.append(f"  {c['case']} {c['prompt']!r}: not in the earlier run")
+            continue
+        diffs = [f"verdict {o['mode']} -> {c['mode']}"] if o["mode"] != c["mode"] else []
+        ja, jb = o.get("joints") or {}, c.get("joints") or {}
+        diffs += [f"{j}.{k}" for j in sorted(set(ja) | set(jb)) for k in ("friction", "holding", "source")
+                  if not same((ja.get(j) or {}).get(k), (jb.get(j) or {}).get(k))]
+        ea, eb = o.get("efforts") or {}, c.get("efforts") or {}
+        diffs += [f"{j} peak force" for j in sorted(set(ea) | set(eb))
+                  if not same((ea.get(j) or {}).get("peak_force_n"), (eb.get(j) or {}).get("peak_force_n"))]
+        diffs += [k for k in ("design", "collision", "out_of_band", "error") if o.get(k) != c.get(k)]
+        if diffs:
+            changed += 1
+            lines.append(f"  {c['case']} {c['prompt']!r}: " + ", ".join(diffs))
+    lines += [f"  {k}: only in the earlier run" for k in sorted(before)]
+    return lines + [f"against the earlier run: {changed} of {len(new)} cases differ, {len(before)} missing"]
+
+
 def _table(title: str, groups: dict[str, list[dict]]) -> list[str]:
     lines = [f"\n{title}", f"{'':28} {'pass':>6} {'n':>5} {'rate':>7}"]
     for key in sorted(groups):
@@ -366,6 +401,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--evaluate", action="store_true", help="also run the evaluation (extras; probes) and count its failures")
     ap.add_argument("--open-containers", action="store_true",
                     help="refine with RefineConfig(open_containers=True): containers of one mesh group decomposed, inside open")
+    ap.add_argument("--against", type=Path, default=None, help="an earlier run's cases.json to compare case by case")
     ap.add_argument("--one-mesh-per-link", action="store_true",
                     help="every object (dev rows and generated) with each link's meshes merged into one OBJ of one group")
     args = ap.parse_args(argv)
@@ -399,6 +435,8 @@ def main(argv: list[str] | None = None) -> int:
     results.sort(key=lambda r: order[r["case"]])
     (args.out / "cases.json").write_text(json.dumps(results, indent=1))
     print(report(results))
+    if args.against is not None:
+        print("\n" + "\n".join(compare_cases(json.loads(args.against.read_text()), results)))
     secs = sorted(r["seconds"] for r in results)
     if secs:
         print(f"\nwall {time.perf_counter() - t0:.0f} s; per case median {secs[len(secs) // 2]:.1f} s, max {secs[-1]:.1f} s "
