@@ -280,6 +280,7 @@ def _measure(res: dict, out: Path, evaluate: bool, open_containers: bool) -> Non
         if res["mode"] == "none" and failures:
             res["mode"] = "evaluation:" + ",".join(sorted(failures))
 
+
 def compare_cases(old: list[dict], new: list[dict]) -> list[str]:
     """One line per case of ``new`` (``cases.json`` records) whose outcome differs from the same case of ``old``:
     verdict, each joint's friction (N or N m), holding record and source, each part's peak operating force (N), the
