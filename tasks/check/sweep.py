@@ -212,7 +212,7 @@ def _joint_sweep(r: _Swept, jtype: str, dt: float, cfg: SweepConfig) -> JointSwe
     if t_out is None and not diverged:
         failure.append(f"reached only {out.far:.0%} of the range opening")
     if t_back is None and not diverged:
-        failure.append(f"closed back only to {back.far:.0%} open")
+        failure.append(f"closed back only to {back.far:.1%} open")
     if max_pen >= cfg.max_penetration:
         failure.append(f"self-penetration {max_pen * 1000:.1f} mm" + (f" ({worst[0]} / {worst[1]})" if worst else ""))
     return JointSweep(
@@ -345,7 +345,8 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
     """:func:`sweep_joint` of ``name``; when a link another movable joint places
     stops it (and ``cfg.hold_others``), swept again with the joints between moved (closed where it opened; where it did
     not, closed then open when it stalled short of ``SHUT_IN_FRACTION``, else open).
-    Returns the first retry that passes (``range_note`` says what moved), else the first sweep."""
+    Returns the first retry that passes (``range_note`` says what moved), else the first sweep (``range_note`` says
+    what each retry moved and reached)."""
     qc, d, rng = closed[name]
     sweep = functools.partial(sweep_joint, session, name, closed=qc, direction=d, open_range=rng, links=links, config=cfg)
     first = sweep(initial_state=initial_state)
@@ -372,6 +373,9 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
     # (share of the way to the open end, its name) of each retry, in turn
     ends = ((0.0, "closed"),) if opened else (((0.0, "closed"), (1.0, "open")) if first.reached_open < SHUT_IN_FRACTION
                                               else ((1.0, "open"),))
+    where = (f"of closing at the initial state ({'pushed into it' if pushed else f'stalled at {stall:.0%}'} on the way back)"
+             if opened else f"at the initial state (stalled at {stall:.0%})")
+    tried = []
     for end, word in ends:
         moved = {k: closed[k][0] + end * closed[k][1] * closed[k][2] for k in between}
         if not moved or all(abs(moved[k] - initial_state.get(k, closed[k][0])) < 1e-9 for k in moved):
@@ -379,10 +383,11 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
         session.restore_state(saved)
         second = sweep(initial_state={**initial_state, **moved})
         if second.passed:
-            where = (f"of closing at the initial state ({'pushed into it' if pushed else f'stalled at {stall:.0%}'} on the way back)"
-                     if opened else f"at the initial state (stalled at {stall:.0%})")
             second.range_note = f"{who} is in the way {where}; swept with {', '.join(sorted(moved))} {word}"
             return second
+        tried.append(f"swept with {', '.join(sorted(moved))} {word}, it {second.failure}")
+    if tried:  # the first sweep's result stands; what the retries reached is said beside it
+        first.range_note = f"{who} is in the way {where}; " + "; ".join(tried)
     return first
 
 
@@ -473,5 +478,7 @@ def sweep_metric(run: SweepRun) -> MetricResult:
                    f"{cfg.reach_fraction:.0%} open and back to <= {1 - cfg.reach_fraction:.0%} within "
                    f"{cfg.time_limit:g} s each way, deepest self-contact < {cfg.max_penetration * 1000:g} mm, no divergence"),
         details={"joints": {j.joint: j.summary() for j in run.joints}, "failing": failing,
-                 "failures": [f"{j.joint}: {j.failure}" for j in run.joints if not j.passed], "skipped": run.skipped},
+                 "failures": [f"{j.joint}: {j.failure}" + (f"; {j.range_note}" if j.range_note else "")
+                              for j in run.joints if not j.passed],
+                 "skipped": run.skipped},
         engine=run.engine)

@@ -95,13 +95,20 @@ def test_a_magazine_hinged_on_a_held_top_is_graded_on_its_written_range(tmp_path
     carries the base out of the way, and passes where the limit can be reached
     then (range_note names the base and the top); a limit reached in no
     position of the top fails (stapler 103099: the sweep used to stop where
-    the base was met and pass)."""
+    the base was met and pass), and its note says what the sweep with the top
+    open reached, beside the first sweep's failure."""
     state, top = {"top": 0.3, "magazine": 0.0}, (0.0, 1.0, 1.5)
     top_j, j = run_sweep("pybullet", SimObject(UrdfFile(_stapler(tmp_path / "ok", magazine_upper=1.3)), state), {"top": top, "magazine": (0.0, 1.0, 1.3)}).joints
     assert top_j.passed and j.passed, j.failure
     assert j.q_far == 1.3 and j.reached_open >= 0.95 and "base" in j.range_note and "swept with top open" in j.range_note
-    _, j = run_sweep("pybullet", SimObject(UrdfFile(_stapler(tmp_path / "far", magazine_upper=2.0)), state), {"top": top, "magazine": (0.0, 1.0, 2.0)}).joints
+    far = run_sweep("pybullet", SimObject(UrdfFile(_stapler(tmp_path / "far", magazine_upper=2.0)), state),
+                    {"top": top, "magazine": (0.0, 1.0, 2.0)})
+    j = far.joints[1]
     assert not j.passed and j.q_far == 2.0 and j.reached_open < 0.95
+    assert j.range_note.startswith("base is in the way at the initial state (stalled at ")
+    assert "; swept with top open, it reached only " in j.range_note
+    said = sweep_metric(far).details["failures"]
+    assert said == [f"magazine: {j.failure}; {j.range_note}"]
 
 
 def _cube_obj(lo, hi) -> str:
