@@ -4,7 +4,7 @@ deferred), so that nothing one refine made serves the next.
 
     nice -n 10 .venv/bin/python benchmarks/bench_cold_cpu.py [--ids 9912,102990] [--work DIR] [--warm] [--subdivide N]
 
-Prints per row the CPU seconds (user + system) of the refine call and of each stage (``timings.json``'s
+Prints per row the verdict (``report.json``'s ``failure_mode``), the CPU seconds (user + system) of the refine call and of each stage (``timings.json``'s
 ``stage_cpu_seconds``), then the totals; imports and interpreter start-up are outside the figures. Each row's process
 has the environment Dask's nanny gives the flow's workers (:data:`WORKER_ENV`, unless set already): one OpenMP thread
 (CoACD's), one BLAS thread. The lazy imports of the refine (SAPIEN, MuJoCo, OpenUSD, SciPy's parts) and its tables
@@ -76,7 +76,8 @@ def _one(folder: Path, prompt: str, out: Path, warm: bool = False) -> None:
     refine_asset(folder, prompt, out, skip_if_complete=False, extras=True, media=False)
     cpu = time.process_time() - c0
     stages = json.loads((out / "timings.json").read_text())["stage_cpu_seconds"]
-    print(json.dumps({"cpu": cpu, "stages": stages}))
+    verdict = json.loads((out / "report.json").read_text()).get("failure_mode")
+    print(json.dumps({"cpu": cpu, "stages": stages, "verdict": verdict}))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -110,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
         total["refine"] = total.get("refine", 0.0) + res["cpu"]
         for k, v in res["stages"].items():
             total[k] = total.get(k, 0.0) + v
-        print(f"{r['id']:>7} {r['category']:<16} {res['cpu']:6.2f} | "
+        print(f"{r['id']:>7} {r['category']:<16} {res['verdict']:<24} {res['cpu']:6.2f} | "
               + " ".join(f"{k}={v:.2f}" for k, v in res["stages"].items() if v >= 0.05), flush=True)
     print("total   " + " ".join(f"{k}={v:.2f}" for k, v in total.items() if v >= 0.05))
     return 0
