@@ -32,6 +32,13 @@ REACH_FRACTION = 0.95
 HOLD_FORCE = 1000.0
 
 
+def shortfall(reached_open: float, reached_closed: float) -> float:
+    """How far a sweep fell short of :data:`REACH_FRACTION` each way, summed (opening fractions; >= 0, a
+    non-finite way counts 1): 0 for a sweep that reached both ends."""
+    out = max(0.0, REACH_FRACTION - reached_open) if np.isfinite(reached_open) else 1.0
+    return out + (max(0.0, reached_closed - (1.0 - REACH_FRACTION)) if np.isfinite(reached_closed) else 1.0)
+
+
 @dataclass
 class SweepConfig:
     """Sweep knobs (units on every field)."""
@@ -80,13 +87,16 @@ class JointSweep:
     failure: str = ""
     #: how the range differs from the closed end's (parts held in the way)
     range_note: str = ""
+    #: joint -> position (rad or m) of the other joints this sweep moved from the initial state (a retry with the
+    #: joints between moved, :func:`_sweep_clearing`); empty: swept from the initial state
+    swept_with: dict[str, float] = field(default_factory=dict)
     #: per step: ``t`` (s), ``fraction`` (opening fraction), ``phase`` (0 opening, 1 closing); for the report,
     #: not in :meth:`summary`
     trace: dict[str, list[float]] = field(default_factory=dict, repr=False, compare=False)
 
     def summary(self) -> dict[str, Any]:
         """JSON-able dict (the trace left out)."""
-        d = {k: v for k, v in self.__dict__.items() if k != "trace"}
+        d = {k: v for k, v in self.__dict__.items() if k != "trace" and (k != "swept_with" or v)}
         d["worst_pair"] = list(self.worst_pair) if self.worst_pair else None
         return d
 
@@ -345,7 +355,8 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
     """:func:`sweep_joint` of ``name``; when a link another movable joint places
     stops it (and ``cfg.hold_others``), swept again with the joints between moved (closed where it opened; where it did
     not, closed then open when it stalled short of ``SHUT_IN_FRACTION``, else open).
-    Returns the first retry that passes (``range_note`` says what moved), else the first sweep (``range_note`` says
+    Returns the first retry that passes (``range_note`` says what moved), else the sweep that came nearest to both
+    ends (:func:`shortfall`; the first one on a tie, ``swept_with`` naming what a retry moved; ``range_note`` says
     what each retry moved and reached)."""
     qc, d, rng = closed[name]
     sweep = functools.partial(sweep_joint, session, name, closed=qc, direction=d, open_range=rng, links=links, config=cfg)
@@ -375,20 +386,24 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
                                               else ((1.0, "open"),))
     where = (f"of closing at the initial state ({'pushed into it' if pushed else f'stalled at {stall:.0%}'} on the way back)"
              if opened else f"at the initial state (stalled at {stall:.0%})")
-    tried = []
+    tried, best = [], first
     for end, word in ends:
         moved = {k: closed[k][0] + end * closed[k][1] * closed[k][2] for k in between}
         if not moved or all(abs(moved[k] - initial_state.get(k, closed[k][0])) < 1e-9 for k in moved):
             continue
         session.restore_state(saved)
         second = sweep(initial_state={**initial_state, **moved})
+        second.swept_with = moved
         if second.passed:
             second.range_note = f"{who} is in the way {where}; swept with {', '.join(sorted(moved))} {word}"
             return second
         tried.append(f"swept with {', '.join(sorted(moved))} {word}, it {second.failure}")
-    if tried:  # the first sweep's result stands; what the retries reached is said beside it
-        first.range_note = f"{who} is in the way {where}; " + "; ".join(tried)
-    return first
+        if not second.diverged and (shortfall(second.reached_open, second.reached_closed)
+                                    < shortfall(best.reached_open, best.reached_closed)):
+            best = second  # the retry that came nearest: where it stalled is what a repair clears
+    if tried:
+        best.range_note = f"{who} is in the way {where}; " + "; ".join(tried)
+    return best
 
 
 def run_sweep(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]],

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check.sweep import REACH_FRACTION
+from asset2sim.tasks.check.sweep import shortfall
 
 
 def blocked_stops(metric: MetricResult) -> dict[str, tuple[float, float]]:
@@ -29,6 +29,14 @@ def blocked_stops(metric: MetricResult) -> dict[str, tuple[float, float]]:
     return out
 
 
+def stall_states(metric: MetricResult) -> dict[str, dict[str, float]]:
+    """Joint -> the other joints' positions (rad or m) its reported sweep moved from the initial state (a retry with the
+    joints between moved, ``swept_with``), for every joint of :func:`blocked_stops`; empty where it was swept from
+    the initial state. Where a stall is, with these over the initial state."""
+    joints = metric.details.get("joints") or {}
+    return {name: dict(joints[name].get("swept_with") or {}) for name in blocked_stops(metric)}
+
+
 def blocked_positions(metric: MetricResult) -> dict[str, float]:
     """Joint -> the position (rad or m) where the sweep stopped short (:func:`blocked_stops`)."""
     return {name: stall for name, (stall, _goal) in blocked_stops(metric).items()}
@@ -38,11 +46,6 @@ def sweep_score(metric: MetricResult) -> tuple[float, float]:
     """Sort key of ``joint_sweep`` results, lower is better: (failing joints,
     summed shortfall of the failing joints, each way >= 0, non-finite = 1,
     rounded to 0.01)."""
-    short = 0.0
-    for j in (metric.details.get("joints") or {}).values():
-        if j["passed"]:
-            continue
-        out, back = j["reached_open"], j["reached_closed"]
-        short += max(0.0, REACH_FRACTION - out) if np.isfinite(out) else 1.0
-        short += max(0.0, back - (1.0 - REACH_FRACTION)) if np.isfinite(back) else 1.0
+    short = sum(shortfall(j["reached_open"], j["reached_closed"])
+                for j in (metric.details.get("joints") or {}).values() if not j["passed"])
     return float(metric.value), round(short, 2)

@@ -50,10 +50,11 @@ def link_pieces(model: UrdfModel, root: Path, link: str) -> list[np.ndarray]:
 
 
 def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float], state: dict[str, float],
-                          subtrees: dict[str, list[str]]) -> ClearanceRepair:
+                          subtrees: dict[str, list[str]], moved: dict[str, dict[str, float]] | None = None) -> ClearanceRepair:
     """Clearance repairs for the joints in ``blocked`` (joint -> rad or m where the sweep stopped) of the written URDF
-    ``model`` (file ``urdf``), other joints at ``state``; ``subtrees``: joint -> the links it moves. Raises OSError: a
-    collision file cannot be read."""
+    ``model`` (file ``urdf``), other joints at ``state``, over which ``moved`` (joint -> {other joint: rad or m}) puts
+    the joints its sweep moved (:func:`~asset2sim.tasks.check.sweep_stalls.stall_states`); ``subtrees``: joint -> the
+    links it moves. Raises OSError: a collision file cannot be read."""
     root = Path(urdf).parent
     rep = ClearanceRepair()
     # link -> its pieces, read once
@@ -61,7 +62,7 @@ def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float
     adjacent = model.adjacent_pairs()
     for name, q in blocked.items():
         joint = model.joint(name)
-        poses = model.link_poses({**state, name: q})
+        poses = model.link_poses({**state, **(moved or {}).get(name, {}), name: q})
         sub = subtrees.get(name, [joint.child])
         others = [ln for ln in model.links if ln not in sub and pieces(ln)]
         for ln in sub:

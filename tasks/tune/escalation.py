@@ -124,14 +124,33 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     return Tuned(overlay, check, rounds)
 
 
+#: Collision repairs of a part held by its neighbours' pieces, one after another while each is kept and the part is still
+#: held: a repair that brings a part nearer its ends can leave it stalled where another pair meets (a retry of the sweep
+#: with the joints between moved, which the first stall had not reached), and the next repair reads that stall.
+SWEEP_REPAIRS = 2
+
+
 def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[str, ClosedState], result: Tuned, st: StateRefinement,
                   state: dict[str, float], config: RefineConfig, ws: Workspace, log: StageLog) -> Tuned:
     """Stage 7b: collision repairs where the post-check shows a part held by its neighbours' pieces: a
     blocked joint sweep (:func:`asset2sim.tasks.tune.repair.sweep_repairs`, better = a better sweep score)
     or parts held together (running clearance, better = fewer failing tiers). Each repair is loaded, the
     limits clipped again from ``unclipped`` and ``closed_raw``, and post-checked; the first that is better
-    while no passed metric fails is kept. ``result``: the post-check's, with its collision overrides and
-    closed ends, returned unchanged or replaced; notes go to ``st.collision_changes``."""
+    while no passed metric fails is kept, and the next one starts from it (at most :data:`SWEEP_REPAIRS`; the pieces
+    of the n-th in a folder of their own, so that a repair not kept leaves the kept pieces as written). ``result``:
+    the post-check's, with its collision overrides and closed ends, returned unchanged or replaced; notes go to
+    ``st.collision_changes``."""
+    for n in range(SWEEP_REPAIRS):
+        before, result = result, _repair_once(ctx, unclipped, closed_raw, result, st, state, config, ws, log, n)
+        if result is before:
+            break
+    return result
+
+
+def _repair_once(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[str, ClosedState], result: Tuned,
+                 st: StateRefinement, state: dict[str, float], config: RefineConfig, ws: Workspace, log: StageLog,
+                 n: int) -> Tuned:
+    """One repair of :func:`repair_sweep` (the ``n``-th, from 0): ``result`` itself when none is kept."""
     overlay, check, rounds, overrides = result.overlay, result.check, result.rounds, result.overrides
     sw = next((m for m in check.metrics if m.name == "joint_sweep"), None)
     blocked = {} if sw is None or sw.passed is not False else sweep_stalls.blocked_positions(sw)
@@ -140,7 +159,7 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
         return result  # the common case: nothing read, nothing simulated
     current = ws.source(Candidate(ctx.asset, overlay, state, overrides, ctx.root_rotation))
     model = current.model()
-    folder = write.collision_folder(ctx.asset)
+    folder = write.collision_folder(ctx.asset) + (f"/repair_{n + 1}" if n else "")
     if blocked:
         label = "sweep blocked"
         repairs = repair.sweep_repairs(postcheck.overlay_object(current, state, overlay, config.sim), ctx.asset, sw,

@@ -18,6 +18,7 @@ from asset2sim.engines.source import SimObject
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check import sweep_stalls
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.geometry.decomposition import DecompositionUnavailable
 from asset2sim.tasks.state import clearance
@@ -52,16 +53,17 @@ def held_together_pairs(metrics: list[MetricResult]) -> list[tuple[str, str]]:
 
 def clearance_repair(model: UrdfModel, urdf: Path, joints: dict[str, float], state: dict[str, float],
                      overrides: dict[str, list[CollisionPiece]], scale: float, out_dir: Path,
-                     folder: str) -> CollisionRepair | None:
+                     folder: str, moved: dict[str, dict[str, float]] | None = None) -> CollisionRepair | None:
     """Running clearance for the sliding contacts of ``joints`` (joint -> position,
-    rad or m) of the written ``model``, other joints at ``state``; pieces written
+    rad or m) of the written ``model``, other joints at ``state`` with ``moved`` over it (as
+    :func:`~asset2sim.tasks.state.clearance.clearance_for_blocked`); pieces written
     under ``out_dir/folder`` at ``scale``. None when no contact needs it.
 
     Raises:
         OSError: a collision file cannot be read or written.
         ValueError: a repaired piece spans no volume (names its link).
     """
-    rep = clearance.clearance_for_blocked(model, urdf, joints, state, limits.subtrees(model))
+    rep = clearance.clearance_for_blocked(model, urdf, joints, state, limits.subtrees(model), moved)
     if not rep.pieces:
         return None
     new = clearance.write_piece_overrides(rep.pieces, scale, out_dir, folder, "clear")
@@ -80,7 +82,8 @@ def sweep_repairs(obj: SimObject, asset: AssetDescription, sweep_metric: MetricR
     Raises:
         OSError: a collision file cannot be read or written.
     """
-    repair = clearance_repair(obj.source.model(), obj.source.path, blocked, dict(obj.state), overrides, scale, out_dir, folder)
+    repair = clearance_repair(obj.source.model(), obj.source.path, blocked, dict(obj.state), overrides, scale, out_dir,
+                              folder, sweep_stalls.stall_states(sweep_metric))
     if repair is not None:
         yield repair
         return

@@ -12,7 +12,7 @@ from pathlib import Path
 from asset2sim.engines.source import SimObject
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check.sweep_stalls import blocked_stops
+from asset2sim.tasks.check.sweep_stalls import blocked_stops, stall_states
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.state import collision
 from asset2sim.tasks.state.collision import CollisionPiece
@@ -28,14 +28,15 @@ def decompose_for_blocked(obj: SimObject, asset: AssetDescription, metric: Metri
                           max_decompositions: int = 32) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
     """(collision overrides link -> pieces, notes) repairing the joints the
     ``joint_sweep`` ``metric`` found stopped short (module docstring). ``obj``:
-    the written URDF at its initial state (joint -> rad or m; searched root fixed, gravity-free, no springs);
+    the written URDF at its initial state (joint -> rad or m; searched root fixed, gravity-free, no springs), with the
+    joints a retry of the sweep moved where it did (:func:`~asset2sim.tasks.check.sweep_stalls.stall_states`);
     ``replaced``: links left alone; pieces under ``out_dir`` / ``folder``.
 
     Raises:
         DecompositionUnavailable: CoACD is not installed.
         EngineUnavailable: PyBullet is not installed.
     """
-    stops = blocked_stops(metric)
+    stops, moved = blocked_stops(metric), stall_states(metric)
     if not stops:
         return {}, []
     source, state = obj.source, dict(obj.state)
@@ -55,14 +56,14 @@ def decompose_for_blocked(obj: SimObject, asset: AssetDescription, metric: Metri
             depth, q, pair = 0.0, stall, None
             for k in range(SAMPLES + 1):
                 at = stall + (goal - stall) * k / SAMPLES
-                session.set_joint_positions({**state, name: at})
+                session.set_joint_positions({**state, **moved[name], name: at})
                 for a, b in itertools.product(sub, others):
                     d = session.link_distances(a, b, 0.0) if frozenset((a, b)) not in adjacent else None
                     if d and -min(d) > depth:
                         depth, q, pair = -min(d), at, (a, b)
             if pair is None or depth < MIN_DEPTH or set(pair) & (replaced | set(overrides)):
                 continue
-            session.set_joint_positions({**state, name: q})
+            session.set_joint_positions({**state, **moved[name], name: q})
             new, dnotes = collision.improve_collisions(session, asset, [pair], scale, out_dir,
                                                        max_decompositions=max_decompositions, folder=folder)
             if new:
