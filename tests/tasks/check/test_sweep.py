@@ -9,7 +9,7 @@ from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import available_engines, open_session
 from tests.contract_asset import write_contract_asset
 from asset2sim.tasks.check.sweep import SweepConfig, effort_limit, run_sweep, sweep_joint, sweep_metric
-from asset2sim.tasks.check.sweep_stalls import blocked_positions, sweep_score
+from asset2sim.tasks.check.sweep_stalls import blocked_positions, stall_states, sweep_score
 from asset2sim.tasks.tune.operating import DAMPED_SPEED_MARGIN, damping_caps
 from asset2sim.tasks.geometry.limits import subtrees
 from asset2sim.urdf import read_urdf
@@ -109,6 +109,9 @@ def test_a_magazine_hinged_on_a_held_top_is_graded_on_its_written_range(tmp_path
     assert "; swept with top open, it reached only " in j.range_note
     said = sweep_metric(far).details["failures"]
     assert said == [f"magazine: {j.failure}; {j.range_note}"]
+    # the sweep with the top open came nearer its ends: it is the one reported, and a repair reads its stall there
+    assert j.swept_with == {"top": 1.5} and j.reached_open > 0.5
+    assert stall_states(sweep_metric(far)) == {"magazine": {"top": 1.5}}
 
 
 def _cube_obj(lo, hi) -> str:
