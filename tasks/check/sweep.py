@@ -356,8 +356,8 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
     stops it (and ``cfg.hold_others``), swept again with the joints between moved (closed where it opened; where it did
     not, closed then open when it stalled short of ``SHUT_IN_FRACTION``, else open).
     Returns the first retry that passes (``range_note`` says what moved), else the sweep that came nearest to both
-    ends (:func:`shortfall`; the first one on a tie, ``swept_with`` naming what a retry moved; ``range_note`` says
-    what each retry moved and reached)."""
+    ends (:func:`shortfall`) of the first and the retries that neither diverged nor pushed through a part (the first
+    one on a tie, ``swept_with`` naming what a retry moved; ``range_note`` says what each retry moved and reached)."""
     qc, d, rng = closed[name]
     sweep = functools.partial(sweep_joint, session, name, closed=qc, direction=d, open_range=rng, links=links, config=cfg)
     first = sweep(initial_state=initial_state)
@@ -398,9 +398,9 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
             second.range_note = f"{who} is in the way {where}; swept with {', '.join(sorted(moved))} {word}"
             return second
         tried.append(f"swept with {', '.join(sorted(moved))} {word}, it {second.failure}")
-        if not second.diverged and (shortfall(second.reached_open, second.reached_closed)
-                                    < shortfall(best.reached_open, best.reached_closed)):
-            best = second  # the retry that came nearest: where it stalled is what a repair clears
+        if (not second.diverged and second.max_penetration < cfg.max_penetration
+                and shortfall(second.reached_open, second.reached_closed) < shortfall(best.reached_open, best.reached_closed)):
+            best = second  # the retry that came nearest, through nothing: where it stalled is what a repair clears
     if tried:
         best.range_note = f"{who} is in the way {where}; " + "; ".join(tried)
     return best
